@@ -1,0 +1,78 @@
+//! `twostage`: the command line of the two-stage estimator toolkit.
+
+mod number;
+mod simulate;
+
+use std::fmt;
+use std::io;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Turn a simulator into a microsecond-fast parameter estimator (Garatti and
+/// Bittanti's two-stage method), and simulate the paper's models.
+#[derive(Debug, Parser)]
+#[command(name = "twostage", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List the built-in models: parameters, prior boxes, sampling, input and noise.
+    Models,
+    /// Simulate one experiment (--theta) or many drawn from the prior (--count).
+    Simulate(simulate::SimulateArgs),
+}
+
+/// A mistake in how the command was called: exit code 2, like clap's own.
+#[derive(Debug)]
+pub struct UsageError(String);
+
+impl fmt::Display for UsageError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for UsageError {}
+
+/// Wrap a usage mistake so that `main` exits with code 2.
+pub fn usage(message: String) -> anyhow::Error {
+    anyhow::Error::new(UsageError(message))
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // clap prints help and version to stdout (exit 0) and usage errors
+        // to stderr (exit 2).
+        Err(e) => e.exit(),
+    };
+    let result = match &cli.command {
+        Command::Models => simulate::models(&mut io::stdout().lock()),
+        Command::Simulate(args) => simulate::simulate(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            if e.downcast_ref::<UsageError>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
+        }
+    }
+}
+
+/// `twostage simulate ... | head` closes our stdout early: not an error.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|cause| {
+        cause
+            .downcast_ref::<io::Error>()
+            .is_some_and(|io| io.kind() == io::ErrorKind::BrokenPipe)
+    })
+}

@@ -1,0 +1,223 @@
+//! `twostage models` and `twostage simulate`.
+
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+use twostage_models::{BuiltinModel, IoData, Simulator, experiment_rng, run_experiment};
+
+use crate::number::{format_f64, parse_list};
+use crate::usage;
+
+/// Options of `twostage simulate`, already parsed by clap.
+#[derive(Debug, clap::Args)]
+pub struct SimulateArgs {
+    /// The model to simulate: benchmark or pacejka (see `twostage models`).
+    #[arg(long)]
+    model: String,
+    /// Parameter vector, comma separated (e.g. `--theta -35,-1.1`); one experiment.
+    #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["count", "out_dir"])]
+    theta: Option<String>,
+    /// Seed of the random streams (input, noise, and drawn parameters).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// With --theta: which experiment's random stream to use, so that
+    /// experiment I of a `--count` run can be simulated again alone.
+    #[arg(long, default_value_t = 0, requires = "theta")]
+    experiment: u64,
+    /// Simulate without noise (benchmark: v11 = v12 = v2 = 0; car: no sensor noise).
+    #[arg(long)]
+    noiseless: bool,
+    /// Accept a --theta outside the model's prior box.
+    #[arg(long, requires = "theta")]
+    allow_outside_prior: bool,
+    /// With --theta: write the CSV here instead of standard output.
+    #[arg(long, requires = "theta")]
+    out: Option<PathBuf>,
+    /// Simulate this many experiments with parameters drawn from the prior.
+    #[arg(long, requires = "out_dir")]
+    count: Option<usize>,
+    /// With --count: the folder that receives data.csv and truth.csv.
+    #[arg(long, requires = "count")]
+    out_dir: Option<PathBuf>,
+}
+
+/// Print the built-in models and their settings.
+pub fn models(out: &mut dyn Write) -> Result<()> {
+    for model in BuiltinModel::ALL {
+        let sim = model.build(false)?;
+        let spec = sim.spec();
+        writeln!(out, "{}: {}", model.name(), model.summary())?;
+        let prior = spec.prior();
+        for (j, name) in spec.param_names().iter().enumerate() {
+            writeln!(
+                out,
+                "  parameter {name:<6} prior uniform on [{}, {}]",
+                format_f64(prior.lower()[j]),
+                format_f64(prior.upper()[j])
+            )?;
+        }
+        let time = if model == BuiltinModel::Benchmark {
+            "discrete time, one sample per step".to_string()
+        } else {
+            format!("sampled every {} s", format_f64(spec.sample_time()))
+        };
+        writeln!(out, "  samples   N = {} ({time})", spec.n_samples())?;
+        writeln!(
+            out,
+            "  signals   input {}, output {}",
+            spec.input_names().join(","),
+            spec.output_names().join(",")
+        )?;
+        writeln!(out, "  input     {}", spec.input_note())?;
+        writeln!(out, "  noise     {}", spec.noise_note())?;
+        writeln!(out)?;
+    }
+    Ok(())
+}
+
+/// Run `twostage simulate`.
+pub fn simulate(args: &SimulateArgs) -> Result<()> {
+    let model: BuiltinModel = args
+        .model
+        .parse()
+        .map_err(|e| usage(format!("{e} (see `twostage models`)")))?;
+    let sim = model.build(args.noiseless)?;
+    match (&args.theta, args.count, &args.out_dir) {
+        (Some(theta), None, None) => one_experiment(sim.as_ref(), theta, args),
+        (None, Some(count), Some(dir)) => many_experiments(sim.as_ref(), count, args.seed, dir),
+        _ => Err(usage(
+            "give either --theta V[,V...] for one experiment, or --count M --out-dir DIR \
+             for M experiments drawn from the prior"
+                .into(),
+        )),
+    }
+}
+
+fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Result<()> {
+    let spec = sim.spec();
+    let theta = parse_list(theta, "--theta").map_err(usage)?;
+    spec.prior()
+        .check(&theta, spec.param_names(), args.allow_outside_prior)
+        .map_err(|e| {
+            usage(format!(
+                "--theta for {}: {e}{}",
+                spec.name(),
+                if matches!(e, twostage_models::SimError::OutsidePrior { .. }) {
+                    " (--allow-outside-prior)"
+                } else {
+                    ""
+                }
+            ))
+        })?;
+    let mut record = spec.new_record();
+    sim.simulate(
+        &theta,
+        &mut experiment_rng(args.seed, args.experiment),
+        &mut record,
+    )
+    .with_context(|| format!("simulating {} at theta = {theta:?}", spec.name()))?;
+    let mut text = String::with_capacity(record.n_samples() * 48);
+    text.push_str(&signal_header(&record));
+    text.push('\n');
+    push_rows(&mut text, None, &record);
+    match &args.out {
+        Some(path) => {
+            fs::write(path, text).with_context(|| format!("writing {}", path.display()))?
+        }
+        None => io::stdout().lock().write_all(text.as_bytes())?,
+    }
+    Ok(())
+}
+
+/// Experiments are simulated in parallel in blocks and written in order, so
+/// that memory stays bounded and the files do not depend on the thread count.
+const BLOCK: usize = 256;
+
+fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) -> Result<()> {
+    if count == 0 {
+        return Err(usage("--count must be at least 1".into()));
+    }
+    let spec = sim.spec();
+    let design = spec.prior().design(count, seed)?;
+    fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let data_path = dir.join("data.csv");
+    let truth_path = dir.join("truth.csv");
+    let open = |path: &Path| -> Result<BufWriter<File>> {
+        Ok(BufWriter::new(
+            File::create(path).with_context(|| format!("creating {}", path.display()))?,
+        ))
+    };
+    let (mut data, mut truth) = (open(&data_path)?, open(&truth_path)?);
+    writeln!(data, "experiment,{}", signal_header(&spec.new_record()))?;
+    writeln!(truth, "experiment,{}", spec.param_names().join(","))?;
+    for start in (0..count).step_by(BLOCK) {
+        let end = (start + BLOCK).min(count);
+        let block: Vec<(String, String)> = (start..end)
+            .into_par_iter()
+            .map_init(
+                || (vec![0.0; spec.n_params()], IoData::default()),
+                |(theta, record), i| -> Result<(String, String)> {
+                    run_experiment(sim, &design, i, theta, record)
+                        .with_context(|| format!("simulating experiment {i}"))?;
+                    let mut rows = String::with_capacity(record.n_samples() * 56);
+                    push_rows(&mut rows, Some(i), record);
+                    let values: Vec<String> = theta.iter().map(|v| format_f64(*v)).collect();
+                    Ok((rows, format!("{i},{}\n", values.join(","))))
+                },
+            )
+            .collect::<Result<_>>()?;
+        for (rows, truth_row) in block {
+            data.write_all(rows.as_bytes())?;
+            truth.write_all(truth_row.as_bytes())?;
+        }
+    }
+    data.flush()
+        .with_context(|| format!("writing {}", data_path.display()))?;
+    truth
+        .flush()
+        .with_context(|| format!("writing {}", truth_path.display()))?;
+    eprintln!(
+        "wrote {count} experiments of {} to {} and {}",
+        spec.name(),
+        data_path.display(),
+        truth_path.display()
+    );
+    Ok(())
+}
+
+/// `u,y` for SISO records; `u1,u2,...` and `y1,...` when there are several.
+fn signal_header(record: &IoData) -> String {
+    let names = |prefix: &str, n: usize| -> Vec<String> {
+        if n == 1 {
+            vec![prefix.to_string()]
+        } else {
+            (1..=n).map(|j| format!("{prefix}{j}")).collect()
+        }
+    };
+    let mut all = names("u", record.n_inputs());
+    all.extend(names("y", record.n_outputs()));
+    all.join(",")
+}
+
+fn push_rows(text: &mut String, experiment: Option<usize>, record: &IoData) {
+    let signals: Vec<&[f64]> = (0..record.n_inputs())
+        .map(|j| record.input(j))
+        .chain((0..record.n_outputs()).map(|j| record.output(j)))
+        .collect();
+    for k in 0..record.n_samples() {
+        if let Some(i) = experiment {
+            text.push_str(&i.to_string());
+            text.push(',');
+        }
+        for (j, signal) in signals.iter().enumerate() {
+            if j > 0 {
+                text.push(',');
+            }
+            text.push_str(&format_f64(signal[k]));
+        }
+        text.push('\n');
+    }
+}

@@ -1,0 +1,227 @@
+//! The `twostage` binary as a user runs it.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn twostage(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .args(args)
+        .output()
+        .expect("the twostage binary runs")
+}
+
+fn stdout(out: &Output) -> String {
+    String::from_utf8(out.stdout.clone()).unwrap()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8(out.stderr.clone()).unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Parse a CSV of numbers into its header and rows.
+fn read_csv(text: &str) -> (String, Vec<Vec<f64>>) {
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().to_string();
+    let rows = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    (header, rows)
+}
+
+fn read_file(path: &Path) -> (String, Vec<Vec<f64>>) {
+    read_csv(&std::fs::read_to_string(path).unwrap())
+}
+
+#[test]
+fn models_lists_both_models_with_their_boxes() {
+    let out = twostage(&["models"]);
+    assert!(out.status.success());
+    let text = stdout(&out);
+    for needle in [
+        "benchmark:",
+        "theta  prior uniform on [-0.9, 0.9]",
+        "N = 1000",
+        "pacejka:",
+        "pK1    prior uniform on [-42.83, -27.32]",
+        "pK2    prior uniform on [-1.22, -0.98]",
+        "N = 500 (sampled every 0.02 s)",
+        "variance 0.01",
+    ] {
+        assert!(text.contains(needle), "missing {needle:?} in\n{text}");
+    }
+}
+
+#[test]
+fn one_noiseless_car_record_matches_the_golden_values() {
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "pacejka",
+        "--theta",
+        "-35,-1.1",
+        "--noiseless",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (header, rows) = read_csv(&stdout(&out));
+    assert_eq!(header, "u,y");
+    assert_eq!(rows.len(), 500);
+    // pacejka-golden.csv, t = 6 s and t = 4 s.
+    assert!((rows[300][1] - 5.98522057067).abs() < 1e-8);
+    assert!((rows[200][0] + 0.170710678119).abs() < 1e-11);
+}
+
+#[test]
+fn the_same_seed_gives_the_same_record_and_another_seed_does_not() {
+    let run = |seed: &str| {
+        stdout(&twostage(&[
+            "simulate",
+            "--model",
+            "benchmark",
+            "--theta",
+            "0.3",
+            "--seed",
+            seed,
+        ]))
+    };
+    let a = run("5");
+    assert_eq!(a, run("5"));
+    assert_ne!(a, run("6"));
+    let (header, rows) = read_csv(&a);
+    assert_eq!(header, "u,y");
+    assert_eq!(rows.len(), 1000);
+}
+
+#[test]
+fn out_writes_the_record_to_a_file() {
+    let dir = scratch("out_file");
+    let path = dir.join("one.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--theta=-0.5",
+        "--out",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stdout(&out).is_empty());
+    assert_eq!(read_file(&path).1.len(), 1000);
+}
+
+#[test]
+fn count_mode_writes_long_format_data_and_truth_that_reproduce() {
+    let dir = scratch("count_mode");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "pacejka",
+        "--count",
+        "300",
+        "--seed",
+        "11",
+        "--out-dir",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (data_header, data) = read_file(&dir.join("data.csv"));
+    let (truth_header, truth) = read_file(&dir.join("truth.csv"));
+    assert_eq!(data_header, "experiment,u,y");
+    assert_eq!(truth_header, "experiment,pK1,pK2");
+    assert_eq!(data.len(), 300 * 500);
+    assert_eq!(truth.len(), 300);
+    for (i, row) in truth.iter().enumerate() {
+        assert_eq!(row[0] as usize, i);
+        assert!((-42.83..=-27.32).contains(&row[1]) && (-1.22..=-0.98).contains(&row[2]));
+    }
+    // Experiment 257 (in the second parallel block) simulated again alone,
+    // from its printed truth: the very same record, bit for bit.
+    let i = 257;
+    let theta = format!("{},{}", truth[i][1], truth[i][2]);
+    let alone = twostage(&[
+        "simulate",
+        "--model",
+        "pacejka",
+        "--theta",
+        &theta,
+        "--seed",
+        "11",
+        "--experiment",
+        "257",
+    ]);
+    assert!(alone.status.success(), "{}", stderr(&alone));
+    let (_, rows) = read_csv(&stdout(&alone));
+    let chart_rows: Vec<&Vec<f64>> = data.iter().filter(|r| r[0] as usize == i).collect();
+    assert_eq!(chart_rows.len(), 500);
+    for (a, b) in rows.iter().zip(chart_rows) {
+        assert_eq!(a[0].to_bits(), b[1].to_bits());
+        assert_eq!(a[1].to_bits(), b[2].to_bits());
+    }
+}
+
+fn assert_usage_error(args: &[&str], needle: &str) {
+    let out = twostage(args);
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+    let err = stderr(&out);
+    assert!(err.contains(needle), "{args:?}: {err}");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "{args:?}: not one line:\n{err}"
+    );
+}
+
+#[test]
+fn bad_calls_get_one_clear_line_and_exit_code_2() {
+    assert_usage_error(
+        &["simulate", "--model", "pacejka", "--theta", "-35"],
+        "expected 2 parameter values (pK1,pK2), got 1",
+    );
+    assert_usage_error(
+        &["simulate", "--model", "benchmark", "--theta", "1.2"],
+        "theta = 1.2 lies outside the prior box [-0.9, 0.9]",
+    );
+    assert_usage_error(
+        &["simulate", "--model", "tractor", "--theta", "1"],
+        "unknown model 'tractor': the built-in models are benchmark, pacejka",
+    );
+    assert_usage_error(&["simulate", "--model", "benchmark", "--theta", "x"], "'x'");
+    assert_usage_error(&["simulate", "--model", "benchmark"], "give either --theta");
+}
+
+#[test]
+fn outside_the_prior_works_when_allowed_and_divergence_fails_cleanly() {
+    let ok = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--theta",
+        "0.95",
+        "--allow-outside-prior",
+    ]);
+    assert!(ok.status.success(), "{}", stderr(&ok));
+    let bad = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--theta",
+        "3",
+        "--allow-outside-prior",
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    let err = stderr(&bad);
+    assert!(
+        err.contains("diverged") && err.contains("theta = [3.0]"),
+        "{err}"
+    );
+    assert!(stdout(&bad).is_empty(), "no partial CSV on failure");
+}

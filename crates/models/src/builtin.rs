@@ -1,0 +1,87 @@
+//! The built-in models by name, for command lines and configuration files.
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::benchmark::Benchmark;
+use crate::error::{Result, SimError};
+use crate::pacejka::PacejkaCar;
+use crate::simulator::Simulator;
+
+/// The models that ship with twostage.
+///
+/// ```
+/// use twostage_models::BuiltinModel;
+/// let model: BuiltinModel = "pacejka".parse()?;
+/// let car = model.build(false)?;
+/// assert_eq!(car.param_names(), ["pK1", "pK2"]);
+/// assert!("tractor".parse::<BuiltinModel>().is_err());
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum BuiltinModel {
+    /// The benchmark system of eq. (5).
+    Benchmark,
+    /// The Pacejka car of Section 6.
+    Pacejka,
+}
+
+impl BuiltinModel {
+    /// Every built-in model.
+    pub const ALL: [Self; 2] = [Self::Benchmark, Self::Pacejka];
+
+    /// The model's name as typed by users.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Benchmark => "benchmark",
+            Self::Pacejka => "pacejka",
+        }
+    }
+
+    /// A one-line description.
+    pub fn summary(self) -> &'static str {
+        match self {
+            Self::Benchmark => {
+                "the paper's benchmark, eq. (5): a second-order linear system whose \
+                 coefficients depend on theta through sin(50 theta^2)"
+            }
+            Self::Pacejka => {
+                "the paper's car (Section 6, spec/pacejka-car.md): lateral, yaw and roll \
+                 dynamics with Pacejka tires, steered along a chicane at 10 m/s"
+            }
+        }
+    }
+
+    /// Build the model with the paper's settings, with or without noise.
+    ///
+    /// # Errors
+    /// Never for the built-in settings; the `Result` keeps the door open for
+    /// models whose construction can fail.
+    pub fn build(self, noiseless: bool) -> Result<Box<dyn Simulator>> {
+        Ok(match self {
+            Self::Benchmark => Box::new(Benchmark::builder().noiseless(noiseless).build()?),
+            Self::Pacejka => Box::new(PacejkaCar::builder().noiseless(noiseless).build()?),
+        })
+    }
+}
+
+impl fmt::Display for BuiltinModel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for BuiltinModel {
+    type Err = SimError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|m| m.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| SimError::UnknownModel {
+                name: s.to_string(),
+                known: Self::ALL.map(|m| m.name()).join(", "),
+            })
+    }
+}

@@ -1,0 +1,243 @@
+//! Input signals: what excites the system during an experiment.
+
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::error::{Result, SimError};
+
+/// The input applied in every experiment of a model.
+///
+/// Three kinds exist: white Gaussian noise drawn anew for each experiment
+/// (the benchmark's `u ~ N(0, 1)`), the chicane steering manoeuvre of the
+/// Pacejka example (spec/pacejka-car.md), and a fixed signal given by the
+/// user, the same in every experiment (Section 4.1 of the paper: train on
+/// inputs like the ones real experiments will use).
+///
+/// ```
+/// use twostage_models::InputSignal;
+/// let steer = InputSignal::chicane(0.2)?;
+/// // delta(2) = 0.2 sin(pi/2) sin(pi/8)^2
+/// assert!((steer.value_at(2.0, 0.02, &[]) - 0.0292893218813).abs() < 1e-12);
+/// let fixed = InputSignal::fixed(vec![0.0, 1.0, 2.0])?;
+/// // Between samples a continuous-time model sees the straight line through them.
+/// assert!((fixed.value_at(0.5, 1.0, &[0.0, 1.0, 2.0]) - 0.5).abs() < 1e-15);
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct InputSignal {
+    kind: Kind,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Kind {
+    WhiteGaussian { std_dev: f64 },
+    Chicane { amplitude: f64 },
+    Fixed(Arc<[f64]>),
+}
+
+impl InputSignal {
+    /// White Gaussian noise of standard deviation `std_dev`, a new
+    /// realization in every experiment.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] unless `std_dev` is finite and positive.
+    pub fn white_gaussian(std_dev: f64) -> Result<Self> {
+        if !(std_dev.is_finite() && std_dev > 0.0) {
+            return Err(invalid(
+                "input standard deviation",
+                std_dev,
+                "must be finite and > 0",
+            ));
+        }
+        Ok(Self {
+            kind: Kind::WhiteGaussian { std_dev },
+        })
+    }
+
+    /// The chicane steering angle of spec/pacejka-car.md, in radians:
+    /// `A sin(2 pi (t - 1) / 4) sin(pi (t - 1) / 8)^2` for `1 <= t <= 9`, else 0.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] unless `amplitude` is finite.
+    pub fn chicane(amplitude: f64) -> Result<Self> {
+        if !amplitude.is_finite() {
+            return Err(invalid("chicane amplitude", amplitude, "must be finite"));
+        }
+        Ok(Self {
+            kind: Kind::Chicane { amplitude },
+        })
+    }
+
+    /// A fixed sampled signal, the same in every experiment. It must hold at
+    /// least as many samples as the model's record length.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidData`] if it is empty or holds a non-finite value.
+    pub fn fixed(samples: Vec<f64>) -> Result<Self> {
+        if samples.is_empty() {
+            return Err(SimError::InvalidData(
+                "the fixed input signal is empty".into(),
+            ));
+        }
+        if let Some(k) = samples.iter().position(|v| !v.is_finite()) {
+            return Err(SimError::InvalidData(format!(
+                "the fixed input signal has a non-finite value at sample {k}"
+            )));
+        }
+        Ok(Self {
+            kind: Kind::Fixed(samples.into()),
+        })
+    }
+
+    /// Whether every experiment sees the same input.
+    pub fn is_deterministic(&self) -> bool {
+        !matches!(self.kind, Kind::WhiteGaussian { .. })
+    }
+
+    /// A one-line description for people.
+    pub fn describe(&self) -> String {
+        match &self.kind {
+            Kind::WhiteGaussian { std_dev } => format!(
+                "white Gaussian noise N(0, {}), drawn anew per experiment",
+                std_dev * std_dev
+            ),
+            Kind::Chicane { amplitude } => format!(
+                "chicane steer {amplitude} sin(2 pi (t-1)/4) sin(pi (t-1)/8)^2 rad for 1 <= t <= 9 s, 0 otherwise"
+            ),
+            Kind::Fixed(samples) => {
+                format!("a fixed user-given signal of {} samples", samples.len())
+            }
+        }
+    }
+
+    /// Write the sampled input `u_k = u(k * sample_time)`, `k = 0..u.len()`.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidData`] if a fixed signal is shorter than `u`.
+    pub fn fill<R: Rng + ?Sized>(
+        &self,
+        sample_time: f64,
+        rng: &mut R,
+        u: &mut [f64],
+    ) -> Result<()> {
+        match &self.kind {
+            Kind::WhiteGaussian { std_dev } => {
+                for v in u.iter_mut() {
+                    let z: f64 = StandardNormal.sample(rng);
+                    *v = std_dev * z;
+                }
+            }
+            Kind::Chicane { amplitude } => {
+                for (k, v) in u.iter_mut().enumerate() {
+                    *v = chicane(*amplitude, k as f64 * sample_time);
+                }
+            }
+            Kind::Fixed(samples) => {
+                if samples.len() < u.len() {
+                    return Err(SimError::InvalidData(format!(
+                        "the fixed input signal has {} samples but the record needs {}: \
+                         give a longer signal or shorten the record",
+                        samples.len(),
+                        u.len()
+                    )));
+                }
+                u.copy_from_slice(&samples[..u.len()]);
+            }
+        }
+        Ok(())
+    }
+
+    /// The input at continuous time `t`, for models integrated between
+    /// samples. The chicane is evaluated exactly; sampled signals (noise
+    /// realizations and fixed signals, passed as `samples` = the output of
+    /// [`InputSignal::fill`]) are interpolated linearly between samples and
+    /// held after the last one (docs/decisions/005-continuous-time-inputs.md).
+    pub fn value_at(&self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
+        match &self.kind {
+            Kind::Chicane { amplitude } => chicane(*amplitude, t),
+            Kind::WhiteGaussian { .. } | Kind::Fixed(_) => interpolate(samples, t / sample_time),
+        }
+    }
+}
+
+fn chicane(amplitude: f64, t: f64) -> f64 {
+    if (1.0..=9.0).contains(&t) {
+        let s = (PI * (t - 1.0) / 8.0).sin();
+        amplitude * (2.0 * PI * (t - 1.0) / 4.0).sin() * s * s
+    } else {
+        0.0
+    }
+}
+
+/// Linear interpolation of `samples` at fractional index `x`.
+fn interpolate(samples: &[f64], x: f64) -> f64 {
+    let Some(&last) = samples.last() else {
+        return 0.0;
+    };
+    if x <= 0.0 {
+        return samples[0];
+    }
+    let k = x.floor();
+    let i = k as usize;
+    if i + 1 >= samples.len() {
+        return last;
+    }
+    let frac = x - k;
+    samples[i] + frac * (samples[i + 1] - samples[i])
+}
+
+fn invalid(name: &'static str, value: f64, reason: &str) -> SimError {
+    SimError::InvalidSetting {
+        name,
+        value: value.to_string(),
+        reason: reason.into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::experiment_rng;
+
+    #[test]
+    fn chicane_is_zero_outside_its_window_and_matches_the_formula() {
+        let c = InputSignal::chicane(0.2).unwrap();
+        assert_eq!(c.value_at(0.5, 0.02, &[]).to_bits(), 0);
+        assert_eq!(c.value_at(9.5, 0.02, &[]).to_bits(), 0);
+        // t = 4: sin(3 pi / 2) sin(3 pi / 8)^2 = -(0.9238795...)^2
+        let want = -0.2 * 0.923_879_532_511_286_7_f64.powi(2);
+        assert!((c.value_at(4.0, 0.02, &[]) - want).abs() < 1e-15);
+        let mut u = vec![0.0; 500];
+        c.fill(0.02, &mut experiment_rng(0, 0), &mut u).unwrap();
+        assert!((u[200] - want).abs() < 1e-15);
+    }
+
+    #[test]
+    fn white_noise_has_the_requested_variance() {
+        let w = InputSignal::white_gaussian(2.0).unwrap();
+        let mut u = vec![0.0; 100_000];
+        w.fill(1.0, &mut experiment_rng(3, 1), &mut u).unwrap();
+        let mean = u.iter().sum::<f64>() / u.len() as f64;
+        let var = u.iter().map(|v| v * v).sum::<f64>() / u.len() as f64;
+        // Standard errors: 0.0063 for the mean, 0.018 for the variance.
+        assert!(mean.abs() < 0.03, "{mean}");
+        assert!((var - 4.0).abs() < 0.08, "{var}");
+    }
+
+    #[test]
+    fn fixed_signals_are_checked_and_interpolated() {
+        assert!(InputSignal::fixed(vec![]).is_err());
+        assert!(InputSignal::fixed(vec![1.0, f64::NAN]).is_err());
+        assert!(InputSignal::white_gaussian(0.0).is_err());
+        let f = InputSignal::fixed(vec![0.0, 2.0, 4.0]).unwrap();
+        let mut u = vec![0.0; 4];
+        assert!(f.fill(0.1, &mut experiment_rng(0, 0), &mut u).is_err());
+        let s = [0.0, 2.0, 4.0];
+        assert!((f.value_at(0.15, 0.1, &s) - 3.0).abs() < 1e-12);
+        assert!((f.value_at(5.0, 0.1, &s) - 4.0).abs() < 1e-12);
+        assert!((f.value_at(-1.0, 0.1, &s) - 0.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,188 @@
+//! The `Simulator` trait: what the two-stage method needs of a model.
+
+use crate::data::IoData;
+use crate::error::Result;
+use crate::prior::Prior;
+use crate::rng::ExperimentRng;
+
+/// What a model is: its name, parameters, prior box, sampling and signals.
+///
+/// ```
+/// use twostage_models::{ModelSpec, Prior};
+/// let spec = ModelSpec::new("spring", &["k", "c"], Prior::uniform_box(&[1.0, 0.1], &[5.0, 1.0])?, 0.01, 800)?
+///     .with_signals(&["force"], &["position"])
+///     .with_notes("a step of 1 N at t = 0", "position noise of variance 1e-4");
+/// assert_eq!(spec.param_names(), ["k", "c"]);
+/// assert_eq!(spec.n_samples(), 800);
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelSpec {
+    name: String,
+    param_names: Vec<String>,
+    prior: Prior,
+    sample_time: f64,
+    n_samples: usize,
+    input_names: Vec<String>,
+    output_names: Vec<String>,
+    input_note: String,
+    noise_note: String,
+}
+
+impl ModelSpec {
+    /// A SISO model (`u`, `y`) with the given parameters, prior box, sampling
+    /// time and record length.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`](crate::SimError::InvalidSetting) if the
+    /// names do not match the prior's dimension, the sampling time is not
+    /// finite and positive, or the record is empty.
+    pub fn new(
+        name: &str,
+        param_names: &[&str],
+        prior: Prior,
+        sample_time: f64,
+        n_samples: usize,
+    ) -> Result<Self> {
+        use crate::error::SimError::InvalidSetting;
+        if param_names.len() != prior.dim() {
+            return Err(InvalidSetting {
+                name: "parameter names",
+                value: param_names.join(","),
+                reason: format!("the prior box has {} parameters", prior.dim()),
+            });
+        }
+        if !(sample_time.is_finite() && sample_time > 0.0) {
+            return Err(InvalidSetting {
+                name: "sample time",
+                value: sample_time.to_string(),
+                reason: "must be finite and > 0".into(),
+            });
+        }
+        if n_samples == 0 {
+            return Err(InvalidSetting {
+                name: "number of samples",
+                value: "0".into(),
+                reason: "a record needs at least one sample".into(),
+            });
+        }
+        Ok(Self {
+            name: name.to_string(),
+            param_names: param_names.iter().map(|s| s.to_string()).collect(),
+            prior,
+            sample_time,
+            n_samples,
+            input_names: vec!["u".into()],
+            output_names: vec!["y".into()],
+            input_note: String::new(),
+            noise_note: String::new(),
+        })
+    }
+
+    /// Name the input and output signals (and so set their number).
+    pub fn with_signals(mut self, inputs: &[&str], outputs: &[&str]) -> Self {
+        self.input_names = inputs.iter().map(|s| s.to_string()).collect();
+        self.output_names = outputs.iter().map(|s| s.to_string()).collect();
+        self
+    }
+
+    /// Describe the input and the noise for people.
+    pub fn with_notes(mut self, input: &str, noise: &str) -> Self {
+        self.input_note = input.to_string();
+        self.noise_note = noise.to_string();
+        self
+    }
+
+    /// The model's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// The parameter names, in the order of theta.
+    pub fn param_names(&self) -> &[String] {
+        &self.param_names
+    }
+    /// The prior box.
+    pub fn prior(&self) -> &Prior {
+        &self.prior
+    }
+    /// Number of parameters q.
+    pub fn n_params(&self) -> usize {
+        self.param_names.len()
+    }
+    /// Time between samples (1 for discrete-time models).
+    pub fn sample_time(&self) -> f64 {
+        self.sample_time
+    }
+    /// Record length N.
+    pub fn n_samples(&self) -> usize {
+        self.n_samples
+    }
+    /// Names of the input signals.
+    pub fn input_names(&self) -> &[String] {
+        &self.input_names
+    }
+    /// Names of the output signals.
+    pub fn output_names(&self) -> &[String] {
+        &self.output_names
+    }
+    /// How the input is generated.
+    pub fn input_note(&self) -> &str {
+        &self.input_note
+    }
+    /// What noise enters the experiment.
+    pub fn noise_note(&self) -> &str {
+        &self.noise_note
+    }
+    /// A zero record of this model's shape.
+    pub fn new_record(&self) -> IoData {
+        IoData::zeros(
+            self.n_samples,
+            self.input_names.len(),
+            self.output_names.len(),
+        )
+    }
+}
+
+/// A simulator of the system `P(theta)`: given a parameter vector and a
+/// random stream, it produces one experiment's input/output record.
+///
+/// Implementations must be deterministic given `(theta, rng)`, draw all their
+/// randomness from `rng`, and return [`SimError::Diverged`](crate::SimError::Diverged)
+/// instead of non-finite samples.
+///
+/// ```
+/// use twostage_models::{experiment_rng, Benchmark, Simulator};
+/// let model = Benchmark::new();
+/// let mut record = model.spec().new_record();
+/// model.simulate(&[0.3], &mut experiment_rng(1, 0), &mut record)?;
+/// assert_eq!(record.n_samples(), 1000);
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+pub trait Simulator: Send + Sync {
+    /// What the model is: names, prior, sampling, signals.
+    fn spec(&self) -> &ModelSpec;
+
+    /// Simulate one experiment at `theta` into `out`, reshaping it to
+    /// `spec().n_samples()` samples.
+    ///
+    /// # Errors
+    /// A parameter vector of the wrong length or with non-finite values, or
+    /// a simulation that diverges.
+    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()>;
+
+    /// The parameter names, in the order of theta.
+    fn param_names(&self) -> &[String] {
+        self.spec().param_names()
+    }
+
+    /// The prior box.
+    fn prior(&self) -> &Prior {
+        self.spec().prior()
+    }
+}
+
+/// Check the length and finiteness of theta for `spec` (not the box:
+/// simulators may be run outside their prior on purpose).
+pub(crate) fn check_theta(spec: &ModelSpec, theta: &[f64]) -> Result<()> {
+    spec.prior().check(theta, spec.param_names(), true)
+}
