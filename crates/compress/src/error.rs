@@ -1,0 +1,84 @@
+//! The one error type of this crate.
+
+use thiserror::Error;
+
+/// Why a record could not be compressed.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum CompressError {
+    /// A structure parameter is out of range.
+    #[error("invalid {name} = {value}: {reason}")]
+    InvalidSetting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: String,
+        /// The valid range.
+        reason: String,
+    },
+    /// The record's signals do not have the shape the compressor was built for.
+    #[error(
+        "the record has {got_inputs} input and {got_outputs} output signals, \
+         the compressor expects {inputs} and {outputs}"
+    )]
+    ShapeMismatch {
+        /// Inputs expected.
+        inputs: usize,
+        /// Outputs expected.
+        outputs: usize,
+        /// Inputs given.
+        got_inputs: usize,
+        /// Outputs given.
+        got_outputs: usize,
+    },
+    /// Inputs and outputs have different lengths.
+    #[error("the inputs have {inputs} samples but the outputs have {outputs}")]
+    LengthMismatch {
+        /// Input samples.
+        inputs: usize,
+        /// Output samples.
+        outputs: usize,
+    },
+    /// A sample is NaN or infinite.
+    #[error("{signal} has a non-finite value ({value}) at sample {index}: repair or drop it")]
+    NonFinite {
+        /// Which signal, e.g. `y` or `u2`.
+        signal: String,
+        /// The sample index.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// Too few samples for the chosen orders.
+    #[error(
+        "the record has {n_samples} samples, too short for {structure}: it needs at \
+         least {needed}; use a longer record or lower orders"
+    )]
+    RecordTooShort {
+        /// Samples given.
+        n_samples: usize,
+        /// Samples needed.
+        needed: usize,
+        /// The structure, e.g. `ARX(5, 5)`.
+        structure: String,
+    },
+    /// The regressors are (numerically) rank deficient.
+    #[error("rank-deficient regressors for {structure}: {cause}")]
+    RankDeficient {
+        /// The structure, e.g. `ARX(5, 5)`.
+        structure: String,
+        /// What makes them so, and what to do.
+        cause: String,
+    },
+    /// The output buffer has the wrong length.
+    #[error("the feature buffer has {got} slots, the compressor produces {expected}")]
+    BufferLength {
+        /// Features produced.
+        expected: usize,
+        /// Slots given.
+        got: usize,
+    },
+}
+
+/// Shorthand for results of this crate.
+pub type Result<T> = std::result::Result<T, CompressError>;

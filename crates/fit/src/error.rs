@@ -1,0 +1,50 @@
+//! The one error type of this crate.
+
+use thiserror::Error;
+
+/// Why a regressor could not be fitted or evaluated.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum FitError {
+    /// A hyperparameter is out of range.
+    #[error("invalid {name} = {value}: {reason}")]
+    InvalidSetting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: String,
+        /// The valid range.
+        reason: String,
+    },
+    /// Features and targets disagree in shape, or a row has the wrong length.
+    #[error("shape mismatch: {0}")]
+    ShapeMismatch(String),
+    /// Too few samples to fit.
+    #[error("{got} training samples are too few: at least {needed} are needed ({why})")]
+    TooFewSamples {
+        /// Samples given.
+        got: usize,
+        /// Samples needed.
+        needed: usize,
+        /// Why.
+        why: String,
+    },
+    /// A feature or target is NaN or infinite.
+    #[error("{what} has a non-finite value ({value}) at row {row}, column {col}")]
+    NonFinite {
+        /// `features` or `targets`.
+        what: &'static str,
+        /// Row index.
+        row: usize,
+        /// Column index.
+        col: usize,
+        /// The value.
+        value: f64,
+    },
+    /// The least-squares problem is rank deficient.
+    #[error("rank-deficient least squares: {0}")]
+    RankDeficient(String),
+}
+
+/// Shorthand for results of this crate.
+pub type Result<T> = std::result::Result<T, FitError>;

@@ -1,0 +1,629 @@
+//! Small feed-forward networks (tanh hidden layers, linear outputs) trained
+//! by Levenberg-Marquardt with a held-out split for early stopping and
+//! seeded restarts run in parallel.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+use ndarray::{Array2, ArrayView2};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::check;
+use crate::error::{FitError, Result};
+use crate::standardize::Standardizer;
+use crate::{Predictor, Regressor};
+
+/// The widest layer supported: prediction keeps activations on the stack.
+pub const MAX_WIDTH: usize = 256;
+
+/// Hyperparameters of an MLP and its Levenberg-Marquardt training.
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `hidden` | `[10]` | 1..=4 layers, each 1..=256 units |
+/// | `restarts` | 4 | >= 1 (run in parallel; the best held-out loss wins) |
+/// | `max_iterations` | 300 | >= 1 LM iterations per restart |
+/// | `validation_fraction` | 0.15 | in [0, 0.5]; 0 disables early stopping |
+/// | `patience` | 25 | iterations without held-out improvement before stopping |
+/// | `weight_decay` | 1e-6 | >= 0, L2 penalty on the weights (standardized units) |
+/// | `seed` | 0 | any |
+///
+/// ```
+/// use ndarray::Array2;
+/// use twostage_fit::{MlpParams, Predictor, Regressor};
+/// // t = sin(2 x): a linear model cannot fit it, a small network can.
+/// let x = Array2::from_shape_fn((300, 1), |(i, _)| -1.5 + 3.0 * i as f64 / 299.0);
+/// let t = x.mapv(|v| (2.0 * v).sin());
+/// let net = MlpParams::new(&[8])?.restarts(2).seed(1).check()?.fit(x.view(), t.view())?;
+/// let mut out = [0.0];
+/// net.predict_into(&[0.4], &mut out)?;
+/// assert!((out[0] - (0.8f64).sin()).abs() < 0.01);
+/// # Ok::<(), twostage_fit::FitError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MlpParams {
+    hidden: Vec<usize>,
+    restarts: usize,
+    max_iterations: usize,
+    validation_fraction: f64,
+    patience: usize,
+    weight_decay: f64,
+    seed: u64,
+}
+
+impl MlpParams {
+    /// A network with the given hidden layer sizes and default training.
+    ///
+    /// # Errors
+    /// Never here: sizes are checked by [`MlpParams::check`]; the `Result`
+    /// keeps the builder chain uniform.
+    pub fn new(hidden: &[usize]) -> Result<Self> {
+        Ok(Self {
+            hidden: hidden.to_vec(),
+            restarts: 4,
+            max_iterations: 300,
+            validation_fraction: 0.15,
+            patience: 25,
+            weight_decay: 1e-6,
+            seed: 0,
+        })
+    }
+    /// Number of seeded restarts.
+    pub fn restarts(mut self, restarts: usize) -> Self {
+        self.restarts = restarts;
+        self
+    }
+    /// Iterations per restart.
+    pub fn max_iterations(mut self, iterations: usize) -> Self {
+        self.max_iterations = iterations;
+        self
+    }
+    /// Share of the training data held out for early stopping.
+    pub fn validation_fraction(mut self, fraction: f64) -> Self {
+        self.validation_fraction = fraction;
+        self
+    }
+    /// Iterations without held-out improvement before stopping.
+    pub fn patience(mut self, patience: usize) -> Self {
+        self.patience = patience;
+        self
+    }
+    /// L2 penalty on the weights.
+    pub fn weight_decay(mut self, decay: f64) -> Self {
+        self.weight_decay = decay;
+        self
+    }
+    /// Seed of the initial weights and of the held-out split.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// Check every setting; the result can be fitted.
+    ///
+    /// # Errors
+    /// [`FitError::InvalidSetting`] naming the first setting out of range.
+    pub fn check(self) -> Result<Mlp> {
+        let invalid = |name: &'static str, value: String, reason: &str| FitError::InvalidSetting {
+            name,
+            value,
+            reason: reason.into(),
+        };
+        if self.hidden.is_empty() || self.hidden.len() > 4 {
+            return Err(invalid(
+                "hidden layers",
+                format!("{:?}", self.hidden),
+                "give 1 to 4 hidden layers",
+            ));
+        }
+        if let Some(w) = self.hidden.iter().find(|&&w| w == 0 || w > MAX_WIDTH) {
+            return Err(invalid("hidden layer width", w.to_string(), "must be in 1..=256"));
+        }
+        if self.restarts == 0 {
+            return Err(invalid("restarts", "0".into(), "at least 1"));
+        }
+        if self.max_iterations == 0 {
+            return Err(invalid("max_iterations", "0".into(), "at least 1"));
+        }
+        if !(0.0..=0.5).contains(&self.validation_fraction) {
+            return Err(invalid(
+                "validation_fraction",
+                self.validation_fraction.to_string(),
+                "must lie in [0, 0.5]",
+            ));
+        }
+        if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
+            return Err(invalid("weight_decay", self.weight_decay.to_string(), "finite and >= 0"));
+        }
+        Ok(Mlp { params: self })
+    }
+}
+
+/// Checked MLP hyperparameters: a [`Regressor`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Mlp {
+    params: MlpParams,
+}
+
+impl Mlp {
+    /// The hyperparameters.
+    pub fn params(&self) -> &MlpParams {
+        &self.params
+    }
+}
+
+/// Why one Levenberg-Marquardt run stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum TerminationReason {
+    /// The held-out loss did not improve for `patience` iterations.
+    EarlyStopping,
+    /// The iteration budget ran out.
+    MaxIterations,
+    /// No step reduced the loss even with the largest damping: a minimum.
+    DampingLimit,
+    /// The relative decrease of the training loss fell below 1e-12.
+    Converged,
+}
+
+/// How one restart went.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RestartReport {
+    /// Restart index.
+    pub restart: usize,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub reason: TerminationReason,
+    /// Training mean squared error (standardized targets) at the kept weights.
+    pub train_mse: f64,
+    /// Held-out mean squared error (standardized targets) at the kept weights
+    /// (the training MSE when nothing is held out).
+    pub validation_mse: f64,
+}
+
+/// A trained network, with its standardization and training report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FittedMlp {
+    features: Standardizer,
+    targets: Standardizer,
+    /// Layer sizes, input first: `[n_in, hidden.., n_out]`.
+    sizes: Vec<usize>,
+    /// All weights and biases, layer after layer: W (row-major, out x in) then b.
+    params: Vec<f64>,
+    /// One report per restart; `best` indexes the one kept.
+    reports: Vec<RestartReport>,
+    best: usize,
+}
+
+impl FittedMlp {
+    /// The restarts' reports.
+    pub fn reports(&self) -> &[RestartReport] {
+        &self.reports
+    }
+    /// The restart whose weights were kept.
+    pub fn best_restart(&self) -> &RestartReport {
+        &self.reports[self.best]
+    }
+    /// Layer sizes, input first.
+    pub fn sizes(&self) -> &[usize] {
+        &self.sizes
+    }
+    /// Number of weights and biases.
+    pub fn n_parameters(&self) -> usize {
+        self.params.len()
+    }
+}
+
+/// Number of parameters of a network with these layer sizes.
+fn parameter_count(sizes: &[usize]) -> usize {
+    sizes.windows(2).map(|w| w[1] * (w[0] + 1)).sum()
+}
+
+/// Forward pass on standardized input `x`, keeping every layer's activation
+/// in `acts` (layer l starts at `offsets[l]`); returns nothing, the output
+/// is the last layer.
+fn forward(sizes: &[usize], params: &[f64], x: &[f64], acts: &mut [f64], offsets: &[usize]) {
+    acts[..sizes[0]].copy_from_slice(x);
+    let mut p = 0;
+    let layers = sizes.len() - 1;
+    for l in 0..layers {
+        let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+        let (before, after) = acts.split_at_mut(offsets[l + 1]);
+        let input = &before[offsets[l]..offsets[l] + n_in];
+        let w = &params[p..p + n_out * n_in];
+        let b = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
+        for (i, out) in after[..n_out].iter_mut().enumerate() {
+            let row = &w[i * n_in..(i + 1) * n_in];
+            let z = b[i] + row.iter().zip(input).map(|(a, c)| a * c).sum::<f64>();
+            *out = if l + 1 < layers { z.tanh() } else { z };
+        }
+        p += n_out * (n_in + 1);
+    }
+}
+
+/// The training problem of one restart: standardized data and buffers.
+struct Problem<'a> {
+    sizes: &'a [usize],
+    offsets: Vec<usize>,
+    x: &'a Array2<f64>,
+    t: &'a Array2<f64>,
+    train: &'a [usize],
+    held_out: &'a [usize],
+    decay: f64,
+}
+
+impl Problem<'_> {
+    fn n_params(&self) -> usize {
+        parameter_count(self.sizes)
+    }
+
+    /// Mean squared error over `rows`, per target value.
+    fn mse(&self, params: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
+        let q = *self.sizes.last().unwrap_or(&1);
+        let out = self.offsets[self.sizes.len() - 1];
+        let mut sse = 0.0;
+        for &i in rows {
+            let xi = self.x.row(i);
+            let xi = xi.as_slice().unwrap_or(&[]);
+            forward(self.sizes, params, xi, acts, &self.offsets);
+            for k in 0..q {
+                sse += (acts[out + k] - self.t[[i, k]]).powi(2);
+            }
+        }
+        sse / (rows.len() * q).max(1) as f64
+    }
+
+    fn penalty(&self, params: &[f64]) -> f64 {
+        self.decay * params.iter().map(|v| v * v).sum::<f64>()
+    }
+
+    /// Residuals r (train rows x targets) and their Jacobian J.
+    fn jacobian(&self, params: &[f64], jac: &mut Mat<f64>, res: &mut Mat<f64>, acts: &mut [f64], delta: &mut [f64]) {
+        let sizes = self.sizes;
+        let layers = sizes.len() - 1;
+        let q = sizes[layers];
+        let out = self.offsets[layers];
+        // Start of each layer's parameters.
+        let mut starts = Vec::with_capacity(layers);
+        let mut p = 0;
+        for l in 0..layers {
+            starts.push(p);
+            p += sizes[l + 1] * (sizes[l] + 1);
+        }
+        for (row_block, &i) in self.train.iter().enumerate() {
+            let xi = self.x.row(i);
+            let xi = xi.as_slice().unwrap_or(&[]);
+            forward(sizes, params, xi, acts, &self.offsets);
+            for k in 0..q {
+                let r = row_block * q + k;
+                res[(r, 0)] = acts[out + k] - self.t[[i, k]];
+                // Back-propagate the unit seed of output k.
+                delta[..q].fill(0.0);
+                delta[k] = 1.0;
+                for l in (0..layers).rev() {
+                    let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+                    let input = &acts[self.offsets[l]..self.offsets[l] + n_in];
+                    let s = starts[l];
+                    for a in 0..n_out {
+                        let d = delta[a];
+                        for (c, inp) in input.iter().enumerate() {
+                            jac[(r, s + a * n_in + c)] = d * inp;
+                        }
+                        jac[(r, s + n_out * n_in + a)] = d;
+                    }
+                    if l > 0 {
+                        // delta_{l-1} = (W_l' delta_l) .* (1 - a^2), in a
+                        // second half of the buffer to avoid aliasing.
+                        let w = &params[s..s + n_out * n_in];
+                        let (cur, next) = delta.split_at_mut(MAX_WIDTH);
+                        for c in 0..n_in {
+                            let mut acc = 0.0;
+                            for a in 0..n_out {
+                                acc += w[a * n_in + c] * cur[a];
+                            }
+                            next[c] = acc * (1.0 - input[c] * input[c]);
+                        }
+                        cur[..n_in].copy_from_slice(&next[..n_in]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Solve `(A + mu I) x = b` by Cholesky, for the symmetric positive
+/// semi-definite `A = J'J`; `None` if the damped matrix is not positive definite.
+fn damped_solve(a: &Mat<f64>, mu: f64, b: &[f64], l: &mut Mat<f64>, x: &mut [f64]) -> Option<()> {
+    let n = b.len();
+    for j in 0..n {
+        let mut d = a[(j, j)] + mu;
+        for k in 0..j {
+            d -= l[(j, k)] * l[(j, k)];
+        }
+        if !(d > 0.0) {
+            return None;
+        }
+        let d = d.sqrt();
+        l[(j, j)] = d;
+        for i in j + 1..n {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= l[(i, k)] * l[(j, k)];
+            }
+            l[(i, j)] = s / d;
+        }
+    }
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= l[(i, k)] * x[k];
+        }
+        x[i] = s / l[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        for k in i + 1..n {
+            s -= l[(k, i)] * x[k];
+        }
+        x[i] = s / l[(i, i)];
+    }
+    Some(())
+}
+
+/// Glorot-uniform weights, small random biases.
+fn initial_parameters(sizes: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let mut params = Vec::with_capacity(parameter_count(sizes));
+    for w in sizes.windows(2) {
+        let (n_in, n_out) = (w[0], w[1]);
+        let limit = (6.0 / (n_in + n_out) as f64).sqrt();
+        params.extend((0..n_out * n_in).map(|_| rng.random_range(-limit..limit)));
+        params.extend((0..n_out).map(|_| rng.random_range(-0.5..0.5)));
+    }
+    params
+}
+
+const MU_START: f64 = 1e-3;
+const MU_MAX: f64 = 1e10;
+
+fn train_one(problem: &Problem<'_>, mlp: &MlpParams, restart: usize) -> (Vec<f64>, RestartReport) {
+    let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
+    rng.set_stream(restart as u64 + 1);
+    let mut params = initial_parameters(problem.sizes, &mut rng);
+    let n = problem.n_params();
+    let q = *problem.sizes.last().unwrap_or(&1);
+    let rows = problem.train.len() * q;
+    let width = problem.offsets.last().copied().unwrap_or(0);
+    let mut acts = vec![0.0; width];
+    let mut delta = vec![0.0; 2 * MAX_WIDTH];
+    let mut jac = Mat::<f64>::zeros(rows, n);
+    let mut res = Mat::<f64>::zeros(rows, 1);
+    let mut jtj = Mat::<f64>::zeros(n, n);
+    let mut jtr = Mat::<f64>::zeros(n, 1);
+    let mut chol = Mat::<f64>::zeros(n, n);
+    let mut step = vec![0.0; n];
+    let mut gradient = vec![0.0; n];
+    let mut trial = vec![0.0; n];
+
+    let held_out = if problem.held_out.is_empty() { problem.train } else { problem.held_out };
+    let mut loss = problem.mse(&params, problem.train, &mut acts) + problem.penalty(&params) / (rows as f64);
+    let mut best = (problem.mse(&params, held_out, &mut acts), params.clone());
+    let mut since_best = 0;
+    let mut mu = MU_START;
+    let mut reason = TerminationReason::MaxIterations;
+    let mut iterations = 0;
+    let scale = 1.0 / rows as f64;
+    for _ in 0..mlp.max_iterations {
+        iterations += 1;
+        problem.jacobian(&params, &mut jac, &mut res, &mut acts, &mut delta);
+        matmul(jtj.as_mut(), Accum::Replace, jac.transpose(), jac.as_ref(), scale, Par::Seq);
+        matmul(jtr.as_mut(), Accum::Replace, jac.transpose(), res.as_ref(), scale, Par::Seq);
+        // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
+        let d = problem.decay * scale;
+        for j in 0..n {
+            jtj[(j, j)] += d;
+            gradient[j] = -(jtr[(j, 0)] + d * params[j]);
+        }
+        let mut improved = false;
+        while mu <= MU_MAX {
+            if damped_solve(&jtj, mu, &gradient, &mut chol, &mut step).is_some() {
+                for ((t, p), s) in trial.iter_mut().zip(&params).zip(&step) {
+                    *t = p + s;
+                }
+                let trial_loss = problem.mse(&trial, problem.train, &mut acts)
+                    + problem.penalty(&trial) / (rows as f64);
+                if trial_loss < loss {
+                    let relative = (loss - trial_loss) / loss.max(f64::MIN_POSITIVE);
+                    params.copy_from_slice(&trial);
+                    loss = trial_loss;
+                    mu = (mu / 10.0).max(1e-12);
+                    improved = true;
+                    if relative < 1e-12 {
+                        reason = TerminationReason::Converged;
+                    }
+                    break;
+                }
+            }
+            mu *= 10.0;
+        }
+        if !improved {
+            reason = TerminationReason::DampingLimit;
+            break;
+        }
+        let held = problem.mse(&params, held_out, &mut acts);
+        if held < best.0 {
+            best = (held, params.clone());
+            since_best = 0;
+        } else {
+            since_best += 1;
+            if !problem.held_out.is_empty() && since_best >= mlp.patience {
+                reason = TerminationReason::EarlyStopping;
+                break;
+            }
+        }
+        if reason == TerminationReason::Converged {
+            break;
+        }
+    }
+    let (validation_mse, kept) = best;
+    let report = RestartReport {
+        restart,
+        iterations,
+        reason,
+        train_mse: problem.mse(&kept, problem.train, &mut acts),
+        validation_mse,
+    };
+    (kept, report)
+}
+
+impl Regressor for Mlp {
+    type Model = FittedMlp;
+
+    fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedMlp> {
+        check::training_data(x, y)?;
+        let p = &self.params;
+        let (m, n_in) = x.dim();
+        let q = y.ncols();
+        if n_in > MAX_WIDTH || q > MAX_WIDTH {
+            return Err(FitError::InvalidSetting {
+                name: "features or targets",
+                value: format!("{n_in} features, {q} targets"),
+                reason: "at most 256 each".into(),
+            });
+        }
+        let mut sizes = vec![n_in];
+        sizes.extend(&p.hidden);
+        sizes.push(q);
+        let n_params = parameter_count(&sizes);
+        let n_held = (p.validation_fraction * m as f64).round() as usize;
+        let n_train = m - n_held;
+        if n_train < 2 || (p.validation_fraction > 0.0 && n_held == 0) {
+            return Err(FitError::TooFewSamples {
+                got: m,
+                needed: 2 + usize::from(p.validation_fraction > 0.0),
+                why: "training and held-out sets both need samples".into(),
+            });
+        }
+        let features = Standardizer::fit(x);
+        let targets = Standardizer::fit(y);
+        // Standard layout so rows are contiguous slices.
+        let xs = features.transform(x).as_standard_layout().to_owned();
+        let ts = targets.transform(y);
+        let mut order: Vec<usize> = (0..m).collect();
+        let mut split_rng = ChaCha8Rng::seed_from_u64(p.seed ^ 0x5350_4c49_5400);
+        order.shuffle(&mut split_rng);
+        let (held_out, train) = order.split_at(n_held);
+        let mut offsets = vec![0];
+        for s in &sizes {
+            offsets.push(offsets.last().copied().unwrap_or(0) + s);
+        }
+        let problem = Problem {
+            sizes: &sizes,
+            offsets,
+            x: &xs,
+            t: &ts,
+            train,
+            held_out,
+            decay: p.weight_decay,
+        };
+        let _ = n_params;
+        let runs: Vec<(Vec<f64>, RestartReport)> = (0..p.restarts)
+            .into_par_iter()
+            .map(|r| train_one(&problem, p, r))
+            .collect();
+        // The lowest held-out loss wins; ties go to the lower index, so the
+        // choice does not depend on scheduling.
+        let best = runs
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1 .1.validation_mse.total_cmp(&b.1 .1.validation_mse))
+            .map(|(i, _)| i)
+            .unwrap_or(0);
+        let params = runs[best].0.clone();
+        let reports = runs.into_iter().map(|(_, r)| r).collect();
+        Ok(FittedMlp {
+            features,
+            targets,
+            sizes,
+            params,
+            reports,
+            best,
+        })
+    }
+}
+
+impl Predictor for FittedMlp {
+    fn n_inputs(&self) -> usize {
+        self.sizes[0]
+    }
+
+    fn n_outputs(&self) -> usize {
+        *self.sizes.last().unwrap_or(&0)
+    }
+
+    fn predict_into(&self, x: &[f64], out: &mut [f64]) -> Result<()> {
+        check::row_lengths(x, out, self.n_inputs(), self.n_outputs())?;
+        // Two stack buffers, used in turn as input and output of each layer.
+        let mut a = [0.0f64; MAX_WIDTH];
+        let mut b = [0.0f64; MAX_WIDTH];
+        self.features.transform_into(x, &mut a[..self.sizes[0]]);
+        let layers = self.sizes.len() - 1;
+        let mut p = 0;
+        for l in 0..layers {
+            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+            let w = &self.params[p..p + n_out * n_in];
+            let bias = &self.params[p + n_out * n_in..p + n_out * (n_in + 1)];
+            for i in 0..n_out {
+                let row = &w[i * n_in..(i + 1) * n_in];
+                let z = bias[i] + row.iter().zip(&a[..n_in]).map(|(u, v)| u * v).sum::<f64>();
+                b[i] = if l + 1 < layers { z.tanh() } else { z };
+            }
+            std::mem::swap(&mut a, &mut b);
+            p += n_out * (n_in + 1);
+        }
+        out.copy_from_slice(&a[..self.n_outputs()]);
+        self.targets.inverse_in_place(out);
+        Ok(())
+    }
+}
+
+/// The network's outputs and their Jacobian with respect to all parameters
+/// at one (standardized) input: for tests of back-propagation.
+#[doc(hidden)]
+pub fn jacobian_at(sizes: &[usize], params: &[f64], x: &[f64]) -> (Vec<f64>, Array2<f64>) {
+    let mut offsets = vec![0];
+    for s in sizes {
+        offsets.push(offsets.last().copied().unwrap_or(0) + s);
+    }
+    let q = *sizes.last().unwrap_or(&1);
+    let xs = Array2::from_shape_vec((1, x.len()), x.to_vec()).unwrap_or_default();
+    let ts = Array2::zeros((1, q));
+    let train = [0usize];
+    let problem = Problem {
+        sizes,
+        offsets: offsets.clone(),
+        x: &xs,
+        t: &ts,
+        train: &train,
+        held_out: &[],
+        decay: 0.0,
+    };
+    let n = parameter_count(sizes);
+    let mut jac = Mat::zeros(q, n);
+    let mut res = Mat::zeros(q, 1);
+    let mut acts = vec![0.0; offsets.last().copied().unwrap_or(0)];
+    let mut delta = vec![0.0; 2 * MAX_WIDTH];
+    problem.jacobian(params, &mut jac, &mut res, &mut acts, &mut delta);
+    let outputs = (0..q).map(|k| res[(k, 0)]).collect();
+    (outputs, Array2::from_shape_fn((q, n), |(i, j)| jac[(i, j)]))
+}
+
+/// Parameter count for layer sizes `[n_in, hidden.., n_out]`.
+#[doc(hidden)]
+pub fn n_parameters(sizes: &[usize]) -> usize {
+    parameter_count(sizes)
+}

@@ -1,0 +1,169 @@
+//! Stage-2 regressors against closed forms, finite differences and each other.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use ndarray::Array2;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use twostage_fit::{
+    FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason,
+    jacobian_at, n_parameters,
+};
+
+fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    Array2::from_shape_fn((rows, cols), |_| rng.random_range(-1.0..1.0))
+}
+
+#[test]
+fn backpropagation_matches_finite_differences() {
+    let sizes = [3, 5, 4, 2];
+    let n = n_parameters(&sizes);
+    assert_eq!(n, 5 * 4 + 4 * 6 + 2 * 5);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let params: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let x = [0.3, -0.7, 0.9];
+    let (_, jac) = jacobian_at(&sizes, &params, &x);
+    let h = 1e-6;
+    for j in 0..n {
+        let (mut plus, mut minus) = (params.clone(), params.clone());
+        plus[j] += h;
+        minus[j] -= h;
+        let (fp, _) = jacobian_at(&sizes, &plus, &x);
+        let (fm, _) = jacobian_at(&sizes, &minus, &x);
+        for k in 0..2 {
+            let fd = (fp[k] - fm[k]) / (2.0 * h);
+            assert!((fd - jac[[k, j]]).abs() < 1e-8, "output {k}, parameter {j}: {fd} vs {}", jac[[k, j]]);
+        }
+    }
+}
+
+#[test]
+fn ridge_equals_the_regularized_normal_equations() {
+    // Independent check: (Z'Z + lambda I) W = Z'T on the standardized data,
+    // solved by Gaussian elimination here.
+    let x = uniform(80, 4, 2);
+    let y = Array2::from_shape_fn((80, 2), |(i, k)| {
+        x[[i, 0]] * (k as f64 + 1.0) - 2.0 * x[[i, 3]] + 0.1 * x[[i, 1]] * x[[i, 2]]
+    });
+    let lambda = 3.0;
+    let model = Ridge::new(lambda).unwrap().fit(x.view(), y.view()).unwrap();
+    let (fs, ts) = (Standardizer::fit(x.view()), Standardizer::fit(y.view()));
+    let (z, t) = (fs.transform(x.view()), ts.transform(y.view()));
+    let n = 4;
+    for k in 0..2 {
+        let mut a = vec![vec![0.0; n + 1]; n];
+        for i in 0..n {
+            for j in 0..n {
+                a[i][j] = (0..80).map(|r| z[[r, i]] * z[[r, j]]).sum::<f64>()
+                    + if i == j { lambda } else { 0.0 };
+            }
+            a[i][n] = (0..80).map(|r| z[[r, i]] * t[[r, k]]).sum();
+        }
+        for c in 0..n {
+            for r in 0..n {
+                if r != c {
+                    let f = a[r][c] / a[c][c];
+                    for j in c..=n {
+                        a[r][j] -= f * a[c][j];
+                    }
+                }
+            }
+        }
+        let w: Vec<f64> = (0..n).map(|i| a[i][n] / a[i][i]).collect();
+        // Compare predictions at a few points.
+        for r in [0, 17, 55] {
+            let zr: f64 = (0..n).map(|j| w[j] * z[[r, j]]).sum();
+            let want = ts.mean()[k] + ts.scale()[k] * zr;
+            let got = model.predict(x.view()).unwrap()[[r, k]];
+            assert!((got - want).abs() < 1e-10, "{got} vs {want}");
+        }
+    }
+}
+
+#[test]
+fn ridge_refuses_collinear_features_without_a_penalty() {
+    let mut x = uniform(30, 3, 3);
+    for i in 0..30 {
+        x[[i, 2]] = 2.0 * x[[i, 0]] - x[[i, 1]];
+    }
+    let y = uniform(30, 1, 4);
+    let err = Ridge::new(0.0).unwrap().fit(x.view(), y.view()).unwrap_err();
+    assert!(matches!(err, FitError::RankDeficient(_)), "{err}");
+    assert!(Ridge::new(1e-3).unwrap().fit(x.view(), y.view()).is_ok());
+    assert!(Ridge::new(-1.0).is_err());
+    let mut bad = y.clone();
+    bad[[4, 0]] = f64::NAN;
+    let err = Ridge::default().fit(x.view(), bad.view()).unwrap_err();
+    assert!(matches!(err, FitError::NonFinite { what: "targets", row: 4, col: 0, .. }));
+}
+
+/// A smooth nonlinear two-output target.
+fn nonlinear(x: &Array2<f64>) -> Array2<f64> {
+    Array2::from_shape_fn((x.nrows(), 2), |(i, k)| {
+        let (a, b) = (x[[i, 0]], x[[i, 1]]);
+        if k == 0 { (2.0 * a).sin() + b * b } else { a * b - 0.5 * b }
+    })
+}
+
+#[test]
+fn the_network_fits_what_a_linear_map_cannot() {
+    let x = uniform(600, 2, 5);
+    let y = nonlinear(&x);
+    let x_test = uniform(300, 2, 6);
+    let y_test = nonlinear(&x_test);
+    let rmse = |p: &Array2<f64>| {
+        ((p - &y_test).mapv(|v| v * v).sum() / (y_test.len() as f64)).sqrt()
+    };
+    let linear = Ridge::default().fit(x.view(), y.view()).unwrap();
+    let net = MlpParams::new(&[12]).unwrap().seed(3).check().unwrap().fit(x.view(), y.view()).unwrap();
+    let (e_lin, e_net) = (rmse(&linear.predict(x_test.view()).unwrap()), rmse(&net.predict(x_test.view()).unwrap()));
+    assert!(e_lin > 0.2, "linear RMSE {e_lin}");
+    assert!(e_net < 0.02, "network RMSE {e_net}");
+    assert_eq!(net.reports().len(), 4);
+    let best = net.best_restart();
+    assert!(net.reports().iter().all(|r| r.validation_mse >= best.validation_mse));
+}
+
+#[test]
+fn training_is_identical_with_one_and_two_threads() {
+    let x = uniform(200, 3, 7);
+    let y = nonlinear(&x.slice(ndarray::s![.., 0..2]).to_owned());
+    let fit = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            MlpParams::new(&[6, 4]).unwrap().restarts(3).max_iterations(40).seed(9).check().unwrap().fit(x.view(), y.view()).unwrap()
+        })
+    };
+    let (one, two) = (fit(1), fit(2));
+    assert_eq!(one, two);
+    let other = MlpParams::new(&[6, 4]).unwrap().restarts(3).max_iterations(40).seed(10).check().unwrap().fit(x.view(), y.view()).unwrap();
+    assert_ne!(one, other);
+}
+
+#[test]
+fn noisy_targets_stop_early_on_the_held_out_set() {
+    // Pure noise: the held-out loss stops improving almost at once.
+    let x = uniform(300, 4, 11);
+    let y = uniform(300, 1, 12);
+    let net = MlpParams::new(&[30]).unwrap().restarts(1).patience(5).weight_decay(0.0).check().unwrap().fit(x.view(), y.view()).unwrap();
+    let report = net.best_restart();
+    assert_eq!(report.reason, TerminationReason::EarlyStopping, "{report:?}");
+    assert!(report.iterations < 300);
+}
+
+#[test]
+fn invalid_settings_name_themselves() {
+    let err = MlpParams::new(&[]).unwrap().check().unwrap_err();
+    assert!(err.to_string().contains("hidden layers"), "{err}");
+    assert!(MlpParams::new(&[300]).unwrap().check().is_err());
+    assert!(MlpParams::new(&[5]).unwrap().restarts(0).check().is_err());
+    assert!(MlpParams::new(&[5]).unwrap().validation_fraction(0.9).check().is_err());
+    let net = MlpParams::new(&[3]).unwrap().check().unwrap();
+    let err = net.fit(uniform(2, 1, 1).view(), uniform(2, 1, 2).view()).unwrap_err();
+    assert!(matches!(err, FitError::TooFewSamples { .. }), "{err}");
+    let fitted = net.fit(uniform(50, 2, 1).view(), uniform(50, 1, 2).view()).unwrap();
+    let mut out = [0.0; 2];
+    assert!(fitted.predict_into(&[0.0, 0.0], &mut out).is_err());
+}

@@ -1,0 +1,33 @@
+//! Validation of two-stage estimators.
+//!
+//! Because the two-stage estimator is trained on simulations, it can be
+//! validated on fresh simulations at no cost in real experiments (Section
+//! 4.3 of the paper). Theorem 1 (Hoeffding) turns the empirical mean squared
+//! error over r such simulations into a bound on the true one:
+//!
+//! `E||theta - f(D)||^2 <= (1/r) sum ||theta_i - f(D_i)||^2 + gamma`
+//! with probability at least `1 - delta`, whenever `r > sigma^2 / (2 gamma^2) ln(1/delta)`.
+//!
+//! # Example
+//!
+//! ```
+//! use twostage_validate::{hoeffding_sample_size, squared_error_bound, HoeffdingBound};
+//!
+//! // Estimates clipped to the benchmark's box [-0.9, 0.9] err by at most 1.8.
+//! let sigma = squared_error_bound(&[-0.9], &[0.9]);
+//! let r = hoeffding_sample_size(sigma, 0.05, 1e-3)?;
+//! assert_eq!(r, 14_503);
+//! let squared_errors = vec![0.0009; r as usize];
+//! let bound = HoeffdingBound::from_squared_errors(&squared_errors, sigma, 1e-3)?;
+//! assert!(bound.gamma < 0.05 && bound.upper() < 0.051);
+//! # Ok::<(), twostage_validate::ValidateError>(())
+//! ```
+#![deny(missing_docs)]
+
+mod error;
+mod hoeffding;
+
+pub use error::{Result, ValidateError};
+pub use hoeffding::{
+    HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound,
+};
