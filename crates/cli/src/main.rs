@@ -1,5 +1,6 @@
 //! `twostage`: the command line of the two-stage estimator toolkit.
 
+mod demo;
 mod number;
 mod simulate;
 
@@ -20,6 +21,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Train the paper's benchmark estimator, validate it, and estimate a fresh record.
+    Demo(demo::DemoArgs),
     /// List the built-in models: parameters, prior boxes, sampling, input and noise.
     Models,
     /// Simulate one experiment (--theta) or many drawn from the prior (--count).
@@ -51,6 +54,7 @@ fn main() -> ExitCode {
         Err(e) => e.exit(),
     };
     let result = match &cli.command {
+        Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
         Command::Models => simulate::models(&mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
     };

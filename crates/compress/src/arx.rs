@@ -3,10 +3,10 @@
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
+use crate::Compressor;
 use crate::error::{CompressError, Result};
 use crate::signals::{check, copy_window, degenerate, name};
 use crate::workspace::{RANK_TOLERANCE, Workspace};
-use crate::Compressor;
 
 /// An ARX(na, nb) structure with input delay `delay`, fitted per output by
 /// least squares (MISO for each output, so MIMO records work):
@@ -127,7 +127,11 @@ impl Arx {
 
     /// The first sample that has all its lags: `max(na, delay + nb - 1)`.
     pub fn first_sample(&self) -> usize {
-        let input_reach = if self.nb == 0 { 0 } else { self.delay + self.nb - 1 };
+        let input_reach = if self.nb == 0 {
+            0
+        } else {
+            self.delay + self.nb - 1
+        };
         self.na.max(input_reach)
     }
 }

@@ -67,7 +67,9 @@ pub trait Compressor: Send + Sync {
 
     /// Names of the features, for reports.
     fn feature_names(&self) -> Vec<String> {
-        (1..=self.n_features()).map(|k| format!("alpha{k}")).collect()
+        (1..=self.n_features())
+            .map(|k| format!("alpha{k}"))
+            .collect()
     }
 
     /// Compress one record into a new vector (allocates a workspace).

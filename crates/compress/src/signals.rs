@@ -72,7 +72,9 @@ pub(crate) fn degenerate(column: ArrayView1<'_, f64>, name: &str) -> Option<Stri
     let spread = column.iter().fold(0.0f64, |m, v| m.max((v - first).abs()));
     let scale = column.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 {
-        Some(format!("{name} is zero over the whole record: there is nothing to fit"))
+        Some(format!(
+            "{name} is zero over the whole record: there is nothing to fit"
+        ))
     } else if spread <= 1e-12 * scale {
         Some(format!(
             "{name} is constant ({first}) over the record: it does not excite the \

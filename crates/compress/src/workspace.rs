@@ -75,20 +75,15 @@ impl Workspace {
             self.rhs = Mat::zeros(rows, 1);
             let block = factor::recommended_block_size::<f64>(rows, cols);
             self.q_coeff = Mat::zeros(block, rows.min(cols));
-            let req = factor::qr_in_place_scratch::<f64>(
-                rows,
-                cols,
-                block,
-                Par::Seq,
-                Default::default(),
-            )
-            .or(solve::solve_lstsq_in_place_scratch::<f64>(
-                rows,
-                cols,
-                block,
-                1,
-                Par::Seq,
-            ));
+            let req =
+                factor::qr_in_place_scratch::<f64>(rows, cols, block, Par::Seq, Default::default())
+                    .or(solve::solve_lstsq_in_place_scratch::<f64>(
+                        rows,
+                        cols,
+                        block,
+                        1,
+                        Par::Seq,
+                    ));
             if req.size_bytes() > self.mem_req.size_bytes() {
                 self.mem = MemBuffer::new(req);
                 self.mem_req = req;
@@ -104,7 +99,13 @@ impl Workspace {
     pub(crate) fn solve(&mut self, alpha: &mut [f64]) -> Option<usize> {
         let cols = self.phi.ncols();
         for (j, norm) in self.norms.iter_mut().enumerate() {
-            *norm = self.phi.col_as_slice(j).iter().map(|v| v * v).sum::<f64>().sqrt();
+            *norm = self
+                .phi
+                .col_as_slice(j)
+                .iter()
+                .map(|v| v * v)
+                .sum::<f64>()
+                .sqrt();
         }
         let stack = MemStack::new(&mut self.mem);
         factor::qr_in_place(
@@ -118,7 +119,8 @@ impl Workspace {
         // the diagonal of R is checked here.
         for j in 0..cols {
             let r = self.phi[(j, j)].abs();
-            if !(r > RANK_TOLERANCE * self.norms[j]) || self.norms[j] == 0.0 {
+            let independent = r > RANK_TOLERANCE * self.norms[j] && self.norms[j] > 0.0;
+            if !independent {
                 return Some(j);
             }
         }

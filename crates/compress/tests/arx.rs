@@ -1,7 +1,7 @@
 //! ARX compression against known coefficients and an independent solver.
 
-// A panic is how a test fails.
-#![allow(clippy::unwrap_used)]
+// A panic is how a test fails; reference linear algebra reads best with indices.
+#![allow(clippy::unwrap_used, clippy::needless_range_loop)]
 
 use ndarray::{Array2, ArrayView2};
 use rand::SeedableRng;
@@ -53,7 +53,9 @@ fn normal_equations(phi: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
         }
     }
     for c in 0..n {
-        let p = (c..n).max_by(|&a, &b| m[a][c].abs().total_cmp(&m[b][c].abs())).unwrap();
+        let p = (c..n)
+            .max_by(|&a, &b| m[a][c].abs().total_cmp(&m[b][c].abs()))
+            .unwrap();
         m.swap(c, p);
         for r in 0..n {
             if r != c {
@@ -78,7 +80,10 @@ fn recovers_known_coefficients_from_noise_free_data() {
         let alpha = arx.compress(column(&u).view(), column(&y).view()).unwrap();
         let want: Vec<f64> = a.iter().chain(&b).copied().collect();
         for (g, w) in alpha.iter().zip(&want) {
-            assert!((g - w).abs() < 1e-12, "delay {delay}: {alpha:?} != {want:?}");
+            assert!(
+                (g - w).abs() < 1e-12,
+                "delay {delay}: {alpha:?} != {want:?}"
+            );
         }
     }
 }
@@ -99,7 +104,17 @@ fn recovers_miso_coefficients_for_each_output_of_a_mimo_record() {
         u[[t, 1]] = u2[t];
     }
     let arx = Arx::new(1, 1).unwrap().with_signals(2, 2).unwrap();
-    assert_eq!(arx.feature_names(), ["a1[y1]", "b1[y1<-u1]", "b1[y1<-u2]", "a1[y2]", "b1[y2<-u1]", "b1[y2<-u2]"]);
+    assert_eq!(
+        arx.feature_names(),
+        [
+            "a1[y1]",
+            "b1[y1<-u1]",
+            "b1[y1<-u2]",
+            "a1[y2]",
+            "b1[y2<-u1]",
+            "b1[y2<-u2]"
+        ]
+    );
     let alpha = arx.compress(u.view(), y.view()).unwrap();
     for (g, w) in alpha.iter().zip([0.5, 2.0, -1.0, -0.4, 0.3, 0.7]) {
         assert!((g - w).abs() < 1e-12, "{alpha:?}");
@@ -120,7 +135,10 @@ fn agrees_with_the_normal_equations_on_noisy_data() {
     let start = arx.first_sample();
     let phi: Vec<Vec<f64>> = (start..n)
         .map(|t| {
-            (1..=na).map(|k| y[t - k]).chain((1..=nb).map(|k| u[t - k])).collect()
+            (1..=na)
+                .map(|k| y[t - k])
+                .chain((1..=nb).map(|k| u[t - k]))
+                .collect()
         })
         .collect();
     let reference = normal_equations(&phi, &y[start..]);
@@ -138,7 +156,8 @@ fn a_reused_workspace_gives_the_same_bits_as_a_fresh_one() {
         let u = noise(n, seed);
         let y = simulate_arx(&[0.3], &[1.0], 1, &u, &noise(n, seed + 100));
         let (u, y) = (column(&u), column(&y));
-        arx.compress_into(u.view(), y.view(), &mut work, &mut alpha).unwrap();
+        arx.compress_into(u.view(), y.view(), &mut work, &mut alpha)
+            .unwrap();
         let fresh = arx.compress(u.view(), y.view()).unwrap();
         assert_eq!(
             alpha.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
@@ -148,7 +167,8 @@ fn a_reused_workspace_gives_the_same_bits_as_a_fresh_one() {
 }
 
 fn compress_error(arx: &Arx, u: &[f64], y: &[f64]) -> CompressError {
-    arx.compress(column(u).view(), column(y).view()).unwrap_err()
+    arx.compress(column(u).view(), column(y).view())
+        .unwrap_err()
 }
 
 #[test]
@@ -177,18 +197,34 @@ fn degenerate_records_are_refused_with_their_cause() {
     let mut bad = y.clone();
     bad[17] = f64::NAN;
     let err = compress_error(&arx, &u, &bad);
-    assert!(matches!(err, CompressError::NonFinite { index: 17, .. }), "{err}");
+    assert!(
+        matches!(err, CompressError::NonFinite { index: 17, .. }),
+        "{err}"
+    );
 
-    let err = arx.compress(column(&u).view(), column(&y[..100]).view()).unwrap_err();
+    let err = arx
+        .compress(column(&u).view(), column(&y[..100]).view())
+        .unwrap_err();
     assert!(matches!(err, CompressError::LengthMismatch { .. }), "{err}");
     let wide = Array2::<f64>::zeros((n, 2));
     let err = arx.compress(wide.view(), column(&y).view()).unwrap_err();
     assert!(matches!(err, CompressError::ShapeMismatch { .. }), "{err}");
     let mut short = [0.0; 3];
     let err = arx
-        .compress_into(column(&u).view(), column(&y).view(), &mut Workspace::new(), &mut short)
+        .compress_into(
+            column(&u).view(),
+            column(&y).view(),
+            &mut Workspace::new(),
+            &mut short,
+        )
         .unwrap_err();
-    assert!(matches!(err, CompressError::BufferLength { expected: 4, got: 3 }));
+    assert!(matches!(
+        err,
+        CompressError::BufferLength {
+            expected: 4,
+            got: 3
+        }
+    ));
 }
 
 #[test]

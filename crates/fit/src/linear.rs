@@ -107,7 +107,11 @@ impl Regressor for Ridge {
         let qr = a.qr();
         let r = qr.R();
         let largest = (0..n).map(|j| r[(j, j)].abs()).fold(0.0f64, f64::max);
-        if let Some(j) = (0..n).find(|&j| !(r[(j, j)].abs() > 1e-12 * largest)) {
+        let dependent = |j: usize| {
+            let d = r[(j, j)].abs();
+            d.is_nan() || d <= 1e-12 * largest
+        };
+        if let Some(j) = (0..n).find(|&j| dependent(j)) {
             return Err(FitError::RankDeficient(format!(
                 "feature {j} is a linear combination of the others (or constant): \
                  use lambda > 0 or drop it"

@@ -5,9 +5,9 @@
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use ndarray::{Array2, ArrayView2};
+use rand::RngExt;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
-use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -72,6 +72,10 @@ impl MlpParams {
             seed: 0,
         })
     }
+    /// The hidden layer sizes.
+    pub fn hidden(&self) -> &[usize] {
+        &self.hidden
+    }
     /// Number of seeded restarts.
     pub fn restarts(mut self, restarts: usize) -> Self {
         self.restarts = restarts;
@@ -121,7 +125,11 @@ impl MlpParams {
             ));
         }
         if let Some(w) = self.hidden.iter().find(|&&w| w == 0 || w > MAX_WIDTH) {
-            return Err(invalid("hidden layer width", w.to_string(), "must be in 1..=256"));
+            return Err(invalid(
+                "hidden layer width",
+                w.to_string(),
+                "must be in 1..=256",
+            ));
         }
         if self.restarts == 0 {
             return Err(invalid("restarts", "0".into(), "at least 1"));
@@ -137,7 +145,11 @@ impl MlpParams {
             ));
         }
         if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
-            return Err(invalid("weight_decay", self.weight_decay.to_string(), "finite and >= 0"));
+            return Err(invalid(
+                "weight_decay",
+                self.weight_decay.to_string(),
+                "finite and >= 0",
+            ));
         }
         Ok(Mlp { params: self })
     }
@@ -283,7 +295,14 @@ impl Problem<'_> {
     }
 
     /// Residuals r (train rows x targets) and their Jacobian J.
-    fn jacobian(&self, params: &[f64], jac: &mut Mat<f64>, res: &mut Mat<f64>, acts: &mut [f64], delta: &mut [f64]) {
+    fn jacobian(
+        &self,
+        params: &[f64],
+        jac: &mut Mat<f64>,
+        res: &mut Mat<f64>,
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
         let sizes = self.sizes;
         let layers = sizes.len() - 1;
         let q = sizes[layers];
@@ -345,7 +364,7 @@ fn damped_solve(a: &Mat<f64>, mu: f64, b: &[f64], l: &mut Mat<f64>, x: &mut [f64
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        if !(d > 0.0) {
+        if d.is_nan() || d <= 0.0 {
             return None;
         }
         let d = d.sqrt();
@@ -409,8 +428,13 @@ fn train_one(problem: &Problem<'_>, mlp: &MlpParams, restart: usize) -> (Vec<f64
     let mut gradient = vec![0.0; n];
     let mut trial = vec![0.0; n];
 
-    let held_out = if problem.held_out.is_empty() { problem.train } else { problem.held_out };
-    let mut loss = problem.mse(&params, problem.train, &mut acts) + problem.penalty(&params) / (rows as f64);
+    let held_out = if problem.held_out.is_empty() {
+        problem.train
+    } else {
+        problem.held_out
+    };
+    let mut loss =
+        problem.mse(&params, problem.train, &mut acts) + problem.penalty(&params) / (rows as f64);
     let mut best = (problem.mse(&params, held_out, &mut acts), params.clone());
     let mut since_best = 0;
     let mut mu = MU_START;
@@ -420,8 +444,22 @@ fn train_one(problem: &Problem<'_>, mlp: &MlpParams, restart: usize) -> (Vec<f64
     for _ in 0..mlp.max_iterations {
         iterations += 1;
         problem.jacobian(&params, &mut jac, &mut res, &mut acts, &mut delta);
-        matmul(jtj.as_mut(), Accum::Replace, jac.transpose(), jac.as_ref(), scale, Par::Seq);
-        matmul(jtr.as_mut(), Accum::Replace, jac.transpose(), res.as_ref(), scale, Par::Seq);
+        matmul(
+            jtj.as_mut(),
+            Accum::Replace,
+            jac.transpose(),
+            jac.as_ref(),
+            scale,
+            Par::Seq,
+        );
+        matmul(
+            jtr.as_mut(),
+            Accum::Replace,
+            jac.transpose(),
+            res.as_ref(),
+            scale,
+            Par::Seq,
+        );
         // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
         let d = problem.decay * scale;
         for j in 0..n {
@@ -540,7 +578,7 @@ impl Regressor for Mlp {
         let best = runs
             .iter()
             .enumerate()
-            .min_by(|a, b| a.1 .1.validation_mse.total_cmp(&b.1 .1.validation_mse))
+            .min_by(|a, b| a.1.1.validation_mse.total_cmp(&b.1.1.validation_mse))
             .map(|(i, _)| i)
             .unwrap_or(0);
         let params = runs[best].0.clone();

@@ -35,7 +35,11 @@ impl Standardizer {
             let var = col.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n;
             let sd = var.sqrt();
             mean.push(m);
-            scale.push(if sd > 1e-300 * m.abs().max(1.0) { sd } else { 1.0 });
+            scale.push(if sd > 1e-300 * m.abs().max(1.0) {
+                sd
+            } else {
+                1.0
+            });
         }
         Self { mean, scale }
     }

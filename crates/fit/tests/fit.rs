@@ -1,14 +1,14 @@
 //! Stage-2 regressors against closed forms, finite differences and each other.
 
-// A panic is how a test fails.
-#![allow(clippy::unwrap_used)]
+// A panic is how a test fails; reference linear algebra reads best with indices.
+#![allow(clippy::unwrap_used, clippy::needless_range_loop)]
 
 use ndarray::Array2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use twostage_fit::{
-    FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason,
-    jacobian_at, n_parameters,
+    FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason, jacobian_at,
+    n_parameters,
 };
 
 fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f64> {
@@ -34,7 +34,11 @@ fn backpropagation_matches_finite_differences() {
         let (fm, _) = jacobian_at(&sizes, &minus, &x);
         for k in 0..2 {
             let fd = (fp[k] - fm[k]) / (2.0 * h);
-            assert!((fd - jac[[k, j]]).abs() < 1e-8, "output {k}, parameter {j}: {fd} vs {}", jac[[k, j]]);
+            assert!(
+                (fd - jac[[k, j]]).abs() < 1e-8,
+                "output {k}, parameter {j}: {fd} vs {}",
+                jac[[k, j]]
+            );
         }
     }
 }
@@ -89,21 +93,36 @@ fn ridge_refuses_collinear_features_without_a_penalty() {
         x[[i, 2]] = 2.0 * x[[i, 0]] - x[[i, 1]];
     }
     let y = uniform(30, 1, 4);
-    let err = Ridge::new(0.0).unwrap().fit(x.view(), y.view()).unwrap_err();
+    let err = Ridge::new(0.0)
+        .unwrap()
+        .fit(x.view(), y.view())
+        .unwrap_err();
     assert!(matches!(err, FitError::RankDeficient(_)), "{err}");
     assert!(Ridge::new(1e-3).unwrap().fit(x.view(), y.view()).is_ok());
     assert!(Ridge::new(-1.0).is_err());
     let mut bad = y.clone();
     bad[[4, 0]] = f64::NAN;
     let err = Ridge::default().fit(x.view(), bad.view()).unwrap_err();
-    assert!(matches!(err, FitError::NonFinite { what: "targets", row: 4, col: 0, .. }));
+    assert!(matches!(
+        err,
+        FitError::NonFinite {
+            what: "targets",
+            row: 4,
+            col: 0,
+            ..
+        }
+    ));
 }
 
 /// A smooth nonlinear two-output target.
 fn nonlinear(x: &Array2<f64>) -> Array2<f64> {
     Array2::from_shape_fn((x.nrows(), 2), |(i, k)| {
         let (a, b) = (x[[i, 0]], x[[i, 1]]);
-        if k == 0 { (2.0 * a).sin() + b * b } else { a * b - 0.5 * b }
+        if k == 0 {
+            (2.0 * a).sin() + b * b
+        } else {
+            a * b - 0.5 * b
+        }
     })
 }
 
@@ -113,17 +132,29 @@ fn the_network_fits_what_a_linear_map_cannot() {
     let y = nonlinear(&x);
     let x_test = uniform(300, 2, 6);
     let y_test = nonlinear(&x_test);
-    let rmse = |p: &Array2<f64>| {
-        ((p - &y_test).mapv(|v| v * v).sum() / (y_test.len() as f64)).sqrt()
-    };
+    let rmse =
+        |p: &Array2<f64>| ((p - &y_test).mapv(|v| v * v).sum() / (y_test.len() as f64)).sqrt();
     let linear = Ridge::default().fit(x.view(), y.view()).unwrap();
-    let net = MlpParams::new(&[12]).unwrap().seed(3).check().unwrap().fit(x.view(), y.view()).unwrap();
-    let (e_lin, e_net) = (rmse(&linear.predict(x_test.view()).unwrap()), rmse(&net.predict(x_test.view()).unwrap()));
+    let net = MlpParams::new(&[12])
+        .unwrap()
+        .seed(3)
+        .check()
+        .unwrap()
+        .fit(x.view(), y.view())
+        .unwrap();
+    let (e_lin, e_net) = (
+        rmse(&linear.predict(x_test.view()).unwrap()),
+        rmse(&net.predict(x_test.view()).unwrap()),
+    );
     assert!(e_lin > 0.2, "linear RMSE {e_lin}");
     assert!(e_net < 0.02, "network RMSE {e_net}");
     assert_eq!(net.reports().len(), 4);
     let best = net.best_restart();
-    assert!(net.reports().iter().all(|r| r.validation_mse >= best.validation_mse));
+    assert!(
+        net.reports()
+            .iter()
+            .all(|r| r.validation_mse >= best.validation_mse)
+    );
 }
 
 #[test]
@@ -131,14 +162,33 @@ fn training_is_identical_with_one_and_two_threads() {
     let x = uniform(200, 3, 7);
     let y = nonlinear(&x.slice(ndarray::s![.., 0..2]).to_owned());
     let fit = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
-            MlpParams::new(&[6, 4]).unwrap().restarts(3).max_iterations(40).seed(9).check().unwrap().fit(x.view(), y.view()).unwrap()
+            MlpParams::new(&[6, 4])
+                .unwrap()
+                .restarts(3)
+                .max_iterations(40)
+                .seed(9)
+                .check()
+                .unwrap()
+                .fit(x.view(), y.view())
+                .unwrap()
         })
     };
     let (one, two) = (fit(1), fit(2));
     assert_eq!(one, two);
-    let other = MlpParams::new(&[6, 4]).unwrap().restarts(3).max_iterations(40).seed(10).check().unwrap().fit(x.view(), y.view()).unwrap();
+    let other = MlpParams::new(&[6, 4])
+        .unwrap()
+        .restarts(3)
+        .max_iterations(40)
+        .seed(10)
+        .check()
+        .unwrap()
+        .fit(x.view(), y.view())
+        .unwrap();
     assert_ne!(one, other);
 }
 
@@ -147,9 +197,21 @@ fn noisy_targets_stop_early_on_the_held_out_set() {
     // Pure noise: the held-out loss stops improving almost at once.
     let x = uniform(300, 4, 11);
     let y = uniform(300, 1, 12);
-    let net = MlpParams::new(&[30]).unwrap().restarts(1).patience(5).weight_decay(0.0).check().unwrap().fit(x.view(), y.view()).unwrap();
+    let net = MlpParams::new(&[30])
+        .unwrap()
+        .restarts(1)
+        .patience(5)
+        .weight_decay(0.0)
+        .check()
+        .unwrap()
+        .fit(x.view(), y.view())
+        .unwrap();
     let report = net.best_restart();
-    assert_eq!(report.reason, TerminationReason::EarlyStopping, "{report:?}");
+    assert_eq!(
+        report.reason,
+        TerminationReason::EarlyStopping,
+        "{report:?}"
+    );
     assert!(report.iterations < 300);
 }
 
@@ -159,11 +221,21 @@ fn invalid_settings_name_themselves() {
     assert!(err.to_string().contains("hidden layers"), "{err}");
     assert!(MlpParams::new(&[300]).unwrap().check().is_err());
     assert!(MlpParams::new(&[5]).unwrap().restarts(0).check().is_err());
-    assert!(MlpParams::new(&[5]).unwrap().validation_fraction(0.9).check().is_err());
+    assert!(
+        MlpParams::new(&[5])
+            .unwrap()
+            .validation_fraction(0.9)
+            .check()
+            .is_err()
+    );
     let net = MlpParams::new(&[3]).unwrap().check().unwrap();
-    let err = net.fit(uniform(2, 1, 1).view(), uniform(2, 1, 2).view()).unwrap_err();
+    let err = net
+        .fit(uniform(2, 1, 1).view(), uniform(2, 1, 2).view())
+        .unwrap_err();
     assert!(matches!(err, FitError::TooFewSamples { .. }), "{err}");
-    let fitted = net.fit(uniform(50, 2, 1).view(), uniform(50, 1, 2).view()).unwrap();
+    let fitted = net
+        .fit(uniform(50, 2, 1).view(), uniform(50, 1, 2).view())
+        .unwrap();
     let mut out = [0.0; 2];
     assert!(fitted.predict_into(&[0.0, 0.0], &mut out).is_err());
 }

@@ -1,6 +1,8 @@
 //! Theorem 1 of the paper (Hoeffding's inequality): how many validation
 //! simulations make the empirical mean squared error a guaranteed bound.
 
+use serde::{Deserialize, Serialize};
+
 use crate::error::{Result, ValidateError};
 
 fn check_positive(name: &'static str, value: f64) -> Result<()> {
@@ -38,7 +40,11 @@ fn check_delta(delta: f64) -> Result<()> {
 /// assert!((squared_error_bound(&[-0.9], &[0.9]) - 3.24).abs() < 1e-12);
 /// ```
 pub fn squared_error_bound(lower: &[f64], upper: &[f64]) -> f64 {
-    lower.iter().zip(upper).map(|(lo, hi)| (hi - lo).powi(2)).sum()
+    lower
+        .iter()
+        .zip(upper)
+        .map(|(lo, hi)| (hi - lo).powi(2))
+        .sum()
 }
 
 /// The smallest number r of validation simulations with
@@ -98,7 +104,7 @@ pub fn hoeffding_gamma(sigma: f64, delta: f64, r: u64) -> Result<f64> {
 }
 
 /// The guarantee of Theorem 1 for one set of validation errors.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HoeffdingBound {
     /// The empirical mean squared error over the r validation simulations.
     pub empirical_mse: f64,
@@ -189,7 +195,9 @@ mod tests {
         let (sigma, delta, r) = (1.0, 0.1, 50u64);
         let mut state = 12345u64;
         let mut uniform = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
         let trials = 4000;
@@ -202,7 +210,10 @@ mod tests {
             }
         }
         // Hoeffding is conservative: the failure rate is far below delta.
-        assert!((failures as f64) / (trials as f64) <= delta, "{failures} failures");
+        assert!(
+            (failures as f64) / (trials as f64) <= delta,
+            "{failures} failures"
+        );
     }
 
     #[test]

@@ -8,6 +8,9 @@
 //! `E||theta - f(D)||^2 <= (1/r) sum ||theta_i - f(D_i)||^2 + gamma`
 //! with probability at least `1 - delta`, whenever `r > sigma^2 / (2 gamma^2) ln(1/delta)`.
 //!
+//! Split-conformal intervals ([`ConformalIntervals`]) add a per-estimate
+//! error bar, and [`ValidationReport`] gathers it all per parameter.
+//!
 //! # Example
 //!
 //! ```
@@ -24,10 +27,12 @@
 //! ```
 #![deny(missing_docs)]
 
+mod conformal;
 mod error;
 mod hoeffding;
+mod report;
 
+pub use conformal::ConformalIntervals;
 pub use error::{Result, ValidateError};
-pub use hoeffding::{
-    HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound,
-};
+pub use hoeffding::{HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound};
+pub use report::{ParameterReport, ValidationReport};

@@ -1,0 +1,108 @@
+//! The offline side: compression as N grows, one simulation of each model,
+//! and training the two paper presets.
+//!
+//! Groups: `compress` (ARX(5, 5) at N = 250 .. 16000, the cost must grow
+//! linearly), `simulate`, `train`.
+
+use std::hint::black_box;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use twostage::TwoStage;
+use twostage::compress::{Arx, Compressor, Workspace};
+use twostage::models::{Benchmark, PacejkaCar, Simulator, experiment_rng};
+use twostage_benches::{config, record, slow_config};
+
+fn compress(c: &mut Criterion) {
+    let arx = Arx::new(5, 5).unwrap_or_else(|e| panic!("{e}"));
+    let mut group = c.benchmark_group("compress");
+    for n in [250usize, 1000, 4000, 16000] {
+        let model = Benchmark::builder()
+            .n_samples(n)
+            .build()
+            .unwrap_or_else(|e| panic!("{e}"));
+        let data = record(&model, &[0.5]);
+        let mut work = Workspace::new();
+        let mut alpha = [0.0; 10];
+        group.throughput(Throughput::Elements(n as u64));
+        group.bench_with_input(BenchmarkId::new("arx5_5", n), &data, |b, data| {
+            b.iter(|| {
+                arx.compress_into(
+                    black_box(data.inputs()),
+                    black_box(data.outputs()),
+                    &mut work,
+                    &mut alpha,
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+                black_box(alpha[0])
+            })
+        });
+    }
+    group.finish();
+}
+
+fn simulate(c: &mut Criterion) {
+    let mut group = c.benchmark_group("simulate");
+    let bench = Benchmark::new();
+    let mut out = bench.spec().new_record();
+    group.bench_function("benchmark_n1000", |b| {
+        b.iter(|| {
+            bench
+                .simulate(black_box(&[0.5]), &mut experiment_rng(1, 0), &mut out)
+                .unwrap_or_else(|e| panic!("{e}"));
+            black_box(out.output(0)[999])
+        })
+    });
+    let car = PacejkaCar::new();
+    let mut out = car.spec().new_record();
+    group.bench_function("pacejka_chicane", |b| {
+        b.iter(|| {
+            car.simulate(
+                black_box(&[-35.0, -1.1]),
+                &mut experiment_rng(1, 0),
+                &mut out,
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+            black_box(out.output(0)[499])
+        })
+    });
+    group.finish();
+}
+
+fn train(c: &mut Criterion) {
+    let mut group = c.benchmark_group("train");
+    let bench = Benchmark::new();
+    group.bench_function("paper_benchmark", |b| {
+        b.iter(|| {
+            TwoStage::builder(&bench)
+                .preset(twostage::paper_benchmark())
+                .validation(0)
+                .calibration(0)
+                .train()
+                .unwrap_or_else(|e| panic!("{e}"))
+        })
+    });
+    let car = PacejkaCar::new();
+    group.bench_function("paper_pacejka", |b| {
+        b.iter(|| {
+            TwoStage::builder(&car)
+                .preset(twostage::paper_pacejka())
+                .validation(0)
+                .calibration(0)
+                .train()
+                .unwrap_or_else(|e| panic!("{e}"))
+        })
+    });
+    group.finish();
+}
+
+criterion_group! {
+    name = fast;
+    config = config();
+    targets = compress, simulate
+}
+criterion_group! {
+    name = slow;
+    config = slow_config();
+    targets = train
+}
+criterion_main!(fast, slow);

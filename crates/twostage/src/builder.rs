@@ -1,0 +1,323 @@
+//! Training: the `TwoStage` builder and the paper's presets.
+
+use twostage_compress::{Arx, Compressor};
+use twostage_fit::{MlpParams, Ridge};
+use twostage_models::{Prior, Sampling, Simulator};
+use twostage_validate::{ConformalIntervals, ValidationReport};
+
+use crate::chart::compress_chart;
+use crate::config::{CompressorConfig, RegressorConfig};
+use crate::error::{Error, Result};
+use crate::estimator::{Estimator, RecordShape, TrainingInfo};
+
+/// The choices of one training run, reusable across simulators.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Preset {
+    /// Stage-1 compressor.
+    pub compressor: CompressorConfig,
+    /// Stage-2 method.
+    pub regressor: RegressorConfig,
+    /// Training simulations m.
+    pub simulations: usize,
+}
+
+/// The paper's benchmark setting (Section 5.3): m = 1500 simulations,
+/// ARX(5, 5), a network with 10 tanh hidden units.
+pub fn paper_benchmark() -> Preset {
+    preset(5, 10, 1500)
+}
+
+/// The paper's car setting (Section 6.2): m = 2000 simulations, ARX(4, 4), a
+/// network with 20 tanh hidden units.
+pub fn paper_pacejka() -> Preset {
+    preset(4, 20, 2000)
+}
+
+fn preset(order: usize, hidden: usize, simulations: usize) -> Preset {
+    let arx = Arx::new(order, order)
+        .unwrap_or_else(|e| unreachable!("the paper's ARX orders are valid: {e}"));
+    let mlp = MlpParams::new(&[hidden])
+        .and_then(MlpParams::check)
+        .unwrap_or_else(|e| unreachable!("the paper's network is valid: {e}"));
+    Preset {
+        compressor: CompressorConfig::Arx(arx),
+        regressor: RegressorConfig::Mlp(mlp),
+        simulations,
+    }
+}
+
+/// Offsets that give the calibration and validation charts their own
+/// streams, disjoint from the training chart of the same seed.
+const CALIBRATION_SEED: u64 = 0x4341_4c49_4252_4154; // "CALIBRAT"
+const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
+
+/// Builder of a two-stage estimator for one simulator.
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `compressor` | ARX(5, 5) | any [`CompressorConfig`] |
+/// | `regressor` | MLP with 10 tanh units, LM | any [`RegressorConfig`] |
+/// | `simulations` (m) | 2000 | >= 10 |
+/// | `sampling` | the prior's own | [`Sampling`] of the training chart |
+/// | `seed` | 0 | any |
+/// | `calibration` | 500 | fresh simulations for conformal intervals; 0 disables |
+/// | `alpha` | 0.1 | interval miscoverage, in (0, 1) |
+/// | `validation` (r) | 500 | fresh simulations for the report; 0 disables |
+/// | `delta` | 1e-3 | confidence of the Hoeffding bound, in (0, 1) |
+/// | `max_failure_fraction` | 0.01 | share of failed simulations tolerated |
+///
+/// ```
+/// use twostage::{Estimator, TwoStage};
+/// use twostage_models::{experiment_rng, Benchmark, Simulator};
+///
+/// let model = Benchmark::builder().n_samples(300).build()?;
+/// let estimator: Estimator = TwoStage::builder(&model)
+///     .preset(twostage::paper_benchmark())
+///     .simulations(300)
+///     .validation(100)
+///     .calibration(100)
+///     .seed(1)
+///     .train()?;
+/// let mut record = model.spec().new_record();
+/// model.simulate(&[0.5], &mut experiment_rng(99, 0), &mut record)?;
+/// let theta = estimator.estimate_record(&record)?;
+/// assert!((-0.9..=0.9).contains(&theta[0]));
+/// # Ok::<(), twostage::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct TwoStage<'a, S: ?Sized> {
+    simulator: &'a S,
+    compressor: CompressorConfig,
+    regressor: RegressorConfig,
+    simulations: usize,
+    sampling: Option<Sampling>,
+    seed: u64,
+    calibration: usize,
+    alpha: f64,
+    validation: usize,
+    delta: f64,
+    max_failure_fraction: f64,
+}
+
+impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
+    /// Start a builder with the defaults of the table above.
+    pub fn builder(simulator: &'a S) -> Self {
+        let p = paper_benchmark();
+        Self {
+            simulator,
+            compressor: p.compressor,
+            regressor: p.regressor,
+            simulations: 2000,
+            sampling: None,
+            seed: 0,
+            calibration: 500,
+            alpha: 0.1,
+            validation: 500,
+            delta: 1e-3,
+            max_failure_fraction: 0.01,
+        }
+    }
+
+    /// Take compressor, regressor and m from a preset.
+    pub fn preset(mut self, preset: Preset) -> Self {
+        self.compressor = preset.compressor;
+        self.regressor = preset.regressor;
+        self.simulations = preset.simulations;
+        self
+    }
+    /// The stage-1 compressor.
+    pub fn compressor(mut self, compressor: impl Into<CompressorConfig>) -> Self {
+        self.compressor = compressor.into();
+        self
+    }
+    /// The stage-2 method.
+    pub fn regressor(mut self, regressor: RegressorConfig) -> Self {
+        self.regressor = regressor;
+        self
+    }
+    /// A linear stage 2 with ridge penalty `lambda` (shorthand).
+    ///
+    /// # Errors
+    /// As [`Ridge::new`].
+    pub fn linear(mut self, lambda: f64) -> Result<Self> {
+        self.regressor = RegressorConfig::Linear(Ridge::new(lambda)?);
+        Ok(self)
+    }
+    /// Number of training simulations m.
+    pub fn simulations(mut self, m: usize) -> Self {
+        self.simulations = m;
+        self
+    }
+    /// How the training parameters fill the prior box.
+    pub fn sampling(mut self, sampling: Sampling) -> Self {
+        self.sampling = Some(sampling);
+        self
+    }
+    /// Seed of every random choice of the run.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+    /// Fresh simulations for the conformal intervals (0: none).
+    pub fn calibration(mut self, count: usize) -> Self {
+        self.calibration = count;
+        self
+    }
+    /// Interval miscoverage level alpha.
+    pub fn alpha(mut self, alpha: f64) -> Self {
+        self.alpha = alpha;
+        self
+    }
+    /// Fresh simulations r for the validation report (0: none).
+    pub fn validation(mut self, r: usize) -> Self {
+        self.validation = r;
+        self
+    }
+    /// Confidence parameter delta of the Hoeffding bound.
+    pub fn delta(mut self, delta: f64) -> Self {
+        self.delta = delta;
+        self
+    }
+    /// Share of failed simulations tolerated in each chart.
+    pub fn max_failure_fraction(mut self, fraction: f64) -> Self {
+        self.max_failure_fraction = fraction;
+        self
+    }
+
+    fn check(&self) -> Result<()> {
+        let invalid = |name: &'static str, value: String, reason: &str| {
+            Err(Error::InvalidSetting {
+                name,
+                value,
+                reason: reason.into(),
+            })
+        };
+        if self.simulations < 10 {
+            return invalid("simulations", self.simulations.to_string(), "at least 10");
+        }
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return invalid("alpha", self.alpha.to_string(), "must lie in (0, 1)");
+        }
+        if !(self.delta > 0.0 && self.delta < 1.0) {
+            return invalid("delta", self.delta.to_string(), "must lie in (0, 1)");
+        }
+        if !(0.0..1.0).contains(&self.max_failure_fraction) {
+            return invalid(
+                "max_failure_fraction",
+                self.max_failure_fraction.to_string(),
+                "must lie in [0, 1)",
+            );
+        }
+        Ok(())
+    }
+
+    /// Simulate and compress the training chart, fit stage 2, then calibrate
+    /// and validate on fresh simulations.
+    ///
+    /// Calibration and validation parameters are drawn i.i.d. uniform from
+    /// the prior whatever the training design, because Theorem 1 and the
+    /// conformal guarantee assume independent draws.
+    ///
+    /// # Errors
+    /// Invalid settings, too many failed simulations, or a failed fit.
+    pub fn train(self) -> Result<Estimator> {
+        self.check()?;
+        let spec = self.simulator.spec();
+        let prior = spec.prior();
+        let training_prior = match self.sampling {
+            Some(s) => prior.clone().with_sampling(s),
+            None => prior.clone(),
+        };
+        let design = training_prior.design(self.simulations, self.seed)?;
+        let chart = compress_chart(
+            self.simulator,
+            &self.compressor,
+            &design,
+            "training",
+            self.max_failure_fraction,
+        )?;
+        let regressor = self
+            .regressor
+            .fit(chart.features.view(), chart.thetas.view())?;
+        let mut estimator = Estimator {
+            param_names: spec.param_names().to_vec(),
+            lower: prior.lower().to_vec(),
+            upper: prior.upper().to_vec(),
+            shape: RecordShape {
+                n_samples: spec.n_samples(),
+                n_inputs: spec.input_names().len(),
+                n_outputs: spec.output_names().len(),
+                sample_time: spec.sample_time(),
+            },
+            compressor: self.compressor.clone(),
+            regressor,
+            training: TrainingInfo {
+                model: spec.name().to_string(),
+                simulations: self.simulations,
+                failures: chart.failures.len(),
+                seed: self.seed,
+                sampling: format!("{:?}", training_prior.sampling()),
+                regressor: self.regressor.clone(),
+                version: env!("CARGO_PKG_VERSION").to_string(),
+            },
+            validation: None,
+        };
+        let iid = prior.clone().with_sampling(Sampling::Uniform);
+        let intervals = if self.calibration > 0 {
+            let (truth, estimates) = self.fresh_estimates(
+                &estimator,
+                &iid,
+                self.calibration,
+                CALIBRATION_SEED,
+                "calibration",
+            )?;
+            Some(ConformalIntervals::calibrate(
+                (&truth - &estimates).view(),
+                self.alpha,
+            )?)
+        } else {
+            None
+        };
+        if self.validation > 0 {
+            let (truth, estimates) = self.fresh_estimates(
+                &estimator,
+                &iid,
+                self.validation,
+                VALIDATION_SEED,
+                "validation",
+            )?;
+            estimator.validation = Some(ValidationReport::new(
+                spec.param_names(),
+                truth.view(),
+                estimates.view(),
+                prior.lower(),
+                prior.upper(),
+                self.delta,
+                intervals,
+            )?);
+        }
+        Ok(estimator)
+    }
+
+    /// Truths and clipped estimates on `count` fresh i.i.d. simulations.
+    fn fresh_estimates(
+        &self,
+        estimator: &Estimator,
+        prior: &Prior,
+        count: usize,
+        offset: u64,
+        stage: &'static str,
+    ) -> Result<(ndarray::Array2<f64>, ndarray::Array2<f64>)> {
+        let design = prior.design(count, self.seed ^ offset)?;
+        let chart = compress_chart(
+            self.simulator,
+            &self.compressor,
+            &design,
+            stage,
+            self.max_failure_fraction,
+        )?;
+        let estimates = estimator.predict_features(chart.features.view())?;
+        debug_assert_eq!(chart.features.ncols(), self.compressor.n_features());
+        Ok((chart.thetas, estimates))
+    }
+}

@@ -1,0 +1,128 @@
+//! The compressed data chart: simulate and compress in one pass.
+
+use ndarray::Array2;
+use rayon::prelude::*;
+use twostage_compress::{Compressor, Workspace};
+use twostage_models::{Design, IoData, Simulator, run_experiment};
+
+use crate::error::{Error, Result};
+
+/// One experiment that could not be simulated or compressed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExperimentFailure {
+    /// Its index in the design.
+    pub index: usize,
+    /// Its parameter vector.
+    pub theta: Vec<f64>,
+    /// What went wrong.
+    pub error: String,
+}
+
+/// The compressed artificial data chart of Table II: for each experiment i,
+/// its parameter vector theta_i and its features alpha_i.
+///
+/// Only `(theta_i, alpha_i)` is kept: records are compressed as they are
+/// simulated, so memory is O(m n), never O(m N).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompressedChart {
+    /// Parameter vectors of the experiments that succeeded (m' x q).
+    pub thetas: Array2<f64>,
+    /// Their features (m' x n).
+    pub features: Array2<f64>,
+    /// Design indices of the rows, in order.
+    pub indices: Vec<usize>,
+    /// Experiments that failed, in index order.
+    pub failures: Vec<ExperimentFailure>,
+}
+
+/// Simulate and compress every experiment of `design` in parallel.
+///
+/// Row i depends only on `(design, i)`: the chart is bitwise identical
+/// whatever the thread count.
+///
+/// ```
+/// use twostage::compress_chart;
+/// use twostage_compress::Arx;
+/// use twostage_models::{Benchmark, Simulator};
+/// let model = Benchmark::new();
+/// let design = model.prior().design(64, 1)?;
+/// let chart = compress_chart(&model, &Arx::new(2, 2)?, &design, "training", 0.0)?;
+/// assert_eq!(chart.features.dim(), (64, 4));
+/// assert_eq!(chart.thetas.dim(), (64, 1));
+/// # Ok::<(), twostage::Error>(())
+/// ```
+///
+/// # Errors
+/// [`Error::TooManyFailures`] if more than `max_failure_fraction` of the
+/// experiments fail (failures below that are dropped and listed).
+pub fn compress_chart<S, C>(
+    simulator: &S,
+    compressor: &C,
+    design: &Design,
+    stage: &'static str,
+    max_failure_fraction: f64,
+) -> Result<CompressedChart>
+where
+    S: Simulator + ?Sized,
+    C: Compressor + ?Sized,
+{
+    let m = design.len();
+    let q = design.prior().dim();
+    let n = compressor.n_features();
+    let mut thetas = vec![0.0; m * q];
+    let mut features = vec![0.0; m * n];
+    let failures: Vec<ExperimentFailure> = thetas
+        .par_chunks_mut(q)
+        .zip(features.par_chunks_mut(n))
+        .enumerate()
+        .map_init(
+            || (IoData::default(), Workspace::new()),
+            |(record, work), (i, (theta, alpha))| {
+                let outcome = run_experiment(simulator, design, i, theta, record)
+                    .map_err(|e| e.to_string())
+                    .and_then(|()| {
+                        compressor
+                            .compress_into(record.inputs(), record.outputs(), work, alpha)
+                            .map_err(|e| e.to_string())
+                    });
+                outcome.err().map(|error| ExperimentFailure {
+                    index: i,
+                    theta: theta.to_vec(),
+                    error,
+                })
+            },
+        )
+        .filter_map(|f| f)
+        .collect();
+    let allowed = (max_failure_fraction * m as f64).floor() as usize;
+    if failures.len() > allowed {
+        let first = &failures[0];
+        return Err(Error::TooManyFailures {
+            stage,
+            failed: failures.len(),
+            total: m,
+            allowed,
+            first_index: first.index,
+            first_error: first.error.clone(),
+        });
+    }
+    let failed: Vec<usize> = failures.iter().map(|f| f.index).collect();
+    let indices: Vec<usize> = (0..m)
+        .filter(|i| failed.binary_search(i).is_err())
+        .collect();
+    let keep = |values: Vec<f64>, width: usize| -> Array2<f64> {
+        let rows = indices.len();
+        let mut kept = Vec::with_capacity(rows * width);
+        for &i in &indices {
+            kept.extend_from_slice(&values[i * width..(i + 1) * width]);
+        }
+        Array2::from_shape_vec((rows, width), kept)
+            .unwrap_or_else(|_| unreachable!("rows * width values were kept"))
+    };
+    Ok(CompressedChart {
+        thetas: keep(thetas, q),
+        features: keep(features, n),
+        indices,
+        failures,
+    })
+}

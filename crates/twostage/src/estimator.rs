@@ -1,0 +1,203 @@
+//! The trained estimator f = clip(h(g(u, y))).
+
+use ndarray::{Array2, ArrayView2};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use twostage_compress::{Compressor, Workspace};
+use twostage_fit::Predictor;
+use twostage_models::IoData;
+use twostage_validate::{ConformalIntervals, ValidationReport};
+
+use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
+use crate::error::{Error, Result};
+
+/// What the estimator was trained on, for people and for audits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingInfo {
+    /// The model's name.
+    pub model: String,
+    /// Number of training simulations m.
+    pub simulations: usize,
+    /// Simulations that failed and were dropped.
+    pub failures: usize,
+    /// The training seed.
+    pub seed: u64,
+    /// The design that placed the training parameters.
+    pub sampling: String,
+    /// The stage-2 method as configured.
+    pub regressor: RegressorConfig,
+    /// The twostage version that trained it.
+    pub version: String,
+}
+
+/// The signals and sampling a record must have.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordShape {
+    /// Samples per record the estimator was trained on.
+    pub n_samples: usize,
+    /// Input signals.
+    pub n_inputs: usize,
+    /// Output signals.
+    pub n_outputs: usize,
+    /// Sampling time.
+    pub sample_time: f64,
+}
+
+/// Scratch space for [`Estimator::estimate_into`]: keep one per thread and
+/// estimates allocate nothing.
+#[derive(Debug, Default)]
+pub struct EstimateWorkspace {
+    compress: Workspace,
+    features: Vec<f64>,
+}
+
+impl EstimateWorkspace {
+    /// An empty workspace; it sizes itself on first use.
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+/// A trained two-stage estimator: `theta_hat = clip(h(g(u, y)))`, explicit,
+/// with no iteration and no tuning at estimate time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Estimator {
+    pub(crate) param_names: Vec<String>,
+    pub(crate) lower: Vec<f64>,
+    pub(crate) upper: Vec<f64>,
+    pub(crate) shape: RecordShape,
+    pub(crate) compressor: CompressorConfig,
+    pub(crate) regressor: FittedRegressor,
+    pub(crate) training: TrainingInfo,
+    pub(crate) validation: Option<ValidationReport>,
+}
+
+impl Estimator {
+    /// Parameter names, in the order of theta.
+    pub fn param_names(&self) -> &[String] {
+        &self.param_names
+    }
+    /// Lower bounds of the prior box (estimates are clipped to it).
+    pub fn lower(&self) -> &[f64] {
+        &self.lower
+    }
+    /// Upper bounds of the prior box.
+    pub fn upper(&self) -> &[f64] {
+        &self.upper
+    }
+    /// The record shape it was trained on.
+    pub fn record_shape(&self) -> &RecordShape {
+        &self.shape
+    }
+    /// The stage-1 compressor.
+    pub fn compressor(&self) -> &CompressorConfig {
+        &self.compressor
+    }
+    /// The fitted stage-2 map.
+    pub fn regressor(&self) -> &FittedRegressor {
+        &self.regressor
+    }
+    /// Training metadata.
+    pub fn training(&self) -> &TrainingInfo {
+        &self.training
+    }
+    /// The validation report, when validated.
+    pub fn validation(&self) -> Option<&ValidationReport> {
+        self.validation.as_ref()
+    }
+    /// Calibrated conformal intervals, when calibrated.
+    pub fn intervals(&self) -> Option<&ConformalIntervals> {
+        self.validation.as_ref().and_then(|v| v.intervals.as_ref())
+    }
+
+    /// Estimate theta from one record (`inputs` N x n_u, `outputs` N x n_y)
+    /// into `theta`: the hot path, allocation-free once `work` is warm.
+    ///
+    /// # Errors
+    /// A record that cannot be compressed (wrong shape, non-finite samples,
+    /// too short, degenerate), or a `theta` of the wrong length.
+    pub fn estimate_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut EstimateWorkspace,
+        theta: &mut [f64],
+    ) -> Result<()> {
+        if theta.len() != self.param_names.len() {
+            return Err(Error::Record(format!(
+                "theta has {} slots, the estimator has {} parameters",
+                theta.len(),
+                self.param_names.len()
+            )));
+        }
+        let n = self.compressor.n_features();
+        if work.features.len() != n {
+            work.features.resize(n, 0.0);
+        }
+        self.compressor
+            .compress_into(inputs, outputs, &mut work.compress, &mut work.features)?;
+        self.regressor.predict_into(&work.features, theta)?;
+        for ((t, lo), hi) in theta.iter_mut().zip(&self.lower).zip(&self.upper) {
+            // A NaN from the network would survive clamp: map it to the
+            // box centre rather than return it.
+            *t = if t.is_nan() {
+                0.5 * (lo + hi)
+            } else {
+                t.clamp(*lo, *hi)
+            };
+        }
+        Ok(())
+    }
+
+    /// Estimate theta from one SISO record.
+    ///
+    /// # Errors
+    /// As [`Estimator::estimate_into`], and `u`, `y` of different lengths.
+    pub fn estimate(&self, u: &[f64], y: &[f64]) -> Result<Vec<f64>> {
+        let record = IoData::siso(u, y)?;
+        self.estimate_record(&record)
+    }
+
+    /// Estimate theta from one record.
+    ///
+    /// # Errors
+    /// As [`Estimator::estimate_into`].
+    pub fn estimate_record(&self, record: &IoData) -> Result<Vec<f64>> {
+        let mut theta = vec![0.0; self.param_names.len()];
+        self.estimate_into(
+            record.inputs(),
+            record.outputs(),
+            &mut EstimateWorkspace::new(),
+            &mut theta,
+        )?;
+        Ok(theta)
+    }
+
+    /// Estimate theta for many records in parallel; each record gets its
+    /// own result, so one bad record does not stop the others.
+    pub fn estimate_batch(&self, records: &[IoData]) -> Vec<Result<Vec<f64>>> {
+        records
+            .par_iter()
+            .map_init(EstimateWorkspace::new, |work, record| {
+                let mut theta = vec![0.0; self.param_names.len()];
+                self.estimate_into(record.inputs(), record.outputs(), work, &mut theta)
+                    .map(|()| theta)
+            })
+            .collect()
+    }
+
+    /// Estimates for every row of a compressed chart's features (clipped).
+    pub(crate) fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
+        let mut out = self.regressor.predict(features)?;
+        for mut row in out.rows_mut() {
+            for ((t, lo), hi) in row.iter_mut().zip(&self.lower).zip(&self.upper) {
+                *t = if t.is_nan() {
+                    0.5 * (lo + hi)
+                } else {
+                    t.clamp(*lo, *hi)
+                };
+            }
+        }
+        Ok(out)
+    }
+}

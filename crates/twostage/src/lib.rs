@@ -1,0 +1,62 @@
+//! Turn a simulator into an explicit, microsecond-fast parameter estimator.
+//!
+//! This is the two-stage (TS) method of Garatti and Bittanti ("A new
+//! paradigm for parameter estimation in system modeling", Int. J. Adapt.
+//! Control Signal Process., 2013):
+//!
+//! ```text
+//! prior --simulate--> chart {theta_i, (u_i, y_i)} --compress g--> {theta_i, alpha_i} --fit h--> h
+//! estimator f = clip_to_prior_box(h(g(u, y)))
+//! ```
+//!
+//! Everything expensive happens once, offline, in [`TwoStage::train`]; an
+//! estimate is then one small least-squares solve and one tiny network
+//! evaluation ([`Estimator::estimate_into`]), with no iteration, no tuning
+//! and no human in the loop. Training ends with calibration (conformal
+//! intervals) and validation (the paper's Theorem 1) on fresh simulations.
+//!
+//! The pieces live in their own crates, re-exported here: [`models`]
+//! (simulators), [`compress`] (stage 1), [`fit`] (stage 2), [`validate`].
+//!
+//! # Example
+//!
+//! ```
+//! use twostage::TwoStage;
+//! use twostage::models::{experiment_rng, Benchmark, Simulator};
+//!
+//! let model = Benchmark::new();
+//! let estimator = TwoStage::builder(&model)
+//!     .preset(twostage::paper_benchmark())
+//!     .simulations(400)
+//!     .validation(200)
+//!     .calibration(200)
+//!     .train()?;
+//! let report = estimator.validation().expect("validated");
+//! println!("{report}");
+//! assert!(report.parameters[0].rmse < 0.3);
+//!
+//! // One estimate from a fresh record.
+//! let mut record = model.spec().new_record();
+//! model.simulate(&[-0.4], &mut experiment_rng(7, 0), &mut record)?;
+//! let theta = estimator.estimate(record.input(0), record.output(0))?;
+//! assert_eq!(theta.len(), 1);
+//! # Ok::<(), twostage::Error>(())
+//! ```
+#![deny(missing_docs)]
+
+mod builder;
+mod chart;
+mod config;
+mod error;
+mod estimator;
+
+pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
+pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
+pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
+pub use error::{Error, Result};
+pub use estimator::{EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
+
+pub use twostage_compress as compress;
+pub use twostage_fit as fit;
+pub use twostage_models as models;
+pub use twostage_validate as validate;
