@@ -24,6 +24,18 @@ fn compress(c: &mut Criterion) {
         let mut work = Workspace::new();
         let mut alpha = [0.0; 10];
         group.throughput(Throughput::Elements(n as u64));
+        group.bench_with_input(BenchmarkId::new("arx5_5_fast", n), &data, |b, data| {
+            b.iter(|| {
+                arx.compress_fast_into(
+                    black_box(data.inputs()),
+                    black_box(data.outputs()),
+                    &mut work,
+                    &mut alpha,
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+                black_box(alpha[0])
+            })
+        });
         group.bench_with_input(BenchmarkId::new("arx5_5", n), &data, |b, data| {
             b.iter(|| {
                 arx.compress_into(

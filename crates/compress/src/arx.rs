@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::Compressor;
 use crate::error::{CompressError, Result};
+use crate::fast::{Column, contiguous_column, lagged_least_squares};
 use crate::signals::{check, copy_window, degenerate, name};
 use crate::workspace::{RANK_TOLERANCE, Workspace};
 
@@ -151,6 +152,34 @@ impl Compressor for Arx {
         self.n_outputs * self.per_output()
     }
 
+    fn compress_fast_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut Workspace,
+        alpha: &mut [f64],
+    ) -> Result<()> {
+        let usable = alpha.len() == self.n_features()
+            && inputs.ncols() == self.n_inputs
+            && outputs.ncols() == self.n_outputs
+            && inputs.nrows() == outputs.nrows()
+            && inputs.nrows() >= self.first_sample() + self.per_output();
+        if usable {
+            let cols = self.per_output();
+            let all = (0..self.n_outputs).all(|i| {
+                let alpha_i = &mut alpha[i * cols..(i + 1) * cols];
+                self.fast_output(&inputs, &outputs, i, work, alpha_i)
+            });
+            if all {
+                return Ok(());
+            }
+        }
+        // Anything the fast path cannot vouch for (shapes, non-finite or
+        // huge samples, poor conditioning) goes through QR, which gives the
+        // exact coefficients or the precise error.
+        self.compress_into(inputs, outputs, work, alpha)
+    }
+
     fn feature_names(&self) -> Vec<String> {
         let mut names = Vec::with_capacity(self.n_features());
         for i in 0..self.n_outputs {
@@ -212,6 +241,50 @@ impl Compressor for Arx {
 }
 
 impl Arx {
+    /// The fast path for one output; false when it cannot vouch for the answer.
+    fn fast_output(
+        &self,
+        inputs: &ArrayView2<'_, f64>,
+        outputs: &ArrayView2<'_, f64>,
+        output: usize,
+        work: &mut Workspace,
+        alpha: &mut [f64],
+    ) -> bool {
+        // At most 1 + 64 inputs is plenty for stack storage of the slices.
+        let mut signals: [&[f64]; 16] = [&[]; 16];
+        if self.n_inputs + 1 > signals.len() {
+            return false;
+        }
+        let Some(y) = contiguous_column(outputs, output) else {
+            return false;
+        };
+        signals[0] = y;
+        for j in 0..self.n_inputs {
+            let Some(u) = contiguous_column(inputs, j) else {
+                return false;
+            };
+            signals[1 + j] = u;
+        }
+        work.columns.clear();
+        work.columns
+            .extend((1..=self.na).map(|lag| Column { signal: 0, lag }));
+        for j in 0..self.n_inputs {
+            work.columns.extend((0..self.nb).map(|l| Column {
+                signal: 1 + j,
+                lag: self.delay + l,
+            }));
+        }
+        let start = self.first_sample();
+        lagged_least_squares(
+            &signals[..=self.n_inputs],
+            &work.columns,
+            start,
+            start,
+            &mut work.fast,
+            alpha,
+        )
+    }
+
     fn rank_error(
         &self,
         inputs: ArrayView2<'_, f64>,

@@ -34,6 +34,7 @@
 
 mod arx;
 mod error;
+mod fast;
 mod signals;
 mod workspace;
 
@@ -64,6 +65,22 @@ pub trait Compressor: Send + Sync {
         work: &mut Workspace,
         alpha: &mut [f64],
     ) -> Result<()>;
+
+    /// The same features as [`Compressor::compress_into`], computed by the
+    /// fastest method the compressor has, to agree with it to 1e-9
+    /// relative: the path of estimates. Defaults to `compress_into`.
+    ///
+    /// # Errors
+    /// As [`Compressor::compress_into`].
+    fn compress_fast_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut Workspace,
+        alpha: &mut [f64],
+    ) -> Result<()> {
+        self.compress_into(inputs, outputs, work, alpha)
+    }
 
     /// Names of the features, for reports.
     fn feature_names(&self) -> Vec<String> {

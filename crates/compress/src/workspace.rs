@@ -4,6 +4,8 @@ use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::{Mat, Par};
 
+use crate::fast::{Column, FastScratch};
+
 /// The relative size under which a diagonal entry of R marks a regressor as
 /// (numerically) a linear combination of the previous ones:
 /// `|R_jj| <= RANK_TOLERANCE * ||phi_j||`, i.e. the sine of the angle between
@@ -34,6 +36,10 @@ pub struct Workspace {
     pub(crate) rhs: Mat<f64>,
     /// Column norms of phi before factorization (for the rank check).
     pub(crate) norms: Vec<f64>,
+    /// Scratch space of the estimate-time fast path.
+    pub(crate) fast: FastScratch,
+    /// Regressor columns of the fast path.
+    pub(crate) columns: Vec<Column>,
     q_coeff: Mat<f64>,
     mem: MemBuffer,
     mem_req: StackReq,
@@ -62,6 +68,8 @@ impl Workspace {
             phi: Mat::zeros(0, 0),
             rhs: Mat::zeros(0, 1),
             norms: Vec::new(),
+            fast: FastScratch::default(),
+            columns: Vec::new(),
             q_coeff: Mat::zeros(1, 0),
             mem: MemBuffer::new(StackReq::EMPTY),
             mem_req: StackReq::EMPTY,

@@ -3,7 +3,7 @@
 // A panic is how a test fails; reference linear algebra reads best with indices.
 #![allow(clippy::unwrap_used, clippy::needless_range_loop)]
 
-use ndarray::{Array2, ArrayView2};
+use ndarray::{Array2, ArrayView2, ShapeBuilder};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -246,4 +246,98 @@ fn strided_views_are_read_correctly() {
     let y_view: ArrayView2<'_, f64> = both.slice(ndarray::s![.., 1..2]);
     let alpha = Arx::new(1, 1).unwrap().compress(u_view, y_view).unwrap();
     assert!((alpha[0] - 0.2).abs() < 1e-12 && (alpha[1] - 0.9).abs() < 1e-12);
+}
+
+fn fast_and_qr(arx: &Arx, u: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> (Vec<f64>, Vec<f64>) {
+    let mut work = Workspace::new();
+    let mut fast = vec![0.0; arx.n_features()];
+    arx.compress_fast_into(u, y, &mut work, &mut fast).unwrap();
+    (fast, arx.compress(u, y).unwrap())
+}
+
+fn assert_agree(fast: &[f64], qr: &[f64], what: &str) {
+    for (f, q) in fast.iter().zip(qr) {
+        assert!(
+            (f - q).abs() <= 1e-9 * q.abs().max(1.0),
+            "{what}: fast {fast:?}\n qr {qr:?}"
+        );
+    }
+}
+
+#[test]
+fn the_fast_path_agrees_with_qr_on_noisy_records() {
+    for (seed, (na, nb, delay)) in [
+        (20, (5, 5, 1)),
+        (21, (4, 4, 1)),
+        (22, (2, 3, 0)),
+        (23, (1, 6, 3)),
+        (24, (6, 0, 1)),
+    ] {
+        let n = 1000;
+        let u = noise(n, seed);
+        let y = simulate_arx(&[0.7, -0.2, 0.05], &[1.0, 0.4], 1, &u, &noise(n, seed + 50));
+        let arx = Arx::new(na, nb).unwrap().with_delay(delay).unwrap();
+        let (fast, qr) = fast_and_qr(&arx, column(&u).view(), column(&y).view());
+        assert_agree(&fast, &qr, &arx.to_string());
+    }
+}
+
+#[test]
+fn the_fast_path_agrees_with_qr_on_mimo_records() {
+    let n = 600;
+    let u = Array2::from_shape_fn((n, 2), |(t, j)| noise(n, 30 + j as u64)[t]);
+    let mut y = Array2::<f64>::zeros((n, 2));
+    let e = noise(2 * n, 40);
+    for t in 1..n {
+        y[[t, 0]] = 0.5 * y[[t - 1, 0]] + u[[t - 1, 0]] - 0.3 * u[[t - 1, 1]] + 0.1 * e[t];
+        y[[t, 1]] = -0.2 * y[[t - 1, 1]] + 0.8 * u[[t - 1, 1]] + 0.1 * e[n + t];
+    }
+    // Column-major copies, so the fast path gets contiguous signals.
+    let u_f = Array2::from_shape_vec((n, 2).f(), u.t().iter().copied().collect()).unwrap();
+    let y_f = Array2::from_shape_vec((n, 2).f(), y.t().iter().copied().collect()).unwrap();
+    let arx = Arx::new(2, 2).unwrap().with_signals(2, 2).unwrap();
+    let (fast, qr) = fast_and_qr(&arx, u_f.view(), y_f.view());
+    assert_agree(&fast, &qr, "MIMO");
+}
+
+#[test]
+fn the_fast_path_falls_back_to_qr_for_its_errors_and_hard_cases() {
+    let n = 300;
+    let u = noise(n, 60);
+    let y = simulate_arx(&[0.5], &[1.0], 1, &u, &noise(n, 61));
+    let arx = Arx::new(2, 2).unwrap();
+    let mut work = Workspace::new();
+    let mut alpha = [0.0; 4];
+    let err = arx
+        .compress_fast_into(
+            column(&[0.7; 300]).view(),
+            column(&y).view(),
+            &mut work,
+            &mut alpha,
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("u is constant"), "{err}");
+    let mut bad = y.clone();
+    bad[100] = f64::INFINITY;
+    let err = arx
+        .compress_fast_into(
+            column(&u).view(),
+            column(&bad).view(),
+            &mut work,
+            &mut alpha,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(err, CompressError::NonFinite { index: 100, .. }),
+        "{err}"
+    );
+    // A smooth input: neighbouring input lags are nearly collinear, so the
+    // fast path hands over to QR; the answer is QR's, bit for bit.
+    let smooth: Vec<f64> = (0..n)
+        .map(|k| (0.02 * k as f64).sin() + 0.3 * (0.05 * k as f64).cos())
+        .collect();
+    let ys = simulate_arx(&[0.9], &[0.1, 0.05], 1, &smooth, &noise(n, 62));
+    let arx = Arx::new(2, 3).unwrap();
+    let (fast, qr) = fast_and_qr(&arx, column(&smooth).view(), column(&ys).view());
+    assert_agree(&fast, &qr, "smooth input");
 }

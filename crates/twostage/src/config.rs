@@ -46,6 +46,18 @@ impl Compressor for CompressorConfig {
         }
     }
 
+    fn compress_fast_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut Workspace,
+        alpha: &mut [f64],
+    ) -> twostage_compress::Result<()> {
+        match self {
+            Self::Arx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+        }
+    }
+
     fn feature_names(&self) -> Vec<String> {
         match self {
             Self::Arx(c) => c.feature_names(),

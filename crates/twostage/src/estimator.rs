@@ -134,8 +134,12 @@ impl Estimator {
         if work.features.len() != n {
             work.features.resize(n, 0.0);
         }
-        self.compressor
-            .compress_into(inputs, outputs, &mut work.compress, &mut work.features)?;
+        self.compressor.compress_fast_into(
+            inputs,
+            outputs,
+            &mut work.compress,
+            &mut work.features,
+        )?;
         self.regressor.predict_into(&work.features, theta)?;
         for ((t, lo), hi) in theta.iter_mut().zip(&self.lower).zip(&self.upper) {
             // A NaN from the network would survive clamp: map it to the

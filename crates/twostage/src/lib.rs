@@ -49,12 +49,14 @@ mod chart;
 mod config;
 mod error;
 mod estimator;
+mod file;
 
 pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
 pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
 pub use error::{Error, Result};
 pub use estimator::{EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
+pub use file::{FORMAT_VERSION, MAGIC};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;

@@ -1,0 +1,203 @@
+//! The estimator file: a small versioned binary container around the
+//! postcard encoding of [`Estimator`], and a JSON export for people.
+//!
+//! Layout (all integers little-endian):
+//!
+//! | bytes | content |
+//! |---|---|
+//! | 0..8 | magic `TWOSTAGE` |
+//! | 8..12 | format version (u32), currently 1 |
+//! | 12..20 | payload length in bytes (u64) |
+//! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
+//! | 24.. | payload: postcard-encoded estimator |
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::estimator::Estimator;
+
+/// The first eight bytes of every estimator file.
+pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
+/// The format version this build writes, and the newest it reads.
+pub const FORMAT_VERSION: u32 = 1;
+const HEADER: usize = 24;
+
+/// CRC-32 with the IEEE 802.3 polynomial (reflected, 0xEDB88320), the
+/// checksum of zip and PNG: its standard check value is
+/// `crc32(b"123456789") = 0xCBF43926`.
+pub(crate) fn crc32(bytes: &[u8]) -> u32 {
+    const fn table() -> [u32; 256] {
+        let mut t = [0u32; 256];
+        let mut i = 0;
+        while i < 256 {
+            let mut c = i as u32;
+            let mut k = 0;
+            while k < 8 {
+                c = if c & 1 == 1 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+                k += 1;
+            }
+            t[i] = c;
+            i += 1;
+        }
+        t
+    }
+    const TABLE: [u32; 256] = table();
+    !bytes.iter().fold(!0u32, |c, &b| {
+        TABLE[((c ^ u32::from(b)) & 0xff) as usize] ^ (c >> 8)
+    })
+}
+
+fn file_error(message: String) -> Error {
+    Error::File(message)
+}
+
+impl Estimator {
+    /// Encode the estimator as the bytes of an estimator file.
+    ///
+    /// # Errors
+    /// [`Error::File`] if encoding fails (it does not for valid estimators).
+    pub fn to_bytes(&self) -> Result<Vec<u8>> {
+        let payload = postcard::to_allocvec(self)
+            .map_err(|e| file_error(format!("encoding the estimator failed: {e}")))?;
+        let mut bytes = Vec::with_capacity(HEADER + payload.len());
+        bytes.extend_from_slice(MAGIC);
+        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&crc32(&payload).to_le_bytes());
+        bytes.extend_from_slice(&payload);
+        Ok(bytes)
+    }
+
+    /// Decode an estimator from the bytes of an estimator file.
+    ///
+    /// ```
+    /// # use twostage::{Estimator, TwoStage};
+    /// # use twostage::models::Benchmark;
+    /// # let model = Benchmark::builder().n_samples(200).build()?;
+    /// # let estimator = TwoStage::builder(&model).simulations(100).validation(0).calibration(0).linear(1e-6)?.train()?;
+    /// let bytes = estimator.to_bytes()?;
+    /// assert_eq!(Estimator::from_bytes(&bytes)?, estimator);
+    /// assert!(Estimator::from_bytes(&bytes[..bytes.len() - 1]).is_err());
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::File`] for a file that is not an estimator file, was written
+    /// by a newer version, is truncated, or is corrupted.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+            return Err(file_error(
+                "not a twostage estimator file (it does not start with TWOSTAGE): \
+                 give a file written by `twostage train` or `Estimator::save`"
+                    .into(),
+            ));
+        }
+        if bytes.len() < HEADER {
+            return Err(file_error(format!(
+                "truncated: {} bytes, shorter than the {HEADER}-byte header",
+                bytes.len()
+            )));
+        }
+        let word = |range: std::ops::Range<usize>| -> [u8; 8] {
+            let mut w = [0u8; 8];
+            w[..range.len()].copy_from_slice(&bytes[range]);
+            w
+        };
+        let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+        if version > FORMAT_VERSION {
+            return Err(file_error(format!(
+                "written by a newer twostage (format version {version}; this build reads \
+                 up to {FORMAT_VERSION}): upgrade twostage to read it"
+            )));
+        }
+        if version == 0 {
+            return Err(file_error(
+                "format version 0 does not exist: the file is corrupted".into(),
+            ));
+        }
+        let length = u64::from_le_bytes(word(12..20));
+        let checksum = u32::from_le_bytes([bytes[20], bytes[21], bytes[22], bytes[23]]);
+        let present = (bytes.len() - HEADER) as u64;
+        if length > present {
+            return Err(file_error(format!(
+                "truncated: the header promises {length} bytes of payload, {present} are present"
+            )));
+        }
+        if length < present {
+            return Err(file_error(format!(
+                "{} unexpected bytes after the payload: the file is corrupted",
+                present - length
+            )));
+        }
+        let payload = &bytes[HEADER..];
+        let actual = crc32(payload);
+        if actual != checksum {
+            return Err(file_error(format!(
+                "corrupted: checksum {actual:08x} does not match the stored {checksum:08x}"
+            )));
+        }
+        postcard::from_bytes(payload).map_err(|e| {
+            file_error(format!(
+                "the payload does not decode ({e}): the file is corrupted"
+            ))
+        })
+    }
+
+    /// Write the estimator file to `path`.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be written.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        std::fs::write(path, self.to_bytes()?).map_err(|source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+
+    /// Read an estimator file.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if it cannot be read, [`Error::File`] as in
+    /// [`Estimator::from_bytes`] (the message names the file).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| Error::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_bytes(&bytes).map_err(|e| match e {
+            Error::File(message) => Error::File(format!("{}: {message}", path.display())),
+            other => other,
+        })
+    }
+
+    /// The whole estimator as pretty JSON, for people and other tools
+    /// (infinite interval widths become `null`).
+    ///
+    /// # Errors
+    /// [`Error::File`] if serialization fails.
+    pub fn to_json(&self) -> Result<String> {
+        serde_json::to_string_pretty(self)
+            .map_err(|e| file_error(format!("JSON export failed: {e}")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_matches_the_standard_check_values() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32(b""), 0);
+        assert_eq!(
+            crc32(b"The quick brown fox jumps over the lazy dog"),
+            0x414F_A339
+        );
+    }
+}

@@ -1,0 +1,246 @@
+//! The trained estimator as a user sees it: training, estimates, files.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use std::path::PathBuf;
+
+use twostage::compress::Arx;
+use twostage::fit::MlpParams;
+use twostage::models::{
+    Benchmark, ExperimentRng, IoData, ModelSpec, SimError, Simulator, experiment_rng,
+};
+use twostage::{Error, Estimator, RegressorConfig, TwoStage};
+
+fn small_benchmark() -> Benchmark {
+    Benchmark::builder().n_samples(400).build().unwrap()
+}
+
+fn small_estimator(model: &Benchmark, seed: u64) -> Estimator {
+    TwoStage::builder(model)
+        .compressor(Arx::new(3, 3).unwrap())
+        .regressor(RegressorConfig::Mlp(
+            MlpParams::new(&[6]).unwrap().restarts(2).check().unwrap(),
+        ))
+        .simulations(300)
+        .calibration(100)
+        .validation(100)
+        .seed(seed)
+        .train()
+        .unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn a_saved_estimator_loads_back_identical_and_estimates_the_same() {
+    let model = small_benchmark();
+    let estimator = small_estimator(&model, 3);
+    let path = scratch("roundtrip").join("bench.tsest");
+    estimator.save(&path).unwrap();
+    let loaded = Estimator::load(&path).unwrap();
+    assert_eq!(loaded, estimator);
+    let mut record = model.spec().new_record();
+    model
+        .simulate(&[0.2], &mut experiment_rng(5, 5), &mut record)
+        .unwrap();
+    let a = estimator.estimate_record(&record).unwrap();
+    let b = loaded.estimate_record(&record).unwrap();
+    assert_eq!(a[0].to_bits(), b[0].to_bits());
+    let json: serde_json::Value = serde_json::from_str(&estimator.to_json().unwrap()).unwrap();
+    assert_eq!(json["param_names"][0], "theta");
+    assert_eq!(json["training"]["simulations"], 300);
+}
+
+#[test]
+fn damaged_files_get_a_clear_error_each() {
+    let model = small_benchmark();
+    let bytes = small_estimator(&model, 4).to_bytes().unwrap();
+    let message = |bytes: &[u8]| match Estimator::from_bytes(bytes) {
+        Err(Error::File(m)) => m,
+        other => panic!("expected a file error, got {other:?}"),
+    };
+    // Truncated, in the payload and in the header.
+    assert!(message(&bytes[..bytes.len() - 10]).contains("truncated"));
+    assert!(message(&bytes[..15]).contains("truncated"));
+    // Corrupted: one payload bit flipped.
+    let mut flipped = bytes.clone();
+    let last = flipped.len() - 3;
+    flipped[last] ^= 0x10;
+    assert!(message(&flipped).contains("checksum"));
+    // Foreign: a PNG header, and an empty file.
+    assert!(
+        message(b"\x89PNG\r\n\x1a\n0000000000000000000000")
+            .contains("not a twostage estimator file")
+    );
+    assert!(message(b"").contains("not a twostage estimator file"));
+    // Newer format version.
+    let mut newer = bytes.clone();
+    newer[8..12].copy_from_slice(&7u32.to_le_bytes());
+    assert!(message(&newer).contains("newer twostage (format version 7"));
+    // Trailing bytes.
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(message(&longer).contains("unexpected bytes"));
+    // A missing file names itself.
+    let err = Estimator::load("/nonexistent/x.tsest").unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/x.tsest"), "{err}");
+}
+
+#[test]
+fn training_gives_the_same_file_with_one_and_two_threads() {
+    let model = small_benchmark();
+    let train = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| small_estimator(&model, 11).to_bytes().unwrap())
+    };
+    assert_eq!(train(1), train(2));
+}
+
+#[test]
+fn conformal_intervals_cover_fresh_simulations_at_their_level() {
+    // Linear stage 2 keeps this quick; coverage holds for any estimator.
+    let model = small_benchmark();
+    let mut covered = 0.0;
+    let seeds = [1u64, 2, 3, 4];
+    for seed in seeds {
+        let estimator = TwoStage::builder(&model)
+            .simulations(300)
+            .linear(1e-6)
+            .unwrap()
+            .calibration(400)
+            .alpha(0.2)
+            .validation(1500)
+            .seed(seed)
+            .train()
+            .unwrap();
+        let report = estimator.validation().unwrap();
+        covered += report.parameters[0].interval_coverage.unwrap();
+    }
+    let mean = covered / seeds.len() as f64;
+    // Expected coverage ceil(401 * 0.8) / 401 = 0.8005; the average over
+    // four calibrations has a standard deviation near 0.012.
+    assert!((0.765..0.84).contains(&mean), "mean coverage {mean}");
+}
+
+#[test]
+fn estimates_are_clipped_to_the_prior_box() {
+    let model = small_benchmark();
+    let estimator = small_estimator(&model, 5);
+    // A record far outside what training saw: a huge output.
+    let mut record = model.spec().new_record();
+    model
+        .simulate(&[0.3], &mut experiment_rng(1, 1), &mut record)
+        .unwrap();
+    for v in record.output_mut(0) {
+        *v *= 1e3;
+    }
+    let theta = estimator.estimate_record(&record).unwrap();
+    assert!((-0.9..=0.9).contains(&theta[0]), "{theta:?}");
+}
+
+#[test]
+fn bad_records_fail_alone_in_a_batch() {
+    let model = small_benchmark();
+    let estimator = small_estimator(&model, 6);
+    let good = {
+        let mut r = model.spec().new_record();
+        model
+            .simulate(&[0.1], &mut experiment_rng(2, 0), &mut r)
+            .unwrap();
+        r
+    };
+    let constant_input = IoData::siso(&[1.0; 400], good.output(0)).unwrap();
+    let too_short = IoData::siso(&good.input(0)[..5], &good.output(0)[..5]).unwrap();
+    let results = estimator.estimate_batch(&[good.clone(), constant_input, too_short, good]);
+    assert!(results[0].is_ok() && results[3].is_ok());
+    let e1 = results[1].as_ref().unwrap_err().to_string();
+    assert!(e1.contains("u is constant"), "{e1}");
+    let e2 = results[2].as_ref().unwrap_err().to_string();
+    assert!(e2.contains("too short"), "{e2}");
+    assert!(estimator.estimate(&[1.0, 2.0], &[1.0]).is_err());
+}
+
+/// The benchmark, failing for theta above a threshold.
+struct Fragile {
+    inner: Benchmark,
+    above: f64,
+}
+
+impl Simulator for Fragile {
+    fn spec(&self) -> &ModelSpec {
+        self.inner.spec()
+    }
+    fn simulate(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
+        if theta[0] > self.above {
+            return Err(SimError::Diverged {
+                theta: theta.to_vec(),
+                time: 0.0,
+            });
+        }
+        self.inner.simulate(theta, rng, out)
+    }
+}
+
+#[test]
+fn failed_simulations_are_dropped_and_counted_up_to_a_limit() {
+    let rare = Fragile {
+        inner: small_benchmark(),
+        above: 0.89,
+    };
+    let estimator = TwoStage::builder(&rare)
+        .simulations(400)
+        .linear(1e-6)
+        .unwrap()
+        .calibration(0)
+        .validation(0)
+        .max_failure_fraction(0.05)
+        .train()
+        .unwrap();
+    let failures = estimator.training().failures;
+    // theta > 0.89 has probability 0.01 / 1.8 = 0.56%: a few of 400.
+    assert!((1..=12).contains(&failures), "{failures} failures");
+    let often = Fragile {
+        inner: small_benchmark(),
+        above: 0.0,
+    };
+    let err = TwoStage::builder(&often)
+        .simulations(400)
+        .linear(1e-6)
+        .unwrap()
+        .train()
+        .unwrap_err();
+    match err {
+        Error::TooManyFailures {
+            stage,
+            failed,
+            total,
+            ..
+        } => {
+            assert_eq!(stage, "training");
+            assert_eq!(total, 400);
+            assert!(failed > 150);
+        }
+        other => panic!("expected too many failures, got {other}"),
+    }
+}
+
+#[test]
+fn invalid_builder_settings_are_refused() {
+    let model = small_benchmark();
+    assert!(TwoStage::builder(&model).simulations(5).train().is_err());
+    assert!(TwoStage::builder(&model).alpha(1.5).train().is_err());
+    assert!(TwoStage::builder(&model).delta(0.0).train().is_err());
+}
