@@ -8,6 +8,8 @@
 //!
 //! - [`Arx`]: ARX(na, nb) by least squares, the paper's eq. (2), solved by
 //!   Householder QR (faer) with an explicit rank check.
+//! - [`Narx`]: polynomial NARX (all monomials up to a degree, or pure
+//!   powers) on scaled signals, for strongly nonlinear systems.
 //! - [`Workspace`]: scratch space so that compressing record after record
 //!   allocates nothing.
 //!
@@ -35,6 +37,7 @@
 mod arx;
 mod error;
 mod fast;
+mod narx;
 mod signals;
 mod workspace;
 
@@ -42,6 +45,7 @@ use ndarray::ArrayView2;
 
 pub use arx::Arx;
 pub use error::{CompressError, Result};
+pub use narx::{Narx, signal_rms};
 pub use workspace::{RANK_TOLERANCE, Workspace};
 
 /// The compression map g: a record `(u, y)` to features `alpha` in `R^n`.

@@ -239,3 +239,32 @@ fn invalid_settings_name_themselves() {
     let mut out = [0.0; 2];
     assert!(fitted.predict_into(&[0.0, 0.0], &mut out).is_err());
 }
+
+#[test]
+fn an_ensemble_of_one_is_the_network_and_of_three_is_not_the_best_one() {
+    let x = uniform(200, 2, 21);
+    let y = nonlinear(&x);
+    let fit = |restarts: usize, ensemble: bool| {
+        MlpParams::new(&[5])
+            .unwrap()
+            .restarts(restarts)
+            .max_iterations(30)
+            .seed(4)
+            .ensemble(ensemble)
+            .check()
+            .unwrap()
+            .fit(x.view(), y.view())
+            .unwrap()
+    };
+    let (one_mean, one_best) = (fit(1, true), fit(1, false));
+    assert_eq!(
+        one_mean.predict(x.view()).unwrap(),
+        one_best.predict(x.view()).unwrap()
+    );
+    let (mean, best) = (fit(3, true), fit(3, false));
+    assert_eq!((mean.n_members(), best.n_members()), (3, 1));
+    let diff = (&mean.predict(x.view()).unwrap() - &best.predict(x.view()).unwrap())
+        .mapv(f64::abs)
+        .fold(0.0f64, |m, v| m.max(*v));
+    assert!(diff > 1e-9 && diff < 0.5, "largest difference {diff}");
+}

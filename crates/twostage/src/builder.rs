@@ -1,8 +1,8 @@
 //! Training: the `TwoStage` builder and the paper's presets.
 
-use twostage_compress::{Arx, Compressor};
+use twostage_compress::{Arx, signal_rms};
 use twostage_fit::{MlpParams, Ridge};
-use twostage_models::{Prior, Sampling, Simulator};
+use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::chart::compress_chart;
@@ -229,16 +229,17 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             None => prior.clone(),
         };
         let design = training_prior.design(self.simulations, self.seed)?;
+        let compressor = self.calibrated_compressor(&design)?;
         let chart = compress_chart(
             self.simulator,
-            &self.compressor,
+            &compressor,
             &design,
             "training",
             self.max_failure_fraction,
         )?;
-        let regressor = self
-            .regressor
-            .fit(chart.features.view(), chart.thetas.view())?;
+        let regressor =
+            self.regressor
+                .fit(chart.features.view(), chart.thetas.view(), self.seed)?;
         let mut estimator = Estimator {
             param_names: spec.param_names().to_vec(),
             lower: prior.lower().to_vec(),
@@ -249,7 +250,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 n_outputs: spec.output_names().len(),
                 sample_time: spec.sample_time(),
             },
-            compressor: self.compressor.clone(),
+            compressor: compressor.clone(),
             regressor,
             training: TrainingInfo {
                 model: spec.name().to_string(),
@@ -299,6 +300,36 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         Ok(estimator)
     }
 
+    /// The compressor with its signal scales set, where it has any: a NARX
+    /// whose scales are all 1 gets the RMS of each signal over the first
+    /// (up to) 32 experiments of the training design.
+    fn calibrated_compressor(&self, design: &twostage_models::Design) -> Result<CompressorConfig> {
+        let CompressorConfig::Narx(narx) = &self.compressor else {
+            return Ok(self.compressor.clone());
+        };
+        if !narx.has_unit_scales() {
+            return Ok(self.compressor.clone());
+        }
+        let spec = self.simulator.spec();
+        let (mut inputs, mut outputs) = (Vec::new(), Vec::new());
+        let mut theta = vec![0.0; spec.n_params()];
+        let mut record = IoData::default();
+        for i in 0..design.len().min(32) {
+            run_experiment(self.simulator, design, i, &mut theta, &mut record)?;
+            inputs.push(signal_rms(record.inputs()));
+            outputs.push(signal_rms(record.outputs()));
+        }
+        let mean = |rows: &[Vec<f64>]| -> Vec<f64> {
+            let width = rows.first().map_or(0, Vec::len);
+            (0..width)
+                .map(|j| (rows.iter().map(|r| r[j] * r[j]).sum::<f64>() / rows.len() as f64).sqrt())
+                .collect()
+        };
+        Ok(CompressorConfig::Narx(
+            narx.clone().with_scales(&mean(&inputs), &mean(&outputs))?,
+        ))
+    }
+
     /// Truths and clipped estimates on `count` fresh i.i.d. simulations.
     fn fresh_estimates(
         &self,
@@ -311,13 +342,12 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         let design = prior.design(count, self.seed ^ offset)?;
         let chart = compress_chart(
             self.simulator,
-            &self.compressor,
+            estimator.compressor(),
             &design,
             stage,
             self.max_failure_fraction,
         )?;
         let estimates = estimator.predict_features(chart.features.view())?;
-        debug_assert_eq!(chart.features.ncols(), self.compressor.n_features());
         Ok((chart.thetas, estimates))
     }
 }

@@ -2,7 +2,7 @@
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_compress::{Arx, Compressor, Workspace};
+use twostage_compress::{Arx, Compressor, Narx, Workspace};
 use twostage_fit::{FittedLinear, FittedMlp, Mlp, Predictor, Regressor, Ridge};
 
 /// The compression map g of stage 1.
@@ -11,12 +11,15 @@ use twostage_fit::{FittedLinear, FittedMlp, Mlp, Predictor, Regressor, Ridge};
 pub enum CompressorConfig {
     /// ARX(na, nb) least-squares coefficients, eq. (2).
     Arx(Arx),
+    /// Polynomial NARX coefficients on scaled signals.
+    Narx(Narx),
 }
 
 impl std::fmt::Display for CompressorConfig {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Arx(arx) => arx.fmt(f),
+            Self::Narx(narx) => narx.fmt(f),
         }
     }
 }
@@ -27,10 +30,17 @@ impl From<Arx> for CompressorConfig {
     }
 }
 
+impl From<Narx> for CompressorConfig {
+    fn from(narx: Narx) -> Self {
+        Self::Narx(narx)
+    }
+}
+
 impl Compressor for CompressorConfig {
     fn n_features(&self) -> usize {
         match self {
             Self::Arx(c) => c.n_features(),
+            Self::Narx(c) => c.n_features(),
         }
     }
 
@@ -43,6 +53,7 @@ impl Compressor for CompressorConfig {
     ) -> twostage_compress::Result<()> {
         match self {
             Self::Arx(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Narx(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -55,12 +66,14 @@ impl Compressor for CompressorConfig {
     ) -> twostage_compress::Result<()> {
         match self {
             Self::Arx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Narx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
     fn feature_names(&self) -> Vec<String> {
         match self {
             Self::Arx(c) => c.feature_names(),
+            Self::Narx(c) => c.feature_names(),
         }
     }
 }
@@ -85,15 +98,18 @@ impl std::fmt::Display for RegressorConfig {
 }
 
 impl RegressorConfig {
-    /// Fit stage 2 on features `x` and parameters `y`.
+    /// Fit stage 2 on features `x` and parameters `y`; `seed` seeds the
+    /// network's initial weights and held-out split, so that the run's one
+    /// seed decides every random choice.
     pub(crate) fn fit(
         &self,
         x: ArrayView2<'_, f64>,
         y: ArrayView2<'_, f64>,
+        seed: u64,
     ) -> twostage_fit::Result<FittedRegressor> {
         Ok(match self {
             Self::Linear(r) => FittedRegressor::Linear(r.fit(x, y)?),
-            Self::Mlp(m) => FittedRegressor::Mlp(m.fit(x, y)?),
+            Self::Mlp(m) => FittedRegressor::Mlp(m.with_seed(seed).fit(x, y)?),
         })
     }
 }

@@ -244,3 +244,30 @@ fn invalid_builder_settings_are_refused() {
     assert!(TwoStage::builder(&model).alpha(1.5).train().is_err());
     assert!(TwoStage::builder(&model).delta(0.0).train().is_err());
 }
+
+#[test]
+fn a_narx_estimator_gets_calibrated_scales_and_learns() {
+    use twostage::CompressorConfig;
+    use twostage::compress::Narx;
+    let model = small_benchmark();
+    let estimator = TwoStage::builder(&model)
+        .compressor(Narx::new(2, 2, 2).unwrap())
+        .simulations(400)
+        .linear(1e-6)
+        .unwrap()
+        .calibration(0)
+        .validation(300)
+        .seed(2)
+        .train()
+        .unwrap();
+    let CompressorConfig::Narx(narx) = estimator.compressor() else {
+        panic!("expected a NARX compressor");
+    };
+    let (u, y) = narx.scales();
+    // u ~ N(0, 1): RMS near 1; y's RMS is set by the system, well above 1.
+    assert!((u[0] - 1.0).abs() < 0.1, "input scale {}", u[0]);
+    assert!(y[0] > 1.2, "output scale {}", y[0]);
+    // Even a linear map of NARX features learns theta (the prior's spread is 0.52).
+    let rmse = estimator.validation().unwrap().parameters[0].rmse;
+    assert!(rmse < 0.3, "RMSE {rmse}");
+}
