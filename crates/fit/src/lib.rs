@@ -36,8 +36,8 @@ use ndarray::{Array2, ArrayView2};
 pub use error::{FitError, Result};
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{
-    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, TerminationReason, jacobian_at,
-    n_parameters,
+    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, TerminationReason, Trainer, jacobian_at,
+    loss_gradient_at, n_parameters,
 };
 pub use standardize::Standardizer;
 

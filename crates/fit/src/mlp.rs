@@ -20,7 +20,37 @@ use crate::{Predictor, Regressor};
 /// The widest layer supported: prediction keeps activations on the stack.
 pub const MAX_WIDTH: usize = 256;
 
-/// Hyperparameters of an MLP and its Levenberg-Marquardt training.
+/// How the network's weights are fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Trainer {
+    /// Levenberg-Marquardt while its Jacobian (samples x outputs x weights)
+    /// stays under 2e7 entries and the network under 1000 weights, Adam
+    /// beyond.
+    Auto,
+    /// Levenberg-Marquardt on the full training set.
+    LevenbergMarquardt,
+    /// Adam (Kingma and Ba, 2015) on shuffled mini-batches.
+    Adam {
+        /// Step size.
+        learning_rate: f64,
+        /// Samples per mini-batch.
+        batch_size: usize,
+        /// Passes over the training set at most.
+        epochs: usize,
+    },
+}
+
+impl Trainer {
+    /// Adam with common settings: step 1e-3, batches of 64, 500 epochs.
+    pub const ADAM: Self = Self::Adam {
+        learning_rate: 1e-3,
+        batch_size: 64,
+        epochs: 500,
+    };
+}
+
+/// Hyperparameters of an MLP and its training.
 ///
 /// | setting | default | valid |
 /// |---|---|---|
@@ -31,6 +61,7 @@ pub const MAX_WIDTH: usize = 256;
 /// | `patience` | 25 | iterations without held-out improvement before stopping |
 /// | `weight_decay` | 1e-6 | >= 0, L2 penalty on the weights (standardized units) |
 /// | `seed` | 0 | any |
+/// | `trainer` | [`Trainer::Auto`] | LM, Adam, or chosen by size |
 /// | `ensemble` | false (keep the best held-out network) | true: average the restarts' networks |
 ///
 /// ```
@@ -55,6 +86,7 @@ pub struct MlpParams {
     weight_decay: f64,
     seed: u64,
     ensemble: bool,
+    trainer: Trainer,
 }
 
 impl MlpParams {
@@ -73,6 +105,7 @@ impl MlpParams {
             weight_decay: 1e-6,
             seed: 0,
             ensemble: false,
+            trainer: Trainer::Auto,
         })
     }
     /// The hidden layer sizes.
@@ -111,6 +144,11 @@ impl MlpParams {
     /// not help (docs/accuracy.md).
     pub fn ensemble(mut self, ensemble: bool) -> Self {
         self.ensemble = ensemble;
+        self
+    }
+    /// The training algorithm. With Adam, `patience` counts epochs.
+    pub fn trainer(mut self, trainer: Trainer) -> Self {
+        self.trainer = trainer;
         self
     }
     /// Seed of the initial weights and of the held-out split.
@@ -156,6 +194,27 @@ impl MlpParams {
                 "must lie in [0, 0.5]",
             ));
         }
+        if let Trainer::Adam {
+            learning_rate,
+            batch_size,
+            epochs,
+        } = self.trainer
+        {
+            if !(learning_rate.is_finite() && learning_rate > 0.0) {
+                return Err(invalid(
+                    "learning_rate",
+                    learning_rate.to_string(),
+                    "finite and > 0",
+                ));
+            }
+            if batch_size == 0 || epochs == 0 {
+                return Err(invalid(
+                    "batch_size, epochs",
+                    format!("{batch_size}, {epochs}"),
+                    "both at least 1",
+                ));
+            }
+        }
         if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
             return Err(invalid(
                 "weight_decay",
@@ -199,6 +258,8 @@ pub enum TerminationReason {
     DampingLimit,
     /// The relative decrease of the training loss fell below 1e-12.
     Converged,
+    /// Adam's epoch budget ran out.
+    MaxEpochs,
 }
 
 /// How one restart went.
@@ -318,6 +379,62 @@ impl Problem<'_> {
         self.decay * params.iter().map(|v| v * v).sum::<f64>()
     }
 
+    /// Gradient of the mean squared error over `rows` (per target value)
+    /// plus the weight decay term, by one backward pass per sample seeded
+    /// with its residual.
+    fn gradient(
+        &self,
+        params: &[f64],
+        rows: &[usize],
+        grad: &mut [f64],
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
+        let sizes = self.sizes;
+        let layers = sizes.len() - 1;
+        let q = sizes[layers];
+        let out = self.offsets[layers];
+        grad.fill(0.0);
+        let scale = 2.0 / (rows.len() * q).max(1) as f64;
+        for &i in rows {
+            let xi = self.x.row(i);
+            let xi = xi.as_slice().unwrap_or(&[]);
+            forward(sizes, params, xi, acts, &self.offsets);
+            for k in 0..q {
+                delta[k] = scale * (acts[out + k] - self.t[[i, k]]);
+            }
+            let mut s = params.len();
+            for l in (0..layers).rev() {
+                let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+                s -= n_out * (n_in + 1);
+                let input = &acts[self.offsets[l]..self.offsets[l] + n_in];
+                for a in 0..n_out {
+                    let d = delta[a];
+                    for (c, inp) in input.iter().enumerate() {
+                        grad[s + a * n_in + c] += d * inp;
+                    }
+                    grad[s + n_out * n_in + a] += d;
+                }
+                if l > 0 {
+                    let w = &params[s..s + n_out * n_in];
+                    let (cur, next) = delta.split_at_mut(MAX_WIDTH);
+                    for c in 0..n_in {
+                        let mut acc = 0.0;
+                        for a in 0..n_out {
+                            acc += w[a * n_in + c] * cur[a];
+                        }
+                        next[c] = acc * (1.0 - input[c] * input[c]);
+                    }
+                    cur[..n_in].copy_from_slice(&next[..n_in]);
+                }
+            }
+        }
+        let decay = 2.0 * self.decay / (self.train.len() * q).max(1) as f64;
+        for (g, p) in grad.iter_mut().zip(params) {
+            *g += decay * p;
+        }
+    }
+
     /// Residuals r (train rows x targets) and their Jacobian J.
     fn jacobian(
         &self,
@@ -433,10 +550,111 @@ fn initial_parameters(sizes: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
 const MU_START: f64 = 1e-3;
 const MU_MAX: f64 = 1e10;
 
+/// Whether Levenberg-Marquardt is used for this problem size.
+fn use_levenberg_marquardt(trainer: Trainer, rows: usize, n_params: usize) -> bool {
+    match trainer {
+        Trainer::LevenbergMarquardt => true,
+        Trainer::Adam { .. } => false,
+        Trainer::Auto => n_params <= 1000 && rows.saturating_mul(n_params) <= 20_000_000,
+    }
+}
+
 fn train_one(problem: &Problem<'_>, mlp: &MlpParams, restart: usize) -> (Vec<f64>, RestartReport) {
     let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
     rng.set_stream(restart as u64 + 1);
-    let mut params = initial_parameters(problem.sizes, &mut rng);
+    let params = initial_parameters(problem.sizes, &mut rng);
+    let q = *problem.sizes.last().unwrap_or(&1);
+    if use_levenberg_marquardt(mlp.trainer, problem.train.len() * q, problem.n_params()) {
+        train_levenberg_marquardt(problem, mlp, restart, params)
+    } else {
+        let (learning_rate, batch_size, epochs) = match mlp.trainer {
+            Trainer::Adam {
+                learning_rate,
+                batch_size,
+                epochs,
+            } => (learning_rate, batch_size, epochs),
+            _ => (1e-3, 64, 500),
+        };
+        train_adam(
+            problem,
+            mlp,
+            restart,
+            params,
+            &mut rng,
+            (learning_rate, batch_size, epochs),
+        )
+    }
+}
+
+/// Adam on shuffled mini-batches, keeping the weights of the best held-out
+/// epoch; `patience` counts epochs.
+fn train_adam(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    mut params: Vec<f64>,
+    rng: &mut ChaCha8Rng,
+    (learning_rate, batch_size, epochs): (f64, usize, usize),
+) -> (Vec<f64>, RestartReport) {
+    const BETA1: f64 = 0.9;
+    const BETA2: f64 = 0.999;
+    const EPSILON: f64 = 1e-8;
+    let n = problem.n_params();
+    let width = problem.offsets.last().copied().unwrap_or(0);
+    let mut acts = vec![0.0; width];
+    let mut delta = vec![0.0; 2 * MAX_WIDTH];
+    let (mut grad, mut m, mut v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let held_out = if problem.held_out.is_empty() {
+        problem.train
+    } else {
+        problem.held_out
+    };
+    let mut order = problem.train.to_vec();
+    let mut best = (problem.mse(&params, held_out, &mut acts), params.clone());
+    let (mut since_best, mut step, mut done) = (0, 0i32, 0);
+    let mut reason = TerminationReason::MaxEpochs;
+    for _ in 0..epochs {
+        done += 1;
+        order.shuffle(rng);
+        for batch in order.chunks(batch_size) {
+            problem.gradient(&params, batch, &mut grad, &mut acts, &mut delta);
+            step += 1;
+            let (c1, c2) = (1.0 - BETA1.powi(step), 1.0 - BETA2.powi(step));
+            for j in 0..n {
+                m[j] = BETA1 * m[j] + (1.0 - BETA1) * grad[j];
+                v[j] = BETA2 * v[j] + (1.0 - BETA2) * grad[j] * grad[j];
+                params[j] -= learning_rate * (m[j] / c1) / ((v[j] / c2).sqrt() + EPSILON);
+            }
+        }
+        let held = problem.mse(&params, held_out, &mut acts);
+        if held < best.0 {
+            best = (held, params.clone());
+            since_best = 0;
+        } else {
+            since_best += 1;
+            if !problem.held_out.is_empty() && since_best >= mlp.patience {
+                reason = TerminationReason::EarlyStopping;
+                break;
+            }
+        }
+    }
+    let (validation_mse, kept) = best;
+    let report = RestartReport {
+        restart,
+        iterations: done,
+        reason,
+        train_mse: problem.mse(&kept, problem.train, &mut acts),
+        validation_mse,
+    };
+    (kept, report)
+}
+
+fn train_levenberg_marquardt(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    mut params: Vec<f64>,
+) -> (Vec<f64>, RestartReport) {
     let n = problem.n_params();
     let q = *problem.sizes.last().unwrap_or(&1);
     let rows = problem.train.len() * q;
@@ -699,8 +917,62 @@ pub fn jacobian_at(sizes: &[usize], params: &[f64], x: &[f64]) -> (Vec<f64>, Arr
     (outputs, Array2::from_shape_fn((q, n), |(i, j)| jac[(i, j)]))
 }
 
+/// The training loss (mean squared error per target value plus weight
+/// decay over the sample count) and its gradient, on standardized data:
+/// for tests of the Adam gradient.
+#[doc(hidden)]
+pub fn loss_gradient_at(
+    sizes: &[usize],
+    params: &[f64],
+    x: &Array2<f64>,
+    t: &Array2<f64>,
+    decay: f64,
+) -> (f64, Vec<f64>) {
+    let mut offsets = vec![0];
+    for s in sizes {
+        offsets.push(offsets.last().copied().unwrap_or(0) + s);
+    }
+    let rows: Vec<usize> = (0..x.nrows()).collect();
+    let x = x.as_standard_layout().to_owned();
+    let problem = Problem {
+        sizes,
+        offsets: offsets.clone(),
+        x: &x,
+        t,
+        train: &rows,
+        held_out: &[],
+        decay,
+    };
+    let q = *sizes.last().unwrap_or(&1);
+    let mut acts = vec![0.0; offsets.last().copied().unwrap_or(0)];
+    let mut delta = vec![0.0; 2 * MAX_WIDTH];
+    let mut grad = vec![0.0; params.len()];
+    problem.gradient(params, &rows, &mut grad, &mut acts, &mut delta);
+    let loss =
+        problem.mse(params, &rows, &mut acts) + problem.penalty(params) / (rows.len() * q) as f64;
+    (loss, grad)
+}
+
 /// Parameter count for layer sizes `[n_in, hidden.., n_out]`.
 #[doc(hidden)]
 pub fn n_parameters(sizes: &[usize]) -> usize {
     parameter_count(sizes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_picks_levenberg_marquardt_for_small_problems_only() {
+        assert!(use_levenberg_marquardt(Trainer::Auto, 3000, 222));
+        assert!(!use_levenberg_marquardt(Trainer::Auto, 200_000, 222));
+        assert!(!use_levenberg_marquardt(Trainer::Auto, 100, 5000));
+        assert!(use_levenberg_marquardt(
+            Trainer::LevenbergMarquardt,
+            200_000,
+            5000
+        ));
+        assert!(!use_levenberg_marquardt(Trainer::ADAM, 10, 10));
+    }
 }

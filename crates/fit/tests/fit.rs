@@ -7,8 +7,8 @@ use ndarray::Array2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use twostage_fit::{
-    FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason, jacobian_at,
-    n_parameters,
+    FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason, Trainer,
+    jacobian_at, loss_gradient_at, n_parameters,
 };
 
 fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f64> {
@@ -267,4 +267,63 @@ fn an_ensemble_of_one_is_the_network_and_of_three_is_not_the_best_one() {
         .mapv(f64::abs)
         .fold(0.0f64, |m, v| m.max(*v));
     assert!(diff > 1e-9 && diff < 0.5, "largest difference {diff}");
+}
+
+#[test]
+fn the_loss_gradient_matches_finite_differences() {
+    let sizes = [2, 4, 3, 2];
+    let n = n_parameters(&sizes);
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let params: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let x = uniform(7, 2, 32);
+    let t = uniform(7, 2, 33);
+    let (_, grad) = loss_gradient_at(&sizes, &params, &x, &t, 0.01);
+    let h = 1e-6;
+    for j in 0..n {
+        let (mut plus, mut minus) = (params.clone(), params.clone());
+        plus[j] += h;
+        minus[j] -= h;
+        let fd = (loss_gradient_at(&sizes, &plus, &x, &t, 0.01).0
+            - loss_gradient_at(&sizes, &minus, &x, &t, 0.01).0)
+            / (2.0 * h);
+        assert!(
+            (fd - grad[j]).abs() < 1e-8,
+            "parameter {j}: {fd} vs {}",
+            grad[j]
+        );
+    }
+}
+
+#[test]
+fn adam_fits_a_smooth_function() {
+    let x = Array2::from_shape_fn((400, 1), |(i, _)| -1.5 + 3.0 * i as f64 / 399.0);
+    let t = x.mapv(|v| (2.0 * v).sin());
+    let net = MlpParams::new(&[16])
+        .unwrap()
+        .trainer(Trainer::Adam {
+            learning_rate: 1e-2,
+            batch_size: 32,
+            epochs: 400,
+        })
+        .restarts(1)
+        .patience(40)
+        .seed(2)
+        .check()
+        .unwrap()
+        .fit(x.view(), t.view())
+        .unwrap();
+    let p = net.predict(x.view()).unwrap();
+    let rmse = ((&p - &t).mapv(|v| v * v).sum() / 400.0).sqrt();
+    assert!(rmse < 0.05, "Adam RMSE {rmse}");
+    assert!(
+        MlpParams::new(&[4])
+            .unwrap()
+            .trainer(Trainer::Adam {
+                learning_rate: 0.0,
+                batch_size: 8,
+                epochs: 5
+            })
+            .check()
+            .is_err()
+    );
 }
