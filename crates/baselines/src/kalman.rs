@@ -62,6 +62,28 @@ pub struct KalmanRun {
 /// # Errors
 /// A record that is not SISO or holds non-finite samples.
 pub fn benchmark_kalman(theta: f64, record: &IoData) -> Result<KalmanRun> {
+    benchmark_kalman_innovations(theta, record, None)
+}
+
+/// As [`benchmark_kalman`], also writing the innovations `y(k) - y_hat(k|k-1)`
+/// (the one-step prediction errors) into `innovations` when given.
+///
+/// # Errors
+/// As [`benchmark_kalman`], and an `innovations` buffer of the wrong length.
+pub fn benchmark_kalman_innovations(
+    theta: f64,
+    record: &IoData,
+    mut innovations: Option<&mut [f64]>,
+) -> Result<KalmanRun> {
+    if let Some(buffer) = &innovations
+        && buffer.len() != record.n_samples()
+    {
+        return Err(BaselineError::InvalidRecord(format!(
+            "an innovation buffer of {} for a record of {} samples",
+            buffer.len(),
+            record.n_samples()
+        )));
+    }
     if record.n_inputs() != 1 || record.n_outputs() != 1 {
         return Err(BaselineError::InvalidRecord(format!(
             "the benchmark has one input and one output, the record has {} and {}",
@@ -97,6 +119,9 @@ pub fn benchmark_kalman(theta: f64, record: &IoData) -> Result<KalmanRun> {
         ];
         log_likelihood -= 0.5 * (ln_2pi + s.ln() + e * e / s);
         sse += e * e;
+        if let Some(buffer) = innovations.as_deref_mut() {
+            buffer[k] = e;
+        }
         // Predict with u(k): x = A x + B u, P = A P A' + Q.
         let a = m.a;
         x = [

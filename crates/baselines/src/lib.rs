@@ -32,11 +32,23 @@
 //! ```
 #![deny(missing_docs)]
 
+mod augmented;
+mod bayes;
 mod error;
+mod filters;
 mod kalman;
+mod particle;
+mod pem;
 
+pub use augmented::{
+    InitialCovariance, THETA_RANDOM_WALK_VARIANCE, transition, transition_jacobian,
+};
+pub use bayes::{BayesBenchmark, Posterior};
 pub use error::{BaselineError, Result};
-pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman};
+pub use filters::{FilterRun, FilterStart, KalmanEstimator, UnscentedParams, run_ekf, run_ukf};
+pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
+pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
+pub use pem::{BenchmarkPredictor, Descent, PemStop, PredictionError, ResidualModel};
 
 use twostage_models::IoData;
 

@@ -1,0 +1,303 @@
+//! The prediction-error method (Section 2.2 of the paper): minimize the sum
+//! of squared one-step prediction errors over theta in the prior box, by
+//! Levenberg-Marquardt with finite-difference derivatives, from several
+//! seeded random starts, keeping the lowest loss.
+
+use twostage_models::{IoData, Prior};
+
+use crate::error::{BaselineError, Result};
+use crate::kalman::benchmark_kalman_innovations;
+use crate::{Estimate, RecordEstimator};
+
+/// A model whose prediction errors on a record can be computed at any theta.
+pub trait ResidualModel: Send + Sync {
+    /// The prior box.
+    fn prior(&self) -> &Prior;
+    /// Write the prediction errors of `record` at `theta` into `residuals`
+    /// (one per sample).
+    ///
+    /// # Errors
+    /// A record the model cannot use, or a prediction that fails.
+    fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()>;
+}
+
+/// The benchmark with its exact Kalman predictor: the PE estimate is then
+/// also the maximum-likelihood estimate up to the innovation variances.
+#[derive(Debug, Clone)]
+pub struct BenchmarkPredictor {
+    prior: Prior,
+}
+
+impl BenchmarkPredictor {
+    /// The paper's benchmark, theta in [-0.9, 0.9].
+    ///
+    /// # Errors
+    /// Never for the built-in box.
+    pub fn new() -> Result<Self> {
+        Ok(Self {
+            prior: Prior::uniform_box(&[-0.9], &[0.9])?,
+        })
+    }
+}
+
+impl ResidualModel for BenchmarkPredictor {
+    fn prior(&self) -> &Prior {
+        &self.prior
+    }
+    fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()> {
+        benchmark_kalman_innovations(theta[0], record, Some(residuals)).map(|_| ())
+    }
+}
+
+/// Why one Levenberg-Marquardt descent stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PemStop {
+    /// The relative decrease of the loss fell below 1e-10.
+    Converged,
+    /// No step decreased the loss at the largest damping.
+    DampingLimit,
+    /// The iteration budget ran out.
+    MaxIterations,
+}
+
+/// One descent from one start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Descent {
+    /// Where it started.
+    pub start: Vec<f64>,
+    /// Where it ended.
+    pub theta: Vec<f64>,
+    /// The loss there.
+    pub loss: f64,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub stop: PemStop,
+}
+
+/// The prediction-error estimator with multi-start.
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `starts` | 1 | >= 1 seeded uniform draws from the prior |
+/// | `max_iterations` | 50 | >= 1 per start |
+/// | `seed` | 0 | any |
+///
+/// ```
+/// use twostage_baselines::{BenchmarkPredictor, PredictionError, RecordEstimator};
+/// use twostage_models::{experiment_rng, Benchmark, Simulator};
+/// let model = Benchmark::new();
+/// let mut record = model.spec().new_record();
+/// model.simulate(&[0.5], &mut experiment_rng(4, 0), &mut record)?;
+/// let pem = PredictionError::new(BenchmarkPredictor::new()?, 10);
+/// let estimate = pem.estimate(&record)?;
+/// assert!((estimate.theta[0] - 0.5).abs() < 0.05);
+/// # Ok::<(), twostage_baselines::BaselineError>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct PredictionError<M> {
+    model: M,
+    starts: usize,
+    max_iterations: usize,
+    seed: u64,
+    name: String,
+}
+
+impl<M: ResidualModel> PredictionError<M> {
+    /// PE with `starts` random starts.
+    pub fn new(model: M, starts: usize) -> Self {
+        Self {
+            model,
+            starts,
+            max_iterations: 50,
+            seed: 0,
+            name: format!("pem{starts}"),
+        }
+    }
+
+    /// The seed of the starting points.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// Iterations per start.
+    pub fn max_iterations(mut self, iterations: usize) -> Self {
+        self.max_iterations = iterations;
+        self
+    }
+
+    /// Run every descent and return them all, best first.
+    ///
+    /// # Errors
+    /// A bad record, or no start at all.
+    pub fn descents(&self, record: &IoData) -> Result<Vec<Descent>> {
+        if self.starts == 0 || self.max_iterations == 0 {
+            return Err(BaselineError::InvalidRecord(
+                "PE needs at least one start and one iteration".into(),
+            ));
+        }
+        let prior = self.model.prior();
+        let design = prior.design(self.starts, self.seed)?;
+        let mut descents = Vec::with_capacity(self.starts);
+        for i in 0..self.starts {
+            let mut start = vec![0.0; prior.dim()];
+            design.fill_theta(i, &mut start)?;
+            descents.push(self.descend(record, start)?);
+        }
+        descents.sort_by(|a, b| a.loss.total_cmp(&b.loss));
+        Ok(descents)
+    }
+
+    /// Loss and residuals at unit-box coordinates `s`.
+    fn evaluate(&self, record: &IoData, s: &[f64], residuals: &mut [f64]) -> Result<f64> {
+        let prior = self.model.prior();
+        let theta: Vec<f64> = s
+            .iter()
+            .zip(prior.lower().iter().zip(prior.upper()))
+            .map(|(si, (lo, hi))| lo + si * (hi - lo))
+            .collect();
+        self.model.residuals(&theta, record, residuals)?;
+        Ok(residuals.iter().map(|r| r * r).sum())
+    }
+
+    /// Levenberg-Marquardt in the unit box, with central differences.
+    fn descend(&self, record: &IoData, start: Vec<f64>) -> Result<Descent> {
+        let prior = self.model.prior();
+        let q = prior.dim();
+        let n = record.n_samples();
+        let to_unit = |theta: &[f64]| -> Vec<f64> {
+            theta
+                .iter()
+                .zip(prior.lower().iter().zip(prior.upper()))
+                .map(|(t, (lo, hi))| (t - lo) / (hi - lo))
+                .collect()
+        };
+        let mut s = to_unit(&start);
+        let mut r = vec![0.0; n];
+        let mut loss = self.evaluate(record, &s, &mut r)?;
+        let (mut plus, mut minus) = (vec![0.0; n], vec![0.0; n]);
+        let mut jac = vec![vec![0.0; n]; q];
+        let mut mu = 1e-3;
+        let h = 1e-6;
+        let mut stop = PemStop::MaxIterations;
+        let mut iterations = 0;
+        for _ in 0..self.max_iterations {
+            iterations += 1;
+            for (j, column) in jac.iter_mut().enumerate() {
+                // Central differences, shifted inward at the box faces.
+                let mut sp = s.clone();
+                let mut sm = s.clone();
+                sp[j] = (s[j] + h).min(1.0);
+                sm[j] = (s[j] - h).max(0.0);
+                self.evaluate(record, &sp, &mut plus)?;
+                self.evaluate(record, &sm, &mut minus)?;
+                let width = sp[j] - sm[j];
+                for k in 0..n {
+                    column[k] = (plus[k] - minus[k]) / width;
+                }
+            }
+            let mut jtj = vec![vec![0.0; q]; q];
+            let mut jtr = vec![0.0; q];
+            for a in 0..q {
+                for b in 0..q {
+                    jtj[a][b] = jac[a].iter().zip(&jac[b]).map(|(x, y)| x * y).sum();
+                }
+                jtr[a] = jac[a].iter().zip(&r).map(|(x, y)| x * y).sum();
+            }
+            let mut accepted = false;
+            while mu < 1e12 {
+                let Some(step) = solve_damped(&jtj, &jtr, mu) else {
+                    mu *= 10.0;
+                    continue;
+                };
+                let trial: Vec<f64> = s
+                    .iter()
+                    .zip(&step)
+                    .map(|(a, d)| (a - d).clamp(0.0, 1.0))
+                    .collect();
+                let trial_loss = self.evaluate(record, &trial, &mut plus)?;
+                if trial_loss < loss {
+                    let relative = (loss - trial_loss) / loss.max(f64::MIN_POSITIVE);
+                    s = trial;
+                    std::mem::swap(&mut r, &mut plus);
+                    loss = trial_loss;
+                    mu = (mu / 10.0).max(1e-12);
+                    accepted = true;
+                    if relative < 1e-10 {
+                        stop = PemStop::Converged;
+                    }
+                    break;
+                }
+                mu *= 10.0;
+            }
+            if !accepted {
+                stop = PemStop::DampingLimit;
+                break;
+            }
+            if stop == PemStop::Converged {
+                break;
+            }
+        }
+        let theta = s
+            .iter()
+            .zip(prior.lower().iter().zip(prior.upper()))
+            .map(|(si, (lo, hi))| lo + si * (hi - lo))
+            .collect();
+        Ok(Descent {
+            start,
+            theta,
+            loss,
+            iterations,
+            stop,
+        })
+    }
+}
+
+/// Solve `(A + mu diag(A) + mu 1e-12 I) x = b` for a tiny SPD A by Cholesky.
+fn solve_damped(a: &[Vec<f64>], b: &[f64], mu: f64) -> Option<Vec<f64>> {
+    let q = b.len();
+    let mut m: Vec<Vec<f64>> = a.to_vec();
+    for j in 0..q {
+        m[j][j] += mu * (a[j][j] + 1e-12);
+    }
+    let mut l = vec![vec![0.0; q]; q];
+    for j in 0..q {
+        let d = m[j][j] - (0..j).map(|k| l[j][k] * l[j][k]).sum::<f64>();
+        if d.is_nan() || d <= 0.0 {
+            return None;
+        }
+        l[j][j] = d.sqrt();
+        for i in j + 1..q {
+            l[i][j] = (m[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>()) / l[j][j];
+        }
+    }
+    let mut z = vec![0.0; q];
+    for i in 0..q {
+        z[i] = (b[i] - (0..i).map(|k| l[i][k] * z[k]).sum::<f64>()) / l[i][i];
+    }
+    let mut x = vec![0.0; q];
+    for i in (0..q).rev() {
+        x[i] = (z[i] - (i + 1..q).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
+    }
+    Some(x)
+}
+
+impl<M: ResidualModel> RecordEstimator for PredictionError<M> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn estimate(&self, record: &IoData) -> Result<Estimate> {
+        let best = self
+            .descents(record)?
+            .into_iter()
+            .next()
+            .ok_or_else(|| BaselineError::InvalidRecord("no descent ran".into()))?;
+        Ok(Estimate {
+            theta: best.theta,
+            spread: None,
+        })
+    }
+}
