@@ -34,6 +34,7 @@
 
 mod augmented;
 mod bayes;
+mod car;
 mod error;
 mod filters;
 mod kalman;
@@ -44,6 +45,7 @@ pub use augmented::{
     InitialCovariance, THETA_RANDOM_WALK_VARIANCE, transition, transition_jacobian,
 };
 pub use bayes::{BayesBenchmark, Posterior};
+pub use car::{BayesCar, CarParticles, CarPosterior, CarPredictor};
 pub use error::{BaselineError, Result};
 pub use filters::{FilterRun, FilterStart, KalmanEstimator, UnscentedParams, run_ekf, run_ukf};
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};

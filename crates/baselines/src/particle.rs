@@ -16,6 +16,11 @@ use crate::{Estimate, RecordEstimator};
 /// A model a particle filter can run: a state that moves from sample to
 /// sample given theta and the input, observed through one noisy output.
 pub trait ParticleModel: Send + Sync {
+    /// Per-block scratch space of [`ParticleModel::propagate`] (an
+    /// integrator's buffers, for instance).
+    type Scratch: Send;
+    /// A fresh scratch space.
+    fn scratch(&self) -> Self::Scratch;
     /// The state dimension.
     fn state_dim(&self) -> usize;
     /// The prior box of theta.
@@ -34,6 +39,7 @@ pub trait ParticleModel: Send + Sync {
         state: &mut [f64],
         inputs: &[f64],
         rng: &mut ChaCha8Rng,
+        scratch: &mut Self::Scratch,
     );
 }
 
@@ -56,6 +62,8 @@ impl BenchmarkParticles {
 }
 
 impl ParticleModel for BenchmarkParticles {
+    type Scratch = ();
+    fn scratch(&self) {}
     fn state_dim(&self) -> usize {
         2
     }
@@ -78,6 +86,7 @@ impl ParticleModel for BenchmarkParticles {
         state: &mut [f64],
         inputs: &[f64],
         rng: &mut ChaCha8Rng,
+        _scratch: &mut (),
     ) {
         let (a, b) = twostage_models::Benchmark::coefficients(theta[0]);
         let sd = PROCESS_NOISE_VARIANCE.sqrt();
@@ -165,8 +174,13 @@ impl<M: ParticleModel> ParticleFilter<M> {
         for (s, t) in states.chunks_exact_mut(dx).zip(thetas.chunks_exact(q)) {
             self.model.initial_state(t, s);
         }
-        let mut rngs: Vec<ChaCha8Rng> = (0..n_p.div_ceil(BLOCK))
-            .map(|b| stream_rng(self.seed, b as u64, StreamPurpose::Simulation))
+        let mut rngs: Vec<(ChaCha8Rng, M::Scratch)> = (0..n_p.div_ceil(BLOCK))
+            .map(|b| {
+                (
+                    stream_rng(self.seed, b as u64, StreamPurpose::Simulation),
+                    self.model.scratch(),
+                )
+            })
             .collect();
         let mut resampler = stream_rng(self.seed, u64::MAX, StreamPurpose::Design);
         let mut log_w = vec![0.0; n_p];
@@ -226,12 +240,12 @@ impl<M: ParticleModel> ParticleFilter<M> {
                 .par_chunks_mut(BLOCK * dx)
                 .zip(thetas.par_chunks_mut(BLOCK * q))
                 .zip(rngs.par_iter_mut())
-                .for_each(|((s_block, t_block), rng)| {
+                .for_each(|((s_block, t_block), (rng, scratch))| {
                     for (s, t) in s_block
                         .chunks_exact_mut(dx)
                         .zip(t_block.chunks_exact_mut(q))
                     {
-                        self.model.propagate(k, t, s, u, rng);
+                        self.model.propagate(k, t, s, u, rng, scratch);
                         for (tj, step) in t.iter_mut().zip(&steps) {
                             let z: f64 = StandardNormal.sample(rng);
                             *tj += step * z;

@@ -295,6 +295,46 @@ impl PacejkaCarBuilder {
 }
 
 impl PacejkaCar {
+    fn dynamics<'a>(&'a self, theta: &[f64], inputs: &'a [f64]) -> CarDynamics<'a> {
+        CarDynamics {
+            vehicle: &self.vehicle,
+            tire: &self.tire,
+            p_k1: theta[0],
+            p_k2: theta[1],
+            input: &self.input,
+            samples: inputs,
+            loads: self.vehicle.axle_loads(),
+        }
+    }
+
+    /// The noise-free lateral acceleration at sample `k` for the state
+    /// `(beta, r, phi, p)` at time `k Ts`; `inputs` are the sampled steer
+    /// (used between samples when the input is not the chicane).
+    pub fn output_at(&self, theta: &[f64], k: usize, state: &[f64; 4], inputs: &[f64]) -> f64 {
+        self.dynamics(theta, inputs)
+            .lateral_acceleration(k as f64 * PACEJKA_SAMPLE_TIME, state)
+    }
+
+    /// Integrate the state from sample `k` to `k + 1` (ten RK4 steps of
+    /// 0.002 s, numbered globally so every stage time is a multiple of the
+    /// step). Filters and predictors step the car with this, exactly as
+    /// [`Simulator::simulate`] does.
+    pub fn advance(
+        &self,
+        theta: &[f64],
+        k: usize,
+        state: &mut [f64; 4],
+        inputs: &[f64],
+        rk4: &mut Rk4,
+    ) {
+        let dynamics = self.dynamics(theta, inputs);
+        let h = PACEJKA_SAMPLE_TIME / PACEJKA_STEPS_PER_SAMPLE as f64;
+        let first = k * PACEJKA_STEPS_PER_SAMPLE;
+        for j in first..first + PACEJKA_STEPS_PER_SAMPLE {
+            rk4.step(&dynamics, j as f64 * h, h, state);
+        }
+    }
+
     /// The paper's setting: chicane, N = 500, noise variance 0.01.
     pub fn new() -> Self {
         Self::builder()
@@ -398,40 +438,24 @@ impl Simulator for PacejkaCar {
         out.resize(n, 1, 1);
         let (u, y) = out.siso_mut();
         self.input.fill(PACEJKA_SAMPLE_TIME, rng, u)?;
-        let dynamics = CarDynamics {
-            vehicle: &self.vehicle,
-            tire: &self.tire,
-            p_k1: theta[0],
-            p_k2: theta[1],
-            input: &self.input,
-            samples: u,
-            loads: self.vehicle.axle_loads(),
-        };
-        let h = PACEJKA_SAMPLE_TIME / PACEJKA_STEPS_PER_SAMPLE as f64;
         let mut rk4 = Rk4::new(4);
         let mut x = [0.0f64; 4];
         let noise_sd = self.noise_variance.sqrt();
         for (k, y_k) in y.iter_mut().enumerate() {
-            let t = k as f64 * PACEJKA_SAMPLE_TIME;
             if k > 0 {
-                // Steps are numbered globally so that every stage time is
-                // j * h, the same whatever the sample.
-                let first = (k - 1) * PACEJKA_STEPS_PER_SAMPLE;
-                for j in first..first + PACEJKA_STEPS_PER_SAMPLE {
-                    rk4.step(&dynamics, j as f64 * h, h, &mut x);
-                }
+                self.advance(theta, k - 1, &mut x, u, &mut rk4);
                 if x.iter().any(|v| !v.is_finite()) {
                     return Err(SimError::Diverged {
                         theta: theta.to_vec(),
-                        time: t,
+                        time: k as f64 * PACEJKA_SAMPLE_TIME,
                     });
                 }
             }
-            let a_y = dynamics.lateral_acceleration(t, &x);
+            let a_y = self.output_at(theta, k, &x, u);
             if !a_y.is_finite() {
                 return Err(SimError::Diverged {
                     theta: theta.to_vec(),
-                    time: t,
+                    time: k as f64 * PACEJKA_SAMPLE_TIME,
                 });
             }
             *y_k = a_y;

@@ -1,0 +1,317 @@
+//! The competitors on the Pacejka car (Section 6): its particle model, its
+//! simulation-error predictor, and its Bayes-optimal reference. The car is
+//! deterministic but for the accelerometer noise, so the predictor of y(k)
+//! is the noise-free simulation.
+//!
+//! These run the car with its own input signal (the chicane by default);
+//! the record's sampled input is used only between samples by models whose
+//! input is not the chicane.
+
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use twostage_models::{IoData, PACEJKA_NOISE_VARIANCE, PacejkaCar, Prior, Rk4, Simulator};
+
+use crate::error::{BaselineError, Result};
+use crate::particle::ParticleModel;
+use crate::pem::ResidualModel;
+use crate::{Estimate, RecordEstimator};
+
+fn state4(state: &mut [f64]) -> Result<&mut [f64; 4]> {
+    <&mut [f64; 4]>::try_from(state)
+        .map_err(|_| BaselineError::InvalidRecord("the car's state has four components".into()))
+}
+
+/// The car for the particle filter: state (beta, r, phi, p), no process
+/// noise, theta = (pK1, pK2).
+#[derive(Debug, Clone)]
+pub struct CarParticles {
+    car: PacejkaCar,
+}
+
+impl CarParticles {
+    /// The paper's car with its chicane.
+    pub fn new() -> Self {
+        Self {
+            car: PacejkaCar::new(),
+        }
+    }
+}
+
+impl Default for CarParticles {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ParticleModel for CarParticles {
+    type Scratch = Rk4;
+    fn scratch(&self) -> Rk4 {
+        Rk4::new(4)
+    }
+    fn state_dim(&self) -> usize {
+        4
+    }
+    fn prior(&self) -> &Prior {
+        self.car.prior()
+    }
+    fn measurement_variance(&self) -> f64 {
+        PACEJKA_NOISE_VARIANCE
+    }
+    fn initial_state(&self, _theta: &[f64], state: &mut [f64]) {
+        state.fill(0.0);
+    }
+    fn output(&self, k: usize, theta: &[f64], state: &[f64], inputs: &[f64]) -> f64 {
+        let mut x = [0.0; 4];
+        x.copy_from_slice(&state[..4]);
+        self.car.output_at(theta, k, &x, inputs)
+    }
+    fn propagate(
+        &self,
+        k: usize,
+        theta: &[f64],
+        state: &mut [f64],
+        inputs: &[f64],
+        _rng: &mut ChaCha8Rng,
+        rk4: &mut Rk4,
+    ) {
+        if let Ok(x) = state4(state) {
+            self.car.advance(theta, k, x, inputs, rk4);
+        }
+    }
+}
+
+/// The car's noise-free prediction, for the prediction-error method.
+#[derive(Debug, Clone)]
+pub struct CarPredictor {
+    car: PacejkaCar,
+}
+
+impl CarPredictor {
+    /// The paper's car with its chicane.
+    pub fn new() -> Self {
+        Self {
+            car: PacejkaCar::new(),
+        }
+    }
+}
+
+impl Default for CarPredictor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The noise-free output of the car at theta over `n` samples.
+fn noise_free(car: &PacejkaCar, theta: &[f64], inputs: &[f64], out: &mut [f64]) -> Result<()> {
+    let mut rk4 = Rk4::new(4);
+    let mut x = [0.0f64; 4];
+    for (k, y_k) in out.iter_mut().enumerate() {
+        if k > 0 {
+            car.advance(theta, k - 1, &mut x, inputs, &mut rk4);
+        }
+        *y_k = car.output_at(theta, k, &x, inputs);
+        if !y_k.is_finite() {
+            return Err(BaselineError::Numerical {
+                sample: k,
+                what: format!("the car diverged at theta = {theta:?}"),
+            });
+        }
+    }
+    Ok(())
+}
+
+impl ResidualModel for CarPredictor {
+    fn prior(&self) -> &Prior {
+        self.car.prior()
+    }
+    fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()> {
+        if record.n_inputs() != 1 || record.n_outputs() != 1 {
+            return Err(BaselineError::InvalidRecord(
+                "the car takes SISO records".into(),
+            ));
+        }
+        noise_free(&self.car, theta, record.input(0), residuals)?;
+        for (r, y) in residuals.iter_mut().zip(record.output(0)) {
+            *r = y - *r;
+        }
+        Ok(())
+    }
+}
+
+/// The car's posterior of (pK1, pK2) given one record, on a grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CarPosterior {
+    /// Posterior mean.
+    pub mean: [f64; 2],
+    /// Posterior standard deviations.
+    pub sd: [f64; 2],
+    /// The grid point of highest density.
+    pub map: [f64; 2],
+    /// How far the mean moved between the half-resolution subgrid and the
+    /// full grid, per parameter: the grid's integration error is far below.
+    pub grid_change: [f64; 2],
+}
+
+/// The Bayes-optimal reference for the car: noise-free trajectories are
+/// simulated once on a regular grid over the prior box (in parallel) and
+/// shared by every record; a record's posterior is proportional to
+/// `exp(-||y - y(theta)||^2 / (2 * 0.01))` on the grid, integrated by the
+/// trapezoid rule.
+///
+/// | setting | default | meaning |
+/// |---|---|---|
+/// | grid | 129 x 65 | points in pK1 x pK2; steps 0.121 and 0.00375, about a quarter and a tenth of the posterior's spreads |
+#[derive(Debug, Clone)]
+pub struct BayesCar {
+    n1: usize,
+    n2: usize,
+    lower: [f64; 2],
+    step: [f64; 2],
+    n_samples: usize,
+    trajectories: Vec<f64>,
+}
+
+impl BayesCar {
+    /// Simulate the grid (n1 x n2 noise-free car runs of `n_samples` samples).
+    ///
+    /// # Errors
+    /// A grid smaller than 3 x 3, or a simulation that fails.
+    pub fn new(n1: usize, n2: usize, n_samples: usize) -> Result<Self> {
+        if n1 < 3 || n2 < 3 {
+            return Err(BaselineError::InvalidRecord(format!(
+                "a {n1} x {n2} grid: use at least 3 x 3"
+            )));
+        }
+        let car = PacejkaCar::builder()
+            .noiseless(true)
+            .n_samples(n_samples)
+            .build()?;
+        let (lo, hi) = (car.prior().lower(), car.prior().upper());
+        let lower = [lo[0], lo[1]];
+        let step = [
+            (hi[0] - lo[0]) / (n1 - 1) as f64,
+            (hi[1] - lo[1]) / (n2 - 1) as f64,
+        ];
+        let chicane = vec![0.0; n_samples];
+        let trajectories: Vec<Vec<f64>> = (0..n1 * n2)
+            .into_par_iter()
+            .map(|g| {
+                let theta = [
+                    lower[0] + step[0] * (g / n2) as f64,
+                    lower[1] + step[1] * (g % n2) as f64,
+                ];
+                let mut y = vec![0.0; n_samples];
+                noise_free(&car, &theta, &chicane, &mut y).map(|()| y)
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self {
+            n1,
+            n2,
+            lower,
+            step,
+            n_samples,
+            trajectories: trajectories.concat(),
+        })
+    }
+
+    /// The paper-scale grid: 129 x 65 points, 500 samples.
+    ///
+    /// # Errors
+    /// As [`BayesCar::new`].
+    pub fn paper() -> Result<Self> {
+        Self::new(129, 65, 500)
+    }
+
+    fn theta(&self, i: usize, j: usize) -> [f64; 2] {
+        [
+            self.lower[0] + self.step[0] * i as f64,
+            self.lower[1] + self.step[1] * j as f64,
+        ]
+    }
+
+    /// The posterior given one record.
+    ///
+    /// # Errors
+    /// A record of another length, or not SISO.
+    pub fn posterior(&self, record: &IoData) -> Result<CarPosterior> {
+        if record.n_outputs() != 1 || record.n_samples() != self.n_samples {
+            return Err(BaselineError::InvalidRecord(format!(
+                "the grid was simulated for {} samples of one output; the record has {} samples of {}",
+                self.n_samples,
+                record.n_samples(),
+                record.n_outputs()
+            )));
+        }
+        record.check_finite()?;
+        let y = record.output(0);
+        let log_post: Vec<f64> = self
+            .trajectories
+            .par_chunks(self.n_samples)
+            .map(|t| {
+                -t.iter().zip(y).map(|(a, b)| (a - b) * (a - b)).sum::<f64>()
+                    / (2.0 * PACEJKA_NOISE_VARIANCE)
+            })
+            .collect();
+        let full = self.moments(&log_post, 1);
+        let half = self.moments(&log_post, 2);
+        Ok(CarPosterior {
+            grid_change: [(full.0[0] - half.0[0]).abs(), (full.0[1] - half.0[1]).abs()],
+            mean: full.0,
+            sd: full.1,
+            map: full.2,
+        })
+    }
+
+    /// Mean, sd and mode by the trapezoid rule on every `stride`-th point.
+    fn moments(&self, log_post: &[f64], stride: usize) -> ([f64; 2], [f64; 2], [f64; 2]) {
+        let peak = log_post.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v));
+        let (mut mass, mut m1, mut m2) = (0.0, [0.0; 2], [0.0; 2]);
+        let mut map = (f64::NEG_INFINITY, [0.0; 2]);
+        let last = |n: usize| (n - 1) / stride * stride;
+        for i in (0..self.n1).step_by(stride) {
+            for j in (0..self.n2).step_by(stride) {
+                let lp = log_post[i * self.n2 + j];
+                let theta = self.theta(i, j);
+                if lp > map.0 {
+                    map = (lp, theta);
+                }
+                let wi = if i == 0 || i == last(self.n1) {
+                    0.5
+                } else {
+                    1.0
+                };
+                let wj = if j == 0 || j == last(self.n2) {
+                    0.5
+                } else {
+                    1.0
+                };
+                let p = wi * wj * (lp - peak).exp();
+                mass += p;
+                for d in 0..2 {
+                    m1[d] += p * theta[d];
+                    m2[d] += p * theta[d] * theta[d];
+                }
+            }
+        }
+        let mean = [m1[0] / mass, m1[1] / mass];
+        let sd = [
+            (m2[0] / mass - mean[0] * mean[0]).max(0.0).sqrt(),
+            (m2[1] / mass - mean[1] * mean[1]).max(0.0).sqrt(),
+        ];
+        (mean, sd, map.1)
+    }
+}
+
+impl RecordEstimator for BayesCar {
+    fn name(&self) -> &str {
+        "bayes"
+    }
+
+    fn estimate(&self, record: &IoData) -> Result<Estimate> {
+        let p = self.posterior(record)?;
+        Ok(Estimate {
+            theta: p.mean.to_vec(),
+            spread: Some(p.sd.to_vec()),
+        })
+    }
+}

@@ -1,0 +1,85 @@
+//! The competitors on the Pacejka car.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use twostage_baselines::{
+    BayesCar, CarParticles, CarPredictor, ParticleFilter, PredictionError, RecordEstimator,
+    ResidualModel,
+};
+use twostage_models::{IoData, PacejkaCar, Simulator, experiment_rng};
+
+fn car_record(theta: [f64; 2], noiseless: bool, n: usize, seed: u64) -> IoData {
+    let car = PacejkaCar::builder()
+        .noiseless(noiseless)
+        .n_samples(n)
+        .build()
+        .unwrap();
+    let mut record = car.spec().new_record();
+    car.simulate(&theta, &mut experiment_rng(seed, 0), &mut record)
+        .unwrap();
+    record
+}
+
+#[test]
+fn the_predictor_reproduces_the_simulator_exactly() {
+    let record = car_record([-31.0, -1.05], true, 500, 1);
+    let mut residuals = vec![0.0; 500];
+    CarPredictor::new()
+        .residuals(&[-31.0, -1.05], &record, &mut residuals)
+        .unwrap();
+    assert!(
+        residuals.iter().all(|r| r.abs() < 1e-12),
+        "largest {:?}",
+        residuals.iter().fold(0.0f64, |m, r| m.max(r.abs()))
+    );
+}
+
+#[test]
+fn prediction_error_recovers_both_parameters_from_clean_data() {
+    let truth = [-36.5, -1.13];
+    let record = car_record(truth, true, 500, 2);
+    let estimate = PredictionError::new(CarPredictor::new(), 3)
+        .seed(4)
+        .estimate(&record)
+        .unwrap();
+    assert!(
+        (estimate.theta[0] - truth[0]).abs() < 1e-3,
+        "{:?}",
+        estimate.theta
+    );
+    assert!(
+        (estimate.theta[1] - truth[1]).abs() < 1e-4,
+        "{:?}",
+        estimate.theta
+    );
+}
+
+#[test]
+fn the_particle_filter_locates_pk1_on_a_noisy_record() {
+    // 250 samples reach 5 s, well into the chicane.
+    let truth = [-35.0, -1.1];
+    let record = car_record(truth, false, 250, 3);
+    let pf = ParticleFilter::new(CarParticles::new(), 200).seed(1);
+    let e = pf.estimate(&record).unwrap();
+    assert!((e.theta[0] - truth[0]).abs() < 3.0, "{:?}", e.theta);
+    assert!((-1.22..=-0.98).contains(&e.theta[1]));
+}
+
+#[test]
+fn the_car_posterior_is_resolved_by_its_grid() {
+    let bayes = BayesCar::new(65, 33, 500).unwrap();
+    let truth = [-33.0, -1.07];
+    let record = car_record(truth, false, 500, 5);
+    let p = bayes.posterior(&record).unwrap();
+    // Halving the grid's resolution moves the mean by a small fraction of
+    // the posterior's spread: the integration error of the full grid is
+    // smaller still.
+    for d in 0..2 {
+        assert!(p.grid_change[d] < 0.05 * p.sd[d], "{p:?}");
+    }
+    assert!((p.mean[0] - truth[0]).abs() < 4.0 * p.sd[0] + 0.1, "{p:?}");
+    assert!(p.sd[0] > 0.1 && p.sd[0] < 2.0, "{p:?}");
+    let short = car_record(truth, false, 100, 5);
+    assert!(bayes.posterior(&short).is_err());
+}
