@@ -1,17 +1,61 @@
 //! The cost of one estimate on one recorded experiment, per method.
 //!
-//! Groups: `estimate_cost_benchmark` and `estimate_cost_pacejka`. Each
-//! method is measured on the same record; the competitors join as the
-//! baselines crate provides them.
+//! Groups: `estimate_cost_benchmark` (ts, ekf, ukf, pf1000, pem1, pem5,
+//! pem10, bayes) and `estimate_cost_pacejka` (ts, pf500, pem5), every
+//! method on the same record of its group.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use twostage::models::{Benchmark, PacejkaCar};
-use twostage::{EstimateWorkspace, TwoStage};
-use twostage_benches::{config, record};
+use twostage::models::{Benchmark, IoData, PacejkaCar};
+use twostage::{EstimateWorkspace, Estimator, TwoStage};
+use twostage_baselines::{
+    BayesBenchmark, BenchmarkParticles, BenchmarkPredictor, CarParticles, CarPredictor,
+    InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError, RecordEstimator,
+};
+use twostage_benches::{config, record, slow_config};
 
-fn estimate_cost(c: &mut Criterion) {
+fn bench_ts(
+    c: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    estimator: &Estimator,
+    data: &IoData,
+) {
+    let mut work = EstimateWorkspace::new();
+    let mut theta = vec![0.0; estimator.param_names().len()];
+    c.bench_function("ts", |b| {
+        b.iter(|| {
+            estimator
+                .estimate_into(
+                    black_box(data.inputs()),
+                    black_box(data.outputs()),
+                    &mut work,
+                    &mut theta,
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+            black_box(theta[0])
+        })
+    });
+}
+
+fn bench_method(
+    c: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    id: &str,
+    method: &dyn RecordEstimator,
+    data: &IoData,
+) {
+    c.bench_function(id, |b| {
+        b.iter(|| {
+            black_box(
+                method
+                    .estimate(black_box(data))
+                    .unwrap_or_else(|e| panic!("{id}: {e}"))
+                    .theta[0],
+            )
+        })
+    });
+}
+
+fn benchmark_costs(c: &mut Criterion) {
     let bench = Benchmark::new();
     let estimator = TwoStage::builder(&bench)
         .preset(twostage::paper_benchmark())
@@ -21,23 +65,53 @@ fn estimate_cost(c: &mut Criterion) {
         .unwrap_or_else(|e| panic!("training the benchmark preset: {e}"));
     let data = record(&bench, &[0.5]);
     let mut group = c.benchmark_group("estimate_cost_benchmark");
-    let mut work = EstimateWorkspace::new();
-    let mut theta = [0.0];
-    group.bench_function("ts", |b| {
-        b.iter(|| {
-            estimator
-                .estimate_into(
-                    black_box(data.inputs()),
-                    black_box(data.outputs()),
-                    &mut work,
-                    &mut theta,
-                )
-                .unwrap_or_else(|e| panic!("{e}"));
-            black_box(theta[0])
-        })
-    });
+    bench_ts(&mut group, &estimator, &data);
+    bench_method(
+        &mut group,
+        "ekf",
+        &KalmanEstimator::ekf(InitialCovariance::Eq6),
+        &data,
+    );
+    bench_method(
+        &mut group,
+        "ukf",
+        &KalmanEstimator::ukf(InitialCovariance::Eq6),
+        &data,
+    );
+    let predictor = || BenchmarkPredictor::new().unwrap_or_else(|e| panic!("{e}"));
+    bench_method(
+        &mut group,
+        "pem1",
+        &PredictionError::new(predictor(), 1),
+        &data,
+    );
+    bench_method(
+        &mut group,
+        "pem5",
+        &PredictionError::new(predictor(), 5),
+        &data,
+    );
+    bench_method(
+        &mut group,
+        "pem10",
+        &PredictionError::new(predictor(), 10),
+        &data,
+    );
     group.finish();
+    let mut group = c.benchmark_group("estimate_cost_benchmark");
+    group.sample_size(10);
+    let particles = BenchmarkParticles::new().unwrap_or_else(|e| panic!("{e}"));
+    bench_method(
+        &mut group,
+        "pf1000",
+        &ParticleFilter::new(particles, 1000),
+        &data,
+    );
+    bench_method(&mut group, "bayes", &BayesBenchmark::default(), &data);
+    group.finish();
+}
 
+fn pacejka_costs(c: &mut Criterion) {
     let car = PacejkaCar::new();
     let estimator = TwoStage::builder(&car)
         .preset(twostage::paper_pacejka())
@@ -47,26 +121,33 @@ fn estimate_cost(c: &mut Criterion) {
         .unwrap_or_else(|e| panic!("training the car preset: {e}"));
     let data = record(&car, &[-35.0, -1.1]);
     let mut group = c.benchmark_group("estimate_cost_pacejka");
-    let mut theta = [0.0; 2];
-    group.bench_function("ts", |b| {
-        b.iter(|| {
-            estimator
-                .estimate_into(
-                    black_box(data.inputs()),
-                    black_box(data.outputs()),
-                    &mut work,
-                    &mut theta,
-                )
-                .unwrap_or_else(|e| panic!("{e}"));
-            black_box(theta[0])
-        })
-    });
+    bench_ts(&mut group, &estimator, &data);
+    group.finish();
+    let mut group = c.benchmark_group("estimate_cost_pacejka");
+    group.sample_size(10);
+    bench_method(
+        &mut group,
+        "pf500",
+        &ParticleFilter::new(CarParticles::new(), 500),
+        &data,
+    );
+    bench_method(
+        &mut group,
+        "pem5",
+        &PredictionError::new(CarPredictor::new(), 5),
+        &data,
+    );
     group.finish();
 }
 
 criterion_group! {
     name = benches;
     config = config();
-    targets = estimate_cost
+    targets = benchmark_costs
 }
-criterion_main!(benches);
+criterion_group! {
+    name = car;
+    config = slow_config();
+    targets = pacejka_costs
+}
+criterion_main!(benches, car);

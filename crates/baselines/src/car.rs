@@ -262,6 +262,82 @@ impl BayesCar {
         })
     }
 
+    /// Refine a grid posterior locally: simulate afresh a grid of
+    /// `(2^(l+4) + 1)^2` points over the mean +- 5 sd (clipped to the box) at
+    /// levels l = 0, 1, ..., until the mean moves by less than
+    /// `tolerance` sd in both parameters between two levels.
+    ///
+    /// # Errors
+    /// As [`BayesCar::posterior`], or a simulation that fails.
+    pub fn refine(
+        &self,
+        record: &IoData,
+        grid: &CarPosterior,
+        tolerance: f64,
+        max_levels: usize,
+    ) -> Result<(CarPosterior, usize)> {
+        let car = PacejkaCar::builder()
+            .noiseless(true)
+            .n_samples(self.n_samples)
+            .build()?;
+        let (box_lo, box_hi) = (car.prior().lower().to_vec(), car.prior().upper().to_vec());
+        let y = record.output(0);
+        let mut previous: Option<CarPosterior> = None;
+        for level in 0..max_levels.max(1) {
+            let points = (1usize << (level + 4)) + 1;
+            let mut lo = [0.0; 2];
+            let mut step = [0.0; 2];
+            for d in 0..2 {
+                let spread = 5.0 * grid.sd[d].max(1e-9);
+                lo[d] = (grid.mean[d] - spread).max(box_lo[d]);
+                let hi = (grid.mean[d] + spread).min(box_hi[d]);
+                step[d] = (hi - lo[d]) / (points - 1) as f64;
+            }
+            let chicane = vec![0.0; self.n_samples];
+            let log_post: Vec<f64> = (0..points * points)
+                .into_par_iter()
+                .map(|g| {
+                    let theta = [
+                        lo[0] + step[0] * (g / points) as f64,
+                        lo[1] + step[1] * (g % points) as f64,
+                    ];
+                    let mut prediction = vec![0.0; self.n_samples];
+                    noise_free(&car, &theta, &chicane, &mut prediction)?;
+                    let sse: f64 = prediction
+                        .iter()
+                        .zip(y)
+                        .map(|(a, b)| (a - b) * (a - b))
+                        .sum();
+                    Ok(-sse / (2.0 * PACEJKA_NOISE_VARIANCE))
+                })
+                .collect::<Result<_>>()?;
+            let local = Self {
+                n1: points,
+                n2: points,
+                lower: lo,
+                step,
+                n_samples: self.n_samples,
+                trajectories: Vec::new(),
+            };
+            let (mean, sd, map) = local.moments(&log_post, 1);
+            let current = CarPosterior {
+                mean,
+                sd,
+                map,
+                grid_change: previous.as_ref().map_or([f64::INFINITY; 2], |p| {
+                    [(mean[0] - p.mean[0]).abs(), (mean[1] - p.mean[1]).abs()]
+                }),
+            };
+            let converged =
+                (0..2).all(|d| current.grid_change[d] < tolerance * current.sd[d].max(1e-12));
+            previous = Some(current);
+            if converged {
+                return Ok((previous.unwrap_or_else(|| grid.clone()), level + 1));
+            }
+        }
+        Ok((previous.unwrap_or_else(|| grid.clone()), max_levels.max(1)))
+    }
+
     /// Mean, sd and mode by the trapezoid rule on every `stride`-th point.
     fn moments(&self, log_post: &[f64], stride: usize) -> ([f64; 2], [f64; 2], [f64; 2]) {
         let peak = log_post.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v));

@@ -83,3 +83,22 @@ fn the_car_posterior_is_resolved_by_its_grid() {
     let short = car_record(truth, false, 100, 5);
     assert!(bayes.posterior(&short).is_err());
 }
+
+#[test]
+fn local_refinement_no_longer_moves_the_car_posterior_mean() {
+    // A short record (5 s) keeps the simulations cheap; the posterior is wider.
+    let bayes = BayesCar::new(33, 17, 250).unwrap();
+    let record = car_record([-38.0, -1.02], false, 250, 6);
+    let grid = bayes.posterior(&record).unwrap();
+    let (refined, levels) = bayes.refine(&record, &grid, 1e-3, 4).unwrap();
+    assert!((2..=4).contains(&levels), "{levels} levels");
+    for d in 0..2 {
+        // Converged: the last doubling moved the mean by under 1e-3 sd...
+        assert!(refined.grid_change[d] < 1e-3 * refined.sd[d], "{refined:?}");
+        // ...and the refined mean agrees with the shared grid's.
+        assert!(
+            (refined.mean[d] - grid.mean[d]).abs() < 0.05 * grid.sd[d],
+            "{grid:?}\n{refined:?}"
+        );
+    }
+}

@@ -100,3 +100,57 @@ fn records_that_are_not_siso_or_finite_are_refused() {
     let bad = twostage_models::IoData::siso(&[0.0, 1.0], &[0.0, f64::NAN]);
     assert!(bad.is_err());
 }
+
+#[test]
+fn the_filters_depend_on_p0_and_miss_the_bayes_accuracy() {
+    // Section 5.1: with P(0) of eq. (6) or eq. (7) the EKF and UKF land in
+    // different places on many records, and far from the best achievable.
+    let model = Benchmark::new();
+    let design = model.prior().design(24, 77).unwrap();
+    let (mut theta, mut record) = ([0.0], model.spec().new_record());
+    let mut sq = [[0.0f64; 2]; 2]; // [ekf, ukf] x [eq6, eq7]
+    let mut moved = [0usize; 2];
+    let mut bayes_sq = 0.0;
+    for i in 0..design.len() {
+        twostage_models::run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
+        for (f, make) in [KalmanEstimator::ekf, KalmanEstimator::ukf]
+            .into_iter()
+            .enumerate()
+        {
+            let e6 = make(InitialCovariance::Eq6)
+                .estimate(&record)
+                .unwrap()
+                .theta[0];
+            let e7 = make(InitialCovariance::Eq7)
+                .estimate(&record)
+                .unwrap()
+                .theta[0];
+            sq[f][0] += (e6 - theta[0]).powi(2);
+            sq[f][1] += (e7 - theta[0]).powi(2);
+            if (e6 - e7).abs() > 0.05 {
+                moved[f] += 1;
+            }
+        }
+        let bayes = twostage_baselines::BayesBenchmark::default()
+            .estimate(&record)
+            .unwrap()
+            .theta[0];
+        bayes_sq += (bayes - theta[0]).powi(2);
+    }
+    let n = design.len() as f64;
+    let bayes_rmse = (bayes_sq / n).sqrt();
+    for f in 0..2 {
+        assert!(
+            moved[f] >= 4,
+            "filter {f}: P(0) changed the estimate by > 0.05 on only {} records",
+            moved[f]
+        );
+        for p in 0..2 {
+            let rmse = (sq[f][p] / n).sqrt();
+            assert!(
+                rmse > 3.0 * bayes_rmse,
+                "filter {f}, P(0) {p}: RMSE {rmse} vs Bayes {bayes_rmse}"
+            );
+        }
+    }
+}

@@ -1,0 +1,211 @@
+//! The figures people read: estimates against the true values, one panel
+//! per parameter, with the bisector dashed and the least-squares line solid,
+//! as in the paper's Figures 3 to 8, 11 and 12. SVG via plotters, with no
+//! system fonts needed (text is left to the viewer).
+//!
+//! ```
+//! use twostage_plot::{Panel, estimates_vs_truth};
+//! let truth = [0.1, 0.5, -0.3, 0.8];
+//! let estimate = [0.12, 0.45, -0.28, 0.83];
+//! let panel = Panel { caption: "TS", name: "theta", truth: &truth, estimate: &estimate, range: (-0.9, 0.9) };
+//! let svg = estimates_vs_truth("Figure 8: TS", &[panel])?;
+//! assert!(svg.starts_with("<svg") && svg.contains("Figure 8"));
+//! # Ok::<(), twostage_plot::PlotError>(())
+//! ```
+#![deny(missing_docs)]
+
+use plotters::prelude::*;
+use thiserror::Error;
+
+/// Why a figure could not be drawn.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum PlotError {
+    /// The data do not make a figure.
+    #[error("cannot plot: {0}")]
+    Data(String),
+    /// The drawing backend failed.
+    #[error("drawing failed: {0}")]
+    Drawing(String),
+}
+
+/// One parameter's points: estimate against truth on a given range.
+#[derive(Debug, Clone, Copy)]
+pub struct Panel<'a> {
+    /// The panel's caption, e.g. the method (empty for none).
+    pub caption: &'a str,
+    /// The parameter's name, for the axis labels.
+    pub name: &'a str,
+    /// True values.
+    pub truth: &'a [f64],
+    /// Estimates, one per true value (non-finite ones are skipped).
+    pub estimate: &'a [f64],
+    /// Axis range, usually the prior box.
+    pub range: (f64, f64),
+}
+
+/// The least-squares line `estimate = a + b truth` over the finite pairs.
+pub fn least_squares_line(truth: &[f64], estimate: &[f64]) -> Option<(f64, f64)> {
+    let pairs: Vec<(f64, f64)> = truth
+        .iter()
+        .zip(estimate)
+        .filter(|(t, e)| t.is_finite() && e.is_finite())
+        .map(|(t, e)| (*t, *e))
+        .collect();
+    let n = pairs.len() as f64;
+    if pairs.len() < 2 {
+        return None;
+    }
+    let (mt, me) = (
+        pairs.iter().map(|p| p.0).sum::<f64>() / n,
+        pairs.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let stt: f64 = pairs.iter().map(|p| (p.0 - mt).powi(2)).sum();
+    let ste: f64 = pairs.iter().map(|p| (p.0 - mt) * (p.1 - me)).sum();
+    if stt <= 0.0 {
+        return None;
+    }
+    let b = ste / stt;
+    Some((me - b * mt, b))
+}
+
+fn drawing<E: std::fmt::Display>(e: E) -> PlotError {
+    PlotError::Drawing(e.to_string())
+}
+
+/// Draw the panels side by side and return the SVG text.
+///
+/// # Errors
+/// [`PlotError::Data`] for no panels, mismatched lengths or an empty range;
+/// [`PlotError::Drawing`] if the backend fails.
+pub fn estimates_vs_truth(title: &str, panels: &[Panel<'_>]) -> Result<String, PlotError> {
+    if panels.is_empty() {
+        return Err(PlotError::Data("no panels".into()));
+    }
+    for p in panels {
+        if p.truth.len() != p.estimate.len() {
+            return Err(PlotError::Data(format!(
+                "{}: {} true values but {} estimates",
+                p.name,
+                p.truth.len(),
+                p.estimate.len()
+            )));
+        }
+        let (lo, hi) = p.range;
+        if lo.is_nan() || hi.is_nan() || lo >= hi {
+            return Err(PlotError::Data(format!(
+                "{}: empty range {:?}",
+                p.name, p.range
+            )));
+        }
+    }
+    let mut svg = String::new();
+    {
+        let width = 420 * panels.len() as u32;
+        let root = SVGBackend::with_string(&mut svg, (width, 440)).into_drawing_area();
+        root.fill(&WHITE).map_err(drawing)?;
+        let root = root.titled(title, ("sans-serif", 20)).map_err(drawing)?;
+        let areas = root.split_evenly((1, panels.len()));
+        for (area, p) in areas.iter().zip(panels) {
+            let (lo, hi) = p.range;
+            let mut chart = ChartBuilder::on(area)
+                .caption(p.caption, ("sans-serif", 15))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(55)
+                .build_cartesian_2d(lo..hi, lo..hi)
+                .map_err(drawing)?;
+            chart
+                .configure_mesh()
+                .x_desc(format!("true {}", p.name))
+                .y_desc(format!("estimated {}", p.name))
+                .disable_mesh()
+                .draw()
+                .map_err(drawing)?;
+            let points = p
+                .truth
+                .iter()
+                .zip(p.estimate)
+                .filter(|(t, e)| t.is_finite() && e.is_finite())
+                .map(|(t, e)| Circle::new((*t, e.clamp(lo, hi)), 2, BLUE.mix(0.6).filled()));
+            chart.draw_series(points).map_err(drawing)?;
+            chart
+                .draw_series(DashedLineSeries::new(
+                    vec![(lo, lo), (hi, hi)],
+                    6,
+                    4,
+                    BLACK.into(),
+                ))
+                .map_err(drawing)?;
+            if let Some((a, b)) = least_squares_line(p.truth, p.estimate) {
+                let line = [(lo, a + b * lo), (hi, a + b * hi)];
+                chart
+                    .draw_series(LineSeries::new(line, RED.stroke_width(2)))
+                    .map_err(drawing)?;
+            }
+        }
+        root.present().map_err(drawing)?;
+    }
+    Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_least_squares_line_of_an_exact_line() {
+        let t = [0.0, 1.0, 2.0, 3.0];
+        let e = [1.0, 3.0, 5.0, 7.0];
+        let (a, b) = least_squares_line(&t, &e).unwrap_or((0.0, 0.0));
+        assert!((a - 1.0).abs() < 1e-12 && (b - 2.0).abs() < 1e-12);
+        assert!(least_squares_line(&[1.0], &[1.0]).is_none());
+        assert!(least_squares_line(&[1.0, 1.0], &[0.0, 2.0]).is_none());
+    }
+
+    #[test]
+    fn a_figure_has_one_panel_per_parameter_and_refuses_bad_data() {
+        let (t, e) = ([1.0, 2.0, 3.0], [1.1, 1.9, f64::NAN]);
+        let panel = Panel {
+            caption: "PF",
+            name: "pK1",
+            truth: &t,
+            estimate: &e,
+            range: (0.0, 4.0),
+        };
+        let svg = estimates_vs_truth(
+            "two",
+            &[
+                panel,
+                Panel {
+                    name: "pK2",
+                    ..panel
+                },
+            ],
+        )
+        .unwrap_or_default();
+        assert!(
+            svg.contains("true pK1") && svg.contains("true pK2"),
+            "{svg}"
+        );
+        // Two finite points per panel, as circles.
+        assert_eq!(svg.matches("<circle").count(), 4);
+        assert!(estimates_vs_truth("none", &[]).is_err());
+        let short = Panel {
+            caption: "PF",
+            name: "x",
+            truth: &t,
+            estimate: &e[..2],
+            range: (0.0, 1.0),
+        };
+        assert!(estimates_vs_truth("bad", &[short]).is_err());
+        let empty = Panel {
+            caption: "PF",
+            name: "x",
+            truth: &t,
+            estimate: &e,
+            range: (1.0, 1.0),
+        };
+        assert!(estimates_vs_truth("bad", &[empty]).is_err());
+    }
+}
