@@ -11,6 +11,7 @@ use crate::augmented::{
     process_noise, symmetrize, transition, transition_jacobian, transpose,
 };
 use crate::error::{BaselineError, Result};
+use crate::kalman::benchmark_signals;
 use crate::{Estimate, RecordEstimator};
 
 /// What a filter run leaves: the final update and the innovation statistics.
@@ -24,18 +25,6 @@ pub struct FilterRun {
     pub log_likelihood: f64,
     /// Sum of squared innovations.
     pub sum_squared_innovations: f64,
-}
-
-fn siso(record: &IoData) -> Result<(&[f64], &[f64])> {
-    if record.n_inputs() != 1 || record.n_outputs() != 1 {
-        return Err(BaselineError::InvalidRecord(format!(
-            "the benchmark has one input and one output, the record has {} and {}",
-            record.n_inputs(),
-            record.n_outputs()
-        )));
-    }
-    record.check_finite()?;
-    Ok((record.input(0), record.output(0)))
 }
 
 /// The measurement update with y = x2 + v (linear, shared by both filters).
@@ -109,7 +98,7 @@ impl FilterStart {
 /// # Errors
 /// A record that is not SISO or not finite, or a covariance that breaks down.
 pub fn run_ekf(record: &IoData, start_at: &FilterStart) -> Result<FilterRun> {
-    let (u, y) = siso(record)?;
+    let (u, y) = benchmark_signals(record)?;
     let (mut z, mut p, mut run) = start(&start_at.p0, start_at.theta0);
     let q = process_noise(start_at.theta_walk);
     for (k, (&uk, &yk)) in u.iter().zip(y).enumerate() {
@@ -164,7 +153,7 @@ pub fn run_ukf(
     start_at: &FilterStart,
     params: &UnscentedParams,
 ) -> Result<FilterRun> {
-    let (u, y) = siso(record)?;
+    let (u, y) = benchmark_signals(record)?;
     let (mut z, mut p, mut run) = start(&start_at.p0, start_at.theta0);
     let q = process_noise(start_at.theta_walk);
     let n = 3.0;

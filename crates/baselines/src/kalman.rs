@@ -34,6 +34,19 @@ impl BenchmarkStateSpace {
     }
 }
 
+/// The input and output of a benchmark record, checked: one of each, finite.
+pub(crate) fn benchmark_signals(record: &IoData) -> Result<(&[f64], &[f64])> {
+    if record.n_inputs() != 1 || record.n_outputs() != 1 {
+        return Err(BaselineError::InvalidRecord(format!(
+            "the benchmark has one input and one output, the record has {} and {}",
+            record.n_inputs(),
+            record.n_outputs()
+        )));
+    }
+    record.check_finite()?;
+    Ok((record.input(0), record.output(0)))
+}
+
 /// What the Kalman filter says of one record.
 #[derive(Debug, Clone, PartialEq)]
 pub struct KalmanRun {
@@ -84,16 +97,8 @@ pub fn benchmark_kalman_innovations(
             record.n_samples()
         )));
     }
-    if record.n_inputs() != 1 || record.n_outputs() != 1 {
-        return Err(BaselineError::InvalidRecord(format!(
-            "the benchmark has one input and one output, the record has {} and {}",
-            record.n_inputs(),
-            record.n_outputs()
-        )));
-    }
-    record.check_finite()?;
+    let (u, y) = benchmark_signals(record)?;
     let m = BenchmarkStateSpace::at(theta);
-    let (u, y) = (record.input(0), record.output(0));
     let mut x = [0.0f64; 2];
     let mut p = [[0.0f64; 2]; 2];
     let mut log_likelihood = 0.0;

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::Compressor;
 use crate::error::{CompressError, Result};
-use crate::signals::{check, degenerate, name};
+use crate::signals::{check_record, degenerate, name};
 use crate::workspace::{RANK_TOLERANCE, Workspace};
 
 /// One monomial: the product of a lower-degree monomial (`parent`, or
@@ -283,23 +283,18 @@ impl Compressor for Narx {
         work: &mut Workspace,
         alpha: &mut [f64],
     ) -> Result<()> {
-        if alpha.len() != self.n_features() {
-            return Err(CompressError::BufferLength {
-                expected: self.n_features(),
-                got: alpha.len(),
-            });
-        }
-        let n = check(inputs, outputs, self.n_inputs(), self.n_outputs())?;
         let start = self.first_sample();
         let cols = self.per_output();
-        let needed = start + cols;
-        if n < needed {
-            return Err(CompressError::RecordTooShort {
-                n_samples: n,
-                needed,
-                structure: self.to_string(),
-            });
-        }
+        let n = check_record(
+            inputs,
+            outputs,
+            self.n_inputs(),
+            self.n_outputs(),
+            alpha.len(),
+            self.n_features(),
+            start + cols,
+            self,
+        )?;
         let rows = n - start;
         work.prepare(rows, cols);
         for (i, alpha_i) in alpha.chunks_exact_mut(cols).enumerate() {

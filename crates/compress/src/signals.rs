@@ -4,6 +4,37 @@ use ndarray::{ArrayView1, ArrayView2};
 
 use crate::error::{CompressError, Result};
 
+/// The checks every least-squares compressor starts with: the feature
+/// buffer, the record's shapes and values, and its length against the
+/// `needed` samples of the structure. Returns the number of samples N.
+#[allow(clippy::too_many_arguments)] // the compressor's whole shape, spelled out
+pub(crate) fn check_record(
+    inputs: ArrayView2<'_, f64>,
+    outputs: ArrayView2<'_, f64>,
+    n_inputs: usize,
+    n_outputs: usize,
+    alpha_len: usize,
+    n_features: usize,
+    needed: usize,
+    structure: &dyn std::fmt::Display,
+) -> Result<usize> {
+    if alpha_len != n_features {
+        return Err(CompressError::BufferLength {
+            expected: n_features,
+            got: alpha_len,
+        });
+    }
+    let n = check(inputs, outputs, n_inputs, n_outputs)?;
+    if n < needed {
+        return Err(CompressError::RecordTooShort {
+            n_samples: n,
+            needed,
+            structure: structure.to_string(),
+        });
+    }
+    Ok(n)
+}
+
 /// Check shapes, lengths and finiteness; return the number of samples.
 pub(crate) fn check(
     inputs: ArrayView2<'_, f64>,
