@@ -19,10 +19,6 @@ use twostage_baselines::{
 /// and validation (the paper's 200 and 800 fresh experiments).
 const TEST_SEED_OFFSET: u64 = 0x5445_5354; // "TEST"
 
-/// Car records whose posterior is refined locally as a check of the grid
-/// (each costs thousands of car simulations).
-const REFINED: usize = 10;
-
 /// One method's estimates on the first `records` test records.
 struct MethodRun {
     name: String,
@@ -143,6 +139,9 @@ struct Sizes {
     car_tests: usize,
     car_slow: usize,
     car_grid: (usize, usize),
+    /// Car records whose posterior is refined locally as a check of the
+    /// grid (each costs thousands of car simulations).
+    car_refined: usize,
 }
 
 fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
@@ -276,7 +275,7 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
     ));
     // The local refinement of the car posterior on the first records, as a
     // check of the shared grid: how far its mean is from the refined one, in sd.
-    let refined_records = &records[..REFINED.min(records.len())];
+    let refined_records = &records[..sizes.car_refined.min(records.len())];
     eprintln!(
         "  refining the car posterior on {} records",
         refined_records.len()
@@ -521,6 +520,7 @@ pub fn reproduce(quick: bool, out: &Path, seed: u64) -> Result<()> {
             car_tests: 60,
             car_slow: 2,
             car_grid: (33, 17),
+            car_refined: 2,
         }
     } else {
         Sizes {
@@ -530,6 +530,7 @@ pub fn reproduce(quick: bool, out: &Path, seed: u64) -> Result<()> {
             car_tests: 800,
             car_slow: 50,
             car_grid: (129, 65),
+            car_refined: 10,
         }
     };
     let total = Instant::now();
