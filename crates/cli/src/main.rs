@@ -1,6 +1,8 @@
 //! `twostage`: the command line of the two-stage estimator toolkit.
 
+mod csv_records;
 mod demo;
+mod estimate;
 mod number;
 mod simulate;
 
@@ -27,6 +29,15 @@ enum Command {
     Models,
     /// Simulate one experiment (--theta) or many drawn from the prior (--count).
     Simulate(simulate::SimulateArgs),
+    /// Train an estimator for a built-in model and write it to a file.
+    Train(estimate::TrainArgs),
+    /// Describe an estimator file: model, structure, training, validation.
+    Inspect {
+        /// The estimator file.
+        file: std::path::PathBuf,
+    },
+    /// Estimate the parameters of recorded experiments (CSV u,y or experiment,u,y).
+    Estimate(estimate::EstimateArgs),
 }
 
 /// A mistake in how the command was called: exit code 2, like clap's own.
@@ -57,6 +68,15 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
         Command::Models => simulate::models(&mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
+        Command::Train(args) => estimate::train(args, &mut io::stdout().lock()),
+        Command::Inspect { file } => estimate::inspect(file, &mut io::stdout().lock()),
+        Command::Estimate(args) => match estimate::estimate(args) {
+            Ok(0) => Ok(()),
+            Ok(failed) => Err(anyhow::anyhow!(
+                "{failed} record(s) could not be estimated (listed above); the others were"
+            )),
+            Err(e) => Err(e),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -58,12 +58,12 @@ pub enum Error {
     #[error("estimator file: {0}")]
     File(String),
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file.
         path: String,
-        /// What happened.
-        source: std::io::Error,
+        /// What happened (not a `source`, so that error chains print it once).
+        cause: std::io::Error,
     },
 }
 

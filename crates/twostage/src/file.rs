@@ -153,9 +153,9 @@ impl Estimator {
     /// [`Error::Io`] if the file cannot be written.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        std::fs::write(path, self.to_bytes()?).map_err(|source| Error::Io {
+        std::fs::write(path, self.to_bytes()?).map_err(|cause| Error::Io {
             path: path.display().to_string(),
-            source,
+            cause,
         })
     }
 
@@ -166,9 +166,9 @@ impl Estimator {
     /// [`Estimator::from_bytes`] (the message names the file).
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| Error::Io {
+        let bytes = std::fs::read(path).map_err(|cause| Error::Io {
             path: path.display().to_string(),
-            source,
+            cause,
         })?;
         Self::from_bytes(&bytes).map_err(|e| match e {
             Error::File(message) => Error::File(format!("{}: {message}", path.display())),

@@ -1,0 +1,285 @@
+//! `twostage train`, `twostage inspect`, `twostage estimate`.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use twostage::compress::{Arx, Narx};
+use twostage::fit::{MlpParams, Ridge};
+use twostage::models::BuiltinModel;
+use twostage::{
+    CompressorConfig, EstimateWorkspace, Estimator, FittedRegressor, RegressorConfig, TwoStage,
+};
+
+use crate::number::format_f64;
+use crate::{csv_records, usage};
+
+/// Options of `twostage train`.
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// The model: benchmark or pacejka.
+    #[arg(long)]
+    model: String,
+    /// Start from the paper's preset of the model (the default).
+    #[arg(long, value_parser = ["paper"], default_value = "paper")]
+    preset: String,
+    /// Training simulations m (default: the preset's).
+    #[arg(long)]
+    sims: Option<usize>,
+    /// Stage 1: arx:NA,NB or narx:NA,NB,DEG (default: the preset's).
+    #[arg(long)]
+    compress: Option<String>,
+    /// Stage 2: linear, or mlp:H[,H...] hidden sizes (default: the preset's).
+    #[arg(long)]
+    fit: Option<String>,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Fresh simulations for the validation report (0: none).
+    #[arg(long, default_value_t = 1000)]
+    validate: usize,
+    /// Fresh simulations for the 90% conformal intervals (0: none).
+    #[arg(long, default_value_t = 1000)]
+    calibrate: usize,
+    /// Where to write the estimator.
+    #[arg(long)]
+    out: PathBuf,
+    /// Print nothing but errors.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn parse_counts(spec: &str, what: &str, count: usize) -> Result<Vec<usize>> {
+    let values: Vec<usize> = spec
+        .split(',')
+        .map(|v| v.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            usage(format!(
+                "{what}: '{spec}' must be {count} whole numbers separated by commas"
+            ))
+        })?;
+    if values.len() != count {
+        return Err(usage(format!(
+            "{what}: '{spec}' must be {count} whole numbers separated by commas"
+        )));
+    }
+    Ok(values)
+}
+
+fn compressor(spec: &str) -> Result<CompressorConfig> {
+    let bad = || {
+        usage(format!(
+            "--compress '{spec}': use arx:NA,NB or narx:NA,NB,DEG"
+        ))
+    };
+    let (kind, orders) = spec.split_once(':').ok_or_else(bad)?;
+    match kind {
+        "arx" => {
+            let o = parse_counts(orders, "--compress arx", 2)?;
+            Ok(Arx::new(o[0], o[1])
+                .map_err(|e| usage(format!("--compress: {e}")))?
+                .into())
+        }
+        "narx" => {
+            let o = parse_counts(orders, "--compress narx", 3)?;
+            Ok(Narx::new(o[0], o[1], o[2])
+                .map_err(|e| usage(format!("--compress: {e}")))?
+                .into())
+        }
+        _ => Err(bad()),
+    }
+}
+
+fn regressor(spec: &str) -> Result<RegressorConfig> {
+    if spec == "linear" {
+        return Ok(RegressorConfig::Linear(Ridge::default()));
+    }
+    let hidden = spec
+        .strip_prefix("mlp:")
+        .ok_or_else(|| usage(format!("--fit '{spec}': use linear or mlp:H[,H...]")))?;
+    let sizes: Vec<usize> = hidden
+        .split(',')
+        .map(|h| h.trim().parse::<usize>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            usage(format!(
+                "--fit '{spec}': hidden sizes must be whole numbers"
+            ))
+        })?;
+    let mlp = MlpParams::new(&sizes)?
+        .check()
+        .map_err(|e| usage(format!("--fit: {e}")))?;
+    Ok(RegressorConfig::Mlp(mlp))
+}
+
+/// Run `twostage train`.
+pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
+    let model: BuiltinModel = args
+        .model
+        .parse()
+        .map_err(|e| usage(format!("{e} (see `twostage models`)")))?;
+    let sim = model.build(false)?;
+    let preset = match model {
+        BuiltinModel::Pacejka => twostage::paper_pacejka(),
+        _ => twostage::paper_benchmark(),
+    };
+    let mut builder = TwoStage::builder(sim.as_ref())
+        .preset(preset)
+        .seed(args.seed)
+        .validation(args.validate)
+        .calibration(args.calibrate);
+    if let Some(m) = args.sims {
+        builder = builder.simulations(m);
+    }
+    if let Some(spec) = &args.compress {
+        builder = builder.compressor(compressor(spec)?);
+    }
+    if let Some(spec) = &args.fit {
+        builder = builder.regressor(regressor(spec)?);
+    }
+    if !args.quiet {
+        eprintln!(
+            "training the {} estimator (simulate, compress, fit, calibrate, validate)...",
+            model.name()
+        );
+    }
+    let start = std::time::Instant::now();
+    let estimator = builder.train().context("training")?;
+    estimator.save(&args.out)?;
+    if !args.quiet {
+        writeln!(
+            out,
+            "trained in {:.2} s; wrote {}",
+            start.elapsed().as_secs_f64(),
+            args.out.display()
+        )?;
+        if let Some(report) = estimator.validation() {
+            writeln!(out, "{report}")?;
+        }
+    }
+    Ok(())
+}
+
+/// Run `twostage inspect FILE`.
+pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
+    let e = Estimator::load(path)?;
+    let t = e.training();
+    writeln!(
+        out,
+        "{}: twostage estimator file, format version {}",
+        path.display(),
+        twostage::FORMAT_VERSION
+    )?;
+    writeln!(
+        out,
+        "  model       {} (trained by twostage {})",
+        t.model, t.version
+    )?;
+    for (j, name) in e.param_names().iter().enumerate() {
+        writeln!(
+            out,
+            "  parameter   {name} in [{}, {}]",
+            format_f64(e.lower()[j]),
+            format_f64(e.upper()[j])
+        )?;
+    }
+    let shape = e.record_shape();
+    writeln!(
+        out,
+        "  records     N = {}, sampled every {}",
+        shape.n_samples,
+        format_f64(shape.sample_time)
+    )?;
+    writeln!(out, "  stage 1     {}", e.compressor())?;
+    let network = match e.regressor() {
+        FittedRegressor::Mlp(net) => format!(
+            "{}; layers {:?}, {} weights, best restart stopped by {:?}",
+            t.regressor,
+            net.sizes(),
+            net.n_parameters(),
+            net.best_restart().reason
+        ),
+        _ => t.regressor.to_string(),
+    };
+    writeln!(out, "  stage 2     {network}")?;
+    writeln!(
+        out,
+        "  training    m = {} simulations ({} failed), seed {}, {} design",
+        t.simulations, t.failures, t.seed, t.sampling
+    )?;
+    match e.validation() {
+        Some(report) => writeln!(out, "{report}")?,
+        None => writeln!(out, "  not validated")?,
+    }
+    Ok(())
+}
+
+/// Options of `twostage estimate`.
+#[derive(Debug, clap::Args)]
+pub struct EstimateArgs {
+    /// The estimator file written by `twostage train`.
+    #[arg(long)]
+    estimator: PathBuf,
+    /// CSV files: header u,y (one record) or experiment,u,y (many).
+    #[arg(required = true)]
+    data: Vec<PathBuf>,
+    /// Write the estimates here instead of standard output.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+/// Run `twostage estimate`; returns how many records failed.
+pub fn estimate(args: &EstimateArgs) -> Result<usize> {
+    let estimator = Estimator::load(&args.estimator)?;
+    let names = estimator.param_names();
+    let intervals = estimator.intervals().map(|c| c.half_widths().to_vec());
+    let mut text = String::from("experiment");
+    for n in names {
+        write!(text, ",{n}")?;
+    }
+    if intervals.is_some() {
+        for n in names {
+            write!(text, ",{n}_lo,{n}_hi")?;
+        }
+    }
+    text.push('\n');
+    let mut work = EstimateWorkspace::new();
+    let mut theta = vec![0.0; names.len()];
+    let mut failed = 0;
+    for path in &args.data {
+        for read in csv_records::read(path).map_err(|e| anyhow::anyhow!(e))? {
+            let outcome = read.record.and_then(|record| {
+                estimator
+                    .estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)
+                    .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))
+            });
+            match outcome {
+                Ok(()) => {
+                    write!(text, "{}", read.id)?;
+                    for t in &theta {
+                        write!(text, ",{}", format_f64(*t))?;
+                    }
+                    if let Some(widths) = &intervals {
+                        for (t, w) in theta.iter().zip(widths) {
+                            write!(text, ",{},{}", format_f64(t - w), format_f64(t + w))?;
+                        }
+                    }
+                    text.push('\n');
+                }
+                Err(problem) => {
+                    failed += 1;
+                    eprintln!("error: {problem}");
+                }
+            }
+        }
+    }
+    match &args.out {
+        Some(path) => {
+            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?
+        }
+        None => std::io::stdout().lock().write_all(text.as_bytes())?,
+    }
+    Ok(failed)
+}

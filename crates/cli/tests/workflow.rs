@@ -1,0 +1,229 @@
+//! Train, inspect and estimate from the shell, as an engineer would.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn twostage(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn path(p: &std::path::Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn train_inspect_and_estimate_recorded_experiments() {
+    let dir = scratch("workflow");
+    let file = dir.join("bench.tsest");
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "500",
+        "--validate",
+        "200",
+        "--calibrate",
+        "200",
+        "--seed",
+        "3",
+        "--out",
+        path(&file),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("Theorem 1"),
+        "{}",
+        text(&out.stdout)
+    );
+
+    let out = twostage(&["inspect", path(&file)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report = text(&out.stdout);
+    for needle in [
+        "model       benchmark",
+        "theta in [-0.9, 0.9]",
+        "ARX(5, 5)",
+        "m = 500 simulations",
+        "seed 3",
+    ] {
+        assert!(report.contains(needle), "missing {needle:?} in\n{report}");
+    }
+
+    let data = dir.join("data");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        "40",
+        "--seed",
+        "8",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success());
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        path(&data.join("data.csv")),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let csv = text(&out.stdout);
+    let mut lines = csv.lines();
+    assert_eq!(lines.next().unwrap(), "experiment,theta,theta_lo,theta_hi");
+    let truth = std::fs::read_to_string(data.join("truth.csv")).unwrap();
+    let mut sq = 0.0;
+    let mut rows = 0;
+    for (estimate, truth) in lines.zip(truth.lines().skip(1)) {
+        let e: Vec<f64> = estimate.split(',').map(|v| v.parse().unwrap()).collect();
+        let t: Vec<f64> = truth.split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(e[0].to_bits(), t[0].to_bits(), "experiment ids in order");
+        assert!(
+            e[2] < e[1] && e[1] < e[3],
+            "the interval surrounds the estimate"
+        );
+        sq += (e[1] - t[1]).powi(2);
+        rows += 1;
+    }
+    assert_eq!(rows, 40);
+    let rmse = (sq / 40.0).sqrt();
+    assert!(rmse < 0.08, "RMSE {rmse}");
+}
+
+#[test]
+fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
+    let dir = scratch("bad_record");
+    let file = dir.join("lin.tsest");
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "200",
+        "--fit",
+        "linear",
+        "--validate",
+        "0",
+        "--calibrate",
+        "0",
+        "--quiet",
+        "--out",
+        path(&file),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).is_empty(), "--quiet prints nothing");
+    let data = dir.join("long.csv");
+    let mut csv = String::from("experiment,u,y\n");
+    for e in ["a", "b"] {
+        for k in 0..300 {
+            let u = ((k * 7919 + 13) % 17) as f64 / 8.0 - 1.0;
+            let y = if e == "b" && k == 100 {
+                "nan".to_string()
+            } else {
+                format!("{}", 0.1 * u + 0.01 * k as f64 % 0.3)
+            };
+            csv.push_str(&format!("{e},{u},{y}\n"));
+        }
+    }
+    std::fs::write(&data, csv).unwrap();
+    let out = twostage(&["estimate", "--estimator", path(&file), path(&data)]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = text(&out.stderr);
+    assert!(err.contains("row 402, column y: 'nan'"), "{err}");
+    let estimates = text(&out.stdout);
+    assert_eq!(
+        estimates.lines().count(),
+        2,
+        "header and experiment a:\n{estimates}"
+    );
+    assert!(estimates.lines().nth(1).unwrap().starts_with("a,"));
+}
+
+#[test]
+fn usage_mistakes_and_missing_files_get_one_clear_line() {
+    let dir = scratch("mistakes");
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--compress",
+        "arx:x",
+        "--out",
+        path(&dir.join("x")),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("--compress arx: 'x'"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--fit",
+        "mlp:0",
+        "--out",
+        path(&dir.join("x")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let out = twostage(&["inspect", "/nonexistent/estimator.tsest"]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = text(&out.stderr);
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+    assert!(err.contains("/nonexistent/estimator.tsest"));
+    let not_an_estimator = dir.join("fake.tsest");
+    std::fs::write(&not_an_estimator, "u,y\n1,2\n").unwrap();
+    let out = twostage(&["inspect", path(&not_an_estimator)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out.stderr).contains("not a twostage estimator file"));
+    let csv = dir.join("bad.csv");
+    std::fs::write(&csv, "time,value\n1,2\n").unwrap();
+    let file = dir.join("m.tsest");
+    assert!(
+        twostage(&[
+            "train",
+            "--model",
+            "benchmark",
+            "--sims",
+            "50",
+            "--fit",
+            "linear",
+            "--validate",
+            "0",
+            "--calibrate",
+            "0",
+            "--quiet",
+            "--out",
+            path(&file)
+        ])
+        .status
+        .success()
+    );
+    let out = twostage(&["estimate", "--estimator", path(&file), path(&csv)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("row 1: header 'time,value'"),
+        "{}",
+        text(&out.stderr)
+    );
+}
