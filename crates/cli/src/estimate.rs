@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use twostage::compress::{Arx, Narx};
 use twostage::fit::{MlpParams, Ridge};
-use twostage::models::BuiltinModel;
+use twostage::models::{BuiltinModel, IoData};
 use twostage::{
     CompressorConfig, EstimateWorkspace, Estimator, FittedRegressor, RegressorConfig, TwoStage,
 };
@@ -220,54 +220,132 @@ pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
 #[derive(Debug, clap::Args)]
 pub struct EstimateArgs {
     /// The estimator file written by `twostage train`.
+    #[arg(long, conflicts_with_all = ["model", "method"])]
+    estimator: Option<PathBuf>,
+    /// With --method: the model the records come from (benchmark or pacejka).
+    #[arg(long, requires = "method")]
+    model: Option<String>,
+    /// A classic method instead of an estimator: ekf, ukf, pf, pem or bayes.
+    #[arg(long, requires = "model")]
+    method: Option<String>,
+    /// EKF/UKF initial covariance: eq6 or eq7 (the paper's).
+    #[arg(long, default_value = "eq6")]
+    p0: String,
+    /// Particle filter: number of particles (default 1000 benchmark, 500 car).
     #[arg(long)]
-    estimator: PathBuf,
+    particles: Option<usize>,
+    /// Prediction error: number of random starts.
+    #[arg(long, default_value_t = 5)]
+    starts: usize,
+    /// Seed of the random methods.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
     /// CSV files: header u,y (one record) or experiment,u,y (many).
     #[arg(required = true)]
     data: Vec<PathBuf>,
+    /// Output format: csv or json.
+    #[arg(long, value_parser = ["csv", "json"], default_value = "csv")]
+    format: String,
     /// Write the estimates here instead of standard output.
     #[arg(long)]
     out: Option<PathBuf>,
 }
 
+/// One record's estimate and its interval half-widths, if any.
+type Estimated = (Vec<f64>, Option<Vec<f64>>);
+
+/// Estimates one record, or says why it cannot.
+type Method = Box<dyn FnMut(&IoData) -> Result<Estimated, String>>;
+
+/// The method chosen on the command line, ready to estimate records.
+fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method)> {
+    use twostage_baselines as b;
+    if let Some(path) = &args.estimator {
+        let estimator = Estimator::load(path)?;
+        let names = estimator.param_names().to_vec();
+        let widths = estimator.intervals().map(|c| c.half_widths().to_vec());
+        let mut work = EstimateWorkspace::new();
+        return Ok((
+            names,
+            Box::new(move |record: &IoData| {
+                let mut theta = vec![0.0; estimator.param_names().len()];
+                estimator
+                    .estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)
+                    .map_err(|e| e.to_string())?;
+                Ok((theta, widths.clone()))
+            }),
+        ));
+    }
+    let (Some(model), Some(name)) = (&args.model, &args.method) else {
+        return Err(usage(
+            "give --estimator FILE, or --model M --method ekf|ukf|pf|pem|bayes".into(),
+        ));
+    };
+    let model: BuiltinModel = model.parse().map_err(|e| usage(format!("{e}")))?;
+    let names = model.build(false)?.param_names().to_vec();
+    let p0 = match args.p0.as_str() {
+        "eq6" => b::InitialCovariance::Eq6,
+        "eq7" => b::InitialCovariance::Eq7,
+        other => return Err(usage(format!("--p0 '{other}': use eq6 or eq7"))),
+    };
+    let car = model == BuiltinModel::Pacejka;
+    let estimator: Box<dyn b::RecordEstimator> = match (name.as_str(), car) {
+        ("ekf", false) => Box::new(b::KalmanEstimator::ekf(p0)),
+        ("ukf", false) => Box::new(b::KalmanEstimator::ukf(p0)),
+        ("ekf" | "ukf", true) => {
+            return Err(usage(format!(
+                "--method {name} exists for the benchmark only (as in the paper)"
+            )));
+        }
+        ("pf", false) => Box::new(
+            b::ParticleFilter::new(
+                b::BenchmarkParticles::new()?,
+                args.particles.unwrap_or(1000),
+            )
+            .seed(args.seed),
+        ),
+        ("pf", true) => Box::new(
+            b::ParticleFilter::new(b::CarParticles::new(), args.particles.unwrap_or(500))
+                .seed(args.seed),
+        ),
+        ("pem", false) => Box::new(
+            b::PredictionError::new(b::BenchmarkPredictor::new()?, args.starts).seed(args.seed),
+        ),
+        ("pem", true) => {
+            Box::new(b::PredictionError::new(b::CarPredictor::new(), args.starts).seed(args.seed))
+        }
+        ("bayes", false) => Box::new(b::BayesBenchmark::default()),
+        ("bayes", true) => Box::new(b::BayesCar::paper()?),
+        (other, _) => {
+            return Err(usage(format!(
+                "--method '{other}': use ekf, ukf, pf, pem or bayes"
+            )));
+        }
+    };
+    Ok((
+        names,
+        Box::new(move |record: &IoData| {
+            estimator
+                .estimate(record)
+                .map(|e| (e.theta, None))
+                .map_err(|e| e.to_string())
+        }),
+    ))
+}
+
 /// Run `twostage estimate`; returns how many records failed.
 pub fn estimate(args: &EstimateArgs) -> Result<usize> {
-    let estimator = Estimator::load(&args.estimator)?;
-    let names = estimator.param_names();
-    let intervals = estimator.intervals().map(|c| c.half_widths().to_vec());
-    let mut text = String::from("experiment");
-    for n in names {
-        write!(text, ",{n}")?;
-    }
-    if intervals.is_some() {
-        for n in names {
-            write!(text, ",{n}_lo,{n}_hi")?;
-        }
-    }
-    text.push('\n');
-    let mut work = EstimateWorkspace::new();
-    let mut theta = vec![0.0; names.len()];
+    let (names, mut estimate_one) = method(args)?;
+    let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     for path in &args.data {
         for read in csv_records::read(path).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
-                estimator
-                    .estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)
+                estimate_one(&record)
                     .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))
             });
             match outcome {
-                Ok(()) => {
-                    write!(text, "{}", read.id)?;
-                    for t in &theta {
-                        write!(text, ",{}", format_f64(*t))?;
-                    }
-                    if let Some(widths) = &intervals {
-                        for (t, w) in theta.iter().zip(widths) {
-                            write!(text, ",{},{}", format_f64(t - w), format_f64(t + w))?;
-                        }
-                    }
-                    text.push('\n');
-                }
+                Ok(estimated) => rows.push((read.id, estimated)),
                 Err(problem) => {
                     failed += 1;
                     eprintln!("error: {problem}");
@@ -275,6 +353,11 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
             }
         }
     }
+    let text = if args.format == "json" {
+        json(&names, &rows)?
+    } else {
+        csv(&names, &rows)?
+    };
     match &args.out {
         Some(path) => {
             std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?
@@ -282,4 +365,50 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
         None => std::io::stdout().lock().write_all(text.as_bytes())?,
     }
     Ok(failed)
+}
+
+fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
+    let with_intervals = rows.iter().any(|(_, (_, w))| w.is_some());
+    let mut text = String::from("experiment");
+    for n in names {
+        write!(text, ",{n}")?;
+    }
+    if with_intervals {
+        for n in names {
+            write!(text, ",{n}_lo,{n}_hi")?;
+        }
+    }
+    text.push('\n');
+    for (id, (theta, widths)) in rows {
+        write!(text, "{id}")?;
+        for t in theta {
+            write!(text, ",{}", format_f64(*t))?;
+        }
+        if let Some(widths) = widths {
+            for (t, w) in theta.iter().zip(widths) {
+                write!(text, ",{},{}", format_f64(t - w), format_f64(t + w))?;
+            }
+        }
+        text.push('\n');
+    }
+    Ok(text)
+}
+
+fn json(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
+    let records: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|(id, (theta, widths))| {
+            let mut object = serde_json::Map::new();
+            object.insert("experiment".into(), id.clone().into());
+            for (j, n) in names.iter().enumerate() {
+                object.insert(n.clone(), theta[j].into());
+                if let Some(w) = widths {
+                    object.insert(format!("{n}_lo"), (theta[j] - w[j]).into());
+                    object.insert(format!("{n}_hi"), (theta[j] + w[j]).into());
+                }
+            }
+            serde_json::Value::Object(object)
+        })
+        .collect();
+    Ok(serde_json::to_string_pretty(&records)? + "\n")
 }

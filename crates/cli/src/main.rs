@@ -5,6 +5,7 @@ mod demo;
 mod estimate;
 mod number;
 mod simulate;
+mod validate;
 
 use std::fmt;
 use std::io;
@@ -38,6 +39,8 @@ enum Command {
     },
     /// Estimate the parameters of recorded experiments (CSV u,y or experiment,u,y).
     Estimate(estimate::EstimateArgs),
+    /// Check an estimator on fresh simulations: accuracy, Theorem 1, interval coverage.
+    Validate(validate::ValidateArgs),
 }
 
 /// A mistake in how the command was called: exit code 2, like clap's own.
@@ -70,6 +73,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::simulate(args),
         Command::Train(args) => estimate::train(args, &mut io::stdout().lock()),
         Command::Inspect { file } => estimate::inspect(file, &mut io::stdout().lock()),
+        Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::Estimate(args) => match estimate::estimate(args) {
             Ok(0) => Ok(()),
             Ok(failed) => Err(anyhow::anyhow!(

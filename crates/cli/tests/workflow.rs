@@ -227,3 +227,95 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
         text(&out.stderr)
     );
 }
+
+#[test]
+fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_files() {
+    let dir = scratch("validate_and_methods");
+    let file = dir.join("lin.tsest");
+    assert!(
+        twostage(&[
+            "train",
+            "--model",
+            "benchmark",
+            "--sims",
+            "300",
+            "--fit",
+            "linear",
+            "--validate",
+            "0",
+            "--calibrate",
+            "100",
+            "--quiet",
+            "--out",
+            path(&file)
+        ])
+        .status
+        .success()
+    );
+    // sigma = 1.8^2 = 3.24; r > 3.24^2 / (2 * 0.3^2) * ln(100) = 268.6.
+    let svg = dir.join("v.svg");
+    let out = twostage(&[
+        "validate",
+        "--estimator",
+        path(&file),
+        "--gamma",
+        "0.3",
+        "--delta",
+        "0.01",
+        "--plot",
+        path(&svg),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report = text(&out.stdout);
+    assert!(report.contains("r = 269 fresh simulations"), "{report}");
+    assert!(report.contains("covers"), "{report}");
+    assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
+
+    let data = dir.join("data");
+    assert!(
+        twostage(&[
+            "simulate",
+            "--model",
+            "benchmark",
+            "--count",
+            "3",
+            "--seed",
+            "4",
+            "--out-dir",
+            path(&data)
+        ])
+        .status
+        .success()
+    );
+    let records = path(&data.join("data.csv")).to_string();
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--method",
+        "pem",
+        "--starts",
+        "3",
+        "--format",
+        "json",
+        &records,
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 3);
+    assert!(json[2]["theta"].as_f64().unwrap().abs() <= 0.9);
+    let out = twostage(&[
+        "estimate", "--model", "pacejka", "--method", "ukf", &records,
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("benchmark only"));
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--method",
+        "magic",
+        &records,
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+}

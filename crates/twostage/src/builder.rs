@@ -261,6 +261,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 regressor: self.regressor.clone(),
                 version: env!("CARGO_PKG_VERSION").to_string(),
             },
+            intervals: None,
             validation: None,
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
@@ -279,6 +280,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         } else {
             None
         };
+        estimator.intervals = intervals.clone();
         if self.validation > 0 {
             let (truth, estimates) = self.fresh_estimates(
                 &estimator,

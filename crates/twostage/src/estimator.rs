@@ -69,6 +69,9 @@ pub struct Estimator {
     pub(crate) compressor: CompressorConfig,
     pub(crate) regressor: FittedRegressor,
     pub(crate) training: TrainingInfo,
+    /// Calibrated on their own fresh simulations, so they exist whether or
+    /// not the estimator was also validated.
+    pub(crate) intervals: Option<ConformalIntervals>,
     pub(crate) validation: Option<ValidationReport>,
 }
 
@@ -107,7 +110,7 @@ impl Estimator {
     }
     /// Calibrated conformal intervals, when calibrated.
     pub fn intervals(&self) -> Option<&ConformalIntervals> {
-        self.validation.as_ref().and_then(|v| v.intervals.as_ref())
+        self.intervals.as_ref()
     }
 
     /// Estimate theta from one record (`inputs` N x n_u, `outputs` N x n_y)

@@ -271,3 +271,24 @@ fn a_narx_estimator_gets_calibrated_scales_and_learns() {
     let rmse = estimator.validation().unwrap().parameters[0].rmse;
     assert!(rmse < 0.3, "RMSE {rmse}");
 }
+
+#[test]
+fn intervals_are_kept_without_validation() {
+    let model = small_benchmark();
+    let estimator = TwoStage::builder(&model)
+        .simulations(200)
+        .linear(1e-6)
+        .unwrap()
+        .calibration(100)
+        .validation(0)
+        .train()
+        .unwrap();
+    assert!(estimator.validation().is_none());
+    let widths = estimator
+        .intervals()
+        .expect("calibrated intervals")
+        .half_widths();
+    assert!(widths[0] > 0.0 && widths[0].is_finite());
+    let loaded = Estimator::from_bytes(&estimator.to_bytes().unwrap()).unwrap();
+    assert_eq!(loaded.intervals(), estimator.intervals());
+}

@@ -1,0 +1,114 @@
+//! `twostage validate`: an estimator on fresh simulations of its model.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use ndarray::Array2;
+use rayon::prelude::*;
+use twostage::models::{BuiltinModel, IoData, run_experiment};
+use twostage::validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
+use twostage::{EstimateWorkspace, Estimator};
+
+use crate::usage;
+
+/// Options of `twostage validate`.
+#[derive(Debug, clap::Args)]
+pub struct ValidateArgs {
+    /// The estimator file.
+    #[arg(long)]
+    estimator: PathBuf,
+    /// Number of fresh simulations r.
+    #[arg(long, conflicts_with = "gamma")]
+    sims: Option<usize>,
+    /// Accuracy gamma of Theorem 1: r is then the smallest size that
+    /// guarantees it with confidence 1 - delta.
+    #[arg(long, requires = "delta")]
+    gamma: Option<f64>,
+    /// Confidence parameter delta of Theorem 1.
+    #[arg(long, default_value_t = 1e-3)]
+    delta: f64,
+    /// Seed of the fresh simulations (disjoint from training by default).
+    #[arg(long, default_value_t = 0x5641_4c49)]
+    seed: u64,
+    /// Also draw estimates against truth into this SVG file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+}
+
+/// Run `twostage validate`.
+pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
+    let estimator = Estimator::load(&args.estimator)?;
+    let model: BuiltinModel = estimator.training().model.parse().map_err(|e| {
+        anyhow::anyhow!(
+            "{}: trained on a model this command cannot simulate ({e})",
+            args.estimator.display()
+        )
+    })?;
+    let sim = model.build(false)?;
+    let sigma = squared_error_bound(estimator.lower(), estimator.upper());
+    let r = match (args.sims, args.gamma) {
+        (Some(r), _) => r,
+        (None, Some(gamma)) => usize::try_from(
+            hoeffding_sample_size(sigma, gamma, args.delta)
+                .map_err(|e| usage(format!("--gamma/--delta: {e}")))?,
+        )
+        .map_err(|_| usage("--gamma is too small: the sample size overflows".into()))?,
+        (None, None) => 1000,
+    };
+    if r == 0 {
+        return Err(usage("--sims must be at least 1".into()));
+    }
+    let q = estimator.param_names().len();
+    let design = sim.prior().design(r, args.seed)?;
+    let pairs: Vec<(Vec<f64>, Vec<f64>)> = (0..r)
+        .into_par_iter()
+        .map_init(
+            || (IoData::default(), EstimateWorkspace::new()),
+            |(record, work), i| -> Result<(Vec<f64>, Vec<f64>)> {
+                let mut theta = vec![0.0; q];
+                run_experiment(sim.as_ref(), &design, i, &mut theta, record)?;
+                let mut estimate = vec![0.0; q];
+                estimator.estimate_into(record.inputs(), record.outputs(), work, &mut estimate)?;
+                Ok((theta, estimate))
+            },
+        )
+        .collect::<Result<_>>()?;
+    let truth = Array2::from_shape_fn((r, q), |(i, j)| pairs[i].0[j]);
+    let estimates = Array2::from_shape_fn((r, q), |(i, j)| pairs[i].1[j]);
+    let report = ValidationReport::new(
+        estimator.param_names(),
+        truth.view(),
+        estimates.view(),
+        estimator.lower(),
+        estimator.upper(),
+        args.delta,
+        estimator.intervals().cloned(),
+    )?;
+    writeln!(out, "{report}")?;
+    if let Some(path) = &args.plot {
+        let columns: Vec<(Vec<f64>, Vec<f64>)> = (0..q)
+            .map(|j| (truth.column(j).to_vec(), estimates.column(j).to_vec()))
+            .collect();
+        let panels: Vec<twostage_plot::Panel<'_>> = columns
+            .iter()
+            .zip(estimator.param_names())
+            .enumerate()
+            .map(|(j, ((t, e), name))| twostage_plot::Panel {
+                caption: "",
+                name,
+                truth: t,
+                estimate: e,
+                range: (estimator.lower()[j], estimator.upper()[j]),
+            })
+            .collect();
+        let title = format!(
+            "{} estimator on {r} fresh simulations",
+            estimator.training().model
+        );
+        let svg = twostage_plot::estimates_vs_truth(&title, &panels)?;
+        std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
+        writeln!(out, "wrote {}", path.display())?;
+    }
+    Ok(())
+}
