@@ -28,6 +28,26 @@ fn path(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// A quick, quiet benchmark estimator with a linear stage 2, written to `file`.
+fn train_linear(file: &std::path::Path, sims: &str, calibrate: &str) -> Output {
+    twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        sims,
+        "--fit",
+        "linear",
+        "--validate",
+        "0",
+        "--calibrate",
+        calibrate,
+        "--quiet",
+        "--out",
+        path(file),
+    ])
+}
+
 #[test]
 fn train_inspect_and_estimate_recorded_experiments() {
     let dir = scratch("workflow");
@@ -113,22 +133,7 @@ fn train_inspect_and_estimate_recorded_experiments() {
 fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     let dir = scratch("bad_record");
     let file = dir.join("lin.tsest");
-    let out = twostage(&[
-        "train",
-        "--model",
-        "benchmark",
-        "--sims",
-        "200",
-        "--fit",
-        "linear",
-        "--validate",
-        "0",
-        "--calibrate",
-        "0",
-        "--quiet",
-        "--out",
-        path(&file),
-    ]);
+    let out = train_linear(&file, "200", "0");
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert!(text(&out.stdout).is_empty(), "--quiet prints nothing");
     let data = dir.join("long.csv");
@@ -199,26 +204,8 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
     let csv = dir.join("bad.csv");
     std::fs::write(&csv, "time,value\n1,2\n").unwrap();
     let file = dir.join("m.tsest");
-    assert!(
-        twostage(&[
-            "train",
-            "--model",
-            "benchmark",
-            "--sims",
-            "50",
-            "--fit",
-            "linear",
-            "--validate",
-            "0",
-            "--calibrate",
-            "0",
-            "--quiet",
-            "--out",
-            path(&file)
-        ])
-        .status
-        .success()
-    );
+    let out = train_linear(&file, "50", "0");
+    assert!(out.status.success(), "{}", text(&out.stderr));
     let out = twostage(&["estimate", "--estimator", path(&file), path(&csv)]);
     assert_eq!(out.status.code(), Some(1));
     assert!(
@@ -232,26 +219,8 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
 fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_files() {
     let dir = scratch("validate_and_methods");
     let file = dir.join("lin.tsest");
-    assert!(
-        twostage(&[
-            "train",
-            "--model",
-            "benchmark",
-            "--sims",
-            "300",
-            "--fit",
-            "linear",
-            "--validate",
-            "0",
-            "--calibrate",
-            "100",
-            "--quiet",
-            "--out",
-            path(&file)
-        ])
-        .status
-        .success()
-    );
+    let out = train_linear(&file, "300", "100");
+    assert!(out.status.success(), "{}", text(&out.stderr));
     // sigma = 1.8^2 = 3.24; r > 3.24^2 / (2 * 0.3^2) * ln(100) = 268.6.
     let svg = dir.join("v.svg");
     let out = twostage(&[

@@ -343,6 +343,23 @@ fn forward(sizes: &[usize], params: &[f64], x: &[f64], acts: &mut [f64], offsets
     }
 }
 
+/// One backward step through a tanh layer: `delta_{l-1} = (W_l' delta_l)
+/// .* (1 - a^2)`, with `a` the layer's input activations. `delta` holds
+/// `delta_l` in its first half and receives `delta_{l-1}` there; the second
+/// half is scratch, so the step never reads what it has overwritten.
+fn backward(w: &[f64], input: &[f64], n_out: usize, delta: &mut [f64]) {
+    let n_in = input.len();
+    let (cur, next) = delta.split_at_mut(MAX_WIDTH);
+    for c in 0..n_in {
+        let mut acc = 0.0;
+        for a in 0..n_out {
+            acc += w[a * n_in + c] * cur[a];
+        }
+        next[c] = acc * (1.0 - input[c] * input[c]);
+    }
+    cur[..n_in].copy_from_slice(&next[..n_in]);
+}
+
 /// The training problem of one restart: standardized data and buffers.
 struct Problem<'a> {
     sizes: &'a [usize],
@@ -416,16 +433,7 @@ impl Problem<'_> {
                     grad[s + n_out * n_in + a] += d;
                 }
                 if l > 0 {
-                    let w = &params[s..s + n_out * n_in];
-                    let (cur, next) = delta.split_at_mut(MAX_WIDTH);
-                    for c in 0..n_in {
-                        let mut acc = 0.0;
-                        for a in 0..n_out {
-                            acc += w[a * n_in + c] * cur[a];
-                        }
-                        next[c] = acc * (1.0 - input[c] * input[c]);
-                    }
-                    cur[..n_in].copy_from_slice(&next[..n_in]);
+                    backward(&params[s..s + n_out * n_in], input, n_out, delta);
                 }
             }
         }
@@ -477,18 +485,7 @@ impl Problem<'_> {
                         jac[(r, s + n_out * n_in + a)] = d;
                     }
                     if l > 0 {
-                        // delta_{l-1} = (W_l' delta_l) .* (1 - a^2), in a
-                        // second half of the buffer to avoid aliasing.
-                        let w = &params[s..s + n_out * n_in];
-                        let (cur, next) = delta.split_at_mut(MAX_WIDTH);
-                        for c in 0..n_in {
-                            let mut acc = 0.0;
-                            for a in 0..n_out {
-                                acc += w[a * n_in + c] * cur[a];
-                            }
-                            next[c] = acc * (1.0 - input[c] * input[c]);
-                        }
-                        cur[..n_in].copy_from_slice(&next[..n_in]);
+                        backward(&params[s..s + n_out * n_in], input, n_out, delta);
                     }
                 }
             }
@@ -550,6 +547,41 @@ fn initial_parameters(sizes: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
 const MU_START: f64 = 1e-3;
 const MU_MAX: f64 = 1e10;
 
+/// Keeps the weights with the lowest held-out loss and says when `patience`
+/// checks have passed without improvement (never, when nothing is held out).
+struct BestHeldOut {
+    loss: f64,
+    params: Vec<f64>,
+    since: usize,
+    patience: usize,
+    active: bool,
+}
+
+impl BestHeldOut {
+    fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
+        Self {
+            loss,
+            params: params.to_vec(),
+            since: 0,
+            patience,
+            active,
+        }
+    }
+
+    /// Record the held-out loss of `params`; true when training should stop.
+    fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
+        if loss < self.loss {
+            self.loss = loss;
+            self.params.copy_from_slice(params);
+            self.since = 0;
+            false
+        } else {
+            self.since += 1;
+            self.active && self.since >= self.patience
+        }
+    }
+}
+
 /// Whether Levenberg-Marquardt is used for this problem size.
 fn use_levenberg_marquardt(trainer: Trainer, rows: usize, n_params: usize) -> bool {
     match trainer {
@@ -610,8 +642,9 @@ fn train_adam(
         problem.held_out
     };
     let mut order = problem.train.to_vec();
-    let mut best = (problem.mse(&params, held_out, &mut acts), params.clone());
-    let (mut since_best, mut step, mut done) = (0, 0i32, 0);
+    let initial = problem.mse(&params, held_out, &mut acts);
+    let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
+    let (mut step, mut done) = (0i32, 0);
     let mut reason = TerminationReason::MaxEpochs;
     for _ in 0..epochs {
         done += 1;
@@ -627,18 +660,12 @@ fn train_adam(
             }
         }
         let held = problem.mse(&params, held_out, &mut acts);
-        if held < best.0 {
-            best = (held, params.clone());
-            since_best = 0;
-        } else {
-            since_best += 1;
-            if !problem.held_out.is_empty() && since_best >= mlp.patience {
-                reason = TerminationReason::EarlyStopping;
-                break;
-            }
+        if best.observe(held, &params) {
+            reason = TerminationReason::EarlyStopping;
+            break;
         }
     }
-    let (validation_mse, kept) = best;
+    let (validation_mse, kept) = (best.loss, best.params);
     let report = RestartReport {
         restart,
         iterations: done,
@@ -677,8 +704,8 @@ fn train_levenberg_marquardt(
     };
     let mut loss =
         problem.mse(&params, problem.train, &mut acts) + problem.penalty(&params) / (rows as f64);
-    let mut best = (problem.mse(&params, held_out, &mut acts), params.clone());
-    let mut since_best = 0;
+    let initial = problem.mse(&params, held_out, &mut acts);
+    let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
     let mut mu = MU_START;
     let mut reason = TerminationReason::MaxIterations;
     let mut iterations = 0;
@@ -735,21 +762,15 @@ fn train_levenberg_marquardt(
             break;
         }
         let held = problem.mse(&params, held_out, &mut acts);
-        if held < best.0 {
-            best = (held, params.clone());
-            since_best = 0;
-        } else {
-            since_best += 1;
-            if !problem.held_out.is_empty() && since_best >= mlp.patience {
-                reason = TerminationReason::EarlyStopping;
-                break;
-            }
+        if best.observe(held, &params) {
+            reason = TerminationReason::EarlyStopping;
+            break;
         }
         if reason == TerminationReason::Converged {
             break;
         }
     }
-    let (validation_mse, kept) = best;
+    let (validation_mse, kept) = (best.loss, best.params);
     let report = RestartReport {
         restart,
         iterations,
