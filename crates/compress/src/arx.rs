@@ -38,6 +38,7 @@ use crate::workspace::{RANK_TOLERANCE, Workspace};
 /// # Ok::<(), twostage_compress::CompressError>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "ArxFields")]
 pub struct Arx {
     na: usize,
     nb: usize,
@@ -47,6 +48,29 @@ pub struct Arx {
 }
 
 const MAX_ORDER: usize = 64;
+/// Signals per record; far above any real use, low enough that a corrupt
+/// file cannot ask for absurd allocations.
+pub(crate) const MAX_SIGNALS: usize = 64;
+
+/// What a file stores; it becomes an [`Arx`] only through the same checks
+/// as [`Arx::new`], so a decoded structure is always a valid one.
+#[derive(Deserialize)]
+struct ArxFields {
+    na: usize,
+    nb: usize,
+    delay: usize,
+    n_inputs: usize,
+    n_outputs: usize,
+}
+
+impl TryFrom<ArxFields> for Arx {
+    type Error = CompressError;
+    fn try_from(f: ArxFields) -> Result<Self> {
+        Self::new(f.na, f.nb)?
+            .with_delay(f.delay)?
+            .with_signals(f.n_inputs, f.n_outputs)
+    }
+}
 
 fn order_error(name: &'static str, value: usize, reason: &str) -> CompressError {
     CompressError::InvalidSetting {
@@ -95,8 +119,15 @@ impl Arx {
     /// The same orders for records with several inputs or outputs.
     ///
     /// # Errors
-    /// [`CompressError::InvalidSetting`] if a count is 0.
+    /// [`CompressError::InvalidSetting`] if a count is 0 or above 64.
     pub fn with_signals(mut self, n_inputs: usize, n_outputs: usize) -> Result<Self> {
+        if n_inputs > MAX_SIGNALS || n_outputs > MAX_SIGNALS {
+            return Err(order_error(
+                "signals",
+                n_inputs.max(n_outputs),
+                "at most 64 inputs and 64 outputs",
+            ));
+        }
         if n_inputs == 0 && self.nb > 0 {
             return Err(order_error("inputs", 0, "nb > 0 needs at least one input"));
         }

@@ -5,6 +5,7 @@ use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
 use crate::Compressor;
+use crate::arx::MAX_SIGNALS;
 use crate::error::{CompressError, Result};
 use crate::signals::{check_record, degenerate, name};
 use crate::workspace::{RANK_TOLERANCE, Workspace};
@@ -44,6 +45,7 @@ struct Monomial {
 /// # Ok::<(), twostage_compress::CompressError>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "NarxFields")]
 pub struct Narx {
     na: usize,
     nb: usize,
@@ -53,6 +55,38 @@ pub struct Narx {
     input_scales: Vec<f64>,
     output_scales: Vec<f64>,
     monomials: Vec<Monomial>,
+}
+
+/// What a file stores; it becomes a [`Narx`] only by rebuilding it through
+/// the constructors, and its monomials must be the ones they build.
+#[derive(Deserialize)]
+struct NarxFields {
+    na: usize,
+    nb: usize,
+    delay: usize,
+    degree: usize,
+    pure_powers: bool,
+    input_scales: Vec<f64>,
+    output_scales: Vec<f64>,
+    monomials: Vec<Monomial>,
+}
+
+impl TryFrom<NarxFields> for Narx {
+    type Error = CompressError;
+    fn try_from(f: NarxFields) -> Result<Self> {
+        let narx = Self::new(f.na, f.nb, f.degree)?
+            .pure_powers(f.pure_powers)
+            .with_delay(f.delay)?
+            .with_scales(&f.input_scales, &f.output_scales)?;
+        if narx.monomials != f.monomials {
+            return Err(setting(
+                "monomials",
+                f.monomials.len(),
+                "do not match the stored orders and degree (the data is corrupted)",
+            ));
+        }
+        Ok(narx)
+    }
 }
 
 const MAX_LAGS: usize = 16;
@@ -136,6 +170,13 @@ impl Narx {
                     output_scales.len()
                 ),
                 "give one scale per signal, at least one output (and one input when nb > 0)",
+            ));
+        }
+        if input_scales.len() > MAX_SIGNALS || output_scales.len() > MAX_SIGNALS {
+            return Err(setting(
+                "scales",
+                input_scales.len().max(output_scales.len()),
+                "at most 64 inputs and 64 outputs",
             ));
         }
         if let Some(s) = input_scales

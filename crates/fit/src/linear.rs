@@ -67,11 +67,40 @@ impl Ridge {
 
 /// A fitted linear map.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "FittedLinearFields")]
 pub struct FittedLinear {
     features: Standardizer,
     targets: Standardizer,
     /// Weights in standardized units, row-major `n_targets x n_features`.
     weights: Vec<f64>,
+}
+
+/// What a file stores; decoding checks that the shapes agree.
+#[derive(Deserialize)]
+struct FittedLinearFields {
+    features: Standardizer,
+    targets: Standardizer,
+    weights: Vec<f64>,
+}
+
+impl TryFrom<FittedLinearFields> for FittedLinear {
+    type Error = FitError;
+    fn try_from(f: FittedLinearFields) -> Result<Self> {
+        let expected = f.features.dim().checked_mul(f.targets.dim());
+        if expected != Some(f.weights.len()) || f.targets.dim() == 0 {
+            return Err(FitError::ShapeMismatch(format!(
+                "linear map with {} weights for {} features and {} targets",
+                f.weights.len(),
+                f.features.dim(),
+                f.targets.dim()
+            )));
+        }
+        Ok(Self {
+            features: f.features,
+            targets: f.targets,
+            weights: f.weights,
+        })
+    }
 }
 
 impl Regressor for Ridge {

@@ -4,6 +4,8 @@
 use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
+use crate::error::FitError;
+
 /// Affine map `z = (x - mean) / scale` per column.
 ///
 /// Columns with zero spread keep scale 1, so constant features map to 0
@@ -19,9 +21,49 @@ use serde::{Deserialize, Serialize};
 /// assert!((z[0] - 1.0).abs() < 1e-15 && z[1].abs() < 1e-15);
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "StandardizerFields")]
 pub struct Standardizer {
     mean: Vec<f64>,
     scale: Vec<f64>,
+}
+
+/// What a file stores; decoding checks it like [`Standardizer::fit`]'s
+/// output: one finite mean and one finite positive scale per column.
+#[derive(Deserialize)]
+struct StandardizerFields {
+    mean: Vec<f64>,
+    scale: Vec<f64>,
+}
+
+impl TryFrom<StandardizerFields> for Standardizer {
+    type Error = FitError;
+    fn try_from(f: StandardizerFields) -> Result<Self, FitError> {
+        if f.mean.len() != f.scale.len() {
+            return Err(FitError::ShapeMismatch(format!(
+                "standardizer with {} means and {} scales",
+                f.mean.len(),
+                f.scale.len()
+            )));
+        }
+        if let Some(s) = f.scale.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
+            return Err(FitError::InvalidSetting {
+                name: "standardizer scale",
+                value: s.to_string(),
+                reason: "must be finite and > 0".into(),
+            });
+        }
+        if let Some(m) = f.mean.iter().find(|m| !m.is_finite()) {
+            return Err(FitError::InvalidSetting {
+                name: "standardizer mean",
+                value: m.to_string(),
+                reason: "must be finite".into(),
+            });
+        }
+        Ok(Self {
+            mean: f.mean,
+            scale: f.scale,
+        })
+    }
 }
 
 impl Standardizer {

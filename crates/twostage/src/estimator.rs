@@ -61,6 +61,7 @@ impl EstimateWorkspace {
 /// A trained two-stage estimator: `theta_hat = clip(h(g(u, y)))`, explicit,
 /// with no iteration and no tuning at estimate time.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "EstimatorFields")]
 pub struct Estimator {
     pub(crate) param_names: Vec<String>,
     pub(crate) lower: Vec<f64>,
@@ -73,6 +74,72 @@ pub struct Estimator {
     /// not the estimator was also validated.
     pub(crate) intervals: Option<ConformalIntervals>,
     pub(crate) validation: Option<ValidationReport>,
+}
+
+/// What a file stores. Each component has checked its own invariants while
+/// decoding; this adds the ones between components, so that a decoded
+/// estimator estimates (or errs) and never indexes out of range.
+#[derive(Deserialize)]
+struct EstimatorFields {
+    param_names: Vec<String>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    shape: RecordShape,
+    compressor: CompressorConfig,
+    regressor: FittedRegressor,
+    training: TrainingInfo,
+    intervals: Option<ConformalIntervals>,
+    validation: Option<ValidationReport>,
+}
+
+impl TryFrom<EstimatorFields> for Estimator {
+    type Error = Error;
+    fn try_from(f: EstimatorFields) -> Result<Self> {
+        let bad = |what: String| Err(Error::File(format!("inconsistent estimator: {what}")));
+        let q = f.param_names.len();
+        if q == 0 || f.lower.len() != q || f.upper.len() != q {
+            return bad(format!(
+                "{q} parameter names, {} lower and {} upper bounds",
+                f.lower.len(),
+                f.upper.len()
+            ));
+        }
+        if let Some(j) = (0..q).find(|&j| {
+            !(f.lower[j].is_finite() && f.upper[j].is_finite() && f.lower[j] < f.upper[j])
+        }) {
+            return bad(format!(
+                "the box [{}, {}] of {}",
+                f.lower[j], f.upper[j], f.param_names[j]
+            ));
+        }
+        if f.regressor.n_outputs() != q || f.regressor.n_inputs() != f.compressor.n_features() {
+            return bad(format!(
+                "stage 2 maps {} features to {} parameters, stage 1 gives {} features for {q}",
+                f.regressor.n_inputs(),
+                f.regressor.n_outputs(),
+                f.compressor.n_features()
+            ));
+        }
+        if let Some(intervals) = &f.intervals {
+            let widths = intervals.half_widths();
+            if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
+                return bad(format!(
+                    "interval half-widths {widths:?} for {q} parameters"
+                ));
+            }
+        }
+        Ok(Self {
+            param_names: f.param_names,
+            lower: f.lower,
+            upper: f.upper,
+            shape: f.shape,
+            compressor: f.compressor,
+            regressor: f.regressor,
+            training: f.training,
+            intervals: f.intervals,
+            validation: f.validation,
+        })
+    }
 }
 
 impl Estimator {

@@ -1,0 +1,163 @@
+//! The estimator-file reader never panics, whatever the bytes.
+//!
+//! Random bytes rarely get past the magic and the checksum, so the
+//! properties also mutate real payloads and then re-seal them with a
+//! correct length and checksum: that is what a buggy writer or a malicious
+//! file would look like, and it reaches the decoder and the estimator.
+#![allow(clippy::unwrap_used)]
+
+use std::sync::OnceLock;
+
+use proptest::prelude::*;
+use twostage::compress::{Arx, Narx};
+use twostage::fit::MlpParams;
+use twostage::models::{Benchmark, IoData, Simulator, experiment_rng};
+use twostage::{CompressorConfig, Estimator, RegressorConfig, TwoStage};
+
+const HEADER: usize = 24;
+
+/// Bit-by-bit CRC-32 (IEEE), a second algorithm beside the library's table.
+fn crc32_bitwise(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            let mask = (crc & 1).wrapping_neg();
+            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
+        }
+    }
+    !crc
+}
+
+fn seal(payload: &[u8]) -> Vec<u8> {
+    let mut bytes = b"TWOSTAGE".to_vec();
+    bytes.extend_from_slice(&1u32.to_le_bytes());
+    bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&crc32_bitwise(payload).to_le_bytes());
+    bytes.extend_from_slice(payload);
+    bytes
+}
+
+fn model() -> Benchmark {
+    Benchmark::builder().n_samples(120).build().unwrap()
+}
+
+/// Three small estimators covering every stored component: linear and MLP
+/// stage 2, ARX and NARX stage 1, intervals and a validation report.
+fn files() -> &'static [Vec<u8>] {
+    static FILES: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
+    FILES.get_or_init(|| {
+        let model = model();
+        let mlp = RegressorConfig::Mlp(
+            MlpParams::new(&[3])
+                .unwrap()
+                .max_iterations(5)
+                .check()
+                .unwrap(),
+        );
+        let configs: [(CompressorConfig, Option<RegressorConfig>); 3] = [
+            (Arx::new(2, 2).unwrap().into(), None),
+            (Arx::new(2, 1).unwrap().into(), Some(mlp.clone())),
+            (Narx::new(1, 1, 2).unwrap().into(), Some(mlp)),
+        ];
+        configs
+            .into_iter()
+            .map(|(compressor, regressor)| {
+                let builder = TwoStage::builder(&model)
+                    .compressor(compressor)
+                    .simulations(40)
+                    .calibration(20)
+                    .validation(20)
+                    .seed(3);
+                let builder = match regressor {
+                    Some(r) => builder.regressor(r),
+                    None => builder.linear(1e-6).unwrap(),
+                };
+                builder.train().unwrap().to_bytes().unwrap()
+            })
+            .collect()
+    })
+}
+
+fn record() -> IoData {
+    let model = model();
+    let mut record = model.spec().new_record();
+    model
+        .simulate(&[0.3], &mut experiment_rng(5, 0), &mut record)
+        .unwrap();
+    record
+}
+
+/// Everything a user can do with a loaded estimator must return, not panic.
+fn exercise(estimator: &Estimator, record: &IoData) {
+    if let Ok(theta) = estimator.estimate_record(record) {
+        assert_eq!(theta.len(), estimator.param_names().len());
+        for ((t, lo), hi) in theta.iter().zip(estimator.lower()).zip(estimator.upper()) {
+            assert!(
+                t.is_nan() || (lo <= t && t <= hi) || lo > hi,
+                "{t} outside [{lo}, {hi}]"
+            );
+        }
+    }
+    let _ = estimator.estimate_batch(std::slice::from_ref(record));
+    let _ = estimator.to_json();
+    let _ = format!("{estimator:?}");
+    if let Some(report) = estimator.validation() {
+        let _ = report.to_string();
+    }
+    if let Some(intervals) = estimator.intervals() {
+        let _ = format!("{intervals:?}");
+    }
+    let bytes = estimator.to_bytes().unwrap();
+    assert_eq!(&Estimator::from_bytes(&bytes).unwrap(), estimator);
+}
+
+#[test]
+fn the_bitwise_crc_agrees_with_the_files_we_write() {
+    for file in files() {
+        assert_eq!(seal(&file[HEADER..]), *file);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
+
+    #[test]
+    fn arbitrary_bytes_are_rejected_or_decoded(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {
+        let _ = Estimator::from_bytes(&bytes);
+        let mut with_magic = b"TWOSTAGE".to_vec();
+        with_magic.extend_from_slice(&bytes);
+        let _ = Estimator::from_bytes(&with_magic);
+        if let Ok(e) = Estimator::from_bytes(&seal(&bytes)) {
+            exercise(&e, &record());
+        }
+    }
+
+    #[test]
+    fn resealed_mutations_of_real_files_never_panic(
+        which in 0usize..3,
+        edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+        cut in proptest::option::of(any::<prop::sample::Index>()),
+    ) {
+        let file = &files()[which];
+        let mut payload = file[HEADER..].to_vec();
+        for (at, byte) in &edits {
+            let i = at.index(payload.len());
+            payload[i] = *byte;
+        }
+        if let Some(cut) = cut {
+            payload.truncate(cut.index(payload.len()));
+        }
+        if let Ok(e) = Estimator::from_bytes(&seal(&payload)) {
+            exercise(&e, &record());
+        }
+    }
+
+    #[test]
+    fn unsealed_corruption_is_always_caught(which in 0usize..3, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
+        let mut file = files()[which].clone();
+        let i = at.index(file.len());
+        file[i] ^= flip;
+        prop_assert!(Estimator::from_bytes(&file).is_err());
+    }
+}
