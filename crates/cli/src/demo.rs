@@ -32,11 +32,13 @@ pub fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
          1500 simulations, ARX(5, 5) compression, a 10-unit network (Section 5.3)."
     )?;
     let start = Instant::now();
+    let bars = crate::bars::Bars::new(false);
     let estimator = TwoStage::builder(&model)
         .preset(twostage::paper_benchmark())
         .seed(args.seed)
         .validation(1000)
         .calibration(1000)
+        .progress(&bars)
         .train()
         .context("training the benchmark preset")?;
     writeln!(

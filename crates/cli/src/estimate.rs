@@ -146,7 +146,12 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         );
     }
     let start = std::time::Instant::now();
-    let estimator = builder.train().context("training")?;
+    let bars = crate::bars::Bars::new(args.quiet);
+    let estimator = builder.progress(&bars).train().map_err(|e| match e {
+        // A setting out of range is the user's to fix, like a bad flag.
+        twostage::Error::InvalidSetting { .. } => usage(e.to_string()),
+        other => anyhow::Error::new(other).context("training"),
+    })?;
     estimator.save(&args.out)?;
     if !args.quiet {
         writeln!(
@@ -257,13 +262,16 @@ type Estimated = (Vec<f64>, Option<Vec<f64>>);
 /// Estimates one record, or says why it cannot.
 type Method = Box<dyn FnMut(&IoData) -> Result<Estimated, String>>;
 
-/// The method chosen on the command line, ready to estimate records.
-fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method)> {
+/// The method chosen on the command line, ready to estimate records: the
+/// parameter names, the method, and the record length an estimator file
+/// was trained and validated on.
+fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
     use twostage_baselines as b;
     if let Some(path) = &args.estimator {
         let estimator = Estimator::load(path)?;
         let names = estimator.param_names().to_vec();
         let widths = estimator.intervals().map(|c| c.half_widths().to_vec());
+        let trained = estimator.record_shape().n_samples;
         let mut work = EstimateWorkspace::new();
         return Ok((
             names,
@@ -274,6 +282,7 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method)> {
                     .map_err(|e| e.to_string())?;
                 Ok((theta, widths.clone()))
             }),
+            Some(trained),
         ));
     }
     let (Some(model), Some(name)) = (&args.model, &args.method) else {
@@ -330,17 +339,30 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method)> {
                 .map(|e| (e.theta, None))
                 .map_err(|e| e.to_string())
         }),
+        None,
     ))
 }
 
 /// Run `twostage estimate`; returns how many records failed.
 pub fn estimate(args: &EstimateArgs) -> Result<usize> {
-    let (names, mut estimate_one) = method(args)?;
+    let (names, mut estimate_one, trained_samples) = method(args)?;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     for path in &args.data {
         for read in csv_records::read(path).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
+                let n = record.n_samples();
+                match trained_samples {
+                    // The estimate is still defined, but the validation
+                    // error and the intervals were measured for another N.
+                    Some(trained) if n != trained => eprintln!(
+                        "warning: {}: experiment {}: {n} samples, the estimator was trained \
+                         and validated on N = {trained}; its accuracy and intervals may not hold",
+                        path.display(),
+                        read.id
+                    ),
+                    _ => {}
+                }
                 estimate_one(&record)
                     .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))
             });

@@ -154,6 +154,12 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     assert_eq!(out.status.code(), Some(1));
     let err = text(&out.stderr);
     assert!(err.contains("row 402, column y: 'nan'"), "{err}");
+    assert!(
+        err.contains(
+            "experiment a: 300 samples, the estimator was trained and validated on N = 1000"
+        ),
+        "a record of another length is estimated with a warning: {err}"
+    );
     let estimates = text(&out.stdout);
     assert_eq!(
         estimates.lines().count(),
@@ -191,6 +197,21 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
         path(&dir.join("x")),
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "5",
+        "--out",
+        path(&dir.join("x")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("simulations = 5: at least 10"),
+        "{}",
+        text(&out.stderr)
+    );
     let out = twostage(&["inspect", "/nonexistent/estimator.tsest"]);
     assert_eq!(out.status.code(), Some(1));
     let err = text(&out.stderr);

@@ -5,10 +5,11 @@ use twostage_fit::{MlpParams, Ridge};
 use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
-use crate::chart::compress_chart;
+use crate::chart::compress_chart_observed;
 use crate::config::{CompressorConfig, RegressorConfig};
 use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, TrainingInfo};
+use crate::progress::{Progress, Silent, Stage};
 
 /// The choices of one training run, reusable across simulators.
 #[derive(Debug, Clone, PartialEq)]
@@ -97,6 +98,7 @@ pub struct TwoStage<'a, S: ?Sized> {
     validation: usize,
     delta: f64,
     max_failure_fraction: f64,
+    progress: &'a dyn Progress,
 }
 
 impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
@@ -115,6 +117,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             validation: 500,
             delta: 1e-3,
             max_failure_fraction: 0.01,
+            progress: &Silent,
         }
     }
 
@@ -184,6 +187,12 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         self
     }
 
+    /// Tell `progress` how the run advances (default: nothing is shown).
+    pub fn progress(mut self, progress: &'a dyn Progress) -> Self {
+        self.progress = progress;
+        self
+    }
+
     fn check(&self) -> Result<()> {
         let invalid = |name: &'static str, value: String, reason: &str| {
             Err(Error::InvalidSetting {
@@ -230,16 +239,20 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         };
         let design = training_prior.design(self.simulations, self.seed)?;
         let compressor = self.calibrated_compressor(&design)?;
-        let chart = compress_chart(
+        let chart = compress_chart_observed(
             self.simulator,
             &compressor,
             &design,
-            "training",
+            Stage::Training,
             self.max_failure_fraction,
+            self.progress,
         )?;
-        let regressor =
-            self.regressor
-                .fit(chart.features.view(), chart.thetas.view(), self.seed)?;
+        self.progress.begin(Stage::Fitting, 0);
+        let regressor = self
+            .regressor
+            .fit(chart.features.view(), chart.thetas.view(), self.seed);
+        self.progress.end(Stage::Fitting);
+        let regressor = regressor?;
         let mut estimator = Estimator {
             param_names: spec.param_names().to_vec(),
             lower: prior.lower().to_vec(),
@@ -271,7 +284,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 &iid,
                 self.calibration,
                 CALIBRATION_SEED,
-                "calibration",
+                Stage::Calibration,
             )?;
             Some(ConformalIntervals::calibrate(
                 (&truth - &estimates).view(),
@@ -287,7 +300,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 &iid,
                 self.validation,
                 VALIDATION_SEED,
-                "validation",
+                Stage::Validation,
             )?;
             estimator.validation = Some(ValidationReport::new(
                 spec.param_names(),
@@ -339,15 +352,16 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         prior: &Prior,
         count: usize,
         offset: u64,
-        stage: &'static str,
+        stage: Stage,
     ) -> Result<(ndarray::Array2<f64>, ndarray::Array2<f64>)> {
         let design = prior.design(count, self.seed ^ offset)?;
-        let chart = compress_chart(
+        let chart = compress_chart_observed(
             self.simulator,
             estimator.compressor(),
             &design,
             stage,
             self.max_failure_fraction,
+            self.progress,
         )?;
         let estimates = estimator.predict_features(chart.features.view())?;
         Ok((chart.thetas, estimates))

@@ -6,6 +6,7 @@ use twostage_compress::{Compressor, Workspace};
 use twostage_models::{Design, IoData, Simulator, run_experiment};
 
 use crate::error::{Error, Result};
+use crate::progress::{Progress, Stage};
 
 /// One experiment that could not be simulated or compressed.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,6 +67,55 @@ where
     S: Simulator + ?Sized,
     C: Compressor + ?Sized,
 {
+    simulate_and_compress(
+        simulator,
+        compressor,
+        design,
+        stage,
+        max_failure_fraction,
+        |_| {},
+    )
+}
+
+/// [`compress_chart`] for one stage of a training run, telling `progress`
+/// of each finished experiment.
+pub(crate) fn compress_chart_observed<S, C>(
+    simulator: &S,
+    compressor: &C,
+    design: &Design,
+    stage: Stage,
+    max_failure_fraction: f64,
+    progress: &dyn Progress,
+) -> Result<CompressedChart>
+where
+    S: Simulator + ?Sized,
+    C: Compressor + ?Sized,
+{
+    progress.begin(stage, design.len());
+    let chart = simulate_and_compress(
+        simulator,
+        compressor,
+        design,
+        stage.label(),
+        max_failure_fraction,
+        |_| progress.advance(stage, 1),
+    );
+    progress.end(stage);
+    chart
+}
+
+fn simulate_and_compress<S, C>(
+    simulator: &S,
+    compressor: &C,
+    design: &Design,
+    stage: &'static str,
+    max_failure_fraction: f64,
+    finished: impl Fn(usize) + Sync,
+) -> Result<CompressedChart>
+where
+    S: Simulator + ?Sized,
+    C: Compressor + ?Sized,
+{
     let m = design.len();
     let q = design.prior().dim();
     let n = compressor.n_features();
@@ -85,6 +135,7 @@ where
                             .compress_into(record.inputs(), record.outputs(), work, alpha)
                             .map_err(|e| e.to_string())
                     });
+                finished(i);
                 outcome.err().map(|error| ExperimentFailure {
                     index: i,
                     theta: theta.to_vec(),

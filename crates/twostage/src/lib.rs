@@ -50,6 +50,7 @@ mod config;
 mod error;
 mod estimator;
 mod file;
+mod progress;
 
 pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
@@ -57,6 +58,7 @@ pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
 pub use error::{Error, Result};
 pub use estimator::{EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
 pub use file::{FORMAT_VERSION, MAGIC};
+pub use progress::{Progress, Silent, Stage};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;

@@ -292,3 +292,64 @@ fn intervals_are_kept_without_validation() {
     let loaded = Estimator::from_bytes(&estimator.to_bytes().unwrap()).unwrap();
     assert_eq!(loaded.intervals(), estimator.intervals());
 }
+
+/// Records every call, so the order of the stages and the counts can be
+/// checked against the builder's settings.
+#[derive(Default)]
+struct Log(std::sync::Mutex<Vec<(twostage::Stage, &'static str, usize)>>);
+
+impl twostage::Progress for Log {
+    fn begin(&self, stage: twostage::Stage, total: usize) {
+        self.0.lock().unwrap().push((stage, "begin", total));
+    }
+    fn advance(&self, stage: twostage::Stage, done: usize) {
+        self.0.lock().unwrap().push((stage, "advance", done));
+    }
+    fn end(&self, stage: twostage::Stage) {
+        self.0.lock().unwrap().push((stage, "end", 0));
+    }
+}
+
+#[test]
+fn progress_sees_every_stage_in_order_with_its_count() {
+    use twostage::Stage::{Calibration, Fitting, Training, Validation};
+    let model = small_benchmark();
+    let log = Log::default();
+    TwoStage::builder(&model)
+        .compressor(Arx::new(2, 2).unwrap())
+        .simulations(60)
+        .calibration(25)
+        .validation(15)
+        .linear(1e-6)
+        .unwrap()
+        .progress(&log)
+        .train()
+        .unwrap();
+    let events = log.0.into_inner().unwrap();
+    // Collapse the advances of each stage into one total.
+    let mut summary: Vec<(twostage::Stage, &str, usize)> = Vec::new();
+    for (stage, what, n) in events {
+        match summary.last_mut() {
+            Some(last) if what == "advance" && last.0 == stage && last.1 == "advance" => {
+                last.2 += n
+            }
+            _ => summary.push((stage, what, n)),
+        }
+    }
+    assert_eq!(
+        summary,
+        vec![
+            (Training, "begin", 60),
+            (Training, "advance", 60),
+            (Training, "end", 0),
+            (Fitting, "begin", 0),
+            (Fitting, "end", 0),
+            (Calibration, "begin", 25),
+            (Calibration, "advance", 25),
+            (Calibration, "end", 0),
+            (Validation, "begin", 15),
+            (Validation, "advance", 15),
+            (Validation, "end", 0),
+        ]
+    );
+}

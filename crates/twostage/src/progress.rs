@@ -1,0 +1,84 @@
+//! Progress of a training run, for bars, logs or cancellation-free
+//! monitoring: the facade calls an observer, the caller decides how to show
+//! it (the CLI draws indicatif bars).
+
+/// The stages of [`crate::TwoStage::train`], in the order they run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Stage {
+    /// Simulating and compressing the training chart.
+    Training,
+    /// Fitting stage 2 (no count: it ends when the fit does).
+    Fitting,
+    /// Simulating the calibration records of the conformal intervals.
+    Calibration,
+    /// Simulating the validation records of the report.
+    Validation,
+}
+
+impl Stage {
+    /// A short lower-case label, e.g. `"training"`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Training => "training",
+            Self::Fitting => "fitting",
+            Self::Calibration => "calibration",
+            Self::Validation => "validation",
+        }
+    }
+}
+
+/// Observer of a training run. Every method has an empty default, so an
+/// implementation overrides only what it shows. `advance` is called from
+/// the worker threads, once per finished simulation.
+///
+/// ```
+/// use std::sync::atomic::{AtomicUsize, Ordering};
+/// use twostage::{Progress, Stage, TwoStage};
+/// use twostage::models::Benchmark;
+///
+/// #[derive(Default)]
+/// struct Count(AtomicUsize);
+/// impl Progress for Count {
+///     fn advance(&self, _stage: Stage, done: usize) {
+///         self.0.fetch_add(done, Ordering::Relaxed);
+///     }
+/// }
+///
+/// let model = Benchmark::builder().n_samples(200).build()?;
+/// let count = Count::default();
+/// TwoStage::builder(&model)
+///     .simulations(100)
+///     .calibration(30)
+///     .validation(20)
+///     .linear(1e-6)?
+///     .progress(&count)
+///     .train()?;
+/// assert_eq!(count.0.load(Ordering::Relaxed), 150);
+/// # Ok::<(), twostage::Error>(())
+/// ```
+pub trait Progress: Sync {
+    /// A stage starts with `total` steps (0: unknown, as for fitting).
+    fn begin(&self, stage: Stage, total: usize) {
+        let _ = (stage, total);
+    }
+    /// `done` more steps of `stage` finished.
+    fn advance(&self, stage: Stage, done: usize) {
+        let _ = (stage, done);
+    }
+    /// The stage finished (successfully or not).
+    fn end(&self, stage: Stage) {
+        let _ = stage;
+    }
+}
+
+/// The observer that shows nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl Progress for Silent {}
+
+impl std::fmt::Debug for dyn Progress + '_ {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("dyn Progress")
+    }
+}
