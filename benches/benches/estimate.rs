@@ -1,17 +1,19 @@
 //! The cost of one estimate on one recorded experiment, per method.
 //!
 //! Groups: `estimate_cost_benchmark` (ts, ekf, ukf, pf1000, pem1, pem5,
-//! pem10, bayes) and `estimate_cost_pacejka` (ts, pf500, pem5), every
+//! pem10, bayes, ii5) and `estimate_cost_pacejka` (ts, pf500, pem5), every
 //! method on the same record of its group.
 
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use twostage::compress::Arx;
 use twostage::models::{Benchmark, IoData, PacejkaCar};
 use twostage::{EstimateWorkspace, Estimator, TwoStage};
 use twostage_baselines::{
     BayesBenchmark, BenchmarkParticles, BenchmarkPredictor, CarParticles, CarPredictor,
-    InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError, RecordEstimator,
+    IndirectInference, InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError,
+    RecordEstimator,
 };
 use twostage_benches::{config, record, slow_config};
 
@@ -108,6 +110,16 @@ fn benchmark_costs(c: &mut Criterion) {
         &data,
     );
     bench_method(&mut group, "bayes", &BayesBenchmark::default(), &data);
+    // Indirect inference through the preset's ARX(5, 5): S = 10, W from 200
+    // simulations (built once, outside the timing, as for a deployed method).
+    let ii5 = IndirectInference::new(
+        bench.clone(),
+        Arx::new(5, 5).unwrap_or_else(|e| panic!("{e}")),
+        5,
+    )
+    .build()
+    .unwrap_or_else(|e| panic!("indirect inference: {e}"));
+    bench_method(&mut group, "ii5", &ii5, &data);
     group.finish();
 }
 

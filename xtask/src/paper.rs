@@ -8,11 +8,13 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
+use twostage::compress::Arx;
 use twostage::models::{Benchmark, IoData, PacejkaCar, Simulator, run_experiment};
 use twostage::{EstimateWorkspace, Estimator, Preset, TwoStage};
 use twostage_baselines::{
     BayesBenchmark, BayesCar, BenchmarkParticles, BenchmarkPredictor, CarParticles, CarPredictor,
-    InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError, RecordEstimator,
+    IndirectInference, InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError,
+    RecordEstimator,
 };
 
 /// Test records are drawn with a seed disjoint from training, calibration
@@ -138,6 +140,9 @@ struct Sizes {
     car_m: usize,
     car_tests: usize,
     car_slow: usize,
+    /// Car records for indirect inference (each costs thousands of car
+    /// simulations).
+    car_ii: usize,
     car_grid: (usize, usize),
     /// Car records whose posterior is refined locally as a check of the
     /// grid (each costs thousands of car simulations).
@@ -197,6 +202,23 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
             &records,
             1,
             baseline(&pem),
+        ));
+    }
+    // Indirect inference (Sections 2.3 and 4.4): the same ARX(5, 5) as the
+    // TS preset, S = 10 common-random-number simulations per theta, W from
+    // 200 simulations at the prior's centre.
+    for starts in [1, 5, 10] {
+        let ii = IndirectInference::new(model.clone(), Arx::new(5, 5)?, starts)
+            .seed(seed)
+            .build()?;
+        let name = format!("II, {starts} start{}", if starts == 1 { "" } else { "s" });
+        methods.push(run_method(
+            &name,
+            "indirect_benchmark",
+            None,
+            &records,
+            1,
+            baseline(&ii),
         ));
     }
     methods.push(run_method(
@@ -262,6 +284,18 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         2,
         baseline(&pem),
     ));
+    let ii = IndirectInference::new(car.clone(), Arx::new(4, 4)?, 5)
+        .seed(seed)
+        .build()?;
+    let ii_records = &records[..sizes.car_ii.min(records.len())];
+    methods.push(run_method(
+        "II, 5 starts",
+        "indirect_car",
+        None,
+        ii_records,
+        2,
+        baseline(&ii),
+    ));
     let grid_start = Instant::now();
     let bayes = BayesCar::new(sizes.car_grid.0, sizes.car_grid.1, 500)?;
     let grid_seconds = grid_start.elapsed().as_secs_f64();
@@ -301,8 +335,10 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
                 estimator.training().regressor
             ),
             format!(
-                "The PF and PE run on the first {} records, as the paper's PF ran on the first 50.",
-                slow.len()
+                "The PF and PE run on the first {} records, as the paper's PF ran on the first 50; \
+                 II, which simulates the car 10 times per evaluation of its loss, on the first {}.",
+                slow.len(),
+                ii_records.len()
             ),
             format!(
                 "The Bayes reference integrates over a {} x {} grid of noise-free trajectories \
@@ -519,6 +555,7 @@ pub fn reproduce(quick: bool, out: &Path, seed: u64) -> Result<()> {
             car_m: 600,
             car_tests: 60,
             car_slow: 2,
+            car_ii: 1,
             car_grid: (33, 17),
             car_refined: 2,
         }
@@ -529,6 +566,7 @@ pub fn reproduce(quick: bool, out: &Path, seed: u64) -> Result<()> {
             car_m: 2000,
             car_tests: 800,
             car_slow: 50,
+            car_ii: 10,
             car_grid: (129, 65),
             car_refined: 10,
         }

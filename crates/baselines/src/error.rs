@@ -10,6 +10,12 @@ pub enum BaselineError {
     /// The model rejected the parameter vector or the data.
     #[error(transparent)]
     Model(#[from] SimError),
+    /// A record could not be compressed (indirect inference).
+    #[error(transparent)]
+    Compress(#[from] twostage_compress::CompressError),
+    /// A setting of the method is out of range.
+    #[error("invalid setting: {0}")]
+    InvalidSetting(String),
     /// The record does not suit the method.
     #[error("invalid record: {0}")]
     InvalidRecord(String),

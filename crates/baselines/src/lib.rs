@@ -37,6 +37,7 @@ mod bayes;
 mod car;
 mod error;
 mod filters;
+mod indirect;
 mod kalman;
 mod particle;
 mod pem;
@@ -48,6 +49,9 @@ pub use bayes::{BayesBenchmark, Posterior};
 pub use car::{BayesCar, CarParticles, CarPosterior, CarPredictor};
 pub use error::{BaselineError, Result};
 pub use filters::{FilterRun, FilterStart, KalmanEstimator, UnscentedParams, run_ekf, run_ukf};
+pub use indirect::{
+    COMMON_NUMBERS_SEED, IndirectInference, IndirectObjective, WEIGHTING_SEED, Weighting,
+};
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
 pub use pem::{BenchmarkPredictor, Descent, PemStop, PredictionError, ResidualModel};

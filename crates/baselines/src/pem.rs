@@ -13,12 +13,18 @@ use crate::{Estimate, RecordEstimator};
 pub trait ResidualModel: Send + Sync {
     /// The prior box.
     fn prior(&self) -> &Prior;
-    /// Write the prediction errors of `record` at `theta` into `residuals`
-    /// (one per sample).
+    /// Write the residuals of `record` at `theta` into `residuals`, whose
+    /// squares sum to the loss: prediction errors, one per sample, unless
+    /// [`ResidualModel::n_residuals`] says otherwise.
     ///
     /// # Errors
     /// A record the model cannot use, or a prediction that fails.
     fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()>;
+
+    /// How many residuals `record` gives (default: one per sample).
+    fn n_residuals(&self, record: &IoData) -> usize {
+        record.n_samples()
+    }
 }
 
 /// The benchmark with its exact Kalman predictor: the PE estimate is then
@@ -127,6 +133,17 @@ impl<M: ResidualModel> PredictionError<M> {
         self
     }
 
+    /// Another name for tables (default `pem<starts>`).
+    pub fn named(mut self, name: impl Into<String>) -> Self {
+        self.name = name.into();
+        self
+    }
+
+    /// The residual model.
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
     /// Iterations per start.
     pub fn max_iterations(mut self, iterations: usize) -> Self {
         self.max_iterations = iterations;
@@ -167,11 +184,23 @@ impl<M: ResidualModel> PredictionError<M> {
         Ok(residuals.iter().map(|r| r * r).sum())
     }
 
-    /// Levenberg-Marquardt in the unit box, with central differences.
-    fn descend(&self, record: &IoData, start: Vec<f64>) -> Result<Descent> {
+    /// One Levenberg-Marquardt descent in the prior box (central
+    /// differences, steps clipped to the box) from `start`: a local search,
+    /// for a start that is already near the answer.
+    ///
+    /// # Errors
+    /// A bad record, or a start of the wrong length.
+    pub fn descend(&self, record: &IoData, start: Vec<f64>) -> Result<Descent> {
+        if start.len() != self.model.prior().dim() || self.max_iterations == 0 {
+            return Err(BaselineError::InvalidRecord(format!(
+                "a start of {} values for {} parameters (and at least one iteration)",
+                start.len(),
+                self.model.prior().dim()
+            )));
+        }
         let prior = self.model.prior();
         let q = prior.dim();
-        let n = record.n_samples();
+        let n = self.model.n_residuals(record);
         let to_unit = |theta: &[f64]| -> Vec<f64> {
             theta
                 .iter()

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use twostage::compress::{Arx, Narx};
 use twostage::fit::{MlpParams, Ridge};
-use twostage::models::{BuiltinModel, IoData};
+use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar};
 use twostage::{
     CompressorConfig, EstimateWorkspace, Estimator, FittedRegressor, RegressorConfig, TwoStage,
 };
@@ -230,7 +230,8 @@ pub struct EstimateArgs {
     /// With --method: the model the records come from (benchmark or pacejka).
     #[arg(long, requires = "method")]
     model: Option<String>,
-    /// A classic method instead of an estimator: ekf, ukf, pf, pem or bayes.
+    /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
+    /// (indirect inference through the TS preset's ARX) or bayes.
     #[arg(long, requires = "model")]
     method: Option<String>,
     /// EKF/UKF initial covariance: eq6 or eq7 (the paper's).
@@ -239,7 +240,7 @@ pub struct EstimateArgs {
     /// Particle filter: number of particles (default 1000 benchmark, 500 car).
     #[arg(long)]
     particles: Option<usize>,
-    /// Prediction error: number of random starts.
+    /// Prediction error and indirect inference: number of random starts.
     #[arg(long, default_value_t = 5)]
     starts: usize,
     /// Seed of the random methods.
@@ -287,7 +288,7 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
     }
     let (Some(model), Some(name)) = (&args.model, &args.method) else {
         return Err(usage(
-            "give --estimator FILE, or --model M --method ekf|ukf|pf|pem|bayes".into(),
+            "give --estimator FILE, or --model M --method ekf|ukf|pf|pem|ii|bayes".into(),
         ));
     };
     let model: BuiltinModel = model.parse().map_err(|e| usage(format!("{e}")))?;
@@ -323,11 +324,21 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
         ("pem", true) => {
             Box::new(b::PredictionError::new(b::CarPredictor::new(), args.starts).seed(args.seed))
         }
+        ("ii", false) => Box::new(
+            b::IndirectInference::new(Benchmark::new(), Arx::new(5, 5)?, args.starts)
+                .seed(args.seed)
+                .build()?,
+        ),
+        ("ii", true) => Box::new(
+            b::IndirectInference::new(PacejkaCar::new(), Arx::new(4, 4)?, args.starts)
+                .seed(args.seed)
+                .build()?,
+        ),
         ("bayes", false) => Box::new(b::BayesBenchmark::default()),
         ("bayes", true) => Box::new(b::BayesCar::paper()?),
         (other, _) => {
             return Err(usage(format!(
-                "--method '{other}': use ekf, ukf, pf, pem or bayes"
+                "--method '{other}': use ekf, ukf, pf, pem, ii or bayes"
             )));
         }
     };

@@ -308,4 +308,43 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
         &records,
     ]);
     assert_eq!(out.status.code(), Some(2));
+
+    // Indirect inference from the shell gives the library's estimate, bit
+    // for bit, on the same record.
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--method",
+        "ii",
+        "--starts",
+        "2",
+        "--seed",
+        "5",
+        &records,
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let csv = text(&out.stdout);
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "experiment,theta");
+    assert_eq!(lines.len(), 4, "{csv}");
+    let model = twostage::models::Benchmark::new();
+    let design = twostage::models::Simulator::prior(&model)
+        .design(3, 4)
+        .unwrap();
+    let (mut theta, mut record) = (vec![0.0], twostage::models::IoData::default());
+    twostage::models::run_experiment(&model, &design, 2, &mut theta, &mut record).unwrap();
+    let ii = twostage_baselines::IndirectInference::new(
+        model,
+        twostage::compress::Arx::new(5, 5).unwrap(),
+        2,
+    )
+    .seed(5)
+    .build()
+    .unwrap();
+    let expected = twostage_baselines::RecordEstimator::estimate(&ii, &record)
+        .unwrap()
+        .theta[0];
+    let got: f64 = lines[3].split(',').nth(1).unwrap().parse().unwrap();
+    assert_eq!(got.to_bits(), expected.to_bits(), "{got} vs {expected}");
 }
