@@ -5,12 +5,10 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use twostage::compress::{Arx, Narx};
+use twostage::compress::{Arx, Narx, OutputPca};
 use twostage::fit::{MlpParams, Ridge};
 use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar};
-use twostage::{
-    CompressorConfig, EstimateWorkspace, Estimator, FittedRegressor, RegressorConfig, TwoStage,
-};
+use twostage::{CompressorConfig, Estimator, FittedRegressor, RegressorConfig, TwoStage};
 
 use crate::number::format_f64;
 use crate::{csv_records, usage};
@@ -27,7 +25,9 @@ pub struct TrainArgs {
     /// Training simulations m (default: the preset's).
     #[arg(long)]
     sims: Option<usize>,
-    /// Stage 1: arx:NA,NB or narx:NA,NB,DEG (default: the preset's).
+    /// Stage 1: arx:NA,NB, narx:NA,NB,DEG or pca:K (output principal
+    /// components; only for models whose experiments share one input)
+    /// (default: the preset's).
     #[arg(long)]
     compress: Option<String>,
     /// Stage 2: linear, or mlp:H[,H...] hidden sizes (default: the preset's).
@@ -71,7 +71,7 @@ fn parse_counts(spec: &str, what: &str, count: usize) -> Result<Vec<usize>> {
 fn compressor(spec: &str) -> Result<CompressorConfig> {
     let bad = || {
         usage(format!(
-            "--compress '{spec}': use arx:NA,NB or narx:NA,NB,DEG"
+            "--compress '{spec}': use arx:NA,NB, narx:NA,NB,DEG or pca:K"
         ))
     };
     let (kind, orders) = spec.split_once(':').ok_or_else(bad)?;
@@ -85,6 +85,12 @@ fn compressor(spec: &str) -> Result<CompressorConfig> {
         "narx" => {
             let o = parse_counts(orders, "--compress narx", 3)?;
             Ok(Narx::new(o[0], o[1], o[2])
+                .map_err(|e| usage(format!("--compress: {e}")))?
+                .into())
+        }
+        "pca" => {
+            let k = parse_counts(orders, "--compress pca", 1)?;
+            Ok(OutputPca::new(k[0])
                 .map_err(|e| usage(format!("--compress: {e}")))?
                 .into())
         }
@@ -257,8 +263,19 @@ pub struct EstimateArgs {
     out: Option<PathBuf>,
 }
 
-/// One record's estimate and its interval half-widths, if any.
-type Estimated = (Vec<f64>, Option<Vec<f64>>);
+/// One record's estimate, its interval half-widths and its feature
+/// distance with the out-of-distribution threshold, where known.
+struct Estimated {
+    theta: Vec<f64>,
+    widths: Option<Vec<f64>>,
+    distance: Option<(f64, f64)>,
+}
+
+impl Estimated {
+    fn out_of_distribution(&self) -> bool {
+        self.distance.is_some_and(|(d, t)| d > t)
+    }
+}
 
 /// Estimates one record, or says why it cannot.
 type Method = Box<dyn FnMut(&IoData) -> Result<Estimated, String>>;
@@ -271,17 +288,16 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
     if let Some(path) = &args.estimator {
         let estimator = Estimator::load(path)?;
         let names = estimator.param_names().to_vec();
-        let widths = estimator.intervals().map(|c| c.half_widths().to_vec());
         let trained = estimator.record_shape().n_samples;
-        let mut work = EstimateWorkspace::new();
         return Ok((
             names,
             Box::new(move |record: &IoData| {
-                let mut theta = vec![0.0; estimator.param_names().len()];
-                estimator
-                    .estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)
-                    .map_err(|e| e.to_string())?;
-                Ok((theta, widths.clone()))
+                let a = estimator.assess(record).map_err(|e| e.to_string())?;
+                Ok(Estimated {
+                    distance: a.feature_distance.zip(a.distance_threshold),
+                    theta: a.theta,
+                    widths: a.half_widths,
+                })
             }),
             Some(trained),
         ));
@@ -347,7 +363,11 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
         Box::new(move |record: &IoData| {
             estimator
                 .estimate(record)
-                .map(|e| (e.theta, None))
+                .map(|e| Estimated {
+                    theta: e.theta,
+                    widths: None,
+                    distance: None,
+                })
                 .map_err(|e| e.to_string())
         }),
         None,
@@ -378,7 +398,19 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
                     .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))
             });
             match outcome {
-                Ok(estimated) => rows.push((read.id, estimated)),
+                Ok(estimated) => {
+                    if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
+                        eprintln!(
+                            "warning: {}: experiment {}: out of distribution: its features lie \
+                             at Mahalanobis distance {d:.3} from the training features, beyond \
+                             the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
+                             and the intervals do not cover it (is it the same model and input?)",
+                            path.display(),
+                            read.id
+                        );
+                    }
+                    rows.push((read.id, estimated));
+                }
                 Err(problem) => {
                     failed += 1;
                     eprintln!("error: {problem}");
@@ -401,7 +433,8 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
 }
 
 fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
-    let with_intervals = rows.iter().any(|(_, (_, w))| w.is_some());
+    let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
+    let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
     let mut text = String::from("experiment");
     for n in names {
         write!(text, ",{n}")?;
@@ -411,16 +444,22 @@ fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
             write!(text, ",{n}_lo,{n}_hi")?;
         }
     }
+    if with_distance {
+        text.push_str(",feature_distance,out_of_distribution");
+    }
     text.push('\n');
-    for (id, (theta, widths)) in rows {
+    for (id, e) in rows {
         write!(text, "{id}")?;
-        for t in theta {
+        for t in &e.theta {
             write!(text, ",{}", format_f64(*t))?;
         }
-        if let Some(widths) = widths {
-            for (t, w) in theta.iter().zip(widths) {
+        if let Some(widths) = &e.widths {
+            for (t, w) in e.theta.iter().zip(widths) {
                 write!(text, ",{},{}", format_f64(t - w), format_f64(t + w))?;
             }
+        }
+        if let Some((d, _)) = e.distance {
+            write!(text, ",{},{}", format_f64(d), e.out_of_distribution())?;
         }
         text.push('\n');
     }
@@ -430,15 +469,19 @@ fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
 fn json(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
     let records: Vec<serde_json::Value> = rows
         .iter()
-        .map(|(id, (theta, widths))| {
+        .map(|(id, e)| {
             let mut object = serde_json::Map::new();
             object.insert("experiment".into(), id.clone().into());
             for (j, n) in names.iter().enumerate() {
-                object.insert(n.clone(), theta[j].into());
-                if let Some(w) = widths {
-                    object.insert(format!("{n}_lo"), (theta[j] - w[j]).into());
-                    object.insert(format!("{n}_hi"), (theta[j] + w[j]).into());
+                object.insert(n.clone(), e.theta[j].into());
+                if let Some(w) = &e.widths {
+                    object.insert(format!("{n}_lo"), (e.theta[j] - w[j]).into());
+                    object.insert(format!("{n}_hi"), (e.theta[j] + w[j]).into());
                 }
+            }
+            if let Some((d, _)) = e.distance {
+                object.insert("feature_distance".into(), d.into());
+                object.insert("out_of_distribution".into(), e.out_of_distribution().into());
             }
             serde_json::Value::Object(object)
         })

@@ -109,12 +109,20 @@ fn train_inspect_and_estimate_recorded_experiments() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let csv = text(&out.stdout);
     let mut lines = csv.lines();
-    assert_eq!(lines.next().unwrap(), "experiment,theta,theta_lo,theta_hi");
+    assert_eq!(
+        lines.next().unwrap(),
+        "experiment,theta,theta_lo,theta_hi,feature_distance,out_of_distribution"
+    );
     let truth = std::fs::read_to_string(data.join("truth.csv")).unwrap();
     let mut sq = 0.0;
     let mut rows = 0;
+    let mut flagged = 0;
     for (estimate, truth) in lines.zip(truth.lines().skip(1)) {
-        let e: Vec<f64> = estimate.split(',').map(|v| v.parse().unwrap()).collect();
+        let fields: Vec<&str> = estimate.split(',').collect();
+        flagged += usize::from(fields[5] == "true");
+        assert!(fields[5] == "true" || fields[5] == "false", "{estimate}");
+        let e: Vec<f64> = fields[..5].iter().map(|v| v.parse().unwrap()).collect();
+        assert!(e[4] > 0.0, "a Mahalanobis distance");
         let t: Vec<f64> = truth.split(',').map(|v| v.parse().unwrap()).collect();
         assert_eq!(e[0].to_bits(), t[0].to_bits(), "experiment ids in order");
         assert!(
@@ -127,6 +135,12 @@ fn train_inspect_and_estimate_recorded_experiments() {
     assert_eq!(rows, 40);
     let rmse = (sq / 40.0).sqrt();
     assert!(rmse < 0.08, "RMSE {rmse}");
+    // Records of the training model: at most a stray one beyond the 99.9% envelope.
+    assert!(flagged <= 1, "{flagged} of 40 flagged:\n{csv}");
+    assert_eq!(
+        text(&out.stderr).matches("out of distribution").count(),
+        flagged
+    );
 }
 
 #[test]
@@ -160,6 +174,10 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
         ),
         "a record of another length is estimated with a warning: {err}"
     );
+    assert!(
+        err.contains("experiment a: out of distribution"),
+        "a record of no benchmark system is flagged: {err}"
+    );
     let estimates = text(&out.stdout);
     assert_eq!(
         estimates.lines().count(),
@@ -167,6 +185,7 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
         "header and experiment a:\n{estimates}"
     );
     assert!(estimates.lines().nth(1).unwrap().starts_with("a,"));
+    assert!(estimates.lines().nth(1).unwrap().ends_with(",true"));
 }
 
 #[test]

@@ -70,6 +70,19 @@ pub enum CompressError {
         /// What makes them so, and what to do.
         cause: String,
     },
+    /// The structure works on records of one fixed length only.
+    #[error(
+        "the record has {got} samples, but {structure} was fitted on records of exactly \
+         {expected}: record with the training length"
+    )]
+    FixedLength {
+        /// Samples of the training records.
+        expected: usize,
+        /// Samples given.
+        got: usize,
+        /// The structure, e.g. `PCA(20)`.
+        structure: String,
+    },
     /// The output buffer has the wrong length.
     #[error("the feature buffer has {got} slots, the compressor produces {expected}")]
     BufferLength {

@@ -10,6 +10,8 @@
 //!   Householder QR (faer) with an explicit rank check.
 //! - [`Narx`]: polynomial NARX (all monomials up to a degree, or pure
 //!   powers) on scaled signals, for strongly nonlinear systems.
+//! - [`OutputPca`]: the leading principal components of the output record,
+//!   for experiments that all apply the same input.
 //! - [`Workspace`]: scratch space so that compressing record after record
 //!   allocates nothing.
 //!
@@ -38,6 +40,7 @@ mod arx;
 mod error;
 mod fast;
 mod narx;
+mod pca;
 mod signals;
 mod workspace;
 
@@ -46,6 +49,7 @@ use ndarray::ArrayView2;
 pub use arx::Arx;
 pub use error::{CompressError, Result};
 pub use narx::{Narx, signal_rms};
+pub use pca::OutputPca;
 pub use workspace::{RANK_TOLERANCE, Workspace};
 
 /// The compression map g: a record `(u, y)` to features `alpha` in `R^n`.

@@ -1,12 +1,13 @@
 //! Training: the `TwoStage` builder and the paper's presets.
 
-use twostage_compress::{Arx, signal_rms};
+use twostage_compress::{Arx, OutputPca, signal_rms};
 use twostage_fit::{MlpParams, Ridge};
 use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::chart::compress_chart_observed;
 use crate::config::{CompressorConfig, RegressorConfig};
+use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, TrainingInfo};
 use crate::progress::{Progress, Silent, Stage};
@@ -46,6 +47,10 @@ fn preset(order: usize, hidden: usize, simulations: usize) -> Preset {
         simulations,
     }
 }
+
+/// Training records an output PCA is fitted on: enough for the leading
+/// directions of a smooth trajectory family, few enough to stay cheap.
+const PCA_RECORDS: usize = 1000;
 
 /// Offsets that give the calibration and validation charts their own
 /// streams, disjoint from the training chart of the same seed.
@@ -276,6 +281,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             },
             intervals: None,
             validation: None,
+            envelope: FeatureEnvelope::fit(chart.features.view()),
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
         let intervals = if self.calibration > 0 {
@@ -319,6 +325,11 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// whose scales are all 1 gets the RMS of each signal over the first
     /// (up to) 32 experiments of the training design.
     fn calibrated_compressor(&self, design: &twostage_models::Design) -> Result<CompressorConfig> {
+        if let CompressorConfig::Pca(pca) = &self.compressor
+            && !pca.is_fitted()
+        {
+            return self.fitted_pca(pca, design);
+        }
         let CompressorConfig::Narx(narx) = &self.compressor else {
             return Ok(self.compressor.clone());
         };
@@ -343,6 +354,31 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         Ok(CompressorConfig::Narx(
             narx.clone().with_scales(&mean(&inputs), &mean(&outputs))?,
         ))
+    }
+
+    /// An output PCA fitted on the first (up to) `PCA_RECORDS` experiments
+    /// of the training design, simulated in parallel.
+    fn fitted_pca(
+        &self,
+        pca: &OutputPca,
+        design: &twostage_models::Design,
+    ) -> Result<CompressorConfig> {
+        use rayon::prelude::*;
+        let count = design.len().min(PCA_RECORDS);
+        let q = self.simulator.spec().n_params();
+        let records: Vec<IoData> = (0..count)
+            .into_par_iter()
+            .map(|i| {
+                let (mut theta, mut record) = (vec![0.0; q], IoData::default());
+                run_experiment(self.simulator, design, i, &mut theta, &mut record).map(|()| record)
+            })
+            .collect::<std::result::Result<_, _>>()?;
+        let views: Vec<_> = records.iter().map(IoData::outputs).collect();
+        let fitted = pca
+            .clone()
+            .fit(&views)?
+            .with_inputs(self.simulator.spec().input_names().len())?;
+        Ok(CompressorConfig::Pca(fitted))
     }
 
     /// Truths and clipped estimates on `count` fresh i.i.d. simulations.

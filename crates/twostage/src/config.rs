@@ -2,7 +2,7 @@
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_compress::{Arx, Compressor, Narx, Workspace};
+use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace};
 use twostage_fit::{FittedLinear, FittedMlp, Mlp, Predictor, Regressor, Ridge};
 
 /// The compression map g of stage 1.
@@ -13,6 +13,9 @@ pub enum CompressorConfig {
     Arx(Arx),
     /// Polynomial NARX coefficients on scaled signals.
     Narx(Narx),
+    /// Leading principal components of the output record (for models whose
+    /// experiments all apply one input); fitted from the training design.
+    Pca(OutputPca),
 }
 
 impl std::fmt::Display for CompressorConfig {
@@ -20,6 +23,7 @@ impl std::fmt::Display for CompressorConfig {
         match self {
             Self::Arx(arx) => arx.fmt(f),
             Self::Narx(narx) => narx.fmt(f),
+            Self::Pca(pca) => pca.fmt(f),
         }
     }
 }
@@ -36,11 +40,18 @@ impl From<Narx> for CompressorConfig {
     }
 }
 
+impl From<OutputPca> for CompressorConfig {
+    fn from(pca: OutputPca) -> Self {
+        Self::Pca(pca)
+    }
+}
+
 impl Compressor for CompressorConfig {
     fn n_features(&self) -> usize {
         match self {
             Self::Arx(c) => c.n_features(),
             Self::Narx(c) => c.n_features(),
+            Self::Pca(c) => c.n_features(),
         }
     }
 
@@ -54,6 +65,7 @@ impl Compressor for CompressorConfig {
         match self {
             Self::Arx(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Pca(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -67,6 +79,7 @@ impl Compressor for CompressorConfig {
         match self {
             Self::Arx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Pca(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -74,6 +87,7 @@ impl Compressor for CompressorConfig {
         match self {
             Self::Arx(c) => c.feature_names(),
             Self::Narx(c) => c.feature_names(),
+            Self::Pca(c) => c.feature_names(),
         }
     }
 }

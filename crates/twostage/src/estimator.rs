@@ -9,6 +9,7 @@ use twostage_models::IoData;
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
+use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
 
 /// What the estimator was trained on, for people and for audits.
@@ -74,6 +75,8 @@ pub struct Estimator {
     /// not the estimator was also validated.
     pub(crate) intervals: Option<ConformalIntervals>,
     pub(crate) validation: Option<ValidationReport>,
+    /// Where the training features lie (format version 2 on).
+    pub(crate) envelope: Option<FeatureEnvelope>,
 }
 
 /// What a file stores. Each component has checked its own invariants while
@@ -90,6 +93,39 @@ struct EstimatorFields {
     training: TrainingInfo,
     intervals: Option<ConformalIntervals>,
     validation: Option<ValidationReport>,
+    envelope: Option<FeatureEnvelope>,
+}
+
+/// Format version 1: the same without the feature envelope.
+#[derive(Deserialize)]
+pub(crate) struct EstimatorFieldsV1 {
+    param_names: Vec<String>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    shape: RecordShape,
+    compressor: CompressorConfig,
+    regressor: FittedRegressor,
+    training: TrainingInfo,
+    intervals: Option<ConformalIntervals>,
+    validation: Option<ValidationReport>,
+}
+
+impl TryFrom<EstimatorFieldsV1> for Estimator {
+    type Error = Error;
+    fn try_from(f: EstimatorFieldsV1) -> Result<Self> {
+        Self::try_from(EstimatorFields {
+            param_names: f.param_names,
+            lower: f.lower,
+            upper: f.upper,
+            shape: f.shape,
+            compressor: f.compressor,
+            regressor: f.regressor,
+            training: f.training,
+            intervals: f.intervals,
+            validation: f.validation,
+            envelope: None,
+        })
+    }
 }
 
 impl TryFrom<EstimatorFields> for Estimator {
@@ -120,6 +156,15 @@ impl TryFrom<EstimatorFields> for Estimator {
                 f.compressor.n_features()
             ));
         }
+        if let Some(envelope) = &f.envelope
+            && envelope.dim() != f.compressor.n_features()
+        {
+            return bad(format!(
+                "a feature envelope of {} features for {}",
+                envelope.dim(),
+                f.compressor.n_features()
+            ));
+        }
         if let Some(intervals) = &f.intervals {
             let widths = intervals.half_widths();
             if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
@@ -138,7 +183,31 @@ impl TryFrom<EstimatorFields> for Estimator {
             training: f.training,
             intervals: f.intervals,
             validation: f.validation,
+            envelope: f.envelope,
         })
+    }
+}
+
+/// One estimate with what is known about how far to trust it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Assessment {
+    /// The estimate, clipped to the prior box.
+    pub theta: Vec<f64>,
+    /// Conformal interval half-widths per parameter, when calibrated.
+    pub half_widths: Option<Vec<f64>>,
+    /// Mahalanobis distance of the record's features from the training
+    /// features, when the estimator has an envelope.
+    pub feature_distance: Option<f64>,
+    /// The distance that 99.9% of the training features stay within.
+    pub distance_threshold: Option<f64>,
+}
+
+impl Assessment {
+    /// Whether the record's features lie outside what training saw: the
+    /// estimate is then an extrapolation, and the validation report and
+    /// the intervals do not speak for it.
+    pub fn out_of_distribution(&self) -> bool {
+        matches!((self.feature_distance, self.distance_threshold), (Some(d), Some(t)) if d > t)
     }
 }
 
@@ -245,6 +314,43 @@ impl Estimator {
             &mut theta,
         )?;
         Ok(theta)
+    }
+
+    /// The feature envelope of the training chart, when it has one.
+    pub fn envelope(&self) -> Option<&FeatureEnvelope> {
+        self.envelope.as_ref()
+    }
+
+    /// Estimate theta from one record, with its intervals and whether the
+    /// record lies outside what training saw.
+    ///
+    /// ```
+    /// # use twostage::TwoStage;
+    /// # use twostage::models::{Benchmark, IoData, Simulator, experiment_rng};
+    /// # let model = Benchmark::builder().n_samples(300).build()?;
+    /// # let estimator = TwoStage::builder(&model).simulations(300).validation(0).calibration(100).linear(1e-6)?.train()?;
+    /// let mut record = model.spec().new_record();
+    /// model.simulate(&[0.2], &mut experiment_rng(4, 0), &mut record)?;
+    /// assert!(!estimator.assess(&record)?.out_of_distribution());
+    /// // The same input with a tenfold output: no benchmark system does that.
+    /// let y: Vec<f64> = record.output(0).iter().map(|v| 10.0 * v).collect();
+    /// let alien = IoData::siso(record.input(0), &y)?;
+    /// assert!(estimator.assess(&alien)?.out_of_distribution());
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`Estimator::estimate_into`].
+    pub fn assess(&self, record: &IoData) -> Result<Assessment> {
+        let mut work = EstimateWorkspace::new();
+        let mut theta = vec![0.0; self.param_names.len()];
+        self.estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)?;
+        Ok(Assessment {
+            theta,
+            half_widths: self.intervals.as_ref().map(|c| c.half_widths().to_vec()),
+            feature_distance: self.envelope.as_ref().map(|e| e.distance(&work.features)),
+            distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),
+        })
     }
 
     /// Estimate theta for many records in parallel; each record gets its

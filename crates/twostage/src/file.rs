@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32), currently 1 |
+//! | 8..12 | format version (u32), currently 2 (1 is still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -19,7 +19,9 @@ use crate::estimator::Estimator;
 /// The first eight bytes of every estimator file.
 pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// The format version this build writes, and the newest it reads.
-pub const FORMAT_VERSION: u32 = 1;
+///
+/// Version 2 added the feature envelope; version 1 files load without one.
+pub const FORMAT_VERSION: u32 = 2;
 const HEADER: usize = 24;
 
 /// CRC-32 with the IEEE 802.3 polynomial (reflected, 0xEDB88320), the
@@ -140,7 +142,14 @@ impl Estimator {
                 "corrupted: checksum {actual:08x} does not match the stored {checksum:08x}"
             )));
         }
-        postcard::from_bytes(payload).map_err(|e| {
+        let decoded = if version == 1 {
+            postcard::from_bytes::<crate::estimator::EstimatorFieldsV1>(payload)
+                .map_err(|e| e.to_string())
+                .and_then(|fields| Estimator::try_from(fields).map_err(|e| e.to_string()))
+        } else {
+            postcard::from_bytes(payload).map_err(|e| e.to_string())
+        };
+        decoded.map_err(|e| {
             file_error(format!(
                 "the payload does not decode ({e}): the file is corrupted"
             ))

@@ -47,6 +47,7 @@
 mod builder;
 mod chart;
 mod config;
+mod envelope;
 mod error;
 mod estimator;
 mod file;
@@ -55,8 +56,9 @@ mod progress;
 pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
 pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
+pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, Result};
-pub use estimator::{EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
+pub use estimator::{Assessment, EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
 pub use file::{FORMAT_VERSION, MAGIC};
 pub use progress::{Progress, Silent, Stage};
 

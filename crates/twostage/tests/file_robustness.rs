@@ -9,7 +9,7 @@
 use std::sync::OnceLock;
 
 use proptest::prelude::*;
-use twostage::compress::{Arx, Narx};
+use twostage::compress::{Arx, Narx, OutputPca};
 use twostage::fit::MlpParams;
 use twostage::models::{Benchmark, IoData, Simulator, experiment_rng};
 use twostage::{CompressorConfig, Estimator, RegressorConfig, TwoStage};
@@ -30,8 +30,12 @@ fn crc32_bitwise(bytes: &[u8]) -> u32 {
 }
 
 fn seal(payload: &[u8]) -> Vec<u8> {
+    seal_version(payload, twostage::FORMAT_VERSION)
+}
+
+fn seal_version(payload: &[u8], version: u32) -> Vec<u8> {
     let mut bytes = b"TWOSTAGE".to_vec();
-    bytes.extend_from_slice(&1u32.to_le_bytes());
+    bytes.extend_from_slice(&version.to_le_bytes());
     bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     bytes.extend_from_slice(&crc32_bitwise(payload).to_le_bytes());
     bytes.extend_from_slice(payload);
@@ -42,8 +46,8 @@ fn model() -> Benchmark {
     Benchmark::builder().n_samples(120).build().unwrap()
 }
 
-/// Three small estimators covering every stored component: linear and MLP
-/// stage 2, ARX and NARX stage 1, intervals and a validation report.
+/// Four small estimators covering every stored component: linear and MLP
+/// stage 2, ARX, NARX and PCA stage 1, intervals and a validation report.
 fn files() -> &'static [Vec<u8>] {
     static FILES: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
     FILES.get_or_init(|| {
@@ -55,10 +59,11 @@ fn files() -> &'static [Vec<u8>] {
                 .check()
                 .unwrap(),
         );
-        let configs: [(CompressorConfig, Option<RegressorConfig>); 3] = [
+        let configs: [(CompressorConfig, Option<RegressorConfig>); 4] = [
             (Arx::new(2, 2).unwrap().into(), None),
             (Arx::new(2, 1).unwrap().into(), Some(mlp.clone())),
             (Narx::new(1, 1, 2).unwrap().into(), Some(mlp)),
+            (OutputPca::new(3).unwrap().into(), None),
         ];
         configs
             .into_iter()
@@ -100,6 +105,9 @@ fn exercise(estimator: &Estimator, record: &IoData) {
         }
     }
     let _ = estimator.estimate_batch(std::slice::from_ref(record));
+    if let Ok(a) = estimator.assess(record) {
+        let _ = a.out_of_distribution();
+    }
     let _ = estimator.to_json();
     let _ = format!("{estimator:?}");
     if let Some(report) = estimator.validation() {
@@ -119,6 +127,33 @@ fn the_bitwise_crc_agrees_with_the_files_we_write() {
     }
 }
 
+#[test]
+fn a_version_1_file_loads_without_an_envelope() {
+    // Version 2 appended the envelope as the last field; an estimator
+    // without one encodes it as a single 0 byte (postcard's None), so
+    // dropping that byte gives exactly what version 1 wrote.
+    let model = model();
+    let estimator = TwoStage::builder(&model)
+        .compressor(Arx::new(5, 5).unwrap())
+        .simulations(10)
+        .calibration(0)
+        .validation(0)
+        .linear(1e-6)
+        .unwrap()
+        .train()
+        .unwrap();
+    assert!(
+        estimator.envelope().is_none(),
+        "10 rows cannot fit an envelope of 10 features"
+    );
+    let v2 = estimator.to_bytes().unwrap();
+    assert_eq!(v2.last(), Some(&0));
+    let v1 = seal_version(&v2[HEADER..v2.len() - 1], 1);
+    assert_eq!(Estimator::from_bytes(&v1).unwrap(), estimator);
+    // And a version-2 reader refuses the version-1 bytes under a version-2 header.
+    assert!(Estimator::from_bytes(&seal_version(&v2[HEADER..v2.len() - 1], 2)).is_err());
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 400, ..ProptestConfig::default() })]
 
@@ -135,7 +170,7 @@ proptest! {
 
     #[test]
     fn resealed_mutations_of_real_files_never_panic(
-        which in 0usize..3,
+        which in 0usize..4,
         edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
         cut in proptest::option::of(any::<prop::sample::Index>()),
     ) {
@@ -154,7 +189,7 @@ proptest! {
     }
 
     #[test]
-    fn unsealed_corruption_is_always_caught(which in 0usize..3, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
+    fn unsealed_corruption_is_always_caught(which in 0usize..4, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
         let mut file = files()[which].clone();
         let i = at.index(file.len());
         file[i] ^= flip;

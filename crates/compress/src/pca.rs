@@ -1,0 +1,521 @@
+//! The leading principal components of the output record: a stage-1
+//! compressor for experiments that all share one input signal.
+
+use ndarray::ArrayView2;
+use serde::{Deserialize, Serialize};
+
+use crate::Compressor;
+use crate::arx::MAX_SIGNALS;
+use crate::error::{CompressError, Result};
+use crate::signals::check;
+use crate::workspace::Workspace;
+
+const MAX_COMPONENTS: usize = 64;
+/// Subspace-iteration sweeps; the leading components of a trajectory
+/// family separate by orders of magnitude, so far fewer are needed.
+const SWEEPS: usize = 300;
+
+/// Scores of the output record on its leading principal directions:
+/// `alpha_i = v_i' (y - y_mean)`, with `v_1, v_2, ...` the principal
+/// directions of the training outputs (all samples of all outputs stacked
+/// in one vector per record), strongest first.
+///
+/// When every experiment applies the same input, as the car's chicane, the
+/// output record itself summarizes the experiment, and its leading
+/// components keep what varies with theta while averaging the measurement
+/// noise over all N samples. The input is ignored, so this compressor is
+/// *only* valid for a fixed input; records must have the training length.
+///
+/// A new `OutputPca` is unfitted; [`OutputPca::fit`] learns the mean and
+/// directions from training outputs (the facade does this from the first
+/// records of the training design).
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `components` | none | 1..=64, fewer than the fitting records |
+///
+/// ```
+/// use ndarray::Array2;
+/// use twostage_compress::{Compressor, OutputPca};
+///
+/// // Records y = a * sin + b * cos + 0.001 * wiggle on 100 samples: two
+/// // directions carry everything.
+/// let wave = |k: usize, f: fn(f64) -> f64| f(k as f64 * 0.1);
+/// let records: Vec<Array2<f64>> = (0..40)
+///     .map(|r| {
+///         let (a, b) = ((r % 7) as f64 - 3.0, (r % 5) as f64 - 2.0);
+///         Array2::from_shape_fn((100, 1), |(k, _)| {
+///             a * wave(k, f64::sin) + b * wave(k, f64::cos) + 1e-3 * ((k * r) % 3) as f64
+///         })
+///     })
+///     .collect();
+/// let views: Vec<_> = records.iter().map(|r| r.view()).collect();
+/// let pca = OutputPca::new(2)?.fit(&views)?;
+/// assert_eq!(pca.n_features(), 2);
+/// let u = Array2::<f64>::zeros((100, 1));
+/// let alpha = pca.compress(u.view(), records[3].view())?;
+/// assert_eq!(alpha.len(), 2);
+/// # Ok::<(), twostage_compress::CompressError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "PcaFields")]
+pub struct OutputPca {
+    components: usize,
+    /// Samples per record; 0 until fitted.
+    n_samples: usize,
+    n_inputs: usize,
+    n_outputs: usize,
+    /// Mean output record, output after output (column-major like `IoData`).
+    mean: Vec<f64>,
+    /// `components` directions of length `n_samples * n_outputs`, row-major.
+    basis: Vec<f64>,
+}
+
+#[derive(Deserialize)]
+struct PcaFields {
+    components: usize,
+    n_samples: usize,
+    n_inputs: usize,
+    n_outputs: usize,
+    mean: Vec<f64>,
+    basis: Vec<f64>,
+}
+
+impl TryFrom<PcaFields> for OutputPca {
+    type Error = CompressError;
+    fn try_from(f: PcaFields) -> Result<Self> {
+        let pca = Self::new(f.components)?;
+        if f.n_samples == 0 {
+            return Ok(pca);
+        }
+        let d = f.n_samples.checked_mul(f.n_outputs);
+        let consistent = f.n_inputs <= MAX_SIGNALS
+            && (1..=MAX_SIGNALS).contains(&f.n_outputs)
+            && d.is_some_and(|d| f.mean.len() == d)
+            && d.and_then(|d| d.checked_mul(f.components)) == Some(f.basis.len())
+            && f.mean.iter().chain(&f.basis).all(|v| v.is_finite());
+        if !consistent {
+            return Err(CompressError::InvalidSetting {
+                name: "PCA basis",
+                value: format!("{} values", f.basis.len()),
+                reason: "does not match the stored record shape (the data is corrupted)".into(),
+            });
+        }
+        Ok(Self {
+            components: f.components,
+            n_samples: f.n_samples,
+            n_inputs: f.n_inputs,
+            n_outputs: f.n_outputs,
+            mean: f.mean,
+            basis: f.basis,
+        })
+    }
+}
+
+impl OutputPca {
+    /// An unfitted compressor keeping `components` principal components.
+    ///
+    /// # Errors
+    /// [`CompressError::InvalidSetting`] outside 1..=64.
+    pub fn new(components: usize) -> Result<Self> {
+        if !(1..=MAX_COMPONENTS).contains(&components) {
+            return Err(CompressError::InvalidSetting {
+                name: "components",
+                value: components.to_string(),
+                reason: "must lie in 1..=64".into(),
+            });
+        }
+        Ok(Self {
+            components,
+            n_samples: 0,
+            n_inputs: 1,
+            n_outputs: 1,
+            mean: Vec::new(),
+            basis: Vec::new(),
+        })
+    }
+
+    /// Number of components kept.
+    pub fn components(&self) -> usize {
+        self.components
+    }
+
+    /// Whether [`OutputPca::fit`] has run.
+    pub fn is_fitted(&self) -> bool {
+        self.n_samples > 0
+    }
+
+    /// The principal directions, strongest first (each of length N x n_y).
+    pub fn directions(&self) -> impl Iterator<Item = &[f64]> {
+        let d = self.n_samples * self.n_outputs;
+        self.basis.chunks_exact(d.max(1)).take(self.components)
+    }
+
+    /// Learn the mean and the leading directions from training output
+    /// records (each N x n_y, all of one shape). Deterministic: the same
+    /// records give the same bits on any machine and thread count.
+    ///
+    /// # Errors
+    /// No records, records of different shapes or with non-finite values,
+    /// fewer records than components + 1, or records that do not vary in
+    /// as many directions as components are asked for.
+    pub fn fit(mut self, outputs: &[ArrayView2<'_, f64>]) -> Result<Self> {
+        let Some(first) = outputs.first() else {
+            return Err(self.too_few(0));
+        };
+        let (n, ny) = first.dim();
+        let d = n * ny;
+        let m = outputs.len();
+        if m <= self.components {
+            return Err(self.too_few(m));
+        }
+        // Records as rows of a centred m x d matrix.
+        let mut x = vec![0.0; m * d];
+        for (row, record) in x.chunks_exact_mut(d).zip(outputs) {
+            if record.dim() != (n, ny) {
+                return Err(CompressError::FixedLength {
+                    expected: n,
+                    got: record.nrows(),
+                    structure: self.to_string(),
+                });
+            }
+            for (j, column) in record.columns().into_iter().enumerate() {
+                for (k, v) in column.iter().enumerate() {
+                    if !v.is_finite() {
+                        return Err(CompressError::NonFinite {
+                            signal: crate::signals::name("y", j, ny),
+                            index: k,
+                            value: *v,
+                        });
+                    }
+                    row[j * n + k] = *v;
+                }
+            }
+        }
+        let mut mean = vec![0.0; d];
+        for row in x.chunks_exact(d) {
+            for (a, v) in mean.iter_mut().zip(row) {
+                *a += v / m as f64;
+            }
+        }
+        for row in x.chunks_exact_mut(d) {
+            for (v, a) in row.iter_mut().zip(&mean) {
+                *v -= a;
+            }
+        }
+        // Principal directions are the leading eigenvectors of X'X (d x d),
+        // or X' times those of XX' (m x m), whichever is smaller. Each is
+        // checked for variance before it is kept: directions with none are
+        // rounding noise (and, through X', not even orthogonal to the rest).
+        let total: f64 = x.iter().map(|v| v * v).sum();
+        let tolerance = 1e-20 * total;
+        let mut basis = vec![0.0; self.components * d];
+        let weak = |i: usize| CompressError::RankDeficient {
+            structure: self.to_string(),
+            cause: format!(
+                "the training outputs vary in only {i} directions: ask for at most {i} components"
+            ),
+        };
+        if d <= m {
+            let vectors = leading_eigenvectors(&gram(&x, m, d, false), d, self.components);
+            for (i, (out, v)) in basis
+                .chunks_exact_mut(d)
+                .zip(vectors.chunks_exact(d))
+                .enumerate()
+            {
+                let variance: f64 = x
+                    .chunks_exact(d)
+                    .map(|row| row.iter().zip(v).map(|(a, b)| a * b).sum::<f64>().powi(2))
+                    .sum();
+                if variance.is_nan() || variance <= tolerance {
+                    return Err(weak(i));
+                }
+                out.copy_from_slice(v);
+            }
+        } else {
+            let u = leading_eigenvectors(&gram(&x, m, d, true), m, self.components);
+            for (i, (vi, ui)) in basis.chunks_exact_mut(d).zip(u.chunks_exact(m)).enumerate() {
+                for (row, w) in x.chunks_exact(d).zip(ui) {
+                    for (a, b) in vi.iter_mut().zip(row) {
+                        *a += w * b;
+                    }
+                }
+                // |X' u|^2 = u' X X' u: the variance along the direction.
+                let variance = vi.iter().map(|a| a * a).sum::<f64>();
+                if variance.is_nan() || variance <= tolerance {
+                    return Err(weak(i));
+                }
+                let norm = variance.sqrt();
+                vi.iter_mut().for_each(|a| *a /= norm);
+            }
+        }
+        self.n_samples = n;
+        self.n_outputs = ny;
+        self.mean = mean;
+        self.basis = basis;
+        Ok(self)
+    }
+
+    /// The same fitted compressor for records with `n_inputs` inputs (the
+    /// inputs are only checked for shape and finiteness, never used).
+    ///
+    /// # Errors
+    /// More than 64 inputs.
+    pub fn with_inputs(mut self, n_inputs: usize) -> Result<Self> {
+        if n_inputs > MAX_SIGNALS {
+            return Err(CompressError::InvalidSetting {
+                name: "inputs",
+                value: n_inputs.to_string(),
+                reason: "at most 64".into(),
+            });
+        }
+        self.n_inputs = n_inputs;
+        Ok(self)
+    }
+
+    fn too_few(&self, m: usize) -> CompressError {
+        CompressError::InvalidSetting {
+            name: "PCA records",
+            value: m.to_string(),
+            reason: format!(
+                "fitting {} components needs at least {} records",
+                self.components,
+                self.components + 1
+            ),
+        }
+    }
+}
+
+/// `X'X` (d x d) or, with `dual`, `XX'` (m x m) of the row-major m x d `x`.
+fn gram(x: &[f64], m: usize, d: usize, dual: bool) -> Vec<f64> {
+    if dual {
+        let mut g = vec![0.0; m * m];
+        for a in 0..m {
+            for b in 0..=a {
+                let ra = &x[a * d..(a + 1) * d];
+                let rb = &x[b * d..(b + 1) * d];
+                let v: f64 = ra.iter().zip(rb).map(|(p, q)| p * q).sum();
+                g[a * m + b] = v;
+                g[b * m + a] = v;
+            }
+        }
+        g
+    } else {
+        let mut g = vec![0.0; d * d];
+        for row in x.chunks_exact(d) {
+            for a in 0..d {
+                let ra = row[a];
+                if ra == 0.0 {
+                    continue;
+                }
+                for (gab, rb) in g[a * d..(a + 1) * d].iter_mut().zip(row) {
+                    *gab += ra * rb;
+                }
+            }
+        }
+        g
+    }
+}
+
+/// The `k` leading eigenvectors (row-major, k x s) of the symmetric
+/// positive semi-definite s x s matrix `a`, by subspace iteration with
+/// Gram-Schmidt, then a Rayleigh-Ritz rotation (Jacobi) that orders them.
+/// Sequential arithmetic in a fixed order: bitwise reproducible.
+fn leading_eigenvectors(a: &[f64], s: usize, k: usize) -> Vec<f64> {
+    // A fixed, full-rank start that favours no direction.
+    let mut q: Vec<f64> = (0..k * s)
+        .map(|i| {
+            let (r, c) = (i / s, i % s);
+            ((r + 1) as f64 * (c as f64 + 0.5) * 0.618_033_988_75).sin()
+        })
+        .collect();
+    orthonormalize(&mut q, s);
+    let mut z = vec![0.0; k * s];
+    for _ in 0..SWEEPS {
+        multiply(a, s, &q, &mut z);
+        std::mem::swap(&mut q, &mut z);
+        orthonormalize(&mut q, s);
+        // Converged when the basis stops moving (z holds the previous one).
+        let moved = q
+            .iter()
+            .zip(&z)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        if moved < 1e-12 {
+            break;
+        }
+    }
+    // Rayleigh-Ritz: B = Q A Q' (k x k), rotate Q by B's eigenvectors.
+    multiply(a, s, &q, &mut z);
+    let mut b = vec![0.0; k * k];
+    for i in 0..k {
+        for j in 0..k {
+            b[i * k + j] = q[i * s..(i + 1) * s]
+                .iter()
+                .zip(&z[j * s..(j + 1) * s])
+                .map(|(x, y)| x * y)
+                .sum();
+        }
+    }
+    let (values, vectors) = jacobi_eigen(b, k);
+    let mut order: Vec<usize> = (0..k).collect();
+    order.sort_by(|&i, &j| values[j].total_cmp(&values[i]));
+    let mut rotated = vec![0.0; k * s];
+    for (out, &e) in rotated.chunks_exact_mut(s).zip(&order) {
+        for i in 0..k {
+            let w = vectors[i * k + e];
+            for (o, v) in out.iter_mut().zip(&q[i * s..(i + 1) * s]) {
+                *o += w * v;
+            }
+        }
+        // A fixed sign: the largest entry positive.
+        let sign = out
+            .iter()
+            .copied()
+            .max_by(|x, y| x.abs().total_cmp(&y.abs()))
+            .map_or(1.0, f64::signum);
+        out.iter_mut().for_each(|v| *v *= sign);
+    }
+    rotated
+}
+
+/// `z_i = A q_i` for each row q_i of `q`.
+fn multiply(a: &[f64], s: usize, q: &[f64], z: &mut [f64]) {
+    for (zi, qi) in z.chunks_exact_mut(s).zip(q.chunks_exact(s)) {
+        for (r, out) in zi.iter_mut().enumerate() {
+            *out = a[r * s..(r + 1) * s]
+                .iter()
+                .zip(qi)
+                .map(|(x, y)| x * y)
+                .sum();
+        }
+    }
+}
+
+/// Modified Gram-Schmidt on the rows of `q` (twice, for orthogonality to
+/// rounding); a row that vanishes is left at zero.
+fn orthonormalize(q: &mut [f64], s: usize) {
+    let k = q.len() / s;
+    for _ in 0..2 {
+        for i in 0..k {
+            for j in 0..i {
+                let (head, tail) = q.split_at_mut(i * s);
+                let qj = &head[j * s..(j + 1) * s];
+                let qi = &mut tail[..s];
+                let dot: f64 = qi.iter().zip(qj).map(|(x, y)| x * y).sum();
+                qi.iter_mut().zip(qj).for_each(|(x, y)| *x -= dot * y);
+            }
+            let qi = &mut q[i * s..(i + 1) * s];
+            let norm = qi.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                qi.iter_mut().for_each(|x| *x /= norm);
+            }
+        }
+    }
+}
+
+/// Cyclic Jacobi eigen-decomposition of the symmetric k x k `b`: the
+/// eigenvalues and the eigenvectors as the columns of a row-major matrix.
+fn jacobi_eigen(mut b: Vec<f64>, k: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut v = vec![0.0; k * k];
+    for i in 0..k {
+        v[i * k + i] = 1.0;
+    }
+    for _ in 0..100 {
+        let off: f64 = (0..k)
+            .flat_map(|i| (0..k).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| b[i * k + j].powi(2))
+            .sum();
+        let scale: f64 = (0..k).map(|i| b[i * k + i].powi(2)).sum();
+        if off <= 1e-30 * scale.max(f64::MIN_POSITIVE) {
+            break;
+        }
+        for p in 0..k {
+            for r in p + 1..k {
+                let bpr = b[p * k + r];
+                if bpr == 0.0 {
+                    continue;
+                }
+                let theta = (b[r * k + r] - b[p * k + p]) / (2.0 * bpr);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let sn = t * c;
+                for i in 0..k {
+                    let (bip, bir) = (b[i * k + p], b[i * k + r]);
+                    b[i * k + p] = c * bip - sn * bir;
+                    b[i * k + r] = sn * bip + c * bir;
+                }
+                for i in 0..k {
+                    let (bpi, bri) = (b[p * k + i], b[r * k + i]);
+                    b[p * k + i] = c * bpi - sn * bri;
+                    b[r * k + i] = sn * bpi + c * bri;
+                }
+                for i in 0..k {
+                    let (vip, vir) = (v[i * k + p], v[i * k + r]);
+                    v[i * k + p] = c * vip - sn * vir;
+                    v[i * k + r] = sn * vip + c * vir;
+                }
+            }
+        }
+    }
+    ((0..k).map(|i| b[i * k + i]).collect(), v)
+}
+
+impl std::fmt::Display for OutputPca {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "PCA({}) of the output", self.components)
+    }
+}
+
+impl Compressor for OutputPca {
+    fn n_features(&self) -> usize {
+        self.components
+    }
+
+    fn feature_names(&self) -> Vec<String> {
+        (1..=self.components).map(|i| format!("pc{i}")).collect()
+    }
+
+    fn compress_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        _work: &mut Workspace,
+        alpha: &mut [f64],
+    ) -> Result<()> {
+        if !self.is_fitted() {
+            return Err(CompressError::InvalidSetting {
+                name: "PCA",
+                value: "unfitted".into(),
+                reason: "fit it on training outputs first (OutputPca::fit)".into(),
+            });
+        }
+        if alpha.len() != self.components {
+            return Err(CompressError::BufferLength {
+                expected: self.components,
+                got: alpha.len(),
+            });
+        }
+        let n = check(inputs, outputs, self.n_inputs, self.n_outputs)?;
+        if n != self.n_samples {
+            return Err(CompressError::FixedLength {
+                expected: self.n_samples,
+                got: n,
+                structure: self.to_string(),
+            });
+        }
+        let d = self.n_samples * self.n_outputs;
+        for (a, v) in alpha.iter_mut().zip(self.basis.chunks_exact(d)) {
+            let mut acc = 0.0;
+            for (j, column) in outputs.columns().into_iter().enumerate() {
+                let offset = j * self.n_samples;
+                for (k, y) in column.iter().enumerate() {
+                    acc += v[offset + k] * (y - self.mean[offset + k]);
+                }
+            }
+            *a = acc;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,203 @@
+//! Where the training features lie, so that an estimate can say when its
+//! record looks like nothing the estimator was trained on.
+
+use ndarray::ArrayView2;
+use serde::{Deserialize, Serialize};
+
+/// The share of training features inside the envelope.
+pub const ENVELOPE_LEVEL: f64 = 0.999;
+
+/// The Mahalanobis envelope of the training features: their mean, the
+/// Cholesky factor of their covariance, and the 99.9% quantile of the
+/// training features' own distances. A record whose features lie farther
+/// out is out of distribution: the network extrapolates there, and neither
+/// the validation report nor the intervals speak for it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "EnvelopeFields")]
+pub struct FeatureEnvelope {
+    mean: Vec<f64>,
+    /// Lower-triangular, row-major n x n.
+    factor: Vec<f64>,
+    threshold: f64,
+}
+
+#[derive(Deserialize)]
+struct EnvelopeFields {
+    mean: Vec<f64>,
+    factor: Vec<f64>,
+    threshold: f64,
+}
+
+impl TryFrom<EnvelopeFields> for FeatureEnvelope {
+    type Error = crate::Error;
+    fn try_from(f: EnvelopeFields) -> crate::Result<Self> {
+        let n = f.mean.len();
+        let diagonal_ok = (0..n).all(|j| {
+            f.factor
+                .get(j * n + j)
+                .is_some_and(|d| d.is_finite() && *d > 0.0)
+        });
+        if n.checked_mul(n) != Some(f.factor.len())
+            || !diagonal_ok
+            || f.factor.iter().chain(&f.mean).any(|v| !v.is_finite())
+            || !(f.threshold.is_finite() && f.threshold >= 0.0)
+        {
+            return Err(crate::Error::File(format!(
+                "inconsistent estimator: a feature envelope of {n} means, {} factor entries \
+                 and threshold {}",
+                f.factor.len(),
+                f.threshold
+            )));
+        }
+        Ok(Self {
+            mean: f.mean,
+            factor: f.factor,
+            threshold: f.threshold,
+        })
+    }
+}
+
+impl FeatureEnvelope {
+    /// Fit on training features (rows are experiments). `None` when there
+    /// are too few rows or a feature does not vary (the covariance is then
+    /// singular and the distance undefined).
+    pub(crate) fn fit(features: ArrayView2<'_, f64>) -> Option<Self> {
+        let (m, n) = features.dim();
+        if m <= n + 1 || n == 0 {
+            return None;
+        }
+        let mean: Vec<f64> = features
+            .columns()
+            .into_iter()
+            .map(|c| c.sum() / m as f64)
+            .collect();
+        let mut factor = vec![0.0; n * n];
+        for row in features.rows() {
+            for a in 0..n {
+                let da = row[a] - mean[a];
+                for b in 0..=a {
+                    factor[a * n + b] += da * (row[b] - mean[b]);
+                }
+            }
+        }
+        for v in &mut factor {
+            *v /= (m - 1) as f64;
+        }
+        cholesky_lower(&mut factor, n)?;
+        let mut envelope = Self {
+            mean,
+            factor,
+            threshold: 0.0,
+        };
+        let mut distances: Vec<f64> = features
+            .rows()
+            .into_iter()
+            .map(|row| envelope.distance_of(row.iter().copied()))
+            .collect();
+        distances.sort_by(f64::total_cmp);
+        // The finite-sample rank of the conformal quantile: a fresh
+        // training-like record falls inside with probability >= 99.9%.
+        let rank = ((m as f64 + 1.0) * ENVELOPE_LEVEL).ceil() as usize;
+        envelope.threshold = distances[rank.clamp(1, m) - 1];
+        Some(envelope)
+    }
+
+    /// The Mahalanobis distance of `features` from the training mean.
+    pub fn distance(&self, features: &[f64]) -> f64 {
+        if features.len() != self.mean.len() {
+            return f64::INFINITY;
+        }
+        self.distance_of(features.iter().copied())
+    }
+
+    fn distance_of(&self, features: impl Iterator<Item = f64>) -> f64 {
+        let n = self.mean.len();
+        // Forward substitution L z = x - mean; the distance is |z|. Sized
+        // once per call: the CLI and batch paths call this, not the hot path.
+        let mut z = vec![0.0; n];
+        for (i, x) in features.enumerate().take(n) {
+            let dot: f64 = (0..i).map(|k| self.factor[i * n + k] * z[k]).sum();
+            z[i] = (x - self.mean[i] - dot) / self.factor[i * n + i];
+        }
+        z.iter().map(|v| v * v).sum::<f64>().sqrt()
+    }
+
+    /// Number of features.
+    pub fn dim(&self) -> usize {
+        self.mean.len()
+    }
+
+    /// The distance beyond which a record is out of distribution.
+    pub fn threshold(&self) -> f64 {
+        self.threshold
+    }
+}
+
+/// In-place Cholesky of the symmetric matrix whose lower triangle is in `a`
+/// (row-major n x n); `None` when a pivot is not clearly positive.
+fn cholesky_lower(a: &mut [f64], n: usize) -> Option<()> {
+    let largest = (0..n).map(|j| a[j * n + j]).fold(0.0f64, f64::max);
+    for j in 0..n {
+        let d = a[j * n + j] - (0..j).map(|k| a[j * n + k].powi(2)).sum::<f64>();
+        if d.is_nan() || d <= 1e-13 * largest {
+            return None;
+        }
+        let root = d.sqrt();
+        a[j * n + j] = root;
+        for i in j + 1..n {
+            let dot: f64 = (0..j).map(|k| a[i * n + k] * a[j * n + k]).sum();
+            a[i * n + j] = (a[i * n + j] - dot) / root;
+        }
+        for k in j + 1..n {
+            a[j * n + k] = 0.0;
+        }
+    }
+    Some(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+
+    #[test]
+    fn the_distance_is_the_quadratic_form_with_the_inverse_covariance() {
+        // Two correlated features from a fixed deterministic sequence.
+        let x = Array2::from_shape_fn((400, 2), |(i, j)| {
+            let a = ((i * 37 + 11) % 101) as f64 / 50.0 - 1.0;
+            let b = ((i * 53 + 7) % 89) as f64 / 44.0 - 1.0;
+            if j == 0 { a } else { 0.5 * a + b }
+        });
+        let e = FeatureEnvelope::fit(x.view()).expect("non-singular");
+        // Closed-form inverse of the 2 x 2 sample covariance.
+        let m = 400.0;
+        let mean = [x.column(0).sum() / m, x.column(1).sum() / m];
+        let c = |a: usize, b: usize| {
+            x.rows()
+                .into_iter()
+                .map(|r| (r[a] - mean[a]) * (r[b] - mean[b]))
+                .sum::<f64>()
+                / (m - 1.0)
+        };
+        let (c00, c01, c11) = (c(0, 0), c(0, 1), c(1, 1));
+        let det = c00 * c11 - c01 * c01;
+        let point = [0.7, -1.3];
+        let d = [point[0] - mean[0], point[1] - mean[1]];
+        let q = (c11 * d[0] * d[0] - 2.0 * c01 * d[0] * d[1] + c00 * d[1] * d[1]) / det;
+        assert!((e.distance(&point) - q.sqrt()).abs() < 1e-12);
+        // 99.9% of 400: rank ceil(401 * 0.999) = 401 > 400, so the largest.
+        let largest = x
+            .rows()
+            .into_iter()
+            .map(|r| e.distance(&[r[0], r[1]]))
+            .fold(0.0, f64::max);
+        assert_eq!(e.threshold().to_bits(), largest.to_bits());
+        assert!(e.distance(&[1.0]).is_infinite());
+    }
+
+    #[test]
+    fn a_constant_feature_gives_no_envelope() {
+        let x = Array2::from_shape_fn((50, 2), |(i, j)| if j == 0 { i as f64 } else { 3.0 });
+        assert!(FeatureEnvelope::fit(x.view()).is_none());
+    }
+}
