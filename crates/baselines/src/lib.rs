@@ -54,7 +54,7 @@ pub use indirect::{
 };
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
-pub use pem::{BenchmarkPredictor, Descent, PemStop, PredictionError, ResidualModel};
+pub use pem::{BenchmarkPredictor, Descent, PemStop, PredictionError, RefineStarts, ResidualModel};
 
 use twostage_models::IoData;
 

@@ -117,3 +117,30 @@ fn the_posterior_matches_brute_force_quadrature() {
         adaptive.mean
     );
 }
+
+#[test]
+fn refinement_stays_in_its_box_and_more_starts_never_end_higher() {
+    use twostage_baselines::RefineStarts;
+    let pe = PredictionError::new(BenchmarkPredictor::new().unwrap(), 1);
+    for (i, truth) in [-0.62, -0.2, 0.35, 0.71].into_iter().enumerate() {
+        let data = record(truth, 40 + i as u64);
+        let start = [truth + 0.02];
+        let radius = [0.05];
+        let one = pe
+            .refine(&data, &start, &radius, RefineStarts::Centre)
+            .unwrap();
+        let three = pe
+            .refine(&data, &start, &radius, RefineStarts::CentreAndAxes)
+            .unwrap();
+        for d in [&one, &three] {
+            assert!((d.theta[0] - start[0]).abs() <= radius[0] + 1e-12, "{d:?}");
+        }
+        assert!(three.loss <= one.loss, "{three:?} vs {one:?}");
+        // From next to the truth, the box holds the likelihood's peak.
+        assert!((three.theta[0] - truth).abs() < 0.04, "{three:?}");
+    }
+    assert!(
+        pe.refine(&record(0.1, 1), &[0.1], &[-1.0], RefineStarts::Centre)
+            .is_err()
+    );
+}

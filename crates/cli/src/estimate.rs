@@ -33,6 +33,17 @@ pub struct TrainArgs {
     /// Stage 2: linear, or mlp:H[,H...] hidden sizes (default: the preset's).
     #[arg(long)]
     fit: Option<String>,
+    /// Search compressors and networks by held-out error instead of using
+    /// the preset (with --budget-seconds or --budget-sims; default 120 s).
+    #[arg(long, conflicts_with_all = ["compress", "fit", "sims"])]
+    auto: bool,
+    /// --auto: wall-clock seconds for the search (machine-dependent outcome).
+    #[arg(long, requires = "auto", conflicts_with = "budget_sims")]
+    budget_seconds: Option<f64>,
+    /// --auto: simulations in the chart, every candidate evaluated
+    /// (reproducible outcome).
+    #[arg(long, requires = "auto")]
+    budget_sims: Option<usize>,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -68,7 +79,7 @@ fn parse_counts(spec: &str, what: &str, count: usize) -> Result<Vec<usize>> {
     Ok(values)
 }
 
-fn compressor(spec: &str) -> Result<CompressorConfig> {
+pub(crate) fn compressor(spec: &str) -> Result<CompressorConfig> {
     let bad = || {
         usage(format!(
             "--compress '{spec}': use arx:NA,NB, narx:NA,NB,DEG or pca:K"
@@ -98,7 +109,7 @@ fn compressor(spec: &str) -> Result<CompressorConfig> {
     }
 }
 
-fn regressor(spec: &str) -> Result<RegressorConfig> {
+pub(crate) fn regressor(spec: &str) -> Result<RegressorConfig> {
     if spec == "linear" {
         return Ok(RegressorConfig::Linear(Ridge::default()));
     }
@@ -153,11 +164,34 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     }
     let start = std::time::Instant::now();
     let bars = crate::bars::Bars::new(args.quiet);
-    let estimator = builder.progress(&bars).train().map_err(|e| match e {
+    let failed = |e: twostage::Error| match e {
         // A setting out of range is the user's to fix, like a bad flag.
         twostage::Error::InvalidSetting { .. } => usage(e.to_string()),
         other => anyhow::Error::new(other).context("training"),
-    })?;
+    };
+    let estimator = if args.auto {
+        let budget = match (args.budget_seconds, args.budget_sims) {
+            (_, Some(m)) => twostage::Budget::Simulations(m),
+            (Some(t), None) => twostage::Budget::Seconds(t),
+            (None, None) => twostage::Budget::Seconds(120.0),
+        };
+        let outcome = TwoStage::auto(sim.as_ref())
+            .budget(budget)
+            .settings(|b| {
+                b.seed(args.seed)
+                    .validation(args.validate)
+                    .calibration(args.calibrate)
+                    .progress(&bars)
+            })
+            .run()
+            .map_err(failed)?;
+        if !args.quiet {
+            writeln!(out, "{outcome}")?;
+        }
+        outcome.estimator
+    } else {
+        builder.progress(&bars).train().map_err(failed)?
+    };
     estimator.save(&args.out)?;
     if !args.quiet {
         writeln!(

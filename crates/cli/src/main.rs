@@ -2,6 +2,7 @@
 
 mod bars;
 mod csv_records;
+mod curve;
 mod demo;
 mod estimate;
 mod number;
@@ -42,6 +43,8 @@ enum Command {
     Estimate(estimate::EstimateArgs),
     /// Check an estimator on fresh simulations: accuracy, Theorem 1, interval coverage.
     Validate(validate::ValidateArgs),
+    /// Validation RMSE against the number of training simulations (m doubling).
+    LearningCurve(curve::CurveArgs),
 }
 
 /// A mistake in how the command was called: exit code 2, like clap's own.
@@ -75,6 +78,7 @@ fn main() -> ExitCode {
         Command::Train(args) => estimate::train(args, &mut io::stdout().lock()),
         Command::Inspect { file } => estimate::inspect(file, &mut io::stdout().lock()),
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
+        Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
         Command::Estimate(args) => match estimate::estimate(args) {
             Ok(0) => Ok(()),
             Ok(failed) => Err(anyhow::anyhow!(

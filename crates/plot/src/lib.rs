@@ -149,6 +149,119 @@ pub fn estimates_vs_truth(title: &str, panels: &[Panel<'_>]) -> Result<String, P
     Ok(svg)
 }
 
+/// One curve of a learning-curve figure: RMSE against the number of
+/// training simulations.
+#[derive(Debug, Clone, Copy)]
+pub struct Curve<'a> {
+    /// The parameter's name.
+    pub name: &'a str,
+    /// Training simulations m, increasing.
+    pub simulations: &'a [usize],
+    /// RMSE at each m (non-finite values are skipped).
+    pub rmse: &'a [f64],
+    /// A floor to draw dashed, e.g. the Bayes-optimal RMSE, if known.
+    pub limit: Option<f64>,
+}
+
+/// Draw RMSE against m on log-log axes, one panel per parameter, and
+/// return the SVG text.
+///
+/// ```
+/// use twostage_plot::{Curve, learning_curve};
+/// let m = [250, 500, 1000, 2000];
+/// let rmse = [0.08, 0.05, 0.035, 0.03];
+/// let curve = Curve { name: "theta", simulations: &m, rmse: &rmse, limit: Some(0.017) };
+/// let svg = learning_curve("Learning curve", &[curve])?;
+/// assert!(svg.starts_with("<svg") && svg.contains("Learning curve"));
+/// # Ok::<(), twostage_plot::PlotError>(())
+/// ```
+///
+/// # Errors
+/// [`PlotError::Data`] for no curves, mismatched lengths, or no positive
+/// finite RMSE; [`PlotError::Drawing`] if the backend fails.
+pub fn learning_curve(title: &str, curves: &[Curve<'_>]) -> Result<String, PlotError> {
+    if curves.is_empty() {
+        return Err(PlotError::Data("no curves".into()));
+    }
+    for c in curves {
+        if c.simulations.len() != c.rmse.len() || c.simulations.is_empty() {
+            return Err(PlotError::Data(format!(
+                "{}: {} sizes but {} RMSE values",
+                c.name,
+                c.simulations.len(),
+                c.rmse.len()
+            )));
+        }
+        if !c.rmse.iter().any(|r| r.is_finite() && *r > 0.0) {
+            return Err(PlotError::Data(format!(
+                "{}: no positive finite RMSE",
+                c.name
+            )));
+        }
+    }
+    let mut svg = String::new();
+    {
+        let width = 420 * curves.len() as u32;
+        let root = SVGBackend::with_string(&mut svg, (width, 400)).into_drawing_area();
+        root.fill(&WHITE).map_err(drawing)?;
+        let root = root.titled(title, ("sans-serif", 20)).map_err(drawing)?;
+        let areas = root.split_evenly((1, curves.len()));
+        for (area, c) in areas.iter().zip(curves) {
+            let points: Vec<(f64, f64)> = c
+                .simulations
+                .iter()
+                .zip(c.rmse)
+                .filter(|(m, r)| **m > 0 && r.is_finite() && **r > 0.0)
+                .map(|(m, r)| (*m as f64, *r))
+                .collect();
+            let (x_lo, x_hi) = points
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+            let (mut y_lo, mut y_hi) = points
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+            if let Some(l) = c.limit.filter(|l| l.is_finite() && *l > 0.0) {
+                y_lo = y_lo.min(l);
+                y_hi = y_hi.max(l);
+            }
+            let mut chart = ChartBuilder::on(area)
+                .caption(c.name, ("sans-serif", 15))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(60)
+                .build_cartesian_2d(
+                    (x_lo / 1.2..x_hi * 1.2).log_scale(),
+                    (y_lo / 1.3..y_hi * 1.3).log_scale(),
+                )
+                .map_err(drawing)?;
+            chart
+                .configure_mesh()
+                .x_desc("training simulations m")
+                .y_desc(format!("validation RMSE of {}", c.name))
+                .draw()
+                .map_err(drawing)?;
+            chart
+                .draw_series(LineSeries::new(points.clone(), BLUE.stroke_width(2)))
+                .map_err(drawing)?;
+            chart
+                .draw_series(points.iter().map(|p| Circle::new(*p, 3, BLUE.filled())))
+                .map_err(drawing)?;
+            if let Some(l) = c.limit.filter(|l| l.is_finite() && *l > 0.0) {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        vec![(x_lo / 1.2, l), (x_hi * 1.2, l)],
+                        6,
+                        4,
+                        BLACK.into(),
+                    ))
+                    .map_err(drawing)?;
+            }
+        }
+        root.present().map_err(drawing)?;
+    }
+    Ok(svg)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

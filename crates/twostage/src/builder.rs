@@ -6,7 +6,7 @@ use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::chart::compress_chart_observed;
-use crate::config::{CompressorConfig, RegressorConfig};
+use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, TrainingInfo};
@@ -46,6 +46,15 @@ fn preset(order: usize, hidden: usize, simulations: usize) -> Preset {
         regressor: RegressorConfig::Mlp(mlp),
         simulations,
     }
+}
+
+/// What the fitted stages were trained on, for the estimator's record.
+pub(crate) struct TrainedOn<'f> {
+    pub(crate) features: ndarray::ArrayView2<'f, f64>,
+    pub(crate) simulations: usize,
+    pub(crate) failures: usize,
+    pub(crate) sampling: String,
+    pub(crate) regressor: RegressorConfig,
 }
 
 /// Training records an output PCA is fitted on: enough for the leading
@@ -92,18 +101,18 @@ const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
 /// ```
 #[derive(Debug, Clone)]
 pub struct TwoStage<'a, S: ?Sized> {
-    simulator: &'a S,
+    pub(crate) simulator: &'a S,
     compressor: CompressorConfig,
     regressor: RegressorConfig,
     simulations: usize,
     sampling: Option<Sampling>,
-    seed: u64,
+    pub(crate) seed: u64,
     calibration: usize,
     alpha: f64,
     validation: usize,
     delta: f64,
-    max_failure_fraction: f64,
-    progress: &'a dyn Progress,
+    pub(crate) max_failure_fraction: f64,
+    pub(crate) progress: &'a dyn Progress,
 }
 
 impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
@@ -258,6 +267,29 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             .fit(chart.features.view(), chart.thetas.view(), self.seed);
         self.progress.end(Stage::Fitting);
         let regressor = regressor?;
+        self.finish(
+            compressor,
+            regressor,
+            TrainedOn {
+                features: chart.features.view(),
+                simulations: self.simulations,
+                failures: chart.failures.len(),
+                sampling: format!("{:?}", training_prior.sampling()),
+                regressor: self.regressor.clone(),
+            },
+        )
+    }
+
+    /// Assemble the estimator from its fitted stages, then calibrate its
+    /// intervals and validate it on fresh simulations.
+    pub(crate) fn finish(
+        &self,
+        compressor: CompressorConfig,
+        regressor: FittedRegressor,
+        trained: TrainedOn<'_>,
+    ) -> Result<Estimator> {
+        let spec = self.simulator.spec();
+        let prior = spec.prior();
         let mut estimator = Estimator {
             param_names: spec.param_names().to_vec(),
             lower: prior.lower().to_vec(),
@@ -268,20 +300,20 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 n_outputs: spec.output_names().len(),
                 sample_time: spec.sample_time(),
             },
-            compressor: compressor.clone(),
+            compressor,
             regressor,
             training: TrainingInfo {
                 model: spec.name().to_string(),
-                simulations: self.simulations,
-                failures: chart.failures.len(),
+                simulations: trained.simulations,
+                failures: trained.failures,
                 seed: self.seed,
-                sampling: format!("{:?}", training_prior.sampling()),
-                regressor: self.regressor.clone(),
+                sampling: trained.sampling,
+                regressor: trained.regressor,
                 version: env!("CARGO_PKG_VERSION").to_string(),
             },
             intervals: None,
             validation: None,
-            envelope: FeatureEnvelope::fit(chart.features.view()),
+            envelope: FeatureEnvelope::fit(trained.features),
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
         let intervals = if self.calibration > 0 {

@@ -44,6 +44,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod auto;
 mod builder;
 mod chart;
 mod config;
@@ -53,6 +54,7 @@ mod estimator;
 mod file;
 mod progress;
 
+pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
 pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
 pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};

@@ -353,3 +353,41 @@ fn progress_sees_every_stage_in_order_with_its_count() {
         ]
     );
 }
+
+#[test]
+fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
+    let model = small_benchmark();
+    let run = || {
+        TwoStage::auto(&model)
+            .budget(twostage::Budget::Simulations(300))
+            .settings(|b| b.seed(4).calibration(50).validation(50))
+            .run()
+            .unwrap()
+    };
+    let outcome = run();
+    let scored: Vec<&twostage::CandidateReport> = outcome
+        .candidates
+        .iter()
+        .filter(|c| c.note.is_none())
+        .collect();
+    assert!(scored.len() >= 8, "{outcome}");
+    let best = &outcome.candidates[outcome.best];
+    assert!(scored.iter().all(|c| c.score >= best.score), "{outcome}");
+    assert!(outcome.candidates.iter().any(|c| c.round == 2), "{outcome}");
+    assert_eq!(
+        outcome.estimator.compressor().to_string(),
+        best.compressor,
+        "the winner is the one shipped"
+    );
+    // Every score is RMSE over the prior's sd (1.8 / sqrt(12)).
+    for c in &scored {
+        let sd = 1.8 / 12f64.sqrt();
+        assert!((c.score - c.rmse[0] / sd).abs() < 1e-12, "{c:?}");
+    }
+    assert!(outcome.estimator.validation().is_some());
+    assert_eq!(
+        outcome.estimator.to_bytes().unwrap(),
+        run().estimator.to_bytes().unwrap(),
+        "a simulation budget gives the same estimator every time"
+    );
+}
