@@ -367,3 +367,70 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
     let got: f64 = lines[3].split(',').nth(1).unwrap().parse().unwrap();
     assert_eq!(got.to_bits(), expected.to_bits(), "{got} vs {expected}");
 }
+
+#[test]
+fn learning_curve_rows_and_auto_usage() {
+    let dir = scratch("curve");
+    let svg = dir.join("curve.svg");
+    let out = twostage(&[
+        "learning-curve",
+        "--model",
+        "benchmark",
+        "--fit",
+        "linear",
+        "--from",
+        "50",
+        "--to",
+        "200",
+        "--validate",
+        "100",
+        "--plot",
+        path(&svg),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    let lines: Vec<&str> = table.lines().collect();
+    assert_eq!(lines[0], "m,seconds,rmse_theta");
+    let sizes: Vec<&str> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(sizes, ["50", "100", "200"]);
+    for l in &lines[1..] {
+        let rmse: f64 = l.split(',').nth(2).unwrap().parse().unwrap();
+        assert!(rmse > 0.0 && rmse < 0.6, "{l}");
+    }
+    assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
+    // --auto searches the structure: it cannot be combined with a fixed one.
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--auto",
+        "--compress",
+        "arx:2,2",
+        "--out",
+        "x",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--budget-sims",
+        "100",
+        "--out",
+        "x",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "a budget needs --auto");
+    let out = twostage(&[
+        "learning-curve",
+        "--model",
+        "benchmark",
+        "--from",
+        "400",
+        "--to",
+        "100",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+}

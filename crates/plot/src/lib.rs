@@ -321,4 +321,33 @@ mod tests {
         };
         assert!(estimates_vs_truth("bad", &[empty]).is_err());
     }
+
+    #[test]
+    fn a_learning_curve_draws_one_marker_per_finite_point_and_refuses_bad_data() {
+        let m = [250, 500, 1000, 2000];
+        let rmse = [0.08, f64::NAN, 0.035, 0.03];
+        let curve = Curve {
+            name: "theta",
+            simulations: &m,
+            rmse: &rmse,
+            limit: None,
+        };
+        let svg = learning_curve("curve", &[curve]).unwrap_or_default();
+        assert_eq!(svg.matches("<circle").count(), 3, "the NaN is skipped");
+        let short = Curve {
+            name: "theta",
+            simulations: &m[..2],
+            rmse: &rmse,
+            limit: None,
+        };
+        assert!(learning_curve("curve", &[short]).is_err());
+        let zero = Curve {
+            name: "theta",
+            simulations: &m,
+            rmse: &[0.0; 4],
+            limit: None,
+        };
+        assert!(learning_curve("curve", &[zero]).is_err());
+        assert!(learning_curve("curve", &[]).is_err());
+    }
 }

@@ -118,6 +118,8 @@ impl std::fmt::Display for AutoOutcome {
 pub struct AutoDesign<'a, S: ?Sized> {
     base: TwoStage<'a, S>,
     budget: Budget,
+    compressors: Option<Vec<CompressorConfig>>,
+    networks: Option<(RegressorConfig, Vec<RegressorConfig>)>,
 }
 
 /// Streams of the timing pilot, apart from the training chart's.
@@ -136,14 +138,23 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// regressor and m are searched.
     ///
     /// ```
-    /// use twostage::{Budget, TwoStage};
+    /// use twostage::{Budget, RegressorConfig, TwoStage};
+    /// use twostage::compress::Arx;
+    /// use twostage::fit::MlpParams;
     /// use twostage::models::Benchmark;
     ///
     /// let model = Benchmark::builder().n_samples(300).build()?;
+    /// let net = |h: usize| -> Result<RegressorConfig, twostage::Error> {
+    ///     Ok(RegressorConfig::Mlp(MlpParams::new(&[h])?.restarts(2).check()?))
+    /// };
     /// let outcome = TwoStage::auto(&model)
     ///     .budget(Budget::Simulations(400))
+    ///     // A small search for the example; the defaults search more.
+    ///     .compressors(vec![Arx::new(2, 2)?.into(), Arx::new(4, 4)?.into()])
+    ///     .networks(net(6)?, vec![net(3)?])
+    ///     .settings(|b| b.calibration(100).validation(100))
     ///     .run()?;
-    /// assert!(outcome.candidates.len() > 5);
+    /// assert_eq!(outcome.candidates.len(), 4);
     /// let best = &outcome.candidates[outcome.best];
     /// assert!(outcome.candidates.iter().all(|c| c.note.is_some() || c.score >= best.score));
     /// println!("{outcome}");
@@ -153,6 +164,8 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         AutoDesign {
             base: TwoStage::builder(simulator),
             budget: Budget::Seconds(120.0),
+            compressors: None,
+            networks: None,
         }
     }
 }
@@ -161,6 +174,20 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     /// The search budget (default: 120 seconds).
     pub fn budget(mut self, budget: Budget) -> Self {
         self.budget = budget;
+        self
+    }
+
+    /// Replace the round-1 compressors (default: ARX(n, n) for n = 2, 3, 4,
+    /// 5, 6, 8, NARX(2, 2, 2), output PCA with 8, 12, 16 components).
+    pub fn compressors(mut self, compressors: Vec<CompressorConfig>) -> Self {
+        self.compressors = Some(compressors);
+        self
+    }
+
+    /// Replace the networks: `first` for round 1, `others` for round 2
+    /// (default: MLP [20]; then [10], [40], [20, 20]).
+    pub fn networks(mut self, first: RegressorConfig, others: Vec<RegressorConfig>) -> Self {
+        self.networks = Some((first, others));
         self
     }
 
@@ -226,9 +253,16 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
 
         // Round 1: every compressor with one medium network. Nothing is
         // known about costs yet: each starts unless the deadline has passed.
-        let medium = network(&[20])?;
-        let compressors =
-            candidate_compressors(spec.output_names().len(), spec.input_names().len());
+        let (medium, networks) = match self.networks.clone() {
+            Some(pair) => pair,
+            None => (
+                network(&[20])?,
+                vec![network(&[10])?, network(&[40])?, network(&[20, 20])?],
+            ),
+        };
+        let compressors = self.compressors.clone().unwrap_or_else(|| {
+            candidate_compressors(spec.output_names().len(), spec.input_names().len())
+        });
         base.progress.begin(Stage::Fitting, 0);
         let round1: Vec<_> = compressors
             .par_iter()
@@ -249,7 +283,6 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             .filter(|&i| candidates[i].note.is_none())
             .collect();
         ranked.sort_by(|&a, &b| candidates[a].score.total_cmp(&candidates[b].score));
-        let networks = [network(&[10])?, network(&[40])?, network(&[20, 20])?];
         let reserve = ranked
             .first()
             .map_or(0.0, |&i| 1.25 * candidates[i].seconds);

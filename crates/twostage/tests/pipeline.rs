@@ -357,9 +357,26 @@ fn progress_sees_every_stage_in_order_with_its_count() {
 #[test]
 fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
     let model = small_benchmark();
+    let net = |h: usize| {
+        RegressorConfig::Mlp(
+            MlpParams::new(&[h])
+                .unwrap()
+                .restarts(2)
+                .max_iterations(60)
+                .check()
+                .unwrap(),
+        )
+    };
     let run = || {
         TwoStage::auto(&model)
             .budget(twostage::Budget::Simulations(300))
+            .compressors(vec![
+                Arx::new(2, 2).unwrap().into(),
+                Arx::new(3, 3).unwrap().into(),
+                Arx::new(5, 5).unwrap().into(),
+                twostage::compress::OutputPca::new(4).unwrap().into(),
+            ])
+            .networks(net(6), vec![net(3), net(10)])
             .settings(|b| b.seed(4).calibration(50).validation(50))
             .run()
             .unwrap()
@@ -370,7 +387,11 @@ fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
         .iter()
         .filter(|c| c.note.is_none())
         .collect();
-    assert!(scored.len() >= 8, "{outcome}");
+    assert_eq!(
+        scored.len(),
+        8,
+        "4 compressors, then 2 networks on the best 2:\n{outcome}"
+    );
     let best = &outcome.candidates[outcome.best];
     assert!(scored.iter().all(|c| c.score >= best.score), "{outcome}");
     assert!(outcome.candidates.iter().any(|c| c.round == 2), "{outcome}");
