@@ -50,9 +50,14 @@ pub struct TrainArgs {
     /// Fresh simulations for the validation report (0: none).
     #[arg(long, default_value_t = 1000)]
     validate: usize,
-    /// Fresh simulations for the 90% conformal intervals (0: none).
-    #[arg(long, default_value_t = 1000)]
+    /// Fresh simulations for the conformal intervals (0: none; adaptive
+    /// intervals need at least 100). With 4000 the coverage on fresh
+    /// records stays within about 2 points of the level.
+    #[arg(long, default_value_t = 4000)]
     calibrate: usize,
+    /// Interval miscoverage: 0.1 gives 90% intervals, 0.05 95%.
+    #[arg(long, default_value_t = 0.1)]
+    alpha: f64,
     /// Where to write the estimator.
     #[arg(long)]
     out: PathBuf,
@@ -146,7 +151,8 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         .preset(preset)
         .seed(args.seed)
         .validation(args.validate)
-        .calibration(args.calibrate);
+        .calibration(args.calibrate)
+        .alpha(args.alpha);
     if let Some(m) = args.sims {
         builder = builder.simulations(m);
     }
@@ -181,6 +187,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
                 b.seed(args.seed)
                     .validation(args.validate)
                     .calibration(args.calibrate)
+                    .alpha(args.alpha)
                     .progress(&bars)
             })
             .run()
@@ -203,6 +210,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         if let Some(report) = estimator.validation() {
             writeln!(out, "{report}")?;
         }
+        write!(out, "{}", trust_summary(&estimator))?;
     }
     Ok(())
 }
@@ -258,7 +266,41 @@ pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
         Some(report) => writeln!(out, "{report}")?,
         None => writeln!(out, "  not validated")?,
     }
+    write!(out, "{}", trust_summary(&e))?;
     Ok(())
+}
+
+/// The adaptive intervals and the out-of-distribution envelope, in words.
+fn trust_summary(e: &Estimator) -> String {
+    let mut text = String::new();
+    if let Some(a) = e.adaptive_intervals() {
+        let _ = write!(
+            text,
+            "  adaptive {:.0}% intervals (normalized conformal, {} calibration records)",
+            100.0 * (1.0 - a.alpha()),
+            a.n_calibration()
+        );
+        if let (Some(widths), Some(coverage)) = (a.mean_half_width(), a.coverage()) {
+            text.push_str(": ");
+            let parts: Vec<String> = e
+                .param_names()
+                .iter()
+                .zip(widths.iter().zip(coverage))
+                .map(|(n, (w, c))| format!("{n} mean +-{w:.3e} (covers {:.1}%)", 100.0 * c))
+                .collect();
+            text.push_str(&parts.join(", "));
+        }
+        text.push('\n');
+    }
+    if let Some(envelope) = e.envelope() {
+        let _ = writeln!(
+            text,
+            "  out of distribution beyond Mahalanobis distance {:.3} of the training features \
+             (99.9% of them lie within)",
+            envelope.threshold()
+        );
+    }
+    text
 }
 
 /// Options of `twostage estimate`.
@@ -330,7 +372,9 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     theta: a.theta,
-                    widths: a.half_widths,
+                    // The adaptive intervals have the same level and follow
+                    // the record; the fixed ones are the fallback.
+                    widths: a.adaptive_half_widths.or(a.half_widths),
                 })
             }),
             Some(trained),

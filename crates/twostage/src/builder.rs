@@ -5,6 +5,7 @@ use twostage_fit::{MlpParams, Ridge};
 use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
+use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
 use crate::chart::compress_chart_observed;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
@@ -314,32 +315,42 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             intervals: None,
             validation: None,
             envelope: FeatureEnvelope::fit(trained.features),
+            adaptive: None,
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
         let intervals = if self.calibration > 0 {
-            let (truth, estimates) = self.fresh_estimates(
+            let (truth, estimates, features) = self.fresh_estimates(
                 &estimator,
                 &iid,
                 self.calibration,
                 CALIBRATION_SEED,
                 Stage::Calibration,
             )?;
-            Some(ConformalIntervals::calibrate(
-                (&truth - &estimates).view(),
-                self.alpha,
-            )?)
+            let residuals = &truth - &estimates;
+            if residuals.nrows() >= MIN_ADAPTIVE_CALIBRATION {
+                estimator.adaptive = Some(AdaptiveIntervals::calibrate(
+                    features.view(),
+                    residuals.view(),
+                    self.alpha,
+                    self.seed,
+                )?);
+            }
+            Some(ConformalIntervals::calibrate(residuals.view(), self.alpha)?)
         } else {
             None
         };
         estimator.intervals = intervals.clone();
         if self.validation > 0 {
-            let (truth, estimates) = self.fresh_estimates(
+            let (truth, estimates, features) = self.fresh_estimates(
                 &estimator,
                 &iid,
                 self.validation,
                 VALIDATION_SEED,
                 Stage::Validation,
             )?;
+            if let Some(adaptive) = estimator.adaptive.as_mut() {
+                adaptive.validate(features.view(), (&truth - &estimates).view())?;
+            }
             estimator.validation = Some(ValidationReport::new(
                 spec.param_names(),
                 truth.view(),
@@ -421,7 +432,11 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         count: usize,
         offset: u64,
         stage: Stage,
-    ) -> Result<(ndarray::Array2<f64>, ndarray::Array2<f64>)> {
+    ) -> Result<(
+        ndarray::Array2<f64>,
+        ndarray::Array2<f64>,
+        ndarray::Array2<f64>,
+    )> {
         let design = prior.design(count, self.seed ^ offset)?;
         let chart = compress_chart_observed(
             self.simulator,
@@ -432,6 +447,6 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             self.progress,
         )?;
         let estimates = estimator.predict_features(chart.features.view())?;
-        Ok((chart.thetas, estimates))
+        Ok((chart.thetas, estimates, chart.features))
     }
 }

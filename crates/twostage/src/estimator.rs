@@ -8,6 +8,7 @@ use twostage_fit::Predictor;
 use twostage_models::IoData;
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
+use crate::adaptive::AdaptiveIntervals;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
@@ -77,6 +78,8 @@ pub struct Estimator {
     pub(crate) validation: Option<ValidationReport>,
     /// Where the training features lie (format version 2 on).
     pub(crate) envelope: Option<FeatureEnvelope>,
+    /// Intervals whose width follows each record (format version 2 on).
+    pub(crate) adaptive: Option<AdaptiveIntervals>,
 }
 
 /// What a file stores. Each component has checked its own invariants while
@@ -94,6 +97,7 @@ struct EstimatorFields {
     intervals: Option<ConformalIntervals>,
     validation: Option<ValidationReport>,
     envelope: Option<FeatureEnvelope>,
+    adaptive: Option<AdaptiveIntervals>,
 }
 
 /// Format version 1: the same without the feature envelope.
@@ -124,6 +128,7 @@ impl TryFrom<EstimatorFieldsV1> for Estimator {
             intervals: f.intervals,
             validation: f.validation,
             envelope: None,
+            adaptive: None,
         })
     }
 }
@@ -165,6 +170,15 @@ impl TryFrom<EstimatorFields> for Estimator {
                 f.compressor.n_features()
             ));
         }
+        if let Some(adaptive) = &f.adaptive
+            && (adaptive.dim() != q || adaptive.n_features() != f.compressor.n_features())
+        {
+            return bad(format!(
+                "adaptive intervals for {} parameters and {} features",
+                adaptive.dim(),
+                adaptive.n_features()
+            ));
+        }
         if let Some(intervals) = &f.intervals {
             let widths = intervals.half_widths();
             if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
@@ -184,6 +198,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             intervals: f.intervals,
             validation: f.validation,
             envelope: f.envelope,
+            adaptive: f.adaptive,
         })
     }
 }
@@ -193,8 +208,12 @@ impl TryFrom<EstimatorFields> for Estimator {
 pub struct Assessment {
     /// The estimate, clipped to the prior box.
     pub theta: Vec<f64>,
-    /// Conformal interval half-widths per parameter, when calibrated.
+    /// Conformal interval half-widths per parameter, when calibrated: the
+    /// same for every record.
     pub half_widths: Option<Vec<f64>>,
+    /// Adaptive conformal half-widths for this record, when calibrated:
+    /// narrow where the estimator is sure, wide where it is not.
+    pub adaptive_half_widths: Option<Vec<f64>>,
     /// Mahalanobis distance of the record's features from the training
     /// features, when the estimator has an envelope.
     pub feature_distance: Option<f64>,
@@ -316,6 +335,11 @@ impl Estimator {
         Ok(theta)
     }
 
+    /// The adaptive intervals, when calibrated.
+    pub fn adaptive_intervals(&self) -> Option<&AdaptiveIntervals> {
+        self.adaptive.as_ref()
+    }
+
     /// The feature envelope of the training chart, when it has one.
     pub fn envelope(&self) -> Option<&FeatureEnvelope> {
         self.envelope.as_ref()
@@ -345,8 +369,17 @@ impl Estimator {
         let mut work = EstimateWorkspace::new();
         let mut theta = vec![0.0; self.param_names.len()];
         self.estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)?;
+        let adaptive_half_widths = match &self.adaptive {
+            Some(a) => {
+                let mut widths = vec![0.0; theta.len()];
+                a.half_widths_into(&work.features, &mut widths)?;
+                Some(widths)
+            }
+            None => None,
+        };
         Ok(Assessment {
             theta,
+            adaptive_half_widths,
             half_widths: self.intervals.as_ref().map(|c| c.half_widths().to_vec()),
             feature_distance: self.envelope.as_ref().map(|e| e.distance(&work.features)),
             distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),

@@ -44,6 +44,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod adaptive;
 mod auto;
 mod builder;
 mod chart;
@@ -54,6 +55,7 @@ mod estimator;
 mod file;
 mod progress;
 
+pub use adaptive::AdaptiveIntervals;
 pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
 pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
