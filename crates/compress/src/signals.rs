@@ -112,6 +112,28 @@ pub(crate) fn degenerate(column: ArrayView1<'_, f64>, name: &str) -> Option<Stri
              system; use a varying signal"
         ))
     } else {
-        None
+        diverging(column, name)
     }
+}
+
+/// A signal that grows by many orders of magnitude from the start of the
+/// record to its end came from an unstable system (or is corrupted); its
+/// regressors then span nothing but the growing mode.
+fn diverging(column: ArrayView1<'_, f64>, name: &str) -> Option<String> {
+    let n = column.len();
+    let tenth = (n / 10).max(1);
+    let peak = |range: std::ops::Range<usize>| {
+        column
+            .iter()
+            .skip(range.start)
+            .take(range.len())
+            .fold(0.0f64, |m, v| m.max(v.abs()))
+    };
+    let (start, end) = (peak(0..tenth), peak(n.saturating_sub(tenth)..n));
+    (start > 0.0 && end > 1e8 * start).then(|| {
+        format!(
+            "{name} grows from {start:.3e} to {end:.3e} over the record: the system that \
+             produced it is unstable (or the record is corrupted), so no fit describes it"
+        )
+    })
 }

@@ -341,3 +341,16 @@ fn the_fast_path_falls_back_to_qr_for_its_errors_and_hard_cases() {
     let (fast, qr) = fast_and_qr(&arx, column(&smooth).view(), column(&ys).view());
     assert_agree(&fast, &qr, "smooth input");
 }
+
+#[test]
+fn a_diverging_record_is_refused_as_unstable_not_as_poorly_excited() {
+    let n = 400;
+    let u = Array2::from_shape_fn((n, 1), |(k, _)| ((k * 7919) % 13) as f64 / 6.0 - 1.0);
+    let mut y = Array2::<f64>::zeros((n, 1));
+    for t in 2..n {
+        // Poles at 1.6 and 0.5: the output grows like 1.6^t (1e81 at the end).
+        y[[t, 0]] = 2.1 * y[[t - 1, 0]] - 0.8 * y[[t - 2, 0]] + u[[t - 1, 0]];
+    }
+    let e = Arx::new(5, 5).unwrap().compress(u.view(), y.view()).unwrap_err();
+    assert!(e.to_string().contains("unstable"), "{e}");
+}

@@ -327,6 +327,9 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 Stage::Calibration,
             )?;
             let residuals = &truth - &estimates;
+            if let Some(envelope) = estimator.envelope.as_mut() {
+                envelope.recalibrate(features.view());
+            }
             if residuals.nrows() >= MIN_ADAPTIVE_CALIBRATION {
                 estimator.adaptive = Some(AdaptiveIntervals::calibrate(
                     features.view(),

@@ -102,6 +102,25 @@ impl FeatureEnvelope {
         Some(envelope)
     }
 
+    /// Replace the in-sample threshold by the conformal quantile of fresh
+    /// records' distances (the calibration records): a fresh record of the
+    /// model is then flagged with probability at most 0.1%. Without enough
+    /// records for that rank (fewer than 999) the training quantile stays.
+    pub(crate) fn recalibrate(&mut self, features: ArrayView2<'_, f64>) {
+        let n = features.nrows();
+        let rank = ((n as f64 + 1.0) * ENVELOPE_LEVEL).ceil() as usize;
+        if rank > n || features.ncols() != self.mean.len() {
+            return;
+        }
+        let mut distances: Vec<f64> = features
+            .rows()
+            .into_iter()
+            .map(|row| self.distance_of(row.iter().copied()))
+            .collect();
+        distances.sort_by(f64::total_cmp);
+        self.threshold = distances[rank.max(1) - 1];
+    }
+
     /// The Mahalanobis distance of `features` from the training mean.
     pub fn distance(&self, features: &[f64]) -> f64 {
         if features.len() != self.mean.len() {
@@ -199,5 +218,29 @@ mod tests {
     fn a_constant_feature_gives_no_envelope() {
         let x = Array2::from_shape_fn((50, 2), |(i, j)| if j == 0 { i as f64 } else { 3.0 });
         assert!(FeatureEnvelope::fit(x.view()).is_none());
+    }
+
+    #[test]
+    fn fresh_records_set_the_threshold_when_there_are_enough() {
+        let make = |rows: usize, offset: usize| {
+            Array2::from_shape_fn((rows, 2), |(i, j)| {
+                let k = i + offset;
+                ((k * (37 + 16 * j) + 11 * j) % 101) as f64 / 50.0 - 1.0
+            })
+        };
+        let mut e = FeatureEnvelope::fit(make(400, 0).view()).expect("non-singular");
+        let before = e.threshold();
+        e.recalibrate(make(500, 400).view());
+        assert_eq!(e.threshold().to_bits(), before.to_bits(), "500 < 999: kept");
+        let fresh = make(2000, 900);
+        e.recalibrate(fresh.view());
+        // rank ceil(2001 * 0.999) = 1999: the second largest fresh distance.
+        let mut d: Vec<f64> = fresh
+            .rows()
+            .into_iter()
+            .map(|r| e.distance(&[r[0], r[1]]))
+            .collect();
+        d.sort_by(f64::total_cmp);
+        assert_eq!(e.threshold().to_bits(), d[1998].to_bits());
     }
 }
