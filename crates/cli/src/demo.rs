@@ -66,12 +66,31 @@ pub fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
         "A fresh record of N = 1000 samples simulated at theta = {}: estimated theta = {:.4}",
         args.theta, theta[0]
     )?;
-    if let Some(w) = estimator.intervals().map(|c| c.half_widths()[0]) {
-        write!(out, " +- {w:.4} (90% conformal interval)")?;
+    let assessment = estimator.assess(&record)?;
+    match (&assessment.adaptive_half_widths, estimator.intervals()) {
+        (Some(w), _) => write!(out, " +- {:.4} (this record's 90% adaptive interval)", w[0])?,
+        (None, Some(c)) => write!(
+            out,
+            " +- {:.4} (90% conformal interval)",
+            c.half_widths()[0]
+        )?,
+        (None, None) => {}
     }
     writeln!(
         out,
         ",\nin {micros:.1} us per estimate (the paper's Matlab: 10 ms)."
     )?;
+    if let (Some(d), Some(t)) = (assessment.feature_distance, assessment.distance_threshold) {
+        writeln!(
+            out,
+            "Its features lie at Mahalanobis distance {d:.2} from the training features \
+             ({}: out of distribution beyond {t:.2}).",
+            if assessment.out_of_distribution() {
+                "OUT OF DISTRIBUTION"
+            } else {
+                "in distribution"
+            }
+        )?;
+    }
     Ok(())
 }

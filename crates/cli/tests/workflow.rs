@@ -434,3 +434,26 @@ fn learning_curve_rows_and_auto_usage() {
     ]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn the_demo_trains_validates_and_estimates_a_fresh_record() {
+    let out = twostage(&["demo", "--theta", "-0.3"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report = text(&out.stdout);
+    assert!(report.contains("r = 1000 fresh simulations"), "{report}");
+    let estimate: f64 = report
+        .split("estimated theta = ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    assert!((estimate + 0.3).abs() < 0.1, "{estimate}");
+    assert!(report.contains("adaptive interval"), "{report}");
+    assert!(report.contains("(in distribution"), "{report}");
+    let out = twostage(&["demo", "--theta", "1.5"]);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "a theta outside the prior is a usage error"
+    );
+}

@@ -351,6 +351,9 @@ fn a_diverging_record_is_refused_as_unstable_not_as_poorly_excited() {
         // Poles at 1.6 and 0.5: the output grows like 1.6^t (1e81 at the end).
         y[[t, 0]] = 2.1 * y[[t - 1, 0]] - 0.8 * y[[t - 2, 0]] + u[[t - 1, 0]];
     }
-    let e = Arx::new(5, 5).unwrap().compress(u.view(), y.view()).unwrap_err();
+    let e = Arx::new(5, 5)
+        .unwrap()
+        .compress(u.view(), y.view())
+        .unwrap_err();
     assert!(e.to_string().contains("unstable"), "{e}");
 }
