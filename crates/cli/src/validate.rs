@@ -12,6 +12,9 @@ use twostage::{EstimateWorkspace, Estimator};
 
 use crate::usage;
 
+/// Most points drawn in the estimate-versus-truth figure.
+const PLOTTED: usize = 2000;
+
 /// Options of `twostage validate`.
 #[derive(Debug, clap::Args)]
 pub struct ValidateArgs {
@@ -87,9 +90,16 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     )?;
     writeln!(out, "{report}")?;
     if let Some(path) = &args.plot {
+        // Every record counts in the report; the figure shows at most
+        // PLOTTED of them (every k-th), so the SVG stays small to open.
+        let step = r.div_ceil(PLOTTED).max(1);
+        let every = |v: ndarray::ArrayView1<'_, f64>| -> Vec<f64> {
+            v.iter().step_by(step).copied().collect()
+        };
         let columns: Vec<(Vec<f64>, Vec<f64>)> = (0..q)
-            .map(|j| (truth.column(j).to_vec(), estimates.column(j).to_vec()))
+            .map(|j| (every(truth.column(j)), every(estimates.column(j))))
             .collect();
+        let shown = columns.first().map_or(0, |c| c.0.len());
         let panels: Vec<twostage_plot::Panel<'_>> = columns
             .iter()
             .zip(estimator.param_names())
@@ -102,10 +112,17 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
                 range: (estimator.lower()[j], estimator.upper()[j]),
             })
             .collect();
-        let title = format!(
-            "{} estimator on {r} fresh simulations",
-            estimator.training().model
-        );
+        let title = if shown < r {
+            format!(
+                "{} estimator on {r} fresh simulations ({shown} shown)",
+                estimator.training().model
+            )
+        } else {
+            format!(
+                "{} estimator on {r} fresh simulations",
+                estimator.training().model
+            )
+        };
         let svg = twostage_plot::estimates_vs_truth(&title, &panels)?;
         std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
         writeln!(out, "wrote {}", path.display())?;
