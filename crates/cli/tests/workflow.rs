@@ -457,3 +457,63 @@ fn the_demo_trains_validates_and_estimates_a_fresh_record() {
         "a theta outside the prior is a usage error"
     );
 }
+
+#[test]
+fn refinement_moves_estimates_towards_the_bayes_ones() {
+    let dir = scratch("refine");
+    let file = dir.join("lin.tsest");
+    let out = train_linear(&file, "400", "300");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let data = dir.join("data");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        "12",
+        "--seed",
+        "6",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success());
+    let records = data.join("data.csv");
+    let column = |args: &[&str]| -> Vec<f64> {
+        let out = twostage(args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        text(&out.stdout)
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect()
+    };
+    let ts = column(&["estimate", "--estimator", path(&file), path(&records)]);
+    let refined = column(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--refine",
+        path(&records),
+    ]);
+    let bayes = column(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--method",
+        "bayes",
+        path(&records),
+    ]);
+    let distance = |a: &[f64]| {
+        a.iter()
+            .zip(&bayes)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+    };
+    assert_eq!(refined.len(), 12);
+    assert!(
+        distance(&refined) < 0.5 * distance(&ts),
+        "refined {refined:?}\nts {ts:?}\nbayes {bayes:?}"
+    );
+    let out = twostage(&["estimate", "--refine", path(&records)]);
+    assert_eq!(out.status.code(), Some(2), "--refine needs --estimator");
+}
