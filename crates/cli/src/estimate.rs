@@ -30,7 +30,9 @@ pub struct TrainArgs {
     /// (default: the preset's).
     #[arg(long)]
     compress: Option<String>,
-    /// Stage 2: linear, or mlp:H[,H...] hidden sizes (default: the preset's).
+    /// Stage 2: linear, mlp:H[,H...] hidden sizes, or piecewise:K,H (a
+    /// global H-unit network routing to K experts by pieces of the first
+    /// parameter's range) (default: the preset's).
     #[arg(long)]
     fit: Option<String>,
     /// Search compressors and networks by held-out error instead of using
@@ -118,9 +120,20 @@ pub(crate) fn regressor(spec: &str) -> Result<RegressorConfig> {
     if spec == "linear" {
         return Ok(RegressorConfig::Linear(Ridge::default()));
     }
-    let hidden = spec
-        .strip_prefix("mlp:")
-        .ok_or_else(|| usage(format!("--fit '{spec}': use linear or mlp:H[,H...]")))?;
+    if let Some(rest) = spec.strip_prefix("piecewise:") {
+        let counts = parse_counts(rest, "--fit piecewise", 2)?;
+        let mlp = MlpParams::new(&[counts[1]])
+            .and_then(MlpParams::check)
+            .map_err(|e| usage(format!("--fit: {e}")))?;
+        let pieces = twostage::fit::Piecewise::new(mlp.clone(), mlp, counts[0])
+            .map_err(|e| usage(format!("--fit: {e}")))?;
+        return Ok(RegressorConfig::Piecewise(pieces));
+    }
+    let hidden = spec.strip_prefix("mlp:").ok_or_else(|| {
+        usage(format!(
+            "--fit '{spec}': use linear, mlp:H[,H...] or piecewise:PIECES,H"
+        ))
+    })?;
     let sizes: Vec<usize> = hidden
         .split(',')
         .map(|h| h.trim().parse::<usize>())

@@ -29,6 +29,7 @@ mod check;
 mod error;
 mod linear;
 mod mlp;
+mod piecewise;
 mod standardize;
 
 use ndarray::{Array2, ArrayView2};
@@ -39,6 +40,7 @@ pub use mlp::{
     FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, TerminationReason, Trainer, jacobian_at,
     loss_gradient_at, n_parameters,
 };
+pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;
 
 /// A learning method for the map `h: alpha -> theta` (its hyperparameters).

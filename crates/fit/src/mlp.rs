@@ -151,6 +151,11 @@ impl MlpParams {
         self.trainer = trainer;
         self
     }
+    /// The seed set by [`MlpParams::seed`].
+    pub fn seed_value(&self) -> u64 {
+        self.seed
+    }
+
     /// Seed of the initial weights and of the held-out split.
     pub fn seed(mut self, seed: u64) -> Self {
         self.seed = seed;

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use ndarray::{Array2, ArrayView2, Axis};
 use rayon::prelude::*;
 use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace};
-use twostage_fit::MlpParams;
+use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::{IoData, Simulator, run_experiment};
 
 use crate::builder::{TrainedOn, TwoStage};
@@ -185,7 +185,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     }
 
     /// Replace the networks: `first` for round 1, `others` for round 2
-    /// (default: MLP [20]; then [10], [40], [20, 20]).
+    /// (default: MLP [20]; then [10], [40], [20, 20], and 4 pieces of [20]).
     pub fn networks(mut self, first: RegressorConfig, others: Vec<RegressorConfig>) -> Self {
         self.networks = Some((first, others));
         self
@@ -257,7 +257,12 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             Some(pair) => pair,
             None => (
                 network(&[20])?,
-                vec![network(&[10])?, network(&[40])?, network(&[20, 20])?],
+                vec![
+                    network(&[10])?,
+                    network(&[40])?,
+                    network(&[20, 20])?,
+                    pieces(4, &[20])?,
+                ],
             ),
         };
         let compressors = self.compressors.clone().unwrap_or_else(|| {
@@ -450,8 +455,22 @@ fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
             sizes.push(q);
             twostage_fit::n_parameters(&sizes) as f64
         }
+        // The global network on every row, then experts that together see
+        // the rows about 1.5 times (their margins overlap).
+        RegressorConfig::Piecewise(p) => {
+            2.5 * network_size(&RegressorConfig::Mlp(p.global().clone()), n, q)
+        }
         _ => (n * q + q) as f64,
     }
+}
+
+fn pieces(count: usize, hidden: &[usize]) -> Result<RegressorConfig> {
+    let mlp = MlpParams::new(hidden)?.check()?;
+    Ok(RegressorConfig::Piecewise(Piecewise::new(
+        mlp.clone(),
+        mlp,
+        count,
+    )?))
 }
 
 fn network(hidden: &[usize]) -> Result<RegressorConfig> {

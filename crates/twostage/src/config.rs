@@ -3,7 +3,9 @@
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace};
-use twostage_fit::{FittedLinear, FittedMlp, Mlp, Predictor, Regressor, Ridge};
+use twostage_fit::{
+    FittedLinear, FittedMlp, FittedPiecewise, Mlp, Piecewise, Predictor, Regressor, Ridge,
+};
 
 /// The compression map g of stage 1.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -100,6 +102,9 @@ pub enum RegressorConfig {
     Linear(Ridge),
     /// A tanh network trained by Levenberg-Marquardt.
     Mlp(Mlp),
+    /// A global network routing each record to a specialist network of its
+    /// piece of the first parameter's range.
+    Piecewise(Piecewise),
 }
 
 impl std::fmt::Display for RegressorConfig {
@@ -107,6 +112,12 @@ impl std::fmt::Display for RegressorConfig {
         match self {
             Self::Linear(r) => write!(f, "linear (ridge lambda {:e})", r.lambda()),
             Self::Mlp(m) => write!(f, "MLP {:?} tanh, Levenberg-Marquardt", m.params().hidden()),
+            Self::Piecewise(p) => write!(
+                f,
+                "{} x MLP {:?} by pieces",
+                p.pieces(),
+                p.global().params().hidden()
+            ),
         }
     }
 }
@@ -124,6 +135,7 @@ impl RegressorConfig {
         Ok(match self {
             Self::Linear(r) => FittedRegressor::Linear(r.fit(x, y)?),
             Self::Mlp(m) => FittedRegressor::Mlp(m.with_seed(seed).fit(x, y)?),
+            Self::Piecewise(p) => FittedRegressor::Piecewise(p.with_seed(seed).fit(x, y)?),
         })
     }
 }
@@ -136,6 +148,8 @@ pub enum FittedRegressor {
     Linear(FittedLinear),
     /// A network.
     Mlp(FittedMlp),
+    /// Networks by pieces.
+    Piecewise(FittedPiecewise),
 }
 
 impl Predictor for FittedRegressor {
@@ -143,6 +157,7 @@ impl Predictor for FittedRegressor {
         match self {
             Self::Linear(m) => m.n_inputs(),
             Self::Mlp(m) => m.n_inputs(),
+            Self::Piecewise(m) => m.n_inputs(),
         }
     }
 
@@ -150,6 +165,7 @@ impl Predictor for FittedRegressor {
         match self {
             Self::Linear(m) => m.n_outputs(),
             Self::Mlp(m) => m.n_outputs(),
+            Self::Piecewise(m) => m.n_outputs(),
         }
     }
 
@@ -157,6 +173,7 @@ impl Predictor for FittedRegressor {
         match self {
             Self::Linear(m) => m.predict_into(x, out),
             Self::Mlp(m) => m.predict_into(x, out),
+            Self::Piecewise(m) => m.predict_into(x, out),
         }
     }
 }

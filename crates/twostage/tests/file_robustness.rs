@@ -46,8 +46,8 @@ fn model() -> Benchmark {
     Benchmark::builder().n_samples(120).build().unwrap()
 }
 
-/// Four small estimators covering every stored component: linear and MLP
-/// stage 2, ARX, NARX and PCA stage 1, intervals and a validation report.
+/// Five small estimators covering every stored component: linear, MLP and
+/// piecewise stage 2, ARX, NARX and PCA stage 1, intervals and a validation report.
 fn files() -> &'static [Vec<u8>] {
     static FILES: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
     FILES.get_or_init(|| {
@@ -59,11 +59,20 @@ fn files() -> &'static [Vec<u8>] {
                 .check()
                 .unwrap(),
         );
-        let configs: [(CompressorConfig, Option<RegressorConfig>); 4] = [
+        let small = MlpParams::new(&[2])
+            .unwrap()
+            .max_iterations(5)
+            .check()
+            .unwrap();
+        let pieces = RegressorConfig::Piecewise(
+            twostage::fit::Piecewise::new(small.clone(), small, 2).unwrap(),
+        );
+        let configs: [(CompressorConfig, Option<RegressorConfig>); 5] = [
             (Arx::new(2, 2).unwrap().into(), None),
             (Arx::new(2, 1).unwrap().into(), Some(mlp.clone())),
             (Narx::new(1, 1, 2).unwrap().into(), Some(mlp)),
             (OutputPca::new(3).unwrap().into(), None),
+            (Arx::new(1, 1).unwrap().into(), Some(pieces)),
         ];
         configs
             .into_iter()
@@ -170,7 +179,7 @@ proptest! {
 
     #[test]
     fn resealed_mutations_of_real_files_never_panic(
-        which in 0usize..4,
+        which in 0usize..5,
         edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
         cut in proptest::option::of(any::<prop::sample::Index>()),
     ) {
@@ -189,7 +198,7 @@ proptest! {
     }
 
     #[test]
-    fn unsealed_corruption_is_always_caught(which in 0usize..4, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
+    fn unsealed_corruption_is_always_caught(which in 0usize..5, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
         let mut file = files()[which].clone();
         let i = at.index(file.len());
         file[i] ^= flip;

@@ -1,0 +1,276 @@
+//! Piecewise networks: a global network routes each record to a specialist
+//! trained only on its part of the parameter range.
+
+use ndarray::{ArrayView2, Axis};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{FitError, Result};
+use crate::mlp::{FittedMlp, Mlp};
+use crate::{Predictor, Regressor};
+
+/// A global network, then one expert per piece of the first parameter's
+/// range.
+///
+/// When the map from features to parameters oscillates (the benchmark's
+/// sin(50 theta^2)), one small network cannot follow it everywhere; a
+/// coarse global estimate is accurate enough to say which piece of the
+/// range a record belongs to, and a specialist trained only on that piece
+/// (widened by a margin on both sides, so records near a boundary that the
+/// global estimate puts in the wrong piece are still inside its expert's
+/// training range) does better there.
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `pieces` | none | 2..=16 |
+/// | `margin` | 0.25 | 0..=1, fraction of a piece's width added on each side |
+///
+/// ```
+/// use ndarray::Array2;
+/// use twostage_fit::{MlpParams, Piecewise, Predictor, Regressor};
+///
+/// // Features that wind around the parameter: x = (t + 0.3 sin 8t, cos 3t).
+/// let t = Array2::from_shape_fn((1200, 1), |(i, _)| i as f64 / 600.0 - 1.0);
+/// let x = Array2::from_shape_fn((1200, 2), |(i, j)| {
+///     let t = t[[i, 0]];
+///     if j == 0 { t + 0.3 * (8.0 * t).sin() } else { (3.0 * t).cos() }
+/// });
+/// let net = MlpParams::new(&[3])?.seed(2).check()?;
+/// let piecewise = Piecewise::new(net.clone(), net.clone(), 4)?.fit(x.view(), t.view())?;
+/// let single = net.fit(x.view(), t.view())?;
+/// let error = |p: &dyn Predictor| -> f64 {
+///     let e = p.predict(x.view()).unwrap() - &t;
+///     e.mapv(|v| v * v).mean().unwrap().sqrt()
+/// };
+/// // Four 3-unit experts follow the winding where one 3-unit network cannot.
+/// assert!(error(&piecewise) < 0.2 * error(&single));
+/// # Ok::<(), twostage_fit::FitError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Piecewise {
+    global: Mlp,
+    expert: Mlp,
+    pieces: usize,
+    margin: f64,
+}
+
+impl Piecewise {
+    /// `pieces` experts like `expert`, routed by `global`.
+    ///
+    /// # Errors
+    /// [`FitError::InvalidSetting`] for pieces outside 2..=16.
+    pub fn new(global: Mlp, expert: Mlp, pieces: usize) -> Result<Self> {
+        if !(2..=16).contains(&pieces) {
+            return Err(FitError::InvalidSetting {
+                name: "pieces",
+                value: pieces.to_string(),
+                reason: "must lie in 2..=16".into(),
+            });
+        }
+        Ok(Self {
+            global,
+            expert,
+            pieces,
+            margin: 0.25,
+        })
+    }
+
+    /// The margin added on each side of a piece, as a fraction of its width.
+    ///
+    /// # Errors
+    /// [`FitError::InvalidSetting`] outside [0, 1].
+    pub fn margin(mut self, margin: f64) -> Result<Self> {
+        if !(0.0..=1.0).contains(&margin) {
+            return Err(FitError::InvalidSetting {
+                name: "margin",
+                value: margin.to_string(),
+                reason: "must lie in [0, 1]".into(),
+            });
+        }
+        self.margin = margin;
+        Ok(self)
+    }
+
+    /// Number of pieces.
+    pub fn pieces(&self) -> usize {
+        self.pieces
+    }
+
+    /// The global network.
+    pub fn global(&self) -> &Mlp {
+        &self.global
+    }
+
+    /// The same regressor with every network reseeded from `seed`.
+    pub fn with_seed(&self, seed: u64) -> Self {
+        Self {
+            global: self.global.with_seed(seed),
+            expert: self.expert.with_seed(seed),
+            ..self.clone()
+        }
+    }
+}
+
+/// A fitted [`Piecewise`] regressor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "FittedPiecewiseFields")]
+pub struct FittedPiecewise {
+    global: FittedMlp,
+    experts: Vec<FittedMlp>,
+    /// Lower end of the first piece and the pieces' width, in units of the
+    /// first parameter.
+    start: f64,
+    width: f64,
+}
+
+#[derive(Deserialize)]
+struct FittedPiecewiseFields {
+    global: FittedMlp,
+    experts: Vec<FittedMlp>,
+    start: f64,
+    width: f64,
+}
+
+impl TryFrom<FittedPiecewiseFields> for FittedPiecewise {
+    type Error = FitError;
+    fn try_from(f: FittedPiecewiseFields) -> Result<Self> {
+        let (n, q) = (f.global.n_inputs(), f.global.n_outputs());
+        if f.experts.is_empty()
+            || f.experts.len() > 16
+            || f.experts
+                .iter()
+                .any(|e| e.n_inputs() != n || e.n_outputs() != q)
+            || !(f.start.is_finite() && f.width.is_finite() && f.width > 0.0)
+        {
+            return Err(FitError::ShapeMismatch(format!(
+                "stored piecewise networks: {} experts for a global network of {n} inputs and \
+                 {q} outputs, pieces from {} of width {}",
+                f.experts.len(),
+                f.start,
+                f.width
+            )));
+        }
+        Ok(Self {
+            global: f.global,
+            experts: f.experts,
+            start: f.start,
+            width: f.width,
+        })
+    }
+}
+
+impl FittedPiecewise {
+    /// The global network.
+    pub fn global(&self) -> &FittedMlp {
+        &self.global
+    }
+    /// The experts, piece by piece.
+    pub fn experts(&self) -> &[FittedMlp] {
+        &self.experts
+    }
+}
+
+impl Regressor for Piecewise {
+    type Model = FittedPiecewise;
+
+    fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedPiecewise> {
+        let global = self.global.fit(x, y)?;
+        let first = y.column(0);
+        let (lo, hi) = first
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let width = (hi - lo) / self.pieces as f64;
+        if !(width.is_finite() && width > 0.0) {
+            return Err(FitError::InvalidSetting {
+                name: "pieces",
+                value: self.pieces.to_string(),
+                reason: "the first target does not vary: there is nothing to split".into(),
+            });
+        }
+        let margin = self.margin * width;
+        let mut experts = Vec::with_capacity(self.pieces);
+        for piece in 0..self.pieces {
+            let from = lo + piece as f64 * width - margin;
+            let to = lo + (piece + 1) as f64 * width + margin;
+            let rows: Vec<usize> = first
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| (from..=to).contains(*v))
+                .map(|(i, _)| i)
+                .collect();
+            let expert = self.expert.with_seed(
+                self.expert
+                    .params()
+                    .seed_value()
+                    .wrapping_add(piece as u64 + 1),
+            );
+            experts.push(expert.fit(
+                x.select(Axis(0), &rows).view(),
+                y.select(Axis(0), &rows).view(),
+            )?);
+        }
+        Ok(FittedPiecewise {
+            global,
+            experts,
+            start: lo,
+            width,
+        })
+    }
+}
+
+impl Predictor for FittedPiecewise {
+    fn n_inputs(&self) -> usize {
+        self.global.n_inputs()
+    }
+
+    fn n_outputs(&self) -> usize {
+        self.global.n_outputs()
+    }
+
+    fn predict_into(&self, x: &[f64], out: &mut [f64]) -> Result<()> {
+        self.global.predict_into(x, out)?;
+        let position = (out[0] - self.start) / self.width;
+        // NaN and out-of-range positions go to the nearest piece.
+        let piece = if position.is_nan() {
+            0
+        } else {
+            (position.max(0.0) as usize).min(self.experts.len() - 1)
+        };
+        self.experts[piece].predict_into(x, out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::MlpParams;
+    use ndarray::Array2;
+
+    #[test]
+    fn each_record_gets_the_expert_of_its_global_estimate() {
+        let t = Array2::from_shape_fn((600, 1), |(i, _)| i as f64 / 300.0 - 1.0);
+        let x = t.mapv(|v| v + 0.2 * (5.0 * v).sin());
+        let net = MlpParams::new(&[4]).unwrap().seed(1).check().unwrap();
+        let fitted = Piecewise::new(net.clone(), net, 3)
+            .unwrap()
+            .fit(x.view(), t.view())
+            .unwrap();
+        // Three pieces over the training targets' range [-1, 599/300 - 1].
+        let width = (599.0 / 300.0) / 3.0;
+        assert!((fitted.start + 1.0).abs() < 1e-12 && (fitted.width - width).abs() < 1e-12);
+        for probe in [-1.5, -0.9, -0.2, 0.4, 0.99, 2.0] {
+            let mut global = [0.0];
+            fitted.global.predict_into(&[probe], &mut global).unwrap();
+            let piece = ((global[0] + 1.0) / width).floor().clamp(0.0, 2.0) as usize;
+            let (mut expected, mut got) = ([0.0], [0.0]);
+            fitted.experts[piece]
+                .predict_into(&[probe], &mut expected)
+                .unwrap();
+            fitted.predict_into(&[probe], &mut got).unwrap();
+            assert_eq!(got[0].to_bits(), expected[0].to_bits(), "x = {probe}");
+        }
+        let small = MlpParams::new(&[2]).unwrap().check().unwrap();
+        assert!(Piecewise::new(small.clone(), small, 1).is_err());
+    }
+}
