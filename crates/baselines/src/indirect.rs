@@ -18,6 +18,7 @@
 
 use rayon::prelude::*;
 use twostage_compress::{Compressor, Workspace};
+use twostage_fit::{CovarianceFactor, forward_substitute};
 use twostage_models::{IoData, Prior, Simulator, experiment_rng};
 
 use crate::error::{BaselineError, Result};
@@ -114,31 +115,16 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
             self.compressor
                 .compress_into(record.inputs(), record.outputs(), &mut work, alpha)?;
         }
-        let mut mean = vec![0.0; n];
-        for alpha in features.chunks_exact(n) {
-            for (m, a) in mean.iter_mut().zip(alpha) {
-                *m += a / count as f64;
-            }
-        }
-        let mut cov = vec![0.0; n * n];
-        for alpha in features.chunks_exact(n) {
-            for a in 0..n {
-                for b in 0..=a {
-                    cov[a * n + b] += (alpha[a] - mean[a]) * (alpha[b] - mean[b]);
-                }
-            }
-        }
-        for v in &mut cov {
-            *v /= (count - 1) as f64;
-        }
-        cholesky_lower(&mut cov, n).ok_or_else(|| {
+        let rows = ndarray::ArrayView2::from_shape((count, n), &features)
+            .unwrap_or_else(|_| unreachable!("count rows of n features"));
+        let covariance = CovarianceFactor::of_rows(rows).ok_or_else(|| {
             BaselineError::InvalidSetting(
                 "the features' covariance at the prior's centre is singular \
                  (a feature does not vary): use Weighting::Identity"
                     .into(),
             )
         })?;
-        Ok(cov)
+        Ok(covariance.factor)
     }
 
     /// The Cholesky factor L of the features' covariance C = L L'
@@ -204,29 +190,6 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
     }
 }
 
-/// In-place Cholesky of the symmetric matrix whose lower triangle is in
-/// `a` (row-major n x n): afterwards the lower triangle holds L, with
-/// `A = L L'`. `None` when a pivot is not clearly positive.
-fn cholesky_lower(a: &mut [f64], n: usize) -> Option<()> {
-    let largest = (0..n).map(|j| a[j * n + j]).fold(0.0f64, f64::max);
-    for j in 0..n {
-        let d = a[j * n + j] - (0..j).map(|k| a[j * n + k].powi(2)).sum::<f64>();
-        if d.is_nan() || d <= 1e-12 * largest {
-            return None;
-        }
-        let root = d.sqrt();
-        a[j * n + j] = root;
-        for i in j + 1..n {
-            let dot: f64 = (0..j).map(|k| a[i * n + k] * a[j * n + k]).sum();
-            a[i * n + j] = (a[i * n + j] - dot) / root;
-        }
-        for k in j + 1..n {
-            a[j * n + k] = 0.0;
-        }
-    }
-    Some(())
-}
-
 impl<S: Simulator, C: Compressor + Send + Sync> ResidualModel for IndirectObjective<S, C> {
     fn prior(&self) -> &Prior {
         self.simulator.prior()
@@ -259,11 +222,7 @@ impl<S: Simulator, C: Compressor + Send + Sync> ResidualModel for IndirectObject
             *r -= d;
         }
         if let Some(l) = &self.factor {
-            // Forward substitution: solve L z = r in place.
-            for i in 0..n {
-                let dot: f64 = (0..i).map(|k| l[i * n + k] * residuals[k]).sum();
-                residuals[i] = (residuals[i] - dot) / l[i * n + i];
-            }
+            forward_substitute(l, n, residuals);
         }
         Ok(())
     }

@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 mod check;
+mod covariance;
 mod error;
 mod linear;
 mod mlp;
@@ -34,6 +35,7 @@ mod standardize;
 
 use ndarray::{Array2, ArrayView2};
 
+pub use covariance::{CovarianceFactor, cholesky_in_place, forward_substitute};
 pub use error::{FitError, Result};
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{

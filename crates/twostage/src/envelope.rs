@@ -3,6 +3,7 @@
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
+use twostage_fit::{CovarianceFactor, forward_substitute};
 
 /// The share of training features inside the envelope.
 pub const ENVELOPE_LEVEL: f64 = 0.999;
@@ -63,27 +64,10 @@ impl FeatureEnvelope {
     /// singular and the distance undefined).
     pub(crate) fn fit(features: ArrayView2<'_, f64>) -> Option<Self> {
         let (m, n) = features.dim();
-        if m <= n + 1 || n == 0 {
+        if m <= n + 1 {
             return None;
         }
-        let mean: Vec<f64> = features
-            .columns()
-            .into_iter()
-            .map(|c| c.sum() / m as f64)
-            .collect();
-        let mut factor = vec![0.0; n * n];
-        for row in features.rows() {
-            for a in 0..n {
-                let da = row[a] - mean[a];
-                for b in 0..=a {
-                    factor[a * n + b] += da * (row[b] - mean[b]);
-                }
-            }
-        }
-        for v in &mut factor {
-            *v /= (m - 1) as f64;
-        }
-        cholesky_lower(&mut factor, n)?;
+        let CovarianceFactor { mean, factor } = CovarianceFactor::of_rows(features)?;
         let mut envelope = Self {
             mean,
             factor,
@@ -130,14 +114,10 @@ impl FeatureEnvelope {
     }
 
     fn distance_of(&self, features: impl Iterator<Item = f64>) -> f64 {
-        let n = self.mean.len();
-        // Forward substitution L z = x - mean; the distance is |z|. Sized
-        // once per call: the CLI and batch paths call this, not the hot path.
-        let mut z = vec![0.0; n];
-        for (i, x) in features.enumerate().take(n) {
-            let dot: f64 = (0..i).map(|k| self.factor[i * n + k] * z[k]).sum();
-            z[i] = (x - self.mean[i] - dot) / self.factor[i * n + i];
-        }
+        // |L^-1 (x - mean)|. Allocated per call: the CLI and batch paths
+        // call this, not the estimate hot path.
+        let mut z: Vec<f64> = features.zip(&self.mean).map(|(x, m)| x - m).collect();
+        forward_substitute(&self.factor, self.mean.len(), &mut z);
         z.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
 
@@ -150,28 +130,6 @@ impl FeatureEnvelope {
     pub fn threshold(&self) -> f64 {
         self.threshold
     }
-}
-
-/// In-place Cholesky of the symmetric matrix whose lower triangle is in `a`
-/// (row-major n x n); `None` when a pivot is not clearly positive.
-fn cholesky_lower(a: &mut [f64], n: usize) -> Option<()> {
-    let largest = (0..n).map(|j| a[j * n + j]).fold(0.0f64, f64::max);
-    for j in 0..n {
-        let d = a[j * n + j] - (0..j).map(|k| a[j * n + k].powi(2)).sum::<f64>();
-        if d.is_nan() || d <= 1e-13 * largest {
-            return None;
-        }
-        let root = d.sqrt();
-        a[j * n + j] = root;
-        for i in j + 1..n {
-            let dot: f64 = (0..j).map(|k| a[i * n + k] * a[j * n + k]).sum();
-            a[i * n + j] = (a[i * n + j] - dot) / root;
-        }
-        for k in j + 1..n {
-            a[j * n + k] = 0.0;
-        }
-    }
-    Some(())
 }
 
 #[cfg(test)]
