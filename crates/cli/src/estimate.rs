@@ -446,9 +446,8 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     theta,
                     // The adaptive intervals have the same level and follow
-                    // the record; the fixed ones are the fallback. (After a
-                    // refinement they are conservative: it moves towards
-                    // the Bayes estimate, whose errors are smaller.)
+                    // the record; the fixed ones are the fallback. Both were
+                    // calibrated for the TS estimate, not a refined one.
                     widths: a.adaptive_half_widths.or(a.half_widths),
                 })
             }),
