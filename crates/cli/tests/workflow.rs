@@ -28,6 +28,26 @@ fn path(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `count` benchmark experiments of seed `seed` written under `dir/data`;
+/// returns the directory (data.csv and truth.csv).
+fn simulate_records(dir: &std::path::Path, count: usize, seed: u64) -> PathBuf {
+    let data = dir.join("data");
+    let (count, seed) = (count.to_string(), seed.to_string());
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        &count,
+        "--seed",
+        &seed,
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    data
+}
+
 /// A quick, quiet benchmark estimator with a linear stage 2, written to `file`.
 fn train_linear(file: &std::path::Path, sims: &str, calibrate: &str) -> Output {
     twostage(&[
@@ -87,19 +107,7 @@ fn train_inspect_and_estimate_recorded_experiments() {
         assert!(report.contains(needle), "missing {needle:?} in\n{report}");
     }
 
-    let data = dir.join("data");
-    let out = twostage(&[
-        "simulate",
-        "--model",
-        "benchmark",
-        "--count",
-        "40",
-        "--seed",
-        "8",
-        "--out-dir",
-        path(&data),
-    ]);
-    assert!(out.status.success());
+    let data = simulate_records(&dir, 40, 8);
     let out = twostage(&[
         "estimate",
         "--estimator",
@@ -280,22 +288,7 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
     assert!(report.contains("covers"), "{report}");
     assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
 
-    let data = dir.join("data");
-    assert!(
-        twostage(&[
-            "simulate",
-            "--model",
-            "benchmark",
-            "--count",
-            "3",
-            "--seed",
-            "4",
-            "--out-dir",
-            path(&data)
-        ])
-        .status
-        .success()
-    );
+    let data = simulate_records(&dir, 3, 4);
     let records = path(&data.join("data.csv")).to_string();
     let out = twostage(&[
         "estimate",
@@ -464,19 +457,7 @@ fn refinement_moves_estimates_towards_the_bayes_ones() {
     let file = dir.join("lin.tsest");
     let out = train_linear(&file, "400", "300");
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let data = dir.join("data");
-    let out = twostage(&[
-        "simulate",
-        "--model",
-        "benchmark",
-        "--count",
-        "12",
-        "--seed",
-        "6",
-        "--out-dir",
-        path(&data),
-    ]);
-    assert!(out.status.success());
+    let data = simulate_records(&dir, 12, 6);
     let records = data.join("data.csv");
     let column = |args: &[&str]| -> Vec<f64> {
         let out = twostage(args);
