@@ -7,13 +7,15 @@ use std::path::PathBuf;
 
 use twostage_models::{InputSignal, PacejkaCar, Simulator, Tire, Vehicle, experiment_rng};
 
-/// `../shared/spec/pacejka-golden.csv`, beside this repository, or the file
-/// named by `TWOSTAGE_PACEJKA_GOLDEN`.
+/// `tests/data/pacejka-golden.csv`: the reference values of
+/// `spec/pacejka-car.md`, copied into the repository so that a fresh clone
+/// tests on its own; `TWOSTAGE_PACEJKA_GOLDEN` names another file (a newer
+/// spec's, say).
 fn golden_path() -> PathBuf {
     if let Some(path) = std::env::var_os("TWOSTAGE_PACEJKA_GOLDEN") {
         return PathBuf::from(path);
     }
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/spec/pacejka-golden.csv")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/pacejka-golden.csv")
 }
 
 fn simulate(car: &PacejkaCar, theta: &[f64]) -> (Vec<f64>, Vec<f64>) {
@@ -32,8 +34,8 @@ fn reproduces_every_golden_row() {
     let path = golden_path();
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
         panic!(
-            "the golden file {} is missing ({e}): check out shared/ beside this \
-             repository, or point TWOSTAGE_PACEJKA_GOLDEN at pacejka-golden.csv",
+            "the golden file {} cannot be read ({e}): restore it from git, or \
+             point TWOSTAGE_PACEJKA_GOLDEN at a pacejka-golden.csv",
             path.display()
         )
     });

@@ -185,7 +185,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     }
 
     /// Replace the networks: `first` for round 1, `others` for round 2
-    /// (default: MLP [20]; then [10], [40], [20, 20], and 4 pieces of [20]).
+    /// (default: MLP `[20]`; then `[10]`, `[40]`, `[20, 20]`, and 4 pieces of `[20]`).
     pub fn networks(mut self, first: RegressorConfig, others: Vec<RegressorConfig>) -> Self {
         self.networks = Some((first, others));
         self
