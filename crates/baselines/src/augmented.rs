@@ -10,6 +10,7 @@
 // 3 x 3 matrix algebra reads best with indices.
 #![allow(clippy::needless_range_loop)]
 
+use twostage_kernels::cholesky::{PivotRule, cholesky_in_place};
 use twostage_models::{MEASUREMENT_NOISE_VARIANCE, PROCESS_NOISE_VARIANCE};
 
 /// Variance of the random walk of theta in the augmented state.
@@ -126,22 +127,9 @@ pub(crate) fn symmetrize(a: &mut M3) {
 /// pivots (a state known exactly) give zero columns. `None` if a pivot is
 /// negative beyond rounding.
 pub(crate) fn cholesky(a: &M3) -> Option<M3> {
-    let mut l = [[0.0; 3]; 3];
-    let scale = (0..3)
-        .map(|i| a[i][i].abs())
-        .fold(0.0f64, f64::max)
-        .max(f64::MIN_POSITIVE);
-    for j in 0..3 {
-        let d = a[j][j] - (0..j).map(|k| l[j][k] * l[j][k]).sum::<f64>();
-        if d < -1e-12 * scale || d.is_nan() {
-            return None;
-        }
-        let d = d.max(0.0).sqrt();
-        l[j][j] = d;
-        for i in j + 1..3 {
-            let s = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            l[i][j] = if d > 0.0 { s / d } else { 0.0 };
-        }
-    }
-    Some(l)
+    let mut flat: [f64; 9] = std::array::from_fn(|k| a[k / 3][k % 3]);
+    cholesky_in_place(&mut flat, 3, PivotRule::SemiDefinite(1e-12)).ok()?;
+    Some(std::array::from_fn(|i| {
+        std::array::from_fn(|j| flat[i * 3 + j])
+    }))
 }

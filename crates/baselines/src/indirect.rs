@@ -18,7 +18,8 @@
 
 use rayon::prelude::*;
 use twostage_compress::{Compressor, Workspace};
-use twostage_fit::{CovarianceFactor, forward_substitute};
+use twostage_fit::CovarianceFactor;
+use twostage_kernels::cholesky::solve_lower_in_place;
 use twostage_models::{IoData, Prior, Simulator, experiment_rng};
 
 use crate::error::{BaselineError, Result};
@@ -222,7 +223,7 @@ impl<S: Simulator, C: Compressor + Send + Sync> ResidualModel for IndirectObject
             *r -= d;
         }
         if let Some(l) = &self.factor {
-            forward_substitute(l, n, residuals);
+            solve_lower_in_place(l, n, residuals);
         }
         Ok(())
     }

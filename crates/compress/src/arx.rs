@@ -5,9 +5,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::Compressor;
 use crate::error::{CompressError, Result};
-use crate::fast::{Column, contiguous_column, lagged_least_squares};
+use crate::fast::{contiguous_column, lagged_least_squares};
 use crate::signals::{check_record, copy_window, degenerate, name};
 use crate::workspace::{RANK_TOLERANCE, Workspace};
+use twostage_kernels::lagged::LaggedColumn;
 
 /// An ARX(na, nb) structure with input delay `delay`, fitted per output by
 /// least squares (MISO for each output, so MIMO records work):
@@ -293,9 +294,9 @@ impl Arx {
         }
         work.columns.clear();
         work.columns
-            .extend((1..=self.na).map(|lag| Column { signal: 0, lag }));
+            .extend((1..=self.na).map(|lag| LaggedColumn { signal: 0, lag }));
         for j in 0..self.n_inputs {
-            work.columns.extend((0..self.nb).map(|l| Column {
+            work.columns.extend((0..self.nb).map(|l| LaggedColumn {
                 signal: 1 + j,
                 lag: self.delay + l,
             }));

@@ -1,7 +1,9 @@
 //! The estimate-time fast path of ARX: the normal-equation entries of
 //! eq. (2) are lagged correlations of the signals, so they cost one dot
 //! product per distinct (signal pair, lag difference) instead of N x n^2
-//! products, and the n x n system is solved by Cholesky.
+//! products, and the n x n system is solved by Cholesky. The arithmetic is
+//! the kernels crate's (`twostage_kernels::lagged`); this module adds the
+//! SIMD dot product and the scratch space.
 //!
 //! Normal equations square the condition number, so the fast path only
 //! answers when the Cholesky pivots show a well-conditioned problem
@@ -10,6 +12,7 @@
 //! the exact answer or the precise error. Tests check agreement with QR to 1e-9.
 
 use ndarray::ArrayView2;
+use twostage_kernels::lagged::{LaggedBuffers, LaggedColumn, lagged_least_squares as solve};
 
 /// Smallest accepted `L_jj / sqrt(G_jj)` (the sine of the angle between a
 /// regressor and the span of the previous ones): at 1e-3 the Gram matrix
@@ -21,18 +24,8 @@ pub(crate) const FAST_PIVOT_TOLERANCE: f64 = 1e-3;
 #[derive(Debug, Default, Clone)]
 pub(crate) struct FastScratch {
     gram: Vec<f64>,
-    rhs: Vec<f64>,
-    /// Full-length correlations `sum_tau a(tau + d) b(tau)`, memoized per
-    /// (signal a, signal b, lag d); NaN marks "not computed yet".
+    /// Full-length correlations, memoized per (signal a, signal b, lag d).
     table: Vec<f64>,
-}
-
-/// One regressor column: which signal (0 = the output being fitted, then
-/// the inputs) at which lag.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Column {
-    pub(crate) signal: usize,
-    pub(crate) lag: usize,
 }
 
 /// Dot product of two equally long slices, with the widest SIMD the
@@ -74,100 +67,37 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// Solve the least-squares problem whose regressors are `columns` of
 /// `signals` over samples `start..N` and whose target is `signals[0]`,
-/// writing the coefficients into `alpha`. Returns false (and leaves
+/// writing the coefficients into `alpha`, by the kernels' lagged normal
+/// equations with this crate's SIMD dot product. Returns false (and leaves
 /// `alpha` unspecified) when the fast path cannot vouch for the answer.
 pub(crate) fn lagged_least_squares(
     signals: &[&[f64]],
-    columns: &[Column],
+    columns: &[LaggedColumn],
     start: usize,
     max_lag: usize,
     scratch: &mut FastScratch,
     alpha: &mut [f64],
 ) -> bool {
     let n = columns.len();
-    let len = signals[0].len();
-    let n_signals = signals.len();
-    let lags = max_lag + 1;
-    if len < lags || signals.iter().any(|s| s.len() != len) {
-        return false;
-    }
-    scratch.table.clear();
-    scratch.table.resize(n_signals * n_signals * lags, f64::NAN);
+    scratch
+        .table
+        .resize(signals.len() * signals.len() * (max_lag + 1), 0.0);
     scratch.gram.resize(n * n, 0.0);
-    scratch.rhs.resize(n, 0.0);
-    // sum_{t = start}^{N-1} a(t - la) b(t - lb), for la <= lb, from the
-    // full-length correlation at lag d = lb - la (computed once per signal
-    // pair and lag) minus the few terms outside the window.
-    let windowed = |a: Column, b: Column, table: &mut [f64]| -> f64 {
-        let (a, b) = if a.lag <= b.lag { (a, b) } else { (b, a) };
-        let d = b.lag - a.lag;
-        let (sa, sb) = (signals[a.signal], signals[b.signal]);
-        let slot = (a.signal * n_signals + b.signal) * lags + d;
-        if table[slot].is_nan() {
-            table[slot] = dot(&sa[d..], &sb[..len - d]);
-        }
-        // Terms tau = t - lb outside [start - lb, N - 1 - lb].
-        let head = dot(&sa[d..d + start - b.lag], &sb[..start - b.lag]);
-        let tail = dot(&sa[len - b.lag + d..len], &sb[len - b.lag..len - d]);
-        table[slot] - head - tail
+    let buffers = LaggedBuffers {
+        table: &mut scratch.table,
+        gram: &mut scratch.gram,
+        solution: alpha,
     };
-    let target = Column { signal: 0, lag: 0 };
-    for i in 0..n {
-        for j in 0..=i {
-            let g = windowed(columns[i], columns[j], &mut scratch.table);
-            scratch.gram[i * n + j] = g;
-            scratch.gram[j * n + i] = g;
-        }
-        scratch.rhs[i] = windowed(columns[i], target, &mut scratch.table);
-    }
-    if !scratch
-        .gram
-        .iter()
-        .chain(&scratch.rhs)
-        .all(|v| v.is_finite())
-    {
-        return false;
-    }
-    // Cholesky G = L L' in place (lower triangle), with the pivot check.
-    let g = &mut scratch.gram;
-    for j in 0..n {
-        let diagonal = g[j * n + j];
-        let mut d = diagonal;
-        for k in 0..j {
-            d -= g[j * n + k] * g[j * n + k];
-        }
-        if d.is_nan()
-            || d <= (FAST_PIVOT_TOLERANCE * FAST_PIVOT_TOLERANCE) * diagonal
-            || diagonal <= 0.0
-        {
-            return false;
-        }
-        let l = d.sqrt();
-        g[j * n + j] = l;
-        for i in j + 1..n {
-            let mut s = g[i * n + j];
-            for k in 0..j {
-                s -= g[i * n + k] * g[j * n + k];
-            }
-            g[i * n + j] = s / l;
-        }
-    }
-    // L z = b, then L' alpha = z.
-    for i in 0..n {
-        let mut s = scratch.rhs[i];
-        for k in 0..i {
-            s -= g[i * n + k] * alpha[k];
-        }
-        alpha[i] = s / g[i * n + i];
-    }
-    for i in (0..n).rev() {
-        let mut s = alpha[i];
-        for k in i + 1..n {
-            s -= g[k * n + i] * alpha[k];
-        }
-        alpha[i] = s / g[i * n + i];
-    }
-    alpha.iter().all(|v| v.is_finite())
+    solve(
+        signals,
+        columns,
+        start,
+        max_lag,
+        FAST_PIVOT_TOLERANCE,
+        dot,
+        buffers,
+    )
+    .is_ok()
 }
 
 /// Contiguous column `j` of a view, if it is one.
@@ -195,9 +125,9 @@ mod tests {
     }
 
     fn solve(u: &[f64], y: &[f64], na: usize, nb: usize) -> (bool, Vec<f64>) {
-        let columns: Vec<Column> = (1..=na)
-            .map(|lag| Column { signal: 0, lag })
-            .chain((1..=nb).map(|lag| Column { signal: 1, lag }))
+        let columns: Vec<LaggedColumn> = (1..=na)
+            .map(|lag| LaggedColumn { signal: 0, lag })
+            .chain((1..=nb).map(|lag| LaggedColumn { signal: 1, lag }))
             .collect();
         let start = na.max(nb);
         let mut alpha = vec![0.0; na + nb];

@@ -4,7 +4,8 @@ use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::{Mat, Par};
 
-use crate::fast::{Column, FastScratch};
+use crate::fast::FastScratch;
+use twostage_kernels::lagged::LaggedColumn;
 
 /// The relative size under which a diagonal entry of R marks a regressor as
 /// (numerically) a linear combination of the previous ones:
@@ -39,7 +40,7 @@ pub struct Workspace {
     /// Scratch space of the estimate-time fast path.
     pub(crate) fast: FastScratch,
     /// Regressor columns of the fast path.
-    pub(crate) columns: Vec<Column>,
+    pub(crate) columns: Vec<LaggedColumn>,
     q_coeff: Mat<f64>,
     mem: MemBuffer,
     mem_req: StackReq,

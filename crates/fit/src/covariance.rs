@@ -2,6 +2,7 @@
 //! a Mahalanobis distance or a weighting by the inverse covariance needs.
 
 use ndarray::ArrayView2;
+use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_lower_in_place};
 
 /// Mean and lower Cholesky factor `L` (`C = L L'`) of the sample covariance
 /// `C` of the rows of a matrix.
@@ -52,43 +53,12 @@ impl CovarianceFactor {
         for v in &mut factor {
             *v /= (m - 1) as f64;
         }
-        cholesky_in_place(&mut factor, n)?;
+        cholesky_in_place(&mut factor, n, PivotRule::RelativeToLargest(1e-12)).ok()?;
         Some(Self { mean, factor })
     }
 
     /// Solve `L z = v` in place: `|z|^2 = v' C^-1 v`.
     pub fn whiten(&self, v: &mut [f64]) {
-        forward_substitute(&self.factor, self.mean.len(), v);
-    }
-}
-
-/// In-place Cholesky of the symmetric matrix whose lower triangle is in
-/// `a` (row-major n x n): afterwards `a` holds L (upper part zeroed).
-/// `None` when a pivot is not above 1e-12 of the largest diagonal entry.
-pub fn cholesky_in_place(a: &mut [f64], n: usize) -> Option<()> {
-    let largest = (0..n).map(|j| a[j * n + j]).fold(0.0f64, f64::max);
-    for j in 0..n {
-        let d = a[j * n + j] - (0..j).map(|k| a[j * n + k].powi(2)).sum::<f64>();
-        if d.is_nan() || d <= 1e-12 * largest {
-            return None;
-        }
-        let root = d.sqrt();
-        a[j * n + j] = root;
-        for i in j + 1..n {
-            let dot: f64 = (0..j).map(|k| a[i * n + k] * a[j * n + k]).sum();
-            a[i * n + j] = (a[i * n + j] - dot) / root;
-        }
-        for k in j + 1..n {
-            a[j * n + k] = 0.0;
-        }
-    }
-    Some(())
-}
-
-/// Solve `L z = v` in place for the row-major lower-triangular n x n `l`.
-pub fn forward_substitute(l: &[f64], n: usize, v: &mut [f64]) {
-    for i in 0..n.min(v.len()) {
-        let dot: f64 = (0..i).map(|k| l[i * n + k] * v[k]).sum();
-        v[i] = (v[i] - dot) / l[i * n + i];
+        solve_lower_in_place(&self.factor, self.mean.len(), v);
     }
 }

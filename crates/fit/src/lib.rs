@@ -35,7 +35,7 @@ mod standardize;
 
 use ndarray::{Array2, ArrayView2};
 
-pub use covariance::{CovarianceFactor, cholesky_in_place, forward_substitute};
+pub use covariance::CovarianceFactor;
 pub use error::{FitError, Result};
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{

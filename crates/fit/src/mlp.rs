@@ -12,6 +12,9 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
+use twostage_kernels::layer::{Activation, dense_layer};
+
 use crate::check;
 use crate::error::{FitError, Result};
 use crate::standardize::Standardizer;
@@ -409,12 +412,17 @@ fn forward(sizes: &[usize], params: &[f64], x: &[f64], acts: &mut [f64], offsets
         let input = &before[offsets[l]..offsets[l] + n_in];
         let w = &params[p..p + n_out * n_in];
         let b = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
-        for (i, out) in after[..n_out].iter_mut().enumerate() {
-            let row = &w[i * n_in..(i + 1) * n_in];
-            let z = b[i] + row.iter().zip(input).map(|(a, c)| a * c).sum::<f64>();
-            *out = if l + 1 < layers { z.tanh() } else { z };
-        }
+        dense_layer(w, b, input, activation(l, layers), &mut after[..n_out]);
         p += n_out * (n_in + 1);
+    }
+}
+
+/// Hidden layers are tanh, the output layer linear.
+fn activation(layer: usize, layers: usize) -> Activation {
+    if layer + 1 < layers {
+        Activation::Tanh
+    } else {
+        Activation::Identity
     }
 }
 
@@ -569,41 +577,19 @@ impl Problem<'_> {
 }
 
 /// Solve `(A + mu I) x = b` by Cholesky, for the symmetric positive
-/// semi-definite `A = J'J`; `None` if the damped matrix is not positive definite.
-fn damped_solve(a: &Mat<f64>, mu: f64, b: &[f64], l: &mut Mat<f64>, x: &mut [f64]) -> Option<()> {
+/// semi-definite `A = J'J` (its lower triangle is read); `l` is scratch of
+/// n x n. `None` if the damped matrix is not positive definite.
+fn damped_solve(a: &Mat<f64>, mu: f64, b: &[f64], l: &mut [f64], x: &mut [f64]) -> Option<()> {
     let n = b.len();
-    for j in 0..n {
-        let mut d = a[(j, j)] + mu;
-        for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
-        }
-        if d.is_nan() || d <= 0.0 {
-            return None;
-        }
-        let d = d.sqrt();
-        l[(j, j)] = d;
-        for i in j + 1..n {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = s / d;
-        }
-    }
     for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= l[(i, k)] * x[k];
+        for j in 0..=i {
+            l[i * n + j] = a[(i, j)];
         }
-        x[i] = s / l[(i, i)];
+        l[i * n + i] += mu;
     }
-    for i in (0..n).rev() {
-        let mut s = x[i];
-        for k in i + 1..n {
-            s -= l[(k, i)] * x[k];
-        }
-        x[i] = s / l[(i, i)];
-    }
+    cholesky_in_place(l, n, PivotRule::Positive).ok()?;
+    x.copy_from_slice(b);
+    solve_cholesky_in_place(l, n, x);
     Some(())
 }
 
@@ -767,7 +753,7 @@ fn train_levenberg_marquardt(
     let mut res = Mat::<f64>::zeros(rows, 1);
     let mut jtj = Mat::<f64>::zeros(n, n);
     let mut jtr = Mat::<f64>::zeros(n, 1);
-    let mut chol = Mat::<f64>::zeros(n, n);
+    let mut chol = vec![0.0; n * n];
     let mut step = vec![0.0; n];
     let mut gradient = vec![0.0; n];
     let mut trial = vec![0.0; n];
@@ -961,11 +947,7 @@ impl Predictor for FittedMlp {
                 let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
                 let w = &params[p..p + n_out * n_in];
                 let bias = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
-                for i in 0..n_out {
-                    let row = &w[i * n_in..(i + 1) * n_in];
-                    let z = bias[i] + row.iter().zip(&a[..n_in]).map(|(u, v)| u * v).sum::<f64>();
-                    b[i] = if l + 1 < layers { z.tanh() } else { z };
-                }
+                dense_layer(w, bias, &a[..n_in], activation(l, layers), &mut b[..n_out]);
                 std::mem::swap(&mut a, &mut b);
                 p += n_out * (n_in + 1);
             }

@@ -118,11 +118,10 @@ impl Prior {
                 .all(|(t, (lo, hi))| *lo <= *t && *t <= *hi)
     }
 
-    /// Clip `theta` to the box, component by component.
+    /// Clip `theta` to the box, component by component; a NaN becomes the
+    /// centre of its interval (`twostage_kernels::vector::clip_to_box`).
     pub fn clip(&self, theta: &mut [f64]) {
-        for (t, (lo, hi)) in theta.iter_mut().zip(self.lower.iter().zip(&self.upper)) {
-            *t = t.clamp(*lo, *hi);
-        }
+        twostage_kernels::vector::clip_to_box(theta, &self.lower, &self.upper);
     }
 
     /// Check a user-given parameter vector: its length, finiteness and,

@@ -11,6 +11,7 @@
 //! selection).
 
 use std::time::{Duration, Instant};
+use twostage_kernels::vector::clip_to_box;
 
 use ndarray::{Array2, ArrayView2, Axis};
 use rayon::prelude::*;
@@ -585,23 +586,23 @@ fn evaluate<S: Simulator + ?Sized>(
         let (x_fit, x_held) = features.view().split_at(Axis(0), fit_rows);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), fit_rows);
         let fitted = regressor.fit(x_fit, t_fit, base.seed)?;
-        let estimates = twostage_fit::Predictor::predict(&fitted, x_held)?;
-        let spec = base.simulator.spec();
-        let (lower, upper) = (spec.prior().lower(), spec.prior().upper());
+        // Standard layout, so that every row is a slice.
+        let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?
+            .as_standard_layout()
+            .into_owned();
+        let prior = base.simulator.spec().prior();
+        for mut row in estimates.rows_mut() {
+            if let Some(theta) = row.as_slice_mut() {
+                clip_to_box(theta, prior.lower(), prior.upper());
+            }
+        }
         let rmse = (0..t_held.ncols())
             .map(|j| {
                 let sq: f64 = t_held
                     .column(j)
                     .iter()
                     .zip(estimates.column(j))
-                    .map(|(t, e)| {
-                        let e = if e.is_nan() {
-                            0.5 * (lower[j] + upper[j])
-                        } else {
-                            e.clamp(lower[j], upper[j])
-                        };
-                        (t - e).powi(2)
-                    })
+                    .map(|(t, e)| (t - e).powi(2))
                     .sum();
                 (sq / t_held.nrows().max(1) as f64).sqrt()
             })

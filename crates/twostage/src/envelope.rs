@@ -3,7 +3,8 @@
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_fit::{CovarianceFactor, forward_substitute};
+use twostage_fit::CovarianceFactor;
+use twostage_kernels::cholesky::solve_lower_in_place;
 
 /// The share of training features inside the envelope.
 pub const ENVELOPE_LEVEL: f64 = 0.999;
@@ -117,7 +118,7 @@ impl FeatureEnvelope {
         // |L^-1 (x - mean)|. Allocated per call: the CLI and batch paths
         // call this, not the estimate hot path.
         let mut z: Vec<f64> = features.zip(&self.mean).map(|(x, m)| x - m).collect();
-        forward_substitute(&self.factor, self.mean.len(), &mut z);
+        solve_lower_in_place(&self.factor, self.mean.len(), &mut z);
         z.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
 

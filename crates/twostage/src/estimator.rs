@@ -5,6 +5,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::Predictor;
+use twostage_kernels::vector::clip_to_box;
 use twostage_models::IoData;
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
@@ -299,15 +300,7 @@ impl Estimator {
             &mut work.features,
         )?;
         self.regressor.predict_into(&work.features, theta)?;
-        for ((t, lo), hi) in theta.iter_mut().zip(&self.lower).zip(&self.upper) {
-            // A NaN from the network would survive clamp: map it to the
-            // box centre rather than return it.
-            *t = if t.is_nan() {
-                0.5 * (lo + hi)
-            } else {
-                t.clamp(*lo, *hi)
-            };
-        }
+        clip_to_box(theta, &self.lower, &self.upper);
         Ok(())
     }
 
@@ -401,14 +394,15 @@ impl Estimator {
 
     /// Estimates for every row of a compressed chart's features (clipped).
     pub(crate) fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
-        let mut out = self.regressor.predict(features)?;
+        // Standard layout, so that every row is a slice.
+        let mut out = self
+            .regressor
+            .predict(features)?
+            .as_standard_layout()
+            .into_owned();
         for mut row in out.rows_mut() {
-            for ((t, lo), hi) in row.iter_mut().zip(&self.lower).zip(&self.upper) {
-                *t = if t.is_nan() {
-                    0.5 * (lo + hi)
-                } else {
-                    t.clamp(*lo, *hi)
-                };
+            if let Some(theta) = row.as_slice_mut() {
+                clip_to_box(theta, &self.lower, &self.upper);
             }
         }
         Ok(out)

@@ -1,0 +1,79 @@
+//! The arithmetic of the two-stage estimate path, in one place.
+//!
+//! `#![no_std]` and allocation-free: every routine works on caller-owned
+//! slices, so the host library, the C API and a microcontroller run the same
+//! code and compute the same numbers. What is here:
+//!
+//! - [`cholesky`]: the Cholesky factorization with a stated rank tolerance
+//!   ([`PivotRule`]) and the triangular solves that go with it;
+//! - [`lagged`]: the least-squares normal equations of an ARX-type
+//!   regression assembled from lagged products of the signals (eq. (2) of
+//!   the paper without forming the regressor matrix);
+//! - [`layer`]: one dense layer of the network (affine map and activation);
+//! - [`vector`]: standardization and clipping to the prior box.
+//!
+//! The summation orders are part of the contract: sums run in index order
+//! and pivots are formed by subtracting one product at a time, so a
+//! re-implementation elsewhere is not needed and a caller that changes
+//! platforms changes only what the platform's `tanh` does.
+//!
+//! ```
+//! use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
+//! // A = [[4, 2], [2, 3]] = L L' with L = [[2, 0], [1, sqrt(2)]].
+//! let mut a = [4.0, 2.0, 2.0, 3.0];
+//! cholesky_in_place(&mut a, 2, PivotRule::Positive)?;
+//! assert!((a[3] - 2f64.sqrt()).abs() < 1e-15);
+//! // A x = (8, 7) has x = (1.25, 1.5).
+//! let mut x = [8.0, 7.0];
+//! solve_cholesky_in_place(&a, 2, &mut x);
+//! assert!((x[0] - 1.25).abs() < 1e-15 && (x[1] - 1.5).abs() < 1e-15);
+//! # Ok::<(), twostage_kernels::cholesky::NotPositiveDefinite>(())
+//! ```
+#![no_std]
+#![deny(missing_docs)]
+
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod cholesky;
+pub mod lagged;
+pub mod layer;
+pub mod vector;
+
+/// Square root, correctly rounded on every platform (IEEE 754).
+#[inline]
+pub(crate) fn sqrt(x: f64) -> f64 {
+    #[cfg(feature = "std")]
+    {
+        x.sqrt()
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        libm::sqrt(x)
+    }
+}
+
+/// Hyperbolic tangent: the platform's with std (what every estimator
+/// trained so far used), libm's without.
+#[inline]
+pub(crate) fn tanh(x: f64) -> f64 {
+    #[cfg(feature = "std")]
+    {
+        x.tanh()
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        libm::tanh(x)
+    }
+}
+
+/// The plain dot product of two slices (over the shorter length), summed
+/// in index order from zero.
+///
+/// ```
+/// assert_eq!(twostage_kernels::dot(&[1.0, 2.0, 3.0], &[4.0, 5.0, 6.0]), 32.0);
+/// ```
+#[inline]
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
