@@ -1,6 +1,7 @@
 //! The leading principal components of the output record: a stage-1
 //! compressor for experiments that all share one input signal.
 
+use faer::Par;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -11,9 +12,6 @@ use crate::signals::check;
 use crate::workspace::Workspace;
 
 const MAX_COMPONENTS: usize = 64;
-/// Subspace-iteration sweeps; the leading components of a trajectory
-/// family separate by orders of magnitude, so far fewer are needed.
-const SWEEPS: usize = 300;
 
 /// Scores of the output record on its leading principal directions:
 /// `alpha_i = v_i' (y - y_mean)`, with `v_1, v_2, ...` the principal
@@ -210,6 +208,12 @@ impl OutputPca {
         let total: f64 = x.iter().map(|v| v * v).sum();
         let tolerance = 1e-20 * total;
         let mut basis = vec![0.0; self.components * d];
+        let no_convergence = || CompressError::RankDeficient {
+            structure: self.to_string(),
+            cause: "the eigendecomposition of the outputs' Gram matrix did not converge \
+                    (non-finite or wildly scaled outputs?)"
+                .into(),
+        };
         let weak = |i: usize| CompressError::RankDeficient {
             structure: self.to_string(),
             cause: format!(
@@ -217,7 +221,8 @@ impl OutputPca {
             ),
         };
         if d <= m {
-            let vectors = leading_eigenvectors(&gram(&x, m, d, false), d, self.components);
+            let vectors = leading_eigenvectors(&gram(&x, m, d, false), d, self.components)
+                .ok_or_else(no_convergence)?;
             for (i, (out, v)) in basis
                 .chunks_exact_mut(d)
                 .zip(vectors.chunks_exact(d))
@@ -233,7 +238,8 @@ impl OutputPca {
                 out.copy_from_slice(v);
             }
         } else {
-            let u = leading_eigenvectors(&gram(&x, m, d, true), m, self.components);
+            let u = leading_eigenvectors(&gram(&x, m, d, true), m, self.components)
+                .ok_or_else(no_convergence)?;
             for (i, (vi, ui)) in basis.chunks_exact_mut(d).zip(u.chunks_exact(m)).enumerate() {
                 for (row, w) in x.chunks_exact(d).zip(ui) {
                     for (a, b) in vi.iter_mut().zip(row) {
@@ -317,58 +323,34 @@ fn gram(x: &[f64], m: usize, d: usize, dual: bool) -> Vec<f64> {
     }
 }
 
-/// The `k` leading eigenvectors (row-major, k x s) of the symmetric
-/// positive semi-definite s x s matrix `a`, by subspace iteration with
-/// Gram-Schmidt, then a Rayleigh-Ritz rotation (Jacobi) that orders them.
-/// Sequential arithmetic in a fixed order: bitwise reproducible.
-fn leading_eigenvectors(a: &[f64], s: usize, k: usize) -> Vec<f64> {
-    // A fixed, full-rank start that favours no direction.
-    let mut q: Vec<f64> = (0..k * s)
-        .map(|i| {
-            let (r, c) = (i / s, i % s);
-            ((r + 1) as f64 * (c as f64 + 0.5) * 0.618_033_988_75).sin()
-        })
-        .collect();
-    orthonormalize(&mut q, s);
-    let mut z = vec![0.0; k * s];
-    for _ in 0..SWEEPS {
-        multiply(a, s, &q, &mut z);
-        std::mem::swap(&mut q, &mut z);
-        orthonormalize(&mut q, s);
-        // Converged when the basis stops moving (z holds the previous one).
-        let moved = q
-            .iter()
-            .zip(&z)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        if moved < 1e-12 {
-            break;
+/// The `k` leading eigenvectors (row-major, k x s, largest eigenvalue
+/// first) of the symmetric positive semi-definite s x s matrix `a`, by
+/// faer's symmetric eigendecomposition on one thread (bitwise reproducible
+/// on a given processor), each with a fixed sign: its largest entry
+/// positive. `None` if the decomposition does not converge.
+fn leading_eigenvectors(a: &[f64], s: usize, k: usize) -> Option<Vec<f64>> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::evd::{ComputeEigenvectors, self_adjoint_evd, self_adjoint_evd_scratch};
+    let matrix = faer::Mat::from_fn(s, s, |i, j| a[i * s + j]);
+    let mut values = faer::diag::Diag::<f64>::zeros(s);
+    let mut vectors = faer::Mat::<f64>::zeros(s, s);
+    let scratch =
+        self_adjoint_evd_scratch::<f64>(s, ComputeEigenvectors::Yes, Par::Seq, Default::default());
+    self_adjoint_evd(
+        matrix.as_ref(),
+        values.as_mut(),
+        Some(vectors.as_mut()),
+        Par::Seq,
+        MemStack::new(&mut MemBuffer::new(scratch)),
+        Default::default(),
+    )
+    .ok()?;
+    // faer sorts the eigenvalues in nondecreasing order: take the last k.
+    let mut leading = vec![0.0; k * s];
+    for (out, column) in leading.chunks_exact_mut(s).zip((0..s).rev()) {
+        for (o, r) in out.iter_mut().zip(0..s) {
+            *o = vectors[(r, column)];
         }
-    }
-    // Rayleigh-Ritz: B = Q A Q' (k x k), rotate Q by B's eigenvectors.
-    multiply(a, s, &q, &mut z);
-    let mut b = vec![0.0; k * k];
-    for i in 0..k {
-        for j in 0..k {
-            b[i * k + j] = q[i * s..(i + 1) * s]
-                .iter()
-                .zip(&z[j * s..(j + 1) * s])
-                .map(|(x, y)| x * y)
-                .sum();
-        }
-    }
-    let (values, vectors) = jacobi_eigen(b, k);
-    let mut order: Vec<usize> = (0..k).collect();
-    order.sort_by(|&i, &j| values[j].total_cmp(&values[i]));
-    let mut rotated = vec![0.0; k * s];
-    for (out, &e) in rotated.chunks_exact_mut(s).zip(&order) {
-        for i in 0..k {
-            let w = vectors[i * k + e];
-            for (o, v) in out.iter_mut().zip(&q[i * s..(i + 1) * s]) {
-                *o += w * v;
-            }
-        }
-        // A fixed sign: the largest entry positive.
         let sign = out
             .iter()
             .copied()
@@ -376,90 +358,7 @@ fn leading_eigenvectors(a: &[f64], s: usize, k: usize) -> Vec<f64> {
             .map_or(1.0, f64::signum);
         out.iter_mut().for_each(|v| *v *= sign);
     }
-    rotated
-}
-
-/// `z_i = A q_i` for each row q_i of `q`.
-fn multiply(a: &[f64], s: usize, q: &[f64], z: &mut [f64]) {
-    for (zi, qi) in z.chunks_exact_mut(s).zip(q.chunks_exact(s)) {
-        for (r, out) in zi.iter_mut().enumerate() {
-            *out = a[r * s..(r + 1) * s]
-                .iter()
-                .zip(qi)
-                .map(|(x, y)| x * y)
-                .sum();
-        }
-    }
-}
-
-/// Modified Gram-Schmidt on the rows of `q` (twice, for orthogonality to
-/// rounding); a row that vanishes is left at zero.
-fn orthonormalize(q: &mut [f64], s: usize) {
-    let k = q.len() / s;
-    for _ in 0..2 {
-        for i in 0..k {
-            for j in 0..i {
-                let (head, tail) = q.split_at_mut(i * s);
-                let qj = &head[j * s..(j + 1) * s];
-                let qi = &mut tail[..s];
-                let dot: f64 = qi.iter().zip(qj).map(|(x, y)| x * y).sum();
-                qi.iter_mut().zip(qj).for_each(|(x, y)| *x -= dot * y);
-            }
-            let qi = &mut q[i * s..(i + 1) * s];
-            let norm = qi.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if norm > 0.0 {
-                qi.iter_mut().for_each(|x| *x /= norm);
-            }
-        }
-    }
-}
-
-/// Cyclic Jacobi eigen-decomposition of the symmetric k x k `b`: the
-/// eigenvalues and the eigenvectors as the columns of a row-major matrix.
-fn jacobi_eigen(mut b: Vec<f64>, k: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut v = vec![0.0; k * k];
-    for i in 0..k {
-        v[i * k + i] = 1.0;
-    }
-    for _ in 0..100 {
-        let off: f64 = (0..k)
-            .flat_map(|i| (0..k).filter(move |&j| j != i).map(move |j| (i, j)))
-            .map(|(i, j)| b[i * k + j].powi(2))
-            .sum();
-        let scale: f64 = (0..k).map(|i| b[i * k + i].powi(2)).sum();
-        if off <= 1e-30 * scale.max(f64::MIN_POSITIVE) {
-            break;
-        }
-        for p in 0..k {
-            for r in p + 1..k {
-                let bpr = b[p * k + r];
-                if bpr == 0.0 {
-                    continue;
-                }
-                let theta = (b[r * k + r] - b[p * k + p]) / (2.0 * bpr);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let sn = t * c;
-                for i in 0..k {
-                    let (bip, bir) = (b[i * k + p], b[i * k + r]);
-                    b[i * k + p] = c * bip - sn * bir;
-                    b[i * k + r] = sn * bip + c * bir;
-                }
-                for i in 0..k {
-                    let (bpi, bri) = (b[p * k + i], b[r * k + i]);
-                    b[p * k + i] = c * bpi - sn * bri;
-                    b[r * k + i] = sn * bpi + c * bri;
-                }
-                for i in 0..k {
-                    let (vip, vir) = (v[i * k + p], v[i * k + r]);
-                    v[i * k + p] = c * vip - sn * vir;
-                    v[i * k + r] = sn * vip + c * vir;
-                }
-            }
-        }
-    }
-    ((0..k).map(|i| b[i * k + i]).collect(), v)
+    Some(leading)
 }
 
 impl std::fmt::Display for OutputPca {
