@@ -54,7 +54,8 @@ pub use indirect::{
 };
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
-pub use pem::{BenchmarkPredictor, Descent, PemStop, PredictionError, RefineStarts, ResidualModel};
+pub use pem::{BenchmarkPredictor, Descent, PredictionError, RefineStarts, ResidualModel};
+pub use twostage_fit::TerminationReason;
 
 use twostage_models::IoData;
 

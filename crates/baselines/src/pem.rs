@@ -3,6 +3,11 @@
 //! Levenberg-Marquardt with finite-difference derivatives, from several
 //! seeded random starts, keeping the lowest loss.
 
+use std::ops::ControlFlow;
+
+use twostage_fit::{
+    Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason, normal_products,
+};
 use twostage_models::{IoData, Prior};
 
 use crate::error::{BaselineError, Result};
@@ -75,18 +80,6 @@ pub enum RefineStarts {
     CentreAndAxes,
 }
 
-/// Why one Levenberg-Marquardt descent stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[non_exhaustive]
-pub enum PemStop {
-    /// The relative decrease of the loss fell below 1e-10.
-    Converged,
-    /// No step decreased the loss at the largest damping.
-    DampingLimit,
-    /// The iteration budget ran out.
-    MaxIterations,
-}
-
 /// One descent from one start.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Descent {
@@ -99,7 +92,7 @@ pub struct Descent {
     /// Iterations taken.
     pub iterations: usize,
     /// Why it stopped.
-    pub stop: PemStop,
+    pub stop: TerminationReason,
 }
 
 /// The prediction-error estimator with multi-start.
@@ -190,18 +183,6 @@ impl<M: ResidualModel> PredictionError<M> {
         }
         descents.sort_by(|a, b| a.loss.total_cmp(&b.loss));
         Ok(descents)
-    }
-
-    /// Loss and residuals at unit-box coordinates `s`.
-    fn evaluate(&self, record: &IoData, s: &[f64], residuals: &mut [f64]) -> Result<f64> {
-        let prior = self.model.prior();
-        let theta: Vec<f64> = s
-            .iter()
-            .zip(prior.lower().iter().zip(prior.upper()))
-            .map(|(si, (lo, hi))| lo + si * (hi - lo))
-            .collect();
-        self.model.residuals(&theta, record, residuals)?;
-        Ok(residuals.iter().map(|r| r * r).sum())
     }
 
     /// One Levenberg-Marquardt descent in the prior box (central
@@ -386,87 +367,29 @@ impl<M: ResidualModel> PredictionError<M> {
             )));
         }
         let prior = self.model.prior();
-        let q = prior.dim();
-        let n = self.model.n_residuals(record);
-        let to_unit = |theta: &[f64]| -> Vec<f64> {
-            theta
-                .iter()
-                .zip(prior.lower().iter().zip(prior.upper()))
-                .map(|(t, (lo, hi))| (t - lo) / (hi - lo))
-                .collect()
-        };
-        let mut s: Vec<f64> = to_unit(&start)
+        let unit: Vec<f64> = start
             .iter()
-            .zip(lo.iter().zip(hi))
-            .map(|(v, (a, b))| v.clamp(*a, *b))
+            .zip(prior.lower().iter().zip(prior.upper()))
+            .map(|(t, (lo, hi))| (t - lo) / (hi - lo))
             .collect();
-        let mut r = vec![0.0; n];
-        let mut loss = self.evaluate(record, &s, &mut r)?;
-        let (mut plus, mut minus) = (vec![0.0; n], vec![0.0; n]);
-        let mut jac = vec![vec![0.0; n]; q];
-        let mut mu = 1e-3;
-        let h = 1e-6;
-        let mut stop = PemStop::MaxIterations;
-        let mut iterations = 0;
-        for _ in 0..self.max_iterations {
-            iterations += 1;
-            for (j, column) in jac.iter_mut().enumerate() {
-                // Central differences, shifted inward at the box faces.
-                let mut sp = s.clone();
-                let mut sm = s.clone();
-                sp[j] = (s[j] + h).min(1.0);
-                sm[j] = (s[j] - h).max(0.0);
-                self.evaluate(record, &sp, &mut plus)?;
-                self.evaluate(record, &sm, &mut minus)?;
-                let width = sp[j] - sm[j];
-                for k in 0..n {
-                    column[k] = (plus[k] - minus[k]) / width;
-                }
-            }
-            let mut jtj = vec![vec![0.0; q]; q];
-            let mut jtr = vec![0.0; q];
-            for a in 0..q {
-                for b in 0..q {
-                    jtj[a][b] = jac[a].iter().zip(&jac[b]).map(|(x, y)| x * y).sum();
-                }
-                jtr[a] = jac[a].iter().zip(&r).map(|(x, y)| x * y).sum();
-            }
-            let mut accepted = false;
-            while mu < 1e12 {
-                let Some(step) = solve_damped(&jtj, &jtr, mu) else {
-                    mu *= 10.0;
-                    continue;
-                };
-                let trial: Vec<f64> = s
-                    .iter()
-                    .zip(&step)
-                    .zip(lo.iter().zip(hi))
-                    .map(|((a, d), (l, h))| (a - d).clamp(*l, *h))
-                    .collect();
-                let trial_loss = self.evaluate(record, &trial, &mut plus)?;
-                if trial_loss < loss {
-                    let relative = (loss - trial_loss) / loss.max(f64::MIN_POSITIVE);
-                    s = trial;
-                    std::mem::swap(&mut r, &mut plus);
-                    loss = trial_loss;
-                    mu = (mu / 10.0).max(1e-12);
-                    accepted = true;
-                    if relative < 1e-10 {
-                        stop = PemStop::Converged;
-                    }
-                    break;
-                }
-                mu *= 10.0;
-            }
-            if !accepted {
-                stop = PemStop::DampingLimit;
-                break;
-            }
-            if stop == PemStop::Converged {
-                break;
-            }
-        }
-        let theta = s
+        let mut problem = PredictionErrors {
+            model: &self.model,
+            record,
+            lo,
+            hi,
+            theta: Vec::with_capacity(unit.len()),
+        };
+        // Marquardt's scaling: the parameters' sensitivities differ by
+        // orders of magnitude (the car's pK1 and pK2).
+        let solver = LevenbergMarquardt::new()
+            .max_iterations(self.max_iterations)
+            .tolerance(1e-10)
+            .damping(Damping::Diagonal { floor: 1e-12 })
+            .initial_damping(1e-3)
+            .max_damping(1e12f64.next_down());
+        let found = solver.minimize(&mut problem, &unit, |_| ControlFlow::Continue(()))?;
+        let theta = found
+            .x
             .iter()
             .zip(prior.lower().iter().zip(prior.upper()))
             .map(|(si, (lo, hi))| lo + si * (hi - lo))
@@ -474,40 +397,73 @@ impl<M: ResidualModel> PredictionError<M> {
         Ok(Descent {
             start,
             theta,
-            loss,
-            iterations,
-            stop,
+            loss: found.cost,
+            iterations: found.iterations,
+            stop: found.reason,
         })
     }
 }
 
-/// Solve `(A + mu diag(A) + mu 1e-12 I) x = b` for a tiny SPD A by Cholesky.
-fn solve_damped(a: &[Vec<f64>], b: &[f64], mu: f64) -> Option<Vec<f64>> {
-    let q = b.len();
-    let mut m: Vec<Vec<f64>> = a.to_vec();
-    for j in 0..q {
-        m[j][j] += mu * (a[j][j] + 1e-12);
+/// The prediction errors of one record as a least-squares problem in the
+/// prior box's unit coordinates, confined to the sub-box `[lo, hi]`.
+struct PredictionErrors<'a, M> {
+    model: &'a M,
+    record: &'a IoData,
+    lo: &'a [f64],
+    hi: &'a [f64],
+    theta: Vec<f64>,
+}
+
+impl<M: ResidualModel> LeastSquaresProblem for PredictionErrors<'_, M> {
+    type Error = BaselineError;
+
+    fn residuals(&mut self, s: &[f64], r: &mut Vec<f64>) -> Result<()> {
+        let prior = self.model.prior();
+        self.theta.clear();
+        self.theta.extend(
+            s.iter()
+                .zip(prior.lower().iter().zip(prior.upper()))
+                .map(|(si, (lo, hi))| lo + si * (hi - lo)),
+        );
+        r.resize(self.model.n_residuals(self.record), 0.0);
+        self.model.residuals(&self.theta, self.record, r)
     }
-    let mut l = vec![vec![0.0; q]; q];
-    for j in 0..q {
-        let d = m[j][j] - (0..j).map(|k| l[j][k] * l[j][k]).sum::<f64>();
-        if d.is_nan() || d <= 0.0 {
-            return None;
+
+    /// Central differences of step 1e-6, shifted inward at the faces of
+    /// the prior box (the model is not defined outside it).
+    fn gauss_newton(
+        &mut self,
+        s: &[f64],
+        r: &[f64],
+        jtj: &mut [f64],
+        jtr: &mut [f64],
+    ) -> Result<()> {
+        let (q, n) = (s.len(), r.len());
+        let h = 1e-6;
+        let mut columns = vec![0.0; q * n];
+        let (mut plus, mut minus) = (Vec::new(), Vec::new());
+        let mut point = s.to_vec();
+        for (j, column) in columns.chunks_exact_mut(n.max(1)).enumerate().take(q) {
+            let (up, down) = ((s[j] + h).min(1.0), (s[j] - h).max(0.0));
+            point[j] = up;
+            self.residuals(&point, &mut plus)?;
+            point[j] = down;
+            self.residuals(&point, &mut minus)?;
+            point[j] = s[j];
+            let width = up - down;
+            for ((c, p), m) in column.iter_mut().zip(&plus).zip(&minus) {
+                *c = (p - m) / width;
+            }
         }
-        l[j][j] = d.sqrt();
-        for i in j + 1..q {
-            l[i][j] = (m[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>()) / l[j][j];
+        normal_products(&columns, r, jtj, jtr);
+        Ok(())
+    }
+
+    fn project(&self, s: &mut [f64]) {
+        for ((v, lo), hi) in s.iter_mut().zip(self.lo).zip(self.hi) {
+            *v = v.clamp(*lo, *hi);
         }
     }
-    let mut z = vec![0.0; q];
-    for i in 0..q {
-        z[i] = (b[i] - (0..i).map(|k| l[i][k] * z[k]).sum::<f64>()) / l[i][i];
-    }
-    let mut x = vec![0.0; q];
-    for i in (0..q).rev() {
-        x[i] = (z[i] - (i + 1..q).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
-    }
-    Some(x)
 }
 
 impl<M: ResidualModel> RecordEstimator for PredictionError<M> {

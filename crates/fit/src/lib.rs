@@ -28,6 +28,7 @@
 mod check;
 mod covariance;
 mod error;
+mod levenberg_marquardt;
 mod linear;
 mod mlp;
 mod piecewise;
@@ -37,10 +38,14 @@ use ndarray::{Array2, ArrayView2};
 
 pub use covariance::CovarianceFactor;
 pub use error::{FitError, Result};
+pub use levenberg_marquardt::{
+    Damping, Iterate, LeastSquaresProblem, LevenbergMarquardt, Minimum, TerminationReason,
+    normal_products,
+};
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{
-    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, TerminationReason, Trainer, jacobian_at,
-    loss_gradient_at, n_parameters,
+    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, jacobian_at, loss_gradient_at,
+    n_parameters,
 };
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;

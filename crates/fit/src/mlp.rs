@@ -12,11 +12,15 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
+use std::ops::ControlFlow;
+
 use twostage_kernels::layer::{Activation, dense_layer};
 
 use crate::check;
 use crate::error::{FitError, Result};
+use crate::levenberg_marquardt::{
+    Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason,
+};
 use crate::standardize::Standardizer;
 use crate::{Predictor, Regressor};
 
@@ -266,22 +270,6 @@ impl Mlp {
         params.seed = seed;
         Self { params }
     }
-}
-
-/// Why one Levenberg-Marquardt run stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[non_exhaustive]
-pub enum TerminationReason {
-    /// The held-out loss did not improve for `patience` iterations.
-    EarlyStopping,
-    /// The iteration budget ran out.
-    MaxIterations,
-    /// No step reduced the loss even with the largest damping: a minimum.
-    DampingLimit,
-    /// The relative decrease of the training loss fell below 1e-12.
-    Converged,
-    /// Adam's epoch budget ran out.
-    MaxEpochs,
 }
 
 /// How one restart went.
@@ -576,23 +564,6 @@ impl Problem<'_> {
     }
 }
 
-/// Solve `(A + mu I) x = b` by Cholesky, for the symmetric positive
-/// semi-definite `A = J'J` (its lower triangle is read); `l` is scratch of
-/// n x n. `None` if the damped matrix is not positive definite.
-fn damped_solve(a: &Mat<f64>, mu: f64, b: &[f64], l: &mut [f64], x: &mut [f64]) -> Option<()> {
-    let n = b.len();
-    for i in 0..n {
-        for j in 0..=i {
-            l[i * n + j] = a[(i, j)];
-        }
-        l[i * n + i] += mu;
-    }
-    cholesky_in_place(l, n, PivotRule::Positive).ok()?;
-    x.copy_from_slice(b);
-    solve_cholesky_in_place(l, n, x);
-    Some(())
-}
-
 /// Glorot-uniform weights, small random biases.
 fn initial_parameters(sizes: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
     let mut params = Vec::with_capacity(parameter_count(sizes));
@@ -604,9 +575,6 @@ fn initial_parameters(sizes: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
     }
     params
 }
-
-const MU_START: f64 = 1e-3;
-const MU_MAX: f64 = 1e10;
 
 /// Keeps the weights with the lowest held-out loss and says when `patience`
 /// checks have passed without improvement (never, when nothing is held out).
@@ -741,105 +709,150 @@ fn train_levenberg_marquardt(
     problem: &Problem<'_>,
     mlp: &MlpParams,
     restart: usize,
-    mut params: Vec<f64>,
+    params: Vec<f64>,
 ) -> (Vec<f64>, RestartReport) {
-    let n = problem.n_params();
-    let q = *problem.sizes.last().unwrap_or(&1);
-    let rows = problem.train.len() * q;
-    let width = problem.offsets.last().copied().unwrap_or(0);
-    let mut acts = vec![0.0; width];
-    let mut delta = vec![0.0; 2 * MAX_WIDTH];
-    let mut jac = Mat::<f64>::zeros(rows, n);
-    let mut res = Mat::<f64>::zeros(rows, 1);
-    let mut jtj = Mat::<f64>::zeros(n, n);
-    let mut jtr = Mat::<f64>::zeros(n, 1);
-    let mut chol = vec![0.0; n * n];
-    let mut step = vec![0.0; n];
-    let mut gradient = vec![0.0; n];
-    let mut trial = vec![0.0; n];
-
     let held_out = if problem.held_out.is_empty() {
         problem.train
     } else {
         problem.held_out
     };
-    let mut loss =
-        problem.mse(&params, problem.train, &mut acts) + problem.penalty(&params) / (rows as f64);
+    let width = problem.offsets.last().copied().unwrap_or(0);
+    let mut acts = vec![0.0; width];
     let initial = problem.mse(&params, held_out, &mut acts);
     let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
-    let mut mu = MU_START;
-    let mut reason = TerminationReason::MaxIterations;
-    let mut iterations = 0;
-    let scale = 1.0 / rows as f64;
-    for _ in 0..mlp.max_iterations {
-        iterations += 1;
-        problem.jacobian(&params, &mut jac, &mut res, &mut acts, &mut delta);
-        matmul(
-            jtj.as_mut(),
-            Accum::Replace,
-            jac.transpose(),
-            jac.as_ref(),
-            scale,
-            Par::Seq,
-        );
-        matmul(
-            jtr.as_mut(),
-            Accum::Replace,
-            jac.transpose(),
-            res.as_ref(),
-            scale,
-            Par::Seq,
-        );
-        // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
-        let d = problem.decay * scale;
-        for j in 0..n {
-            jtj[(j, j)] += d;
-            gradient[j] = -(jtr[(j, 0)] + d * params[j]);
+    let mut least_squares = NetworkLeastSquares::new(problem);
+    let solver = LevenbergMarquardt::new()
+        .max_iterations(mlp.max_iterations)
+        .tolerance(1e-12)
+        .damping(Damping::Identity)
+        .initial_damping(1e-3)
+        .max_damping(1e10);
+    let Ok(minimum) = solver.minimize(&mut least_squares, &params, |iterate| {
+        let held = problem.mse(iterate.x, held_out, &mut acts);
+        if best.observe(held, iterate.x) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
         }
-        let mut improved = false;
-        while mu <= MU_MAX {
-            if damped_solve(&jtj, mu, &gradient, &mut chol, &mut step).is_some() {
-                for ((t, p), s) in trial.iter_mut().zip(&params).zip(&step) {
-                    *t = p + s;
-                }
-                let trial_loss = problem.mse(&trial, problem.train, &mut acts)
-                    + problem.penalty(&trial) / (rows as f64);
-                if trial_loss < loss {
-                    let relative = (loss - trial_loss) / loss.max(f64::MIN_POSITIVE);
-                    params.copy_from_slice(&trial);
-                    loss = trial_loss;
-                    mu = (mu / 10.0).max(1e-12);
-                    improved = true;
-                    if relative < 1e-12 {
-                        reason = TerminationReason::Converged;
-                    }
-                    break;
-                }
-            }
-            mu *= 10.0;
-        }
-        if !improved {
-            reason = TerminationReason::DampingLimit;
-            break;
-        }
-        let held = problem.mse(&params, held_out, &mut acts);
-        if best.observe(held, &params) {
-            reason = TerminationReason::EarlyStopping;
-            break;
-        }
-        if reason == TerminationReason::Converged {
-            break;
-        }
-    }
+    });
     let (validation_mse, kept) = (best.loss, best.params);
     let report = RestartReport {
         restart,
-        iterations,
-        reason,
+        iterations: minimum.iterations,
+        reason: minimum.reason,
         train_mse: problem.mse(&kept, problem.train, &mut acts),
         validation_mse,
     };
     (kept, report)
+}
+
+/// The training rows' residuals as a least-squares problem: the cost is
+/// the mean squared error per target value plus the weight decay over the
+/// same count, and the Gauss-Newton products come from the back-propagated
+/// Jacobian (kept here between iterations: rows x parameters).
+struct NetworkLeastSquares<'p, 'a> {
+    problem: &'p Problem<'a>,
+    rows: usize,
+    acts: Vec<f64>,
+    delta: Vec<f64>,
+    jac: Mat<f64>,
+    res: Mat<f64>,
+    jtj: Mat<f64>,
+    jtr: Mat<f64>,
+}
+
+impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
+    fn new(problem: &'p Problem<'a>) -> Self {
+        let n = problem.n_params();
+        let q = *problem.sizes.last().unwrap_or(&1);
+        let rows = problem.train.len() * q;
+        Self {
+            problem,
+            rows,
+            acts: vec![0.0; problem.offsets.last().copied().unwrap_or(0)],
+            delta: vec![0.0; 2 * MAX_WIDTH],
+            jac: Mat::zeros(rows, n),
+            res: Mat::zeros(rows, 1),
+            jtj: Mat::zeros(n, n),
+            jtr: Mat::zeros(n, 1),
+        }
+    }
+}
+
+impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
+    type Error = std::convert::Infallible;
+
+    fn residuals(
+        &mut self,
+        params: &[f64],
+        r: &mut Vec<f64>,
+    ) -> std::result::Result<(), Self::Error> {
+        let problem = self.problem;
+        let q = *problem.sizes.last().unwrap_or(&1);
+        let out = problem.offsets[problem.sizes.len() - 1];
+        r.clear();
+        for &i in problem.train {
+            let xi = problem.x.row(i);
+            forward(
+                problem.sizes,
+                params,
+                xi.as_slice().unwrap_or(&[]),
+                &mut self.acts,
+                &problem.offsets,
+            );
+            r.extend((0..q).map(|k| self.acts[out + k] - problem.t[[i, k]]));
+        }
+        Ok(())
+    }
+
+    fn cost(&mut self, params: &[f64], r: &[f64]) -> f64 {
+        let sse: f64 = r.iter().map(|v| v * v).sum();
+        sse / self.rows.max(1) as f64 + self.problem.penalty(params) / (self.rows as f64)
+    }
+
+    fn gauss_newton(
+        &mut self,
+        params: &[f64],
+        _r: &[f64],
+        jtj: &mut [f64],
+        jtr: &mut [f64],
+    ) -> std::result::Result<(), Self::Error> {
+        let n = jtr.len();
+        let scale = 1.0 / self.rows as f64;
+        self.problem.jacobian(
+            params,
+            &mut self.jac,
+            &mut self.res,
+            &mut self.acts,
+            &mut self.delta,
+        );
+        matmul(
+            self.jtj.as_mut(),
+            Accum::Replace,
+            self.jac.transpose(),
+            self.jac.as_ref(),
+            scale,
+            Par::Seq,
+        );
+        matmul(
+            self.jtr.as_mut(),
+            Accum::Replace,
+            self.jac.transpose(),
+            self.res.as_ref(),
+            scale,
+            Par::Seq,
+        );
+        // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
+        let d = self.problem.decay * scale;
+        for i in 0..n {
+            for j in 0..=i {
+                jtj[i * n + j] = self.jtj[(i, j)];
+            }
+            jtj[i * n + i] += d;
+            jtr[i] = self.jtr[(i, 0)] + d * params[i];
+        }
+        Ok(())
+    }
 }
 
 impl Regressor for Mlp {

@@ -1,0 +1,450 @@
+//! One Levenberg-Marquardt solver for every nonlinear least-squares fit of
+//! the project: the network's training, prediction error, indirect
+//! inference and the refinement of a two-stage estimate.
+//!
+//! A problem says how to compute its residuals (the one required method)
+//! and may supply its own cost scaling, Gauss-Newton products and
+//! feasible set; the solver owns the damping schedule, the acceptance test
+//! and the stop rules, and reports why it stopped with the same
+//! [`TerminationReason`] for everyone.
+
+use std::ops::ControlFlow;
+
+use serde::{Deserialize, Serialize};
+use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
+
+/// Why an iterative fit stopped.
+///
+/// Stored in estimator files (a network's restart reports): new variants go
+/// at the end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum TerminationReason {
+    /// The observer asked to stop: the held-out loss did not improve for
+    /// `patience` checks.
+    EarlyStopping,
+    /// The iteration budget ran out.
+    MaxIterations,
+    /// No step reduced the cost even with the largest damping: a minimum
+    /// (or a point the problem's Gauss-Newton model cannot leave).
+    DampingLimit,
+    /// The relative decrease of the cost fell below the tolerance.
+    Converged,
+    /// Adam's epoch budget ran out.
+    MaxEpochs,
+}
+
+/// A nonlinear least-squares problem: minimize the cost of the residuals
+/// `r(x)` over `x`.
+///
+/// Only [`LeastSquaresProblem::residuals`] is required. The methods take
+/// `&mut self` so that a problem can keep its scratch space (a network's
+/// Jacobian is rows x parameters) across the solver's calls.
+pub trait LeastSquaresProblem {
+    /// What a failed evaluation returns.
+    type Error;
+
+    /// The residuals at `x`, written into `r` (resized as the problem needs).
+    ///
+    /// # Errors
+    /// Whatever the problem cannot evaluate; the solver passes it on.
+    fn residuals(&mut self, x: &[f64], r: &mut Vec<f64>) -> Result<(), Self::Error>;
+
+    /// The cost of residuals `r` at `x` (default: `sum r_i^2`). A problem
+    /// that scales its cost or adds a penalty scales [`Self::gauss_newton`]
+    /// the same way.
+    fn cost(&mut self, x: &[f64], r: &[f64]) -> f64 {
+        let _ = x;
+        r.iter().map(|v| v * v).sum()
+    }
+
+    /// The Gauss-Newton model at `x`, whose residuals are `r`: `J'J` into
+    /// `jtj` (row-major n x n; the solver reads its lower triangle) and the
+    /// gradient half `J'r` into `jtr`. Default: central differences of the
+    /// residuals with steps `1e-6 max(1, |x_j|)`, sums in index order.
+    ///
+    /// # Errors
+    /// As [`Self::residuals`].
+    fn gauss_newton(
+        &mut self,
+        x: &[f64],
+        r: &[f64],
+        jtj: &mut [f64],
+        jtr: &mut [f64],
+    ) -> Result<(), Self::Error> {
+        let n = x.len();
+        let mut columns = vec![0.0; n * r.len()];
+        let (mut point, mut plus, mut minus) = (x.to_vec(), Vec::new(), Vec::new());
+        for (j, column) in columns.chunks_exact_mut(r.len().max(1)).enumerate().take(n) {
+            let h = 1e-6 * x[j].abs().max(1.0);
+            point[j] = x[j] + h;
+            self.residuals(&point, &mut plus)?;
+            point[j] = x[j] - h;
+            self.residuals(&point, &mut minus)?;
+            point[j] = x[j];
+            for ((c, p), m) in column.iter_mut().zip(&plus).zip(&minus) {
+                *c = (p - m) / (2.0 * h);
+            }
+        }
+        normal_products(&columns, r, jtj, jtr);
+        Ok(())
+    }
+
+    /// Move `x` into the feasible set (default: everything is feasible).
+    /// Trial points are projected before they are evaluated.
+    fn project(&self, x: &mut [f64]) {
+        let _ = x;
+    }
+}
+
+/// `J'J` and `J'r` from the columns of `J` (each `r.len()` long, stored one
+/// after another), with sums in index order.
+pub fn normal_products(columns: &[f64], r: &[f64], jtj: &mut [f64], jtr: &mut [f64]) {
+    let rows = r.len().max(1);
+    let n = jtr.len();
+    for a in 0..n {
+        let ca = &columns[a * rows..(a + 1) * rows];
+        for b in 0..n {
+            let cb = &columns[b * rows..(b + 1) * rows];
+            jtj[a * n + b] = ca.iter().zip(cb).map(|(x, y)| x * y).sum();
+        }
+        jtr[a] = ca.iter().zip(r).map(|(x, y)| x * y).sum();
+    }
+}
+
+/// How the damping enters the step equations `(J'J + D) step = -J'r`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Damping {
+    /// Levenberg's `D = mu I`: for parameters of one scale (a standardized
+    /// network's weights).
+    Identity,
+    /// Marquardt's `D = mu (diag(J'J) + floor)`: invariant to the
+    /// parameters' scales; `floor` keeps a parameter with no gradient
+    /// damped.
+    Diagonal {
+        /// Added to each diagonal entry before scaling.
+        floor: f64,
+    },
+}
+
+/// One accepted iterate, shown to the observer.
+#[derive(Debug, Clone, Copy)]
+pub struct Iterate<'a> {
+    /// Iterations so far (this one included).
+    pub iteration: usize,
+    /// The accepted point.
+    pub x: &'a [f64],
+    /// Its cost.
+    pub cost: f64,
+    /// The damping that will start the next iteration.
+    pub damping: f64,
+}
+
+/// Where a run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Minimum {
+    /// The last accepted point.
+    pub x: Vec<f64>,
+    /// Its cost.
+    pub cost: f64,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub reason: TerminationReason,
+}
+
+/// The Levenberg-Marquardt solver's settings.
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `max_iterations` | 100 | >= 1 (0 returns the start) |
+/// | `tolerance` (relative cost decrease that counts as converged) | 1e-12 | >= 0 |
+/// | `damping` | [`Damping::Identity`] | |
+/// | `initial_damping` | 1e-3 | > 0 |
+/// | `max_damping` (steps are tried while the damping is at most this) | 1e10 | > 0 |
+/// | `min_damping` | 1e-12 | > 0 |
+///
+/// After an accepted step the damping is divided by 10 (not below
+/// `min_damping`); after a refused one, or a damped matrix that is not
+/// positive definite, multiplied by 10.
+///
+/// ```
+/// use twostage_fit::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+/// // Rosenbrock as least squares: r = (10 (x1 - x0^2), 1 - x0), minimum at (1, 1).
+/// struct Rosenbrock;
+/// impl LeastSquaresProblem for Rosenbrock {
+///     type Error = std::convert::Infallible;
+///     fn residuals(&mut self, x: &[f64], r: &mut Vec<f64>) -> Result<(), Self::Error> {
+///         r.clear();
+///         r.extend([10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]]);
+///         Ok(())
+///     }
+/// }
+/// let found = LevenbergMarquardt::new().minimize(&mut Rosenbrock, &[-1.2, 1.0], |_| {
+///     std::ops::ControlFlow::Continue(())
+/// })?;
+/// assert!((found.x[0] - 1.0).abs() < 1e-6 && (found.x[1] - 1.0).abs() < 1e-6);
+/// assert!(matches!(found.reason, TerminationReason::Converged | TerminationReason::DampingLimit));
+/// # Ok::<(), std::convert::Infallible>(())
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct LevenbergMarquardt {
+    max_iterations: usize,
+    tolerance: f64,
+    damping: Damping,
+    initial_damping: f64,
+    max_damping: f64,
+    min_damping: f64,
+}
+
+impl Default for LevenbergMarquardt {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LevenbergMarquardt {
+    /// The defaults of the table above.
+    pub fn new() -> Self {
+        Self {
+            max_iterations: 100,
+            tolerance: 1e-12,
+            damping: Damping::Identity,
+            initial_damping: 1e-3,
+            max_damping: 1e10,
+            min_damping: 1e-12,
+        }
+    }
+
+    /// Iterations (each one Gauss-Newton model and up to a few trial steps).
+    pub fn max_iterations(mut self, iterations: usize) -> Self {
+        self.max_iterations = iterations;
+        self
+    }
+
+    /// Relative cost decrease below which an accepted step ends the run.
+    pub fn tolerance(mut self, tolerance: f64) -> Self {
+        self.tolerance = tolerance;
+        self
+    }
+
+    /// How the damping enters the step equations.
+    pub fn damping(mut self, damping: Damping) -> Self {
+        self.damping = damping;
+        self
+    }
+
+    /// The damping of the first trial step.
+    pub fn initial_damping(mut self, mu: f64) -> Self {
+        self.initial_damping = mu;
+        self
+    }
+
+    /// The largest damping tried before the run ends at
+    /// [`TerminationReason::DampingLimit`].
+    pub fn max_damping(mut self, mu: f64) -> Self {
+        self.max_damping = mu;
+        self
+    }
+
+    /// Minimize `problem` from `start`. After every accepted step `observe`
+    /// sees the iterate and may stop the run
+    /// ([`TerminationReason::EarlyStopping`]).
+    ///
+    /// # Errors
+    /// The first error of the problem's evaluations.
+    pub fn minimize<P: LeastSquaresProblem>(
+        &self,
+        problem: &mut P,
+        start: &[f64],
+        mut observe: impl FnMut(&Iterate<'_>) -> ControlFlow<()>,
+    ) -> Result<Minimum, P::Error> {
+        let n = start.len();
+        let mut x = start.to_vec();
+        problem.project(&mut x);
+        let (mut r, mut trial_r) = (Vec::new(), Vec::new());
+        problem.residuals(&x, &mut r)?;
+        let mut cost = problem.cost(&x, &r);
+        let mut jtj = vec![0.0; n * n];
+        let mut jtr = vec![0.0; n];
+        let mut factor = vec![0.0; n * n];
+        let mut step = vec![0.0; n];
+        let mut trial = vec![0.0; n];
+        let mut mu = self.initial_damping;
+        let mut reason = TerminationReason::MaxIterations;
+        let mut iterations = 0;
+        for _ in 0..self.max_iterations {
+            iterations += 1;
+            problem.gauss_newton(&x, &r, &mut jtj, &mut jtr)?;
+            let mut accepted = false;
+            while mu <= self.max_damping {
+                if self.damped_step(&jtj, &jtr, mu, &mut factor, &mut step) {
+                    for ((t, a), s) in trial.iter_mut().zip(&x).zip(&step) {
+                        *t = a + s;
+                    }
+                    problem.project(&mut trial);
+                    problem.residuals(&trial, &mut trial_r)?;
+                    let trial_cost = problem.cost(&trial, &trial_r);
+                    if trial_cost < cost {
+                        let relative = (cost - trial_cost) / cost.max(f64::MIN_POSITIVE);
+                        std::mem::swap(&mut x, &mut trial);
+                        std::mem::swap(&mut r, &mut trial_r);
+                        cost = trial_cost;
+                        mu = (mu / 10.0).max(self.min_damping);
+                        accepted = true;
+                        if relative < self.tolerance {
+                            reason = TerminationReason::Converged;
+                        }
+                        break;
+                    }
+                }
+                mu *= 10.0;
+            }
+            if !accepted {
+                reason = TerminationReason::DampingLimit;
+                break;
+            }
+            let iterate = Iterate {
+                iteration: iterations,
+                x: &x,
+                cost,
+                damping: mu,
+            };
+            if observe(&iterate).is_break() {
+                reason = TerminationReason::EarlyStopping;
+                break;
+            }
+            if reason == TerminationReason::Converged {
+                break;
+            }
+        }
+        Ok(Minimum {
+            x,
+            cost,
+            iterations,
+            reason,
+        })
+    }
+
+    /// Solve `(J'J + D(mu)) step = -J'r` by Cholesky; false when the damped
+    /// matrix is not positive definite.
+    fn damped_step(
+        &self,
+        jtj: &[f64],
+        jtr: &[f64],
+        mu: f64,
+        factor: &mut [f64],
+        step: &mut [f64],
+    ) -> bool {
+        let n = jtr.len();
+        for i in 0..n {
+            factor[i * n..i * n + i + 1].copy_from_slice(&jtj[i * n..i * n + i + 1]);
+            let diagonal = jtj[i * n + i];
+            factor[i * n + i] = match self.damping {
+                Damping::Identity => diagonal + mu,
+                Damping::Diagonal { floor } => diagonal + mu * (diagonal + floor),
+            };
+        }
+        if cholesky_in_place(factor, n, PivotRule::Positive).is_err() {
+            return false;
+        }
+        for (s, g) in step.iter_mut().zip(jtr) {
+            *s = -g;
+        }
+        solve_cholesky_in_place(factor, n, step);
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A linear problem r = A x - b: one Gauss-Newton step from anywhere
+    /// lands on the least-squares solution, found independently here from
+    /// the 2 x 2 normal equations by Cramer's rule.
+    struct Linear;
+    impl LeastSquaresProblem for Linear {
+        type Error = ();
+        fn residuals(&mut self, x: &[f64], r: &mut Vec<f64>) -> Result<(), ()> {
+            r.clear();
+            for (a0, a1, b) in [
+                (1.0, 0.0, 1.0),
+                (1.0, 1.0, 2.0),
+                (1.0, 2.0, 2.0),
+                (1.0, 3.0, 5.0),
+            ] {
+                r.push(a0 * x[0] + a1 * x[1] - b);
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn linear_least_squares_matches_the_closed_form() {
+        // Normal equations [[4, 6], [6, 14]] x = [10, 21].
+        let det = 4.0 * 14.0 - 36.0;
+        let want = [
+            (10.0 * 14.0 - 6.0 * 21.0) / det,
+            (4.0 * 21.0 - 6.0 * 10.0) / det,
+        ];
+        let found = LevenbergMarquardt::new()
+            .minimize(&mut Linear, &[5.0, -3.0], |_| ControlFlow::Continue(()))
+            .unwrap();
+        for (got, want) in found.x.iter().zip(want) {
+            assert!((got - want).abs() < 1e-8, "{:?} vs {want}", found.x);
+        }
+    }
+
+    #[test]
+    fn the_observer_can_stop_and_the_budget_is_kept() {
+        let mut seen = 0;
+        let found = LevenbergMarquardt::new()
+            .minimize(&mut Linear, &[5.0, -3.0], |it| {
+                seen = it.iteration;
+                ControlFlow::Break(())
+            })
+            .unwrap();
+        assert_eq!(
+            (found.reason, found.iterations, seen),
+            (TerminationReason::EarlyStopping, 1, 1)
+        );
+        let found = LevenbergMarquardt::new()
+            .max_iterations(1)
+            .tolerance(0.0)
+            .minimize(&mut Linear, &[5.0, -3.0], |_| ControlFlow::Continue(()))
+            .unwrap();
+        assert_eq!(
+            (found.reason, found.iterations),
+            (TerminationReason::MaxIterations, 1)
+        );
+    }
+
+    /// A box: the minimum of (x - 3)^2 within [0, 1] is 1, reached by
+    /// projected steps.
+    struct Boxed;
+    impl LeastSquaresProblem for Boxed {
+        type Error = ();
+        fn residuals(&mut self, x: &[f64], r: &mut Vec<f64>) -> Result<(), ()> {
+            r.clear();
+            r.push(x[0] - 3.0);
+            Ok(())
+        }
+        fn project(&self, x: &mut [f64]) {
+            x[0] = x[0].clamp(0.0, 1.0);
+        }
+    }
+
+    #[test]
+    fn projected_steps_stay_feasible() {
+        let found = LevenbergMarquardt::new()
+            .damping(Damping::Diagonal { floor: 1e-12 })
+            .minimize(&mut Boxed, &[0.2], |it| {
+                assert!((0.0..=1.0).contains(&it.x[0]));
+                ControlFlow::Continue(())
+            })
+            .unwrap();
+        assert!((found.x[0] - 1.0).abs() < 1e-12 && (found.cost - 4.0).abs() < 1e-12);
+        assert_eq!(found.reason, TerminationReason::DampingLimit);
+    }
+}
