@@ -73,10 +73,11 @@ impl BayesBenchmark {
     /// A record the Kalman filter refuses, or invalid settings.
     pub fn posterior(&self, record: &IoData) -> Result<Posterior> {
         if self.initial_points < 3 || self.tolerance.is_nan() || self.tolerance <= 0.0 {
-            return Err(BaselineError::InvalidRecord(format!(
-                "grid of {} points, tolerance {}: use at least 3 points and a positive tolerance",
-                self.initial_points, self.tolerance
-            )));
+            return Err(BaselineError::InvalidSetting {
+                name: "grid points and tolerance",
+                value: format!("{} and {}", self.initial_points, self.tolerance),
+                expected: "at least 3 points and a positive tolerance".into(),
+            });
         }
         let (lo, hi) = (-0.9, 0.9);
         let log_likelihood = |thetas: &[f64]| -> Result<Vec<f64>> {

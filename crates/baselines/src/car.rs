@@ -17,8 +17,12 @@ use crate::pem::ResidualModel;
 use crate::{Estimate, RecordEstimator};
 
 fn state4(state: &mut [f64]) -> Result<&mut [f64; 4]> {
-    <&mut [f64; 4]>::try_from(state)
-        .map_err(|_| BaselineError::InvalidRecord("the car's state has four components".into()))
+    let length = state.len();
+    <&mut [f64; 4]>::try_from(state).map_err(|_| BaselineError::Shape {
+        what: "the car's state",
+        found: format!("{length} components"),
+        expected: "four (beta, r, phi, p)".into(),
+    })
 }
 
 /// The car for the particle filter: state (beta, r, phi, p), no process
@@ -126,9 +130,11 @@ impl ResidualModel for CarPredictor {
     }
     fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()> {
         if record.n_inputs() != 1 || record.n_outputs() != 1 {
-            return Err(BaselineError::InvalidRecord(
-                "the car takes SISO records".into(),
-            ));
+            return Err(BaselineError::Shape {
+                what: "the record's inputs and outputs",
+                found: format!("{} and {}", record.n_inputs(), record.n_outputs()),
+                expected: "one of each (the car is SISO)".into(),
+            });
         }
         noise_free(&self.car, theta, record.input(0), residuals)?;
         for (r, y) in residuals.iter_mut().zip(record.output(0)) {
@@ -178,9 +184,11 @@ impl BayesCar {
     /// A grid smaller than 3 x 3, or a simulation that fails.
     pub fn new(n1: usize, n2: usize, n_samples: usize) -> Result<Self> {
         if n1 < 3 || n2 < 3 {
-            return Err(BaselineError::InvalidRecord(format!(
-                "a {n1} x {n2} grid: use at least 3 x 3"
-            )));
+            return Err(BaselineError::InvalidSetting {
+                name: "grid",
+                value: format!("{n1} x {n2}"),
+                expected: "at least 3 x 3 points".into(),
+            });
         }
         let car = PacejkaCar::builder()
             .noiseless(true)
@@ -235,12 +243,18 @@ impl BayesCar {
     /// A record of another length, or not SISO.
     pub fn posterior(&self, record: &IoData) -> Result<CarPosterior> {
         if record.n_outputs() != 1 || record.n_samples() != self.n_samples {
-            return Err(BaselineError::InvalidRecord(format!(
-                "the grid was simulated for {} samples of one output; the record has {} samples of {}",
-                self.n_samples,
-                record.n_samples(),
-                record.n_outputs()
-            )));
+            return Err(BaselineError::Shape {
+                what: "the record",
+                found: format!(
+                    "{} samples of {} outputs",
+                    record.n_samples(),
+                    record.n_outputs()
+                ),
+                expected: format!(
+                    "{} samples of one output (what the grid was simulated for)",
+                    self.n_samples
+                ),
+            });
         }
         record.check_finite()?;
         let y = record.output(0);

@@ -14,11 +14,25 @@ pub enum BaselineError {
     #[error(transparent)]
     Compress(#[from] twostage_compress::CompressError),
     /// A setting of the method is out of range.
-    #[error("invalid setting: {0}")]
-    InvalidSetting(String),
-    /// The record does not suit the method.
-    #[error("invalid record: {0}")]
-    InvalidRecord(String),
+    #[error("invalid {name} = {value}: {expected}")]
+    InvalidSetting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: String,
+        /// What is accepted, or what to do instead.
+        expected: String,
+    },
+    /// A record, or a buffer or vector given with it, has the wrong shape.
+    #[error("{what}: {found}, where the method needs {expected}")]
+    Shape {
+        /// What has the wrong shape.
+        what: &'static str,
+        /// What was given.
+        found: String,
+        /// What the method needs.
+        expected: String,
+    },
     /// The filter's covariance lost positive definiteness.
     #[error("numerical failure at sample {sample}: {what}")]
     Numerical {

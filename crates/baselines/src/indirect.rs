@@ -74,9 +74,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
         seed: u64,
     ) -> Result<Self> {
         if simulations == 0 {
-            return Err(BaselineError::InvalidSetting(
-                "indirect inference needs at least one simulation per theta".into(),
-            ));
+            return Err(BaselineError::InvalidSetting {
+                name: "simulations per theta",
+                value: "0".into(),
+                expected: "at least 1".into(),
+            });
         }
         let mut objective = Self {
             simulator,
@@ -95,10 +97,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
     fn covariance_factor(&self, count: usize) -> Result<Vec<f64>> {
         let n = self.compressor.n_features();
         if count <= n {
-            return Err(BaselineError::InvalidSetting(format!(
-                "{count} weighting simulations cannot estimate the covariance of {n} features: \
-                 give more than {n}"
-            )));
+            return Err(BaselineError::InvalidSetting {
+                name: "weighting simulations",
+                value: count.to_string(),
+                expected: format!("more than the {n} features, to estimate their covariance"),
+            });
         }
         let prior = self.simulator.prior();
         let centre: Vec<f64> = prior
@@ -118,13 +121,15 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
         }
         let rows = ndarray::ArrayView2::from_shape((count, n), &features)
             .unwrap_or_else(|_| unreachable!("count rows of n features"));
-        let covariance = CovarianceFactor::of_rows(rows).ok_or_else(|| {
-            BaselineError::InvalidSetting(
-                "the features' covariance at the prior's centre is singular \
-                 (a feature does not vary): use Weighting::Identity"
+        let covariance =
+            CovarianceFactor::of_rows(rows).ok_or_else(|| BaselineError::InvalidSetting {
+                name: "weighting",
+                value: "inverse covariance".into(),
+                expected: "a weighting that exists: the features' covariance at the prior's \
+                           centre is singular (a feature does not vary), use \
+                           Weighting::Identity"
                     .into(),
-            )
-        })?;
+            })?;
         Ok(covariance.factor)
     }
 
@@ -144,10 +149,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
     pub fn mean_features(&self, theta: &[f64], out: &mut [f64]) -> Result<()> {
         let n = self.compressor.n_features();
         if out.len() != n {
-            return Err(BaselineError::InvalidRecord(format!(
-                "{} slots for {n} features",
-                out.len()
-            )));
+            return Err(BaselineError::Shape {
+                what: "the feature buffer",
+                found: format!("{} slots", out.len()),
+                expected: format!("{n}, one per feature"),
+            });
         }
         let mut features = vec![0.0; self.simulations * n];
         features
@@ -204,10 +210,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> ResidualModel for IndirectObject
     fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()> {
         let n = self.compressor.n_features();
         if residuals.len() != n {
-            return Err(BaselineError::InvalidRecord(format!(
-                "{} residual slots for {n} features",
-                residuals.len()
-            )));
+            return Err(BaselineError::Shape {
+                what: "the residual buffer",
+                found: format!("{} slots", residuals.len()),
+                expected: format!("{n}, one per feature"),
+            });
         }
         // beta(D) is recompressed at every evaluation: one record against
         // the S simulated ones, a small share of the cost.
@@ -305,9 +312,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectInference<S, C> {
     /// As [`IndirectObjective::new`], and no start.
     pub fn build(self) -> Result<PredictionError<IndirectObjective<S, C>>> {
         if self.starts == 0 {
-            return Err(BaselineError::InvalidSetting(
-                "indirect inference needs at least one start".into(),
-            ));
+            return Err(BaselineError::InvalidSetting {
+                name: "starts",
+                value: "0".into(),
+                expected: "at least 1".into(),
+            });
         }
         let objective = IndirectObjective::new(
             self.simulator,

@@ -37,11 +37,11 @@ impl BenchmarkStateSpace {
 /// The input and output of a benchmark record, checked: one of each, finite.
 pub(crate) fn benchmark_signals(record: &IoData) -> Result<(&[f64], &[f64])> {
     if record.n_inputs() != 1 || record.n_outputs() != 1 {
-        return Err(BaselineError::InvalidRecord(format!(
-            "the benchmark has one input and one output, the record has {} and {}",
-            record.n_inputs(),
-            record.n_outputs()
-        )));
+        return Err(BaselineError::Shape {
+            what: "the record's inputs and outputs",
+            found: format!("{} and {}", record.n_inputs(), record.n_outputs()),
+            expected: "one of each (the benchmark is SISO)".into(),
+        });
     }
     record.check_finite()?;
     Ok((record.input(0), record.output(0)))
@@ -91,11 +91,11 @@ pub fn benchmark_kalman_innovations(
     if let Some(buffer) = &innovations
         && buffer.len() != record.n_samples()
     {
-        return Err(BaselineError::InvalidRecord(format!(
-            "an innovation buffer of {} for a record of {} samples",
-            buffer.len(),
-            record.n_samples()
-        )));
+        return Err(BaselineError::Shape {
+            what: "the innovation buffer",
+            found: format!("{} slots", buffer.len()),
+            expected: format!("one per sample ({})", record.n_samples()),
+        });
     }
     let (u, y) = benchmark_signals(record)?;
     let m = BenchmarkStateSpace::at(theta);

@@ -145,16 +145,19 @@ impl<M: ParticleModel> ParticleFilter<M> {
 
     fn run(&self, record: &IoData) -> Result<Estimate> {
         if record.n_inputs() != 1 || record.n_outputs() != 1 {
-            return Err(BaselineError::InvalidRecord(
-                "the particle filter takes SISO records".into(),
-            ));
+            return Err(BaselineError::Shape {
+                what: "the record's inputs and outputs",
+                found: format!("{} and {}", record.n_inputs(), record.n_outputs()),
+                expected: "one of each (the particle filter is SISO)".into(),
+            });
         }
         record.check_finite()?;
         if self.particles < 2 || self.jitter.is_nan() || self.jitter < 0.0 {
-            return Err(BaselineError::InvalidRecord(format!(
-                "{} particles and jitter {}: use at least 2 particles and a jitter >= 0",
-                self.particles, self.jitter
-            )));
+            return Err(BaselineError::InvalidSetting {
+                name: "particles and jitter",
+                value: format!("{} and {}", self.particles, self.jitter),
+                expected: "at least 2 particles and a jitter >= 0".into(),
+            });
         }
         let (u, y) = (record.input(0), record.output(0));
         let prior = self.model.prior();

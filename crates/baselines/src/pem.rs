@@ -169,9 +169,11 @@ impl<M: ResidualModel> PredictionError<M> {
     /// A bad record, or no start at all.
     pub fn descents(&self, record: &IoData) -> Result<Vec<Descent>> {
         if self.starts == 0 || self.max_iterations == 0 {
-            return Err(BaselineError::InvalidRecord(
-                "PE needs at least one start and one iteration".into(),
-            ));
+            return Err(BaselineError::InvalidSetting {
+                name: "starts and iterations",
+                value: format!("{} and {}", self.starts, self.max_iterations),
+                expected: "at least 1 each".into(),
+            });
         }
         let prior = self.model.prior();
         let design = prior.design(self.starts, self.seed)?;
@@ -217,11 +219,11 @@ impl<M: ResidualModel> PredictionError<M> {
         let prior = self.model.prior();
         let q = prior.dim();
         if radius.len() != q || start.len() != q || radius.iter().any(|r| r.is_nan() || *r < 0.0) {
-            return Err(BaselineError::InvalidRecord(format!(
-                "a start of {} and a radius of {} values for {q} parameters (radii >= 0)",
-                start.len(),
-                radius.len(),
-            )));
+            return Err(BaselineError::Shape {
+                what: "the start and the radius",
+                found: format!("{} and {} values", start.len(), radius.len()),
+                expected: format!("{q} each (one per parameter), radii >= 0"),
+            });
         }
         // The box in unit coordinates, and a start confined to a sub-box.
         let unit = |j: usize, t: f64| {
@@ -284,20 +286,19 @@ impl<M: ResidualModel> PredictionError<M> {
             || radius.iter().any(|r| r.is_nan() || *r < 0.0)
             || points < 2
         {
-            return Err(BaselineError::InvalidRecord(format!(
-                "a centre of {} and a radius of {} values for {q} parameters (radii >= 0), \
-                 and at least 2 points per axis ({points} given)",
-                centre.len(),
-                radius.len()
-            )));
+            return Err(BaselineError::Shape {
+                what: "the centre, the radius and the points per axis",
+                found: format!("{}, {} and {points}", centre.len(), radius.len()),
+                expected: format!("{q}, {q} (radii >= 0) and at least 2"),
+            });
         }
         let total = points
             .checked_pow(q as u32)
             .filter(|t| *t <= 1 << 20)
-            .ok_or_else(|| {
-                BaselineError::InvalidRecord(format!(
-                    "{points}^{q} grid points are too many: use fewer points per axis"
-                ))
+            .ok_or_else(|| BaselineError::InvalidSetting {
+                name: "points per axis",
+                value: points.to_string(),
+                expected: format!("at most 2^20 grid points in all ({points}^{q} is more)"),
             })?;
         let axes: Vec<Vec<f64>> = (0..q)
             .map(|j| {
@@ -360,11 +361,15 @@ impl<M: ResidualModel> PredictionError<M> {
         hi: &[f64],
     ) -> Result<Descent> {
         if start.len() != self.model.prior().dim() || self.max_iterations == 0 {
-            return Err(BaselineError::InvalidRecord(format!(
-                "a start of {} values for {} parameters (and at least one iteration)",
-                start.len(),
-                self.model.prior().dim()
-            )));
+            return Err(BaselineError::Shape {
+                what: "the start (and the iteration budget)",
+                found: format!(
+                    "{} values ({} iterations)",
+                    start.len(),
+                    self.max_iterations
+                ),
+                expected: format!("{} values (at least 1 iteration)", self.model.prior().dim()),
+            });
         }
         let prior = self.model.prior();
         let unit: Vec<f64> = start
@@ -472,11 +477,13 @@ impl<M: ResidualModel> RecordEstimator for PredictionError<M> {
     }
 
     fn estimate(&self, record: &IoData) -> Result<Estimate> {
-        let best = self
-            .descents(record)?
-            .into_iter()
-            .next()
-            .ok_or_else(|| BaselineError::InvalidRecord("no descent ran".into()))?;
+        let best = self.descents(record)?.into_iter().next().ok_or_else(|| {
+            BaselineError::InvalidSetting {
+                name: "starts",
+                value: self.starts.to_string(),
+                expected: "at least 1".into(),
+            }
+        })?;
         Ok(Estimate {
             theta: best.theta,
             spread: None,

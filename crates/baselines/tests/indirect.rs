@@ -166,21 +166,28 @@ fn a_record_of_the_common_stream_has_zero_loss_at_its_truth_and_is_found() {
 fn bad_settings_and_records_are_refused_with_the_reason() {
     let model = Benchmark::builder().n_samples(200).build().unwrap();
     let arx = Arx::new(5, 5).unwrap();
-    let message = |r: Result<_, BaselineError>| r.map(|_| ()).unwrap_err().to_string();
-    let e = message(IndirectInference::new(model.clone(), arx, 0).build());
-    assert!(e.contains("at least one start"), "{e}");
-    let e = message(
+    let setting = |r: Result<_, BaselineError>| match r.map(|_| ()).unwrap_err() {
+        BaselineError::InvalidSetting { name, value, .. } => (name, value),
+        other => panic!("expected a setting error, got {other}"),
+    };
+    let e = setting(IndirectInference::new(model.clone(), arx, 0).build());
+    assert_eq!(e, ("starts", "0".to_string()));
+    let e = setting(
         IndirectInference::new(model.clone(), arx, 1)
             .simulations(0)
             .build(),
     );
-    assert!(e.contains("at least one simulation"), "{e}");
-    let e = message(
-        IndirectInference::new(model.clone(), arx, 1)
-            .weighting(Weighting::InverseCovariance { simulations: 10 })
-            .build(),
+    assert_eq!(e, ("simulations per theta", "0".to_string()));
+    let e = IndirectInference::new(model.clone(), arx, 1)
+        .weighting(Weighting::InverseCovariance { simulations: 10 })
+        .build()
+        .map(|_| ())
+        .unwrap_err();
+    assert!(
+        matches!(&e, BaselineError::InvalidSetting { name: "weighting simulations", value, .. } if value == "10"),
+        "{e}"
     );
-    assert!(e.contains("give more than 10"), "{e}");
+    assert!(e.to_string().contains("more than the 10 features"), "{e}");
     let ii = IndirectInference::new(model, arx, 1).build().unwrap();
     let flat = IoData::siso(&[1.0; 200], &[0.5; 200]).unwrap();
     assert!(ii.estimate(&flat).is_err());

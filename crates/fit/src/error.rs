@@ -42,8 +42,14 @@ pub enum FitError {
         value: f64,
     },
     /// The least-squares problem is rank deficient.
-    #[error("rank-deficient least squares: {0}")]
-    RankDeficient(String),
+    #[error(
+        "rank-deficient least squares: feature {feature} is a linear combination of the \
+         others (or constant): use lambda > 0 or drop it"
+    )]
+    RankDeficient {
+        /// The first dependent feature (0-based column).
+        feature: usize,
+    },
 }
 
 /// Shorthand for results of this crate.

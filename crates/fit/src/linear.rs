@@ -141,10 +141,7 @@ impl Regressor for Ridge {
             d.is_nan() || d <= 1e-12 * largest
         };
         if let Some(j) = (0..n).find(|&j| dependent(j)) {
-            return Err(FitError::RankDeficient(format!(
-                "feature {j} is a linear combination of the others (or constant): \
-                 use lambda > 0 or drop it"
-            )));
+            return Err(FitError::RankDeficient { feature: j });
         }
         qr.solve_lstsq_in_place_with_conj(faer::Conj::No, rhs.as_mut());
         let weights = (0..q)

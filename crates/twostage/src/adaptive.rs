@@ -5,7 +5,7 @@ use ndarray::{Array2, ArrayView2, Axis};
 use serde::{Deserialize, Serialize};
 use twostage_fit::{FittedMlp, MlpParams, Predictor, Regressor};
 
-use crate::error::{Error, Result};
+use crate::error::{FileError, Result};
 
 /// Normalized split-conformal intervals (Lei et al., 2018, Section 5.2):
 /// a small network `sigma(x)` learns the typical absolute error of each
@@ -44,8 +44,8 @@ struct AdaptiveFields {
 }
 
 impl TryFrom<AdaptiveFields> for AdaptiveIntervals {
-    type Error = Error;
-    fn try_from(f: AdaptiveFields) -> Result<Self> {
+    type Error = FileError;
+    fn try_from(f: AdaptiveFields) -> std::result::Result<Self, FileError> {
         let q = f.difficulty.n_outputs();
         let lengths_ok = f.floor.len() == q
             && f.quantile.len() == q
@@ -56,13 +56,15 @@ impl TryFrom<AdaptiveFields> for AdaptiveIntervals {
             && f.alpha > 0.0
             && f.alpha < 1.0;
         if !(lengths_ok && values_ok) {
-            return Err(Error::File(format!(
-                "inconsistent estimator: adaptive intervals for {q} parameters with {} floors, \
-                 {} quantiles, alpha {}",
-                f.floor.len(),
-                f.quantile.len(),
-                f.alpha
-            )));
+            return Err(FileError::Inconsistent {
+                what: format!(
+                    "adaptive intervals for {q} parameters with {} floors, {} quantiles, \
+                     alpha {}",
+                    f.floor.len(),
+                    f.quantile.len(),
+                    f.alpha
+                ),
+            });
         }
         Ok(Self {
             alpha: f.alpha,

@@ -31,8 +31,8 @@ struct EnvelopeFields {
 }
 
 impl TryFrom<EnvelopeFields> for FeatureEnvelope {
-    type Error = crate::Error;
-    fn try_from(f: EnvelopeFields) -> crate::Result<Self> {
+    type Error = crate::FileError;
+    fn try_from(f: EnvelopeFields) -> Result<Self, crate::FileError> {
         let n = f.mean.len();
         let diagonal_ok = (0..n).all(|j| {
             f.factor
@@ -44,12 +44,13 @@ impl TryFrom<EnvelopeFields> for FeatureEnvelope {
             || f.factor.iter().chain(&f.mean).any(|v| !v.is_finite())
             || !(f.threshold.is_finite() && f.threshold >= 0.0)
         {
-            return Err(crate::Error::File(format!(
-                "inconsistent estimator: a feature envelope of {n} means, {} factor entries \
-                 and threshold {}",
-                f.factor.len(),
-                f.threshold
-            )));
+            return Err(crate::FileError::Inconsistent {
+                what: format!(
+                    "a feature envelope of {n} means, {} factor entries and threshold {}",
+                    f.factor.len(),
+                    f.threshold
+                ),
+            });
         }
         Ok(Self {
             mean: f.mean,

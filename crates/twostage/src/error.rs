@@ -51,12 +51,27 @@ pub enum Error {
         /// The valid range.
         reason: String,
     },
-    /// A record does not fit the estimator.
-    #[error("the record does not fit this estimator: {0}")]
-    Record(String),
-    /// An estimator file could not be read or written.
-    #[error("estimator file: {0}")]
-    File(String),
+    /// A record or output slot does not fit the estimator.
+    #[error(
+        "the record does not fit this estimator: {what} has {found} values, the estimator \
+         needs {expected}"
+    )]
+    Record {
+        /// Which part: "theta" (the output slots), say.
+        what: &'static str,
+        /// What was given.
+        found: usize,
+        /// What the estimator needs.
+        expected: usize,
+    },
+    /// An estimator file could not be read, decoded or written.
+    #[error("{}{error}", path.as_ref().map(|p| format!("{}: ", p.display())).unwrap_or_default())]
+    File {
+        /// The file, when one was named.
+        path: Option<std::path::PathBuf>,
+        /// What is wrong with it.
+        error: FileError,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {cause}")]
     Io {
@@ -65,6 +80,84 @@ pub enum Error {
         /// What happened (not a `source`, so that error chains print it once).
         cause: std::io::Error,
     },
+}
+
+/// What is wrong with an estimator file's bytes: each case a variant, so
+/// that a caller can tell a truncated, a newer and a damaged file apart.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[non_exhaustive]
+pub enum FileError {
+    /// The bytes do not start with the magic `TWOSTAGE`.
+    #[error(
+        "not a twostage estimator file (it does not start with TWOSTAGE): give a file \
+         written by `twostage train` or `Estimator::save`"
+    )]
+    BadMagic,
+    /// Fewer bytes than the header or the payload needs.
+    #[error("truncated: the {part} needs {expected} bytes, {found} are present")]
+    Truncated {
+        /// "header" or "payload".
+        part: &'static str,
+        /// Bytes needed.
+        expected: u64,
+        /// Bytes present.
+        found: u64,
+    },
+    /// Bytes after the payload the header announced.
+    #[error("{extra} unexpected bytes after the payload: the file is corrupted")]
+    TrailingBytes {
+        /// How many.
+        extra: u64,
+    },
+    /// Written by a newer format version than this build reads.
+    #[error(
+        "written by a newer twostage (format version {found}; this build reads up to \
+         {supported}): upgrade twostage to read it"
+    )]
+    NewerVersion {
+        /// The file's version.
+        found: u32,
+        /// The newest this build reads.
+        supported: u32,
+    },
+    /// A version number that no build ever wrote.
+    #[error("format version {found} does not exist: the file is corrupted")]
+    UnknownVersion {
+        /// The file's version.
+        found: u32,
+    },
+    /// The payload's checksum does not match the header's.
+    #[error("corrupted: checksum {actual:08x} does not match the stored {stored:08x}")]
+    BadChecksum {
+        /// The header's CRC-32.
+        stored: u32,
+        /// The payload's.
+        actual: u32,
+    },
+    /// The payload is not a postcard-encoded estimator.
+    #[error("the payload does not decode ({reason}): the file is corrupted")]
+    Undecodable {
+        /// The decoder's message.
+        reason: String,
+    },
+    /// The parts decode but do not agree with each other (sizes, ranges).
+    #[error("inconsistent estimator: {what}")]
+    Inconsistent {
+        /// Which parts disagree, with their sizes or values.
+        what: String,
+    },
+    /// Encoding (postcard or JSON) failed.
+    #[error("encoding the estimator failed: {reason}")]
+    Encoding {
+        /// The encoder's message.
+        reason: String,
+    },
+}
+
+impl From<FileError> for Error {
+    fn from(error: FileError) -> Self {
+        Error::File { path: None, error }
+    }
 }
 
 /// Shorthand for results of this crate.

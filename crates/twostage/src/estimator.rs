@@ -12,7 +12,7 @@ use twostage_validate::{ConformalIntervals, ValidationReport};
 use crate::adaptive::AdaptiveIntervals;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
-use crate::error::{Error, Result};
+use crate::error::{Error, FileError, Result};
 
 /// What the estimator was trained on, for people and for audits.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -116,8 +116,8 @@ pub(crate) struct EstimatorFieldsV1 {
 }
 
 impl TryFrom<EstimatorFieldsV1> for Estimator {
-    type Error = Error;
-    fn try_from(f: EstimatorFieldsV1) -> Result<Self> {
+    type Error = FileError;
+    fn try_from(f: EstimatorFieldsV1) -> std::result::Result<Self, FileError> {
         Self::try_from(EstimatorFields {
             param_names: f.param_names,
             lower: f.lower,
@@ -135,9 +135,9 @@ impl TryFrom<EstimatorFieldsV1> for Estimator {
 }
 
 impl TryFrom<EstimatorFields> for Estimator {
-    type Error = Error;
-    fn try_from(f: EstimatorFields) -> Result<Self> {
-        let bad = |what: String| Err(Error::File(format!("inconsistent estimator: {what}")));
+    type Error = FileError;
+    fn try_from(f: EstimatorFields) -> std::result::Result<Self, FileError> {
+        let bad = |what: String| Err(FileError::Inconsistent { what });
         let q = f.param_names.len();
         if q == 0 || f.lower.len() != q || f.upper.len() != q {
             return bad(format!(
@@ -283,11 +283,11 @@ impl Estimator {
         theta: &mut [f64],
     ) -> Result<()> {
         if theta.len() != self.param_names.len() {
-            return Err(Error::Record(format!(
-                "theta has {} slots, the estimator has {} parameters",
-                theta.len(),
-                self.param_names.len()
-            )));
+            return Err(Error::Record {
+                what: "theta",
+                found: theta.len(),
+                expected: self.param_names.len(),
+            });
         }
         let n = self.compressor.n_features();
         if work.features.len() != n {

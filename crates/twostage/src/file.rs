@@ -13,7 +13,7 @@
 
 use std::path::Path;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, FileError, Result};
 use crate::estimator::Estimator;
 
 /// The first eight bytes of every estimator file.
@@ -53,18 +53,15 @@ pub(crate) fn crc32(bytes: &[u8]) -> u32 {
     })
 }
 
-fn file_error(message: String) -> Error {
-    Error::File(message)
-}
-
 impl Estimator {
     /// Encode the estimator as the bytes of an estimator file.
     ///
     /// # Errors
     /// [`Error::File`] if encoding fails (it does not for valid estimators).
     pub fn to_bytes(&self) -> Result<Vec<u8>> {
-        let payload = postcard::to_allocvec(self)
-            .map_err(|e| file_error(format!("encoding the estimator failed: {e}")))?;
+        let payload = postcard::to_allocvec(self).map_err(|e| FileError::Encoding {
+            reason: e.to_string(),
+        })?;
         let mut bytes = Vec::with_capacity(HEADER + payload.len());
         bytes.extend_from_slice(MAGIC);
         bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -88,21 +85,19 @@ impl Estimator {
     /// ```
     ///
     /// # Errors
-    /// [`Error::File`] for a file that is not an estimator file, was written
-    /// by a newer version, is truncated, or is corrupted.
+    /// [`Error::File`] with the [`FileError`] that says what is wrong: not an
+    /// estimator file, written by a newer version, truncated, or corrupted.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
         if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
-            return Err(file_error(
-                "not a twostage estimator file (it does not start with TWOSTAGE): \
-                 give a file written by `twostage train` or `Estimator::save`"
-                    .into(),
-            ));
+            return Err(FileError::BadMagic.into());
         }
         if bytes.len() < HEADER {
-            return Err(file_error(format!(
-                "truncated: {} bytes, shorter than the {HEADER}-byte header",
-                bytes.len()
-            )));
+            return Err(FileError::Truncated {
+                part: "header",
+                expected: HEADER as u64,
+                found: bytes.len() as u64,
+            }
+            .into());
         }
         let word = |range: std::ops::Range<usize>| -> [u8; 8] {
             let mut w = [0u8; 8];
@@ -111,36 +106,40 @@ impl Estimator {
         };
         let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
         if version > FORMAT_VERSION {
-            return Err(file_error(format!(
-                "written by a newer twostage (format version {version}; this build reads \
-                 up to {FORMAT_VERSION}): upgrade twostage to read it"
-            )));
+            return Err(FileError::NewerVersion {
+                found: version,
+                supported: FORMAT_VERSION,
+            }
+            .into());
         }
         if version == 0 {
-            return Err(file_error(
-                "format version 0 does not exist: the file is corrupted".into(),
-            ));
+            return Err(FileError::UnknownVersion { found: version }.into());
         }
         let length = u64::from_le_bytes(word(12..20));
         let checksum = u32::from_le_bytes([bytes[20], bytes[21], bytes[22], bytes[23]]);
         let present = (bytes.len() - HEADER) as u64;
         if length > present {
-            return Err(file_error(format!(
-                "truncated: the header promises {length} bytes of payload, {present} are present"
-            )));
+            return Err(FileError::Truncated {
+                part: "payload",
+                expected: length,
+                found: present,
+            }
+            .into());
         }
         if length < present {
-            return Err(file_error(format!(
-                "{} unexpected bytes after the payload: the file is corrupted",
-                present - length
-            )));
+            return Err(FileError::TrailingBytes {
+                extra: present - length,
+            }
+            .into());
         }
         let payload = &bytes[HEADER..];
         let actual = crc32(payload);
         if actual != checksum {
-            return Err(file_error(format!(
-                "corrupted: checksum {actual:08x} does not match the stored {checksum:08x}"
-            )));
+            return Err(FileError::BadChecksum {
+                stored: checksum,
+                actual,
+            }
+            .into());
         }
         let decoded = if version == 1 {
             postcard::from_bytes::<crate::estimator::EstimatorFieldsV1>(payload)
@@ -149,11 +148,7 @@ impl Estimator {
         } else {
             postcard::from_bytes(payload).map_err(|e| e.to_string())
         };
-        decoded.map_err(|e| {
-            file_error(format!(
-                "the payload does not decode ({e}): the file is corrupted"
-            ))
-        })
+        decoded.map_err(|reason| FileError::Undecodable { reason }.into())
     }
 
     /// Write the estimator file to `path`.
@@ -180,7 +175,10 @@ impl Estimator {
             cause,
         })?;
         Self::from_bytes(&bytes).map_err(|e| match e {
-            Error::File(message) => Error::File(format!("{}: {message}", path.display())),
+            Error::File { error, .. } => Error::File {
+                path: Some(path.to_path_buf()),
+                error,
+            },
             other => other,
         })
     }
@@ -191,8 +189,12 @@ impl Estimator {
     /// # Errors
     /// [`Error::File`] if serialization fails.
     pub fn to_json(&self) -> Result<String> {
-        serde_json::to_string_pretty(self)
-            .map_err(|e| file_error(format!("JSON export failed: {e}")))
+        serde_json::to_string_pretty(self).map_err(|e| {
+            FileError::Encoding {
+                reason: format!("JSON: {e}"),
+            }
+            .into()
+        })
     }
 }
 

@@ -61,7 +61,7 @@ pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
 pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
-pub use error::{Error, Result};
+pub use error::{Error, FileError, Result};
 pub use estimator::{Assessment, EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
 pub use file::{FORMAT_VERSION, MAGIC};
 pub use progress::{Progress, Silent, Stage};

@@ -10,7 +10,7 @@ use twostage::fit::MlpParams;
 use twostage::models::{
     Benchmark, ExperimentRng, IoData, ModelSpec, SimError, Simulator, experiment_rng,
 };
-use twostage::{Error, Estimator, RegressorConfig, TwoStage};
+use twostage::{Error, Estimator, FileError, RegressorConfig, TwoStage};
 
 fn small_benchmark() -> Benchmark {
     Benchmark::builder().n_samples(400).build().unwrap()
@@ -60,32 +60,57 @@ fn a_saved_estimator_loads_back_identical_and_estimates_the_same() {
 fn damaged_files_get_a_clear_error_each() {
     let model = small_benchmark();
     let bytes = small_estimator(&model, 4).to_bytes().unwrap();
-    let message = |bytes: &[u8]| match Estimator::from_bytes(bytes) {
-        Err(Error::File(m)) => m,
+    let kind = |bytes: &[u8]| match Estimator::from_bytes(bytes) {
+        Err(Error::File { path: None, error }) => error,
         other => panic!("expected a file error, got {other:?}"),
     };
+    let header = bytes.len() as u64 - 24;
     // Truncated, in the payload and in the header.
-    assert!(message(&bytes[..bytes.len() - 10]).contains("truncated"));
-    assert!(message(&bytes[..15]).contains("truncated"));
+    assert_eq!(
+        kind(&bytes[..bytes.len() - 10]),
+        FileError::Truncated {
+            part: "payload",
+            expected: header,
+            found: header - 10
+        }
+    );
+    assert!(matches!(
+        kind(&bytes[..15]),
+        FileError::Truncated {
+            part: "header",
+            expected: 24,
+            found: 15
+        }
+    ));
     // Corrupted: one payload bit flipped.
     let mut flipped = bytes.clone();
     let last = flipped.len() - 3;
     flipped[last] ^= 0x10;
-    assert!(message(&flipped).contains("checksum"));
-    // Foreign: a PNG header, and an empty file.
-    assert!(
-        message(b"\x89PNG\r\n\x1a\n0000000000000000000000")
-            .contains("not a twostage estimator file")
+    assert!(matches!(kind(&flipped), FileError::BadChecksum { .. }));
+    // Foreign: a PNG header, and an empty file; the message says what to do.
+    assert_eq!(
+        kind(b"\x89PNG\r\n\x1a\n0000000000000000000000"),
+        FileError::BadMagic
     );
-    assert!(message(b"").contains("not a twostage estimator file"));
-    // Newer format version.
+    assert_eq!(kind(b""), FileError::BadMagic);
+    assert!(FileError::BadMagic.to_string().contains("twostage train"));
+    // Newer and impossible format versions.
     let mut newer = bytes.clone();
     newer[8..12].copy_from_slice(&7u32.to_le_bytes());
-    assert!(message(&newer).contains("newer twostage (format version 7"));
+    assert_eq!(
+        kind(&newer),
+        FileError::NewerVersion {
+            found: 7,
+            supported: 2
+        }
+    );
+    assert!(kind(&newer).to_string().contains("upgrade twostage"));
+    newer[8..12].copy_from_slice(&0u32.to_le_bytes());
+    assert_eq!(kind(&newer), FileError::UnknownVersion { found: 0 });
     // Trailing bytes.
     let mut longer = bytes.clone();
     longer.push(0);
-    assert!(message(&longer).contains("unexpected bytes"));
+    assert_eq!(kind(&longer), FileError::TrailingBytes { extra: 1 });
     // A missing file names itself.
     let err = Estimator::load("/nonexistent/x.tsest").unwrap_err();
     assert!(err.to_string().contains("/nonexistent/x.tsest"), "{err}");
