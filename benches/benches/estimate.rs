@@ -7,14 +7,9 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use twostage::compress::Arx;
-use twostage::models::{Benchmark, IoData, PacejkaCar};
-use twostage::{EstimateWorkspace, Estimator, TwoStage};
-use twostage_baselines::{
-    BayesBenchmark, BenchmarkParticles, BenchmarkPredictor, CarParticles, CarPredictor,
-    IndirectInference, InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError,
-    RecordEstimator,
-};
+use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar};
+use twostage::{ClassicMethod, EstimateWorkspace, Estimator, ModelProfile, TwoStage};
+use twostage_baselines::{MethodSettings, RecordEstimator, classic_estimator};
 use twostage_benches::{config, record, slow_config};
 
 fn bench_ts(
@@ -57,10 +52,23 @@ fn bench_method(
     });
 }
 
+/// A classic method as the per-model table builds it (seed 0).
+fn classic(model: BuiltinModel, method: ClassicMethod, starts: usize) -> Box<dyn RecordEstimator> {
+    let settings = MethodSettings {
+        starts,
+        ..MethodSettings::default()
+    };
+    classic_estimator(model, method, &settings)
+        .unwrap_or_else(|e| panic!("{method} for {model}: {e}"))
+}
+
 fn benchmark_costs(c: &mut Criterion) {
+    use ClassicMethod as M;
+    let model = BuiltinModel::Benchmark;
+    let profile = ModelProfile::of(model);
     let bench = Benchmark::new();
     let estimator = TwoStage::builder(&bench)
-        .preset(twostage::paper_benchmark())
+        .preset(profile.preset("paper").unwrap_or_else(|e| panic!("{e}")))
         .validation(0)
         .calibration(0)
         .train()
@@ -68,65 +76,38 @@ fn benchmark_costs(c: &mut Criterion) {
     let data = record(&bench, &[0.5]);
     let mut group = c.benchmark_group("estimate_cost_benchmark");
     bench_ts(&mut group, &estimator, &data);
-    bench_method(
-        &mut group,
-        "ekf",
-        &KalmanEstimator::ekf(InitialCovariance::Eq6),
-        &data,
-    );
-    bench_method(
-        &mut group,
-        "ukf",
-        &KalmanEstimator::ukf(InitialCovariance::Eq6),
-        &data,
-    );
-    let predictor = || BenchmarkPredictor::new().unwrap_or_else(|e| panic!("{e}"));
-    bench_method(
-        &mut group,
-        "pem1",
-        &PredictionError::new(predictor(), 1),
-        &data,
-    );
-    bench_method(
-        &mut group,
-        "pem5",
-        &PredictionError::new(predictor(), 5),
-        &data,
-    );
-    bench_method(
-        &mut group,
-        "pem10",
-        &PredictionError::new(predictor(), 10),
-        &data,
-    );
+    bench_method(&mut group, "ekf", classic(model, M::Ekf, 1).as_ref(), &data);
+    bench_method(&mut group, "ukf", classic(model, M::Ukf, 1).as_ref(), &data);
+    for starts in [1, 5, 10] {
+        let pem = classic(model, M::PredictionError, starts);
+        bench_method(&mut group, &format!("pem{starts}"), pem.as_ref(), &data);
+    }
     group.finish();
     let mut group = c.benchmark_group("estimate_cost_benchmark");
     group.sample_size(10);
-    let particles = BenchmarkParticles::new().unwrap_or_else(|e| panic!("{e}"));
+    let pf = classic(model, M::ParticleFilter, 1);
+    let name = format!("pf{}", profile.default_particles());
+    bench_method(&mut group, &name, pf.as_ref(), &data);
     bench_method(
         &mut group,
-        "pf1000",
-        &ParticleFilter::new(particles, 1000),
+        "bayes",
+        classic(model, M::Bayes, 1).as_ref(),
         &data,
     );
-    bench_method(&mut group, "bayes", &BayesBenchmark::default(), &data);
     // Indirect inference through the preset's ARX(5, 5): S = 10, W from 200
     // simulations (built once, outside the timing, as for a deployed method).
-    let ii5 = IndirectInference::new(
-        bench.clone(),
-        Arx::new(5, 5).unwrap_or_else(|e| panic!("{e}")),
-        5,
-    )
-    .build()
-    .unwrap_or_else(|e| panic!("indirect inference: {e}"));
-    bench_method(&mut group, "ii5", &ii5, &data);
+    let ii5 = classic(model, M::IndirectInference, 5);
+    bench_method(&mut group, "ii5", ii5.as_ref(), &data);
     group.finish();
 }
 
 fn pacejka_costs(c: &mut Criterion) {
+    use ClassicMethod as M;
+    let model = BuiltinModel::Pacejka;
+    let profile = ModelProfile::of(model);
     let car = PacejkaCar::new();
     let estimator = TwoStage::builder(&car)
-        .preset(twostage::paper_pacejka())
+        .preset(profile.preset("paper").unwrap_or_else(|e| panic!("{e}")))
         .validation(0)
         .calibration(0)
         .train()
@@ -137,18 +118,11 @@ fn pacejka_costs(c: &mut Criterion) {
     group.finish();
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     group.sample_size(10);
-    bench_method(
-        &mut group,
-        "pf500",
-        &ParticleFilter::new(CarParticles::new(), 500),
-        &data,
-    );
-    bench_method(
-        &mut group,
-        "pem5",
-        &PredictionError::new(CarPredictor::new(), 5),
-        &data,
-    );
+    let pf = classic(model, M::ParticleFilter, 1);
+    let name = format!("pf{}", profile.default_particles());
+    bench_method(&mut group, &name, pf.as_ref(), &data);
+    let pem5 = classic(model, M::PredictionError, 5);
+    bench_method(&mut group, "pem5", pem5.as_ref(), &data);
     group.finish();
 }
 

@@ -8,13 +8,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use twostage::compress::Arx;
-use twostage::models::{Benchmark, IoData, PacejkaCar, Simulator, run_experiment};
-use twostage::{EstimateWorkspace, Estimator, Preset, TwoStage};
+use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar, Simulator, run_experiment};
+use twostage::{ClassicMethod, EstimateWorkspace, Estimator, ModelProfile, Preset, TwoStage};
 use twostage_baselines::{
-    BayesBenchmark, BayesCar, BenchmarkParticles, BenchmarkPredictor, CarParticles, CarPredictor,
-    IndirectInference, InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError,
-    RecordEstimator, RefineStarts, ResidualModel,
+    BayesCar, InitialCovariance, MethodSettings, PredictionError, RecordEstimator, RefineStarts,
+    ResidualModel, classic_estimator, exact_likelihood,
 };
 
 /// Test records are drawn with a seed disjoint from training, calibration
@@ -198,47 +196,61 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
     eprintln!("Section 5: benchmark, {} test records", sizes.bench_tests);
     let model = Benchmark::new();
     let (truth, records) = test_records(&model, sizes.bench_tests, seed)?;
-    let (estimator, train_seconds) =
-        train(&model, twostage::paper_benchmark(), sizes.bench_m, seed)?;
+    let profile = ModelProfile::of(BuiltinModel::Benchmark);
+    let (estimator, train_seconds) = train(&model, profile.preset("paper")?, sizes.bench_m, seed)?;
+    // The classic methods as the per-model table builds them.
+    let classic = |method, initial_covariance, starts| {
+        let settings = MethodSettings {
+            initial_covariance,
+            particles: None,
+            starts,
+            seed,
+        };
+        classic_estimator(BuiltinModel::Benchmark, method, &settings)
+    };
     let mut methods = Vec::new();
     for (p0, label, figure) in [
         (InitialCovariance::Eq6, "eq. 6", "figure3"),
         (InitialCovariance::Eq7, "eq. 7", "figure4"),
     ] {
-        let ekf = KalmanEstimator::ekf(p0);
+        let ekf = classic(ClassicMethod::Ekf, p0, 1)?;
         methods.push(run_method(
             &format!("EKF, P(0) {label}"),
             figure,
             Some(0.055),
             &records,
             1,
-            baseline(&ekf),
+            baseline(ekf.as_ref()),
         ));
-        let ukf = KalmanEstimator::ukf(p0);
+        let ukf = classic(ClassicMethod::Ukf, p0, 1)?;
         methods.push(run_method(
             &format!("UKF, P(0) {label}"),
             figure,
             Some(1.0),
             &records,
             1,
-            baseline(&ukf),
+            baseline(ukf.as_ref()),
         ));
     }
-    let pf = ParticleFilter::new(BenchmarkParticles::new()?, 1000).seed(seed);
+    let pf = classic(ClassicMethod::ParticleFilter, InitialCovariance::Eq6, 1)?;
     methods.push(run_method(
-        "PF, 1000 particles",
+        &format!("PF, {} particles", profile.default_particles()),
         "figure5",
         Some(23.38),
         &records,
         1,
-        baseline(&pf),
+        baseline(pf.as_ref()),
     ));
     for (starts, figure, paper) in [
         (1, "figure6", 0.09),
         (5, "figure7", 0.47),
         (10, "figure7", 0.9),
     ] {
-        let pem = PredictionError::new(BenchmarkPredictor::new()?, starts).seed(seed);
+        let pem = classic(
+            ClassicMethod::PredictionError,
+            InitialCovariance::Eq6,
+            starts,
+        )?;
         let name = format!("PE, {starts} start{}", if starts == 1 { "" } else { "s" });
         methods.push(run_method(
             &name,
@@ -246,16 +258,18 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
             Some(paper),
             &records,
             1,
-            baseline(&pem),
+            baseline(pem.as_ref()),
         ));
     }
     // Indirect inference (Sections 2.3 and 4.4): the same ARX(5, 5) as the
     // TS preset, S = 10 common-random-number simulations per theta, W from
     // 200 simulations at the prior's centre.
     for starts in [1, 5, 10] {
-        let ii = IndirectInference::new(model.clone(), Arx::new(5, 5)?, starts)
-            .seed(seed)
-            .build()?;
+        let ii = classic(
+            ClassicMethod::IndirectInference,
+            InitialCovariance::Eq6,
+            starts,
+        )?;
         let name = format!("II, {starts} start{}", if starts == 1 { "" } else { "s" });
         methods.push(run_method(
             &name,
@@ -263,7 +277,7 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
             None,
             &records,
             1,
-            baseline(&ii),
+            baseline(ii.as_ref()),
         ));
     }
     methods.push(run_method(
@@ -274,7 +288,7 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         1,
         two_stage(&estimator),
     ));
-    let local = PredictionError::new(BenchmarkPredictor::new()?, 1);
+    let local = PredictionError::new(exact_likelihood(BuiltinModel::Benchmark)?, 1);
     methods.push(run_method(
         "TS + PE refinement",
         "refined_benchmark",
@@ -289,16 +303,16 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         None,
         &records,
         1,
-        local_posterior(&estimator, &local, 45)?,
+        local_posterior(&estimator, &local, profile.refinement_points())?,
     ));
-    let bayes = BayesBenchmark::default();
+    let bayes = classic(ClassicMethod::Bayes, InitialCovariance::Eq6, 1)?;
     methods.push(run_method(
         "Bayes posterior mean",
         "bayes_benchmark",
         None,
         &records,
         1,
-        baseline(&bayes),
+        baseline(bayes.as_ref()),
     ));
     Ok(Section {
         title: "Section 5: the benchmark system, eq. (5)",
@@ -323,7 +337,16 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
     eprintln!("Section 6: car, {} test records", sizes.car_tests);
     let car = PacejkaCar::new();
     let (truth, records) = test_records(&car, sizes.car_tests, seed)?;
-    let (estimator, train_seconds) = train(&car, twostage::paper_pacejka(), sizes.car_m, seed)?;
+    let profile = ModelProfile::of(BuiltinModel::Pacejka);
+    let (estimator, train_seconds) = train(&car, profile.preset("paper")?, sizes.car_m, seed)?;
+    let classic = |method, starts| {
+        let settings = MethodSettings {
+            starts,
+            seed,
+            ..MethodSettings::default()
+        };
+        classic_estimator(BuiltinModel::Pacejka, method, &settings)
+    };
     let slow = &records[..sizes.car_slow.min(records.len())];
     let mut methods = vec![run_method(
         "TS (paper preset)",
@@ -333,25 +356,25 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         2,
         two_stage(&estimator),
     )];
-    let pf = ParticleFilter::new(CarParticles::new(), 500).seed(seed);
+    let pf = classic(ClassicMethod::ParticleFilter, 1)?;
     methods.push(run_method(
-        "PF, 500 particles",
+        &format!("PF, {} particles", profile.default_particles()),
         "figure12",
         Some(5.0 * 3600.0),
         slow,
         2,
-        baseline(&pf),
+        baseline(pf.as_ref()),
     ));
-    let pem = PredictionError::new(CarPredictor::new(), 5).seed(seed);
+    let pem = classic(ClassicMethod::PredictionError, 5)?;
     methods.push(run_method(
         "PE, 5 starts",
         "pem5_car",
         None,
         slow,
         2,
-        baseline(&pem),
+        baseline(pem.as_ref()),
     ));
-    let local = PredictionError::new(CarPredictor::new(), 1);
+    let local = PredictionError::new(exact_likelihood(BuiltinModel::Pacejka)?, 1);
     methods.push(run_method(
         "TS + PE refinement",
         "refined_car",
@@ -366,11 +389,9 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         None,
         slow,
         2,
-        local_posterior(&estimator, &local, 13)?,
+        local_posterior(&estimator, &local, profile.refinement_points())?,
     ));
-    let ii = IndirectInference::new(car.clone(), Arx::new(4, 4)?, 5)
-        .seed(seed)
-        .build()?;
+    let ii = classic(ClassicMethod::IndirectInference, 5)?;
     let ii_records = &records[..sizes.car_ii.min(records.len())];
     methods.push(run_method(
         "II, 5 starts",
@@ -378,7 +399,7 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         None,
         ii_records,
         2,
-        baseline(&ii),
+        baseline(ii.as_ref()),
     ));
     let grid_start = Instant::now();
     let bayes = BayesCar::new(sizes.car_grid.0, sizes.car_grid.1, 500)?;

@@ -13,6 +13,16 @@ pub enum BaselineError {
     /// A record could not be compressed (indirect inference).
     #[error(transparent)]
     Compress(#[from] twostage_compress::CompressError),
+    /// The model's table entry does not list the method.
+    #[error("method '{method}' is not available for {model}: it has {available}")]
+    NotAvailable {
+        /// The method asked for.
+        method: &'static str,
+        /// The model.
+        model: &'static str,
+        /// The methods the model has.
+        available: String,
+    },
     /// A setting of the method is out of range.
     #[error("invalid {name} = {value}: {expected}")]
     InvalidSetting {

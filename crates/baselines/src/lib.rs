@@ -41,6 +41,7 @@ mod indirect;
 mod kalman;
 mod particle;
 mod pem;
+mod suite;
 
 pub use augmented::{
     InitialCovariance, THETA_RANDOM_WALK_VARIANCE, transition, transition_jacobian,
@@ -55,6 +56,7 @@ pub use indirect::{
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
 pub use pem::{BenchmarkPredictor, Descent, PredictionError, RefineStarts, ResidualModel};
+pub use suite::{MethodSettings, classic_estimator, exact_likelihood};
 pub use twostage_fit::TerminationReason;
 
 use twostage_models::IoData;

@@ -5,6 +5,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use twostage::ModelProfile;
 use twostage::TwoStage;
 use twostage::models::BuiltinModel;
 
@@ -57,10 +58,7 @@ pub fn learning_curve(args: &CurveArgs, out: &mut dyn Write) -> Result<()> {
         return Err(usage("--validate must be at least 1".into()));
     }
     let sim = model.build(false)?;
-    let preset = match model {
-        BuiltinModel::Pacejka => twostage::paper_pacejka(),
-        _ => twostage::paper_benchmark(),
-    };
+    let preset = ModelProfile::of(model).preset("paper")?;
     let stage1 = args.compress.as_deref().map(compressor).transpose()?;
     let stage2 = args.fit.as_deref().map(regressor).transpose()?;
     let names = sim.param_names().to_vec();

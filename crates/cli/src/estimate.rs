@@ -7,8 +7,10 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use twostage::compress::{Arx, Narx, OutputPca};
 use twostage::fit::{MlpParams, Ridge};
-use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar};
-use twostage::{CompressorConfig, Estimator, FittedRegressor, RegressorConfig, TwoStage};
+use twostage::models::{BuiltinModel, IoData};
+use twostage::{
+    CompressorConfig, Estimator, FittedRegressor, ModelProfile, RegressorConfig, TwoStage,
+};
 
 use crate::number::format_f64;
 use crate::{csv_records, usage};
@@ -19,8 +21,9 @@ pub struct TrainArgs {
     /// The model: benchmark or pacejka.
     #[arg(long)]
     model: String,
-    /// Start from the paper's preset of the model (the default).
-    #[arg(long, value_parser = ["paper"], default_value = "paper")]
+    /// Start from a preset of the model's (`paper`, the default, is the
+    /// paper's setting; `twostage models` lists each model's).
+    #[arg(long, default_value = "paper")]
     preset: String,
     /// Training simulations m (default: the preset's).
     #[arg(long)]
@@ -156,10 +159,9 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         .parse()
         .map_err(|e| usage(format!("{e} (see `twostage models`)")))?;
     let sim = model.build(false)?;
-    let preset = match model {
-        BuiltinModel::Pacejka => twostage::paper_pacejka(),
-        _ => twostage::paper_benchmark(),
-    };
+    let preset = ModelProfile::of(model)
+        .preset(&args.preset)
+        .map_err(|e| usage(e.to_string()))?;
     let mut builder = TwoStage::builder(sim.as_ref())
         .preset(preset)
         .seed(args.seed)
@@ -398,26 +400,14 @@ fn refinement(estimator: &Estimator) -> Result<Refine> {
         .iter()
         .map(|w| 2.0 * w)
         .collect();
-    Ok(match model {
-        BuiltinModel::Pacejka => {
-            let pe = b::PredictionError::new(b::CarPredictor::new(), 1);
-            Box::new(move |record: &IoData, start: &[f64]| {
-                Ok(pe
-                    .local_posterior(record, start, &radius, 13)
-                    .map_err(|e| e.to_string())?
-                    .mean)
-            })
-        }
-        _ => {
-            let pe = b::PredictionError::new(b::BenchmarkPredictor::new()?, 1);
-            Box::new(move |record: &IoData, start: &[f64]| {
-                Ok(pe
-                    .local_posterior(record, start, &radius, 45)
-                    .map_err(|e| e.to_string())?
-                    .mean)
-            })
-        }
-    })
+    let points = ModelProfile::of(model).refinement_points();
+    let pe = b::PredictionError::new(b::exact_likelihood(model)?, 1);
+    Ok(Box::new(move |record: &IoData, start: &[f64]| {
+        Ok(pe
+            .local_posterior(record, start, &radius, points)
+            .map_err(|e| e.to_string())?
+            .mean)
+    }))
 }
 
 /// The method chosen on the command line, ready to estimate records: the
@@ -461,55 +451,21 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
     };
     let model: BuiltinModel = model.parse().map_err(|e| usage(format!("{e}")))?;
     let names = model.build(false)?.param_names().to_vec();
-    let p0 = match args.p0.as_str() {
+    let initial_covariance = match args.p0.as_str() {
         "eq6" => b::InitialCovariance::Eq6,
         "eq7" => b::InitialCovariance::Eq7,
         other => return Err(usage(format!("--p0 '{other}': use eq6 or eq7"))),
     };
-    let car = model == BuiltinModel::Pacejka;
-    let estimator: Box<dyn b::RecordEstimator> = match (name.as_str(), car) {
-        ("ekf", false) => Box::new(b::KalmanEstimator::ekf(p0)),
-        ("ukf", false) => Box::new(b::KalmanEstimator::ukf(p0)),
-        ("ekf" | "ukf", true) => {
-            return Err(usage(format!(
-                "--method {name} exists for the benchmark only (as in the paper)"
-            )));
-        }
-        ("pf", false) => Box::new(
-            b::ParticleFilter::new(
-                b::BenchmarkParticles::new()?,
-                args.particles.unwrap_or(1000),
-            )
-            .seed(args.seed),
-        ),
-        ("pf", true) => Box::new(
-            b::ParticleFilter::new(b::CarParticles::new(), args.particles.unwrap_or(500))
-                .seed(args.seed),
-        ),
-        ("pem", false) => Box::new(
-            b::PredictionError::new(b::BenchmarkPredictor::new()?, args.starts).seed(args.seed),
-        ),
-        ("pem", true) => {
-            Box::new(b::PredictionError::new(b::CarPredictor::new(), args.starts).seed(args.seed))
-        }
-        ("ii", false) => Box::new(
-            b::IndirectInference::new(Benchmark::new(), Arx::new(5, 5)?, args.starts)
-                .seed(args.seed)
-                .build()?,
-        ),
-        ("ii", true) => Box::new(
-            b::IndirectInference::new(PacejkaCar::new(), Arx::new(4, 4)?, args.starts)
-                .seed(args.seed)
-                .build()?,
-        ),
-        ("bayes", false) => Box::new(b::BayesBenchmark::default()),
-        ("bayes", true) => Box::new(b::BayesCar::paper()?),
-        (other, _) => {
-            return Err(usage(format!(
-                "--method '{other}': use ekf, ukf, pf, pem, ii or bayes"
-            )));
-        }
+    let method = ModelProfile::of(model)
+        .classic_method(name)
+        .map_err(|e| usage(e.to_string()))?;
+    let settings = b::MethodSettings {
+        initial_covariance,
+        particles: args.particles,
+        starts: args.starts,
+        seed: args.seed,
     };
+    let estimator = b::classic_estimator(model, method, &settings)?;
     Ok((
         names,
         Box::new(move |record: &IoData| {

@@ -73,6 +73,15 @@ pub fn models(out: &mut dyn Write) -> Result<()> {
         )?;
         writeln!(out, "  input     {}", spec.input_note())?;
         writeln!(out, "  noise     {}", spec.noise_note())?;
+        let profile = twostage::ModelProfile::of(model);
+        let presets: Vec<&str> = profile.preset_names().collect();
+        let methods: Vec<&str> = profile.classic_methods().iter().map(|m| m.name()).collect();
+        writeln!(out, "  presets   {} (train --preset)", presets.join(", "))?;
+        writeln!(
+            out,
+            "  methods   {} (estimate --method)",
+            methods.join(", ")
+        )?;
         writeln!(out)?;
     }
     Ok(())

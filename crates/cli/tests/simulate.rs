@@ -56,6 +56,9 @@ fn models_lists_both_models_with_their_boxes() {
         "pK2    prior uniform on [-1.22, -0.98]",
         "N = 500 (sampled every 0.02 s)",
         "variance 0.01",
+        "methods   ekf, ukf, pf, pem, ii, bayes",
+        "methods   pf, pem, ii, bayes",
+        "presets   paper",
     ] {
         assert!(text.contains(needle), "missing {needle:?} in\n{text}");
     }

@@ -239,6 +239,38 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
         "{}",
         text(&out.stderr)
     );
+    // What a model lacks is refused by name, never replaced by another
+    // model's: the car has no Kalman filter and no such preset.
+    let csv = simulate_records(&dir, 1, 3);
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "pacejka",
+        "--method",
+        "ekf",
+        path(&csv),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("'ekf' is not available for pacejka: it has pf, pem, ii, bayes"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = twostage(&[
+        "train",
+        "--model",
+        "pacejka",
+        "--preset",
+        "fastest",
+        "--out",
+        path(&dir.join("x")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("preset 'fastest' is not available for pacejka: it has paper"),
+        "{}",
+        text(&out.stderr)
+    );
     let out = twostage(&["inspect", "/nonexistent/estimator.tsest"]);
     assert_eq!(out.status.code(), Some(1));
     let err = text(&out.stderr);
@@ -310,7 +342,7 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
         "estimate", "--model", "pacejka", "--method", "ukf", &records,
     ]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(text(&out.stderr).contains("benchmark only"));
+    assert!(text(&out.stderr).contains("'ukf' is not available for pacejka"));
     let out = twostage(&[
         "estimate",
         "--model",

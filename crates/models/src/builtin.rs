@@ -18,8 +18,10 @@ use crate::simulator::Simulator;
 /// assert!("tractor".parse::<BuiltinModel>().is_err());
 /// # Ok::<(), twostage_models::SimError>(())
 /// ```
+// Not `#[non_exhaustive]` on purpose: every table keyed by the built-in
+// models (presets, classic methods) must say what a new model offers, and
+// an exhaustive `match` makes the compiler ask (docs/decisions/014).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[non_exhaustive]
 pub enum BuiltinModel {
     /// The benchmark system of eq. (5).
     Benchmark,

@@ -1,7 +1,7 @@
 //! Training: the `TwoStage` builder and the paper's presets.
 
-use twostage_compress::{Arx, OutputPca, signal_rms};
-use twostage_fit::{MlpParams, Ridge};
+use twostage_compress::{OutputPca, signal_rms};
+use twostage_fit::Ridge;
 use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
@@ -11,6 +11,7 @@ use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, TrainingInfo};
+use crate::profile::paper_benchmark;
 use crate::progress::{Progress, Silent, Stage};
 
 /// The choices of one training run, reusable across simulators.
@@ -22,31 +23,6 @@ pub struct Preset {
     pub regressor: RegressorConfig,
     /// Training simulations m.
     pub simulations: usize,
-}
-
-/// The paper's benchmark setting (Section 5.3): m = 1500 simulations,
-/// ARX(5, 5), a network with 10 tanh hidden units.
-pub fn paper_benchmark() -> Preset {
-    preset(5, 10, 1500)
-}
-
-/// The paper's car setting (Section 6.2): m = 2000 simulations, ARX(4, 4), a
-/// network with 20 tanh hidden units.
-pub fn paper_pacejka() -> Preset {
-    preset(4, 20, 2000)
-}
-
-fn preset(order: usize, hidden: usize, simulations: usize) -> Preset {
-    let arx = Arx::new(order, order)
-        .unwrap_or_else(|e| unreachable!("the paper's ARX orders are valid: {e}"));
-    let mlp = MlpParams::new(&[hidden])
-        .and_then(MlpParams::check)
-        .unwrap_or_else(|e| unreachable!("the paper's network is valid: {e}"));
-    Preset {
-        compressor: CompressorConfig::Arx(arx),
-        regressor: RegressorConfig::Mlp(mlp),
-        simulations,
-    }
 }
 
 /// What the fitted stages were trained on, for the estimator's record.

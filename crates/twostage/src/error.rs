@@ -51,6 +51,18 @@ pub enum Error {
         /// The valid range.
         reason: String,
     },
+    /// A model has no preset or method of that name (another model may).
+    #[error("{what} '{name}' is not available for {model}: it has {available}")]
+    NotAvailable {
+        /// "preset" or "method".
+        what: &'static str,
+        /// The name asked for.
+        name: String,
+        /// The model.
+        model: String,
+        /// What the model has instead.
+        available: String,
+    },
     /// A record or output slot does not fit the estimator.
     #[error(
         "the record does not fit this estimator: {what} has {found} values, the estimator \

@@ -53,17 +53,19 @@ mod envelope;
 mod error;
 mod estimator;
 mod file;
+mod profile;
 mod progress;
 
 pub use adaptive::AdaptiveIntervals;
 pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
-pub use builder::{Preset, TwoStage, paper_benchmark, paper_pacejka};
+pub use builder::{Preset, TwoStage};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
 pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};
 pub use estimator::{Assessment, EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
 pub use file::{FORMAT_VERSION, MAGIC};
+pub use profile::{ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka};
 pub use progress::{Progress, Silent, Stage};
 
 pub use twostage_compress as compress;
