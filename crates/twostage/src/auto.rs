@@ -13,13 +13,14 @@
 use std::time::{Duration, Instant};
 use twostage_kernels::vector::clip_to_box;
 
-use ndarray::{Array2, ArrayView2, Axis};
+use ndarray::{Array2, Axis};
 use rayon::prelude::*;
 use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace};
 use twostage_fit::{MlpParams, Piecewise};
-use twostage_models::{IoData, Simulator, run_experiment};
+use twostage_models::{IoData, Simulator};
 
 use crate::builder::{TrainedOn, TwoStage};
+use crate::chart::{StoredChart, simulate_records};
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
@@ -375,12 +376,6 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     }
 }
 
-/// The stored chart: parameter vectors and full records.
-pub(crate) struct StoredChart {
-    pub(crate) thetas: Array2<f64>,
-    pub(crate) records: Vec<IoData>,
-}
-
 impl<S: Simulator + ?Sized> TwoStage<'_, S> {
     /// Parallel throughput of the simulator, from a small timed pilot.
     fn pilot_seconds_per_simulation(&self) -> Result<f64> {
@@ -389,15 +384,8 @@ impl<S: Simulator + ?Sized> TwoStage<'_, S> {
             .simulator
             .prior()
             .design(pilot, self.seed ^ PILOT_SEED)?;
-        let q = self.simulator.spec().n_params();
         let start = Instant::now();
-        (0..pilot)
-            .into_par_iter()
-            .map(|i| {
-                let (mut theta, mut record) = (vec![0.0; q], IoData::default());
-                run_experiment(self.simulator, &design, i, &mut theta, &mut record)
-            })
-            .collect::<std::result::Result<Vec<()>, _>>()?;
+        simulate_records(self.simulator, &design, pilot, 0.0, None)?;
         Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
     }
 
@@ -405,44 +393,13 @@ impl<S: Simulator + ?Sized> TwoStage<'_, S> {
     /// (failed experiments are dropped, within the failure allowance).
     pub(crate) fn stored_chart(&self, m: usize) -> Result<StoredChart> {
         let design = self.simulator.prior().design(m, self.seed)?;
-        let q = self.simulator.spec().n_params();
-        self.progress.begin(Stage::Training, m);
-        let outcomes: Vec<std::result::Result<(Vec<f64>, IoData), String>> = (0..m)
-            .into_par_iter()
-            .map(|i| {
-                let (mut theta, mut record) = (vec![0.0; q], IoData::default());
-                let outcome = run_experiment(self.simulator, &design, i, &mut theta, &mut record)
-                    .map(|()| (theta, record))
-                    .map_err(|e| format!("experiment {i}: {e}"));
-                self.progress.advance(Stage::Training, 1);
-                outcome
-            })
-            .collect();
-        self.progress.end(Stage::Training);
-        let failed = outcomes.iter().filter(|o| o.is_err()).count();
-        let allowed = (self.max_failure_fraction * m as f64).floor() as usize;
-        if failed > allowed {
-            let first = outcomes.iter().position(|o| o.is_err()).unwrap_or_default();
-            return Err(Error::TooManyFailures {
-                stage: "training",
-                failed,
-                total: m,
-                allowed,
-                first_index: first,
-                first_error: outcomes[first].clone().err().unwrap_or_default(),
-            });
-        }
-        let mut thetas = Vec::with_capacity((m - failed) * q);
-        let mut records = Vec::with_capacity(m - failed);
-        for (theta, record) in outcomes.into_iter().flatten() {
-            thetas.extend(theta);
-            records.push(record);
-        }
-        Ok(StoredChart {
-            thetas: Array2::from_shape_vec((records.len(), q), thetas)
-                .unwrap_or_else(|_| unreachable!("q values per kept record")),
-            records,
-        })
+        simulate_records(
+            self.simulator,
+            &design,
+            m,
+            self.max_failure_fraction,
+            Some((Stage::Training, self.progress)),
+        )
     }
 }
 
@@ -499,41 +456,6 @@ fn candidate_compressors(n_outputs: usize, n_inputs: usize) -> Vec<CompressorCon
     list
 }
 
-/// Fit the unfitted parts of a compressor on `records`.
-fn prepared(compressor: &CompressorConfig, records: &[IoData]) -> Result<CompressorConfig> {
-    Ok(match compressor {
-        CompressorConfig::Pca(pca) if !pca.is_fitted() => {
-            let take = records.len().min(1000);
-            let views: Vec<ArrayView2<'_, f64>> =
-                records[..take].iter().map(IoData::outputs).collect();
-            let n_inputs = records.first().map_or(1, IoData::n_inputs);
-            CompressorConfig::Pca(pca.clone().fit(&views)?.with_inputs(n_inputs)?)
-        }
-        CompressorConfig::Narx(narx) if narx.has_unit_scales() => {
-            let take = &records[..records.len().min(32)];
-            let rms = |signals: Vec<Vec<f64>>| -> Vec<f64> {
-                let width = signals.first().map_or(0, Vec::len);
-                (0..width)
-                    .map(|j| {
-                        (signals.iter().map(|s| s[j] * s[j]).sum::<f64>() / signals.len() as f64)
-                            .sqrt()
-                    })
-                    .collect()
-            };
-            let inputs = rms(take
-                .iter()
-                .map(|r| twostage_compress::signal_rms(r.inputs()))
-                .collect());
-            let outputs = rms(take
-                .iter()
-                .map(|r| twostage_compress::signal_rms(r.outputs()))
-                .collect());
-            CompressorConfig::Narx(narx.clone().with_scales(&inputs, &outputs)?)
-        }
-        other => other.clone(),
-    })
-}
-
 /// Features of every record, in parallel (row i is record i).
 fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Array2<f64>> {
     let n = compressor.n_features();
@@ -581,7 +503,7 @@ fn evaluate<S: Simulator + ?Sized>(
     }
     let start = Instant::now();
     let outcome = (|| -> Result<(Vec<f64>, CompressorConfig, FittedRegressor)> {
-        let compressor = prepared(compressor, &chart.records[..fit_rows])?;
+        let compressor = compressor.prepared(&chart.records[..fit_rows])?;
         let features = compress_all(&compressor, &chart.records)?;
         let (x_fit, x_held) = features.view().split_at(Axis(0), fit_rows);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), fit_rows);

@@ -1,12 +1,11 @@
 //! Training: the `TwoStage` builder and the paper's presets.
 
-use twostage_compress::{OutputPca, signal_rms};
 use twostage_fit::Ridge;
-use twostage_models::{IoData, Prior, Sampling, Simulator, run_experiment};
+use twostage_models::{Prior, Sampling, Simulator};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
-use crate::chart::compress_chart_observed;
+use crate::chart::{compress_chart_observed, simulate_records};
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
@@ -33,10 +32,6 @@ pub(crate) struct TrainedOn<'f> {
     pub(crate) sampling: String,
     pub(crate) regressor: RegressorConfig,
 }
-
-/// Training records an output PCA is fitted on: enough for the leading
-/// directions of a smooth trajectory family, few enough to stay cheap.
-const PCA_RECORDS: usize = 1000;
 
 /// Offsets that give the calibration and validation charts their own
 /// streams, disjoint from the training chart of the same seed.
@@ -343,64 +338,16 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         Ok(estimator)
     }
 
-    /// The compressor with its signal scales set, where it has any: a NARX
-    /// whose scales are all 1 gets the RMS of each signal over the first
-    /// (up to) 32 experiments of the training design.
+    /// The compressor with its own parameters fitted on the first
+    /// experiments of the training design (an output PCA's directions, a
+    /// NARX's signal scales), or as it is when it has none.
     fn calibrated_compressor(&self, design: &twostage_models::Design) -> Result<CompressorConfig> {
-        if let CompressorConfig::Pca(pca) = &self.compressor
-            && !pca.is_fitted()
-        {
-            return self.fitted_pca(pca, design);
-        }
-        let CompressorConfig::Narx(narx) = &self.compressor else {
-            return Ok(self.compressor.clone());
-        };
-        if !narx.has_unit_scales() {
+        let count = self.compressor.records_to_prepare();
+        if count == 0 {
             return Ok(self.compressor.clone());
         }
-        let spec = self.simulator.spec();
-        let (mut inputs, mut outputs) = (Vec::new(), Vec::new());
-        let mut theta = vec![0.0; spec.n_params()];
-        let mut record = IoData::default();
-        for i in 0..design.len().min(32) {
-            run_experiment(self.simulator, design, i, &mut theta, &mut record)?;
-            inputs.push(signal_rms(record.inputs()));
-            outputs.push(signal_rms(record.outputs()));
-        }
-        let mean = |rows: &[Vec<f64>]| -> Vec<f64> {
-            let width = rows.first().map_or(0, Vec::len);
-            (0..width)
-                .map(|j| (rows.iter().map(|r| r[j] * r[j]).sum::<f64>() / rows.len() as f64).sqrt())
-                .collect()
-        };
-        Ok(CompressorConfig::Narx(
-            narx.clone().with_scales(&mean(&inputs), &mean(&outputs))?,
-        ))
-    }
-
-    /// An output PCA fitted on the first (up to) `PCA_RECORDS` experiments
-    /// of the training design, simulated in parallel.
-    fn fitted_pca(
-        &self,
-        pca: &OutputPca,
-        design: &twostage_models::Design,
-    ) -> Result<CompressorConfig> {
-        use rayon::prelude::*;
-        let count = design.len().min(PCA_RECORDS);
-        let q = self.simulator.spec().n_params();
-        let records: Vec<IoData> = (0..count)
-            .into_par_iter()
-            .map(|i| {
-                let (mut theta, mut record) = (vec![0.0; q], IoData::default());
-                run_experiment(self.simulator, design, i, &mut theta, &mut record).map(|()| record)
-            })
-            .collect::<std::result::Result<_, _>>()?;
-        let views: Vec<_> = records.iter().map(IoData::outputs).collect();
-        let fitted = pca
-            .clone()
-            .fit(&views)?
-            .with_inputs(self.simulator.spec().input_names().len())?;
-        Ok(CompressorConfig::Pca(fitted))
+        let chart = simulate_records(self.simulator, design, count, 0.0, None)?;
+        self.compressor.prepared(&chart.records)
     }
 
     /// Truths and clipped estimates on `count` fresh i.i.d. simulations.

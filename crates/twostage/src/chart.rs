@@ -145,18 +145,7 @@ where
         )
         .filter_map(|f| f)
         .collect();
-    let allowed = (max_failure_fraction * m as f64).floor() as usize;
-    if failures.len() > allowed {
-        let first = &failures[0];
-        return Err(Error::TooManyFailures {
-            stage,
-            failed: failures.len(),
-            total: m,
-            allowed,
-            first_index: first.index,
-            first_error: first.error.clone(),
-        });
-    }
+    within_allowance(stage, &failures, m, max_failure_fraction)?;
     let failed: Vec<usize> = failures.iter().map(|f| f.index).collect();
     let indices: Vec<usize> = (0..m)
         .filter(|i| failed.binary_search(i).is_err())
@@ -175,5 +164,93 @@ where
         features: keep(features, n),
         indices,
         failures,
+    })
+}
+
+/// Refuse a chart whose failures exceed `max_failure_fraction` of `total`
+/// experiments (`failures` in index order), naming the first.
+fn within_allowance(
+    stage: &'static str,
+    failures: &[ExperimentFailure],
+    total: usize,
+    max_failure_fraction: f64,
+) -> Result<()> {
+    let allowed = (max_failure_fraction * total as f64).floor() as usize;
+    match failures.first() {
+        Some(first) if failures.len() > allowed => Err(Error::TooManyFailures {
+            stage,
+            failed: failures.len(),
+            total,
+            allowed,
+            first_index: first.index,
+            first_error: first.error.clone(),
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// A chart kept whole: parameter vectors and full records, for the
+/// automatic design (which compresses one chart many ways) and for fitting
+/// a compressor's own parameters (PCA directions, NARX scales).
+pub(crate) struct StoredChart {
+    /// Parameter vectors of the experiments that succeeded (m' x q).
+    pub(crate) thetas: Array2<f64>,
+    /// Their records, in design order.
+    pub(crate) records: Vec<IoData>,
+}
+
+/// Simulate the first `count` experiments of `design` in parallel and keep
+/// their records; failed experiments are dropped within
+/// `max_failure_fraction`. `progress`, when given, hears of each finished
+/// experiment under its stage. Record i depends only on `(design, i)`.
+pub(crate) fn simulate_records<S: Simulator + ?Sized>(
+    simulator: &S,
+    design: &Design,
+    count: usize,
+    max_failure_fraction: f64,
+    progress: Option<(Stage, &dyn Progress)>,
+) -> Result<StoredChart> {
+    let count = count.min(design.len());
+    let q = design.prior().dim();
+    if let Some((stage, progress)) = progress {
+        progress.begin(stage, count);
+    }
+    let outcomes: Vec<std::result::Result<(Vec<f64>, IoData), ExperimentFailure>> = (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let (mut theta, mut record) = (vec![0.0; q], IoData::default());
+            let outcome = run_experiment(simulator, design, i, &mut theta, &mut record);
+            if let Some((stage, progress)) = progress {
+                progress.advance(stage, 1);
+            }
+            match outcome {
+                Ok(()) => Ok((theta, record)),
+                Err(e) => Err(ExperimentFailure {
+                    index: i,
+                    theta,
+                    error: e.to_string(),
+                }),
+            }
+        })
+        .collect();
+    if let Some((stage, progress)) = progress {
+        progress.end(stage);
+    }
+    let stage = progress.map_or("simulation", |(stage, _)| stage.label());
+    let (mut thetas, mut records, mut failures) = (Vec::new(), Vec::new(), Vec::new());
+    for outcome in outcomes {
+        match outcome {
+            Ok((theta, record)) => {
+                thetas.extend(theta);
+                records.push(record);
+            }
+            Err(failure) => failures.push(failure),
+        }
+    }
+    within_allowance(stage, &failures, count, max_failure_fraction)?;
+    Ok(StoredChart {
+        thetas: Array2::from_shape_vec((records.len(), q), thetas)
+            .unwrap_or_else(|_| unreachable!("q values per kept record")),
+        records,
     })
 }

@@ -2,7 +2,10 @@
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace};
+use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace, signal_rms};
+use twostage_models::IoData;
+
+use crate::error::Result;
 use twostage_fit::{
     FittedLinear, FittedMlp, FittedPiecewise, Mlp, Piecewise, Predictor, Regressor, Ridge,
 };
@@ -18,6 +21,57 @@ pub enum CompressorConfig {
     /// Leading principal components of the output record (for models whose
     /// experiments all apply one input); fitted from the training design.
     Pca(OutputPca),
+}
+
+/// Records a compressor's own parameters are fitted on: the first (up to)
+/// 1000 training records for the output PCA's directions (more cost
+/// without changing the leading directions), 32 for the NARX's signal
+/// scales.
+pub(crate) const PCA_RECORDS: usize = 1000;
+pub(crate) const NARX_SCALE_RECORDS: usize = 32;
+
+impl CompressorConfig {
+    /// How many training records [`CompressorConfig::prepared`] uses: 0
+    /// when the compressor has nothing to fit.
+    pub(crate) fn records_to_prepare(&self) -> usize {
+        match self {
+            CompressorConfig::Pca(pca) if !pca.is_fitted() => PCA_RECORDS,
+            CompressorConfig::Narx(narx) if narx.has_unit_scales() => NARX_SCALE_RECORDS,
+            _ => 0,
+        }
+    }
+
+    /// The compressor with its unfitted parts fitted on `records`: an output
+    /// PCA's directions, a NARX's signal scales (the RMS of each signal
+    /// over the records); anything else as it is.
+    pub(crate) fn prepared(&self, records: &[IoData]) -> Result<CompressorConfig> {
+        Ok(match self {
+            CompressorConfig::Pca(pca) if !pca.is_fitted() => {
+                let take = records.len().min(PCA_RECORDS);
+                let views: Vec<ArrayView2<'_, f64>> =
+                    records[..take].iter().map(IoData::outputs).collect();
+                let n_inputs = records.first().map_or(1, IoData::n_inputs);
+                CompressorConfig::Pca(pca.clone().fit(&views)?.with_inputs(n_inputs)?)
+            }
+            CompressorConfig::Narx(narx) if narx.has_unit_scales() => {
+                let take = &records[..records.len().min(NARX_SCALE_RECORDS)];
+                let rms = |signals: Vec<Vec<f64>>| -> Vec<f64> {
+                    let width = signals.first().map_or(0, Vec::len);
+                    (0..width)
+                        .map(|j| {
+                            (signals.iter().map(|s| s[j] * s[j]).sum::<f64>()
+                                / signals.len() as f64)
+                                .sqrt()
+                        })
+                        .collect()
+                };
+                let inputs = rms(take.iter().map(|r| signal_rms(r.inputs())).collect());
+                let outputs = rms(take.iter().map(|r| signal_rms(r.outputs())).collect());
+                CompressorConfig::Narx(narx.clone().with_scales(&inputs, &outputs)?)
+            }
+            other => other.clone(),
+        })
+    }
 }
 
 impl std::fmt::Display for CompressorConfig {
