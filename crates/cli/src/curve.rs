@@ -9,7 +9,7 @@ use twostage::ModelProfile;
 use twostage::TwoStage;
 use twostage::models::BuiltinModel;
 
-use crate::estimate::{compressor, regressor};
+use crate::specs::{compressor, regressor};
 use crate::usage;
 
 /// Options of `twostage learning-curve`.

@@ -5,8 +5,11 @@ mod csv_records;
 mod curve;
 mod demo;
 mod estimate;
+mod inspect;
 mod number;
 mod simulate;
+mod specs;
+mod train;
 mod validate;
 
 use std::fmt;
@@ -33,7 +36,7 @@ enum Command {
     /// Simulate one experiment (--theta) or many drawn from the prior (--count).
     Simulate(simulate::SimulateArgs),
     /// Train an estimator for a built-in model and write it to a file.
-    Train(estimate::TrainArgs),
+    Train(train::TrainArgs),
     /// Describe an estimator file: model, structure, training, validation.
     Inspect {
         /// The estimator file.
@@ -75,8 +78,8 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
         Command::Models => simulate::models(&mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
-        Command::Train(args) => estimate::train(args, &mut io::stdout().lock()),
-        Command::Inspect { file } => estimate::inspect(file, &mut io::stdout().lock()),
+        Command::Train(args) => train::train(args, &mut io::stdout().lock()),
+        Command::Inspect { file } => inspect::inspect(file, &mut io::stdout().lock()),
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
         Command::Estimate(args) => match estimate::estimate(args) {

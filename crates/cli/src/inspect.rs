@@ -1,0 +1,98 @@
+//! `twostage inspect`: what an estimator file holds, in words.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use twostage::{Estimator, FittedRegressor};
+
+use crate::number::format_f64;
+
+/// Run `twostage inspect FILE`.
+pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
+    let e = Estimator::load(path)?;
+    let t = e.training();
+    writeln!(
+        out,
+        "{}: twostage estimator file, format version {}",
+        path.display(),
+        twostage::FORMAT_VERSION
+    )?;
+    writeln!(
+        out,
+        "  model       {} (trained by twostage {})",
+        t.model, t.version
+    )?;
+    for (j, name) in e.param_names().iter().enumerate() {
+        writeln!(
+            out,
+            "  parameter   {name} in [{}, {}]",
+            format_f64(e.lower()[j]),
+            format_f64(e.upper()[j])
+        )?;
+    }
+    let shape = e.record_shape();
+    writeln!(
+        out,
+        "  records     N = {}, sampled every {}",
+        shape.n_samples,
+        format_f64(shape.sample_time)
+    )?;
+    writeln!(out, "  stage 1     {}", e.compressor())?;
+    let network = match e.regressor() {
+        FittedRegressor::Mlp(net) => format!(
+            "{}; layers {:?}, {} weights, best restart stopped by {:?}",
+            t.regressor,
+            net.sizes(),
+            net.n_parameters(),
+            net.best_restart().reason
+        ),
+        _ => t.regressor.to_string(),
+    };
+    writeln!(out, "  stage 2     {network}")?;
+    writeln!(
+        out,
+        "  training    m = {} simulations ({} failed), seed {}, {} design",
+        t.simulations, t.failures, t.seed, t.sampling
+    )?;
+    match e.validation() {
+        Some(report) => writeln!(out, "{report}")?,
+        None => writeln!(out, "  not validated")?,
+    }
+    write!(out, "{}", trust_summary(&e))?;
+    Ok(())
+}
+
+/// The adaptive intervals and the out-of-distribution envelope, in words.
+pub(crate) fn trust_summary(e: &Estimator) -> String {
+    let mut text = String::new();
+    if let Some(a) = e.adaptive_intervals() {
+        let _ = write!(
+            text,
+            "  adaptive {:.0}% intervals (normalized conformal, {} calibration records)",
+            100.0 * (1.0 - a.alpha()),
+            a.n_calibration()
+        );
+        if let (Some(widths), Some(coverage)) = (a.mean_half_width(), a.coverage()) {
+            text.push_str(": ");
+            let parts: Vec<String> = e
+                .param_names()
+                .iter()
+                .zip(widths.iter().zip(coverage))
+                .map(|(n, (w, c))| format!("{n} mean +-{w:.3e} (covers {:.1}%)", 100.0 * c))
+                .collect();
+            text.push_str(&parts.join(", "));
+        }
+        text.push('\n');
+    }
+    if let Some(envelope) = e.envelope() {
+        let _ = writeln!(
+            text,
+            "  out of distribution beyond Mahalanobis distance {:.3} of the training features \
+             (99.9% of them lie within)",
+            envelope.threshold()
+        );
+    }
+    text
+}
