@@ -19,8 +19,14 @@ pub const THETA_RANDOM_WALK_VARIANCE: f64 = 1e-6;
 /// A 3 x 3 matrix, row-major.
 pub(crate) type M3 = [[f64; 3]; 3];
 
-/// The state transition of the augmented benchmark.
-#[doc(hidden)]
+/// The state transition of the benchmark augmented with theta as a third
+/// state (Section 5.1 of the paper), without its noises: what the EKF and
+/// UKF propagate.
+///
+/// ```
+/// // theta = 0 makes x2 forget everything: x2(k+1) = 0.
+/// assert_eq!(twostage_baselines::transition([1.0, 2.0, 0.0], 3.0), [3.5, 0.0, 0.0]);
+/// ```
 pub fn transition(z: [f64; 3], u: f64) -> [f64; 3] {
     let (x1, x2, th) = (z[0], z[1], z[2]);
     let t2 = th * th;
@@ -31,8 +37,8 @@ pub fn transition(z: [f64; 3], u: f64) -> [f64; 3] {
     ]
 }
 
-/// The Jacobian of [`transition`] with respect to the state.
-#[doc(hidden)]
+/// The Jacobian of [`transition`] with respect to the state (the EKF's
+/// linearization; a test checks it against finite differences).
 pub fn transition_jacobian(z: [f64; 3], u: f64) -> M3 {
     let (x1, x2, th) = (z[0], z[1], z[2]);
     let t2 = th * th;

@@ -43,10 +43,7 @@ pub use levenberg_marquardt::{
     normal_products,
 };
 pub use linear::{FittedLinear, Ridge};
-pub use mlp::{
-    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, jacobian_at, loss_gradient_at,
-    n_parameters,
-};
+pub use mlp::{FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, n_parameters};
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;
 

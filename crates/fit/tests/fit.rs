@@ -8,39 +8,11 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use twostage_fit::{
     FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason, Trainer,
-    jacobian_at, loss_gradient_at, n_parameters,
 };
 
 fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     Array2::from_shape_fn((rows, cols), |_| rng.random_range(-1.0..1.0))
-}
-
-#[test]
-fn backpropagation_matches_finite_differences() {
-    let sizes = [3, 5, 4, 2];
-    let n = n_parameters(&sizes);
-    assert_eq!(n, 5 * 4 + 4 * 6 + 2 * 5);
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let params: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-    let x = [0.3, -0.7, 0.9];
-    let (_, jac) = jacobian_at(&sizes, &params, &x);
-    let h = 1e-6;
-    for j in 0..n {
-        let (mut plus, mut minus) = (params.clone(), params.clone());
-        plus[j] += h;
-        minus[j] -= h;
-        let (fp, _) = jacobian_at(&sizes, &plus, &x);
-        let (fm, _) = jacobian_at(&sizes, &minus, &x);
-        for k in 0..2 {
-            let fd = (fp[k] - fm[k]) / (2.0 * h);
-            assert!(
-                (fd - jac[[k, j]]).abs() < 1e-8,
-                "output {k}, parameter {j}: {fd} vs {}",
-                jac[[k, j]]
-            );
-        }
-    }
 }
 
 #[test]
@@ -267,31 +239,6 @@ fn an_ensemble_of_one_is_the_network_and_of_three_is_not_the_best_one() {
         .mapv(f64::abs)
         .fold(0.0f64, |m, v| m.max(*v));
     assert!(diff > 1e-9 && diff < 0.5, "largest difference {diff}");
-}
-
-#[test]
-fn the_loss_gradient_matches_finite_differences() {
-    let sizes = [2, 4, 3, 2];
-    let n = n_parameters(&sizes);
-    let mut rng = ChaCha8Rng::seed_from_u64(31);
-    let params: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-    let x = uniform(7, 2, 32);
-    let t = uniform(7, 2, 33);
-    let (_, grad) = loss_gradient_at(&sizes, &params, &x, &t, 0.01);
-    let h = 1e-6;
-    for j in 0..n {
-        let (mut plus, mut minus) = (params.clone(), params.clone());
-        plus[j] += h;
-        minus[j] -= h;
-        let fd = (loss_gradient_at(&sizes, &plus, &x, &t, 0.01).0
-            - loss_gradient_at(&sizes, &minus, &x, &t, 0.01).0)
-            / (2.0 * h);
-        assert!(
-            (fd - grad[j]).abs() < 1e-8,
-            "parameter {j}: {fd} vs {}",
-            grad[j]
-        );
-    }
 }
 
 #[test]

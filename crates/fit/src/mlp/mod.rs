@@ -1,0 +1,15 @@
+//! Small feed-forward networks (tanh hidden layers, linear outputs) trained
+//! by Levenberg-Marquardt with a held-out split for early stopping and
+//! seeded restarts run in parallel.
+//!
+//! - `params`: the hyperparameters, unchecked and checked;
+//! - `network`: the forward pass, back-propagation and the fitted network;
+//! - `training`: restarts, the Levenberg-Marquardt and Adam trainers.
+
+mod network;
+mod params;
+mod training;
+
+pub use network::{FittedMlp, MAX_WIDTH, n_parameters};
+pub use params::{Mlp, MlpParams, Trainer};
+pub use training::RestartReport;

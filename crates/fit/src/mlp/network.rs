@@ -1,0 +1,466 @@
+//! The network itself: layer sizes and weights, the forward pass (the
+//! kernels' dense layer), back-propagation of residuals and of the
+//! Jacobian, and the trained [`FittedMlp`] that predicts.
+
+use faer::Mat;
+use ndarray::Array2;
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use twostage_kernels::layer::{Activation, dense_layer};
+
+use crate::Predictor;
+use crate::check;
+use crate::error::{FitError, Result};
+use crate::standardize::Standardizer;
+
+use super::training::RestartReport;
+
+/// The widest layer supported: prediction keeps activations on the stack.
+pub const MAX_WIDTH: usize = 256;
+
+/// A trained network, with its standardization and training report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "FittedMlpFields")]
+pub struct FittedMlp {
+    pub(super) features: Standardizer,
+    pub(super) targets: Standardizer,
+    /// Layer sizes, input first: `[n_in, hidden.., n_out]`.
+    pub(super) sizes: Vec<usize>,
+    /// The networks whose outputs are averaged, each with all its weights
+    /// and biases, layer after layer: W (row-major, out x in) then b.
+    pub(super) members: Vec<Vec<f64>>,
+    /// One report per restart; `best` indexes the one kept.
+    pub(super) reports: Vec<RestartReport>,
+    pub(super) best: usize,
+}
+
+/// What a file stores; decoding checks every shape the forward pass relies
+/// on, so a decoded network predicts or errs but never indexes out of range.
+#[derive(Deserialize)]
+struct FittedMlpFields {
+    features: Standardizer,
+    targets: Standardizer,
+    sizes: Vec<usize>,
+    members: Vec<Vec<f64>>,
+    reports: Vec<RestartReport>,
+    best: usize,
+}
+
+impl TryFrom<FittedMlpFields> for FittedMlp {
+    type Error = FitError;
+    fn try_from(f: FittedMlpFields) -> Result<Self> {
+        let shape = |what: String| Err(FitError::ShapeMismatch(format!("stored network: {what}")));
+        if f.sizes.len() < 3 || f.sizes.len() > 6 {
+            return shape(format!("{} layers, expected 3 to 6", f.sizes.len()));
+        }
+        if let Some(w) = f.sizes.iter().find(|&&w| w == 0 || w > MAX_WIDTH) {
+            return shape(format!("a layer of width {w}, expected 1..={MAX_WIDTH}"));
+        }
+        if f.sizes[0] != f.features.dim() || f.sizes[f.sizes.len() - 1] != f.targets.dim() {
+            return shape(format!(
+                "layers {:?} for {} features and {} targets",
+                f.sizes,
+                f.features.dim(),
+                f.targets.dim()
+            ));
+        }
+        let count = parameter_count(&f.sizes);
+        if f.members.is_empty() || f.members.iter().any(|m| m.len() != count) {
+            return shape(format!(
+                "{} member networks, each must have {count} weights",
+                f.members.len()
+            ));
+        }
+        if f.best >= f.reports.len() {
+            return shape(format!(
+                "best restart {} of {} reports",
+                f.best,
+                f.reports.len()
+            ));
+        }
+        Ok(Self {
+            features: f.features,
+            targets: f.targets,
+            sizes: f.sizes,
+            members: f.members,
+            reports: f.reports,
+            best: f.best,
+        })
+    }
+}
+
+impl FittedMlp {
+    /// The restarts' reports.
+    pub fn reports(&self) -> &[RestartReport] {
+        &self.reports
+    }
+    /// The restart whose weights were kept.
+    pub fn best_restart(&self) -> &RestartReport {
+        &self.reports[self.best]
+    }
+    /// Layer sizes, input first.
+    pub fn sizes(&self) -> &[usize] {
+        &self.sizes
+    }
+    /// Number of weights and biases of one network.
+    pub fn n_parameters(&self) -> usize {
+        parameter_count(&self.sizes)
+    }
+    /// Number of networks averaged (1 unless trained as an ensemble).
+    pub fn n_members(&self) -> usize {
+        self.members.len()
+    }
+}
+
+/// Number of parameters of a network with these layer sizes.
+pub(super) fn parameter_count(sizes: &[usize]) -> usize {
+    sizes.windows(2).map(|w| w[1] * (w[0] + 1)).sum()
+}
+
+/// Forward pass on standardized input `x`, keeping every layer's activation
+/// in `acts` (layer l starts at `offsets[l]`); returns nothing, the output
+/// is the last layer.
+pub(super) fn forward(
+    sizes: &[usize],
+    params: &[f64],
+    x: &[f64],
+    acts: &mut [f64],
+    offsets: &[usize],
+) {
+    acts[..sizes[0]].copy_from_slice(x);
+    let mut p = 0;
+    let layers = sizes.len() - 1;
+    for l in 0..layers {
+        let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+        let (before, after) = acts.split_at_mut(offsets[l + 1]);
+        let input = &before[offsets[l]..offsets[l] + n_in];
+        let w = &params[p..p + n_out * n_in];
+        let b = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
+        dense_layer(w, b, input, activation(l, layers), &mut after[..n_out]);
+        p += n_out * (n_in + 1);
+    }
+}
+
+/// Hidden layers are tanh, the output layer linear.
+pub(super) fn activation(layer: usize, layers: usize) -> Activation {
+    if layer + 1 < layers {
+        Activation::Tanh
+    } else {
+        Activation::Identity
+    }
+}
+
+/// One backward step through a tanh layer: `delta_{l-1} = (W_l' delta_l)
+/// .* (1 - a^2)`, with `a` the layer's input activations. `delta` holds
+/// `delta_l` in its first half and receives `delta_{l-1}` there; the second
+/// half is scratch, so the step never reads what it has overwritten.
+pub(super) fn backward(w: &[f64], input: &[f64], n_out: usize, delta: &mut [f64]) {
+    let n_in = input.len();
+    let (cur, next) = delta.split_at_mut(MAX_WIDTH);
+    for c in 0..n_in {
+        let mut acc = 0.0;
+        for a in 0..n_out {
+            acc += w[a * n_in + c] * cur[a];
+        }
+        next[c] = acc * (1.0 - input[c] * input[c]);
+    }
+    cur[..n_in].copy_from_slice(&next[..n_in]);
+}
+
+/// The training problem of one restart: standardized data and buffers.
+pub(super) struct Problem<'a> {
+    pub(super) sizes: &'a [usize],
+    pub(super) offsets: Vec<usize>,
+    pub(super) x: &'a Array2<f64>,
+    pub(super) t: &'a Array2<f64>,
+    pub(super) train: &'a [usize],
+    pub(super) held_out: &'a [usize],
+    pub(super) decay: f64,
+}
+
+impl Problem<'_> {
+    pub(super) fn n_params(&self) -> usize {
+        parameter_count(self.sizes)
+    }
+
+    /// Mean squared error over `rows`, per target value.
+    pub(super) fn mse(&self, params: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
+        let q = *self.sizes.last().unwrap_or(&1);
+        let out = self.offsets[self.sizes.len() - 1];
+        let mut sse = 0.0;
+        for &i in rows {
+            let xi = self.x.row(i);
+            let xi = xi.as_slice().unwrap_or(&[]);
+            forward(self.sizes, params, xi, acts, &self.offsets);
+            for k in 0..q {
+                sse += (acts[out + k] - self.t[[i, k]]).powi(2);
+            }
+        }
+        sse / (rows.len() * q).max(1) as f64
+    }
+
+    pub(super) fn penalty(&self, params: &[f64]) -> f64 {
+        self.decay * params.iter().map(|v| v * v).sum::<f64>()
+    }
+
+    /// Gradient of the mean squared error over `rows` (per target value)
+    /// plus the weight decay term, by one backward pass per sample seeded
+    /// with its residual.
+    pub(super) fn gradient(
+        &self,
+        params: &[f64],
+        rows: &[usize],
+        grad: &mut [f64],
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
+        let sizes = self.sizes;
+        let layers = sizes.len() - 1;
+        let q = sizes[layers];
+        let out = self.offsets[layers];
+        grad.fill(0.0);
+        let scale = 2.0 / (rows.len() * q).max(1) as f64;
+        for &i in rows {
+            let xi = self.x.row(i);
+            let xi = xi.as_slice().unwrap_or(&[]);
+            forward(sizes, params, xi, acts, &self.offsets);
+            for k in 0..q {
+                delta[k] = scale * (acts[out + k] - self.t[[i, k]]);
+            }
+            let mut s = params.len();
+            for l in (0..layers).rev() {
+                let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+                s -= n_out * (n_in + 1);
+                let input = &acts[self.offsets[l]..self.offsets[l] + n_in];
+                for a in 0..n_out {
+                    let d = delta[a];
+                    for (c, inp) in input.iter().enumerate() {
+                        grad[s + a * n_in + c] += d * inp;
+                    }
+                    grad[s + n_out * n_in + a] += d;
+                }
+                if l > 0 {
+                    backward(&params[s..s + n_out * n_in], input, n_out, delta);
+                }
+            }
+        }
+        let decay = 2.0 * self.decay / (self.train.len() * q).max(1) as f64;
+        for (g, p) in grad.iter_mut().zip(params) {
+            *g += decay * p;
+        }
+    }
+
+    /// Residuals r (train rows x targets) and their Jacobian J.
+    pub(super) fn jacobian(
+        &self,
+        params: &[f64],
+        jac: &mut Mat<f64>,
+        res: &mut Mat<f64>,
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
+        let sizes = self.sizes;
+        let layers = sizes.len() - 1;
+        let q = sizes[layers];
+        let out = self.offsets[layers];
+        // Start of each layer's parameters.
+        let mut starts = Vec::with_capacity(layers);
+        let mut p = 0;
+        for l in 0..layers {
+            starts.push(p);
+            p += sizes[l + 1] * (sizes[l] + 1);
+        }
+        for (row_block, &i) in self.train.iter().enumerate() {
+            let xi = self.x.row(i);
+            let xi = xi.as_slice().unwrap_or(&[]);
+            forward(sizes, params, xi, acts, &self.offsets);
+            for k in 0..q {
+                let r = row_block * q + k;
+                res[(r, 0)] = acts[out + k] - self.t[[i, k]];
+                // Back-propagate the unit seed of output k.
+                delta[..q].fill(0.0);
+                delta[k] = 1.0;
+                for l in (0..layers).rev() {
+                    let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+                    let input = &acts[self.offsets[l]..self.offsets[l] + n_in];
+                    let s = starts[l];
+                    for a in 0..n_out {
+                        let d = delta[a];
+                        for (c, inp) in input.iter().enumerate() {
+                            jac[(r, s + a * n_in + c)] = d * inp;
+                        }
+                        jac[(r, s + n_out * n_in + a)] = d;
+                    }
+                    if l > 0 {
+                        backward(&params[s..s + n_out * n_in], input, n_out, delta);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Glorot-uniform weights, small random biases.
+pub(super) fn initial_parameters(sizes: &[usize], rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let mut params = Vec::with_capacity(parameter_count(sizes));
+    for w in sizes.windows(2) {
+        let (n_in, n_out) = (w[0], w[1]);
+        let limit = (6.0 / (n_in + n_out) as f64).sqrt();
+        params.extend((0..n_out * n_in).map(|_| rng.random_range(-limit..limit)));
+        params.extend((0..n_out).map(|_| rng.random_range(-0.5..0.5)));
+    }
+    params
+}
+
+impl Predictor for FittedMlp {
+    fn n_inputs(&self) -> usize {
+        self.sizes[0]
+    }
+
+    fn n_outputs(&self) -> usize {
+        *self.sizes.last().unwrap_or(&0)
+    }
+
+    fn predict_into(&self, x: &[f64], out: &mut [f64]) -> Result<()> {
+        let q = self.n_outputs();
+        check::row_lengths(x, out, self.n_inputs(), q)?;
+        let mut input = [0.0f64; MAX_WIDTH];
+        self.features.transform_into(x, &mut input[..self.sizes[0]]);
+        out.fill(0.0);
+        for params in &self.members {
+            // Two stack buffers, used in turn as input and output of each layer.
+            let mut a = input;
+            let mut b = [0.0f64; MAX_WIDTH];
+            let layers = self.sizes.len() - 1;
+            let mut p = 0;
+            for l in 0..layers {
+                let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+                let w = &params[p..p + n_out * n_in];
+                let bias = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
+                dense_layer(w, bias, &a[..n_in], activation(l, layers), &mut b[..n_out]);
+                std::mem::swap(&mut a, &mut b);
+                p += n_out * (n_in + 1);
+            }
+            for (o, v) in out.iter_mut().zip(&a[..q]) {
+                *o += v;
+            }
+        }
+        let members = self.members.len() as f64;
+        for o in out.iter_mut() {
+            *o /= members;
+        }
+        self.targets.inverse_in_place(out);
+        Ok(())
+    }
+}
+
+/// Number of weights and biases of a network with layer sizes `[n_in,
+/// hidden.., n_out]`: what a Levenberg-Marquardt step's cost grows with.
+///
+/// ```
+/// assert_eq!(twostage_fit::n_parameters(&[10, 20, 2]), 20 * 11 + 2 * 21);
+/// ```
+pub fn n_parameters(sizes: &[usize]) -> usize {
+    parameter_count(sizes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// A problem over every row of `x` (standardized data), nothing held out.
+    fn problem<'a>(
+        sizes: &'a [usize],
+        x: &'a Array2<f64>,
+        t: &'a Array2<f64>,
+        rows: &'a [usize],
+        decay: f64,
+    ) -> Problem<'a> {
+        let mut offsets = vec![0];
+        for s in sizes {
+            offsets.push(offsets.last().copied().unwrap_or(0) + s);
+        }
+        Problem {
+            sizes,
+            offsets,
+            x,
+            t,
+            train: rows,
+            held_out: &[],
+            decay,
+        }
+    }
+
+    fn random(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    /// The back-propagated Jacobian of the outputs (the residuals against
+    /// zero targets) against central differences of the forward pass.
+    #[test]
+    fn backpropagation_matches_finite_differences() {
+        let sizes = [3, 5, 4, 2];
+        let n = n_parameters(&sizes);
+        assert_eq!(n, 5 * 4 + 4 * 6 + 2 * 5);
+        let params = random(n, 1);
+        let x = Array2::from_shape_vec((1, 3), vec![0.3, -0.7, 0.9]).unwrap();
+        let t = Array2::zeros((1, 2));
+        let p = problem(&sizes, &x, &t, &[0], 0.0);
+        let width = p.offsets.last().copied().unwrap();
+        let (mut acts, mut delta) = (vec![0.0; width], vec![0.0; 2 * MAX_WIDTH]);
+        let (mut jac, mut res) = (Mat::zeros(2, n), Mat::zeros(2, 1));
+        p.jacobian(&params, &mut jac, &mut res, &mut acts, &mut delta);
+        let output = |w: &[f64], acts: &mut [f64]| -> [f64; 2] {
+            forward(&sizes, w, &[0.3, -0.7, 0.9], acts, &p.offsets);
+            [acts[width - 2], acts[width - 1]]
+        };
+        let h = 1e-6;
+        for j in 0..n {
+            let (mut plus, mut minus) = (params.clone(), params.clone());
+            plus[j] += h;
+            minus[j] -= h;
+            let (fp, fm) = (output(&plus, &mut acts), output(&minus, &mut acts));
+            for k in 0..2 {
+                let fd = (fp[k] - fm[k]) / (2.0 * h);
+                assert!(
+                    (fd - jac[(k, j)]).abs() < 1e-8,
+                    "output {k}, parameter {j}: {fd} vs {}",
+                    jac[(k, j)]
+                );
+            }
+        }
+    }
+
+    /// Adam's gradient of the loss (mean squared error plus weight decay)
+    /// against central differences of the loss.
+    #[test]
+    fn the_loss_gradient_matches_finite_differences() {
+        let sizes = [2, 4, 3, 2];
+        let n = n_parameters(&sizes);
+        let params = random(n, 31);
+        let x = Array2::from_shape_vec((7, 2), random(14, 32)).unwrap();
+        let t = Array2::from_shape_vec((7, 2), random(14, 33)).unwrap();
+        let rows: Vec<usize> = (0..7).collect();
+        let p = problem(&sizes, &x, &t, &rows, 0.01);
+        let width = p.offsets.last().copied().unwrap();
+        let (mut acts, mut delta) = (vec![0.0; width], vec![0.0; 2 * MAX_WIDTH]);
+        let loss = |w: &[f64], acts: &mut [f64]| p.mse(w, &rows, acts) + p.penalty(w) / 14.0;
+        let mut grad = vec![0.0; n];
+        p.gradient(&params, &rows, &mut grad, &mut acts, &mut delta);
+        let h = 1e-6;
+        for j in 0..n {
+            let (mut plus, mut minus) = (params.clone(), params.clone());
+            plus[j] += h;
+            minus[j] -= h;
+            let fd = (loss(&plus, &mut acts) - loss(&minus, &mut acts)) / (2.0 * h);
+            assert!(
+                (fd - grad[j]).abs() < 1e-8,
+                "parameter {j}: {fd} vs {}",
+                grad[j]
+            );
+        }
+    }
+}

@@ -1,0 +1,417 @@
+//! Training: seeded restarts in parallel, each by Levenberg-Marquardt (the
+//! crate's one solver) or Adam, with early stopping on a held-out split.
+
+use std::ops::ControlFlow;
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+use ndarray::ArrayView2;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::Regressor;
+use crate::check;
+use crate::error::{FitError, Result};
+use crate::levenberg_marquardt::{
+    Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason,
+};
+use crate::standardize::Standardizer;
+
+use super::network::{FittedMlp, MAX_WIDTH, Problem, forward, initial_parameters, parameter_count};
+use super::params::{Mlp, MlpParams, Trainer};
+
+/// How one restart went.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RestartReport {
+    /// Restart index.
+    pub restart: usize,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub reason: TerminationReason,
+    /// Training mean squared error (standardized targets) at the kept weights.
+    pub train_mse: f64,
+    /// Held-out mean squared error (standardized targets) at the kept weights
+    /// (the training MSE when nothing is held out).
+    pub validation_mse: f64,
+}
+
+/// Keeps the weights with the lowest held-out loss and says when `patience`
+/// checks have passed without improvement (never, when nothing is held out).
+struct BestHeldOut {
+    loss: f64,
+    params: Vec<f64>,
+    since: usize,
+    patience: usize,
+    active: bool,
+}
+
+impl BestHeldOut {
+    fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
+        Self {
+            loss,
+            params: params.to_vec(),
+            since: 0,
+            patience,
+            active,
+        }
+    }
+
+    /// Record the held-out loss of `params`; true when training should stop.
+    fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
+        if loss < self.loss {
+            self.loss = loss;
+            self.params.copy_from_slice(params);
+            self.since = 0;
+            false
+        } else {
+            self.since += 1;
+            self.active && self.since >= self.patience
+        }
+    }
+}
+
+/// Whether Levenberg-Marquardt is used for this problem size.
+fn use_levenberg_marquardt(trainer: Trainer, rows: usize, n_params: usize) -> bool {
+    match trainer {
+        Trainer::LevenbergMarquardt => true,
+        Trainer::Adam { .. } => false,
+        Trainer::Auto => n_params <= 1000 && rows.saturating_mul(n_params) <= 20_000_000,
+    }
+}
+
+fn train_one(problem: &Problem<'_>, mlp: &MlpParams, restart: usize) -> (Vec<f64>, RestartReport) {
+    let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
+    rng.set_stream(restart as u64 + 1);
+    let params = initial_parameters(problem.sizes, &mut rng);
+    let q = *problem.sizes.last().unwrap_or(&1);
+    if use_levenberg_marquardt(mlp.trainer, problem.train.len() * q, problem.n_params()) {
+        train_levenberg_marquardt(problem, mlp, restart, params)
+    } else {
+        let (learning_rate, batch_size, epochs) = match mlp.trainer {
+            Trainer::Adam {
+                learning_rate,
+                batch_size,
+                epochs,
+            } => (learning_rate, batch_size, epochs),
+            _ => (1e-3, 64, 500),
+        };
+        train_adam(
+            problem,
+            mlp,
+            restart,
+            params,
+            &mut rng,
+            (learning_rate, batch_size, epochs),
+        )
+    }
+}
+
+/// Adam on shuffled mini-batches, keeping the weights of the best held-out
+/// epoch; `patience` counts epochs.
+fn train_adam(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    mut params: Vec<f64>,
+    rng: &mut ChaCha8Rng,
+    (learning_rate, batch_size, epochs): (f64, usize, usize),
+) -> (Vec<f64>, RestartReport) {
+    const BETA1: f64 = 0.9;
+    const BETA2: f64 = 0.999;
+    const EPSILON: f64 = 1e-8;
+    let n = problem.n_params();
+    let width = problem.offsets.last().copied().unwrap_or(0);
+    let mut acts = vec![0.0; width];
+    let mut delta = vec![0.0; 2 * MAX_WIDTH];
+    let (mut grad, mut m, mut v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let held_out = if problem.held_out.is_empty() {
+        problem.train
+    } else {
+        problem.held_out
+    };
+    let mut order = problem.train.to_vec();
+    let initial = problem.mse(&params, held_out, &mut acts);
+    let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
+    let (mut step, mut done) = (0i32, 0);
+    let mut reason = TerminationReason::MaxEpochs;
+    for _ in 0..epochs {
+        done += 1;
+        order.shuffle(rng);
+        for batch in order.chunks(batch_size) {
+            problem.gradient(&params, batch, &mut grad, &mut acts, &mut delta);
+            step += 1;
+            let (c1, c2) = (1.0 - BETA1.powi(step), 1.0 - BETA2.powi(step));
+            for j in 0..n {
+                m[j] = BETA1 * m[j] + (1.0 - BETA1) * grad[j];
+                v[j] = BETA2 * v[j] + (1.0 - BETA2) * grad[j] * grad[j];
+                params[j] -= learning_rate * (m[j] / c1) / ((v[j] / c2).sqrt() + EPSILON);
+            }
+        }
+        let held = problem.mse(&params, held_out, &mut acts);
+        if best.observe(held, &params) {
+            reason = TerminationReason::EarlyStopping;
+            break;
+        }
+    }
+    let (validation_mse, kept) = (best.loss, best.params);
+    let report = RestartReport {
+        restart,
+        iterations: done,
+        reason,
+        train_mse: problem.mse(&kept, problem.train, &mut acts),
+        validation_mse,
+    };
+    (kept, report)
+}
+
+fn train_levenberg_marquardt(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    params: Vec<f64>,
+) -> (Vec<f64>, RestartReport) {
+    let held_out = if problem.held_out.is_empty() {
+        problem.train
+    } else {
+        problem.held_out
+    };
+    let width = problem.offsets.last().copied().unwrap_or(0);
+    let mut acts = vec![0.0; width];
+    let initial = problem.mse(&params, held_out, &mut acts);
+    let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
+    let mut least_squares = NetworkLeastSquares::new(problem);
+    let solver = LevenbergMarquardt::new()
+        .max_iterations(mlp.max_iterations)
+        .tolerance(1e-12)
+        .damping(Damping::Identity)
+        .initial_damping(1e-3)
+        .max_damping(1e10);
+    let Ok(minimum) = solver.minimize(&mut least_squares, &params, |iterate| {
+        let held = problem.mse(iterate.x, held_out, &mut acts);
+        if best.observe(held, iterate.x) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    });
+    let (validation_mse, kept) = (best.loss, best.params);
+    let report = RestartReport {
+        restart,
+        iterations: minimum.iterations,
+        reason: minimum.reason,
+        train_mse: problem.mse(&kept, problem.train, &mut acts),
+        validation_mse,
+    };
+    (kept, report)
+}
+
+/// The training rows' residuals as a least-squares problem: the cost is
+/// the mean squared error per target value plus the weight decay over the
+/// same count, and the Gauss-Newton products come from the back-propagated
+/// Jacobian (kept here between iterations: rows x parameters).
+struct NetworkLeastSquares<'p, 'a> {
+    problem: &'p Problem<'a>,
+    rows: usize,
+    acts: Vec<f64>,
+    delta: Vec<f64>,
+    jac: Mat<f64>,
+    res: Mat<f64>,
+    jtj: Mat<f64>,
+    jtr: Mat<f64>,
+}
+
+impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
+    fn new(problem: &'p Problem<'a>) -> Self {
+        let n = problem.n_params();
+        let q = *problem.sizes.last().unwrap_or(&1);
+        let rows = problem.train.len() * q;
+        Self {
+            problem,
+            rows,
+            acts: vec![0.0; problem.offsets.last().copied().unwrap_or(0)],
+            delta: vec![0.0; 2 * MAX_WIDTH],
+            jac: Mat::zeros(rows, n),
+            res: Mat::zeros(rows, 1),
+            jtj: Mat::zeros(n, n),
+            jtr: Mat::zeros(n, 1),
+        }
+    }
+}
+
+impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
+    type Error = std::convert::Infallible;
+
+    fn residuals(
+        &mut self,
+        params: &[f64],
+        r: &mut Vec<f64>,
+    ) -> std::result::Result<(), Self::Error> {
+        let problem = self.problem;
+        let q = *problem.sizes.last().unwrap_or(&1);
+        let out = problem.offsets[problem.sizes.len() - 1];
+        r.clear();
+        for &i in problem.train {
+            let xi = problem.x.row(i);
+            forward(
+                problem.sizes,
+                params,
+                xi.as_slice().unwrap_or(&[]),
+                &mut self.acts,
+                &problem.offsets,
+            );
+            r.extend((0..q).map(|k| self.acts[out + k] - problem.t[[i, k]]));
+        }
+        Ok(())
+    }
+
+    fn cost(&mut self, params: &[f64], r: &[f64]) -> f64 {
+        let sse: f64 = r.iter().map(|v| v * v).sum();
+        sse / self.rows.max(1) as f64 + self.problem.penalty(params) / (self.rows as f64)
+    }
+
+    fn gauss_newton(
+        &mut self,
+        params: &[f64],
+        _r: &[f64],
+        jtj: &mut [f64],
+        jtr: &mut [f64],
+    ) -> std::result::Result<(), Self::Error> {
+        let n = jtr.len();
+        let scale = 1.0 / self.rows as f64;
+        self.problem.jacobian(
+            params,
+            &mut self.jac,
+            &mut self.res,
+            &mut self.acts,
+            &mut self.delta,
+        );
+        matmul(
+            self.jtj.as_mut(),
+            Accum::Replace,
+            self.jac.transpose(),
+            self.jac.as_ref(),
+            scale,
+            Par::Seq,
+        );
+        matmul(
+            self.jtr.as_mut(),
+            Accum::Replace,
+            self.jac.transpose(),
+            self.res.as_ref(),
+            scale,
+            Par::Seq,
+        );
+        // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
+        let d = self.problem.decay * scale;
+        for i in 0..n {
+            for j in 0..=i {
+                jtj[i * n + j] = self.jtj[(i, j)];
+            }
+            jtj[i * n + i] += d;
+            jtr[i] = self.jtr[(i, 0)] + d * params[i];
+        }
+        Ok(())
+    }
+}
+
+impl Regressor for Mlp {
+    type Model = FittedMlp;
+
+    fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedMlp> {
+        check::training_data(x, y)?;
+        let p = &self.params;
+        let (m, n_in) = x.dim();
+        let q = y.ncols();
+        if n_in > MAX_WIDTH || q > MAX_WIDTH {
+            return Err(FitError::InvalidSetting {
+                name: "features or targets",
+                value: format!("{n_in} features, {q} targets"),
+                reason: "at most 256 each".into(),
+            });
+        }
+        let mut sizes = vec![n_in];
+        sizes.extend(&p.hidden);
+        sizes.push(q);
+        let n_params = parameter_count(&sizes);
+        let n_held = (p.validation_fraction * m as f64).round() as usize;
+        let n_train = m - n_held;
+        if n_train < 2 || (p.validation_fraction > 0.0 && n_held == 0) {
+            return Err(FitError::TooFewSamples {
+                got: m,
+                needed: 2 + usize::from(p.validation_fraction > 0.0),
+                why: "training and held-out sets both need samples".into(),
+            });
+        }
+        let features = Standardizer::fit(x);
+        let targets = Standardizer::fit(y);
+        // Standard layout so rows are contiguous slices.
+        let xs = features.transform(x).as_standard_layout().to_owned();
+        let ts = targets.transform(y);
+        let mut order: Vec<usize> = (0..m).collect();
+        let mut split_rng = ChaCha8Rng::seed_from_u64(p.seed ^ 0x5350_4c49_5400);
+        order.shuffle(&mut split_rng);
+        let (held_out, train) = order.split_at(n_held);
+        let mut offsets = vec![0];
+        for s in &sizes {
+            offsets.push(offsets.last().copied().unwrap_or(0) + s);
+        }
+        let problem = Problem {
+            sizes: &sizes,
+            offsets,
+            x: &xs,
+            t: &ts,
+            train,
+            held_out,
+            decay: p.weight_decay,
+        };
+        let _ = n_params;
+        let runs: Vec<(Vec<f64>, RestartReport)> = (0..p.restarts)
+            .into_par_iter()
+            .map(|r| train_one(&problem, p, r))
+            .collect();
+        // The lowest held-out loss wins; ties go to the lower index, so the
+        // choice does not depend on scheduling.
+        let best = runs
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.1.validation_mse.total_cmp(&b.1.1.validation_mse))
+            .map(|(i, _)| i)
+            .unwrap_or(0);
+        let (members, reports): (Vec<Vec<f64>>, Vec<RestartReport>) = runs.into_iter().unzip();
+        let members = if p.ensemble {
+            members
+        } else {
+            vec![members[best].clone()]
+        };
+        Ok(FittedMlp {
+            features,
+            targets,
+            sizes,
+            members,
+            reports,
+            best,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_picks_levenberg_marquardt_for_small_problems_only() {
+        assert!(use_levenberg_marquardt(Trainer::Auto, 3000, 222));
+        assert!(!use_levenberg_marquardt(Trainer::Auto, 200_000, 222));
+        assert!(!use_levenberg_marquardt(Trainer::Auto, 100, 5000));
+        assert!(use_levenberg_marquardt(
+            Trainer::LevenbergMarquardt,
+            200_000,
+            5000
+        ));
+        assert!(!use_levenberg_marquardt(Trainer::ADAM, 10, 10));
+    }
+}
