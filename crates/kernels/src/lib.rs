@@ -5,7 +5,7 @@
 //! code and compute the same numbers. What is here:
 //!
 //! - [`cholesky`]: the Cholesky factorization with a stated rank tolerance
-//!   ([`PivotRule`]) and the triangular solves that go with it;
+//!   ([`cholesky::PivotRule`]) and the triangular solves that go with it;
 //! - [`lagged`]: the least-squares normal equations of an ARX-type
 //!   regression assembled from lagged products of the signals (eq. (2) of
 //!   the paper without forming the regressor matrix);

@@ -154,7 +154,8 @@ impl Compressor for CompressorConfig {
 pub enum RegressorConfig {
     /// Linear (ridge) least squares.
     Linear(Ridge),
-    /// A tanh network trained by Levenberg-Marquardt.
+    /// A tanh network, trained by Levenberg-Marquardt or Adam as its
+    /// `Trainer` says.
     Mlp(Mlp),
     /// A global network routing each record to a specialist network of its
     /// piece of the first parameter's range.
@@ -165,7 +166,12 @@ impl std::fmt::Display for RegressorConfig {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Linear(r) => write!(f, "linear (ridge lambda {:e})", r.lambda()),
-            Self::Mlp(m) => write!(f, "MLP {:?} tanh, Levenberg-Marquardt", m.params().hidden()),
+            Self::Mlp(m) => write!(
+                f,
+                "MLP {:?} tanh, {}",
+                m.params().hidden(),
+                m.params().trainer_choice()
+            ),
             Self::Piecewise(p) => write!(
                 f,
                 "{} x MLP {:?} by pieces",

@@ -28,6 +28,23 @@ pub enum Trainer {
     },
 }
 
+impl std::fmt::Display for Trainer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Auto => f.write_str("Levenberg-Marquardt (Adam for large problems)"),
+            Self::LevenbergMarquardt => f.write_str("Levenberg-Marquardt"),
+            Self::Adam {
+                learning_rate,
+                batch_size,
+                epochs,
+            } => write!(
+                f,
+                "Adam (step {learning_rate:e}, batches of {batch_size}, {epochs} epochs)"
+            ),
+        }
+    }
+}
+
 impl Trainer {
     /// Adam with common settings: step 1e-3, batches of 64, 500 epochs.
     pub const ADAM: Self = Self::Adam {
@@ -138,7 +155,13 @@ impl MlpParams {
         self.trainer = trainer;
         self
     }
-    /// The seed set by [`MlpParams::seed`].
+
+    /// The trainer set by [`MlpParams::trainer`] (default [`Trainer::Auto`]).
+    pub fn trainer_choice(&self) -> Trainer {
+        self.trainer
+    }
+
+    /// The seed of the initial weights and the held-out split.
     pub fn seed_value(&self) -> u64 {
         self.seed
     }
@@ -218,7 +241,7 @@ impl MlpParams {
     }
 }
 
-/// Checked MLP hyperparameters: a [`Regressor`].
+/// Checked MLP hyperparameters: a [`crate::Regressor`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "MlpFields")]
 pub struct Mlp {
