@@ -20,7 +20,7 @@ use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::{IoData, Simulator};
 
 use crate::builder::{TrainedOn, TwoStage};
-use crate::chart::{StoredChart, simulate_records};
+use crate::chart::StoredChart;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
@@ -124,8 +124,6 @@ pub struct AutoDesign<'a, S: ?Sized> {
     networks: Option<(RegressorConfig, Vec<RegressorConfig>)>,
 }
 
-/// Streams of the timing pilot, apart from the training chart's.
-const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
 /// Largest chart a time budget chooses: beyond it the network fits, not
 /// the simulations, dominate the cost.
 const MAX_AUTO_SIMULATIONS: usize = 8000;
@@ -207,8 +205,65 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     /// that could be fitted.
     pub fn run(self) -> Result<AutoOutcome> {
         let start = Instant::now();
-        let base = &self.base;
-        let spec = base.simulator.spec();
+        let (m, deadline) = self.chart_size(start)?;
+        let chart = self.base.stored_chart(m)?;
+        let (medium, networks) = match self.networks.clone() {
+            Some(pair) => pair,
+            None => (
+                network(&[20])?,
+                vec![
+                    network(&[10])?,
+                    network(&[40])?,
+                    network(&[20, 20])?,
+                    pieces(4, &[20])?,
+                ],
+            ),
+        };
+        let spec = self.base.simulator().spec();
+        let compressors = self.compressors.clone().unwrap_or_else(|| {
+            candidate_compressors(spec.output_names().len(), spec.input_names().len())
+        });
+        let mut search = Search::new(&self.base, &chart, deadline);
+        self.base.observer().begin(Stage::Fitting, 0);
+        search.round_one(&compressors, &medium);
+        search.round_two(&medium, &networks);
+        let best = search.best(&self.budget)?;
+        let Winner {
+            compressor,
+            features,
+            regressor_config,
+            regressor,
+            refitted,
+        } = search.winner(best)?;
+        self.base.observer().end(Stage::Fitting);
+        let search_seconds = start.elapsed().as_secs_f64();
+        let estimator = self.base.finish(
+            compressor,
+            regressor,
+            TrainedOn {
+                features: features.view(),
+                simulations: m,
+                failures: m - chart.thetas.nrows(),
+                sampling: format!("{:?}", spec.prior().sampling()),
+                regressor: regressor_config,
+            },
+        )?;
+        Ok(AutoOutcome {
+            estimator,
+            candidates: search.candidates,
+            best,
+            simulations: m,
+            search_seconds,
+            refitted,
+        })
+    }
+
+    /// The number of simulations in the stored chart and the deadline: a
+    /// simulation budget as given; a time budget spends a fifth on the
+    /// chart (sized by a timed pilot), the rest on fits. Either way the
+    /// records must fit in memory.
+    fn chart_size(&self, start: Instant) -> Result<(usize, Option<Instant>)> {
+        let spec = self.base.simulator().spec();
         let record_bytes =
             spec.n_samples() * (spec.input_names().len() + spec.output_names().len()) * 8;
         let memory_cap = (MAX_CHART_BYTES / record_bytes.max(1)).max(100);
@@ -222,8 +277,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                         reason: "must be finite and > 0".into(),
                     });
                 }
-                let per_simulation = base.pilot_seconds_per_simulation()?;
-                // A fifth of the budget for the chart, the rest for fits.
+                let per_simulation = self.base.pilot_seconds_per_simulation()?;
                 let m = (0.2 * t / per_simulation) as usize;
                 (
                     m.clamp(500, MAX_AUTO_SIMULATIONS).min(memory_cap),
@@ -238,69 +292,77 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
             });
         }
-        let chart = base.stored_chart(m)?;
-        let q = spec.n_params();
-        let prior_sd: Vec<f64> = spec
-            .prior()
+        Ok((m, deadline))
+    }
+}
+
+/// The candidates of one automatic design: what was tried, on which stored
+/// chart, and what each fit gave.
+struct Search<'s, 'a, S: Simulator + ?Sized> {
+    base: &'s TwoStage<'a, S>,
+    chart: &'s StoredChart,
+    deadline: Option<Instant>,
+    /// Rows of the chart the candidates are fitted on; the rest score them.
+    fit_rows: usize,
+    /// The prior's standard deviation per parameter: RMSEs are scored in
+    /// its units, so that parameters of different scales weigh alike.
+    prior_sd: Vec<f64>,
+    candidates: Vec<CandidateReport>,
+    fitted: Vec<Option<(CompressorConfig, FittedRegressor)>>,
+    networks_of: Vec<RegressorConfig>,
+}
+
+impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
+    fn new(base: &'s TwoStage<'a, S>, chart: &'s StoredChart, deadline: Option<Instant>) -> Self {
+        let prior = base.simulator().spec().prior();
+        let prior_sd = prior
             .lower()
             .iter()
-            .zip(spec.prior().upper())
+            .zip(prior.upper())
             .map(|(lo, hi)| (hi - lo) / 12f64.sqrt())
             .collect();
         let rows = chart.thetas.nrows();
-        let fit_rows = ((1.0 - HELD_OUT) * rows as f64).round() as usize;
-        let mut candidates: Vec<CandidateReport> = Vec::new();
-        let mut fitted: Vec<Option<(CompressorConfig, FittedRegressor)>> = Vec::new();
-        let mut networks_of: Vec<RegressorConfig> = Vec::new();
-
-        // Round 1: every compressor with one medium network. Nothing is
-        // known about costs yet: each starts unless the deadline has passed.
-        let (medium, networks) = match self.networks.clone() {
-            Some(pair) => pair,
-            None => (
-                network(&[20])?,
-                vec![
-                    network(&[10])?,
-                    network(&[40])?,
-                    network(&[20, 20])?,
-                    pieces(4, &[20])?,
-                ],
-            ),
-        };
-        let compressors = self.compressors.clone().unwrap_or_else(|| {
-            candidate_compressors(spec.output_names().len(), spec.input_names().len())
-        });
-        base.progress.begin(Stage::Fitting, 0);
-        let round1: Vec<_> = compressors
-            .par_iter()
-            .map(|c| {
-                let limit = deadline.map(|d| (d, 0.0));
-                evaluate(base, &chart, c, &medium, fit_rows, &prior_sd, limit, 1)
-            })
-            .collect();
-        for (report, outcome) in round1 {
-            candidates.push(report);
-            fitted.push(outcome);
-            networks_of.push(medium.clone());
+        Self {
+            base,
+            chart,
+            deadline,
+            fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
+            prior_sd,
+            candidates: Vec::new(),
+            fitted: Vec::new(),
+            networks_of: Vec::new(),
         }
-        // Round 2: other networks on the two best compressors, each started
-        // only if its cost (the round-1 time scaled by the network's size)
-        // leaves time to refit the best candidate found so far.
-        let mut ranked: Vec<usize> = (0..candidates.len())
-            .filter(|&i| candidates[i].note.is_none())
+    }
+
+    /// Round 1: every compressor with one medium network. Nothing is known
+    /// about costs yet: each starts unless the deadline has passed.
+    fn round_one(&mut self, compressors: &[CompressorConfig], medium: &RegressorConfig) {
+        let outcomes: Vec<_> = compressors
+            .par_iter()
+            .map(|c| self.evaluate(c, medium, self.deadline.map(|d| (d, 0.0)), 1))
             .collect();
-        ranked.sort_by(|&a, &b| candidates[a].score.total_cmp(&candidates[b].score));
+        for (report, outcome) in outcomes {
+            self.record(report, outcome, medium.clone());
+        }
+    }
+
+    /// Round 2: the other networks on the two best compressors, each
+    /// started only if its cost (the round-1 time scaled by the network's
+    /// size) leaves time to refit the best candidate found so far.
+    fn round_two(&mut self, medium: &RegressorConfig, networks: &[RegressorConfig]) {
+        let q = self.chart.thetas.ncols();
+        let ranked = self.ranked();
         let reserve = ranked
             .first()
-            .map_or(0.0, |&i| 1.25 * candidates[i].seconds);
+            .map_or(0.0, |&i| 1.25 * self.candidates[i].seconds);
         let pairs: Vec<(CompressorConfig, RegressorConfig, f64)> = ranked
             .iter()
             .take(2)
             .filter_map(|&i| {
-                let (c, _) = fitted[i].as_ref()?;
+                let (c, _) = self.fitted[i].as_ref()?;
                 let n = c.n_features();
-                let base_size = network_size(&medium, n, q);
-                let seconds = candidates[i].seconds;
+                let base_size = network_size(medium, n, q);
+                let seconds = self.candidates[i].seconds;
                 Some(networks.iter().map(move |net| {
                     let scale = network_size(net, n, q) / base_size;
                     (c.clone(), net.clone(), seconds * scale)
@@ -308,99 +370,127 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             })
             .flatten()
             .collect();
-        let round2: Vec<_> = pairs
+        let outcomes: Vec<_> = pairs
             .par_iter()
             .map(|(c, net, cost)| {
-                let limit = deadline.map(|d| (d, cost + reserve));
-                evaluate(base, &chart, c, net, fit_rows, &prior_sd, limit, 2)
+                self.evaluate(c, net, self.deadline.map(|d| (d, cost + reserve)), 2)
             })
             .collect();
-        for (report, outcome) in round2 {
-            candidates.push(report);
-            fitted.push(outcome);
+        for ((report, outcome), (_, net, _)) in outcomes.into_iter().zip(pairs) {
+            self.record(report, outcome, net);
         }
-        networks_of.extend(pairs.iter().map(|(_, n, _)| n.clone()));
-        let best = (0..candidates.len())
-            .filter(|&i| candidates[i].note.is_none())
-            .min_by(|&a, &b| candidates[a].score.total_cmp(&candidates[b].score))
+    }
+
+    fn evaluate(
+        &self,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+        limit: Option<(Instant, f64)>,
+        round: usize,
+    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
+        evaluate(
+            self.base,
+            self.chart,
+            compressor,
+            regressor,
+            self.fit_rows,
+            &self.prior_sd,
+            limit,
+            round,
+        )
+    }
+
+    fn record(
+        &mut self,
+        report: CandidateReport,
+        outcome: Option<(CompressorConfig, FittedRegressor)>,
+        network: RegressorConfig,
+    ) {
+        self.candidates.push(report);
+        self.fitted.push(outcome);
+        self.networks_of.push(network);
+    }
+
+    /// The candidates that were fitted, best score first (ties keep the
+    /// order in which they were tried).
+    fn ranked(&self) -> Vec<usize> {
+        let mut ranked: Vec<usize> = (0..self.candidates.len())
+            .filter(|&i| self.candidates[i].note.is_none())
+            .collect();
+        ranked.sort_by(|&a, &b| {
+            self.candidates[a]
+                .score
+                .total_cmp(&self.candidates[b].score)
+        });
+        ranked
+    }
+
+    /// The best candidate's index.
+    fn best(&self, budget: &Budget) -> Result<usize> {
+        (0..self.candidates.len())
+            .filter(|&i| self.candidates[i].note.is_none())
+            .min_by(|&a, &b| {
+                self.candidates[a]
+                    .score
+                    .total_cmp(&self.candidates[b].score)
+            })
             .ok_or_else(|| Error::InvalidSetting {
                 name: "budget",
-                value: format!("{:?}", self.budget),
+                value: format!("{budget:?}"),
                 reason: format!(
                     "no candidate could be fitted within it (first: {})",
-                    candidates
+                    self.candidates
                         .first()
                         .and_then(|c| c.note.clone())
                         .unwrap_or_default()
                 ),
-            })?;
+            })
+    }
+
+    /// The winner, refitted on the whole chart if there is time for it,
+    /// else with its fit on the first 80% of rows as it is.
+    fn winner(&self, best: usize) -> Result<Winner> {
         let (compressor, held_out_fit) =
-            fitted[best].clone().ok_or_else(|| Error::InvalidSetting {
-                name: "budget",
-                value: format!("{:?}", self.budget),
-                reason: "the best candidate lost its fit".into(),
-            })?;
-        let features = compress_all(&compressor, &chart.records)?;
-        let regressor_config = networks_of[best].clone();
-        // The winner on the whole chart, if there is time for it; else the
-        // fit on the first 80% of rows that won is shipped as it is.
-        let refit_cost = 1.25 * candidates[best].seconds;
-        let refitted =
-            deadline.is_none_or(|d| Instant::now() + Duration::from_secs_f64(refit_cost) <= d);
-        let regressor: FittedRegressor = if refitted {
-            regressor_config.fit(features.view(), chart.thetas.view(), base.seed)?
+            self.fitted[best]
+                .clone()
+                .ok_or_else(|| Error::InvalidSetting {
+                    name: "budget",
+                    value: String::new(),
+                    reason: "the best candidate lost its fit".into(),
+                })?;
+        let regressor_config = self.networks_of[best].clone();
+        let refit_cost = 1.25 * self.candidates[best].seconds;
+        let refitted = self
+            .deadline
+            .is_none_or(|d| Instant::now() + Duration::from_secs_f64(refit_cost) <= d);
+        let features = compress_all(&compressor, &self.chart.records)?;
+        let regressor = if refitted {
+            regressor_config.fit(
+                features.view(),
+                self.chart.thetas.view(),
+                self.base.seed_value(),
+            )?
         } else {
             held_out_fit
         };
-        base.progress.end(Stage::Fitting);
-        let search_seconds = start.elapsed().as_secs_f64();
-        let estimator = base.finish(
+        Ok(Winner {
             compressor,
+            features,
+            regressor_config,
             regressor,
-            TrainedOn {
-                features: features.view(),
-                simulations: m,
-                failures: m - rows,
-                sampling: format!("{:?}", spec.prior().sampling()),
-                regressor: regressor_config,
-            },
-        )?;
-        Ok(AutoOutcome {
-            estimator,
-            candidates,
-            best,
-            simulations: m,
-            search_seconds,
             refitted,
         })
     }
 }
 
-impl<S: Simulator + ?Sized> TwoStage<'_, S> {
-    /// Parallel throughput of the simulator, from a small timed pilot.
-    fn pilot_seconds_per_simulation(&self) -> Result<f64> {
-        let pilot = 64;
-        let design = self
-            .simulator
-            .prior()
-            .design(pilot, self.seed ^ PILOT_SEED)?;
-        let start = Instant::now();
-        simulate_records(self.simulator, &design, pilot, 0.0, None)?;
-        Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
-    }
-
-    /// Simulate m experiments of the training design and keep the records
-    /// (failed experiments are dropped, within the failure allowance).
-    pub(crate) fn stored_chart(&self, m: usize) -> Result<StoredChart> {
-        let design = self.simulator.prior().design(m, self.seed)?;
-        simulate_records(
-            self.simulator,
-            &design,
-            m,
-            self.max_failure_fraction,
-            Some((Stage::Training, self.progress)),
-        )
-    }
+/// What the search ships: the winning structure, fitted.
+struct Winner {
+    compressor: CompressorConfig,
+    /// The whole chart's features under the winning compressor.
+    features: Array2<f64>,
+    regressor_config: RegressorConfig,
+    regressor: FittedRegressor,
+    refitted: bool,
 }
 
 /// Weights and biases of a network candidate on n features and q outputs:
@@ -507,12 +597,12 @@ fn evaluate<S: Simulator + ?Sized>(
         let features = compress_all(&compressor, &chart.records)?;
         let (x_fit, x_held) = features.view().split_at(Axis(0), fit_rows);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), fit_rows);
-        let fitted = regressor.fit(x_fit, t_fit, base.seed)?;
+        let fitted = regressor.fit(x_fit, t_fit, base.seed_value())?;
         // Standard layout, so that every row is a slice.
         let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?
             .as_standard_layout()
             .into_owned();
-        let prior = base.simulator.spec().prior();
+        let prior = base.simulator().spec().prior();
         for mut row in estimates.rows_mut() {
             if let Some(theta) = row.as_slice_mut() {
                 clip_to_box(theta, prior.lower(), prior.upper());

@@ -1,11 +1,14 @@
-//! Training: the `TwoStage` builder and the paper's presets.
+//! Training: the `TwoStage` builder (the presets are in the per-model
+//! table, `profile.rs`).
+
+use std::time::Instant;
 
 use twostage_fit::Ridge;
 use twostage_models::{Prior, Sampling, Simulator};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
-use crate::chart::{compress_chart_observed, simulate_records};
+use crate::chart::{StoredChart, compress_chart_observed, simulate_records};
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
@@ -32,6 +35,9 @@ pub(crate) struct TrainedOn<'f> {
     pub(crate) sampling: String,
     pub(crate) regressor: RegressorConfig,
 }
+
+/// Streams of the timing pilot, apart from the training chart's.
+const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
 
 /// Offsets that give the calibration and validation charts their own
 /// streams, disjoint from the training chart of the same seed.
@@ -73,18 +79,18 @@ const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
 /// ```
 #[derive(Debug, Clone)]
 pub struct TwoStage<'a, S: ?Sized> {
-    pub(crate) simulator: &'a S,
+    simulator: &'a S,
     compressor: CompressorConfig,
     regressor: RegressorConfig,
     simulations: usize,
     sampling: Option<Sampling>,
-    pub(crate) seed: u64,
+    seed: u64,
     calibration: usize,
     alpha: f64,
     validation: usize,
     delta: f64,
-    pub(crate) max_failure_fraction: f64,
-    pub(crate) progress: &'a dyn Progress,
+    max_failure_fraction: f64,
+    progress: &'a dyn Progress,
 }
 
 impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
@@ -374,5 +380,47 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         )?;
         let estimates = estimator.predict_features(chart.features.view())?;
         Ok((chart.thetas, estimates, chart.features))
+    }
+}
+
+impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
+    /// The simulator (read by the automatic design).
+    pub(crate) fn simulator(&self) -> &'a S {
+        self.simulator
+    }
+
+    /// The seed of every random choice.
+    pub(crate) fn seed_value(&self) -> u64 {
+        self.seed
+    }
+
+    /// The progress observer.
+    pub(crate) fn observer(&self) -> &'a dyn Progress {
+        self.progress
+    }
+
+    /// Parallel throughput of the simulator, from a small timed pilot.
+    pub(crate) fn pilot_seconds_per_simulation(&self) -> Result<f64> {
+        let pilot = 64;
+        let design = self
+            .simulator
+            .prior()
+            .design(pilot, self.seed ^ PILOT_SEED)?;
+        let start = Instant::now();
+        simulate_records(self.simulator, &design, pilot, 0.0, None)?;
+        Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
+    }
+
+    /// Simulate m experiments of the training design and keep the records
+    /// (failed experiments are dropped, within the failure allowance).
+    pub(crate) fn stored_chart(&self, m: usize) -> Result<StoredChart> {
+        let design = self.simulator.prior().design(m, self.seed)?;
+        simulate_records(
+            self.simulator,
+            &design,
+            m,
+            self.max_failure_fraction,
+            Some((Stage::Training, self.progress)),
+        )
     }
 }
