@@ -69,6 +69,7 @@ impl std::error::Error for NotPositiveDefinite {}
 /// # Errors
 /// The first pivot that `rule` refuses, or a NaN pivot; `a` is then
 /// partly overwritten. A slice shorter than `n * n` is refused at column 0.
+#[inline]
 pub fn cholesky_in_place(
     a: &mut [f64],
     n: usize,
@@ -133,6 +134,7 @@ pub fn cholesky_in_place(
 /// solve_lower_in_place(&l, 2, &mut v);
 /// assert_eq!(v, [1.0, 2.0]);
 /// ```
+#[inline]
 pub fn solve_lower_in_place(l: &[f64], n: usize, v: &mut [f64]) {
     for i in 0..n.min(v.len()) {
         let mut s = v[i];
@@ -152,6 +154,7 @@ pub fn solve_lower_in_place(l: &[f64], n: usize, v: &mut [f64]) {
 /// solve_lower_transposed_in_place(&l, 2, &mut z);
 /// assert_eq!(z, [1.0, 2.0]);
 /// ```
+#[inline]
 pub fn solve_lower_transposed_in_place(l: &[f64], n: usize, v: &mut [f64]) {
     for i in (0..n.min(v.len())).rev() {
         let mut s = v[i];
@@ -163,6 +166,7 @@ pub fn solve_lower_transposed_in_place(l: &[f64], n: usize, v: &mut [f64]) {
 }
 
 /// Solve `L L' x = b` in place, `l` from [`cholesky_in_place`].
+#[inline]
 pub fn solve_cholesky_in_place(l: &[f64], n: usize, b: &mut [f64]) {
     solve_lower_in_place(l, n, b);
     solve_lower_transposed_in_place(l, n, b);

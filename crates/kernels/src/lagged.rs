@@ -74,6 +74,7 @@ pub struct LaggedBuffers<'a> {
 /// # Errors
 /// [`LaggedDeclined`]: the caller should then solve by QR, which gives the
 /// exact answer or the precise reason.
+#[inline]
 pub fn lagged_least_squares(
     signals: &[&[f64]],
     columns: &[LaggedColumn],

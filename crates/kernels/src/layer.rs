@@ -21,6 +21,7 @@ pub enum Activation {
 ///
 /// Weights or bias shorter than the layer leave the remaining outputs
 /// untouched (callers size them from the same layer sizes).
+#[inline]
 pub fn dense_layer(
     weights: &[f64],
     bias: &[f64],

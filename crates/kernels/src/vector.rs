@@ -8,6 +8,7 @@
 /// twostage_kernels::vector::standardize(&[3.0, -1.0], &[1.0, 1.0], &[2.0, 4.0], &mut z);
 /// assert_eq!(z, [1.0, -0.5]);
 /// ```
+#[inline]
 pub fn standardize(x: &[f64], mean: &[f64], scale: &[f64], z: &mut [f64]) {
     for ((zi, xi), (m, s)) in z.iter_mut().zip(x).zip(mean.iter().zip(scale)) {
         *zi = (xi - m) / s;
@@ -15,6 +16,7 @@ pub fn standardize(x: &[f64], mean: &[f64], scale: &[f64], z: &mut [f64]) {
 }
 
 /// `x = mean + scale z`, in place: the inverse of [`standardize`].
+#[inline]
 pub fn unstandardize_in_place(z: &mut [f64], mean: &[f64], scale: &[f64]) {
     for (zi, (m, s)) in z.iter_mut().zip(mean.iter().zip(scale)) {
         *zi = m + s * *zi;
@@ -29,6 +31,7 @@ pub fn unstandardize_in_place(z: &mut [f64], mean: &[f64], scale: &[f64]) {
 /// twostage_kernels::vector::clip_to_box(&mut theta, &[-1.0; 3], &[1.0; 3]);
 /// assert_eq!(theta, [-1.0, 0.0, 0.3]);
 /// ```
+#[inline]
 pub fn clip_to_box(theta: &mut [f64], lower: &[f64], upper: &[f64]) {
     for (t, (lo, hi)) in theta.iter_mut().zip(lower.iter().zip(upper)) {
         *t = if t.is_nan() {
