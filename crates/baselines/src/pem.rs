@@ -5,9 +5,7 @@
 
 use std::ops::ControlFlow;
 
-use twostage_fit::{
-    Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason, normal_products,
-};
+use twostage_fit::{Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use twostage_models::{IoData, Prior};
 
 use crate::error::{BaselineError, Result};
@@ -383,6 +381,8 @@ impl<M: ResidualModel> PredictionError<M> {
             lo,
             hi,
             theta: Vec::with_capacity(unit.len()),
+            unit_lower: vec![0.0; unit.len()],
+            unit_upper: vec![1.0; unit.len()],
         };
         // Marquardt's scaling: the parameters' sensitivities differ by
         // orders of magnitude (the car's pK1 and pK2).
@@ -417,6 +417,9 @@ struct PredictionErrors<'a, M> {
     lo: &'a [f64],
     hi: &'a [f64],
     theta: Vec<f64>,
+    /// The whole prior box in unit coordinates: zeros and ones.
+    unit_lower: Vec<f64>,
+    unit_upper: Vec<f64>,
 }
 
 impl<M: ResidualModel> LeastSquaresProblem for PredictionErrors<'_, M> {
@@ -434,34 +437,10 @@ impl<M: ResidualModel> LeastSquaresProblem for PredictionErrors<'_, M> {
         self.model.residuals(&self.theta, self.record, r)
     }
 
-    /// Central differences of step 1e-6, shifted inward at the faces of
-    /// the prior box (the model is not defined outside it).
-    fn gauss_newton(
-        &mut self,
-        s: &[f64],
-        r: &[f64],
-        jtj: &mut [f64],
-        jtr: &mut [f64],
-    ) -> Result<()> {
-        let (q, n) = (s.len(), r.len());
-        let h = 1e-6;
-        let mut columns = vec![0.0; q * n];
-        let (mut plus, mut minus) = (Vec::new(), Vec::new());
-        let mut point = s.to_vec();
-        for (j, column) in columns.chunks_exact_mut(n.max(1)).enumerate().take(q) {
-            let (up, down) = ((s[j] + h).min(1.0), (s[j] - h).max(0.0));
-            point[j] = up;
-            self.residuals(&point, &mut plus)?;
-            point[j] = down;
-            self.residuals(&point, &mut minus)?;
-            point[j] = s[j];
-            let width = up - down;
-            for ((c, p), m) in column.iter_mut().zip(&plus).zip(&minus) {
-                *c = (p - m) / width;
-            }
-        }
-        normal_products(&columns, r, jtj, jtr);
-        Ok(())
+    /// The prior box, in unit coordinates: the model is not defined
+    /// outside it, so the finite differences step inward at its faces.
+    fn domain(&self) -> Option<(&[f64], &[f64])> {
+        Some((&self.unit_lower, &self.unit_upper))
     }
 
     fn project(&self, s: &mut [f64]) {

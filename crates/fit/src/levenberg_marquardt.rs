@@ -61,7 +61,9 @@ pub trait LeastSquaresProblem {
     /// The Gauss-Newton model at `x`, whose residuals are `r`: `J'J` into
     /// `jtj` (row-major n x n; the solver reads its lower triangle) and the
     /// gradient half `J'r` into `jtr`. Default: central differences of the
-    /// residuals with steps `1e-6 max(1, |x_j|)`, sums in index order.
+    /// residuals with steps `1e-6 max(1, |x_j|)`, shifted inward at the
+    /// faces of [`Self::domain`] and divided by the step actually taken;
+    /// sums in index order.
     ///
     /// # Errors
     /// As [`Self::residuals`].
@@ -73,21 +75,35 @@ pub trait LeastSquaresProblem {
         jtr: &mut [f64],
     ) -> Result<(), Self::Error> {
         let n = x.len();
-        let mut columns = vec![0.0; n * r.len()];
+        let rows = r.len();
+        let mut columns = vec![0.0; n * rows];
         let (mut point, mut plus, mut minus) = (x.to_vec(), Vec::new(), Vec::new());
-        for (j, column) in columns.chunks_exact_mut(r.len().max(1)).enumerate().take(n) {
+        for (j, column) in columns.chunks_exact_mut(rows.max(1)).enumerate().take(n) {
             let h = 1e-6 * x[j].abs().max(1.0);
-            point[j] = x[j] + h;
+            let (mut up, mut down) = (x[j] + h, x[j] - h);
+            if let Some((lower, upper)) = self.domain() {
+                up = up.min(upper[j]);
+                down = down.max(lower[j]);
+            }
+            point[j] = up;
             self.residuals(&point, &mut plus)?;
-            point[j] = x[j] - h;
+            point[j] = down;
             self.residuals(&point, &mut minus)?;
             point[j] = x[j];
+            let width = up - down;
             for ((c, p), m) in column.iter_mut().zip(&plus).zip(&minus) {
-                *c = (p - m) / (2.0 * h);
+                *c = (p - m) / width;
             }
         }
         normal_products(&columns, r, jtj, jtr);
         Ok(())
+    }
+
+    /// Where the residuals are defined, as lower and upper bounds per
+    /// parameter (default: everywhere). Finite differences never step
+    /// outside it.
+    fn domain(&self) -> Option<(&[f64], &[f64])> {
+        None
     }
 
     /// Move `x` into the feasible set (default: everything is feasible).
@@ -433,6 +449,40 @@ mod tests {
         fn project(&self, x: &mut [f64]) {
             x[0] = x[0].clamp(0.0, 1.0);
         }
+    }
+
+    /// Residuals undefined below zero (an error there), a start on that
+    /// face: the differences must step inward, and the minimum is found.
+    struct HalfLine {
+        bounds: (Vec<f64>, Vec<f64>),
+    }
+    impl LeastSquaresProblem for HalfLine {
+        type Error = String;
+        fn residuals(&mut self, x: &[f64], r: &mut Vec<f64>) -> Result<(), String> {
+            if x[0] < 0.0 {
+                return Err(format!("evaluated outside the domain at {}", x[0]));
+            }
+            r.clear();
+            r.push(x[0] * x[0] - 0.25);
+            Ok(())
+        }
+        fn domain(&self) -> Option<(&[f64], &[f64])> {
+            Some((&self.bounds.0, &self.bounds.1))
+        }
+        fn project(&self, x: &mut [f64]) {
+            x[0] = x[0].clamp(0.0, 10.0);
+        }
+    }
+
+    #[test]
+    fn differences_stay_inside_the_domain() {
+        let mut problem = HalfLine {
+            bounds: (vec![0.0], vec![10.0]),
+        };
+        let found = LevenbergMarquardt::new()
+            .minimize(&mut problem, &[0.0], |_| ControlFlow::Continue(()))
+            .unwrap();
+        assert!((found.x[0] - 0.5).abs() < 1e-6, "{found:?}");
     }
 
     #[test]
