@@ -77,7 +77,11 @@ pub enum Error {
         expected: usize,
     },
     /// An estimator file could not be read, decoded or written.
-    #[error("{}{error}", path.as_ref().map(|p| format!("{}: ", p.display())).unwrap_or_default())]
+    #[error(
+        "{}{error}",
+        path.as_ref()
+            .map_or_else(|| "estimator file: ".to_string(), |p| format!("{}: ", p.display()))
+    )]
     File {
         /// The file, when one was named.
         path: Option<std::path::PathBuf>,

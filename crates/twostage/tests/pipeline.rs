@@ -94,6 +94,10 @@ fn damaged_files_get_a_clear_error_each() {
     );
     assert_eq!(kind(b""), FileError::BadMagic);
     assert!(FileError::BadMagic.to_string().contains("twostage train"));
+    // Without a path the message still says what it is about; with one, it
+    // names the file.
+    let bare = Estimator::from_bytes(b"").unwrap_err().to_string();
+    assert!(bare.starts_with("estimator file: not a twostage"), "{bare}");
     // Newer and impossible format versions.
     let mut newer = bytes.clone();
     newer[8..12].copy_from_slice(&7u32.to_le_bytes());
