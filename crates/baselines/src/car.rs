@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use twostage_models::{IoData, PACEJKA_NOISE_VARIANCE, PacejkaCar, Prior, Rk4, Simulator};
 
 use crate::error::{BaselineError, Result};
+use crate::moments::WeightedMoments;
 use crate::particle::ParticleModel;
 use crate::pem::ResidualModel;
 use crate::{Estimate, RecordEstimator};
@@ -355,7 +356,7 @@ impl BayesCar {
     /// Mean, sd and mode by the trapezoid rule on every `stride`-th point.
     fn moments(&self, log_post: &[f64], stride: usize) -> ([f64; 2], [f64; 2], [f64; 2]) {
         let peak = log_post.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v));
-        let (mut mass, mut m1, mut m2) = (0.0, [0.0; 2], [0.0; 2]);
+        let mut moments = WeightedMoments::new(2);
         let mut map = (f64::NEG_INFINITY, [0.0; 2]);
         let last = |n: usize| (n - 1) / stride * stride;
         for i in (0..self.n1).step_by(stride) {
@@ -375,20 +376,11 @@ impl BayesCar {
                 } else {
                     1.0
                 };
-                let p = wi * wj * (lp - peak).exp();
-                mass += p;
-                for d in 0..2 {
-                    m1[d] += p * theta[d];
-                    m2[d] += p * theta[d] * theta[d];
-                }
+                moments.add(wi * wj * (lp - peak).exp(), &theta);
             }
         }
-        let mean = [m1[0] / mass, m1[1] / mass];
-        let sd = [
-            (m2[0] / mass - mean[0] * mean[0]).max(0.0).sqrt(),
-            (m2[1] / mass - mean[1] * mean[1]).max(0.0).sqrt(),
-        ];
-        (mean, sd, map.1)
+        let (mean, sd) = moments.mean_and_sd();
+        ([mean[0], mean[1]], [sd[0], sd[1]], map.1)
     }
 }
 

@@ -39,6 +39,7 @@ mod error;
 mod filters;
 mod indirect;
 mod kalman;
+mod moments;
 mod particle;
 mod pem;
 mod suite;

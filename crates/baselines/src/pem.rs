@@ -10,6 +10,7 @@ use twostage_models::{IoData, Prior};
 
 use crate::error::{BaselineError, Result};
 use crate::kalman::benchmark_kalman_innovations;
+use crate::moments::WeightedMoments;
 use crate::{Estimate, RecordEstimator};
 
 /// A model whose prediction errors on a record can be computed at any theta.
@@ -329,22 +330,14 @@ impl<M: ResidualModel> PredictionError<M> {
             });
         }
         let variance = (best / n.max(1) as f64).max(f64::MIN_POSITIVE);
-        let (mut mean, mut second, mut mass) = (vec![0.0; q], vec![0.0; q], 0.0);
+        let mut moments = WeightedMoments::new(q);
         for (t, loss) in &grid {
-            let w = (-(loss - best) / (2.0 * variance)).exp();
-            mass += w;
-            for j in 0..q {
-                mean[j] += w * t[j];
-                second[j] += w * t[j] * t[j];
-            }
+            moments.add((-(loss - best) / (2.0 * variance)).exp(), t);
         }
-        for j in 0..q {
-            mean[j] /= mass;
-            second[j] = (second[j] / mass - mean[j] * mean[j]).max(0.0).sqrt();
-        }
+        let (mean, sd) = moments.mean_and_sd();
         Ok(LocalPosterior {
             mean,
-            sd: second,
+            sd,
             evaluations: total,
         })
     }
