@@ -11,7 +11,6 @@
 //! selection).
 
 use std::time::{Duration, Instant};
-use twostage_kernels::vector::clip_to_box;
 
 use ndarray::{Array2, Axis};
 use rayon::prelude::*;
@@ -23,7 +22,7 @@ use crate::builder::{TrainedOn, TwoStage};
 use crate::chart::StoredChart;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::error::{Error, Result};
-use crate::estimator::Estimator;
+use crate::estimator::{Estimator, clip_rows};
 use crate::progress::Stage;
 
 /// How much the search may spend.
@@ -598,16 +597,9 @@ fn evaluate<S: Simulator + ?Sized>(
         let (x_fit, x_held) = features.view().split_at(Axis(0), fit_rows);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), fit_rows);
         let fitted = regressor.fit(x_fit, t_fit, base.seed_value())?;
-        // Standard layout, so that every row is a slice.
-        let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?
-            .as_standard_layout()
-            .into_owned();
+        let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?;
         let prior = base.simulator().spec().prior();
-        for mut row in estimates.rows_mut() {
-            if let Some(theta) = row.as_slice_mut() {
-                clip_to_box(theta, prior.lower(), prior.upper());
-            }
-        }
+        clip_rows(&mut estimates, prior.lower(), prior.upper());
         let rmse = (0..t_held.ncols())
             .map(|j| {
                 let sq: f64 = t_held

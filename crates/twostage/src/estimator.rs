@@ -394,17 +394,50 @@ impl Estimator {
 
     /// Estimates for every row of a compressed chart's features (clipped).
     pub(crate) fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
-        // Standard layout, so that every row is a slice.
-        let mut out = self
-            .regressor
-            .predict(features)?
-            .as_standard_layout()
-            .into_owned();
-        for mut row in out.rows_mut() {
-            if let Some(theta) = row.as_slice_mut() {
-                clip_to_box(theta, &self.lower, &self.upper);
-            }
-        }
+        let mut out = self.regressor.predict(features)?;
+        clip_rows(&mut out, &self.lower, &self.upper);
         Ok(out)
+    }
+}
+
+/// Clip every row of a matrix of estimates to the box (rows made contiguous
+/// first if they are not; `predict` already returns them so).
+pub(crate) fn clip_rows(estimates: &mut Array2<f64>, lower: &[f64], upper: &[f64]) {
+    if !estimates.is_standard_layout() {
+        *estimates = estimates.as_standard_layout().into_owned();
+    }
+    for mut row in estimates.rows_mut() {
+        if let Some(theta) = row.as_slice_mut() {
+            clip_to_box(theta, lower, upper);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rows in either memory order are clipped, NaN to the centre.
+    #[test]
+    fn clip_rows_clips_every_row_in_any_layout() {
+        let want: Array2<f64> = ndarray::array![[-1.0, 3.0], [0.5, 2.5], [0.0, 2.5]];
+        let standard = ndarray::array![[-5.0, 9.0], [0.5, f64::NAN], [f64::NAN, 2.5]];
+        let mut columns_first = standard
+            .t()
+            .as_standard_layout()
+            .into_owned()
+            .reversed_axes();
+        assert!(!columns_first.is_standard_layout());
+        for mut m in [standard, columns_first.clone()] {
+            clip_rows(&mut m, &[-1.0, 2.0], &[1.0, 3.0]);
+            assert!(
+                m.iter()
+                    .zip(want.iter())
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{m}"
+            );
+        }
+        clip_rows(&mut columns_first, &[-1.0, 2.0], &[1.0, 3.0]);
+        assert!(columns_first.is_standard_layout());
     }
 }
