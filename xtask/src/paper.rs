@@ -9,10 +9,13 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar, Simulator, run_experiment};
-use twostage::{ClassicMethod, EstimateWorkspace, Estimator, ModelProfile, Preset, TwoStage};
+use twostage::{
+    ClassicMethod, EstimateWorkspace, Estimator, ModelProfile, Preset, RefineStarts, Refinement,
+    ResidualModel, TwoStage,
+};
 use twostage_baselines::{
-    BayesCar, InitialCovariance, MethodSettings, PredictionError, RecordEstimator, RefineStarts,
-    ResidualModel, classic_estimator, exact_likelihood,
+    BaselineError, BayesCar, InitialCovariance, MethodSettings, RecordEstimator, classic_estimator,
+    exact_likelihood,
 };
 
 /// Test records are drawn with a seed disjoint from training, calibration
@@ -97,44 +100,34 @@ fn two_stage(estimator: &Estimator) -> impl FnMut(&IoData) -> Result<Vec<f64>> +
 /// TS, then local Levenberg-Marquardt descents of the prediction-error
 /// loss confined to 1.5 times TS's 90% interval around its estimate:
 /// TS picks the neighbourhood, PE finds the bottom of its lowest basin.
-fn refined<'a, M: ResidualModel>(
+fn refined<'a, M: ResidualModel<Error = BaselineError>>(
     estimator: &'a Estimator,
-    pe: &'a PredictionError<M>,
+    local: &'a Refinement<M>,
     starts: RefineStarts,
 ) -> Result<impl FnMut(&IoData) -> Result<Vec<f64>> + 'a> {
-    let radius: Vec<f64> = estimator
-        .intervals()
-        .context("the refinement needs calibrated intervals")?
-        .half_widths()
-        .iter()
-        .map(|w| 1.5 * w)
-        .collect();
+    let radius = estimator.neighbourhood(1.5)?;
     let mut ts = two_stage(estimator);
     Ok(move |record: &IoData| {
         let start = ts(record)?;
-        Ok(pe.refine(record, &start, &radius, starts)?.theta)
+        Ok(local.refine(record, &start, &radius, starts)?.theta)
     })
 }
 
 /// TS, then the posterior mean over a grid of `points` per axis on twice
 /// TS's 90% interval around its estimate, with the PE loss as a Gaussian
 /// negative log-likelihood.
-fn local_posterior<'a, M: ResidualModel>(
+fn local_posterior<'a, M: ResidualModel<Error = BaselineError>>(
     estimator: &'a Estimator,
-    pe: &'a PredictionError<M>,
+    local: &'a Refinement<M>,
     points: usize,
 ) -> Result<impl FnMut(&IoData) -> Result<Vec<f64>> + 'a> {
-    let radius: Vec<f64> = estimator
-        .intervals()
-        .context("the local posterior needs calibrated intervals")?
-        .half_widths()
-        .iter()
-        .map(|w| 2.0 * w)
-        .collect();
+    let radius = estimator.neighbourhood(2.0)?;
     let mut ts = two_stage(estimator);
     Ok(move |record: &IoData| {
         let centre = ts(record)?;
-        Ok(pe.local_posterior(record, &centre, &radius, points)?.mean)
+        Ok(local
+            .local_posterior(record, &centre, &radius, points)?
+            .mean)
     })
 }
 
@@ -288,7 +281,7 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         1,
         two_stage(&estimator),
     ));
-    let local = PredictionError::new(exact_likelihood(BuiltinModel::Benchmark)?, 1);
+    let local = Refinement::new(exact_likelihood(BuiltinModel::Benchmark)?);
     methods.push(run_method(
         "TS + PE refinement",
         "refined_benchmark",
@@ -374,7 +367,7 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         2,
         baseline(pem.as_ref()),
     ));
-    let local = PredictionError::new(exact_likelihood(BuiltinModel::Pacejka)?, 1);
+    let local = Refinement::new(exact_likelihood(BuiltinModel::Pacejka)?);
     methods.push(run_method(
         "TS + PE refinement",
         "refined_car",

@@ -9,12 +9,11 @@
 
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use twostage::{ResidualModel, WeightedMoments};
 use twostage_models::{IoData, PACEJKA_NOISE_VARIANCE, PacejkaCar, Prior, Rk4, Simulator};
 
 use crate::error::{BaselineError, Result};
-use crate::moments::WeightedMoments;
 use crate::particle::ParticleModel;
-use crate::pem::ResidualModel;
 use crate::{Estimate, RecordEstimator};
 
 fn state4(state: &mut [f64]) -> Result<&mut [f64; 4]> {
@@ -126,6 +125,7 @@ fn noise_free(car: &PacejkaCar, theta: &[f64], inputs: &[f64], out: &mut [f64]) 
 }
 
 impl ResidualModel for CarPredictor {
+    type Error = BaselineError;
     fn prior(&self) -> &Prior {
         self.car.prior()
     }

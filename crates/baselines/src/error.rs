@@ -4,7 +4,7 @@ use thiserror::Error;
 use twostage_models::SimError;
 
 /// Why a baseline could not produce an estimate.
-#[derive(Debug, Clone, PartialEq, Error)]
+#[derive(Debug, Error)]
 #[non_exhaustive]
 pub enum BaselineError {
     /// The model rejected the parameter vector or the data.
@@ -13,6 +13,10 @@ pub enum BaselineError {
     /// A record could not be compressed (indirect inference).
     #[error(transparent)]
     Compress(#[from] twostage_compress::CompressError),
+    /// The facade's refinement search (on which PE and indirect inference
+    /// descend) refused a setting.
+    #[error(transparent)]
+    TwoStage(Box<twostage::Error>),
     /// The model's table entry does not list the method.
     #[error("method '{method}' is not available for {model}: it has {available}")]
     NotAvailable {
@@ -51,6 +55,12 @@ pub enum BaselineError {
         /// What happened.
         what: String,
     },
+}
+
+impl From<twostage::Error> for BaselineError {
+    fn from(error: twostage::Error) -> Self {
+        BaselineError::TwoStage(Box::new(error))
+    }
 }
 
 /// Shorthand for results of this crate.

@@ -17,13 +17,14 @@
 //! beta_bar(theta))||^2`, a sum of squared residuals.
 
 use rayon::prelude::*;
+use twostage::ResidualModel;
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::CovarianceFactor;
 use twostage_kernels::cholesky::solve_lower_in_place;
 use twostage_models::{IoData, Prior, Simulator, experiment_rng};
 
 use crate::error::{BaselineError, Result};
-use crate::pem::{PredictionError, ResidualModel};
+use crate::pem::PredictionError;
 
 /// The weighting matrix W of the II loss.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,6 +199,7 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
 }
 
 impl<S: Simulator, C: Compressor + Send + Sync> ResidualModel for IndirectObjective<S, C> {
+    type Error = BaselineError;
     fn prior(&self) -> &Prior {
         self.simulator.prior()
     }

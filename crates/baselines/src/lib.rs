@@ -39,7 +39,6 @@ mod error;
 mod filters;
 mod indirect;
 mod kalman;
-mod moments;
 mod particle;
 mod pem;
 mod suite;
@@ -56,7 +55,7 @@ pub use indirect::{
 };
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
-pub use pem::{BenchmarkPredictor, Descent, PredictionError, RefineStarts, ResidualModel};
+pub use pem::{BenchmarkPredictor, PredictionError};
 pub use suite::{MethodSettings, classic_estimator, exact_likelihood};
 pub use twostage_fit::TerminationReason;
 

@@ -3,14 +3,14 @@
 //! methods exist for a model and with which settings, this module binds each
 //! (model, method) pair to its implementation.
 
-use twostage::models::{Benchmark, BuiltinModel, IoData, PacejkaCar, Prior};
-use twostage::{ClassicMethod, ModelProfile};
+use twostage::models::{Benchmark, BuiltinModel, PacejkaCar};
+use twostage::{ClassicMethod, ModelProfile, ResidualModel};
 
 use crate::error::{BaselineError, Result};
 use crate::{
     BayesBenchmark, BayesCar, BenchmarkParticles, BenchmarkPredictor, CarParticles, CarPredictor,
     IndirectInference, InitialCovariance, KalmanEstimator, ParticleFilter, PredictionError,
-    RecordEstimator, ResidualModel,
+    RecordEstimator,
 };
 
 /// The per-run settings of a classic method (the per-model ones are in the
@@ -121,23 +121,13 @@ pub fn classic_estimator(
 ///
 /// # Errors
 /// Never for the built-in models.
-pub fn exact_likelihood(model: BuiltinModel) -> Result<Box<dyn ResidualModel>> {
+pub fn exact_likelihood(
+    model: BuiltinModel,
+) -> Result<Box<dyn ResidualModel<Error = BaselineError>>> {
     Ok(match model {
         BuiltinModel::Benchmark => Box::new(BenchmarkPredictor::new()?),
         BuiltinModel::Pacejka => Box::new(CarPredictor::new()),
     })
-}
-
-impl ResidualModel for Box<dyn ResidualModel> {
-    fn prior(&self) -> &Prior {
-        (**self).prior()
-    }
-    fn residuals(&self, theta: &[f64], record: &IoData, residuals: &mut [f64]) -> Result<()> {
-        (**self).residuals(theta, record, residuals)
-    }
-    fn n_residuals(&self, record: &IoData) -> usize {
-        (**self).n_residuals(record)
-    }
 }
 
 #[cfg(test)]

@@ -3,9 +3,9 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
+use twostage::ResidualModel;
 use twostage_baselines::{
     BayesCar, CarParticles, CarPredictor, ParticleFilter, PredictionError, RecordEstimator,
-    ResidualModel,
 };
 use twostage_models::{IoData, PacejkaCar, Simulator, experiment_rng};
 

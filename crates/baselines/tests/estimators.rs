@@ -119,9 +119,9 @@ fn the_posterior_matches_brute_force_quadrature() {
 }
 
 #[test]
-fn refinement_stays_in_its_box_and_more_starts_never_end_higher() {
-    use twostage_baselines::RefineStarts;
-    let pe = PredictionError::new(BenchmarkPredictor::new().unwrap(), 1);
+fn refining_with_the_exact_likelihood_stays_in_its_box_and_more_starts_never_end_higher() {
+    use twostage::{RefineStarts, Refinement};
+    let pe = Refinement::new(BenchmarkPredictor::new().unwrap());
     for (i, truth) in [-0.62, -0.2, 0.35, 0.71].into_iter().enumerate() {
         let data = record(truth, 40 + i as u64);
         let start = [truth + 0.02];
@@ -143,54 +143,4 @@ fn refinement_stays_in_its_box_and_more_starts_never_end_higher() {
         pe.refine(&record(0.1, 1), &[0.1], &[-1.0], RefineStarts::Centre)
             .is_err()
     );
-}
-
-/// y_k = theta + noise: the loss is sum (y_k - theta)^2, so under a flat
-/// prior the posterior is Gaussian with mean y_bar and sd s / sqrt(n).
-struct ConstantMean {
-    prior: twostage_models::Prior,
-}
-
-impl twostage_baselines::ResidualModel for ConstantMean {
-    fn prior(&self) -> &twostage_models::Prior {
-        &self.prior
-    }
-    fn residuals(
-        &self,
-        theta: &[f64],
-        record: &IoData,
-        residuals: &mut [f64],
-    ) -> twostage_baselines::Result<()> {
-        for (r, y) in residuals.iter_mut().zip(record.output(0)) {
-            *r = y - theta[0];
-        }
-        Ok(())
-    }
-}
-
-#[test]
-fn the_local_posterior_of_a_gaussian_mean_is_the_closed_form() {
-    let n = 400;
-    let y: Vec<f64> = (0..n)
-        .map(|k| 1.3 + ((k * 7919 + 11) % 101) as f64 / 50.0 - 1.0)
-        .collect();
-    let data = IoData::siso(&vec![0.0; n], &y).unwrap();
-    let mean = y.iter().sum::<f64>() / n as f64;
-    let loss_min: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
-    let sd = (loss_min / n as f64).sqrt() / (n as f64).sqrt();
-    let model = ConstantMean {
-        prior: twostage_models::Prior::uniform_box(&[-10.0], &[10.0]).unwrap(),
-    };
-    let pe = PredictionError::new(model, 1);
-    // A grid centred off the mean, wide enough to hold the posterior.
-    let local = pe
-        .local_posterior(&data, &[mean + sd], &[8.0 * sd], 401)
-        .unwrap();
-    assert!(
-        (local.mean[0] - mean).abs() < 1e-3 * sd,
-        "{local:?} vs {mean}"
-    );
-    assert!((local.sd[0] / sd - 1.0).abs() < 0.01, "{local:?} vs {sd}");
-    assert_eq!(local.evaluations, 401);
-    assert!(pe.local_posterior(&data, &[mean], &[1.0], 1).is_err());
 }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use twostage::models::{BuiltinModel, IoData};
-use twostage::{Estimator, ModelProfile};
+use twostage::{Estimator, ModelProfile, Refinement};
 
 use crate::number::format_f64;
 use crate::{csv_records, usage};
@@ -74,10 +74,9 @@ type Method = Box<dyn FnMut(&IoData) -> Result<Estimated, String>>;
 type Refine = Box<dyn FnMut(&IoData, &[f64]) -> Result<Vec<f64>, String>>;
 
 /// The local posterior refinement for an estimator of a built-in model:
-/// twice its 90% (or calibrated) interval, 45 points per axis for one
-/// parameter, 13 for two.
+/// over twice its 90% (or calibrated) interval, with the model's own number
+/// of grid points per axis.
 fn refinement(estimator: &Estimator) -> Result<Refine> {
-    use twostage_baselines as b;
     let model: BuiltinModel = estimator.training().model.parse().map_err(|_| {
         usage(format!(
             "--refine needs the likelihood of the model, known for the built-in models only; \
@@ -85,19 +84,13 @@ fn refinement(estimator: &Estimator) -> Result<Refine> {
             estimator.training().model
         ))
     })?;
-    let radius: Vec<f64> = estimator
-        .intervals()
-        .ok_or_else(|| {
-            usage("--refine sizes its neighbourhood by the estimator's intervals: train with --calibrate > 0".into())
-        })?
-        .half_widths()
-        .iter()
-        .map(|w| 2.0 * w)
-        .collect();
+    let radius = estimator
+        .neighbourhood(2.0)
+        .map_err(|e| usage(format!("--refine: {e}")))?;
     let points = ModelProfile::of(model).refinement_points();
-    let pe = b::PredictionError::new(b::exact_likelihood(model)?, 1);
+    let local = Refinement::new(twostage_baselines::exact_likelihood(model)?);
     Ok(Box::new(move |record: &IoData, start: &[f64]| {
-        Ok(pe
+        Ok(local
             .local_posterior(record, start, &radius, points)
             .map_err(|e| e.to_string())?
             .mean)

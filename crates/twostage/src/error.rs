@@ -51,6 +51,22 @@ pub enum Error {
         /// The valid range.
         reason: String,
     },
+    /// A vector given with a record (a start, a radius) has the wrong length.
+    #[error("{what} has {found} values where {expected} are needed, one per parameter")]
+    Length {
+        /// Which vector.
+        what: &'static str,
+        /// Its length.
+        found: usize,
+        /// The number of parameters.
+        expected: usize,
+    },
+    /// A computation on a record gave no finite answer.
+    #[error("numerical failure: {what}")]
+    Numerical {
+        /// What failed, and where.
+        what: String,
+    },
     /// A model has no preset or method of that name (another model may).
     #[error("{what} '{name}' is not available for {model}: it has {available}")]
     NotAvailable {

@@ -269,6 +269,47 @@ impl Estimator {
         self.intervals.as_ref()
     }
 
+    /// The neighbourhood a [`Refinement`](crate::Refinement) of this
+    /// estimator's estimates searches: `scale` times the calibrated
+    /// intervals' half-widths, one radius per parameter. TS has already
+    /// found the right region; the radius says how far its error goes.
+    ///
+    /// ```
+    /// use twostage::TwoStage;
+    /// use twostage::models::Benchmark;
+    /// let estimator = TwoStage::builder(&Benchmark::new())
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(300)
+    ///     .validation(0)
+    ///     .calibration(100)
+    ///     .train()?;
+    /// let radius = estimator.neighbourhood(2.0)?;
+    /// let half = estimator.intervals().expect("calibrated").half_widths();
+    /// assert_eq!(radius, [2.0 * half[0]]);
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// An estimator trained without calibration, or a scale that is not
+    /// positive and finite.
+    pub fn neighbourhood(&self, scale: f64) -> Result<Vec<f64>> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(Error::InvalidSetting {
+                name: "neighbourhood scale",
+                value: scale.to_string(),
+                reason: "a positive, finite multiple of the interval half-widths".into(),
+            });
+        }
+        let intervals = self.intervals().ok_or_else(|| Error::InvalidSetting {
+            name: "calibration",
+            value: "0".into(),
+            reason: "a refinement sizes its neighbourhood by the calibrated intervals: train \
+                     with calibration > 0 (the command line's --calibrate)"
+                .into(),
+        })?;
+        Ok(intervals.half_widths().iter().map(|w| scale * w).collect())
+    }
+
     /// Estimate theta from one record (`inputs` N x n_u, `outputs` N x n_y)
     /// into `theta`: the hot path, allocation-free once `work` is warm.
     ///

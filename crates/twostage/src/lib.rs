@@ -53,8 +53,10 @@ mod envelope;
 mod error;
 mod estimator;
 mod file;
+mod moments;
 mod profile;
 mod progress;
+mod refine;
 
 pub use adaptive::AdaptiveIntervals;
 pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
@@ -65,8 +67,10 @@ pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};
 pub use estimator::{Assessment, EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
 pub use file::{FORMAT_VERSION, MAGIC};
+pub use moments::WeightedMoments;
 pub use profile::{ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka};
 pub use progress::{Progress, Silent, Stage};
+pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;
