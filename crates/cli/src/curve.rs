@@ -5,19 +5,17 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use twostage::ModelProfile;
 use twostage::TwoStage;
-use twostage::models::BuiltinModel;
 
+use crate::model_arg::ModelArgs;
 use crate::specs::{compressor, regressor};
 use crate::usage;
 
 /// Options of `twostage learning-curve`.
 #[derive(Debug, clap::Args)]
 pub struct CurveArgs {
-    /// The model: benchmark or pacejka.
-    #[arg(long)]
-    model: String,
+    #[command(flatten)]
+    model: ModelArgs,
     /// Stage 1 (as in `train`; default: the paper preset's).
     #[arg(long)]
     compress: Option<String>,
@@ -44,10 +42,7 @@ pub struct CurveArgs {
 /// Train at m = from, 2 from, ... up to `to`, validate each on the same
 /// fresh simulations, and print one row per m as it finishes.
 pub fn learning_curve(args: &CurveArgs, out: &mut dyn Write) -> Result<()> {
-    let model: BuiltinModel = args
-        .model
-        .parse()
-        .map_err(|e| usage(format!("{e} (see `twostage models`)")))?;
+    let model = args.model.resolve()?;
     if args.from < 10 || args.to < args.from {
         return Err(usage(format!(
             "--from {} --to {}: need 10 <= from <= to",
@@ -57,8 +52,8 @@ pub fn learning_curve(args: &CurveArgs, out: &mut dyn Write) -> Result<()> {
     if args.validate == 0 {
         return Err(usage("--validate must be at least 1".into()));
     }
-    let sim = model.build(false)?;
-    let preset = ModelProfile::of(model).preset("paper")?;
+    let sim = model.simulator(false)?;
+    let preset = model.preset(None)?;
     let stage1 = args.compress.as_deref().map(compressor).transpose()?;
     let stage2 = args.fit.as_deref().map(regressor).transpose()?;
     let names = sim.param_names().to_vec();

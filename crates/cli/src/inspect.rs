@@ -24,13 +24,20 @@ pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
         "  model       {} (trained by twostage {})",
         t.model, t.version
     )?;
-    for (j, name) in e.param_names().iter().enumerate() {
-        writeln!(
-            out,
-            "  parameter   {name} in [{}, {}]",
+    for (j, (name, marginal)) in e.param_names().iter().zip(e.marginals()).enumerate() {
+        let range = format!(
+            "[{}, {}]",
             format_f64(e.lower()[j]),
             format_f64(e.upper()[j])
-        )?;
+        );
+        if marginal.is_bounded() {
+            writeln!(out, "  parameter   {name} in {range}, prior {marginal}")?;
+        } else {
+            writeln!(
+                out,
+                "  parameter   {name} in {range} (central 1 - 2e-6 of its prior {marginal})"
+            )?;
+        }
     }
     let shape = e.record_shape();
     writeln!(

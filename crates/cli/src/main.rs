@@ -6,6 +6,7 @@ mod curve;
 mod demo;
 mod estimate;
 mod inspect;
+mod model_arg;
 mod number;
 mod simulate;
 mod specs;
@@ -31,11 +32,16 @@ struct Cli {
 enum Command {
     /// Train the paper's benchmark estimator, validate it, and estimate a fresh record.
     Demo(demo::DemoArgs),
-    /// List the built-in models: parameters, prior boxes, sampling, input and noise.
-    Models,
+    /// List the built-in models (parameters, priors, sampling, input, noise), or print an
+    /// annotated model file (--template).
+    Models {
+        /// Print an annotated model file to start your own from.
+        #[arg(long)]
+        template: bool,
+    },
     /// Simulate one experiment (--theta) or many drawn from the prior (--count).
     Simulate(simulate::SimulateArgs),
-    /// Train an estimator for a built-in model and write it to a file.
+    /// Train an estimator for a built-in model or a model file and write it to a file.
     Train(train::TrainArgs),
     /// Describe an estimator file: model, structure, training, validation.
     Inspect {
@@ -76,7 +82,7 @@ fn main() -> ExitCode {
     };
     let result = match &cli.command {
         Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
-        Command::Models => simulate::models(&mut io::stdout().lock()),
+        Command::Models { template } => simulate::models(*template, &mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
         Command::Train(args) => train::train(args, &mut io::stdout().lock()),
         Command::Inspect { file } => inspect::inspect(file, &mut io::stdout().lock()),

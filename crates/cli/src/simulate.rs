@@ -8,15 +8,15 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage_models::{BuiltinModel, IoData, Simulator, experiment_rng, run_experiment};
 
+use crate::model_arg::ModelArgs;
 use crate::number::{format_f64, parse_list};
 use crate::usage;
 
 /// Options of `twostage simulate`, already parsed by clap.
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
-    /// The model to simulate: benchmark or pacejka (see `twostage models`).
-    #[arg(long)]
-    model: String,
+    #[command(flatten)]
+    model: ModelArgs,
     /// Parameter vector, comma separated (e.g. `--theta -35,-1.1`); one experiment.
     #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["count", "out_dir"])]
     theta: Option<String>,
@@ -44,20 +44,19 @@ pub struct SimulateArgs {
     out_dir: Option<PathBuf>,
 }
 
-/// Print the built-in models and their settings.
-pub fn models(out: &mut dyn Write) -> Result<()> {
+/// Print the built-in models and their settings, or the model file template.
+pub fn models(template: bool, out: &mut dyn Write) -> Result<()> {
+    if template {
+        out.write_all(twostage::MODEL_FILE_TEMPLATE.as_bytes())?;
+        return Ok(());
+    }
     for model in BuiltinModel::ALL {
         let sim = model.build(false)?;
         let spec = sim.spec();
         writeln!(out, "{}: {}", model.name(), model.summary())?;
         let prior = spec.prior();
-        for (j, name) in spec.param_names().iter().enumerate() {
-            writeln!(
-                out,
-                "  parameter {name:<6} prior uniform on [{}, {}]",
-                format_f64(prior.lower()[j]),
-                format_f64(prior.upper()[j])
-            )?;
+        for (name, marginal) in spec.param_names().iter().zip(prior.marginals()) {
+            writeln!(out, "  parameter {name:<6} prior {marginal}")?;
         }
         let time = if model == BuiltinModel::Benchmark {
             "discrete time, one sample per step".to_string()
@@ -89,11 +88,7 @@ pub fn models(out: &mut dyn Write) -> Result<()> {
 
 /// Run `twostage simulate`.
 pub fn simulate(args: &SimulateArgs) -> Result<()> {
-    let model: BuiltinModel = args
-        .model
-        .parse()
-        .map_err(|e| usage(format!("{e} (see `twostage models`)")))?;
-    let sim = model.build(args.noiseless)?;
+    let sim = args.model.resolve()?.simulator(args.noiseless)?;
     match (&args.theta, args.count, &args.out_dir) {
         (Some(theta), None, None) => one_experiment(sim.as_ref(), theta, args),
         (None, Some(count), Some(dir)) => many_experiments(sim.as_ref(), count, args.seed, dir),

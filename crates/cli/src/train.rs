@@ -4,23 +4,22 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
-use twostage::models::BuiltinModel;
-use twostage::{ModelProfile, TwoStage};
+use twostage::TwoStage;
 
 use crate::inspect::trust_summary;
+use crate::model_arg::ModelArgs;
 use crate::specs::{compressor, regressor};
 use crate::usage;
 
 /// Options of `twostage train`.
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
-    /// The model: benchmark or pacejka.
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Start from a preset of the model's (default: a built-in model's
+    /// `paper`, the paper's setting; a model file's first preset).
     #[arg(long)]
-    model: String,
-    /// Start from a preset of the model's (`paper`, the default, is the
-    /// paper's setting; `twostage models` lists each model's).
-    #[arg(long, default_value = "paper")]
-    preset: String,
+    preset: Option<String>,
     /// Training simulations m (default: the preset's).
     #[arg(long)]
     sims: Option<usize>,
@@ -69,14 +68,9 @@ pub struct TrainArgs {
 
 /// Run `twostage train`.
 pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
-    let model: BuiltinModel = args
-        .model
-        .parse()
-        .map_err(|e| usage(format!("{e} (see `twostage models`)")))?;
-    let sim = model.build(false)?;
-    let preset = ModelProfile::of(model)
-        .preset(&args.preset)
-        .map_err(|e| usage(e.to_string()))?;
+    let model = args.model.resolve()?;
+    let sim = model.simulator(false)?;
+    let preset = model.preset(args.preset.as_deref())?;
     let mut builder = TwoStage::builder(sim.as_ref())
         .preset(preset)
         .seed(args.seed)

@@ -8,7 +8,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 use twostage::models::{BuiltinModel, IoData, run_experiment};
 use twostage::validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
-use twostage::{EstimateWorkspace, Estimator};
+use twostage::{EstimateWorkspace, Estimator, ModelFile};
 
 use crate::usage;
 
@@ -37,18 +37,39 @@ pub struct ValidateArgs {
     /// Also draw estimates against truth into this SVG file.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// The model file the estimator was trained from (needed unless it is
+    /// of a built-in model).
+    #[arg(long, value_name = "PATH")]
+    model_file: Option<PathBuf>,
 }
 
 /// Run `twostage validate`.
 pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let estimator = Estimator::load(&args.estimator)?;
-    let model: BuiltinModel = estimator.training().model.parse().map_err(|e| {
-        anyhow::anyhow!(
-            "{}: trained on a model this command cannot simulate ({e})",
-            args.estimator.display()
-        )
-    })?;
-    let sim = model.build(false)?;
+    let trained_on = &estimator.training().model;
+    let sim = match &args.model_file {
+        Some(path) => {
+            let file = ModelFile::load(path).map_err(|e| usage(e.to_string()))?;
+            if file.name() != trained_on {
+                return Err(usage(format!(
+                    "{} describes '{}', the estimator was trained on '{trained_on}'",
+                    path.display(),
+                    file.name()
+                )));
+            }
+            file.simulator().map_err(|e| usage(e.to_string()))?
+        }
+        None => {
+            let model: BuiltinModel = trained_on.parse().map_err(|_| {
+                usage(format!(
+                    "{} was trained on '{trained_on}', not a built-in model: give its \
+                     --model-file",
+                    args.estimator.display()
+                ))
+            })?;
+            model.build(false)?
+        }
+    };
     let sigma = squared_error_bound(estimator.lower(), estimator.upper());
     let r = match (args.sims, args.gamma) {
         (Some(r), _) => r,

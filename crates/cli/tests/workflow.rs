@@ -210,7 +210,7 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
     ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
-        text(&out.stderr).contains("--compress arx: 'x'"),
+        text(&out.stderr).contains("--compress: invalid compressor = arx:x"),
         "{}",
         text(&out.stderr)
     );

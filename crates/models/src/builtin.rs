@@ -5,6 +5,7 @@ use std::str::FromStr;
 
 use crate::benchmark::Benchmark;
 use crate::error::{Result, SimError};
+use crate::input::InputSignal;
 use crate::pacejka::PacejkaCar;
 use crate::simulator::Simulator;
 
@@ -61,11 +62,64 @@ impl BuiltinModel {
     /// Never for the built-in settings; the `Result` keeps the door open for
     /// models whose construction can fail.
     pub fn build(self, noiseless: bool) -> Result<Box<dyn Simulator>> {
-        Ok(match self {
-            Self::Benchmark => Box::new(Benchmark::builder().noiseless(noiseless).build()?),
-            Self::Pacejka => Box::new(PacejkaCar::builder().noiseless(noiseless).build()?),
+        self.build_with(&BuiltinOverrides {
+            noiseless,
+            ..BuiltinOverrides::default()
         })
     }
+
+    /// Build the model with some of the paper's settings replaced (what a
+    /// model file with a built-in source may change).
+    ///
+    /// ```
+    /// use twostage_models::{BuiltinModel, BuiltinOverrides, InputSignal};
+    /// let short = BuiltinModel::Benchmark.build_with(&BuiltinOverrides {
+    ///     n_samples: Some(200),
+    ///     input: Some(InputSignal::white_gaussian(2.0)?),
+    ///     ..BuiltinOverrides::default()
+    /// })?;
+    /// assert_eq!(short.spec().n_samples(), 200);
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A record length or input the model's builder refuses.
+    pub fn build_with(self, overrides: &BuiltinOverrides) -> Result<Box<dyn Simulator>> {
+        Ok(match self {
+            Self::Benchmark => {
+                let mut b = Benchmark::builder().noiseless(overrides.noiseless);
+                if let Some(n) = overrides.n_samples {
+                    b = b.n_samples(n);
+                }
+                if let Some(input) = &overrides.input {
+                    b = b.input(input.clone());
+                }
+                Box::new(b.build()?)
+            }
+            Self::Pacejka => {
+                let mut b = PacejkaCar::builder().noiseless(overrides.noiseless);
+                if let Some(n) = overrides.n_samples {
+                    b = b.n_samples(n);
+                }
+                if let Some(input) = &overrides.input {
+                    b = b.input(input.clone());
+                }
+                Box::new(b.build()?)
+            }
+        })
+    }
+}
+
+/// The settings of a built-in model that may be replaced; `None` keeps the
+/// paper's.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BuiltinOverrides {
+    /// Drop the model's own process and measurement noise.
+    pub noiseless: bool,
+    /// Samples per record.
+    pub n_samples: Option<usize>,
+    /// The input of every experiment.
+    pub input: Option<InputSignal>,
 }
 
 impl fmt::Display for BuiltinModel {

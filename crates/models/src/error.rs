@@ -64,6 +64,16 @@ pub enum SimError {
         /// Why it is invalid.
         reason: &'static str,
     },
+    /// A parameter's prior distribution was malformed.
+    #[error("invalid prior for parameter {index}: {marginal} ({reason})")]
+    InvalidMarginal {
+        /// Index of the parameter.
+        index: usize,
+        /// The distribution as given.
+        marginal: String,
+        /// What is accepted.
+        reason: &'static str,
+    },
     /// A design or model setting is out of its valid range.
     #[error("invalid setting {name} = {value}: {reason}")]
     InvalidSetting {

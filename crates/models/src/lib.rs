@@ -45,6 +45,7 @@ mod builtin;
 mod data;
 mod error;
 mod input;
+mod marginal;
 mod ode;
 mod pacejka;
 mod prior;
@@ -56,10 +57,13 @@ pub use benchmark::{
     BENCHMARK_SAMPLES, Benchmark, BenchmarkBuilder, MEASUREMENT_NOISE_VARIANCE,
     PROCESS_NOISE_VARIANCE,
 };
-pub use builtin::BuiltinModel;
+pub use builtin::{BuiltinModel, BuiltinOverrides};
 pub use data::IoData;
 pub use error::{Result, SimError};
 pub use input::InputSignal;
+pub use marginal::{
+    Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
+};
 pub use ode::{OdeSystem, Rk4};
 pub use pacejka::{
     CHICANE_AMPLITUDE, PACEJKA_NOISE_VARIANCE, PACEJKA_SAMPLE_TIME, PACEJKA_SAMPLES,

@@ -1,8 +1,10 @@
-//! Prior boxes for the parameter vector and the designs that sample them.
+//! Priors of the parameter vector (independent marginals inside a range
+//! box) and the designs that sample them.
 
 use rand::{Rng, RngExt};
 
 use crate::error::{Result, SimError};
+use crate::marginal::Marginal;
 use crate::rng::{ExperimentRng, StreamPurpose, stream_rng};
 use crate::sobol::{self, Sobol};
 
@@ -22,8 +24,12 @@ pub enum Sampling {
     Sobol,
 }
 
-/// A uniform prior on a box `[lower_j, upper_j]`, the range of interest of
-/// each parameter, with the [`Sampling`] used to fill it.
+/// A prior of independent parameters, each with its [`Marginal`]
+/// (uniform on the paper's box by default), and the [`Sampling`] used to
+/// fill it. Every prior has a box, `[lower_j, upper_j]`: the support of a
+/// bounded marginal, the central `1 - 2e-6` of an unbounded one
+/// ([`Marginal::range`]). Charts are drawn inside it, estimates are clipped
+/// to it, and certificates are stated on it.
 ///
 /// ```
 /// use twostage_models::{Prior, Sampling};
@@ -36,6 +42,7 @@ pub enum Sampling {
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct Prior {
+    marginals: Vec<Marginal>,
     lower: Vec<f64>,
     upper: Vec<f64>,
     sampling: Sampling,
@@ -77,10 +84,67 @@ impl Prior {
             }
         }
         Ok(Self {
+            marginals: lower
+                .iter()
+                .zip(upper)
+                .map(|(&low, &high)| Marginal::Uniform { low, high })
+                .collect(),
             lower: lower.to_vec(),
             upper: upper.to_vec(),
             sampling: Sampling::Uniform,
         })
+    }
+
+    /// A prior of independent parameters with the given marginals, sampled
+    /// i.i.d.
+    ///
+    /// ```
+    /// use twostage_models::{Marginal, Prior, Sampling};
+    /// let prior = Prior::new(vec![
+    ///     Marginal::LogNormal { mu: -0.916, sigma: 0.5 },
+    ///     Marginal::Uniform { low: 0.05, high: 0.3 },
+    /// ])?
+    /// .with_sampling(Sampling::Sobol);
+    /// let design = prior.design(256, 1)?;
+    /// let mut theta = [0.0; 2];
+    /// design.fill_theta(0, &mut theta)?;
+    /// assert!(theta[0] > 0.0 && prior.contains(&theta));
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidMarginal`] for a malformed marginal, naming its
+    /// index; [`SimError::InvalidSetting`] for no parameter at all.
+    pub fn new(marginals: Vec<Marginal>) -> Result<Self> {
+        if marginals.is_empty() {
+            return Err(SimError::InvalidSetting {
+                name: "prior",
+                value: "no parameter".into(),
+                reason: "give at least one parameter".into(),
+            });
+        }
+        for (index, m) in marginals.iter().enumerate() {
+            m.check(index)?;
+        }
+        let (lower, upper) = marginals.iter().map(Marginal::range).unzip();
+        Ok(Self {
+            marginals,
+            lower,
+            upper,
+            sampling: Sampling::Uniform,
+        })
+    }
+
+    /// Each parameter's marginal distribution.
+    pub fn marginals(&self) -> &[Marginal] {
+        &self.marginals
+    }
+
+    /// Whether every marginal is uniform: the paper's prior box.
+    pub fn is_uniform_box(&self) -> bool {
+        self.marginals
+            .iter()
+            .all(|m| matches!(m, Marginal::Uniform { .. }))
     }
 
     /// The same box, sampled by another design.
@@ -94,7 +158,7 @@ impl Prior {
         self.lower.len()
     }
 
-    /// Lower bounds of the box.
+    /// Lower bounds of the box (see the type's documentation).
     pub fn lower(&self) -> &[f64] {
         &self.lower
     }
@@ -279,7 +343,6 @@ impl Design {
             });
         }
         let mut rng: ExperimentRng = stream_rng(self.seed, index as u64, StreamPurpose::Parameter);
-        let (lower, upper) = (&self.prior.lower, &self.prior.upper);
         for (j, t) in theta.iter_mut().enumerate() {
             let unit = match &self.kind {
                 DesignKind::Uniform => rng.random::<f64>(),
@@ -293,7 +356,7 @@ impl Design {
                     (f64::from(bits) + 0.5) * sobol::UNIT
                 }
             };
-            *t = lower[j] + unit * (upper[j] - lower[j]);
+            *t = self.prior.marginals[j].from_unit(unit);
         }
         Ok(())
     }
@@ -398,5 +461,103 @@ mod tests {
         assert!(prior.check(&[0.1, 0.2], &names, false).is_err());
         assert!(prior.check(&[f64::INFINITY], &names, true).is_err());
         assert!(prior.design(0, 1).is_err());
+    }
+
+    #[test]
+    fn designs_of_general_priors_have_their_moments_and_strata_by_probability() {
+        let (mu, sigma) = (2.0, 0.5);
+        let prior = Prior::new(vec![
+            Marginal::Normal { mu, sigma },
+            Marginal::LogNormal {
+                mu: -1.0,
+                sigma: 0.3,
+            },
+            Marginal::TruncatedNormal {
+                mu: 0.0,
+                sigma: 1.0,
+                low: 0.0,
+                high: 10.0,
+            },
+        ])
+        .unwrap();
+        assert!(!prior.is_uniform_box());
+        let m = 40_000;
+        for sampling in [Sampling::Uniform, Sampling::LatinHypercube, Sampling::Sobol] {
+            let points = draws(&prior.clone().with_sampling(sampling), m, 8);
+            assert!(points.iter().all(|t| prior.contains(t)), "{sampling:?}");
+            let mean = |j: usize| points.iter().map(|t| t[j]).sum::<f64>() / m as f64;
+            let var = |j: usize, c: f64| {
+                points.iter().map(|t| (t[j] - c).powi(2)).sum::<f64>() / (m - 1) as f64
+            };
+            // Normal: standard errors 0.0025 (mean) and 0.0018 (variance).
+            assert!((mean(0) - mu).abs() < 0.0125, "{sampling:?} {}", mean(0));
+            assert!(
+                (var(0, mean(0)) - sigma * sigma).abs() < 0.009,
+                "{sampling:?}"
+            );
+            // Log-normal: mean exp(mu + s^2 / 2).
+            let expected = (-1.0f64 + 0.045).exp();
+            assert!(
+                (mean(1) / expected - 1.0).abs() < 0.005,
+                "{sampling:?} {}",
+                mean(1)
+            );
+            // Half-normal: mean sqrt(2 / pi), variance 1 - 2 / pi.
+            let half = (2.0 / std::f64::consts::PI).sqrt();
+            assert!((mean(2) - half).abs() < 0.01, "{sampling:?} {}", mean(2));
+            assert!(
+                (var(2, half) - (1.0 - half * half)).abs() < 0.01,
+                "{sampling:?}"
+            );
+        }
+        // A Latin hypercube places one point per stratum of probability.
+        let lhs = prior.with_sampling(Sampling::LatinHypercube);
+        let m = 101;
+        let points = draws(&lhs, m, 2);
+        for j in 0..3 {
+            let marginal = lhs.marginals()[j];
+            let tail = if marginal.is_bounded() {
+                0.0
+            } else {
+                crate::UNBOUNDED_TAIL
+            };
+            let mut counts = vec![0; m];
+            for t in &points {
+                let u = (marginal.cdf(t[j]) - tail) / (1.0 - 2.0 * tail);
+                counts[((u * m as f64).floor() as usize).min(m - 1)] += 1;
+            }
+            assert!(counts.iter().all(|&c| c == 1), "parameter {j}: {counts:?}");
+        }
+    }
+
+    #[test]
+    fn a_uniform_box_is_the_prior_of_uniform_marginals() {
+        let by_box = Prior::uniform_box(&[-1.0, 2.0], &[1.0, 5.0]).unwrap();
+        let by_marginals = Prior::new(vec![
+            Marginal::Uniform {
+                low: -1.0,
+                high: 1.0,
+            },
+            Marginal::Uniform {
+                low: 2.0,
+                high: 5.0,
+            },
+        ])
+        .unwrap();
+        assert_eq!(by_box, by_marginals);
+        assert!(by_box.is_uniform_box());
+        assert!(Prior::new(vec![]).is_err());
+        let e = Prior::new(vec![
+            Marginal::Uniform {
+                low: 0.0,
+                high: 1.0,
+            },
+            Marginal::Normal {
+                mu: 0.0,
+                sigma: -1.0,
+            },
+        ])
+        .unwrap_err();
+        assert!(e.to_string().contains("parameter 1"), "{e}");
     }
 }

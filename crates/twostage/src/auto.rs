@@ -22,8 +22,9 @@ use crate::builder::{TrainedOn, TwoStage};
 use crate::chart::StoredChart;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::error::{Error, Result};
-use crate::estimator::{Estimator, clip_rows};
+use crate::estimator::Estimator;
 use crate::progress::Stage;
+use crate::space::{rows_to_estimates, to_learning_space};
 
 /// How much the search may spend.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -464,9 +465,10 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .is_none_or(|d| Instant::now() + Duration::from_secs_f64(refit_cost) <= d);
         let features = compress_all(&compressor, &self.chart.records)?;
         let regressor = if refitted {
+            let marginals = self.base.simulator().spec().prior().marginals();
             regressor_config.fit(
                 features.view(),
-                self.chart.thetas.view(),
+                to_learning_space(self.chart.thetas.view(), marginals).view(),
                 self.base.seed_value(),
             )?
         } else {
@@ -596,10 +598,16 @@ fn evaluate<S: Simulator + ?Sized>(
         let features = compress_all(&compressor, &chart.records)?;
         let (x_fit, x_held) = features.view().split_at(Axis(0), fit_rows);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), fit_rows);
-        let fitted = regressor.fit(x_fit, t_fit, base.seed_value())?;
-        let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?;
         let prior = base.simulator().spec().prior();
-        clip_rows(&mut estimates, prior.lower(), prior.upper());
+        let z_fit = to_learning_space(t_fit, prior.marginals());
+        let fitted = regressor.fit(x_fit, z_fit.view(), base.seed_value())?;
+        let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?;
+        rows_to_estimates(
+            &mut estimates,
+            prior.marginals(),
+            prior.lower(),
+            prior.upper(),
+        );
         let rmse = (0..t_held.ncols())
             .map(|j| {
                 let sq: f64 = t_held

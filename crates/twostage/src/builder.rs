@@ -15,6 +15,7 @@ use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, TrainingInfo};
 use crate::profile::paper_benchmark;
 use crate::progress::{Progress, Silent, Stage};
+use crate::space::to_learning_space;
 
 /// The choices of one training run, reusable across simulators.
 #[derive(Debug, Clone, PartialEq)]
@@ -240,9 +241,10 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             self.progress,
         )?;
         self.progress.begin(Stage::Fitting, 0);
+        let targets = to_learning_space(chart.thetas.view(), training_prior.marginals());
         let regressor = self
             .regressor
-            .fit(chart.features.view(), chart.thetas.view(), self.seed);
+            .fit(chart.features.view(), targets.view(), self.seed);
         self.progress.end(Stage::Fitting);
         let regressor = regressor?;
         self.finish(
@@ -293,6 +295,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             validation: None,
             envelope: FeatureEnvelope::fit(trained.features),
             adaptive: None,
+            marginals: prior.marginals().to_vec(),
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
         let intervals = if self.calibration > 0 {

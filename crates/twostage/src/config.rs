@@ -5,9 +5,10 @@ use serde::{Deserialize, Serialize};
 use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace, signal_rms};
 use twostage_models::IoData;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use twostage_fit::{
-    FittedLinear, FittedMlp, FittedPiecewise, Mlp, Piecewise, Predictor, Regressor, Ridge,
+    FittedLinear, FittedMlp, FittedPiecewise, Mlp, MlpParams, Piecewise, Predictor, Regressor,
+    Ridge,
 };
 
 /// The compression map g of stage 1.
@@ -81,6 +82,61 @@ impl std::fmt::Display for CompressorConfig {
             Self::Narx(narx) => narx.fmt(f),
             Self::Pca(pca) => pca.fmt(f),
         }
+    }
+}
+
+/// Whole numbers separated by commas, exactly `count` of them.
+fn counts(spec: &str, whole: &str, count: usize, what: &'static str) -> Result<Vec<usize>> {
+    let values: Option<Vec<usize>> = spec.split(',').map(|v| v.trim().parse().ok()).collect();
+    values
+        .filter(|v| v.len() == count)
+        .ok_or_else(|| Error::InvalidSetting {
+            name: what,
+            value: whole.to_string(),
+            reason: format!(
+                "the part after ':' must be {count} whole number(s) separated by commas"
+            ),
+        })
+}
+
+impl std::str::FromStr for CompressorConfig {
+    type Err = Error;
+
+    /// A stage-1 specification as the command line and model files write
+    /// it: `arx:NA,NB`, `narx:NA,NB,DEG` or `pca:K`.
+    ///
+    /// ```
+    /// use twostage::CompressorConfig;
+    /// let arx: CompressorConfig = "arx:5,5".parse()?;
+    /// assert_eq!(arx.n_features(), 10);
+    /// assert!("arx:5".parse::<CompressorConfig>().is_err());
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    fn from_str(spec: &str) -> Result<Self> {
+        const WHAT: &str = "compressor";
+        let (kind, orders) = spec.split_once(':').ok_or_else(|| Error::InvalidSetting {
+            name: WHAT,
+            value: spec.to_string(),
+            reason: "use arx:NA,NB, narx:NA,NB,DEG or pca:K".into(),
+        })?;
+        Ok(match kind.trim() {
+            "arx" => {
+                let o = counts(orders, spec, 2, WHAT)?;
+                Arx::new(o[0], o[1])?.into()
+            }
+            "narx" => {
+                let o = counts(orders, spec, 3, WHAT)?;
+                Narx::new(o[0], o[1], o[2])?.into()
+            }
+            "pca" => OutputPca::new(counts(orders, spec, 1, WHAT)?[0])?.into(),
+            _ => {
+                return Err(Error::InvalidSetting {
+                    name: WHAT,
+                    value: spec.to_string(),
+                    reason: "use arx:NA,NB, narx:NA,NB,DEG or pca:K".into(),
+                });
+            }
+        })
     }
 }
 
@@ -179,6 +235,46 @@ impl std::fmt::Display for RegressorConfig {
                 p.global().params().hidden()
             ),
         }
+    }
+}
+
+impl std::str::FromStr for RegressorConfig {
+    type Err = Error;
+
+    /// A stage-2 specification as the command line and model files write
+    /// it: `linear`, `mlp:H[,H...]` (hidden sizes) or `piecewise:K,H` (a
+    /// global H-unit network routing to K experts by pieces of the first
+    /// parameter's range).
+    ///
+    /// ```
+    /// use twostage::RegressorConfig;
+    /// assert!(matches!("mlp:10".parse()?, RegressorConfig::Mlp(_)));
+    /// assert!("mlp:ten".parse::<RegressorConfig>().is_err());
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    fn from_str(spec: &str) -> Result<Self> {
+        const WHAT: &str = "regressor";
+        if spec.trim() == "linear" {
+            return Ok(Self::Linear(Ridge::default()));
+        }
+        if let Some(rest) = spec.trim().strip_prefix("piecewise:") {
+            let c = counts(rest, spec, 2, WHAT)?;
+            let mlp = MlpParams::new(&[c[1]]).and_then(MlpParams::check)?;
+            return Ok(Self::Piecewise(Piecewise::new(mlp.clone(), mlp, c[0])?));
+        }
+        let hidden = spec
+            .trim()
+            .strip_prefix("mlp:")
+            .ok_or_else(|| Error::InvalidSetting {
+                name: WHAT,
+                value: spec.to_string(),
+                reason: "use linear, mlp:H[,H...] or piecewise:PIECES,H".into(),
+            })?;
+        let n = hidden.split(',').count();
+        let sizes = counts(hidden, spec, n, WHAT)?;
+        Ok(Self::Mlp(
+            MlpParams::new(&sizes).and_then(MlpParams::check)?,
+        ))
     }
 }
 

@@ -67,6 +67,22 @@ pub enum Error {
         /// What failed, and where.
         what: String,
     },
+    /// A model file is malformed.
+    #[error(
+        "{file}{}{}: {message}",
+        line.map_or_else(String::new, |l| format!(", line {l}")),
+        if key.is_empty() { String::new() } else { format!(", key `{key}`") }
+    )]
+    ModelFile {
+        /// The file as it was named.
+        file: String,
+        /// The line of the mistake, when known.
+        line: Option<usize>,
+        /// The key, dotted from the table (`parameter.prior.sigma`).
+        key: String,
+        /// What is wrong and what is accepted.
+        message: String,
+    },
     /// A model has no preset or method of that name (another model may).
     #[error("{what} '{name}' is not available for {model}: it has {available}")]
     NotAvailable {

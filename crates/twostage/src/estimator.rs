@@ -5,14 +5,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::Predictor;
-use twostage_kernels::vector::clip_to_box;
-use twostage_models::IoData;
+use twostage_models::{IoData, Marginal};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
+use crate::space::{rows_to_estimates, stored_marginals, to_estimate};
 
 /// What the estimator was trained on, for people and for audits.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -81,6 +81,10 @@ pub struct Estimator {
     pub(crate) envelope: Option<FeatureEnvelope>,
     /// Intervals whose width follows each record (format version 2 on).
     pub(crate) adaptive: Option<AdaptiveIntervals>,
+    /// Each parameter's prior, whose transform the network learned in
+    /// (format version 3 on; earlier files are uniform on the box).
+    #[serde(with = "stored_marginals")]
+    pub(crate) marginals: Vec<Marginal>,
 }
 
 /// What a file stores. Each component has checked its own invariants while
@@ -99,6 +103,50 @@ struct EstimatorFields {
     validation: Option<ValidationReport>,
     envelope: Option<FeatureEnvelope>,
     adaptive: Option<AdaptiveIntervals>,
+    #[serde(with = "stored_marginals")]
+    marginals: Vec<Marginal>,
+}
+
+/// Format version 2: the same without the marginals (every prior uniform).
+#[derive(Deserialize)]
+pub(crate) struct EstimatorFieldsV2 {
+    param_names: Vec<String>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    shape: RecordShape,
+    compressor: CompressorConfig,
+    regressor: FittedRegressor,
+    training: TrainingInfo,
+    intervals: Option<ConformalIntervals>,
+    validation: Option<ValidationReport>,
+    envelope: Option<FeatureEnvelope>,
+    adaptive: Option<AdaptiveIntervals>,
+}
+
+impl TryFrom<EstimatorFieldsV2> for Estimator {
+    type Error = FileError;
+    fn try_from(f: EstimatorFieldsV2) -> std::result::Result<Self, FileError> {
+        let marginals = f
+            .lower
+            .iter()
+            .zip(&f.upper)
+            .map(|(&low, &high)| Marginal::Uniform { low, high })
+            .collect();
+        Self::try_from(EstimatorFields {
+            param_names: f.param_names,
+            lower: f.lower,
+            upper: f.upper,
+            shape: f.shape,
+            compressor: f.compressor,
+            regressor: f.regressor,
+            training: f.training,
+            intervals: f.intervals,
+            validation: f.validation,
+            envelope: f.envelope,
+            adaptive: f.adaptive,
+            marginals,
+        })
+    }
 }
 
 /// Format version 1: the same without the feature envelope.
@@ -118,7 +166,7 @@ pub(crate) struct EstimatorFieldsV1 {
 impl TryFrom<EstimatorFieldsV1> for Estimator {
     type Error = FileError;
     fn try_from(f: EstimatorFieldsV1) -> std::result::Result<Self, FileError> {
-        Self::try_from(EstimatorFields {
+        Self::try_from(EstimatorFieldsV2 {
             param_names: f.param_names,
             lower: f.lower,
             upper: f.upper,
@@ -153,6 +201,24 @@ impl TryFrom<EstimatorFields> for Estimator {
                 "the box [{}, {}] of {}",
                 f.lower[j], f.upper[j], f.param_names[j]
             ));
+        }
+        if f.marginals.len() != q {
+            return bad(format!("{} priors for {q} parameters", f.marginals.len()));
+        }
+        for (j, marginal) in f.marginals.iter().enumerate() {
+            if marginal.check(j).is_err() {
+                return bad(format!("the prior {marginal:?} of {}", f.param_names[j]));
+            }
+            // The box is the prior's range; a clip outside it would leave
+            // the support (a log-normal's estimate must stay > 0).
+            let (low, high) = marginal.range();
+            let slack = 1e-9 * (high - low);
+            if !(f.lower[j] >= low - slack && f.upper[j] <= high + slack) {
+                return bad(format!(
+                    "the box [{}, {}] of {} outside its prior's range [{low}, {high}]",
+                    f.lower[j], f.upper[j], f.param_names[j]
+                ));
+            }
         }
         if f.regressor.n_outputs() != q || f.regressor.n_inputs() != f.compressor.n_features() {
             return bad(format!(
@@ -200,6 +266,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             validation: f.validation,
             envelope: f.envelope,
             adaptive: f.adaptive,
+            marginals: f.marginals,
         })
     }
 }
@@ -243,6 +310,11 @@ impl Estimator {
     /// Upper bounds of the prior box.
     pub fn upper(&self) -> &[f64] {
         &self.upper
+    }
+    /// Each parameter's prior (uniform on the box for files before format
+    /// version 3).
+    pub fn marginals(&self) -> &[Marginal] {
+        &self.marginals
     }
     /// The record shape it was trained on.
     pub fn record_shape(&self) -> &RecordShape {
@@ -341,7 +413,7 @@ impl Estimator {
             &mut work.features,
         )?;
         self.regressor.predict_into(&work.features, theta)?;
-        clip_to_box(theta, &self.lower, &self.upper);
+        to_estimate(theta, &self.marginals, &self.lower, &self.upper);
         Ok(())
     }
 
@@ -433,52 +505,11 @@ impl Estimator {
             .collect()
     }
 
-    /// Estimates for every row of a compressed chart's features (clipped).
+    /// Estimates for every row of a compressed chart's features (out of the
+    /// learning space, clipped).
     pub(crate) fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
         let mut out = self.regressor.predict(features)?;
-        clip_rows(&mut out, &self.lower, &self.upper);
+        rows_to_estimates(&mut out, &self.marginals, &self.lower, &self.upper);
         Ok(out)
-    }
-}
-
-/// Clip every row of a matrix of estimates to the box (rows made contiguous
-/// first if they are not; `predict` already returns them so).
-pub(crate) fn clip_rows(estimates: &mut Array2<f64>, lower: &[f64], upper: &[f64]) {
-    if !estimates.is_standard_layout() {
-        *estimates = estimates.as_standard_layout().into_owned();
-    }
-    for mut row in estimates.rows_mut() {
-        if let Some(theta) = row.as_slice_mut() {
-            clip_to_box(theta, lower, upper);
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Rows in either memory order are clipped, NaN to the centre.
-    #[test]
-    fn clip_rows_clips_every_row_in_any_layout() {
-        let want: Array2<f64> = ndarray::array![[-1.0, 3.0], [0.5, 2.5], [0.0, 2.5]];
-        let standard = ndarray::array![[-5.0, 9.0], [0.5, f64::NAN], [f64::NAN, 2.5]];
-        let mut columns_first = standard
-            .t()
-            .as_standard_layout()
-            .into_owned()
-            .reversed_axes();
-        assert!(!columns_first.is_standard_layout());
-        for mut m in [standard, columns_first.clone()] {
-            clip_rows(&mut m, &[-1.0, 2.0], &[1.0, 3.0]);
-            assert!(
-                m.iter()
-                    .zip(want.iter())
-                    .all(|(a, b)| a.to_bits() == b.to_bits()),
-                "{m}"
-            );
-        }
-        clip_rows(&mut columns_first, &[-1.0, 2.0], &[1.0, 3.0]);
-        assert!(columns_first.is_standard_layout());
     }
 }

@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32), currently 2 (1 is still read) |
+//! | 8..12 | format version (u32), currently 3 (1 and 2 are still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -20,8 +20,9 @@ use crate::estimator::Estimator;
 pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// The format version this build writes, and the newest it reads.
 ///
-/// Version 2 added the feature envelope; version 1 files load without one.
-pub const FORMAT_VERSION: u32 = 2;
+/// Version 2 added the feature envelope and the adaptive intervals, version
+/// 3 the parameters' priors; older files load without them (uniform priors).
+pub const FORMAT_VERSION: u32 = 3;
 const HEADER: usize = 24;
 
 /// CRC-32 with the IEEE 802.3 polynomial (reflected, 0xEDB88320), the
@@ -141,12 +142,19 @@ impl Estimator {
             }
             .into());
         }
-        let decoded = if version == 1 {
-            postcard::from_bytes::<crate::estimator::EstimatorFieldsV1>(payload)
+        fn decode<'a, F>(payload: &'a [u8]) -> std::result::Result<Estimator, String>
+        where
+            F: serde::Deserialize<'a>,
+            Estimator: TryFrom<F, Error = FileError>,
+        {
+            postcard::from_bytes::<F>(payload)
                 .map_err(|e| e.to_string())
                 .and_then(|fields| Estimator::try_from(fields).map_err(|e| e.to_string()))
-        } else {
-            postcard::from_bytes(payload).map_err(|e| e.to_string())
+        }
+        let decoded = match version {
+            1 => decode::<crate::estimator::EstimatorFieldsV1>(payload),
+            2 => decode::<crate::estimator::EstimatorFieldsV2>(payload),
+            _ => postcard::from_bytes(payload).map_err(|e| e.to_string()),
         };
         decoded.map_err(|reason| FileError::Undecodable { reason }.into())
     }

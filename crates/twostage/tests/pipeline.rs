@@ -105,7 +105,7 @@ fn damaged_files_get_a_clear_error_each() {
         kind(&newer),
         FileError::NewerVersion {
             found: 7,
-            supported: 2
+            supported: twostage::FORMAT_VERSION
         }
     );
     assert!(kind(&newer).to_string().contains("upgrade twostage"));

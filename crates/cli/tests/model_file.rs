@@ -1,0 +1,128 @@
+//! A model file from the shell: print the template, train, inspect,
+//! validate and simulate with it, and read a mistake's line.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn twostage(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn the_template_trains_validates_and_simulates_an_estimator() {
+    let dir = scratch("model-file-template");
+    let out = twostage(&["models", "--template"]);
+    assert!(out.status.success());
+    let model = dir.join("model.toml");
+    // A smaller run than the template's preset, for the test's time.
+    let template = text(&out.stdout).replace("sims = 1500", "sims = 300");
+    std::fs::write(&model, template).unwrap();
+    let estimator = dir.join("est.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--validate",
+        "200",
+        "--calibrate",
+        "200",
+        "--quiet",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&["inspect", path(&estimator)]);
+    let shown = text(&out.stdout);
+    assert!(shown.contains("model       benchmark-normal"), "{shown}");
+    assert!(
+        shown.contains("prior truncnormal(mu = 0, sigma = 0.4) on [-0.9, 0.9]"),
+        "{shown}"
+    );
+    assert!(shown.contains("N = 500"), "{shown}");
+    assert!(shown.contains("m = 300 simulations"), "{shown}");
+    // Validation simulates the model again: from the file, which it needs.
+    let out = twostage(&["validate", "--estimator", path(&estimator), "--sims", "100"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("give its --model-file"));
+    let out = twostage(&[
+        "validate",
+        "--estimator",
+        path(&estimator),
+        "--sims",
+        "100",
+        "--model-file",
+        path(&model),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("r = 100 fresh simulations"));
+    // And `simulate` writes the file's records: 500 samples each.
+    let out = twostage(&["simulate", "--model-file", path(&model), "--theta", "0.3"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let csv = text(&out.stdout);
+    assert_eq!(csv.lines().next(), Some("u,y"));
+    assert_eq!(csv.lines().count(), 501);
+}
+
+#[test]
+fn a_mistake_in_a_model_file_is_one_line_naming_file_line_and_key() {
+    let dir = scratch("model-file-mistake");
+    let model = dir.join("bad.toml");
+    std::fs::write(
+        &model,
+        "[model]\nname = \"m\"\n[source]\nbuiltin = \"benchmark\"\n[[parameter]]\nname = \"t\"\n\
+         prior = { dist = \"uniform\", low = 1.0, high = 0.0 }\n",
+    )
+    .unwrap();
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--out",
+        path(&dir.join("x")),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("bad.toml, line 7, key `parameter.prior`: parameter 't'"),
+        "{err}"
+    );
+    assert!(
+        err.contains("lower bound must be below the upper bound"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    // --model and --model-file are one or the other.
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--model-file",
+        path(&model),
+        "--out",
+        path(&dir.join("x")),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = twostage(&["train", "--out", path(&dir.join("x"))]);
+    assert_eq!(out.status.code(), Some(2));
+}

@@ -1,0 +1,806 @@
+//! Model files: a model described in TOML, so that the command line trains
+//! estimators for models other than the built-in ones. The file names the
+//! parameters and their priors, the signals, the input, the measurement
+//! noise, the presets, and where simulations come from. Every mistake is an
+//! [`Error::ModelFile`] naming the file, the line, the key and what is
+//! accepted. The annotated [`TEMPLATE`] is the reference;
+//! docs/your-own-model.md walks through it.
+
+use std::ops::Range;
+use std::path::Path;
+
+use serde::Deserialize;
+use toml::Spanned;
+use twostage_models::{
+    BuiltinModel, BuiltinOverrides, ExperimentRng, InputSignal, IoData, Marginal, ModelSpec, Prior,
+    Simulator,
+};
+
+use crate::builder::Preset;
+use crate::config::{CompressorConfig, RegressorConfig};
+use crate::error::{Error, Result};
+use crate::profile::ModelProfile;
+
+/// An annotated model file, as `twostage models --template` prints it.
+pub const TEMPLATE: &str = include_str!("model_file_template.toml");
+
+/// The simulations of a preset that does not say.
+const DEFAULT_PRESET_SIMULATIONS: usize = 2000;
+
+/// Where a model file's simulations come from.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum ModelSource {
+    /// A built-in model, with some of its settings replaced.
+    Builtin {
+        /// Which one.
+        model: BuiltinModel,
+        /// Its settings as the file changes them.
+        overrides: BuiltinOverrides,
+    },
+    /// None: the file describes charts simulated elsewhere (`--chart`).
+    ChartsOnly,
+}
+
+/// A model described by a model file.
+///
+/// ```
+/// use twostage::ModelFile;
+/// let file = ModelFile::parse(
+///     r#"
+///     [model]
+///     name = "short-benchmark"
+///     [source]
+///     builtin = "benchmark"
+///     [[parameter]]
+///     name = "theta"
+///     prior = { dist = "truncnormal", mu = 0.0, sigma = 0.3, low = -0.9, high = 0.9 }
+///     [signals]
+///     samples = 300
+///     [[preset]]
+///     name = "small"
+///     compress = "arx:3,3"
+///     fit = "mlp:6"
+///     sims = 800
+///     "#,
+///     "short.toml",
+/// )?;
+/// let simulator = file.simulator()?;
+/// assert_eq!(simulator.spec().n_samples(), 300);
+/// assert_eq!(file.preset("small")?.simulations, 800);
+/// // The built-in model's own presets stay available.
+/// assert!(file.preset("paper").is_ok());
+/// # Ok::<(), twostage::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct ModelFile {
+    origin: String,
+    description: String,
+    source: ModelSource,
+    spec: ModelSpec,
+    output_sd: Vec<f64>,
+    presets: Vec<(String, Preset)>,
+}
+
+impl ModelFile {
+    /// Read and check a model file.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if it cannot be read, [`Error::ModelFile`] for every
+    /// mistake in it.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|cause| Error::Io {
+            path: path.display().to_string(),
+            cause,
+        })?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Check the text of a model file; `origin` names it in messages.
+    ///
+    /// # Errors
+    /// [`Error::ModelFile`] naming the line, the key and what is accepted.
+    pub fn parse(text: &str, origin: &str) -> Result<Self> {
+        let at = Locator { text, origin };
+        let raw: RawFile = toml::from_str(text).map_err(|e| Error::ModelFile {
+            file: origin.to_string(),
+            line: e.span().map(|s| at.line(s.start)),
+            key: String::new(),
+            message: e.message().to_string(),
+        })?;
+        let mut source = at.source(raw.source.as_ref(), raw.noise.as_ref(), raw.input.as_ref())?;
+        let builtin = match &source {
+            ModelSource::Builtin { model, overrides } => {
+                Some((*model, model.build_with(overrides)?))
+            }
+            ModelSource::ChartsOnly => None,
+        };
+        let base = builtin.as_ref().map(|(_, sim)| sim.spec());
+        let (names, marginals) = at.parameters(&raw.parameter, base)?;
+        let signals = at.signals(raw.signals.as_ref(), base)?;
+        if let ModelSource::Builtin { overrides, .. } = &mut source
+            && base.is_some_and(|b| b.n_samples() != signals.samples)
+        {
+            overrides.n_samples = Some(signals.samples);
+        }
+        let prior =
+            Prior::new(marginals).map_err(|e| at.error(None, "parameter", e.to_string()))?;
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        let inputs: Vec<&str> = signals.inputs.iter().map(String::as_str).collect();
+        let outputs: Vec<&str> = signals.outputs.iter().map(String::as_str).collect();
+        let spec = ModelSpec::new(
+            raw.model.name.get_ref(),
+            &names,
+            prior,
+            signals.sample_time,
+            signals.samples,
+        )
+        .map_err(|e| at.error(Some(raw.model.name.span()), "model", e.to_string()))?
+        .with_signals(&inputs, &outputs);
+        let spec = match base {
+            Some(b) => spec.with_notes(b.input_note(), b.noise_note()),
+            None => spec,
+        };
+        let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
+        let mut presets = at.presets(&raw.preset)?;
+        if let Some((model, _)) = &builtin {
+            let profile = ModelProfile::of(*model);
+            for name in profile.preset_names() {
+                if !presets.iter().any(|(n, _)| n == name) {
+                    presets.push((name.to_string(), profile.preset(name)?));
+                }
+            }
+        }
+        Ok(Self {
+            origin: origin.to_string(),
+            description: raw.model.description.unwrap_or_default(),
+            source,
+            spec,
+            output_sd,
+            presets,
+        })
+    }
+
+    /// The model's name, parameters, prior, sampling and signals.
+    pub fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    /// The model's name.
+    pub fn name(&self) -> &str {
+        self.spec.name()
+    }
+
+    /// What the file says the model is, for people.
+    pub fn description(&self) -> &str {
+        &self.description
+    }
+
+    /// Where simulations come from.
+    pub fn source(&self) -> &ModelSource {
+        &self.source
+    }
+
+    /// The simulator the file describes.
+    ///
+    /// # Errors
+    /// [`Error::ModelFile`] for a file without a source (it describes
+    /// charts simulated elsewhere).
+    pub fn simulator(&self) -> Result<Box<dyn Simulator>> {
+        match &self.source {
+            ModelSource::Builtin { model, overrides } => Ok(Box::new(FileSimulator {
+                inner: model.build_with(overrides)?,
+                spec: self.spec.clone(),
+                output_sd: self.output_sd.clone(),
+            })),
+            ModelSource::ChartsOnly => Err(Error::ModelFile {
+                file: self.origin.clone(),
+                line: None,
+                key: "source".into(),
+                message: "the file has no [source], so nothing can be simulated: add one \
+                          (a file without it describes charts simulated elsewhere, which this \
+                          command cannot use)"
+                    .into(),
+            }),
+        }
+    }
+
+    /// The presets, the file's first, then a built-in source's own.
+    pub fn preset_names(&self) -> impl Iterator<Item = &str> {
+        self.presets.iter().map(|(name, _)| name.as_str())
+    }
+
+    /// A preset by name.
+    ///
+    /// # Errors
+    /// [`Error::NotAvailable`] naming the presets that exist.
+    pub fn preset(&self, name: &str) -> Result<Preset> {
+        self.presets
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.clone())
+            .ok_or_else(|| Error::NotAvailable {
+                what: "preset",
+                name: name.to_string(),
+                model: self.name().to_string(),
+                available: if self.presets.is_empty() {
+                    "none (add a [[preset]], or give the stages on the command line)".into()
+                } else {
+                    self.preset_names().collect::<Vec<_>>().join(", ")
+                },
+            })
+    }
+}
+
+/// A model file's simulator: the source's, under the file's name, prior
+/// and signal names, with the file's measurement noise added.
+struct FileSimulator {
+    inner: Box<dyn Simulator>,
+    spec: ModelSpec,
+    output_sd: Vec<f64>,
+}
+
+impl Simulator for FileSimulator {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    fn simulate(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        out: &mut IoData,
+    ) -> twostage_models::Result<()> {
+        self.inner.simulate(theta, rng, out)?;
+        let (n, want) = (out.n_samples(), self.spec.n_samples());
+        if n != want || out.n_outputs() != self.output_sd.len() {
+            return Err(twostage_models::SimError::InvalidData(format!(
+                "the source gave {n} samples of {} outputs, the model file says {want} of {}",
+                out.n_outputs(),
+                self.output_sd.len()
+            )));
+        }
+        // After the source's own draws, from the same stream: experiment i
+        // of seed s stays the same bits.
+        for (j, &sd) in self.output_sd.iter().enumerate() {
+            if sd > 0.0 {
+                for y in out.output_mut(j) {
+                    let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
+                    *y += sd * e;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+// ---- The file as TOML gives it (unknown keys are refused with their line).
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    model: RawModel,
+    source: Option<Spanned<RawSource>>,
+    #[serde(default)]
+    parameter: Vec<Spanned<RawParameter>>,
+    signals: Option<Spanned<RawSignals>>,
+    input: Option<Spanned<RawInput>>,
+    noise: Option<Spanned<RawNoise>>,
+    #[serde(default)]
+    preset: Vec<Spanned<RawPreset>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModel {
+    name: Spanned<String>,
+    description: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSource {
+    builtin: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawParameter {
+    name: Spanned<String>,
+    prior: Option<Spanned<RawPrior>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPrior {
+    dist: Spanned<String>,
+    low: Option<f64>,
+    high: Option<f64>,
+    mu: Option<f64>,
+    sigma: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSignals {
+    inputs: Option<Spanned<Vec<String>>>,
+    outputs: Option<Spanned<Vec<String>>>,
+    samples: Option<Spanned<i64>>,
+    sample_time: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInput {
+    signal: Spanned<String>,
+    sd: Option<f64>,
+    amplitude: Option<f64>,
+    values: Option<Vec<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawNoise {
+    model: Option<bool>,
+    output_sd: Option<Spanned<OneOrMany>>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum OneOrMany {
+    One(f64),
+    Many(Vec<f64>),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPreset {
+    name: Spanned<String>,
+    compress: Spanned<String>,
+    fit: Spanned<String>,
+    sims: Option<Spanned<i64>>,
+}
+
+/// The checked signals.
+struct Signals {
+    inputs: Vec<String>,
+    outputs: Vec<String>,
+    samples: usize,
+    sample_time: f64,
+}
+
+/// Turns byte spans into lines and builds errors.
+struct Locator<'t> {
+    text: &'t str,
+    origin: &'t str,
+}
+
+impl Locator<'_> {
+    fn line(&self, offset: usize) -> usize {
+        1 + self.text.as_bytes()[..offset.min(self.text.len())]
+            .iter()
+            .filter(|b| **b == b'\n')
+            .count()
+    }
+
+    fn error(&self, span: Option<Range<usize>>, key: &str, message: String) -> Error {
+        Error::ModelFile {
+            file: self.origin.to_string(),
+            line: span.map(|s| self.line(s.start)),
+            key: key.to_string(),
+            message,
+        }
+    }
+
+    fn source(
+        &self,
+        source: Option<&Spanned<RawSource>>,
+        noise: Option<&Spanned<RawNoise>>,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<ModelSource> {
+        let Some(source) = source else {
+            if let Some(input) = input {
+                return Err(self.error(
+                    Some(input.span()),
+                    "input",
+                    "an [input] needs a [source] to drive; a file without one describes charts \
+                     simulated elsewhere"
+                        .into(),
+                ));
+            }
+            return Ok(ModelSource::ChartsOnly);
+        };
+        let Some(name) = &source.get_ref().builtin else {
+            return Err(self.error(
+                Some(source.span()),
+                "source",
+                "give where simulations come from: builtin = \"benchmark\" or \"pacejka\"".into(),
+            ));
+        };
+        let model: BuiltinModel =
+            name.get_ref()
+                .parse()
+                .map_err(|e: twostage_models::SimError| {
+                    self.error(Some(name.span()), "source.builtin", e.to_string())
+                })?;
+        let noiseless = noise.is_some_and(|n| n.get_ref().model == Some(false));
+        let input = input.map(|i| self.input(i)).transpose()?;
+        Ok(ModelSource::Builtin {
+            model,
+            overrides: BuiltinOverrides {
+                noiseless,
+                n_samples: None,
+                input,
+            },
+        })
+    }
+
+    fn input(&self, input: &Spanned<RawInput>) -> Result<InputSignal> {
+        let raw = input.get_ref();
+        let kind = raw.signal.get_ref().as_str();
+        let here = || Some(input.span());
+        let (needed, signal) = match kind {
+            "white" => ("sd", raw.sd.map(InputSignal::white_gaussian)),
+            "chicane" => ("amplitude", raw.amplitude.map(InputSignal::chicane)),
+            "fixed" => ("values", raw.values.clone().map(InputSignal::fixed)),
+            other => {
+                return Err(self.error(
+                    Some(raw.signal.span()),
+                    "input.signal",
+                    format!("unknown signal '{other}': use \"white\", \"chicane\" or \"fixed\""),
+                ));
+            }
+        };
+        let extra = [
+            ("sd", raw.sd.is_some()),
+            ("amplitude", raw.amplitude.is_some()),
+            ("values", raw.values.is_some()),
+        ]
+        .into_iter()
+        .find(|(key, given)| *given && *key != needed);
+        if let Some((key, _)) = extra {
+            return Err(self.error(
+                here(),
+                &format!("input.{key}"),
+                format!("a \"{kind}\" input takes {needed} only"),
+            ));
+        }
+        signal
+            .ok_or_else(|| {
+                self.error(
+                    here(),
+                    &format!("input.{needed}"),
+                    format!("a \"{kind}\" input needs {needed}"),
+                )
+            })?
+            .map_err(|e| self.error(here(), "input", e.to_string()))
+    }
+
+    fn parameters(
+        &self,
+        raw: &[Spanned<RawParameter>],
+        base: Option<&ModelSpec>,
+    ) -> Result<(Vec<String>, Vec<Marginal>)> {
+        if let Some(base) = base {
+            if raw.is_empty() {
+                return Ok((
+                    base.param_names().to_vec(),
+                    base.prior().marginals().to_vec(),
+                ));
+            }
+            if raw.len() != base.n_params() {
+                return Err(self.error(
+                    Some(raw[0].span()),
+                    "parameter",
+                    format!(
+                        "the built-in source has {} parameter(s) ({}); give one [[parameter]] \
+                         each, in that order, or none to keep its priors",
+                        base.n_params(),
+                        base.param_names().join(", ")
+                    ),
+                ));
+            }
+        } else if raw.is_empty() {
+            return Err(self.error(
+                None,
+                "parameter",
+                "no [[parameter]]: give each parameter a name and a prior".into(),
+            ));
+        }
+        let mut names = Vec::with_capacity(raw.len());
+        let mut marginals = Vec::with_capacity(raw.len());
+        for (j, p) in raw.iter().enumerate() {
+            let p_ref = p.get_ref();
+            let name = p_ref.name.get_ref().trim().to_string();
+            if name.is_empty() || names.contains(&name) {
+                return Err(self.error(
+                    Some(p_ref.name.span()),
+                    "parameter.name",
+                    format!("'{name}' is empty or used twice: every parameter needs its own name"),
+                ));
+            }
+            let marginal = match (&p_ref.prior, base) {
+                (Some(prior), _) => self.marginal(prior, &name, j)?,
+                (None, Some(base)) => base.prior().marginals()[j],
+                (None, None) => {
+                    return Err(self.error(
+                        Some(p.span()),
+                        "parameter.prior",
+                        format!(
+                            "parameter '{name}' has no prior: add prior = {{ dist = \"uniform\", \
+                             low = ..., high = ... }} (or normal, lognormal, truncnormal)"
+                        ),
+                    ));
+                }
+            };
+            names.push(name);
+            marginals.push(marginal);
+        }
+        Ok((names, marginals))
+    }
+
+    fn marginal(&self, prior: &Spanned<RawPrior>, name: &str, index: usize) -> Result<Marginal> {
+        let raw = prior.get_ref();
+        let dist = raw.dist.get_ref().as_str();
+        let key = "parameter.prior";
+        let needs: &[&str] = match dist {
+            "uniform" => &["low", "high"],
+            "normal" | "lognormal" => &["mu", "sigma"],
+            "truncnormal" => &["mu", "sigma", "low", "high"],
+            other => {
+                return Err(self.error(
+                    Some(raw.dist.span()),
+                    "parameter.prior.dist",
+                    format!(
+                        "parameter '{name}': unknown distribution '{other}': use uniform, \
+                         normal, lognormal or truncnormal"
+                    ),
+                ));
+            }
+        };
+        let given = [
+            ("low", raw.low),
+            ("high", raw.high),
+            ("mu", raw.mu),
+            ("sigma", raw.sigma),
+        ];
+        for (k, v) in given {
+            if v.is_some() != needs.contains(&k) {
+                return Err(self.error(
+                    Some(prior.span()),
+                    &format!("{key}.{k}"),
+                    format!(
+                        "parameter '{name}': a {dist} prior takes exactly {}",
+                        needs.join(", ")
+                    ),
+                ));
+            }
+        }
+        let v = |x: Option<f64>| x.unwrap_or(f64::NAN);
+        let marginal = match dist {
+            "uniform" => Marginal::Uniform {
+                low: v(raw.low),
+                high: v(raw.high),
+            },
+            "normal" => Marginal::Normal {
+                mu: v(raw.mu),
+                sigma: v(raw.sigma),
+            },
+            "lognormal" => Marginal::LogNormal {
+                mu: v(raw.mu),
+                sigma: v(raw.sigma),
+            },
+            _ => Marginal::TruncatedNormal {
+                mu: v(raw.mu),
+                sigma: v(raw.sigma),
+                low: v(raw.low),
+                high: v(raw.high),
+            },
+        };
+        marginal
+            .check(index)
+            .map_err(|e| self.error(Some(prior.span()), key, format!("parameter '{name}': {e}")))?;
+        Ok(marginal)
+    }
+
+    fn signals(
+        &self,
+        raw: Option<&Spanned<RawSignals>>,
+        base: Option<&ModelSpec>,
+    ) -> Result<Signals> {
+        let empty = RawSignals {
+            inputs: None,
+            outputs: None,
+            samples: None,
+            sample_time: None,
+        };
+        let s = raw.map_or(&empty, Spanned::get_ref);
+        let whole = raw.map(Spanned::span);
+        let names = |given: &Option<Spanned<Vec<String>>>,
+                     key: &str,
+                     base: Option<&[String]>|
+         -> Result<Vec<String>> {
+            match (given, base) {
+                (Some(list), Some(base)) if list.get_ref().len() != base.len() => Err(self.error(
+                    Some(list.span()),
+                    key,
+                    format!(
+                        "the built-in source has {} ({}); rename them one for one",
+                        base.len(),
+                        base.join(", ")
+                    ),
+                )),
+                (Some(list), _) => {
+                    let mut seen: Vec<&String> = Vec::new();
+                    for n in list.get_ref() {
+                        if n.trim().is_empty() || seen.contains(&n) {
+                            return Err(self.error(
+                                Some(list.span()),
+                                key,
+                                format!(
+                                    "'{n}' is empty or used twice: each signal needs its own name"
+                                ),
+                            ));
+                        }
+                        seen.push(n);
+                    }
+                    Ok(list.get_ref().clone())
+                }
+                (None, Some(base)) => Ok(base.to_vec()),
+                (None, None) if key == "signals.inputs" => Ok(Vec::new()),
+                (None, None) => Err(self.error(
+                    whole.clone(),
+                    key,
+                    "name the measured outputs, e.g. outputs = [\"y\"]".into(),
+                )),
+            }
+        };
+        let inputs = names(
+            &s.inputs,
+            "signals.inputs",
+            base.map(ModelSpec::input_names),
+        )?;
+        let outputs = names(
+            &s.outputs,
+            "signals.outputs",
+            base.map(ModelSpec::output_names),
+        )?;
+        if outputs.is_empty() {
+            return Err(self.error(
+                whole,
+                "signals.outputs",
+                "at least one output: an estimator learns from what is measured".into(),
+            ));
+        }
+        let samples = match (&s.samples, base) {
+            (Some(n), _) => usize::try_from(*n.get_ref())
+                .ok()
+                .filter(|n| *n >= 1)
+                .ok_or_else(|| {
+                    self.error(
+                        Some(n.span()),
+                        "signals.samples",
+                        format!(
+                            "{} samples: give a record length of at least 1",
+                            n.get_ref()
+                        ),
+                    )
+                })?,
+            (None, Some(base)) => base.n_samples(),
+            (None, None) => {
+                return Err(self.error(
+                    whole,
+                    "signals.samples",
+                    "give the record length, samples = N".into(),
+                ));
+            }
+        };
+        let sample_time = match (&s.sample_time, base) {
+            (Some(t), Some(base)) if t.get_ref().to_bits() != base.sample_time().to_bits() => {
+                return Err(self.error(
+                    Some(t.span()),
+                    "signals.sample_time",
+                    format!(
+                        "the built-in source samples every {}: leave sample_time out",
+                        base.sample_time()
+                    ),
+                ));
+            }
+            (Some(t), _) if !(t.get_ref().is_finite() && *t.get_ref() > 0.0) => {
+                return Err(self.error(
+                    Some(t.span()),
+                    "signals.sample_time",
+                    format!("{}: give a finite time > 0 between samples", t.get_ref()),
+                ));
+            }
+            (Some(t), _) => *t.get_ref(),
+            (None, Some(base)) => base.sample_time(),
+            (None, None) => 1.0,
+        };
+        Ok(Signals {
+            inputs,
+            outputs,
+            samples,
+            sample_time,
+        })
+    }
+
+    fn output_noise(&self, noise: Option<&Spanned<RawNoise>>, outputs: usize) -> Result<Vec<f64>> {
+        let Some(sd) = noise.and_then(|n| n.get_ref().output_sd.as_ref()) else {
+            return Ok(vec![0.0; outputs]);
+        };
+        let values = match sd.get_ref() {
+            OneOrMany::One(v) => vec![*v; outputs],
+            OneOrMany::Many(v) => v.clone(),
+        };
+        if values.len() != outputs || values.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(self.error(
+                Some(sd.span()),
+                "noise.output_sd",
+                format!(
+                    "{values:?}: give one standard deviation >= 0 for all outputs, or a list of \
+                     {outputs} (one per output)"
+                ),
+            ));
+        }
+        Ok(values)
+    }
+
+    fn presets(&self, raw: &[Spanned<RawPreset>]) -> Result<Vec<(String, Preset)>> {
+        let mut presets: Vec<(String, Preset)> = Vec::new();
+        for p in raw {
+            let r = p.get_ref();
+            let name = r.name.get_ref().trim().to_string();
+            if name.is_empty() || presets.iter().any(|(n, _)| *n == name) {
+                return Err(self.error(
+                    Some(r.name.span()),
+                    "preset.name",
+                    format!("'{name}' is empty or used twice: every preset needs its own name"),
+                ));
+            }
+            let compressor: CompressorConfig =
+                r.compress.get_ref().parse().map_err(|e: Error| {
+                    self.error(Some(r.compress.span()), "preset.compress", e.to_string())
+                })?;
+            let regressor: RegressorConfig =
+                r.fit.get_ref().parse().map_err(|e: Error| {
+                    self.error(Some(r.fit.span()), "preset.fit", e.to_string())
+                })?;
+            let simulations = match &r.sims {
+                Some(m) => usize::try_from(*m.get_ref())
+                    .ok()
+                    .filter(|m| *m >= 2)
+                    .ok_or_else(|| {
+                        self.error(
+                            Some(m.span()),
+                            "preset.sims",
+                            format!("{}: give at least 2 training simulations", m.get_ref()),
+                        )
+                    })?,
+                None => DEFAULT_PRESET_SIMULATIONS,
+            };
+            presets.push((
+                name,
+                Preset {
+                    compressor,
+                    regressor,
+                    simulations,
+                },
+            ));
+        }
+        Ok(presets)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_template_is_a_valid_model_file() {
+        let file = ModelFile::parse(TEMPLATE, "template.toml").unwrap();
+        assert!(file.simulator().is_ok());
+        assert!(file.preset_names().count() >= 1);
+    }
+}

@@ -1,0 +1,322 @@
+//! Model files: what they build, and every mistake named by line and key.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use twostage::models::{Benchmark, Marginal, Simulator, experiment_rng};
+use twostage::{Error, MODEL_FILE_TEMPLATE, ModelFile, ModelSource};
+
+const GOOD: &str = r#"[model]
+name = "quiet-benchmark"
+[source]
+builtin = "benchmark"
+[[parameter]]
+name = "a"
+prior = { dist = "normal", mu = 0.1, sigma = 0.2 }
+[signals]
+inputs = ["force"]
+outputs = ["position"]
+samples = 300
+[noise]
+model = false
+output_sd = 0.5
+"#;
+
+#[test]
+fn a_built_in_source_takes_the_files_names_prior_length_and_noise() {
+    let file = ModelFile::parse(GOOD, "good.toml").unwrap();
+    let spec = file.spec();
+    assert_eq!(file.name(), "quiet-benchmark");
+    assert_eq!(spec.param_names(), ["a"]);
+    assert_eq!(spec.input_names(), ["force"]);
+    assert_eq!(spec.output_names(), ["position"]);
+    assert_eq!(spec.n_samples(), 300);
+    assert_eq!(
+        spec.prior().marginals(),
+        [Marginal::Normal {
+            mu: 0.1,
+            sigma: 0.2
+        }]
+    );
+    assert!(matches!(file.source(), ModelSource::Builtin { .. }));
+    // The file's noise is the only noise: the difference from the noiseless
+    // benchmark (same stream, same input) is white with sd 0.5.
+    let simulator = file.simulator().unwrap();
+    let noiseless = Benchmark::builder()
+        .n_samples(300)
+        .noiseless(true)
+        .build()
+        .unwrap();
+    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
+    let mut sum_sq = 0.0;
+    let runs = 20;
+    for i in 0..runs {
+        simulator
+            .simulate(&[0.3], &mut experiment_rng(4, i), &mut noisy)
+            .unwrap();
+        noiseless
+            .simulate(&[0.3], &mut experiment_rng(4, i), &mut clean)
+            .unwrap();
+        assert_eq!(noisy.n_samples(), 300);
+        assert!(noisy.input(0) == clean.input(0), "the same input stream");
+        sum_sq += noisy
+            .output(0)
+            .iter()
+            .zip(clean.output(0))
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>();
+    }
+    // 6000 draws: the sample sd is within 3% of 0.5 with overwhelming odds.
+    let sd = (sum_sq / (runs as f64 * 300.0)).sqrt();
+    assert!((sd / 0.5 - 1.0).abs() < 0.03, "noise sd {sd}");
+}
+
+#[test]
+fn leaving_out_the_parameters_keeps_the_built_in_priors_and_presets() {
+    let file = ModelFile::parse(
+        "[model]\nname = \"car\"\n[source]\nbuiltin = \"pacejka\"\n",
+        "car.toml",
+    )
+    .unwrap();
+    let car = twostage::models::PacejkaCar::new();
+    assert_eq!(file.spec().prior(), car.prior());
+    assert_eq!(file.spec().param_names(), car.param_names());
+    assert_eq!(
+        file.preset("paper").unwrap(),
+        twostage::paper_pacejka(),
+        "the built-in presets come along"
+    );
+    let e = file.preset("fast").unwrap_err().to_string();
+    assert!(
+        e.contains("preset 'fast' is not available for car: it has paper"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_file_without_a_source_describes_charts_and_cannot_simulate() {
+    let text = r#"[model]
+name = "sir"
+[[parameter]]
+name = "beta"
+prior = { dist = "lognormal", mu = -0.916, sigma = 0.5 }
+[[parameter]]
+name = "gamma"
+prior = { dist = "uniform", low = 0.05, high = 0.3 }
+[signals]
+inputs = []
+outputs = ["I"]
+samples = 10
+"#;
+    let file = ModelFile::parse(text, "sir.toml").unwrap();
+    assert_eq!(file.source(), &ModelSource::ChartsOnly);
+    assert_eq!(file.spec().input_names().len(), 0);
+    assert_eq!(file.spec().n_samples(), 10);
+    let e = file.simulator().map(|_| ()).unwrap_err();
+    assert!(
+        matches!(e, Error::ModelFile { ref key, .. } if key == "source"),
+        "{e}"
+    );
+}
+
+#[test]
+fn the_template_parses_and_simulates() {
+    let file = ModelFile::parse(MODEL_FILE_TEMPLATE, "template.toml").unwrap();
+    let sim = file.simulator().unwrap();
+    let mut record = sim.spec().new_record();
+    sim.simulate(&[0.2], &mut experiment_rng(1, 0), &mut record)
+        .unwrap();
+    assert_eq!(record.n_samples(), 500);
+    assert_eq!(file.preset_names().next(), Some("default"));
+}
+
+/// Replace `from` by `to` in the good file: each mistake must be named by
+/// its line and key.
+#[test]
+fn every_mistake_names_its_line_and_key() {
+    let cases: &[(&str, &str, Option<usize>, &str, &str)] = &[
+        // (replace, with, line, key, text in the message)
+        (
+            "[source]",
+            "[sourse]",
+            Some(3),
+            "",
+            "unknown field `sourse`",
+        ),
+        (
+            "name = \"a\"",
+            "nam = \"a\"",
+            Some(6),
+            "",
+            "unknown field `nam`",
+        ),
+        (
+            "sigma = 0.2",
+            "sigma = -0.2",
+            Some(7),
+            "parameter.prior",
+            "sigma finite and > 0",
+        ),
+        (
+            "sigma = 0.2",
+            "sigma = \"wide\"",
+            Some(7),
+            "",
+            "invalid type",
+        ),
+        (
+            "dist = \"normal\"",
+            "dist = \"gauss\"",
+            Some(7),
+            "parameter.prior.dist",
+            "unknown distribution 'gauss'",
+        ),
+        (
+            "mu = 0.1, sigma = 0.2",
+            "mu = 0.1, sigma = 0.2, low = 0",
+            Some(7),
+            "parameter.prior.low",
+            "takes exactly mu, sigma",
+        ),
+        (
+            "mu = 0.1, sigma = 0.2",
+            "mu = 0.1",
+            Some(7),
+            "parameter.prior.sigma",
+            "takes exactly mu, sigma",
+        ),
+        (
+            "builtin = \"benchmark\"",
+            "builtin = \"tractor\"",
+            Some(4),
+            "source.builtin",
+            "tractor",
+        ),
+        (
+            "samples = 300",
+            "samples = 0",
+            Some(11),
+            "signals.samples",
+            "at least 1",
+        ),
+        (
+            "samples = 300",
+            "samples = 300\nsample_time = 0.5",
+            Some(12),
+            "signals.sample_time",
+            "samples every 1",
+        ),
+        (
+            "outputs = [\"position\"]",
+            "outputs = [\"p\", \"q\"]",
+            Some(10),
+            "signals.outputs",
+            "rename them one for one",
+        ),
+        (
+            "output_sd = 0.5",
+            "output_sd = [0.5, 0.1]",
+            Some(14),
+            "noise.output_sd",
+            "a list of 1",
+        ),
+        (
+            "output_sd = 0.5",
+            "output_sd = -1.0",
+            Some(14),
+            "noise.output_sd",
+            ">= 0",
+        ),
+        (
+            "[[parameter]]",
+            "[[parameter]]\nname = \"b\"\n[[parameter]]",
+            Some(5),
+            "parameter",
+            "1 parameter(s) (theta)",
+        ),
+    ];
+    for (from, to, line, key, text) in cases {
+        assert!(GOOD.contains(from), "{from}");
+        let bad = GOOD.replacen(from, to, 1);
+        let e = ModelFile::parse(&bad, "m.toml").map(|_| ()).unwrap_err();
+        let message = e.to_string();
+        match e {
+            Error::ModelFile {
+                file,
+                line: l,
+                key: k,
+                message: m,
+            } => {
+                assert_eq!(file, "m.toml");
+                assert_eq!((l, k.as_str()), (*line, *key), "{from} -> {to}: {message}");
+                assert!(m.contains(text), "{from} -> {to}: {message}");
+            }
+            other => panic!("{from} -> {to}: {other}"),
+        }
+    }
+}
+
+#[test]
+fn presets_and_inputs_are_checked_too() {
+    let with = |extra: &str| format!("{GOOD}{extra}");
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "[[preset]]\nname = \"p\"\ncompress = \"arx:5\"\nfit = \"mlp:4\"\n",
+            "preset.compress",
+            "2 whole number(s)",
+        ),
+        (
+            "[[preset]]\nname = \"p\"\ncompress = \"arx:2,2\"\nfit = \"net:4\"\n",
+            "preset.fit",
+            "use linear",
+        ),
+        (
+            "[[preset]]\nname = \"p\"\ncompress = \"arx:2,2\"\nfit = \"mlp:4\"\nsims = 1\n",
+            "preset.sims",
+            "at least 2",
+        ),
+        ("[input]\nsignal = \"white\"\n", "input.sd", "needs sd"),
+        (
+            "[input]\nsignal = \"white\"\nsd = 1.0\namplitude = 2.0\n",
+            "input.amplitude",
+            "takes sd only",
+        ),
+        (
+            "[input]\nsignal = \"square\"\n",
+            "input.signal",
+            "unknown signal 'square'",
+        ),
+        (
+            "[input]\nsignal = \"white\"\nsd = -1.0\n",
+            "input",
+            "finite and > 0",
+        ),
+    ];
+    for (extra, key, text) in cases {
+        let e = ModelFile::parse(&with(extra), "m.toml")
+            .map(|_| ())
+            .unwrap_err();
+        match &e {
+            Error::ModelFile {
+                key: k,
+                line,
+                message,
+                ..
+            } => {
+                assert_eq!(k, key, "{e}");
+                assert!(line.is_some_and(|l| l >= 15), "{e}");
+                assert!(message.contains(text), "{e}");
+            }
+            other => panic!("{other}"),
+        }
+    }
+    let two = with(
+        "[[preset]]\nname = \"p\"\ncompress = \"arx:2,2\"\nfit = \"linear\"\n[[preset]]\nname = \"p\"\ncompress = \"arx:3,3\"\nfit = \"linear\"\n",
+    );
+    assert!(
+        ModelFile::parse(&two, "m.toml")
+            .unwrap_err()
+            .to_string()
+            .contains("used twice")
+    );
+}
