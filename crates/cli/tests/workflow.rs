@@ -3,30 +3,12 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn twostage(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twostage"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8(bytes.to_vec()).unwrap()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn path(p: &std::path::Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{path, scratch, text, twostage};
 
 /// `count` benchmark experiments of seed `seed` written under `dir/data`;
 /// returns the directory (data.csv and truth.csv).

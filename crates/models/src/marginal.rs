@@ -24,6 +24,7 @@ pub const UNBOUNDED_TAIL: f64 = 1e-6;
 /// # Ok::<(), twostage_models::SimError>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Marginal {
     /// Uniform on `[low, high]` (the paper's choice).
     Uniform {

@@ -12,7 +12,7 @@ use crate::adaptive::AdaptiveIntervals;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
-use crate::space::{rows_to_estimates, stored_marginals, to_estimate};
+use crate::space::{rows_to_estimates, to_estimate};
 
 /// What the estimator was trained on, for people and for audits.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -83,7 +83,6 @@ pub struct Estimator {
     pub(crate) adaptive: Option<AdaptiveIntervals>,
     /// Each parameter's prior, whose transform the network learned in
     /// (format version 3 on; earlier files are uniform on the box).
-    #[serde(with = "stored_marginals")]
     pub(crate) marginals: Vec<Marginal>,
 }
 
@@ -103,7 +102,6 @@ struct EstimatorFields {
     validation: Option<ValidationReport>,
     envelope: Option<FeatureEnvelope>,
     adaptive: Option<AdaptiveIntervals>,
-    #[serde(with = "stored_marginals")]
     marginals: Vec<Marginal>,
 }
 

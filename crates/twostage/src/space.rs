@@ -1,10 +1,9 @@
 //! The space the stage-2 map learns in: each parameter through its prior's
 //! [`Transform`] (the logarithm of a log-normal parameter, the parameter
 //! itself otherwise), so that every network output maps back into the
-//! prior's support; and how an estimator file stores the marginals.
+//! prior's support.
 
 use ndarray::{Array2, ArrayView2};
-use serde::{Deserialize, Serialize};
 use twostage_kernels::vector::clip_to_box;
 use twostage_models::{Marginal, Transform};
 
@@ -49,91 +48,6 @@ pub(crate) fn rows_to_estimates(
         if let Some(theta) = row.as_slice_mut() {
             to_estimate(theta, marginals, lower, upper);
         }
-    }
-}
-
-/// A [`Marginal`] as the estimator file stores it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-enum StoredMarginal {
-    Uniform {
-        low: f64,
-        high: f64,
-    },
-    Normal {
-        mu: f64,
-        sigma: f64,
-    },
-    LogNormal {
-        mu: f64,
-        sigma: f64,
-    },
-    TruncatedNormal {
-        mu: f64,
-        sigma: f64,
-        low: f64,
-        high: f64,
-    },
-}
-
-impl From<Marginal> for StoredMarginal {
-    fn from(m: Marginal) -> Self {
-        match m {
-            Marginal::Uniform { low, high } => Self::Uniform { low, high },
-            Marginal::Normal { mu, sigma } => Self::Normal { mu, sigma },
-            Marginal::LogNormal { mu, sigma } => Self::LogNormal { mu, sigma },
-            Marginal::TruncatedNormal {
-                mu,
-                sigma,
-                low,
-                high,
-            } => Self::TruncatedNormal {
-                mu,
-                sigma,
-                low,
-                high,
-            },
-        }
-    }
-}
-
-impl From<StoredMarginal> for Marginal {
-    fn from(m: StoredMarginal) -> Self {
-        match m {
-            StoredMarginal::Uniform { low, high } => Self::Uniform { low, high },
-            StoredMarginal::Normal { mu, sigma } => Self::Normal { mu, sigma },
-            StoredMarginal::LogNormal { mu, sigma } => Self::LogNormal { mu, sigma },
-            StoredMarginal::TruncatedNormal {
-                mu,
-                sigma,
-                low,
-                high,
-            } => Self::TruncatedNormal {
-                mu,
-                sigma,
-                low,
-                high,
-            },
-        }
-    }
-}
-
-/// `#[serde(with = "stored_marginals")]` for a `Vec<Marginal>`.
-pub(crate) mod stored_marginals {
-    use super::*;
-
-    pub(crate) fn serialize<S: serde::Serializer>(
-        marginals: &[Marginal],
-        serializer: S,
-    ) -> Result<S::Ok, S::Error> {
-        let stored: Vec<StoredMarginal> = marginals.iter().copied().map(Into::into).collect();
-        stored.serialize(serializer)
-    }
-
-    pub(crate) fn deserialize<'de, D: serde::Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Vec<Marginal>, D::Error> {
-        let stored = Vec::<StoredMarginal>::deserialize(deserializer)?;
-        Ok(stored.into_iter().map(Into::into).collect())
     }
 }
 

@@ -1,0 +1,31 @@
+//! What every command-line test needs: run the binary, read its output,
+//! get a clean scratch folder.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// Run `twostage` with `args`.
+pub fn twostage(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .args(args)
+        .output()
+        .expect("the twostage binary runs")
+}
+
+/// Output bytes as text.
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("the output is UTF-8")
+}
+
+/// An empty folder of the test's own under the target directory.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("the target directory is writable");
+    dir
+}
+
+/// A path as an argument.
+pub fn path(p: &Path) -> &str {
+    p.to_str().expect("test paths are UTF-8")
+}
