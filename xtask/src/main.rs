@@ -5,6 +5,9 @@
 //! Every method of Sections 5 and 6 runs on the same fresh records: EKF,
 //! UKF, particle filter, prediction error with 1, 5 and 10 starts, the
 //! two-stage estimator, and the Bayes-optimal references.
+//!
+//! `cargo xtask test` runs the whole test suite with what its external
+//! programs need (a Python virtual environment with numpy under target/).
 
 use std::fs;
 use std::path::PathBuf;
@@ -16,6 +19,7 @@ use clap::{Parser, Subcommand};
 use twostage::models::{Benchmark, Simulator};
 
 mod paper;
+mod test;
 
 #[derive(Debug, Parser)]
 #[command(name = "cargo xtask")]
@@ -38,6 +42,13 @@ enum Command {
         #[arg(long, default_value_t = 2013)]
         seed: u64,
     },
+    /// The whole test suite, with the Python environment some tests need
+    /// (set up under target/venv on first use); arguments go to cargo test.
+    Test {
+        /// Passed on to `cargo test --workspace`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// Simulate and compress a large benchmark chart; report throughput and
     /// peak memory (the bounded-memory claim of DESIGN.md).
     ChartScale {
@@ -55,6 +66,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::ReproducePaper { quick, out, seed } => paper::reproduce(quick, &out, seed),
         Command::ChartScale { sims, threads } => chart_scale(sims, threads),
+        Command::Test { args } => test::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -74,6 +74,14 @@ pub enum SimError {
         /// What is accepted.
         reason: &'static str,
     },
+    /// An external simulator failed or broke the protocol.
+    #[error("external simulator `{command}`: {message}")]
+    External {
+        /// The command line.
+        command: String,
+        /// What happened, quoting what it answered.
+        message: String,
+    },
     /// A design or model setting is out of its valid range.
     #[error("invalid setting {name} = {value}: {reason}")]
     InvalidSetting {

@@ -44,6 +44,7 @@ mod benchmark;
 mod builtin;
 mod data;
 mod error;
+mod external;
 mod input;
 mod marginal;
 mod ode;
@@ -60,6 +61,7 @@ pub use benchmark::{
 pub use builtin::{BuiltinModel, BuiltinOverrides};
 pub use data::IoData;
 pub use error::{Result, SimError};
+pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,

@@ -107,6 +107,7 @@ impl std::str::FromStr for CompressorConfig {
     ///
     /// ```
     /// use twostage::CompressorConfig;
+    /// use twostage::compress::Compressor;
     /// let arx: CompressorConfig = "arx:5,5".parse()?;
     /// assert_eq!(arx.n_features(), 10);
     /// assert!("arx:5".parse::<CompressorConfig>().is_err());

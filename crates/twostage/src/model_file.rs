@@ -12,8 +12,8 @@ use std::path::Path;
 use serde::Deserialize;
 use toml::Spanned;
 use twostage_models::{
-    BuiltinModel, BuiltinOverrides, ExperimentRng, InputSignal, IoData, Marginal, ModelSpec, Prior,
-    Simulator,
+    BuiltinModel, BuiltinOverrides, ExperimentRng, ExternalSimulator, InputSignal, IoData,
+    Marginal, ModelSpec, Prior, Simulator,
 };
 
 use crate::builder::Preset;
@@ -38,7 +38,16 @@ pub enum ModelSource {
         /// Its settings as the file changes them.
         overrides: BuiltinOverrides,
     },
-    /// None: the file describes charts simulated elsewhere (`--chart`).
+    /// Another program speaking the protocol of docs/protocol.md.
+    Command {
+        /// The program and its arguments.
+        command: Vec<String>,
+        /// Where it runs: the model file's folder (or the caller's).
+        dir: Option<std::path::PathBuf>,
+        /// The longest wait for a record.
+        timeout: std::time::Duration,
+    },
+    /// None: the file describes charts simulated elsewhere.
     ChartsOnly,
 }
 
@@ -94,7 +103,22 @@ impl ModelFile {
             path: path.display().to_string(),
             cause,
         })?;
-        Self::parse(&text, &path.display().to_string())
+        let mut file = Self::parse(&text, &path.display().to_string())?;
+        // A command runs beside its model file, so that `python3 sim.py` works
+        // from any folder.
+        if let ModelSource::Command { dir, .. } = &mut file.source {
+            *dir = path
+                .parent()
+                .map(|p| {
+                    if p.as_os_str().is_empty() {
+                        Path::new(".")
+                    } else {
+                        p
+                    }
+                })
+                .map(Path::to_path_buf);
+        }
+        Ok(file)
     }
 
     /// Check the text of a model file; `origin` names it in messages.
@@ -114,7 +138,7 @@ impl ModelFile {
             ModelSource::Builtin { model, overrides } => {
                 Some((*model, model.build_with(overrides)?))
             }
-            ModelSource::ChartsOnly => None,
+            ModelSource::Command { .. } | ModelSource::ChartsOnly => None,
         };
         let base = builtin.as_ref().map(|(_, sim)| sim.spec());
         let (names, marginals) = at.parameters(&raw.parameter, base)?;
@@ -194,6 +218,22 @@ impl ModelFile {
                 spec: self.spec.clone(),
                 output_sd: self.output_sd.clone(),
             })),
+            ModelSource::Command {
+                command,
+                dir,
+                timeout,
+            } => {
+                let mut external =
+                    ExternalSimulator::new(self.spec.clone(), command.clone())?.timeout(*timeout);
+                if let Some(dir) = dir {
+                    external = external.current_dir(dir);
+                }
+                Ok(Box::new(FileSimulator {
+                    inner: Box::new(external),
+                    spec: self.spec.clone(),
+                    output_sd: self.output_sd.clone(),
+                }))
+            }
             ModelSource::ChartsOnly => Err(Error::ModelFile {
                 file: self.origin.clone(),
                 line: None,
@@ -302,6 +342,8 @@ struct RawModel {
 #[serde(deny_unknown_fields)]
 struct RawSource {
     builtin: Option<Spanned<String>>,
+    command: Option<Spanned<Vec<String>>>,
+    timeout_seconds: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -411,13 +453,27 @@ impl Locator<'_> {
             }
             return Ok(ModelSource::ChartsOnly);
         };
-        let Some(name) = &source.get_ref().builtin else {
-            return Err(self.error(
-                Some(source.span()),
-                "source",
-                "give where simulations come from: builtin = \"benchmark\" or \"pacejka\"".into(),
-            ));
+        let raw = source.get_ref();
+        let name = match (&raw.builtin, &raw.command) {
+            (Some(name), None) => name,
+            (None, Some(command)) => return self.command(command, raw, noise, input),
+            _ => {
+                return Err(self.error(
+                    Some(source.span()),
+                    "source",
+                    "give one source: builtin = \"benchmark\" (or \"pacejka\"), or command = \
+                     [\"python3\", \"sim.py\"] (docs/protocol.md)"
+                        .into(),
+                ));
+            }
         };
+        if let Some(t) = &raw.timeout_seconds {
+            return Err(self.error(
+                Some(t.span()),
+                "source.timeout_seconds",
+                "a built-in model runs in this process: the timeout is for a command".into(),
+            ));
+        }
         let model: BuiltinModel =
             name.get_ref()
                 .parse()
@@ -433,6 +489,59 @@ impl Locator<'_> {
                 n_samples: None,
                 input,
             },
+        })
+    }
+
+    fn command(
+        &self,
+        command: &Spanned<Vec<String>>,
+        raw: &RawSource,
+        noise: Option<&Spanned<RawNoise>>,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<ModelSource> {
+        if command
+            .get_ref()
+            .first()
+            .is_none_or(|c| c.trim().is_empty())
+        {
+            return Err(self.error(
+                Some(command.span()),
+                "source.command",
+                "give the program and its arguments, e.g. [\"python3\", \"sim.py\"]".into(),
+            ));
+        }
+        if let Some(input) = input {
+            return Err(self.error(
+                Some(input.span()),
+                "input",
+                "a command makes its own input and returns it with the outputs: leave [input] out"
+                    .into(),
+            ));
+        }
+        if let Some(noise) = noise.filter(|n| n.get_ref().model.is_some()) {
+            return Err(self.error(
+                Some(noise.span()),
+                "noise.model",
+                "`model` switches a built-in model's noise; a command's noise is its own".into(),
+            ));
+        }
+        let timeout = match &raw.timeout_seconds {
+            None => std::time::Duration::from_secs(60),
+            Some(t) => std::time::Duration::try_from_secs_f64(*t.get_ref())
+                .ok()
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    self.error(
+                        Some(t.span()),
+                        "source.timeout_seconds",
+                        format!("{}: give a number of seconds > 0", t.get_ref()),
+                    )
+                })?,
+        };
+        Ok(ModelSource::Command {
+            command: command.get_ref().clone(),
+            dir: None,
+            timeout,
         })
     }
 

@@ -1,0 +1,451 @@
+//! External simulators: any program, in any language, that speaks the
+//! line-based protocol of docs/protocol.md on its standard input and output.
+//! Each worker thread gets its own long-lived process; a process that
+//! crashes, hangs past the timeout or answers out of protocol is killed, its
+//! experiment fails with an error quoting the answer, and the next
+//! experiment starts a fresh process.
+
+use std::collections::VecDeque;
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Write};
+use std::path::PathBuf;
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use crate::data::IoData;
+use crate::error::{Result, SimError};
+use crate::rng::ExperimentRng;
+use crate::simulator::{ModelSpec, Simulator, check_theta};
+
+/// The protocol version this build speaks (the first word of the greeting).
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// How many lines of a process's standard error an error message quotes.
+const STDERR_LINES: usize = 5;
+
+/// One experiment of a batch request.
+#[derive(Debug, Clone, Copy)]
+pub struct ExternalJob<'a> {
+    /// The experiment's index in its chart.
+    pub index: u64,
+    /// The seed the simulator draws the experiment's randomness from,
+    /// together with the index.
+    pub seed: u64,
+    /// The parameter vector.
+    pub theta: &'a [f64],
+}
+
+impl ExternalJob<'_> {
+    /// The index and seed that the experiment stream `rng` stands for: its
+    /// ChaCha stream number and the first eight bytes of its key. A chart's
+    /// experiment `i` of seed `s` always gets the same pair, so an external
+    /// simulator that draws from them keeps charts reproducible.
+    pub fn stream_of(rng: &ExperimentRng) -> (u64, u64) {
+        let key = rng.get_seed();
+        let mut seed = [0u8; 8];
+        seed.copy_from_slice(&key[..8]);
+        (rng.get_stream(), u64::from_le_bytes(seed))
+    }
+}
+
+/// A simulator that is another program (docs/protocol.md).
+///
+/// | setting | default | valid |
+/// |---|---|---|
+/// | `timeout` | 60 s | > 0: per record, and for the greeting |
+/// | `current_dir` | the caller's | a folder |
+///
+/// ```no_run
+/// use twostage_models::{ExternalSimulator, ModelSpec, Prior, Simulator, experiment_rng};
+/// let spec = ModelSpec::new("sir", &["beta", "gamma"], Prior::uniform_box(&[0.1, 0.05], &[1.0, 0.3])?, 1.0, 10)?
+///     .with_signals(&[], &["I"]);
+/// let sir = ExternalSimulator::new(spec, vec!["python3".into(), "sir.py".into()])?;
+/// let mut record = sir.spec().new_record();
+/// sir.simulate(&[0.4, 0.1], &mut experiment_rng(1, 0), &mut record)?;
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+#[derive(Debug)]
+pub struct ExternalSimulator {
+    spec: ModelSpec,
+    command: Vec<String>,
+    current_dir: Option<PathBuf>,
+    timeout: Duration,
+    idle: Mutex<Vec<Process>>,
+}
+
+impl ExternalSimulator {
+    /// The program `command[0]` with arguments `command[1..]`, simulating
+    /// the model `spec` describes.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for an empty command.
+    pub fn new(spec: ModelSpec, command: Vec<String>) -> Result<Self> {
+        if command.first().is_none_or(|c| c.trim().is_empty()) {
+            return Err(SimError::InvalidSetting {
+                name: "command",
+                value: format!("{command:?}"),
+                reason: "give the program and its arguments, e.g. [\"python3\", \"sim.py\"]".into(),
+            });
+        }
+        Ok(Self {
+            spec,
+            command,
+            current_dir: None,
+            timeout: Duration::from_secs(60),
+            idle: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// Run the program in `dir` (a model file's folder, say).
+    pub fn current_dir(mut self, dir: impl Into<PathBuf>) -> Self {
+        self.current_dir = Some(dir.into());
+        self
+    }
+
+    /// The longest wait for the greeting and for each record.
+    pub fn timeout(mut self, timeout: Duration) -> Self {
+        self.timeout = timeout;
+        self
+    }
+
+    /// The command, as one line for messages.
+    fn command_line(&self) -> String {
+        self.command.join(" ")
+    }
+
+    /// Simulate a batch in one request. Each job gets its own result, in
+    /// order: a process that fails mid-batch fails the rest of the batch,
+    /// and the next request starts a fresh one.
+    pub fn simulate_batch(&self, jobs: &[ExternalJob<'_>], outs: &mut [IoData]) -> Vec<Result<()>> {
+        if jobs.len() != outs.len() {
+            let e =
+                SimError::InvalidData(format!("{} jobs for {} records", jobs.len(), outs.len()));
+            return jobs.iter().map(|_| Err(e.clone())).collect();
+        }
+        // A parameter vector the model refuses is that job's error; the
+        // others are sent.
+        let mut results: Vec<Option<Result<()>>> = jobs
+            .iter()
+            .map(|job| check_theta(&self.spec, job.theta).err().map(Err))
+            .collect();
+        let sent: Vec<usize> = (0..jobs.len()).filter(|&i| results[i].is_none()).collect();
+        if !sent.is_empty() {
+            let batch: Vec<ExternalJob<'_>> = sent.iter().map(|&i| jobs[i]).collect();
+            let mut records: Vec<IoData> =
+                sent.iter().map(|&i| std::mem::take(&mut outs[i])).collect();
+            let answers = self.request(&batch, &mut records);
+            for ((&i, record), answer) in sent.iter().zip(records).zip(answers) {
+                outs[i] = record;
+                results[i] = Some(answer);
+            }
+        }
+        results
+            .into_iter()
+            .map(|r| r.unwrap_or_else(|| Err(self.failure("no answer"))))
+            .collect()
+    }
+
+    /// One request to a process of the pool, one result per job.
+    fn request(&self, jobs: &[ExternalJob<'_>], outs: &mut [IoData]) -> Vec<Result<()>> {
+        let mut process = match self.checkout() {
+            Ok(p) => p,
+            Err(e) => return jobs.iter().map(|_| Err(e.clone())).collect(),
+        };
+        let mut results = Vec::with_capacity(jobs.len());
+        match self.exchange(&mut process, jobs, outs, &mut results) {
+            Ok(()) => self.checkin(process),
+            Err(e) => {
+                let e = self.with_stderr(e, &process);
+                process.kill();
+                while results.len() < jobs.len() {
+                    results.push(Err(e.clone()));
+                }
+            }
+        }
+        results
+    }
+
+    /// Send one request and read its answers into `outs`, pushing one
+    /// result per job; an `Err` means the process is out of protocol.
+    fn exchange(
+        &self,
+        process: &mut Process,
+        jobs: &[ExternalJob<'_>],
+        outs: &mut [IoData],
+        results: &mut Vec<Result<()>>,
+    ) -> Result<()> {
+        let mut request = format!("batch {}\n", jobs.len());
+        for job in jobs {
+            let _ = write!(request, "{} {}", job.index, job.seed);
+            for t in job.theta {
+                let _ = write!(request, " {t:?}");
+            }
+            request.push('\n');
+        }
+        process.send(&request).map_err(|e| self.failure(&e))?;
+        let (n, n_u, n_y) = (
+            self.spec.n_samples(),
+            self.spec.input_names().len(),
+            self.spec.output_names().len(),
+        );
+        for (job, out) in jobs.iter().zip(outs.iter_mut()) {
+            let head = process.line(self.timeout).map_err(|e| self.failure(&e))?;
+            let mut words = head.split_whitespace();
+            match (words.next(), words.next().map(str::parse::<u64>)) {
+                (Some("record"), Some(Ok(index))) if index == job.index => {}
+                (Some("error"), Some(Ok(index))) if index == job.index => {
+                    let message = head.splitn(3, ' ').nth(2).unwrap_or("").trim();
+                    results.push(Err(SimError::External {
+                        command: self.command_line(),
+                        message: format!("experiment {index} failed: {message}"),
+                    }));
+                    continue;
+                }
+                _ => {
+                    return Err(self.failure(&format!(
+                        "expected `record {0}` or `error {0} MESSAGE`, it answered {head:?}",
+                        job.index
+                    )));
+                }
+            }
+            out.resize(n, n_u, n_y);
+            for k in 0..n {
+                let line = process.line(self.timeout).map_err(|e| {
+                    self.failure(&format!("{e} (at sample {k} of experiment {})", job.index))
+                })?;
+                let mut count = 0;
+                for (c, word) in line.split_whitespace().enumerate() {
+                    let value: f64 = word.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+                        self.failure(&format!(
+                            "sample {k} of experiment {}: {word:?} is not a finite number (line {line:?})",
+                            job.index
+                        ))
+                    })?;
+                    if c < n_u {
+                        out.input_mut(c)[k] = value;
+                    } else if c < n_u + n_y {
+                        out.output_mut(c - n_u)[k] = value;
+                    }
+                    count += 1;
+                }
+                if count != n_u + n_y {
+                    return Err(self.failure(&format!(
+                        "sample {k} of experiment {} has {count} values, the model has {n_u} \
+                         input(s) and {n_y} output(s) (line {line:?})",
+                        job.index
+                    )));
+                }
+            }
+            results.push(Ok(()));
+        }
+        Ok(())
+    }
+
+    fn failure(&self, message: &str) -> SimError {
+        SimError::External {
+            command: self.command_line(),
+            message: message.to_string(),
+        }
+    }
+
+    /// The error with the last lines the process wrote to standard error.
+    fn with_stderr(&self, e: SimError, process: &Process) -> SimError {
+        let tail = process.stderr_tail();
+        match e {
+            SimError::External { command, message } if !tail.is_empty() => SimError::External {
+                command,
+                message: format!("{message}; its standard error ended with: {tail}"),
+            },
+            other => other,
+        }
+    }
+
+    fn checkout(&self) -> Result<Process> {
+        let idle = self
+            .idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .pop();
+        match idle {
+            Some(p) => Ok(p),
+            None => self.spawn(),
+        }
+    }
+
+    fn checkin(&self, process: Process) {
+        self.idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(process);
+    }
+
+    /// Start the program and exchange the greeting.
+    fn spawn(&self) -> Result<Process> {
+        let mut command = Command::new(&self.command[0]);
+        command
+            .args(&self.command[1..])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        if let Some(dir) = &self.current_dir {
+            command.current_dir(dir);
+        }
+        let mut child = command.spawn().map_err(|e| {
+            self.failure(&format!(
+                "cannot start it ({e}){}",
+                self.current_dir
+                    .as_ref()
+                    .map_or(String::new(), |d| format!(" in {}", d.display()))
+            ))
+        })?;
+        let (stdin, stdout, stderr) =
+            match (child.stdin.take(), child.stdout.take(), child.stderr.take()) {
+                (Some(i), Some(o), Some(e)) => (i, o, e),
+                _ => {
+                    let _ = child.kill();
+                    return Err(self.failure("its standard streams could not be opened"));
+                }
+            };
+        let (sender, lines) = channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if sender.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let tail = Arc::new(Mutex::new(VecDeque::with_capacity(STDERR_LINES)));
+        let writer = Arc::clone(&tail);
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                let mut tail = writer.lock().unwrap_or_else(PoisonError::into_inner);
+                if tail.len() == STDERR_LINES {
+                    tail.pop_front();
+                }
+                tail.push_back(line);
+            }
+        });
+        let mut process = Process {
+            child,
+            stdin,
+            lines,
+            stderr: tail,
+        };
+        let spec = &self.spec;
+        let greeting = format!(
+            "twostage {PROTOCOL_VERSION} {} {} {} {}\n",
+            spec.n_params(),
+            spec.input_names().len(),
+            spec.output_names().len(),
+            spec.n_samples()
+        );
+        let answer = process
+            .send(&greeting)
+            .and_then(|()| process.line(self.timeout));
+        match answer {
+            Ok(line) if line.trim() == "ready" => Ok(process),
+            Ok(line) => {
+                let e = self.failure(&format!(
+                    "it answered the greeting {:?} with {line:?}, not `ready`",
+                    greeting.trim_end()
+                ));
+                let e = self.with_stderr(e, &process);
+                process.kill();
+                Err(e)
+            }
+            Err(message) => {
+                // Give a crashing program a moment to write why.
+                std::thread::sleep(Duration::from_millis(50));
+                let e = self.with_stderr(
+                    self.failure(&format!("at the greeting: {message}")),
+                    &process,
+                );
+                process.kill();
+                Err(e)
+            }
+        }
+    }
+}
+
+impl Simulator for ExternalSimulator {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    /// One experiment as a batch of one; the index and seed come from the
+    /// experiment's stream ([`ExternalJob::stream_of`]).
+    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
+        let (index, seed) = ExternalJob::stream_of(rng);
+        let job = ExternalJob { index, seed, theta };
+        self.simulate_batch(&[job], std::slice::from_mut(out))
+            .pop()
+            .unwrap_or_else(|| Err(self.failure("no answer")))
+    }
+}
+
+impl Drop for ExternalSimulator {
+    fn drop(&mut self) {
+        let idle = std::mem::take(self.idle.get_mut().unwrap_or_else(PoisonError::into_inner));
+        for mut process in idle {
+            // A polite end first: `quit`, then the process has a moment to go.
+            let _ = process.send("quit\n");
+            let deadline = Instant::now() + Duration::from_millis(200);
+            while Instant::now() < deadline {
+                if matches!(process.child.try_wait(), Ok(Some(_))) {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            process.kill();
+        }
+    }
+}
+
+/// One running simulator process.
+#[derive(Debug)]
+struct Process {
+    child: Child,
+    stdin: ChildStdin,
+    lines: Receiver<String>,
+    stderr: Arc<Mutex<VecDeque<String>>>,
+}
+
+impl Process {
+    fn send(&mut self, text: &str) -> std::result::Result<(), String> {
+        self.stdin
+            .write_all(text.as_bytes())
+            .and_then(|()| self.stdin.flush())
+            .map_err(|e| format!("it stopped reading its input ({e})"))
+    }
+
+    fn line(&mut self, timeout: Duration) -> std::result::Result<String, String> {
+        match self.lines.recv_timeout(timeout) {
+            Ok(line) => Ok(line),
+            Err(RecvTimeoutError::Timeout) => Err(format!(
+                "no answer within {} s (the timeout)",
+                timeout.as_secs_f64()
+            )),
+            Err(RecvTimeoutError::Disconnected) => {
+                let status = self
+                    .child
+                    .wait()
+                    .map_or_else(|e| e.to_string(), |s| s.to_string());
+                Err(format!("it ended ({status})"))
+            }
+        }
+    }
+
+    fn stderr_tail(&self) -> String {
+        let tail = self.stderr.lock().unwrap_or_else(PoisonError::into_inner);
+        tail.iter().cloned().collect::<Vec<_>>().join(" | ")
+    }
+
+    fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

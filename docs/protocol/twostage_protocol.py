@@ -1,0 +1,93 @@
+"""The twostage simulator protocol, version 1: serve a Python simulator to
+`twostage` over standard input and output (docs/protocol.md).
+
+    from twostage_protocol import serve
+
+    def simulate(theta, seed, index):
+        rng = random.Random(seed * 1_000_003 + index)   # or numpy's default_rng([seed, index])
+        ...
+        return inputs, outputs          # N rows of n_u values, N rows of n_y values
+
+    serve(simulate)
+
+A simulator that vectorizes gives `serve(batch=f)` instead, with
+f(thetas, seeds, indices) -> (inputs, outputs) of shapes [b][N][n_u] and
+[b][N][n_y]. Pure Python: no package is needed.
+"""
+
+import sys
+
+VERSION = 1
+
+
+class Shape:
+    """What the greeting announced: parameters, inputs, outputs, samples."""
+
+    def __init__(self, q, n_u, n_y, n):
+        self.q, self.n_u, self.n_y, self.n = q, n_u, n_y, n
+
+
+def _record(index, inputs, outputs, shape):
+    """The answer lines of one experiment, checked against the shape."""
+    lines = ["record %d" % index]
+    for k in range(shape.n):
+        row = [float(v) for v in (inputs[k] if shape.n_u else [])]
+        row += [float(v) for v in outputs[k]]
+        if len(row) != shape.n_u + shape.n_y:
+            raise ValueError(
+                "sample %d has %d values, the model has %d input(s) and %d output(s)"
+                % (k, len(row), shape.n_u, shape.n_y)
+            )
+        lines.append(" ".join(repr(v) for v in row))
+    return lines
+
+
+def _one_line(text):
+    return " ".join(str(text).split()) or "failed"
+
+
+def serve(simulate=None, batch=None, stdin=None, stdout=None):
+    """Answer requests until `quit` or the end of input."""
+    if (simulate is None) == (batch is None):
+        raise TypeError("give simulate= (one experiment) or batch= (many at once)")
+    stdin = stdin or sys.stdin
+    stdout = stdout or sys.stdout
+    greeting = stdin.readline().split()
+    if len(greeting) != 6 or greeting[0] != "twostage" or int(greeting[1]) != VERSION:
+        sys.stderr.write("not a twostage %d greeting: %r\n" % (VERSION, greeting))
+        sys.exit(2)
+    shape = Shape(*(int(v) for v in greeting[2:]))
+    stdout.write("ready\n")
+    stdout.flush()
+    while True:
+        line = stdin.readline()
+        words = line.split()
+        if not words or words[0] == "quit":
+            return
+        if words[0] != "batch" or len(words) != 2:
+            sys.stderr.write("unknown request %r\n" % line)
+            sys.exit(2)
+        jobs = []
+        for _ in range(int(words[1])):
+            values = stdin.readline().split()
+            index, seed = int(values[0]), int(values[1])
+            jobs.append((index, seed, [float(v) for v in values[2:]]))
+        out = []
+        if batch is not None:
+            try:
+                inputs, outputs = batch(
+                    [j[2] for j in jobs], [j[1] for j in jobs], [j[0] for j in jobs]
+                )
+                for b, (index, _, _) in enumerate(jobs):
+                    out += _record(index, inputs[b] if shape.n_u else None, outputs[b], shape)
+            except Exception as e:  # every experiment of the batch fails
+                out = ["error %d %s" % (j[0], _one_line(e)) for j in jobs]
+        else:
+            for index, seed, theta in jobs:
+                try:
+                    inputs, outputs = simulate(theta, seed, index)
+                    out += _record(index, inputs, outputs, shape)
+                except Exception as e:  # this experiment fails, the others go on
+                    out.append("error %d %s" % (index, _one_line(e)))
+        stdout.write("\n".join(out) + "\n")
+        stdout.flush()
