@@ -60,8 +60,15 @@ pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
     writeln!(out, "  stage 2     {network}")?;
     writeln!(
         out,
-        "  training    m = {} simulations ({} failed), seed {}, {} design",
-        t.simulations, t.failures, t.seed, t.sampling
+        "  training    m = {} records ({} failed), seed {}, {}",
+        t.simulations,
+        t.failures,
+        t.seed,
+        if t.sampling.starts_with("the chart") {
+            format!("from {}", t.sampling)
+        } else {
+            format!("simulated, {} design", t.sampling)
+        }
     )?;
     match e.validation() {
         Some(report) => writeln!(out, "{report}")?,

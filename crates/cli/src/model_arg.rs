@@ -70,6 +70,15 @@ impl Model {
         }
     }
 
+    /// The model for training on charts read from files: a model file
+    /// without a source has a spec but nothing to simulate with.
+    pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
+        match self {
+            Model::Builtin(model) => Ok(model.build(false)?),
+            Model::File(file) => file.chart_model().map_err(|e| usage(e.to_string())),
+        }
+    }
+
     /// A preset by name; `None` is the model's default (a built-in model's
     /// `paper`, a model file's first).
     pub fn preset(&self, name: Option<&str>) -> Result<Preset> {

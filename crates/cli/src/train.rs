@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
-use twostage::TwoStage;
+use twostage::{ChartFiles, TwoStage};
 
 use crate::inspect::trust_summary;
 use crate::model_arg::ModelArgs;
@@ -58,6 +58,20 @@ pub struct TrainArgs {
     /// Interval miscoverage: 0.1 gives 90% intervals, 0.05 95%.
     #[arg(long, default_value_t = 0.1)]
     alpha: f64,
+    /// Train on a chart simulated elsewhere: a folder with truth.csv
+    /// (experiment,<parameters>) and data.csv (experiment,<inputs>,<outputs>),
+    /// as `twostage simulate --count --out-dir` writes. Without
+    /// --validate-chart / --calibrate-chart, --validate and --calibrate
+    /// records are held out of it at random.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["auto", "sims"])]
+    chart: Option<PathBuf>,
+    /// With --chart: validate on this chart instead of held-out records.
+    #[arg(long, value_name = "DIR", requires = "chart")]
+    validate_chart: Option<PathBuf>,
+    /// With --chart: calibrate the intervals on this chart instead of
+    /// held-out records.
+    #[arg(long, value_name = "DIR", requires = "chart")]
+    calibrate_chart: Option<PathBuf>,
     /// Where to write the estimator.
     #[arg(long)]
     out: PathBuf,
@@ -69,7 +83,11 @@ pub struct TrainArgs {
 /// Run `twostage train`.
 pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     let model = args.model.resolve()?;
-    let sim = model.simulator(false)?;
+    let sim = if args.chart.is_some() {
+        model.chart_model()?
+    } else {
+        model.simulator(false)?
+    };
     let preset = model.preset(args.preset.as_deref())?;
     let mut builder = TwoStage::builder(sim.as_ref())
         .preset(preset)
@@ -99,7 +117,22 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         twostage::Error::InvalidSetting { .. } => usage(e.to_string()),
         other => anyhow::Error::new(other).context("training"),
     };
-    let estimator = if args.auto {
+    let chart = |dir: &Option<PathBuf>| -> Result<Option<ChartFiles>> {
+        dir.as_ref()
+            .map(|d| ChartFiles::open(d, sim.spec()).map_err(|e| usage(e.to_string())))
+            .transpose()
+    };
+    let estimator = if let Some(training) = chart(&args.chart)? {
+        let (calibration, validation) =
+            (chart(&args.calibrate_chart)?, chart(&args.validate_chart)?);
+        builder
+            .progress(&bars)
+            .train_on_chart(&training, calibration.as_ref(), validation.as_ref())
+            .map_err(|e| match e {
+                twostage::Error::ChartFile { .. } => usage(e.to_string()),
+                other => failed(other),
+            })?
+    } else if args.auto {
         let budget = match (args.budget_seconds, args.budget_sims) {
             (_, Some(m)) => twostage::Budget::Simulations(m),
             (Some(t), None) => twostage::Budget::Seconds(t),
@@ -131,6 +164,11 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
             start.elapsed().as_secs_f64(),
             args.out.display()
         )?;
+        let sampling = &estimator.training().sampling;
+        if sampling.starts_with("the chart") {
+            // The certificate covers records drawn as the chart's were.
+            writeln!(out, "trained on {sampling}")?;
+        }
         if let Some(report) = estimator.validation() {
             writeln!(out, "{report}")?;
         }

@@ -39,7 +39,7 @@ fn the_template_trains_validates_and_simulates_an_estimator() {
         "{shown}"
     );
     assert!(shown.contains("N = 500"), "{shown}");
-    assert!(shown.contains("m = 300 simulations"), "{shown}");
+    assert!(shown.contains("m = 300 records (0 failed), seed 1, simulated, Uniform design"), "{shown}");
     // Validation simulates the model again: from the file, which it needs.
     let out = twostage(&["validate", "--estimator", path(&estimator), "--sims", "100"]);
     assert_eq!(out.status.code(), Some(2));
@@ -54,7 +54,7 @@ fn the_template_trains_validates_and_simulates_an_estimator() {
         path(&model),
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
-    assert!(text(&out.stdout).contains("r = 100 fresh simulations"));
+    assert!(text(&out.stdout).contains("r = 100 records unseen in training"));
     // And `simulate` writes the file's records: 500 samples each.
     let out = twostage(&["simulate", "--model-file", path(&model), "--theta", "0.3"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
@@ -104,4 +104,93 @@ fn a_mistake_in_a_model_file_is_one_line_naming_file_line_and_key() {
     assert_eq!(out.status.code(), Some(2));
     let out = twostage(&["train", "--out", path(&dir.join("x"))]);
     assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn a_chart_simulated_elsewhere_trains_from_the_shell() {
+    let dir = scratch("model-file-chart");
+    // A model file without a source: its charts come from files.
+    let model = dir.join("short.toml");
+    std::fs::write(
+        &model,
+        "[model]\nname = \"short\"\n[[parameter]]\nname = \"theta\"\n\
+         prior = { dist = \"uniform\", low = -0.9, high = 0.9 }\n\
+         [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 300\n\
+         [[preset]]\nname = \"small\"\ncompress = \"arx:5,5\"\nfit = \"mlp:8\"\n",
+    )
+    .unwrap();
+    // The chart made "elsewhere": here by the built-in benchmark, shortened.
+    let maker = dir.join("maker.toml");
+    std::fs::write(
+        &maker,
+        "[model]\nname = \"maker\"\n[source]\nbuiltin = \"benchmark\"\n[signals]\nsamples = 300\n",
+    )
+    .unwrap();
+    let chart = dir.join("chart");
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&maker),
+        "--count",
+        "700",
+        "--seed",
+        "4",
+        "--out-dir",
+        path(&chart),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let estimator = dir.join("est.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        path(&chart),
+        "--validate",
+        "150",
+        "--calibrate",
+        "150",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report = text(&out.stdout);
+    assert!(report.contains("trained on the chart"), "{report}");
+    assert!(
+        report.contains("150 records held out of it at random"),
+        "{report}"
+    );
+    assert!(
+        report.contains("r = 150 records unseen in training"),
+        "{report}"
+    );
+    let shown = text(&twostage(&["inspect", path(&estimator)]).stdout);
+    assert!(shown.contains("m = 400 records (0 failed)"), "{shown}");
+    // Without a source the model cannot simulate: said, not attempted.
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--out",
+        path(&estimator),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("has no [source]"));
+    // A broken chart is one line naming the file and the line.
+    std::fs::write(chart.join("truth.csv"), "experiment,beta\n0,0.1\n").unwrap();
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        path(&chart),
+        "--out",
+        path(&estimator),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("truth.csv, line 1: header 'experiment,beta'"),
+        "{err}"
+    );
 }

@@ -83,7 +83,7 @@ fn train_inspect_and_estimate_recorded_experiments() {
         "model       benchmark",
         "theta in [-0.9, 0.9]",
         "ARX(5, 5)",
-        "m = 500 simulations",
+        "m = 500 records",
         "seed 3",
     ] {
         assert!(report.contains(needle), "missing {needle:?} in\n{report}");
@@ -298,7 +298,10 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let report = text(&out.stdout);
-    assert!(report.contains("r = 269 fresh simulations"), "{report}");
+    assert!(
+        report.contains("r = 269 records unseen in training"),
+        "{report}"
+    );
     assert!(report.contains("covers"), "{report}");
     assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
 
@@ -447,7 +450,10 @@ fn the_demo_trains_validates_and_estimates_a_fresh_record() {
     let out = twostage(&["demo", "--theta", "-0.3"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let report = text(&out.stdout);
-    assert!(report.contains("r = 1000 fresh simulations"), "{report}");
+    assert!(
+        report.contains("r = 1000 records unseen in training"),
+        "{report}"
+    );
     let estimate: f64 = report
         .split("estimated theta = ")
         .nth(1)

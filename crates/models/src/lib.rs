@@ -71,7 +71,7 @@ pub use pacejka::{
     CHICANE_AMPLITUDE, PACEJKA_NOISE_VARIANCE, PACEJKA_SAMPLE_TIME, PACEJKA_SAMPLES,
     PACEJKA_STEPS_PER_SAMPLE, PacejkaCar, PacejkaCarBuilder, Tire, Vehicle,
 };
-pub use prior::{Design, Prior, Sampling};
+pub use prior::{Design, Prior, Sampling, random_permutation};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
 pub use simulator::{ModelSpec, Simulator};
 

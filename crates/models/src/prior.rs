@@ -245,7 +245,7 @@ impl Prior {
             Sampling::Uniform => DesignKind::Uniform,
             Sampling::LatinHypercube => {
                 let strata = (0..self.dim())
-                    .map(|_| permutation(m, &mut design_rng))
+                    .map(|_| random_permutation(m, &mut design_rng))
                     .collect();
                 DesignKind::LatinHypercube { strata }
             }
@@ -362,8 +362,17 @@ impl Design {
     }
 }
 
-/// A uniformly random permutation of 0..m (Fisher-Yates).
-fn permutation(m: usize, rng: &mut ExperimentRng) -> Vec<u32> {
+/// A uniformly random permutation of 0..m (Fisher-Yates), drawn from `rng`:
+/// the Latin hypercube's strata, and the held-out split of a chart.
+///
+/// ```
+/// use twostage_models::{random_permutation, experiment_rng};
+/// let p = random_permutation(5, &mut experiment_rng(1, 0));
+/// let mut sorted = p.clone();
+/// sorted.sort_unstable();
+/// assert_eq!(sorted, [0, 1, 2, 3, 4]);
+/// ```
+pub fn random_permutation(m: usize, rng: &mut ExperimentRng) -> Vec<u32> {
     // Strata are stored as u32 to halve the memory of large designs; a design
     // of more than 2^32 experiments would not fit in memory anyway.
     let mut p: Vec<u32> = (0..m).map(|i| i as u32).collect();

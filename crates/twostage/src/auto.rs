@@ -247,6 +247,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 sampling: format!("{:?}", spec.prior().sampling()),
                 regressor: regressor_config,
             },
+            crate::builder::Fresh::Simulate,
         )?;
         Ok(AutoOutcome {
             estimator,

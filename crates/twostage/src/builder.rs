@@ -3,12 +3,18 @@
 
 use std::time::Instant;
 
+use twostage_compress::Compressor;
 use twostage_fit::Ridge;
-use twostage_models::{Prior, Sampling, Simulator};
+use twostage_models::{
+    IoData, Prior, Sampling, Simulator, StreamPurpose, random_permutation, stream_rng,
+};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
-use crate::chart::{StoredChart, compress_chart_observed, simulate_records};
+use crate::chart::{
+    CompressedChart, ExperimentFailure, StoredChart, compress_chart_observed, simulate_records,
+};
+use crate::chart_file::ChartFiles;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
@@ -35,6 +41,31 @@ pub(crate) struct TrainedOn<'f> {
     pub(crate) failures: usize,
     pub(crate) sampling: String,
     pub(crate) regressor: RegressorConfig,
+}
+
+/// Where calibration and validation records come from.
+#[derive(Clone, Copy)]
+pub(crate) enum Fresh<'c> {
+    /// Fresh simulations, as many as the builder says.
+    Simulate,
+    /// Compressed charts made elsewhere (held out of a chart, or their own).
+    Given {
+        calibration: Option<&'c CompressedChart>,
+        validation: Option<&'c CompressedChart>,
+    },
+}
+
+/// Truths, estimates and features of a compressed chart.
+fn given_estimates(
+    estimator: &Estimator,
+    chart: &CompressedChart,
+) -> Result<(
+    ndarray::Array2<f64>,
+    ndarray::Array2<f64>,
+    ndarray::Array2<f64>,
+)> {
+    let estimates = estimator.predict_features(chart.features.view())?;
+    Ok((chart.thetas.clone(), estimates, chart.features.clone()))
 }
 
 /// Streams of the timing pilot, apart from the training chart's.
@@ -187,6 +218,18 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     }
 
     fn check(&self) -> Result<()> {
+        if self.simulations < 10 {
+            return Err(Error::InvalidSetting {
+                name: "simulations",
+                value: self.simulations.to_string(),
+                reason: "at least 10".into(),
+            });
+        }
+        self.check_common()
+    }
+
+    /// The settings a run checks whether it simulates or reads its chart.
+    fn check_common(&self) -> Result<()> {
         let invalid = |name: &'static str, value: String, reason: &str| {
             Err(Error::InvalidSetting {
                 name,
@@ -194,9 +237,6 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 reason: reason.into(),
             })
         };
-        if self.simulations < 10 {
-            return invalid("simulations", self.simulations.to_string(), "at least 10");
-        }
         if !(self.alpha > 0.0 && self.alpha < 1.0) {
             return invalid("alpha", self.alpha.to_string(), "must lie in (0, 1)");
         }
@@ -257,7 +297,165 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 sampling: format!("{:?}", training_prior.sampling()),
                 regressor: self.regressor.clone(),
             },
+            Fresh::Simulate,
         )
+    }
+
+    /// Train on a chart simulated elsewhere ([`ChartFiles`]) instead of
+    /// simulating one: compress its records as they are read, fit stage 2,
+    /// then calibrate and validate on `calibration` and `validation` charts
+    /// when given, else on records held out of `chart` at random (seeded):
+    /// as many as [`Self::calibration`] and [`Self::validation`] say. The
+    /// certificate then covers records drawn as the chart's were, and the
+    /// estimator's training record says where they came from.
+    ///
+    /// # Errors
+    /// Invalid settings, a chart too small for its held-out parts, a file
+    /// problem ([`Error::ChartFile`]), too many records that cannot be
+    /// compressed, or a failed fit.
+    pub fn train_on_chart(
+        self,
+        chart: &ChartFiles,
+        calibration: Option<&ChartFiles>,
+        validation: Option<&ChartFiles>,
+    ) -> Result<Estimator> {
+        let spec = self.simulator.spec();
+        let m = chart.len();
+        let held_validation = if validation.is_some() {
+            0
+        } else {
+            self.validation
+        };
+        let held_calibration = if calibration.is_some() {
+            0
+        } else {
+            self.calibration
+        };
+        let held = held_validation + held_calibration;
+        if m < held + 10 {
+            return Err(Error::InvalidSetting {
+                name: "held-out records",
+                value: format!("{held_validation} validation + {held_calibration} calibration"),
+                reason: format!(
+                    "the chart {} has {m} records: at least 10 must be left to train on (hold \
+                     out fewer, or give separate validation and calibration charts)",
+                    chart.dir().display()
+                ),
+            });
+        }
+        self.check_common()?;
+        // Roles by a seeded permutation: 0 train, 1 calibration, 2 validation.
+        let order = random_permutation(m, &mut stream_rng(self.seed, 0, StreamPurpose::Design));
+        let mut role = vec![0u8; m];
+        for (rank, &row) in order.iter().enumerate() {
+            role[row as usize] = if rank < held_validation {
+                2
+            } else if rank < held {
+                1
+            } else {
+                0
+            };
+        }
+        let compressor = self.chart_compressor(chart, Some(&role))?;
+        let mut parts = chart_parts(spec, &compressor, chart, Some(&role), 3)?;
+        let (training, held_out) = parts.split_at_mut(1);
+        let training = &training[0];
+        for (part, stage) in [
+            (&training, "training"),
+            (&&held_out[0], "calibration"),
+            (&&held_out[1], "validation"),
+        ] {
+            crate::chart::within_allowance(
+                stage,
+                &part.failures,
+                part.total(),
+                self.max_failure_fraction,
+            )?;
+        }
+        let own = |given: Option<&ChartFiles>| -> Result<Option<CompressedChart>> {
+            given
+                .map(|c| {
+                    let mut parts = chart_parts(spec, &compressor, c, None, 1)?;
+                    let part = parts.swap_remove(0);
+                    crate::chart::within_allowance(
+                        "given",
+                        &part.failures,
+                        part.total(),
+                        self.max_failure_fraction,
+                    )?;
+                    Ok(part)
+                })
+                .transpose()
+        };
+        let calibration_chart = match own(calibration)? {
+            Some(c) => Some(c),
+            None if held_calibration > 0 => Some(held_out[0].clone()),
+            None => None,
+        };
+        let validation_chart = match own(validation)? {
+            Some(c) => Some(c),
+            None if held_validation > 0 => Some(held_out[1].clone()),
+            None => None,
+        };
+        self.progress.begin(Stage::Fitting, 0);
+        let targets = to_learning_space(training.thetas.view(), spec.prior().marginals());
+        let regressor = self
+            .regressor
+            .fit(training.features.view(), targets.view(), self.seed);
+        self.progress.end(Stage::Fitting);
+        let source = |given: Option<&ChartFiles>, held: usize| match given {
+            Some(c) => format!("the chart {}", c.dir().display()),
+            None if held > 0 => format!("{held} records held out of it at random"),
+            None => "none".into(),
+        };
+        self.finish(
+            compressor,
+            regressor?,
+            TrainedOn {
+                features: training.features.view(),
+                simulations: training.total(),
+                failures: training.failures.len(),
+                sampling: format!(
+                    "the chart {} (calibration: {}; validation: {})",
+                    chart.dir().display(),
+                    source(calibration, held_calibration),
+                    source(validation, held_validation)
+                ),
+                regressor: self.regressor.clone(),
+            },
+            Fresh::Given {
+                calibration: calibration_chart.as_ref(),
+                validation: validation_chart.as_ref(),
+            },
+        )
+    }
+
+    /// The compressor, prepared (PCA directions, NARX scales) on the first
+    /// training records of a chart when it needs that.
+    fn chart_compressor(
+        &self,
+        chart: &ChartFiles,
+        role: Option<&[u8]>,
+    ) -> Result<CompressorConfig> {
+        let count = self.compressor.records_to_prepare();
+        if count == 0 {
+            return Ok(self.compressor.clone());
+        }
+        // The first `count` training rows of truth.csv, whatever data.csv's order.
+        let wanted: Vec<usize> = (0..chart.len())
+            .filter(|row| role.is_none_or(|r| r[*row] == 0))
+            .take(count)
+            .collect();
+        let mut first: Vec<(usize, IoData)> = Vec::with_capacity(wanted.len());
+        chart.for_each_record(self.simulator.spec(), |row, record| {
+            if wanted.binary_search(&row).is_ok() {
+                first.push((row, record.clone()));
+            }
+            Ok(())
+        })?;
+        first.sort_by_key(|(row, _)| *row);
+        let records: Vec<IoData> = first.into_iter().map(|(_, r)| r).collect();
+        self.compressor.prepared(&records)
     }
 
     /// Assemble the estimator from its fitted stages, then calibrate its
@@ -267,6 +465,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         compressor: CompressorConfig,
         regressor: FittedRegressor,
         trained: TrainedOn<'_>,
+        fresh: Fresh<'_>,
     ) -> Result<Estimator> {
         let spec = self.simulator.spec();
         let prior = spec.prior();
@@ -298,14 +497,21 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             marginals: prior.marginals().to_vec(),
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
-        let intervals = if self.calibration > 0 {
-            let (truth, estimates, features) = self.fresh_estimates(
+        let calibration = match fresh {
+            Fresh::Simulate if self.calibration > 0 => Some(self.fresh_estimates(
                 &estimator,
                 &iid,
                 self.calibration,
                 CALIBRATION_SEED,
                 Stage::Calibration,
-            )?;
+            )?),
+            Fresh::Given {
+                calibration: Some(chart),
+                ..
+            } => Some(given_estimates(&estimator, chart)?),
+            _ => None,
+        };
+        let intervals = if let Some((truth, estimates, features)) = calibration {
             let residuals = &truth - &estimates;
             if let Some(envelope) = estimator.envelope.as_mut() {
                 envelope.recalibrate(features.view());
@@ -323,14 +529,21 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             None
         };
         estimator.intervals = intervals.clone();
-        if self.validation > 0 {
-            let (truth, estimates, features) = self.fresh_estimates(
+        let validation = match fresh {
+            Fresh::Simulate if self.validation > 0 => Some(self.fresh_estimates(
                 &estimator,
                 &iid,
                 self.validation,
                 VALIDATION_SEED,
                 Stage::Validation,
-            )?;
+            )?),
+            Fresh::Given {
+                validation: Some(chart),
+                ..
+            } => Some(given_estimates(&estimator, chart)?),
+            _ => None,
+        };
+        if let Some((truth, estimates, features)) = validation {
             if let Some(adaptive) = estimator.adaptive.as_mut() {
                 adaptive.validate(features.view(), (&truth - &estimates).view())?;
             }
@@ -426,4 +639,68 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             Some((Stage::Training, self.progress)),
         )
     }
+}
+
+/// A chart's records compressed, split into `parts` by `role` (all in part
+/// 0 without one), in the file's order; records that cannot be compressed
+/// are counted as failures of their part.
+fn chart_parts(
+    spec: &twostage_models::ModelSpec,
+    compressor: &CompressorConfig,
+    chart: &ChartFiles,
+    role: Option<&[u8]>,
+    parts: usize,
+) -> Result<Vec<CompressedChart>> {
+    let (q, n) = (spec.n_params(), compressor.n_features());
+    // Features by truth.csv row, so that the order of data.csv never
+    // changes the estimator.
+    let mut features = vec![f64::NAN; chart.len() * n];
+    let mut errors: Vec<Option<String>> = vec![None; chart.len()];
+    let mut work = twostage_compress::Workspace::new();
+    chart.for_each_record(spec, |row, record| {
+        let alpha = &mut features[row * n..(row + 1) * n];
+        if let Err(e) =
+            compressor.compress_into(record.inputs(), record.outputs(), &mut work, alpha)
+        {
+            errors[row] = Some(e.to_string());
+        }
+        Ok(())
+    })?;
+    let mut out = Vec::with_capacity(parts);
+    for p in 0..parts {
+        let in_part = |row: &usize| role.is_none_or(|r| usize::from(r[*row]) == p);
+        let kept: Vec<usize> = (0..chart.len())
+            .filter(|row| in_part(row) && errors[*row].is_none())
+            .collect();
+        let failures = (0..chart.len())
+            .filter(in_part)
+            .filter_map(|row| {
+                errors[row].as_ref().map(|e| ExperimentFailure {
+                    index: row,
+                    theta: chart.theta(row).to_vec(),
+                    error: e.clone(),
+                })
+            })
+            .collect();
+        let thetas: Vec<f64> = kept
+            .iter()
+            .flat_map(|&r| chart.theta(r).iter().copied())
+            .collect();
+        let kept_features: Vec<f64> = kept
+            .iter()
+            .flat_map(|&r| features[r * n..(r + 1) * n].iter().copied())
+            .collect();
+        let rows = kept.len();
+        let shape = |v: Vec<f64>, w: usize| {
+            ndarray::Array2::from_shape_vec((rows, w), v)
+                .unwrap_or_else(|_| unreachable!("rows * width values were kept"))
+        };
+        out.push(CompressedChart {
+            thetas: shape(thetas, q),
+            features: shape(kept_features, n),
+            indices: kept,
+            failures,
+        });
+    }
+    Ok(out)
 }

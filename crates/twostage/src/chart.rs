@@ -167,9 +167,16 @@ where
     })
 }
 
+impl CompressedChart {
+    /// Experiments tried: kept and failed.
+    pub fn total(&self) -> usize {
+        self.indices.len() + self.failures.len()
+    }
+}
+
 /// Refuse a chart whose failures exceed `max_failure_fraction` of `total`
 /// experiments (`failures` in index order), naming the first.
-fn within_allowance(
+pub(crate) fn within_allowance(
     stage: &'static str,
     failures: &[ExperimentFailure],
     total: usize,

@@ -83,6 +83,19 @@ pub enum Error {
         /// What is wrong and what is accepted.
         message: String,
     },
+    /// A chart file is malformed.
+    #[error(
+        "{file}{}: {message}",
+        line.map_or_else(String::new, |l| format!(", line {l}"))
+    )]
+    ChartFile {
+        /// The file.
+        file: String,
+        /// The line of the problem, when known.
+        line: Option<usize>,
+        /// What is wrong and what is accepted.
+        message: String,
+    },
     /// A model has no preset or method of that name (another model may).
     #[error("{what} '{name}' is not available for {model}: it has {available}")]
     NotAvailable {

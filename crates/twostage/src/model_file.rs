@@ -246,6 +246,19 @@ impl ModelFile {
         }
     }
 
+    /// The model as charts read from files need it: its spec, without
+    /// simulating (a file without a source has nothing to simulate with;
+    /// one with a source simulates as [`ModelFile::simulator`] does).
+    pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
+        match self.source {
+            ModelSource::ChartsOnly => Ok(Box::new(ChartsOnly {
+                spec: self.spec.clone(),
+                origin: self.origin.clone(),
+            })),
+            _ => self.simulator(),
+        }
+    }
+
     /// The presets, the file's first, then a built-in source's own.
     pub fn preset_names(&self) -> impl Iterator<Item = &str> {
         self.presets.iter().map(|(name, _)| name.as_str())
@@ -312,6 +325,30 @@ impl Simulator for FileSimulator {
             }
         }
         Ok(())
+    }
+}
+
+/// The model of a file without a source: a spec, and a refusal to simulate.
+struct ChartsOnly {
+    spec: ModelSpec,
+    origin: String,
+}
+
+impl Simulator for ChartsOnly {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    fn simulate(
+        &self,
+        _: &[f64],
+        _: &mut ExperimentRng,
+        _: &mut IoData,
+    ) -> twostage_models::Result<()> {
+        Err(twostage_models::SimError::InvalidData(format!(
+            "{} has no [source]: its charts come from files, it cannot simulate",
+            self.origin
+        )))
     }
 }
 

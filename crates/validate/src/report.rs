@@ -133,7 +133,7 @@ impl std::fmt::Display for ValidationReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(
             f,
-            "validation on r = {} fresh simulations (confidence 1 - delta = {}):",
+            "validation on r = {} records unseen in training (confidence 1 - delta = {}):",
             self.total.r,
             1.0 - self.total.delta
         )?;

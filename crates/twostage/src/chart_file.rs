@@ -1,0 +1,350 @@
+//! Charts simulated elsewhere, read from files: the CSV layout `twostage
+//! simulate --count --out-dir` writes. DIR/truth.csv holds
+//! `experiment,<parameter names>`, one row per experiment; DIR/data.csv holds
+//! `experiment,<input names>,<output names>`, one row per sample, each
+//! experiment's rows together, experiments in any order. Records are read
+//! one at a time, so memory stays O(m (q + n)) for m experiments, whatever
+//! their length. Every problem names the file, the line and the column.
+
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+
+use twostage_models::{IoData, ModelSpec};
+
+use crate::error::{Error, Result};
+
+/// A chart on disk, its parameters read and checked, its records read on
+/// demand.
+///
+/// ```no_run
+/// use twostage::{ChartFiles, ModelFile};
+/// let model = ModelFile::load("sir.toml")?;
+/// let chart = ChartFiles::open("runs/sir", model.spec())?;
+/// println!("{} experiments", chart.len());
+/// # Ok::<(), twostage::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct ChartFiles {
+    dir: PathBuf,
+    ids: Vec<String>,
+    thetas: Vec<f64>,
+    q: usize,
+}
+
+impl ChartFiles {
+    /// Read DIR/truth.csv and check it against the model.
+    ///
+    /// # Errors
+    /// [`Error::ChartFile`] naming the file, line and column of the first
+    /// problem: a header without the model's parameter names, a value that
+    /// is not a finite number, an experiment listed twice, no experiment.
+    pub fn open(dir: impl AsRef<Path>, spec: &ModelSpec) -> Result<Self> {
+        let dir = dir.as_ref().to_path_buf();
+        let path = dir.join("truth.csv");
+        let file = Located::new(&path);
+        let mut lines = file.lines()?;
+        let q = spec.n_params();
+        let header = lines
+            .next()
+            .ok_or_else(|| file.error(None, "the file is empty; expected a header".into()))??;
+        let expected: Vec<&str> = std::iter::once("experiment")
+            .chain(spec.param_names().iter().map(String::as_str))
+            .collect();
+        let found: Vec<&str> = header.1.split(',').map(str::trim).collect();
+        if found != expected {
+            return Err(file.error(
+                Some(header.0),
+                format!(
+                    "header '{}': expected '{}' (the model's parameters, in order)",
+                    header.1,
+                    expected.join(",")
+                ),
+            ));
+        }
+        let (mut ids, mut thetas, mut seen) = (Vec::new(), Vec::new(), HashMap::new());
+        for line in lines {
+            let (number, text) = line?;
+            let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+            if fields.len() != q + 1 {
+                return Err(file.error(
+                    Some(number),
+                    format!("{} values, the header has {}", fields.len(), q + 1),
+                ));
+            }
+            let id = fields[0].to_string();
+            if let Some(first) = seen.insert(id.clone(), number) {
+                return Err(file.error(
+                    Some(number),
+                    format!("experiment '{id}' again (first on line {first})"),
+                ));
+            }
+            for (j, field) in fields[1..].iter().enumerate() {
+                thetas.push(file.number(field, number, expected[j + 1])?);
+            }
+            ids.push(id);
+        }
+        if ids.is_empty() {
+            return Err(file.error(None, "no experiment: the header is alone".into()));
+        }
+        Ok(Self {
+            dir,
+            ids,
+            thetas,
+            q,
+        })
+    }
+
+    /// Number of experiments m.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Whether the chart is empty (never: `open` refuses that).
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    /// The folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The parameters of experiment `row` (in truth.csv's order).
+    pub fn theta(&self, row: usize) -> &[f64] {
+        &self.thetas[row * self.q..(row + 1) * self.q]
+    }
+
+    /// Read DIR/data.csv and hand each record to `visit` with its row in
+    /// truth.csv, in the file's order.
+    ///
+    /// # Errors
+    /// [`Error::ChartFile`] for the first problem in the file (a header
+    /// without the model's signals, a value that is not a finite number, a
+    /// record of another length, an experiment not in truth.csv, one whose
+    /// rows are split, one missing); `visit`'s own errors.
+    pub fn for_each_record(
+        &self,
+        spec: &ModelSpec,
+        mut visit: impl FnMut(usize, &IoData) -> Result<()>,
+    ) -> Result<()> {
+        let path = self.dir.join("data.csv");
+        let file = Located::new(&path);
+        let mut lines = file.lines()?;
+        let header = lines
+            .next()
+            .ok_or_else(|| file.error(None, "the file is empty; expected a header".into()))??;
+        let columns = signal_columns(spec, &header.1).ok_or_else(|| {
+            file.error(
+                Some(header.0),
+                format!(
+                    "header '{}': expected experiment, then the inputs and outputs ({}), or u,y \
+                     as `twostage simulate` writes them",
+                    header.1,
+                    spec.input_names()
+                        .iter()
+                        .chain(spec.output_names())
+                        .cloned()
+                        .collect::<Vec<_>>()
+                        .join(",")
+                ),
+            )
+        })?;
+        let rows: HashMap<&str, usize> = self
+            .ids
+            .iter()
+            .enumerate()
+            .map(|(row, id)| (id.as_str(), row))
+            .collect();
+        let (n, n_u, n_y) = (
+            spec.n_samples(),
+            spec.input_names().len(),
+            spec.output_names().len(),
+        );
+        let mut done = vec![false; self.ids.len()];
+        let mut record = IoData::zeros(n, n_u, n_y);
+        // The experiment being read: its row, first line, and samples so far.
+        let mut current: Option<(usize, usize, usize)> = None;
+        let mut finish =
+            |current: Option<(usize, usize, usize)>, record: &IoData, at: usize| -> Result<()> {
+                if let Some((row, first, k)) = current {
+                    if k != n {
+                        return Err(file.error(
+                            Some(at),
+                            format!(
+                                "experiment '{}' (from line {first}) has {k} samples, the model's \
+                             records have {n}",
+                                self.ids[row]
+                            ),
+                        ));
+                    }
+                    visit(row, record)?;
+                }
+                Ok(())
+            };
+        let mut last_line = header.0;
+        for line in lines {
+            let (number, text) = line?;
+            last_line = number;
+            let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+            if fields.len() != columns.len() + 1 {
+                return Err(file.error(
+                    Some(number),
+                    format!(
+                        "{} values, the header has {}",
+                        fields.len(),
+                        columns.len() + 1
+                    ),
+                ));
+            }
+            let id = fields[0];
+            let same = current.is_some_and(|(row, _, _)| self.ids[row] == id);
+            if !same {
+                finish(current, &record, number)?;
+                let row = *rows.get(id).ok_or_else(|| {
+                    file.error(
+                        Some(number),
+                        format!("experiment '{id}' is not in truth.csv"),
+                    )
+                })?;
+                if done[row] {
+                    return Err(file.error(
+                        Some(number),
+                        format!(
+                            "experiment '{id}' resumes after other experiments: keep each \
+                             experiment's rows together"
+                        ),
+                    ));
+                }
+                done[row] = true;
+                current = Some((row, number, 0));
+            }
+            let Some((_, _, k)) = current.as_mut() else {
+                continue;
+            };
+            if *k >= n {
+                return Err(file.error(
+                    Some(number),
+                    format!("experiment '{id}' has more than the model's {n} samples"),
+                ));
+            }
+            for (c, field) in fields[1..].iter().enumerate() {
+                let value = file.number(field, number, &columns[c].1)?;
+                match columns[c].0 {
+                    Signal::Input(j) => record.input_mut(j)[*k] = value,
+                    Signal::Output(j) => record.output_mut(j)[*k] = value,
+                }
+            }
+            *k += 1;
+        }
+        finish(current, &record, last_line + 1)?;
+        if let Some(row) = done.iter().position(|d| !d) {
+            let missing = done.iter().filter(|d| !**d).count();
+            return Err(file.error(
+                None,
+                format!(
+                    "{missing} experiment(s) of truth.csv have no rows, the first '{}'",
+                    self.ids[row]
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Where a column's values go.
+#[derive(Debug, Clone, Copy)]
+enum Signal {
+    Input(usize),
+    Output(usize),
+}
+
+/// The data columns after `experiment`, by the model's signal names or by
+/// the generic `u,y` (`u1,u2,...,y1,...`) of `twostage simulate`; `None` if
+/// the header is neither.
+fn signal_columns(spec: &ModelSpec, header: &str) -> Option<Vec<(Signal, String)>> {
+    let found: Vec<&str> = header.split(',').map(str::trim).collect();
+    let (first, rest) = found.split_first()?;
+    if *first != "experiment" {
+        return None;
+    }
+    let generic = |prefix: &str, n: usize| -> Vec<String> {
+        if n == 1 {
+            vec![prefix.to_string()]
+        } else {
+            (1..=n).map(|j| format!("{prefix}{j}")).collect()
+        }
+    };
+    let (n_u, n_y) = (spec.input_names().len(), spec.output_names().len());
+    for (inputs, outputs) in [
+        (spec.input_names().to_vec(), spec.output_names().to_vec()),
+        (generic("u", n_u), generic("y", n_y)),
+    ] {
+        let mut columns = Vec::with_capacity(rest.len());
+        for name in rest {
+            if let Some(j) = inputs.iter().position(|s| s == name) {
+                columns.push((Signal::Input(j), (*name).to_string()));
+            } else if let Some(j) = outputs.iter().position(|s| s == name) {
+                columns.push((Signal::Output(j), (*name).to_string()));
+            }
+        }
+        let mut named: Vec<&str> = rest.to_vec();
+        named.sort_unstable();
+        named.dedup();
+        if columns.len() == rest.len() && named.len() == rest.len() && rest.len() == n_u + n_y {
+            return Some(columns);
+        }
+    }
+    None
+}
+
+/// A file being read, for its messages.
+struct Located<'p> {
+    path: &'p Path,
+}
+
+impl<'p> Located<'p> {
+    fn new(path: &'p Path) -> Self {
+        Self { path }
+    }
+
+    fn error(&self, line: Option<usize>, message: String) -> Error {
+        Error::ChartFile {
+            file: self.path.display().to_string(),
+            line,
+            message,
+        }
+    }
+
+    /// The non-empty lines with their 1-based numbers.
+    fn lines(&self) -> Result<impl Iterator<Item = Result<(usize, String)>> + 'p> {
+        let file = std::fs::File::open(self.path).map_err(|cause| Error::Io {
+            path: self.path.display().to_string(),
+            cause,
+        })?;
+        let path = self.path;
+        Ok(BufReader::new(file)
+            .lines()
+            .enumerate()
+            .map(move |(i, line)| {
+                line.map(|l| (i + 1, l)).map_err(|cause| Error::Io {
+                    path: path.display().to_string(),
+                    cause,
+                })
+            })
+            .filter(|l| l.as_ref().map_or(true, |(_, text)| !text.trim().is_empty())))
+    }
+
+    fn number(&self, field: &str, line: usize, column: &str) -> Result<f64> {
+        field
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| {
+                self.error(
+                    Some(line),
+                    format!("column {column}: '{field}' is not a finite number"),
+                )
+            })
+    }
+}

@@ -1,0 +1,226 @@
+//! Charts simulated elsewhere, read from CSV files: the same estimator as
+//! when simulating the same chart, held-out parts when there is no
+//! simulator, and every file problem named by file and line.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use twostage::models::{Benchmark, IoData, Simulator, run_experiment};
+use twostage::{ChartFiles, Error, TwoStage};
+
+fn model() -> Benchmark {
+    Benchmark::builder().n_samples(200).build().unwrap()
+}
+
+/// Experiments 0..m of the design of `seed`, written as `twostage simulate
+/// --count` does (values that read back to the same bits).
+fn write_chart(dir: &Path, m: usize, seed: u64) {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    let model = model();
+    let design = model.prior().design(m, seed).unwrap();
+    let (mut truth, mut data) = (
+        String::from("experiment,theta\n"),
+        String::from("experiment,u,y\n"),
+    );
+    let (mut theta, mut record) = ([0.0], IoData::default());
+    for i in 0..m {
+        run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
+        writeln!(truth, "{i},{:?}", theta[0]).unwrap();
+    }
+    // data.csv in reverse: experiments may come in any order.
+    for i in (0..m).rev() {
+        run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
+        for k in 0..record.n_samples() {
+            let (u, y) = (record.input(0)[k], record.output(0)[k]);
+            writeln!(data, "{i},{u:?},{y:?}").unwrap();
+        }
+    }
+    std::fs::write(dir.join("truth.csv"), truth).unwrap();
+    std::fs::write(dir.join("data.csv"), data).unwrap();
+}
+
+fn scratch(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name)
+}
+
+#[test]
+fn a_chart_from_files_trains_the_same_stages_as_simulating_it() {
+    let model = model();
+    let (train, check) = (scratch("chart-same-train"), scratch("chart-same-check"));
+    write_chart(&train, 300, 7);
+    write_chart(&check, 120, 8);
+    let builder = || {
+        TwoStage::builder(&model)
+            .preset(twostage::paper_benchmark())
+            .simulations(300)
+            .seed(7)
+    };
+    let spec = model.spec();
+    let (chart, other) = (
+        ChartFiles::open(&train, spec).unwrap(),
+        ChartFiles::open(&check, spec).unwrap(),
+    );
+    let from_files = builder()
+        .train_on_chart(&chart, Some(&other), Some(&other))
+        .unwrap();
+    let simulated = builder().validation(0).calibration(0).train().unwrap();
+    // Stage 1 and stage 2 are the same bits: the chart is the design's.
+    assert_eq!(from_files.compressor(), simulated.compressor());
+    assert!(
+        from_files.regressor() == simulated.regressor(),
+        "the fitted networks differ"
+    );
+    let report = from_files.validation().unwrap();
+    assert_eq!(report.total.r, 120);
+    assert!(report.parameters[0].rmse < 0.15, "{report}");
+    assert!(from_files.training().sampling.contains("chart-same-check"));
+}
+
+#[test]
+fn without_other_charts_the_checks_are_held_out_at_random_and_reproducibly() {
+    let model = model();
+    let dir = scratch("chart-held-out");
+    write_chart(&dir, 260, 3);
+    let chart = ChartFiles::open(&dir, model.spec()).unwrap();
+    let train = || {
+        TwoStage::builder(&model)
+            .preset(twostage::paper_benchmark())
+            .validation(60)
+            .calibration(50)
+            .seed(2)
+            .train_on_chart(&chart, None, None)
+            .unwrap()
+    };
+    let a = train();
+    assert_eq!(a.training().simulations, 150);
+    assert_eq!(a.validation().unwrap().total.r, 60);
+    assert!(a.training().sampling.contains("60 records held out"));
+    assert_eq!(a.to_bytes().unwrap(), train().to_bytes().unwrap());
+    let e = TwoStage::builder(&model)
+        .validation(200)
+        .calibration(100)
+        .train_on_chart(&chart, None, None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("has 260 records: at least 10 must be left"),
+        "{e}"
+    );
+}
+
+#[test]
+fn every_file_problem_names_its_file_and_line() {
+    let model = model();
+    let spec = model.spec();
+    let dir = scratch("chart-problems");
+    let cases: &[(&str, &str, &str, Option<usize>, &str)] = &[
+        // (file, replace, with, line, message)
+        (
+            "truth.csv",
+            "experiment,theta",
+            "experiment,beta",
+            Some(1),
+            "expected 'experiment,theta'",
+        ),
+        (
+            "truth.csv",
+            "\n1,",
+            "\n0,",
+            Some(3),
+            "experiment '0' again (first on line 2)",
+        ),
+        (
+            "data.csv",
+            "experiment,u,y",
+            "experiment,u",
+            Some(1),
+            "or u,y",
+        ),
+        (
+            "data.csv",
+            "\n2,",
+            "\n2,nan,",
+            Some(2),
+            "values, the header has 3",
+        ),
+        (
+            "data.csv",
+            "\n1,",
+            "\n7,",
+            Some(202),
+            "experiment '7' is not in truth.csv",
+        ),
+    ];
+    for (file, from, to, line, text) in cases {
+        write_chart(&dir, 3, 1);
+        let path = dir.join(file);
+        let body = std::fs::read_to_string(&path).unwrap();
+        assert!(body.contains(from), "{from}");
+        std::fs::write(&path, body.replacen(from, to, 1)).unwrap();
+        let e = ChartFiles::open(&dir, spec)
+            .and_then(|chart| chart.for_each_record(spec, |_, _| Ok(())))
+            .unwrap_err();
+        match &e {
+            Error::ChartFile {
+                file: f,
+                line: l,
+                message,
+            } => {
+                assert!(f.ends_with(file), "{e}");
+                assert_eq!(l, line, "{from} -> {to}: {e}");
+                assert!(message.contains(text), "{from} -> {to}: {e}");
+            }
+            other => panic!("{other}"),
+        }
+    }
+    // A value that is not a number names its column; a short record and a
+    // missing experiment are named too.
+    write_chart(&dir, 3, 1);
+    let data = std::fs::read_to_string(dir.join("data.csv")).unwrap();
+    let mut lines: Vec<String> = data.lines().map(str::to_string).collect();
+    lines[5] = "2,0.5,abc".into();
+    std::fs::write(dir.join("data.csv"), lines.join("\n")).unwrap();
+    let chart = ChartFiles::open(&dir, spec).unwrap();
+    let e = chart
+        .for_each_record(spec, |_, _| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 6: column y: 'abc' is not a finite number"),
+        "{e}"
+    );
+    lines.remove(5);
+    std::fs::write(dir.join("data.csv"), lines.join("\n")).unwrap();
+    let e = chart
+        .for_each_record(spec, |_, _| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("experiment '2' (from line 2) has 199 samples"),
+        "{e}"
+    );
+    let without_last: Vec<&str> = data.lines().filter(|l| !l.starts_with("0,")).collect();
+    std::fs::write(dir.join("data.csv"), without_last.join("\n")).unwrap();
+    let e = chart
+        .for_each_record(spec, |_, _| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("1 experiment(s) of truth.csv have no rows, the first '0'"),
+        "{e}"
+    );
+    // Rows of one experiment must stay together: experiment 2 again at the end.
+    let all: Vec<&str> = data.lines().collect();
+    let mut split = all.clone();
+    split.extend_from_slice(&all[1..201]);
+    std::fs::write(dir.join("data.csv"), split.join("\n")).unwrap();
+    let e = chart
+        .for_each_record(spec, |_, _| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("resumes after other experiments"), "{e}");
+}
