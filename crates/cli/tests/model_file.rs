@@ -39,7 +39,10 @@ fn the_template_trains_validates_and_simulates_an_estimator() {
         "{shown}"
     );
     assert!(shown.contains("N = 500"), "{shown}");
-    assert!(shown.contains("m = 300 records (0 failed), seed 1, simulated, Uniform design"), "{shown}");
+    assert!(
+        shown.contains("m = 300 records (0 failed), seed 1, simulated, Uniform design"),
+        "{shown}"
+    );
     // Validation simulates the model again: from the file, which it needs.
     let out = twostage(&["validate", "--estimator", path(&estimator), "--sims", "100"]);
     assert_eq!(out.status.code(), Some(2));

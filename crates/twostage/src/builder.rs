@@ -437,9 +437,10 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         chart: &ChartFiles,
         role: Option<&[u8]>,
     ) -> Result<CompressorConfig> {
-        let count = self.compressor.records_to_prepare();
+        let compressor = self.shaped_compressor()?;
+        let count = compressor.records_to_prepare();
         if count == 0 {
-            return Ok(self.compressor.clone());
+            return Ok(compressor);
         }
         // The first `count` training rows of truth.csv, whatever data.csv's order.
         let wanted: Vec<usize> = (0..chart.len())
@@ -455,7 +456,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         })?;
         first.sort_by_key(|(row, _)| *row);
         let records: Vec<IoData> = first.into_iter().map(|(_, r)| r).collect();
-        self.compressor.prepared(&records)
+        compressor.prepared(&records)
     }
 
     /// Assemble the estimator from its fitted stages, then calibrate its
@@ -564,12 +565,20 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// experiments of the training design (an output PCA's directions, a
     /// NARX's signal scales), or as it is when it has none.
     fn calibrated_compressor(&self, design: &twostage_models::Design) -> Result<CompressorConfig> {
-        let count = self.compressor.records_to_prepare();
+        let compressor = self.shaped_compressor()?;
+        let count = compressor.records_to_prepare();
         if count == 0 {
-            return Ok(self.compressor.clone());
+            return Ok(compressor);
         }
         let chart = simulate_records(self.simulator, design, count, 0.0, None)?;
-        self.compressor.prepared(&chart.records)
+        compressor.prepared(&chart.records)
+    }
+
+    /// The compressor for the model's number of inputs and outputs.
+    fn shaped_compressor(&self) -> Result<CompressorConfig> {
+        let spec = self.simulator.spec();
+        self.compressor
+            .for_shape(spec.input_names().len(), spec.output_names().len())
     }
 
     /// Truths and clipped estimates on `count` fresh i.i.d. simulations.

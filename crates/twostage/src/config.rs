@@ -32,6 +32,47 @@ pub(crate) const PCA_RECORDS: usize = 1000;
 pub(crate) const NARX_SCALE_RECORDS: usize = 32;
 
 impl CompressorConfig {
+    /// The same compressor for records of `n_inputs` inputs and `n_outputs`
+    /// outputs (the specifications `arx:5,5` and friends are written for
+    /// one of each).
+    ///
+    /// ```
+    /// use twostage::CompressorConfig;
+    /// use twostage::compress::Compressor;
+    /// let ar: CompressorConfig = "ar:3".parse()?;
+    /// // Output-only: three lags of each of two outputs.
+    /// assert_eq!(ar.for_shape(0, 2)?.n_features(), 6);
+    /// let arx: CompressorConfig = "arx:2,2".parse()?;
+    /// assert!(arx.for_shape(0, 1).is_err());
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] for a shape the compressor cannot take: an
+    /// ARX with input lags for a model without input, a NARX for more than
+    /// one input or output.
+    pub fn for_shape(&self, n_inputs: usize, n_outputs: usize) -> Result<Self> {
+        let refuse = |reason: &str| Error::InvalidSetting {
+            name: "compressor",
+            value: self.to_string(),
+            reason: format!("{reason} ({n_inputs} input(s), {n_outputs} output(s))"),
+        };
+        Ok(match self {
+            Self::Arx(arx) if n_inputs == 0 && arx.nb() > 0 => {
+                return Err(refuse(
+                    "input lags need an input: for a model without input use ar:NA, an \
+                     autoregression on the outputs",
+                ));
+            }
+            Self::Arx(arx) => Self::Arx((*arx).with_signals(n_inputs, n_outputs)?),
+            Self::Narx(_) if (n_inputs, n_outputs) != (1, 1) => {
+                return Err(refuse("a NARX takes one input and one output"));
+            }
+            Self::Pca(pca) if pca.is_fitted() => Self::Pca(pca.clone().with_inputs(n_inputs)?),
+            other => other.clone(),
+        })
+    }
+
     /// How many training records [`CompressorConfig::prepared`] uses: 0
     /// when the compressor has nothing to fit.
     pub(crate) fn records_to_prepare(&self) -> usize {
@@ -103,7 +144,8 @@ impl std::str::FromStr for CompressorConfig {
     type Err = Error;
 
     /// A stage-1 specification as the command line and model files write
-    /// it: `arx:NA,NB`, `narx:NA,NB,DEG` or `pca:K`.
+    /// it: `arx:NA,NB`, `ar:NA` (outputs only, for a model without input),
+    /// `narx:NA,NB,DEG` or `pca:K`.
     ///
     /// ```
     /// use twostage::CompressorConfig;
@@ -118,7 +160,7 @@ impl std::str::FromStr for CompressorConfig {
         let (kind, orders) = spec.split_once(':').ok_or_else(|| Error::InvalidSetting {
             name: WHAT,
             value: spec.to_string(),
-            reason: "use arx:NA,NB, narx:NA,NB,DEG or pca:K".into(),
+            reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG or pca:K".into(),
         })?;
         Ok(match kind.trim() {
             "arx" => {
@@ -129,12 +171,13 @@ impl std::str::FromStr for CompressorConfig {
                 let o = counts(orders, spec, 3, WHAT)?;
                 Narx::new(o[0], o[1], o[2])?.into()
             }
+            "ar" => Arx::new(counts(orders, spec, 1, WHAT)?[0], 0)?.into(),
             "pca" => OutputPca::new(counts(orders, spec, 1, WHAT)?[0])?.into(),
             _ => {
                 return Err(Error::InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
-                    reason: "use arx:NA,NB, narx:NA,NB,DEG or pca:K".into(),
+                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG or pca:K".into(),
                 });
             }
         })

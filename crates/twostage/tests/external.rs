@@ -347,3 +347,52 @@ fn a_model_file_command_runs_beside_the_file_and_its_mistakes_are_named() {
         }
     }
 }
+
+/// A model without input (an autonomous system, outputs only) through the
+/// protocol: `y_k = a y_{k-1} + e_k`, estimated by an autoregression on the
+/// output (`ar:2`).
+#[test]
+fn an_autonomous_model_trains_with_an_output_only_compressor() {
+    let dir = script(
+        "external-autonomous",
+        r#"
+def simulate(theta, seed, index):
+    rng = random.Random(seed * 1000003 + index)
+    y, out = 0.0, []
+    for _ in range(200):
+        y = theta[0] * y + rng.gauss(0, 1)
+        out.append([y])
+    return [], out
+
+serve(simulate)
+"#,
+    );
+    let toml = format!(
+        "[model]\nname = \"ar1\"\n[source]\ncommand = [{:?}, \"sim.py\"]\n\
+         [[parameter]]\nname = \"a\"\nprior = {{ dist = \"normal\", mu = 0.0, sigma = 0.3 }}\n\
+         [signals]\ninputs = []\noutputs = [\"y\"]\nsamples = 200\n\
+         [[preset]]\nname = \"ar\"\ncompress = \"ar:2\"\nfit = \"mlp:6\"\nsims = 600\n",
+        python()
+    );
+    std::fs::write(dir.join("ar1.toml"), &toml).unwrap();
+    let file = twostage::ModelFile::load(dir.join("ar1.toml")).unwrap();
+    let sim = file.simulator().unwrap();
+    let estimator = twostage::TwoStage::builder(sim.as_ref())
+        .preset(file.preset("ar").unwrap())
+        .validation(200)
+        .calibration(0)
+        .train()
+        .unwrap();
+    let report = estimator.validation().unwrap();
+    // The least-squares AR(1) estimate from 200 samples has sd about
+    // sqrt((1 - a^2) / 200) <= 0.071; the network learns about that.
+    assert!(report.parameters[0].rmse < 0.09, "{report}");
+    // An ARX with input lags is refused for it, by name.
+    let e = twostage::TwoStage::builder(sim.as_ref())
+        .compressor("arx:2,2".parse::<twostage::CompressorConfig>().unwrap())
+        .simulations(20)
+        .train()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("for a model without input use ar:NA"), "{e}");
+}
