@@ -55,6 +55,7 @@ impl ExternalJob<'_> {
 /// | setting | default | valid |
 /// |---|---|---|
 /// | `timeout` | 60 s | > 0: per record, and for the greeting |
+/// | `batch` | 1 | >= 1 experiments per request |
 /// | `current_dir` | the caller's | a folder |
 ///
 /// ```no_run
@@ -72,6 +73,7 @@ pub struct ExternalSimulator {
     command: Vec<String>,
     current_dir: Option<PathBuf>,
     timeout: Duration,
+    batch: usize,
     idle: Mutex<Vec<Process>>,
 }
 
@@ -94,6 +96,7 @@ impl ExternalSimulator {
             command,
             current_dir: None,
             timeout: Duration::from_secs(60),
+            batch: 1,
             idle: Mutex::new(Vec::new()),
         })
     }
@@ -107,6 +110,13 @@ impl ExternalSimulator {
     /// The longest wait for the greeting and for each record.
     pub fn timeout(mut self, timeout: Duration) -> Self {
         self.timeout = timeout;
+        self
+    }
+
+    /// Experiments per request (at least 1): more for a program that
+    /// vectorizes over a batch.
+    pub fn batch(mut self, batch: usize) -> Self {
+        self.batch = batch.max(1);
         self
     }
 
@@ -374,6 +384,29 @@ impl ExternalSimulator {
 impl Simulator for ExternalSimulator {
     fn spec(&self) -> &ModelSpec {
         &self.spec
+    }
+
+    fn batch_size(&self) -> usize {
+        self.batch
+    }
+
+    /// One request for the block; each experiment's index and seed come
+    /// from its stream ([`ExternalJob::stream_of`]).
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        let jobs: Vec<ExternalJob<'_>> = thetas
+            .iter()
+            .zip(rngs.iter())
+            .map(|(theta, rng)| {
+                let (index, seed) = ExternalJob::stream_of(rng);
+                ExternalJob { index, seed, theta }
+            })
+            .collect();
+        ExternalSimulator::simulate_batch(self, &jobs, outs)
     }
 
     /// One experiment as a batch of one; the index and seed come from the

@@ -105,6 +105,58 @@ pub fn run_experiment<S: Simulator + ?Sized>(
     simulator.simulate(theta, &mut experiment_rng(design.seed(), index as u64), out)
 }
 
+/// Run experiments `start..start + outs.len()` of `design` as one block
+/// ([`Simulator::simulate_batch`]): their parameter vectors into `thetas`
+/// (`q` values each, in order), their records into `outs`, one result each.
+/// Experiment i gives the same bits as [`run_experiment`] whatever block it
+/// is in.
+///
+/// ```
+/// use twostage_models::{Benchmark, IoData, Simulator, run_experiment, run_experiments};
+/// let model = Benchmark::builder().n_samples(50).build()?;
+/// let design = model.prior().design(8, 3)?;
+/// let (mut thetas, mut outs) = (vec![0.0; 4], vec![IoData::default(); 4]);
+/// let results = run_experiments(&model, &design, 4, &mut thetas, &mut outs);
+/// assert!(results.iter().all(Result::is_ok));
+/// let (mut theta, mut alone) = ([0.0], IoData::default());
+/// run_experiment(&model, &design, 6, &mut theta, &mut alone)?;
+/// assert_eq!((thetas[2], &outs[2]), (theta[0], &alone));
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+pub fn run_experiments<S: Simulator + ?Sized>(
+    simulator: &S,
+    design: &Design,
+    start: usize,
+    thetas: &mut [f64],
+    outs: &mut [IoData],
+) -> Vec<Result<()>> {
+    let q = design.prior().dim();
+    let count = outs.len();
+    if thetas.len() != count * q {
+        let e = SimError::InvalidData(format!(
+            "{} parameter slots for {count} experiments of {q} parameters",
+            thetas.len()
+        ));
+        return vec![Err(e); count];
+    }
+    let mut filled: Vec<Result<()>> = thetas
+        .chunks_exact_mut(q)
+        .enumerate()
+        .map(|(k, theta)| design.fill_theta(start + k, theta))
+        .collect();
+    let mut rngs: Vec<ExperimentRng> = (0..count)
+        .map(|k| experiment_rng(design.seed(), (start + k) as u64))
+        .collect();
+    let views: Vec<&[f64]> = thetas.chunks_exact(q).collect();
+    let simulated = simulator.simulate_batch(&views, &mut rngs, outs);
+    for (f, s) in filled.iter_mut().zip(simulated) {
+        if f.is_ok() {
+            *f = s;
+        }
+    }
+    filled
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -170,6 +170,32 @@ pub trait Simulator: Send + Sync {
     /// a simulation that diverges.
     fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()>;
 
+    /// How many experiments the simulator would rather receive at once
+    /// (default 1): charts hand it blocks of this size through
+    /// [`Simulator::simulate_batch`]. A program that vectorizes (numpy over
+    /// a batch) says more than 1.
+    fn batch_size(&self) -> usize {
+        1
+    }
+
+    /// Simulate a block of experiments: `thetas[k]` with the stream
+    /// `rngs[k]` into `outs[k]`, one result each. Each experiment must depend
+    /// on its own parameter vector and stream only, never on the block it
+    /// came in. Default: one by one through [`Simulator::simulate`].
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        thetas
+            .iter()
+            .zip(rngs.iter_mut())
+            .zip(outs.iter_mut())
+            .map(|((theta, rng), out)| self.simulate(theta, rng, out))
+            .collect()
+    }
+
     /// The parameter names, in the order of theta.
     fn param_names(&self) -> &[String] {
         self.spec().param_names()

@@ -3,7 +3,7 @@
 use ndarray::Array2;
 use rayon::prelude::*;
 use twostage_compress::{Compressor, Workspace};
-use twostage_models::{Design, IoData, Simulator, run_experiment};
+use twostage_models::{Design, IoData, Simulator, run_experiments};
 
 use crate::error::{Error, Result};
 use crate::progress::{Progress, Stage};
@@ -121,29 +121,45 @@ where
     let n = compressor.n_features();
     let mut thetas = vec![0.0; m * q];
     let mut features = vec![0.0; m * n];
+    // Blocks of the simulator's batch size (1 unless it vectorizes): the
+    // bits of experiment i do not depend on the block it is in.
+    let block = simulator.batch_size().max(1);
     let failures: Vec<ExperimentFailure> = thetas
-        .par_chunks_mut(q)
-        .zip(features.par_chunks_mut(n))
+        .par_chunks_mut(q * block)
+        .zip(features.par_chunks_mut(n * block))
         .enumerate()
         .map_init(
-            || (IoData::default(), Workspace::new()),
-            |(record, work), (i, (theta, alpha))| {
-                let outcome = run_experiment(simulator, design, i, theta, record)
-                    .map_err(|e| e.to_string())
-                    .and_then(|()| {
+            || (Vec::<IoData>::new(), Workspace::new()),
+            |(records, work), (c, (theta_block, alpha_block))| {
+                let start = c * block;
+                let len = theta_block.len() / q;
+                records.resize_with(len, IoData::default);
+                let simulated =
+                    run_experiments(simulator, design, start, theta_block, &mut records[..len]);
+                let mut failed = Vec::new();
+                for (k, outcome) in simulated.into_iter().enumerate() {
+                    let record = &records[k];
+                    let alpha = &mut alpha_block[k * n..(k + 1) * n];
+                    let outcome = outcome.map_err(|e| e.to_string()).and_then(|()| {
                         compressor
                             .compress_into(record.inputs(), record.outputs(), work, alpha)
                             .map_err(|e| e.to_string())
                     });
-                finished(i);
-                outcome.err().map(|error| ExperimentFailure {
-                    index: i,
-                    theta: theta.to_vec(),
-                    error,
-                })
+                    finished(start + k);
+                    if let Err(error) = outcome {
+                        failed.push(ExperimentFailure {
+                            index: start + k,
+                            theta: theta_block[k * q..(k + 1) * q].to_vec(),
+                            error,
+                        });
+                    }
+                }
+                failed
             },
         )
-        .filter_map(|f| f)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
         .collect();
     within_allowance(stage, &failures, m, max_failure_fraction)?;
     let failed: Vec<usize> = failures.iter().map(|f| f.index).collect();
@@ -222,23 +238,35 @@ pub(crate) fn simulate_records<S: Simulator + ?Sized>(
     if let Some((stage, progress)) = progress {
         progress.begin(stage, count);
     }
-    let outcomes: Vec<std::result::Result<(Vec<f64>, IoData), ExperimentFailure>> = (0..count)
+    let block = simulator.batch_size().max(1);
+    let outcomes: Vec<std::result::Result<(Vec<f64>, IoData), ExperimentFailure>> = (0..count
+        .div_ceil(block))
         .into_par_iter()
-        .map(|i| {
-            let (mut theta, mut record) = (vec![0.0; q], IoData::default());
-            let outcome = run_experiment(simulator, design, i, &mut theta, &mut record);
+        .map(|c| {
+            let start = c * block;
+            let len = block.min(count - start);
+            let (mut thetas, mut records) = (vec![0.0; len * q], vec![IoData::default(); len]);
+            let simulated = run_experiments(simulator, design, start, &mut thetas, &mut records);
             if let Some((stage, progress)) = progress {
-                progress.advance(stage, 1);
+                progress.advance(stage, len);
             }
-            match outcome {
-                Ok(()) => Ok((theta, record)),
-                Err(e) => Err(ExperimentFailure {
-                    index: i,
-                    theta,
-                    error: e.to_string(),
-                }),
-            }
+            simulated
+                .into_iter()
+                .zip(thetas.chunks_exact(q).zip(records))
+                .enumerate()
+                .map(|(k, (outcome, (theta, record)))| match outcome {
+                    Ok(()) => Ok((theta.to_vec(), record)),
+                    Err(e) => Err(ExperimentFailure {
+                        index: start + k,
+                        theta: theta.to_vec(),
+                        error: e.to_string(),
+                    }),
+                })
+                .collect::<Vec<_>>()
         })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
         .collect();
     if let Some((stage, progress)) = progress {
         progress.end(stage);

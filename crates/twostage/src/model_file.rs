@@ -46,6 +46,8 @@ pub enum ModelSource {
         dir: Option<std::path::PathBuf>,
         /// The longest wait for a record.
         timeout: std::time::Duration,
+        /// Experiments per request.
+        batch: usize,
     },
     /// None: the file describes charts simulated elsewhere.
     ChartsOnly,
@@ -222,9 +224,11 @@ impl ModelFile {
                 command,
                 dir,
                 timeout,
+                batch,
             } => {
-                let mut external =
-                    ExternalSimulator::new(self.spec.clone(), command.clone())?.timeout(*timeout);
+                let mut external = ExternalSimulator::new(self.spec.clone(), command.clone())?
+                    .timeout(*timeout)
+                    .batch(*batch);
                 if let Some(dir) = dir {
                     external = external.current_dir(dir);
                 }
@@ -306,6 +310,33 @@ impl Simulator for FileSimulator {
         out: &mut IoData,
     ) -> twostage_models::Result<()> {
         self.inner.simulate(theta, rng, out)?;
+        self.measured(rng, out)
+    }
+
+    fn batch_size(&self) -> usize {
+        self.inner.batch_size()
+    }
+
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<twostage_models::Result<()>> {
+        let mut results = self.inner.simulate_batch(thetas, rngs, outs);
+        for ((result, rng), out) in results.iter_mut().zip(rngs.iter_mut()).zip(outs.iter_mut()) {
+            if result.is_ok() {
+                *result = self.measured(rng, out);
+            }
+        }
+        results
+    }
+}
+
+impl FileSimulator {
+    /// Check the source's record against the file and add the file's
+    /// measurement noise.
+    fn measured(&self, rng: &mut ExperimentRng, out: &mut IoData) -> twostage_models::Result<()> {
         let (n, want) = (out.n_samples(), self.spec.n_samples());
         if n != want || out.n_outputs() != self.output_sd.len() {
             return Err(twostage_models::SimError::InvalidData(format!(
@@ -381,6 +412,7 @@ struct RawSource {
     builtin: Option<Spanned<String>>,
     command: Option<Spanned<Vec<String>>>,
     timeout_seconds: Option<Spanned<f64>>,
+    batch: Option<Spanned<i64>>,
 }
 
 #[derive(Deserialize)]
@@ -511,6 +543,13 @@ impl Locator<'_> {
                 "a built-in model runs in this process: the timeout is for a command".into(),
             ));
         }
+        if let Some(b) = &raw.batch {
+            return Err(self.error(
+                Some(b.span()),
+                "source.batch",
+                "a built-in model runs in this process: the batch is for a command".into(),
+            ));
+        }
         let model: BuiltinModel =
             name.get_ref()
                 .parse()
@@ -575,10 +614,27 @@ impl Locator<'_> {
                     )
                 })?,
         };
+        let batch = match &raw.batch {
+            None => 1,
+            Some(b) => usize::try_from(*b.get_ref())
+                .ok()
+                .filter(|b| (1..=1 << 20).contains(b))
+                .ok_or_else(|| {
+                    self.error(
+                        Some(b.span()),
+                        "source.batch",
+                        format!(
+                            "{}: give the experiments per request, 1 to 2^20",
+                            b.get_ref()
+                        ),
+                    )
+                })?,
+        };
         Ok(ModelSource::Command {
             command: command.get_ref().clone(),
             dir: None,
             timeout,
+            batch,
         })
     }
 

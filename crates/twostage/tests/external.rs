@@ -111,6 +111,16 @@ fn records_arrive_as_the_simulator_sent_them_and_charts_ignore_the_thread_count(
     };
     let (one, two) = (chart(1), chart(2));
     assert_eq!(one.features.len(), 24 * 2);
+    // Requests of 5 experiments (the last of 4) give the same chart.
+    let batched = gain(&dir).batch(5);
+    let design = sim.prior().design(24, 5).unwrap();
+    let five = compress_chart(&batched, &Arx::new(1, 1).unwrap(), &design, "test", 0.0).unwrap();
+    assert!(
+        one.features
+            .iter()
+            .zip(five.features.iter())
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
     assert!(
         one.features
             .iter()
@@ -241,6 +251,7 @@ fn the_numpy_benchmark_trains_as_accurately_as_the_built_in_one() {
 name = "numpy-benchmark"
 [source]
 command = [{python:?}, {:?}]
+batch = 25
 [[parameter]]
 name = "theta"
 prior = {{ dist = "uniform", low = -0.9, high = 0.9 }}
@@ -329,6 +340,12 @@ fn a_model_file_command_runs_beside_the_file_and_its_mistakes_are_named() {
             "[source]\nbuiltin = \"benchmark\"\n",
             "source",
             "give one source",
+        ),
+        (
+            "timeout_seconds = 5",
+            "timeout_seconds = 5\nbatch = 0",
+            "source.batch",
+            "1 to 2^20",
         ),
     ];
     for (from, to, key, text) in cases {
