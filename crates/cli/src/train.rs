@@ -24,9 +24,10 @@ pub struct TrainArgs {
     #[arg(long)]
     sims: Option<usize>,
     /// Stage 1: arx:NA,NB, ar:NA (outputs only, for a model without
-    /// input), narx:NA,NB,DEG or pca:K (output principal components; only
-    /// for models whose experiments share one input) (default: the
-    /// preset's). ARX orders apply to each of the model's inputs and outputs.
+    /// input), narx:NA,NB,DEG, pca:K (output principal components; only
+    /// for models whose experiments share one input) or raw (the record
+    /// itself, for records of tens of samples) (default: the preset's).
+    /// ARX orders apply to each of the model's inputs and outputs.
     #[arg(long)]
     compress: Option<String>,
     /// Stage 2: linear, mlp:H[,H...] hidden sizes, or piecewise:K,H (a

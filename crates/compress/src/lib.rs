@@ -41,6 +41,7 @@ mod error;
 mod fast;
 mod narx;
 mod pca;
+mod raw;
 mod signals;
 mod workspace;
 
@@ -50,6 +51,7 @@ pub use arx::Arx;
 pub use error::{CompressError, Result};
 pub use narx::{Narx, signal_rms};
 pub use pca::OutputPca;
+pub use raw::{MAX_RAW_FEATURES, RawRecord};
 pub use workspace::{RANK_TOLERANCE, Workspace};
 
 /// The compression map g: a record `(u, y)` to features `alpha` in `R^n`.

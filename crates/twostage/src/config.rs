@@ -2,7 +2,7 @@
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace, signal_rms};
+use twostage_compress::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace, signal_rms};
 use twostage_models::IoData;
 
 use crate::error::{Error, Result};
@@ -22,6 +22,8 @@ pub enum CompressorConfig {
     /// Leading principal components of the output record (for models whose
     /// experiments all apply one input); fitted from the training design.
     Pca(OutputPca),
+    /// The record itself, for very short records (`raw`).
+    Raw(RawRecord),
 }
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
@@ -32,18 +34,21 @@ pub(crate) const PCA_RECORDS: usize = 1000;
 pub(crate) const NARX_SCALE_RECORDS: usize = 32;
 
 impl CompressorConfig {
-    /// The same compressor for records of `n_inputs` inputs and `n_outputs`
-    /// outputs (the specifications `arx:5,5` and friends are written for
-    /// one of each).
+    /// The same compressor for records of `n_inputs` inputs, `n_outputs`
+    /// outputs and `n_samples` samples (the specifications `arx:5,5` and
+    /// friends are written for one input and one output, `raw` for any).
     ///
     /// ```
     /// use twostage::CompressorConfig;
     /// use twostage::compress::Compressor;
     /// let ar: CompressorConfig = "ar:3".parse()?;
     /// // Output-only: three lags of each of two outputs.
-    /// assert_eq!(ar.for_shape(0, 2)?.n_features(), 6);
+    /// assert_eq!(ar.for_shape(0, 2, 100)?.n_features(), 6);
     /// let arx: CompressorConfig = "arx:2,2".parse()?;
-    /// assert!(arx.for_shape(0, 1).is_err());
+    /// assert!(arx.for_shape(0, 1, 100).is_err());
+    /// // The whole record: 10 samples of one output.
+    /// let raw: CompressorConfig = "raw".parse()?;
+    /// assert_eq!(raw.for_shape(0, 1, 10)?.n_features(), 10);
     /// # Ok::<(), twostage::Error>(())
     /// ```
     ///
@@ -51,7 +56,7 @@ impl CompressorConfig {
     /// [`Error::InvalidSetting`] for a shape the compressor cannot take: an
     /// ARX with input lags for a model without input, a NARX for more than
     /// one input or output.
-    pub fn for_shape(&self, n_inputs: usize, n_outputs: usize) -> Result<Self> {
+    pub fn for_shape(&self, n_inputs: usize, n_outputs: usize, n_samples: usize) -> Result<Self> {
         let refuse = |reason: &str| Error::InvalidSetting {
             name: "compressor",
             value: self.to_string(),
@@ -69,6 +74,7 @@ impl CompressorConfig {
                 return Err(refuse("a NARX takes one input and one output"));
             }
             Self::Pca(pca) if pca.is_fitted() => Self::Pca(pca.clone().with_inputs(n_inputs)?),
+            Self::Raw(_) => Self::Raw(RawRecord::new(n_samples, n_inputs, n_outputs)?),
             other => other.clone(),
         })
     }
@@ -122,6 +128,7 @@ impl std::fmt::Display for CompressorConfig {
             Self::Arx(arx) => arx.fmt(f),
             Self::Narx(narx) => narx.fmt(f),
             Self::Pca(pca) => pca.fmt(f),
+            Self::Raw(raw) => raw.fmt(f),
         }
     }
 }
@@ -145,7 +152,8 @@ impl std::str::FromStr for CompressorConfig {
 
     /// A stage-1 specification as the command line and model files write
     /// it: `arx:NA,NB`, `ar:NA` (outputs only, for a model without input),
-    /// `narx:NA,NB,DEG` or `pca:K`.
+    /// `narx:NA,NB,DEG`, `pca:K`, or `raw` (the record itself, for very
+    /// short records).
     ///
     /// ```
     /// use twostage::CompressorConfig;
@@ -157,10 +165,14 @@ impl std::str::FromStr for CompressorConfig {
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
         const WHAT: &str = "compressor";
+        if spec.trim() == "raw" {
+            // Shaped by the model (`for_shape`): one sample of one output until then.
+            return Ok(Self::Raw(RawRecord::new(1, 0, 1)?));
+        }
         let (kind, orders) = spec.split_once(':').ok_or_else(|| Error::InvalidSetting {
             name: WHAT,
             value: spec.to_string(),
-            reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG or pca:K".into(),
+            reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw".into(),
         })?;
         Ok(match kind.trim() {
             "arx" => {
@@ -177,7 +189,7 @@ impl std::str::FromStr for CompressorConfig {
                 return Err(Error::InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
-                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG or pca:K".into(),
+                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw".into(),
                 });
             }
         })
@@ -208,6 +220,7 @@ impl Compressor for CompressorConfig {
             Self::Arx(c) => c.n_features(),
             Self::Narx(c) => c.n_features(),
             Self::Pca(c) => c.n_features(),
+            Self::Raw(c) => c.n_features(),
         }
     }
 
@@ -222,6 +235,7 @@ impl Compressor for CompressorConfig {
             Self::Arx(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Pca(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Raw(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -236,6 +250,7 @@ impl Compressor for CompressorConfig {
             Self::Arx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Pca(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Raw(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -244,6 +259,7 @@ impl Compressor for CompressorConfig {
             Self::Arx(c) => c.feature_names(),
             Self::Narx(c) => c.feature_names(),
             Self::Pca(c) => c.feature_names(),
+            Self::Raw(c) => c.feature_names(),
         }
     }
 }
