@@ -62,7 +62,8 @@ pub struct TrainArgs {
     alpha: f64,
     /// Train on a chart simulated elsewhere: a folder with truth.csv
     /// (experiment,<parameters>) and data.csv (experiment,<inputs>,<outputs>),
-    /// as `twostage simulate --count --out-dir` writes. Without
+    /// as `twostage simulate --count --out-dir` writes, or theta.npy,
+    /// inputs.npy and outputs.npy (float64 [m, q], [m, N, n_u], [m, N, n_y]). Without
     /// --validate-chart / --calibrate-chart, --validate and --calibrate
     /// records are held out of it at random.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["auto", "sims"])]

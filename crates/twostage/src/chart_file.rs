@@ -1,10 +1,16 @@
-//! Charts simulated elsewhere, read from files: the CSV layout `twostage
-//! simulate --count --out-dir` writes. DIR/truth.csv holds
-//! `experiment,<parameter names>`, one row per experiment; DIR/data.csv holds
-//! `experiment,<input names>,<output names>`, one row per sample, each
-//! experiment's rows together, experiments in any order. Records are read
-//! one at a time, so memory stays O(m (q + n)) for m experiments, whatever
-//! their length. Every problem names the file, the line and the column.
+//! Charts simulated elsewhere, read from files, in one of two layouts:
+//!
+//! - CSV, as `twostage simulate --count --out-dir` writes it. DIR/truth.csv
+//!   holds `experiment,<parameter names>`, one row per experiment;
+//!   DIR/data.csv holds `experiment,<input names>,<output names>`, one row
+//!   per sample, each experiment's rows together, experiments in any order.
+//! - NumPy, for large charts: DIR/theta.npy `[m, q]`, DIR/outputs.npy
+//!   `[m, N, n_y]` and, for a model with inputs, DIR/inputs.npy
+//!   `[m, N, n_u]`; float64, C order (numpy's defaults).
+//!
+//! Records are read one at a time, so memory stays O(m (q + n)) for m
+//! experiments, whatever their length. Every problem names the file, and
+//! the line and column of a CSV.
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
@@ -30,6 +36,7 @@ pub struct ChartFiles {
     ids: Vec<String>,
     thetas: Vec<f64>,
     q: usize,
+    numpy: bool,
 }
 
 impl ChartFiles {
@@ -41,6 +48,9 @@ impl ChartFiles {
     /// is not a finite number, an experiment listed twice, no experiment.
     pub fn open(dir: impl AsRef<Path>, spec: &ModelSpec) -> Result<Self> {
         let dir = dir.as_ref().to_path_buf();
+        if !dir.join("truth.csv").exists() && dir.join("theta.npy").exists() {
+            return Self::open_numpy(dir, spec);
+        }
         let path = dir.join("truth.csv");
         let file = Located::new(&path);
         let mut lines = file.lines()?;
@@ -92,7 +102,70 @@ impl ChartFiles {
             ids,
             thetas,
             q,
+            numpy: false,
         })
+    }
+
+    /// Read DIR/theta.npy and check the shapes of the record arrays.
+    fn open_numpy(dir: PathBuf, spec: &ModelSpec) -> Result<Self> {
+        let q = spec.n_params();
+        let (theta_file, shape) = npy(&dir.join("theta.npy"))?;
+        let m = shape.first().copied().unwrap_or(0);
+        let named = Located::new(&dir).join("theta.npy");
+        if shape.len() != 2 || shape[1] != q || m == 0 {
+            return Err(named.error(
+                None,
+                format!(
+                    "shape {shape:?}: expected [m, {q}] (m experiments of the model's {q} \
+                     parameters), m >= 1"
+                ),
+            ));
+        }
+        let thetas = read_all(theta_file, &named)?;
+        if let Some(k) = thetas.iter().position(|v| !v.is_finite()) {
+            return Err(named.error(
+                None,
+                format!(
+                    "theta[{}, {}] = {} is not a finite number",
+                    k / q,
+                    k % q,
+                    thetas[k]
+                ),
+            ));
+        }
+        let chart = Self {
+            dir,
+            ids: (0..m).map(|i| i.to_string()).collect(),
+            thetas,
+            q,
+            numpy: true,
+        };
+        // Shapes now, so that a wrong file fails before any work.
+        for (name, width) in chart.record_arrays(spec) {
+            let (_, shape) = npy(&chart.dir.join(name))?;
+            let want = [m, spec.n_samples(), width];
+            if shape != want {
+                return Err(Located::new(&chart.dir).join(name).error(
+                    None,
+                    format!(
+                        "shape {shape:?}: expected {want:?} (experiments, samples, signals; \
+                         theta.npy has {m} experiments, the model {} samples)",
+                        spec.n_samples()
+                    ),
+                ));
+            }
+        }
+        Ok(chart)
+    }
+
+    /// The record arrays of a NumPy chart and their signal counts.
+    fn record_arrays(&self, spec: &ModelSpec) -> Vec<(&'static str, usize)> {
+        let (n_u, n_y) = (spec.input_names().len(), spec.output_names().len());
+        let mut arrays = vec![("outputs.npy", n_y)];
+        if n_u > 0 {
+            arrays.insert(0, ("inputs.npy", n_u));
+        }
+        arrays
     }
 
     /// Number of experiments m.
@@ -128,6 +201,9 @@ impl ChartFiles {
         spec: &ModelSpec,
         mut visit: impl FnMut(usize, &IoData) -> Result<()>,
     ) -> Result<()> {
+        if self.numpy {
+            return self.for_each_numpy_record(spec, visit);
+        }
         let path = self.dir.join("data.csv");
         let file = Located::new(&path);
         let mut lines = file.lines()?;
@@ -252,6 +328,94 @@ impl ChartFiles {
     }
 }
 
+impl ChartFiles {
+    /// The records of a NumPy chart, read in step from inputs.npy and
+    /// outputs.npy, one record's values at a time.
+    fn for_each_numpy_record(
+        &self,
+        spec: &ModelSpec,
+        mut visit: impl FnMut(usize, &IoData) -> Result<()>,
+    ) -> Result<()> {
+        let (n, n_u, n_y) = (
+            spec.n_samples(),
+            spec.input_names().len(),
+            spec.output_names().len(),
+        );
+        let mut readers = Vec::new();
+        for (name, _) in self.record_arrays(spec) {
+            let path = self.dir.join(name);
+            let (file, _) = npy(&path)?;
+            let located = Located::new(&self.dir).join(name);
+            let values = file.data::<f64>().map_err(|e| {
+                located.error(None, format!("{e}: save float64 arrays (numpy's default)"))
+            })?;
+            readers.push((located, values));
+        }
+        let mut record = IoData::zeros(n, n_u, n_y);
+        for row in 0..self.ids.len() {
+            for (located, values) in &mut readers {
+                let inputs = located.path.ends_with("inputs.npy");
+                let width = if inputs { n_u } else { n_y };
+                for k in 0..n {
+                    for j in 0..width {
+                        let value = values
+                            .next()
+                            .ok_or_else(|| located.error(None, "ends early".into()))?
+                            .map_err(|cause| Error::Io {
+                                path: located.path.display().to_string(),
+                                cause,
+                            })?;
+                        if !value.is_finite() {
+                            return Err(located.error(
+                                None,
+                                format!("[{row}, {k}, {j}] = {value} is not a finite number"),
+                            ));
+                        }
+                        if inputs {
+                            record.input_mut(j)[k] = value;
+                        } else {
+                            record.output_mut(j)[k] = value;
+                        }
+                    }
+                }
+            }
+            visit(row, &record)?;
+        }
+        Ok(())
+    }
+}
+
+/// An .npy file opened, its header read: the reader and the shape.
+fn npy(path: &Path) -> Result<(npyz::NpyFile<BufReader<std::fs::File>>, Vec<usize>)> {
+    let file = std::fs::File::open(path).map_err(|cause| Error::Io {
+        path: path.display().to_string(),
+        cause,
+    })?;
+    let npy = npyz::NpyFile::new(BufReader::new(file)).map_err(|e| Error::ChartFile {
+        file: path.display().to_string(),
+        line: None,
+        message: format!("not a NumPy .npy file ({e})"),
+    })?;
+    if npy.order() != npyz::Order::C {
+        return Err(Error::ChartFile {
+            file: path.display().to_string(),
+            line: None,
+            message: "stored in Fortran order: save np.ascontiguousarray(a)".into(),
+        });
+    }
+    let shape = npy.shape().iter().map(|&d| d as usize).collect();
+    Ok((npy, shape))
+}
+
+/// Every value of a small .npy file (theta), as float64.
+fn read_all(
+    npy: npyz::NpyFile<BufReader<std::fs::File>>,
+    located: &Located<'_>,
+) -> Result<Vec<f64>> {
+    npy.into_vec::<f64>()
+        .map_err(|e| located.error(None, format!("{e}: save float64 arrays (numpy's default)")))
+}
+
 /// Where a column's values go.
 #[derive(Debug, Clone, Copy)]
 enum Signal {
@@ -300,12 +464,21 @@ fn signal_columns(spec: &ModelSpec, header: &str) -> Option<Vec<(Signal, String)
 
 /// A file being read, for its messages.
 struct Located<'p> {
-    path: &'p Path,
+    path: std::borrow::Cow<'p, Path>,
 }
 
 impl<'p> Located<'p> {
     fn new(path: &'p Path) -> Self {
-        Self { path }
+        Self {
+            path: std::borrow::Cow::Borrowed(path),
+        }
+    }
+
+    /// The file `name` in this folder.
+    fn join(&self, name: &str) -> Located<'static> {
+        Located {
+            path: std::borrow::Cow::Owned(self.path.join(name)),
+        }
     }
 
     fn error(&self, line: Option<usize>, message: String) -> Error {
@@ -317,12 +490,12 @@ impl<'p> Located<'p> {
     }
 
     /// The non-empty lines with their 1-based numbers.
-    fn lines(&self) -> Result<impl Iterator<Item = Result<(usize, String)>> + 'p> {
-        let file = std::fs::File::open(self.path).map_err(|cause| Error::Io {
+    fn lines(&self) -> Result<impl Iterator<Item = Result<(usize, String)>> + 'static> {
+        let file = std::fs::File::open(&self.path).map_err(|cause| Error::Io {
             path: self.path.display().to_string(),
             cause,
         })?;
-        let path = self.path;
+        let path = self.path.to_path_buf();
         Ok(BufReader::new(file)
             .lines()
             .enumerate()

@@ -224,3 +224,100 @@ fn every_file_problem_names_its_file_and_line() {
         .to_string();
     assert!(e.contains("resumes after other experiments"), "{e}");
 }
+
+/// `values` as a float64 .npy file of `shape`.
+fn write_npy(path: &Path, shape: &[u64], values: impl IntoIterator<Item = f64>) {
+    use npyz::WriterBuilder;
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut writer = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(shape)
+        .writer(file)
+        .begin_nd()
+        .unwrap();
+    writer.extend(values).unwrap();
+    writer.finish().unwrap();
+}
+
+/// The chart of `write_chart` as NumPy arrays: theta [m, 1], inputs and
+/// outputs [m, N, 1].
+fn write_numpy_chart(dir: &Path, m: usize, seed: u64) {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    let model = model();
+    let design = model.prior().design(m, seed).unwrap();
+    let (mut thetas, mut inputs, mut outputs) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut theta, mut record) = ([0.0], IoData::default());
+    for i in 0..m {
+        run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
+        thetas.push(theta[0]);
+        inputs.extend_from_slice(record.input(0));
+        outputs.extend_from_slice(record.output(0));
+    }
+    let n = model.spec().n_samples() as u64;
+    write_npy(&dir.join("theta.npy"), &[m as u64, 1], thetas);
+    write_npy(&dir.join("inputs.npy"), &[m as u64, n, 1], inputs);
+    write_npy(&dir.join("outputs.npy"), &[m as u64, n, 1], outputs);
+}
+
+#[test]
+fn a_numpy_chart_trains_the_same_networks_as_the_csv_one() {
+    let model = model();
+    let (csv, npy) = (scratch("chart-npy-csv"), scratch("chart-npy-npy"));
+    write_chart(&csv, 240, 9);
+    write_numpy_chart(&npy, 240, 9);
+    let train = |dir: &Path| {
+        let chart = ChartFiles::open(dir, model.spec()).unwrap();
+        TwoStage::builder(&model)
+            .preset(twostage::paper_benchmark())
+            .validation(40)
+            .calibration(40)
+            .seed(1)
+            .train_on_chart(&chart, None, None)
+            .unwrap()
+    };
+    let (from_csv, from_npy) = (train(&csv), train(&npy));
+    assert!(
+        from_csv.regressor() == from_npy.regressor(),
+        "the fitted networks differ"
+    );
+    assert!(from_csv.validation() == from_npy.validation());
+    // Wrong shapes and values are named by file.
+    write_npy(
+        &npy.join("outputs.npy"),
+        &[240, 199, 1],
+        vec![0.0; 240 * 199],
+    );
+    let e = ChartFiles::open(&npy, model.spec())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("outputs.npy: shape [240, 199, 1]: expected [240, 200, 1]"),
+        "{e}"
+    );
+    let mut values = vec![0.5; 240 * 200];
+    values[200 * 7 + 3] = f64::NAN;
+    write_npy(&npy.join("outputs.npy"), &[240, 200, 1], values);
+    let chart = ChartFiles::open(&npy, model.spec()).unwrap();
+    let e = chart
+        .for_each_record(model.spec(), |_, _| Ok(()))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("outputs.npy: [7, 3, 0] = NaN is not a finite number"),
+        "{e}"
+    );
+    write_npy(&npy.join("theta.npy"), &[240, 2], vec![0.1; 480]);
+    let e = ChartFiles::open(&npy, model.spec())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("theta.npy: shape [240, 2]: expected [m, 1]"),
+        "{e}"
+    );
+    std::fs::write(npy.join("theta.npy"), b"not numpy").unwrap();
+    let e = ChartFiles::open(&npy, model.spec())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not a NumPy .npy file"), "{e}");
+}
