@@ -15,9 +15,17 @@ use twostage::models::{
     ExternalSimulator, IoData, ModelSpec, Prior, SimError, Simulator, experiment_rng,
 };
 
-/// The Python to run: `TWOSTAGE_PYTHON` (CI's virtual environment) or python3.
+/// The Python to run: `TWOSTAGE_PYTHON` (as `cargo xtask test` sets it),
+/// else the virtual environment `cargo xtask test` made, else python3.
 fn python() -> String {
-    std::env::var("TWOSTAGE_PYTHON").unwrap_or_else(|_| "python3".into())
+    std::env::var("TWOSTAGE_PYTHON").unwrap_or_else(|_| {
+        let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/venv/bin/python");
+        if venv.exists() {
+            venv.to_string_lossy().into_owned()
+        } else {
+            "python3".into()
+        }
+    })
 }
 
 fn protocol_dir() -> PathBuf {
