@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use ndarray::{Array2, Axis};
 use rayon::prelude::*;
-use twostage_compress::{Arx, Compressor, Narx, OutputPca, Workspace};
+use twostage_compress::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace};
 use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::{IoData, Simulator};
 
@@ -221,7 +221,11 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         };
         let spec = self.base.simulator().spec();
         let compressors = self.compressors.clone().unwrap_or_else(|| {
-            candidate_compressors(spec.output_names().len(), spec.input_names().len())
+            candidate_compressors(
+                spec.output_names().len(),
+                spec.input_names().len(),
+                spec.n_samples(),
+            )
         });
         let mut search = Search::new(&self.base, &chart, deadline);
         self.base.observer().begin(Stage::Fitting, 0);
@@ -527,26 +531,54 @@ fn network(hidden: &[usize]) -> Result<RegressorConfig> {
     Ok(RegressorConfig::Mlp(MlpParams::new(hidden)?.check()?))
 }
 
-/// Stage-1 candidates: ARX orders, a quadratic NARX, and output PCAs.
+/// Stage-1 candidates that fit the records' shape: ARX orders (AR on the
+/// outputs for a model without input), a quadratic NARX for one input and
+/// one output, output PCAs, and the raw record when it has at most
+/// [`RAW_CANDIDATE_VALUES`] values. A least-squares structure is left out
+/// when its coefficients would be more than a quarter of the samples.
 /// Unfitted compressors (NARX scales, PCA directions) are fitted on the
 /// chart's fitting rows before use.
-fn candidate_compressors(n_outputs: usize, n_inputs: usize) -> Vec<CompressorConfig> {
+fn candidate_compressors(
+    n_outputs: usize,
+    n_inputs: usize,
+    n_samples: usize,
+) -> Vec<CompressorConfig> {
+    let fits = |coefficients: usize| 4 * coefficients <= n_samples;
     let mut list: Vec<CompressorConfig> = Vec::new();
     for order in [2, 3, 4, 5, 6, 8] {
-        if let Ok(arx) = Arx::new(order, order).and_then(|a| a.with_signals(n_inputs, n_outputs)) {
+        let input_lags = if n_inputs == 0 { 0 } else { order };
+        if let Ok(arx) =
+            Arx::new(order, input_lags).and_then(|a| a.with_signals(n_inputs, n_outputs))
+            && fits(order * n_outputs + input_lags * n_inputs)
+        {
             list.push(arx.into());
         }
     }
-    if let Ok(narx) = Narx::new(2, 2, 2) {
+    if (n_inputs, n_outputs) == (1, 1)
+        && let Ok(narx) = Narx::new(2, 2, 2)
+        && fits(narx.n_features())
+    {
         list.push(narx.into());
     }
     for k in [8, 12, 16] {
-        if let Ok(pca) = OutputPca::new(k) {
+        if let Ok(pca) = OutputPca::new(k)
+            && k < n_samples * n_outputs
+        {
             list.push(pca.into());
         }
     }
+    let values = n_samples * (n_inputs + n_outputs);
+    if values <= RAW_CANDIDATE_VALUES
+        && let Ok(raw) = RawRecord::new(n_samples, n_inputs, n_outputs)
+    {
+        list.push(CompressorConfig::Raw(raw));
+    }
     list
 }
+
+/// The longest record (in values) whose raw samples the search tries as
+/// features.
+const RAW_CANDIDATE_VALUES: usize = 256;
 
 /// Features of every record, in parallel (row i is record i).
 fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Array2<f64>> {
@@ -634,5 +666,46 @@ fn evaluate<S: Simulator + ?Sized>(
             report.note = Some(format!("failed: {e}"));
             (report, None)
         }
+    }
+}
+
+#[cfg(test)]
+mod shape_tests {
+    use super::*;
+
+    fn names(list: &[CompressorConfig]) -> Vec<String> {
+        list.iter().map(ToString::to_string).collect()
+    }
+
+    /// The built-in models' search is what it was; a short record without
+    /// input gets autoregressions and its raw samples, nothing that cannot
+    /// run on it.
+    #[test]
+    fn the_candidates_fit_the_records_shape() {
+        let siso = candidate_compressors(1, 1, 1000);
+        assert_eq!(siso.len(), 6 + 1 + 3);
+        assert!(siso.iter().all(|c| !matches!(c, CompressorConfig::Raw(_))));
+        let short = candidate_compressors(1, 0, 10);
+        let shown = names(&short);
+        assert!(
+            short.iter().all(|c| c.n_features() * 4 <= 10
+                || matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Pca(_))),
+            "{shown:?}"
+        );
+        assert!(
+            matches!(short.last(), Some(CompressorConfig::Raw(r)) if r.n_samples() == 10),
+            "{shown:?}"
+        );
+        assert!(!shown.iter().any(|s| s.contains("NARX")), "{shown:?}");
+        // Two outputs, no input, a long record: ARs, PCAs, no raw.
+        let mimo = candidate_compressors(2, 0, 400);
+        assert!(
+            mimo.iter()
+                .any(|c| matches!(c, CompressorConfig::Arx(a) if a.nb() == 0))
+        );
+        assert!(
+            mimo.iter()
+                .all(|c| !matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Narx(_)))
+        );
     }
 }
