@@ -1,9 +1,13 @@
-//! Reading records from CSV: `u,y` (one record) or `experiment,u,y` (many,
-//! long format). Every problem names the file, the row and the column.
+//! Reading records from CSV: one record (`u,y`, the signal columns only) or
+//! many (`experiment,u,y`, long format), with the columns named as the
+//! estimator's signals (`u`, `y` for the built-in models; a model file's
+//! names otherwise, or `u1,..,y1,..` as `simulate` writes them), in any
+//! order. Every problem names the file, the row and the column.
 
 use std::collections::HashMap;
 use std::path::Path;
 
+use twostage::SignalNames;
 use twostage::models::IoData;
 
 /// One record read from a file, or why it could not be.
@@ -14,99 +18,148 @@ pub struct ReadRecord {
     pub record: Result<IoData, String>,
 }
 
-/// Read every record of one CSV file.
+/// Read every record of one CSV file with columns named as `signals`.
 ///
 /// # Errors
 /// A file that cannot be read or has no usable header: one line naming it.
-pub fn read(path: &Path) -> Result<Vec<ReadRecord>, String> {
+pub fn read(path: &Path, signals: &SignalNames) -> Result<Vec<ReadRecord>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let name = path.display().to_string();
     let stem = path
         .file_stem()
         .map_or_else(|| name.clone(), |s| s.to_string_lossy().into_owned());
-    parse(&text, &name, &stem)
+    parse(&text, &name, &stem, signals)
 }
 
-/// Parse the text of a CSV file called `name`; records of the `u,y` form
-/// take `stem` as their id.
+/// The SISO signals `u`, `y`.
+#[cfg(test)]
+fn siso() -> SignalNames {
+    SignalNames {
+        inputs: vec!["u".into()],
+        outputs: vec!["y".into()],
+    }
+}
+
+/// Where each column after `experiment` goes: (is an input, index), and
+/// its name; `None` if the header names other signals.
+fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<(bool, usize)>> {
+    let generic = |prefix: &str, n: usize| -> Vec<String> {
+        if n == 1 {
+            vec![prefix.to_string()]
+        } else {
+            (1..=n).map(|j| format!("{prefix}{j}")).collect()
+        }
+    };
+    let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
+    for (inputs, outputs) in [
+        (signals.inputs.clone(), signals.outputs.clone()),
+        (generic("u", n_u), generic("y", n_y)),
+    ] {
+        let mut found = Vec::with_capacity(header.len());
+        for name in header {
+            if let Some(j) = inputs.iter().position(|s| s == name) {
+                found.push((true, j));
+            } else if let Some(j) = outputs.iter().position(|s| s == name) {
+                found.push((false, j));
+            }
+        }
+        let mut distinct = found.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        if found.len() == header.len() && distinct.len() == n_u + n_y && header.len() == n_u + n_y {
+            return Some(found);
+        }
+    }
+    None
+}
+
+/// Parse the text of a CSV file called `name`; records without an
+/// `experiment` column take `stem` as their id.
 ///
 /// # Errors
 /// As [`read`].
-pub fn parse(text: &str, name: &str, stem: &str) -> Result<Vec<ReadRecord>, String> {
+pub fn parse(
+    text: &str,
+    name: &str,
+    stem: &str,
+    signals: &SignalNames,
+) -> Result<Vec<ReadRecord>, String> {
+    let all: Vec<&str> = signals
+        .inputs
+        .iter()
+        .chain(&signals.outputs)
+        .map(String::as_str)
+        .collect();
+    let expected = format!("{} or experiment,{}", all.join(","), all.join(","));
     let mut lines = text
         .lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty());
     let Some((_, header)) = lines.next() else {
         return Err(format!(
-            "{name}: the file is empty; expected a header u,y or experiment,u,y"
+            "{name}: the file is empty; expected a header {expected}"
         ));
     };
-    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
-    let long = match columns.as_slice() {
-        ["u", "y"] => false,
-        ["experiment", "u", "y"] => true,
-        _ => {
-            return Err(format!(
-                "{name}: row 1: header '{header}' is neither u,y nor experiment,u,y"
-            ));
-        }
-    };
-    // Records in the order their experiment first appears.
+    let fields: Vec<&str> = header.split(',').map(str::trim).collect();
+    let long = fields.first() == Some(&"experiment");
+    let placed = columns(&fields[usize::from(long)..], signals)
+        .ok_or_else(|| format!("{name}: row 1: header '{header}' is not {expected}"))?;
+    let width = fields.len();
+    let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
+    // Records in the order their experiment first appears: one column of
+    // values per signal, and the first problem.
     let mut order: Vec<String> = Vec::new();
     let mut slots: HashMap<String, usize> = HashMap::new();
-    let mut data: Vec<(Vec<f64>, Vec<f64>, Option<String>)> = Vec::new();
+    let mut data: Vec<(Vec<Vec<f64>>, Option<String>)> = Vec::new();
     for (index, line) in lines {
         let row = index + 1;
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if fields.len() != columns.len() {
+        let values: Vec<&str> = line.split(',').map(str::trim).collect();
+        if values.len() != width {
             return Err(format!(
-                "{name}: row {row}: {} values, the header has {}",
-                fields.len(),
-                columns.len()
+                "{name}: row {row}: {} values, the header has {width}",
+                values.len()
             ));
         }
-        let id = if long { fields[0] } else { stem };
-        let slot = match slots.get(id) {
-            Some(&slot) => slot,
-            None => {
-                slots.insert(id.to_string(), order.len());
-                order.push(id.to_string());
-                data.push((Vec::new(), Vec::new(), None));
-                order.len() - 1
-            }
-        };
+        let id = if long { values[0] } else { stem };
+        let slot = *slots.entry(id.to_string()).or_insert_with(|| {
+            order.push(id.to_string());
+            data.push((vec![Vec::new(); n_u + n_y], None));
+            order.len() - 1
+        });
         let entry = &mut data[slot];
-        let offset = usize::from(long);
-        for (k, column) in ["u", "y"].iter().enumerate() {
-            let text = fields[offset + k];
+        for (c, &(input, j)) in placed.iter().enumerate() {
+            let text = values[usize::from(long) + c];
+            let column = if input { j } else { n_u + j };
             let value = text.parse::<f64>().ok().filter(|v| v.is_finite());
-            match value {
-                Some(v) if k == 0 => entry.0.push(v),
-                Some(v) => entry.1.push(v),
-                None => {
-                    if entry.2.is_none() {
-                        entry.2 = Some(format!(
-                            "{name}: row {row}, column {column}: '{text}' is not a finite number"
-                        ));
-                    }
-                    // Keep the lengths aligned so later rows still parse.
-                    if k == 0 {
-                        entry.0.push(0.0);
-                    } else {
-                        entry.1.push(0.0);
-                    }
-                }
+            if value.is_none() && entry.1.is_none() {
+                entry.1 = Some(format!(
+                    "{name}: row {row}, column {}: '{text}' is not a finite number",
+                    fields[usize::from(long) + c]
+                ));
             }
+            // Keep the lengths aligned so later rows still parse.
+            entry.0[column].push(value.unwrap_or(0.0));
         }
     }
     Ok(order
         .into_iter()
         .zip(data)
-        .map(|(id, (u, y, problem))| ReadRecord {
+        .map(|(id, (columns, problem))| ReadRecord {
             record: match problem {
                 Some(p) => Err(p),
-                None => IoData::siso(&u, &y).map_err(|e| format!("{name}: experiment {id}: {e}")),
+                None => {
+                    let n = columns.first().map_or(0, Vec::len);
+                    let mut record = IoData::zeros(n, n_u, n_y);
+                    for (c, values) in columns.iter().enumerate() {
+                        let target = if c < n_u {
+                            record.input_mut(c)
+                        } else {
+                            record.output_mut(c - n_u)
+                        };
+                        target.copy_from_slice(values);
+                    }
+                    Ok(record)
+                }
             },
             id,
         })
@@ -142,7 +195,7 @@ mod tests {
                 1 => format!("u,y\n{text}"),
                 _ => format!("experiment,u,y\n{text}"),
             };
-            match parse(&text, "data.csv", "data") {
+            match parse(&text, "data.csv", "data", &siso()) {
                 Ok(records) => {
                     for r in records {
                         if let Err(problem) = r.record {
@@ -175,7 +228,7 @@ mod tests {
                     }
                 }
             }
-            let records = parse(&text, "f.csv", "f").expect("valid text");
+            let records = parse(&text, "f.csv", "f", &siso()).expect("valid text");
             prop_assert_eq!(records.len(), experiments.len());
             for (record, (id, rows)) in records.iter().zip(&experiments) {
                 prop_assert_eq!(&record.id, id);
@@ -209,7 +262,7 @@ mod tests {
                     text.push_str(&format!("{id},{u},{y}\n"));
                 }
             }
-            let records = parse(&text, "f.csv", "f").expect("valid header");
+            let records = parse(&text, "f.csv", "f", &siso()).expect("valid header");
             for (e, record) in records.iter().enumerate() {
                 if e == victim {
                     let problem = record.record.as_ref().expect_err("the bad record fails");
@@ -225,7 +278,7 @@ mod tests {
 
     #[test]
     fn headers_and_ragged_rows_are_rejected_with_their_row() {
-        let problem = |text: &str| parse(text, "f.csv", "f").err().unwrap_or_default();
+        let problem = |text: &str| parse(text, "f.csv", "f", &siso()).err().unwrap_or_default();
         assert_eq!(
             problem("\n \n"),
             "f.csv: the file is empty; expected a header u,y or experiment,u,y"
@@ -235,7 +288,7 @@ mod tests {
             problem("u,y\n1,2\n\n3\n"),
             "f.csv: row 4: 1 values, the header has 2"
         );
-        let records = parse("u,y\n1,2\n3,4\n", "f.csv", "f").expect("valid");
+        let records = parse("u,y\n1,2\n3,4\n", "f.csv", "f", &siso()).expect("valid");
         assert_eq!(records.len(), 1);
         assert_eq!(records[0].id, "f");
         assert_eq!(
@@ -245,5 +298,50 @@ mod tests {
                 vec![2f64.to_bits(), 4f64.to_bits()]
             )
         );
+    }
+
+    /// Columns are found by the model's names, in any order, several
+    /// inputs and outputs; the generic names work too.
+    #[test]
+    fn named_signals_in_any_order() {
+        let signals = SignalNames {
+            inputs: vec!["force".into()],
+            outputs: vec!["x".into(), "v".into()],
+        };
+        let text = "experiment,v,force,x\na,1,2,3\na,4,5,6\n";
+        let records = parse(text, "f.csv", "f", &signals).expect("valid");
+        let r = records[0].record.as_ref().expect("a record");
+        assert_eq!(
+            r.input(0).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            [2f64, 5.0].map(f64::to_bits)
+        );
+        assert_eq!(
+            r.output(0).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            [3f64, 6.0].map(f64::to_bits)
+        );
+        assert_eq!(
+            r.output(1).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            [1f64, 4.0].map(f64::to_bits)
+        );
+        assert!(parse("u,y1,y2\n1,2,3\n", "f.csv", "f", &signals).is_ok());
+        let e = parse("force,x\n1,2\n", "f.csv", "f", &signals)
+            .err()
+            .unwrap_or_default();
+        assert_eq!(
+            e,
+            "f.csv: row 1: header 'force,x' is not force,x,v or experiment,force,x,v"
+        );
+        let e = parse("force,x,x\n1,2,3\n", "f.csv", "f", &signals)
+            .err()
+            .unwrap_or_default();
+        assert!(e.starts_with("f.csv: row 1: header"), "{e}");
+        // No input at all: outputs only.
+        let autonomous = SignalNames {
+            inputs: vec![],
+            outputs: vec!["I".into()],
+        };
+        let records = parse("I\n0.1\n0.2\n", "f.csv", "f", &autonomous).expect("valid");
+        let r = records[0].record.as_ref().expect("a record");
+        assert_eq!((r.n_inputs(), r.n_samples()), (0, 2));
     }
 }

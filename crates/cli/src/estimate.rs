@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use twostage::models::{BuiltinModel, IoData};
-use twostage::{Estimator, ModelProfile, Refinement};
+use twostage::{Estimator, ModelProfile, Refinement, SignalNames};
 
 use crate::number::format_f64;
 use crate::{csv_records, usage};
@@ -97,23 +97,34 @@ fn refinement(estimator: &Estimator) -> Result<Refine> {
     }))
 }
 
-/// The method chosen on the command line, ready to estimate records: the
-/// parameter names, the method, and the record length an estimator file
-/// was trained and validated on.
-fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
+/// What a record is estimated with: the parameter names, the method, the
+/// record length an estimator file was trained and validated on, and the
+/// signals (the CSV columns) it reads.
+struct Chosen {
+    names: Vec<String>,
+    method: Method,
+    trained: Option<usize>,
+    signals: SignalNames,
+}
+
+/// The method chosen on the command line, ready to estimate records.
+fn method(args: &EstimateArgs) -> Result<Chosen> {
     use twostage_baselines as b;
     if let Some(path) = &args.estimator {
         let estimator = Estimator::load(path)?;
         let names = estimator.param_names().to_vec();
         let trained = estimator.record_shape().n_samples;
+        let signals = estimator.signal_names();
         let mut refine = if args.refine {
             Some(refinement(&estimator)?)
         } else {
             None
         };
-        return Ok((
+        return Ok(Chosen {
             names,
-            Box::new(move |record: &IoData| {
+            signals,
+            trained: Some(trained),
+            method: Box::new(move |record: &IoData| {
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
                 let theta = match refine.as_mut() {
                     Some(refine) => refine(record, &a.theta)?,
@@ -128,8 +139,7 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
                     widths: a.adaptive_half_widths.or(a.half_widths),
                 })
             }),
-            Some(trained),
-        ));
+        });
     }
     let (Some(model), Some(name)) = (&args.model, &args.method) else {
         return Err(usage(
@@ -137,7 +147,12 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
         ));
     };
     let model: BuiltinModel = model.parse().map_err(|e| usage(format!("{e}")))?;
-    let names = model.build(false)?.param_names().to_vec();
+    let simulator = model.build(false)?;
+    let names = simulator.param_names().to_vec();
+    let signals = SignalNames {
+        inputs: simulator.spec().input_names().to_vec(),
+        outputs: simulator.spec().output_names().to_vec(),
+    };
     let initial_covariance = match args.p0.as_str() {
         "eq6" => b::InitialCovariance::Eq6,
         "eq7" => b::InitialCovariance::Eq7,
@@ -153,9 +168,11 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
         seed: args.seed,
     };
     let estimator = b::classic_estimator(model, method, &settings)?;
-    Ok((
+    Ok(Chosen {
         names,
-        Box::new(move |record: &IoData| {
+        signals,
+        trained: None,
+        method: Box::new(move |record: &IoData| {
             estimator
                 .estimate(record)
                 .map(|e| Estimated {
@@ -165,17 +182,21 @@ fn method(args: &EstimateArgs) -> Result<(Vec<String>, Method, Option<usize>)> {
                 })
                 .map_err(|e| e.to_string())
         }),
-        None,
-    ))
+    })
 }
 
 /// Run `twostage estimate`; returns how many records failed.
 pub fn estimate(args: &EstimateArgs) -> Result<usize> {
-    let (names, mut estimate_one, trained_samples) = method(args)?;
+    let Chosen {
+        names,
+        method: mut estimate_one,
+        trained: trained_samples,
+        signals,
+    } = method(args)?;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     for path in &args.data {
-        for read in csv_records::read(path).map_err(|e| anyhow::anyhow!(e))? {
+        for read in csv_records::read(path, &signals).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
                 let n = record.n_samples();
                 match trained_samples {

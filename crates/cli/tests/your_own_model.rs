@@ -118,4 +118,20 @@ fn a_chart_simulated_in_numpy_trains_from_the_shell() {
     // Measured on 4000 records: 0.023 and 0.019.
     assert!(rmse(&report, "beta") < 0.05, "{report}");
     assert!(rmse(&report, "gamma") < 0.035, "{report}");
+    // Estimates of recorded epidemics read the column by its name, I: here
+    // the chart's own records (experiment,I).
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&dir.join("sir.tsest")),
+        path(&chart.join("data.csv")),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows = text(&out.stdout);
+    assert_eq!(
+        rows.lines().count(),
+        2501,
+        "a header and one row per experiment"
+    );
+    assert!(rows.starts_with("experiment,beta,gamma,"), "{rows}");
 }

@@ -18,7 +18,7 @@ use crate::chart_file::ChartFiles;
 use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
-use crate::estimator::{Estimator, RecordShape, TrainingInfo};
+use crate::estimator::{Estimator, RecordShape, SignalNames, TrainingInfo};
 use crate::profile::paper_benchmark;
 use crate::progress::{Progress, Silent, Stage};
 use crate::space::to_learning_space;
@@ -496,6 +496,10 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             envelope: FeatureEnvelope::fit(trained.features),
             adaptive: None,
             marginals: prior.marginals().to_vec(),
+            signal_names: Some(SignalNames {
+                inputs: spec.input_names().to_vec(),
+                outputs: spec.output_names().to_vec(),
+            }),
         };
         let iid = prior.clone().with_sampling(Sampling::Uniform);
         let calibration = match fresh {

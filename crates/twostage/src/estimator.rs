@@ -84,6 +84,18 @@ pub struct Estimator {
     /// Each parameter's prior, whose transform the network learned in
     /// (format version 3 on; earlier files are uniform on the box).
     pub(crate) marginals: Vec<Marginal>,
+    /// The names of the input and output signals, the columns `estimate`
+    /// reads (format version 3 on; earlier files are `u`, `y`).
+    pub(crate) signal_names: Option<SignalNames>,
+}
+
+/// The names of a model's input and output signals.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SignalNames {
+    /// Input names, in the order of the record's input columns.
+    pub inputs: Vec<String>,
+    /// Output names.
+    pub outputs: Vec<String>,
 }
 
 /// What a file stores. Each component has checked its own invariants while
@@ -103,6 +115,7 @@ struct EstimatorFields {
     envelope: Option<FeatureEnvelope>,
     adaptive: Option<AdaptiveIntervals>,
     marginals: Vec<Marginal>,
+    signal_names: Option<SignalNames>,
 }
 
 /// Format version 2: the same without the marginals (every prior uniform).
@@ -143,6 +156,7 @@ impl TryFrom<EstimatorFieldsV2> for Estimator {
             envelope: f.envelope,
             adaptive: f.adaptive,
             marginals,
+            signal_names: None,
         })
     }
 }
@@ -244,6 +258,17 @@ impl TryFrom<EstimatorFields> for Estimator {
                 adaptive.n_features()
             ));
         }
+        if let Some(names) = &f.signal_names
+            && (names.inputs.len() != f.shape.n_inputs || names.outputs.len() != f.shape.n_outputs)
+        {
+            return bad(format!(
+                "{} input and {} output names for records of {} and {}",
+                names.inputs.len(),
+                names.outputs.len(),
+                f.shape.n_inputs,
+                f.shape.n_outputs
+            ));
+        }
         if let Some(intervals) = &f.intervals {
             let widths = intervals.half_widths();
             if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
@@ -265,6 +290,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             envelope: f.envelope,
             adaptive: f.adaptive,
             marginals: f.marginals,
+            signal_names: f.signal_names,
         })
     }
 }
@@ -313,6 +339,23 @@ impl Estimator {
     /// version 3).
     pub fn marginals(&self) -> &[Marginal] {
         &self.marginals
+    }
+    /// The names of the input and output signals (`u`, `y`, or `u1`, `u2`,
+    /// ... for files before format version 3).
+    pub fn signal_names(&self) -> SignalNames {
+        self.signal_names.clone().unwrap_or_else(|| {
+            let generic = |prefix: &str, n: usize| -> Vec<String> {
+                if n == 1 {
+                    vec![prefix.to_string()]
+                } else {
+                    (1..=n).map(|j| format!("{prefix}{j}")).collect()
+                }
+            };
+            SignalNames {
+                inputs: generic("u", self.shape.n_inputs),
+                outputs: generic("y", self.shape.n_outputs),
+            }
+        })
     }
     /// The record shape it was trained on.
     pub fn record_shape(&self) -> &RecordShape {

@@ -69,7 +69,9 @@ pub use chart_file::ChartFiles;
 pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};
-pub use estimator::{Assessment, EstimateWorkspace, Estimator, RecordShape, TrainingInfo};
+pub use estimator::{
+    Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
+};
 pub use file::{FORMAT_VERSION, MAGIC};
 pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE};
 pub use moments::WeightedMoments;

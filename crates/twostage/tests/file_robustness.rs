@@ -142,8 +142,8 @@ fn the_bitwise_crc_agrees_with_the_files_we_write() {
 
 #[test]
 fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
-    // Version 3 appended the priors, version 2 the envelope and the adaptive
-    // intervals, each as the last fields. One uniform prior is postcard's
+    // Version 3 appended the priors and the signal names, version 2 the
+    // envelope and the adaptive intervals, each as the last fields. One uniform prior is postcard's
     // length 1, variant 0 and two f64 (17 bytes after the length); an
     // estimator without envelope and adaptive intervals encodes each as a
     // single 0 byte (None). Dropping those gives what versions 2 and 1 wrote.
@@ -162,19 +162,27 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
         "10 rows cannot fit an envelope of 10 features"
     );
     let v3 = estimator.to_bytes().unwrap();
-    let priors = 1 + 17;
+    // Then the signal names: Some, ["u"], ["y"] (lengths and bytes).
+    let names = [1, 1, 1, b'u', 1, 1, b'y'];
+    assert_eq!(&v3[v3.len() - names.len()..], &names);
+    let priors = 1 + 17 + names.len();
     let v2_payload = &v3[HEADER..v3.len() - priors];
     assert_eq!(&v3[v3.len() - priors..v3.len() - priors + 2], &[1, 0]);
-    assert_eq!(
-        Estimator::from_bytes(&seal_version(v2_payload, 2)).unwrap(),
-        estimator
-    );
+    // An older file is the same estimator: without stored names it reads
+    // columns u and y, which is what this one stores.
+    let same = |old: &Estimator| {
+        assert_eq!(old.signal_names(), estimator.signal_names());
+        // Re-encoded with the names a version-3 file would hold.
+        let mut bytes = old.to_bytes().unwrap();
+        bytes.truncate(bytes.len() - 1);
+        bytes.extend_from_slice(&names);
+        assert_eq!(bytes.len(), v3.len());
+        assert_eq!(bytes[HEADER..], v3[HEADER..]);
+    };
+    same(&Estimator::from_bytes(&seal_version(v2_payload, 2)).unwrap());
     assert_eq!(&v2_payload[v2_payload.len() - 2..], &[0, 0]);
     let v1_payload = &v2_payload[..v2_payload.len() - 2];
-    assert_eq!(
-        Estimator::from_bytes(&seal_version(v1_payload, 1)).unwrap(),
-        estimator
-    );
+    same(&Estimator::from_bytes(&seal_version(v1_payload, 1)).unwrap());
     // And each reader refuses the older bytes under its own header.
     assert!(Estimator::from_bytes(&seal_version(v1_payload, 2)).is_err());
     assert!(Estimator::from_bytes(&seal_version(v2_payload, 3)).is_err());
