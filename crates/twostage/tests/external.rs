@@ -421,3 +421,74 @@ serve(simulate)
         .to_string();
     assert!(e.contains("for a model without input use ar:NA"), "{e}");
 }
+
+/// The benchmark in Octave (docs/protocol/benchmark_octave.m and its client
+/// twostage_serve.m): the same records twice, and an estimator as accurate
+/// as the built-in model's. Needs octave-cli: CI installs Debian's octave
+/// and sets TWOSTAGE_REQUIRE_OCTAVE, elsewhere the test says it skipped.
+#[test]
+fn the_octave_benchmark_speaks_the_protocol() {
+    let octave = std::env::var("TWOSTAGE_OCTAVE").unwrap_or_else(|_| "octave-cli".into());
+    let present = std::process::Command::new(&octave)
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !present {
+        assert!(
+            std::env::var_os("TWOSTAGE_REQUIRE_OCTAVE").is_none(),
+            "{octave} is required here (TWOSTAGE_REQUIRE_OCTAVE) but does not run"
+        );
+        eprintln!("skipped: no {octave} (apt-get install --no-install-recommends octave)");
+        return;
+    }
+    let n = 300;
+    let model = twostage::models::Benchmark::builder()
+        .n_samples(n)
+        .build()
+        .unwrap();
+    let spec = ModelSpec::new(
+        "octave-benchmark",
+        &["theta"],
+        model.prior().clone(),
+        1.0,
+        n,
+    )
+    .unwrap();
+    let script = protocol_dir().join("benchmark_octave.m");
+    let sim = ExternalSimulator::new(
+        spec,
+        vec![
+            octave,
+            "--no-gui".into(),
+            "--quiet".into(),
+            "--norc".into(),
+            script.to_str().unwrap().into(),
+        ],
+    )
+    .unwrap()
+    .batch(20);
+    let (a, b) = (run(&sim, 0.3, 5).unwrap(), run(&sim, 0.3, 5).unwrap());
+    assert_eq!((a.n_samples(), a.n_inputs()), (n, 1));
+    assert!(a == b, "the same experiment gave another record");
+    let rmse = |sim: &dyn Simulator| {
+        twostage::TwoStage::builder(sim)
+            .preset(twostage::paper_benchmark())
+            .simulations(1000)
+            .validation(400)
+            .calibration(0)
+            .seed(6)
+            .train()
+            .unwrap()
+            .validation()
+            .unwrap()
+            .parameters[0]
+            .rmse
+    };
+    // Measured: 0.0523 through Octave, 0.0470 built in (N = 300, m = 1000).
+    let (octave_rmse, built_in) = (rmse(&sim), rmse(&model));
+    let ratio = octave_rmse / built_in;
+    assert!(
+        (1.0 / 1.5..1.5).contains(&ratio),
+        "Octave {octave_rmse} vs built-in {built_in}"
+    );
+}

@@ -1,0 +1,61 @@
+function twostage_serve(simulate)
+  % TWOSTAGE_SERVE  Serve a simulator to twostage over the protocol of
+  % docs/protocol.md (version 1), reading requests on standard input and
+  % writing records on standard output. Octave (octave-cli); the same code
+  % is MATLAB syntax, but MATLAB has no standard input to read from.
+  %
+  %   twostage_serve(@simulate)
+  %
+  % simulate(theta, seed, index, n) returns [inputs, outputs]: n x n_u and
+  % n x n_y matrices (n_u may be 0). Draw every random number from seed and
+  % index, e.g. randn("state", twostage_seed_state(seed, index)), so that
+  % experiment i of a chart is always the same. An error thrown by
+  % simulate fails that experiment only.
+  greeting = strsplit(strtrim(next_line()), " ");
+  if numel(greeting) != 6 || !strcmp(greeting{1}, "twostage") || !strcmp(greeting{2}, "1")
+    fprintf(stderr, "not a twostage 1 greeting: %s\n", strjoin(greeting, " "));
+    exit(2);
+  end
+  shape = str2double(greeting(3:6));
+  nu = shape(2); ny = shape(3); n = shape(4);
+  fprintf(stdout, "ready\n");
+  fflush(stdout);
+  while true
+    line = next_line();
+    if !ischar(line) || strncmp(line, "quit", 4)
+      break;
+    end
+    words = strsplit(strtrim(line), " ");
+    count = str2double(words{2});
+    for k = 1:count
+      job = strsplit(strtrim(next_line()), " ");
+      index = job{1};
+      seed = job{2};
+      theta = str2double(job(3:end));
+      try
+        [u, y] = simulate(theta, seed, str2double(index), n);
+        if rows(y) != n || columns(y) != ny || (nu > 0 && (rows(u) != n || columns(u) != nu))
+          error("the record is %dx%d and %dx%d, the model has %d samples of %d input(s) and %d output(s)",
+                rows(u), columns(u), rows(y), columns(y), n, nu, ny);
+        end
+        fprintf(stdout, "record %s\n", index);
+        values = [reshape(u, n, nu), y]';
+        fprintf(stdout, [repmat("%.17g ", 1, nu + ny - 1), "%.17g\n"], values);
+      catch err
+        fprintf(stdout, "error %s %s\n", index, strrep(err.message, "\n", " "));
+      end
+    end
+    fflush(stdout);
+  end
+end
+
+function line = next_line()
+  % One line of standard input, or -1 at its end. input() reads a line as
+  % it arrives; fgetl(stdin) waits for a buffer to fill, which would
+  % deadlock the exchange.
+  try
+    line = input("", "s");
+  catch
+    line = -1;
+  end
+end
