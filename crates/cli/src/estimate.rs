@@ -16,7 +16,7 @@ use crate::{csv_records, usage};
 #[derive(Debug, clap::Args)]
 pub struct EstimateArgs {
     /// The estimator file written by `twostage train`.
-    #[arg(long, conflicts_with_all = ["model", "method"])]
+    #[arg(long, conflicts_with_all = ["model", "model_file", "method"])]
     estimator: Option<PathBuf>,
     /// With --estimator of a built-in model: refine each estimate by the
     /// posterior mean of the prediction-error likelihood over twice its
@@ -24,11 +24,15 @@ pub struct EstimateArgs {
     #[arg(long, requires = "estimator")]
     refine: bool,
     /// With --method: the model the records come from (benchmark or pacejka).
-    #[arg(long, requires = "method")]
+    #[arg(long, requires = "method", conflicts_with = "model_file")]
     model: Option<String>,
+    /// With --method: a model file the records come from (the classic
+    /// methods exist for the built-in models only: it says so).
+    #[arg(long, value_name = "PATH", requires = "method")]
+    model_file: Option<PathBuf>,
     /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
     /// (indirect inference through the TS preset's ARX) or bayes.
-    #[arg(long, requires = "model")]
+    #[arg(long)]
     method: Option<String>,
     /// EKF/UKF initial covariance: eq6 or eq7 (the paper's).
     #[arg(long, default_value = "eq6")]
@@ -140,6 +144,14 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 })
             }),
         });
+    }
+    if let (Some(path), Some(name)) = (&args.model_file, &args.method) {
+        let file = twostage::ModelFile::load(path).map_err(|e| usage(e.to_string()))?;
+        return Err(usage(format!(
+            "method '{name}' is not available for {}: the classic methods exist for the \
+             built-in models only; train an estimator with `twostage train --model-file`",
+            file.name()
+        )));
     }
     let (Some(model), Some(name)) = (&args.model, &args.method) else {
         return Err(usage(

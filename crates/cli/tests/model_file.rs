@@ -107,6 +107,22 @@ fn a_mistake_in_a_model_file_is_one_line_naming_file_line_and_key() {
     assert_eq!(out.status.code(), Some(2));
     let out = twostage(&["train", "--out", path(&dir.join("x"))]);
     assert_eq!(out.status.code(), Some(2));
+    // The classic methods are the built-in models': refused for a model file.
+    std::fs::write(
+        &model,
+        "[model]\nname = \"m\"\n[source]\nbuiltin = \"benchmark\"\n",
+    )
+    .unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--model-file",
+        path(&model),
+        "--method",
+        "pem",
+        path(&dir.join("r.csv")),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("method 'pem' is not available for m"));
 }
 
 #[test]
