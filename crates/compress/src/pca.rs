@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::Compressor;
 use crate::arx::MAX_SIGNALS;
 use crate::error::{CompressError, Result};
-use crate::signals::check;
+use crate::signals::check_fixed_record;
 use crate::workspace::Workspace;
 
 const MAX_COMPONENTS: usize = 64;
@@ -390,20 +390,16 @@ impl Compressor for OutputPca {
                 reason: "fit it on training outputs first (OutputPca::fit)".into(),
             });
         }
-        if alpha.len() != self.components {
-            return Err(CompressError::BufferLength {
-                expected: self.components,
-                got: alpha.len(),
-            });
-        }
-        let n = check(inputs, outputs, self.n_inputs, self.n_outputs)?;
-        if n != self.n_samples {
-            return Err(CompressError::FixedLength {
-                expected: self.n_samples,
-                got: n,
-                structure: self.to_string(),
-            });
-        }
+        check_fixed_record(
+            inputs,
+            outputs,
+            self.n_inputs,
+            self.n_outputs,
+            self.n_samples,
+            alpha.len(),
+            self.components,
+            self,
+        )?;
         let d = self.n_samples * self.n_outputs;
         for (a, v) in alpha.iter_mut().zip(self.basis.chunks_exact(d)) {
             let mut acc = 0.0;

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::Compressor;
 use crate::error::{CompressError, Result};
-use crate::signals::{check, name};
+use crate::signals::{check_fixed_record, name};
 use crate::workspace::Workspace;
 
 /// The records' samples, each input then each output, sample by sample:
@@ -86,20 +86,16 @@ impl Compressor for RawRecord {
         _work: &mut Workspace,
         alpha: &mut [f64],
     ) -> Result<()> {
-        if alpha.len() != self.n_features() {
-            return Err(CompressError::BufferLength {
-                expected: self.n_features(),
-                got: alpha.len(),
-            });
-        }
-        let n = check(inputs, outputs, self.n_inputs, self.n_outputs)?;
-        if n != self.n_samples {
-            return Err(CompressError::FixedLength {
-                expected: self.n_samples,
-                got: n,
-                structure: self.to_string(),
-            });
-        }
+        check_fixed_record(
+            inputs,
+            outputs,
+            self.n_inputs,
+            self.n_outputs,
+            self.n_samples,
+            alpha.len(),
+            self.n_features(),
+            self,
+        )?;
         let width = self.n_inputs + self.n_outputs;
         for (k, row) in alpha.chunks_exact_mut(width).enumerate() {
             let (u, y) = row.split_at_mut(self.n_inputs);

@@ -35,6 +35,37 @@ pub(crate) fn check_record(
     Ok(n)
 }
 
+/// The checks of a compressor fitted to records of exactly `n_samples`
+/// samples (output PCA, raw record): the feature buffer, the record's
+/// shapes and values, and its length.
+#[allow(clippy::too_many_arguments)] // the compressor's whole shape, spelled out
+pub(crate) fn check_fixed_record(
+    inputs: ArrayView2<'_, f64>,
+    outputs: ArrayView2<'_, f64>,
+    n_inputs: usize,
+    n_outputs: usize,
+    n_samples: usize,
+    alpha_len: usize,
+    n_features: usize,
+    structure: &dyn std::fmt::Display,
+) -> Result<()> {
+    if alpha_len != n_features {
+        return Err(CompressError::BufferLength {
+            expected: n_features,
+            got: alpha_len,
+        });
+    }
+    let n = check(inputs, outputs, n_inputs, n_outputs)?;
+    if n != n_samples {
+        return Err(CompressError::FixedLength {
+            expected: n_samples,
+            got: n,
+            structure: structure.to_string(),
+        });
+    }
+    Ok(())
+}
+
 /// Check shapes, lengths and finiteness; return the number of samples.
 pub(crate) fn check(
     inputs: ArrayView2<'_, f64>,

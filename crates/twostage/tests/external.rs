@@ -68,6 +68,23 @@ def simulate(theta, seed, index):
 serve(simulate)
 "#;
 
+/// The validation RMSE of the paper's benchmark preset trained on `m`
+/// simulations of `sim` and validated on `r`.
+fn paper_rmse(sim: &dyn Simulator, m: usize, r: usize, seed: u64) -> f64 {
+    twostage::TwoStage::builder(sim)
+        .preset(twostage::paper_benchmark())
+        .simulations(m)
+        .validation(r)
+        .calibration(0)
+        .seed(seed)
+        .train()
+        .unwrap()
+        .validation()
+        .unwrap()
+        .parameters[0]
+        .rmse
+}
+
 fn gain(dir: &std::path::Path) -> ExternalSimulator {
     let spec = ModelSpec::new(
         "gain",
@@ -274,22 +291,9 @@ samples = 1000
     )
     .unwrap();
     let numpy = file.simulator().unwrap();
-    let rmse = |sim: &dyn Simulator| {
-        twostage::TwoStage::builder(sim)
-            .preset(twostage::paper_benchmark())
-            .validation(1000)
-            .calibration(0)
-            .seed(4)
-            .train()
-            .unwrap()
-            .validation()
-            .unwrap()
-            .parameters[0]
-            .rmse
-    };
     let (through_protocol, built_in) = (
-        rmse(numpy.as_ref()),
-        rmse(&twostage::models::Benchmark::new()),
+        paper_rmse(numpy.as_ref(), 1500, 1000, 4),
+        paper_rmse(&twostage::models::Benchmark::new(), 1500, 1000, 4),
     );
     // Measured: 0.02618 through the protocol, 0.02627 built in. Another
     // chart moves an RMSE by some 15%, so a factor of 1.5 either way is
@@ -470,22 +474,11 @@ fn the_octave_benchmark_speaks_the_protocol() {
     let (a, b) = (run(&sim, 0.3, 5).unwrap(), run(&sim, 0.3, 5).unwrap());
     assert_eq!((a.n_samples(), a.n_inputs()), (n, 1));
     assert!(a == b, "the same experiment gave another record");
-    let rmse = |sim: &dyn Simulator| {
-        twostage::TwoStage::builder(sim)
-            .preset(twostage::paper_benchmark())
-            .simulations(1000)
-            .validation(400)
-            .calibration(0)
-            .seed(6)
-            .train()
-            .unwrap()
-            .validation()
-            .unwrap()
-            .parameters[0]
-            .rmse
-    };
     // Measured: 0.0523 through Octave, 0.0470 built in (N = 300, m = 1000).
-    let (octave_rmse, built_in) = (rmse(&sim), rmse(&model));
+    let (octave_rmse, built_in) = (
+        paper_rmse(&sim, 1000, 400, 6),
+        paper_rmse(&model, 1000, 400, 6),
+    );
     let ratio = octave_rmse / built_in;
     assert!(
         (1.0 / 1.5..1.5).contains(&ratio),
