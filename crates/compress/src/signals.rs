@@ -18,12 +18,7 @@ pub(crate) fn check_record(
     needed: usize,
     structure: &dyn std::fmt::Display,
 ) -> Result<usize> {
-    if alpha_len != n_features {
-        return Err(CompressError::BufferLength {
-            expected: n_features,
-            got: alpha_len,
-        });
-    }
+    check_buffer(alpha_len, n_features)?;
     let n = check(inputs, outputs, n_inputs, n_outputs)?;
     if n < needed {
         return Err(CompressError::RecordTooShort {
@@ -49,12 +44,7 @@ pub(crate) fn check_fixed_record(
     n_features: usize,
     structure: &dyn std::fmt::Display,
 ) -> Result<()> {
-    if alpha_len != n_features {
-        return Err(CompressError::BufferLength {
-            expected: n_features,
-            got: alpha_len,
-        });
-    }
+    check_buffer(alpha_len, n_features)?;
     let n = check(inputs, outputs, n_inputs, n_outputs)?;
     if n != n_samples {
         return Err(CompressError::FixedLength {
@@ -64,6 +54,18 @@ pub(crate) fn check_fixed_record(
         });
     }
     Ok(())
+}
+
+/// The feature buffer has one slot per feature.
+fn check_buffer(alpha_len: usize, n_features: usize) -> Result<()> {
+    if alpha_len == n_features {
+        Ok(())
+    } else {
+        Err(CompressError::BufferLength {
+            expected: n_features,
+            got: alpha_len,
+        })
+    }
 }
 
 /// Check shapes, lengths and finiteness; return the number of samples.
