@@ -82,6 +82,10 @@ pub enum SimError {
         /// What happened, quoting what it answered.
         message: String,
     },
+    /// An FMU failed or was refused (the message names the FMU, the call
+    /// and what the FMU logged).
+    #[error("{0}")]
+    Fmu(String),
     /// A design or model setting is out of its valid range.
     #[error("invalid setting {name} = {value}: {reason}")]
     InvalidSetting {
