@@ -81,5 +81,6 @@ pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualMode
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;
+pub use twostage_fmi as fmi;
 pub use twostage_models as models;
 pub use twostage_validate as validate;

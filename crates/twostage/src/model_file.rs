@@ -6,11 +6,13 @@
 //! accepted. The annotated [`TEMPLATE`] is the reference;
 //! docs/your-own-model.md walks through it.
 
+use std::collections::BTreeMap;
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use toml::Spanned;
+use twostage_fmi::{FmiError, FmuSimulator, InterfaceKind};
 use twostage_models::{
     BuiltinModel, BuiltinOverrides, ExperimentRng, ExternalSimulator, InputSignal, IoData,
     Marginal, ModelSpec, Prior, Simulator,
@@ -48,6 +50,25 @@ pub enum ModelSource {
         timeout: std::time::Duration,
         /// Experiments per request.
         batch: usize,
+    },
+    /// An FMU (FMI 2.0 or 3.0), docs/fmu.md.
+    Fmu {
+        /// The FMU, relative paths resolved against the model file's folder.
+        path: PathBuf,
+        /// Co-simulation or model exchange (`None`: co-simulation if the
+        /// FMU has it).
+        interface: Option<InterfaceKind>,
+        /// Communication or integration steps per sample.
+        step_divisor: usize,
+        /// The simulation time of the first sample.
+        start_time: f64,
+        /// FMU variables set before initialization in every experiment.
+        starts: Vec<(String, f64)>,
+        /// FMU inputs driven with white Gaussian noise: name and standard
+        /// deviation, drawn in this order at every sample.
+        noise_inputs: Vec<(String, f64)>,
+        /// The design of the measured inputs.
+        input: Option<InputSignal>,
     },
     /// None: the file describes charts simulated elsewhere.
     ChartsOnly,
@@ -91,6 +112,10 @@ pub struct ModelFile {
     spec: ModelSpec,
     output_sd: Vec<f64>,
     presets: Vec<(String, Preset)>,
+    /// Where each name the source must know was written: (name, key, line).
+    name_lines: Vec<(String, &'static str, usize)>,
+    /// The line of `fmu = ...`.
+    fmu_line: Option<usize>,
 }
 
 impl ModelFile {
@@ -107,18 +132,22 @@ impl ModelFile {
         })?;
         let mut file = Self::parse(&text, &path.display().to_string())?;
         // A command runs beside its model file, so that `python3 sim.py` works
-        // from any folder.
-        if let ModelSource::Command { dir, .. } = &mut file.source {
-            *dir = path
-                .parent()
-                .map(|p| {
-                    if p.as_os_str().is_empty() {
-                        Path::new(".")
-                    } else {
-                        p
-                    }
-                })
-                .map(Path::to_path_buf);
+        // from any folder; an FMU is found beside it.
+        let folder = path.parent().map(|p| {
+            if p.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                p
+            }
+        });
+        match &mut file.source {
+            ModelSource::Command { dir, .. } => *dir = folder.map(Path::to_path_buf),
+            ModelSource::Fmu { path: fmu, .. } => {
+                if let Some(folder) = folder.filter(|_| fmu.is_relative()) {
+                    *fmu = folder.join(&*fmu);
+                }
+            }
+            _ => {}
         }
         Ok(file)
     }
@@ -140,7 +169,7 @@ impl ModelFile {
             ModelSource::Builtin { model, overrides } => {
                 Some((*model, model.build_with(overrides)?))
             }
-            ModelSource::Command { .. } | ModelSource::ChartsOnly => None,
+            ModelSource::Command { .. } | ModelSource::Fmu { .. } | ModelSource::ChartsOnly => None,
         };
         let base = builtin.as_ref().map(|(_, sim)| sim.spec());
         let (names, marginals) = at.parameters(&raw.parameter, base)?;
@@ -168,6 +197,56 @@ impl ModelFile {
             Some(b) => spec.with_notes(b.input_note(), b.noise_note()),
             None => spec,
         };
+        if let (ModelSource::Fmu { .. }, None) = (
+            &source,
+            raw.signals
+                .as_ref()
+                .and_then(|s| s.get_ref().sample_time.as_ref()),
+        ) {
+            return Err(at.error(
+                raw.signals.as_ref().map(Spanned::span),
+                "signals.sample_time",
+                "an FMU runs in its own time unit: give the time between samples, \
+                 sample_time = T"
+                    .into(),
+            ));
+        }
+        if let ModelSource::Fmu { input, .. } = &source {
+            let span = raw.signals.as_ref().map(Spanned::span);
+            if input.is_none() && !signals.inputs.is_empty() {
+                return Err(at.error(
+                    span,
+                    "signals.inputs",
+                    "the FMU's inputs need a design: add an [input] (white, chicane or fixed)"
+                        .into(),
+                ));
+            }
+            if let (Some(_), true) = (input, signals.inputs.is_empty()) {
+                return Err(at.error(
+                    raw.input.as_ref().map(Spanned::span),
+                    "input",
+                    "[input] drives the measured inputs, but [signals] names none".into(),
+                ));
+            }
+        }
+        let spec = match &source {
+            ModelSource::Fmu {
+                input,
+                noise_inputs,
+                ..
+            } => spec.with_notes(
+                &input
+                    .as_ref()
+                    .map(InputSignal::describe)
+                    .unwrap_or_default(),
+                &noise_inputs
+                    .iter()
+                    .map(|(name, sd)| format!("{name} ~ N(0, {sd}^2)"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            ),
+            _ => spec,
+        };
         let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
         let mut presets = at.presets(&raw.preset)?;
         if let Some((model, _)) = &builtin {
@@ -178,6 +257,12 @@ impl ModelFile {
                 }
             }
         }
+        let name_lines = at.name_lines(&raw);
+        let fmu_line = raw
+            .source
+            .as_ref()
+            .and_then(|s| s.get_ref().fmu.as_ref())
+            .map(|f| at.line(f.span().start));
         Ok(Self {
             origin: origin.to_string(),
             description: raw.model.description.unwrap_or_default(),
@@ -185,6 +270,8 @@ impl ModelFile {
             spec,
             output_sd,
             presets,
+            name_lines,
+            fmu_line,
         })
     }
 
@@ -238,6 +325,37 @@ impl ModelFile {
                     output_sd: self.output_sd.clone(),
                 }))
             }
+            ModelSource::Fmu {
+                path,
+                interface,
+                step_divisor,
+                start_time,
+                starts,
+                noise_inputs,
+                input,
+            } => {
+                let mut builder = FmuSimulator::builder(path, self.spec.clone())
+                    .step_divisor(*step_divisor)
+                    .start_time(*start_time);
+                if let Some(kind) = interface {
+                    builder = builder.interface(*kind);
+                }
+                if let Some(input) = input {
+                    builder = builder.input(input.clone());
+                }
+                for (name, sd) in noise_inputs {
+                    builder = builder.noise_input(name, *sd);
+                }
+                for (name, value) in starts {
+                    builder = builder.start(name, *value);
+                }
+                let fmu = builder.build().map_err(|e| self.fmu_error(e))?;
+                Ok(Box::new(FileSimulator {
+                    inner: Box::new(fmu),
+                    spec: self.spec.clone(),
+                    output_sd: self.output_sd.clone(),
+                }))
+            }
             ModelSource::ChartsOnly => Err(Error::ModelFile {
                 file: self.origin.clone(),
                 line: None,
@@ -247,6 +365,27 @@ impl ModelFile {
                           command cannot use)"
                     .into(),
             }),
+        }
+    }
+
+    /// An FMU's complaint, placed at the line of the name it concerns (or
+    /// of `fmu = ...`).
+    fn fmu_error(&self, e: FmiError) -> Error {
+        let (key, line) = match &e {
+            FmiError::Variable { name, .. } => self
+                .name_lines
+                .iter()
+                .rfind(|(n, _, _)| n == name)
+                .map_or(("source.fmu", self.fmu_line), |(_, key, line)| {
+                    (*key, Some(*line))
+                }),
+            _ => ("source.fmu", self.fmu_line),
+        };
+        Error::ModelFile {
+            file: self.origin.clone(),
+            line,
+            key: key.into(),
+            message: e.to_string(),
         }
     }
 
@@ -411,8 +550,36 @@ struct RawModel {
 struct RawSource {
     builtin: Option<Spanned<String>>,
     command: Option<Spanned<Vec<String>>>,
+    fmu: Option<Spanned<String>>,
     timeout_seconds: Option<Spanned<f64>>,
     batch: Option<Spanned<i64>>,
+    interface: Option<Spanned<String>>,
+    step_divisor: Option<Spanned<i64>>,
+    start_time: Option<Spanned<f64>>,
+    start: Option<Spanned<BTreeMap<String, f64>>>,
+}
+
+impl RawSource {
+    /// The first key given that only an FMU source takes.
+    fn fmu_key(&self) -> Option<(&'static str, Range<usize>)> {
+        [
+            (
+                "source.interface",
+                self.interface.as_ref().map(Spanned::span),
+            ),
+            (
+                "source.step_divisor",
+                self.step_divisor.as_ref().map(Spanned::span),
+            ),
+            (
+                "source.start_time",
+                self.start_time.as_ref().map(Spanned::span),
+            ),
+            ("source.start", self.start.as_ref().map(Spanned::span)),
+        ]
+        .into_iter()
+        .find_map(|(key, span)| span.map(|s| (key, s)))
+    }
 }
 
 #[derive(Deserialize)]
@@ -455,6 +622,14 @@ struct RawInput {
 struct RawNoise {
     model: Option<bool>,
     output_sd: Option<Spanned<OneOrMany>>,
+    inputs: Option<Spanned<Vec<RawNoiseInput>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawNoiseInput {
+    name: String,
+    sd: f64,
 }
 
 #[derive(Deserialize)]
@@ -523,18 +698,26 @@ impl Locator<'_> {
             return Ok(ModelSource::ChartsOnly);
         };
         let raw = source.get_ref();
+        if let Some(fmu) = &raw.fmu {
+            if raw.builtin.is_some() || raw.command.is_some() {
+                return Err(self.one_source(source.span()));
+            }
+            return self.fmu(fmu, raw, noise, input);
+        }
+        if let Some((key, span)) = raw.fmu_key() {
+            return Err(self.error(Some(span), key, "only an FMU source takes this key".into()));
+        }
+        if let Some(inputs) = noise.and_then(|n| n.get_ref().inputs.as_ref()) {
+            return Err(self.error(
+                Some(inputs.span()),
+                "noise.inputs",
+                "noise inputs drive an FMU's inputs: only an FMU source takes them".into(),
+            ));
+        }
         let name = match (&raw.builtin, &raw.command) {
             (Some(name), None) => name,
             (None, Some(command)) => return self.command(command, raw, noise, input),
-            _ => {
-                return Err(self.error(
-                    Some(source.span()),
-                    "source",
-                    "give one source: builtin = \"benchmark\" (or \"pacejka\"), or command = \
-                     [\"python3\", \"sim.py\"] (docs/protocol.md)"
-                        .into(),
-                ));
-            }
+            _ => return Err(self.one_source(source.span())),
         };
         if let Some(t) = &raw.timeout_seconds {
             return Err(self.error(
@@ -566,6 +749,180 @@ impl Locator<'_> {
                 input,
             },
         })
+    }
+
+    fn one_source(&self, span: Range<usize>) -> Error {
+        self.error(
+            Some(span),
+            "source",
+            "give one source: builtin = \"benchmark\" (or \"pacejka\"), command = \
+             [\"python3\", \"sim.py\"] (docs/protocol.md), or fmu = \"model.fmu\" (docs/fmu.md)"
+                .into(),
+        )
+    }
+
+    fn fmu(
+        &self,
+        fmu: &Spanned<String>,
+        raw: &RawSource,
+        noise: Option<&Spanned<RawNoise>>,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<ModelSource> {
+        if fmu.get_ref().trim().is_empty() {
+            return Err(self.error(
+                Some(fmu.span()),
+                "source.fmu",
+                "give the FMU's path, e.g. fmu = \"car.fmu\" (relative to this file)".into(),
+            ));
+        }
+        for (key, span) in [
+            (
+                "source.timeout_seconds",
+                raw.timeout_seconds.as_ref().map(Spanned::span),
+            ),
+            ("source.batch", raw.batch.as_ref().map(Spanned::span)),
+        ] {
+            if let Some(span) = span {
+                return Err(self.error(
+                    Some(span),
+                    key,
+                    "an FMU runs in this process: the key is for a command".into(),
+                ));
+            }
+        }
+        if let Some(noise) = noise.filter(|n| n.get_ref().model.is_some()) {
+            return Err(self.error(
+                Some(noise.span()),
+                "noise.model",
+                "`model` switches a built-in model's noise; give an FMU's noise as noise inputs"
+                    .into(),
+            ));
+        }
+        let interface = raw
+            .interface
+            .as_ref()
+            .map(|i| {
+                i.get_ref()
+                    .parse::<InterfaceKind>()
+                    .map_err(|e| self.error(Some(i.span()), "source.interface", e.to_string()))
+            })
+            .transpose()?;
+        let step_divisor = match &raw.step_divisor {
+            None => 1,
+            Some(d) => usize::try_from(*d.get_ref())
+                .ok()
+                .filter(|d| (1..=1 << 16).contains(d))
+                .ok_or_else(|| {
+                    self.error(
+                        Some(d.span()),
+                        "source.step_divisor",
+                        format!("{}: give 1 to 65536 steps per sample", d.get_ref()),
+                    )
+                })?,
+        };
+        let start_time = match &raw.start_time {
+            None => 0.0,
+            Some(t) if t.get_ref().is_finite() => *t.get_ref(),
+            Some(t) => {
+                return Err(self.error(
+                    Some(t.span()),
+                    "source.start_time",
+                    format!("{}: give a finite time", t.get_ref()),
+                ));
+            }
+        };
+        let starts: Vec<(String, f64)> = raw
+            .start
+            .as_ref()
+            .map(|s| s.get_ref().iter().map(|(k, v)| (k.clone(), *v)).collect())
+            .unwrap_or_default();
+        if let Some((name, value)) = starts.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(self.error(
+                raw.start.as_ref().map(Spanned::span),
+                "source.start",
+                format!("{name} = {value}: give a finite start value"),
+            ));
+        }
+        let mut noise_inputs: Vec<(String, f64)> = Vec::new();
+        if let Some(list) = noise.and_then(|n| n.get_ref().inputs.as_ref()) {
+            for n in list.get_ref() {
+                let name = n.name.trim().to_string();
+                if name.is_empty() || noise_inputs.iter().any(|(other, _)| *other == name) {
+                    return Err(self.error(
+                        Some(list.span()),
+                        "noise.inputs",
+                        format!("'{name}' is empty or named twice"),
+                    ));
+                }
+                if !(n.sd.is_finite() && n.sd >= 0.0) {
+                    return Err(self.error(
+                        Some(list.span()),
+                        "noise.inputs",
+                        format!("{name}: sd = {} must be finite and >= 0", n.sd),
+                    ));
+                }
+                noise_inputs.push((name, n.sd));
+            }
+        }
+        Ok(ModelSource::Fmu {
+            path: PathBuf::from(fmu.get_ref()),
+            interface,
+            step_divisor,
+            start_time,
+            starts,
+            noise_inputs,
+            input: input.map(|i| self.input(i)).transpose()?,
+        })
+    }
+
+    /// Where the names a source must know were written.
+    fn name_lines(&self, raw: &RawFile) -> Vec<(String, &'static str, usize)> {
+        let mut lines = Vec::new();
+        for p in &raw.parameter {
+            let name = p.get_ref().name.get_ref().trim().to_string();
+            lines.push((
+                name,
+                "parameter.name",
+                self.line(p.get_ref().name.span().start),
+            ));
+        }
+        // In the order the FMU simulator checks them, so that a name given
+        // two roles is placed at its second.
+        let signals = raw.signals.as_ref().map(Spanned::get_ref);
+        let at = |list: &Spanned<Vec<String>>| self.line(list.span().start);
+        if let Some(list) = signals.and_then(|s| s.inputs.as_ref()) {
+            lines.extend(
+                list.get_ref()
+                    .iter()
+                    .map(|n| (n.clone(), "signals.inputs", at(list))),
+            );
+        }
+        if let Some(inputs) = raw.noise.as_ref().and_then(|n| n.get_ref().inputs.as_ref()) {
+            let line = self.line(inputs.span().start);
+            lines.extend(
+                inputs
+                    .get_ref()
+                    .iter()
+                    .map(|n| (n.name.trim().to_string(), "noise.inputs", line)),
+            );
+        }
+        if let Some(list) = signals.and_then(|s| s.outputs.as_ref()) {
+            lines.extend(
+                list.get_ref()
+                    .iter()
+                    .map(|n| (n.clone(), "signals.outputs", at(list))),
+            );
+        }
+        if let Some(start) = raw.source.as_ref().and_then(|s| s.get_ref().start.as_ref()) {
+            let line = self.line(start.span().start);
+            lines.extend(
+                start
+                    .get_ref()
+                    .keys()
+                    .map(|n| (n.clone(), "source.start", line)),
+            );
+        }
+        lines
     }
 
     fn command(

@@ -25,8 +25,9 @@ pub enum Model {
     Pendulum,
 }
 
+/// The C sources, from any crate of the workspace (crates/<name>).
 fn sources() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmus")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fmi/tests/fmus")
 }
 
 /// Compile `model` for `version` into a shared library at `binary`.
