@@ -5,6 +5,7 @@ mod csv_records;
 mod curve;
 mod demo;
 mod estimate;
+mod fmu;
 mod inspect;
 mod model_arg;
 mod number;
@@ -54,6 +55,11 @@ enum Command {
     Validate(validate::ValidateArgs),
     /// Validation RMSE against the number of training simulations (m doubling).
     LearningCurve(curve::CurveArgs),
+    /// FMUs (FMI 2.0 and 3.0): list what one offers and write a model file to start from.
+    Fmu {
+        #[command(subcommand)]
+        command: fmu::FmuCommand,
+    },
 }
 
 /// A mistake in how the command was called: exit code 2, like clap's own.
@@ -88,6 +94,7 @@ fn main() -> ExitCode {
         Command::Inspect { file } => inspect::inspect(file, &mut io::stdout().lock()),
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
+        Command::Fmu { command } => fmu::run(command, &mut io::stdout().lock()),
         Command::Estimate(args) => match estimate::estimate(args) {
             Ok(0) => Ok(()),
             Ok(failed) => Err(anyhow::anyhow!(

@@ -73,7 +73,7 @@ pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
 };
 pub use file::{FORMAT_VERSION, MAGIC};
-pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE};
+pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE, fmu_model_file};
 pub use moments::WeightedMoments;
 pub use profile::{ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka};
 pub use progress::{Progress, Silent, Stage};

@@ -174,6 +174,10 @@ pub fn description(model: Model, version: FmiVersion) -> String {
     xml.push_str(&head);
     xml.push_str("\n  ");
     xml.push_str(&interface);
+    if model != Model::Pendulum {
+        // One doStep of 1 per sample, as the model file should say.
+        xml.push_str("\n  <DefaultExperiment startTime=\"0\" stopTime=\"300\" stepSize=\"1\"/>");
+    }
     xml.push_str("\n  <ModelVariables>\n");
     for (i, (name, vr, causality, variability, start, text)) in variables.iter().enumerate() {
         let start = start.map(|s| format!(" start=\"{s}\"")).unwrap_or_default();

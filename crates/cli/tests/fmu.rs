@@ -1,0 +1,118 @@
+//! From an FMU to a validated estimator on the command line: `fmu
+//! inspect` lists what the FMU offers and writes a model file that
+//! `train` and `validate` take as it is.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+#[path = "../../fmi/tests/common/mod.rs"]
+mod fmus;
+
+use common::{path, scratch, text, twostage};
+use twostage::fmi::FmiVersion;
+
+#[test]
+fn inspect_lists_the_roles_and_writes_a_model_file_that_trains_and_validates() {
+    let fmu = fmus::build(fmus::Model::Benchmark, FmiVersion::V3);
+    let dir = scratch("fmu-inspect");
+    let copy = dir.join("benchmark.fmu");
+    std::fs::copy(&fmu.path, &copy).unwrap();
+    let model = dir.join("benchmark.toml");
+
+    let out = twostage(&["fmu", "inspect", path(&copy), "--write", path(&model)]);
+    let listing = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(listing.contains("FMU: benchmark (FMI 3.0)"), "{listing}");
+    let section = |title: &str| {
+        let start = listing
+            .find(title)
+            .unwrap_or_else(|| panic!("no {title}: {listing}"));
+        let rest = &listing[start..];
+        rest[..rest[1..].find("\n\n").map_or(rest.len(), |e| e + 1)].to_string()
+    };
+    let parameters = section("parameters");
+    assert!(
+        parameters.contains("theta") && parameters.contains("fail_at"),
+        "{parameters}"
+    );
+    assert!(
+        !parameters.contains(" a "),
+        "a calculated parameter is not offered: {parameters}"
+    );
+    let inputs = section("inputs");
+    assert!(
+        ["u", "v2", "v11", "v12"].iter().all(|i| inputs.contains(i)),
+        "{inputs}"
+    );
+    assert!(section("outputs").contains("measured output"));
+    assert!(listing.contains("2 local real variable(s)"), "{listing}");
+
+    // The file starts from the FMU's suggested experiment. As its CHECK
+    // lines ask, the modeller moves the disturbances to noise inputs (with
+    // every noise measured, y is an exact function of the lagged signals
+    // and ARX refuses the rank-deficient regressors) and drops fail_at.
+    let written = std::fs::read_to_string(&model).unwrap();
+    assert!(
+        written.contains("fmu = \"benchmark.fmu\"") && written.contains("samples = 300"),
+        "{written}"
+    );
+    let fail_at = "[[parameter]]\nname = \"fail_at\"\n# CHECK: start value -1: fail the step at this time\nprior = { dist = \"uniform\", low = -1.5, high = -0.5 }\n";
+    assert!(written.contains(fail_at), "{written}");
+    let edited = written
+        .replace(fail_at, "")
+        .replace("inputs = [\"u\", \"v2\", \"v11\", \"v12\"]", "inputs = [\"u\"]")
+        .replace(
+            "[[preset]]",
+            "[noise]\ninputs = [{ name = \"v2\", sd = 0.3 }, { name = \"v11\", sd = 1.0 }, { name = \"v12\", sd = 1.0 }]\n\n[[preset]]",
+        );
+    std::fs::write(&model, edited).unwrap();
+    let estimator = dir.join("e.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--sims",
+        "400",
+        "--validate",
+        "100",
+        "--calibrate",
+        "0",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&[
+        "validate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--sims",
+        "100",
+    ]);
+    let report = text(&out.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(report.contains("theta"), "{report}");
+
+    // A second --write refuses to overwrite.
+    let out = twostage(&["fmu", "inspect", path(&copy), "--write", path(&model)]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("may exist already"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn inspect_answers_a_file_that_is_not_an_fmu() {
+    let dir = scratch("fmu-not");
+    let file = dir.join("notes.fmu");
+    std::fs::write(&file, "not a zip").unwrap();
+    let out = twostage(&["fmu", "inspect", path(&file)]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("is not an FMU") && err.contains("zip"),
+        "{err}"
+    );
+}
