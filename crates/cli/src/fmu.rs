@@ -14,6 +14,10 @@ pub enum FmuCommand {
     /// List the variables that can be parameters, inputs and outputs (units, start
     /// values), and optionally write a starting model file.
     Inspect(InspectArgs),
+    /// Serve experiments to a parent twostage over stdin and stdout (for FMUs that
+    /// allow one instance per process; started by twostage itself).
+    #[command(hide = true)]
+    Worker,
 }
 
 /// Arguments of `twostage fmu inspect`.
@@ -29,10 +33,26 @@ pub struct InspectArgs {
     pub locals: bool,
 }
 
+/// Let FMUs that allow one instance per process run in worker processes
+/// of this very binary (`twostage fmu worker`).
+pub fn serve_workers_from_this_binary() {
+    if let Ok(exe) = std::env::current_exe() {
+        twostage::fmi::use_worker_processes(vec![
+            exe.display().to_string(),
+            "fmu".into(),
+            "worker".into(),
+        ]);
+    }
+}
+
 /// Run an FMU command.
 pub fn run(command: &FmuCommand, out: &mut impl Write) -> Result<()> {
     match command {
         FmuCommand::Inspect(args) => inspect(args, out),
+        FmuCommand::Worker => {
+            twostage::fmi::serve_worker(std::io::stdin().lock(), std::io::stdout().lock())?;
+            Ok(())
+        }
     }
 }
 
@@ -100,7 +120,7 @@ fn describe(md: &ModelDescription, locals: bool, out: &mut impl Write) -> Result
     {
         let mut text = interface.kind.to_string();
         if interface.once_per_process {
-            text.push_str(" (one instance per process: experiments run one at a time)");
+            text.push_str(" (one instance per process: twostage runs it in worker processes)");
         }
         interfaces.push(text);
     }

@@ -86,6 +86,7 @@ fn main() -> ExitCode {
         // to stderr (exit 2).
         Err(e) => e.exit(),
     };
+    fmu::serve_workers_from_this_binary();
     let result = match &cli.command {
         Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
         Command::Models { template } => simulate::models(*template, &mut io::stdout().lock()),

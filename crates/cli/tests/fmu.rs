@@ -116,3 +116,76 @@ fn inspect_answers_a_file_that_is_not_an_fmu() {
         "{err}"
     );
 }
+
+/// An FMU that allows one instance per process trains through worker
+/// processes of the binary (`twostage fmu worker`), to the same estimator
+/// as the same FMU without the restriction.
+#[test]
+fn a_once_per_process_fmu_trains_in_worker_processes_to_the_same_estimator() {
+    let dir = scratch("fmu-once");
+    let mut reports = Vec::new();
+    for (name, model) in [
+        ("free", fmus::Model::Benchmark),
+        ("once", fmus::Model::BenchmarkOnce),
+    ] {
+        let fmu = fmus::build(model, FmiVersion::V2);
+        let copy = dir.join(format!("{name}.fmu"));
+        std::fs::copy(&fmu.path, &copy).unwrap();
+        let model = dir.join(format!("{name}.toml"));
+        std::fs::write(
+            &model,
+            format!(
+                r#"[model]
+name = "benchmark"
+[source]
+fmu = "{name}.fmu"
+[[parameter]]
+name = "theta"
+prior = {{ dist = "uniform", low = -0.9, high = 0.9 }}
+[signals]
+inputs = ["u"]
+outputs = ["y"]
+samples = 300
+sample_time = 1.0
+[input]
+signal = "white"
+sd = 1.0
+[noise]
+inputs = [{{ name = "v2", sd = 0.3 }}, {{ name = "v11", sd = 1.0 }}, {{ name = "v12", sd = 1.0 }}]
+[[preset]]
+name = "small"
+compress = "arx:3,3"
+fit = "mlp:6"
+sims = 300
+"#
+            ),
+        )
+        .unwrap();
+        let out = twostage(&[
+            "train",
+            "--model-file",
+            path(&model),
+            "--validate",
+            "100",
+            "--calibrate",
+            "0",
+            "--out",
+            path(&dir.join(format!("{name}.tsest"))),
+        ]);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let report = text(&out.stdout);
+        let rmse: Vec<String> = report
+            .lines()
+            .filter(|l| l.contains("theta"))
+            .map(str::to_string)
+            .collect();
+        assert!(!rmse.is_empty(), "{report}");
+        reports.push(rmse);
+    }
+    assert_eq!(
+        reports[0], reports[1],
+        "the same chart, the same estimator, the same report"
+    );
+    let listing = text(&twostage(&["fmu", "inspect", path(&dir.join("once.fmu"))]).stdout);
+    assert!(listing.contains("worker processes"), "{listing}");
+}

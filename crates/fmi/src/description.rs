@@ -27,7 +27,7 @@ impl std::fmt::Display for FmiVersion {
 }
 
 /// How an FMU is simulated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum InterfaceKind {
     /// The FMU brings its own solver; the importer calls `doStep`.
     CoSimulation,

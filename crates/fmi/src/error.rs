@@ -102,6 +102,15 @@ pub enum FmiError {
         /// The last messages the FMU logged.
         log: Vec<String>,
     },
+    /// A worker process (for an FMU that allows one instance per process)
+    /// failed or ended.
+    #[error("{path}: worker process: {message}")]
+    Worker {
+        /// The FMU.
+        path: String,
+        /// What happened.
+        message: String,
+    },
     /// A setting is out of its valid range.
     #[error("invalid FMU setting {name} = {value}: {reason}")]
     Setting {

@@ -43,6 +43,7 @@ mod description;
 mod error;
 mod ffi;
 mod simulator;
+mod worker;
 
 pub use archive::platform_folder;
 pub use description::{
@@ -50,4 +51,5 @@ pub use description::{
     Variability, Variable,
 };
 pub use error::{FmiError, Result};
-pub use simulator::{Fmu, FmuSimulator, FmuSimulatorBuilder};
+pub use simulator::{Execution, Fmu, FmuSimulator, FmuSimulatorBuilder, use_worker_processes};
+pub use worker::serve_worker;

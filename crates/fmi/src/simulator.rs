@@ -1,9 +1,9 @@
 //! An FMU behind the [`Simulator`] trait.
 
 use std::cell::RefCell;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 
 use rand_distr::{Distribution, StandardNormal};
 use twostage_models::{
@@ -11,9 +11,12 @@ use twostage_models::{
 };
 
 use crate::archive::Unpacked;
-use crate::description::{Causality, InterfaceKind, ModelDescription, Variability, Variable};
+use crate::description::{
+    Causality, Interface, InterfaceKind, ModelDescription, Variability, Variable,
+};
 use crate::error::{FmiError, Result};
 use crate::ffi::{Binary, Component};
+use crate::worker::WorkerPool;
 
 /// The most communication (or integration) steps per sample.
 const MAX_STEP_DIVISOR: usize = 1 << 16;
@@ -52,17 +55,47 @@ impl Fmu {
     }
 }
 
+/// What the FMU is asked to do, by variable name: everything a worker
+/// process needs to set up the same simulation.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub(crate) struct Setup {
+    pub path: PathBuf,
+    pub parameters: Vec<String>,
+    pub inputs: Vec<String>,
+    pub outputs: Vec<String>,
+    pub noise_inputs: Vec<(String, f64)>,
+    pub starts: Vec<(String, f64)>,
+    pub interface: Option<InterfaceKind>,
+    pub step_divisor: usize,
+    pub start_time: f64,
+    pub sample_time: f64,
+    pub n_samples: usize,
+}
+
+/// The program every once-per-process FMU runs its worker processes with,
+/// unless its builder names one.
+static WORKER_COMMAND: OnceLock<Vec<String>> = OnceLock::new();
+
+/// Run FMUs that may be instantiated only once per process in worker
+/// processes started with `command`, a program that calls
+/// [`serve_worker`](crate::serve_worker) on its stdin and stdout (the
+/// `twostage` binary: `["twostage", "fmu", "worker"]`). The first call
+/// wins. Without it such FMUs run one experiment at a time in this process.
+///
+/// ```
+/// twostage_fmi::use_worker_processes(vec!["twostage".into(), "fmu".into(), "worker".into()]);
+/// ```
+pub fn use_worker_processes(command: Vec<String>) {
+    let _ = WORKER_COMMAND.set(command);
+}
+
 /// How an [`FmuSimulator`] drives its FMU; see [`FmuSimulator::builder`].
 #[derive(Debug, Clone)]
 pub struct FmuSimulatorBuilder {
-    path: std::path::PathBuf,
+    setup: Setup,
     spec: ModelSpec,
     input: Option<InputSignal>,
-    noise_inputs: Vec<(String, f64)>,
-    starts: Vec<(String, f64)>,
-    interface: Option<InterfaceKind>,
-    step_divisor: usize,
-    start_time: f64,
+    workers: Option<Vec<String>>,
 }
 
 impl FmuSimulatorBuilder {
@@ -78,34 +111,41 @@ impl FmuSimulatorBuilder {
     /// drawn from the experiment's stream: sample by sample, in the order
     /// the noise inputs were named.
     pub fn noise_input(mut self, name: &str, sd: f64) -> Self {
-        self.noise_inputs.push((name.to_string(), sd));
+        self.setup.noise_inputs.push((name.to_string(), sd));
         self
     }
 
     /// Set the FMU variable `name` (a parameter, or an input's start) to
     /// `value` before initialization, in every experiment.
     pub fn start(mut self, name: &str, value: f64) -> Self {
-        self.starts.push((name.to_string(), value));
+        self.setup.starts.push((name.to_string(), value));
         self
     }
 
     /// Co-simulation or model exchange (default: co-simulation if the FMU
     /// has it).
     pub fn interface(mut self, kind: InterfaceKind) -> Self {
-        self.interface = Some(kind);
+        self.setup.interface = Some(kind);
         self
     }
 
     /// Communication steps (co-simulation) or RK4 steps (model exchange)
     /// per sample.
     pub fn step_divisor(mut self, divisor: usize) -> Self {
-        self.step_divisor = divisor;
+        self.setup.step_divisor = divisor;
         self
     }
 
     /// The simulation time of the first sample.
     pub fn start_time(mut self, time: f64) -> Self {
-        self.start_time = time;
+        self.setup.start_time = time;
+        self
+    }
+
+    /// The worker program for an FMU that may be instantiated only once
+    /// per process (see [`use_worker_processes`]); ignored for others.
+    pub fn worker_processes(mut self, command: Vec<String>) -> Self {
+        self.workers = Some(command);
         self
     }
 
@@ -128,39 +168,81 @@ impl FmuSimulatorBuilder {
     /// [`FmiError::NoBinary`] and [`FmiError::Binary`] for the binary;
     /// [`FmiError::Setting`] for settings out of range.
     pub fn build(self) -> Result<FmuSimulator> {
-        let unpacked = Unpacked::open(&self.path)?;
+        let loaded = Loaded::open(&self.setup)?;
+        if !self.spec.input_names().is_empty() && self.input.is_none() {
+            return Err(FmiError::Setting {
+                name: "input",
+                value: self.spec.input_names().join(", "),
+                reason: "the FMU's inputs need an input design (white, chicane or fixed)".into(),
+            });
+        }
+        let single = loaded.interface.once_per_process || loaded.interface.needs_execution_tool;
+        let workers = self.workers.or_else(|| WORKER_COMMAND.get().cloned());
+        let engine = match workers {
+            Some(command) if single => Engine::Workers(Box::new(WorkerPool::start(
+                command,
+                &self.setup,
+                &loaded.unpacked.origin,
+            )?)),
+            _ => Engine::InProcess(loaded.in_process(single)?),
+        };
+        Ok(FmuSimulator {
+            noise_sd: self.setup.noise_inputs.iter().map(|(_, sd)| *sd).collect(),
+            spec: self.spec,
+            input: self.input,
+            plan: loaded.plan,
+            engine,
+            unpacked: Arc::new(loaded.unpacked),
+        })
+    }
+}
+
+/// An FMU opened and checked against a [`Setup`]: its description, the
+/// interface in use and the plan of an experiment.
+pub(crate) struct Loaded {
+    pub unpacked: Unpacked,
+    pub interface: Interface,
+    pub plan: Plan,
+}
+
+impl Loaded {
+    pub fn open(setup: &Setup) -> Result<Self> {
+        let unpacked = Unpacked::open(&setup.path)?;
         let origin = unpacked.origin.clone();
-        if !(1..=MAX_STEP_DIVISOR).contains(&self.step_divisor) {
+        if !(1..=MAX_STEP_DIVISOR).contains(&setup.step_divisor) {
             return Err(FmiError::Setting {
                 name: "step_divisor",
-                value: self.step_divisor.to_string(),
+                value: setup.step_divisor.to_string(),
                 reason: format!("give 1 to {MAX_STEP_DIVISOR} steps per sample"),
             });
         }
-        if !self.start_time.is_finite() {
+        if !setup.start_time.is_finite() {
             return Err(FmiError::Setting {
                 name: "start_time",
-                value: self.start_time.to_string(),
+                value: setup.start_time.to_string(),
                 reason: "must be finite".into(),
             });
         }
         let md = &unpacked.description;
-        let kind = match self.interface {
+        let kind = match setup.interface {
             Some(kind) => kind,
             None if md.co_simulation.is_some() => InterfaceKind::CoSimulation,
             None => InterfaceKind::ModelExchange,
         };
-        let interface = md.interface(kind).ok_or_else(|| FmiError::Interface {
-            path: origin.clone(),
-            message: format!(
-                "the FMU has no {kind} interface; it has {}",
-                if md.co_simulation.is_some() {
-                    "co-simulation"
-                } else {
-                    "model exchange"
-                }
-            ),
-        })?;
+        let interface = md
+            .interface(kind)
+            .ok_or_else(|| FmiError::Interface {
+                path: origin.clone(),
+                message: format!(
+                    "the FMU has no {kind} interface; it has {}",
+                    if md.co_simulation.is_some() {
+                        "co-simulation"
+                    } else {
+                        "model exchange"
+                    }
+                ),
+            })?
+            .clone();
         if kind == InterfaceKind::ModelExchange && md.event_indicators > 0 {
             return Err(FmiError::Interface {
                 path: origin,
@@ -172,43 +254,45 @@ impl FmuSimulatorBuilder {
                 ),
             });
         }
-        let roles = Roles::check(md, &origin, &self)?;
-        if !self.spec.input_names().is_empty() && self.input.is_none() {
-            return Err(FmiError::Setting {
-                name: "input",
-                value: self.spec.input_names().join(", "),
-                reason: "the FMU's inputs need an input design (white, chicane or fixed)".into(),
-            });
-        }
-        let binary = unpacked.binary(&interface.model_identifier)?;
+        let roles = Roles::check(md, &origin, setup)?;
+        let plan = Plan {
+            roles,
+            kind,
+            step_divisor: setup.step_divisor,
+            start_time: setup.start_time,
+            sample_time: setup.sample_time,
+            continuous_states: md.continuous_states,
+            origin,
+        };
+        Ok(Self {
+            unpacked,
+            interface,
+            plan,
+        })
+    }
+
+    /// Load the binary and instantiate it once, so that a token mismatch
+    /// or a missing resource is reported before any experiment.
+    pub fn in_process(&self, serial: bool) -> Result<InProcess> {
+        let md = &self.unpacked.description;
+        let binary = self.unpacked.binary(&self.interface.model_identifier)?;
         let binary = Arc::new(Binary::load(
             &binary,
             md.version,
-            kind,
-            &origin,
+            self.plan.kind,
+            &self.unpacked.origin,
             &md.token,
-            &unpacked.resource_location(),
+            &self.unpacked.resource_location(),
         )?);
-        let simulator = FmuSimulator {
-            spec: self.spec,
-            input: self.input,
-            noise_sd: self.noise_inputs.iter().map(|(_, sd)| *sd).collect(),
-            roles,
-            kind,
-            step_divisor: self.step_divisor,
-            start_time: self.start_time,
-            continuous_states: md.continuous_states,
-            serial: interface.once_per_process || interface.needs_execution_tool,
+        let engine = InProcess {
+            binary,
+            serial,
             idle: Mutex::new(Vec::new()),
             instances: AtomicUsize::new(0),
-            binary,
-            unpacked: Arc::new(unpacked),
         };
-        // Instantiate once now, so that a token mismatch or a missing
-        // resource is reported before any experiment.
-        let first = simulator.instantiate()?;
-        simulator.give_back(first);
-        Ok(simulator)
+        let first = engine.instantiate()?;
+        engine.give_back(first);
+        Ok(engine)
     }
 }
 
@@ -218,13 +302,14 @@ struct Roles {
     parameters: Vec<u32>,
     /// The measured inputs, then the noise inputs.
     inputs: Vec<u32>,
+    n_measured_inputs: usize,
     outputs: Vec<u32>,
     start_references: Vec<u32>,
     start_values: Vec<f64>,
 }
 
 impl Roles {
-    fn check(md: &ModelDescription, origin: &str, setup: &FmuSimulatorBuilder) -> Result<Self> {
+    fn check(md: &ModelDescription, origin: &str, setup: &Setup) -> Result<Self> {
         let mut used: Vec<(&str, &str)> = Vec::new();
         let mut find = |name: &str, role: &'static str| -> Result<&Variable> {
             let variable = md.variable(name).ok_or_else(|| {
@@ -281,7 +366,7 @@ impl Roles {
                 && matches!(v.variability, Variability::Fixed | Variability::Tunable)
         };
         let mut parameters = Vec::new();
-        for name in setup.spec.param_names() {
+        for name in &setup.parameters {
             let v = find(name, "a parameter to estimate")?;
             if !settable(v) {
                 return Err(refuse(
@@ -296,14 +381,8 @@ impl Roles {
         }
         let mut inputs = Vec::new();
         let noise_names = setup.noise_inputs.iter().map(|(n, _)| n);
-        for (j, name) in setup
-            .spec
-            .input_names()
-            .iter()
-            .chain(noise_names)
-            .enumerate()
-        {
-            let role = if j < setup.spec.input_names().len() {
+        for (j, name) in setup.inputs.iter().chain(noise_names).enumerate() {
+            let role = if j < setup.inputs.len() {
                 "an input"
             } else {
                 "a noise input"
@@ -324,7 +403,7 @@ impl Roles {
             }
         }
         let mut outputs = Vec::new();
-        for name in setup.spec.output_names() {
+        for name in &setup.outputs {
             let v = find(name, "an output")?;
             if !matches!(v.causality, Causality::Output | Causality::Local) {
                 return Err(refuse(
@@ -357,6 +436,7 @@ impl Roles {
         }
         Ok(Self {
             parameters,
+            n_measured_inputs: setup.inputs.len(),
             inputs,
             outputs,
             start_references,
@@ -370,10 +450,12 @@ impl Roles {
 /// experiment's stream, and the outputs are read at every sample.
 ///
 /// Each worker thread gets its own instance (reset and reused between
-/// experiments); an FMU that may be instantiated only once per process
-/// runs its experiments one at a time. Either way, experiment `i` of seed
-/// `s` is the same bits whatever the thread count: everything random is
-/// drawn from the experiment's stream before the FMU runs.
+/// experiments). An FMU that may be instantiated only once per process runs
+/// in worker processes, one instance each, if a worker program is known
+/// ([`use_worker_processes`]), and otherwise one experiment at a time.
+/// Either way, experiment `i` of seed `s` is the same bits whatever the
+/// thread count: everything random is drawn from the experiment's stream
+/// before the FMU runs.
 ///
 /// ```no_run
 /// use twostage_fmi::FmuSimulator;
@@ -391,27 +473,39 @@ pub struct FmuSimulator {
     spec: ModelSpec,
     input: Option<InputSignal>,
     noise_sd: Vec<f64>,
-    roles: Roles,
-    kind: InterfaceKind,
-    step_divisor: usize,
-    start_time: f64,
-    continuous_states: usize,
-    serial: bool,
-    idle: Mutex<Vec<Component>>,
-    instances: AtomicUsize,
-    binary: Arc<Binary>,
+    plan: Plan,
+    engine: Engine,
     unpacked: Arc<Unpacked>,
+}
+
+/// Where experiments run.
+enum Engine {
+    InProcess(InProcess),
+    Workers(Box<WorkerPool>),
 }
 
 impl std::fmt::Debug for FmuSimulator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("FmuSimulator")
             .field("fmu", &self.unpacked.origin)
-            .field("interface", &self.kind)
-            .field("step_divisor", &self.step_divisor)
-            .field("one_at_a_time", &self.serial)
+            .field("interface", &self.plan.kind)
+            .field("step_divisor", &self.plan.step_divisor)
+            .field("execution", &self.execution())
             .finish_non_exhaustive()
     }
+}
+
+/// Where an [`FmuSimulator`] runs its experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Execution {
+    /// One instance per worker thread, in this process.
+    Threads,
+    /// One instance, one experiment at a time (the FMU may be instantiated
+    /// only once per process, and no worker program is known).
+    OneAtATime,
+    /// One instance in each of several worker processes.
+    WorkerProcesses,
 }
 
 impl FmuSimulator {
@@ -419,14 +513,22 @@ impl FmuSimulator {
     /// parameter, input and output names are FMU variable names.
     pub fn builder(path: impl AsRef<Path>, spec: ModelSpec) -> FmuSimulatorBuilder {
         FmuSimulatorBuilder {
-            path: path.as_ref().to_path_buf(),
+            setup: Setup {
+                path: path.as_ref().to_path_buf(),
+                parameters: spec.param_names().to_vec(),
+                inputs: spec.input_names().to_vec(),
+                outputs: spec.output_names().to_vec(),
+                noise_inputs: Vec::new(),
+                starts: Vec::new(),
+                interface: None,
+                step_divisor: 1,
+                start_time: 0.0,
+                sample_time: spec.sample_time(),
+                n_samples: spec.n_samples(),
+            },
             spec,
             input: None,
-            noise_inputs: Vec::new(),
-            starts: Vec::new(),
-            interface: None,
-            step_divisor: 1,
-            start_time: 0.0,
+            workers: None,
         }
     }
 
@@ -437,31 +539,31 @@ impl FmuSimulator {
 
     /// The interface in use.
     pub fn interface(&self) -> InterfaceKind {
-        self.kind
+        self.plan.kind
     }
 
-    /// Whether experiments run one at a time (the FMU may be instantiated
-    /// only once per process, or needs an external tool).
-    pub fn one_at_a_time(&self) -> bool {
-        self.serial
+    /// Where experiments run.
+    pub fn execution(&self) -> Execution {
+        match &self.engine {
+            Engine::InProcess(e) if e.serial => Execution::OneAtATime,
+            Engine::InProcess(_) => Execution::Threads,
+            Engine::Workers(_) => Execution::WorkerProcesses,
+        }
     }
+}
 
+/// Instances in this process: one per concurrent caller, or one shared.
+pub(crate) struct InProcess {
+    binary: Arc<Binary>,
+    serial: bool,
+    idle: Mutex<Vec<Component>>,
+    instances: AtomicUsize,
+}
+
+impl InProcess {
     fn instantiate(&self) -> Result<Component> {
         let n = self.instances.fetch_add(1, Ordering::Relaxed);
         self.binary.instantiate(&format!("twostage-{n}"))
-    }
-
-    /// An instance ready for an experiment: an idle one, or a new one.
-    fn take(&self) -> Result<Component> {
-        let idle = self
-            .idle
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .pop();
-        match idle {
-            Some(component) => Ok(component),
-            None => self.instantiate(),
-        }
     }
 
     /// Keep an instance that finished its experiment, reset for the next.
@@ -474,7 +576,55 @@ impl FmuSimulator {
         }
     }
 
-    /// Run one experiment on `component`, the random draws done.
+    /// Run one experiment, the random draws done. An instance that failed
+    /// is dropped: the next experiment gets a fresh one.
+    pub fn run(&self, plan: &Plan, theta: &[f64], noise: &[f64], out: &mut IoData) -> Result<()> {
+        if self.serial {
+            // The lock is held for the whole experiment: one instance, one
+            // experiment at a time.
+            let mut idle = self.idle.lock().unwrap_or_else(PoisonError::into_inner);
+            let mut component = match idle.pop() {
+                Some(c) => c,
+                None => self.instantiate()?,
+            };
+            let result = plan.run(&mut component, theta, noise, out);
+            if result.is_ok() && component.reset().is_ok() {
+                idle.push(component);
+            }
+            return result;
+        }
+        let idle = self
+            .idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .pop();
+        let mut component = match idle {
+            Some(component) => component,
+            None => self.instantiate()?,
+        };
+        let result = plan.run(&mut component, theta, noise, out);
+        if result.is_ok() {
+            self.give_back(component);
+        }
+        result
+    }
+}
+
+/// How one experiment runs: value references and steps.
+#[derive(Debug, Clone)]
+pub(crate) struct Plan {
+    roles: Roles,
+    kind: InterfaceKind,
+    step_divisor: usize,
+    start_time: f64,
+    sample_time: f64,
+    continuous_states: usize,
+    origin: String,
+}
+
+impl Plan {
+    /// Run one experiment on `component`: `out` holds the inputs, `noise`
+    /// the noise inputs sample by sample; the outputs are written to `out`.
     fn run(
         &self,
         component: &mut Component,
@@ -492,6 +642,11 @@ impl FmuSimulator {
         }
     }
 
+    /// The number of noise inputs.
+    pub fn noise_inputs(&self) -> usize {
+        self.roles.inputs.len() - self.roles.n_measured_inputs
+    }
+
     /// Set the inputs of sample `k` (measured, then noise) and read its
     /// outputs.
     fn sample(
@@ -503,7 +658,7 @@ impl FmuSimulator {
         out: &mut IoData,
     ) -> Result<()> {
         let n_u = out.n_inputs();
-        let n_noise = self.noise_sd.len();
+        let n_noise = self.noise_inputs();
         for j in 0..n_u {
             scratch.inputs[j] = out.input(j)[k];
         }
@@ -573,7 +728,7 @@ impl FmuSimulator {
                     let tolerance = 1e-9 * (step + end.abs());
                     if at < end - tolerance && at > t + tolerance {
                         return Err(FmiError::Interface {
-                            path: self.unpacked.origin.clone(),
+                            path: self.origin.clone(),
                             message: format!(
                                 "a time event at t = {at} falls inside the integration step \
                                  [{t}, {end}]; the fixed step cannot honour it. Choose a \
@@ -601,7 +756,7 @@ impl FmuSimulator {
     fn steps(&self) -> (usize, f64) {
         (
             self.step_divisor,
-            self.spec.sample_time() / self.step_divisor as f64,
+            self.sample_time / self.step_divisor as f64,
         )
     }
 }
@@ -681,47 +836,18 @@ impl Simulator for FmuSimulator {
                 noise.push(sd * e);
             }
         }
-        let _one_at_a_time = self
-            .serial
-            .then(|| self.idle.lock().unwrap_or_else(PoisonError::into_inner));
-        let mut component = match _one_at_a_time {
-            // The lock is held: use the one instance directly.
-            Some(mut idle) => {
-                let mut component = match idle.pop() {
-                    Some(c) => c,
-                    None => self.instantiate()?,
-                };
-                let result = self.run(&mut component, theta, &noise, out);
-                if result.is_ok() && component.reset().is_ok() {
-                    idle.push(component);
-                }
-                return finish(result, theta, spec.sample_time(), out);
+        match &self.engine {
+            Engine::InProcess(engine) => engine.run(&self.plan, theta, &noise, out)?,
+            Engine::Workers(pool) => pool.run(theta, &noise, out)?,
+        }
+        for j in 0..out.n_outputs() {
+            if let Some(k) = out.output(j).iter().position(|y| !y.is_finite()) {
+                return Err(SimError::Diverged {
+                    theta: theta.to_vec(),
+                    time: k as f64 * spec.sample_time(),
+                });
             }
-            None => self.take()?,
-        };
-        let result = self.run(&mut component, theta, &noise, out);
-        if result.is_ok() {
-            self.give_back(component);
         }
-        finish(result, theta, spec.sample_time(), out)
+        Ok(())
     }
-}
-
-/// The experiment's result: the FMU's error, or a diverged record.
-fn finish(
-    result: Result<()>,
-    theta: &[f64],
-    sample_time: f64,
-    out: &IoData,
-) -> twostage_models::Result<()> {
-    result?;
-    for j in 0..out.n_outputs() {
-        if let Some(k) = out.output(j).iter().position(|y| !y.is_finite()) {
-            return Err(SimError::Diverged {
-                theta: theta.to_vec(),
-                time: k as f64 * sample_time,
-            });
-        }
-    }
-    Ok(())
 }

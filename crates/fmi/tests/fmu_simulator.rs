@@ -7,7 +7,7 @@ mod common;
 
 use common::{Model, build, build_with};
 use rayon::prelude::*;
-use twostage_fmi::{FmiError, FmiVersion, FmuSimulator, InterfaceKind};
+use twostage_fmi::{Execution, FmiError, FmiVersion, FmuSimulator, InterfaceKind};
 use twostage_models::{
     Benchmark, InputSignal, IoData, ModelSpec, OdeSystem, Prior, Rk4, Simulator, experiment_rng,
 };
@@ -75,14 +75,32 @@ fn the_benchmark_as_a_co_simulation_fmu_is_the_built_in_model_sample_for_sample(
     }
 }
 
+fn worker() -> Vec<String> {
+    vec![env!("CARGO_BIN_EXE_twostage-fmu-worker").to_string()]
+}
+
 #[test]
 fn experiments_are_the_same_bits_whatever_the_thread_count_and_instance_policy() {
     let fmu = build(Model::Benchmark, FmiVersion::V2);
     let once = build(Model::BenchmarkOnce, FmiVersion::V2);
     let sim = benchmark_fmu(&fmu.path);
     let single = benchmark_fmu(&once.path);
-    assert!(!sim.one_at_a_time());
-    assert!(single.one_at_a_time(), "declared once per process");
+    let spec = benchmark_spec("benchmark-fmu");
+    let workers = FmuSimulator::builder(&once.path, spec)
+        .input(InputSignal::white_gaussian(1.0).unwrap())
+        .noise_input("v2", 0.1f64.sqrt())
+        .noise_input("v11", 1.0)
+        .noise_input("v12", 1.0)
+        .worker_processes(worker())
+        .build()
+        .unwrap();
+    assert_eq!(sim.execution(), Execution::Threads);
+    assert_eq!(
+        single.execution(),
+        Execution::OneAtATime,
+        "declared once per process"
+    );
+    assert_eq!(workers.execution(), Execution::WorkerProcesses);
     let chart = |sim: &FmuSimulator, threads: usize| -> Vec<Vec<f64>> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -101,9 +119,48 @@ fn experiments_are_the_same_bits_whatever_the_thread_count_and_instance_policy()
     };
     let one = chart(&sim, 1);
     assert_eq!(chart(&sim, 4), one, "4 threads, 4 instances");
-    // The once-per-process FMU would refuse a second live instance: it is
-    // run one experiment at a time, and gives the same chart.
+    // The once-per-process FMU refuses a second live instance: in this
+    // process it runs one experiment at a time, or in 4 worker processes,
+    // and gives the same chart either way.
     assert_eq!(chart(&single, 4), one);
+    assert_eq!(chart(&workers, 4), one);
+}
+
+#[test]
+fn a_crashing_fmu_in_a_worker_fails_only_its_experiments() {
+    let once = build(Model::BenchmarkOnce, FmiVersion::V3);
+    let crashing = FmuSimulator::builder(&once.path, benchmark_spec("crashing"))
+        .input(InputSignal::white_gaussian(1.0).unwrap())
+        .start("crash_at", 40.0)
+        .worker_processes(worker())
+        .build()
+        .unwrap();
+    let mut record = crashing.spec().new_record();
+    for i in 0..2 {
+        let err = crashing
+            .simulate(&[0.2], &mut experiment_rng(2, i), &mut record)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("ended without an answer") && err.contains("signal"),
+            "{err}"
+        );
+    }
+    // A step failure inside a worker comes back with the FMU's log.
+    let failing = FmuSimulator::builder(&once.path, benchmark_spec("failing"))
+        .input(InputSignal::white_gaussian(1.0).unwrap())
+        .start("fail_at", 3.0)
+        .worker_processes(worker())
+        .build()
+        .unwrap();
+    let err = failing
+        .simulate(&[0.2], &mut experiment_rng(2, 0), &mut record)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("worker process: fmi3DoStep at t = 3") && err.contains("deliberate failure"),
+        "{err}"
+    );
 }
 
 /// The pendulum of tests/fmus/pendulum.c in Rust, with the input held

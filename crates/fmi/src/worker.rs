@@ -1,0 +1,341 @@
+//! Worker processes for FMUs that may be instantiated only once per
+//! process (`canBeInstantiatedOnlyOncePerProcess`): each worker holds one
+//! instance and runs the experiments the parent sends it.
+//!
+//! The parent draws every random number (inputs and noise) from the
+//! experiment's stream and sends them with the parameters; the worker runs
+//! the FMU exactly as the in-process simulator does and sends the outputs
+//! back. A chart is therefore the same bits with workers, threads, or one
+//! experiment at a time.
+//!
+//! Messages are postcard frames behind an 8-byte marker and a length. The
+//! parent skips anything before a marker, so an FMU that prints to stdout
+//! cannot break the conversation.
+
+use std::io::{BufReader, Read, Write};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::sync::{Mutex, PoisonError};
+
+use twostage_models::IoData;
+
+use crate::error::{FmiError, Result};
+use crate::simulator::{Loaded, Setup};
+
+/// Starts every frame.
+const MARKER: &[u8; 8] = b"TSFMUwk1";
+/// The largest frame accepted (a record of 2^27 values).
+const MAX_FRAME: usize = 1 << 30;
+
+#[derive(serde::Serialize, serde::Deserialize)]
+enum ToWorker {
+    Setup(Setup),
+    Run {
+        theta: Vec<f64>,
+        /// Each input's samples in turn.
+        inputs: Vec<f64>,
+        /// The noise inputs, sample by sample.
+        noise: Vec<f64>,
+    },
+}
+
+#[derive(serde::Serialize, serde::Deserialize)]
+enum FromWorker {
+    Ready,
+    /// Each output's samples in turn.
+    Outputs(Vec<f64>),
+    Failed(String),
+}
+
+fn write_frame<T: serde::Serialize>(writer: &mut impl Write, message: &T) -> std::io::Result<()> {
+    let payload = postcard::to_stdvec(message).map_err(std::io::Error::other)?;
+    let length =
+        u32::try_from(payload.len()).map_err(|_| std::io::Error::other("a frame over 4 GiB"))?;
+    writer.write_all(MARKER)?;
+    writer.write_all(&length.to_le_bytes())?;
+    writer.write_all(&payload)?;
+    writer.flush()
+}
+
+/// The next frame, skipping anything before its marker; `None` at the end
+/// of the stream.
+fn read_frame<T: serde::de::DeserializeOwned>(
+    reader: &mut impl Read,
+) -> std::io::Result<Option<T>> {
+    let mut matched = 0;
+    let mut byte = [0u8; 1];
+    while matched < MARKER.len() {
+        if reader.read(&mut byte)? == 0 {
+            return if matched == 0 {
+                Ok(None)
+            } else {
+                Err(std::io::ErrorKind::UnexpectedEof.into())
+            };
+        }
+        matched = if byte[0] == MARKER[matched] {
+            matched + 1
+        } else {
+            usize::from(byte[0] == MARKER[0])
+        };
+    }
+    let mut length = [0u8; 4];
+    reader.read_exact(&mut length)?;
+    let length = u32::from_le_bytes(length) as usize;
+    if length > MAX_FRAME {
+        return Err(std::io::Error::other(format!("a frame of {length} bytes")));
+    }
+    let mut payload = vec![0u8; length];
+    reader.read_exact(&mut payload)?;
+    postcard::from_bytes(&payload)
+        .map(Some)
+        .map_err(std::io::Error::other)
+}
+
+/// Serve a parent's experiments: the body of a worker process. Reads the
+/// set-up and then experiments from `input`, answers on `output`, and
+/// returns at the end of `input`.
+///
+/// A program that embeds twostage can be its own worker: call this when
+/// started with a worker argument, and name that command in
+/// [`use_worker_processes`](crate::use_worker_processes).
+///
+/// # Errors
+/// Only when the pipes fail; every FMU failure is sent to the parent.
+pub fn serve_worker(input: impl Read, output: impl Write) -> Result<()> {
+    let mut input = BufReader::new(input);
+    let mut output = std::io::BufWriter::new(output);
+    let pipe = |e: std::io::Error| FmiError::Worker {
+        path: "-".into(),
+        message: format!("the pipe to the parent failed: {e}"),
+    };
+    let Some(ToWorker::Setup(setup)) = read_frame(&mut input).map_err(pipe)? else {
+        return Err(FmiError::Worker {
+            path: "-".into(),
+            message: "the parent did not start with a set-up".into(),
+        });
+    };
+    let ready = Loaded::open(&setup).and_then(|loaded| {
+        let engine = loaded.in_process(true)?;
+        Ok((loaded, engine))
+    });
+    let (loaded, engine) = match ready {
+        Ok(ready) => ready,
+        Err(e) => {
+            write_frame(&mut output, &FromWorker::Failed(e.to_string())).map_err(pipe)?;
+            return Ok(());
+        }
+    };
+    write_frame(&mut output, &FromWorker::Ready).map_err(pipe)?;
+    let (n, n_u, n_y) = (setup.n_samples, setup.inputs.len(), setup.outputs.len());
+    let mut record = IoData::zeros(n, n_u, n_y);
+    while let Some(message) = read_frame::<ToWorker>(&mut input).map_err(pipe)? {
+        let ToWorker::Run {
+            theta,
+            inputs,
+            noise,
+        } = message
+        else {
+            continue;
+        };
+        let reply = if inputs.len() != n * n_u {
+            FromWorker::Failed(format!(
+                "{} input values for {n} samples of {n_u} inputs",
+                inputs.len()
+            ))
+        } else {
+            for j in 0..n_u {
+                record
+                    .input_mut(j)
+                    .copy_from_slice(&inputs[j * n..(j + 1) * n]);
+            }
+            match engine.run(&loaded.plan, &theta, &noise, &mut record) {
+                Ok(()) => FromWorker::Outputs(
+                    (0..n_y)
+                        .flat_map(|j| record.output(j).iter().copied())
+                        .collect(),
+                ),
+                Err(e) => FromWorker::Failed(e.to_string()),
+            }
+        };
+        write_frame(&mut output, &reply).map_err(pipe)?;
+    }
+    Ok(())
+}
+
+/// One worker process.
+struct WorkerProcess {
+    child: Child,
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+}
+
+impl Drop for WorkerProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The worker processes of one simulator: one per concurrent caller.
+pub(crate) struct WorkerPool {
+    command: Vec<String>,
+    setup: Setup,
+    origin: String,
+    idle: Mutex<Vec<WorkerProcess>>,
+}
+
+impl WorkerPool {
+    /// Start one worker, so that a failing set-up is reported now.
+    pub fn start(command: Vec<String>, setup: &Setup, origin: &str) -> Result<Self> {
+        if command.first().is_none_or(|c| c.trim().is_empty()) {
+            return Err(FmiError::Setting {
+                name: "worker command",
+                value: format!("{command:?}"),
+                reason: "give the program and its arguments".into(),
+            });
+        }
+        let pool = Self {
+            command,
+            setup: setup.clone(),
+            origin: origin.into(),
+            idle: Mutex::new(Vec::new()),
+        };
+        let first = pool.spawn()?;
+        pool.idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(first);
+        Ok(pool)
+    }
+
+    fn fail(&self, message: String) -> FmiError {
+        FmiError::Worker {
+            path: self.origin.clone(),
+            message,
+        }
+    }
+
+    fn spawn(&self) -> Result<WorkerProcess> {
+        let mut child = Command::new(&self.command[0])
+            .args(&self.command[1..])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| self.fail(format!("`{}` does not start: {e}", self.command.join(" "))))?;
+        let (Some(stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
+            return Err(self.fail("no pipes to the worker".into()));
+        };
+        let mut worker = WorkerProcess {
+            child,
+            stdin,
+            stdout: BufReader::new(stdout),
+        };
+        match self.call(&mut worker, &ToWorker::Setup(self.setup.clone()))? {
+            FromWorker::Ready => Ok(worker),
+            FromWorker::Failed(message) => Err(self.fail(self.unprefixed(message))),
+            FromWorker::Outputs(_) => Err(self.fail("answered the set-up with outputs".into())),
+        }
+    }
+
+    /// Send one message and wait for the answer.
+    fn call(&self, worker: &mut WorkerProcess, message: &ToWorker) -> Result<FromWorker> {
+        let sent = write_frame(&mut worker.stdin, message);
+        let answer = sent.and_then(|()| read_frame(&mut worker.stdout));
+        match answer {
+            Ok(Some(reply)) => Ok(reply),
+            Ok(None) | Err(_) => {
+                let status = worker
+                    .child
+                    .wait()
+                    .map_or_else(|e| e.to_string(), |s| s.to_string());
+                Err(self.fail(format!(
+                    "`{}` ended without an answer ({status}): the FMU may have crashed; the next \
+                     experiment starts a new worker",
+                    self.command.join(" ")
+                )))
+            }
+        }
+    }
+
+    /// The worker's message without the FMU path it starts with.
+    fn unprefixed(&self, message: String) -> String {
+        message
+            .strip_prefix(&format!("{}: ", self.origin))
+            .map(str::to_string)
+            .unwrap_or(message)
+    }
+
+    /// Run one experiment in a worker: `out` holds the inputs and receives
+    /// the outputs.
+    pub fn run(&self, theta: &[f64], noise: &[f64], out: &mut IoData) -> Result<()> {
+        let idle = self
+            .idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .pop();
+        let mut worker = match idle {
+            Some(worker) => worker,
+            None => self.spawn()?,
+        };
+        let (n, n_y) = (out.n_samples(), out.n_outputs());
+        let message = ToWorker::Run {
+            theta: theta.to_vec(),
+            inputs: (0..out.n_inputs())
+                .flat_map(|j| out.input(j).iter().copied())
+                .collect(),
+            noise: noise.to_vec(),
+        };
+        // A worker that did not answer is dropped (killed) here.
+        let reply = self.call(&mut worker, &message)?;
+        let result = match reply {
+            FromWorker::Outputs(y) if y.len() == n * n_y => {
+                for j in 0..n_y {
+                    out.output_mut(j).copy_from_slice(&y[j * n..(j + 1) * n]);
+                }
+                Ok(())
+            }
+            FromWorker::Outputs(y) => Err(self.fail(format!(
+                "{} output values for {n} samples of {n_y} outputs",
+                y.len()
+            ))),
+            FromWorker::Failed(message) => Err(self.fail(self.unprefixed(message))),
+            FromWorker::Ready => Err(self.fail("answered an experiment with `ready`".into())),
+        };
+        self.idle
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(worker);
+        result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_survive_text_printed_before_and_between_them() {
+        let mut stream = Vec::new();
+        stream.extend_from_slice(b"FMU says hello\nTSFMU");
+        write_frame(&mut stream, &FromWorker::Outputs(vec![1.5, -2.0])).unwrap();
+        stream.extend_from_slice(b"TSFMUwk");
+        write_frame(&mut stream, &FromWorker::Failed("no".into())).unwrap();
+        let mut reader = &stream[..];
+        let first: FromWorker = read_frame(&mut reader).unwrap().unwrap();
+        assert!(
+            matches!(first, FromWorker::Outputs(y) if y.len() == 2 && y[1].to_bits() == (-2.0f64).to_bits())
+        );
+        let second: FromWorker = read_frame(&mut reader).unwrap().unwrap();
+        assert!(matches!(second, FromWorker::Failed(m) if m == "no"));
+        assert!(read_frame::<FromWorker>(&mut reader).unwrap().is_none());
+    }
+
+    #[test]
+    fn a_stream_cut_inside_a_frame_is_an_error_not_a_frame() {
+        let mut stream = Vec::new();
+        write_frame(&mut stream, &FromWorker::Outputs(vec![1.0; 10])).unwrap();
+        stream.truncate(stream.len() - 3);
+        assert!(read_frame::<FromWorker>(&mut &stream[..]).is_err());
+        assert!(read_frame::<FromWorker>(&mut &b"TSFM"[..]).is_err());
+    }
+}
