@@ -25,9 +25,13 @@ pub enum Model {
     Pendulum,
 }
 
-/// The C sources, from any crate of the workspace (crates/<name>).
+/// The C sources, from any package of the workspace.
 fn sources() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fmi/tests/fmus")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .map(|dir| dir.join("crates/fmi/tests/fmus"))
+        .find(|dir| dir.is_dir())
+        .expect("the workspace holds crates/fmi/tests/fmus")
 }
 
 /// Compile `model` for `version` into a shared library at `binary`.
