@@ -138,6 +138,8 @@ struct Fmi2EventInfo {
 }
 
 type Status0 = unsafe extern "C" fn(Handle) -> c_int;
+type InputDerivatives =
+    unsafe extern "C" fn(Handle, *const u32, usize, *const c_int, *const f64) -> c_int;
 type SetReals = unsafe extern "C" fn(Handle, *const u32, usize, *const f64) -> c_int;
 type GetReals = unsafe extern "C" fn(Handle, *const u32, usize, *mut f64) -> c_int;
 type SetTime = unsafe extern "C" fn(Handle, f64) -> c_int;
@@ -162,6 +164,7 @@ struct Fmi2 {
     set_real: SetReals,
     get_real: GetReals,
     do_step: Option<unsafe extern "C" fn(Handle, f64, f64, c_int) -> c_int>,
+    set_real_input_derivatives: Option<InputDerivatives>,
     me: Option<Fmi2Me>,
 }
 
@@ -289,11 +292,13 @@ fn optional<T: Copy>(library: &Library, name: &str) -> Option<T> {
 }
 
 impl Binary {
-    /// Load the shared library and its functions for `kind`.
+    /// Load the shared library and its functions for `kind` (and FMI 2.0's
+    /// input derivatives if `interpolate_inputs`).
     pub fn load(
         path: &Path,
         version: FmiVersion,
         kind: InterfaceKind,
+        interpolate_inputs: bool,
         origin: &str,
         token: &str,
         resources: &str,
@@ -325,6 +330,11 @@ impl Binary {
                 do_step: match kind {
                     InterfaceKind::CoSimulation => Some(get!("fmi2DoStep")),
                     InterfaceKind::ModelExchange => None,
+                },
+                set_real_input_derivatives: if interpolate_inputs {
+                    Some(get!("fmi2SetRealInputDerivatives"))
+                } else {
+                    None
                 },
                 me: match kind {
                     InterfaceKind::CoSimulation => None,
@@ -641,6 +651,34 @@ impl Component {
             }
         };
         self.check(name, status)
+    }
+
+    /// FMI 2.0 co-simulation: the first derivatives of inputs over the
+    /// coming communication step.
+    pub fn set_input_slopes(&mut self, references: &[u32], slopes: &[f64]) -> Result<()> {
+        debug_assert_eq!(references.len(), slopes.len());
+        let Functions::V2(Fmi2 {
+            set_real_input_derivatives: Some(set),
+            ..
+        }) = &self.binary.functions
+        else {
+            return Err(self.refused(
+                "fmi2SetRealInputDerivatives",
+                "not loaded: the FMU does not interpolate inputs".into(),
+            ));
+        };
+        let orders = vec![1 as c_int; references.len()];
+        // SAFETY: the three slices hold `len` elements.
+        let status = unsafe {
+            set(
+                self.handle,
+                references.as_ptr(),
+                references.len(),
+                orders.as_ptr(),
+                slopes.as_ptr(),
+            )
+        };
+        self.check("fmi2SetRealInputDerivatives", status)
     }
 
     /// Enter and leave initialization mode at `start_time` (after the start

@@ -255,9 +255,18 @@ impl Loaded {
             });
         }
         let roles = Roles::check(md, &origin, setup)?;
+        // FMI 2.0 co-simulation FMUs that say they interpolate inputs get
+        // the straight line to the next sample (the project's convention
+        // for continuous-time models, decision 005); FMI 3.0 has no input
+        // derivatives, and others hold inputs between samples.
+        let interpolate_inputs = md.version == crate::FmiVersion::V2
+            && kind == InterfaceKind::CoSimulation
+            && md.can_interpolate_inputs
+            && !setup.inputs.is_empty();
         let plan = Plan {
             roles,
             kind,
+            interpolate_inputs,
             step_divisor: setup.step_divisor,
             start_time: setup.start_time,
             sample_time: setup.sample_time,
@@ -280,6 +289,7 @@ impl Loaded {
             &binary,
             md.version,
             self.plan.kind,
+            self.plan.interpolate_inputs,
             &self.unpacked.origin,
             &md.token,
             &self.unpacked.resource_location(),
@@ -542,6 +552,13 @@ impl FmuSimulator {
         self.plan.kind
     }
 
+    /// Whether the measured inputs follow the straight line between
+    /// samples (an FMI 2.0 co-simulation FMU that can interpolate inputs)
+    /// rather than being held.
+    pub fn interpolates_inputs(&self) -> bool {
+        self.plan.interpolate_inputs
+    }
+
     /// Where experiments run.
     pub fn execution(&self) -> Execution {
         match &self.engine {
@@ -615,6 +632,9 @@ impl InProcess {
 pub(crate) struct Plan {
     roles: Roles,
     kind: InterfaceKind,
+    /// Measured inputs follow the straight line between samples (FMI 2.0
+    /// co-simulation with `canInterpolateInputs`).
+    interpolate_inputs: bool,
     step_divisor: usize,
     start_time: f64,
     sample_time: f64,
@@ -680,13 +700,34 @@ impl Plan {
         let n = out.n_samples();
         let mut scratch = Scratch::new(self.roles.inputs.len(), self.roles.outputs.len());
         let (d, step) = self.steps();
+        let measured = &self.roles.inputs[..self.roles.n_measured_inputs];
+        let mut slopes = vec![0.0; measured.len()];
+        let mut values = vec![0.0; measured.len()];
         for k in 0..n {
             self.sample(component, k, noise, &mut scratch, out)?;
-            if k + 1 < n {
-                for s in 0..d {
-                    // From the step count, so time does not drift by rounding.
-                    component.do_step(self.start_time + (k * d + s) as f64 * step, step)?;
+            if k + 1 == n {
+                break;
+            }
+            if self.interpolate_inputs {
+                for (j, slope) in slopes.iter_mut().enumerate() {
+                    let u = out.input(j);
+                    *slope = (u[k + 1] - u[k]) / self.sample_time;
                 }
+            }
+            for s in 0..d {
+                if self.interpolate_inputs {
+                    if s > 0 {
+                        // Within a sample, the value on the line at the
+                        // sub-step's start.
+                        for (j, value) in values.iter_mut().enumerate() {
+                            *value = out.input(j)[k] + slopes[j] * (s as f64 * step);
+                        }
+                        component.set_reals(measured, &values)?;
+                    }
+                    component.set_input_slopes(measured, &slopes)?;
+                }
+                // From the step count, so time does not drift by rounding.
+                component.do_step(self.start_time + (k * d + s) as f64 * step, step)?;
             }
         }
         Ok(())

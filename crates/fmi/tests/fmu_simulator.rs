@@ -457,3 +457,76 @@ fn broken_fmus_are_answered_clearly() {
     let err = pendulum_fmu(&fmu.path, None).unwrap_err();
     assert!(err.to_string().contains("2 event indicator(s)"), "{err}");
 }
+
+#[test]
+fn inputs_are_held_between_samples_unless_the_fmu_interpolates_them() {
+    let spec = || {
+        ModelSpec::new(
+            "integrator",
+            &["gain"],
+            Prior::uniform_box(&[0.5], &[2.0]).unwrap(),
+            0.1,
+            50,
+        )
+        .unwrap()
+        .with_signals(&["u"], &["y"])
+    };
+    for (interpolates, divisor) in [(false, 1), (true, 1), (true, 3)] {
+        let fmu = build(Model::Integrator(interpolates), FmiVersion::V2);
+        let sim = FmuSimulator::builder(&fmu.path, spec())
+            .input(InputSignal::white_gaussian(1.0).unwrap())
+            .step_divisor(divisor)
+            .build()
+            .unwrap();
+        assert_eq!(sim.interpolates_inputs(), interpolates);
+        let mut record = sim.spec().new_record();
+        sim.simulate(&[1.5], &mut experiment_rng(6, 0), &mut record)
+            .unwrap();
+        let (u, y) = (record.input(0), record.output(0));
+        // y' = 1.5 u: held, each sample adds 1.5 u[k] h; on the straight
+        // line, the trapezoid 1.5 h (u[k] + u[k+1]) / 2, exactly.
+        let mut expected = 0.0;
+        for k in 0..u.len() {
+            assert!(
+                (y[k] - expected).abs() <= 1e-12,
+                "interpolates {interpolates}, d = {divisor}, sample {k}: {} vs {expected}",
+                y[k]
+            );
+            if k + 1 < u.len() {
+                expected += 1.5
+                    * 0.1
+                    * if interpolates {
+                        0.5 * (u[k] + u[k + 1])
+                    } else {
+                        u[k]
+                    };
+            }
+        }
+    }
+}
+
+#[test]
+fn after_a_fatal_status_the_fmu_is_not_called_again() {
+    let fmu = build(Model::Benchmark, FmiVersion::V2);
+    let sim = FmuSimulator::builder(&fmu.path, benchmark_spec("fatal"))
+        .input(InputSignal::white_gaussian(1.0).unwrap())
+        .start("fail_at", 9.0)
+        .start("fail_fatally", 1.0)
+        .build()
+        .unwrap();
+    let mut record = sim.spec().new_record();
+    let err = sim
+        .simulate(&[0.1], &mut experiment_rng(8, 0), &mut record)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("fmi2DoStep at t = 9 returned Fatal")
+            && err.contains("Fatal [twostage-test]: deliberate failure"),
+        "{err}"
+    );
+    let err = sim
+        .simulate(&[0.1], &mut experiment_rng(8, 1), &mut record)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("an earlier call returned Fatal"), "{err}");
+}

@@ -23,6 +23,9 @@ pub enum Model {
     BenchmarkOnce,
     /// The damped pendulum, model exchange.
     Pendulum,
+    /// An integrator, FMI 2.0 co-simulation; `true`: it declares that it
+    /// interpolates inputs.
+    Integrator(bool),
 }
 
 /// The C sources, from any package of the workspace.
@@ -40,6 +43,7 @@ pub fn compile(model: Model, version: FmiVersion, binary: &Path) {
         Model::Benchmark => ("benchmark.c", false),
         Model::BenchmarkOnce => ("benchmark.c", true),
         Model::Pendulum => ("pendulum.c", false),
+        Model::Integrator(_) => ("integrator.c", false),
     };
     std::fs::create_dir_all(binary.parent().unwrap()).unwrap();
     let mut gcc = Command::new(std::env::var("CC").unwrap_or_else(|_| "gcc".into()));
@@ -72,6 +76,7 @@ pub fn identifier(model: Model) -> &'static str {
     match model {
         Model::Benchmark | Model::BenchmarkOnce => "benchmark",
         Model::Pendulum => "pendulum",
+        Model::Integrator(_) => "integrator",
     }
 }
 
@@ -146,6 +151,14 @@ pub fn description(model: Model, version: FmiVersion) -> String {
                     Some(-1.0),
                     "abort the process at this time",
                 ),
+                (
+                    "fail_fatally",
+                    11,
+                    "parameter",
+                    "fixed",
+                    Some(0.0),
+                    "fail with status Fatal",
+                ),
             ],
             (vec![5], vec![]),
         ),
@@ -172,6 +185,18 @@ pub fn description(model: Model, version: FmiVersion) -> String {
             ],
             (vec![3], vec![(6, 4), (7, 5)]),
         ),
+        Model::Integrator(interpolates) => (
+            "{twostage-integrator-1}",
+            format!(
+                "<CoSimulation modelIdentifier=\"{id}\" canHandleVariableCommunicationStepSize=\"true\" canInterpolateInputs=\"{interpolates}\"/>"
+            ),
+            vec![
+                ("gain", 0, "parameter", "fixed", Some(1.0), "gain"),
+                ("u", 1, "input", "continuous", Some(0.0), "input"),
+                ("y", 2, "output", "continuous", None, "integral"),
+            ],
+            (vec![2], vec![]),
+        ),
     };
     let mut xml = String::new();
     let head = match version {
@@ -186,7 +211,7 @@ pub fn description(model: Model, version: FmiVersion) -> String {
     xml.push_str(&head);
     xml.push_str("\n  ");
     xml.push_str(&interface);
-    if model != Model::Pendulum {
+    if matches!(model, Model::Benchmark | Model::BenchmarkOnce) {
         // One doStep of 1 per sample, as the model file should say.
         xml.push_str("\n  <DefaultExperiment startTime=\"0\" stopTime=\"300\" stepSize=\"1\"/>");
     }

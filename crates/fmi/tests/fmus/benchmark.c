@@ -6,12 +6,13 @@
  *             + theta/(1 + theta^2) u(k) + v12(k)
  *   y(k)    = x2(k) + v2(k)
  * One doStep of h = 1 is one sample. The parameter fail_at >= 0 makes the
- * step at that time fail on purpose, and crash_at >= 0 makes the process
- * abort there (for the tests of failing FMUs).
+ * step at that time fail on purpose (with status Fatal if fail_fatally > 0),
+ * and crash_at >= 0 makes the process abort there (for the tests of
+ * failing FMUs).
  * -DONCE builds a variant that refuses a second live instance. */
 #include <math.h>
 
-enum { THETA, U, V2, V11, V12, Y, X1, X2, FAIL_AT, A, CRASH_AT, N_REALS };
+enum { THETA, U, V2, V11, V12, Y, X1, X2, FAIL_AT, A, CRASH_AT, FAIL_FATALLY, N_REALS };
 #define N_REALS N_REALS
 #include "fmi_abi.h"
 
@@ -33,8 +34,9 @@ static void outputs(Instance *m) { m->r[Y] = m->r[X2] + m->r[V2]; }
 static Status step(Instance *m, double t, double h) {
     if (m->r[CRASH_AT] >= 0.0 && t >= m->r[CRASH_AT]) abort();
     if (m->r[FAIL_AT] >= 0.0 && t >= m->r[FAIL_AT]) {
-        say(m, Error, "deliberate failure at t = %g (fail_at = %g)", t, m->r[FAIL_AT]);
-        return Error;
+        Status status = m->r[FAIL_FATALLY] > 0.0 ? Fatal : Error;
+        say(m, status, "deliberate failure at t = %g (fail_at = %g)", t, m->r[FAIL_AT]);
+        return status;
     }
     if (h != 1.0) {
         say(m, Error, "this FMU steps one sample (h = 1) at a time, not h = %g", h);
