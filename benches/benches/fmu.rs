@@ -10,12 +10,14 @@
 //!   overhead per RK4 step (four derivative calls, each with setTime and
 //!   setContinuousStates, and completedIntegratorStep).
 //! - `fmu_chart`: 400 benchmark records through the FMI 2.0 FMU on 1 and 2
-//!   threads (one instance per thread).
+//!   threads (one instance per thread), and through its once-per-process
+//!   variant in 2 worker processes (this bench binary, started with
+//!   `--twostage-fmu-worker`).
 
 #[path = "../../crates/fmi/tests/common/mod.rs"]
 mod fmus;
 
-use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 use rayon::prelude::*;
 use twostage::fmi::{FmiVersion, FmuSimulator};
 use twostage::models::{
@@ -165,18 +167,31 @@ fn pendulum_record(c: &mut Criterion) {
     );
 }
 
+const WORKER_FLAG: &str = "--twostage-fmu-worker";
+
 fn chart(c: &mut Criterion) {
     const RECORDS: usize = 400;
     let built = fmus::build(fmus::Model::Benchmark, FmiVersion::V2);
-    let sim = benchmark_fmu(&built.path);
+    let once = fmus::build(fmus::Model::BenchmarkOnce, FmiVersion::V2);
+    twostage::fmi::use_worker_processes(vec![
+        std::env::current_exe()
+            .unwrap_or_else(|e| panic!("{e}"))
+            .display()
+            .to_string(),
+        WORKER_FLAG.into(),
+    ]);
+    let sims = [
+        ("fmi2_cs_threads", benchmark_fmu(&built.path)),
+        ("fmi2_cs_workers", benchmark_fmu(&once.path)),
+    ];
     let mut group = c.benchmark_group("fmu_chart");
     group.throughput(Throughput::Elements(RECORDS as u64));
-    for threads in [1usize, 2] {
+    for ((name, sim), threads) in [(&sims[0], 1usize), (&sims[0], 2), (&sims[1], 2)] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap_or_else(|e| panic!("{e}"));
-        group.bench_function(BenchmarkId::new("fmi2_cs_threads", threads), |b| {
+        group.bench_function(BenchmarkId::new(*name, threads), |b| {
             b.iter(|| {
                 pool.install(|| {
                     (0..RECORDS as u64).into_par_iter().for_each_init(
@@ -203,4 +218,14 @@ criterion_group! {
     config = slow_config();
     targets = chart
 }
-criterion_main!(records, charts);
+fn main() {
+    // The bench binary is also the worker of the once-per-process FMU.
+    if std::env::args().any(|a| a == WORKER_FLAG) {
+        twostage::fmi::serve_worker(std::io::stdin().lock(), std::io::stdout().lock())
+            .unwrap_or_else(|e| panic!("{e}"));
+        return;
+    }
+    records();
+    charts();
+    Criterion::default().configure_from_args().final_summary();
+}

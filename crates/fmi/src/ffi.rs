@@ -486,6 +486,11 @@ impl Binary {
         })
     }
 
+    /// Whether a call returned Fatal: no function may be called again.
+    pub fn is_fatal(&self) -> bool {
+        self.fatal.load(Ordering::Acquire)
+    }
+
     fn refuse_after_fatal(&self, function: &'static str, time: f64) -> Result<()> {
         if self.fatal.load(Ordering::Acquire) {
             return Err(FmiError::Call {

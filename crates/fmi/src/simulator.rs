@@ -578,6 +578,11 @@ pub(crate) struct InProcess {
 }
 
 impl InProcess {
+    /// Whether the FMU returned Fatal: this process cannot run it again.
+    pub fn is_fatal(&self) -> bool {
+        self.binary.is_fatal()
+    }
+
     fn instantiate(&self) -> Result<Component> {
         let n = self.instances.fetch_add(1, Ordering::Relaxed);
         self.binary.instantiate(&format!("twostage-{n}"))

@@ -43,7 +43,12 @@ enum FromWorker {
     Ready,
     /// Each output's samples in turn.
     Outputs(Vec<f64>),
-    Failed(String),
+    /// The experiment failed; `retire`: this worker cannot run the FMU
+    /// again (it returned Fatal) and exits.
+    Failed {
+        message: String,
+        retire: bool,
+    },
 }
 
 fn write_frame<T: serde::Serialize>(writer: &mut impl Write, message: &T) -> std::io::Result<()> {
@@ -120,7 +125,11 @@ pub fn serve_worker(input: impl Read, output: impl Write) -> Result<()> {
     let (loaded, engine) = match ready {
         Ok(ready) => ready,
         Err(e) => {
-            write_frame(&mut output, &FromWorker::Failed(e.to_string())).map_err(pipe)?;
+            let failed = FromWorker::Failed {
+                message: e.to_string(),
+                retire: true,
+            };
+            write_frame(&mut output, &failed).map_err(pipe)?;
             return Ok(());
         }
     };
@@ -137,10 +146,13 @@ pub fn serve_worker(input: impl Read, output: impl Write) -> Result<()> {
             continue;
         };
         let reply = if inputs.len() != n * n_u {
-            FromWorker::Failed(format!(
-                "{} input values for {n} samples of {n_u} inputs",
-                inputs.len()
-            ))
+            FromWorker::Failed {
+                message: format!(
+                    "{} input values for {n} samples of {n_u} inputs",
+                    inputs.len()
+                ),
+                retire: false,
+            }
         } else {
             for j in 0..n_u {
                 record
@@ -153,10 +165,17 @@ pub fn serve_worker(input: impl Read, output: impl Write) -> Result<()> {
                         .flat_map(|j| record.output(j).iter().copied())
                         .collect(),
                 ),
-                Err(e) => FromWorker::Failed(e.to_string()),
+                Err(e) => FromWorker::Failed {
+                    message: e.to_string(),
+                    retire: engine.is_fatal(),
+                },
             }
         };
         write_frame(&mut output, &reply).map_err(pipe)?;
+        if engine.is_fatal() {
+            // A fresh process loads the FMU afresh; this one cannot.
+            return Ok(());
+        }
     }
     Ok(())
 }
@@ -232,7 +251,7 @@ impl WorkerPool {
         };
         match self.call(&mut worker, &ToWorker::Setup(self.setup.clone()))? {
             FromWorker::Ready => Ok(worker),
-            FromWorker::Failed(message) => Err(self.fail(self.unprefixed(message))),
+            FromWorker::Failed { message, .. } => Err(self.fail(self.unprefixed(message))),
             FromWorker::Outputs(_) => Err(self.fail("answered the set-up with outputs".into())),
         }
     }
@@ -287,6 +306,7 @@ impl WorkerPool {
         };
         // A worker that did not answer is dropped (killed) here.
         let reply = self.call(&mut worker, &message)?;
+        let mut retire = false;
         let result = match reply {
             FromWorker::Outputs(y) if y.len() == n * n_y => {
                 for j in 0..n_y {
@@ -298,13 +318,18 @@ impl WorkerPool {
                 "{} output values for {n} samples of {n_y} outputs",
                 y.len()
             ))),
-            FromWorker::Failed(message) => Err(self.fail(self.unprefixed(message))),
+            FromWorker::Failed { message, retire: r } => {
+                retire = r;
+                Err(self.fail(self.unprefixed(message)))
+            }
             FromWorker::Ready => Err(self.fail("answered an experiment with `ready`".into())),
         };
-        self.idle
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .push(worker);
+        if !retire {
+            self.idle
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(worker);
+        }
         result
     }
 }
@@ -319,14 +344,18 @@ mod tests {
         stream.extend_from_slice(b"FMU says hello\nTSFMU");
         write_frame(&mut stream, &FromWorker::Outputs(vec![1.5, -2.0])).unwrap();
         stream.extend_from_slice(b"TSFMUwk");
-        write_frame(&mut stream, &FromWorker::Failed("no".into())).unwrap();
+        let failed = FromWorker::Failed {
+            message: "no".into(),
+            retire: true,
+        };
+        write_frame(&mut stream, &failed).unwrap();
         let mut reader = &stream[..];
         let first: FromWorker = read_frame(&mut reader).unwrap().unwrap();
         assert!(
             matches!(first, FromWorker::Outputs(y) if y.len() == 2 && y[1].to_bits() == (-2.0f64).to_bits())
         );
         let second: FromWorker = read_frame(&mut reader).unwrap().unwrap();
-        assert!(matches!(second, FromWorker::Failed(m) if m == "no"));
+        assert!(matches!(second, FromWorker::Failed { message, retire: true } if message == "no"));
         assert!(read_frame::<FromWorker>(&mut reader).unwrap().is_none());
     }
 

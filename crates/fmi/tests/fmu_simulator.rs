@@ -529,4 +529,26 @@ fn after_a_fatal_status_the_fmu_is_not_called_again() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("an earlier call returned Fatal"), "{err}");
+
+    // In a worker process, the worker that saw Fatal retires: the next
+    // experiment runs in a fresh process and meets the same failure, not a
+    // refusal.
+    let once = build(Model::BenchmarkOnce, FmiVersion::V2);
+    let sim = FmuSimulator::builder(&once.path, benchmark_spec("fatal"))
+        .input(InputSignal::white_gaussian(1.0).unwrap())
+        .start("fail_at", 9.0)
+        .start("fail_fatally", 1.0)
+        .worker_processes(worker())
+        .build()
+        .unwrap();
+    for i in 0..2 {
+        let err = sim
+            .simulate(&[0.1], &mut experiment_rng(8, i), &mut record)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("t = 9 returned Fatal"),
+            "experiment {i}: {err}"
+        );
+    }
 }
