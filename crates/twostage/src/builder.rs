@@ -5,9 +5,7 @@ use std::time::Instant;
 
 use twostage_compress::Compressor;
 use twostage_fit::Ridge;
-use twostage_models::{
-    IoData, Prior, Sampling, Simulator, StreamPurpose, random_permutation, stream_rng,
-};
+use twostage_models::{IoData, Sampling, Simulator, StreamPurpose, random_permutation, stream_rng};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
@@ -21,6 +19,7 @@ use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, SignalNames, TrainingInfo};
 use crate::profile::paper_benchmark;
 use crate::progress::{Progress, Silent, Stage};
+use crate::shard::{ChartRole, ShardedChart};
 use crate::space::to_learning_space;
 
 /// The choices of one training run, reusable across simulators.
@@ -70,11 +69,6 @@ fn given_estimates(
 
 /// Streams of the timing pilot, apart from the training chart's.
 const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
-
-/// Offsets that give the calibration and validation charts their own
-/// streams, disjoint from the training chart of the same seed.
-const CALIBRATION_SEED: u64 = 0x4341_4c49_4252_4154; // "CALIBRAT"
-const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
 
 /// Builder of a two-stage estimator for one simulator.
 ///
@@ -270,7 +264,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             Some(s) => prior.clone().with_sampling(s),
             None => prior.clone(),
         };
-        let design = training_prior.design(self.simulations, self.seed)?;
+        let design = ChartRole::Training.design(&training_prior, self.simulations, self.seed)?;
         let compressor = self.calibrated_compressor(&design)?;
         let chart = compress_chart_observed(
             self.simulator,
@@ -430,6 +424,112 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         )
     }
 
+    /// Train on a chart simulated in shards ([`ShardedChart`], e.g. by a
+    /// Slurm array): the estimator is, bit for bit, the one [`Self::train`]
+    /// gives with the shards' seed and sizes, since the shards hold the
+    /// very experiments `train` would simulate. The seed, the number of
+    /// simulations, and the calibration and validation sizes come from the
+    /// shards; the builder's must agree where they were set.
+    ///
+    /// # Errors
+    /// Shards of another model, or compressed by another compressor than
+    /// the builder's; a seed that differs; too many failed records; a
+    /// failed fit; a damaged shard ([`Error::Shards`]).
+    pub fn train_on_shards(mut self, chart: &ShardedChart) -> Result<Estimator> {
+        chart.check_model(self.simulator.spec())?;
+        let plan = chart.plan();
+        if self.seed != plan.seed {
+            return Err(Error::Shards {
+                what: chart.pattern().to_string(),
+                message: format!(
+                    "the shards were simulated with seed {}, the training asks for seed {}: \
+                     train with --seed {} (or leave it out)",
+                    plan.seed, self.seed, plan.seed
+                ),
+            });
+        }
+        let [m, calibration, validation] = plan.counts;
+        self.simulations = m;
+        self.calibration = calibration;
+        self.validation = validation;
+        self.check()?;
+        let prior = self.simulator.spec().prior();
+        let training_prior = match self.sampling {
+            Some(s) => prior.clone().with_sampling(s),
+            None => prior.clone(),
+        };
+        let sampling = format!("{:?}", training_prior.sampling());
+        if sampling != chart.sampling() {
+            return Err(Error::Shards {
+                what: chart.pattern().to_string(),
+                message: format!(
+                    "the shards were drawn by {} sampling, the training asks for {sampling}",
+                    chart.sampling()
+                ),
+            });
+        }
+        let mut compressor = self.shaped_compressor()?;
+        if let Some(spec_text) = &plan.compressor {
+            let stored: CompressorConfig = spec_text.parse()?;
+            let stored = stored.for_shape(
+                self.simulator.spec().input_names().len(),
+                self.simulator.spec().output_names().len(),
+                self.simulator.spec().n_samples(),
+            )?;
+            if stored.to_string() != compressor.to_string() {
+                return Err(Error::Shards {
+                    what: chart.pattern().to_string(),
+                    message: format!(
+                        "the shards hold features of {spec_text} ({stored}), the training asks \
+                         for {compressor}: train with --compress {spec_text} (or simulate raw \
+                         shards)"
+                    ),
+                });
+            }
+        } else if compressor.records_to_prepare() > 0 {
+            let records = chart.first_training_records(compressor.records_to_prepare())?;
+            compressor = compressor.prepared(&records)?;
+        }
+        let part = |role: ChartRole, stage: &'static str| -> Result<CompressedChart> {
+            let compressed = chart.compressed(role, &compressor)?;
+            crate::chart::within_allowance(
+                stage,
+                &compressed.failures,
+                compressed.total(),
+                self.max_failure_fraction,
+            )?;
+            Ok(compressed)
+        };
+        let training = part(ChartRole::Training, Stage::Training.label())?;
+        let calibration = (calibration > 0)
+            .then(|| part(ChartRole::Calibration, Stage::Calibration.label()))
+            .transpose()?;
+        let validation = (validation > 0)
+            .then(|| part(ChartRole::Validation, Stage::Validation.label()))
+            .transpose()?;
+        self.progress.begin(Stage::Fitting, 0);
+        let targets = to_learning_space(training.thetas.view(), training_prior.marginals());
+        let regressor = self
+            .regressor
+            .fit(training.features.view(), targets.view(), self.seed);
+        self.progress.end(Stage::Fitting);
+        self.finish(
+            compressor,
+            regressor?,
+            TrainedOn {
+                features: training.features.view(),
+                simulations: m,
+                failures: training.failures.len(),
+                sampling,
+                regressor: self.regressor.clone(),
+            },
+            Fresh::Given {
+                calibration: calibration.as_ref(),
+                validation: validation.as_ref(),
+            },
+        )
+    }
+
     /// The compressor, prepared (PCA directions, NARX scales) on the first
     /// training records of a chart when it needs that.
     fn chart_compressor(
@@ -501,13 +601,11 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 outputs: spec.output_names().to_vec(),
             }),
         };
-        let iid = prior.clone().with_sampling(Sampling::Uniform);
         let calibration = match fresh {
             Fresh::Simulate if self.calibration > 0 => Some(self.fresh_estimates(
                 &estimator,
-                &iid,
+                ChartRole::Calibration,
                 self.calibration,
-                CALIBRATION_SEED,
                 Stage::Calibration,
             )?),
             Fresh::Given {
@@ -537,9 +635,8 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         let validation = match fresh {
             Fresh::Simulate if self.validation > 0 => Some(self.fresh_estimates(
                 &estimator,
-                &iid,
+                ChartRole::Validation,
                 self.validation,
-                VALIDATION_SEED,
                 Stage::Validation,
             )?),
             Fresh::Given {
@@ -588,20 +685,20 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         )
     }
 
-    /// Truths and clipped estimates on `count` fresh i.i.d. simulations.
+    /// Truths and clipped estimates on `count` fresh i.i.d. simulations of
+    /// the calibration or validation chart.
     fn fresh_estimates(
         &self,
         estimator: &Estimator,
-        prior: &Prior,
+        role: ChartRole,
         count: usize,
-        offset: u64,
         stage: Stage,
     ) -> Result<(
         ndarray::Array2<f64>,
         ndarray::Array2<f64>,
         ndarray::Array2<f64>,
     )> {
-        let design = prior.design(count, self.seed ^ offset)?;
+        let design = role.design(self.simulator.spec().prior(), count, self.seed)?;
         let chart = compress_chart_observed(
             self.simulator,
             estimator.compressor(),

@@ -212,39 +212,30 @@ pub(crate) fn within_allowance(
     }
 }
 
-/// A chart kept whole: parameter vectors and full records, for the
-/// automatic design (which compresses one chart many ways) and for fitting
-/// a compressor's own parameters (PCA directions, NARX scales).
-pub(crate) struct StoredChart {
-    /// Parameter vectors of the experiments that succeeded (m' x q).
-    pub(crate) thetas: Array2<f64>,
-    /// Their records, in design order.
-    pub(crate) records: Vec<IoData>,
-}
+/// One simulated experiment: its parameter vector and record, or why it
+/// failed.
+pub(crate) type Outcome = std::result::Result<(Vec<f64>, IoData), ExperimentFailure>;
 
-/// Simulate the first `count` experiments of `design` in parallel and keep
-/// their records; failed experiments are dropped within
-/// `max_failure_fraction`. `progress`, when given, hears of each finished
-/// experiment under its stage. Record i depends only on `(design, i)`.
-pub(crate) fn simulate_records<S: Simulator + ?Sized>(
+/// Simulate experiments `range` of `design` in parallel, in blocks of the
+/// simulator's batch size, and return their outcomes in index order.
+/// `progress`, when given, hears of each finished experiment under its
+/// stage. Record i depends only on `(design, i)`, not on the range.
+pub(crate) fn simulate_range<S: Simulator + ?Sized>(
     simulator: &S,
     design: &Design,
-    count: usize,
-    max_failure_fraction: f64,
+    range: std::ops::Range<usize>,
     progress: Option<(Stage, &dyn Progress)>,
-) -> Result<StoredChart> {
-    let count = count.min(design.len());
+) -> Vec<Outcome> {
     let q = design.prior().dim();
     if let Some((stage, progress)) = progress {
-        progress.begin(stage, count);
+        progress.begin(stage, range.len());
     }
     let block = simulator.batch_size().max(1);
-    let outcomes: Vec<std::result::Result<(Vec<f64>, IoData), ExperimentFailure>> = (0..count
-        .div_ceil(block))
+    let outcomes: Vec<Outcome> = (0..range.len().div_ceil(block))
         .into_par_iter()
         .map(|c| {
-            let start = c * block;
-            let len = block.min(count - start);
+            let start = range.start + c * block;
+            let len = block.min(range.end - start);
             let (mut thetas, mut records) = (vec![0.0; len * q], vec![IoData::default(); len]);
             let simulated = run_experiments(simulator, design, start, &mut thetas, &mut records);
             if let Some((stage, progress)) = progress {
@@ -271,6 +262,33 @@ pub(crate) fn simulate_records<S: Simulator + ?Sized>(
     if let Some((stage, progress)) = progress {
         progress.end(stage);
     }
+    outcomes
+}
+
+/// A chart kept whole: parameter vectors and full records, for the
+/// automatic design (which compresses one chart many ways) and for fitting
+/// a compressor's own parameters (PCA directions, NARX scales).
+pub(crate) struct StoredChart {
+    /// Parameter vectors of the experiments that succeeded (m' x q).
+    pub(crate) thetas: Array2<f64>,
+    /// Their records, in design order.
+    pub(crate) records: Vec<IoData>,
+}
+
+/// Simulate the first `count` experiments of `design` in parallel and keep
+/// their records; failed experiments are dropped within
+/// `max_failure_fraction`. `progress`, when given, hears of each finished
+/// experiment under its stage. Record i depends only on `(design, i)`.
+pub(crate) fn simulate_records<S: Simulator + ?Sized>(
+    simulator: &S,
+    design: &Design,
+    count: usize,
+    max_failure_fraction: f64,
+    progress: Option<(Stage, &dyn Progress)>,
+) -> Result<StoredChart> {
+    let count = count.min(design.len());
+    let q = design.prior().dim();
+    let outcomes = simulate_range(simulator, design, 0..count, progress);
     let stage = progress.map_or("simulation", |(stage, _)| stage.label());
     let (mut thetas, mut records, mut failures) = (Vec::new(), Vec::new(), Vec::new());
     for outcome in outcomes {

@@ -96,6 +96,15 @@ pub enum Error {
         /// What is wrong and what is accepted.
         message: String,
     },
+    /// Shards of a chart that are damaged, do not belong together, or
+    /// leave records out.
+    #[error("{what}: {message}")]
+    Shards {
+        /// The shard file or the pattern.
+        what: String,
+        /// What is wrong and what to do.
+        message: String,
+    },
     /// A model has no preset or method of that name (another model may).
     #[error("{what} '{name}' is not available for {model}: it has {available}")]
     NotAvailable {

@@ -59,6 +59,7 @@ mod moments;
 mod profile;
 mod progress;
 mod refine;
+mod shard;
 mod space;
 
 pub use adaptive::AdaptiveIntervals;
@@ -78,6 +79,7 @@ pub use moments::WeightedMoments;
 pub use profile::{ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka};
 pub use progress::{Progress, Silent, Stage};
 pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
+pub use shard::{ChartRole, ShardIndex, ShardPlan, ShardedChart, simulate_shard};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;

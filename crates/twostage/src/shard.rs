@@ -1,0 +1,912 @@
+//! Charts simulated in shards, on a cluster, and merged bit for bit.
+//!
+//! A training run simulates three designs: the training chart, and the
+//! calibration and validation charts (i.i.d. uniform, with their own
+//! streams). Shard `i` of `n` simulates records `[i m / n, (i + 1) m / n)` of
+//! each, exactly as the single-machine run would (experiment `j` of a design
+//! depends on the seed and `j` alone), and writes them, raw or already
+//! compressed, to one file with a checksum. [`ShardedChart::open`] checks
+//! that a set of shard files belongs together and leaves nothing out, and
+//! [`TwoStage::train_on_shards`](crate::TwoStage::train_on_shards) trains
+//! the very estimator `train` would have (docs/cluster.md,
+//! docs/decisions/023-sharded-charts.md).
+
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use ndarray::Array2;
+use serde::{Deserialize, Serialize};
+use twostage_compress::{Compressor, Workspace};
+use twostage_models::{Design, IoData, Prior, Sampling, Simulator};
+
+use crate::chart::{CompressedChart, ExperimentFailure, simulate_range};
+use crate::config::CompressorConfig;
+use crate::error::{Error, Result};
+
+/// Starts every shard file.
+const MAGIC: &[u8; 8] = b"TSSHARD\0";
+/// The layout of the header and the records; bumped on any change.
+const SHARD_FORMAT: u32 = 1;
+/// Records simulated (and held in memory) at once while a shard is written.
+const BLOCK: usize = 256;
+/// Offsets that give the calibration and validation charts their own
+/// streams, disjoint from the training chart of the same seed.
+const CALIBRATION_SEED: u64 = 0x4341_4c49_4252_4154; // "CALIBRAT"
+const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
+
+/// The three charts of a training run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ChartRole {
+    /// The training chart, from the prior's own sampling.
+    Training,
+    /// The calibration chart of the intervals: i.i.d. uniform draws.
+    Calibration,
+    /// The validation chart of the report: i.i.d. uniform draws.
+    Validation,
+}
+
+impl ChartRole {
+    /// All three, in file order.
+    pub const ALL: [ChartRole; 3] = [Self::Training, Self::Calibration, Self::Validation];
+
+    /// A word for messages.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Training => "training",
+            Self::Calibration => "calibration",
+            Self::Validation => "validation",
+        }
+    }
+
+    fn slot(self) -> usize {
+        match self {
+            Self::Training => 0,
+            Self::Calibration => 1,
+            Self::Validation => 2,
+        }
+    }
+
+    /// The design of this chart of a run with `seed`: the training chart
+    /// from `prior` as it samples, the calibration and validation charts
+    /// i.i.d. uniform (Theorem 1 and the conformal guarantee assume
+    /// independent draws) with streams of their own. One place, so that
+    /// `train` and the shards draw the same experiments.
+    ///
+    /// # Errors
+    /// An empty design or a malformed prior.
+    pub fn design(self, prior: &Prior, count: usize, seed: u64) -> Result<Design> {
+        let iid = || prior.clone().with_sampling(Sampling::Uniform);
+        Ok(match self {
+            Self::Training => prior.design(count, seed)?,
+            Self::Calibration => iid().design(count, seed ^ CALIBRATION_SEED)?,
+            Self::Validation => iid().design(count, seed ^ VALIDATION_SEED)?,
+        })
+    }
+}
+
+/// Which shard of how many.
+///
+/// ```
+/// use twostage::ShardIndex;
+/// let shard: ShardIndex = "2/4".parse()?;
+/// // Records [2 m / 4, 3 m / 4): the four shards cover 0..10 exactly.
+/// assert_eq!(shard.range(10), 5..7);
+/// # Ok::<(), twostage::Error>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShardIndex {
+    /// Which one, from 0.
+    pub index: usize,
+    /// How many.
+    pub count: usize,
+}
+
+impl std::str::FromStr for ShardIndex {
+    type Err = Error;
+    fn from_str(text: &str) -> Result<Self> {
+        let bad = || Error::InvalidSetting {
+            name: "shard",
+            value: text.to_string(),
+            reason: "give I/N with 0 <= I < N (shard I of N, from 0), or auto (Slurm's \
+                     SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT) or auto/N (the index from \
+                     SLURM_ARRAY_TASK_ID or Kubernetes' JOB_COMPLETION_INDEX)"
+                .into(),
+        };
+        let (i, n) = text.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (
+            i.trim().parse::<usize>().map_err(|_| bad())?,
+            n.trim().parse::<usize>().map_err(|_| bad())?,
+        );
+        if index >= count {
+            return Err(bad());
+        }
+        Ok(Self { index, count })
+    }
+}
+
+impl ShardIndex {
+    /// Parse `I/N`, or read the index (and count) from a batch system's
+    /// environment: `auto` takes Slurm's `SLURM_ARRAY_TASK_ID` (less
+    /// `SLURM_ARRAY_TASK_MIN`) and `SLURM_ARRAY_TASK_COUNT`; `auto/N` takes
+    /// the index from `SLURM_ARRAY_TASK_ID` or Kubernetes' indexed-job
+    /// `JOB_COMPLETION_INDEX`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidSetting`] naming what is missing or malformed.
+    pub fn resolve(text: &str, env: impl Fn(&str) -> Option<String>) -> Result<Self> {
+        let Some(rest) = text.strip_prefix("auto") else {
+            return text.parse();
+        };
+        let number = |name: &str| -> Result<Option<usize>> {
+            env(name)
+                .map(|v| {
+                    v.trim()
+                        .parse::<usize>()
+                        .map_err(|_| Error::InvalidSetting {
+                            name: "shard",
+                            value: format!("{name}={v}"),
+                            reason: "is not a whole number".into(),
+                        })
+                })
+                .transpose()
+        };
+        let slurm = number("SLURM_ARRAY_TASK_ID")?.map(|id| {
+            id.saturating_sub(number("SLURM_ARRAY_TASK_MIN").ok().flatten().unwrap_or(0))
+        });
+        let (index, count) = match rest.strip_prefix('/') {
+            None if rest.is_empty() => (slurm, number("SLURM_ARRAY_TASK_COUNT")?),
+            Some(n) => (
+                slurm.or(number("JOB_COMPLETION_INDEX")?),
+                Some(
+                    n.trim()
+                        .parse::<usize>()
+                        .map_err(|_| Error::InvalidSetting {
+                            name: "shard",
+                            value: text.into(),
+                            reason: "auto/N takes the number of shards N".into(),
+                        })?,
+                ),
+            ),
+            None => return text.parse(),
+        };
+        match (index, count) {
+            (Some(index), Some(count)) => format!("{index}/{count}").parse(),
+            _ => Err(Error::InvalidSetting {
+                name: "shard",
+                value: text.into(),
+                reason: "no array task in the environment (SLURM_ARRAY_TASK_ID and \
+                         SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX with auto/N): run it \
+                         as an array job, or give I/N"
+                    .into(),
+            }),
+        }
+    }
+
+    /// The records of a chart of `m` that this shard simulates.
+    pub fn range(&self, m: usize) -> Range<usize> {
+        self.index * m / self.count..(self.index + 1) * m / self.count
+    }
+}
+
+/// What a sharded chart is: every shard of it must say the same.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShardPlan {
+    /// The model's name.
+    pub model: String,
+    /// Identifies the model's description (a hash of the model file).
+    pub model_fingerprint: u64,
+    /// The seed of the run.
+    pub seed: u64,
+    /// Records of the training, calibration and validation charts.
+    pub counts: [usize; 3],
+    /// The stage-1 compressor the records were compressed with, or `None`
+    /// for raw records.
+    pub compressor: Option<String>,
+}
+
+/// The header of a shard file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Header {
+    format: u32,
+    plan: ShardPlan,
+    /// `format!("{:?}")` of the training prior's sampling.
+    sampling: String,
+    param_names: Vec<String>,
+    shape: [usize; 3],
+    shard: usize,
+    shards: usize,
+}
+
+/// One experiment of a shard.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+enum Stored {
+    /// Its parameter vector, and its features (compressed shards) or its
+    /// record's signals, inputs then outputs, each whole.
+    Kept { theta: Vec<f64>, values: Vec<f64> },
+    /// Its parameter vector and why it failed.
+    Failed { theta: Vec<f64>, error: String },
+}
+
+/// The file name of shard `i` of `n`.
+fn file_name(shard: ShardIndex) -> String {
+    format!("shard-{:05}-of-{:05}.tsshard", shard.index, shard.count)
+}
+
+/// Simulate shard `shard` of the chart `plan` describes with `simulator`
+/// and write it into `dir`; returns the file written. Records are
+/// compressed when the plan names a compressor (one that needs no
+/// preparation: ARX, AR or raw).
+///
+/// ```
+/// use twostage::{ShardIndex, ShardPlan, ShardedChart, simulate_shard};
+/// use twostage::models::{Benchmark, Simulator};
+/// let model = Benchmark::builder().n_samples(200).build()?;
+/// let plan = ShardPlan {
+///     model: "benchmark".into(),
+///     model_fingerprint: 7,
+///     seed: 3,
+///     counts: [40, 0, 10],
+///     compressor: Some("arx:2,2".into()),
+/// };
+/// let dir = std::env::temp_dir().join(format!("shards-doc-{}", std::process::id()));
+/// for i in 0..2 {
+///     simulate_shard(&model, &plan, ShardIndex { index: i, count: 2 }, &dir)?;
+/// }
+/// let chart = ShardedChart::open(&format!("{}/shard-*", dir.display()))?;
+/// assert_eq!(chart.plan().counts, [40, 0, 10]);
+/// # std::fs::remove_dir_all(&dir).ok();
+/// # Ok::<(), twostage::Error>(())
+/// ```
+///
+/// # Errors
+/// A plan that does not fit the model, a compressor that needs preparing
+/// on the whole chart, a failed file write.
+pub fn simulate_shard<S: Simulator + ?Sized>(
+    simulator: &S,
+    plan: &ShardPlan,
+    shard: ShardIndex,
+    dir: &Path,
+) -> Result<PathBuf> {
+    let spec = simulator.spec();
+    let compressor = plan
+        .compressor
+        .as_deref()
+        .map(|text| -> Result<CompressorConfig> {
+            let config: CompressorConfig = text.parse()?;
+            let config = config.for_shape(
+                spec.input_names().len(),
+                spec.output_names().len(),
+                spec.n_samples(),
+            )?;
+            if config.records_to_prepare() > 0 {
+                return Err(Error::InvalidSetting {
+                    name: "compress",
+                    value: text.into(),
+                    reason: "this compressor is fitted on the first training records of the \
+                             whole chart, which one shard does not have: shard raw records \
+                             (leave --compress out) and compress when training"
+                        .into(),
+                });
+            }
+            Ok(config)
+        })
+        .transpose()?;
+    let header = Header {
+        format: SHARD_FORMAT,
+        plan: plan.clone(),
+        sampling: format!("{:?}", spec.prior().sampling()),
+        param_names: spec.param_names().to_vec(),
+        shape: [
+            spec.n_samples(),
+            spec.input_names().len(),
+            spec.output_names().len(),
+        ],
+        shard: shard.index,
+        shards: shard.count,
+    };
+    std::fs::create_dir_all(dir).map_err(|cause| Error::Io {
+        path: dir.display().to_string(),
+        cause,
+    })?;
+    let path = dir.join(file_name(shard));
+    // Written to a temporary name and renamed at the end: a killed task
+    // leaves no file that looks complete.
+    let partial = dir.join(format!("{}.partial", file_name(shard)));
+    let io = |cause: std::io::Error| Error::Io {
+        path: partial.display().to_string(),
+        cause,
+    };
+    let file = std::fs::File::create(&partial).map_err(io)?;
+    let mut out = Checksummed::new(BufWriter::new(file));
+    out.inner.write_all(MAGIC).map_err(io)?;
+    write_part(&mut out, &header).map_err(io)?;
+    for role in ChartRole::ALL {
+        let m = plan.counts[role.slot()];
+        let range = shard.range(m);
+        write_part(&mut out, &(range.start as u64, range.end as u64)).map_err(io)?;
+        if range.is_empty() {
+            continue;
+        }
+        let design = role.design(spec.prior(), m, plan.seed)?;
+        let mut work = Workspace::new();
+        for start in range.clone().step_by(BLOCK) {
+            let block = start..(start + BLOCK).min(range.end);
+            for outcome in simulate_range(simulator, &design, block, None) {
+                let stored = match outcome {
+                    Err(failure) => Stored::Failed {
+                        theta: failure.theta,
+                        error: failure.error,
+                    },
+                    Ok((theta, record)) => match &compressor {
+                        None => Stored::Kept {
+                            theta,
+                            values: flatten(&record),
+                        },
+                        Some(c) => {
+                            let mut alpha = vec![0.0; c.n_features()];
+                            match c.compress_into(
+                                record.inputs(),
+                                record.outputs(),
+                                &mut work,
+                                &mut alpha,
+                            ) {
+                                Ok(()) => Stored::Kept {
+                                    theta,
+                                    values: alpha,
+                                },
+                                Err(e) => Stored::Failed {
+                                    theta,
+                                    error: e.to_string(),
+                                },
+                            }
+                        }
+                    },
+                };
+                write_part(&mut out, &stored).map_err(io)?;
+            }
+        }
+    }
+    let crc = out.hasher.clone().finalize();
+    out.inner.write_all(&crc.to_le_bytes()).map_err(io)?;
+    out.inner.flush().map_err(io)?;
+    drop(out);
+    std::fs::rename(&partial, &path).map_err(|cause| Error::Io {
+        path: path.display().to_string(),
+        cause,
+    })?;
+    Ok(path)
+}
+
+/// A record's signals, inputs then outputs, each whole.
+fn flatten(record: &IoData) -> Vec<f64> {
+    let mut values =
+        Vec::with_capacity(record.n_samples() * (record.n_inputs() + record.n_outputs()));
+    for j in 0..record.n_inputs() {
+        values.extend_from_slice(record.input(j));
+    }
+    for j in 0..record.n_outputs() {
+        values.extend_from_slice(record.output(j));
+    }
+    values
+}
+
+/// A writer or reader that checksums what passes through.
+struct Checksummed<T> {
+    inner: T,
+    hasher: crc32fast::Hasher,
+}
+
+impl<T> Checksummed<T> {
+    fn new(inner: T) -> Self {
+        Self {
+            inner,
+            hasher: crc32fast::Hasher::new(),
+        }
+    }
+}
+
+/// One length-prefixed postcard part, checksummed.
+fn write_part<W: Write, T: Serialize>(out: &mut Checksummed<W>, value: &T) -> std::io::Result<()> {
+    let bytes = postcard::to_stdvec(value).map_err(std::io::Error::other)?;
+    let length = (bytes.len() as u64).to_le_bytes();
+    out.hasher.update(&length);
+    out.hasher.update(&bytes);
+    out.inner.write_all(&length)?;
+    out.inner.write_all(&bytes)
+}
+
+/// The largest part a shard file may hold (a record of 2^27 numbers).
+const MAX_PART: u64 = 1 << 30;
+
+fn read_part<R: Read, T: serde::de::DeserializeOwned>(
+    input: &mut Checksummed<R>,
+    what: &str,
+) -> std::result::Result<T, String> {
+    let mut length = [0u8; 8];
+    input
+        .inner
+        .read_exact(&mut length)
+        .map_err(|e| format!("the file ends inside {what} ({e})"))?;
+    let n = u64::from_le_bytes(length);
+    if n > MAX_PART {
+        return Err(format!("{what} claims {n} bytes: the file is damaged"));
+    }
+    let mut bytes = vec![0u8; n as usize];
+    input
+        .inner
+        .read_exact(&mut bytes)
+        .map_err(|e| format!("the file ends inside {what} ({e})"))?;
+    input.hasher.update(&length);
+    input.hasher.update(&bytes);
+    postcard::from_bytes(&bytes).map_err(|e| format!("{what} cannot be read ({e})"))
+}
+
+/// A set of shard files that belong together and cover every record.
+#[derive(Debug, Clone)]
+pub struct ShardedChart {
+    pattern: String,
+    /// The files in shard order.
+    files: Vec<PathBuf>,
+    header: Header,
+}
+
+impl ShardedChart {
+    /// Find the shard files `pattern` names (a path with `*` and `?`, e.g.
+    /// `DIR/shard-*`), read their headers and check that they belong
+    /// together (the same model, seed, sizes and structure), that none is
+    /// there twice and none is missing.
+    ///
+    /// # Errors
+    /// [`Error::Shards`] naming the file and what differs, or the missing
+    /// shards with their record ranges and the command that re-runs them.
+    pub fn open(pattern: &str) -> Result<Self> {
+        let fail = |message: String| Error::Shards {
+            what: pattern.to_string(),
+            message,
+        };
+        let paths = glob::glob(pattern).map_err(|e| fail(format!("not a file pattern: {e}")))?;
+        let mut files: Vec<PathBuf> = paths
+            .filter_map(std::result::Result::ok)
+            .filter(|p| p.is_file() && !p.to_string_lossy().ends_with(".partial"))
+            .collect();
+        files.sort();
+        if files.is_empty() {
+            return Err(fail(
+                "no shard file matches: simulate them first (twostage simulate --shard I/N \
+                 --out DIR, or twostage slurm)"
+                    .into(),
+            ));
+        }
+        let mut headers = Vec::with_capacity(files.len());
+        for file in &files {
+            headers.push(read_header(file)?);
+        }
+        let first = &headers[0];
+        for (file, header) in files.iter().zip(&headers).skip(1) {
+            let differs = [
+                ("model", header.plan.model != first.plan.model),
+                (
+                    "model file",
+                    header.plan.model_fingerprint != first.plan.model_fingerprint,
+                ),
+                ("seed", header.plan.seed != first.plan.seed),
+                ("chart sizes", header.plan.counts != first.plan.counts),
+                (
+                    "compressor",
+                    header.plan.compressor != first.plan.compressor,
+                ),
+                ("sampling", header.sampling != first.sampling),
+                ("parameters", header.param_names != first.param_names),
+                ("record shape", header.shape != first.shape),
+                ("number of shards", header.shards != first.shards),
+            ]
+            .into_iter()
+            .find(|(_, d)| *d);
+            if let Some((what, _)) = differs {
+                return Err(Error::Shards {
+                    what: file.display().to_string(),
+                    message: format!(
+                        "its {what} differs from {}'s ({}): shards of different charts are mixed; \
+                         keep one chart's shards in a folder",
+                        files[0].display(),
+                        describe(first)
+                    ),
+                });
+            }
+        }
+        let n = first.shards;
+        let mut by_index: Vec<Option<usize>> = vec![None; n];
+        for (k, header) in headers.iter().enumerate() {
+            if let Some(other) = by_index[header.shard] {
+                return Err(fail(format!(
+                    "shard {} of {n} is there twice: {} and {}",
+                    header.shard,
+                    files[other].display(),
+                    files[k].display()
+                )));
+            }
+            by_index[header.shard] = Some(k);
+        }
+        let missing: Vec<usize> = (0..n).filter(|i| by_index[*i].is_none()).collect();
+        if !missing.is_empty() {
+            let ranges: Vec<String> = missing
+                .iter()
+                .map(|&i| {
+                    let shard = ShardIndex { index: i, count: n };
+                    let parts: Vec<String> = ChartRole::ALL
+                        .iter()
+                        .filter(|r| first.plan.counts[r.slot()] > 0)
+                        .map(|r| {
+                            let range = shard.range(first.plan.counts[r.slot()]);
+                            format!("{} [{}, {})", r.label(), range.start, range.end)
+                        })
+                        .collect();
+                    format!("shard {i} ({})", parts.join(", "))
+                })
+                .collect();
+            return Err(fail(format!(
+                "{} of {n} shard(s) missing: {}; re-run them alone (twostage simulate ... \
+                 --shard I/{n}, or sbatch --array={} on the script twostage slurm wrote)",
+                missing.len(),
+                ranges.join("; "),
+                missing
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(",")
+            )));
+        }
+        let files = by_index
+            .into_iter()
+            .map(|k| files[k.unwrap_or_else(|| unreachable!("none missing"))].clone())
+            .collect();
+        Ok(Self {
+            pattern: pattern.to_string(),
+            files,
+            header: first.clone(),
+        })
+    }
+
+    /// What the shards say the chart is.
+    pub fn plan(&self) -> &ShardPlan {
+        &self.header.plan
+    }
+
+    /// The pattern the shards were found by.
+    pub fn pattern(&self) -> &str {
+        &self.pattern
+    }
+
+    /// The shard files, in shard order.
+    pub fn files(&self) -> &[PathBuf] {
+        &self.files
+    }
+
+    /// The training prior's sampling the shards were drawn with.
+    pub(crate) fn sampling(&self) -> &str {
+        &self.header.sampling
+    }
+
+    /// Check the shards against the model they are trained for.
+    pub(crate) fn check_model(&self, spec: &twostage_models::ModelSpec) -> Result<()> {
+        let shape = [
+            spec.n_samples(),
+            spec.input_names().len(),
+            spec.output_names().len(),
+        ];
+        let fail = |message: String| Error::Shards {
+            what: self.pattern.clone(),
+            message,
+        };
+        if self.header.param_names != spec.param_names() || self.header.shape != shape {
+            return Err(fail(format!(
+                "the shards hold {} ({}; {} samples of {} inputs and {} outputs), not the model \
+                 {} ({}; {} samples of {} and {})",
+                self.header.plan.model,
+                self.header.param_names.join(", "),
+                self.header.shape[0],
+                self.header.shape[1],
+                self.header.shape[2],
+                spec.name(),
+                spec.param_names().join(", "),
+                shape[0],
+                shape[1],
+                shape[2]
+            )));
+        }
+        Ok(())
+    }
+
+    /// The records of `role`, compressed with `compressor` (raw shards) or
+    /// as stored (compressed shards), as [`crate::compress_chart`] would
+    /// have made them: rows in design order, failures listed.
+    pub(crate) fn compressed(
+        &self,
+        role: ChartRole,
+        compressor: &CompressorConfig,
+    ) -> Result<CompressedChart> {
+        let m = self.header.plan.counts[role.slot()];
+        let q = self.header.param_names.len();
+        let n = compressor.n_features();
+        let stored_features = self.header.plan.compressor.is_some();
+        let (mut thetas, mut features) = (Vec::with_capacity(m * q), Vec::with_capacity(m * n));
+        let (mut indices, mut failures) = (Vec::with_capacity(m), Vec::new());
+        let mut work = Workspace::new();
+        let [samples, n_u, n_y] = self.header.shape;
+        let mut record = IoData::zeros(samples, n_u, n_y);
+        self.for_each(role, |index, stored| {
+            let (theta, values) = match stored {
+                Stored::Failed { theta, error } => {
+                    failures.push(ExperimentFailure {
+                        index,
+                        theta,
+                        error,
+                    });
+                    return Ok(());
+                }
+                Stored::Kept { theta, values } => (theta, values),
+            };
+            if stored_features {
+                if values.len() != n {
+                    return Err(format!(
+                        "{} features, the compressor gives {n}",
+                        values.len()
+                    ));
+                }
+                thetas.extend_from_slice(&theta);
+                features.extend_from_slice(&values);
+                indices.push(index);
+                return Ok(());
+            }
+            unflatten(&values, &mut record)?;
+            let mut alpha = vec![0.0; n];
+            match compressor.compress_into(record.inputs(), record.outputs(), &mut work, &mut alpha)
+            {
+                Ok(()) => {
+                    thetas.extend_from_slice(&theta);
+                    features.extend_from_slice(&alpha);
+                    indices.push(index);
+                }
+                Err(e) => failures.push(ExperimentFailure {
+                    index,
+                    theta,
+                    error: e.to_string(),
+                }),
+            }
+            Ok(())
+        })?;
+        let rows = indices.len();
+        Ok(CompressedChart {
+            thetas: Array2::from_shape_vec((rows, q), thetas)
+                .unwrap_or_else(|_| unreachable!("q values per kept record")),
+            features: Array2::from_shape_vec((rows, n), features)
+                .unwrap_or_else(|_| unreachable!("n values per kept record")),
+            indices,
+            failures,
+        })
+    }
+
+    /// The first `count` training records that were simulated (raw shards
+    /// only), for a compressor fitted on them.
+    pub(crate) fn first_training_records(&self, count: usize) -> Result<Vec<IoData>> {
+        let [samples, n_u, n_y] = self.header.shape;
+        let mut records = Vec::with_capacity(count);
+        let (mut seen, mut failed) = (0, None);
+        self.for_each(ChartRole::Training, |index, stored| {
+            if seen == count {
+                return Ok(());
+            }
+            seen += 1;
+            match stored {
+                Stored::Kept { values, .. } => {
+                    let mut record = IoData::zeros(samples, n_u, n_y);
+                    unflatten(&values, &mut record)?;
+                    records.push(record);
+                }
+                Stored::Failed { error, .. } => {
+                    failed.get_or_insert((index, error));
+                }
+            }
+            Ok(())
+        })?;
+        match failed {
+            // As `train` does: the records a compressor is fitted on must
+            // all be there.
+            Some((index, error)) => Err(Error::Shards {
+                what: self.pattern.clone(),
+                message: format!(
+                    "training experiment {index}, among the first {count} the compressor is \
+                     fitted on, failed: {error}"
+                ),
+            }),
+            None => Ok(records),
+        }
+    }
+
+    /// Visit the stored experiments of `role` in index order, shard by
+    /// shard, verifying each file's checksum.
+    fn for_each(
+        &self,
+        role: ChartRole,
+        mut visit: impl FnMut(usize, Stored) -> std::result::Result<(), String>,
+    ) -> Result<()> {
+        for (i, file) in self.files.iter().enumerate() {
+            let fail = |message: String| Error::Shards {
+                what: file.display().to_string(),
+                message,
+            };
+            let handle = std::fs::File::open(file).map_err(|e| fail(e.to_string()))?;
+            let mut input = Checksummed::new(BufReader::new(handle));
+            let mut magic = [0u8; 8];
+            input
+                .inner
+                .read_exact(&mut magic)
+                .map_err(|e| fail(e.to_string()))?;
+            let _: Header = read_part(&mut input, "the header").map_err(fail)?;
+            for r in ChartRole::ALL {
+                let (start, end): (u64, u64) = read_part(&mut input, "a range").map_err(fail)?;
+                let range = start as usize..end as usize;
+                let wanted = r == role;
+                let its = ShardIndex {
+                    index: i,
+                    count: self.header.shards,
+                }
+                .range(self.header.plan.counts[r.slot()]);
+                if range != its {
+                    return Err(fail(format!(
+                        "its {} records are [{start}, {end}), shard {i} of {} should hold [{}, {})",
+                        r.label(),
+                        self.header.shards,
+                        its.start,
+                        its.end
+                    )));
+                }
+                for index in range {
+                    let stored: Stored = read_part(&mut input, "a record").map_err(fail)?;
+                    if wanted {
+                        visit(index, stored)
+                            .map_err(|e| fail(format!("{} record {index}: {e}", r.label())))?;
+                    }
+                }
+            }
+            let computed = input.hasher.clone().finalize();
+            let mut stored = [0u8; 4];
+            input
+                .inner
+                .read_exact(&mut stored)
+                .map_err(|_| fail("the file ends before its checksum: it was cut short".into()))?;
+            if u32::from_le_bytes(stored) != computed {
+                return Err(fail(
+                    "the checksum does not match: the file is damaged; simulate this shard again"
+                        .into(),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A record's signals back from [`flatten`].
+fn unflatten(values: &[f64], record: &mut IoData) -> std::result::Result<(), String> {
+    let (n, n_u, n_y) = (record.n_samples(), record.n_inputs(), record.n_outputs());
+    if values.len() != n * (n_u + n_y) {
+        return Err(format!(
+            "{} values, a record of {n} samples of {n_u} inputs and {n_y} outputs has {}",
+            values.len(),
+            n * (n_u + n_y)
+        ));
+    }
+    for j in 0..n_u {
+        record
+            .input_mut(j)
+            .copy_from_slice(&values[j * n..(j + 1) * n]);
+    }
+    for j in 0..n_y {
+        let at = (n_u + j) * n;
+        record.output_mut(j).copy_from_slice(&values[at..at + n]);
+    }
+    Ok(())
+}
+
+fn describe(header: &Header) -> String {
+    format!(
+        "model {}, seed {}, {} training, {} calibration and {} validation records, {}, {} shards",
+        header.plan.model,
+        header.plan.seed,
+        header.plan.counts[0],
+        header.plan.counts[1],
+        header.plan.counts[2],
+        header.plan.compressor.as_deref().map_or_else(
+            || "raw records".to_string(),
+            |c| format!("compressed by {c}")
+        ),
+        header.shards
+    )
+}
+
+/// Read and check a shard file's header (not its records).
+fn read_header(file: &Path) -> Result<Header> {
+    let fail = |message: String| Error::Shards {
+        what: file.display().to_string(),
+        message,
+    };
+    let handle = std::fs::File::open(file).map_err(|e| fail(e.to_string()))?;
+    let mut input = Checksummed::new(BufReader::new(handle));
+    let mut magic = [0u8; 8];
+    if input.inner.read_exact(&mut magic).is_err() || &magic != MAGIC {
+        return Err(fail(
+            "not a twostage shard file (written by twostage simulate --shard)".into(),
+        ));
+    }
+    let header: Header = read_part(&mut input, "the header").map_err(fail)?;
+    if header.format != SHARD_FORMAT {
+        return Err(fail(format!(
+            "shard format {}, this twostage reads {SHARD_FORMAT}: simulate the shards with \
+             this version",
+            header.format
+        )));
+    }
+    if header.shards == 0 || header.shard >= header.shards {
+        return Err(fail(format!(
+            "shard {} of {}: the header is damaged",
+            header.shard, header.shards
+        )));
+    }
+    Ok(header)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_ranges_cover_every_record_once() {
+        for m in [0usize, 1, 7, 100, 1001] {
+            for n in 1..=9 {
+                let mut next = 0;
+                for index in 0..n {
+                    let r = ShardIndex { index, count: n }.range(m);
+                    assert_eq!(r.start, next, "m {m}, n {n}");
+                    next = r.end;
+                }
+                assert_eq!(next, m);
+            }
+        }
+    }
+
+    #[test]
+    fn shard_indices_come_from_slurm_or_kubernetes() {
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |name: &str| {
+                vars.iter()
+                    .find(|(k, _)| *k == name)
+                    .map(|(_, v)| v.to_string())
+            }
+        };
+        let slurm = env(&[
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_MIN", "5"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ]);
+        assert_eq!(
+            ShardIndex::resolve("auto", slurm).unwrap(),
+            ShardIndex { index: 2, count: 4 }
+        );
+        let k8s = env(&[("JOB_COMPLETION_INDEX", "3")]);
+        assert_eq!(
+            ShardIndex::resolve("auto/8", k8s).unwrap(),
+            ShardIndex { index: 3, count: 8 }
+        );
+        assert!(ShardIndex::resolve("auto", k8s).is_err(), "no count");
+        assert!(ShardIndex::resolve("auto/2", k8s).is_err(), "index 3 of 2");
+        assert!(ShardIndex::resolve("auto", env(&[])).is_err());
+        assert_eq!(
+            ShardIndex::resolve("1/3", env(&[])).unwrap(),
+            ShardIndex { index: 1, count: 3 }
+        );
+        for bad in ["3/3", "1", "a/2", "-1/2", "1/0"] {
+            assert!(bad.parse::<ShardIndex>().is_err(), "{bad}");
+        }
+    }
+}
