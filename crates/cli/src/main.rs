@@ -10,6 +10,7 @@ mod inspect;
 mod model_arg;
 mod number;
 mod simulate;
+mod slurm;
 mod specs;
 mod train;
 mod validate;
@@ -55,6 +56,9 @@ enum Command {
     Validate(validate::ValidateArgs),
     /// Validation RMSE against the number of training simulations (m doubling).
     LearningCurve(curve::CurveArgs),
+    /// Write an sbatch array script that simulates a training run's charts in shards on
+    /// a Slurm cluster, and print the command that merges them (docs/cluster.md).
+    Slurm(slurm::SlurmArgs),
     /// FMUs (FMI 2.0 and 3.0): list what one offers and write a model file to start from.
     Fmu {
         #[command(subcommand)]
@@ -95,6 +99,7 @@ fn main() -> ExitCode {
         Command::Inspect { file } => inspect::inspect(file, &mut io::stdout().lock()),
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
+        Command::Slurm(args) => slurm::slurm(args, &mut io::stdout().lock()),
         Command::Fmu { command } => fmu::run(command, &mut io::stdout().lock()),
         Command::Estimate(args) => match estimate::estimate(args) {
             Ok(0) => Ok(()),

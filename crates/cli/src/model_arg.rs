@@ -18,10 +18,10 @@ pub struct ModelArgs {
         conflicts_with = "model_file",
         required_unless_present = "model_file"
     )]
-    model: Option<String>,
+    pub model: Option<String>,
     /// A model file (TOML; `twostage models --template` prints an annotated one).
     #[arg(long, value_name = "PATH")]
-    model_file: Option<PathBuf>,
+    pub model_file: Option<PathBuf>,
 }
 
 /// A model named on the command line.
@@ -50,6 +50,17 @@ impl ModelArgs {
 }
 
 impl Model {
+    /// Identifies the model's description in shard files: the model
+    /// file's text, or the built-in model's name.
+    pub fn fingerprint(&self) -> u64 {
+        match self {
+            Model::Builtin(model) => {
+                twostage::fingerprint(format!("builtin:{}", model.name()).as_bytes())
+            }
+            Model::File(file) => file.fingerprint(),
+        }
+    }
+
     /// The model's name.
     pub fn name(&self) -> &str {
         match self {

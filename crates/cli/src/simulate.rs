@@ -33,12 +33,31 @@ pub struct SimulateArgs {
     /// Accept a --theta outside the model's prior box.
     #[arg(long, requires = "theta")]
     allow_outside_prior: bool,
-    /// With --theta: write the CSV here instead of standard output.
-    #[arg(long, requires = "theta")]
+    /// With --theta: write the CSV here instead of standard output. With
+    /// --shard: the folder that receives the shard file.
+    #[arg(long)]
     out: Option<PathBuf>,
-    /// Simulate this many experiments with parameters drawn from the prior.
-    #[arg(long, requires = "out_dir")]
+    /// Simulate this many experiments with parameters drawn from the prior
+    /// (with --shard: the training chart's size, as `train --sims`).
+    #[arg(long)]
     count: Option<usize>,
+    /// Simulate one shard of a training run's charts: I/N (from 0), or
+    /// `auto` (Slurm's SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT), or
+    /// `auto/N` (the index from SLURM_ARRAY_TASK_ID or Kubernetes'
+    /// JOB_COMPLETION_INDEX). Needs --count and --out DIR; `train --chart
+    /// 'DIR/shard-*'` merges the shards (docs/cluster.md).
+    #[arg(long, value_name = "I/N", requires = "count", conflicts_with_all = ["theta", "out_dir"])]
+    shard: Option<String>,
+    /// With --shard: the validation chart's size (as `train --validate`).
+    #[arg(long, default_value_t = 1000, requires = "shard")]
+    validate: usize,
+    /// With --shard: the calibration chart's size (as `train --calibrate`).
+    #[arg(long, default_value_t = 4000, requires = "shard")]
+    calibrate: usize,
+    /// With --shard: store features of this stage-1 compressor (arx:NA,NB,
+    /// ar:NA or raw) instead of raw records, O(n) numbers per record.
+    #[arg(long, requires = "shard")]
+    compress: Option<String>,
     /// With --count: the folder that receives data.csv and truth.csv.
     #[arg(long, requires = "count")]
     out_dir: Option<PathBuf>,
@@ -88,7 +107,18 @@ pub fn models(template: bool, out: &mut dyn Write) -> Result<()> {
 
 /// Run `twostage simulate`.
 pub fn simulate(args: &SimulateArgs) -> Result<()> {
-    let sim = args.model.resolve()?.simulator(args.noiseless)?;
+    let model = args.model.resolve()?;
+    let sim = model.simulator(args.noiseless)?;
+    if let (Some(shard), Some(count)) = (&args.shard, args.count) {
+        return one_shard(&model, sim.as_ref(), shard, count, args);
+    }
+    if args.out.is_some() && args.theta.is_none() {
+        return Err(usage(
+            "--out goes with --theta (a CSV file) or --shard (a folder); --count writes to \
+             --out-dir"
+                .into(),
+        ));
+    }
     match (&args.theta, args.count, &args.out_dir) {
         (Some(theta), None, None) => one_experiment(sim.as_ref(), theta, args),
         (None, Some(count), Some(dir)) => many_experiments(sim.as_ref(), count, args.seed, dir),
@@ -133,6 +163,50 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
         }
         None => io::stdout().lock().write_all(text.as_bytes())?,
     }
+    Ok(())
+}
+
+/// One shard of a training run's charts.
+fn one_shard(
+    model: &crate::model_arg::Model,
+    sim: &dyn Simulator,
+    shard: &str,
+    count: usize,
+    args: &SimulateArgs,
+) -> Result<()> {
+    let dir = args
+        .out
+        .as_ref()
+        .ok_or_else(|| usage("--shard needs --out DIR, the folder of the shard files".into()))?;
+    if args.noiseless {
+        return Err(usage(
+            "--noiseless changes the model: shards must be the training run's own records".into(),
+        ));
+    }
+    let index = twostage::ShardIndex::resolve(shard, |name| std::env::var(name).ok())
+        .map_err(|e| usage(e.to_string()))?;
+    let plan = twostage::ShardPlan {
+        model: model.name().to_string(),
+        model_fingerprint: model.fingerprint(),
+        seed: args.seed,
+        counts: [count, args.calibrate, args.validate],
+        compressor: args.compress.clone(),
+    };
+    let start = std::time::Instant::now();
+    let path = twostage::simulate_shard(sim, &plan, index, dir).map_err(|e| match e {
+        twostage::Error::InvalidSetting { .. } => usage(e.to_string()),
+        other => anyhow::Error::new(other).context(format!("simulating shard {shard}")),
+    })?;
+    eprintln!(
+        "wrote shard {} of {} ({} training, {} calibration, {} validation records) to {} in {:.1} s",
+        index.index,
+        index.count,
+        index.range(count).len(),
+        index.range(args.calibrate).len(),
+        index.range(args.validate).len(),
+        path.display(),
+        start.elapsed().as_secs_f64()
+    );
     Ok(())
 }
 

@@ -46,9 +46,9 @@ pub struct TrainArgs {
     /// (reproducible outcome).
     #[arg(long, requires = "auto")]
     budget_sims: Option<usize>,
-    /// Seed of every random choice.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    /// Seed of every random choice (default 1; with shards, theirs).
+    #[arg(long)]
+    seed: Option<u64>,
     /// Fresh simulations for the validation report (0: none).
     #[arg(long, default_value_t = 1000)]
     validate: usize,
@@ -65,7 +65,10 @@ pub struct TrainArgs {
     /// as `twostage simulate --count --out-dir` writes, or theta.npy,
     /// inputs.npy and outputs.npy (float64 [m, q], [m, N, n_u], [m, N, n_y]). Without
     /// --validate-chart / --calibrate-chart, --validate and --calibrate
-    /// records are held out of it at random.
+    /// records are held out of it at random. Or shard files of `simulate
+    /// --shard` (a pattern such as 'DIR/shard-*', quoted): their training,
+    /// calibration and validation records, seed and sizes, merged into the
+    /// estimator a single machine would train (docs/cluster.md).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["auto", "sims"])]
     chart: Option<PathBuf>,
     /// With --chart: validate on this chart instead of held-out records.
@@ -83,6 +86,15 @@ pub struct TrainArgs {
     quiet: bool,
 }
 
+/// The seed when none is given.
+const DEFAULT_SEED: u64 = 1;
+
+/// Whether `--chart` names shard files rather than a chart folder.
+fn is_shard_pattern(chart: &std::path::Path) -> bool {
+    let text = chart.to_string_lossy();
+    text.contains(['*', '?', '[']) || text.ends_with(".tsshard")
+}
+
 /// Run `twostage train`.
 pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     let model = args.model.resolve()?;
@@ -94,7 +106,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     let preset = model.preset(args.preset.as_deref())?;
     let mut builder = TwoStage::builder(sim.as_ref())
         .preset(preset)
-        .seed(args.seed)
+        .seed(args.seed.unwrap_or(DEFAULT_SEED))
         .validation(args.validate)
         .calibration(args.calibrate)
         .alpha(args.alpha);
@@ -125,7 +137,53 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
             .map(|d| ChartFiles::open(d, sim.spec()).map_err(|e| usage(e.to_string())))
             .transpose()
     };
-    let estimator = if let Some(training) = chart(&args.chart)? {
+    let shards = args
+        .chart
+        .as_ref()
+        .filter(|c| is_shard_pattern(c))
+        .map(|pattern| -> Result<twostage::ShardedChart> {
+            if args.validate_chart.is_some() || args.calibrate_chart.is_some() {
+                return Err(usage(
+                    "shards hold their own calibration and validation records: leave out \
+                     --validate-chart and --calibrate-chart"
+                        .into(),
+                ));
+            }
+            let chart = twostage::ShardedChart::open(&pattern.to_string_lossy())
+                .map_err(|e| usage(e.to_string()))?;
+            if chart.plan().model_fingerprint != model.fingerprint() {
+                return Err(usage(format!(
+                    "{}: the shards were simulated from another model description than {} \
+                     (another model file, or this one since edited): simulate them again, or \
+                     train with the model they came from",
+                    chart.pattern(),
+                    model.name()
+                )));
+            }
+            Ok(chart)
+        })
+        .transpose()?;
+    let estimator = if let Some(shards) = &shards {
+        let plan = shards.plan();
+        if !args.quiet {
+            eprintln!(
+                "merging {} shards: {} training, {} calibration and {} validation records, seed {}",
+                shards.files().len(),
+                plan.counts[0],
+                plan.counts[1],
+                plan.counts[2],
+                plan.seed
+            );
+        }
+        builder
+            .seed(args.seed.unwrap_or(plan.seed))
+            .progress(&bars)
+            .train_on_shards(shards)
+            .map_err(|e| match e {
+                twostage::Error::Shards { .. } => usage(e.to_string()),
+                other => failed(other),
+            })?
+    } else if let Some(training) = chart(&args.chart)? {
         let (calibration, validation) =
             (chart(&args.calibrate_chart)?, chart(&args.validate_chart)?);
         builder
@@ -144,7 +202,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         let outcome = TwoStage::auto(sim.as_ref())
             .budget(budget)
             .settings(|b| {
-                b.seed(args.seed)
+                b.seed(args.seed.unwrap_or(DEFAULT_SEED))
                     .validation(args.validate)
                     .calibration(args.calibrate)
                     .alpha(args.alpha)

@@ -79,7 +79,7 @@ pub use moments::WeightedMoments;
 pub use profile::{ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka};
 pub use progress::{Progress, Silent, Stage};
 pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
-pub use shard::{ChartRole, ShardIndex, ShardPlan, ShardedChart, simulate_shard};
+pub use shard::{ChartRole, ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;

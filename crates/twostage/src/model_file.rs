@@ -116,6 +116,8 @@ pub struct ModelFile {
     name_lines: Vec<(String, &'static str, usize)>,
     /// The line of `fmu = ...`.
     fmu_line: Option<usize>,
+    /// Identifies the file's text (shards record it).
+    fingerprint: u64,
 }
 
 impl ModelFile {
@@ -272,6 +274,7 @@ impl ModelFile {
             presets,
             name_lines,
             fmu_line,
+            fingerprint: crate::shard::fingerprint(text.as_bytes()),
         })
     }
 
@@ -283,6 +286,12 @@ impl ModelFile {
     /// The model's name.
     pub fn name(&self) -> &str {
         self.spec.name()
+    }
+
+    /// A hash of the file's text ([`crate::fingerprint`]): shards simulated
+    /// from it record it, and training checks it.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
     }
 
     /// What the file says the model is, for people.

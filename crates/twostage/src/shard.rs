@@ -35,6 +35,19 @@ const BLOCK: usize = 256;
 const CALIBRATION_SEED: u64 = 0x4341_4c49_4252_4154; // "CALIBRAT"
 const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
 
+/// A 64-bit FNV-1a hash of `bytes`: identifies a model file in shard
+/// headers (a consistency check between shards, not a security measure).
+///
+/// ```
+/// assert_ne!(twostage::fingerprint(b"a = 1"), twostage::fingerprint(b"a = 2"));
+/// ```
+pub fn fingerprint(bytes: &[u8]) -> u64 {
+    // Fowler, Noll and Vo's 64-bit offset basis and prime.
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |hash, &b| {
+        (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
 /// The three charts of a training run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ChartRole {
@@ -127,10 +140,11 @@ impl std::str::FromStr for ShardIndex {
 
 impl ShardIndex {
     /// Parse `I/N`, or read the index (and count) from a batch system's
-    /// environment: `auto` takes Slurm's `SLURM_ARRAY_TASK_ID` (less
-    /// `SLURM_ARRAY_TASK_MIN`) and `SLURM_ARRAY_TASK_COUNT`; `auto/N` takes
-    /// the index from `SLURM_ARRAY_TASK_ID` or Kubernetes' indexed-job
-    /// `JOB_COMPLETION_INDEX`.
+    /// environment: `auto` takes Slurm's `SLURM_ARRAY_TASK_ID` and
+    /// `SLURM_ARRAY_TASK_COUNT` (an array `0-(N-1)`); `auto/N` takes the
+    /// index from `SLURM_ARRAY_TASK_ID` or Kubernetes' indexed-job
+    /// `JOB_COMPLETION_INDEX`, so that an array re-submitted for some
+    /// shards only (`sbatch --array=2,5`) still knows N.
     ///
     /// # Errors
     /// [`Error::InvalidSetting`] naming what is missing or malformed.
@@ -151,9 +165,7 @@ impl ShardIndex {
                 })
                 .transpose()
         };
-        let slurm = number("SLURM_ARRAY_TASK_ID")?.map(|id| {
-            id.saturating_sub(number("SLURM_ARRAY_TASK_MIN").ok().flatten().unwrap_or(0))
-        });
+        let slurm = number("SLURM_ARRAY_TASK_ID")?;
         let (index, count) = match rest.strip_prefix('/') {
             None if rest.is_empty() => (slurm, number("SLURM_ARRAY_TASK_COUNT")?),
             Some(n) => (
@@ -861,6 +873,14 @@ mod tests {
     use super::*;
 
     #[test]
+    fn fingerprints_are_fnv1a() {
+        // The published FNV-1a 64 test vectors.
+        assert_eq!(fingerprint(b""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(fingerprint(b"a"), 0xaf63_dc4c_8601_ec8c);
+        assert_eq!(fingerprint(b"foobar"), 0x8594_4171_f739_67e8);
+    }
+
+    #[test]
     fn shard_ranges_cover_every_record_once() {
         for m in [0usize, 1, 7, 100, 1001] {
             for n in 1..=9 {
@@ -885,10 +905,19 @@ mod tests {
             }
         };
         let slurm = env(&[
-            ("SLURM_ARRAY_TASK_ID", "7"),
-            ("SLURM_ARRAY_TASK_MIN", "5"),
+            ("SLURM_ARRAY_TASK_ID", "2"),
             ("SLURM_ARRAY_TASK_COUNT", "4"),
         ]);
+        // An array re-submitted for shard 5 alone: Slurm counts 1 task.
+        let again = env(&[
+            ("SLURM_ARRAY_TASK_ID", "5"),
+            ("SLURM_ARRAY_TASK_COUNT", "1"),
+        ]);
+        assert!(ShardIndex::resolve("auto", again).is_err(), "5 of 1");
+        assert_eq!(
+            ShardIndex::resolve("auto/8", again).unwrap(),
+            ShardIndex { index: 5, count: 8 }
+        );
         assert_eq!(
             ShardIndex::resolve("auto", slurm).unwrap(),
             ShardIndex { index: 2, count: 4 }

@@ -57,7 +57,11 @@ fn pattern(dir: &Path) -> String {
 fn shards_merge_into_the_single_machine_estimator_bit_for_bit() {
     let model = model();
     for compress in ["arx:2,2", "narx:2,2,2"] {
-        let single = builder(&model, compress).train().unwrap().to_bytes().unwrap();
+        let single = builder(&model, compress)
+            .train()
+            .unwrap()
+            .to_bytes()
+            .unwrap();
         // Raw shards, 4 and 3 of them; compressed shards where the
         // compressor needs no fitting of its own.
         let mut variants = vec![(None, 4), (None, 3)];
@@ -73,7 +77,10 @@ fn shards_merge_into_the_single_machine_estimator_bit_for_bit() {
                 .unwrap()
                 .to_bytes()
                 .unwrap();
-            assert!(merged == single, "{compress}, {n} shards, stored features {stored:?}");
+            assert!(
+                merged == single,
+                "{compress}, {n} shards, stored features {stored:?}"
+            );
         }
     }
 }
@@ -116,7 +123,10 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
     let mixed = dir.join("shard-stray.tsshard");
     std::fs::copy(&stray[3], &mixed).unwrap();
     let err = open_error(&pattern(&dir));
-    assert!(err.contains("its seed differs") && err.contains("shard-stray"), "{err}");
+    assert!(
+        err.contains("its seed differs") && err.contains("shard-stray"),
+        "{err}"
+    );
     std::fs::remove_file(&mixed).unwrap();
 
     // A flipped byte in a record: found by the checksum when training.
@@ -126,14 +136,27 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
     damaged[at] ^= 0x40;
     std::fs::write(&files[0], &damaged).unwrap();
     let chart = ShardedChart::open(&pattern(&dir)).unwrap();
-    let err = builder(&model, "arx:2,2").train_on_shards(&chart).unwrap_err().to_string();
-    assert!(err.contains("shard-00000-of-00004") && (err.contains("checksum") || err.contains("cannot be read")), "{err}");
+    let err = builder(&model, "arx:2,2")
+        .train_on_shards(&chart)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("shard-00000-of-00004")
+            && (err.contains("checksum") || err.contains("cannot be read")),
+        "{err}"
+    );
 
     // A file cut short, as a killed task might leave behind.
     std::fs::write(&files[0], &original[..original.len() / 2]).unwrap();
     let chart = ShardedChart::open(&pattern(&dir)).unwrap();
-    let err = builder(&model, "arx:2,2").train_on_shards(&chart).unwrap_err().to_string();
-    assert!(err.contains("shard-00000-of-00004") && err.contains("ends"), "{err}");
+    let err = builder(&model, "arx:2,2")
+        .train_on_shards(&chart)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("shard-00000-of-00004") && err.contains("ends"),
+        "{err}"
+    );
 
     // Not a shard at all.
     std::fs::write(&files[0], "experiment,u,y\n").unwrap();
@@ -152,18 +175,37 @@ fn shards_refuse_another_seed_or_compressor_at_training() {
     let dir = scratch("shards-refuse");
     shards(&model, &plan(Some("arx:2,2")), 2, &dir);
     let chart = ShardedChart::open(&pattern(&dir)).unwrap();
-    let err = builder(&model, "arx:2,2").seed(9).train_on_shards(&chart).unwrap_err().to_string();
-    assert!(err.contains("seed 5") && err.contains("--seed 5"), "{err}");
-    let err = builder(&model, "arx:3,3").train_on_shards(&chart).unwrap_err().to_string();
-    assert!(err.contains("features of arx:2,2"), "{err}");
-    // A compressor fitted on the whole chart cannot compress a shard.
-    let err = simulate_shard(&model, &plan(Some("pca:3")), ShardIndex { index: 0, count: 2 }, &dir)
+    let err = builder(&model, "arx:2,2")
+        .seed(9)
+        .train_on_shards(&chart)
         .unwrap_err()
         .to_string();
+    assert!(err.contains("seed 5") && err.contains("--seed 5"), "{err}");
+    let err = builder(&model, "arx:3,3")
+        .train_on_shards(&chart)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("features of arx:2,2"), "{err}");
+    // A compressor fitted on the whole chart cannot compress a shard.
+    let err = simulate_shard(
+        &model,
+        &plan(Some("pca:3")),
+        ShardIndex { index: 0, count: 2 },
+        &dir,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("shard raw records"), "{err}");
     // Another model.
     let longer = Benchmark::builder().n_samples(300).build().unwrap();
-    let err = TwoStage::builder(&longer).seed(SEED).train_on_shards(&chart).unwrap_err().to_string();
-    assert!(err.contains("200 samples") && err.contains("300 samples"), "{err}");
+    let err = TwoStage::builder(&longer)
+        .seed(SEED)
+        .train_on_shards(&chart)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("200 samples") && err.contains("300 samples"),
+        "{err}"
+    );
     let _ = model.spec();
 }
