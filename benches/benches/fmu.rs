@@ -18,10 +18,11 @@
 mod fmus;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
+use fmus::{PENDULUM_DIVISOR, PENDULUM_STEP};
 use rayon::prelude::*;
 use twostage::fmi::{FmiVersion, FmuSimulator};
 use twostage::models::{
-    Benchmark, InputSignal, IoData, ModelSpec, OdeSystem, Prior, Rk4, Simulator, experiment_rng,
+    Benchmark, InputSignal, IoData, ModelSpec, Prior, Simulator, experiment_rng,
 };
 use twostage_benches::{config, slow_config};
 
@@ -80,30 +81,11 @@ fn benchmark_record(c: &mut Criterion) {
     );
 }
 
-/// The pendulum of crates/fmi/tests/fmus/pendulum.c in Rust, its input
-/// held over each sample as the FMU simulator holds it.
+/// The pendulum of crates/fmi/tests/fmus/pendulum.c in Rust (the tests'
+/// reference), as a simulator.
 struct Pendulum {
     spec: ModelSpec,
 }
-
-struct PendulumOde {
-    k: f64,
-    c: f64,
-    u: f64,
-}
-
-impl OdeSystem for PendulumOde {
-    fn dim(&self) -> usize {
-        2
-    }
-    fn rhs(&self, _t: f64, x: &[f64], dx: &mut [f64]) {
-        dx[0] = x[1];
-        dx[1] = -self.k * x[0].sin() - self.c * x[1] + self.u;
-    }
-}
-
-const PENDULUM_STEP: f64 = 0.05;
-const PENDULUM_DIVISOR: usize = 4;
 
 impl Simulator for Pendulum {
     fn spec(&self) -> &ModelSpec {
@@ -117,23 +99,9 @@ impl Simulator for Pendulum {
     ) -> twostage::models::Result<()> {
         let n = self.spec.n_samples();
         out.resize(n, 1, 1);
-        InputSignal::white_gaussian(0.5)?.fill(PENDULUM_STEP, rng, out.input_mut(0))?;
-        let u: Vec<f64> = out.input(0).to_vec();
-        let mut x = [0.5, 0.0];
-        let mut rk4 = Rk4::new(2);
-        let h = PENDULUM_STEP / PENDULUM_DIVISOR as f64;
-        let y = out.output_mut(0);
-        for k in 0..n {
-            y[k] = x[0];
-            let system = PendulumOde {
-                k: theta[0],
-                c: theta[1],
-                u: u[k],
-            };
-            for s in 0..PENDULUM_DIVISOR {
-                rk4.step(&system, (k * PENDULUM_DIVISOR + s) as f64 * h, h, &mut x);
-            }
-        }
+        InputSignal::white_gaussian(0.5)?.fill(fmus::PENDULUM_STEP, rng, out.input_mut(0))?;
+        let y = fmus::pendulum_in_rust(theta[0], theta[1], out.input(0), None);
+        out.output_mut(0).copy_from_slice(&y);
         Ok(())
     }
 }

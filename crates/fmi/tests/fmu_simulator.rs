@@ -5,11 +5,11 @@
 
 mod common;
 
-use common::{Model, build, build_with};
+use common::{Model, PENDULUM_DIVISOR, PENDULUM_STEP, build, build_with, pendulum_in_rust};
 use rayon::prelude::*;
 use twostage_fmi::{Execution, FmiError, FmiVersion, FmuSimulator, InterfaceKind};
 use twostage_models::{
-    Benchmark, InputSignal, IoData, ModelSpec, OdeSystem, Prior, Rk4, Simulator, experiment_rng,
+    Benchmark, InputSignal, IoData, ModelSpec, Prior, Simulator, experiment_rng,
 };
 
 const N: usize = 300;
@@ -161,52 +161,6 @@ fn a_crashing_fmu_in_a_worker_fails_only_its_experiments() {
         err.contains("worker process: fmi3DoStep at t = 3") && err.contains("deliberate failure"),
         "{err}"
     );
-}
-
-/// The pendulum of tests/fmus/pendulum.c in Rust, with the input held
-/// over each sample, as the FMU simulator holds it.
-struct Pendulum {
-    k: f64,
-    c: f64,
-    u: f64,
-}
-
-impl OdeSystem for Pendulum {
-    fn dim(&self) -> usize {
-        2
-    }
-    fn rhs(&self, _t: f64, x: &[f64], dx: &mut [f64]) {
-        dx[0] = x[1];
-        dx[1] = -self.k * x[0].sin() - self.c * x[1] + self.u;
-    }
-}
-
-const PENDULUM_STEP: f64 = 0.05;
-const PENDULUM_DIVISOR: usize = 4;
-
-/// y = phi at every sample, from phi = 0.5, omega = 0, with RK4 steps of
-/// PENDULUM_STEP / PENDULUM_DIVISOR, and a kick of +1 to omega at step
-/// `kick_step` if given.
-fn pendulum_in_rust(k: f64, c: f64, u: &[f64], kick_step: Option<usize>) -> Vec<f64> {
-    let mut x = [0.5, 0.0];
-    let mut rk4 = Rk4::new(2);
-    let h = PENDULUM_STEP / PENDULUM_DIVISOR as f64;
-    let mut y = Vec::with_capacity(u.len());
-    for (k_sample, &u_k) in u.iter().enumerate() {
-        y.push(x[0]);
-        if k_sample + 1 == u.len() {
-            break;
-        }
-        let system = Pendulum { k, c, u: u_k };
-        for s in 0..PENDULUM_DIVISOR {
-            let step = k_sample * PENDULUM_DIVISOR + s;
-            rk4.step(&system, step as f64 * h, h, &mut x);
-            if kick_step == Some(step + 1) {
-                x[1] += 1.0;
-            }
-        }
-    }
-    y
 }
 
 fn pendulum_fmu(fmu: &std::path::Path, kick_at: Option<f64>) -> twostage_fmi::Result<FmuSimulator> {

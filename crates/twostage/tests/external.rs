@@ -6,6 +6,10 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
+use common::paper_rmse;
+
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -67,23 +71,6 @@ def simulate(theta, seed, index):
 
 serve(simulate)
 "#;
-
-/// The validation RMSE of the paper's benchmark preset trained on `m`
-/// simulations of `sim` and validated on `r`.
-fn paper_rmse(sim: &dyn Simulator, m: usize, r: usize, seed: u64) -> f64 {
-    twostage::TwoStage::builder(sim)
-        .preset(twostage::paper_benchmark())
-        .simulations(m)
-        .validation(r)
-        .calibration(0)
-        .seed(seed)
-        .train()
-        .unwrap()
-        .validation()
-        .unwrap()
-        .parameters[0]
-        .rmse
-}
 
 fn gain(dir: &std::path::Path) -> ExternalSimulator {
     let spec = ModelSpec::new(

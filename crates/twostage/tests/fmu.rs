@@ -2,6 +2,10 @@
 //! like any model, with every mistake placed at its line.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
+use common::paper_rmse;
+
 #[path = "../../fmi/tests/common/mod.rs"]
 mod fmus;
 
@@ -35,21 +39,6 @@ sd = 1.0
 
 const SAME_NOISE: &str = r#"[noise]
 inputs = [{ name = "v2", sd = 0.31622776601683794 }, { name = "v11", sd = 1.0 }, { name = "v12", sd = 1.0 }]"#;
-
-fn rmse(sim: &dyn Simulator, m: usize, r: usize, seed: u64) -> f64 {
-    twostage::TwoStage::builder(sim)
-        .preset(twostage::paper_benchmark())
-        .simulations(m)
-        .validation(r)
-        .calibration(0)
-        .seed(seed)
-        .train()
-        .unwrap()
-        .validation()
-        .unwrap()
-        .parameters[0]
-        .rmse
-}
 
 #[test]
 fn a_model_file_fmu_simulates_the_benchmark_and_trains_as_accurately_as_the_built_in_one() {
@@ -85,8 +74,8 @@ output_sd = 0.31622776601683794"#,
         .simulator()
         .unwrap();
     let (through_fmu, built_in) = (
-        rmse(sim.as_ref(), 1500, 1000, 4),
-        rmse(&builtin, 1500, 1000, 4),
+        paper_rmse(sim.as_ref(), 1500, 1000, 4),
+        paper_rmse(&builtin, 1500, 1000, 4),
     );
     // As for the protocol's numpy benchmark: another chart moves an RMSE by
     // some 15%, so a factor of 1.5 either way is sampling.

@@ -105,6 +105,11 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
     let err = open_error(&pattern(&dir));
     assert!(err.contains("1 of 4 shard(s) missing: shard 2 (training [120, 180), calibration [60, 90), validation [40, 60))"), "{err}");
     assert!(err.contains("--array=2"), "{err}");
+    // What a task killed while writing leaves behind is not a shard.
+    let partial = dir.join("shard-00002-of-00004.tsshard.partial");
+    std::fs::write(&partial, &std::fs::read(aside.join("kept")).unwrap()[..300]).unwrap();
+    assert!(open_error(&pattern(&dir)).contains("shard 2 ("));
+    std::fs::remove_file(&partial).unwrap();
     std::fs::rename(aside.join("kept"), &files[2]).unwrap();
     ShardedChart::open(&pattern(&dir)).unwrap();
 

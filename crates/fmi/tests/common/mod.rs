@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use twostage_fmi::{FmiVersion, platform_folder};
+use twostage_models::{OdeSystem, Rk4};
 
 /// A built FMU in its own temporary folder.
 pub struct TestFmu {
@@ -336,4 +337,50 @@ pub fn build_with(model: Model, version: FmiVersion, edit: impl FnOnce(&Path)) -
 /// Build `model` as an FMI `version` FMU.
 pub fn build(model: Model, version: FmiVersion) -> TestFmu {
     build_with(model, version, |_| {})
+}
+
+/// The pendulum of tests/fmus/pendulum.c in Rust, with the input held
+/// over each sample, as the FMU simulator holds it.
+pub struct Pendulum {
+    pub k: f64,
+    pub c: f64,
+    pub u: f64,
+}
+
+impl OdeSystem for Pendulum {
+    fn dim(&self) -> usize {
+        2
+    }
+    fn rhs(&self, _t: f64, x: &[f64], dx: &mut [f64]) {
+        dx[0] = x[1];
+        dx[1] = -self.k * x[0].sin() - self.c * x[1] + self.u;
+    }
+}
+
+pub const PENDULUM_STEP: f64 = 0.05;
+pub const PENDULUM_DIVISOR: usize = 4;
+
+/// y = phi at every sample, from phi = 0.5, omega = 0, with RK4 steps of
+/// PENDULUM_STEP / PENDULUM_DIVISOR, and a kick of +1 to omega at step
+/// `kick_step` if given.
+pub fn pendulum_in_rust(k: f64, c: f64, u: &[f64], kick_step: Option<usize>) -> Vec<f64> {
+    let mut x = [0.5, 0.0];
+    let mut rk4 = Rk4::new(2);
+    let h = PENDULUM_STEP / PENDULUM_DIVISOR as f64;
+    let mut y = Vec::with_capacity(u.len());
+    for (k_sample, &u_k) in u.iter().enumerate() {
+        y.push(x[0]);
+        if k_sample + 1 == u.len() {
+            break;
+        }
+        let system = Pendulum { k, c, u: u_k };
+        for s in 0..PENDULUM_DIVISOR {
+            let step = k_sample * PENDULUM_DIVISOR + s;
+            rk4.step(&system, step as f64 * h, h, &mut x);
+            if kick_step == Some(step + 1) {
+                x[1] += 1.0;
+            }
+        }
+    }
+    y
 }
