@@ -258,12 +258,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// Invalid settings, too many failed simulations, or a failed fit.
     pub fn train(self) -> Result<Estimator> {
         self.check()?;
-        let spec = self.simulator.spec();
-        let prior = spec.prior();
-        let training_prior = match self.sampling {
-            Some(s) => prior.clone().with_sampling(s),
-            None => prior.clone(),
-        };
+        let training_prior = self.training_prior();
         let design = ChartRole::Training.design(&training_prior, self.simulations, self.seed)?;
         let compressor = self.calibrated_compressor(&design)?;
         let chart = compress_chart_observed(
@@ -453,11 +448,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         self.calibration = calibration;
         self.validation = validation;
         self.check()?;
-        let prior = self.simulator.spec().prior();
-        let training_prior = match self.sampling {
-            Some(s) => prior.clone().with_sampling(s),
-            None => prior.clone(),
-        };
+        let training_prior = self.training_prior();
         let sampling = format!("{:?}", training_prior.sampling());
         if sampling != chart.sampling() {
             return Err(Error::Shards {
@@ -673,6 +664,16 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         }
         let chart = simulate_records(self.simulator, design, count, 0.0, None)?;
         compressor.prepared(&chart.records)
+    }
+
+    /// The prior the training chart is drawn from: the model's, with the
+    /// builder's sampling if one was set.
+    fn training_prior(&self) -> twostage_models::Prior {
+        let prior = self.simulator.spec().prior().clone();
+        match self.sampling {
+            Some(s) => prior.with_sampling(s),
+            None => prior,
+        }
     }
 
     /// The compressor for the model's number of inputs and outputs.
