@@ -2,7 +2,8 @@
 //! and training the two paper presets.
 //!
 //! Groups: `compress` (ARX(5, 5) at N = 250 .. 16000, the cost must grow
-//! linearly), `simulate`, `train`.
+//! linearly), `simulate`, `certify` (the betting certificate of r squared
+//! errors), `train`.
 
 use std::hint::black_box;
 
@@ -80,6 +81,24 @@ fn simulate(c: &mut Criterion) {
     group.finish();
 }
 
+fn certify(c: &mut Criterion) {
+    let mut group = c.benchmark_group("certify");
+    for r in [1000usize, 100_000] {
+        // Squared errors of the benchmark preset's size (MSE 7e-4).
+        let errors: Vec<f64> = (0..r)
+            .map(|i| 1.4e-3 * ((i * 7919) % 1000) as f64 / 1000.0)
+            .collect();
+        group.throughput(Throughput::Elements(r as u64));
+        group.bench_with_input(BenchmarkId::new("betting", r), &errors, |b, errors| {
+            b.iter(|| {
+                twostage::validate::BettingBound::from_squared_errors(black_box(errors), 3.24, 1e-3)
+                    .unwrap_or_else(|e| panic!("{e}"))
+            })
+        });
+    }
+    group.finish();
+}
+
 fn train(c: &mut Criterion) {
     let mut group = c.benchmark_group("train");
     let bench = Benchmark::new();
@@ -110,7 +129,7 @@ fn train(c: &mut Criterion) {
 criterion_group! {
     name = fast;
     config = config();
-    targets = compress, simulate
+    targets = compress, simulate, certify
 }
 criterion_group! {
     name = slow;

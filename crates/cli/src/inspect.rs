@@ -9,15 +9,34 @@ use twostage::{Estimator, FittedRegressor};
 
 use crate::number::format_f64;
 
-/// Run `twostage inspect FILE`.
-pub fn inspect(path: &PathBuf, out: &mut dyn Write) -> Result<()> {
+/// Run `twostage inspect FILE [--json]`.
+pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
     let e = Estimator::load(path)?;
+    // The version the file was written in (it loaded, so the header is
+    // whole): older files lack what later versions added.
+    let version = std::fs::read(path)?
+        .get(8..12)
+        .and_then(|b| b.try_into().ok())
+        .map_or(twostage::FORMAT_VERSION, u32::from_le_bytes);
+    if json {
+        let summary = serde_json::json!({
+            "file": path.display().to_string(),
+            "format_version": version,
+            "training": e.training(),
+            "parameters": e.param_names(),
+            "lower": e.lower(),
+            "upper": e.upper(),
+            "priors": e.marginals(),
+            "validation": e.validation(),
+        });
+        writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
+        return Ok(());
+    }
     let t = e.training();
     writeln!(
         out,
-        "{}: twostage estimator file, format version {}",
+        "{}: twostage estimator file, format version {version}",
         path.display(),
-        twostage::FORMAT_VERSION
     )?;
     writeln!(
         out,

@@ -49,10 +49,14 @@ enum Command {
     Inspect {
         /// The estimator file.
         file: std::path::PathBuf,
+        /// Print what the file holds as JSON: the training, the priors and
+        /// the validation report with its certificates.
+        #[arg(long)]
+        json: bool,
     },
     /// Estimate the parameters of recorded experiments (CSV u,y or experiment,u,y).
     Estimate(estimate::EstimateArgs),
-    /// Check an estimator on fresh simulations: accuracy, Theorem 1, interval coverage.
+    /// Check an estimator on fresh simulations: accuracy, certificates, interval coverage.
     Validate(validate::ValidateArgs),
     /// Validation RMSE against the number of training simulations (m doubling).
     LearningCurve(curve::CurveArgs),
@@ -96,7 +100,7 @@ fn main() -> ExitCode {
         Command::Models { template } => simulate::models(*template, &mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
         Command::Train(args) => train::train(args, &mut io::stdout().lock()),
-        Command::Inspect { file } => inspect::inspect(file, &mut io::stdout().lock()),
+        Command::Inspect { file, json } => inspect::inspect(file, *json, &mut io::stdout().lock()),
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
         Command::Slurm(args) => slurm::slurm(args, &mut io::stdout().lock()),

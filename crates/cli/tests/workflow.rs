@@ -85,9 +85,23 @@ fn train_inspect_and_estimate_recorded_experiments() {
         "ARX(5, 5)",
         "m = 500 records",
         "seed 3",
+        "format version 4",
+        "RMSE <= ",
     ] {
         assert!(report.contains(needle), "missing {needle:?} in\n{report}");
     }
+    // The same in JSON: the certificate is at least what was observed and
+    // at most Theorem 1's bound at the same confidence.
+    let out = twostage(&["inspect", "--json", path(&file)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    let validation = &json["validation"];
+    let observed = validation["total"]["empirical_mse"].as_f64().unwrap();
+    let certified = validation["certified_total"]["mse_bound"].as_f64().unwrap();
+    let hoeffding = observed + validation["total"]["gamma"].as_f64().unwrap();
+    assert!(observed < certified && certified < hoeffding, "{json}");
+    assert_eq!(validation["certified_total"]["r"], 200);
+    assert_eq!(json["training"]["simulations"], 500);
 
     let data = simulate_records(&dir, 40, 8);
     let out = twostage(&[
@@ -275,6 +289,77 @@ fn usage_mistakes_and_missing_files_get_one_clear_line() {
         "{}",
         text(&out.stderr)
     );
+}
+
+/// The largest certified-to-observed RMSE ratio in a JSON report.
+fn certified_ratio(report: &serde_json::Value) -> f64 {
+    let ratio = |certificate: &serde_json::Value| {
+        (certificate["mse_bound"].as_f64().unwrap()
+            / certificate["empirical_mse"].as_f64().unwrap())
+        .sqrt()
+    };
+    report["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| ratio(&p["certified"]))
+        .chain([ratio(&report["certified_total"])])
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn validate_doubles_r_until_the_certificate_meets_the_target() {
+    let dir = scratch("validate_target");
+    let file = dir.join("lin.tsest");
+    let out = train_linear(&file, "300", "0");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let validate = |extra: &[&str]| {
+        let mut args = vec!["validate", "--estimator", path(&file), "--seed", "11"];
+        args.extend_from_slice(extra);
+        let out = twostage(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        text(&out.stdout)
+    };
+    let printed = validate(&["--sims", "100", "--target-rmse", "1.5"]);
+    let r: usize = printed
+        .split("met with r = ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .unwrap_or_else(|| panic!("{printed}"))
+        .parse()
+        .unwrap();
+    assert!(
+        r > 100 && r.is_multiple_of(100) && (r / 100).is_power_of_two(),
+        "r = {r}"
+    );
+    // Each round extends the one before: the stopping round's report is the
+    // fixed-r report, and the round before it did not meet the target.
+    let json = |r: usize| -> serde_json::Value {
+        serde_json::from_str(&validate(&["--sims", &r.to_string(), "--json"])).unwrap()
+    };
+    let at_r = json(r);
+    assert!(certified_ratio(&at_r) <= 1.5, "{at_r}");
+    assert!(printed.contains(&format!("r = {r} records")), "{printed}");
+    assert!(certified_ratio(&json(r / 2)) > 1.5);
+    // A target that --max-sims cannot reach is said, not hidden.
+    let printed = validate(&[
+        "--sims",
+        "100",
+        "--target-rmse",
+        "1.01",
+        "--max-sims",
+        "300",
+    ]);
+    assert!(printed.contains("not met with r = 300"), "{printed}");
+    let out = twostage(&[
+        "validate",
+        "--estimator",
+        path(&file),
+        "--target-rmse",
+        "0.9",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("give a multiple above 1"));
 }
 
 #[test]

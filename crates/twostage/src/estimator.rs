@@ -102,96 +102,20 @@ pub struct SignalNames {
 /// decoding; this adds the ones between components, so that a decoded
 /// estimator estimates (or errs) and never indexes out of range.
 #[derive(Deserialize)]
-struct EstimatorFields {
-    param_names: Vec<String>,
-    lower: Vec<f64>,
-    upper: Vec<f64>,
-    shape: RecordShape,
-    compressor: CompressorConfig,
-    regressor: FittedRegressor,
-    training: TrainingInfo,
-    intervals: Option<ConformalIntervals>,
-    validation: Option<ValidationReport>,
-    envelope: Option<FeatureEnvelope>,
-    adaptive: Option<AdaptiveIntervals>,
-    marginals: Vec<Marginal>,
-    signal_names: Option<SignalNames>,
-}
-
-/// Format version 2: the same without the marginals (every prior uniform).
-#[derive(Deserialize)]
-pub(crate) struct EstimatorFieldsV2 {
-    param_names: Vec<String>,
-    lower: Vec<f64>,
-    upper: Vec<f64>,
-    shape: RecordShape,
-    compressor: CompressorConfig,
-    regressor: FittedRegressor,
-    training: TrainingInfo,
-    intervals: Option<ConformalIntervals>,
-    validation: Option<ValidationReport>,
-    envelope: Option<FeatureEnvelope>,
-    adaptive: Option<AdaptiveIntervals>,
-}
-
-impl TryFrom<EstimatorFieldsV2> for Estimator {
-    type Error = FileError;
-    fn try_from(f: EstimatorFieldsV2) -> std::result::Result<Self, FileError> {
-        let marginals = f
-            .lower
-            .iter()
-            .zip(&f.upper)
-            .map(|(&low, &high)| Marginal::Uniform { low, high })
-            .collect();
-        Self::try_from(EstimatorFields {
-            param_names: f.param_names,
-            lower: f.lower,
-            upper: f.upper,
-            shape: f.shape,
-            compressor: f.compressor,
-            regressor: f.regressor,
-            training: f.training,
-            intervals: f.intervals,
-            validation: f.validation,
-            envelope: f.envelope,
-            adaptive: f.adaptive,
-            marginals,
-            signal_names: None,
-        })
-    }
-}
-
-/// Format version 1: the same without the feature envelope.
-#[derive(Deserialize)]
-pub(crate) struct EstimatorFieldsV1 {
-    param_names: Vec<String>,
-    lower: Vec<f64>,
-    upper: Vec<f64>,
-    shape: RecordShape,
-    compressor: CompressorConfig,
-    regressor: FittedRegressor,
-    training: TrainingInfo,
-    intervals: Option<ConformalIntervals>,
-    validation: Option<ValidationReport>,
-}
-
-impl TryFrom<EstimatorFieldsV1> for Estimator {
-    type Error = FileError;
-    fn try_from(f: EstimatorFieldsV1) -> std::result::Result<Self, FileError> {
-        Self::try_from(EstimatorFieldsV2 {
-            param_names: f.param_names,
-            lower: f.lower,
-            upper: f.upper,
-            shape: f.shape,
-            compressor: f.compressor,
-            regressor: f.regressor,
-            training: f.training,
-            intervals: f.intervals,
-            validation: f.validation,
-            envelope: None,
-            adaptive: None,
-        })
-    }
+pub(crate) struct EstimatorFields {
+    pub(crate) param_names: Vec<String>,
+    pub(crate) lower: Vec<f64>,
+    pub(crate) upper: Vec<f64>,
+    pub(crate) shape: RecordShape,
+    pub(crate) compressor: CompressorConfig,
+    pub(crate) regressor: FittedRegressor,
+    pub(crate) training: TrainingInfo,
+    pub(crate) intervals: Option<ConformalIntervals>,
+    pub(crate) validation: Option<ValidationReport>,
+    pub(crate) envelope: Option<FeatureEnvelope>,
+    pub(crate) adaptive: Option<AdaptiveIntervals>,
+    pub(crate) marginals: Vec<Marginal>,
+    pub(crate) signal_names: Option<SignalNames>,
 }
 
 impl TryFrom<EstimatorFields> for Estimator {

@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32), currently 3 (1 and 2 are still read) |
+//! | 8..12 | format version (u32), currently 4 (1 to 3 are still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -21,38 +21,11 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// The format version this build writes, and the newest it reads.
 ///
 /// Version 2 added the feature envelope and the adaptive intervals, version
-/// 3 the parameters' priors; older files load without them (uniform priors).
-pub const FORMAT_VERSION: u32 = 3;
+/// 3 the parameters' priors, version 4 the betting certificate of the
+/// validation report; older files load without them (uniform priors, no
+/// certificate). The layouts of older versions live in `legacy.rs`.
+pub const FORMAT_VERSION: u32 = 4;
 const HEADER: usize = 24;
-
-/// CRC-32 with the IEEE 802.3 polynomial (reflected, 0xEDB88320), the
-/// checksum of zip and PNG: its standard check value is
-/// `crc32(b"123456789") = 0xCBF43926`.
-pub(crate) fn crc32(bytes: &[u8]) -> u32 {
-    const fn table() -> [u32; 256] {
-        let mut t = [0u32; 256];
-        let mut i = 0;
-        while i < 256 {
-            let mut c = i as u32;
-            let mut k = 0;
-            while k < 8 {
-                c = if c & 1 == 1 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-                k += 1;
-            }
-            t[i] = c;
-            i += 1;
-        }
-        t
-    }
-    const TABLE: [u32; 256] = table();
-    !bytes.iter().fold(!0u32, |c, &b| {
-        TABLE[((c ^ u32::from(b)) & 0xff) as usize] ^ (c >> 8)
-    })
-}
 
 impl Estimator {
     /// Encode the estimator as the bytes of an estimator file.
@@ -67,7 +40,7 @@ impl Estimator {
         bytes.extend_from_slice(MAGIC);
         bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
         bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-        bytes.extend_from_slice(&crc32(&payload).to_le_bytes());
+        bytes.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
         bytes.extend_from_slice(&payload);
         Ok(bytes)
     }
@@ -134,7 +107,7 @@ impl Estimator {
             .into());
         }
         let payload = &bytes[HEADER..];
-        let actual = crc32(payload);
+        let actual = crc32fast::hash(payload);
         if actual != checksum {
             return Err(FileError::BadChecksum {
                 stored: checksum,
@@ -152,8 +125,9 @@ impl Estimator {
                 .and_then(|fields| Estimator::try_from(fields).map_err(|e| e.to_string()))
         }
         let decoded = match version {
-            1 => decode::<crate::estimator::EstimatorFieldsV1>(payload),
-            2 => decode::<crate::estimator::EstimatorFieldsV2>(payload),
+            1 => decode::<crate::legacy::EstimatorFieldsV1>(payload),
+            2 => decode::<crate::legacy::EstimatorFieldsV2>(payload),
+            3 => decode::<crate::legacy::EstimatorFieldsV3>(payload),
             _ => postcard::from_bytes(payload).map_err(|e| e.to_string()),
         };
         decoded.map_err(|reason| FileError::Undecodable { reason }.into())
@@ -203,20 +177,5 @@ impl Estimator {
             }
             .into()
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn crc32_matches_the_standard_check_values() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-        assert_eq!(crc32(b""), 0);
-        assert_eq!(
-            crc32(b"The quick brown fox jumps over the lazy dog"),
-            0x414F_A339
-        );
     }
 }

@@ -54,6 +54,7 @@ mod envelope;
 mod error;
 mod estimator;
 mod file;
+mod legacy;
 mod model_file;
 mod moments;
 mod profile;

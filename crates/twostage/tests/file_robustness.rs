@@ -161,6 +161,7 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
         estimator.envelope().is_none(),
         "10 rows cannot fit an envelope of 10 features"
     );
+    // Without a validation report, version 4 writes what version 3 did.
     let v3 = estimator.to_bytes().unwrap();
     // Then the signal names: Some, ["u"], ["y"] (lengths and bytes).
     let names = [1, 1, 1, b'u', 1, 1, b'y'];
@@ -186,6 +187,62 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
     // And each reader refuses the older bytes under its own header.
     assert!(Estimator::from_bytes(&seal_version(v1_payload, 2)).is_err());
     assert!(Estimator::from_bytes(&seal_version(v2_payload, 3)).is_err());
+}
+
+#[test]
+fn version_3_files_load_their_report_without_a_certificate() {
+    // Version 4 added the betting certificate, an Option after each
+    // parameter's Theorem 1 bound and after the whole vector's. Cutting the
+    // encoded certificates out of a version-4 payload (each Some(bound) is
+    // postcard's 1 and the bound's fields, unique bytes here) gives what
+    // version 3 wrote.
+    let model = model();
+    let estimator = TwoStage::builder(&model)
+        .compressor(Arx::new(3, 3).unwrap())
+        .simulations(40)
+        .calibration(0)
+        .validation(30)
+        .linear(1e-6)
+        .unwrap()
+        .train()
+        .unwrap();
+    let report = estimator.validation().unwrap();
+    let v4 = estimator.to_bytes().unwrap();
+    // Version 3 has no such field; version 4 without certificates has a
+    // None, a single 0 byte, in its place.
+    let (mut payload, mut without) = (v4[HEADER..].to_vec(), v4[HEADER..].to_vec());
+    let certificates = report
+        .parameters
+        .iter()
+        .map(|p| p.certified)
+        .chain([report.certified_total]);
+    for certificate in certificates {
+        assert!(certificate.is_some());
+        let encoded = postcard::to_allocvec(&certificate).unwrap();
+        let find = |bytes: &[u8]| {
+            bytes
+                .windows(encoded.len())
+                .position(|w| w == encoded.as_slice())
+                .unwrap()
+        };
+        let at = find(&payload);
+        payload.splice(at..at + encoded.len(), []);
+        let at = find(&without);
+        without.splice(at..at + encoded.len(), [0]);
+    }
+    let old = Estimator::from_bytes(&seal_version(&payload, 3)).unwrap();
+    let old_report = old.validation().unwrap();
+    assert!(old_report.certified_total.is_none());
+    assert!(old_report.parameters.iter().all(|p| p.certified.is_none()));
+    assert_eq!(old_report.total, report.total);
+    assert_eq!(
+        old_report.parameters[0].hoeffding,
+        report.parameters[0].hoeffding
+    );
+    // Everything else is the same estimator: written again, it is the
+    // version-4 file of a report without certificates.
+    assert_eq!(old.to_bytes().unwrap(), seal_version(&without, 4));
+    assert!(Estimator::from_bytes(&seal_version(&v4[HEADER..], 3)).is_err());
 }
 
 proptest! {

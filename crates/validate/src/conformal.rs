@@ -129,12 +129,9 @@ mod tests {
     fn coverage_holds_on_exchangeable_residuals() {
         // Residuals from a fixed heavy-tailed sequence: calibrate on the first
         // half, check coverage on the second (exchangeable by construction).
-        let mut state = 99u64;
+        let mut uniform = crate::tests::uniform_stream(99);
         let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let u = (state >> 11) as f64 / (1u64 << 53) as f64;
+            let u = uniform();
             (u - 0.5) / (u * (1.0 - u)).sqrt()
         };
         let all = Array2::from_shape_fn((4000, 1), |_| next());

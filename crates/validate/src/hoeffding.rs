@@ -17,7 +17,7 @@ fn check_positive(name: &'static str, value: f64) -> Result<()> {
     }
 }
 
-fn check_delta(delta: f64) -> Result<()> {
+pub(crate) fn check_delta(delta: f64) -> Result<()> {
     if delta > 0.0 && delta < 1.0 {
         Ok(())
     } else {
@@ -27,6 +27,32 @@ fn check_delta(delta: f64) -> Result<()> {
             reason: "must lie in (0, 1)",
         })
     }
+}
+
+/// Squared errors a bound can take: at least one, each finite, in
+/// `[0, sigma]`.
+pub(crate) fn check_squared_errors(squared_errors: &[f64], sigma: f64) -> Result<()> {
+    check_positive("sigma", sigma)?;
+    if squared_errors.is_empty() {
+        return Err(ValidateError::InvalidErrors(
+            "no validation errors: run at least one validation simulation".into(),
+        ));
+    }
+    for (index, &value) in squared_errors.iter().enumerate() {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(ValidateError::InvalidErrors(format!(
+                "squared error {index} is {value}, not a finite non-negative number"
+            )));
+        }
+        if value > sigma {
+            return Err(ValidateError::AboveSigma {
+                index,
+                value,
+                sigma,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// The bound `sigma` on the squared error `||theta - f(D)||^2` when both the
@@ -137,25 +163,7 @@ impl HoeffdingBound {
     /// Empty input, a non-finite or negative error, an error above `sigma`
     /// (the theorem would not apply), or invalid `sigma` or `delta`.
     pub fn from_squared_errors(squared_errors: &[f64], sigma: f64, delta: f64) -> Result<Self> {
-        if squared_errors.is_empty() {
-            return Err(ValidateError::InvalidErrors(
-                "no validation errors: run at least one validation simulation".into(),
-            ));
-        }
-        for (index, &value) in squared_errors.iter().enumerate() {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(ValidateError::InvalidErrors(format!(
-                    "squared error {index} is {value}, not a finite non-negative number"
-                )));
-            }
-            if value > sigma {
-                return Err(ValidateError::AboveSigma {
-                    index,
-                    value,
-                    sigma,
-                });
-            }
-        }
+        check_squared_errors(squared_errors, sigma)?;
         let r = squared_errors.len() as u64;
         let empirical_mse = squared_errors.iter().sum::<f64>() / r as f64;
         Ok(Self {
@@ -193,13 +201,7 @@ mod tests {
         // the bound may fail with frequency at most delta. A tiny LCG keeps
         // this crate free of a random-number dependency.
         let (sigma, delta, r) = (1.0, 0.1, 50u64);
-        let mut state = 12345u64;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut uniform = crate::tests::uniform_stream(12345);
         let trials = 4000;
         let mut failures = 0;
         for _ in 0..trials {

@@ -3,6 +3,7 @@
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
+use crate::betting::BettingBound;
 use crate::conformal::ConformalIntervals;
 use crate::error::{Result, ValidateError};
 use crate::hoeffding::{HoeffdingBound, squared_error_bound};
@@ -26,6 +27,10 @@ pub struct ParameterReport {
     /// (union bound: all q parameter bounds hold together with probability
     /// at least 1 - delta), with sigma = the squared width of its box.
     pub hoeffding: HoeffdingBound,
+    /// The betting certificate for this parameter alone, at the same
+    /// confidence `1 - delta / q` as `hoeffding` (absent in reports read
+    /// from estimator files before format version 4).
+    pub certified: Option<BettingBound>,
     /// Half-width of the conformal interval, if calibrated.
     pub interval_half_width: Option<f64>,
     /// Share of validation truths inside their interval, if calibrated.
@@ -43,6 +48,8 @@ pub struct ParameterReport {
 /// let p = &report.parameters[0];
 /// assert!((p.mse - (0.0004 + 0.0025 + 0.0 + 0.0009) / 4.0).abs() < 1e-12);
 /// assert!(report.total.upper() > p.mse);
+/// // The betting certificate, stated for the RMSE of each parameter.
+/// assert!(p.certified.unwrap().rmse_upper() > p.rmse);
 /// # Ok::<(), twostage_validate::ValidateError>(())
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -52,6 +59,10 @@ pub struct ValidationReport {
     /// Theorem 1 for the whole vector: E||theta - f(D)||^2 <= mse + gamma
     /// with probability at least 1 - delta, sigma = squared box diagonal.
     pub total: HoeffdingBound,
+    /// The betting certificate for the whole vector at the same confidence
+    /// `1 - delta` (absent in reports read from estimator files before
+    /// format version 4).
+    pub certified_total: Option<BettingBound>,
     /// The conformal intervals, if calibrated.
     pub intervals: Option<ConformalIntervals>,
 }
@@ -92,8 +103,9 @@ impl ValidationReport {
             .zip(estimates.rows())
             .map(|(t, e)| t.iter().zip(e.iter()).map(|(a, b)| (a - b).powi(2)).sum())
             .collect();
-        let total =
-            HoeffdingBound::from_squared_errors(&totals, squared_error_bound(lower, upper), delta)?;
+        let sigma = squared_error_bound(lower, upper);
+        let total = HoeffdingBound::from_squared_errors(&totals, sigma, delta)?;
+        let certified_total = BettingBound::from_squared_errors(&totals, sigma, delta)?;
         let coverage = intervals.as_ref().map(|c| c.coverage(truth, estimates));
         let mut parameters = Vec::with_capacity(q);
         for j in 0..q {
@@ -102,6 +114,7 @@ impl ValidationReport {
             let squared: Vec<f64> = errors.iter().map(|v| v * v).collect();
             let sigma = (upper[j] - lower[j]).powi(2);
             let hoeffding = HoeffdingBound::from_squared_errors(&squared, sigma, delta / q as f64)?;
+            let certified = BettingBound::from_squared_errors(&squared, sigma, delta / q as f64)?;
             let mse = hoeffding.empirical_mse;
             let mean_t = t.sum() / r as f64;
             let var_t = t.iter().map(|v| (v - mean_t).powi(2)).sum::<f64>() / r as f64;
@@ -117,6 +130,7 @@ impl ValidationReport {
                 },
                 max_abs_error: errors.iter().fold(0.0f64, |m, v| m.max(v.abs())),
                 hoeffding,
+                certified: Some(certified),
                 interval_half_width: intervals.as_ref().map(|c| c.half_widths()[j]),
                 interval_coverage: coverage.as_ref().map(|c| c[j]),
             });
@@ -124,6 +138,7 @@ impl ValidationReport {
         Ok(Self {
             parameters,
             total,
+            certified_total: Some(certified_total),
             intervals,
         })
     }
@@ -140,22 +155,44 @@ impl std::fmt::Display for ValidationReport {
         for p in &self.parameters {
             write!(
                 f,
-                "  {:<6} RMSE {:.4e}  bias {:+.2e}  R^2 {:.4}  max |err| {:.3e}  E[err^2] <= {:.3e}",
-                p.name,
-                p.rmse,
-                p.bias,
-                p.r2,
-                p.max_abs_error,
-                p.hoeffding.upper()
+                "  {:<6} RMSE {:.4e}  bias {:+.2e}  R^2 {:.4}  max |err| {:.3e}",
+                p.name, p.rmse, p.bias, p.r2, p.max_abs_error,
             )?;
             if let (Some(w), Some(c)) = (p.interval_half_width, p.interval_coverage) {
                 write!(f, "  interval +-{w:.3e} (covers {:.1}%)", 100.0 * c)?;
             }
             writeln!(f)?;
         }
+        writeln!(
+            f,
+            "  certified with probability >= {} (each parameter at delta / q, so all hold together):",
+            1.0 - self.total.delta
+        )?;
+        for p in &self.parameters {
+            match p.certified {
+                Some(c) => write!(
+                    f,
+                    "    {:<6} RMSE <= {:.4e}  E[err^2] <= {:.3e} (betting)",
+                    p.name,
+                    c.rmse_upper(),
+                    c.upper()
+                )?,
+                None => write!(f, "    {:<6} (no betting certificate in this file)", p.name)?,
+            }
+            writeln!(f, "  Theorem 1: E[err^2] <= {:.3e}", p.hoeffding.upper())?;
+        }
+        if let Some(c) = self.certified_total {
+            write!(
+                f,
+                "  whole vector: E||theta - f(D)||^2 <= {:.4e} (betting); ",
+                c.upper()
+            )?;
+        } else {
+            write!(f, "  whole vector: ")?;
+        }
         write!(
             f,
-            "  Theorem 1: E||theta - f(D)||^2 <= {:.4e} + gamma {:.4e} = {:.4e}",
+            "Theorem 1: <= {:.4e} + gamma {:.4e} = {:.4e}",
             self.total.empirical_mse,
             self.total.gamma,
             self.total.upper()
