@@ -332,7 +332,8 @@ fn the_fast_path_falls_back_to_qr_for_its_errors_and_hard_cases() {
         "{err}"
     );
     // A smooth input: neighbouring input lags are nearly collinear, so the
-    // fast path hands over to QR; the answer is QR's, bit for bit.
+    // fast path refines its answer or hands over to QR; either way it is
+    // QR's to 1e-9.
     let smooth: Vec<f64> = (0..n)
         .map(|k| (0.02 * k as f64).sin() + 0.3 * (0.05 * k as f64).cos())
         .collect();

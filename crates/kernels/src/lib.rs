@@ -77,3 +77,39 @@ pub(crate) fn tanh(x: f64) -> f64 {
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
+
+/// The vector arithmetic that [`lagged`] runs on: a microcontroller uses
+/// [`PlainOps`], the host library its SIMD versions. Results may differ in
+/// the last bits between implementations (summation order), never within
+/// one on one processor.
+pub trait VectorOps {
+    /// `sum_k a[k] b[k]` over the shorter length.
+    fn dot(&self, a: &[f64], b: &[f64]) -> f64;
+    /// `r[k] -= x v[k]` for every k of the shorter length.
+    fn subtract_scaled(&self, r: &mut [f64], x: f64, v: &[f64]);
+}
+
+/// Plain loops in index order: [`dot`], and a scalar update.
+///
+/// ```
+/// use twostage_kernels::{PlainOps, VectorOps};
+/// let mut r = [1.0, 2.0];
+/// PlainOps.subtract_scaled(&mut r, 2.0, &[0.5, 1.0]);
+/// assert_eq!(r, [0.0, 0.0]);
+/// assert_eq!(PlainOps.dot(&[1.0, 2.0], &[3.0, 4.0]), 11.0);
+/// ```
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PlainOps;
+
+impl VectorOps for PlainOps {
+    #[inline]
+    fn dot(&self, a: &[f64], b: &[f64]) -> f64 {
+        dot(a, b)
+    }
+    #[inline]
+    fn subtract_scaled(&self, r: &mut [f64], x: f64, v: &[f64]) {
+        for (r, v) in r.iter_mut().zip(v) {
+            *r -= x * v;
+        }
+    }
+}
