@@ -17,7 +17,8 @@ pub struct TrainArgs {
     #[command(flatten)]
     model: ModelArgs,
     /// Start from a preset of the model's (default: a built-in model's
-    /// `paper`, the paper's setting; a model file's first preset).
+    /// `paper`, the paper's setting; `recommended` is what the automatic
+    /// design chose, nearer the Bayes limit; a model file's first preset).
     #[arg(long)]
     preset: Option<String>,
     /// Training simulations m (default: the preset's).

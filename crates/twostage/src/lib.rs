@@ -77,7 +77,10 @@ pub use estimator::{
 pub use file::{FORMAT_VERSION, MAGIC};
 pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE, fmu_model_file};
 pub use moments::WeightedMoments;
-pub use profile::{ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka};
+pub use profile::{
+    ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka, recommended_benchmark,
+    recommended_pacejka,
+};
 pub use progress::{Progress, Silent, Stage};
 pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
 pub use shard::{ChartRole, ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};

@@ -9,7 +9,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use twostage_compress::Arx;
-use twostage_fit::MlpParams;
+use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::BuiltinModel;
 
 use crate::builder::Preset;
@@ -105,7 +105,10 @@ pub struct ModelProfile {
 static PROFILES: [ModelProfile; 2] = [
     ModelProfile {
         model: BuiltinModel::Benchmark,
-        presets: &[("paper", paper_benchmark)],
+        presets: &[
+            ("paper", paper_benchmark),
+            ("recommended", recommended_benchmark),
+        ],
         classic: &ClassicMethod::ALL,
         particles: 1000,
         indirect_arx: (5, 5),
@@ -113,7 +116,10 @@ static PROFILES: [ModelProfile; 2] = [
     },
     ModelProfile {
         model: BuiltinModel::Pacejka,
-        presets: &[("paper", paper_pacejka)],
+        presets: &[
+            ("paper", paper_pacejka),
+            ("recommended", recommended_pacejka),
+        ],
         // The paper runs the Kalman filters on the benchmark only.
         classic: &[
             ClassicMethod::ParticleFilter,
@@ -235,14 +241,39 @@ pub fn paper_pacejka() -> Preset {
     arx_mlp(4, 20, 2000)
 }
 
+/// What the automatic design chose for the benchmark (docs/accuracy.md):
+/// ARX(2, 2), a global 20-unit network routing to 4 experts of 20 units
+/// by pieces of theta's range, m = 16000 simulations.
+pub fn recommended_benchmark() -> Preset {
+    let mlp = MlpParams::new(&[20])
+        .and_then(MlpParams::check)
+        .unwrap_or_else(|e| unreachable!("a 20-unit network is valid: {e}"));
+    let piecewise = Piecewise::new(mlp.clone(), mlp, 4)
+        .unwrap_or_else(|e| unreachable!("4 pieces are valid: {e}"));
+    Preset {
+        compressor: CompressorConfig::Arx(arx(2)),
+        regressor: RegressorConfig::Piecewise(piecewise),
+        simulations: 16_000,
+    }
+}
+
+/// What the automatic design chose for the car (docs/accuracy.md): ARX(2,
+/// 2), whose two input lags are far less collinear on the chicane than
+/// the paper's four, and a 10-unit network, m = 8000 simulations.
+pub fn recommended_pacejka() -> Preset {
+    arx_mlp(2, 10, 8000)
+}
+
+fn arx(order: usize) -> Arx {
+    Arx::new(order, order).unwrap_or_else(|e| unreachable!("ARX({order}, {order}) is valid: {e}"))
+}
+
 fn arx_mlp(order: usize, hidden: usize, simulations: usize) -> Preset {
-    let arx = Arx::new(order, order)
-        .unwrap_or_else(|e| unreachable!("the paper's ARX orders are valid: {e}"));
     let mlp = MlpParams::new(&[hidden])
         .and_then(MlpParams::check)
-        .unwrap_or_else(|e| unreachable!("the paper's network is valid: {e}"));
+        .unwrap_or_else(|e| unreachable!("a {hidden}-unit network is valid: {e}"));
     Preset {
-        compressor: CompressorConfig::Arx(arx),
+        compressor: CompressorConfig::Arx(arx(order)),
         regressor: RegressorConfig::Mlp(mlp),
         simulations,
     }
@@ -267,8 +298,17 @@ mod tests {
         assert_eq!(bench.preset("paper").unwrap(), paper_benchmark());
         assert_eq!(car.preset("paper").unwrap(), paper_pacejka());
         assert_ne!(paper_benchmark(), paper_pacejka());
+        assert_eq!(car.preset("recommended").unwrap(), recommended_pacejka());
+        assert_eq!(
+            bench.preset("recommended").unwrap(),
+            recommended_benchmark()
+        );
+        assert_eq!(
+            bench.preset_names().collect::<Vec<_>>(),
+            ["paper", "recommended"]
+        );
         assert!(matches!(
-            car.preset("recommended"),
+            car.preset("fastest"),
             Err(Error::NotAvailable { what: "preset", .. })
         ));
         for m in ClassicMethod::ALL {
