@@ -1,8 +1,9 @@
 //! The cost of one estimate on one recorded experiment, per method.
 //!
-//! Groups: `estimate_cost_benchmark` (ts, ekf, ukf, pf1000, pem1, pem5,
-//! pem10, bayes, ii5) and `estimate_cost_pacejka` (ts, pf500, pem5), every
-//! method on the same record of its group.
+//! Groups: `estimate_cost_benchmark` (ts, ts_recommended, ekf, ukf,
+//! pf1000, pem1, pem5, pem10, bayes, ii5) and `estimate_cost_pacejka` (ts,
+//! ts_recommended, pf500, pem5), every method on the same record of its
+//! group. `ts` is the paper preset, `ts_recommended` the recommended one.
 
 use std::hint::black_box;
 
@@ -12,14 +13,33 @@ use twostage::{ClassicMethod, EstimateWorkspace, Estimator, ModelProfile, TwoSta
 use twostage_baselines::{MethodSettings, RecordEstimator, classic_estimator};
 use twostage_benches::{config, record, slow_config};
 
+/// The model's preset `name`, trained (seed 1, no calibration or
+/// validation).
+fn trained(
+    model: &dyn twostage::models::Simulator,
+    builtin: BuiltinModel,
+    name: &str,
+) -> Estimator {
+    let preset = ModelProfile::of(builtin)
+        .preset(name)
+        .unwrap_or_else(|e| panic!("{e}"));
+    TwoStage::builder(model)
+        .preset(preset)
+        .validation(0)
+        .calibration(0)
+        .train()
+        .unwrap_or_else(|e| panic!("training the {builtin} {name} preset: {e}"))
+}
+
 fn bench_ts(
     c: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    id: &str,
     estimator: &Estimator,
     data: &IoData,
 ) {
     let mut work = EstimateWorkspace::new();
     let mut theta = vec![0.0; estimator.param_names().len()];
-    c.bench_function("ts", |b| {
+    c.bench_function(id, |b| {
         b.iter(|| {
             estimator
                 .estimate_into(
@@ -67,15 +87,12 @@ fn benchmark_costs(c: &mut Criterion) {
     let model = BuiltinModel::Benchmark;
     let profile = ModelProfile::of(model);
     let bench = Benchmark::new();
-    let estimator = TwoStage::builder(&bench)
-        .preset(profile.preset("paper").unwrap_or_else(|e| panic!("{e}")))
-        .validation(0)
-        .calibration(0)
-        .train()
-        .unwrap_or_else(|e| panic!("training the benchmark preset: {e}"));
+    let estimator = trained(&bench, model, "paper");
+    let recommended = trained(&bench, model, "recommended");
     let data = record(&bench, &[0.5]);
     let mut group = c.benchmark_group("estimate_cost_benchmark");
-    bench_ts(&mut group, &estimator, &data);
+    bench_ts(&mut group, "ts", &estimator, &data);
+    bench_ts(&mut group, "ts_recommended", &recommended, &data);
     bench_method(&mut group, "ekf", classic(model, M::Ekf, 1).as_ref(), &data);
     bench_method(&mut group, "ukf", classic(model, M::Ukf, 1).as_ref(), &data);
     for starts in [1, 5, 10] {
@@ -106,15 +123,12 @@ fn pacejka_costs(c: &mut Criterion) {
     let model = BuiltinModel::Pacejka;
     let profile = ModelProfile::of(model);
     let car = PacejkaCar::new();
-    let estimator = TwoStage::builder(&car)
-        .preset(profile.preset("paper").unwrap_or_else(|e| panic!("{e}")))
-        .validation(0)
-        .calibration(0)
-        .train()
-        .unwrap_or_else(|e| panic!("training the car preset: {e}"));
+    let estimator = trained(&car, model, "paper");
+    let recommended = trained(&car, model, "recommended");
     let data = record(&car, &[-35.0, -1.1]);
     let mut group = c.benchmark_group("estimate_cost_pacejka");
-    bench_ts(&mut group, &estimator, &data);
+    bench_ts(&mut group, "ts", &estimator, &data);
+    bench_ts(&mut group, "ts_recommended", &recommended, &data);
     group.finish();
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     group.sample_size(10);

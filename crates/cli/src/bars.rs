@@ -2,15 +2,18 @@
 //! hidden when stderr is not a terminal (indicatif checks) or on --quiet.
 
 use std::sync::Mutex;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 use twostage::{Progress, Stage};
 
-/// Draws the stages of [`twostage::TwoStage::train`].
+/// Draws the stages of [`twostage::TwoStage::train`], and times them.
 pub struct Bars {
     current: Mutex<Option<ProgressBar>>,
     quiet: bool,
+    /// When the running stage began, and each stage's wall time so far
+    /// (in `Stage` order; a stage may run more than once, as in --auto).
+    clock: Mutex<(Option<Instant>, [Duration; 4])>,
 }
 
 impl Bars {
@@ -19,6 +22,35 @@ impl Bars {
         Self {
             current: Mutex::new(None),
             quiet,
+            clock: Mutex::new((None, [Duration::ZERO; 4])),
+        }
+    }
+
+    /// The wall time of each stage that ran, as "simulate + compress
+    /// 1.20 s, fit 3.40 s, ...".
+    pub fn phase_times(&self) -> String {
+        let clock = self
+            .clock
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        STAGES
+            .iter()
+            .zip(clock.1)
+            .filter(|(_, time)| !time.is_zero())
+            .map(|(stage, time)| format!("{} {:.2} s", phase(*stage), time.as_secs_f64()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    fn tick(&self, stage: Stage, starting: bool) {
+        let mut clock = self
+            .clock
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if starting {
+            clock.0 = Some(Instant::now());
+        } else if let Some(began) = clock.0.take() {
+            clock.1[slot(stage)] += began.elapsed();
         }
     }
 
@@ -30,6 +62,28 @@ impl Bars {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         f(&mut guard);
+    }
+}
+
+const STAGES: [Stage; 4] = [
+    Stage::Training,
+    Stage::Fitting,
+    Stage::Calibration,
+    Stage::Validation,
+];
+
+fn slot(stage: Stage) -> usize {
+    STAGES.iter().position(|s| *s == stage).unwrap_or(0)
+}
+
+/// The phase's name in the timing line: the training chart is simulated
+/// and compressed record by record (so memory stays bounded), one phase.
+fn phase(stage: Stage) -> &'static str {
+    match stage {
+        Stage::Training => "simulate + compress",
+        Stage::Fitting => "fit",
+        Stage::Calibration => "calibrate",
+        Stage::Validation => "validate",
     }
 }
 
@@ -63,6 +117,7 @@ impl Progress for Bars {
         };
         bar.set_message(what(stage));
         self.with_bar(|current| *current = Some(bar));
+        self.tick(stage, true);
     }
 
     fn advance(&self, _stage: Stage, done: usize) {
@@ -73,7 +128,8 @@ impl Progress for Bars {
         });
     }
 
-    fn end(&self, _stage: Stage) {
+    fn end(&self, stage: Stage) {
+        self.tick(stage, false);
         self.with_bar(|current| {
             if let Some(bar) = current.take() {
                 bar.finish();

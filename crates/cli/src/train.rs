@@ -226,6 +226,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
             start.elapsed().as_secs_f64(),
             args.out.display()
         )?;
+        writeln!(out, "phases: {}", bars.phase_times())?;
         let sampling = &estimator.training().sampling;
         if sampling.starts_with("the chart") {
             // The certificate covers records drawn as the chart's were.

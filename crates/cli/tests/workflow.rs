@@ -75,6 +75,15 @@ fn train_inspect_and_estimate_recorded_experiments() {
         "{}",
         text(&out.stdout)
     );
+    // Each phase's wall time, in the order they ran.
+    let phases = text(&out.stdout)
+        .lines()
+        .find(|l| l.starts_with("phases: "))
+        .map(str::to_owned)
+        .unwrap_or_else(|| panic!("{}", text(&out.stdout)));
+    let order = ["simulate + compress ", "fit ", "calibrate ", "validate "]
+        .map(|p| phases.find(p).unwrap_or_else(|| panic!("{p} in {phases}")));
+    assert!(order.is_sorted(), "{phases}");
 
     let out = twostage(&["inspect", path(&file)]);
     assert!(out.status.success(), "{}", text(&out.stderr));
