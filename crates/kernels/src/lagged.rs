@@ -402,7 +402,7 @@ mod tests {
             lag: c % 4 + 1,
         });
         let (start, n) = (4, 8);
-        let mut run = |conditioning: Conditioning, alpha: &mut [f64; 8]| {
+        let run = |conditioning: Conditioning, alpha: &mut [f64; 8]| {
             let (mut table, mut gram) = ([0.0; 20], [0.0; 64]);
             let (mut residual, mut correction) = ([0.0; N], [0.0; 8]);
             lagged_least_squares(
