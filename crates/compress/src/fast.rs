@@ -202,6 +202,19 @@ mod tests {
         (ok, alpha)
     }
 
+    /// The ARX(order, order) coefficients by the QR path, the reference.
+    fn qr_solution(u: Vec<f64>, y: Vec<f64>, order: usize) -> Vec<f64> {
+        let n = u.len();
+        let (u, y) = (
+            Array2::from_shape_vec((n, 1), u).unwrap(),
+            Array2::from_shape_vec((n, 1), y).unwrap(),
+        );
+        Arx::new(order, order)
+            .unwrap()
+            .compress(u.view(), y.view())
+            .unwrap()
+    }
+
     #[test]
     fn answers_well_conditioned_problems_and_matches_qr() {
         let n = 1000;
@@ -213,14 +226,7 @@ mod tests {
         }
         let (ok, fast) = solve(&u, &y, 5, 5);
         assert!(ok, "the fast path declined a well-conditioned problem");
-        let (uc, yc) = (
-            Array2::from_shape_vec((n, 1), u).unwrap(),
-            Array2::from_shape_vec((n, 1), y).unwrap(),
-        );
-        let qr = Arx::new(5, 5)
-            .unwrap()
-            .compress(uc.view(), yc.view())
-            .unwrap();
+        let qr = qr_solution(u, y, 5);
         for (f, q) in fast.iter().zip(&qr) {
             assert!(
                 (f - q).abs() < 1e-11 * q.abs().max(1.0),
@@ -248,14 +254,7 @@ mod tests {
         }
         let (ok, fast) = solve(&u, &y, 4, 4);
         assert!(ok, "the fast path declined a smooth input it can refine");
-        let (uc, yc) = (
-            Array2::from_shape_vec((n, 1), u).unwrap(),
-            Array2::from_shape_vec((n, 1), y).unwrap(),
-        );
-        let qr = Arx::new(4, 4)
-            .unwrap()
-            .compress(uc.view(), yc.view())
-            .unwrap();
+        let qr = qr_solution(u, y, 4);
         let size = qr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for (f, q) in fast.iter().zip(&qr) {
             assert!((f - q).abs() <= 1e-9 * size, "{fast:?} vs {qr:?}");
