@@ -18,6 +18,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use twostage::models::{Benchmark, Simulator};
 
+mod bayes_gap;
 mod paper;
 mod test;
 
@@ -49,6 +50,19 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// An estimator of the benchmark against the Bayes posterior mean on
+    /// the same fresh records: both RMSEs and their ratio.
+    BayesGap {
+        /// The estimator file (trained on the built-in benchmark).
+        #[arg(long)]
+        estimator: PathBuf,
+        /// Fresh test records.
+        #[arg(long, default_value_t = 2000)]
+        records: usize,
+        /// Seed of the test records (kept apart from training seeds).
+        #[arg(long, default_value_t = 2026)]
+        seed: u64,
+    },
     /// Simulate and compress a large benchmark chart; report throughput and
     /// peak memory (the bounded-memory claim of DESIGN.md).
     ChartScale {
@@ -67,6 +81,11 @@ fn main() -> ExitCode {
         Command::ReproducePaper { quick, out, seed } => paper::reproduce(quick, &out, seed),
         Command::ChartScale { sims, threads } => chart_scale(sims, threads),
         Command::Test { args } => test::run(&args),
+        Command::BayesGap {
+            estimator,
+            records,
+            seed,
+        } => bayes_gap::run(&estimator, records, seed),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

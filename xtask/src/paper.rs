@@ -139,7 +139,7 @@ struct Section {
     notes: Vec<String>,
 }
 
-fn test_records<S: Simulator>(
+pub(crate) fn test_records<S: Simulator>(
     model: &S,
     count: usize,
     seed: u64,

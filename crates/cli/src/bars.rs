@@ -27,7 +27,7 @@ impl Bars {
     }
 
     /// The wall time of each stage that ran, as "simulate + compress
-    /// 1.20 s, fit 3.40 s, ...".
+    /// 1.200 s, fit 3.400 s, ...".
     pub fn phase_times(&self) -> String {
         let clock = self
             .clock
@@ -37,7 +37,7 @@ impl Bars {
             .iter()
             .zip(clock.1)
             .filter(|(_, time)| !time.is_zero())
-            .map(|(stage, time)| format!("{} {:.2} s", phase(*stage), time.as_secs_f64()))
+            .map(|(stage, time)| format!("{} {:.3} s", phase(*stage), time.as_secs_f64()))
             .collect::<Vec<_>>()
             .join(", ")
     }

@@ -10,8 +10,10 @@
 
 use std::ops::ControlFlow;
 
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt;
+use faer::{Mat, MatMut, Par};
 use serde::{Deserialize, Serialize};
-use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
 
 /// Why an iterative fit stopped.
 ///
@@ -283,7 +285,14 @@ impl LevenbergMarquardt {
         let mut cost = problem.cost(&x, &r);
         let mut jtj = vec![0.0; n * n];
         let mut jtr = vec![0.0; n];
-        let mut factor = vec![0.0; n * n];
+        // faer's blocked factorization: the scalar kernel of the estimator's
+        // small systems is latency-bound at a network's hundreds of weights.
+        let mut factor = Mat::<f64>::zeros(n, n);
+        let mut scratch = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
+            n,
+            Par::Seq,
+            Default::default(),
+        ));
         let mut step = vec![0.0; n];
         let mut trial = vec![0.0; n];
         let mut mu = self.initial_damping;
@@ -294,7 +303,7 @@ impl LevenbergMarquardt {
             problem.gauss_newton(&x, &r, &mut jtj, &mut jtr)?;
             let mut accepted = false;
             while mu <= self.max_damping {
-                if self.damped_step(&jtj, &jtr, mu, &mut factor, &mut step) {
+                if self.damped_step(&jtj, &jtr, mu, &mut factor, &mut scratch, &mut step) {
                     for ((t, a), s) in trial.iter_mut().zip(&x).zip(&step) {
                         *t = a + s;
                     }
@@ -342,32 +351,51 @@ impl LevenbergMarquardt {
         })
     }
 
-    /// Solve `(J'J + D(mu)) step = -J'r` by Cholesky; false when the damped
+    /// Solve `(J'J + D(mu)) step = -J'r` by Cholesky (on one thread, so
+    /// the step does not depend on the thread count); false when the damped
     /// matrix is not positive definite.
     fn damped_step(
         &self,
         jtj: &[f64],
         jtr: &[f64],
         mu: f64,
-        factor: &mut [f64],
+        factor: &mut Mat<f64>,
+        scratch: &mut MemBuffer,
         step: &mut [f64],
     ) -> bool {
         let n = jtr.len();
         for i in 0..n {
-            factor[i * n..i * n + i + 1].copy_from_slice(&jtj[i * n..i * n + i + 1]);
+            for j in 0..i {
+                factor[(i, j)] = jtj[i * n + j];
+            }
             let diagonal = jtj[i * n + i];
-            factor[i * n + i] = match self.damping {
+            factor[(i, i)] = match self.damping {
                 Damping::Identity => diagonal + mu,
                 Damping::Diagonal { floor } => diagonal + mu * (diagonal + floor),
             };
         }
-        if cholesky_in_place(factor, n, PivotRule::Positive).is_err() {
+        let factored = llt::factor::cholesky_in_place(
+            factor.as_mut(),
+            Default::default(),
+            Par::Seq,
+            MemStack::new(scratch),
+            Default::default(),
+        );
+        // faer refuses every pivot that is not `> 0`, NaN included.
+        if factored.is_err() {
             return false;
         }
         for (s, g) in step.iter_mut().zip(jtr) {
             *s = -g;
         }
-        solve_cholesky_in_place(factor, n, step);
+        llt::solve::solve_in_place(
+            factor.as_ref(),
+            MatMut::from_column_major_slice_mut(step, n, 1),
+            Par::Seq,
+            MemStack::new(&mut MemBuffer::new(
+                llt::solve::solve_in_place_scratch::<f64>(n, 1, Par::Seq),
+            )),
+        );
         true
     }
 }

@@ -2,10 +2,10 @@
 //! kernels' dense layer), back-propagation of residuals and of the
 //! Jacobian, and the trained [`FittedMlp`] that predicts.
 
-use faer::Mat;
 use ndarray::Array2;
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use twostage_kernels::layer::{Activation, dense_layer};
 
@@ -179,13 +179,42 @@ pub(super) struct Problem<'a> {
     pub(super) decay: f64,
 }
 
+/// Samples per block of the training loops that run in parallel. The
+/// blocks, and the order in which their partial sums are added, are fixed,
+/// so every result is the same bits whatever the number of threads.
+pub(super) const BLOCK_SAMPLES: usize = 256;
+
 impl Problem<'_> {
     pub(super) fn n_params(&self) -> usize {
         parameter_count(self.sizes)
     }
 
-    /// Mean squared error over `rows`, per target value.
-    pub(super) fn mse(&self, params: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
+    /// Scratch for one worker: every layer's activations.
+    fn activations(&self) -> Vec<f64> {
+        vec![0.0; self.offsets.last().copied().unwrap_or(0)]
+    }
+
+    /// Mean squared error over `rows`, per target value: blocks of rows in
+    /// parallel, their sums added in block order.
+    pub(super) fn mse(&self, params: &[f64], rows: &[usize]) -> f64 {
+        let q = *self.sizes.last().unwrap_or(&1);
+        let sse: f64 = if rows.len() <= BLOCK_SAMPLES {
+            self.sse(params, rows, &mut self.activations())
+        } else {
+            rows.par_chunks(BLOCK_SAMPLES)
+                .map_init(
+                    || self.activations(),
+                    |acts, block| self.sse(params, block, acts),
+                )
+                .collect::<Vec<f64>>()
+                .iter()
+                .sum()
+        };
+        sse / (rows.len() * q).max(1) as f64
+    }
+
+    /// Sum of squared errors over `rows`, in row order.
+    fn sse(&self, params: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
         let q = *self.sizes.last().unwrap_or(&1);
         let out = self.offsets[self.sizes.len() - 1];
         let mut sse = 0.0;
@@ -197,7 +226,34 @@ impl Problem<'_> {
                 sse += (acts[out + k] - self.t[[i, k]]).powi(2);
             }
         }
-        sse / (rows.len() * q).max(1) as f64
+        sse
+    }
+
+    /// Residuals `output - target` of the training rows, row-major (rows x
+    /// targets), into `r`: blocks of rows in parallel.
+    pub(super) fn residuals(&self, params: &[f64], r: &mut [f64]) {
+        let q = *self.sizes.last().unwrap_or(&1);
+        let out = self.offsets[self.sizes.len() - 1];
+        r.par_chunks_mut(BLOCK_SAMPLES * q)
+            .zip(self.train.par_chunks(BLOCK_SAMPLES))
+            .for_each_init(
+                || self.activations(),
+                |acts, (r, rows)| {
+                    for (r, &i) in r.chunks_exact_mut(q).zip(rows) {
+                        let xi = self.x.row(i);
+                        forward(
+                            self.sizes,
+                            params,
+                            xi.as_slice().unwrap_or(&[]),
+                            acts,
+                            &self.offsets,
+                        );
+                        for (k, r) in r.iter_mut().enumerate() {
+                            *r = acts[out + k] - self.t[[i, k]];
+                        }
+                    }
+                },
+            );
     }
 
     pub(super) fn penalty(&self, params: &[f64]) -> f64 {
@@ -206,11 +262,54 @@ impl Problem<'_> {
 
     /// Gradient of the mean squared error over `rows` (per target value)
     /// plus the weight decay term, by one backward pass per sample seeded
-    /// with its residual.
-    pub(super) fn gradient(
+    /// with its residual: blocks of rows in parallel, their gradients added
+    /// in block order (one block, as an Adam mini-batch usually is, runs
+    /// on the calling thread).
+    pub(super) fn gradient(&self, params: &[f64], rows: &[usize], grad: &mut [f64]) {
+        let q = *self.sizes.last().unwrap_or(&1);
+        let scale = 2.0 / (rows.len() * q).max(1) as f64;
+        grad.fill(0.0);
+        if rows.len() <= BLOCK_SAMPLES {
+            let mut delta = vec![0.0; 2 * MAX_WIDTH];
+            self.add_gradient(
+                params,
+                rows,
+                scale,
+                grad,
+                &mut self.activations(),
+                &mut delta,
+            );
+        } else {
+            let partials: Vec<Vec<f64>> = rows
+                .par_chunks(BLOCK_SAMPLES)
+                .map_init(
+                    || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
+                    |(acts, delta), block| {
+                        let mut partial = vec![0.0; params.len()];
+                        self.add_gradient(params, block, scale, &mut partial, acts, delta);
+                        partial
+                    },
+                )
+                .collect();
+            for partial in &partials {
+                for (g, p) in grad.iter_mut().zip(partial) {
+                    *g += p;
+                }
+            }
+        }
+        let decay = 2.0 * self.decay / (self.train.len() * q).max(1) as f64;
+        for (g, p) in grad.iter_mut().zip(params) {
+            *g += decay * p;
+        }
+    }
+
+    /// Add `scale` times the gradient of the squared errors of `rows` to
+    /// `grad`, in row order.
+    fn add_gradient(
         &self,
         params: &[f64],
         rows: &[usize],
+        scale: f64,
         grad: &mut [f64],
         acts: &mut [f64],
         delta: &mut [f64],
@@ -219,8 +318,6 @@ impl Problem<'_> {
         let layers = sizes.len() - 1;
         let q = sizes[layers];
         let out = self.offsets[layers];
-        grad.fill(0.0);
-        let scale = 2.0 / (rows.len() * q).max(1) as f64;
         for &i in rows {
             let xi = self.x.row(i);
             let xi = xi.as_slice().unwrap_or(&[]);
@@ -245,18 +342,33 @@ impl Problem<'_> {
                 }
             }
         }
-        let decay = 2.0 * self.decay / (self.train.len() * q).max(1) as f64;
-        for (g, p) in grad.iter_mut().zip(params) {
-            *g += decay * p;
-        }
     }
 
-    /// Residuals r (train rows x targets) and their Jacobian J.
-    pub(super) fn jacobian(
+    /// The residuals r (training rows x targets, row-major) and the
+    /// transposed Jacobian `J'` (parameters x residuals, column-major: each
+    /// residual's derivatives are one contiguous column), blocks of rows in
+    /// parallel.
+    pub(super) fn jacobian(&self, params: &[f64], jt: &mut [f64], res: &mut [f64]) {
+        let q = *self.sizes.last().unwrap_or(&1);
+        let n = params.len();
+        jt.par_chunks_mut(n * BLOCK_SAMPLES * q)
+            .zip(res.par_chunks_mut(BLOCK_SAMPLES * q))
+            .zip(self.train.par_chunks(BLOCK_SAMPLES))
+            .for_each_init(
+                || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
+                |(acts, delta), ((jt, res), rows)| {
+                    self.jacobian_block(params, rows, jt, res, acts, delta);
+                },
+            );
+    }
+
+    /// [`Self::jacobian`] for the samples `rows`, on one thread.
+    fn jacobian_block(
         &self,
         params: &[f64],
-        jac: &mut Mat<f64>,
-        res: &mut Mat<f64>,
+        rows: &[usize],
+        jt: &mut [f64],
+        res: &mut [f64],
         acts: &mut [f64],
         delta: &mut [f64],
     ) {
@@ -271,13 +383,14 @@ impl Problem<'_> {
             starts.push(p);
             p += sizes[l + 1] * (sizes[l] + 1);
         }
-        for (row_block, &i) in self.train.iter().enumerate() {
+        for (sample, &i) in rows.iter().enumerate() {
             let xi = self.x.row(i);
             let xi = xi.as_slice().unwrap_or(&[]);
             forward(sizes, params, xi, acts, &self.offsets);
             for k in 0..q {
-                let r = row_block * q + k;
-                res[(r, 0)] = acts[out + k] - self.t[[i, k]];
+                let r = sample * q + k;
+                res[r] = acts[out + k] - self.t[[i, k]];
+                let column = &mut jt[r * params.len()..(r + 1) * params.len()];
                 // Back-propagate the unit seed of output k.
                 delta[..q].fill(0.0);
                 delta[k] = 1.0;
@@ -287,10 +400,13 @@ impl Problem<'_> {
                     let s = starts[l];
                     for a in 0..n_out {
                         let d = delta[a];
-                        for (c, inp) in input.iter().enumerate() {
-                            jac[(r, s + a * n_in + c)] = d * inp;
+                        for (slot, inp) in column[s + a * n_in..s + (a + 1) * n_in]
+                            .iter_mut()
+                            .zip(input)
+                        {
+                            *slot = d * inp;
                         }
-                        jac[(r, s + n_out * n_in + a)] = d;
+                        column[s + n_out * n_in + a] = d;
                     }
                     if l > 0 {
                         backward(&params[s..s + n_out * n_in], input, n_out, delta);
@@ -410,9 +526,9 @@ mod tests {
         let t = Array2::zeros((1, 2));
         let p = problem(&sizes, &x, &t, &[0], 0.0);
         let width = p.offsets.last().copied().unwrap();
-        let (mut acts, mut delta) = (vec![0.0; width], vec![0.0; 2 * MAX_WIDTH]);
-        let (mut jac, mut res) = (Mat::zeros(2, n), Mat::zeros(2, 1));
-        p.jacobian(&params, &mut jac, &mut res, &mut acts, &mut delta);
+        let mut acts = vec![0.0; width];
+        let (mut jt, mut res) = (vec![0.0; n * 2], vec![0.0; 2]);
+        p.jacobian(&params, &mut jt, &mut res);
         let output = |w: &[f64], acts: &mut [f64]| -> [f64; 2] {
             forward(&sizes, w, &[0.3, -0.7, 0.9], acts, &p.offsets);
             [acts[width - 2], acts[width - 1]]
@@ -426,9 +542,9 @@ mod tests {
             for k in 0..2 {
                 let fd = (fp[k] - fm[k]) / (2.0 * h);
                 assert!(
-                    (fd - jac[(k, j)]).abs() < 1e-8,
+                    (fd - jt[k * n + j]).abs() < 1e-8,
                     "output {k}, parameter {j}: {fd} vs {}",
-                    jac[(k, j)]
+                    jt[k * n + j]
                 );
             }
         }
@@ -445,20 +561,88 @@ mod tests {
         let t = Array2::from_shape_vec((7, 2), random(14, 33)).unwrap();
         let rows: Vec<usize> = (0..7).collect();
         let p = problem(&sizes, &x, &t, &rows, 0.01);
-        let width = p.offsets.last().copied().unwrap();
-        let (mut acts, mut delta) = (vec![0.0; width], vec![0.0; 2 * MAX_WIDTH]);
-        let loss = |w: &[f64], acts: &mut [f64]| p.mse(w, &rows, acts) + p.penalty(w) / 14.0;
+        let loss = |w: &[f64]| p.mse(w, &rows) + p.penalty(w) / 14.0;
         let mut grad = vec![0.0; n];
-        p.gradient(&params, &rows, &mut grad, &mut acts, &mut delta);
+        p.gradient(&params, &rows, &mut grad);
         let h = 1e-6;
         for j in 0..n {
             let (mut plus, mut minus) = (params.clone(), params.clone());
             plus[j] += h;
             minus[j] -= h;
-            let fd = (loss(&plus, &mut acts) - loss(&minus, &mut acts)) / (2.0 * h);
+            let fd = (loss(&plus) - loss(&minus)) / (2.0 * h);
             assert!(
                 (fd - grad[j]).abs() < 1e-8,
                 "parameter {j}: {fd} vs {}",
+                grad[j]
+            );
+        }
+    }
+
+    /// Several blocks of rows: the parallel Jacobian, residuals, loss and
+    /// gradient against the same quantities built one row at a time from
+    /// single-row problems, on 1 and 3 threads (same bits on both).
+    #[test]
+    fn blocks_of_rows_add_up_to_the_row_by_row_quantities() {
+        let sizes = [3, 4, 2];
+        let n = n_parameters(&sizes);
+        let samples = 2 * BLOCK_SAMPLES + 37;
+        let x = Array2::from_shape_vec((samples, 3), random(3 * samples, 41)).unwrap();
+        let t = Array2::from_shape_vec((samples, 2), random(2 * samples, 42)).unwrap();
+        let params = random(n, 43);
+        // Shuffled rows, as the training split gives them.
+        let mut rows: Vec<usize> = (0..samples).collect();
+        rows.reverse();
+        rows.swap(3, 400);
+        let p = problem(&sizes, &x, &t, &rows, 0.02);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let (mut jt, mut res, mut r) = (
+                    vec![0.0; n * samples * 2],
+                    vec![0.0; samples * 2],
+                    vec![0.0; samples * 2],
+                );
+                p.jacobian(&params, &mut jt, &mut res);
+                p.residuals(&params, &mut r);
+                let mut grad = vec![0.0; n];
+                p.gradient(&params, &rows, &mut grad);
+                (jt, res, r, grad, p.mse(&params, &rows))
+            })
+        };
+        let (jt, res, r, grad, mse) = run(1);
+        let three = run(3);
+        assert!(jt == three.0 && res == three.1 && r == three.2 && grad == three.3);
+        assert_eq!(mse.to_bits(), three.4.to_bits());
+        assert_eq!(res, r);
+        let (mut sse, mut expected_grad) = (0.0, vec![0.0; n]);
+        for (sample, &i) in rows.iter().enumerate() {
+            let one = problem(&sizes, &x, &t, std::slice::from_ref(&i), 0.0);
+            let (mut jt1, mut res1) = (vec![0.0; n * 2], vec![0.0; 2]);
+            one.jacobian(&params, &mut jt1, &mut res1);
+            assert_eq!(&jt[sample * 2 * n..(sample + 1) * 2 * n], &jt1[..]);
+            assert_eq!(&res[sample * 2..sample * 2 + 2], &res1[..]);
+            sse += res1.iter().map(|v| v * v).sum::<f64>();
+            // The gradient of the squared errors is 2 J' r.
+            for k in 0..2 {
+                for j in 0..n {
+                    expected_grad[j] += 2.0 * jt1[k * n + j] * res1[k];
+                }
+            }
+        }
+        let values = (2 * samples) as f64;
+        assert!(
+            (mse - sse / values).abs() <= 1e-13 * mse,
+            "{mse} vs {}",
+            sse / values
+        );
+        for j in 0..n {
+            let expected = expected_grad[j] / values + 2.0 * 0.02 * params[j] / values;
+            assert!(
+                (grad[j] - expected).abs() <= 1e-12 * (1.0 + expected.abs()),
+                "parameter {j}: {} vs {expected}",
                 grad[j]
             );
         }

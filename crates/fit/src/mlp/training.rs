@@ -4,7 +4,7 @@
 use std::ops::ControlFlow;
 
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, Par};
+use faer::{Accum, Mat, MatRef, Par};
 use ndarray::ArrayView2;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -20,7 +20,7 @@ use crate::levenberg_marquardt::{
 };
 use crate::standardize::Standardizer;
 
-use super::network::{FittedMlp, MAX_WIDTH, Problem, forward, initial_parameters, parameter_count};
+use super::network::{FittedMlp, MAX_WIDTH, Problem, initial_parameters, parameter_count};
 use super::params::{Mlp, MlpParams, Trainer};
 
 /// How one restart went.
@@ -124,9 +124,6 @@ fn train_adam(
     const BETA2: f64 = 0.999;
     const EPSILON: f64 = 1e-8;
     let n = problem.n_params();
-    let width = problem.offsets.last().copied().unwrap_or(0);
-    let mut acts = vec![0.0; width];
-    let mut delta = vec![0.0; 2 * MAX_WIDTH];
     let (mut grad, mut m, mut v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     let held_out = if problem.held_out.is_empty() {
         problem.train
@@ -134,7 +131,7 @@ fn train_adam(
         problem.held_out
     };
     let mut order = problem.train.to_vec();
-    let initial = problem.mse(&params, held_out, &mut acts);
+    let initial = problem.mse(&params, held_out);
     let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
     let (mut step, mut done) = (0i32, 0);
     let mut reason = TerminationReason::MaxEpochs;
@@ -142,7 +139,7 @@ fn train_adam(
         done += 1;
         order.shuffle(rng);
         for batch in order.chunks(batch_size) {
-            problem.gradient(&params, batch, &mut grad, &mut acts, &mut delta);
+            problem.gradient(&params, batch, &mut grad);
             step += 1;
             let (c1, c2) = (1.0 - BETA1.powi(step), 1.0 - BETA2.powi(step));
             for j in 0..n {
@@ -151,7 +148,7 @@ fn train_adam(
                 params[j] -= learning_rate * (m[j] / c1) / ((v[j] / c2).sqrt() + EPSILON);
             }
         }
-        let held = problem.mse(&params, held_out, &mut acts);
+        let held = problem.mse(&params, held_out);
         if best.observe(held, &params) {
             reason = TerminationReason::EarlyStopping;
             break;
@@ -162,7 +159,7 @@ fn train_adam(
         restart,
         iterations: done,
         reason,
-        train_mse: problem.mse(&kept, problem.train, &mut acts),
+        train_mse: problem.mse(&kept, problem.train),
         validation_mse,
     };
     (kept, report)
@@ -179,9 +176,7 @@ fn train_levenberg_marquardt(
     } else {
         problem.held_out
     };
-    let width = problem.offsets.last().copied().unwrap_or(0);
-    let mut acts = vec![0.0; width];
-    let initial = problem.mse(&params, held_out, &mut acts);
+    let initial = problem.mse(&params, held_out);
     let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
     let mut least_squares = NetworkLeastSquares::new(problem);
     let solver = LevenbergMarquardt::new()
@@ -191,7 +186,7 @@ fn train_levenberg_marquardt(
         .initial_damping(1e-3)
         .max_damping(1e10);
     let Ok(minimum) = solver.minimize(&mut least_squares, &params, |iterate| {
-        let held = problem.mse(iterate.x, held_out, &mut acts);
+        let held = problem.mse(iterate.x, held_out);
         if best.observe(held, iterate.x) {
             ControlFlow::Break(())
         } else {
@@ -203,7 +198,7 @@ fn train_levenberg_marquardt(
         restart,
         iterations: minimum.iterations,
         reason: minimum.reason,
-        train_mse: problem.mse(&kept, problem.train, &mut acts),
+        train_mse: problem.mse(&kept, problem.train),
         validation_mse,
     };
     (kept, report)
@@ -212,17 +207,20 @@ fn train_levenberg_marquardt(
 /// The training rows' residuals as a least-squares problem: the cost is
 /// the mean squared error per target value plus the weight decay over the
 /// same count, and the Gauss-Newton products come from the back-propagated
-/// Jacobian (kept here between iterations: rows x parameters).
+/// Jacobian (kept here between iterations, transposed: parameters x rows).
 struct NetworkLeastSquares<'p, 'a> {
     problem: &'p Problem<'a>,
     rows: usize,
-    acts: Vec<f64>,
-    delta: Vec<f64>,
-    jac: Mat<f64>,
-    res: Mat<f64>,
+    jt: Vec<f64>,
+    res: Vec<f64>,
     jtj: Mat<f64>,
     jtr: Mat<f64>,
 }
+
+/// Columns of `J'J` per parallel task: each task owns its columns' lower
+/// part and sums over every row in one fixed order, so the products do
+/// not depend on the number of threads.
+const GRAM_TILE: usize = 16;
 
 impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
     fn new(problem: &'p Problem<'a>) -> Self {
@@ -232,14 +230,45 @@ impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
         Self {
             problem,
             rows,
-            acts: vec![0.0; problem.offsets.last().copied().unwrap_or(0)],
-            delta: vec![0.0; 2 * MAX_WIDTH],
-            jac: Mat::zeros(rows, n),
-            res: Mat::zeros(rows, 1),
+            jt: vec![0.0; n * rows],
+            res: vec![0.0; rows],
             jtj: Mat::zeros(n, n),
             jtr: Mat::zeros(n, 1),
         }
     }
+}
+
+/// The lower triangle of `scale J'J` and `scale J'r` from `J'` (n x rows,
+/// column-major) and `r`, by tiles of [`GRAM_TILE`] columns in parallel.
+fn gram_products(jt: &[f64], res: &[f64], scale: f64, jtj: &mut Mat<f64>, jtr: &mut Mat<f64>) {
+    let n = jtj.nrows();
+    let rows = res.len();
+    let jt = MatRef::from_column_major_slice(jt, n, rows);
+    let res = MatRef::from_column_major_slice(res, rows, 1);
+    jtj.as_mut()
+        .par_col_chunks_mut(GRAM_TILE)
+        .zip(jtr.as_mut().par_row_chunks_mut(GRAM_TILE))
+        .enumerate()
+        .for_each(|(tile, (columns, gradient))| {
+            let first = tile * GRAM_TILE;
+            let width = columns.ncols();
+            matmul(
+                columns.subrows_mut(first, n - first),
+                Accum::Replace,
+                jt.subrows(first, n - first),
+                jt.subrows(first, width).transpose(),
+                scale,
+                Par::Seq,
+            );
+            matmul(
+                gradient,
+                Accum::Replace,
+                jt.subrows(first, width),
+                res,
+                scale,
+                Par::Seq,
+            );
+        });
 }
 
 impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
@@ -250,21 +279,8 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
         params: &[f64],
         r: &mut Vec<f64>,
     ) -> std::result::Result<(), Self::Error> {
-        let problem = self.problem;
-        let q = *problem.sizes.last().unwrap_or(&1);
-        let out = problem.offsets[problem.sizes.len() - 1];
-        r.clear();
-        for &i in problem.train {
-            let xi = problem.x.row(i);
-            forward(
-                problem.sizes,
-                params,
-                xi.as_slice().unwrap_or(&[]),
-                &mut self.acts,
-                &problem.offsets,
-            );
-            r.extend((0..q).map(|k| self.acts[out + k] - problem.t[[i, k]]));
-        }
+        r.resize(self.rows, 0.0);
+        self.problem.residuals(params, r);
         Ok(())
     }
 
@@ -282,29 +298,8 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
     ) -> std::result::Result<(), Self::Error> {
         let n = jtr.len();
         let scale = 1.0 / self.rows as f64;
-        self.problem.jacobian(
-            params,
-            &mut self.jac,
-            &mut self.res,
-            &mut self.acts,
-            &mut self.delta,
-        );
-        matmul(
-            self.jtj.as_mut(),
-            Accum::Replace,
-            self.jac.transpose(),
-            self.jac.as_ref(),
-            scale,
-            Par::Seq,
-        );
-        matmul(
-            self.jtr.as_mut(),
-            Accum::Replace,
-            self.jac.transpose(),
-            self.res.as_ref(),
-            scale,
-            Par::Seq,
-        );
+        self.problem.jacobian(params, &mut self.jt, &mut self.res);
+        gram_products(&self.jt, &self.res, scale, &mut self.jtj, &mut self.jtr);
         // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
         let d = self.problem.decay * scale;
         for i in 0..n {
@@ -413,5 +408,31 @@ mod tests {
             5000
         ));
         assert!(!use_levenberg_marquardt(Trainer::ADAM, 10, 10));
+    }
+
+    /// The tiled products against a plain triple loop, with a width that
+    /// is not a multiple of the tile.
+    #[test]
+    fn gram_products_match_the_plain_sums() {
+        let (n, rows) = (2 * GRAM_TILE + 5, 53);
+        let value = |i: usize| ((i * 7919 + 13) % 101) as f64 / 50.0 - 1.0;
+        let jt: Vec<f64> = (0..n * rows).map(value).collect();
+        let res: Vec<f64> = (0..rows).map(|i| value(i + 5000)).collect();
+        let (mut jtj, mut jtr) = (Mat::zeros(n, n), Mat::zeros(n, 1));
+        gram_products(&jt, &res, 0.5, &mut jtj, &mut jtr);
+        for i in 0..n {
+            let mut gradient = 0.0;
+            for r in 0..rows {
+                gradient += jt[r * n + i] * res[r];
+            }
+            assert!((jtr[(i, 0)] - 0.5 * gradient).abs() < 1e-12, "J'r[{i}]");
+            for j in 0..=i {
+                let mut product = 0.0;
+                for r in 0..rows {
+                    product += jt[r * n + i] * jt[r * n + j];
+                }
+                assert!((jtj[(i, j)] - 0.5 * product).abs() < 1e-12, "J'J[{i}, {j}]");
+            }
+        }
     }
 }
