@@ -56,6 +56,9 @@ pub struct CandidateReport {
     pub score: f64,
     /// Seconds spent compressing and fitting it.
     pub seconds: f64,
+    /// Chart rows its network was fitted on: all the fitting rows, or a
+    /// screening share of them in round 1 of a large chart.
+    pub fit_rows: usize,
     /// Why it has no score, if it has none (skipped for time, or failed).
     pub note: Option<String>,
 }
@@ -102,12 +105,13 @@ impl std::fmt::Display for AutoOutcome {
                 }
                 None => writeln!(
                     f,
-                    " {mark} {:<28} {:<14} score {:.4}  RMSE [{}]  {:.1} s",
+                    " {mark} {:<28} {:<14} score {:.4}  RMSE [{}]  {:.1} s on {} rows",
                     c.compressor,
                     c.regressor,
                     c.score,
                     rmse.join(", "),
-                    c.seconds
+                    c.seconds,
+                    c.fit_rows
                 )?,
             }
         }
@@ -122,13 +126,21 @@ pub struct AutoDesign<'a, S: ?Sized> {
     budget: Budget,
     compressors: Option<Vec<CompressorConfig>>,
     networks: Option<(RegressorConfig, Vec<RegressorConfig>)>,
+    screening_rows: usize,
 }
 
-/// Largest chart a time budget chooses: beyond it the network fits, not
-/// the simulations, dominate the cost.
-const MAX_AUTO_SIMULATIONS: usize = 8000;
+/// Largest chart a time budget chooses per second of budget: the default
+/// search's fits, not its simulations, dominate its cost, and they grow
+/// with m; on 2 cores they take about 100 s at m = 8000 (docs/accuracy.md),
+/// so 120 s buys 8000 simulations and 300 s 20000.
+const SIMULATIONS_PER_BUDGET_SECOND: f64 = 8000.0 / 120.0;
 /// Share of the chart held out to score candidates.
 const HELD_OUT: f64 = 0.2;
+/// Fitting rows round 1 uses at most: it only picks the compressors worth
+/// round 2, and the best few are close (on the benchmark at m = 20000 the
+/// ARX orders 2 to 4 score within 2% of each other, round 2's networks
+/// move the score by 10%); the time saved goes to round 2 on every row.
+const SCREENING_ROWS: usize = 4000;
 /// Memory allowed for the stored records.
 const MAX_CHART_BYTES: usize = 2 << 30;
 
@@ -166,6 +178,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             budget: Budget::Seconds(120.0),
             compressors: None,
             networks: None,
+            screening_rows: SCREENING_ROWS,
         }
     }
 }
@@ -188,6 +201,15 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     /// (default: MLP `[20]`; then `[10]`, `[40]`, `[20, 20]`, and 4 pieces of `[20]`).
     pub fn networks(mut self, first: RegressorConfig, others: Vec<RegressorConfig>) -> Self {
         self.networks = Some((first, others));
+        self
+    }
+
+    /// Fitting rows of round 1, which only ranks the compressors (default
+    /// 4000): on a larger chart the round-1 fits see only this many, and
+    /// round 2 fits its networks, the round-1 network among them, on every
+    /// fitting row; only full fits compete for the win.
+    pub fn screening_rows(mut self, rows: usize) -> Self {
+        self.screening_rows = rows.max(1);
         self
     }
 
@@ -227,7 +249,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 spec.n_samples(),
             )
         });
-        let mut search = Search::new(&self.base, &chart, deadline);
+        let mut search = Search::new(&self.base, &chart, deadline, self.screening_rows);
         self.base.observer().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
@@ -283,9 +305,9 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                     });
                 }
                 let per_simulation = self.base.pilot_seconds_per_simulation()?;
-                let m = (0.2 * t / per_simulation) as usize;
+                let affordable = (0.2 * t / per_simulation).min(SIMULATIONS_PER_BUDGET_SECOND * t);
                 (
-                    m.clamp(500, MAX_AUTO_SIMULATIONS).min(memory_cap),
+                    (affordable as usize).max(500).min(memory_cap),
                     Some(start + Duration::from_secs_f64(t)),
                 )
             }
@@ -307,6 +329,8 @@ struct Search<'s, 'a, S: Simulator + ?Sized> {
     base: &'s TwoStage<'a, S>,
     chart: &'s StoredChart,
     deadline: Option<Instant>,
+    /// Round 1's fitting rows at most.
+    screening_rows: usize,
     /// Rows of the chart the candidates are fitted on; the rest score them.
     fit_rows: usize,
     /// The prior's standard deviation per parameter: RMSEs are scored in
@@ -318,7 +342,12 @@ struct Search<'s, 'a, S: Simulator + ?Sized> {
 }
 
 impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
-    fn new(base: &'s TwoStage<'a, S>, chart: &'s StoredChart, deadline: Option<Instant>) -> Self {
+    fn new(
+        base: &'s TwoStage<'a, S>,
+        chart: &'s StoredChart,
+        deadline: Option<Instant>,
+        screening_rows: usize,
+    ) -> Self {
         let prior = base.simulator().spec().prior();
         let prior_sd = prior
             .lower()
@@ -331,6 +360,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             base,
             chart,
             deadline,
+            screening_rows,
             fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
             prior_sd,
             candidates: Vec::new(),
@@ -342,43 +372,63 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// Round 1: every compressor with one medium network. Nothing is known
     /// about costs yet: each starts unless the deadline has passed.
     fn round_one(&mut self, compressors: &[CompressorConfig], medium: &RegressorConfig) {
+        let rows = self.fit_rows.min(self.screening_rows);
         let outcomes: Vec<_> = compressors
             .par_iter()
-            .map(|c| self.evaluate(c, medium, self.deadline.map(|d| (d, 0.0)), 1))
+            .map(|c| self.evaluate(c, medium, rows, self.deadline.map(|d| (d, 0.0)), 1))
             .collect();
         for (report, outcome) in outcomes {
             self.record(report, outcome, medium.clone());
         }
     }
 
-    /// Round 2: the other networks on the two best compressors, each
-    /// started only if its cost (the round-1 time scaled by the network's
-    /// size) leaves time to refit the best candidate found so far.
+    /// Round 2: the other networks on the two best compressors (and the
+    /// round-1 network again when round 1 only screened a share of the
+    /// rows), on every fitting row. Cheapest first, each started only if
+    /// its cost (the round-1 time scaled by the network's size and the
+    /// rows) leaves time to refit the best candidate found so far.
     fn round_two(&mut self, medium: &RegressorConfig, networks: &[RegressorConfig]) {
         let q = self.chart.thetas.ncols();
         let ranked = self.ranked();
+        let screened = self
+            .candidates
+            .first()
+            .map_or(self.fit_rows, |c| c.fit_rows);
+        let growth = self.fit_rows as f64 / screened.max(1) as f64;
         let reserve = ranked
             .first()
-            .map_or(0.0, |&i| 1.25 * self.candidates[i].seconds);
-        let pairs: Vec<(CompressorConfig, RegressorConfig, f64)> = ranked
+            .map_or(0.0, |&i| 1.25 * growth * self.candidates[i].seconds);
+        let mut trials: Vec<&RegressorConfig> = Vec::new();
+        if screened < self.fit_rows {
+            trials.push(medium);
+        }
+        trials.extend(networks);
+        let mut pairs: Vec<(CompressorConfig, RegressorConfig, f64)> = ranked
             .iter()
             .take(2)
             .filter_map(|&i| {
                 let (c, _) = self.fitted[i].as_ref()?;
                 let n = c.n_features();
                 let base_size = network_size(medium, n, q);
-                let seconds = self.candidates[i].seconds;
-                Some(networks.iter().map(move |net| {
-                    let scale = network_size(net, n, q) / base_size;
-                    (c.clone(), net.clone(), seconds * scale)
+                let seconds = self.candidates[i].seconds * growth;
+                Some(trials.iter().map(move |net| {
+                    // Levenberg-Marquardt's products grow with the square
+                    // of the weights, its iterations less: the fits of the
+                    // benchmark's search grew as size^1.4 to size^1.5.
+                    let scale = (network_size(net, n, q) / base_size).powf(1.5);
+                    (c.clone(), (*net).clone(), seconds * scale)
                 }))
             })
             .flatten()
             .collect();
+        // Stable: equal costs keep the order above, so a simulation budget
+        // (no deadline) evaluates the same list in the same order anywhere.
+        pairs.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let rows = self.fit_rows;
         let outcomes: Vec<_> = pairs
             .par_iter()
             .map(|(c, net, cost)| {
-                self.evaluate(c, net, self.deadline.map(|d| (d, cost + reserve)), 2)
+                self.evaluate(c, net, rows, self.deadline.map(|d| (d, cost + reserve)), 2)
             })
             .collect();
         for ((report, outcome), (_, net, _)) in outcomes.into_iter().zip(pairs) {
@@ -390,6 +440,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         &self,
         compressor: &CompressorConfig,
         regressor: &RegressorConfig,
+        rows: usize,
         limit: Option<(Instant, f64)>,
         round: usize,
     ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
@@ -398,7 +449,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             self.chart,
             compressor,
             regressor,
-            self.fit_rows,
+            (rows, self.fit_rows),
             &self.prior_sd,
             limit,
             round,
@@ -430,10 +481,18 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         ranked
     }
 
-    /// The best candidate's index.
+    /// The best candidate's index: among those fitted on every fitting
+    /// row (a screened fit is not compared with them), or, if none was,
+    /// among all.
     fn best(&self, budget: &Budget) -> Result<usize> {
+        let full = (0..self.candidates.len()).any(|i| {
+            self.candidates[i].note.is_none() && self.candidates[i].fit_rows == self.fit_rows
+        });
         (0..self.candidates.len())
-            .filter(|&i| self.candidates[i].note.is_none())
+            .filter(|&i| {
+                self.candidates[i].note.is_none()
+                    && (!full || self.candidates[i].fit_rows == self.fit_rows)
+            })
             .min_by(|&a, &b| {
                 self.candidates[a]
                     .score
@@ -464,7 +523,8 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     reason: "the best candidate lost its fit".into(),
                 })?;
         let regressor_config = self.networks_of[best].clone();
-        let refit_cost = 1.25 * self.candidates[best].seconds;
+        let refit_cost = 1.25 * self.candidates[best].seconds * self.fit_rows as f64
+            / self.candidates[best].fit_rows.max(1) as f64;
         let refitted = self
             .deadline
             .is_none_or(|d| Instant::now() + Duration::from_secs_f64(refit_cost) <= d);
@@ -500,7 +560,7 @@ struct Winner {
 }
 
 /// Weights and biases of a network candidate on n features and q outputs:
-/// the cost of a Levenberg-Marquardt fit grows with it.
+/// the cost of a Levenberg-Marquardt fit grows with its power 1.5 (above).
 fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
         RegressorConfig::Mlp(mlp) => {
@@ -595,14 +655,15 @@ fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Arr
         .unwrap_or_else(|_| unreachable!("n features per record")))
 }
 
-/// Compress, fit on the first `fit_rows` rows, score on the rest.
+/// Compress, fit on the first `rows` rows, score on the rows from
+/// `held_out` on (`rows <= held_out`).
 #[allow(clippy::too_many_arguments)]
 fn evaluate<S: Simulator + ?Sized>(
     base: &TwoStage<'_, S>,
     chart: &StoredChart,
     compressor: &CompressorConfig,
     regressor: &RegressorConfig,
-    fit_rows: usize,
+    (fit_rows, held_out): (usize, usize),
     prior_sd: &[f64],
     deadline: Option<(Instant, f64)>,
     round: usize,
@@ -614,6 +675,7 @@ fn evaluate<S: Simulator + ?Sized>(
         rmse: Vec::new(),
         score: f64::INFINITY,
         seconds: 0.0,
+        fit_rows,
         note: None,
     };
     // (deadline, estimated seconds): skip what would not finish in time.
@@ -629,8 +691,12 @@ fn evaluate<S: Simulator + ?Sized>(
     let outcome = (|| -> Result<(Vec<f64>, CompressorConfig, FittedRegressor)> {
         let compressor = compressor.prepared(&chart.records[..fit_rows])?;
         let features = compress_all(&compressor, &chart.records)?;
-        let (x_fit, x_held) = features.view().split_at(Axis(0), fit_rows);
-        let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), fit_rows);
+        let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
+        let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);
+        let (x_fit, t_fit) = (
+            x_fit.slice_move(ndarray::s![..fit_rows, ..]),
+            t_fit.slice_move(ndarray::s![..fit_rows, ..]),
+        );
         let prior = base.simulator().spec().prior();
         let z_fit = to_learning_space(t_fit, prior.marginals());
         let fitted = regressor.fit(x_fit, z_fit.view(), base.seed_value())?;

@@ -441,3 +441,54 @@ fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
         "a simulation budget gives the same estimator every time"
     );
 }
+
+/// Round 1 on a share of the rows ranks the compressors; round 2 refits
+/// the round-1 network with the others on every fitting row, and only
+/// those full fits compete for the win.
+#[test]
+fn a_screened_first_round_only_ranks_the_compressors() {
+    let model = small_benchmark();
+    let net = |h: usize| {
+        RegressorConfig::Mlp(
+            MlpParams::new(&[h])
+                .unwrap()
+                .restarts(1)
+                .max_iterations(40)
+                .check()
+                .unwrap(),
+        )
+    };
+    let outcome = TwoStage::auto(&model)
+        .budget(twostage::Budget::Simulations(300))
+        .screening_rows(100)
+        .compressors(vec![
+            Arx::new(2, 2).unwrap().into(),
+            Arx::new(3, 3).unwrap().into(),
+            Arx::new(5, 5).unwrap().into(),
+        ])
+        .networks(net(6), vec![net(3)])
+        .settings(|b| b.seed(4).calibration(0).validation(0))
+        .run()
+        .unwrap();
+    let fit_rows = 240; // 80% of 300
+    let (first, second): (Vec<_>, Vec<_>) = outcome.candidates.iter().partition(|c| c.round == 1);
+    assert_eq!(first.len(), 3, "{outcome}");
+    assert!(first.iter().all(|c| c.fit_rows == 100), "{outcome}");
+    assert_eq!(
+        second.len(),
+        4,
+        "both networks on the best 2 compressors:\n{outcome}"
+    );
+    assert!(second.iter().all(|c| c.fit_rows == fit_rows), "{outcome}");
+    assert_eq!(
+        second
+            .iter()
+            .filter(|c| c.regressor == net(6).to_string())
+            .count(),
+        2,
+        "the round-1 network again, on every row:\n{outcome}"
+    );
+    let best = &outcome.candidates[outcome.best];
+    assert_eq!(best.round, 2, "{outcome}");
+    assert!(second.iter().all(|c| c.score >= best.score), "{outcome}");
+}

@@ -1,5 +1,7 @@
 //! Training: seeded restarts in parallel, each by Levenberg-Marquardt (the
-//! crate's one solver) or Adam, with early stopping on a held-out split.
+//! crate's one solver) or Adam, with early stopping on a held-out split;
+//! within a restart the rows are divided over the threads in fixed blocks
+//! (docs/decisions/026), so the weights do not depend on the thread count.
 
 use std::ops::ControlFlow;
 
