@@ -57,6 +57,7 @@ mod file;
 mod legacy;
 mod model_file;
 mod moments;
+mod named_model;
 mod profile;
 mod progress;
 mod refine;
@@ -77,6 +78,7 @@ pub use estimator::{
 pub use file::{FORMAT_VERSION, MAGIC};
 pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE, fmu_model_file};
 pub use moments::WeightedMoments;
+pub use named_model::NamedModel;
 pub use profile::{
     ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka, recommended_benchmark,
     recommended_pacejka,
