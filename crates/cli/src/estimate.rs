@@ -130,6 +130,10 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             trained: Some(trained),
             method: Box::new(move |record: &IoData| {
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
+                // The adaptive intervals have the same level and follow the
+                // record; the fixed ones are the fallback. Both were
+                // calibrated for the TS estimate, not a refined one.
+                let widths = a.interval_half_widths().map(<[f64]>::to_vec);
                 let theta = match refine.as_mut() {
                     Some(refine) => refine(record, &a.theta)?,
                     None => a.theta,
@@ -137,10 +141,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     theta,
-                    // The adaptive intervals have the same level and follow
-                    // the record; the fixed ones are the fallback. Both were
-                    // calibrated for the TS estimate, not a refined one.
-                    widths: a.adaptive_half_widths.or(a.half_widths),
+                    widths,
                 })
             }),
         });

@@ -244,6 +244,14 @@ impl Assessment {
     pub fn out_of_distribution(&self) -> bool {
         matches!((self.feature_distance, self.distance_threshold), (Some(d), Some(t)) if d > t)
     }
+
+    /// The half-widths the record's intervals use: the adaptive ones where
+    /// calibrated, else the conformal ones, else none.
+    pub fn interval_half_widths(&self) -> Option<&[f64]> {
+        self.adaptive_half_widths
+            .as_deref()
+            .or(self.half_widths.as_deref())
+    }
 }
 
 impl Estimator {
@@ -437,9 +445,26 @@ impl Estimator {
     /// # Errors
     /// As [`Estimator::estimate_into`].
     pub fn assess(&self, record: &IoData) -> Result<Assessment> {
-        let mut work = EstimateWorkspace::new();
+        self.assess_with(
+            record.inputs(),
+            record.outputs(),
+            &mut EstimateWorkspace::new(),
+        )
+    }
+
+    /// [`Estimator::assess`] of the record `inputs` (N x n_u), `outputs`
+    /// (N x n_y), with a workspace kept across records.
+    ///
+    /// # Errors
+    /// As [`Estimator::estimate_into`].
+    pub fn assess_with(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut EstimateWorkspace,
+    ) -> Result<Assessment> {
         let mut theta = vec![0.0; self.param_names.len()];
-        self.estimate_into(record.inputs(), record.outputs(), &mut work, &mut theta)?;
+        self.estimate_into(inputs, outputs, work, &mut theta)?;
         let adaptive_half_widths = match &self.adaptive {
             Some(a) => {
                 let mut widths = vec![0.0; theta.len()];

@@ -1,0 +1,174 @@
+"""twostage: explicit parameter estimators trained on simulations.
+
+Train once on thousands of simulated experiments, then estimate the
+parameters of a recorded experiment in microseconds, with intervals, an
+out-of-distribution flag and a validation certificate. The engine is
+Rust; arrays go in and out as numpy float64.
+
+>>> import numpy as np, twostage
+>>> est = twostage.train(model="benchmark", sims=300, validate=100, calibrate=0)
+>>> est.parameters
+['theta']
+>>> n = est.record_shape[0]
+>>> u, y = np.random.default_rng(0).standard_normal((2, n, 1))
+>>> est.estimate(u, y).shape   # one record: theta [q]
+(1,)
+>>> est.assess(u, y)["out_of_distribution"]
+False
+"""
+
+from __future__ import annotations
+
+import json
+from os import PathLike
+from typing import Any, Optional, Union
+
+import numpy as np
+import numpy.typing as npt
+
+from ._twostage import Estimator as _NativeEstimator
+from ._twostage import __version__
+from ._twostage import train as _train
+
+__all__ = ["Estimator", "train", "__version__"]
+
+
+class Estimator:
+    """A trained estimator: the same files as the ``twostage`` command line.
+
+    >>> est = twostage.Estimator.load("bench.tsest")   # doctest: +SKIP
+    >>> theta = est.estimate(u, y)                       # doctest: +SKIP
+    """
+
+    __slots__ = ("_native",)
+
+    def __init__(self, native):
+        self._native = native
+
+    @classmethod
+    def load(cls, path: Union[str, PathLike[str]]) -> Estimator:
+        """Read an estimator file written by ``twostage train``, ``save``
+        or any earlier version of either."""
+        return cls(_NativeEstimator.load(str(path)))
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> Estimator:
+        """An estimator from the bytes of a file."""
+        return cls(_NativeEstimator.from_bytes(bytes(data)))
+
+    def save(self, path: Union[str, PathLike[str]]) -> None:
+        """Write the estimator file (readable by the command line)."""
+        self._native.save(str(path))
+
+    def to_bytes(self) -> bytes:
+        """The bytes of the estimator file."""
+        return self._native.to_bytes()
+
+    @property
+    def parameters(self) -> list[str]:
+        """Parameter names, in the order of theta."""
+        return self._native.parameters
+
+    @property
+    def lower(self) -> list[float]:
+        """Lower corner of the prior box."""
+        return self._native.lower
+
+    @property
+    def upper(self) -> list[float]:
+        """Upper corner of the prior box."""
+        return self._native.upper
+
+    @property
+    def record_shape(self) -> tuple[int, int, int]:
+        """(samples per record N, inputs n_u, outputs n_y)."""
+        return self._native.record_shape
+
+    @property
+    def model(self) -> str:
+        """The name of the model it was trained on."""
+        return self._native.model
+
+    def estimate(
+        self, u: Optional[npt.NDArray[np.float64]], y: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.float64]:
+        """Estimate theta from one record (``u`` [N, n_u], ``y`` [N, n_y]
+        float64, giving [q]) or a batch (``u`` [b, N, n_u], ``y``
+        [b, N, n_y], giving [b, q]); ``u`` is None for a model without
+        input. The records of a batch run in parallel, without the GIL.
+        Bad arrays raise ValueError naming the argument and index."""
+        return self._native.estimate(u, y)
+
+    def assess(
+        self, u: Optional[npt.NDArray[np.float64]], y: npt.NDArray[np.float64]
+    ) -> dict[str, Any]:
+        """Estimate with intervals and the out-of-distribution flag, for one
+        record or a batch (shapes as ``estimate``). Returns a dict:
+
+        - ``theta``: the estimates ([q] or [b, q]);
+        - ``lower``, ``upper``: the 90% (or the trained level's) interval,
+          adaptive where calibrated, else conformal; None when uncalibrated;
+        - ``feature_distance``: the record's Mahalanobis distance from the
+          training features, ``distance_threshold`` the distance 99.9% of
+          them stay within, ``out_of_distribution`` whether it is beyond
+          (None without a feature envelope).
+        """
+        theta, widths, distance, threshold = self._native.assess(u, y)
+        result = {
+            "theta": theta,
+            "lower": None if widths is None else theta - widths,
+            "upper": None if widths is None else theta + widths,
+            "feature_distance": distance,
+            "distance_threshold": threshold,
+            "out_of_distribution": None if distance is None else distance > threshold,
+        }
+        return result
+
+    @property
+    def validation(self) -> Optional[dict[str, Any]]:
+        """The validation report as plain data (a dict: per-parameter RMSE,
+        bias, certificates, interval coverage), or None."""
+        text = self._native.validation_json()
+        return None if text is None else json.loads(text)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The whole estimator as plain data (what ``to_json`` holds)."""
+        return json.loads(self._native.to_json())
+
+    def __repr__(self) -> str:
+        return "twostage.Estimator(model={!r}, parameters={!r})".format(
+            self.model, self.parameters
+        )
+
+
+def train(
+    model: Optional[str] = None,
+    *,
+    model_file: Optional[Union[str, PathLike[str]]] = None,
+    preset: Optional[str] = None,
+    sims: Optional[int] = None,
+    compress: Optional[str] = None,
+    fit: Optional[str] = None,
+    seed: int = 1,
+    validate: int = 1000,
+    calibrate: int = 4000,
+    alpha: float = 0.1,
+) -> Estimator:
+    """Train an estimator for a built-in model (``model="benchmark"`` or
+    ``"pacejka"``) or a model file (``model_file="car.toml"``), with the
+    command line's defaults: the same arguments and seed give the same
+    file, bit for bit, as ``twostage train``. The simulation, compression
+    and fitting run in Rust without the GIL."""
+    native = _train(
+        model,
+        model_file=None if model_file is None else str(model_file),
+        preset=preset,
+        sims=sims,
+        compress=compress,
+        fit=fit,
+        seed=seed,
+        validate=validate,
+        calibrate=calibrate,
+        alpha=alpha,
+    )
+    return Estimator(native)

@@ -1,0 +1,50 @@
+"""Type stubs of the native module (src/lib.rs); the package's public API
+is twostage/__init__.py, which wraps it."""
+
+from os import PathLike
+from typing import Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Array = npt.NDArray[np.float64]
+
+class Estimator:
+    @staticmethod
+    def load(path: Union[str, PathLike[str]]) -> Estimator: ...
+    @staticmethod
+    def from_bytes(data: bytes) -> Estimator: ...
+    def save(self, path: Union[str, PathLike[str]]) -> None: ...
+    def to_bytes(self) -> bytes: ...
+    @property
+    def parameters(self) -> list[str]: ...
+    @property
+    def lower(self) -> list[float]: ...
+    @property
+    def upper(self) -> list[float]: ...
+    @property
+    def record_shape(self) -> Tuple[int, int, int]: ...
+    @property
+    def model(self) -> str: ...
+    def to_json(self) -> str: ...
+    def validation_json(self) -> Optional[str]: ...
+    def estimate(self, u: Optional[_Array], y: _Array) -> _Array: ...
+    def assess(
+        self, u: Optional[_Array], y: _Array
+    ) -> Tuple[_Array, Optional[_Array], Optional[Union[float, _Array]], Optional[float]]: ...
+
+def train(
+    model: Optional[str] = None,
+    *,
+    model_file: Optional[str] = None,
+    preset: Optional[str] = None,
+    sims: Optional[int] = None,
+    compress: Optional[str] = None,
+    fit: Optional[str] = None,
+    seed: int = 1,
+    validate: int = 1000,
+    calibrate: int = 4000,
+    alpha: float = 0.1,
+) -> Estimator: ...

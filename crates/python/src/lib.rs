@@ -1,0 +1,441 @@
+//! The native module of the `twostage` Python package
+//! (`twostage._twostage`): estimator files, estimates from numpy arrays
+//! with the GIL released and the records in parallel, and training from a
+//! built-in model or a model file. The Python layer
+//! (`python/twostage/__init__.py`) turns the JSON reports into plain data.
+//!
+//! Arrays come in as float64 only, never cast: a record in float32 or int
+//! would estimate something other than what the CLI estimates from the same
+//! numbers. Every rejection is a `ValueError` naming the argument and, for
+//! a bad value, its index.
+
+use std::path::PathBuf;
+
+use ndarray::{ArrayView2, ArrayView3, Axis, Dimension, Ix3};
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyBytes;
+use rayon::prelude::*;
+use twostage::{EstimateWorkspace, NamedModel, TwoStage};
+
+/// A twostage error as the Python exception a caller would expect: a file
+/// that cannot be read is an `OSError`, everything else a `ValueError`.
+fn to_python(error: twostage::Error) -> PyErr {
+    match error {
+        twostage::Error::Io { .. } => PyOSError::new_err(error.to_string()),
+        other => PyValueError::new_err(other.to_string()),
+    }
+}
+
+/// A trained estimator: the same files as the command line's.
+#[pyclass(name = "Estimator", module = "twostage", frozen)]
+struct PyEstimator {
+    inner: twostage::Estimator,
+}
+
+/// One record `[N, n]` or a batch `[b, N, n]` of float64, as a batch view,
+/// and whether it was one record. `n` must be `width`; `None` stands for a
+/// model without that kind of signal (`width == 0`).
+fn records<'a>(
+    name: &str,
+    array: Option<&'a Bound<'_, PyAny>>,
+    width: usize,
+    batch: Option<usize>,
+) -> PyResult<(Option<numpy::PyReadonlyArrayDyn<'a, f64>>, bool)> {
+    let Some(array) = array else {
+        if width == 0 {
+            return Ok((None, batch.is_none()));
+        }
+        return Err(PyValueError::new_err(format!(
+            "{name} is None, but the estimator's model has {width} such signal(s): pass a \
+             float64 array [N, {width}] or [b, N, {width}]"
+        )));
+    };
+    let Ok(untyped) = array.cast::<PyUntypedArray>() else {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be a numpy array (float64 [N, {width}] or [b, N, {width}]), not {}",
+            array.get_type().name()?
+        )));
+    };
+    let Ok(typed) = array.cast::<PyArrayDyn<f64>>() else {
+        return Err(PyValueError::new_err(format!(
+            "{name} has dtype {}, not float64: convert it with np.asarray({name}, \
+             dtype=np.float64) (the estimator never casts on its own)",
+            untyped.dtype()
+        )));
+    };
+    let shape = untyped.shape().to_vec();
+    let single = match shape.len() {
+        2 => true,
+        3 => false,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "{name} has shape {shape:?}: give one record [N, {width}] or a batch \
+                 [b, N, {width}]"
+            )));
+        }
+    };
+    if shape[shape.len() - 1] != width {
+        return Err(PyValueError::new_err(format!(
+            "{name} has shape {shape:?}: its last axis must be the model's {width} signal(s)"
+        )));
+    }
+    if let Some(b) = batch
+        && (single || shape[0] != b)
+    {
+        return Err(PyValueError::new_err(format!(
+            "{name} has shape {shape:?}, the other array holds {b} record(s): give both as \
+             one record or both as batches of the same size"
+        )));
+    }
+    let readonly = typed.try_readonly().map_err(|e| {
+        PyValueError::new_err(format!("{name} cannot be read while it is written: {e}"))
+    })?;
+    if let Some(bad) = readonly
+        .as_array()
+        .indexed_iter()
+        .find(|(_, v)| !v.is_finite())
+    {
+        let (index, value) = bad;
+        return Err(PyValueError::new_err(format!(
+            "{name}{:?} is {value}: records must be finite (drop or repair that sample)",
+            index.slice()
+        )));
+    }
+    Ok((Some(readonly), single))
+}
+
+/// A `[N, n]` or `[b, N, n]` view as `[b, N, n]`.
+fn as_batch<'a>(
+    array: Option<&'a numpy::PyReadonlyArrayDyn<'_, f64>>,
+) -> PyResult<ArrayView3<'a, f64>> {
+    let Some(array) = array else {
+        return ArrayView3::from_shape((0, 0, 0), &[]).map_err(shape_error);
+    };
+    let view = array.as_array();
+    let view = if view.ndim() == 2 {
+        view.insert_axis(Axis(0))
+    } else {
+        view
+    };
+    view.into_dimensionality::<Ix3>().map_err(shape_error)
+}
+
+fn shape_error(e: ndarray::ShapeError) -> PyErr {
+    PyValueError::new_err(format!("array shape: {e}"))
+}
+
+#[pymethods]
+impl PyEstimator {
+    /// Read an estimator file (written by `twostage train`, `save`, or any
+    /// earlier format version).
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        twostage::Estimator::load(&path)
+            .map(|inner| Self { inner })
+            .map_err(to_python)
+    }
+
+    /// An estimator from the bytes of a file.
+    #[staticmethod]
+    fn from_bytes(data: &[u8]) -> PyResult<Self> {
+        twostage::Estimator::from_bytes(data)
+            .map(|inner| Self { inner })
+            .map_err(to_python)
+    }
+
+    /// Write the estimator file.
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        self.inner.save(&path).map_err(to_python)
+    }
+
+    /// The file's bytes.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let bytes = self.inner.to_bytes().map_err(to_python)?;
+        Ok(PyBytes::new(py, &bytes))
+    }
+
+    /// Parameter names, in the order of theta.
+    #[getter]
+    fn parameters(&self) -> Vec<String> {
+        self.inner.param_names().to_vec()
+    }
+
+    /// The prior box's lower corner.
+    #[getter]
+    fn lower(&self) -> Vec<f64> {
+        self.inner.lower().to_vec()
+    }
+
+    /// The prior box's upper corner.
+    #[getter]
+    fn upper(&self) -> Vec<f64> {
+        self.inner.upper().to_vec()
+    }
+
+    /// (samples per record, inputs, outputs) the estimator was trained on.
+    #[getter]
+    fn record_shape(&self) -> (usize, usize, usize) {
+        let shape = self.inner.record_shape();
+        (shape.n_samples, shape.n_inputs, shape.n_outputs)
+    }
+
+    /// The model's name.
+    #[getter]
+    fn model(&self) -> String {
+        self.inner.training().model.clone()
+    }
+
+    /// The whole estimator as JSON (the CLI's `inspect --json` reads the
+    /// same fields).
+    fn to_json(&self) -> PyResult<String> {
+        self.inner.to_json().map_err(to_python)
+    }
+
+    /// The validation report as JSON, or None when not validated.
+    fn validation_json(&self) -> PyResult<Option<String>> {
+        self.inner
+            .validation()
+            .map(|report| {
+                serde_json::to_string(report)
+                    .map_err(|e| PyValueError::new_err(format!("validation report: {e}")))
+            })
+            .transpose()
+    }
+
+    /// Estimates of one record (`u` [N, n_u], `y` [N, n_y]: theta [q]) or
+    /// of a batch (`u` [b, N, n_u], `y` [b, N, n_y]: theta [b, q]), the
+    /// records in parallel without the GIL. `u` is None for a model
+    /// without input.
+    #[pyo3(signature = (u, y))]
+    fn estimate<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let q = self.inner.param_names().len();
+        let estimator = &self.inner;
+        let (theta, single) = self.each_record(py, u, y, q, |u, y, work, out| {
+            estimator.estimate_into(u, y, work, out)
+        })?;
+        Ok(rows(py, theta, q, single))
+    }
+
+    /// Estimates with their intervals and the out-of-distribution flag, for
+    /// one record or a batch: `(theta, half_widths, feature_distance,
+    /// distance_threshold)`, the half-widths those of the adaptive
+    /// intervals where calibrated, else of the conformal ones (None when
+    /// neither is), the distance None without a feature envelope.
+    #[pyo3(signature = (u, y))]
+    #[allow(clippy::type_complexity)]
+    fn assess<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+    ) -> PyResult<(
+        Bound<'py, PyAny>,
+        Option<Bound<'py, PyAny>>,
+        Option<Bound<'py, PyAny>>,
+        Option<f64>,
+    )> {
+        let q = self.inner.param_names().len();
+        let estimator = &self.inner;
+        // Per record: theta, half-widths (NaN when none), distance (NaN when none).
+        let width = 2 * q + 1;
+        let (values, single) = self.each_record(py, u, y, width, |u, y, work, out| {
+            let assessment = estimator.assess_with(u, y, work)?;
+            let (theta, rest) = out.split_at_mut(q);
+            theta.copy_from_slice(&assessment.theta);
+            let (widths, distance) = rest.split_at_mut(q);
+            match assessment.interval_half_widths() {
+                Some(w) => widths.copy_from_slice(w),
+                None => widths.fill(f64::NAN),
+            }
+            distance[0] = assessment.feature_distance.unwrap_or(f64::NAN);
+            Ok(())
+        })?;
+        let b = values.len() / width;
+        let column = |from: usize, to: usize| -> Vec<f64> {
+            values
+                .chunks_exact(width)
+                .flat_map(|row| row[from..to].iter().copied())
+                .collect()
+        };
+        let theta = rows(py, column(0, q), q, single);
+        let widths = (self.inner.intervals().is_some()
+            || self.inner.adaptive_intervals().is_some())
+        .then(|| rows(py, column(q, 2 * q), q, single));
+        let threshold = self
+            .inner
+            .envelope()
+            .map(twostage::FeatureEnvelope::threshold);
+        let distance = threshold.map(|_| {
+            let d = column(2 * q, width);
+            if single {
+                d[0].into_pyobject(py)
+                    .map(|v| v.into_any())
+                    .unwrap_or_else(|e| match e {})
+            } else {
+                ndarray::Array1::from_vec(d).into_pyarray(py).into_any()
+            }
+        });
+        debug_assert_eq!(b, if single { 1 } else { b });
+        Ok((theta, widths, distance, threshold))
+    }
+}
+
+/// `values` ([b, width] row-major) as a numpy array [width] for one record
+/// or [b, width] for a batch.
+fn rows(py: Python<'_>, values: Vec<f64>, width: usize, single: bool) -> Bound<'_, PyAny> {
+    if single {
+        ndarray::Array1::from_vec(values)
+            .into_pyarray(py)
+            .into_any()
+    } else {
+        let b = values.len() / width.max(1);
+        ndarray::Array2::from_shape_vec((b, width), values)
+            .map(|a| a.into_pyarray(py).into_any())
+            .unwrap_or_else(|_| unreachable!("b rows of width values"))
+    }
+}
+
+impl PyEstimator {
+    /// Check `u` and `y`, then run `each` on every record in parallel
+    /// without the GIL, each writing `width` numbers; the first failure
+    /// (by record index) becomes a `ValueError` naming the record.
+    fn each_record(
+        &self,
+        py: Python<'_>,
+        u: Option<&Bound<'_, PyAny>>,
+        y: &Bound<'_, PyAny>,
+        width: usize,
+        each: impl Fn(
+            ArrayView2<'_, f64>,
+            ArrayView2<'_, f64>,
+            &mut EstimateWorkspace,
+            &mut [f64],
+        ) -> twostage::Result<()>
+        + Sync,
+    ) -> PyResult<(Vec<f64>, bool)> {
+        let shape = self.inner.record_shape();
+        let (y_array, single) = records("y", Some(y), shape.n_outputs, None)?;
+        let y_view = as_batch(y_array.as_ref())?;
+        let (b, n) = (y_view.shape()[0], y_view.shape()[1]);
+        let (u_array, u_single) = records("u", u, shape.n_inputs, (!single).then_some(b))?;
+        if u_array.is_some() && u_single != single {
+            return Err(PyValueError::new_err(
+                "u is a batch and y one record: give both as one record or both as batches",
+            ));
+        }
+        let u_view = match u_array.as_ref() {
+            Some(_) => as_batch(u_array.as_ref())?,
+            None => ArrayView3::from_shape((b, n, 0), &[]).map_err(shape_error)?,
+        };
+        let (values, failure) = py.detach(|| {
+            let mut values = vec![0.0; b * width];
+            // Every record's outcome, so that the error reported is the
+            // lowest record's whatever the scheduling.
+            let failure = values
+                .par_chunks_mut(width.max(1))
+                .enumerate()
+                .map_init(EstimateWorkspace::new, |work, (k, out)| {
+                    each(
+                        u_view.index_axis(Axis(0), k),
+                        y_view.index_axis(Axis(0), k),
+                        work,
+                        out,
+                    )
+                    .err()
+                    .map(|e| (k, e))
+                })
+                .collect::<Vec<_>>()
+                .into_iter()
+                .flatten()
+                .next();
+            (values, failure)
+        });
+        match failure {
+            None => Ok((values, single)),
+            Some((_, e)) if single => Err(PyValueError::new_err(e.to_string())),
+            Some((k, e)) => Err(PyValueError::new_err(format!("record {k}: {e}"))),
+        }
+    }
+}
+
+/// Train an estimator for a built-in model (`model`) or a model file
+/// (`model_file`) with the command line's defaults: the same arguments
+/// and seed give the same file as `twostage train`.
+#[pyfunction]
+#[pyo3(signature = (model=None, *, model_file=None, preset=None, sims=None, compress=None, fit=None, seed=1, validate=1000, calibrate=4000, alpha=0.1))]
+#[allow(clippy::too_many_arguments)]
+fn train(
+    py: Python<'_>,
+    model: Option<&str>,
+    model_file: Option<PathBuf>,
+    preset: Option<&str>,
+    sims: Option<usize>,
+    compress: Option<&str>,
+    fit: Option<&str>,
+    seed: u64,
+    validate: usize,
+    calibrate: usize,
+    alpha: f64,
+) -> PyResult<PyEstimator> {
+    let named = match (model, model_file) {
+        (Some(name), None) => NamedModel::builtin(name),
+        (None, Some(path)) => NamedModel::file(path),
+        _ => {
+            return Err(PyValueError::new_err(
+                "give model='benchmark' (a built-in model) or model_file='path.toml', not both",
+            ));
+        }
+    }
+    .map_err(to_python)?;
+    let compressor = compress
+        .map(|spec| {
+            spec.parse::<twostage::CompressorConfig>()
+                .map_err(|e| PyValueError::new_err(format!("compress: {e}")))
+        })
+        .transpose()?;
+    let regressor = fit
+        .map(|spec| {
+            spec.parse::<twostage::RegressorConfig>()
+                .map_err(|e| PyValueError::new_err(format!("fit: {e}")))
+        })
+        .transpose()?;
+    let preset = named.preset(preset).map_err(to_python)?;
+    let estimator = py.detach(|| -> twostage::Result<twostage::Estimator> {
+        let simulator = named.simulator(false)?;
+        let mut builder = TwoStage::builder(simulator.as_ref())
+            .preset(preset)
+            .seed(seed)
+            .validation(validate)
+            .calibration(calibrate)
+            .alpha(alpha);
+        if let Some(m) = sims {
+            builder = builder.simulations(m);
+        }
+        if let Some(c) = compressor {
+            builder = builder.compressor(c);
+        }
+        if let Some(r) = regressor {
+            builder = builder.regressor(r);
+        }
+        builder.train()
+    });
+    estimator
+        .map(|inner| PyEstimator { inner })
+        .map_err(to_python)
+}
+
+/// The native module.
+#[pymodule]
+fn _twostage(module: &Bound<'_, PyModule>) -> PyResult<()> {
+    module.add_class::<PyEstimator>()?;
+    module.add_function(wrap_pyfunction!(train, module)?)?;
+    module.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,148 @@
+"""The Python package against the command line: same files, same
+estimates bit for bit, plain-data reports, and clear errors for bad arrays.
+
+The command line binary comes from TWOSTAGE_CLI (``cargo xtask test`` sets
+it to the one it built).
+"""
+
+import json
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import twostage
+
+CLI = os.environ.get("TWOSTAGE_CLI")
+
+
+def cli(*args):
+    if not CLI:
+        pytest.fail(
+            "TWOSTAGE_CLI is not set: run the suite with `cargo xtask test`, "
+            "or point it at a built `twostage` binary"
+        )
+    done = subprocess.run([CLI, *args], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+SMALL = dict(sims=300, validate=100, calibrate=100, seed=5)
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """A small benchmark estimator trained by Python, and its file."""
+    estimator = twostage.train(model="benchmark", **SMALL)
+    path = tmp_path_factory.mktemp("est") / "small.tsest"
+    estimator.save(path)
+    return estimator, path
+
+
+def test_the_same_seed_gives_the_cli_s_file(small, tmp_path):
+    estimator, _ = small
+    out = tmp_path / "cli.tsest"
+    cli(
+        "train", "--model", "benchmark", "--sims", "300", "--validate", "100",
+        "--calibrate", "100", "--seed", "5", "--out", str(out), "--quiet",
+    )
+    assert out.read_bytes() == estimator.to_bytes()
+    other = twostage.train(model="benchmark", **{**SMALL, "seed": 6})
+    assert other.to_bytes() != estimator.to_bytes()
+
+
+def test_estimates_are_the_cli_s_bit_for_bit(small, tmp_path):
+    estimator, path = small
+    charts = tmp_path / "records"
+    cli("simulate", "--model", "benchmark", "--count", "7", "--seed", "11",
+        "--out-dir", str(charts))
+    out = cli("estimate", "--estimator", str(path), "--format", "json",
+              str(charts / "data.csv"))
+    from_cli = json.loads(out)
+    data = np.loadtxt(charts / "data.csv", delimiter=",", skiprows=1)
+    experiments = np.unique(data[:, 0]).astype(int)
+    u = np.stack([data[data[:, 0] == e, 1:2] for e in experiments])
+    y = np.stack([data[data[:, 0] == e, 2:3] for e in experiments])
+    batch = estimator.estimate(u, y)
+    assert batch.shape == (7, 1)
+    assessed = estimator.assess(u, y)
+    assert len(from_cli) == 7
+    for k, row in enumerate(from_cli):
+        assert batch[k].tolist() == [row["theta"]], (k, row)
+        # One record at a time gives the same bits as the batch.
+        assert estimator.estimate(u[k], y[k]).tolist() == batch[k].tolist()
+        # The intervals and the flag are the CLI's too.
+        assert assessed["lower"][k].tolist() == [row["theta_lo"]]
+        assert assessed["upper"][k].tolist() == [row["theta_hi"]]
+        assert assessed["feature_distance"][k] == row["feature_distance"]
+        assert bool(assessed["out_of_distribution"][k]) == row["out_of_distribution"]
+    one = estimator.assess(u[0], y[0])
+    assert one["theta"].shape == (1,) and isinstance(one["feature_distance"], float)
+
+
+def test_a_record_from_elsewhere_is_flagged(small):
+    estimator, _ = small
+    n, _, _ = estimator.record_shape
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal((n, 1))
+    # A tenfold output: no benchmark system does that.
+    y = 10.0 * rng.standard_normal((n, 1))
+    assert estimator.assess(u, y)["out_of_distribution"]
+
+
+def test_a_file_round_trips_and_the_cli_reads_it(small):
+    estimator, path = small
+    again = twostage.Estimator.load(path)
+    assert again.to_bytes() == estimator.to_bytes()
+    assert twostage.Estimator.from_bytes(estimator.to_bytes()).parameters == ["theta"]
+    assert "twostage estimator file" in cli("inspect", str(path))
+
+
+def test_the_validation_report_is_plain_data(small):
+    estimator, _ = small
+    report = estimator.validation
+    assert isinstance(report, dict)
+    theta = report["parameters"][0]
+    assert theta["name"] == "theta"
+    assert 0.0 < theta["rmse"] < 0.2
+    # Both certificates bound the mean squared error from above.
+    certified = theta["certified"]
+    assert certified["mse_bound"] >= theta["rmse"] ** 2
+    assert estimator.to_dict()["training"]["seed"] == 5
+    json.dumps(report)  # nothing but JSON's types
+
+
+def test_bad_arrays_name_the_argument_and_the_index(small):
+    estimator, _ = small
+    n, _, _ = estimator.record_shape
+    u, y = np.zeros((n, 1)), np.ones((n, 1))
+    with pytest.raises(ValueError, match=r"u has dtype float32"):
+        estimator.estimate(u.astype(np.float32), y)
+    with pytest.raises(ValueError, match=r"y has shape \[%d\]" % n):
+        estimator.estimate(u, y.ravel())
+    bad = y.copy()
+    bad[17, 0] = np.nan
+    with pytest.raises(ValueError, match=r"y\[17, 0\] is NaN"):
+        estimator.estimate(u, bad)
+    batch = np.ones((3, n, 1))
+    batch[2, 5, 0] = np.inf
+    with pytest.raises(ValueError, match=r"u\[2, 5, 0\] is inf"):
+        estimator.estimate(batch, np.ones((3, n, 1)))
+    with pytest.raises(ValueError, match=r"the other array holds 3 record"):
+        estimator.estimate(np.ones((2, n, 1)), np.ones((3, n, 1)))
+    with pytest.raises(ValueError, match=r"u is None"):
+        estimator.estimate(None, y)
+    with pytest.raises(ValueError, match=r"must be a numpy array"):
+        estimator.estimate([[0.0]] * n, y)
+
+
+def test_files_that_cannot_be_read_say_why(tmp_path):
+    with pytest.raises(OSError, match="missing.tsest"):
+        twostage.Estimator.load(tmp_path / "missing.tsest")
+    junk = tmp_path / "junk.tsest"
+    junk.write_bytes(b"not an estimator")
+    with pytest.raises(ValueError, match="TWOSTAGE"):
+        twostage.Estimator.load(junk)
+    with pytest.raises(ValueError, match="pendulum"):
+        twostage.train(model="pendulum", sims=10)
