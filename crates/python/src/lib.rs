@@ -19,6 +19,9 @@ use pyo3::types::PyBytes;
 use rayon::prelude::*;
 use twostage::{EstimateWorkspace, NamedModel, TwoStage};
 
+mod simulator;
+use simulator::{PythonProgress, PythonSimulator};
+
 /// A twostage error as the Python exception a caller would expect: a file
 /// that cannot be read is an `OSError`, everything else a `ValueError`.
 fn to_python(error: twostage::Error) -> PyErr {
@@ -365,16 +368,22 @@ impl PyEstimator {
     }
 }
 
-/// Train an estimator for a built-in model (`model`) or a model file
-/// (`model_file`) with the command line's defaults: the same arguments
-/// and seed give the same file as `twostage train`.
+/// Train an estimator. The model is a built-in one (`model`), a model
+/// file (`model_file`, or its text as `model_toml`), or, with `simulator`,
+/// a Python function simulating the model a source-less model file
+/// describes, in batches of `batch_size`. The command line's defaults: the
+/// same arguments and seed give the same file as `twostage train`.
+/// `progress` is called as `progress(event, stage, count)`.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, preset=None, sims=None, compress=None, fit=None, seed=1, validate=1000, calibrate=4000, alpha=0.1))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=1, validate=1000, calibrate=4000, alpha=0.1, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn train(
     py: Python<'_>,
     model: Option<&str>,
     model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+    simulator: Option<Py<PyAny>>,
+    batch_size: usize,
     preset: Option<&str>,
     sims: Option<usize>,
     compress: Option<&str>,
@@ -383,13 +392,21 @@ fn train(
     validate: usize,
     calibrate: usize,
     alpha: f64,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<PyEstimator> {
-    let named = match (model, model_file) {
-        (Some(name), None) => NamedModel::builtin(name),
-        (None, Some(path)) => NamedModel::file(path),
+    let named = match (model, model_file, model_toml) {
+        (Some(name), None, None) if simulator.is_none() => NamedModel::builtin(name),
+        (None, Some(path), None) => NamedModel::file(path),
+        (None, None, Some(text)) => twostage::ModelFile::parse(text, "model_toml")
+            .map(|file| NamedModel::File(Box::new(file))),
+        (Some(_), None, None) => {
+            return Err(PyValueError::new_err(
+                "a simulator needs a model file without [source] (model_file= or model_toml=)                  for its parameter names, priors and signals, not a built-in model",
+            ));
+        }
         _ => {
             return Err(PyValueError::new_err(
-                "give model='benchmark' (a built-in model) or model_file='path.toml', not both",
+                "give one of model='benchmark' (a built-in model), model_file='path.toml' or                  model_toml='...' (a model file's text)",
             ));
         }
     }
@@ -407,9 +424,21 @@ fn train(
         })
         .transpose()?;
     let preset = named.preset(preset).map_err(to_python)?;
+    let source = match (&named, simulator) {
+        (NamedModel::File(file), Some(function)) => {
+            let python = PythonSimulator::new(function, file.spec().clone(), batch_size);
+            file.simulator_with(Box::new(python)).map_err(to_python)?
+        }
+        (_, Some(_)) => {
+            return Err(PyValueError::new_err(
+                "a simulator needs a model file without [source] (model_file= or model_toml=)",
+            ));
+        }
+        (named, None) => named.simulator(false).map_err(to_python)?,
+    };
+    let reporter = progress.map(PythonProgress::new);
     let estimator = py.detach(|| -> twostage::Result<twostage::Estimator> {
-        let simulator = named.simulator(false)?;
-        let mut builder = TwoStage::builder(simulator.as_ref())
+        let mut builder = TwoStage::builder(source.as_ref())
             .preset(preset)
             .seed(seed)
             .validation(validate)
@@ -423,6 +452,9 @@ fn train(
         }
         if let Some(r) = regressor {
             builder = builder.regressor(r);
+        }
+        if let Some(reporter) = &reporter {
+            builder = builder.progress(reporter);
         }
         builder.train()
     });

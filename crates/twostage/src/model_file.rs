@@ -377,6 +377,58 @@ impl ModelFile {
         }
     }
 
+    /// The file's model simulated by `source`, a simulator the caller
+    /// supplies (a Python function, say): the file gives the names, prior,
+    /// signals and measurement noise, `source` the records. Only a file
+    /// without a `[source]` of its own takes one.
+    ///
+    /// # Errors
+    /// [`Error::ModelFile`] when the file names its own source, or when
+    /// `source` simulates records of another shape than the file's.
+    pub fn simulator_with(&self, source: Box<dyn Simulator>) -> Result<Box<dyn Simulator>> {
+        let error = |key: &str, message: String| Error::ModelFile {
+            file: self.origin.clone(),
+            line: None,
+            key: key.into(),
+            message,
+        };
+        if !matches!(self.source, ModelSource::ChartsOnly) {
+            return Err(error(
+                "source",
+                "the file names its own [source]: leave it out to simulate with the one given \
+                 here"
+                    .into(),
+            ));
+        }
+        let (mine, theirs) = (&self.spec, source.spec());
+        if mine.n_params() != theirs.n_params()
+            || mine.input_names().len() != theirs.input_names().len()
+            || mine.output_names().len() != theirs.output_names().len()
+            || mine.n_samples() != theirs.n_samples()
+        {
+            return Err(error(
+                "signals",
+                format!(
+                    "the given simulator has {} parameters, {} inputs, {} outputs and {} \
+                     samples; the file says {}, {}, {} and {}",
+                    theirs.n_params(),
+                    theirs.input_names().len(),
+                    theirs.output_names().len(),
+                    theirs.n_samples(),
+                    mine.n_params(),
+                    mine.input_names().len(),
+                    mine.output_names().len(),
+                    mine.n_samples()
+                ),
+            ));
+        }
+        Ok(Box::new(FileSimulator {
+            inner: source,
+            spec: self.spec.clone(),
+            output_sd: self.output_sd.clone(),
+        }))
+    }
+
     /// An FMU's complaint, placed at the line of the name it concerns (or
     /// of `fmu = ...`).
     fn fmu_error(&self, e: FmiError) -> Error {

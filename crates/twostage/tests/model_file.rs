@@ -119,6 +119,55 @@ samples = 10
     );
 }
 
+/// A file without a source takes one from the caller (the Python
+/// package's functions): the file's noise on top of the source's records,
+/// and a source of another shape refused.
+#[test]
+fn a_file_without_a_source_simulates_with_a_given_one() {
+    let text = r#"[model]
+name = "given"
+[[parameter]]
+name = "theta"
+prior = { dist = "uniform", low = -0.9, high = 0.9 }
+[signals]
+inputs = ["u"]
+outputs = ["y"]
+samples = 1000
+[noise]
+output_sd = 0.5
+"#;
+    let file = ModelFile::parse(text, "given.toml").unwrap();
+    let sim = file.simulator_with(Box::new(Benchmark::new())).unwrap();
+    let (mut given, mut plain) = (sim.spec().new_record(), sim.spec().new_record());
+    sim.simulate(&[0.3], &mut experiment_rng(2, 5), &mut given)
+        .unwrap();
+    Benchmark::new()
+        .simulate(&[0.3], &mut experiment_rng(2, 5), &mut plain)
+        .unwrap();
+    assert_eq!(given.input(0), plain.input(0));
+    // The file's noise, sd 0.5, drawn after the source's own.
+    let added: Vec<f64> = given
+        .output(0)
+        .iter()
+        .zip(plain.output(0))
+        .map(|(a, b)| a - b)
+        .collect();
+    let sd = (added.iter().map(|d| d * d).sum::<f64>() / added.len() as f64).sqrt();
+    assert!((sd - 0.5).abs() < 0.05, "{sd}");
+    let short = Benchmark::builder().n_samples(300).build().unwrap();
+    let e = file
+        .simulator_with(Box::new(short))
+        .map(|_| ())
+        .unwrap_err();
+    assert!(e.to_string().contains("300 samples"), "{e}");
+    let own = ModelFile::parse(GOOD, "good.toml").unwrap();
+    let e = own
+        .simulator_with(Box::new(Benchmark::new()))
+        .map(|_| ())
+        .unwrap_err();
+    assert!(e.to_string().contains("its own [source]"), "{e}");
+}
+
 #[test]
 fn the_template_parses_and_simulates() {
     let file = ModelFile::parse(MODEL_FILE_TEMPLATE, "template.toml").unwrap();

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 from os import PathLike
-from typing import Any, Optional, Union
+from typing import Any, Callable, Optional, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -141,10 +141,42 @@ class Estimator:
         )
 
 
+class _TqdmProgress:
+    """One tqdm bar per stage of training (simulation, fitting,
+    calibration, validation)."""
+
+    def __init__(self, tqdm):
+        self._tqdm = tqdm
+        self._bars = {}
+
+    def __call__(self, event, stage, count):
+        if event == "begin":
+            self._bars[stage] = self._tqdm(total=count or None, desc=stage, unit="sim")
+        elif event == "advance" and stage in self._bars:
+            self._bars[stage].update(count)
+        elif event == "end" and stage in self._bars:
+            self._bars.pop(stage).close()
+
+
+def _progress(progress):
+    if progress is True:
+        try:
+            from tqdm.auto import tqdm
+        except ImportError:
+            return None
+        return _TqdmProgress(tqdm)
+    if progress is False or progress is None:
+        return None
+    return progress
+
+
 def train(
     model: Optional[str] = None,
     *,
     model_file: Optional[Union[str, PathLike[str]]] = None,
+    model_toml: Optional[str] = None,
+    simulator: Optional[Callable[..., Any]] = None,
+    batch_size: int = 64,
     preset: Optional[str] = None,
     sims: Optional[int] = None,
     compress: Optional[str] = None,
@@ -153,15 +185,38 @@ def train(
     validate: int = 1000,
     calibrate: int = 4000,
     alpha: float = 0.1,
+    progress: Union[bool, Callable[[str, str, int], Any]] = True,
 ) -> Estimator:
-    """Train an estimator for a built-in model (``model="benchmark"`` or
-    ``"pacejka"``) or a model file (``model_file="car.toml"``), with the
-    command line's defaults: the same arguments and seed give the same
-    file, bit for bit, as ``twostage train``. The simulation, compression
-    and fitting run in Rust without the GIL."""
+    """Train an estimator with the command line's defaults: the same
+    arguments and seed give the same file, bit for bit, as ``twostage
+    train``. The model is
+
+    - a built-in one: ``model="benchmark"`` or ``"pacejka"``;
+    - a model file: ``model_file="car.toml"``, or its text as
+      ``model_toml``;
+    - a Python simulator: ``simulator=f`` with a model file without
+      ``[source]`` giving the parameter names, priors, signals and presets.
+      ``f(thetas, seeds, indices)`` receives a batch (``thetas`` float64
+      [b, q], ``seeds`` and ``indices`` uint64 [b]) and returns the outputs
+      float64 [b, N, n_y], or the pair ``(inputs [b, N, n_u], outputs)``
+      for a model with inputs. Experiment k must draw its randomness from
+      ``np.random.default_rng([seeds[k], indices[k]])`` only, so that a
+      chart is the same whatever the batches (the protocol's convention,
+      docs/protocol.md). It is called in batches of ``batch_size`` from
+      the training threads.
+
+    ``preset``, ``sims``, ``compress`` (``"arx:2,2"``...), ``fit``
+    (``"mlp:10"``...) override the model's default preset as the CLI's
+    flags do. ``progress=True`` shows tqdm bars when tqdm is installed;
+    a callable receives ``(event, stage, count)``. The simulation,
+    compression and fitting run in Rust without the GIL.
+    """
     native = _train(
         model,
         model_file=None if model_file is None else str(model_file),
+        model_toml=model_toml,
+        simulator=simulator,
+        batch_size=batch_size,
         preset=preset,
         sims=sims,
         compress=compress,
@@ -170,5 +225,6 @@ def train(
         validate=validate,
         calibrate=calibrate,
         alpha=alpha,
+        progress=_progress(progress),
     )
     return Estimator(native)

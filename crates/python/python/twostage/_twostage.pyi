@@ -2,7 +2,7 @@
 is twostage/__init__.py, which wraps it."""
 
 from os import PathLike
-from typing import Optional, Tuple, Union
+from typing import Any, Callable, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -39,6 +39,9 @@ def train(
     model: Optional[str] = None,
     *,
     model_file: Optional[str] = None,
+    model_toml: Optional[str] = None,
+    simulator: Optional[Callable[..., Any]] = None,
+    batch_size: int = 64,
     preset: Optional[str] = None,
     sims: Optional[int] = None,
     compress: Optional[str] = None,
@@ -47,4 +50,5 @@ def train(
     validate: int = 1000,
     calibrate: int = 4000,
     alpha: float = 0.1,
+    progress: Optional[Callable[[str, str, int], Any]] = None,
 ) -> Estimator: ...
