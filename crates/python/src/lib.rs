@@ -375,7 +375,7 @@ impl PyEstimator {
 /// same arguments and seed give the same file as `twostage train`.
 /// `progress` is called as `progress(event, stage, count)`.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=1, validate=1000, calibrate=4000, alpha=0.1, progress=None))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=1, validate=1000, calibrate=4000, alpha=0.1, progress=None, chart=None, validate_chart=None, calibrate_chart=None))]
 #[allow(clippy::too_many_arguments)]
 fn train(
     py: Python<'_>,
@@ -393,6 +393,9 @@ fn train(
     calibrate: usize,
     alpha: f64,
     progress: Option<Py<PyAny>>,
+    chart: Option<(PathBuf, Option<String>)>,
+    validate_chart: Option<(PathBuf, Option<String>)>,
+    calibrate_chart: Option<(PathBuf, Option<String>)>,
 ) -> PyResult<PyEstimator> {
     let named = match (model, model_file, model_toml) {
         (Some(name), None, None) if simulator.is_none() => NamedModel::builtin(name),
@@ -434,8 +437,35 @@ fn train(
                 "a simulator needs a model file without [source] (model_file= or model_toml=)",
             ));
         }
+        (named, None) if chart.is_some() => named.chart_model().map_err(to_python)?,
         (named, None) => named.simulator(false).map_err(to_python)?,
     };
+    // Charts simulated elsewhere, read as `twostage train --chart` reads them.
+    // A folder, and the label of arrays written there for the occasion.
+    let open =
+        |given: &Option<(PathBuf, Option<String>)>| -> PyResult<Option<twostage::ChartFiles>> {
+            given
+                .as_ref()
+                .map(|(dir, label)| {
+                    let chart =
+                        twostage::ChartFiles::open(dir, source.spec()).map_err(to_python)?;
+                    Ok(match label {
+                        Some(label) => chart.labelled(label.clone()),
+                        None => chart,
+                    })
+                })
+                .transpose()
+        };
+    let (training, validation, calibration) = (
+        open(&chart)?,
+        open(&validate_chart)?,
+        open(&calibrate_chart)?,
+    );
+    if training.is_none() && (validation.is_some() || calibration.is_some()) {
+        return Err(PyValueError::new_err(
+            "validate_chart and calibrate_chart go with chart (a training chart)",
+        ));
+    }
     let reporter = progress.map(PythonProgress::new);
     let estimator = py.detach(|| -> twostage::Result<twostage::Estimator> {
         let mut builder = TwoStage::builder(source.as_ref())
@@ -456,7 +486,10 @@ fn train(
         if let Some(reporter) = &reporter {
             builder = builder.progress(reporter);
         }
-        builder.train()
+        match &training {
+            Some(chart) => builder.train_on_chart(chart, calibration.as_ref(), validation.as_ref()),
+            None => builder.train(),
+        }
     });
     estimator
         .map(|inner| PyEstimator { inner })

@@ -143,3 +143,52 @@ def test_a_simulator_needs_a_model_file_without_a_source():
     with pytest.raises(ValueError, match=r"model_toml, line 6, key `parameter.prior.dist`"):
         twostage.train(model_toml=MODEL.replace("uniform", "uniformly"),
                        simulator=BENCHMARK.batch, progress=False)
+
+
+def _chart(m, seed):
+    rng = np.random.default_rng(seed)
+    theta = rng.uniform(-0.9, 0.9, size=(m, 1))
+    u, y = BENCHMARK.batch(theta, np.full(m, seed, dtype=np.uint64), np.arange(m, dtype=np.uint64))
+    return theta, u, y
+
+
+def test_a_chart_of_arrays_trains_as_the_cli_trains_on_its_files(tmp_path):
+    if not CLI:
+        pytest.fail("TWOSTAGE_CLI is not set: run the suite with `cargo xtask test`")
+    theta, u, y = _chart(500, 8)
+    model = tmp_path / "chart.toml"
+    model.write_text(MODEL)
+    from_arrays = twostage.train(model_file=model, chart=(theta, u, y), validate=100,
+                                 calibrate=100, seed=2, progress=False)
+    folder = tmp_path / "chart"
+    folder.mkdir()
+    for name, array in (("theta", theta), ("inputs", u), ("outputs", y)):
+        np.save(folder / (name + ".npy"), array)
+    out = tmp_path / "cli.tsest"
+    done = subprocess.run(
+        [CLI, "train", "--model-file", str(model), "--chart", str(folder), "--validate", "100",
+         "--calibrate", "100", "--seed", "2", "--out", str(out), "--quiet"],
+        capture_output=True, text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    # The folder itself: the CLI's file, bit for bit.
+    from_folder = twostage.train(model_file=model, chart=folder, validate=100,
+                                 calibrate=100, seed=2, progress=False)
+    assert out.read_bytes() == from_folder.to_bytes()
+    # The arrays: the same estimator, the chart named as arrays.
+    cli_dict, arrays_dict = twostage.Estimator.load(out).to_dict(), from_arrays.to_dict()
+    assert arrays_dict["training"].pop("sampling").startswith("the chart of 500 experiments given as arrays")
+    cli_dict["training"].pop("sampling")
+    assert arrays_dict == cli_dict
+    assert from_arrays.validation["parameters"][0]["rmse"] < 0.1
+
+
+def test_a_bad_chart_is_named():
+    theta, u, y = _chart(50, 9)
+    y[7, 3, 0] = np.nan
+    with pytest.raises(ValueError, match=r"chart outputs\[7, 3, 0\] is nan"):
+        twostage.train(model_toml=MODEL, chart=(theta, u, y), validate=10, calibrate=0,
+                       progress=False)
+    with pytest.raises(ValueError, match="chart outputs must be a float64"):
+        twostage.train(model_toml=MODEL, chart=(theta, u, y.astype(np.float32)),
+                       progress=False)

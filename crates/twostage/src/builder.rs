@@ -393,7 +393,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             .fit(training.features.view(), targets.view(), self.seed);
         self.progress.end(Stage::Fitting);
         let source = |given: Option<&ChartFiles>, held: usize| match given {
-            Some(c) => format!("the chart {}", c.dir().display()),
+            Some(c) => format!("the chart {}", c.describe()),
             None if held > 0 => format!("{held} records held out of it at random"),
             None => "none".into(),
         };
@@ -406,7 +406,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 failures: training.failures.len(),
                 sampling: format!(
                     "the chart {} (calibration: {}; validation: {})",
-                    chart.dir().display(),
+                    chart.describe(),
                     source(calibration, held_calibration),
                     source(validation, held_validation)
                 ),

@@ -33,6 +33,8 @@ use crate::error::{Error, Result};
 #[derive(Debug, Clone)]
 pub struct ChartFiles {
     dir: PathBuf,
+    /// How the estimator file names the chart, when not by its folder.
+    label: Option<String>,
     ids: Vec<String>,
     thetas: Vec<f64>,
     q: usize,
@@ -99,6 +101,7 @@ impl ChartFiles {
         }
         Ok(Self {
             dir,
+            label: None,
             ids,
             thetas,
             q,
@@ -135,6 +138,7 @@ impl ChartFiles {
         }
         let chart = Self {
             dir,
+            label: None,
             ids: (0..m).map(|i| i.to_string()).collect(),
             thetas,
             q,
@@ -181,6 +185,21 @@ impl ChartFiles {
     /// The folder.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Name the chart in the estimator file by `label` instead of its
+    /// folder (the Python package's arrays live in a folder that is gone
+    /// once trained).
+    pub fn labelled(mut self, label: impl Into<String>) -> Self {
+        self.label = Some(label.into());
+        self
+    }
+
+    /// How the estimator file names the chart: its label, or its folder.
+    pub fn describe(&self) -> String {
+        self.label
+            .clone()
+            .unwrap_or_else(|| self.dir.display().to_string())
     }
 
     /// The parameters of experiment `row` (in truth.csv's order).

@@ -20,6 +20,8 @@ False
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 from os import PathLike
 from typing import Any, Callable, Optional, Union
 
@@ -186,6 +188,9 @@ def train(
     calibrate: int = 4000,
     alpha: float = 0.1,
     progress: Union[bool, Callable[[str, str, int], Any]] = True,
+    chart: Any = None,
+    validate_chart: Any = None,
+    calibrate_chart: Any = None,
 ) -> Estimator:
     """Train an estimator with the command line's defaults: the same
     arguments and seed give the same file, bit for bit, as ``twostage
@@ -205,26 +210,78 @@ def train(
       docs/protocol.md). It is called in batches of ``batch_size`` from
       the training threads.
 
+    ``chart`` trains on experiments simulated elsewhere instead: a tuple
+    ``(theta [m, q], inputs [m, N, n_u], outputs [m, N, n_y])`` of float64
+    arrays (``inputs`` None for a model without input), or a folder as
+    ``twostage train --chart`` reads (CSV or ``.npy``). ``validate`` and
+    ``calibrate`` records are then held out of it, unless
+    ``validate_chart`` and ``calibrate_chart`` give their own.
+
     ``preset``, ``sims``, ``compress`` (``"arx:2,2"``...), ``fit``
     (``"mlp:10"``...) override the model's default preset as the CLI's
     flags do. ``progress=True`` shows tqdm bars when tqdm is installed;
     a callable receives ``(event, stage, count)``. The simulation,
     compression and fitting run in Rust without the GIL.
     """
-    native = _train(
-        model,
-        model_file=None if model_file is None else str(model_file),
-        model_toml=model_toml,
-        simulator=simulator,
-        batch_size=batch_size,
-        preset=preset,
-        sims=sims,
-        compress=compress,
-        fit=fit,
-        seed=seed,
-        validate=validate,
-        calibrate=calibrate,
-        alpha=alpha,
-        progress=_progress(progress),
-    )
+    with tempfile.TemporaryDirectory(prefix="twostage-chart-") as scratch:
+        charts = {
+            name: _chart_folder(value, os.path.join(scratch, name))
+            for name, value in (
+                ("chart", chart),
+                ("validate_chart", validate_chart),
+                ("calibrate_chart", calibrate_chart),
+            )
+        }
+        native = _train(
+            model,
+            model_file=None if model_file is None else str(model_file),
+            model_toml=model_toml,
+            simulator=simulator,
+            batch_size=batch_size,
+            preset=preset,
+            sims=sims,
+            compress=compress,
+            fit=fit,
+            seed=seed,
+            validate=validate,
+            calibrate=calibrate,
+            alpha=alpha,
+            progress=_progress(progress),
+            **charts,
+        )
     return Estimator(native)
+
+
+def _chart_folder(chart, folder):
+    """A chart as a folder ``twostage train --chart`` reads: a folder is
+    passed on, arrays ``(theta, inputs, outputs)`` are written there as
+    the ``.npy`` files of docs/decisions/021 (the reader that checks
+    them is the command line's)."""
+    if chart is None:
+        return None
+    if isinstance(chart, (str, PathLike)):
+        return (str(chart), None)
+    if not (isinstance(chart, tuple) and len(chart) == 3):
+        raise ValueError(
+            "a chart is a folder or a tuple (theta [m, q], inputs [m, N, n_u] or None, "
+            "outputs [m, N, n_y]), not %s" % type(chart).__name__
+        )
+    os.makedirs(folder)
+    for name, array in zip(("theta", "inputs", "outputs"), chart):
+        if array is None and name == "inputs":
+            continue
+        if not isinstance(array, np.ndarray) or array.dtype != np.float64:
+            raise ValueError(
+                "chart %s must be a float64 numpy array (np.asarray(%s, dtype=np.float64)), "
+                "not %s" % (name, name, getattr(array, "dtype", type(array).__name__))
+            )
+        bad = np.argwhere(~np.isfinite(array))
+        if len(bad):
+            index = tuple(int(i) for i in bad[0])
+            raise ValueError(
+                "chart %s%s is %r: charts must be finite (drop or repair that experiment)"
+                % (name, list(index), float(array[index]))
+            )
+        np.save(os.path.join(folder, name + ".npy"), array)
+    # The folder is gone after training: the file names the arrays instead.
+    return (folder, "of %d experiments given as arrays" % len(chart[0]))

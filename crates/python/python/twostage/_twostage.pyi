@@ -51,4 +51,7 @@ def train(
     calibrate: int = 4000,
     alpha: float = 0.1,
     progress: Optional[Callable[[str, str, int], Any]] = None,
+    chart: Optional[Tuple[str, Optional[str]]] = None,
+    validate_chart: Optional[Tuple[str, Optional[str]]] = None,
+    calibrate_chart: Optional[Tuple[str, Optional[str]]] = None,
 ) -> Estimator: ...
