@@ -11,7 +11,7 @@
 
 use std::path::PathBuf;
 
-use ndarray::{ArrayView2, ArrayView3, Axis, Dimension, Ix3};
+use ndarray::{ArrayView2, ArrayView3, Axis, Ix3};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
@@ -95,17 +95,6 @@ fn records<'a>(
     let readonly = typed.try_readonly().map_err(|e| {
         PyValueError::new_err(format!("{name} cannot be read while it is written: {e}"))
     })?;
-    if let Some(bad) = readonly
-        .as_array()
-        .indexed_iter()
-        .find(|(_, v)| !v.is_finite())
-    {
-        let (index, value) = bad;
-        return Err(PyValueError::new_err(format!(
-            "{name}{:?} is {value}: records must be finite (drop or repair that sample)",
-            index.slice()
-        )));
-    }
     Ok((Some(readonly), single))
 }
 
@@ -290,6 +279,33 @@ impl PyEstimator {
     }
 }
 
+/// Why a record was not estimated.
+enum Failure {
+    /// A sample that is not a finite number, named by its index.
+    Value(String),
+    /// What the estimator said.
+    Estimate(twostage::Error),
+}
+
+/// The first sample of record `k` of `name` that is not finite, as the
+/// message naming its index in the caller's array.
+fn non_finite(name: &str, record: ArrayView2<'_, f64>, k: usize, single: bool) -> Option<String> {
+    if let Some(flat) = record.as_slice()
+        && flat.iter().all(|v| v.is_finite())
+    {
+        return None;
+    }
+    let ((t, j), value) = record.indexed_iter().find(|(_, v)| !v.is_finite())?;
+    let index = if single {
+        format!("[{t}, {j}]")
+    } else {
+        format!("[{k}, {t}, {j}]")
+    };
+    Some(format!(
+        "{name}{index} is {value}: records must be finite (drop or repair that sample)"
+    ))
+}
+
 /// `values` ([b, width] row-major) as a numpy array [width] for one record
 /// or [b, width] for a batch.
 fn rows(py: Python<'_>, values: Vec<f64>, width: usize, single: bool) -> Bound<'_, PyAny> {
@@ -339,31 +355,35 @@ impl PyEstimator {
         };
         let (values, failure) = py.detach(|| {
             let mut values = vec![0.0; b * width];
-            // Every record's outcome, so that the error reported is the
-            // lowest record's whatever the scheduling.
+            // The lowest failing record's error, whatever the scheduling.
             let failure = values
                 .par_chunks_mut(width.max(1))
                 .enumerate()
                 .map_init(EstimateWorkspace::new, |work, (k, out)| {
-                    each(
-                        u_view.index_axis(Axis(0), k),
-                        y_view.index_axis(Axis(0), k),
-                        work,
-                        out,
-                    )
-                    .err()
-                    .map(|e| (k, e))
+                    let (u, y) = (u_view.index_axis(Axis(0), k), y_view.index_axis(Axis(0), k));
+                    // Checked here, record by record in the workers, while
+                    // the record is in cache: a pass over a whole batch
+                    // first would cost most of a batch's estimates.
+                    if let Some(bad) =
+                        non_finite("u", u, k, single).or_else(|| non_finite("y", y, k, single))
+                    {
+                        return Some((k, Failure::Value(bad)));
+                    }
+                    each(u, y, work, out)
+                        .err()
+                        .map(|e| (k, Failure::Estimate(e)))
                 })
-                .collect::<Vec<_>>()
-                .into_iter()
                 .flatten()
-                .next();
+                .min_by_key(|(k, _)| *k);
             (values, failure)
         });
         match failure {
             None => Ok((values, single)),
-            Some((_, e)) if single => Err(PyValueError::new_err(e.to_string())),
-            Some((k, e)) => Err(PyValueError::new_err(format!("record {k}: {e}"))),
+            Some((_, Failure::Value(message))) => Err(PyValueError::new_err(message)),
+            Some((_, Failure::Estimate(e))) if single => Err(PyValueError::new_err(e.to_string())),
+            Some((k, Failure::Estimate(e))) => {
+                Err(PyValueError::new_err(format!("record {k}: {e}")))
+            }
         }
     }
 }

@@ -125,10 +125,11 @@ def test_bad_arrays_name_the_argument_and_the_index(small):
     bad[17, 0] = np.nan
     with pytest.raises(ValueError, match=r"y\[17, 0\] is NaN"):
         estimator.estimate(u, bad)
-    batch = np.ones((3, n, 1))
+    # Records 0 and 1 are fine: the bad sample of record 2 is named.
+    batch, outputs = np.random.default_rng(1).standard_normal((2, 3, n, 1))
     batch[2, 5, 0] = np.inf
     with pytest.raises(ValueError, match=r"u\[2, 5, 0\] is inf"):
-        estimator.estimate(batch, np.ones((3, n, 1)))
+        estimator.estimate(batch, outputs)
     with pytest.raises(ValueError, match=r"the other array holds 3 record"):
         estimator.estimate(np.ones((2, n, 1)), np.ones((3, n, 1)))
     with pytest.raises(ValueError, match=r"u is None"):
