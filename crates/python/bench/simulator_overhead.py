@@ -14,22 +14,7 @@ import twostage
 
 ROOT = Path(__file__).resolve().parents[3]
 
-MODEL = """
-[model]
-name = "numpy-benchmark"
-[[parameter]]
-name = "theta"
-prior = { dist = "uniform", low = -0.9, high = 0.9 }
-[signals]
-inputs = ["u"]
-outputs = ["y"]
-samples = 1000
-[[preset]]
-name = "paper"
-compress = "arx:5,5"
-fit = "mlp:10"
-sims = 1500
-"""
+MODEL = (ROOT / "docs" / "protocol" / "benchmark_numpy.toml").read_text()
 
 
 def main():

@@ -29,22 +29,7 @@ BENCHMARK = _numpy_benchmark()
 
 # The benchmark as a model file without a source: names, prior, signals,
 # the paper's preset. The simulator comes from Python.
-MODEL = """
-[model]
-name = "numpy-benchmark"
-[[parameter]]
-name = "theta"
-prior = { dist = "uniform", low = -0.9, high = 0.9 }
-[signals]
-inputs = ["u"]
-outputs = ["y"]
-samples = 1000
-[[preset]]
-name = "paper"
-compress = "arx:5,5"
-fit = "mlp:10"
-sims = 1500
-"""
+MODEL = (ROOT / "docs" / "protocol" / "benchmark_numpy.toml").read_text()
 
 SMALL = dict(sims=400, validate=100, calibrate=100, seed=3, progress=False)
 
@@ -140,7 +125,7 @@ def test_a_bad_simulator_is_named_with_its_fault(simulator, message):
 def test_a_simulator_needs_a_model_file_without_a_source():
     with pytest.raises(ValueError, match="model file without"):
         twostage.train(model="benchmark", simulator=BENCHMARK.batch, progress=False)
-    with pytest.raises(ValueError, match=r"model_toml, line 6, key `parameter.prior.dist`"):
+    with pytest.raises(ValueError, match=r"model_toml, line 10, key `parameter.prior.dist`"):
         twostage.train(model_toml=MODEL.replace("uniform", "uniformly"),
                        simulator=BENCHMARK.batch, progress=False)
 
