@@ -249,7 +249,6 @@ impl PyEstimator {
             distance[0] = assessment.feature_distance.unwrap_or(f64::NAN);
             Ok(())
         })?;
-        let b = values.len() / width;
         let column = |from: usize, to: usize| -> Vec<f64> {
             values
                 .chunks_exact(width)
@@ -274,7 +273,6 @@ impl PyEstimator {
                 ndarray::Array1::from_vec(d).into_pyarray(py).into_any()
             }
         });
-        debug_assert_eq!(b, if single { 1 } else { b });
         Ok((theta, widths, distance, threshold))
     }
 }
