@@ -99,12 +99,7 @@ fn records<'a>(
 }
 
 /// A `[N, n]` or `[b, N, n]` view as `[b, N, n]`.
-fn as_batch<'a>(
-    array: Option<&'a numpy::PyReadonlyArrayDyn<'_, f64>>,
-) -> PyResult<ArrayView3<'a, f64>> {
-    let Some(array) = array else {
-        return ArrayView3::from_shape((0, 0, 0), &[]).map_err(shape_error);
-    };
+fn as_batch<'a>(array: &'a numpy::PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView3<'a, f64>> {
     let view = array.as_array();
     let view = if view.ndim() == 2 {
         view.insert_axis(Axis(0))
@@ -339,7 +334,12 @@ impl PyEstimator {
     ) -> PyResult<(Vec<f64>, bool)> {
         let shape = self.inner.record_shape();
         let (y_array, single) = records("y", Some(y), shape.n_outputs, None)?;
-        let y_view = as_batch(y_array.as_ref())?;
+        let Some(y_array) = y_array else {
+            return Err(PyValueError::new_err(
+                "y is None: pass the outputs [N, n_y]",
+            ));
+        };
+        let y_view = as_batch(&y_array)?;
         let (b, n) = (y_view.shape()[0], y_view.shape()[1]);
         let (u_array, u_single) = records("u", u, shape.n_inputs, (!single).then_some(b))?;
         if u_array.is_some() && u_single != single {
@@ -347,8 +347,8 @@ impl PyEstimator {
                 "u is a batch and y one record: give both as one record or both as batches",
             ));
         }
-        let u_view = match u_array.as_ref() {
-            Some(_) => as_batch(u_array.as_ref())?,
+        let u_view = match &u_array {
+            Some(u_array) => as_batch(u_array)?,
             None => ArrayView3::from_shape((b, n, 0), &[]).map_err(shape_error)?,
         };
         let (values, failure) = py.detach(|| {
