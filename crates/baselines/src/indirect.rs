@@ -232,7 +232,7 @@ impl<S: Simulator, C: Compressor + Send + Sync> ResidualModel for IndirectObject
             *r -= d;
         }
         if let Some(l) = &self.factor {
-            solve_lower_in_place(l, n, residuals);
+            solve_lower_in_place(&l[..], n, residuals);
         }
         Ok(())
     }

@@ -59,6 +59,6 @@ impl CovarianceFactor {
 
     /// Solve `L z = v` in place: `|z|^2 = v' C^-1 v`.
     pub fn whiten(&self, v: &mut [f64]) {
-        solve_lower_in_place(&self.factor, self.mean.len(), v);
+        solve_lower_in_place(&self.factor[..], self.mean.len(), v);
     }
 }

@@ -111,12 +111,12 @@ impl Standardizer {
 
     /// `z = (x - mean) / scale` (slices of length [`Standardizer::dim`]).
     pub fn transform_into(&self, x: &[f64], z: &mut [f64]) {
-        twostage_kernels::vector::standardize(x, &self.mean, &self.scale, z);
+        twostage_kernels::vector::standardize(x, &self.mean[..], &self.scale[..], z);
     }
 
     /// `x = mean + scale z`, in place.
     pub fn inverse_in_place(&self, z: &mut [f64]) {
-        twostage_kernels::vector::unstandardize_in_place(z, &self.mean, &self.scale);
+        twostage_kernels::vector::unstandardize_in_place(z, &self.mean[..], &self.scale[..]);
     }
 
     /// Standardize every row of `x`.

@@ -131,17 +131,23 @@ pub fn cholesky_in_place(
 /// use twostage_kernels::cholesky::solve_lower_in_place;
 /// let l = [2.0, 0.0, 1.0, 4.0];
 /// let mut v = [2.0, 9.0];
-/// solve_lower_in_place(&l, 2, &mut v);
+/// solve_lower_in_place(&l[..], 2, &mut v);
 /// assert_eq!(v, [1.0, 2.0]);
 /// ```
+///
+/// `l` is any [`Values`](crate::Values): a slice, or an exported
+/// estimator's bytes read in place.
 #[inline]
-pub fn solve_lower_in_place(l: &[f64], n: usize, v: &mut [f64]) {
+pub fn solve_lower_in_place<L: crate::Values + ?Sized>(l: &L, n: usize, v: &mut [f64]) {
     for i in 0..n.min(v.len()) {
-        let mut s = v[i];
-        for k in 0..i {
-            s -= l[i * n + k] * v[k];
+        let (done, rest) = v.split_at_mut(i);
+        if let Some(vi) = rest.first_mut() {
+            let mut s = *vi;
+            for (k, vk) in done.iter().enumerate() {
+                s -= l.at(i * n + k) * vk;
+            }
+            *vi = s / l.at(i * n + i);
         }
-        v[i] = s / l[i * n + i];
     }
 }
 

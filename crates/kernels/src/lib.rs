@@ -78,6 +78,55 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// A read-only sequence of numbers that the estimate path reads its
+/// trained values from: a slice on the host, the little-endian bytes of an
+/// exported estimator in place on a microcontroller (which need not be
+/// aligned). Reads past the end give NaN, never a panic, so a caller's
+/// shape mistake shows in its answer instead of stopping a control unit.
+pub trait Values {
+    /// How many numbers there are.
+    fn len(&self) -> usize;
+    /// Whether there are none.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Number `i`, or NaN past the end.
+    fn at(&self, i: usize) -> f64;
+    /// `sum_c self[offset + c] x[c]` over `c < x.len()`, summed in index
+    /// order as [`dot`] does (so every implementation gives the same
+    /// bits); NaN when the run passes the end.
+    fn dot_from(&self, offset: usize, x: &[f64]) -> f64 {
+        if offset
+            .checked_add(x.len())
+            .is_none_or(|end| end > self.len())
+        {
+            return f64::NAN;
+        }
+        x.iter()
+            .enumerate()
+            .map(|(c, v)| self.at(offset + c) * v)
+            .sum()
+    }
+}
+
+impl Values for [f64] {
+    #[inline]
+    fn len(&self) -> usize {
+        <[f64]>::len(self)
+    }
+    #[inline]
+    fn at(&self, i: usize) -> f64 {
+        self.get(i).copied().unwrap_or(f64::NAN)
+    }
+    #[inline]
+    fn dot_from(&self, offset: usize, x: &[f64]) -> f64 {
+        offset
+            .checked_add(x.len())
+            .and_then(|end| self.get(offset..end))
+            .map_or(f64::NAN, |row| dot(row, x))
+    }
+}
+
 /// The vector arithmetic that [`lagged`] runs on: a microcontroller uses
 /// [`PlainOps`], the host library its SIMD versions. Results may differ in
 /// the last bits between implementations (summation order), never within

@@ -1,25 +1,38 @@
 //! Element-wise maps of the estimate path: standardization and the clip to
-//! the prior box.
+//! the prior box. The trained values (means, scales, bounds) are any
+//! [`Values`]: a slice, or an exported estimator's bytes read in place.
+
+use crate::Values;
 
 /// `z = (x - mean) / scale`, element by element (over the shortest slice).
 ///
 /// ```
 /// let mut z = [0.0; 2];
-/// twostage_kernels::vector::standardize(&[3.0, -1.0], &[1.0, 1.0], &[2.0, 4.0], &mut z);
+/// twostage_kernels::vector::standardize(&[3.0, -1.0], &[1.0, 1.0][..], &[2.0, 4.0][..], &mut z);
 /// assert_eq!(z, [1.0, -0.5]);
 /// ```
 #[inline]
-pub fn standardize(x: &[f64], mean: &[f64], scale: &[f64], z: &mut [f64]) {
-    for ((zi, xi), (m, s)) in z.iter_mut().zip(x).zip(mean.iter().zip(scale)) {
-        *zi = (xi - m) / s;
+pub fn standardize<M, S>(x: &[f64], mean: &M, scale: &S, z: &mut [f64])
+where
+    M: Values + ?Sized,
+    S: Values + ?Sized,
+{
+    let n = mean.len().min(scale.len());
+    for (i, (zi, xi)) in z.iter_mut().zip(x).enumerate().take(n) {
+        *zi = (xi - mean.at(i)) / scale.at(i);
     }
 }
 
 /// `x = mean + scale z`, in place: the inverse of [`standardize`].
 #[inline]
-pub fn unstandardize_in_place(z: &mut [f64], mean: &[f64], scale: &[f64]) {
-    for (zi, (m, s)) in z.iter_mut().zip(mean.iter().zip(scale)) {
-        *zi = m + s * *zi;
+pub fn unstandardize_in_place<M, S>(z: &mut [f64], mean: &M, scale: &S)
+where
+    M: Values + ?Sized,
+    S: Values + ?Sized,
+{
+    let n = mean.len().min(scale.len());
+    for (i, zi) in z.iter_mut().enumerate().take(n) {
+        *zi = mean.at(i) + scale.at(i) * *zi;
     }
 }
 
@@ -28,16 +41,22 @@ pub fn unstandardize_in_place(z: &mut [f64], mean: &[f64], scale: &[f64]) {
 ///
 /// ```
 /// let mut theta = [-2.0, f64::NAN, 0.3];
-/// twostage_kernels::vector::clip_to_box(&mut theta, &[-1.0; 3], &[1.0; 3]);
+/// twostage_kernels::vector::clip_to_box(&mut theta, &[-1.0; 3][..], &[1.0; 3][..]);
 /// assert_eq!(theta, [-1.0, 0.0, 0.3]);
 /// ```
 #[inline]
-pub fn clip_to_box(theta: &mut [f64], lower: &[f64], upper: &[f64]) {
-    for (t, (lo, hi)) in theta.iter_mut().zip(lower.iter().zip(upper)) {
+pub fn clip_to_box<L, U>(theta: &mut [f64], lower: &L, upper: &U)
+where
+    L: Values + ?Sized,
+    U: Values + ?Sized,
+{
+    let n = lower.len().min(upper.len());
+    for (i, t) in theta.iter_mut().enumerate().take(n) {
+        let (lo, hi) = (lower.at(i), upper.at(i));
         *t = if t.is_nan() {
             0.5 * (lo + hi)
         } else {
-            t.clamp(*lo, *hi)
+            t.clamp(lo, hi)
         };
     }
 }

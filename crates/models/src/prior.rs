@@ -185,7 +185,7 @@ impl Prior {
     /// Clip `theta` to the box, component by component; a NaN becomes the
     /// centre of its interval (`twostage_kernels::vector::clip_to_box`).
     pub fn clip(&self, theta: &mut [f64]) {
-        twostage_kernels::vector::clip_to_box(theta, &self.lower, &self.upper);
+        twostage_kernels::vector::clip_to_box(theta, &self.lower[..], &self.upper[..]);
     }
 
     /// Check a user-given parameter vector: its length, finiteness and,

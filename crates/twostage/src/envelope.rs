@@ -119,7 +119,7 @@ impl FeatureEnvelope {
         // |L^-1 (x - mean)|. Allocated per call: the CLI and batch paths
         // call this, not the estimate hot path.
         let mut z: Vec<f64> = features.zip(&self.mean).map(|(x, m)| x - m).collect();
-        solve_lower_in_place(&self.factor, self.mean.len(), &mut z);
+        solve_lower_in_place(&self.factor[..], self.mean.len(), &mut z);
         z.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
 
