@@ -7,12 +7,9 @@ use faer::{Mat, Par};
 use crate::fast::FastScratch;
 use twostage_kernels::lagged::LaggedColumn;
 
-/// The relative size under which a diagonal entry of R marks a regressor as
-/// (numerically) a linear combination of the previous ones:
-/// `|R_jj| <= RANK_TOLERANCE * ||phi_j||`, i.e. the sine of the angle between
-/// column j and the span of columns 0..j is below 1e-9 (a condition number
-/// near 1e9, where least-squares coefficients stop being meaningful).
-pub const RANK_TOLERANCE: f64 = 1e-9;
+/// The rank test of every least-squares solve, here and in the
+/// microcontroller runtime (see the kernels).
+pub use twostage_kernels::cholesky::RANK_TOLERANCE;
 
 /// Scratch space for compressing records one after another without
 /// allocating: it grows to the largest problem seen and then stays.

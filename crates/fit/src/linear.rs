@@ -103,6 +103,21 @@ impl TryFrom<FittedLinearFields> for FittedLinear {
     }
 }
 
+impl FittedLinear {
+    /// The standardization of the inputs.
+    pub fn feature_scaling(&self) -> &Standardizer {
+        &self.features
+    }
+    /// The standardization of the outputs.
+    pub fn target_scaling(&self) -> &Standardizer {
+        &self.targets
+    }
+    /// Row-major weights on standardized inputs: row k gives output k.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+}
+
 impl Regressor for Ridge {
     type Model = FittedLinear;
 

@@ -167,6 +167,12 @@ impl FittedPiecewise {
     pub fn experts(&self) -> &[FittedMlp] {
         &self.experts
     }
+    /// Where piece 0 starts and how wide each piece is, on the first
+    /// output of the global network: piece `floor((out0 - start) / width)`,
+    /// clamped to the pieces.
+    pub fn pieces_start_width(&self) -> (f64, f64) {
+        (self.start, self.width)
+    }
 }
 
 impl Regressor for Piecewise {

@@ -6,6 +6,15 @@
 //! zeroed. Each pivot is formed as `a_jj - l_j0^2 - l_j1^2 - ...`,
 //! subtracting one product at a time, and each solve likewise.
 
+/// The relative size under which a diagonal entry of R (or a Cholesky
+/// pivot of the normal equations) marks a regressor as (numerically) a
+/// linear combination of the previous ones: `|R_jj| <= RANK_TOLERANCE *
+/// ||phi_j||`, i.e. the sine of the angle between column j and the span of
+/// columns 0..j is below 1e-9 (a condition number near 1e9, where
+/// least-squares coefficients stop being meaningful). The host's QR and the
+/// microcontroller runtime's double-double Cholesky both test against it.
+pub const RANK_TOLERANCE: f64 = 1e-9;
+
 /// When a pivot counts as zero: the rank tolerance of a factorization.
 ///
 /// `d_j` is the pivot before its square root (`a_jj` less the squares

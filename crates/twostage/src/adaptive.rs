@@ -194,6 +194,12 @@ impl AdaptiveIntervals {
         Ok(())
     }
 
+    /// The floors, quantiles and difficulty network, for the runtime's
+    /// export.
+    pub(crate) fn parts(&self) -> (&[f64], &[f64], &FittedMlp) {
+        (&self.floor, &self.quantile, &self.difficulty)
+    }
+
     /// The miscoverage level alpha.
     pub fn alpha(&self) -> f64 {
         self.alpha

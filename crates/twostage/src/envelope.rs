@@ -123,6 +123,12 @@ impl FeatureEnvelope {
         z.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
 
+    /// The mean and the row-major lower Cholesky factor of the features'
+    /// covariance, for the runtime's export.
+    pub(crate) fn parts(&self) -> (&[f64], &[f64]) {
+        (&self.mean, &self.factor)
+    }
+
     /// Number of features.
     pub fn dim(&self) -> usize {
         self.mean.len()

@@ -105,6 +105,13 @@ pub enum Error {
         /// What is wrong and what to do.
         message: String,
     },
+    /// The estimator uses a structure the microcontroller runtime does not
+    /// evaluate.
+    #[error("this estimator cannot be exported to the runtime: {reason}")]
+    NotExportable {
+        /// What the runtime lacks and what to train instead.
+        reason: String,
+    },
     /// A model has no preset or method of that name (another model may).
     #[error("{what} '{name}' is not available for {model}: it has {available}")]
     NotAvailable {

@@ -61,6 +61,7 @@ mod named_model;
 mod profile;
 mod progress;
 mod refine;
+mod runtime_export;
 mod shard;
 mod space;
 
@@ -91,4 +92,5 @@ pub use twostage_compress as compress;
 pub use twostage_fit as fit;
 pub use twostage_fmi as fmi;
 pub use twostage_models as models;
+pub use twostage_runtime as runtime;
 pub use twostage_validate as validate;

@@ -111,6 +111,19 @@ impl FittedMlp {
     pub fn n_members(&self) -> usize {
         self.members.len()
     }
+    /// Each member's weights and biases, layer by layer: row-major
+    /// weights (row i feeds unit i), then the biases.
+    pub fn members(&self) -> &[Vec<f64>] {
+        &self.members
+    }
+    /// The standardization of the inputs.
+    pub fn feature_scaling(&self) -> &Standardizer {
+        &self.features
+    }
+    /// The standardization of the outputs (undone after the network).
+    pub fn target_scaling(&self) -> &Standardizer {
+        &self.targets
+    }
 }
 
 /// Number of parameters of a network with these layer sizes.

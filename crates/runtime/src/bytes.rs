@@ -1,0 +1,152 @@
+//! Numbers read in place from the blob's little-endian bytes.
+
+use twostage_kernels::Values;
+
+use crate::error::Error;
+
+/// A run of little-endian `f64` inside the blob, read where it lies (any
+/// alignment): the [`Values`] the kernels compute with.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LeF64s<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> LeF64s<'a> {
+    /// The numbers `start..start + count`, or none when out of range.
+    pub(crate) fn sub(&self, start: usize, count: usize) -> LeF64s<'a> {
+        let range = start
+            .checked_mul(8)
+            .zip(count.checked_mul(8))
+            .and_then(|(a, n)| Some(a..a.checked_add(n)?));
+        LeF64s {
+            bytes: range.and_then(|r| self.bytes.get(r)).unwrap_or(&[]),
+        }
+    }
+
+    /// Whether every number is finite.
+    pub(crate) fn all_finite(&self) -> bool {
+        (0..self.len()).all(|i| self.at(i).is_finite())
+    }
+}
+
+#[inline]
+fn le_f64(chunk: &[u8]) -> f64 {
+    chunk
+        .try_into()
+        .map_or(f64::NAN, |b: [u8; 8]| f64::from_le_bytes(b))
+}
+
+impl Values for LeF64s<'_> {
+    #[inline]
+    fn len(&self) -> usize {
+        self.bytes.len() / 8
+    }
+    #[inline]
+    fn at(&self, i: usize) -> f64 {
+        i.checked_mul(8)
+            .and_then(|a| self.bytes.get(a..a.checked_add(8)?))
+            .map_or(f64::NAN, le_f64)
+    }
+    #[inline]
+    fn dot_from(&self, offset: usize, x: &[f64]) -> f64 {
+        let run = offset
+            .checked_mul(8)
+            .zip(x.len().checked_mul(8))
+            .and_then(|(a, n)| self.bytes.get(a..a.checked_add(n)?));
+        match run {
+            Some(run) => run.chunks_exact(8).zip(x).map(|(w, v)| le_f64(w) * v).sum(),
+            None => f64::NAN,
+        }
+    }
+}
+
+/// A little-endian `u32` at byte `at`, or `None` past the end.
+pub(crate) fn u32_at(bytes: &[u8], at: usize) -> Option<u32> {
+    let chunk: [u8; 4] = bytes.get(at..at.checked_add(4)?)?.try_into().ok()?;
+    Some(u32::from_le_bytes(chunk))
+}
+
+/// Reads the blob's sections in order, checking every bound.
+pub(crate) struct Cursor<'a> {
+    bytes: &'a [u8],
+    pub(crate) at: usize,
+}
+
+impl<'a> Cursor<'a> {
+    pub(crate) fn new(bytes: &'a [u8], at: usize) -> Self {
+        Self { bytes, at }
+    }
+
+    pub(crate) fn u32(&mut self) -> Result<u32, Error> {
+        let v = u32_at(self.bytes, self.at).ok_or(Error::Truncated { at: self.at })?;
+        self.at += 4;
+        Ok(v)
+    }
+
+    /// A count no larger than `max`.
+    pub(crate) fn count(&mut self, field: &'static str, max: usize) -> Result<usize, Error> {
+        let at = self.at;
+        let v = self.u32()? as usize;
+        if v > max {
+            return Err(Error::Invalid { field, at });
+        }
+        Ok(v)
+    }
+
+    /// `count` u32s as bytes, then padding to the next multiple of 8.
+    pub(crate) fn u32s(&mut self, count: usize) -> Result<&'a [u8], Error> {
+        let start = self.at;
+        let end = count
+            .checked_mul(4)
+            .and_then(|n| start.checked_add(n))
+            .ok_or(Error::Truncated { at: start })?;
+        let run = self
+            .bytes
+            .get(start..end)
+            .ok_or(Error::Truncated { at: start })?;
+        self.at = end;
+        self.align()?;
+        Ok(run)
+    }
+
+    fn align(&mut self) -> Result<(), Error> {
+        let padded = self.at.div_ceil(8).saturating_mul(8);
+        if padded > self.bytes.len() {
+            return Err(Error::Truncated { at: self.at });
+        }
+        self.at = padded;
+        Ok(())
+    }
+
+    pub(crate) fn f64s(&mut self, count: usize) -> Result<LeF64s<'a>, Error> {
+        let start = self.at;
+        let end = count
+            .checked_mul(8)
+            .and_then(|n| start.checked_add(n))
+            .ok_or(Error::Truncated { at: start })?;
+        let bytes = self
+            .bytes
+            .get(start..end)
+            .ok_or(Error::Truncated { at: start })?;
+        self.at = end;
+        Ok(LeF64s { bytes })
+    }
+
+    /// `count` finite numbers.
+    pub(crate) fn finite(
+        &mut self,
+        field: &'static str,
+        count: usize,
+    ) -> Result<LeF64s<'a>, Error> {
+        let at = self.at;
+        let v = self.f64s(count)?;
+        if !v.all_finite() {
+            return Err(Error::Invalid { field, at });
+        }
+        Ok(v)
+    }
+
+    pub(crate) fn f64(&mut self, field: &'static str) -> Result<f64, Error> {
+        Ok(self.finite(field, 1)?.at(0))
+    }
+}

@@ -1,0 +1,175 @@
+//! Every way an estimate can fail, as a value (the runtime never panics).
+
+/// Why a blob was refused or an estimate could not be made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Error {
+    /// The blob does not start with `TSRT`: not an exported estimator.
+    BadMagic,
+    /// The blob's format version is one this build does not read.
+    UnsupportedVersion {
+        /// The version in the blob.
+        found: u32,
+    },
+    /// The blob's declared length differs from the bytes given (a
+    /// truncated copy, or one with bytes appended).
+    Length {
+        /// The length the header declares.
+        declared: usize,
+        /// The bytes given.
+        actual: usize,
+    },
+    /// The checksum does not match: the blob was damaged.
+    Checksum {
+        /// The CRC-32 the header stores.
+        stored: u32,
+        /// The CRC-32 of the bytes.
+        actual: u32,
+    },
+    /// A section runs past the blob's end.
+    Truncated {
+        /// Byte offset of the section.
+        at: usize,
+    },
+    /// A value lies outside what it may be (a count beyond the runtime's
+    /// limits, a non-finite weight, a box with lower >= upper, ...).
+    Invalid {
+        /// What the value is.
+        field: &'static str,
+        /// Byte offset where it was read.
+        at: usize,
+    },
+    /// Bytes follow the last section.
+    TrailingBytes {
+        /// Byte offset of the first unread byte.
+        at: usize,
+    },
+    /// The workspace given to a stream is smaller than
+    /// [`crate::Estimator::workspace_len`].
+    WorkspaceTooSmall {
+        /// Words needed.
+        needed: usize,
+        /// Words given.
+        given: usize,
+    },
+    /// A pushed sample has the wrong number of inputs or outputs, or a
+    /// record's input and output arrays disagree.
+    SignalCount {
+        /// Inputs per sample the estimator takes.
+        inputs: usize,
+        /// Outputs per sample the estimator takes.
+        outputs: usize,
+    },
+    /// A sample is NaN or infinite; the record cannot be estimated (reset
+    /// the stream to start another).
+    NotFinite {
+        /// Index of the sample in the record.
+        sample: usize,
+    },
+    /// The record is shorter than the regression needs.
+    TooShort {
+        /// Samples pushed.
+        samples: usize,
+        /// Samples needed.
+        needed: usize,
+    },
+    /// A regressor is (numerically) a combination of the ones before it:
+    /// the input does not excite the system enough for these orders.
+    RankDeficient {
+        /// The output whose regression failed.
+        output: usize,
+        /// The regressor column.
+        column: usize,
+    },
+    /// The sums left the floating-point range (samples near 1e150).
+    Overflow,
+    /// An output slice is shorter than the parameters.
+    OutputTooShort {
+        /// Numbers needed.
+        needed: usize,
+    },
+    /// The stream was finished: reset it before pushing again.
+    Finished,
+}
+
+impl Error {
+    /// A stable number for C callers (always negative).
+    pub fn code(&self) -> i32 {
+        match self {
+            Error::BadMagic => -1,
+            Error::UnsupportedVersion { .. } => -2,
+            Error::Length { .. } => -3,
+            Error::Checksum { .. } => -4,
+            Error::Truncated { .. } => -5,
+            Error::Invalid { .. } => -6,
+            Error::TrailingBytes { .. } => -7,
+            Error::WorkspaceTooSmall { .. } => -8,
+            Error::SignalCount { .. } => -9,
+            Error::NotFinite { .. } => -10,
+            Error::TooShort { .. } => -11,
+            Error::RankDeficient { .. } => -12,
+            Error::Overflow => -13,
+            Error::OutputTooShort { .. } => -14,
+            Error::Finished => -15,
+        }
+    }
+}
+
+impl core::fmt::Display for Error {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Error::BadMagic => f.write_str(
+                "not an exported estimator (no TSRT magic): write one with \
+                 `twostage export --to runtime`",
+            ),
+            Error::UnsupportedVersion { found } => write!(
+                f,
+                "blob format version {found}, this runtime reads version {}: export \
+                 the estimator again with the matching twostage",
+                crate::format::VERSION
+            ),
+            Error::Length { declared, actual } => write!(
+                f,
+                "the blob declares {declared} bytes but {actual} were given: the copy is \
+                 truncated or padded"
+            ),
+            Error::Checksum { stored, actual } => write!(
+                f,
+                "checksum {actual:#010x} does not match the stored {stored:#010x}: the \
+                 blob was damaged; export it again"
+            ),
+            Error::Truncated { at } => write!(f, "a section at byte {at} runs past the end"),
+            Error::Invalid { field, at } => {
+                write!(f, "invalid {field} at byte {at} of the blob")
+            }
+            Error::TrailingBytes { at } => write!(f, "unexpected bytes from byte {at} on"),
+            Error::WorkspaceTooSmall { needed, given } => write!(
+                f,
+                "the workspace has {given} numbers, the estimator needs {needed} \
+                 (Estimator::workspace_len)"
+            ),
+            Error::SignalCount { inputs, outputs } => write!(
+                f,
+                "a sample must have {inputs} input(s) and {outputs} output(s)"
+            ),
+            Error::NotFinite { sample } => write!(
+                f,
+                "sample {sample} is not finite: the record cannot be estimated; reset the \
+                 stream"
+            ),
+            Error::TooShort { samples, needed } => write!(
+                f,
+                "{samples} samples pushed, the regression needs at least {needed}"
+            ),
+            Error::RankDeficient { output, column } => write!(
+                f,
+                "regressor {column} of output {output} is (numerically) a combination of \
+                 the ones before it: the input does not excite the system enough"
+            ),
+            Error::Overflow => f.write_str("the sums overflowed: samples are far too large"),
+            Error::OutputTooShort { needed } => {
+                write!(f, "an output slice needs room for {needed} numbers")
+            }
+            Error::Finished => f.write_str("the stream was finished: reset it first"),
+        }
+    }
+}

@@ -1,0 +1,389 @@
+//! An exported estimator, checked once and then read in place.
+
+use twostage_kernels::Values;
+
+use crate::bytes::{Cursor, LeF64s, u32_at};
+use crate::error::Error;
+use crate::format::{
+    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, HEADER_BYTES, MAGIC, MAX_EXPERTS,
+    MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
+    TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+};
+use crate::network::Network;
+
+/// Stage 2: one network, or a global one routing to experts.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Regressor<'a> {
+    Network(Network<'a>),
+    Piecewise {
+        global: Network<'a>,
+        start: f64,
+        width: f64,
+        experts: [u32; MAX_EXPERTS],
+        count: usize,
+    },
+}
+
+/// Normalized split-conformal intervals.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Adaptive<'a> {
+    pub(crate) floor: LeF64s<'a>,
+    pub(crate) quantile: LeF64s<'a>,
+    pub(crate) difficulty: Network<'a>,
+}
+
+/// Where the training features lie.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Envelope<'a> {
+    pub(crate) threshold: f64,
+    pub(crate) mean: LeF64s<'a>,
+    pub(crate) factor: LeF64s<'a>,
+}
+
+/// A trained estimator exported by `twostage export --to runtime`, checked
+/// once (magic, version, length, checksum, every count and value) and then
+/// read where it lies: no copy, no allocation.
+///
+/// ```
+/// # use twostage::{TwoStage, models::{Benchmark, Simulator, experiment_rng}};
+/// # let model = Benchmark::builder().n_samples(200).build()?;
+/// # let trained = TwoStage::builder(&model).simulations(300).validation(0)
+/// #     .calibration(100).linear(1e-6)?.train()?;
+/// # let blob: Vec<u8> = trained.to_runtime()?;
+/// # let mut record = model.spec().new_record();
+/// # model.simulate(&[0.4], &mut experiment_rng(1, 0), &mut record)?;
+/// # let (inputs, outputs) = (record.input(0).to_vec(), record.output(0).to_vec());
+/// use twostage_runtime::{Estimator, Stream};
+/// let estimator = Estimator::from_bytes(&blob)?;
+/// let mut work = vec![0.0; estimator.workspace_len()];
+/// let mut stream = Stream::new(&estimator, &mut work)?;
+/// for (u, y) in inputs.iter().zip(&outputs) {
+///     stream.push(&[*u], &[*y])?; // as the samples arrive
+/// }
+/// let (mut theta, mut half_widths) = ([0.0], [0.0]);
+/// let assessment = stream.finish(&mut theta, &mut half_widths)?;
+/// let host = trained.estimate(&inputs, &outputs)?;
+/// assert!((theta[0] - host[0]).abs() <= 1e-9 * host[0].abs());
+/// assert!(!assessment.out_of_distribution());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Debug, Clone, Copy)]
+pub struct Estimator<'a> {
+    pub(crate) q: usize,
+    pub(crate) n_inputs: usize,
+    pub(crate) n_outputs: usize,
+    pub(crate) trained_samples: usize,
+    pub(crate) na: usize,
+    pub(crate) nb: usize,
+    pub(crate) delay: usize,
+    pub(crate) transforms: &'a [u8],
+    pub(crate) lower: LeF64s<'a>,
+    pub(crate) upper: LeF64s<'a>,
+    pub(crate) regressor: Regressor<'a>,
+    pub(crate) conformal: Option<LeF64s<'a>>,
+    pub(crate) adaptive: Option<Adaptive<'a>>,
+    pub(crate) envelope: Option<Envelope<'a>>,
+    blob: &'a [u8],
+    max_width: usize,
+}
+
+impl<'a> Estimator<'a> {
+    /// Check a blob and view it as an estimator.
+    ///
+    /// # Errors
+    /// Any [`Error`] of the blob kind: bad magic, another version, a wrong
+    /// length or checksum, a count beyond the runtime's limits
+    /// ([`crate::format`]), a non-finite or out-of-range value.
+    pub fn from_bytes(blob: &'a [u8]) -> Result<Self, Error> {
+        if blob.get(..4) != Some(&MAGIC[..]) {
+            return Err(Error::BadMagic);
+        }
+        let version = u32_at(blob, 4).ok_or(Error::Truncated { at: 4 })?;
+        if version != VERSION {
+            return Err(Error::UnsupportedVersion { found: version });
+        }
+        let declared = u32_at(blob, 8).ok_or(Error::Truncated { at: 8 })? as usize;
+        if declared != blob.len() || declared < HEADER_BYTES {
+            return Err(Error::Length {
+                declared,
+                actual: blob.len(),
+            });
+        }
+        let stored = u32_at(blob, 12).ok_or(Error::Truncated { at: 12 })?;
+        let actual = checksum(blob.get(CHECKSUM_FROM..).unwrap_or(&[]));
+        if stored != actual {
+            return Err(Error::Checksum { stored, actual });
+        }
+        Self::read(blob)
+    }
+
+    fn read(blob: &'a [u8]) -> Result<Self, Error> {
+        let mut c = Cursor::new(blob, CHECKSUM_FROM);
+        let q = c.count("parameter count", MAX_PARAMETERS)?;
+        let n_inputs = c.count("input count", MAX_SIGNALS)?;
+        let n_outputs = c.count("output count", MAX_SIGNALS)?;
+        let trained_samples = c.u32()? as usize;
+        let na = c.count("na", MAX_ORDER)?;
+        let nb = c.count("nb", MAX_ORDER)?;
+        let delay = c.count("delay", MAX_ORDER)?;
+        let flags_at = c.at;
+        let flags = c.u32()?;
+        let kind_at = c.at;
+        let kind = c.u32()?;
+        let n_experts = c.count("expert count", MAX_EXPERTS)?;
+        let (r1, r2) = (c.u32()?, c.u32()?);
+        if q == 0 || n_outputs == 0 || na + nb == 0 || (nb > 0 && n_inputs == 0) {
+            return Err(Error::Invalid {
+                field: "record shape or ARX orders",
+                at: CHECKSUM_FROM,
+            });
+        }
+        if flags & !(FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE) != 0 || r1 != 0 || r2 != 0 {
+            return Err(Error::Invalid {
+                field: "flags",
+                at: flags_at,
+            });
+        }
+        let n_features = n_outputs * (na + n_inputs * nb);
+        let transforms_at = c.at;
+        let transforms = c.u32s(q)?;
+        if (0..q).any(|j| {
+            !matches!(
+                u32_at(transforms, 4 * j),
+                Some(TRANSFORM_IDENTITY | TRANSFORM_LOG)
+            )
+        }) {
+            return Err(Error::Invalid {
+                field: "transform code",
+                at: transforms_at,
+            });
+        }
+        let bounds_at = c.at;
+        let lower = c.finite("lower bound", q)?;
+        let upper = c.finite("upper bound", q)?;
+        if (0..q).any(|j| lower.at(j) >= upper.at(j)) {
+            return Err(Error::Invalid {
+                field: "prior box (lower >= upper)",
+                at: bounds_at,
+            });
+        }
+        let regressor = match kind {
+            REGRESSOR_NETWORK if n_experts == 0 => {
+                Regressor::Network(Network::read(&mut c, n_features, q)?)
+            }
+            REGRESSOR_PIECEWISE if n_experts > 0 => {
+                let start = c.f64("piece start")?;
+                let width_at = c.at;
+                let width = c.f64("piece width")?;
+                if width <= 0.0 {
+                    return Err(Error::Invalid {
+                        field: "piece width",
+                        at: width_at,
+                    });
+                }
+                let global = Network::read(&mut c, n_features, q)?;
+                let mut experts = [0u32; MAX_EXPERTS];
+                for slot in experts.iter_mut().take(n_experts) {
+                    *slot = u32::try_from(c.at).map_err(|_| Error::Truncated { at: c.at })?;
+                    Network::read(&mut c, n_features, q)?;
+                }
+                Regressor::Piecewise {
+                    global,
+                    start,
+                    width,
+                    experts,
+                    count: n_experts,
+                }
+            }
+            _ => {
+                return Err(Error::Invalid {
+                    field: "regressor kind",
+                    at: kind_at,
+                });
+            }
+        };
+        let conformal = if flags & FLAG_CONFORMAL != 0 {
+            let at = c.at;
+            let widths = c.f64s(q)?;
+            if (0..q).any(|j| widths.at(j).is_nan() || widths.at(j) < 0.0) {
+                return Err(Error::Invalid {
+                    field: "conformal half-width",
+                    at,
+                });
+            }
+            Some(widths)
+        } else {
+            None
+        };
+        let adaptive = if flags & FLAG_ADAPTIVE != 0 {
+            let at = c.at;
+            let floor = c.finite("adaptive floor", q)?;
+            let quantile = c.f64s(q)?;
+            let bad = (0..q)
+                .any(|j| floor.at(j) <= 0.0 || quantile.at(j).is_nan() || quantile.at(j) < 0.0);
+            if bad {
+                return Err(Error::Invalid {
+                    field: "adaptive floor or quantile",
+                    at,
+                });
+            }
+            let difficulty = Network::read(&mut c, n_features, q)?;
+            Some(Adaptive {
+                floor,
+                quantile,
+                difficulty,
+            })
+        } else {
+            None
+        };
+        let envelope = if flags & FLAG_ENVELOPE != 0 {
+            let at = c.at;
+            let threshold = c.f64("envelope threshold")?;
+            let mean = c.finite("envelope mean", n_features)?;
+            let factor_at = c.at;
+            let factor = c.finite("envelope factor", n_features * n_features)?;
+            if threshold < 0.0 {
+                return Err(Error::Invalid {
+                    field: "envelope threshold",
+                    at,
+                });
+            }
+            if (0..n_features).any(|j| factor.at(j * n_features + j) <= 0.0) {
+                return Err(Error::Invalid {
+                    field: "envelope factor diagonal",
+                    at: factor_at,
+                });
+            }
+            Some(Envelope {
+                threshold,
+                mean,
+                factor,
+            })
+        } else {
+            None
+        };
+        if c.at != blob.len() {
+            return Err(Error::TrailingBytes { at: c.at });
+        }
+        let mut estimator = Self {
+            q,
+            n_inputs,
+            n_outputs,
+            trained_samples,
+            na,
+            nb,
+            delay,
+            transforms,
+            lower,
+            upper,
+            regressor,
+            conformal,
+            adaptive,
+            envelope,
+            blob,
+            max_width: 0,
+        };
+        estimator.max_width = estimator.networks_max_width();
+        Ok(estimator)
+    }
+
+    fn networks_max_width(&self) -> usize {
+        let mut width = self.adaptive.map_or(0, |a| a.difficulty.max_width());
+        match self.regressor {
+            Regressor::Network(n) => width = width.max(n.max_width()),
+            Regressor::Piecewise { global, count, .. } => {
+                width = width.max(global.max_width());
+                for k in 0..count {
+                    width = width.max(self.expert(k).map_or(0, |e| e.max_width()));
+                }
+            }
+        }
+        width
+    }
+
+    /// Expert `k` of a piecewise regressor (read again where it lies).
+    pub(crate) fn expert(&self, k: usize) -> Option<Network<'a>> {
+        let Regressor::Piecewise { experts, count, .. } = self.regressor else {
+            return None;
+        };
+        if k >= count {
+            return None;
+        }
+        let at = *experts.get(k)? as usize;
+        Network::read(&mut Cursor::new(self.blob, at), self.n_features(), self.q).ok()
+    }
+
+    /// Number of parameters q.
+    pub fn n_parameters(&self) -> usize {
+        self.q
+    }
+    /// Input signals per sample.
+    pub fn n_inputs(&self) -> usize {
+        self.n_inputs
+    }
+    /// Output signals per sample.
+    pub fn n_outputs(&self) -> usize {
+        self.n_outputs
+    }
+    /// The record length the estimator was trained on: other lengths are
+    /// estimated too, but the validation speaks for this one.
+    pub fn trained_samples(&self) -> usize {
+        self.trained_samples
+    }
+    /// Stage 1's features: `n_outputs * (na + n_inputs * nb)`.
+    pub fn n_features(&self) -> usize {
+        self.n_outputs * self.per_output()
+    }
+    /// Lower bound of parameter `j`'s prior box (NaN past the end).
+    pub fn lower(&self, j: usize) -> f64 {
+        self.lower.at(j)
+    }
+    /// Upper bound of parameter `j`'s prior box (NaN past the end).
+    pub fn upper(&self, j: usize) -> f64 {
+        self.upper.at(j)
+    }
+    /// Whether the estimator has intervals (adaptive or conformal).
+    pub fn has_intervals(&self) -> bool {
+        self.adaptive.is_some() || self.conformal.is_some()
+    }
+    /// Whether it can tell records unlike its training ones.
+    pub fn has_envelope(&self) -> bool {
+        self.envelope.is_some()
+    }
+
+    /// Regressor columns per output: na output lags and nb lags of each
+    /// input.
+    pub(crate) fn per_output(&self) -> usize {
+        self.na + self.n_inputs * self.nb
+    }
+    /// The first sample whose regressors are all inside the record.
+    pub(crate) fn first_sample(&self) -> usize {
+        let input_reach = if self.nb == 0 {
+            0
+        } else {
+            self.delay + self.nb - 1
+        };
+        self.na.max(input_reach)
+    }
+    pub(crate) fn max_width(&self) -> usize {
+        self.max_width
+    }
+    pub(crate) fn is_log(&self, j: usize) -> bool {
+        u32_at(self.transforms, 4 * j) == Some(TRANSFORM_LOG)
+    }
+
+    /// How many `f64` a [`crate::Stream`] of this estimator needs as its
+    /// workspace: the past samples of each signal, the normal equations
+    /// of each output in double-double, and the scratch of the final
+    /// solve and networks.
+    pub fn workspace_len(&self) -> usize {
+        crate::stream::Layout::of(self).total
+    }
+}
+
+/// CRC-32 (IEEE), as the exporter computes it.
+pub(crate) fn checksum(bytes: &[u8]) -> u32 {
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(bytes);
+    hasher.finalize()
+}

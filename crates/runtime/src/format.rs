@@ -1,0 +1,69 @@
+//! The exported estimator's byte layout, version 1: what
+//! `twostage export --to runtime` writes and [`crate::Estimator`] reads.
+//!
+//! Every number is little-endian; counts are `u32`, trained values `f64`.
+//! Each section starts at a multiple of 8 bytes from the blob's start (a
+//! list of `u32` is padded with zero bytes), so a blob placed at an
+//! 8-aligned address can be read with aligned loads, though the reader
+//! does not need it.
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 0..4 | magic `TSRT` |
+//! | 4..8 | format version (1) |
+//! | 8..12 | the blob's length in bytes |
+//! | 12..16 | CRC-32 (IEEE) of bytes 16..length |
+//! | 16..64 | twelve `u32`: q, inputs, outputs, trained record length, na, nb, delay, flags, regressor kind, experts, 0, 0 |
+//!
+//! Then, in order: q transform codes (`u32`); q lower and q upper bounds;
+//! for a piecewise regressor its start and width; the networks (one, or
+//! the global one and each expert); the conformal half-widths (flag 1);
+//! the adaptive floors, quantiles and difficulty network (flag 2); the
+//! envelope's threshold, mean and row-major lower Cholesky factor (flag
+//! 4). A network is: the count of its layer sizes and of its ensemble
+//! members (`u32`), the sizes (`u32`), the feature means and scales, the
+//! target means and scales, then each member's weights and biases, layer
+//! by layer (row-major weights, then biases). A linear map is a network
+//! with no hidden layer and zero biases.
+
+/// The first four bytes.
+pub const MAGIC: [u8; 4] = *b"TSRT";
+/// The version this crate reads and the exporter writes.
+pub const VERSION: u32 = 1;
+/// Bytes before the first section.
+pub const HEADER_BYTES: usize = 64;
+/// The checksum covers the blob from here to its end.
+pub const CHECKSUM_FROM: usize = 16;
+
+/// Flag: conformal half-widths follow.
+pub const FLAG_CONFORMAL: u32 = 1;
+/// Flag: adaptive intervals follow.
+pub const FLAG_ADAPTIVE: u32 = 2;
+/// Flag: a feature envelope follows.
+pub const FLAG_ENVELOPE: u32 = 4;
+
+/// Regressor kind: one network (an MLP ensemble, or a linear map).
+pub const REGRESSOR_NETWORK: u32 = 1;
+/// Regressor kind: a global network routing to experts by pieces of the
+/// first parameter's range.
+pub const REGRESSOR_PIECEWISE: u32 = 2;
+
+/// Transform code: the network learned the parameter itself.
+pub const TRANSFORM_IDENTITY: u32 = 0;
+/// Transform code: the network learned its logarithm.
+pub const TRANSFORM_LOG: u32 = 1;
+
+/// Most parameters.
+pub const MAX_PARAMETERS: usize = 64;
+/// Most input (and most output) signals.
+pub const MAX_SIGNALS: usize = 16;
+/// Largest ARX order or delay.
+pub const MAX_ORDER: usize = 64;
+/// Widest network layer.
+pub const MAX_WIDTH: usize = 256;
+/// Most layer sizes of a network (inputs, hidden layers, outputs).
+pub const MAX_SIZES: usize = 10;
+/// Most ensemble members of a network.
+pub const MAX_MEMBERS: usize = 64;
+/// Most experts of a piecewise regressor.
+pub const MAX_EXPERTS: usize = 16;

@@ -1,0 +1,421 @@
+//! Stage 1 accumulated sample by sample, then the rest of the estimate.
+
+use twostage_kernels::Values;
+use twostage_kernels::cholesky::{RANK_TOLERANCE, solve_lower_in_place};
+use twostage_kernels::vector::clip_to_box;
+
+use crate::dd::{Dd, two_prod};
+use crate::error::Error;
+use crate::estimator::{Estimator, Regressor};
+
+/// Where each part of a stream's workspace lies (in `f64`).
+pub(crate) struct Layout {
+    /// Past samples: `signals * lags`, most recent first per signal.
+    history: usize,
+    /// Per output: the packed lower triangle of the normal matrix, then
+    /// the right-hand side, as (hi, lo) pairs.
+    per_output_sums: usize,
+    sums: usize,
+    features: usize,
+    scratch: usize,
+    pub(crate) total: usize,
+}
+
+impl Layout {
+    pub(crate) fn of(e: &Estimator<'_>) -> Self {
+        let n = e.per_output();
+        let history = (e.n_inputs + e.n_outputs) * e.first_sample();
+        let per_output_sums = n * (n + 1) + 2 * n;
+        let sums = e.n_outputs * per_output_sums;
+        let features = e.n_features();
+        // The regressors of a push, or the network's input and layers, or
+        // the envelope's whitened features.
+        let scratch = n.max(features + 2 * e.max_width());
+        Self {
+            history,
+            per_output_sums,
+            sums,
+            features,
+            scratch,
+            total: history + sums + features + scratch,
+        }
+    }
+}
+
+/// What an estimate says of itself besides theta.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Assessment {
+    /// Which intervals the half-widths are.
+    pub intervals: Intervals,
+    /// Mahalanobis distance of the record's features from the training
+    /// features, when the estimator has an envelope.
+    pub feature_distance: Option<f64>,
+    /// The distance 99.9% of training features stay within.
+    pub distance_threshold: Option<f64>,
+}
+
+impl Assessment {
+    /// Whether the record lies outside what training saw: the estimate is
+    /// an extrapolation and the intervals do not speak for it.
+    pub fn out_of_distribution(&self) -> bool {
+        matches!((self.feature_distance, self.distance_threshold), (Some(d), Some(t)) if d > t)
+    }
+}
+
+/// The intervals written into the half-widths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Intervals {
+    /// None: the estimator was not calibrated (or no room was given).
+    None,
+    /// The same conformal half-widths for every record.
+    Conformal,
+    /// Half-widths that follow this record's difficulty.
+    Adaptive,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum State {
+    Open,
+    Failed(Error),
+    Finished,
+}
+
+/// One estimation in progress: push the samples as they arrive, then
+/// [`Stream::finish`]. It keeps the normal equations (O(n^2) numbers) and
+/// the last few samples, never the record, in the caller's workspace.
+#[derive(Debug)]
+pub struct Stream<'e, 'a, 'w> {
+    estimator: &'e Estimator<'a>,
+    work: &'w mut [f64],
+    samples: usize,
+    state: State,
+}
+
+impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
+    /// A stream over `work`, which must hold
+    /// [`Estimator::workspace_len`] numbers (a longer one is fine).
+    ///
+    /// # Errors
+    /// [`Error::WorkspaceTooSmall`].
+    pub fn new(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
+        let needed = estimator.workspace_len();
+        if work.len() < needed {
+            return Err(Error::WorkspaceTooSmall {
+                needed,
+                given: work.len(),
+            });
+        }
+        let mut stream = Self {
+            estimator,
+            work,
+            samples: 0,
+            state: State::Open,
+        };
+        stream.reset();
+        Ok(stream)
+    }
+
+    /// Forget every sample: ready for the next record.
+    pub fn reset(&mut self) {
+        self.work.fill(0.0);
+        self.samples = 0;
+        self.state = State::Open;
+    }
+
+    /// Samples pushed so far.
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+
+    /// Take the next sample: `inputs` and `outputs` at this sampling time.
+    ///
+    /// # Errors
+    /// [`Error::SignalCount`] for slices of the wrong length (the sample is
+    /// not taken); [`Error::NotFinite`] for a NaN or infinity, after which
+    /// the record is refused as the host refuses it, until
+    /// [`Stream::reset`]; [`Error::Finished`] after [`Stream::finish`].
+    pub fn push(&mut self, inputs: &[f64], outputs: &[f64]) -> Result<(), Error> {
+        let e = self.estimator;
+        match self.state {
+            State::Open => {}
+            State::Failed(error) => return Err(error),
+            State::Finished => return Err(Error::Finished),
+        }
+        if inputs.len() != e.n_inputs || outputs.len() != e.n_outputs {
+            return Err(Error::SignalCount {
+                inputs: e.n_inputs,
+                outputs: e.n_outputs,
+            });
+        }
+        if !inputs.iter().chain(outputs).all(|v| v.is_finite()) {
+            let error = Error::NotFinite {
+                sample: self.samples,
+            };
+            self.state = State::Failed(error);
+            return Err(error);
+        }
+        let layout = Layout::of(e);
+        let lags = e.first_sample();
+        let n = e.per_output();
+        let (history, rest) = self.work.split_at_mut(layout.history.min(self.work.len()));
+        let (sums, rest) = rest.split_at_mut(layout.sums.min(rest.len()));
+        let phi = rest
+            .get_mut(layout.features..layout.features + n)
+            .unwrap_or_default();
+        if self.samples >= lags {
+            for (i, y) in outputs.iter().enumerate() {
+                // The regressors of output i at this sample: its own past
+                // values, then each input's lagged values.
+                let value = |signal: usize, lag: usize, current: f64| -> f64 {
+                    if lag == 0 {
+                        current
+                    } else {
+                        history
+                            .get(signal * lags + lag - 1)
+                            .copied()
+                            .unwrap_or(f64::NAN)
+                    }
+                };
+                for (c, slot) in phi.iter_mut().enumerate() {
+                    *slot = if c < e.na {
+                        value(i, c + 1, *y)
+                    } else {
+                        let (j, l) = ((c - e.na) / e.nb, (c - e.na) % e.nb);
+                        let u = inputs.get(j).copied().unwrap_or(f64::NAN);
+                        value(e.n_outputs + j, e.delay + l, u)
+                    };
+                }
+                let own = sums
+                    .get_mut(i * layout.per_output_sums..(i + 1) * layout.per_output_sums)
+                    .unwrap_or_default();
+                accumulate(own, phi, *y);
+            }
+        }
+        if lags > 0 {
+            let current = outputs.iter().chain(inputs);
+            for (past, now) in history.chunks_exact_mut(lags).zip(current) {
+                past.copy_within(..lags - 1, 1);
+                if let Some(first) = past.first_mut() {
+                    *first = *now;
+                }
+            }
+        }
+        self.samples = self.samples.saturating_add(1);
+        Ok(())
+    }
+
+    /// End the record: the features, the estimate (in the prior box) into
+    /// `theta`, the record's interval half-widths into `half_widths` (when
+    /// calibrated and it has room for q numbers; pass `&mut []` to skip
+    /// them), and the out-of-distribution distance. The stream must be
+    /// [`Stream::reset`] before the next record.
+    ///
+    /// # Errors
+    /// [`Error::OutputTooShort`] for a `theta` shorter than q,
+    /// [`Error::TooShort`] for too few samples, [`Error::RankDeficient`]
+    /// for regressors the input does not excite, [`Error::Overflow`], and
+    /// the error that stopped a push.
+    pub fn finish(
+        &mut self,
+        theta: &mut [f64],
+        half_widths: &mut [f64],
+    ) -> Result<Assessment, Error> {
+        let e = self.estimator;
+        match self.state {
+            State::Open => {}
+            State::Failed(error) => return Err(error),
+            State::Finished => return Err(Error::Finished),
+        }
+        let q = e.n_parameters();
+        let theta = theta
+            .get_mut(..q)
+            .ok_or(Error::OutputTooShort { needed: q })?;
+        let n = e.per_output();
+        let needed = e.first_sample() + n;
+        if self.samples < needed {
+            return Err(Error::TooShort {
+                samples: self.samples,
+                needed,
+            });
+        }
+        let layout = Layout::of(e);
+        let rest = self.work.get_mut(layout.history..).unwrap_or_default();
+        let (sums, rest) = rest.split_at_mut(layout.sums.min(rest.len()));
+        let (features, scratch) = rest.split_at_mut(layout.features.min(rest.len()));
+        let scratch = scratch.get_mut(..layout.scratch).unwrap_or_default();
+        self.state = State::Finished;
+        for (i, (own, alpha)) in sums
+            .chunks_exact_mut(layout.per_output_sums)
+            .zip(features.chunks_exact_mut(n))
+            .enumerate()
+        {
+            solve(own, n, alpha).map_err(|column| match column {
+                Some(column) => Error::RankDeficient { output: i, column },
+                None => Error::Overflow,
+            })?;
+        }
+        predict(e, features, scratch, theta)?;
+        for (j, t) in theta.iter_mut().enumerate() {
+            if e.is_log(j) {
+                *t = libm::exp(*t);
+            }
+        }
+        clip_to_box(theta, &e.lower, &e.upper);
+        let intervals = match (e.adaptive, e.conformal, half_widths.get_mut(..q)) {
+            (Some(adaptive), _, Some(widths)) => {
+                adaptive.difficulty.predict(features, scratch, widths)?;
+                for (j, w) in widths.iter_mut().enumerate() {
+                    let floor = adaptive.floor.at(j);
+                    let sigma = if w.is_nan() { floor } else { w.max(floor) };
+                    *w = adaptive.quantile.at(j) * sigma;
+                }
+                Intervals::Adaptive
+            }
+            (None, Some(conformal), Some(widths)) => {
+                for (j, w) in widths.iter_mut().enumerate() {
+                    *w = conformal.at(j);
+                }
+                Intervals::Conformal
+            }
+            _ => Intervals::None,
+        };
+        let feature_distance = e.envelope.map(|envelope| {
+            let z = scratch.get_mut(..features.len()).unwrap_or_default();
+            for (j, (z, x)) in z.iter_mut().zip(features.iter()).enumerate() {
+                *z = x - envelope.mean.at(j);
+            }
+            solve_lower_in_place(&envelope.factor, features.len(), z);
+            libm::sqrt(z.iter().map(|v| v * v).sum::<f64>())
+        });
+        Ok(Assessment {
+            intervals,
+            feature_distance,
+            distance_threshold: e.envelope.map(|envelope| envelope.threshold),
+        })
+    }
+}
+
+/// The learning-space estimate of the features.
+fn predict(
+    e: &Estimator<'_>,
+    features: &[f64],
+    scratch: &mut [f64],
+    out: &mut [f64],
+) -> Result<(), Error> {
+    match e.regressor {
+        Regressor::Network(network) => network.predict(features, scratch, out),
+        Regressor::Piecewise {
+            global,
+            start,
+            width,
+            count,
+            ..
+        } => {
+            global.predict(features, scratch, out)?;
+            let position = (out.first().copied().unwrap_or(f64::NAN) - start) / width;
+            // NaN and out-of-range positions go to the nearest piece.
+            let piece = if position.is_nan() {
+                0
+            } else {
+                (position.max(0.0) as usize).min(count.saturating_sub(1))
+            };
+            let expert = e.expert(piece).ok_or(Error::Invalid {
+                field: "expert",
+                at: 0,
+            })?;
+            expert.predict(features, scratch, out)
+        }
+    }
+}
+
+/// Packed lower-triangle index of (row, column), column <= row.
+#[inline]
+fn packed(row: usize, column: usize) -> usize {
+    row * (row + 1) / 2 + column
+}
+
+#[inline]
+fn load(sums: &[f64], k: usize) -> Dd {
+    Dd {
+        hi: sums.get(2 * k).copied().unwrap_or(f64::NAN),
+        lo: sums.get(2 * k + 1).copied().unwrap_or(f64::NAN),
+    }
+}
+
+#[inline]
+fn store(sums: &mut [f64], k: usize, v: Dd) {
+    if let Some(pair) = sums.get_mut(2 * k..2 * k + 2) {
+        pair.copy_from_slice(&[v.hi, v.lo]);
+    }
+}
+
+/// `G += phi phi'` (lower triangle) and `b += phi y`, exactly rounded to
+/// double-double.
+fn accumulate(sums: &mut [f64], phi: &[f64], y: f64) {
+    let n = phi.len();
+    let mut k = 0;
+    for (r, a) in phi.iter().enumerate() {
+        for b in phi.iter().take(r + 1) {
+            store(sums, k, load(sums, k).add(two_prod(*a, *b)));
+            k += 1;
+        }
+    }
+    let rhs = packed(n, 0);
+    for (r, a) in phi.iter().enumerate() {
+        store(sums, rhs + r, load(sums, rhs + r).add(two_prod(*a, y)));
+    }
+}
+
+/// Solve the normal equations in `sums` (destroyed) into `alpha`, in
+/// double-double, with the QR rank test's tolerance on each pivot's sine.
+/// `Err(Some(column))` for a rank deficiency, `Err(None)` for overflow.
+fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usize>> {
+    let tolerance = Dd::from_f64(RANK_TOLERANCE * RANK_TOLERANCE);
+    for j in 0..n {
+        let diagonal = load(sums, packed(j, j));
+        if !(diagonal.hi.is_finite() && diagonal.lo.is_finite()) {
+            return Err(None);
+        }
+        let mut pivot = diagonal;
+        for k in 0..j {
+            let l = load(sums, packed(j, k));
+            pivot = pivot.sub(l.mul(l));
+        }
+        // The squared sine of column j's angle to the ones before it.
+        if !(diagonal.hi > 0.0 && pivot.hi > tolerance.mul(diagonal).hi) {
+            return Err(Some(j));
+        }
+        let root = pivot.sqrt();
+        store(sums, packed(j, j), root);
+        for i in j + 1..n {
+            let mut s = load(sums, packed(i, j));
+            for k in 0..j {
+                s = s.sub(load(sums, packed(i, k)).mul(load(sums, packed(j, k))));
+            }
+            store(sums, packed(i, j), s.div(root));
+        }
+    }
+    let rhs = packed(n, 0);
+    // L z = b, then L' x = z, in place in the right-hand side.
+    for i in 0..n {
+        let mut s = load(sums, rhs + i);
+        for k in 0..i {
+            s = s.sub(load(sums, packed(i, k)).mul(load(sums, rhs + k)));
+        }
+        store(sums, rhs + i, s.div(load(sums, packed(i, i))));
+    }
+    for i in (0..n).rev() {
+        let mut s = load(sums, rhs + i);
+        for k in i + 1..n {
+            s = s.sub(load(sums, packed(k, i)).mul(load(sums, rhs + k)));
+        }
+        store(sums, rhs + i, s.div(load(sums, packed(i, i))));
+    }
+    for (i, a) in alpha.iter_mut().enumerate().take(n) {
+        *a = load(sums, rhs + i).to_f64();
+        if !a.is_finite() {
+            return Err(None);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,240 @@
+//! `Estimator::to_runtime`: the blob the no_std runtime reads in place
+//! (layout: [`twostage_runtime::format`]).
+
+use twostage_compress::Compressor;
+use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
+use twostage_models::Transform;
+use twostage_runtime::format::{
+    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, HEADER_BYTES, MAGIC, MAX_EXPERTS,
+    MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK,
+    REGRESSOR_PIECEWISE, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+};
+
+use crate::config::{CompressorConfig, FittedRegressor};
+use crate::error::{Error, Result};
+use crate::estimator::Estimator;
+
+/// Little-endian sections, each starting at a multiple of 8 bytes.
+struct Writer {
+    bytes: Vec<u8>,
+}
+
+impl Writer {
+    fn u32(&mut self, v: usize) -> Result<()> {
+        let v = u32::try_from(v).map_err(|_| refuse(format!("the count {v} exceeds 32 bits")))?;
+        self.bytes.extend_from_slice(&v.to_le_bytes());
+        Ok(())
+    }
+    fn u32s(&mut self, values: &[usize]) -> Result<()> {
+        for v in values {
+            self.u32(*v)?;
+        }
+        while !self.bytes.len().is_multiple_of(8) {
+            self.bytes.push(0);
+        }
+        Ok(())
+    }
+    fn f64s(&mut self, values: &[f64]) {
+        for v in values {
+            self.bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+
+    /// A network with its standardizations; `members` are its ensemble.
+    fn network(
+        &mut self,
+        sizes: &[usize],
+        features: &Standardizer,
+        targets: &Standardizer,
+        members: &[Vec<f64>],
+    ) -> Result<()> {
+        if sizes.len() > MAX_SIZES || sizes.iter().any(|w| *w > MAX_WIDTH) {
+            return Err(refuse(format!(
+                "the network {sizes:?} exceeds the runtime's {} layers of at most {MAX_WIDTH} \
+                 units",
+                MAX_SIZES - 2
+            )));
+        }
+        if members.len() > MAX_MEMBERS {
+            return Err(refuse(format!(
+                "{} ensemble members, the runtime takes at most {MAX_MEMBERS}",
+                members.len()
+            )));
+        }
+        self.u32(sizes.len())?;
+        self.u32(members.len())?;
+        self.u32s(sizes)?;
+        self.f64s(features.mean());
+        self.f64s(features.scale());
+        self.f64s(targets.mean());
+        self.f64s(targets.scale());
+        for member in members {
+            self.f64s(member);
+        }
+        Ok(())
+    }
+
+    fn mlp(&mut self, mlp: &FittedMlp) -> Result<()> {
+        self.network(
+            mlp.sizes(),
+            mlp.feature_scaling(),
+            mlp.target_scaling(),
+            mlp.members(),
+        )
+    }
+
+    /// A linear map is a network without hidden layer and with zero biases.
+    fn linear(&mut self, linear: &FittedLinear) -> Result<()> {
+        let (n, q) = (linear.n_inputs(), linear.n_outputs());
+        let mut member = linear.weights().to_vec();
+        member.extend(std::iter::repeat_n(0.0, q));
+        self.network(
+            &[n, q],
+            linear.feature_scaling(),
+            linear.target_scaling(),
+            &[member],
+        )
+    }
+}
+
+fn refuse(reason: String) -> Error {
+    Error::NotExportable { reason }
+}
+
+impl Estimator {
+    /// The estimator as a blob for the microcontroller runtime
+    /// ([`twostage_runtime`]): versioned, checksummed, read in place. The
+    /// runtime streams ARX and AR compressors; stage 2 may be any of the
+    /// project's (linear, MLP, piecewise), with the intervals and the
+    /// envelope.
+    ///
+    /// ```
+    /// use twostage::TwoStage;
+    /// use twostage::models::Benchmark;
+    /// let estimator = TwoStage::builder(&Benchmark::builder().n_samples(200).build()?)
+    ///     .simulations(300).validation(0).calibration(100).linear(1e-6)?.train()?;
+    /// let blob = estimator.to_runtime()?;
+    /// let runtime = twostage::runtime::Estimator::from_bytes(&blob)?;
+    /// assert_eq!(runtime.n_parameters(), 1);
+    /// assert!(runtime.has_intervals() && runtime.has_envelope());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::NotExportable`] for a NARX, PCA or raw compressor, or sizes
+    /// beyond the runtime's limits ([`twostage_runtime::format`]).
+    pub fn to_runtime(&self) -> Result<Vec<u8>> {
+        let CompressorConfig::Arx(arx) = &self.compressor else {
+            return Err(refuse(format!(
+                "the runtime streams ARX and AR compressors only, this estimator uses {}; \
+                 train with --compress arx:NA,NB (or ar:NA)",
+                self.compressor
+            )));
+        };
+        let q = self.param_names.len();
+        let shape = &self.shape;
+        if q > MAX_PARAMETERS
+            || shape.n_inputs > MAX_SIGNALS
+            || shape.n_outputs > MAX_SIGNALS
+            || arx.na().max(arx.nb()).max(arx.delay()) > MAX_ORDER
+        {
+            return Err(refuse(format!(
+                "{q} parameters, {} inputs, {} outputs and {arx}: the runtime takes at most \
+                 {MAX_PARAMETERS} parameters, {MAX_SIGNALS} signals each way and orders up \
+                 to {MAX_ORDER}",
+                shape.n_inputs, shape.n_outputs
+            )));
+        }
+        let mut w = Writer {
+            bytes: Vec::with_capacity(4096),
+        };
+        w.bytes.extend_from_slice(&MAGIC);
+        w.u32(VERSION as usize)?;
+        w.u32(0)?; // length, set below
+        w.u32(0)?; // checksum, set below
+        let mut flags = 0;
+        if self.intervals.is_some() {
+            flags |= FLAG_CONFORMAL;
+        }
+        if self.adaptive.is_some() {
+            flags |= FLAG_ADAPTIVE;
+        }
+        if self.envelope.is_some() {
+            flags |= FLAG_ENVELOPE;
+        }
+        let (kind, experts) = match &self.regressor {
+            FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),
+            _ => (REGRESSOR_NETWORK, 0),
+        };
+        if experts > MAX_EXPERTS {
+            return Err(refuse(format!(
+                "{experts} experts, the runtime takes at most {MAX_EXPERTS}"
+            )));
+        }
+        for v in [
+            q,
+            shape.n_inputs,
+            shape.n_outputs,
+            shape.n_samples,
+            arx.na(),
+            arx.nb(),
+            arx.delay(),
+            flags as usize,
+            kind as usize,
+            experts,
+            0,
+            0,
+        ] {
+            w.u32(v)?;
+        }
+        debug_assert_eq!(w.bytes.len(), HEADER_BYTES);
+        let transforms: Vec<usize> = self
+            .marginals
+            .iter()
+            .map(|m| match m.transform() {
+                Transform::Identity => TRANSFORM_IDENTITY as usize,
+                Transform::Log => TRANSFORM_LOG as usize,
+            })
+            .collect();
+        w.u32s(&transforms)?;
+        w.f64s(&self.lower);
+        w.f64s(&self.upper);
+        match &self.regressor {
+            FittedRegressor::Linear(linear) => w.linear(linear)?,
+            FittedRegressor::Mlp(mlp) => w.mlp(mlp)?,
+            FittedRegressor::Piecewise(piecewise) => {
+                let (start, width) = piecewise.pieces_start_width();
+                w.f64s(&[start, width]);
+                w.mlp(piecewise.global())?;
+                for expert in piecewise.experts() {
+                    w.mlp(expert)?;
+                }
+            }
+        }
+        if let Some(intervals) = &self.intervals {
+            w.f64s(intervals.half_widths());
+        }
+        if let Some(adaptive) = &self.adaptive {
+            let (floor, quantile, difficulty) = adaptive.parts();
+            w.f64s(floor);
+            w.f64s(quantile);
+            w.mlp(difficulty)?;
+        }
+        if let Some(envelope) = &self.envelope {
+            let (mean, factor) = envelope.parts();
+            w.f64s(&[envelope.threshold()]);
+            w.f64s(mean);
+            w.f64s(factor);
+        }
+        debug_assert_eq!(self.compressor.n_features(), self.regressor.n_inputs());
+        let length = w.bytes.len();
+        let length = u32::try_from(length)
+            .map_err(|_| refuse(format!("{length} bytes exceed the format's 4 GiB")))?;
+        w.bytes[8..12].copy_from_slice(&length.to_le_bytes());
+        let mut hasher = crc32fast::Hasher::new();
+        hasher.update(&w.bytes[CHECKSUM_FROM..]);
+        let crc = hasher.finalize();
+        w.bytes[12..16].copy_from_slice(&crc.to_le_bytes());
+        Ok(w.bytes)
+    }
+}
