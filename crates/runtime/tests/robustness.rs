@@ -1,0 +1,242 @@
+//! Blobs from anywhere: random, truncated and mutated (and re-sealed, so
+//! that the checks behind the checksum are reached) never panic, and an
+//! estimator that passes its checks estimates without panicking; streams
+//! misused answer with the error that says so.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+use std::sync::OnceLock;
+
+use proptest::prelude::*;
+use twostage::TwoStage;
+use twostage::models::{Benchmark, Simulator, experiment_rng};
+use twostage_runtime::format::{CHECKSUM_FROM, HEADER_BYTES};
+use twostage_runtime::{Error, Estimator, Stream};
+
+/// A network estimator and a piecewise one, with intervals and envelope.
+fn blobs() -> &'static [Vec<u8>; 2] {
+    static BLOBS: OnceLock<[Vec<u8>; 2]> = OnceLock::new();
+    BLOBS.get_or_init(|| {
+        let model = Benchmark::builder().n_samples(120).build().unwrap();
+        let train = |regressor: &str| {
+            TwoStage::builder(&model)
+                .compressor(twostage::compress::Arx::new(2, 2).unwrap())
+                .regressor(regressor.parse().unwrap())
+                .simulations(300)
+                .validation(0)
+                .calibration(150)
+                .seed(2)
+                .train()
+                .unwrap()
+                .to_runtime()
+                .unwrap()
+        };
+        [train("mlp:4"), train("piecewise:2,3")]
+    })
+}
+
+fn record() -> (Vec<f64>, Vec<f64>) {
+    let model = Benchmark::builder().n_samples(120).build().unwrap();
+    let mut record = model.spec().new_record();
+    model
+        .simulate(&[0.5], &mut experiment_rng(5, 0), &mut record)
+        .unwrap();
+    (record.input(0).to_vec(), record.output(0).to_vec())
+}
+
+/// Set the length and checksum of a blob to its bytes.
+fn seal(blob: &mut [u8]) {
+    if blob.len() < HEADER_BYTES {
+        return;
+    }
+    let length = u32::try_from(blob.len()).unwrap();
+    blob[8..12].copy_from_slice(&length.to_le_bytes());
+    let crc = crc32fast::hash(&blob[CHECKSUM_FROM..]);
+    blob[12..16].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// Whatever the blob, reading it and (if it reads) estimating ends in a
+/// value, never a panic.
+fn exercise(blob: &[u8]) {
+    if let Ok(estimator) = Estimator::from_bytes(blob) {
+        let (u, y) = record();
+        let mut work = vec![0.0; estimator.workspace_len().min(1 << 20)];
+        let q = estimator.n_parameters();
+        let (mut theta, mut widths) = (vec![0.0; q], vec![0.0; q]);
+        if let Ok(mut stream) = Stream::new(&estimator, &mut work) {
+            let (ni, no) = (estimator.n_inputs(), estimator.n_outputs());
+            for k in 0..u.len() {
+                let _ = stream.push(&vec![u[k]; ni], &vec![y[k]; no]);
+            }
+            if let Ok(a) = stream.finish(&mut theta, &mut widths) {
+                let _ = a.out_of_distribution();
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        exercise(&bytes);
+        // The same bytes behind a valid header reach the field checks.
+        let mut sealed = b"TSRT\x01\0\0\0".to_vec();
+        sealed.extend_from_slice(&[0; 8]);
+        sealed.extend_from_slice(&bytes);
+        seal(&mut sealed);
+        exercise(&sealed);
+    }
+
+    #[test]
+    fn mutated_blobs_never_panic(
+        which in 0usize..2,
+        edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+        cut in any::<prop::sample::Index>(),
+        truncate in any::<bool>(),
+    ) {
+        let mut blob = blobs()[which].clone();
+        for (at, value) in &edits {
+            let i = at.index(blob.len());
+            blob[i] = *value;
+        }
+        exercise(&blob); // the checksum refuses it
+        if truncate {
+            blob.truncate(cut.index(blob.len()));
+        }
+        seal(&mut blob);
+        exercise(&blob);
+    }
+
+    #[test]
+    fn counts_set_to_anything_never_panic(
+        which in 0usize..2,
+        field in 0usize..12,
+        value in prop_oneof![0u32..300, any::<u32>()],
+    ) {
+        let mut blob = blobs()[which].clone();
+        let at = CHECKSUM_FROM + 4 * field;
+        blob[at..at + 4].copy_from_slice(&value.to_le_bytes());
+        seal(&mut blob);
+        exercise(&blob);
+    }
+}
+
+#[test]
+fn damage_is_named() {
+    let blob = &blobs()[0];
+    assert_eq!(
+        Estimator::from_bytes(&blob[1..]).unwrap_err(),
+        Error::BadMagic
+    );
+    let mut flipped = blob.clone();
+    let last = flipped.len() - 1;
+    flipped[last] ^= 1;
+    assert!(matches!(
+        Estimator::from_bytes(&flipped),
+        Err(Error::Checksum { .. })
+    ));
+    assert!(matches!(
+        Estimator::from_bytes(&blob[..blob.len() - 8]),
+        Err(Error::Length { declared, actual }) if declared == blob.len() && actual == blob.len() - 8
+    ));
+    let mut newer = blob.clone();
+    newer[4] = 2;
+    assert_eq!(
+        Estimator::from_bytes(&newer).unwrap_err(),
+        Error::UnsupportedVersion { found: 2 }
+    );
+    // One more byte, sealed: read to the end, the byte is left over.
+    let mut longer = blob.clone();
+    longer.push(0);
+    seal(&mut longer);
+    assert_eq!(
+        Estimator::from_bytes(&longer).unwrap_err(),
+        Error::TrailingBytes { at: blob.len() }
+    );
+    // A layer wider than the runtime takes.
+    let mut wide = blob.clone();
+    let q_at = CHECKSUM_FROM;
+    wide[q_at..q_at + 4].copy_from_slice(&1000u32.to_le_bytes());
+    seal(&mut wide);
+    assert!(matches!(
+        Estimator::from_bytes(&wide),
+        Err(Error::Invalid { field: "parameter count", at }) if at == q_at
+    ));
+}
+
+#[test]
+fn a_misused_stream_answers_with_the_reason() {
+    let estimator = Estimator::from_bytes(&blobs()[0]).unwrap();
+    let needed = estimator.workspace_len();
+    let mut small = vec![0.0; needed - 1];
+    assert_eq!(
+        Stream::new(&estimator, &mut small).unwrap_err(),
+        Error::WorkspaceTooSmall {
+            needed,
+            given: needed - 1
+        }
+    );
+    let mut work = vec![0.0; needed];
+    let mut stream = Stream::new(&estimator, &mut work).unwrap();
+    let (mut theta, mut widths) = ([0.0], [0.0]);
+    assert_eq!(
+        stream.push(&[1.0, 2.0], &[0.0]).unwrap_err(),
+        Error::SignalCount {
+            inputs: 1,
+            outputs: 1
+        }
+    );
+    for k in 0..5 {
+        stream.push(&[1.0], &[f64::from(k)]).unwrap();
+    }
+    // ARX(2, 2) needs 2 past samples and 4 equations.
+    assert_eq!(
+        stream.finish(&mut theta, &mut widths).unwrap_err(),
+        Error::TooShort {
+            samples: 5,
+            needed: 6
+        }
+    );
+    assert_eq!(
+        stream.finish(&mut [], &mut widths).unwrap_err(),
+        Error::OutputTooShort { needed: 1 }
+    );
+    stream.push(&[f64::NAN], &[0.0]).unwrap_err();
+    assert_eq!(
+        stream.finish(&mut theta, &mut widths).unwrap_err(),
+        Error::NotFinite { sample: 5 }
+    );
+    stream.reset();
+    // A constant input does not excite the input lags: column 3 (b2)
+    // repeats column 2 (b1).
+    let (_, y) = record();
+    for v in &y {
+        stream.push(&[1.0], &[*v]).unwrap();
+    }
+    assert_eq!(
+        stream.finish(&mut theta, &mut widths).unwrap_err(),
+        Error::RankDeficient {
+            output: 0,
+            column: 3
+        }
+    );
+    assert_eq!(stream.push(&[1.0], &[0.0]).unwrap_err(), Error::Finished);
+    stream.reset();
+    let (u, y) = record();
+    for (u, y) in u.iter().zip(&y) {
+        stream.push(&[*u], &[*y]).unwrap();
+    }
+    // After the errors and resets, the record simulated at theta = 0.5
+    // is estimated as from a fresh stream.
+    stream.finish(&mut theta, &mut widths).unwrap();
+    let mut fresh_work = vec![0.0; needed];
+    let (mut fresh, mut fresh_widths) = ([0.0], [0.0]);
+    estimator
+        .estimate_record(&u, &y, &mut fresh_work, &mut fresh, &mut fresh_widths)
+        .unwrap();
+    assert_eq!(theta[0].to_bits(), fresh[0].to_bits());
+    assert!((theta[0] - 0.5).abs() < 0.3, "{theta:?}");
+}
