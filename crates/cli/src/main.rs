@@ -5,6 +5,7 @@ mod csv_records;
 mod curve;
 mod demo;
 mod estimate;
+mod export;
 mod fmu;
 mod inspect;
 mod model_arg;
@@ -63,6 +64,9 @@ enum Command {
     /// Write an sbatch array script that simulates a training run's charts in shards on
     /// a Slurm cluster, and print the command that merges them (docs/cluster.md).
     Slurm(slurm::SlurmArgs),
+    /// Export an estimator for the no_std runtime, its C API and microcontrollers
+    /// (docs/embedded.md).
+    Export(export::ExportArgs),
     /// FMUs (FMI 2.0 and 3.0): list what one offers and write a model file to start from.
     Fmu {
         #[command(subcommand)]
@@ -104,6 +108,7 @@ fn main() -> ExitCode {
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
         Command::Slurm(args) => slurm::slurm(args, &mut io::stdout().lock()),
+        Command::Export(args) => export::export(args, &mut io::stdout().lock()),
         Command::Fmu { command } => fmu::run(command, &mut io::stdout().lock()),
         Command::Estimate(args) => match estimate::estimate(args) {
             Ok(0) => Ok(()),

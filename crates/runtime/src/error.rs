@@ -89,6 +89,8 @@ pub enum Error {
     },
     /// The stream was finished: reset it before pushing again.
     Finished,
+    /// The workspace holds no stream: start one with `Stream::new`.
+    NotStarted,
 }
 
 impl Error {
@@ -110,6 +112,7 @@ impl Error {
             Error::Overflow => -13,
             Error::OutputTooShort { .. } => -14,
             Error::Finished => -15,
+            Error::NotStarted => -16,
         }
     }
 }
@@ -170,6 +173,9 @@ impl core::fmt::Display for Error {
                 write!(f, "an output slice needs room for {needed} numbers")
             }
             Error::Finished => f.write_str("the stream was finished: reset it first"),
+            Error::NotStarted => {
+                f.write_str("the workspace holds no stream: start one (Stream::new)")
+            }
         }
     }
 }

@@ -8,7 +8,15 @@ use crate::dd::{Dd, two_prod};
 use crate::error::Error;
 use crate::estimator::{Estimator, Regressor};
 
-/// Where each part of a stream's workspace lies (in `f64`).
+/// Words at the start of the workspace: samples pushed, the state, and
+/// the sample that was not finite (for a failed stream).
+const STATUS_WORDS: usize = 3;
+const OPEN: f64 = 0.0;
+const FINISHED: f64 = 1.0;
+const FAILED: f64 = 2.0;
+
+/// Where each part of a stream's workspace lies (in `f64`), after the
+/// status words.
 pub(crate) struct Layout {
     /// Past samples: `signals * lags`, most recent first per signal.
     history: usize,
@@ -37,7 +45,7 @@ impl Layout {
             sums,
             features,
             scratch,
-            total: history + sums + features + scratch,
+            total: STATUS_WORDS + history + sums + features + scratch,
         }
     }
 }
@@ -73,22 +81,17 @@ pub enum Intervals {
     Adaptive,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum State {
-    Open,
-    Failed(Error),
-    Finished,
-}
-
 /// One estimation in progress: push the samples as they arrive, then
 /// [`Stream::finish`]. It keeps the normal equations (O(n^2) numbers) and
-/// the last few samples, never the record, in the caller's workspace.
+/// the last few samples, never the record, in the caller's workspace,
+/// which holds all of its state: a stream can be dropped and
+/// [`Stream::resume`]d over the same workspace (the C API does so on
+/// every call).
 #[derive(Debug)]
 pub struct Stream<'e, 'a, 'w> {
     estimator: &'e Estimator<'a>,
+    status: &'w mut [f64],
     work: &'w mut [f64],
-    samples: usize,
-    state: State,
 }
 
 impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
@@ -98,6 +101,29 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     /// # Errors
     /// [`Error::WorkspaceTooSmall`].
     pub fn new(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
+        let mut stream = Self::attach(estimator, work)?;
+        stream.reset();
+        Ok(stream)
+    }
+
+    /// The stream whose state `work` holds (from [`Stream::new`] over the
+    /// same estimator), to go on pushing or to finish it.
+    ///
+    /// # Errors
+    /// [`Error::WorkspaceTooSmall`], and [`Error::NotStarted`] for a
+    /// workspace no stream was started in.
+    pub fn resume(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
+        let stream = Self::attach(estimator, work)?;
+        let samples = stream.status.first().copied().unwrap_or(f64::NAN);
+        let state = stream.status.get(1).copied().unwrap_or(f64::NAN);
+        let whole = samples >= 0.0 && samples < 4.0e15 && samples.fract() == 0.0;
+        if !(whole && [OPEN, FINISHED, FAILED].contains(&state)) {
+            return Err(Error::NotStarted);
+        }
+        Ok(stream)
+    }
+
+    fn attach(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
         let needed = estimator.workspace_len();
         if work.len() < needed {
             return Err(Error::WorkspaceTooSmall {
@@ -105,26 +131,46 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
                 given: work.len(),
             });
         }
-        let mut stream = Self {
+        let (status, work) = work.split_at_mut(STATUS_WORDS);
+        Ok(Self {
             estimator,
+            status,
             work,
-            samples: 0,
-            state: State::Open,
-        };
-        stream.reset();
-        Ok(stream)
+        })
     }
 
     /// Forget every sample: ready for the next record.
     pub fn reset(&mut self) {
+        self.status.fill(0.0);
         self.work.fill(0.0);
-        self.samples = 0;
-        self.state = State::Open;
     }
 
     /// Samples pushed so far.
     pub fn samples(&self) -> usize {
-        self.samples
+        self.status.first().map_or(0, |s| *s as usize)
+    }
+
+    fn set_samples(&mut self, samples: usize) {
+        if let Some(s) = self.status.first_mut() {
+            *s = samples as f64;
+        }
+    }
+
+    /// The error a stream that cannot go on answers with.
+    fn check_open(&self) -> Result<(), Error> {
+        match self.status.get(1).copied() {
+            Some(OPEN) => Ok(()),
+            Some(FINISHED) => Err(Error::Finished),
+            _ => Err(Error::NotFinite {
+                sample: self.status.get(2).map_or(0, |s| *s as usize),
+            }),
+        }
+    }
+
+    fn set_state(&mut self, state: f64, sample: usize) {
+        if let Some(s) = self.status.get_mut(1..3) {
+            s.copy_from_slice(&[state, sample as f64]);
+        }
     }
 
     /// Take the next sample: `inputs` and `outputs` at this sampling time.
@@ -136,23 +182,17 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     /// [`Stream::reset`]; [`Error::Finished`] after [`Stream::finish`].
     pub fn push(&mut self, inputs: &[f64], outputs: &[f64]) -> Result<(), Error> {
         let e = self.estimator;
-        match self.state {
-            State::Open => {}
-            State::Failed(error) => return Err(error),
-            State::Finished => return Err(Error::Finished),
-        }
+        self.check_open()?;
         if inputs.len() != e.n_inputs || outputs.len() != e.n_outputs {
             return Err(Error::SignalCount {
                 inputs: e.n_inputs,
                 outputs: e.n_outputs,
             });
         }
+        let samples = self.samples();
         if !inputs.iter().chain(outputs).all(|v| v.is_finite()) {
-            let error = Error::NotFinite {
-                sample: self.samples,
-            };
-            self.state = State::Failed(error);
-            return Err(error);
+            self.set_state(FAILED, samples);
+            return Err(Error::NotFinite { sample: samples });
         }
         let layout = Layout::of(e);
         let lags = e.first_sample();
@@ -162,7 +202,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let phi = rest
             .get_mut(layout.features..layout.features + n)
             .unwrap_or_default();
-        if self.samples >= lags {
+        if samples >= lags {
             for (i, y) in outputs.iter().enumerate() {
                 // The regressors of output i at this sample: its own past
                 // values, then each input's lagged values.
@@ -200,7 +240,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
                 }
             }
         }
-        self.samples = self.samples.saturating_add(1);
+        self.set_samples(samples.saturating_add(1));
         Ok(())
     }
 
@@ -221,29 +261,24 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         half_widths: &mut [f64],
     ) -> Result<Assessment, Error> {
         let e = self.estimator;
-        match self.state {
-            State::Open => {}
-            State::Failed(error) => return Err(error),
-            State::Finished => return Err(Error::Finished),
-        }
+        self.check_open()?;
         let q = e.n_parameters();
         let theta = theta
             .get_mut(..q)
             .ok_or(Error::OutputTooShort { needed: q })?;
         let n = e.per_output();
         let needed = e.first_sample() + n;
-        if self.samples < needed {
-            return Err(Error::TooShort {
-                samples: self.samples,
-                needed,
-            });
+        let samples = self.samples();
+        if samples < needed {
+            return Err(Error::TooShort { samples, needed });
         }
+        // The sums are solved in place: the stream is spent either way.
+        self.set_state(FINISHED, 0);
         let layout = Layout::of(e);
         let rest = self.work.get_mut(layout.history..).unwrap_or_default();
         let (sums, rest) = rest.split_at_mut(layout.sums.min(rest.len()));
         let (features, scratch) = rest.split_at_mut(layout.features.min(rest.len()));
         let scratch = scratch.get_mut(..layout.scratch).unwrap_or_default();
-        self.state = State::Finished;
         for (i, (own, alpha)) in sums
             .chunks_exact_mut(layout.per_output_sums)
             .zip(features.chunks_exact_mut(n))

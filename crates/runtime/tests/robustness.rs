@@ -238,5 +238,23 @@ fn a_misused_stream_answers_with_the_reason() {
         .estimate_record(&u, &y, &mut fresh_work, &mut fresh, &mut fresh_widths)
         .unwrap();
     assert_eq!(theta[0].to_bits(), fresh[0].to_bits());
+    // A stream dropped halfway and resumed over its workspace goes on.
+    let mut halves = vec![f64::NAN; needed];
+    assert_eq!(
+        Stream::resume(&estimator, &mut halves).unwrap_err(),
+        Error::NotStarted
+    );
+    let half = u.len() / 2;
+    let mut first = Stream::new(&estimator, &mut halves).unwrap();
+    for k in 0..half {
+        first.push(&[u[k]], &[y[k]]).unwrap();
+    }
+    let mut second = Stream::resume(&estimator, &mut halves).unwrap();
+    assert_eq!(second.samples(), half);
+    for k in half..u.len() {
+        second.push(&[u[k]], &[y[k]]).unwrap();
+    }
+    second.finish(&mut theta, &mut widths).unwrap();
+    assert_eq!(theta[0].to_bits(), fresh[0].to_bits());
     assert!((theta[0] - 0.5).abs() < 0.3, "{theta:?}");
 }

@@ -1,0 +1,60 @@
+//! `twostage export`: an estimator for somewhere else (the microcontroller
+//! runtime's blob).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use twostage::Estimator;
+
+/// Where an exported estimator goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ExportTarget {
+    /// The no_std runtime and its C API (`twostage-runtime`): a versioned,
+    /// checksummed blob read in place (docs/embedded.md).
+    Runtime,
+}
+
+/// Arguments of `twostage export`.
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// The estimator file (from `twostage train`).
+    #[arg(long)]
+    pub estimator: PathBuf,
+    /// What to export to.
+    #[arg(long, value_enum, default_value = "runtime")]
+    pub to: ExportTarget,
+    /// Where to write it (by convention NAME.tsrt).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Run `twostage export`.
+pub fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
+    let estimator = Estimator::load(&args.estimator)?;
+    match args.to {
+        ExportTarget::Runtime => {
+            let blob = estimator
+                .to_runtime()
+                .with_context(|| format!("exporting {}", args.estimator.display()))?;
+            let runtime = twostage::runtime::Estimator::from_bytes(&blob)
+                .map_err(|e| anyhow::anyhow!("the exported blob does not read back: {e}"))?;
+            std::fs::write(&args.out, &blob)
+                .with_context(|| format!("writing {}", args.out.display()))?;
+            writeln!(
+                out,
+                "wrote {} ({} bytes): {} parameter(s) from {} input(s) and {} output(s), {} \
+                 stage-1 features; a stream needs a workspace of {} numbers ({} bytes)",
+                args.out.display(),
+                blob.len(),
+                runtime.n_parameters(),
+                runtime.n_inputs(),
+                runtime.n_outputs(),
+                runtime.n_features(),
+                runtime.workspace_len(),
+                8 * runtime.workspace_len()
+            )?;
+        }
+    }
+    Ok(())
+}
