@@ -116,7 +116,8 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let stream = Self::attach(estimator, work)?;
         let samples = stream.status.first().copied().unwrap_or(f64::NAN);
         let state = stream.status.get(1).copied().unwrap_or(f64::NAN);
-        let whole = samples >= 0.0 && samples < 4.0e15 && samples.fract() == 0.0;
+        let whole =
+            (0.0..4.0e15).contains(&samples) && libm::trunc(samples).to_bits() == samples.to_bits();
         if !(whole && [OPEN, FINISHED, FAILED].contains(&state)) {
             return Err(Error::NotStarted);
         }
