@@ -117,6 +117,33 @@ impl Error {
     }
 }
 
+impl Error {
+    /// What a code of [`Error::code`] means, in one sentence without the
+    /// details (a NUL-terminated string, for C callers); `None` for a code
+    /// that is not one.
+    pub fn explain(code: i32) -> Option<&'static core::ffi::CStr> {
+        Some(match code {
+            -1 => c"not an exported estimator (no TSRT magic): write one with twostage export --to runtime",
+            -2 => c"the blob's format version is not the one this runtime reads: export it again",
+            -3 => c"the blob's declared length differs from the bytes given (truncated or padded copy)",
+            -4 => c"the blob's checksum does not match: it was damaged; export it again",
+            -5 => c"a section of the blob runs past its end",
+            -6 => c"a value in the blob is outside its range (a count beyond the runtime's limits, a non-finite weight)",
+            -7 => c"bytes follow the blob's last section",
+            -8 => c"the workspace is smaller than ts_workspace_len",
+            -9 => c"a sample has the wrong number of inputs or outputs",
+            -10 => c"a sample is not finite: the record cannot be estimated; reset the stream",
+            -11 => c"too few samples for the regression",
+            -12 => c"a regressor is a combination of the others: the input does not excite the system enough",
+            -13 => c"the sums overflowed: samples are far too large",
+            -14 => c"the output array is shorter than the parameters",
+            -15 => c"the stream was finished: reset it first",
+            -16 => c"the workspace holds no stream: start one with ts_stream_start",
+            _ => return None,
+        })
+    }
+}
+
 impl core::fmt::Display for Error {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
