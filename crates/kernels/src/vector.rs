@@ -53,10 +53,16 @@ where
     let n = lower.len().min(upper.len());
     for (i, t) in theta.iter_mut().enumerate().take(n) {
         let (lo, hi) = (lower.at(i), upper.at(i));
+        // As f64::clamp, without its panic on a box with lower > upper
+        // (which would also bring float formatting into a firmware).
         *t = if t.is_nan() {
             0.5 * (lo + hi)
+        } else if *t < lo {
+            lo
+        } else if *t > hi {
+            hi
         } else {
-            t.clamp(lo, hi)
+            *t
         };
     }
 }
