@@ -110,7 +110,7 @@ impl<'a> Estimator<'a> {
             });
         }
         let stored = u32_at(blob, 12).ok_or(Error::Truncated { at: 12 })?;
-        let actual = checksum(blob.get(CHECKSUM_FROM..).unwrap_or(&[]));
+        let actual = crate::format::checksum(blob.get(CHECKSUM_FROM..).unwrap_or(&[]));
         if stored != actual {
             return Err(Error::Checksum { stored, actual });
         }
@@ -379,11 +379,4 @@ impl<'a> Estimator<'a> {
     pub fn workspace_len(&self) -> usize {
         crate::stream::Layout::of(self).total
     }
-}
-
-/// CRC-32 (IEEE), as the exporter computes it.
-pub(crate) fn checksum(bytes: &[u8]) -> u32 {
-    let mut hasher = crc32fast::Hasher::new();
-    hasher.update(bytes);
-    hasher.finalize()
 }

@@ -67,3 +67,17 @@ pub const MAX_SIZES: usize = 10;
 pub const MAX_MEMBERS: usize = 64;
 /// Most experts of a piecewise regressor.
 pub const MAX_EXPERTS: usize = 16;
+
+/// The blob's checksum: CRC-32 (IEEE 802.3, as zip and PNG use it),
+/// computed bit by bit, without a table: it runs once per load, and a
+/// table would cost a microcontroller 1 to 16 KiB of flash.
+///
+/// ```
+/// // The standard check value of CRC-32.
+/// assert_eq!(twostage_runtime::format::checksum(b"123456789"), 0xCBF4_3926);
+/// ```
+pub fn checksum(bytes: &[u8]) -> u32 {
+    const CRC: crc::Crc<u32, crc::NoTable> =
+        crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
+    CRC.checksum(bytes)
+}

@@ -4,7 +4,7 @@ use twostage_kernels::Values;
 use twostage_kernels::cholesky::{RANK_TOLERANCE, solve_lower_in_place};
 use twostage_kernels::vector::clip_to_box;
 
-use crate::dd::{Dd, two_prod};
+use crate::dd::{self, Dd, split_into};
 use crate::error::Error;
 use crate::estimator::{Estimator, Regressor};
 
@@ -36,9 +36,9 @@ impl Layout {
         let per_output_sums = n * (n + 1) + 2 * n;
         let sums = e.n_outputs * per_output_sums;
         let features = e.n_features();
-        // The regressors of a push, or the network's input and layers, or
-        // the envelope's whitened features.
-        let scratch = n.max(features + 2 * e.max_width());
+        // The regressors of a push and their halves, or the network's
+        // input and layers, or the envelope's whitened features.
+        let scratch = (3 * n).max(features + 2 * e.max_width());
         Self {
             history,
             per_output_sums,
@@ -201,7 +201,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let (history, rest) = self.work.split_at_mut(layout.history.min(self.work.len()));
         let (sums, rest) = rest.split_at_mut(layout.sums.min(rest.len()));
         let phi = rest
-            .get_mut(layout.features..layout.features + n)
+            .get_mut(layout.features..layout.features + 3 * n)
             .unwrap_or_default();
         if samples >= lags {
             for (i, y) in outputs.iter().enumerate() {
@@ -217,7 +217,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
                             .unwrap_or(f64::NAN)
                     }
                 };
-                for (c, slot) in phi.iter_mut().enumerate() {
+                for (c, slot) in phi.iter_mut().take(n).enumerate() {
                     *slot = if c < e.na {
                         value(i, c + 1, *y)
                     } else {
@@ -385,20 +385,35 @@ fn store(sums: &mut [f64], k: usize, v: Dd) {
     }
 }
 
-/// `G += phi phi'` (lower triangle) and `b += phi y`, exactly rounded to
-/// double-double.
-fn accumulate(sums: &mut [f64], phi: &[f64], y: f64) {
-    let n = phi.len();
+/// `G += phi phi'` (lower triangle) and `b += phi y`: each product exact,
+/// each sum compensated (see [`crate::dd::accumulate`]). `phi` holds the
+/// n regressors, then room for their halves.
+fn accumulate(sums: &mut [f64], phi: &mut [f64], y: f64) {
+    let n = phi.len() / 3;
+    let (values, halves) = phi.split_at_mut(n);
+    for (v, pair) in values.iter().zip(halves.chunks_exact_mut(2)) {
+        let (hi, lo) = split_into(*v);
+        pair.copy_from_slice(&[hi, lo]);
+    }
+    let half = |r: usize| {
+        (
+            halves.get(2 * r).copied().unwrap_or(f64::NAN),
+            halves.get(2 * r + 1).copied().unwrap_or(f64::NAN),
+        )
+    };
     let mut k = 0;
-    for (r, a) in phi.iter().enumerate() {
-        for b in phi.iter().take(r + 1) {
-            store(sums, k, load(sums, k).add(two_prod(*a, *b)));
+    for (r, a) in values.iter().enumerate() {
+        let ha = half(r);
+        for (c, b) in values.iter().enumerate().take(r + 1) {
+            store(sums, k, dd::accumulate(load(sums, k), *a, ha, half(c), *b));
             k += 1;
         }
     }
     let rhs = packed(n, 0);
-    for (r, a) in phi.iter().enumerate() {
-        store(sums, rhs + r, load(sums, rhs + r).add(two_prod(*a, y)));
+    let hy = split_into(y);
+    for (r, a) in values.iter().enumerate() {
+        let sum = dd::accumulate(load(sums, rhs + r), *a, half(r), hy, y);
+        store(sums, rhs + r, sum);
     }
 }
 
@@ -407,6 +422,9 @@ fn accumulate(sums: &mut [f64], phi: &[f64], y: f64) {
 /// `Err(Some(column))` for a rank deficiency, `Err(None)` for overflow.
 fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usize>> {
     let tolerance = Dd::from_f64(RANK_TOLERANCE * RANK_TOLERANCE);
+    for k in 0..packed(n, 0) + n {
+        store(sums, k, load(sums, k).normalized());
+    }
     for j in 0..n {
         let diagonal = load(sums, packed(j, j));
         if !(diagonal.hi.is_finite() && diagonal.lo.is_finite()) {

@@ -52,7 +52,7 @@ fn seal(blob: &mut [u8]) {
     }
     let length = u32::try_from(blob.len()).unwrap();
     blob[8..12].copy_from_slice(&length.to_le_bytes());
-    let crc = crc32fast::hash(&blob[CHECKSUM_FROM..]);
+    let crc = twostage_runtime::format::checksum(&blob[CHECKSUM_FROM..]);
     blob[12..16].copy_from_slice(&crc.to_le_bytes());
 }
 
@@ -121,6 +121,14 @@ proptest! {
         blob[at..at + 4].copy_from_slice(&value.to_le_bytes());
         seal(&mut blob);
         exercise(&blob);
+    }
+}
+
+proptest! {
+    /// The runtime's table-free CRC against crc32fast's tables.
+    #[test]
+    fn the_checksum_is_crc32(bytes in proptest::collection::vec(any::<u8>(), 0..3000)) {
+        prop_assert_eq!(twostage_runtime::format::checksum(&bytes), crc32fast::hash(&bytes));
     }
 }
 

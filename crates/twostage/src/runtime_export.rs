@@ -231,9 +231,7 @@ impl Estimator {
         let length = u32::try_from(length)
             .map_err(|_| refuse(format!("{length} bytes exceed the format's 4 GiB")))?;
         w.bytes[8..12].copy_from_slice(&length.to_le_bytes());
-        let mut hasher = crc32fast::Hasher::new();
-        hasher.update(&w.bytes[CHECKSUM_FROM..]);
-        let crc = hasher.finalize();
+        let crc = twostage_runtime::format::checksum(&w.bytes[CHECKSUM_FROM..]);
         w.bytes[12..16].copy_from_slice(&crc.to_le_bytes());
         Ok(w.bytes)
     }
