@@ -1,0 +1,115 @@
+//! The microcontroller runtime on this machine: the cost of one pushed
+//! sample (`runtime_push`, per sample) and of the final solve, network,
+//! intervals and envelope (`runtime_finish`), for both presets of both
+//! models (docs/embedded.md puts them beside the Cortex-M4's instruction
+//! counts). The estimators are trained on fewer simulations than the
+//! presets say: the cost depends on the structure, not on m.
+
+use std::hint::black_box;
+
+use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
+use twostage::models::{Benchmark, IoData, PacejkaCar, Simulator};
+use twostage::runtime::{Estimator, Stream};
+use twostage::{Preset, TwoStage};
+use twostage_benches::{config, record};
+
+struct Case {
+    name: &'static str,
+    blob: Vec<u8>,
+    inputs: Vec<f64>,
+    outputs: Vec<f64>,
+}
+
+fn case(name: &'static str, model: &dyn Simulator, preset: Preset, theta: &[f64]) -> Case {
+    let blob = TwoStage::builder(model)
+        .preset(preset)
+        .simulations(1000)
+        .validation(0)
+        .calibration(300)
+        .train()
+        .and_then(|e| e.to_runtime())
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let data: IoData = record(model, theta);
+    Case {
+        name,
+        blob,
+        inputs: data.inputs().iter().copied().collect(),
+        outputs: data.outputs().iter().copied().collect(),
+    }
+}
+
+fn runtime(c: &mut Criterion) {
+    let cases = [
+        case(
+            "benchmark_paper",
+            &Benchmark::new(),
+            twostage::paper_benchmark(),
+            &[0.4],
+        ),
+        case(
+            "benchmark_recommended",
+            &Benchmark::new(),
+            twostage::recommended_benchmark(),
+            &[0.4],
+        ),
+        case(
+            "car_paper",
+            &PacejkaCar::new(),
+            twostage::paper_pacejka(),
+            &[-25.0, -1.0],
+        ),
+        case(
+            "car_recommended",
+            &PacejkaCar::new(),
+            twostage::recommended_pacejka(),
+            &[-25.0, -1.0],
+        ),
+    ];
+    for case in &cases {
+        let estimator = Estimator::from_bytes(&case.blob).unwrap_or_else(|e| panic!("{e}"));
+        let (nu, ny) = (estimator.n_inputs(), estimator.n_outputs());
+        let samples = case.outputs.len() / ny;
+        let q = estimator.n_parameters();
+        let mut work = vec![0.0; estimator.workspace_len()];
+        let push_all = |work: &mut [f64]| {
+            let mut stream = Stream::new(&estimator, work).unwrap_or_else(|e| panic!("{e}"));
+            for t in 0..samples {
+                stream
+                    .push(
+                        black_box(&case.inputs[t * nu..(t + 1) * nu]),
+                        black_box(&case.outputs[t * ny..(t + 1) * ny]),
+                    )
+                    .unwrap_or_else(|e| panic!("{e}"));
+            }
+        };
+        let mut group = c.benchmark_group("runtime_push");
+        group.throughput(Throughput::Elements(samples as u64));
+        group.bench_function(case.name, |b| b.iter(|| push_all(&mut work)));
+        group.finish();
+        push_all(&mut work);
+        let pushed = work.clone();
+        let (mut theta, mut widths) = (vec![0.0; q], vec![0.0; q]);
+        c.benchmark_group("runtime_finish")
+            .bench_function(case.name, |b| {
+                b.iter_batched_ref(
+                    || pushed.clone(),
+                    |work| {
+                        let mut stream =
+                            Stream::resume(&estimator, work).unwrap_or_else(|e| panic!("{e}"));
+                        let a = stream
+                            .finish(&mut theta, &mut widths)
+                            .unwrap_or_else(|e| panic!("{e}"));
+                        black_box((theta[0], a.feature_distance))
+                    },
+                    BatchSize::SmallInput,
+                )
+            });
+    }
+}
+
+criterion_group! {
+    name = benches;
+    config = config();
+    targets = runtime
+}
+criterion_main!(benches);
