@@ -30,6 +30,7 @@
 #![cfg_attr(test, allow(clippy::unwrap_used, clippy::indexing_slicing))]
 
 mod bytes;
+mod correlations;
 mod dd;
 mod error;
 mod estimator;

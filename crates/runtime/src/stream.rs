@@ -4,7 +4,8 @@ use twostage_kernels::Values;
 use twostage_kernels::cholesky::{RANK_TOLERANCE, solve_lower_in_place};
 use twostage_kernels::vector::clip_to_box;
 
-use crate::dd::{self, Dd, split_into};
+use crate::correlations::{Memory, Shape, load, store};
+use crate::dd::Dd;
 use crate::error::Error;
 use crate::estimator::{Estimator, Regressor};
 
@@ -18,11 +19,9 @@ const FAILED: f64 = 2.0;
 /// Where each part of a stream's workspace lies (in `f64`), after the
 /// status words.
 pub(crate) struct Layout {
-    /// Past samples: `signals * lags`, most recent first per signal.
+    pub(crate) shape: Shape,
     history: usize,
-    /// Per output: the packed lower triangle of the normal matrix, then
-    /// the right-hand side, as (hi, lo) pairs.
-    per_output_sums: usize,
+    first: usize,
     sums: usize,
     features: usize,
     scratch: usize,
@@ -32,21 +31,48 @@ pub(crate) struct Layout {
 impl Layout {
     pub(crate) fn of(e: &Estimator<'_>) -> Self {
         let n = e.per_output();
-        let history = (e.n_inputs + e.n_outputs) * e.first_sample();
-        let per_output_sums = n * (n + 1) + 2 * n;
-        let sums = e.n_outputs * per_output_sums;
+        let shape = Shape {
+            outputs: e.n_outputs,
+            signals: e.n_outputs + e.n_inputs,
+            lags: e.first_sample(),
+        };
         let features = e.n_features();
-        // The regressors of a push and their halves, or the network's
-        // input and layers, or the envelope's whitened features.
-        let scratch = (3 * n).max(features + 2 * e.max_width());
+        // One output's normal equations (packed, double-double) while it
+        // is solved, or the network's input and layers, or the envelope's
+        // whitened features.
+        let scratch = (n * (n + 1) + 2 * n).max(features + 2 * e.max_width());
+        let (history, first, sums) = (
+            shape.history_words(),
+            shape.first_words(),
+            shape.sum_words(),
+        );
         Self {
+            shape,
             history,
-            per_output_sums,
+            first,
             sums,
             features,
             scratch,
-            total: STATUS_WORDS + history + sums + features + scratch,
+            total: STATUS_WORDS + history + first + sums + features + scratch,
         }
+    }
+
+    /// The stream's memory, the features and the scratch.
+    fn split<'w>(&self, work: &'w mut [f64]) -> (Memory<'w>, &'w mut [f64], &'w mut [f64]) {
+        let (history, rest) = work.split_at_mut(self.history.min(work.len()));
+        let (first, rest) = rest.split_at_mut(self.first.min(rest.len()));
+        let (sums, rest) = rest.split_at_mut(self.sums.min(rest.len()));
+        let (features, rest) = rest.split_at_mut(self.features.min(rest.len()));
+        let scratch = rest.get_mut(..self.scratch).unwrap_or_default();
+        (
+            Memory {
+                history,
+                first,
+                sums,
+            },
+            features,
+            scratch,
+        )
     }
 }
 
@@ -196,51 +222,17 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             return Err(Error::NotFinite { sample: samples });
         }
         let layout = Layout::of(e);
-        let lags = e.first_sample();
-        let n = e.per_output();
-        let (history, rest) = self.work.split_at_mut(layout.history.min(self.work.len()));
-        let (sums, rest) = rest.split_at_mut(layout.sums.min(rest.len()));
-        let phi = rest
-            .get_mut(layout.features..layout.features + 3 * n)
-            .unwrap_or_default();
-        if samples >= lags {
-            for (i, y) in outputs.iter().enumerate() {
-                // The regressors of output i at this sample: its own past
-                // values, then each input's lagged values.
-                let value = |signal: usize, lag: usize, current: f64| -> f64 {
-                    if lag == 0 {
-                        current
-                    } else {
-                        history
-                            .get(signal * lags + lag - 1)
-                            .copied()
-                            .unwrap_or(f64::NAN)
-                    }
-                };
-                for (c, slot) in phi.iter_mut().take(n).enumerate() {
-                    *slot = if c < e.na {
-                        value(i, c + 1, *y)
-                    } else {
-                        let (j, l) = ((c - e.na) / e.nb, (c - e.na) % e.nb);
-                        let u = inputs.get(j).copied().unwrap_or(f64::NAN);
-                        value(e.n_outputs + j, e.delay + l, u)
-                    };
-                }
-                let own = sums
-                    .get_mut(i * layout.per_output_sums..(i + 1) * layout.per_output_sums)
-                    .unwrap_or_default();
-                accumulate(own, phi, *y);
+        let (mut memory, _, _) = layout.split(self.work);
+        let current = |signal: usize| -> f64 {
+            if signal < e.n_outputs {
+                outputs.get(signal)
+            } else {
+                inputs.get(signal - e.n_outputs)
             }
-        }
-        if lags > 0 {
-            let current = outputs.iter().chain(inputs);
-            for (past, now) in history.chunks_exact_mut(lags).zip(current) {
-                past.copy_within(..lags - 1, 1);
-                if let Some(first) = past.first_mut() {
-                    *first = *now;
-                }
-            }
-        }
+            .copied()
+            .unwrap_or(f64::NAN)
+        };
+        layout.shape.push(samples, current, &mut memory);
         self.set_samples(samples.saturating_add(1));
         Ok(())
     }
@@ -276,16 +268,31 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         // The sums are solved in place: the stream is spent either way.
         self.set_state(FINISHED, 0);
         let layout = Layout::of(e);
-        let rest = self.work.get_mut(layout.history..).unwrap_or_default();
-        let (sums, rest) = rest.split_at_mut(layout.sums.min(rest.len()));
-        let (features, scratch) = rest.split_at_mut(layout.features.min(rest.len()));
-        let scratch = scratch.get_mut(..layout.scratch).unwrap_or_default();
-        for (i, (own, alpha)) in sums
-            .chunks_exact_mut(layout.per_output_sums)
-            .zip(features.chunks_exact_mut(n))
-            .enumerate()
-        {
-            solve(own, n, alpha).map_err(|column| match column {
+        let (memory, features, scratch) = layout.split(self.work);
+        let rhs = packed(n, 0);
+        for (i, alpha) in features.chunks_exact_mut(n).enumerate() {
+            // Column c of output i's regression: its own lags, then each
+            // input's; the target is the output at lag 0.
+            let column = |c: usize| -> (usize, usize) {
+                if c < e.na {
+                    (i, c + 1)
+                } else {
+                    let (j, l) = ((c - e.na) / e.nb, (c - e.na) % e.nb);
+                    (e.n_outputs + j, e.delay + l)
+                }
+            };
+            for r in 0..n {
+                for c in 0..=r {
+                    let g = layout.shape.entry(&memory, samples, column(r), column(c));
+                    store(scratch, packed(r, c), g);
+                }
+                store(
+                    scratch,
+                    rhs + r,
+                    layout.shape.entry(&memory, samples, column(r), (i, 0)),
+                );
+            }
+            solve(scratch, n, alpha).map_err(|column| match column {
                 Some(column) => Error::RankDeficient { output: i, column },
                 None => Error::Overflow,
             })?;
@@ -368,53 +375,6 @@ fn predict(
 #[inline]
 fn packed(row: usize, column: usize) -> usize {
     row * (row + 1) / 2 + column
-}
-
-#[inline]
-fn load(sums: &[f64], k: usize) -> Dd {
-    Dd {
-        hi: sums.get(2 * k).copied().unwrap_or(f64::NAN),
-        lo: sums.get(2 * k + 1).copied().unwrap_or(f64::NAN),
-    }
-}
-
-#[inline]
-fn store(sums: &mut [f64], k: usize, v: Dd) {
-    if let Some(pair) = sums.get_mut(2 * k..2 * k + 2) {
-        pair.copy_from_slice(&[v.hi, v.lo]);
-    }
-}
-
-/// `G += phi phi'` (lower triangle) and `b += phi y`: each product exact,
-/// each sum compensated (see [`crate::dd::accumulate`]). `phi` holds the
-/// n regressors, then room for their halves.
-fn accumulate(sums: &mut [f64], phi: &mut [f64], y: f64) {
-    let n = phi.len() / 3;
-    let (values, halves) = phi.split_at_mut(n);
-    for (v, pair) in values.iter().zip(halves.chunks_exact_mut(2)) {
-        let (hi, lo) = split_into(*v);
-        pair.copy_from_slice(&[hi, lo]);
-    }
-    let half = |r: usize| {
-        (
-            halves.get(2 * r).copied().unwrap_or(f64::NAN),
-            halves.get(2 * r + 1).copied().unwrap_or(f64::NAN),
-        )
-    };
-    let mut k = 0;
-    for (r, a) in values.iter().enumerate() {
-        let ha = half(r);
-        for (c, b) in values.iter().enumerate().take(r + 1) {
-            store(sums, k, dd::accumulate(load(sums, k), *a, ha, half(c), *b));
-            k += 1;
-        }
-    }
-    let rhs = packed(n, 0);
-    let hy = split_into(y);
-    for (r, a) in values.iter().enumerate() {
-        let sum = dd::accumulate(load(sums, rhs + r), *a, half(r), hy, y);
-        store(sums, rhs + r, sum);
-    }
 }
 
 /// Solve the normal equations in `sums` (destroyed) into `alpha`, in

@@ -247,4 +247,62 @@ fn a_two_by_two_model_with_a_log_normal_gain_and_a_linear_map_agrees() {
         .train()
         .unwrap();
     check("two-by-two network, no delay", &network, &model);
+    let delayed = TwoStage::builder(&model)
+        .compressor(Arx::new(2, 2).unwrap().with_delay(3).unwrap())
+        .regressor("mlp:5".parse().unwrap())
+        .simulations(400)
+        .validation(0)
+        .calibration(200)
+        .seed(4)
+        .train()
+        .unwrap();
+    check("two-by-two network, delay 3", &delayed, &model);
+}
+
+/// No input: an autoregression driven by noise, `y_k = a y_{k-1} - 0.2
+/// y_{k-2} + e_k`.
+struct OutputOnly {
+    spec: ModelSpec,
+}
+
+impl Simulator for OutputOnly {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+    fn simulate(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
+        let n = self.spec.n_samples();
+        out.resize(n, 0, 1);
+        let y = out.output_mut(0);
+        for k in 0..n {
+            let e: f64 = StandardNormal.sample(rng);
+            let past = |j: usize| if k >= j { y[k - j] } else { 0.0 };
+            y[k] = theta[0] * past(1) - 0.2 * past(2) + e;
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn an_output_only_model_agrees() {
+    let prior = Prior::uniform_box(&[-0.7], &[0.7]).unwrap();
+    let model = OutputOnly {
+        spec: ModelSpec::new("ar", &["a"], prior, 1.0, 300)
+            .unwrap()
+            .with_signals(&[], &["y"]),
+    };
+    let estimator = TwoStage::builder(&model)
+        .compressor(Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap())
+        .regressor("mlp:4".parse().unwrap())
+        .simulations(400)
+        .validation(0)
+        .calibration(200)
+        .seed(6)
+        .train()
+        .unwrap();
+    check("output only, ar:3", &estimator, &model);
 }
