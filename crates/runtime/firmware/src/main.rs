@@ -101,6 +101,8 @@ fn main() -> ! {
         estimate_case(k, blob, records, work, &mut peak_stack);
     }
     hprintln!("stack {}", peak_stack);
+    #[cfg(not(feature = "baseline"))]
+    hprintln!("view {}", core::mem::size_of::<Estimator<'static>>());
     unsafe extern "C" {
         static __stext: u8;
         static __etext: u8;
