@@ -78,9 +78,8 @@ impl<'a> Cursor<'a> {
     }
 
     pub(crate) fn u32(&mut self) -> Result<u32, Error> {
-        let v = u32_at(self.bytes, self.at).ok_or(Error::Truncated { at: self.at })?;
-        self.at += 4;
-        Ok(v)
+        let run = self.take(1, 4)?;
+        Ok(u32_at(run, 0).unwrap_or(0))
     }
 
     /// A count no larger than `max`.
@@ -93,18 +92,20 @@ impl<'a> Cursor<'a> {
         Ok(v)
     }
 
+    /// The next `count` items of `size` bytes.
+    fn take(&mut self, count: usize, size: usize) -> Result<&'a [u8], Error> {
+        let start = self.at;
+        let run = count
+            .checked_mul(size)
+            .and_then(|n| self.bytes.get(start..start.checked_add(n)?))
+            .ok_or(Error::Truncated { at: start })?;
+        self.at += run.len();
+        Ok(run)
+    }
+
     /// `count` u32s as bytes, then padding to the next multiple of 8.
     pub(crate) fn u32s(&mut self, count: usize) -> Result<&'a [u8], Error> {
-        let start = self.at;
-        let end = count
-            .checked_mul(4)
-            .and_then(|n| start.checked_add(n))
-            .ok_or(Error::Truncated { at: start })?;
-        let run = self
-            .bytes
-            .get(start..end)
-            .ok_or(Error::Truncated { at: start })?;
-        self.at = end;
+        let run = self.take(count, 4)?;
         self.align()?;
         Ok(run)
     }
@@ -119,17 +120,9 @@ impl<'a> Cursor<'a> {
     }
 
     pub(crate) fn f64s(&mut self, count: usize) -> Result<LeF64s<'a>, Error> {
-        let start = self.at;
-        let end = count
-            .checked_mul(8)
-            .and_then(|n| start.checked_add(n))
-            .ok_or(Error::Truncated { at: start })?;
-        let bytes = self
-            .bytes
-            .get(start..end)
-            .ok_or(Error::Truncated { at: start })?;
-        self.at = end;
-        Ok(LeF64s { bytes })
+        Ok(LeF64s {
+            bytes: self.take(count, 8)?,
+        })
     }
 
     /// `count` finite numbers.

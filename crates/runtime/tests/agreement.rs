@@ -135,6 +135,19 @@ fn trained(model: &dyn Simulator, preset: Preset, simulations: usize) -> twostag
         .unwrap()
 }
 
+/// An estimator of the given structure (400 simulations, 200 to calibrate).
+fn structured(model: &dyn Simulator, arx: Arx, regressor: &str, seed: u64) -> twostage::Estimator {
+    TwoStage::builder(model)
+        .compressor(arx)
+        .regressor(regressor.parse().unwrap())
+        .simulations(400)
+        .validation(0)
+        .calibration(200)
+        .seed(seed)
+        .train()
+        .unwrap()
+}
+
 #[test]
 fn the_benchmark_presets_agree_with_the_host() {
     let model = Benchmark::new();
@@ -225,37 +238,12 @@ fn a_two_by_two_model_with_a_log_normal_gain_and_a_linear_map_agrees() {
             .unwrap()
             .with_signals(&["u1", "u2"], &["y1", "y2"]),
     };
-    let arx = Arx::new(2, 3).unwrap().with_delay(1).unwrap();
-    let linear = TwoStage::builder(&model)
-        .compressor(arx)
-        .simulations(400)
-        .validation(0)
-        .calibration(200)
-        .seed(3)
-        .linear(1e-6)
-        .unwrap()
-        .train()
-        .unwrap();
+    let arx = |na, nb, delay| Arx::new(na, nb).unwrap().with_delay(delay).unwrap();
+    let linear = structured(&model, arx(2, 3, 1), "linear", 3);
     check("two-by-two linear", &linear, &model);
-    let network = TwoStage::builder(&model)
-        .compressor(Arx::new(1, 2).unwrap().with_delay(0).unwrap())
-        .regressor("mlp:6".parse().unwrap())
-        .simulations(400)
-        .validation(0)
-        .calibration(200)
-        .seed(3)
-        .train()
-        .unwrap();
+    let network = structured(&model, arx(1, 2, 0), "mlp:6", 3);
     check("two-by-two network, no delay", &network, &model);
-    let delayed = TwoStage::builder(&model)
-        .compressor(Arx::new(2, 2).unwrap().with_delay(3).unwrap())
-        .regressor("mlp:5".parse().unwrap())
-        .simulations(400)
-        .validation(0)
-        .calibration(200)
-        .seed(4)
-        .train()
-        .unwrap();
+    let delayed = structured(&model, arx(2, 2, 3), "mlp:5", 4);
     check("two-by-two network, delay 3", &delayed, &model);
 }
 
@@ -295,14 +283,7 @@ fn an_output_only_model_agrees() {
             .unwrap()
             .with_signals(&[], &["y"]),
     };
-    let estimator = TwoStage::builder(&model)
-        .compressor(Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap())
-        .regressor("mlp:4".parse().unwrap())
-        .simulations(400)
-        .validation(0)
-        .calibration(200)
-        .seed(6)
-        .train()
-        .unwrap();
+    let ar = Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap();
+    let estimator = structured(&model, ar, "mlp:4", 6);
     check("output only, ar:3", &estimator, &model);
 }
