@@ -107,11 +107,12 @@ int32_t ts_stream_start(ts_stream *s, const ts_estimator *e, double *work, size_
 // readable doubles.
 int32_t ts_stream_push(const ts_stream *s, const double *inputs, const double *outputs);
 
-// Finish the record: the estimate into `theta` (`theta_len` >= q), the
-// interval half-widths into `half_widths` (may be null; filled when the
-// estimator is calibrated and `half_widths_len` >= q), and what else is
-// known into `assessment` (may be null). Then `ts_stream_reset` before
-// the next record.
+// Estimate from the samples so far: the estimate into `theta`
+// (`theta_len` >= q), the interval half-widths into `half_widths` (may be
+// null; filled when the estimator is calibrated and `half_widths_len` >=
+// q), and what else is known into `assessment` (may be null). The stream
+// keeps its samples (push more and finish again for the longer record);
+// `ts_stream_reset` starts the next record.
 //
 // # Safety
 // `s` as for `ts_stream_start`; each non-null pointer points to that many

@@ -285,11 +285,12 @@ unsafe fn doubles<'x>(p: *const f64, count: usize) -> Option<&'x [f64]> {
     Some(unsafe { core::slice::from_raw_parts(p, count) })
 }
 
-/// Finish the record: the estimate into `theta` (`theta_len` >= q), the
-/// interval half-widths into `half_widths` (may be null; filled when the
-/// estimator is calibrated and `half_widths_len` >= q), and what else is
-/// known into `assessment` (may be null). Then `ts_stream_reset` before
-/// the next record.
+/// Estimate from the samples so far: the estimate into `theta`
+/// (`theta_len` >= q), the interval half-widths into `half_widths` (may be
+/// null; filled when the estimator is calibrated and `half_widths_len` >=
+/// q), and what else is known into `assessment` (may be null). The stream
+/// keeps its samples (push more and finish again for the longer record);
+/// `ts_stream_reset` starts the next record.
 ///
 /// # Safety
 /// `s` as for `ts_stream_start`; each non-null pointer points to that many

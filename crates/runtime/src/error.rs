@@ -87,8 +87,6 @@ pub enum Error {
         /// Numbers needed.
         needed: usize,
     },
-    /// The stream was finished: reset it before pushing again.
-    Finished,
     /// The workspace holds no stream: start one with `Stream::new`.
     NotStarted,
 }
@@ -111,8 +109,7 @@ impl Error {
             Error::RankDeficient { .. } => -12,
             Error::Overflow => -13,
             Error::OutputTooShort { .. } => -14,
-            Error::Finished => -15,
-            Error::NotStarted => -16,
+            Error::NotStarted => -15,
         }
     }
 }
@@ -137,8 +134,7 @@ impl Error {
             -12 => c"a regressor is a combination of the others: the input does not excite the system enough",
             -13 => c"the sums overflowed: samples are far too large",
             -14 => c"the output array is shorter than the parameters",
-            -15 => c"the stream was finished: reset it first",
-            -16 => c"the workspace holds no stream: start one with ts_stream_start",
+            -15 => c"the workspace holds no stream: start one with ts_stream_start",
             _ => return None,
         })
     }
@@ -199,7 +195,6 @@ impl core::fmt::Display for Error {
             Error::OutputTooShort { needed } => {
                 write!(f, "an output slice needs room for {needed} numbers")
             }
-            Error::Finished => f.write_str("the stream was finished: reset it first"),
             Error::NotStarted => {
                 f.write_str("the workspace holds no stream: start one (Stream::new)")
             }

@@ -13,7 +13,6 @@ use crate::estimator::{Estimator, Regressor};
 /// the sample that was not finite (for a failed stream).
 const STATUS_WORDS: usize = 3;
 const OPEN: f64 = 0.0;
-const FINISHED: f64 = 1.0;
 const FAILED: f64 = 2.0;
 
 /// Where each part of a stream's workspace lies (in `f64`), after the
@@ -144,7 +143,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let state = stream.status.get(1).copied().unwrap_or(f64::NAN);
         let whole =
             (0.0..4.0e15).contains(&samples) && libm::trunc(samples).to_bits() == samples.to_bits();
-        if !(whole && [OPEN, FINISHED, FAILED].contains(&state)) {
+        if !(whole && [OPEN, FAILED].contains(&state)) {
             return Err(Error::NotStarted);
         }
         Ok(stream)
@@ -187,7 +186,6 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     fn check_open(&self) -> Result<(), Error> {
         match self.status.get(1).copied() {
             Some(OPEN) => Ok(()),
-            Some(FINISHED) => Err(Error::Finished),
             _ => Err(Error::NotFinite {
                 sample: self.status.get(2).map_or(0, |s| *s as usize),
             }),
@@ -206,7 +204,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     /// [`Error::SignalCount`] for slices of the wrong length (the sample is
     /// not taken); [`Error::NotFinite`] for a NaN or infinity, after which
     /// the record is refused as the host refuses it, until
-    /// [`Stream::reset`]; [`Error::Finished`] after [`Stream::finish`].
+    /// [`Stream::reset`].
     pub fn push(&mut self, inputs: &[f64], outputs: &[f64]) -> Result<(), Error> {
         let e = self.estimator;
         self.check_open()?;
@@ -237,11 +235,13 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         Ok(())
     }
 
-    /// End the record: the features, the estimate (in the prior box) into
-    /// `theta`, the record's interval half-widths into `half_widths` (when
-    /// calibrated and it has room for q numbers; pass `&mut []` to skip
-    /// them), and the out-of-distribution distance. The stream must be
-    /// [`Stream::reset`] before the next record.
+    /// Estimate from the samples so far: the features, the estimate (in
+    /// the prior box) into `theta`, the record's interval half-widths into
+    /// `half_widths` (when calibrated and it has room for q numbers; pass
+    /// `&mut []` to skip them), and the out-of-distribution distance. The
+    /// stream keeps its samples: push more and finish again for the
+    /// longer record (a control unit can update its estimate as the data
+    /// comes), or [`Stream::reset`] for the next record.
     ///
     /// # Errors
     /// [`Error::OutputTooShort`] for a `theta` shorter than q,
@@ -265,8 +265,6 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         if samples < needed {
             return Err(Error::TooShort { samples, needed });
         }
-        // The sums are solved in place: the stream is spent either way.
-        self.set_state(FINISHED, 0);
         let layout = Layout::of(e);
         let (memory, features, scratch) = layout.split(self.work);
         let rhs = packed(n, 0);

@@ -231,7 +231,6 @@ fn a_misused_stream_answers_with_the_reason() {
             column: 3
         }
     );
-    assert_eq!(stream.push(&[1.0], &[0.0]).unwrap_err(), Error::Finished);
     stream.reset();
     let (u, y) = record();
     for (u, y) in u.iter().zip(&y) {
@@ -246,13 +245,39 @@ fn a_misused_stream_answers_with_the_reason() {
         .estimate_record(&u, &y, &mut fresh_work, &mut fresh, &mut fresh_widths)
         .unwrap();
     assert_eq!(theta[0].to_bits(), fresh[0].to_bits());
+    // Finishing halfway estimates the first half, as a stream of the first
+    // half alone does, and the stream goes on to the whole record.
+    let half = u.len() / 2;
+    let mut early = Stream::new(&estimator, &mut fresh_work).unwrap();
+    for k in 0..half {
+        early.push(&[u[k]], &[y[k]]).unwrap();
+    }
+    let mut so_far = [0.0];
+    early.finish(&mut so_far, &mut []).unwrap();
+    for k in half..u.len() {
+        early.push(&[u[k]], &[y[k]]).unwrap();
+    }
+    early.finish(&mut theta, &mut widths).unwrap();
+    assert_eq!(theta[0].to_bits(), fresh[0].to_bits());
+    let mut prefix_work = vec![0.0; needed];
+    let mut prefix = [0.0];
+    estimator
+        .estimate_record(
+            &u[..half],
+            &y[..half],
+            &mut prefix_work,
+            &mut prefix,
+            &mut [],
+        )
+        .unwrap();
+    assert_eq!(so_far[0].to_bits(), prefix[0].to_bits());
+    assert_ne!(so_far[0].to_bits(), fresh[0].to_bits());
     // A stream dropped halfway and resumed over its workspace goes on.
     let mut halves = vec![f64::NAN; needed];
     assert_eq!(
         Stream::resume(&estimator, &mut halves).unwrap_err(),
         Error::NotStarted
     );
-    let half = u.len() / 2;
     let mut first = Stream::new(&estimator, &mut halves).unwrap();
     for k in 0..half {
         first.push(&[u[k]], &[y[k]]).unwrap();

@@ -91,7 +91,7 @@ int main(int argc, char **argv) {
             printf(" %s", ts_error_message(rc));
         }
         printf("\n");
-        /* Pushing after a finish without a reset is refused. */
+        /* A finished stream goes on (finish estimates the samples so far). */
         if (r == 0) after_finish = ts_stream_push(&stream, u, y);
         ts_stream_reset(&stream);
     }
