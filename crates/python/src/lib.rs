@@ -143,6 +143,13 @@ impl PyEstimator {
         Ok(PyBytes::new(py, &bytes))
     }
 
+    /// The estimator as a blob for the microcontroller runtime and its C
+    /// API (what `twostage export --to runtime` writes).
+    fn to_runtime<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let blob = self.inner.to_runtime().map_err(to_python)?;
+        Ok(PyBytes::new(py, &blob))
+    }
+
     /// Parameter names, in the order of theta.
     #[getter]
     fn parameters(&self) -> Vec<String> {

@@ -52,6 +52,18 @@ def test_the_same_seed_gives_the_cli_s_file(small, tmp_path):
     assert other.to_bytes() != estimator.to_bytes()
 
 
+def test_the_runtime_blob_is_the_cli_s_export(small, tmp_path):
+    _, path = small
+    blob = tmp_path / "small.tsrt"
+    cli("export", "--estimator", str(path), "--to", "runtime", "--out", str(blob))
+    assert twostage.Estimator.load(path).to_runtime() == blob.read_bytes()
+    assert blob.read_bytes()[:4] == b"TSRT"
+    narx = twostage.train(model="benchmark", compress="narx:2,2,2", fit="mlp:3",
+                          sims=200, validate=0, calibrate=0)
+    with pytest.raises(ValueError, match="arx:NA,NB"):
+        narx.to_runtime()
+
+
 def test_estimates_are_the_cli_s_bit_for_bit(small, tmp_path):
     estimator, path = small
     charts = tmp_path / "records"

@@ -66,6 +66,13 @@ class Estimator:
         """The bytes of the estimator file."""
         return self._native.to_bytes()
 
+    def to_runtime(self) -> bytes:
+        """The estimator as a blob for the microcontroller runtime and its C
+        API, as ``twostage export --to runtime`` writes it (docs/embedded.md).
+        Raises ``ValueError`` for a structure the runtime cannot stream (a
+        NARX, PCA or raw compressor)."""
+        return self._native.to_runtime()
+
     @property
     def parameters(self) -> list[str]:
         """Parameter names, in the order of theta."""
