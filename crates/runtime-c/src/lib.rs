@@ -120,11 +120,14 @@ pub unsafe extern "C" fn ts_estimator_load(
     blob: *const u8,
     len: usize,
 ) -> i32 {
-    // SAFETY: the caller passes null or a valid pointer.
-    let Some(out) = (unsafe { out.as_mut() }) else {
+    if out.is_null() {
         return TS_ERROR_NULL;
-    };
-    out.magic = 0;
+    }
+    // Raw writes only: `out` may be fresh, uninitialized storage.
+    // SAFETY: `out` points to a ts_estimator (checked non-null above).
+    let magic = unsafe { core::ptr::addr_of_mut!((*out).magic) };
+    // SAFETY: as above.
+    unsafe { magic.write(0) };
     if blob.is_null() {
         return TS_ERROR_NULL;
     }
@@ -132,14 +135,14 @@ pub unsafe extern "C" fn ts_estimator_load(
     let bytes: &'static [u8] = unsafe { core::slice::from_raw_parts(blob, len) };
     match Estimator::from_bytes(bytes) {
         Ok(estimator) => {
-            // SAFETY: the storage is large and aligned enough (asserted).
+            // SAFETY: the storage is large and aligned enough (asserted),
+            // and the magic is set only once the estimator is in it.
             unsafe {
-                out.opaque
-                    .as_mut_ptr()
+                core::ptr::addr_of_mut!((*out).opaque)
                     .cast::<Estimator<'static>>()
                     .write(estimator);
+                magic.write(LOADED);
             }
-            out.magic = LOADED;
             TS_OK
         }
         Err(e) => e.code(),
