@@ -160,12 +160,7 @@ impl Arx {
 
     /// The first sample that has all its lags: `max(na, delay + nb - 1)`.
     pub fn first_sample(&self) -> usize {
-        let input_reach = if self.nb == 0 {
-            0
-        } else {
-            self.delay + self.nb - 1
-        };
-        self.na.max(input_reach)
+        twostage_kernels::lagged::arx_first_sample(self.na, self.nb, self.delay)
     }
 }
 

@@ -60,6 +60,21 @@ pub struct Conditioning {
     pub refined: f64,
 }
 
+/// The first sample of an ARX regression with `na` output lags and `nb`
+/// input lags from `delay` on: the first whose regressors all lie inside
+/// the record, `max(na, delay + nb - 1)` (just `na` without input lags).
+///
+/// ```
+/// use twostage_kernels::lagged::arx_first_sample;
+/// assert_eq!(arx_first_sample(2, 2, 1), 2);
+/// assert_eq!(arx_first_sample(1, 2, 3), 4);
+/// assert_eq!(arx_first_sample(3, 0, 1), 3);
+/// ```
+pub fn arx_first_sample(na: usize, nb: usize, delay: usize) -> usize {
+    let input_reach = if nb == 0 { 0 } else { delay + nb - 1 };
+    na.max(input_reach)
+}
+
 /// The most refinement steps; a problem that needs more is declined.
 pub const MAX_REFINEMENT_STEPS: usize = 4;
 

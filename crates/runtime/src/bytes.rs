@@ -143,3 +143,36 @@ impl<'a> Cursor<'a> {
         Ok(self.finite(field, 1)?.at(0))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bytes_read_in_place_give_the_slice_s_numbers_and_sums() {
+        let values: [f64; 6] = [0.1, -2.5, 3.0e-7, 1.0e12, -0.0, 7.25];
+        // One byte of offset: an unaligned run, as a blob in flash may be.
+        let mut bytes = [0u8; 49];
+        for (chunk, v) in bytes[1..].chunks_exact_mut(8).zip(values) {
+            chunk.copy_from_slice(&v.to_le_bytes());
+        }
+        let run = LeF64s { bytes: &bytes[1..] };
+        assert_eq!(run.len(), 6);
+        assert!((0..6).all(|i| run.at(i).to_bits() == values[i].to_bits()));
+        assert!(run.at(6).is_nan() && run.at(usize::MAX).is_nan());
+        let x = [1.5, -0.25, 4.0];
+        for offset in 0..=3 {
+            let from_bytes = run.dot_from(offset, &x);
+            assert_eq!(
+                from_bytes.to_bits(),
+                values[..].dot_from(offset, &x).to_bits()
+            );
+            let by_hand: f64 = (0..3).map(|c| values[offset + c] * x[c]).sum();
+            assert_eq!(from_bytes.to_bits(), by_hand.to_bits());
+        }
+        assert!(run.dot_from(4, &x).is_nan() && values[..].dot_from(4, &x).is_nan());
+        assert!(run.dot_from(usize::MAX, &x).is_nan());
+        assert_eq!(run.sub(2, 3).at(0).to_bits(), values[2].to_bits());
+        assert_eq!(run.sub(5, 2).len(), 0);
+    }
+}

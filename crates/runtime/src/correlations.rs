@@ -10,7 +10,7 @@
 //! Each product is exact and each sum compensated
 //! ([`crate::dd::accumulate`]); the ends are subtracted in double-double.
 
-use crate::dd::{self, Dd, split_into, two_prod};
+use crate::dd::{self, Dd, split, two_prod};
 
 /// The shape of a stream's correlations: `signals` = outputs then inputs,
 /// `lags` = the largest regressor lag (the first sample of the window).
@@ -61,12 +61,12 @@ impl Shape {
         };
         for x in 0..self.signals {
             let cx = current(x);
-            let sx = split_into(cx);
+            let sx = split(cx);
             for z in (0..self.signals).filter(|z| self.needed(x, *z)) {
                 for d in 0..=lags.min(t) {
                     let (zv, sz) = if d == 0 {
                         let cz = current(z);
-                        (cz, split_into(cz))
+                        (cz, split(cz))
                     } else {
                         past(m.history, z, d)
                     };
@@ -87,7 +87,7 @@ impl Shape {
             }
             if let Some(block) = m.history.get_mut(3 * s * lags..3 * (s + 1) * lags) {
                 block.copy_within(..3 * (lags - 1), 3);
-                let (hi, lo) = split_into(now);
+                let (hi, lo) = split(now);
                 if let Some(head) = block.get_mut(..3) {
                     head.copy_from_slice(&[now, hi, lo]);
                 }

@@ -32,9 +32,10 @@ fn quick_two_sum(a: f64, b: f64) -> (f64, f64) {
     (s, b - (s - a))
 }
 
-/// `a = hi + lo` with each half holding 26 bits.
+/// `a = hi + lo` with each half holding 26 bits: the halves that
+/// [`accumulate`] multiplies exactly.
 #[inline]
-fn split(a: f64) -> (f64, f64) {
+pub(crate) fn split(a: f64) -> (f64, f64) {
     const SPLITTER: f64 = 134_217_729.0; // 2^27 + 1
     let t = SPLITTER * a;
     let hi = t - (t - a);
@@ -52,7 +53,7 @@ pub(crate) fn two_prod(a: f64, b: f64) -> Dd {
 }
 
 /// `acc + a b` with the product exact and the sum compensated, for
-/// factors already split into halves ([`split_into`]): the running sum
+/// factors already split into halves ([`split`]): the running sum
 /// stays in `hi`, every rounding error goes to `lo` (the Dot2 of Ogita,
 /// Rump and Oishi, "Accurate sum and dot product", SIAM J. Sci. Comput.
 /// 26, 2005: as accurate as twice the working precision, at about half
@@ -72,12 +73,6 @@ pub(crate) fn accumulate(
         hi: s,
         lo: acc.lo + (t + e),
     }
-}
-
-/// The halves of `a` that [`accumulate`] multiplies exactly.
-#[inline]
-pub(crate) fn split_into(a: f64) -> (f64, f64) {
-    split(a)
 }
 
 impl Dd {
@@ -178,7 +173,7 @@ mod tests {
         let (mut exact, mut compensated) = (Dd::default(), Dd::default());
         for (a, b) in terms {
             exact = exact.add(two_prod(a, b));
-            compensated = accumulate(compensated, a, split_into(a), split_into(b), b);
+            compensated = accumulate(compensated, a, split(a), split(b), b);
         }
         let compensated = compensated.normalized();
         // Dot2's bound: within (n eps)^2 of the sum of |terms| (6e8 here).

@@ -358,12 +358,7 @@ impl<'a> Estimator<'a> {
     }
     /// The first sample whose regressors are all inside the record.
     pub(crate) fn first_sample(&self) -> usize {
-        let input_reach = if self.nb == 0 {
-            0
-        } else {
-            self.delay + self.nb - 1
-        };
-        self.na.max(input_reach)
+        twostage_kernels::lagged::arx_first_sample(self.na, self.nb, self.delay)
     }
     pub(crate) fn max_width(&self) -> usize {
         self.max_width

@@ -375,14 +375,11 @@ fn packed(row: usize, column: usize) -> usize {
     row * (row + 1) / 2 + column
 }
 
-/// Solve the normal equations in `sums` (destroyed) into `alpha`, in
+/// Solve the packed normal equations in `sums` (overwritten) into `alpha`, in
 /// double-double, with the QR rank test's tolerance on each pivot's sine.
 /// `Err(Some(column))` for a rank deficiency, `Err(None)` for overflow.
 fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usize>> {
     let tolerance = Dd::from_f64(RANK_TOLERANCE * RANK_TOLERANCE);
-    for k in 0..packed(n, 0) + n {
-        store(sums, k, load(sums, k).normalized());
-    }
     for j in 0..n {
         let diagonal = load(sums, packed(j, j));
         if !(diagonal.hi.is_finite() && diagonal.lo.is_finite()) {
