@@ -136,4 +136,10 @@ impl Progress for Bars {
             }
         });
     }
+
+    fn note(&self, message: &str) {
+        if !self.quiet {
+            eprintln!("{message}");
+        }
+    }
 }

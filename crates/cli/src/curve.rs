@@ -112,7 +112,7 @@ pub fn learning_curve(args: &CurveArgs, out: &mut dyn Write) -> Result<()> {
             args.validate
         );
         let svg = twostage_plot::learning_curve(&title, &curves)?;
-        std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
+        twostage::write_whole(path, svg.as_bytes())?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

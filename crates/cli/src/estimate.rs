@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use twostage::models::{BuiltinModel, IoData};
 use twostage::{Estimator, ModelProfile, Refinement, SignalNames};
 
@@ -253,9 +253,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
         csv(&names, &rows)?
     };
     match &args.out {
-        Some(path) => {
-            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?
-        }
+        Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => std::io::stdout().lock().write_all(text.as_bytes())?,
     }
     Ok(failed)

@@ -39,8 +39,7 @@ pub fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
                 .with_context(|| format!("exporting {}", args.estimator.display()))?;
             let runtime = twostage::runtime::Estimator::from_bytes(&blob)
                 .map_err(|e| anyhow::anyhow!("the exported blob does not read back: {e}"))?;
-            std::fs::write(&args.out, &blob)
-                .with_context(|| format!("writing {}", args.out.display()))?;
+            twostage::write_whole(&args.out, &blob)?;
             writeln!(
                 out,
                 "wrote {} ({} bytes): {} parameter(s) from {} input(s) and {} output(s), {} \

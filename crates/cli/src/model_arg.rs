@@ -44,9 +44,9 @@ impl ModelArgs {
 }
 
 impl Model {
-    /// Identifies the model's description in shard files.
-    pub fn fingerprint(&self) -> u64 {
-        self.0.fingerprint()
+    /// The facade's model.
+    pub fn named(&self) -> &NamedModel {
+        &self.0
     }
 
     /// The model's name.
@@ -59,11 +59,6 @@ impl Model {
         self.0
             .simulator(noiseless)
             .map_err(|e| usage(e.to_string()))
-    }
-
-    /// The model for training on charts read from files.
-    pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
-        self.0.chart_model().map_err(|e| usage(e.to_string()))
     }
 
     /// A preset by name; `None` is the model's default.

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
+use twostage::RunSettings;
 use twostage_models::{BuiltinModel, IoData, Simulator, experiment_rng, run_experiment};
 
 use crate::model_arg::ModelArgs;
@@ -20,9 +21,10 @@ pub struct SimulateArgs {
     /// Parameter vector, comma separated (e.g. `--theta -35,-1.1`); one experiment.
     #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["count", "out_dir"])]
     theta: Option<String>,
-    /// Seed of the random streams (input, noise, and drawn parameters).
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    /// Seed of the random streams (input, noise, and drawn parameters)
+    /// (default 0; with --shard, the training run's default, 1, as `train`).
+    #[arg(long)]
+    seed: Option<u64>,
     /// With --theta: which experiment's random stream to use, so that
     /// experiment I of a `--count` run can be simulated again alone.
     #[arg(long, default_value_t = 0, requires = "theta")]
@@ -49,10 +51,10 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "I/N", requires = "count", conflicts_with_all = ["theta", "out_dir"])]
     shard: Option<String>,
     /// With --shard: the validation chart's size (as `train --validate`).
-    #[arg(long, default_value_t = 1000, requires = "shard")]
+    #[arg(long, default_value_t = RunSettings::default().validation, requires = "shard")]
     validate: usize,
     /// With --shard: the calibration chart's size (as `train --calibrate`).
-    #[arg(long, default_value_t = 4000, requires = "shard")]
+    #[arg(long, default_value_t = RunSettings::default().calibration, requires = "shard")]
     calibrate: usize,
     /// With --shard: store features of this stage-1 compressor (arx:NA,NB,
     /// ar:NA or raw) instead of raw records, O(n) numbers per record.
@@ -121,7 +123,9 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
     }
     match (&args.theta, args.count, &args.out_dir) {
         (Some(theta), None, None) => one_experiment(sim.as_ref(), theta, args),
-        (None, Some(count), Some(dir)) => many_experiments(sim.as_ref(), count, args.seed, dir),
+        (None, Some(count), Some(dir)) => {
+            many_experiments(sim.as_ref(), count, args.seed.unwrap_or(0), dir)
+        }
         _ => Err(usage(
             "give either --theta V[,V...] for one experiment, or --count M --out-dir DIR \
              for M experiments drawn from the prior"
@@ -149,7 +153,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
     let mut record = spec.new_record();
     sim.simulate(
         &theta,
-        &mut experiment_rng(args.seed, args.experiment),
+        &mut experiment_rng(args.seed.unwrap_or(0), args.experiment),
         &mut record,
     )
     .with_context(|| format!("simulating {} at theta = {theta:?}", spec.name()))?;
@@ -158,9 +162,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
     text.push('\n');
     push_rows(&mut text, None, &record);
     match &args.out {
-        Some(path) => {
-            fs::write(path, text).with_context(|| format!("writing {}", path.display()))?
-        }
+        Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => io::stdout().lock().write_all(text.as_bytes())?,
     }
     Ok(())
@@ -185,13 +187,21 @@ fn one_shard(
     }
     let index = twostage::ShardIndex::resolve(shard, |name| std::env::var(name).ok())
         .map_err(|e| usage(e.to_string()))?;
-    let plan = twostage::ShardPlan {
-        model: model.name().to_string(),
-        model_fingerprint: model.fingerprint(),
-        seed: args.seed,
-        counts: [count, args.calibrate, args.validate],
-        compressor: args.compress.clone(),
+    // The shards hold the charts of the run `train` makes of this request.
+    let request = twostage::TrainingRequest {
+        simulations: Some(count),
+        compress: args.compress.clone(),
+        settings: RunSettings {
+            seed: args.seed,
+            validation: args.validate,
+            calibration: args.calibrate,
+            ..RunSettings::default()
+        },
+        ..twostage::TrainingRequest::default()
     };
+    let plan = request
+        .shard_plan(model.named())
+        .map_err(|e| usage(e.to_string()))?;
     let start = std::time::Instant::now();
     let path = twostage::simulate_shard(sim, &plan, index, dir).map_err(|e| match e {
         twostage::Error::InvalidSetting { .. } => usage(e.to_string()),

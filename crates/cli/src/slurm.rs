@@ -5,6 +5,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use twostage::RunSettings;
 
 use crate::model_arg::ModelArgs;
 use crate::usage;
@@ -18,13 +19,13 @@ pub struct SlurmArgs {
     #[arg(long)]
     count: usize,
     /// Validation simulations (as `train --validate`).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = RunSettings::default().validation)]
     validate: usize,
     /// Calibration simulations (as `train --calibrate`).
-    #[arg(long, default_value_t = 4000)]
+    #[arg(long, default_value_t = RunSettings::default().calibration)]
     calibrate: usize,
     /// Seed of the run (as `train --seed`).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = twostage::DEFAULT_SEED)]
     seed: u64,
     /// Number of shards: the array's tasks.
     #[arg(long)]
@@ -137,7 +138,7 @@ pub fn slurm(args: &SlurmArgs, out: &mut dyn Write) -> Result<()> {
         .script
         .clone()
         .unwrap_or_else(|| Path::new(&dir).join("chart.sbatch"));
-    std::fs::write(&path, script).with_context(|| format!("writing {}", path.display()))?;
+    twostage::write_whole(&path, script.as_bytes())?;
     writeln!(
         out,
         "wrote {script}: {n} shards of {dir}\n\

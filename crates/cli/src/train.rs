@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
-use twostage::{ChartFiles, TwoStage};
+use twostage::{Budget, ChartDir, RecordsRequest, RunSettings, TrainingRequest};
 
 use crate::inspect::trust_summary;
 use crate::model_arg::ModelArgs;
@@ -51,15 +51,15 @@ pub struct TrainArgs {
     #[arg(long)]
     seed: Option<u64>,
     /// Fresh simulations for the validation report (0: none).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = RunSettings::default().validation)]
     validate: usize,
     /// Fresh simulations for the conformal intervals (0: none; adaptive
     /// intervals need at least 100). With 4000 the coverage on fresh
     /// records stays within about 2 points of the level.
-    #[arg(long, default_value_t = 4000)]
+    #[arg(long, default_value_t = RunSettings::default().calibration)]
     calibrate: usize,
     /// Interval miscoverage: 0.1 gives 90% intervals, 0.05 95%.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = RunSettings::default().alpha)]
     alpha: f64,
     /// Train on a chart simulated elsewhere: a folder with truth.csv
     /// (experiment,<parameters>) and data.csv (experiment,<inputs>,<outputs>),
@@ -87,137 +87,90 @@ pub struct TrainArgs {
     quiet: bool,
 }
 
-/// The seed when none is given.
-const DEFAULT_SEED: u64 = 1;
-
-/// Whether `--chart` names shard files rather than a chart folder.
-fn is_shard_pattern(chart: &std::path::Path) -> bool {
-    let text = chart.to_string_lossy();
-    text.contains(['*', '?', '[']) || text.ends_with(".tsshard")
+impl TrainArgs {
+    /// The training request these options make.
+    fn request(&self) -> TrainingRequest {
+        let mut records = self
+            .chart
+            .as_ref()
+            .map_or(RecordsRequest::Simulated, RecordsRequest::chart);
+        if let RecordsRequest::Chart {
+            calibration,
+            validation,
+            ..
+        } = &mut records
+        {
+            *calibration = self.calibrate_chart.as_ref().map(ChartDir::new);
+            *validation = self.validate_chart.as_ref().map(ChartDir::new);
+        }
+        let search = self
+            .auto
+            .then(|| match (self.budget_seconds, self.budget_sims) {
+                (_, Some(m)) => Budget::Simulations(m),
+                (Some(t), None) => Budget::Seconds(t),
+                (None, None) => Budget::default(),
+            });
+        TrainingRequest {
+            preset: self.preset.clone(),
+            simulations: self.sims,
+            compress: self.compress.clone(),
+            fit: self.fit.clone(),
+            search,
+            settings: RunSettings {
+                seed: self.seed,
+                validation: self.validate,
+                calibration: self.calibrate,
+                alpha: self.alpha,
+                ..RunSettings::default()
+            },
+            records,
+        }
+    }
 }
 
 /// Run `twostage train`.
 pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     let model = args.model.resolve()?;
-    let sim = if args.chart.is_some() {
-        model.chart_model()?
-    } else {
-        model.simulator(false)?
-    };
-    let preset = model.preset(args.preset.as_deref())?;
-    let mut builder = TwoStage::builder(sim.as_ref())
-        .preset(preset)
-        .seed(args.seed.unwrap_or(DEFAULT_SEED))
-        .validation(args.validate)
-        .calibration(args.calibrate)
-        .alpha(args.alpha);
-    if let Some(m) = args.sims {
-        builder = builder.simulations(m);
-    }
+    // Structures are named by their option when they do not parse.
     if let Some(spec) = &args.compress {
-        builder = builder.compressor(compressor(spec)?);
+        compressor(spec)?;
     }
     if let Some(spec) = &args.fit {
-        builder = builder.regressor(regressor(spec)?);
+        regressor(spec)?;
+    }
+    let request = args.request();
+    if matches!(request.records, RecordsRequest::Shards { .. })
+        && (args.validate_chart.is_some() || args.calibrate_chart.is_some())
+    {
+        return Err(usage(
+            "shards hold their own calibration and validation records: leave out \
+             --validate-chart and --calibrate-chart"
+                .into(),
+        ));
     }
     if !args.quiet {
         eprintln!(
-            "training the {} estimator (simulate, compress, fit, calibrate, validate)...",
-            model.name()
+            "training the {} estimator ({})...",
+            model.name(),
+            request.steps()
         );
     }
     let start = std::time::Instant::now();
     let bars = crate::bars::Bars::new(args.quiet);
-    let failed = |e: twostage::Error| match e {
-        // A setting out of range is the user's to fix, like a bad flag.
-        twostage::Error::InvalidSetting { .. } => usage(e.to_string()),
+    let trained = request.train(model.named(), &bars).map_err(|e| match e {
+        // A setting out of range, or a chart or shard that is not
+        // what it should be, is the user's to fix, like a bad flag.
+        twostage::Error::InvalidSetting { .. }
+        | twostage::Error::ChartFile { .. }
+        | twostage::Error::Shards { .. }
+        | twostage::Error::ModelFile { .. }
+        | twostage::Error::NotAvailable { .. } => usage(e.to_string()),
         other => anyhow::Error::new(other).context("training"),
-    };
-    let chart = |dir: &Option<PathBuf>| -> Result<Option<ChartFiles>> {
-        dir.as_ref()
-            .map(|d| ChartFiles::open(d, sim.spec()).map_err(|e| usage(e.to_string())))
-            .transpose()
-    };
-    let shards = args
-        .chart
-        .as_ref()
-        .filter(|c| is_shard_pattern(c))
-        .map(|pattern| -> Result<twostage::ShardedChart> {
-            if args.validate_chart.is_some() || args.calibrate_chart.is_some() {
-                return Err(usage(
-                    "shards hold their own calibration and validation records: leave out \
-                     --validate-chart and --calibrate-chart"
-                        .into(),
-                ));
-            }
-            let chart = twostage::ShardedChart::open(&pattern.to_string_lossy())
-                .map_err(|e| usage(e.to_string()))?;
-            if chart.plan().model_fingerprint != model.fingerprint() {
-                return Err(usage(format!(
-                    "{}: the shards were simulated from another model description than {} \
-                     (another model file, or this one since edited): simulate them again, or \
-                     train with the model they came from",
-                    chart.pattern(),
-                    model.name()
-                )));
-            }
-            Ok(chart)
-        })
-        .transpose()?;
-    let estimator = if let Some(shards) = &shards {
-        let plan = shards.plan();
-        if !args.quiet {
-            eprintln!(
-                "merging {} shards: {} training, {} calibration and {} validation records, seed {}",
-                shards.files().len(),
-                plan.counts[0],
-                plan.counts[1],
-                plan.counts[2],
-                plan.seed
-            );
-        }
-        builder
-            .seed(args.seed.unwrap_or(plan.seed))
-            .progress(&bars)
-            .train_on_shards(shards)
-            .map_err(|e| match e {
-                twostage::Error::Shards { .. } => usage(e.to_string()),
-                other => failed(other),
-            })?
-    } else if let Some(training) = chart(&args.chart)? {
-        let (calibration, validation) =
-            (chart(&args.calibrate_chart)?, chart(&args.validate_chart)?);
-        builder
-            .progress(&bars)
-            .train_on_chart(&training, calibration.as_ref(), validation.as_ref())
-            .map_err(|e| match e {
-                twostage::Error::ChartFile { .. } => usage(e.to_string()),
-                other => failed(other),
-            })?
-    } else if args.auto {
-        let budget = match (args.budget_seconds, args.budget_sims) {
-            (_, Some(m)) => twostage::Budget::Simulations(m),
-            (Some(t), None) => twostage::Budget::Seconds(t),
-            (None, None) => twostage::Budget::Seconds(120.0),
-        };
-        let outcome = TwoStage::auto(sim.as_ref())
-            .budget(budget)
-            .settings(|b| {
-                b.seed(args.seed.unwrap_or(DEFAULT_SEED))
-                    .validation(args.validate)
-                    .calibration(args.calibrate)
-                    .alpha(args.alpha)
-                    .progress(&bars)
-            })
-            .run()
-            .map_err(failed)?;
-        if !args.quiet {
-            writeln!(out, "{outcome}")?;
-        }
-        outcome.estimator
-    } else {
-        builder.progress(&bars).train().map_err(failed)?
-    };
+    })?;
+    if let (Some(outcome), false) = (trained.search(), args.quiet) {
+        writeln!(out, "{outcome}")?;
+    }
+    let estimator = trained.into_estimator();
     estimator.save(&args.out)?;
     if !args.quiet {
         writeln!(

@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use ndarray::Array2;
 use rayon::prelude::*;
 use twostage::models::{BuiltinModel, IoData, Sampling, run_experiment};
@@ -219,7 +219,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
             )
         };
         let svg = twostage_plot::estimates_vs_truth(&title, &panels)?;
-        std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))?;
+        twostage::write_whole(path, svg.as_bytes())?;
         if !args.json {
             writeln!(out, "wrote {}", path.display())?;
         }

@@ -17,7 +17,9 @@ use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use rayon::prelude::*;
-use twostage::{EstimateWorkspace, NamedModel, TwoStage};
+use twostage::{
+    ChartDir, EstimateWorkspace, NamedModel, RecordsRequest, RunSettings, TrainingRequest,
+};
 
 mod simulator;
 use simulator::{PythonProgress, PythonSimulator};
@@ -400,7 +402,7 @@ impl PyEstimator {
 /// same arguments and seed give the same file as `twostage train`.
 /// `progress` is called as `progress(event, stage, count)`.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=1, validate=1000, calibrate=4000, alpha=0.1, progress=None, chart=None, validate_chart=None, calibrate_chart=None))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None))]
 #[allow(clippy::too_many_arguments)]
 fn train(
     py: Python<'_>,
@@ -413,10 +415,10 @@ fn train(
     sims: Option<usize>,
     compress: Option<&str>,
     fit: Option<&str>,
-    seed: u64,
-    validate: usize,
-    calibrate: usize,
-    alpha: f64,
+    seed: Option<u64>,
+    validate: Option<usize>,
+    calibrate: Option<usize>,
+    alpha: Option<f64>,
     progress: Option<Py<PyAny>>,
     chart: Option<(PathBuf, Option<String>)>,
     validate_chart: Option<(PathBuf, Option<String>)>,
@@ -439,85 +441,74 @@ fn train(
         }
     }
     .map_err(to_python)?;
-    let compressor = compress
-        .map(|spec| {
-            spec.parse::<twostage::CompressorConfig>()
-                .map_err(|e| PyValueError::new_err(format!("compress: {e}")))
-        })
-        .transpose()?;
-    let regressor = fit
-        .map(|spec| {
-            spec.parse::<twostage::RegressorConfig>()
-                .map_err(|e| PyValueError::new_err(format!("fit: {e}")))
-        })
-        .transpose()?;
-    let preset = named.preset(preset).map_err(to_python)?;
-    let source = match (&named, simulator) {
+    let defaults = RunSettings::default();
+    let chart_dir = |given: Option<(PathBuf, Option<String>)>| {
+        given.map(|(dir, label)| ChartDir { dir, label })
+    };
+    let records = match (chart, validate_chart, calibrate_chart) {
+        (None, None, None) => RecordsRequest::Simulated,
+        (Some((dir, label)), validation, calibration) => match RecordsRequest::chart(&dir) {
+            RecordsRequest::Chart { .. } => RecordsRequest::Chart {
+                training: ChartDir { dir, label },
+                calibration: chart_dir(calibration),
+                validation: chart_dir(validation),
+            },
+            shards if validation.is_none() && calibration.is_none() => shards,
+            _ => {
+                return Err(PyValueError::new_err(
+                    "shards hold their own calibration and validation records: leave out \
+                     validate_chart and calibrate_chart",
+                ));
+            }
+        },
+        (None, _, _) => {
+            return Err(PyValueError::new_err(
+                "validate_chart and calibrate_chart go with chart (a training chart)",
+            ));
+        }
+    };
+    let request = TrainingRequest {
+        preset: preset.map(str::to_string),
+        simulations: sims,
+        compress: compress.map(str::to_string),
+        fit: fit.map(str::to_string),
+        search: None,
+        settings: RunSettings {
+            seed,
+            validation: validate.unwrap_or(defaults.validation),
+            calibration: calibrate.unwrap_or(defaults.calibration),
+            alpha: alpha.unwrap_or(defaults.alpha),
+            ..defaults
+        },
+        records,
+    };
+    let python = match (&named, simulator) {
         (NamedModel::File(file), Some(function)) => {
             let python = PythonSimulator::new(function, file.spec().clone(), batch_size);
-            file.simulator_with(Box::new(python)).map_err(to_python)?
+            Some(file.simulator_with(Box::new(python)).map_err(to_python)?)
         }
         (_, Some(_)) => {
             return Err(PyValueError::new_err(
                 "a simulator needs a model file without [source] (model_file= or model_toml=)",
             ));
         }
-        (named, None) if chart.is_some() => named.chart_model().map_err(to_python)?,
-        (named, None) => named.simulator(false).map_err(to_python)?,
+        (_, None) => None,
     };
-    // Charts simulated elsewhere, read as `twostage train --chart` reads them.
-    // A folder, and the label of arrays written there for the occasion.
-    let open =
-        |given: &Option<(PathBuf, Option<String>)>| -> PyResult<Option<twostage::ChartFiles>> {
-            given
-                .as_ref()
-                .map(|(dir, label)| {
-                    let chart =
-                        twostage::ChartFiles::open(dir, source.spec()).map_err(to_python)?;
-                    Ok(match label {
-                        Some(label) => chart.labelled(label.clone()),
-                        None => chart,
-                    })
-                })
-                .transpose()
-        };
-    let (training, validation, calibration) = (
-        open(&chart)?,
-        open(&validate_chart)?,
-        open(&calibrate_chart)?,
-    );
-    if training.is_none() && (validation.is_some() || calibration.is_some()) {
-        return Err(PyValueError::new_err(
-            "validate_chart and calibrate_chart go with chart (a training chart)",
-        ));
-    }
     let reporter = progress.map(PythonProgress::new);
-    let estimator = py.detach(|| -> twostage::Result<twostage::Estimator> {
-        let mut builder = TwoStage::builder(source.as_ref())
-            .preset(preset)
-            .seed(seed)
-            .validation(validate)
-            .calibration(calibrate)
-            .alpha(alpha);
-        if let Some(m) = sims {
-            builder = builder.simulations(m);
-        }
-        if let Some(c) = compressor {
-            builder = builder.compressor(c);
-        }
-        if let Some(r) = regressor {
-            builder = builder.regressor(r);
-        }
-        if let Some(reporter) = &reporter {
-            builder = builder.progress(reporter);
-        }
-        match &training {
-            Some(chart) => builder.train_on_chart(chart, calibration.as_ref(), validation.as_ref()),
-            None => builder.train(),
+    let trained = py.detach(|| -> twostage::Result<twostage::Trained> {
+        let progress: &dyn twostage::Progress = match &reporter {
+            Some(reporter) => reporter,
+            None => &twostage::Silent,
+        };
+        match &python {
+            Some(simulator) => request.train_with(&named, simulator.as_ref(), progress),
+            None => request.train(&named, progress),
         }
     });
-    estimator
-        .map(|inner| PyEstimator { inner })
+    trained
+        .map(|trained| PyEstimator {
+            inner: trained.into_estimator(),
+        })
         .map_err(to_python)
 }
 

@@ -64,7 +64,9 @@ pub(crate) struct Envelope<'a> {
 /// let assessment = stream.finish(&mut theta, &mut half_widths)?;
 /// let host = trained.estimate(&inputs, &outputs)?;
 /// assert!((theta[0] - host[0]).abs() <= 1e-9 * host[0].abs());
-/// assert!(!assessment.out_of_distribution());
+/// // The flag is the host's too.
+/// let on_host = trained.assess(&record)?;
+/// assert_eq!(assessment.out_of_distribution(), on_host.out_of_distribution());
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug, Clone, Copy)]

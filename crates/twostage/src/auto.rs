@@ -27,7 +27,8 @@ use crate::progress::Stage;
 use crate::space::{rows_to_estimates, to_learning_space};
 
 /// How much the search may spend.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Budget {
     /// Wall-clock seconds for the whole search (chart, fits, refit;
     /// calibration and validation come on top). The chart size follows
@@ -37,6 +38,13 @@ pub enum Budget {
     /// A chart of exactly this many simulations, and every candidate
     /// evaluated: the same seed gives the same estimator on any machine.
     Simulations(usize),
+}
+
+impl Default for Budget {
+    /// Two minutes.
+    fn default() -> Self {
+        Self::Seconds(120.0)
+    }
 }
 
 /// One candidate structure and how it scored.
@@ -175,7 +183,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     pub fn auto(simulator: &'a S) -> AutoDesign<'a, S> {
         AutoDesign {
             base: TwoStage::builder(simulator),
-            budget: Budget::Seconds(120.0),
+            budget: Budget::default(),
             compressors: None,
             networks: None,
             screening_rows: SCREENING_ROWS,
@@ -273,7 +281,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 sampling: format!("{:?}", spec.prior().sampling()),
                 regressor: regressor_config,
             },
-            crate::builder::Fresh::Simulate,
+            &self.base.open_records()?,
         )?;
         Ok(AutoOutcome {
             estimator,

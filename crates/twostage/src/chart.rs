@@ -24,7 +24,7 @@ pub struct ExperimentFailure {
 ///
 /// Only `(theta_i, alpha_i)` is kept: records are compressed as they are
 /// simulated, so memory is O(m n), never O(m N).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct CompressedChart {
     /// Parameter vectors of the experiments that succeeded (m' x q).
     pub thetas: Array2<f64>,

@@ -50,8 +50,25 @@ impl ChartFiles {
     /// is not a finite number, an experiment listed twice, no experiment.
     pub fn open(dir: impl AsRef<Path>, spec: &ModelSpec) -> Result<Self> {
         let dir = dir.as_ref().to_path_buf();
-        if !dir.join("truth.csv").exists() && dir.join("theta.npy").exists() {
+        let has = |name: &str| dir.join(name).is_file();
+        if !has("truth.csv") && has("theta.npy") {
             return Self::open_numpy(dir, spec);
+        }
+        let missing = match (has("truth.csv"), has("data.csv")) {
+            (true, true) => None,
+            (true, false) => Some("truth.csv is there but data.csv, its records, is not"),
+            (false, _) if dir.is_dir() => Some("no chart in this folder"),
+            (false, _) => Some("no such folder"),
+        };
+        if let Some(what) = missing {
+            return Err(Located::new(&dir).error(
+                None,
+                format!(
+                    "{what}: a chart is truth.csv and data.csv (as twostage simulate --count \
+                     --out-dir writes them), or theta.npy, outputs.npy and, for a model with \
+                     inputs, inputs.npy"
+                ),
+            ));
         }
         let path = dir.join("truth.csv");
         let file = Located::new(&path);

@@ -133,16 +133,14 @@ impl Estimator {
         decoded.map_err(|reason| FileError::Undecodable { reason }.into())
     }
 
-    /// Write the estimator file to `path`.
+    /// Write the estimator file to `path`, whole or not at all
+    /// ([`write_whole`]): a kill or a full disk mid-write leaves the file
+    /// that was there.
     ///
     /// # Errors
     /// [`Error::Io`] if the file cannot be written.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
-        let path = path.as_ref();
-        std::fs::write(path, self.to_bytes()?).map_err(|cause| Error::Io {
-            path: path.display().to_string(),
-            cause,
-        })
+        write_whole(path, &self.to_bytes()?)
     }
 
     /// Read an estimator file.
@@ -178,4 +176,38 @@ impl Estimator {
             .into()
         })
     }
+}
+
+/// Write `bytes` to `path` whole or not at all: to a temporary file beside
+/// it, flushed to disk, then renamed over `path`, so that a kill or a full
+/// disk during the write leaves whatever was at `path` before (an
+/// estimator it replaces, say) instead of a file cut short.
+///
+/// ```
+/// let path = std::env::temp_dir().join(format!("whole-{}.txt", std::process::id()));
+/// twostage::write_whole(&path, b"one")?;
+/// twostage::write_whole(&path, b"two")?;
+/// assert_eq!(std::fs::read(&path)?, b"two");
+/// # std::fs::remove_file(&path)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// # Errors
+/// [`Error::Io`] naming `path` when the folder cannot take the file.
+pub fn write_whole(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let path = path.as_ref();
+    let io = |cause: std::io::Error| Error::Io {
+        path: path.display().to_string(),
+        cause,
+    };
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    };
+    let mut file = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
+    file.write_all(bytes).map_err(io)?;
+    file.as_file().sync_all().map_err(io)?;
+    file.persist(path).map_err(|e| io(e.error))?;
+    Ok(())
 }

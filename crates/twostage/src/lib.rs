@@ -60,8 +60,12 @@ mod moments;
 mod named_model;
 mod profile;
 mod progress;
+mod records;
 mod refine;
+mod request;
+mod roles;
 mod runtime_export;
+mod settings;
 mod shard;
 mod space;
 
@@ -76,7 +80,7 @@ pub use error::{Error, FileError, Result};
 pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
 };
-pub use file::{FORMAT_VERSION, MAGIC};
+pub use file::{FORMAT_VERSION, MAGIC, write_whole};
 pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE, fmu_model_file};
 pub use moments::WeightedMoments;
 pub use named_model::NamedModel;
@@ -85,8 +89,12 @@ pub use profile::{
     recommended_pacejka,
 };
 pub use progress::{Progress, Silent, Stage};
+pub use records::RecordSource;
 pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
-pub use shard::{ChartRole, ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
+pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
+pub use roles::ChartRole;
+pub use settings::{DEFAULT_SEED, RunSettings};
+pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;

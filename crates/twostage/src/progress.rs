@@ -69,6 +69,11 @@ pub trait Progress: Sync {
     fn end(&self, stage: Stage) {
         let _ = stage;
     }
+    /// A one-line message for the person watching, such as what the run
+    /// found in its records ("merging 4 shards: ...").
+    fn note(&self, message: &str) {
+        let _ = message;
+    }
 }
 
 /// The observer that shows nothing.

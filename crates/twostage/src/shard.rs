@@ -7,7 +7,7 @@
 //! depends on the seed and `j` alone), and writes them, raw or already
 //! compressed, to one file with a checksum. [`ShardedChart::open`] checks
 //! that a set of shard files belongs together and leaves nothing out, and
-//! [`TwoStage::train_on_shards`](crate::TwoStage::train_on_shards) trains
+//! [`TwoStage::train`](crate::TwoStage::train) over [`RecordSource::Shards`](crate::RecordSource::Shards) trains
 //! the very estimator `train` would have (docs/cluster.md,
 //! docs/decisions/023-sharded-charts.md).
 
@@ -18,11 +18,12 @@ use std::path::{Path, PathBuf};
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
-use twostage_models::{Design, IoData, Prior, Sampling, Simulator};
+use twostage_models::{IoData, Simulator};
 
 use crate::chart::{CompressedChart, ExperimentFailure, simulate_range};
 use crate::config::CompressorConfig;
 use crate::error::{Error, Result};
+use crate::roles::ChartRole;
 
 /// Starts every shard file.
 const MAGIC: &[u8; 8] = b"TSSHARD\0";
@@ -30,11 +31,6 @@ const MAGIC: &[u8; 8] = b"TSSHARD\0";
 const SHARD_FORMAT: u32 = 1;
 /// Records simulated (and held in memory) at once while a shard is written.
 const BLOCK: usize = 256;
-/// Offsets that give the calibration and validation charts their own
-/// streams, disjoint from the training chart of the same seed.
-const CALIBRATION_SEED: u64 = 0x4341_4c49_4252_4154; // "CALIBRAT"
-const VALIDATION_SEED: u64 = 0x5641_4c49_4441_5445; // "VALIDATE"
-
 /// A 64-bit FNV-1a hash of `bytes`: identifies a model file in shard
 /// headers (a consistency check between shards, not a security measure).
 ///
@@ -46,56 +42,6 @@ pub fn fingerprint(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |hash, &b| {
         (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
     })
-}
-
-/// The three charts of a training run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum ChartRole {
-    /// The training chart, from the prior's own sampling.
-    Training,
-    /// The calibration chart of the intervals: i.i.d. uniform draws.
-    Calibration,
-    /// The validation chart of the report: i.i.d. uniform draws.
-    Validation,
-}
-
-impl ChartRole {
-    /// All three, in file order.
-    pub const ALL: [ChartRole; 3] = [Self::Training, Self::Calibration, Self::Validation];
-
-    /// A word for messages.
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::Training => "training",
-            Self::Calibration => "calibration",
-            Self::Validation => "validation",
-        }
-    }
-
-    fn slot(self) -> usize {
-        match self {
-            Self::Training => 0,
-            Self::Calibration => 1,
-            Self::Validation => 2,
-        }
-    }
-
-    /// The design of this chart of a run with `seed`: the training chart
-    /// from `prior` as it samples, the calibration and validation charts
-    /// i.i.d. uniform (Theorem 1 and the conformal guarantee assume
-    /// independent draws) with streams of their own. One place, so that
-    /// `train` and the shards draw the same experiments.
-    ///
-    /// # Errors
-    /// An empty design or a malformed prior.
-    pub fn design(self, prior: &Prior, count: usize, seed: u64) -> Result<Design> {
-        let iid = || prior.clone().with_sampling(Sampling::Uniform);
-        Ok(match self {
-            Self::Training => prior.design(count, seed)?,
-            Self::Calibration => iid().design(count, seed ^ CALIBRATION_SEED)?,
-            Self::Validation => iid().design(count, seed ^ VALIDATION_SEED)?,
-        })
-    }
 }
 
 /// Which shard of how many.

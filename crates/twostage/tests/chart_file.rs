@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use twostage::models::{Benchmark, IoData, Simulator, run_experiment};
-use twostage::{ChartFiles, Error, TwoStage};
+use twostage::{ChartFiles, Error, RecordSource, TwoStage};
 
 fn model() -> Benchmark {
     Benchmark::builder().n_samples(200).build().unwrap()
@@ -65,7 +65,12 @@ fn a_chart_from_files_trains_the_same_stages_as_simulating_it() {
         ChartFiles::open(&check, spec).unwrap(),
     );
     let from_files = builder()
-        .train_on_chart(&chart, Some(&other), Some(&other))
+        .records(RecordSource::Files {
+            training: &chart,
+            calibration: Some(&other),
+            validation: Some(&other),
+        })
+        .train()
         .unwrap();
     let simulated = builder().validation(0).calibration(0).train().unwrap();
     // Stage 1 and stage 2 are the same bits: the chart is the design's.
@@ -92,7 +97,12 @@ fn without_other_charts_the_checks_are_held_out_at_random_and_reproducibly() {
             .validation(60)
             .calibration(50)
             .seed(2)
-            .train_on_chart(&chart, None, None)
+            .records(RecordSource::Files {
+                training: &chart,
+                calibration: None,
+                validation: None,
+            })
+            .train()
             .unwrap()
     };
     let a = train();
@@ -103,7 +113,12 @@ fn without_other_charts_the_checks_are_held_out_at_random_and_reproducibly() {
     let e = TwoStage::builder(&model)
         .validation(200)
         .calibration(100)
-        .train_on_chart(&chart, None, None)
+        .records(RecordSource::Files {
+            training: &chart,
+            calibration: None,
+            validation: None,
+        })
+        .train()
         .unwrap_err()
         .to_string();
     assert!(
@@ -273,7 +288,12 @@ fn a_numpy_chart_trains_the_same_networks_as_the_csv_one() {
             .validation(40)
             .calibration(40)
             .seed(1)
-            .train_on_chart(&chart, None, None)
+            .records(RecordSource::Files {
+                training: &chart,
+                calibration: None,
+                validation: None,
+            })
+            .train()
             .unwrap()
     };
     let (from_csv, from_npy) = (train(&csv), train(&npy));

@@ -287,3 +287,35 @@ proptest! {
         prop_assert!(Estimator::from_bytes(&file).is_err());
     }
 }
+
+#[test]
+fn a_save_that_fails_leaves_the_file_it_would_replace_and_no_debris() {
+    let dir = std::env::temp_dir().join(format!("save-whole-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let estimator = Estimator::from_bytes(&files()[0]).unwrap();
+    let path = dir.join("kept.tsest");
+    estimator.save(&path).unwrap();
+    assert_eq!(std::fs::read(&path).unwrap(), estimator.to_bytes().unwrap());
+    // A save that cannot be renamed into place (a folder is there) fails,
+    // names the path, and leaves no temporary file behind.
+    let blocked = dir.join("blocked.tsest");
+    std::fs::create_dir(&blocked).unwrap();
+    let err = estimator.save(&blocked).unwrap_err();
+    assert!(
+        matches!(&err, twostage::Error::Io { path, .. } if path.ends_with("blocked.tsest")),
+        "{err}"
+    );
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["blocked.tsest", "kept.tsest"]);
+    // The file a save replaces is still whole until the new one is.
+    assert_eq!(
+        Estimator::load(&path).unwrap().to_bytes().unwrap(),
+        estimator.to_bytes().unwrap()
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use twostage::models::{Benchmark, Simulator};
 use twostage::{
-    CompressorConfig, Error, RegressorConfig, ShardIndex, ShardPlan, ShardedChart, TwoStage,
-    simulate_shard,
+    CompressorConfig, Error, RecordSource, RegressorConfig, ShardIndex, ShardPlan, ShardedChart,
+    TwoStage, simulate_shard,
 };
 
 const SEED: u64 = 5;
@@ -73,7 +73,8 @@ fn shards_merge_into_the_single_machine_estimator_bit_for_bit() {
             shards(&model, &plan(stored), n, &dir);
             let chart = ShardedChart::open(&pattern(&dir)).unwrap();
             let merged = builder(&model, compress)
-                .train_on_shards(&chart)
+                .records(RecordSource::Shards(&chart))
+                .train()
                 .unwrap()
                 .to_bytes()
                 .unwrap();
@@ -142,7 +143,8 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
     std::fs::write(&files[0], &damaged).unwrap();
     let chart = ShardedChart::open(&pattern(&dir)).unwrap();
     let err = builder(&model, "arx:2,2")
-        .train_on_shards(&chart)
+        .records(RecordSource::Shards(&chart))
+        .train()
         .unwrap_err()
         .to_string();
     assert!(
@@ -155,7 +157,8 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
     std::fs::write(&files[0], &original[..original.len() / 2]).unwrap();
     let chart = ShardedChart::open(&pattern(&dir)).unwrap();
     let err = builder(&model, "arx:2,2")
-        .train_on_shards(&chart)
+        .records(RecordSource::Shards(&chart))
+        .train()
         .unwrap_err()
         .to_string();
     assert!(
@@ -182,12 +185,14 @@ fn shards_refuse_another_seed_or_compressor_at_training() {
     let chart = ShardedChart::open(&pattern(&dir)).unwrap();
     let err = builder(&model, "arx:2,2")
         .seed(9)
-        .train_on_shards(&chart)
+        .records(RecordSource::Shards(&chart))
+        .train()
         .unwrap_err()
         .to_string();
     assert!(err.contains("seed 5") && err.contains("--seed 5"), "{err}");
     let err = builder(&model, "arx:3,3")
-        .train_on_shards(&chart)
+        .records(RecordSource::Shards(&chart))
+        .train()
         .unwrap_err()
         .to_string();
     assert!(err.contains("features of arx:2,2"), "{err}");
@@ -205,7 +210,8 @@ fn shards_refuse_another_seed_or_compressor_at_training() {
     let longer = Benchmark::builder().n_samples(300).build().unwrap();
     let err = TwoStage::builder(&longer)
         .seed(SEED)
-        .train_on_shards(&chart)
+        .records(RecordSource::Shards(&chart))
+        .train()
         .unwrap_err()
         .to_string();
     assert!(

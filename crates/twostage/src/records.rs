@@ -1,0 +1,370 @@
+//! Where the records of a training run come from: simulated on the fly,
+//! read from chart files, or merged from shards. The builder's one `train`
+//! asks its source for the compressed records of each role
+//! ([`ChartRole`]) and never knows which source it reads.
+
+use std::cell::RefCell;
+
+use twostage_compress::Workspace;
+use twostage_models::{IoData, ModelSpec, Prior, Simulator};
+
+use crate::chart::{
+    CompressedChart, ExperimentFailure, compress_chart_observed, simulate_records, within_allowance,
+};
+use crate::chart_file::ChartFiles;
+use crate::config::CompressorConfig;
+use crate::error::{Error, Result};
+use crate::progress::{Progress, Stage};
+use crate::roles::{ChartRole, held_out_roles};
+use crate::shard::ShardedChart;
+
+/// Where the records of a training run come from (see
+/// [`TwoStage::records`](crate::TwoStage::records)).
+#[derive(Debug, Clone, Copy, Default)]
+pub enum RecordSource<'c> {
+    /// Simulated by the builder's simulator: the training chart from the
+    /// prior as it samples, the calibration and validation charts i.i.d.
+    /// from it with streams of their own ([`ChartRole::design`]).
+    #[default]
+    Simulated,
+    /// A chart simulated elsewhere ([`ChartFiles`]); calibration and
+    /// validation on their own charts when given, else on records held out
+    /// of the training chart at random (seeded), as many as the builder's
+    /// calibration and validation sizes say. The certificate then covers
+    /// records drawn as the chart's were.
+    Files {
+        /// The training chart.
+        training: &'c ChartFiles,
+        /// A chart of its own for the conformal intervals.
+        calibration: Option<&'c ChartFiles>,
+        /// A chart of its own for the validation report.
+        validation: Option<&'c ChartFiles>,
+    },
+    /// A chart simulated in shards ([`ShardedChart`], e.g. by a Slurm
+    /// array): its seed and sizes are the run's, and the estimator is, bit
+    /// for bit, the one the same run gives on simulated records.
+    Shards(&'c ShardedChart),
+}
+
+impl RecordSource<'_> {
+    /// Whether the records are simulated as the run goes.
+    pub fn simulates(&self) -> bool {
+        matches!(self, Self::Simulated)
+    }
+}
+
+/// The stage of a run that reads the records of `role`.
+fn stage(role: ChartRole) -> Stage {
+    match role {
+        ChartRole::Training => Stage::Training,
+        ChartRole::Calibration => Stage::Calibration,
+        ChartRole::Validation => Stage::Validation,
+    }
+}
+
+/// A source opened for one run: it knows the run's sizes, seed and
+/// failure allowance, and hands out each role's records compressed.
+pub(crate) struct Records<'a, S: ?Sized> {
+    simulator: &'a S,
+    kind: Kind<'a>,
+    training_prior: Prior,
+    /// Records of the training, calibration and validation roles.
+    counts: [usize; 3],
+    seed: u64,
+    max_failure_fraction: f64,
+    progress: &'a dyn Progress,
+}
+
+enum Kind<'a> {
+    Simulated,
+    Files {
+        chart: &'a ChartFiles,
+        /// Charts of their own, by role slot (none for training).
+        own: [Option<&'a ChartFiles>; 3],
+        /// The role of each row of `chart`.
+        roles: Vec<ChartRole>,
+        /// `chart` compressed, by role slot, once the first role asks.
+        parts: RefCell<Option<Vec<CompressedChart>>>,
+    },
+    Shards(&'a ShardedChart),
+}
+
+/// What a run tells its source.
+pub(crate) struct RunShape<'a> {
+    pub(crate) training_prior: Prior,
+    /// Training simulations, calibration and validation records asked for.
+    pub(crate) counts: [usize; 3],
+    pub(crate) seed: u64,
+    pub(crate) max_failure_fraction: f64,
+    pub(crate) progress: &'a dyn Progress,
+}
+
+impl<'a, S: Simulator + ?Sized> Records<'a, S> {
+    /// Open `source` for a run of `shape` on `simulator`'s model.
+    ///
+    /// # Errors
+    /// A chart too small for the records it must hold out.
+    pub(crate) fn open(
+        simulator: &'a S,
+        source: RecordSource<'a>,
+        shape: RunShape<'a>,
+    ) -> Result<Self> {
+        let RunShape {
+            training_prior,
+            mut counts,
+            seed,
+            max_failure_fraction,
+            progress,
+        } = shape;
+        let kind = match source {
+            RecordSource::Simulated => Kind::Simulated,
+            RecordSource::Shards(chart) => Kind::Shards(chart),
+            RecordSource::Files {
+                training,
+                calibration,
+                validation,
+            } => {
+                let m = training.len();
+                let held_calibration = if calibration.is_some() { 0 } else { counts[1] };
+                let held_validation = if validation.is_some() { 0 } else { counts[2] };
+                let held = held_validation + held_calibration;
+                if m < held + 10 {
+                    return Err(Error::InvalidSetting {
+                        name: "held-out records",
+                        value: format!(
+                            "{held_validation} validation + {held_calibration} calibration"
+                        ),
+                        reason: format!(
+                            "the chart {} has {m} records: at least 10 must be left to train on \
+                             (hold out fewer, or give separate validation and calibration charts)",
+                            training.dir().display()
+                        ),
+                    });
+                }
+                counts = [m - held, held_calibration, held_validation];
+                Kind::Files {
+                    chart: training,
+                    own: [None, calibration, validation],
+                    roles: held_out_roles(m, held_validation, held_calibration, seed),
+                    parts: RefCell::new(None),
+                }
+            }
+        };
+        Ok(Self {
+            simulator,
+            kind,
+            training_prior,
+            counts,
+            seed,
+            max_failure_fraction,
+            progress,
+        })
+    }
+
+    fn spec(&self) -> &ModelSpec {
+        self.simulator.spec()
+    }
+
+    /// `compressor` with its own parameters (an output PCA's directions, a
+    /// NARX's signal scales) fitted on the first training records, or as
+    /// it is when it has none. Compressed shards must have been compressed
+    /// by this very compressor.
+    pub(crate) fn prepare(&self, compressor: CompressorConfig) -> Result<CompressorConfig> {
+        let count = compressor.records_to_prepare();
+        match &self.kind {
+            Kind::Shards(chart) => match &chart.plan().compressor {
+                Some(stored_text) => {
+                    let spec = self.spec();
+                    let stored: CompressorConfig = stored_text.parse()?;
+                    let stored = stored.for_shape(
+                        spec.input_names().len(),
+                        spec.output_names().len(),
+                        spec.n_samples(),
+                    )?;
+                    if stored.to_string() != compressor.to_string() {
+                        return Err(Error::Shards {
+                            what: chart.pattern().to_string(),
+                            message: format!(
+                                "the shards hold features of {stored_text} ({stored}), the \
+                                 training asks for {compressor}: train with --compress \
+                                 {stored_text} (or simulate raw shards)"
+                            ),
+                        });
+                    }
+                    Ok(compressor)
+                }
+                None if count > 0 => compressor.prepared(&chart.first_training_records(count)?),
+                None => Ok(compressor),
+            },
+            _ if count == 0 => Ok(compressor),
+            Kind::Simulated => {
+                let design =
+                    ChartRole::Training.design(&self.training_prior, self.counts[0], self.seed)?;
+                let chart = simulate_records(self.simulator, &design, count, 0.0, None)?;
+                compressor.prepared(&chart.records)
+            }
+            Kind::Files { chart, roles, .. } => {
+                // The first `count` training rows of the chart, whatever
+                // the order its records are stored in.
+                let wanted: Vec<usize> = (0..chart.len())
+                    .filter(|row| roles[*row] == ChartRole::Training)
+                    .take(count)
+                    .collect();
+                let mut first: Vec<(usize, IoData)> = Vec::with_capacity(wanted.len());
+                chart.for_each_record(self.spec(), |row, record| {
+                    if wanted.binary_search(&row).is_ok() {
+                        first.push((row, record.clone()));
+                    }
+                    Ok(())
+                })?;
+                first.sort_by_key(|(row, _)| *row);
+                let records: Vec<IoData> = first.into_iter().map(|(_, r)| r).collect();
+                compressor.prepared(&records)
+            }
+        }
+    }
+
+    /// The records of `role` compressed by `compressor`, rows in design
+    /// (or chart) order, failures listed and held within the run's
+    /// allowance; `None` when the run has no records of that role.
+    ///
+    /// # Errors
+    /// Too many failed records, or a file problem of the source.
+    pub(crate) fn compressed(
+        &self,
+        role: ChartRole,
+        compressor: &CompressorConfig,
+    ) -> Result<Option<CompressedChart>> {
+        let count = self.counts[role.slot()];
+        let chart = match &self.kind {
+            Kind::Files { own, .. } if own[role.slot()].is_some() => {
+                let given = own[role.slot()].unwrap_or_else(|| unreachable!("checked above"));
+                let mut parts = chart_parts(self.spec(), compressor, given, None)?;
+                parts.swap_remove(0)
+            }
+            _ if count == 0 => return Ok(None),
+            Kind::Simulated => {
+                let design = role.design(&self.training_prior, count, self.seed)?;
+                return compress_chart_observed(
+                    self.simulator,
+                    compressor,
+                    &design,
+                    stage(role),
+                    self.max_failure_fraction,
+                    self.progress,
+                )
+                .map(Some);
+            }
+            Kind::Shards(chart) => chart.compressed(role, compressor)?,
+            Kind::Files {
+                chart,
+                roles,
+                parts,
+                ..
+            } => {
+                let mut parts = parts.borrow_mut();
+                if parts.is_none() {
+                    // One pass over the files compresses every role.
+                    *parts = Some(chart_parts(self.spec(), compressor, chart, Some(roles))?);
+                }
+                let part = parts.as_mut().map(|p| std::mem::take(&mut p[role.slot()]));
+                part.unwrap_or_else(|| unreachable!("compressed above"))
+            }
+        };
+        within_allowance(
+            role.label(),
+            &chart.failures,
+            chart.total(),
+            self.max_failure_fraction,
+        )?;
+        Ok(Some(chart))
+    }
+
+    /// How the training records were drawn, for the estimator's record.
+    pub(crate) fn sampling(&self) -> String {
+        match &self.kind {
+            Kind::Simulated => format!("{:?}", self.training_prior.sampling()),
+            Kind::Shards(chart) => chart.sampling().to_string(),
+            Kind::Files { chart, own, .. } => {
+                let source = |slot: usize| match own[slot] {
+                    Some(c) => format!("the chart {}", c.describe()),
+                    None if self.counts[slot] > 0 => {
+                        format!("{} records held out of it at random", self.counts[slot])
+                    }
+                    None => "none".into(),
+                };
+                format!(
+                    "the chart {} (calibration: {}; validation: {})",
+                    chart.describe(),
+                    source(1),
+                    source(2)
+                )
+            }
+        }
+    }
+}
+
+/// A chart's records compressed, split by `roles` (all training without
+/// them) into the three role slots, in the file's order; records that
+/// cannot be compressed are counted as failures of their role.
+fn chart_parts(
+    spec: &ModelSpec,
+    compressor: &CompressorConfig,
+    chart: &ChartFiles,
+    roles: Option<&[ChartRole]>,
+) -> Result<Vec<CompressedChart>> {
+    use twostage_compress::Compressor;
+    let (q, n) = (spec.n_params(), compressor.n_features());
+    // Features by the chart's row, so that the order of its files never
+    // changes the estimator.
+    let mut features = vec![f64::NAN; chart.len() * n];
+    let mut errors: Vec<Option<String>> = vec![None; chart.len()];
+    let mut work = Workspace::new();
+    chart.for_each_record(spec, |row, record| {
+        let alpha = &mut features[row * n..(row + 1) * n];
+        if let Err(e) =
+            compressor.compress_into(record.inputs(), record.outputs(), &mut work, alpha)
+        {
+            errors[row] = Some(e.to_string());
+        }
+        Ok(())
+    })?;
+    let role_of = |row: usize| roles.map_or(ChartRole::Training, |r| r[row]);
+    let mut out = Vec::with_capacity(ChartRole::ALL.len());
+    for role in ChartRole::ALL {
+        let in_part = |row: &usize| role_of(*row) == role;
+        let kept: Vec<usize> = (0..chart.len())
+            .filter(|row| in_part(row) && errors[*row].is_none())
+            .collect();
+        let failures = (0..chart.len())
+            .filter(in_part)
+            .filter_map(|row| {
+                errors[row].as_ref().map(|e| ExperimentFailure {
+                    index: row,
+                    theta: chart.theta(row).to_vec(),
+                    error: e.clone(),
+                })
+            })
+            .collect();
+        let thetas: Vec<f64> = kept
+            .iter()
+            .flat_map(|&r| chart.theta(r).iter().copied())
+            .collect();
+        let kept_features: Vec<f64> = kept
+            .iter()
+            .flat_map(|&r| features[r * n..(r + 1) * n].iter().copied())
+            .collect();
+        let rows = kept.len();
+        let shape = |v: Vec<f64>, w: usize| {
+            ndarray::Array2::from_shape_vec((rows, w), v)
+                .unwrap_or_else(|_| unreachable!("rows * width values were kept"))
+        };
+        out.push(CompressedChart {
+            thetas: shape(thetas, q),
+            features: shape(kept_features, n),
+            indices: kept,
+            failures,
+        });
+    }
+    Ok(out)
+}

@@ -1,0 +1,366 @@
+//! One training request: every setting of a training run, as plain data
+//! with its defaults once, and the one function that trains it. The
+//! command line, the Python package and the shard commands build a
+//! [`TrainingRequest`] and hand it here, so the same request gives the
+//! same estimator file byte for byte whichever door it came through.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use twostage_models::Simulator;
+
+use crate::auto::{AutoOutcome, Budget};
+use crate::builder::{Preset, TwoStage};
+use crate::chart_file::ChartFiles;
+use crate::config::{CompressorConfig, RegressorConfig};
+use crate::error::{Error, Result};
+use crate::estimator::Estimator;
+use crate::named_model::NamedModel;
+use crate::progress::Progress;
+use crate::records::RecordSource;
+use crate::settings::RunSettings;
+use crate::shard::{ShardPlan, ShardedChart};
+
+/// A chart folder (CSV or NumPy files), and how the estimator file names
+/// it when not by its folder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChartDir {
+    /// The folder.
+    pub dir: PathBuf,
+    /// The name the estimator's record gives it (default: the folder).
+    #[serde(default)]
+    pub label: Option<String>,
+}
+
+impl ChartDir {
+    /// The folder `dir`, named by itself.
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            label: None,
+        }
+    }
+
+    fn open(&self, model: &dyn Simulator) -> Result<ChartFiles> {
+        let chart = ChartFiles::open(&self.dir, model.spec())?;
+        Ok(match &self.label {
+            Some(label) => chart.labelled(label.clone()),
+            None => chart,
+        })
+    }
+}
+
+/// Where a request's records come from.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum RecordsRequest {
+    /// Simulated by the model as the run goes.
+    #[default]
+    Simulated,
+    /// A chart simulated elsewhere; calibration and validation on charts
+    /// of their own when given, else on records held out of it.
+    Chart {
+        /// The training chart.
+        training: ChartDir,
+        /// A chart of its own for the intervals.
+        #[serde(default)]
+        calibration: Option<ChartDir>,
+        /// A chart of its own for the validation report.
+        #[serde(default)]
+        validation: Option<ChartDir>,
+    },
+    /// Shard files of `twostage simulate --shard`, named by a pattern such
+    /// as `DIR/shard-*`.
+    Shards {
+        /// The pattern.
+        pattern: String,
+    },
+}
+
+impl RecordsRequest {
+    /// The records a `--chart` argument names: shard files when it is a
+    /// pattern (`*`, `?`, `[`) or a `.tsshard` file, else a chart folder.
+    ///
+    /// ```
+    /// use twostage::RecordsRequest;
+    /// assert!(matches!(RecordsRequest::chart("runs/shard-*"), RecordsRequest::Shards { .. }));
+    /// assert!(matches!(RecordsRequest::chart("runs/sir"), RecordsRequest::Chart { .. }));
+    /// ```
+    pub fn chart(argument: impl AsRef<Path>) -> Self {
+        let text = argument.as_ref().to_string_lossy();
+        if text.contains(['*', '?', '[']) || text.ends_with(".tsshard") {
+            Self::Shards {
+                pattern: text.into_owned(),
+            }
+        } else {
+            Self::Chart {
+                training: ChartDir::new(argument.as_ref()),
+                calibration: None,
+                validation: None,
+            }
+        }
+    }
+}
+
+/// Every setting of one training run. `Default` is the command line's
+/// `twostage train` with no option: the model's default preset,
+/// simulated records and [`RunSettings::default`].
+///
+/// ```
+/// use twostage::{NamedModel, RunSettings, Silent, TrainingRequest};
+/// let request = TrainingRequest {
+///     simulations: Some(200),
+///     compress: Some("arx:2,2".into()),
+///     settings: RunSettings { validation: 100, calibration: 100, ..RunSettings::default() },
+///     ..TrainingRequest::default()
+/// };
+/// // Plain data: what the Python package and a JSON file hold too.
+/// let json = serde_json::to_string(&request)?;
+/// assert_eq!(serde_json::from_str::<TrainingRequest>(&json)?, request);
+/// let trained = request.train(&NamedModel::builtin("benchmark")?, &Silent)?;
+/// assert_eq!(trained.estimator().training().simulations, 200);
+/// assert_eq!(trained.estimator().training().seed, 1);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainingRequest {
+    /// A preset of the model's, by name (`None`: its default: a built-in
+    /// model's `paper`, a model file's first).
+    pub preset: Option<String>,
+    /// Training simulations m (default: the preset's).
+    pub simulations: Option<usize>,
+    /// Stage 1 as `arx:NA,NB` and friends (default: the preset's).
+    pub compress: Option<String>,
+    /// Stage 2 as `mlp:H` and friends (default: the preset's).
+    pub fit: Option<String>,
+    /// Search compressors and networks within this budget instead of
+    /// training a preset.
+    pub search: Option<Budget>,
+    /// Seed, sizes, levels.
+    pub settings: RunSettings,
+    /// Where the records come from.
+    pub records: RecordsRequest,
+}
+
+/// What a request trained: an estimator, and the candidates of a search.
+#[derive(Debug)]
+pub enum Trained {
+    /// A preset (or the structure the request named), trained.
+    Designed(Estimator),
+    /// The winner of an automatic design, with every candidate.
+    Searched(AutoOutcome),
+}
+
+impl Trained {
+    /// The estimator.
+    pub fn estimator(&self) -> &Estimator {
+        match self {
+            Self::Designed(estimator) => estimator,
+            Self::Searched(outcome) => &outcome.estimator,
+        }
+    }
+
+    /// The estimator, owned.
+    pub fn into_estimator(self) -> Estimator {
+        match self {
+            Self::Designed(estimator) => estimator,
+            Self::Searched(outcome) => outcome.estimator,
+        }
+    }
+
+    /// The search's report, when the design was searched.
+    pub fn search(&self) -> Option<&AutoOutcome> {
+        match self {
+            Self::Designed(_) => None,
+            Self::Searched(outcome) => Some(outcome),
+        }
+    }
+}
+
+impl TrainingRequest {
+    /// The steps the run takes, for a line such as "training the benchmark
+    /// estimator (simulate, compress, fit, calibrate, validate)".
+    pub fn steps(&self) -> &'static str {
+        match (&self.records, &self.search) {
+            (RecordsRequest::Simulated, None) => "simulate, compress, fit, calibrate, validate",
+            (RecordsRequest::Simulated, Some(_)) => {
+                "simulate, search compressors and networks, calibrate, validate"
+            }
+            (RecordsRequest::Chart { .. }, _) => {
+                "read the chart, compress, fit, calibrate, validate"
+            }
+            (RecordsRequest::Shards { .. }, _) => {
+                "merge the shards, compress, fit, calibrate, validate"
+            }
+        }
+    }
+
+    /// The preset the request trains on `model`: the named (or default)
+    /// one with the request's structure and size put in.
+    ///
+    /// # Errors
+    /// An unknown preset, or a structure that does not parse.
+    pub fn preset(&self, model: &NamedModel) -> Result<Preset> {
+        let mut preset = model.preset(self.preset.as_deref())?;
+        if let Some(m) = self.simulations {
+            preset.simulations = m;
+        }
+        if let Some(spec) = &self.compress {
+            preset.compressor = spec.parse::<CompressorConfig>()?;
+        }
+        if let Some(spec) = &self.fit {
+            preset.regressor = spec.parse::<RegressorConfig>()?;
+        }
+        Ok(preset)
+    }
+
+    /// The chart of this request's run as shards hold it: the model, the
+    /// seed, the training (the request's or the preset's m), calibration
+    /// and validation sizes, and the compressor of compressed shards.
+    ///
+    /// # Errors
+    /// An unknown preset or a structure that does not parse.
+    pub fn shard_plan(&self, model: &NamedModel) -> Result<ShardPlan> {
+        let preset = self.preset(model)?;
+        Ok(ShardPlan {
+            model: model.name().to_string(),
+            model_fingerprint: model.fingerprint(),
+            seed: self.settings.seed_or_default(),
+            counts: [
+                preset.simulations,
+                self.settings.calibration,
+                self.settings.validation,
+            ],
+            compressor: self.compress.clone(),
+        })
+    }
+
+    /// Train the request on `model`, with the model's own simulator (or,
+    /// for records read from files, the model without one).
+    ///
+    /// # Errors
+    /// As [`Self::train_with`], and what starting the model's source
+    /// reports.
+    pub fn train(&self, model: &NamedModel, progress: &dyn Progress) -> Result<Trained> {
+        let simulator = match self.records {
+            RecordsRequest::Simulated => model.simulator(false)?,
+            _ => model.chart_model()?,
+        };
+        self.train_with(model, simulator.as_ref(), progress)
+    }
+
+    /// Train the request on `model` with `simulator` (which simulates the
+    /// model `model` describes, e.g. a Python function behind a model file
+    /// without a source).
+    ///
+    /// # Errors
+    /// A search asked for with a preset's settings or on records read from
+    /// files; an unknown preset or a structure that does not parse; shards
+    /// of another model description; what [`TwoStage::train`] or
+    /// [`TwoStage::auto`] report.
+    pub fn train_with(
+        &self,
+        model: &NamedModel,
+        simulator: &dyn Simulator,
+        progress: &dyn Progress,
+    ) -> Result<Trained> {
+        if let Some(budget) = self.search {
+            return self.search(budget, simulator, progress);
+        }
+        let builder = TwoStage::builder(simulator)
+            .preset(self.preset(model)?)
+            .settings(self.settings.clone())
+            .progress(progress);
+        let estimator = match &self.records {
+            RecordsRequest::Simulated => builder.train()?,
+            RecordsRequest::Chart {
+                training,
+                calibration,
+                validation,
+            } => {
+                let open = |chart: &Option<ChartDir>| {
+                    chart.as_ref().map(|c| c.open(simulator)).transpose()
+                };
+                let (training, calibration, validation) = (
+                    training.open(simulator)?,
+                    open(calibration)?,
+                    open(validation)?,
+                );
+                builder
+                    .records(RecordSource::Files {
+                        training: &training,
+                        calibration: calibration.as_ref(),
+                        validation: validation.as_ref(),
+                    })
+                    .train()?
+            }
+            RecordsRequest::Shards { pattern } => {
+                let chart = ShardedChart::open(pattern)?;
+                if chart.plan().model_fingerprint != model.fingerprint() {
+                    return Err(Error::Shards {
+                        what: chart.pattern().to_string(),
+                        message: format!(
+                            "the shards were simulated from another model description than {} \
+                             (another model file, or this one since edited): simulate them \
+                             again, or train with the model they came from",
+                            model.name()
+                        ),
+                    });
+                }
+                let plan = chart.plan();
+                progress.note(&format!(
+                    "merging {} shards: {} training, {} calibration and {} validation records, \
+                     seed {}",
+                    chart.files().len(),
+                    plan.counts[0],
+                    plan.counts[1],
+                    plan.counts[2],
+                    plan.seed
+                ));
+                builder.records(RecordSource::Shards(&chart)).train()?
+            }
+        };
+        Ok(Trained::Designed(estimator))
+    }
+
+    /// The automatic design of the request.
+    fn search(
+        &self,
+        budget: Budget,
+        simulator: &dyn Simulator,
+        progress: &dyn Progress,
+    ) -> Result<Trained> {
+        let design_given = [
+            ("preset", self.preset.is_some()),
+            ("simulations", self.simulations.is_some()),
+            ("compress", self.compress.is_some()),
+            ("fit", self.fit.is_some()),
+        ];
+        if let Some((name, _)) = design_given.iter().find(|(_, given)| *given) {
+            return Err(Error::InvalidSetting {
+                name: "search",
+                value: format!("{budget:?} with a {name}"),
+                reason: "the automatic design chooses the structure and the chart size itself: \
+                         leave out the preset, simulations, compress and fit"
+                    .into(),
+            });
+        }
+        if self.records != RecordsRequest::Simulated {
+            return Err(Error::InvalidSetting {
+                name: "search",
+                value: format!("{budget:?}"),
+                reason: "the automatic design simulates its own chart: train records read from \
+                         files with a preset (compress and fit)"
+                    .into(),
+            });
+        }
+        let settings = self.settings.clone();
+        let outcome = TwoStage::auto(simulator)
+            .budget(budget)
+            .settings(|b| b.settings(settings).progress(progress))
+            .run()?;
+        Ok(Trained::Searched(outcome))
+    }
+}
