@@ -52,6 +52,54 @@ def test_the_same_seed_gives_the_cli_s_file(small, tmp_path):
     assert other.to_bytes() != estimator.to_bytes()
 
 
+ONE_REQUEST_MODEL = """
+[model]
+name = "one-request"
+[source]
+builtin = "benchmark"
+[signals]
+inputs = ["u"]
+outputs = ["y"]
+samples = 300
+[[preset]]
+name = "small"
+compress = "arx:3,3"
+fit = "mlp:6"
+sims = 240
+"""
+
+
+def test_one_request_gives_one_file_from_every_door(tmp_path):
+    """The same request, left at its defaults (seed, level) but for the
+    sizes, trained from the command line, from Python, and from 4 shards
+    merged by each: byte for byte one file."""
+    model = tmp_path / "model.toml"
+    model.write_text(ONE_REQUEST_MODEL)
+    sizes = ["--validate", "60", "--calibrate", "120"]
+    from_cli = tmp_path / "cli.tsest"
+    cli("train", "--model-file", str(model), *sizes, "--out", str(from_cli), "--quiet")
+    from_python = twostage.train(
+        model_file=model, validate=60, calibrate=120, progress=False
+    ).to_bytes()
+    for i in range(4):
+        cli(
+            "simulate", "--model-file", str(model), "--count", "240", *sizes,
+            "--shard", "%d/4" % i, "--out", str(tmp_path / "shards"),
+        )
+    pattern = str(tmp_path / "shards" / "shard-*")
+    from_shards = tmp_path / "shards.tsest"
+    cli(
+        "train", "--model-file", str(model), "--chart", pattern,
+        "--out", str(from_shards), "--quiet",
+    )
+    from_python_shards = twostage.train(
+        model_file=model, chart=pattern, progress=False
+    ).to_bytes()
+    assert from_python == from_cli.read_bytes()
+    assert from_shards.read_bytes() == from_cli.read_bytes()
+    assert from_python_shards == from_cli.read_bytes()
+
+
 def test_the_runtime_blob_is_the_cli_s_export(small, tmp_path):
     _, path = small
     blob = tmp_path / "small.tsrt"
@@ -91,6 +139,10 @@ def test_estimates_are_the_cli_s_bit_for_bit(small, tmp_path):
         assert bool(assessed["out_of_distribution"][k]) == row["out_of_distribution"]
     one = estimator.assess(u[0], y[0])
     assert one["theta"].shape == (1,) and isinstance(one["feature_distance"], float)
+    # A record of one input and one output may give them as 1-D arrays.
+    flat = estimator.assess(u[0][:, 0], y[0][:, 0])
+    assert flat["theta"].tolist() == one["theta"].tolist()
+    assert estimator.estimate(u[1][:, 0], y[1][:, 0]).tolist() == batch[1].tolist()
 
 
 def test_a_record_from_elsewhere_is_flagged(small):
@@ -131,8 +183,9 @@ def test_bad_arrays_name_the_argument_and_the_index(small):
     u, y = np.zeros((n, 1)), np.ones((n, 1))
     with pytest.raises(ValueError, match=r"u has dtype float32"):
         estimator.estimate(u.astype(np.float32), y)
-    with pytest.raises(ValueError, match=r"y has shape \[%d\]" % n):
-        estimator.estimate(u, y.ravel())
+    # A lone signal may come as a 1-D array, but not a record of two.
+    with pytest.raises(ValueError, match=r"y has shape \[%d, 2\]" % n):
+        estimator.estimate(u, np.ones((n, 2)))
     bad = y.copy()
     bad[17, 0] = np.nan
     with pytest.raises(ValueError, match=r"y\[17, 0\] is NaN"):

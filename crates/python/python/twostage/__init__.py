@@ -105,8 +105,23 @@ class Estimator:
         float64, giving [q]) or a batch (``u`` [b, N, n_u], ``y``
         [b, N, n_y], giving [b, q]); ``u`` is None for a model without
         input. The records of a batch run in parallel, without the GIL.
-        Bad arrays raise ValueError naming the argument and index."""
+        Bad arrays raise ValueError naming the argument and index. A
+        record of one input (or one output) may give that signal as a 1-D
+        array [N]."""
+        u, y = self._columns(u, y)
         return self._native.estimate(u, y)
+
+    def _columns(self, u, y):
+        """One record's lone signals given as 1-D arrays [N], as the [N, 1]
+        columns the native side reads (views, not copies)."""
+        _, n_u, n_y = self.record_shape
+
+        def column(array, width):
+            if isinstance(array, np.ndarray) and array.ndim == 1 and width == 1:
+                return array.reshape(-1, 1)
+            return array
+
+        return column(u, n_u), column(y, n_y)
 
     def assess(
         self, u: Optional[npt.NDArray[np.float64]], y: npt.NDArray[np.float64]
@@ -122,6 +137,7 @@ class Estimator:
           them stay within, ``out_of_distribution`` whether it is beyond
           (None without a feature envelope).
         """
+        u, y = self._columns(u, y)
         theta, widths, distance, threshold = self._native.assess(u, y)
         result = {
             "theta": theta,
@@ -190,10 +206,10 @@ def train(
     sims: Optional[int] = None,
     compress: Optional[str] = None,
     fit: Optional[str] = None,
-    seed: int = 1,
-    validate: int = 1000,
-    calibrate: int = 4000,
-    alpha: float = 0.1,
+    seed: Optional[int] = None,
+    validate: Optional[int] = None,
+    calibrate: Optional[int] = None,
+    alpha: Optional[float] = None,
     progress: Union[bool, Callable[[str, str, int], Any]] = True,
     chart: Any = None,
     validate_chart: Any = None,
@@ -226,7 +242,9 @@ def train(
 
     ``preset``, ``sims``, ``compress`` (``"arx:2,2"``...), ``fit``
     (``"mlp:10"``...) override the model's default preset as the CLI's
-    flags do. ``progress=True`` shows tqdm bars when tqdm is installed;
+    flags do; ``seed``, ``validate``, ``calibrate`` and ``alpha`` left as
+    None take the command line's defaults (1, 1000, 4000, 0.1), which the
+    Rust side holds once. ``progress=True`` shows tqdm bars when tqdm is installed;
     a callable receives ``(event, stage, count)``. The simulation,
     compression and fitting run in Rust without the GIL.
     """
