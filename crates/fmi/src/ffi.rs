@@ -66,8 +66,13 @@ fn text(pointer: *const c_char) -> String {
 /// The sink of every FMU message: FMI 3.0's log callback itself, and the
 /// end of FMI 2.0's variadic logger (src/logger.c). `environment` is the
 /// instance's [`Log`].
+///
+/// # Safety
+/// `environment` is null or the `Log` an instance was created with, alive;
+/// `category` and `message` are null or NUL-terminated strings, as FMI
+/// promises of its callers.
 #[unsafe(no_mangle)]
-pub extern "C" fn twostage_fmi_log(
+pub unsafe extern "C" fn twostage_fmi_log(
     environment: *mut c_void,
     status: c_int,
     category: *const c_char,

@@ -19,7 +19,8 @@
 //! int rc = ts_stream_finish(&s, theta, 1, half, 1, &a);
 //! ```
 #![cfg_attr(not(feature = "std"), no_std)]
-// The only unsafe code of the project: a C API takes raw pointers. Each
+// Unsafe code, as a C API must be (the FMU loader's FFI in crates/fmi is the
+// project's only other): it takes raw pointers. Each
 // pointer is checked for null, each length comes from the caller or the
 // estimator, and the estimator is kept inside caller-owned storage whose
 // size and alignment are checked at compile time.
@@ -221,10 +222,12 @@ pub unsafe extern "C" fn ts_stream_start(
     work: *mut f64,
     work_len: usize,
 ) -> i32 {
-    // SAFETY: as documented.
-    let Some(stream) = (unsafe { s.as_mut() }) else {
+    // The caller's stream storage may be uninitialized: it is written
+    // through the raw pointer, never read or borrowed, as in
+    // `ts_estimator_load`.
+    if s.is_null() {
         return TS_ERROR_NULL;
-    };
+    }
     // SAFETY: as documented.
     let Some(estimator) = (unsafe { loaded(e) }) else {
         return TS_ERROR_NOT_LOADED;
@@ -236,10 +239,14 @@ pub unsafe extern "C" fn ts_stream_start(
     let slice = unsafe { core::slice::from_raw_parts_mut(work, work_len) };
     match Stream::new(estimator, slice) {
         Ok(_) => {
-            *stream = TsStream {
-                estimator: e,
-                work,
-                work_len,
+            // SAFETY: `s` is not null and points to storage for a TsStream
+            // (as documented); `write` neither reads nor drops what was there.
+            unsafe {
+                s.write(TsStream {
+                    estimator: e,
+                    work,
+                    work_len,
+                })
             };
             TS_OK
         }
