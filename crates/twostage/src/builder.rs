@@ -401,12 +401,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
 
     /// The compressor for the model's number of inputs and outputs.
     fn shaped_compressor(&self) -> Result<CompressorConfig> {
-        let spec = self.simulator.spec();
-        self.compressor.for_shape(
-            spec.input_names().len(),
-            spec.output_names().len(),
-            spec.n_samples(),
-        )
+        self.compressor.for_model(self.simulator.spec())
     }
 }
 

@@ -79,6 +79,16 @@ impl CompressorConfig {
         })
     }
 
+    /// The same compressor for the records of `spec`'s model
+    /// ([`Self::for_shape`] with its inputs, outputs and length).
+    pub(crate) fn for_model(&self, spec: &twostage_models::ModelSpec) -> Result<Self> {
+        self.for_shape(
+            spec.input_names().len(),
+            spec.output_names().len(),
+            spec.n_samples(),
+        )
+    }
+
     /// How many training records [`CompressorConfig::prepared`] uses: 0
     /// when the compressor has nothing to fit.
     pub(crate) fn records_to_prepare(&self) -> usize {

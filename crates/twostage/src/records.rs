@@ -174,13 +174,8 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
         match &self.kind {
             Kind::Shards(chart) => match &chart.plan().compressor {
                 Some(stored_text) => {
-                    let spec = self.spec();
                     let stored: CompressorConfig = stored_text.parse()?;
-                    let stored = stored.for_shape(
-                        spec.input_names().len(),
-                        spec.output_names().len(),
-                        spec.n_samples(),
-                    )?;
+                    let stored = stored.for_model(self.spec())?;
                     if stored.to_string() != compressor.to_string() {
                         return Err(Error::Shards {
                             what: chart.pattern().to_string(),

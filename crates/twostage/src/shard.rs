@@ -232,11 +232,7 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
         .as_deref()
         .map(|text| -> Result<CompressorConfig> {
             let config: CompressorConfig = text.parse()?;
-            let config = config.for_shape(
-                spec.input_names().len(),
-                spec.output_names().len(),
-                spec.n_samples(),
-            )?;
+            let config = config.for_model(spec)?;
             if config.records_to_prepare() > 0 {
                 return Err(Error::InvalidSetting {
                     name: "compress",
