@@ -203,9 +203,12 @@ fn one_shard(
         .shard_plan(model.named())
         .map_err(|e| usage(e.to_string()))?;
     let start = std::time::Instant::now();
-    let path = twostage::simulate_shard(sim, &plan, index, dir).map_err(|e| match e {
-        twostage::Error::InvalidSetting { .. } => usage(e.to_string()),
-        other => anyhow::Error::new(other).context(format!("simulating shard {shard}")),
+    let path = twostage::simulate_shard(sim, &plan, index, dir).map_err(|e| {
+        if e.is_setting() {
+            usage(e.to_string())
+        } else {
+            anyhow::Error::new(e).context(format!("simulating shard {shard}"))
+        }
     })?;
     eprintln!(
         "wrote shard {} of {} ({} training, {} calibration, {} validation records) to {} in {:.1} s",

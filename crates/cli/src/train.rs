@@ -157,15 +157,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     }
     let start = std::time::Instant::now();
     let bars = crate::bars::Bars::new(args.quiet);
-    let trained = request.train(model.named(), &bars).map_err(|e| match e {
-        // A setting out of range, or a chart or shard that is not
-        // what it should be, is the user's to fix, like a bad flag.
-        twostage::Error::InvalidSetting { .. }
-        | twostage::Error::ChartFile { .. }
-        | twostage::Error::Shards { .. }
-        | twostage::Error::ModelFile { .. }
-        | twostage::Error::NotAvailable { .. } => usage(e.to_string()),
-        other => anyhow::Error::new(other).context("training"),
+    let trained = request.train(model.named(), &bars).map_err(|e| {
+        // What was asked for is the user's to fix, like a bad flag.
+        if e.is_setting() {
+            usage(e.to_string())
+        } else {
+            anyhow::Error::new(e).context("training")
+        }
     })?;
     if let (Some(outcome), false) = (trained.search(), args.quiet) {
         writeln!(out, "{outcome}")?;

@@ -37,6 +37,7 @@
 #![deny(missing_docs)]
 
 mod arx;
+mod config;
 mod error;
 mod fast;
 mod narx;
@@ -48,6 +49,7 @@ mod workspace;
 use ndarray::ArrayView2;
 
 pub use arx::Arx;
+pub use config::{CompressorConfig, NARX_SCALE_RECORDS, PCA_RECORDS};
 pub use error::{CompressError, Result};
 pub use narx::{Narx, signal_rms};
 pub use pca::OutputPca;

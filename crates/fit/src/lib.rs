@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 mod check;
+mod config;
 mod covariance;
 mod error;
 mod levenberg_marquardt;
@@ -36,6 +37,7 @@ mod standardize;
 
 use ndarray::{Array2, ArrayView2};
 
+pub use config::{FittedRegressor, RegressorConfig};
 pub use covariance::CovarianceFactor;
 pub use error::{FitError, Result};
 pub use levenberg_marquardt::{

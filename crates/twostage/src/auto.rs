@@ -20,11 +20,13 @@ use twostage_models::{IoData, Simulator};
 
 use crate::builder::{TrainedOn, TwoStage};
 use crate::chart::StoredChart;
-use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
 use crate::progress::Stage;
+use crate::records::ForModel;
 use crate::space::{rows_to_estimates, to_learning_space};
+use twostage_compress::CompressorConfig;
+use twostage_fit::{FittedRegressor, RegressorConfig};
 
 /// How much the search may spend.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -697,7 +699,7 @@ fn evaluate<S: Simulator + ?Sized>(
     }
     let start = Instant::now();
     let outcome = (|| -> Result<(Vec<f64>, CompressorConfig, FittedRegressor)> {
-        let compressor = compressor.prepared(&chart.records[..fit_rows])?;
+        let compressor = compressor.prepared_on(&chart.records[..fit_rows])?;
         let features = compress_all(&compressor, &chart.records)?;
         let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);

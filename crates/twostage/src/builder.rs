@@ -10,16 +10,18 @@ use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
 use crate::chart::{StoredChart, simulate_records};
-use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, SignalNames, TrainingInfo};
 use crate::profile::paper_benchmark;
 use crate::progress::{Progress, Silent, Stage};
+use crate::records::ForModel;
 use crate::records::{RecordSource, Records, RunShape};
 use crate::roles::ChartRole;
 use crate::settings::RunSettings;
 use crate::space::to_learning_space;
+use twostage_compress::CompressorConfig;
+use twostage_fit::{FittedRegressor, RegressorConfig};
 
 /// The choices of one training run, reusable across simulators.
 #[derive(Debug, Clone, PartialEq)]

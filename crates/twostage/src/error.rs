@@ -7,6 +7,10 @@ use twostage_models::SimError;
 use twostage_validate::ValidateError;
 
 /// Everything that can go wrong while training, using or storing an estimator.
+///
+/// [`Error::is_setting`] tells the mistakes a user fixes by changing what
+/// they asked for (a setting, a structure, a file they named) from what
+/// went wrong while the work ran.
 #[derive(Debug, Error)]
 #[non_exhaustive]
 pub enum Error {
@@ -239,3 +243,28 @@ impl From<FileError> for Error {
 
 /// Shorthand for results of this crate.
 pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// Whether the error is in what was asked for: a setting out of range,
+    /// a structure that does not parse or fit the model, a preset or
+    /// method the model lacks, a model file, chart or shard that is not
+    /// what it should be. The command line exits with 2 on these.
+    ///
+    /// ```
+    /// use twostage::CompressorConfig;
+    /// let e: twostage::Error = "arx:x".parse::<CompressorConfig>().unwrap_err().into();
+    /// assert!(e.is_setting());
+    /// ```
+    pub fn is_setting(&self) -> bool {
+        matches!(
+            self,
+            Self::InvalidSetting { .. }
+                | Self::NotAvailable { .. }
+                | Self::ModelFile { .. }
+                | Self::ChartFile { .. }
+                | Self::Shards { .. }
+                | Self::Compression(CompressError::InvalidSetting { .. })
+                | Self::Fit(FitError::InvalidSetting { .. })
+        )
+    }
+}

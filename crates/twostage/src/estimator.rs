@@ -9,10 +9,11 @@ use twostage_models::{IoData, Marginal};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
-use crate::config::{CompressorConfig, FittedRegressor, RegressorConfig};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
 use crate::space::{rows_to_estimates, to_estimate};
+use twostage_compress::CompressorConfig;
+use twostage_fit::{FittedRegressor, RegressorConfig};
 
 /// What the estimator was trained on, for people and for audits.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -8,10 +8,11 @@ use twostage_models::Marginal;
 use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
-use crate::config::{CompressorConfig, FittedRegressor};
 use crate::envelope::FeatureEnvelope;
 use crate::error::FileError;
 use crate::estimator::{Estimator, EstimatorFields, RecordShape, SignalNames, TrainingInfo};
+use twostage_compress::CompressorConfig;
+use twostage_fit::FittedRegressor;
 
 /// A parameter's validation before format version 4: no betting
 /// certificate.

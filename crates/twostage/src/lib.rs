@@ -49,7 +49,6 @@ mod auto;
 mod builder;
 mod chart;
 mod chart_file;
-mod config;
 mod envelope;
 mod error;
 mod estimator;
@@ -74,7 +73,6 @@ pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
 pub use builder::{Preset, TwoStage};
 pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
 pub use chart_file::ChartFiles;
-pub use config::{CompressorConfig, FittedRegressor, RegressorConfig};
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};
 pub use estimator::{
@@ -95,6 +93,8 @@ pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use roles::ChartRole;
 pub use settings::{DEFAULT_SEED, RunSettings};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
+pub use twostage_compress::CompressorConfig;
+pub use twostage_fit::{FittedRegressor, RegressorConfig};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;

@@ -19,9 +19,10 @@ use twostage_models::{
 };
 
 use crate::builder::Preset;
-use crate::config::{CompressorConfig, RegressorConfig};
 use crate::error::{Error, Result};
 use crate::profile::ModelProfile;
+use twostage_compress::CompressorConfig;
+use twostage_fit::RegressorConfig;
 
 /// An annotated model file, as `twostage models --template` prints it.
 pub const TEMPLATE: &str = include_str!("model_file_template.toml");
@@ -1548,13 +1549,19 @@ impl Locator<'_> {
                 ));
             }
             let compressor: CompressorConfig =
-                r.compress.get_ref().parse().map_err(|e: Error| {
-                    self.error(Some(r.compress.span()), "preset.compress", e.to_string())
-                })?;
+                r.compress
+                    .get_ref()
+                    .parse()
+                    .map_err(|e: twostage_compress::CompressError| {
+                        self.error(Some(r.compress.span()), "preset.compress", e.to_string())
+                    })?;
             let regressor: RegressorConfig =
-                r.fit.get_ref().parse().map_err(|e: Error| {
-                    self.error(Some(r.fit.span()), "preset.fit", e.to_string())
-                })?;
+                r.fit
+                    .get_ref()
+                    .parse()
+                    .map_err(|e: twostage_fit::FitError| {
+                        self.error(Some(r.fit.span()), "preset.fit", e.to_string())
+                    })?;
             let simulations = match &r.sims {
                 Some(m) => usize::try_from(*m.get_ref())
                     .ok()

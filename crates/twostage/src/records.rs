@@ -12,11 +12,11 @@ use crate::chart::{
     CompressedChart, ExperimentFailure, compress_chart_observed, simulate_records, within_allowance,
 };
 use crate::chart_file::ChartFiles;
-use crate::config::CompressorConfig;
 use crate::error::{Error, Result};
 use crate::progress::{Progress, Stage};
 use crate::roles::{ChartRole, held_out_roles};
 use crate::shard::ShardedChart;
+use twostage_compress::CompressorConfig;
 
 /// Where the records of a training run come from (see
 /// [`TwoStage::records`](crate::TwoStage::records)).
@@ -50,6 +50,29 @@ impl RecordSource<'_> {
     /// Whether the records are simulated as the run goes.
     pub fn simulates(&self) -> bool {
         matches!(self, Self::Simulated)
+    }
+}
+
+/// A stage-1 compressor fitted to a model's records: shaped for its
+/// signals and length, prepared on its whole records.
+pub(crate) trait ForModel: Sized {
+    /// The same compressor for the records of `spec`'s model.
+    fn for_model(&self, spec: &ModelSpec) -> Result<Self>;
+    /// The compressor with its own parameters fitted on `records`.
+    fn prepared_on(&self, records: &[IoData]) -> Result<Self>;
+}
+
+impl ForModel for CompressorConfig {
+    fn for_model(&self, spec: &ModelSpec) -> Result<Self> {
+        Ok(self.for_shape(
+            spec.input_names().len(),
+            spec.output_names().len(),
+            spec.n_samples(),
+        )?)
+    }
+
+    fn prepared_on(&self, records: &[IoData]) -> Result<Self> {
+        Ok(self.prepared(records.iter().map(|r| (r.inputs(), r.outputs())))?)
     }
 }
 
@@ -188,7 +211,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                     }
                     Ok(compressor)
                 }
-                None if count > 0 => compressor.prepared(&chart.first_training_records(count)?),
+                None if count > 0 => compressor.prepared_on(&chart.first_training_records(count)?),
                 None => Ok(compressor),
             },
             _ if count == 0 => Ok(compressor),
@@ -196,7 +219,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                 let design =
                     ChartRole::Training.design(&self.training_prior, self.counts[0], self.seed)?;
                 let chart = simulate_records(self.simulator, &design, count, 0.0, None)?;
-                compressor.prepared(&chart.records)
+                compressor.prepared_on(&chart.records)
             }
             Kind::Files { chart, roles, .. } => {
                 // The first `count` training rows of the chart, whatever
@@ -214,7 +237,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                 })?;
                 first.sort_by_key(|(row, _)| *row);
                 let records: Vec<IoData> = first.into_iter().map(|(_, r)| r).collect();
-                compressor.prepared(&records)
+                compressor.prepared_on(&records)
             }
         }
     }

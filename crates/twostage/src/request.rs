@@ -12,7 +12,6 @@ use twostage_models::Simulator;
 use crate::auto::{AutoOutcome, Budget};
 use crate::builder::{Preset, TwoStage};
 use crate::chart_file::ChartFiles;
-use crate::config::{CompressorConfig, RegressorConfig};
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
 use crate::named_model::NamedModel;
@@ -20,6 +19,8 @@ use crate::progress::Progress;
 use crate::records::RecordSource;
 use crate::settings::RunSettings;
 use crate::shard::{ShardPlan, ShardedChart};
+use twostage_compress::CompressorConfig;
+use twostage_fit::RegressorConfig;
 
 /// A chart folder (CSV or NumPy files), and how the estimator file names
 /// it when not by its folder.

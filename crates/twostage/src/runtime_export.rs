@@ -10,9 +10,10 @@ use twostage_runtime::format::{
     REGRESSOR_PIECEWISE, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
 };
 
-use crate::config::{CompressorConfig, FittedRegressor};
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
+use twostage_compress::CompressorConfig;
+use twostage_fit::FittedRegressor;
 
 /// Little-endian sections, each starting at a multiple of 8 bytes.
 struct Writer {

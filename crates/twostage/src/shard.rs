@@ -21,9 +21,10 @@ use twostage_compress::{Compressor, Workspace};
 use twostage_models::{IoData, Simulator};
 
 use crate::chart::{CompressedChart, ExperimentFailure, simulate_range};
-use crate::config::CompressorConfig;
 use crate::error::{Error, Result};
+use crate::records::ForModel;
 use crate::roles::ChartRole;
+use twostage_compress::CompressorConfig;
 
 /// Starts every shard file.
 const MAGIC: &[u8; 8] = b"TSSHARD\0";

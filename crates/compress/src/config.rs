@@ -1,19 +1,14 @@
-//! The stage-1 and stage-2 choices, as serializable values.
+//! The stage-1 choice as a serializable value, and its specification as
+//! the command line and model files write it (`arx:5,5`, `pca:8`, ...).
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_compress::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace, signal_rms};
-use twostage_models::IoData;
 
-use crate::error::{Error, Result};
-use twostage_fit::{
-    FittedLinear, FittedMlp, FittedPiecewise, Mlp, MlpParams, Piecewise, Predictor, Regressor,
-    Ridge,
-};
+use crate::error::{CompressError as Error, Result};
+use crate::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace, signal_rms};
 
 /// The compression map g of stage 1.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[non_exhaustive]
 pub enum CompressorConfig {
     /// ARX(na, nb) least-squares coefficients, eq. (2).
     Arx(Arx),
@@ -28,10 +23,11 @@ pub enum CompressorConfig {
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
 /// 1000 training records for the output PCA's directions (more cost
-/// without changing the leading directions), 32 for the NARX's signal
-/// scales.
-pub(crate) const PCA_RECORDS: usize = 1000;
-pub(crate) const NARX_SCALE_RECORDS: usize = 32;
+/// without changing the leading directions); a NARX's signal scales take
+/// [`NARX_SCALE_RECORDS`].
+pub const PCA_RECORDS: usize = 1000;
+/// Records a NARX's signal scales are measured on (see [`PCA_RECORDS`]).
+pub const NARX_SCALE_RECORDS: usize = 32;
 
 impl CompressorConfig {
     /// The same compressor for records of `n_inputs` inputs, `n_outputs`
@@ -39,8 +35,7 @@ impl CompressorConfig {
     /// friends are written for one input and one output, `raw` for any).
     ///
     /// ```
-    /// use twostage::CompressorConfig;
-    /// use twostage::compress::Compressor;
+    /// use twostage_compress::{Compressor, CompressorConfig};
     /// let ar: CompressorConfig = "ar:3".parse()?;
     /// // Output-only: three lags of each of two outputs.
     /// assert_eq!(ar.for_shape(0, 2, 100)?.n_features(), 6);
@@ -49,11 +44,11 @@ impl CompressorConfig {
     /// // The whole record: 10 samples of one output.
     /// let raw: CompressorConfig = "raw".parse()?;
     /// assert_eq!(raw.for_shape(0, 1, 10)?.n_features(), 10);
-    /// # Ok::<(), twostage::Error>(())
+    /// # Ok::<(), twostage_compress::CompressError>(())
     /// ```
     ///
     /// # Errors
-    /// [`Error::InvalidSetting`] for a shape the compressor cannot take: an
+    /// [`CompressError::InvalidSetting`](crate::CompressError::InvalidSetting) for a shape the compressor cannot take: an
     /// ARX with input lags for a model without input, a NARX for more than
     /// one input or output.
     pub fn for_shape(&self, n_inputs: usize, n_outputs: usize, n_samples: usize) -> Result<Self> {
@@ -79,19 +74,9 @@ impl CompressorConfig {
         })
     }
 
-    /// The same compressor for the records of `spec`'s model
-    /// ([`Self::for_shape`] with its inputs, outputs and length).
-    pub(crate) fn for_model(&self, spec: &twostage_models::ModelSpec) -> Result<Self> {
-        self.for_shape(
-            spec.input_names().len(),
-            spec.output_names().len(),
-            spec.n_samples(),
-        )
-    }
-
     /// How many training records [`CompressorConfig::prepared`] uses: 0
     /// when the compressor has nothing to fit.
-    pub(crate) fn records_to_prepare(&self) -> usize {
+    pub fn records_to_prepare(&self) -> usize {
         match self {
             CompressorConfig::Pca(pca) if !pca.is_fitted() => PCA_RECORDS,
             CompressorConfig::Narx(narx) if narx.has_unit_scales() => NARX_SCALE_RECORDS,
@@ -99,16 +84,26 @@ impl CompressorConfig {
         }
     }
 
-    /// The compressor with its unfitted parts fitted on `records`: an output
-    /// PCA's directions, a NARX's signal scales (the RMS of each signal
-    /// over the records); anything else as it is.
-    pub(crate) fn prepared(&self, records: &[IoData]) -> Result<CompressorConfig> {
+    /// The compressor with its unfitted parts fitted on `records` (each
+    /// its inputs and outputs, a column per signal): an output PCA's
+    /// directions, a NARX's signal scales (the RMS of each signal over the
+    /// records); anything else as it is.
+    ///
+    /// # Errors
+    /// What fitting the PCA or setting the scales reports (too few
+    /// records, non-finite samples).
+    pub fn prepared<'r>(
+        &self,
+        records: impl IntoIterator<Item = (ArrayView2<'r, f64>, ArrayView2<'r, f64>)>,
+    ) -> Result<CompressorConfig> {
+        let records: Vec<(ArrayView2<'r, f64>, ArrayView2<'r, f64>)> =
+            records.into_iter().collect();
         Ok(match self {
             CompressorConfig::Pca(pca) if !pca.is_fitted() => {
                 let take = records.len().min(PCA_RECORDS);
                 let views: Vec<ArrayView2<'_, f64>> =
-                    records[..take].iter().map(IoData::outputs).collect();
-                let n_inputs = records.first().map_or(1, IoData::n_inputs);
+                    records[..take].iter().map(|(_, y)| y.view()).collect();
+                let n_inputs = records.first().map_or(1, |(u, _)| u.ncols());
                 CompressorConfig::Pca(pca.clone().fit(&views)?.with_inputs(n_inputs)?)
             }
             CompressorConfig::Narx(narx) if narx.has_unit_scales() => {
@@ -123,8 +118,8 @@ impl CompressorConfig {
                         })
                         .collect()
                 };
-                let inputs = rms(take.iter().map(|r| signal_rms(r.inputs())).collect());
-                let outputs = rms(take.iter().map(|r| signal_rms(r.outputs())).collect());
+                let inputs = rms(take.iter().map(|(u, _)| signal_rms(u.view())).collect());
+                let outputs = rms(take.iter().map(|(_, y)| signal_rms(y.view())).collect());
                 CompressorConfig::Narx(narx.clone().with_scales(&inputs, &outputs)?)
             }
             other => other.clone(),
@@ -166,12 +161,11 @@ impl std::str::FromStr for CompressorConfig {
     /// short records).
     ///
     /// ```
-    /// use twostage::CompressorConfig;
-    /// use twostage::compress::Compressor;
+    /// use twostage_compress::{Compressor, CompressorConfig};
     /// let arx: CompressorConfig = "arx:5,5".parse()?;
     /// assert_eq!(arx.n_features(), 10);
     /// assert!("arx:5".parse::<CompressorConfig>().is_err());
-    /// # Ok::<(), twostage::Error>(())
+    /// # Ok::<(), twostage_compress::CompressError>(())
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
         const WHAT: &str = "compressor";
@@ -240,7 +234,7 @@ impl Compressor for CompressorConfig {
         outputs: ArrayView2<'_, f64>,
         work: &mut Workspace,
         alpha: &mut [f64],
-    ) -> twostage_compress::Result<()> {
+    ) -> Result<()> {
         match self {
             Self::Arx(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_into(inputs, outputs, work, alpha),
@@ -255,7 +249,7 @@ impl Compressor for CompressorConfig {
         outputs: ArrayView2<'_, f64>,
         work: &mut Workspace,
         alpha: &mut [f64],
-    ) -> twostage_compress::Result<()> {
+    ) -> Result<()> {
         match self {
             Self::Arx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
@@ -270,136 +264,6 @@ impl Compressor for CompressorConfig {
             Self::Narx(c) => c.feature_names(),
             Self::Pca(c) => c.feature_names(),
             Self::Raw(c) => c.feature_names(),
-        }
-    }
-}
-
-/// The fitting method of stage 2.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[non_exhaustive]
-pub enum RegressorConfig {
-    /// Linear (ridge) least squares.
-    Linear(Ridge),
-    /// A tanh network, trained by Levenberg-Marquardt or Adam as its
-    /// `Trainer` says.
-    Mlp(Mlp),
-    /// A global network routing each record to a specialist network of its
-    /// piece of the first parameter's range.
-    Piecewise(Piecewise),
-}
-
-impl std::fmt::Display for RegressorConfig {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Linear(r) => write!(f, "linear (ridge lambda {:e})", r.lambda()),
-            Self::Mlp(m) => write!(
-                f,
-                "MLP {:?} tanh, {}",
-                m.params().hidden(),
-                m.params().trainer_choice()
-            ),
-            Self::Piecewise(p) => write!(
-                f,
-                "{} x MLP {:?} by pieces",
-                p.pieces(),
-                p.global().params().hidden()
-            ),
-        }
-    }
-}
-
-impl std::str::FromStr for RegressorConfig {
-    type Err = Error;
-
-    /// A stage-2 specification as the command line and model files write
-    /// it: `linear`, `mlp:H[,H...]` (hidden sizes) or `piecewise:K,H` (a
-    /// global H-unit network routing to K experts by pieces of the first
-    /// parameter's range).
-    ///
-    /// ```
-    /// use twostage::RegressorConfig;
-    /// assert!(matches!("mlp:10".parse()?, RegressorConfig::Mlp(_)));
-    /// assert!("mlp:ten".parse::<RegressorConfig>().is_err());
-    /// # Ok::<(), twostage::Error>(())
-    /// ```
-    fn from_str(spec: &str) -> Result<Self> {
-        const WHAT: &str = "regressor";
-        if spec.trim() == "linear" {
-            return Ok(Self::Linear(Ridge::default()));
-        }
-        if let Some(rest) = spec.trim().strip_prefix("piecewise:") {
-            let c = counts(rest, spec, 2, WHAT)?;
-            let mlp = MlpParams::new(&[c[1]]).and_then(MlpParams::check)?;
-            return Ok(Self::Piecewise(Piecewise::new(mlp.clone(), mlp, c[0])?));
-        }
-        let hidden = spec
-            .trim()
-            .strip_prefix("mlp:")
-            .ok_or_else(|| Error::InvalidSetting {
-                name: WHAT,
-                value: spec.to_string(),
-                reason: "use linear, mlp:H[,H...] or piecewise:PIECES,H".into(),
-            })?;
-        let n = hidden.split(',').count();
-        let sizes = counts(hidden, spec, n, WHAT)?;
-        Ok(Self::Mlp(
-            MlpParams::new(&sizes).and_then(MlpParams::check)?,
-        ))
-    }
-}
-
-impl RegressorConfig {
-    /// Fit stage 2 on features `x` and parameters `y`; `seed` seeds the
-    /// network's initial weights and held-out split, so that the run's one
-    /// seed decides every random choice.
-    pub(crate) fn fit(
-        &self,
-        x: ArrayView2<'_, f64>,
-        y: ArrayView2<'_, f64>,
-        seed: u64,
-    ) -> twostage_fit::Result<FittedRegressor> {
-        Ok(match self {
-            Self::Linear(r) => FittedRegressor::Linear(r.fit(x, y)?),
-            Self::Mlp(m) => FittedRegressor::Mlp(m.with_seed(seed).fit(x, y)?),
-            Self::Piecewise(p) => FittedRegressor::Piecewise(p.with_seed(seed).fit(x, y)?),
-        })
-    }
-}
-
-/// A fitted stage-2 map h.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[non_exhaustive]
-pub enum FittedRegressor {
-    /// A linear map.
-    Linear(FittedLinear),
-    /// A network.
-    Mlp(FittedMlp),
-    /// Networks by pieces.
-    Piecewise(FittedPiecewise),
-}
-
-impl Predictor for FittedRegressor {
-    fn n_inputs(&self) -> usize {
-        match self {
-            Self::Linear(m) => m.n_inputs(),
-            Self::Mlp(m) => m.n_inputs(),
-            Self::Piecewise(m) => m.n_inputs(),
-        }
-    }
-
-    fn n_outputs(&self) -> usize {
-        match self {
-            Self::Linear(m) => m.n_outputs(),
-            Self::Mlp(m) => m.n_outputs(),
-            Self::Piecewise(m) => m.n_outputs(),
-        }
-    }
-
-    fn predict_into(&self, x: &[f64], out: &mut [f64]) -> twostage_fit::Result<()> {
-        match self {
-            Self::Linear(m) => m.predict_into(x, out),
-            Self::Mlp(m) => m.predict_into(x, out),
-            Self::Piecewise(m) => m.predict_into(x, out),
         }
     }
 }

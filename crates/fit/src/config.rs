@@ -1,0 +1,157 @@
+//! The stage-2 choice as a serializable value, its specification as the
+//! command line and model files write it (`linear`, `mlp:10`,
+//! `piecewise:4,20`), and the fitted map it gives.
+
+use ndarray::ArrayView2;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{FitError as Error, Result};
+use crate::{
+    FittedLinear, FittedMlp, FittedPiecewise, Mlp, MlpParams, Piecewise, Predictor, Regressor,
+    Ridge,
+};
+
+/// Whole numbers separated by commas, exactly `count` of them.
+fn counts(spec: &str, whole: &str, count: usize, what: &'static str) -> Result<Vec<usize>> {
+    let values: Option<Vec<usize>> = spec.split(',').map(|v| v.trim().parse().ok()).collect();
+    values
+        .filter(|v| v.len() == count)
+        .ok_or_else(|| Error::InvalidSetting {
+            name: what,
+            value: whole.to_string(),
+            reason: format!(
+                "the part after ':' must be {count} whole number(s) separated by commas"
+            ),
+        })
+}
+
+/// The fitting method of stage 2.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum RegressorConfig {
+    /// Linear (ridge) least squares.
+    Linear(Ridge),
+    /// A tanh network, trained by Levenberg-Marquardt or Adam as its
+    /// `Trainer` says.
+    Mlp(Mlp),
+    /// A global network routing each record to a specialist network of its
+    /// piece of the first parameter's range.
+    Piecewise(Piecewise),
+}
+
+impl std::fmt::Display for RegressorConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Linear(r) => write!(f, "linear (ridge lambda {:e})", r.lambda()),
+            Self::Mlp(m) => write!(
+                f,
+                "MLP {:?} tanh, {}",
+                m.params().hidden(),
+                m.params().trainer_choice()
+            ),
+            Self::Piecewise(p) => write!(
+                f,
+                "{} x MLP {:?} by pieces",
+                p.pieces(),
+                p.global().params().hidden()
+            ),
+        }
+    }
+}
+
+impl std::str::FromStr for RegressorConfig {
+    type Err = Error;
+
+    /// A stage-2 specification as the command line and model files write
+    /// it: `linear`, `mlp:H[,H...]` (hidden sizes) or `piecewise:K,H` (a
+    /// global H-unit network routing to K experts by pieces of the first
+    /// parameter's range).
+    ///
+    /// ```
+    /// use twostage_fit::RegressorConfig;
+    /// assert!(matches!("mlp:10".parse()?, RegressorConfig::Mlp(_)));
+    /// assert!("mlp:ten".parse::<RegressorConfig>().is_err());
+    /// # Ok::<(), twostage_fit::FitError>(())
+    /// ```
+    fn from_str(spec: &str) -> Result<Self> {
+        const WHAT: &str = "regressor";
+        if spec.trim() == "linear" {
+            return Ok(Self::Linear(Ridge::default()));
+        }
+        if let Some(rest) = spec.trim().strip_prefix("piecewise:") {
+            let c = counts(rest, spec, 2, WHAT)?;
+            let mlp = MlpParams::new(&[c[1]]).and_then(MlpParams::check)?;
+            return Ok(Self::Piecewise(Piecewise::new(mlp.clone(), mlp, c[0])?));
+        }
+        let hidden = spec
+            .trim()
+            .strip_prefix("mlp:")
+            .ok_or_else(|| Error::InvalidSetting {
+                name: WHAT,
+                value: spec.to_string(),
+                reason: "use linear, mlp:H[,H...] or piecewise:PIECES,H".into(),
+            })?;
+        let n = hidden.split(',').count();
+        let sizes = counts(hidden, spec, n, WHAT)?;
+        Ok(Self::Mlp(
+            MlpParams::new(&sizes).and_then(MlpParams::check)?,
+        ))
+    }
+}
+
+impl RegressorConfig {
+    /// Fit stage 2 on features `x` and parameters `y`; `seed` seeds the
+    /// network's initial weights and held-out split, so that the run's one
+    /// seed decides every random choice.
+    ///
+    /// # Errors
+    /// What the chosen method's fit reports.
+    pub fn fit(
+        &self,
+        x: ArrayView2<'_, f64>,
+        y: ArrayView2<'_, f64>,
+        seed: u64,
+    ) -> Result<FittedRegressor> {
+        Ok(match self {
+            Self::Linear(r) => FittedRegressor::Linear(r.fit(x, y)?),
+            Self::Mlp(m) => FittedRegressor::Mlp(m.with_seed(seed).fit(x, y)?),
+            Self::Piecewise(p) => FittedRegressor::Piecewise(p.with_seed(seed).fit(x, y)?),
+        })
+    }
+}
+
+/// A fitted stage-2 map h.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum FittedRegressor {
+    /// A linear map.
+    Linear(FittedLinear),
+    /// A network.
+    Mlp(FittedMlp),
+    /// Networks by pieces.
+    Piecewise(FittedPiecewise),
+}
+
+impl Predictor for FittedRegressor {
+    fn n_inputs(&self) -> usize {
+        match self {
+            Self::Linear(m) => m.n_inputs(),
+            Self::Mlp(m) => m.n_inputs(),
+            Self::Piecewise(m) => m.n_inputs(),
+        }
+    }
+
+    fn n_outputs(&self) -> usize {
+        match self {
+            Self::Linear(m) => m.n_outputs(),
+            Self::Mlp(m) => m.n_outputs(),
+            Self::Piecewise(m) => m.n_outputs(),
+        }
+    }
+
+    fn predict_into(&self, x: &[f64], out: &mut [f64]) -> Result<()> {
+        match self {
+            Self::Linear(m) => m.predict_into(x, out),
+            Self::Mlp(m) => m.predict_into(x, out),
+            Self::Piecewise(m) => m.predict_into(x, out),
+        }
+    }
+}
