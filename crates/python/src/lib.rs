@@ -26,9 +26,12 @@ use simulator::{PythonProgress, PythonSimulator};
 
 /// A twostage error as the Python exception a caller would expect: a file
 /// that cannot be read is an `OSError`, everything else a `ValueError`.
-fn to_python(error: twostage::Error) -> PyErr {
-    match error {
-        twostage::Error::Io { .. } => PyOSError::new_err(error.to_string()),
+fn to_python(error: impl Into<twostage::Error>) -> PyErr {
+    match error.into() {
+        error @ (twostage::Error::Io { .. }
+        | twostage::Error::Source(twostage::sources::Error::Io { .. })) => {
+            PyOSError::new_err(error.to_string())
+        }
         other => PyValueError::new_err(other.to_string()),
     }
 }
@@ -428,7 +431,8 @@ fn train(
         (Some(name), None, None) if simulator.is_none() => NamedModel::builtin(name),
         (None, Some(path), None) => NamedModel::file(path),
         (None, None, Some(text)) => twostage::ModelFile::parse(text, "model_toml")
-            .map(|file| NamedModel::File(Box::new(file))),
+            .map(|file| NamedModel::File(Box::new(file)))
+            .map_err(twostage::Error::from),
         (Some(_), None, None) => {
             return Err(PyValueError::new_err(
                 "a simulator needs a model file without [source] (model_file= or model_toml=)                  for its parameter names, priors and signals, not a built-in model",

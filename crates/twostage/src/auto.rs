@@ -19,14 +19,14 @@ use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::{IoData, Simulator};
 
 use crate::builder::{TrainedOn, TwoStage};
-use crate::chart::StoredChart;
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
-use crate::progress::Stage;
-use crate::records::ForModel;
 use crate::space::{rows_to_estimates, to_learning_space};
 use twostage_compress::CompressorConfig;
 use twostage_fit::{FittedRegressor, RegressorConfig};
+use twostage_sources::ForModel;
+use twostage_sources::Stage;
+use twostage_sources::StoredChart;
 
 /// How much the search may spend.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -9,30 +9,19 @@ use twostage_models::{Sampling, Simulator};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
-use crate::chart::{StoredChart, simulate_records};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, Result};
 use crate::estimator::{Estimator, RecordShape, SignalNames, TrainingInfo};
 use crate::profile::paper_benchmark;
-use crate::progress::{Progress, Silent, Stage};
-use crate::records::ForModel;
-use crate::records::{RecordSource, Records, RunShape};
-use crate::roles::ChartRole;
 use crate::settings::RunSettings;
 use crate::space::to_learning_space;
 use twostage_compress::CompressorConfig;
 use twostage_fit::{FittedRegressor, RegressorConfig};
-
-/// The choices of one training run, reusable across simulators.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Preset {
-    /// Stage-1 compressor.
-    pub compressor: CompressorConfig,
-    /// Stage-2 method.
-    pub regressor: RegressorConfig,
-    /// Training simulations m.
-    pub simulations: usize,
-}
+use twostage_sources::ChartRole;
+use twostage_sources::ForModel;
+use twostage_sources::{Preset, StoredChart, simulate_records};
+use twostage_sources::{Progress, Silent, Stage};
+use twostage_sources::{RecordSource, Records, RunShape};
 
 /// What the fitted stages were trained on, for the estimator's record.
 pub(crate) struct TrainedOn<'f> {
@@ -186,6 +175,32 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     }
 
     /// Tell `progress` how the run advances (default: nothing is shown).
+    ///
+    /// ```
+    /// use std::sync::atomic::{AtomicUsize, Ordering};
+    /// use twostage::{Progress, Stage, TwoStage};
+    /// use twostage::models::Benchmark;
+    ///
+    /// #[derive(Default)]
+    /// struct Count(AtomicUsize);
+    /// impl Progress for Count {
+    ///     fn advance(&self, _stage: Stage, done: usize) {
+    ///         self.0.fetch_add(done, Ordering::Relaxed);
+    ///     }
+    /// }
+    ///
+    /// let model = Benchmark::builder().n_samples(200).build()?;
+    /// let count = Count::default();
+    /// TwoStage::builder(&model)
+    ///     .simulations(100)
+    ///     .calibration(30)
+    ///     .validation(20)
+    ///     .linear(1e-6)?
+    ///     .progress(&count)
+    ///     .train()?;
+    /// assert_eq!(count.0.load(Ordering::Relaxed), 150);
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
     pub fn progress(mut self, progress: &'a dyn Progress) -> Self {
         self.progress = progress;
         self
@@ -252,14 +267,15 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         chart.check_model(self.simulator.spec())?;
         let plan = chart.plan();
         if let Some(seed) = self.settings.seed.filter(|s| *s != plan.seed) {
-            return Err(Error::Shards {
+            return Err(twostage_sources::Error::Shards {
                 what: chart.pattern().to_string(),
                 message: format!(
                     "the shards were simulated with seed {}, the training asks for seed {seed}: \
                      train with --seed {} (or leave it out)",
                     plan.seed, plan.seed
                 ),
-            });
+            }
+            .into());
         }
         let [m, calibration, validation] = plan.counts;
         self.settings.seed = Some(plan.seed);
@@ -268,20 +284,21 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         self.settings.validation = validation;
         let sampling = format!("{:?}", self.training_prior().sampling());
         if sampling != chart.sampling() {
-            return Err(Error::Shards {
+            return Err(twostage_sources::Error::Shards {
                 what: chart.pattern().to_string(),
                 message: format!(
                     "the shards were drawn by {} sampling, the training asks for {sampling}",
                     chart.sampling()
                 ),
-            });
+            }
+            .into());
         }
         Ok(self)
     }
 
     /// The builder's record source, opened for its run.
     pub(crate) fn open_records(&self) -> Result<Records<'a, S>> {
-        Records::open(
+        Ok(Records::open(
             self.simulator,
             self.records,
             RunShape {
@@ -295,7 +312,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
                 max_failure_fraction: self.settings.max_failure_fraction,
                 progress: self.progress,
             },
-        )
+        )?)
     }
 
     /// Assemble the estimator from its fitted stages, then calibrate its
@@ -403,7 +420,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
 
     /// The compressor for the model's number of inputs and outputs.
     fn shaped_compressor(&self) -> Result<CompressorConfig> {
-        self.compressor.for_model(self.simulator.spec())
+        Ok(self.compressor.for_model(self.simulator.spec())?)
     }
 }
 
@@ -439,12 +456,12 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// (failed experiments are dropped, within the failure allowance).
     pub(crate) fn stored_chart(&self, m: usize) -> Result<StoredChart> {
         let design = self.simulator.prior().design(m, self.seed_value())?;
-        simulate_records(
+        Ok(simulate_records(
             self.simulator,
             &design,
             m,
             self.settings.max_failure_fraction,
             Some((Stage::Training, self.progress)),
-        )
+        )?)
     }
 }

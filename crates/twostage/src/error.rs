@@ -4,6 +4,7 @@ use thiserror::Error;
 use twostage_compress::CompressError;
 use twostage_fit::FitError;
 use twostage_models::SimError;
+use twostage_sources::Error as SourceError;
 use twostage_validate::ValidateError;
 
 /// Everything that can go wrong while training, using or storing an estimator.
@@ -26,25 +27,10 @@ pub enum Error {
     /// Validation failed.
     #[error(transparent)]
     Validation(#[from] ValidateError),
-    /// Too many experiments of a chart failed.
-    #[error(
-        "{failed} of {total} {stage} experiments failed (at most {allowed} may): first, \
-         experiment {first_index}: {first_error}"
-    )]
-    TooManyFailures {
-        /// Which chart: training, calibration or validation.
-        stage: &'static str,
-        /// Failed experiments.
-        failed: usize,
-        /// All experiments.
-        total: usize,
-        /// The most that may fail.
-        allowed: usize,
-        /// Index of the first failure.
-        first_index: usize,
-        /// Its error.
-        first_error: String,
-    },
+    /// A source of records failed: a model file, a chart on disk, shards,
+    /// or too many failed simulations.
+    #[error(transparent)]
+    Source(#[from] SourceError),
     /// A builder setting is out of range.
     #[error("invalid {name} = {value}: {reason}")]
     InvalidSetting {
@@ -70,44 +56,6 @@ pub enum Error {
     Numerical {
         /// What failed, and where.
         what: String,
-    },
-    /// A model file is malformed.
-    #[error(
-        "{file}{}{}: {message}",
-        line.map_or_else(String::new, |l| format!(", line {l}")),
-        if key.is_empty() { String::new() } else { format!(", key `{key}`") }
-    )]
-    ModelFile {
-        /// The file as it was named.
-        file: String,
-        /// The line of the mistake, when known.
-        line: Option<usize>,
-        /// The key, dotted from the table (`parameter.prior.sigma`).
-        key: String,
-        /// What is wrong and what is accepted.
-        message: String,
-    },
-    /// A chart file is malformed.
-    #[error(
-        "{file}{}: {message}",
-        line.map_or_else(String::new, |l| format!(", line {l}"))
-    )]
-    ChartFile {
-        /// The file.
-        file: String,
-        /// The line of the problem, when known.
-        line: Option<usize>,
-        /// What is wrong and what is accepted.
-        message: String,
-    },
-    /// Shards of a chart that are damaged, do not belong together, or
-    /// leave records out.
-    #[error("{what}: {message}")]
-    Shards {
-        /// The shard file or the pattern.
-        what: String,
-        /// What is wrong and what to do.
-        message: String,
     },
     /// The estimator uses a structure the microcontroller runtime does not
     /// evaluate.
@@ -260,11 +208,8 @@ impl Error {
             self,
             Self::InvalidSetting { .. }
                 | Self::NotAvailable { .. }
-                | Self::ModelFile { .. }
-                | Self::ChartFile { .. }
-                | Self::Shards { .. }
                 | Self::Compression(CompressError::InvalidSetting { .. })
                 | Self::Fit(FitError::InvalidSetting { .. })
-        )
+        ) || matches!(self, Self::Source(e) if e.is_setting())
     }
 }

@@ -47,58 +47,51 @@
 mod adaptive;
 mod auto;
 mod builder;
-mod chart;
-mod chart_file;
 mod envelope;
 mod error;
 mod estimator;
 mod file;
 mod legacy;
-mod model_file;
 mod moments;
 mod named_model;
 mod profile;
-mod progress;
-mod records;
 mod refine;
 mod request;
-mod roles;
 mod runtime_export;
 mod settings;
-mod shard;
 mod space;
 
 pub use adaptive::AdaptiveIntervals;
 pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
-pub use builder::{Preset, TwoStage};
-pub use chart::{CompressedChart, ExperimentFailure, compress_chart};
-pub use chart_file::ChartFiles;
+pub use builder::TwoStage;
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};
 pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
 };
 pub use file::{FORMAT_VERSION, MAGIC, write_whole};
-pub use model_file::{ModelFile, ModelSource, TEMPLATE as MODEL_FILE_TEMPLATE, fmu_model_file};
 pub use moments::WeightedMoments;
 pub use named_model::NamedModel;
 pub use profile::{
     ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka, recommended_benchmark,
     recommended_pacejka,
 };
-pub use progress::{Progress, Silent, Stage};
-pub use records::RecordSource;
 pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
-pub use roles::ChartRole;
 pub use settings::{DEFAULT_SEED, RunSettings};
-pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
+
+pub use twostage_sources::{
+    ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,
+    Progress, RecordSource, ShardIndex, ShardPlan, ShardedChart, Silent, Stage,
+    TEMPLATE as MODEL_FILE_TEMPLATE, compress_chart, fingerprint, fmu_model_file, simulate_shard,
+};
 
 pub use twostage_compress as compress;
 pub use twostage_fit as fit;
 pub use twostage_fmi as fmi;
 pub use twostage_models as models;
 pub use twostage_runtime as runtime;
+pub use twostage_sources as sources;
 pub use twostage_validate as validate;

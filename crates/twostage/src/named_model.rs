@@ -6,11 +6,11 @@ use std::path::Path;
 
 use twostage_models::{BuiltinModel, Simulator};
 
-use crate::builder::Preset;
 use crate::error::{Error, Result};
-use crate::model_file::ModelFile;
 use crate::profile::ModelProfile;
-use crate::shard::fingerprint;
+use twostage_sources::Preset;
+use twostage_sources::fingerprint;
+use twostage_sources::{ModelFile, ModelSource};
 
 /// A built-in model or a model file.
 ///
@@ -21,6 +21,17 @@ use crate::shard::fingerprint;
 /// // A built-in model's default preset is the paper's.
 /// assert_eq!(model.preset(None)?.simulations, 1500);
 /// assert!(NamedModel::builtin("pendulum").is_err());
+/// // A model file with a built-in source keeps that model's presets.
+/// let file = twostage::ModelFile::parse(
+///     "[model]\nname = \"short\"\n[source]\nbuiltin = \"benchmark\"\n\
+///      [signals]\nsamples = 300\n[[preset]]\nname = \"small\"\ncompress = \"arx:3,3\"\n\
+///      fit = \"mlp:6\"\nsims = 800\n",
+///     "short.toml",
+/// )?;
+/// let short = NamedModel::File(Box::new(file));
+/// assert_eq!(short.preset_names(), ["small", "paper", "recommended"]);
+/// assert_eq!(short.preset(None)?.simulations, 800);
+/// assert_eq!(short.preset(Some("paper"))?.simulations, 1500);
 /// # Ok::<(), twostage::Error>(())
 /// ```
 #[derive(Debug)]
@@ -78,7 +89,7 @@ impl NamedModel {
                 value: "true".into(),
                 reason: "is for built-in models; a model file says `[noise] model = false`".into(),
             }),
-            Self::File(file) => file.simulator(),
+            Self::File(file) => Ok(file.simulator()?),
         }
     }
 
@@ -90,24 +101,71 @@ impl NamedModel {
     pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
         match self {
             Self::Builtin(model) => Ok(model.build(false)?),
-            Self::File(file) => file.chart_model(),
+            Self::File(file) => Ok(file.chart_model()?),
         }
     }
 
+    /// The names of the model's presets: a built-in model's; a model
+    /// file's own, in its order, then those of a built-in source that the
+    /// file does not shadow.
+    pub fn preset_names(&self) -> Vec<String> {
+        let builtin = self.builtin_profile().map(ModelProfile::preset_names);
+        let mut names: Vec<String> = match self {
+            Self::Builtin(_) => Vec::new(),
+            Self::File(file) => file.preset_names().map(str::to_string).collect(),
+        };
+        for name in builtin.into_iter().flatten() {
+            if !names.iter().any(|n| n == name) {
+                names.push(name.to_string());
+            }
+        }
+        names
+    }
+
     /// A preset by name; `None` is the model's default (a built-in model's
-    /// `paper`, a model file's first).
+    /// `paper`, a model file's first, then its built-in source's).
     ///
     /// # Errors
     /// An unknown preset name; the message lists the model's presets.
     pub fn preset(&self, name: Option<&str>) -> Result<Preset> {
         match self {
             Self::Builtin(model) => ModelProfile::of(*model).preset(name.unwrap_or("paper")),
-            Self::File(file) => match name {
-                Some(name) => file.preset(name),
-                None => {
-                    let first = file.preset_names().next().unwrap_or("default").to_string();
-                    file.preset(&first)
+            Self::File(file) => {
+                let names = self.preset_names();
+                let name = name
+                    .map(str::to_string)
+                    .or_else(|| names.first().cloned())
+                    .unwrap_or_else(|| "default".into());
+                if file.preset_names().any(|n| n == name) {
+                    return Ok(file.preset(&name)?);
                 }
+                match self.builtin_profile() {
+                    Some(profile) if profile.preset_names().any(|n| n == name) => {
+                        profile.preset(&name)
+                    }
+                    _ => Err(Error::NotAvailable {
+                        what: "preset",
+                        name,
+                        model: self.name().to_string(),
+                        available: if names.is_empty() {
+                            "none (add a [[preset]], or give the stages on the command line)".into()
+                        } else {
+                            names.join(", ")
+                        },
+                    }),
+                }
+            }
+        }
+    }
+
+    /// The per-model table of a built-in model, or of a model file's
+    /// built-in source.
+    fn builtin_profile(&self) -> Option<&'static ModelProfile> {
+        match self {
+            Self::Builtin(model) => Some(ModelProfile::of(*model)),
+            Self::File(file) => match file.source() {
+                ModelSource::Builtin { model, .. } => Some(ModelProfile::of(*model)),
+                _ => None,
             },
         }
     }

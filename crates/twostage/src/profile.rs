@@ -12,10 +12,10 @@ use twostage_compress::Arx;
 use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::BuiltinModel;
 
-use crate::builder::Preset;
 use crate::error::{Error, Result};
 use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
+use twostage_sources::Preset;
 
 /// A classic estimation method of the paper (Sections 2 and 5), or an
 /// exact reference, by its command-line name.

@@ -10,17 +10,17 @@ use serde::{Deserialize, Serialize};
 use twostage_models::Simulator;
 
 use crate::auto::{AutoOutcome, Budget};
-use crate::builder::{Preset, TwoStage};
-use crate::chart_file::ChartFiles;
+use crate::builder::TwoStage;
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
 use crate::named_model::NamedModel;
-use crate::progress::Progress;
-use crate::records::RecordSource;
 use crate::settings::RunSettings;
-use crate::shard::{ShardPlan, ShardedChart};
 use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
+use twostage_sources::Progress;
+use twostage_sources::RecordSource;
+use twostage_sources::{ChartFiles, Preset};
+use twostage_sources::{ShardPlan, ShardedChart};
 
 /// A chart folder (CSV or NumPy files), and how the estimator file names
 /// it when not by its folder.
@@ -300,7 +300,7 @@ impl TrainingRequest {
             RecordsRequest::Shards { pattern } => {
                 let chart = ShardedChart::open(pattern)?;
                 if chart.plan().model_fingerprint != model.fingerprint() {
-                    return Err(Error::Shards {
+                    return Err(twostage_sources::Error::Shards {
                         what: chart.pattern().to_string(),
                         message: format!(
                             "the shards were simulated from another model description than {} \
@@ -308,7 +308,8 @@ impl TrainingRequest {
                              again, or train with the model they came from",
                             model.name()
                         ),
-                    });
+                    }
+                    .into());
                 }
                 let plan = chart.plan();
                 progress.note(&format!(

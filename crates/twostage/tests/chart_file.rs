@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use twostage::models::{Benchmark, IoData, Simulator, run_experiment};
-use twostage::{ChartFiles, Error, RecordSource, TwoStage};
+use twostage::{ChartFiles, RecordSource, TwoStage};
 
 fn model() -> Benchmark {
     Benchmark::builder().n_samples(200).build().unwrap()
@@ -180,7 +180,7 @@ fn every_file_problem_names_its_file_and_line() {
             .and_then(|chart| chart.for_each_record(spec, |_, _| Ok(())))
             .unwrap_err();
         match &e {
-            Error::ChartFile {
+            twostage::sources::Error::ChartFile {
                 file: f,
                 line: l,
                 message,

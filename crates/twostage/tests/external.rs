@@ -350,7 +350,7 @@ fn a_model_file_command_runs_beside_the_file_and_its_mistakes_are_named() {
     for (from, to, key, text) in cases {
         let bad = toml.replacen(from, to, 1);
         match twostage::ModelFile::parse(&bad, "gain.toml") {
-            Err(twostage::Error::ModelFile {
+            Err(twostage::sources::Error::ModelFile {
                 key: k,
                 message,
                 line,

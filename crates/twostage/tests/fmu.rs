@@ -10,9 +10,9 @@ use common::paper_rmse;
 mod fmus;
 
 use fmus::{Model, build};
+use twostage::ModelFile;
 use twostage::fmi::FmiVersion;
 use twostage::models::{Benchmark, Simulator, experiment_rng};
-use twostage::{Error, ModelFile};
 
 /// eq. (5) as an FMU, its noises as noise inputs in the built-in order.
 fn benchmark_file(fmu: &std::path::Path, noise: &str) -> String {
@@ -91,7 +91,7 @@ output_sd = 0.31622776601683794"#,
 fn model_file_error(text: &str) -> (Option<usize>, String, String) {
     let result = ModelFile::parse(text, "m.toml").and_then(|f| f.simulator().map(|_| ()));
     match result {
-        Err(Error::ModelFile {
+        Err(twostage::sources::Error::ModelFile {
             line, key, message, ..
         }) => (line, key, message),
         other => panic!("expected a model-file error, got {other:?}"),

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)]
 
 use twostage::models::{Benchmark, Marginal, Simulator, experiment_rng};
-use twostage::{Error, MODEL_FILE_TEMPLATE, ModelFile, ModelSource};
+use twostage::{MODEL_FILE_TEMPLATE, ModelFile, ModelSource};
 
 const GOOD: &str = r#"[model]
 name = "quiet-benchmark"
@@ -81,12 +81,15 @@ fn leaving_out_the_parameters_keeps_the_built_in_priors_and_presets() {
     let car = twostage::models::PacejkaCar::new();
     assert_eq!(file.spec().prior(), car.prior());
     assert_eq!(file.spec().param_names(), car.param_names());
+    // The model named by its file: the built-in presets come along.
+    let named = twostage::NamedModel::File(Box::new(file));
     assert_eq!(
-        file.preset("paper").unwrap(),
+        named.preset(Some("paper")).unwrap(),
         twostage::paper_pacejka(),
         "the built-in presets come along"
     );
-    let e = file.preset("fast").unwrap_err().to_string();
+    assert_eq!(named.preset(None).unwrap(), twostage::paper_pacejka());
+    let e = named.preset(Some("fast")).unwrap_err().to_string();
     assert!(
         e.contains("preset 'fast' is not available for car: it has paper"),
         "{e}"
@@ -114,7 +117,7 @@ samples = 10
     assert_eq!(file.spec().n_samples(), 10);
     let e = file.simulator().map(|_| ()).unwrap_err();
     assert!(
-        matches!(e, Error::ModelFile { ref key, .. } if key == "source"),
+        matches!(e, twostage::sources::Error::ModelFile { ref key, .. } if key == "source"),
         "{e}"
     );
 }
@@ -290,7 +293,7 @@ fn every_mistake_names_its_line_and_key() {
         let e = ModelFile::parse(&bad, "m.toml").map(|_| ()).unwrap_err();
         let message = e.to_string();
         match e {
-            Error::ModelFile {
+            twostage::sources::Error::ModelFile {
                 file,
                 line: l,
                 key: k,
@@ -346,7 +349,7 @@ fn presets_and_inputs_are_checked_too() {
             .map(|_| ())
             .unwrap_err();
         match &e {
-            Error::ModelFile {
+            twostage::sources::Error::ModelFile {
                 key: k,
                 line,
                 message,

@@ -252,12 +252,12 @@ fn failed_simulations_are_dropped_and_counted_up_to_a_limit() {
         .train()
         .unwrap_err();
     match err {
-        Error::TooManyFailures {
+        Error::Source(twostage::sources::Error::TooManyFailures {
             stage,
             failed,
             total,
             ..
-        } => {
+        }) => {
             assert_eq!(stage, "training");
             assert_eq!(total, 400);
             assert!(failed > 150);

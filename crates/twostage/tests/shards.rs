@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use twostage::models::{Benchmark, Simulator};
 use twostage::{
-    CompressorConfig, Error, RecordSource, RegressorConfig, ShardIndex, ShardPlan, ShardedChart,
-    TwoStage, simulate_shard,
+    CompressorConfig, RecordSource, RegressorConfig, ShardIndex, ShardPlan, ShardedChart, TwoStage,
+    simulate_shard,
 };
 
 const SEED: u64 = 5;
@@ -88,7 +88,7 @@ fn shards_merge_into_the_single_machine_estimator_bit_for_bit() {
 
 fn open_error(pattern: &str) -> String {
     match ShardedChart::open(pattern) {
-        Err(e @ Error::Shards { .. }) => e.to_string(),
+        Err(e @ twostage::sources::Error::Shards { .. }) => e.to_string(),
         other => panic!("expected a shard error, got {other:?}"),
     }
 }

@@ -7,8 +7,8 @@
 //! depends on the seed and `j` alone), and writes them, raw or already
 //! compressed, to one file with a checksum. [`ShardedChart::open`] checks
 //! that a set of shard files belongs together and leaves nothing out, and
-//! [`TwoStage::train`](crate::TwoStage::train) over [`RecordSource::Shards`](crate::RecordSource::Shards) trains
-//! the very estimator `train` would have (docs/cluster.md,
+//! the facade's `train` over [`RecordSource::Shards`](crate::RecordSource::Shards)
+//! trains the very estimator the same run trains on simulated records (docs/cluster.md,
 //! docs/decisions/023-sharded-charts.md).
 
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -36,7 +36,7 @@ const BLOCK: usize = 256;
 /// headers (a consistency check between shards, not a security measure).
 ///
 /// ```
-/// assert_ne!(twostage::fingerprint(b"a = 1"), twostage::fingerprint(b"a = 2"));
+/// assert_ne!(twostage_sources::fingerprint(b"a = 1"), twostage_sources::fingerprint(b"a = 2"));
 /// ```
 pub fn fingerprint(bytes: &[u8]) -> u64 {
     // Fowler, Noll and Vo's 64-bit offset basis and prime.
@@ -48,11 +48,11 @@ pub fn fingerprint(bytes: &[u8]) -> u64 {
 /// Which shard of how many.
 ///
 /// ```
-/// use twostage::ShardIndex;
+/// use twostage_sources::ShardIndex;
 /// let shard: ShardIndex = "2/4".parse()?;
 /// // Records [2 m / 4, 3 m / 4): the four shards cover 0..10 exactly.
 /// assert_eq!(shard.range(10), 5..7);
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ShardIndex {
@@ -198,8 +198,8 @@ fn file_name(shard: ShardIndex) -> String {
 /// preparation: ARX, AR or raw).
 ///
 /// ```
-/// use twostage::{ShardIndex, ShardPlan, ShardedChart, simulate_shard};
-/// use twostage::models::{Benchmark, Simulator};
+/// use twostage_sources::{ShardIndex, ShardPlan, ShardedChart, simulate_shard};
+/// use twostage_models::{Benchmark, Simulator};
 /// let model = Benchmark::builder().n_samples(200).build()?;
 /// let plan = ShardPlan {
 ///     model: "benchmark".into(),
@@ -215,7 +215,7 @@ fn file_name(shard: ShardIndex) -> String {
 /// let chart = ShardedChart::open(&format!("{}/shard-*", dir.display()))?;
 /// assert_eq!(chart.plan().counts, [40, 0, 10]);
 /// # std::fs::remove_dir_all(&dir).ok();
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 ///
 /// # Errors
@@ -539,12 +539,15 @@ impl ShardedChart {
     }
 
     /// The training prior's sampling the shards were drawn with.
-    pub(crate) fn sampling(&self) -> &str {
+    pub fn sampling(&self) -> &str {
         &self.header.sampling
     }
 
     /// Check the shards against the model they are trained for.
-    pub(crate) fn check_model(&self, spec: &twostage_models::ModelSpec) -> Result<()> {
+    ///
+    /// # Errors
+    /// [`Error::Shards`] when their parameters or record shape differ.
+    pub fn check_model(&self, spec: &twostage_models::ModelSpec) -> Result<()> {
         let shape = [
             spec.n_samples(),
             spec.input_names().len(),

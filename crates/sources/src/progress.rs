@@ -2,7 +2,7 @@
 //! monitoring: the facade calls an observer, the caller decides how to show
 //! it (the CLI draws indicatif bars).
 
-/// The stages of [`crate::TwoStage::train`], in the order they run.
+/// The stages of a training run, in the order they run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Stage {
     /// Simulating and compressing the training chart.
@@ -33,8 +33,8 @@ impl Stage {
 ///
 /// ```
 /// use std::sync::atomic::{AtomicUsize, Ordering};
-/// use twostage::{Progress, Stage, TwoStage};
-/// use twostage::models::Benchmark;
+/// use twostage_models::{Benchmark, Simulator};
+/// use twostage_sources::{Progress, Stage, simulate_records};
 ///
 /// #[derive(Default)]
 /// struct Count(AtomicUsize);
@@ -45,16 +45,11 @@ impl Stage {
 /// }
 ///
 /// let model = Benchmark::builder().n_samples(200).build()?;
+/// let design = model.prior().design(100, 1)?;
 /// let count = Count::default();
-/// TwoStage::builder(&model)
-///     .simulations(100)
-///     .calibration(30)
-///     .validation(20)
-///     .linear(1e-6)?
-///     .progress(&count)
-///     .train()?;
-/// assert_eq!(count.0.load(Ordering::Relaxed), 150);
-/// # Ok::<(), twostage::Error>(())
+/// simulate_records(&model, &design, 100, 0.0, Some((Stage::Training, &count)))?;
+/// assert_eq!(count.0.load(Ordering::Relaxed), 100);
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 pub trait Progress: Sync {
     /// A stage starts with `total` steps (0: unknown, as for fitting).

@@ -18,9 +18,8 @@ use twostage_models::{
     Marginal, ModelSpec, Prior, Simulator,
 };
 
-use crate::builder::Preset;
 use crate::error::{Error, Result};
-use crate::profile::ModelProfile;
+use crate::preset::Preset;
 use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
 
@@ -78,7 +77,7 @@ pub enum ModelSource {
 /// A model described by a model file.
 ///
 /// ```
-/// use twostage::ModelFile;
+/// use twostage_sources::ModelFile;
 /// let file = ModelFile::parse(
 ///     r#"
 ///     [model]
@@ -101,9 +100,7 @@ pub enum ModelSource {
 /// let simulator = file.simulator()?;
 /// assert_eq!(simulator.spec().n_samples(), 300);
 /// assert_eq!(file.preset("small")?.simulations, 800);
-/// // The built-in model's own presets stay available.
-/// assert!(file.preset("paper").is_ok());
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 #[derive(Debug, Clone)]
 pub struct ModelFile {
@@ -251,15 +248,7 @@ impl ModelFile {
             _ => spec,
         };
         let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
-        let mut presets = at.presets(&raw.preset)?;
-        if let Some((model, _)) = &builtin {
-            let profile = ModelProfile::of(*model);
-            for name in profile.preset_names() {
-                if !presets.iter().any(|(n, _)| n == name) {
-                    presets.push((name.to_string(), profile.preset(name)?));
-                }
-            }
-        }
+        let presets = at.presets(&raw.preset)?;
         let name_lines = at.name_lines(&raw);
         let fmu_line = raw
             .source
@@ -275,7 +264,7 @@ impl ModelFile {
             presets,
             name_lines,
             fmu_line,
-            fingerprint: crate::shard::fingerprint(text.as_bytes()),
+            fingerprint: crate::fingerprint(text.as_bytes()),
         })
     }
 
@@ -464,7 +453,8 @@ impl ModelFile {
         }
     }
 
-    /// The presets, the file's first, then a built-in source's own.
+    /// The file's presets, in its order (a built-in source's own come on
+    /// top through the facade's named model).
     pub fn preset_names(&self) -> impl Iterator<Item = &str> {
         self.presets.iter().map(|(name, _)| name.as_str())
     }
@@ -498,7 +488,8 @@ impl ModelFile {
 /// time. Lines marked CHECK need a modeller's eye.
 ///
 /// ```
-/// use twostage::{fmi::ModelDescription, fmu_model_file, ModelFile};
+/// use twostage_fmi::ModelDescription;
+/// use twostage_sources::{fmu_model_file, ModelFile};
 /// let xml = r#"<fmiModelDescription fmiVersion="2.0" modelName="tank" guid="{1}">
 ///   <CoSimulation modelIdentifier="tank"/>
 ///   <DefaultExperiment stopTime="50" stepSize="0.1"/>
@@ -513,7 +504,7 @@ impl ModelFile {
 /// let file = ModelFile::parse(&text, "tank.toml").expect("the starting file parses");
 /// assert_eq!(file.spec().param_names(), ["area"]);
 /// assert_eq!(file.spec().n_samples(), 500);
-/// # Ok::<(), twostage::fmi::FmiError>(())
+/// # Ok::<(), twostage_fmi::FmiError>(())
 /// ```
 pub fn fmu_model_file(description: &twostage_fmi::ModelDescription, fmu: &str) -> String {
     use std::fmt::Write;

@@ -24,11 +24,11 @@ use crate::error::{Error, Result};
 /// demand.
 ///
 /// ```no_run
-/// use twostage::{ChartFiles, ModelFile};
+/// use twostage_sources::{ChartFiles, ModelFile};
 /// let model = ModelFile::load("sir.toml")?;
 /// let chart = ChartFiles::open("runs/sir", model.spec())?;
 /// println!("{} experiments", chart.len());
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 #[derive(Debug, Clone)]
 pub struct ChartFiles {

@@ -18,8 +18,8 @@ use crate::roles::{ChartRole, held_out_roles};
 use crate::shard::ShardedChart;
 use twostage_compress::CompressorConfig;
 
-/// Where the records of a training run come from (see
-/// [`TwoStage::records`](crate::TwoStage::records)).
+/// Where the records of a training run come from (the facade's builder
+/// reads them through [`Records`]).
 #[derive(Debug, Clone, Copy, Default)]
 pub enum RecordSource<'c> {
     /// Simulated by the builder's simulator: the training chart from the
@@ -55,10 +55,16 @@ impl RecordSource<'_> {
 
 /// A stage-1 compressor fitted to a model's records: shaped for its
 /// signals and length, prepared on its whole records.
-pub(crate) trait ForModel: Sized {
+pub trait ForModel: Sized {
     /// The same compressor for the records of `spec`'s model.
+    ///
+    /// # Errors
+    /// A structure the model's signals cannot take.
     fn for_model(&self, spec: &ModelSpec) -> Result<Self>;
     /// The compressor with its own parameters fitted on `records`.
+    ///
+    /// # Errors
+    /// What fitting those parameters reports.
     fn prepared_on(&self, records: &[IoData]) -> Result<Self>;
 }
 
@@ -87,7 +93,7 @@ fn stage(role: ChartRole) -> Stage {
 
 /// A source opened for one run: it knows the run's sizes, seed and
 /// failure allowance, and hands out each role's records compressed.
-pub(crate) struct Records<'a, S: ?Sized> {
+pub struct Records<'a, S: ?Sized> {
     simulator: &'a S,
     kind: Kind<'a>,
     training_prior: Prior,
@@ -113,13 +119,17 @@ enum Kind<'a> {
 }
 
 /// What a run tells its source.
-pub(crate) struct RunShape<'a> {
-    pub(crate) training_prior: Prior,
+pub struct RunShape<'a> {
+    /// The prior the training records are drawn from, as it samples.
+    pub training_prior: Prior,
     /// Training simulations, calibration and validation records asked for.
-    pub(crate) counts: [usize; 3],
-    pub(crate) seed: u64,
-    pub(crate) max_failure_fraction: f64,
-    pub(crate) progress: &'a dyn Progress,
+    pub counts: [usize; 3],
+    /// The run's seed.
+    pub seed: u64,
+    /// Share of failed records tolerated per role.
+    pub max_failure_fraction: f64,
+    /// Who hears of each simulated record.
+    pub progress: &'a dyn Progress,
 }
 
 impl<'a, S: Simulator + ?Sized> Records<'a, S> {
@@ -127,11 +137,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     ///
     /// # Errors
     /// A chart too small for the records it must hold out.
-    pub(crate) fn open(
-        simulator: &'a S,
-        source: RecordSource<'a>,
-        shape: RunShape<'a>,
-    ) -> Result<Self> {
+    pub fn open(simulator: &'a S, source: RecordSource<'a>, shape: RunShape<'a>) -> Result<Self> {
         let RunShape {
             training_prior,
             mut counts,
@@ -192,7 +198,10 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     /// NARX's signal scales) fitted on the first training records, or as
     /// it is when it has none. Compressed shards must have been compressed
     /// by this very compressor.
-    pub(crate) fn prepare(&self, compressor: CompressorConfig) -> Result<CompressorConfig> {
+    ///
+    /// # Errors
+    /// Compressed shards of another compressor, a failed preparation.
+    pub fn prepare(&self, compressor: CompressorConfig) -> Result<CompressorConfig> {
         let count = compressor.records_to_prepare();
         match &self.kind {
             Kind::Shards(chart) => match &chart.plan().compressor {
@@ -248,7 +257,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     ///
     /// # Errors
     /// Too many failed records, or a file problem of the source.
-    pub(crate) fn compressed(
+    pub fn compressed(
         &self,
         role: ChartRole,
         compressor: &CompressorConfig,
@@ -299,7 +308,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     }
 
     /// How the training records were drawn, for the estimator's record.
-    pub(crate) fn sampling(&self) -> String {
+    pub fn sampling(&self) -> String {
         match &self.kind {
             Kind::Simulated => format!("{:?}", self.training_prior.sampling()),
             Kind::Shards(chart) => chart.sampling().to_string(),

@@ -42,7 +42,7 @@ pub struct CompressedChart {
 /// whatever the thread count.
 ///
 /// ```
-/// use twostage::compress_chart;
+/// use twostage_sources::compress_chart;
 /// use twostage_compress::Arx;
 /// use twostage_models::{Benchmark, Simulator};
 /// let model = Benchmark::new();
@@ -50,7 +50,7 @@ pub struct CompressedChart {
 /// let chart = compress_chart(&model, &Arx::new(2, 2)?, &design, "training", 0.0)?;
 /// assert_eq!(chart.features.dim(), (64, 4));
 /// assert_eq!(chart.thetas.dim(), (64, 1));
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 ///
 /// # Errors
@@ -268,18 +268,20 @@ pub(crate) fn simulate_range<S: Simulator + ?Sized>(
 /// A chart kept whole: parameter vectors and full records, for the
 /// automatic design (which compresses one chart many ways) and for fitting
 /// a compressor's own parameters (PCA directions, NARX scales).
-pub(crate) struct StoredChart {
+pub struct StoredChart {
     /// Parameter vectors of the experiments that succeeded (m' x q).
-    pub(crate) thetas: Array2<f64>,
+    pub thetas: Array2<f64>,
     /// Their records, in design order.
-    pub(crate) records: Vec<IoData>,
+    pub records: Vec<IoData>,
 }
 
 /// Simulate the first `count` experiments of `design` in parallel and keep
 /// their records; failed experiments are dropped within
 /// `max_failure_fraction`. `progress`, when given, hears of each finished
 /// experiment under its stage. Record i depends only on `(design, i)`.
-pub(crate) fn simulate_records<S: Simulator + ?Sized>(
+/// # Errors
+/// [`Error::TooManyFailures`] beyond the allowance.
+pub fn simulate_records<S: Simulator + ?Sized>(
     simulator: &S,
     design: &Design,
     count: usize,

@@ -1,0 +1,48 @@
+//! Where the records of a two-stage estimator's training come from, behind
+//! one [`RecordSource`]: simulated on the fly (a built-in model, a model
+//! file's command, an FMU), read from chart files (CSV or NumPy), or merged
+//! from shards simulated on a cluster; and the formats these live in: the
+//! model file ([`ModelFile`]), the chart folder ([`ChartFiles`]) and the
+//! shard file ([`ShardedChart`]).
+//!
+//! Every source hands out the records of each [`ChartRole`] (training,
+//! calibration, validation) compressed, in one order whatever the thread
+//! count or shard split, so that the facade's one `train` never knows which
+//! it reads.
+//!
+//! # Example
+//!
+//! ```
+//! use twostage_compress::Arx;
+//! use twostage_models::{Benchmark, Simulator};
+//! use twostage_sources::{ChartRole, compress_chart};
+//!
+//! let model = Benchmark::builder().n_samples(200).build()?;
+//! let design = ChartRole::Training.design(model.prior(), 50, 1)?;
+//! let chart = compress_chart(&model, &Arx::new(2, 2)?, &design, "training", 0.0)?;
+//! assert_eq!(chart.features.dim(), (50, 4));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+#![deny(missing_docs)]
+
+mod chart;
+mod chart_file;
+mod error;
+mod model_file;
+mod preset;
+mod progress;
+mod records;
+mod roles;
+mod shard;
+
+pub use chart::{
+    CompressedChart, ExperimentFailure, StoredChart, compress_chart, simulate_records,
+};
+pub use chart_file::ChartFiles;
+pub use error::{Error, Result};
+pub use model_file::{ModelFile, ModelSource, TEMPLATE, fmu_model_file};
+pub use preset::Preset;
+pub use progress::{Progress, Silent, Stage};
+pub use records::{ForModel, RecordSource, Records, RunShape};
+pub use roles::ChartRole;
+pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
