@@ -219,7 +219,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// # Errors
     /// Invalid settings, a chart too small for its held-out records, too
     /// many failed records, a file problem of the source
-    /// ([`Error::ChartFile`], [`Error::Shards`]), or a failed fit.
+    /// ([`Error::Source`]), or a failed fit.
     pub fn train(self) -> Result<Estimator> {
         let run = self.adopting_source()?;
         run.settings.check()?;
