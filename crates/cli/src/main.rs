@@ -9,6 +9,7 @@ mod export;
 mod fmu;
 mod inspect;
 mod model_arg;
+mod models;
 mod number;
 mod simulate;
 mod slurm;
@@ -35,13 +36,9 @@ struct Cli {
 enum Command {
     /// Train the paper's benchmark estimator, validate it, and estimate a fresh record.
     Demo(demo::DemoArgs),
-    /// List the built-in models (parameters, priors, sampling, input, noise), or print an
-    /// annotated model file (--template).
-    Models {
-        /// Print an annotated model file to start your own from.
-        #[arg(long)]
-        template: bool,
-    },
+    /// List the built-in models (parameters, priors, sampling, input, noise), describe a
+    /// model file's (--model-file), or print an annotated model file (--template).
+    Models(models::ModelsArgs),
     /// Simulate one experiment (--theta) or many drawn from the prior (--count).
     Simulate(simulate::SimulateArgs),
     /// Train an estimator for a built-in model or a model file and write it to a file.
@@ -101,7 +98,7 @@ fn main() -> ExitCode {
     fmu::serve_workers_from_this_binary();
     let result = match &cli.command {
         Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
-        Command::Models { template } => simulate::models(*template, &mut io::stdout().lock()),
+        Command::Models(args) => models::models(args, &mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
         Command::Train(args) => train::train(args, &mut io::stdout().lock()),
         Command::Inspect { file, json } => inspect::inspect(file, *json, &mut io::stdout().lock()),

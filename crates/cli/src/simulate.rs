@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::RunSettings;
-use twostage_models::{BuiltinModel, IoData, Simulator, experiment_rng, run_experiment};
+use twostage_models::{IoData, Simulator, experiment_rng, run_experiment};
 
 use crate::model_arg::ModelArgs;
 use crate::number::{format_f64, parse_list};
@@ -63,48 +63,6 @@ pub struct SimulateArgs {
     /// With --count: the folder that receives data.csv and truth.csv.
     #[arg(long, requires = "count")]
     out_dir: Option<PathBuf>,
-}
-
-/// Print the built-in models and their settings, or the model file template.
-pub fn models(template: bool, out: &mut dyn Write) -> Result<()> {
-    if template {
-        out.write_all(twostage::MODEL_FILE_TEMPLATE.as_bytes())?;
-        return Ok(());
-    }
-    for model in BuiltinModel::ALL {
-        let sim = model.build(false)?;
-        let spec = sim.spec();
-        writeln!(out, "{}: {}", model.name(), model.summary())?;
-        let prior = spec.prior();
-        for (name, marginal) in spec.param_names().iter().zip(prior.marginals()) {
-            writeln!(out, "  parameter {name:<6} prior {marginal}")?;
-        }
-        let time = if model == BuiltinModel::Benchmark {
-            "discrete time, one sample per step".to_string()
-        } else {
-            format!("sampled every {} s", format_f64(spec.sample_time()))
-        };
-        writeln!(out, "  samples   N = {} ({time})", spec.n_samples())?;
-        writeln!(
-            out,
-            "  signals   input {}, output {}",
-            spec.input_names().join(","),
-            spec.output_names().join(",")
-        )?;
-        writeln!(out, "  input     {}", spec.input_note())?;
-        writeln!(out, "  noise     {}", spec.noise_note())?;
-        let profile = twostage::ModelProfile::of(model);
-        let presets: Vec<&str> = profile.preset_names().collect();
-        let methods: Vec<&str> = profile.classic_methods().iter().map(|m| m.name()).collect();
-        writeln!(out, "  presets   {} (train --preset)", presets.join(", "))?;
-        writeln!(
-            out,
-            "  methods   {} (estimate --method)",
-            methods.join(", ")
-        )?;
-        writeln!(out)?;
-    }
-    Ok(())
 }
 
 /// Run `twostage simulate`.

@@ -17,6 +17,22 @@ fn the_template_trains_validates_and_simulates_an_estimator() {
     // A smaller run than the template's preset, for the test's time.
     let template = text(&out.stdout).replace("sims = 1500", "sims = 300");
     std::fs::write(&model, template).unwrap();
+    // `models` describes the file's model as it does the built-in ones:
+    // its priors, record and presets (the file's, then its built-in
+    // source's).
+    let out = twostage(&["models", "--model-file", path(&model)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let described = text(&out.stdout);
+    assert!(described.starts_with("benchmark-normal: "), "{described}");
+    assert!(
+        described.contains("parameter theta  prior truncnormal(mu = 0, sigma = 0.4)"),
+        "{described}"
+    );
+    assert!(described.contains("N = 500"), "{described}");
+    assert!(
+        described.contains("presets   default, paper, recommended"),
+        "{described}"
+    );
     let estimator = dir.join("est.tsest");
     let out = twostage(&[
         "train",

@@ -12,7 +12,6 @@
 //! docs/decisions/023-sharded-charts.md).
 
 use std::io::{BufReader, BufWriter, Read, Write};
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use ndarray::Array2;
@@ -26,10 +25,15 @@ use crate::records::ForModel;
 use crate::roles::ChartRole;
 use twostage_compress::CompressorConfig;
 
-/// Starts every shard file.
-const MAGIC: &[u8; 8] = b"TSSHARD\0";
-/// The layout of the header and the records; bumped on any change.
-const SHARD_FORMAT: u32 = 1;
+mod format;
+mod index;
+
+use format::{
+    Checksummed, Header, MAGIC, SHARD_FORMAT, Stored, file_name, flatten, read_header, read_part,
+    unflatten, write_part,
+};
+pub use index::ShardIndex;
+
 /// Records simulated (and held in memory) at once while a shard is written.
 const BLOCK: usize = 256;
 /// A 64-bit FNV-1a hash of `bytes`: identifies a model file in shard
@@ -43,109 +47,6 @@ pub fn fingerprint(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |hash, &b| {
         (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
     })
-}
-
-/// Which shard of how many.
-///
-/// ```
-/// use twostage_sources::ShardIndex;
-/// let shard: ShardIndex = "2/4".parse()?;
-/// // Records [2 m / 4, 3 m / 4): the four shards cover 0..10 exactly.
-/// assert_eq!(shard.range(10), 5..7);
-/// # Ok::<(), twostage_sources::Error>(())
-/// ```
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ShardIndex {
-    /// Which one, from 0.
-    pub index: usize,
-    /// How many.
-    pub count: usize,
-}
-
-impl std::str::FromStr for ShardIndex {
-    type Err = Error;
-    fn from_str(text: &str) -> Result<Self> {
-        let bad = || Error::InvalidSetting {
-            name: "shard",
-            value: text.to_string(),
-            reason: "give I/N with 0 <= I < N (shard I of N, from 0), or auto (Slurm's \
-                     SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT) or auto/N (the index from \
-                     SLURM_ARRAY_TASK_ID or Kubernetes' JOB_COMPLETION_INDEX)"
-                .into(),
-        };
-        let (i, n) = text.split_once('/').ok_or_else(bad)?;
-        let (index, count) = (
-            i.trim().parse::<usize>().map_err(|_| bad())?,
-            n.trim().parse::<usize>().map_err(|_| bad())?,
-        );
-        if index >= count {
-            return Err(bad());
-        }
-        Ok(Self { index, count })
-    }
-}
-
-impl ShardIndex {
-    /// Parse `I/N`, or read the index (and count) from a batch system's
-    /// environment: `auto` takes Slurm's `SLURM_ARRAY_TASK_ID` and
-    /// `SLURM_ARRAY_TASK_COUNT` (an array `0-(N-1)`); `auto/N` takes the
-    /// index from `SLURM_ARRAY_TASK_ID` or Kubernetes' indexed-job
-    /// `JOB_COMPLETION_INDEX`, so that an array re-submitted for some
-    /// shards only (`sbatch --array=2,5`) still knows N.
-    ///
-    /// # Errors
-    /// [`Error::InvalidSetting`] naming what is missing or malformed.
-    pub fn resolve(text: &str, env: impl Fn(&str) -> Option<String>) -> Result<Self> {
-        let Some(rest) = text.strip_prefix("auto") else {
-            return text.parse();
-        };
-        let number = |name: &str| -> Result<Option<usize>> {
-            env(name)
-                .map(|v| {
-                    v.trim()
-                        .parse::<usize>()
-                        .map_err(|_| Error::InvalidSetting {
-                            name: "shard",
-                            value: format!("{name}={v}"),
-                            reason: "is not a whole number".into(),
-                        })
-                })
-                .transpose()
-        };
-        let slurm = number("SLURM_ARRAY_TASK_ID")?;
-        let (index, count) = match rest.strip_prefix('/') {
-            None if rest.is_empty() => (slurm, number("SLURM_ARRAY_TASK_COUNT")?),
-            Some(n) => (
-                slurm.or(number("JOB_COMPLETION_INDEX")?),
-                Some(
-                    n.trim()
-                        .parse::<usize>()
-                        .map_err(|_| Error::InvalidSetting {
-                            name: "shard",
-                            value: text.into(),
-                            reason: "auto/N takes the number of shards N".into(),
-                        })?,
-                ),
-            ),
-            None => return text.parse(),
-        };
-        match (index, count) {
-            (Some(index), Some(count)) => format!("{index}/{count}").parse(),
-            _ => Err(Error::InvalidSetting {
-                name: "shard",
-                value: text.into(),
-                reason: "no array task in the environment (SLURM_ARRAY_TASK_ID and \
-                         SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX with auto/N): run it \
-                         as an array job, or give I/N"
-                    .into(),
-            }),
-        }
-    }
-
-    /// The records of a chart of `m` that this shard simulates.
-    pub fn range(&self, m: usize) -> Range<usize> {
-        self.index * m / self.count..(self.index + 1) * m / self.count
-    }
 }
 
 /// What a sharded chart is: every shard of it must say the same.
@@ -162,34 +63,6 @@ pub struct ShardPlan {
     /// The stage-1 compressor the records were compressed with, or `None`
     /// for raw records.
     pub compressor: Option<String>,
-}
-
-/// The header of a shard file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct Header {
-    format: u32,
-    plan: ShardPlan,
-    /// `format!("{:?}")` of the training prior's sampling.
-    sampling: String,
-    param_names: Vec<String>,
-    shape: [usize; 3],
-    shard: usize,
-    shards: usize,
-}
-
-/// One experiment of a shard.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-enum Stored {
-    /// Its parameter vector, and its features (compressed shards) or its
-    /// record's signals, inputs then outputs, each whole.
-    Kept { theta: Vec<f64>, values: Vec<f64> },
-    /// Its parameter vector and why it failed.
-    Failed { theta: Vec<f64>, error: String },
-}
-
-/// The file name of shard `i` of `n`.
-fn file_name(shard: ShardIndex) -> String {
-    format!("shard-{:05}-of-{:05}.tsshard", shard.index, shard.count)
 }
 
 /// Simulate shard `shard` of the chart `plan` describes with `simulator`
@@ -331,70 +204,6 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
         cause,
     })?;
     Ok(path)
-}
-
-/// A record's signals, inputs then outputs, each whole.
-fn flatten(record: &IoData) -> Vec<f64> {
-    let mut values =
-        Vec::with_capacity(record.n_samples() * (record.n_inputs() + record.n_outputs()));
-    for j in 0..record.n_inputs() {
-        values.extend_from_slice(record.input(j));
-    }
-    for j in 0..record.n_outputs() {
-        values.extend_from_slice(record.output(j));
-    }
-    values
-}
-
-/// A writer or reader that checksums what passes through.
-struct Checksummed<T> {
-    inner: T,
-    hasher: crc32fast::Hasher,
-}
-
-impl<T> Checksummed<T> {
-    fn new(inner: T) -> Self {
-        Self {
-            inner,
-            hasher: crc32fast::Hasher::new(),
-        }
-    }
-}
-
-/// One length-prefixed postcard part, checksummed.
-fn write_part<W: Write, T: Serialize>(out: &mut Checksummed<W>, value: &T) -> std::io::Result<()> {
-    let bytes = postcard::to_stdvec(value).map_err(std::io::Error::other)?;
-    let length = (bytes.len() as u64).to_le_bytes();
-    out.hasher.update(&length);
-    out.hasher.update(&bytes);
-    out.inner.write_all(&length)?;
-    out.inner.write_all(&bytes)
-}
-
-/// The largest part a shard file may hold (a record of 2^27 numbers).
-const MAX_PART: u64 = 1 << 30;
-
-fn read_part<R: Read, T: serde::de::DeserializeOwned>(
-    input: &mut Checksummed<R>,
-    what: &str,
-) -> std::result::Result<T, String> {
-    let mut length = [0u8; 8];
-    input
-        .inner
-        .read_exact(&mut length)
-        .map_err(|e| format!("the file ends inside {what} ({e})"))?;
-    let n = u64::from_le_bytes(length);
-    if n > MAX_PART {
-        return Err(format!("{what} claims {n} bytes: the file is damaged"));
-    }
-    let mut bytes = vec![0u8; n as usize];
-    input
-        .inner
-        .read_exact(&mut bytes)
-        .map_err(|e| format!("the file ends inside {what} ({e})"))?;
-    input.hasher.update(&length);
-    input.hasher.update(&bytes);
-    postcard::from_bytes(&bytes).map_err(|e| format!("{what} cannot be read ({e})"))
 }
 
 /// A set of shard files that belong together and cover every record.
@@ -745,28 +554,6 @@ impl ShardedChart {
     }
 }
 
-/// A record's signals back from [`flatten`].
-fn unflatten(values: &[f64], record: &mut IoData) -> std::result::Result<(), String> {
-    let (n, n_u, n_y) = (record.n_samples(), record.n_inputs(), record.n_outputs());
-    if values.len() != n * (n_u + n_y) {
-        return Err(format!(
-            "{} values, a record of {n} samples of {n_u} inputs and {n_y} outputs has {}",
-            values.len(),
-            n * (n_u + n_y)
-        ));
-    }
-    for j in 0..n_u {
-        record
-            .input_mut(j)
-            .copy_from_slice(&values[j * n..(j + 1) * n]);
-    }
-    for j in 0..n_y {
-        let at = (n_u + j) * n;
-        record.output_mut(j).copy_from_slice(&values[at..at + n]);
-    }
-    Ok(())
-}
-
 fn describe(header: &Header) -> String {
     format!(
         "model {}, seed {}, {} training, {} calibration and {} validation records, {}, {} shards",
@@ -783,37 +570,6 @@ fn describe(header: &Header) -> String {
     )
 }
 
-/// Read and check a shard file's header (not its records).
-fn read_header(file: &Path) -> Result<Header> {
-    let fail = |message: String| Error::Shards {
-        what: file.display().to_string(),
-        message,
-    };
-    let handle = std::fs::File::open(file).map_err(|e| fail(e.to_string()))?;
-    let mut input = Checksummed::new(BufReader::new(handle));
-    let mut magic = [0u8; 8];
-    if input.inner.read_exact(&mut magic).is_err() || &magic != MAGIC {
-        return Err(fail(
-            "not a twostage shard file (written by twostage simulate --shard)".into(),
-        ));
-    }
-    let header: Header = read_part(&mut input, "the header").map_err(fail)?;
-    if header.format != SHARD_FORMAT {
-        return Err(fail(format!(
-            "shard format {}, this twostage reads {SHARD_FORMAT}: simulate the shards with \
-             this version",
-            header.format
-        )));
-    }
-    if header.shards == 0 || header.shard >= header.shards {
-        return Err(fail(format!(
-            "shard {} of {}: the header is damaged",
-            header.shard, header.shards
-        )));
-    }
-    Ok(header)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -824,64 +580,5 @@ mod tests {
         assert_eq!(fingerprint(b""), 0xcbf2_9ce4_8422_2325);
         assert_eq!(fingerprint(b"a"), 0xaf63_dc4c_8601_ec8c);
         assert_eq!(fingerprint(b"foobar"), 0x8594_4171_f739_67e8);
-    }
-
-    #[test]
-    fn shard_ranges_cover_every_record_once() {
-        for m in [0usize, 1, 7, 100, 1001] {
-            for n in 1..=9 {
-                let mut next = 0;
-                for index in 0..n {
-                    let r = ShardIndex { index, count: n }.range(m);
-                    assert_eq!(r.start, next, "m {m}, n {n}");
-                    next = r.end;
-                }
-                assert_eq!(next, m);
-            }
-        }
-    }
-
-    #[test]
-    fn shard_indices_come_from_slurm_or_kubernetes() {
-        let env = |vars: &'static [(&'static str, &'static str)]| {
-            move |name: &str| {
-                vars.iter()
-                    .find(|(k, _)| *k == name)
-                    .map(|(_, v)| v.to_string())
-            }
-        };
-        let slurm = env(&[
-            ("SLURM_ARRAY_TASK_ID", "2"),
-            ("SLURM_ARRAY_TASK_COUNT", "4"),
-        ]);
-        // An array re-submitted for shard 5 alone: Slurm counts 1 task.
-        let again = env(&[
-            ("SLURM_ARRAY_TASK_ID", "5"),
-            ("SLURM_ARRAY_TASK_COUNT", "1"),
-        ]);
-        assert!(ShardIndex::resolve("auto", again).is_err(), "5 of 1");
-        assert_eq!(
-            ShardIndex::resolve("auto/8", again).unwrap(),
-            ShardIndex { index: 5, count: 8 }
-        );
-        assert_eq!(
-            ShardIndex::resolve("auto", slurm).unwrap(),
-            ShardIndex { index: 2, count: 4 }
-        );
-        let k8s = env(&[("JOB_COMPLETION_INDEX", "3")]);
-        assert_eq!(
-            ShardIndex::resolve("auto/8", k8s).unwrap(),
-            ShardIndex { index: 3, count: 8 }
-        );
-        assert!(ShardIndex::resolve("auto", k8s).is_err(), "no count");
-        assert!(ShardIndex::resolve("auto/2", k8s).is_err(), "index 3 of 2");
-        assert!(ShardIndex::resolve("auto", env(&[])).is_err());
-        assert_eq!(
-            ShardIndex::resolve("1/3", env(&[])).unwrap(),
-            ShardIndex { index: 1, count: 3 }
-        );
-        for bad in ["3/3", "1", "a/2", "-1/2", "1/0"] {
-            assert!(bad.parse::<ShardIndex>().is_err(), "{bad}");
-        }
     }
 }

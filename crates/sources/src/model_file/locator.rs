@@ -1,0 +1,734 @@
+//! Checking a parsed model file, every mistake named by its line and key.
+
+use std::ops::Range;
+use std::path::PathBuf;
+
+use toml::Spanned;
+use twostage_compress::CompressorConfig;
+use twostage_fit::RegressorConfig;
+use twostage_fmi::InterfaceKind;
+use twostage_models::{BuiltinModel, BuiltinOverrides, InputSignal, Marginal, ModelSpec};
+
+use super::raw::*;
+use super::{DEFAULT_PRESET_SIMULATIONS, ModelSource};
+use crate::error::{Error, Result};
+use crate::preset::Preset;
+
+/// The checked signals.
+pub(super) struct Signals {
+    pub(super) inputs: Vec<String>,
+    pub(super) outputs: Vec<String>,
+    pub(super) samples: usize,
+    pub(super) sample_time: f64,
+}
+
+/// Turns byte spans into lines and builds errors.
+pub(super) struct Locator<'t> {
+    pub(super) text: &'t str,
+    pub(super) origin: &'t str,
+}
+
+impl Locator<'_> {
+    pub(super) fn line(&self, offset: usize) -> usize {
+        1 + self.text.as_bytes()[..offset.min(self.text.len())]
+            .iter()
+            .filter(|b| **b == b'\n')
+            .count()
+    }
+
+    pub(super) fn error(&self, span: Option<Range<usize>>, key: &str, message: String) -> Error {
+        Error::ModelFile {
+            file: self.origin.to_string(),
+            line: span.map(|s| self.line(s.start)),
+            key: key.to_string(),
+            message,
+        }
+    }
+
+    pub(super) fn source(
+        &self,
+        source: Option<&Spanned<RawSource>>,
+        noise: Option<&Spanned<RawNoise>>,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<ModelSource> {
+        let Some(source) = source else {
+            if let Some(input) = input {
+                return Err(self.error(
+                    Some(input.span()),
+                    "input",
+                    "an [input] needs a [source] to drive; a file without one describes charts \
+                     simulated elsewhere"
+                        .into(),
+                ));
+            }
+            return Ok(ModelSource::ChartsOnly);
+        };
+        let raw = source.get_ref();
+        if let Some(fmu) = &raw.fmu {
+            if raw.builtin.is_some() || raw.command.is_some() {
+                return Err(self.one_source(source.span()));
+            }
+            return self.fmu(fmu, raw, noise, input);
+        }
+        if let Some((key, span)) = raw.fmu_key() {
+            return Err(self.error(Some(span), key, "only an FMU source takes this key".into()));
+        }
+        if let Some(inputs) = noise.and_then(|n| n.get_ref().inputs.as_ref()) {
+            return Err(self.error(
+                Some(inputs.span()),
+                "noise.inputs",
+                "noise inputs drive an FMU's inputs: only an FMU source takes them".into(),
+            ));
+        }
+        let name = match (&raw.builtin, &raw.command) {
+            (Some(name), None) => name,
+            (None, Some(command)) => return self.command(command, raw, noise, input),
+            _ => return Err(self.one_source(source.span())),
+        };
+        if let Some(t) = &raw.timeout_seconds {
+            return Err(self.error(
+                Some(t.span()),
+                "source.timeout_seconds",
+                "a built-in model runs in this process: the timeout is for a command".into(),
+            ));
+        }
+        if let Some(b) = &raw.batch {
+            return Err(self.error(
+                Some(b.span()),
+                "source.batch",
+                "a built-in model runs in this process: the batch is for a command".into(),
+            ));
+        }
+        let model: BuiltinModel =
+            name.get_ref()
+                .parse()
+                .map_err(|e: twostage_models::SimError| {
+                    self.error(Some(name.span()), "source.builtin", e.to_string())
+                })?;
+        let noiseless = noise.is_some_and(|n| n.get_ref().model == Some(false));
+        let input = input.map(|i| self.input(i)).transpose()?;
+        Ok(ModelSource::Builtin {
+            model,
+            overrides: BuiltinOverrides {
+                noiseless,
+                n_samples: None,
+                input,
+            },
+        })
+    }
+
+    pub(super) fn one_source(&self, span: Range<usize>) -> Error {
+        self.error(
+            Some(span),
+            "source",
+            "give one source: builtin = \"benchmark\" (or \"pacejka\"), command = \
+             [\"python3\", \"sim.py\"] (docs/protocol.md), or fmu = \"model.fmu\" (docs/fmu.md)"
+                .into(),
+        )
+    }
+
+    pub(super) fn fmu(
+        &self,
+        fmu: &Spanned<String>,
+        raw: &RawSource,
+        noise: Option<&Spanned<RawNoise>>,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<ModelSource> {
+        if fmu.get_ref().trim().is_empty() {
+            return Err(self.error(
+                Some(fmu.span()),
+                "source.fmu",
+                "give the FMU's path, e.g. fmu = \"car.fmu\" (relative to this file)".into(),
+            ));
+        }
+        for (key, span) in [
+            (
+                "source.timeout_seconds",
+                raw.timeout_seconds.as_ref().map(Spanned::span),
+            ),
+            ("source.batch", raw.batch.as_ref().map(Spanned::span)),
+        ] {
+            if let Some(span) = span {
+                return Err(self.error(
+                    Some(span),
+                    key,
+                    "an FMU runs in this process: the key is for a command".into(),
+                ));
+            }
+        }
+        if let Some(noise) = noise.filter(|n| n.get_ref().model.is_some()) {
+            return Err(self.error(
+                Some(noise.span()),
+                "noise.model",
+                "`model` switches a built-in model's noise; give an FMU's noise as noise inputs"
+                    .into(),
+            ));
+        }
+        let interface = raw
+            .interface
+            .as_ref()
+            .map(|i| {
+                i.get_ref()
+                    .parse::<InterfaceKind>()
+                    .map_err(|e| self.error(Some(i.span()), "source.interface", e.to_string()))
+            })
+            .transpose()?;
+        let step_divisor = match &raw.step_divisor {
+            None => 1,
+            Some(d) => usize::try_from(*d.get_ref())
+                .ok()
+                .filter(|d| (1..=1 << 16).contains(d))
+                .ok_or_else(|| {
+                    self.error(
+                        Some(d.span()),
+                        "source.step_divisor",
+                        format!("{}: give 1 to 65536 steps per sample", d.get_ref()),
+                    )
+                })?,
+        };
+        let start_time = match &raw.start_time {
+            None => 0.0,
+            Some(t) if t.get_ref().is_finite() => *t.get_ref(),
+            Some(t) => {
+                return Err(self.error(
+                    Some(t.span()),
+                    "source.start_time",
+                    format!("{}: give a finite time", t.get_ref()),
+                ));
+            }
+        };
+        let starts: Vec<(String, f64)> = raw
+            .start
+            .as_ref()
+            .map(|s| s.get_ref().iter().map(|(k, v)| (k.clone(), *v)).collect())
+            .unwrap_or_default();
+        if let Some((name, value)) = starts.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(self.error(
+                raw.start.as_ref().map(Spanned::span),
+                "source.start",
+                format!("{name} = {value}: give a finite start value"),
+            ));
+        }
+        let mut noise_inputs: Vec<(String, f64)> = Vec::new();
+        if let Some(list) = noise.and_then(|n| n.get_ref().inputs.as_ref()) {
+            for n in list.get_ref() {
+                let name = n.name.trim().to_string();
+                if name.is_empty() || noise_inputs.iter().any(|(other, _)| *other == name) {
+                    return Err(self.error(
+                        Some(list.span()),
+                        "noise.inputs",
+                        format!("'{name}' is empty or named twice"),
+                    ));
+                }
+                if !(n.sd.is_finite() && n.sd >= 0.0) {
+                    return Err(self.error(
+                        Some(list.span()),
+                        "noise.inputs",
+                        format!("{name}: sd = {} must be finite and >= 0", n.sd),
+                    ));
+                }
+                noise_inputs.push((name, n.sd));
+            }
+        }
+        Ok(ModelSource::Fmu {
+            path: PathBuf::from(fmu.get_ref()),
+            interface,
+            step_divisor,
+            start_time,
+            starts,
+            noise_inputs,
+            input: input.map(|i| self.input(i)).transpose()?,
+        })
+    }
+
+    /// Where the names a source must know were written.
+    pub(super) fn name_lines(&self, raw: &RawFile) -> Vec<(String, &'static str, usize)> {
+        let mut lines = Vec::new();
+        for p in &raw.parameter {
+            let name = p.get_ref().name.get_ref().trim().to_string();
+            lines.push((
+                name,
+                "parameter.name",
+                self.line(p.get_ref().name.span().start),
+            ));
+        }
+        // In the order the FMU simulator checks them, so that a name given
+        // two roles is placed at its second.
+        let signals = raw.signals.as_ref().map(Spanned::get_ref);
+        let at = |list: &Spanned<Vec<String>>| self.line(list.span().start);
+        if let Some(list) = signals.and_then(|s| s.inputs.as_ref()) {
+            lines.extend(
+                list.get_ref()
+                    .iter()
+                    .map(|n| (n.clone(), "signals.inputs", at(list))),
+            );
+        }
+        if let Some(inputs) = raw.noise.as_ref().and_then(|n| n.get_ref().inputs.as_ref()) {
+            let line = self.line(inputs.span().start);
+            lines.extend(
+                inputs
+                    .get_ref()
+                    .iter()
+                    .map(|n| (n.name.trim().to_string(), "noise.inputs", line)),
+            );
+        }
+        if let Some(list) = signals.and_then(|s| s.outputs.as_ref()) {
+            lines.extend(
+                list.get_ref()
+                    .iter()
+                    .map(|n| (n.clone(), "signals.outputs", at(list))),
+            );
+        }
+        if let Some(start) = raw.source.as_ref().and_then(|s| s.get_ref().start.as_ref()) {
+            let line = self.line(start.span().start);
+            lines.extend(
+                start
+                    .get_ref()
+                    .keys()
+                    .map(|n| (n.clone(), "source.start", line)),
+            );
+        }
+        lines
+    }
+
+    pub(super) fn command(
+        &self,
+        command: &Spanned<Vec<String>>,
+        raw: &RawSource,
+        noise: Option<&Spanned<RawNoise>>,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<ModelSource> {
+        if command
+            .get_ref()
+            .first()
+            .is_none_or(|c| c.trim().is_empty())
+        {
+            return Err(self.error(
+                Some(command.span()),
+                "source.command",
+                "give the program and its arguments, e.g. [\"python3\", \"sim.py\"]".into(),
+            ));
+        }
+        if let Some(input) = input {
+            return Err(self.error(
+                Some(input.span()),
+                "input",
+                "a command makes its own input and returns it with the outputs: leave [input] out"
+                    .into(),
+            ));
+        }
+        if let Some(noise) = noise.filter(|n| n.get_ref().model.is_some()) {
+            return Err(self.error(
+                Some(noise.span()),
+                "noise.model",
+                "`model` switches a built-in model's noise; a command's noise is its own".into(),
+            ));
+        }
+        let timeout = match &raw.timeout_seconds {
+            None => std::time::Duration::from_secs(60),
+            Some(t) => std::time::Duration::try_from_secs_f64(*t.get_ref())
+                .ok()
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    self.error(
+                        Some(t.span()),
+                        "source.timeout_seconds",
+                        format!("{}: give a number of seconds > 0", t.get_ref()),
+                    )
+                })?,
+        };
+        let batch = match &raw.batch {
+            None => 1,
+            Some(b) => usize::try_from(*b.get_ref())
+                .ok()
+                .filter(|b| (1..=1 << 20).contains(b))
+                .ok_or_else(|| {
+                    self.error(
+                        Some(b.span()),
+                        "source.batch",
+                        format!(
+                            "{}: give the experiments per request, 1 to 2^20",
+                            b.get_ref()
+                        ),
+                    )
+                })?,
+        };
+        Ok(ModelSource::Command {
+            command: command.get_ref().clone(),
+            dir: None,
+            timeout,
+            batch,
+        })
+    }
+
+    pub(super) fn input(&self, input: &Spanned<RawInput>) -> Result<InputSignal> {
+        let raw = input.get_ref();
+        let kind = raw.signal.get_ref().as_str();
+        let here = || Some(input.span());
+        let (needed, signal) = match kind {
+            "white" => ("sd", raw.sd.map(InputSignal::white_gaussian)),
+            "chicane" => ("amplitude", raw.amplitude.map(InputSignal::chicane)),
+            "fixed" => ("values", raw.values.clone().map(InputSignal::fixed)),
+            other => {
+                return Err(self.error(
+                    Some(raw.signal.span()),
+                    "input.signal",
+                    format!("unknown signal '{other}': use \"white\", \"chicane\" or \"fixed\""),
+                ));
+            }
+        };
+        let extra = [
+            ("sd", raw.sd.is_some()),
+            ("amplitude", raw.amplitude.is_some()),
+            ("values", raw.values.is_some()),
+        ]
+        .into_iter()
+        .find(|(key, given)| *given && *key != needed);
+        if let Some((key, _)) = extra {
+            return Err(self.error(
+                here(),
+                &format!("input.{key}"),
+                format!("a \"{kind}\" input takes {needed} only"),
+            ));
+        }
+        signal
+            .ok_or_else(|| {
+                self.error(
+                    here(),
+                    &format!("input.{needed}"),
+                    format!("a \"{kind}\" input needs {needed}"),
+                )
+            })?
+            .map_err(|e| self.error(here(), "input", e.to_string()))
+    }
+
+    pub(super) fn parameters(
+        &self,
+        raw: &[Spanned<RawParameter>],
+        base: Option<&ModelSpec>,
+    ) -> Result<(Vec<String>, Vec<Marginal>)> {
+        if let Some(base) = base {
+            if raw.is_empty() {
+                return Ok((
+                    base.param_names().to_vec(),
+                    base.prior().marginals().to_vec(),
+                ));
+            }
+            if raw.len() != base.n_params() {
+                return Err(self.error(
+                    Some(raw[0].span()),
+                    "parameter",
+                    format!(
+                        "the built-in source has {} parameter(s) ({}); give one [[parameter]] \
+                         each, in that order, or none to keep its priors",
+                        base.n_params(),
+                        base.param_names().join(", ")
+                    ),
+                ));
+            }
+        } else if raw.is_empty() {
+            return Err(self.error(
+                None,
+                "parameter",
+                "no [[parameter]]: give each parameter a name and a prior".into(),
+            ));
+        }
+        let mut names = Vec::with_capacity(raw.len());
+        let mut marginals = Vec::with_capacity(raw.len());
+        for (j, p) in raw.iter().enumerate() {
+            let p_ref = p.get_ref();
+            let name = p_ref.name.get_ref().trim().to_string();
+            if name.is_empty() || names.contains(&name) {
+                return Err(self.error(
+                    Some(p_ref.name.span()),
+                    "parameter.name",
+                    format!("'{name}' is empty or used twice: every parameter needs its own name"),
+                ));
+            }
+            let marginal = match (&p_ref.prior, base) {
+                (Some(prior), _) => self.marginal(prior, &name, j)?,
+                (None, Some(base)) => base.prior().marginals()[j],
+                (None, None) => {
+                    return Err(self.error(
+                        Some(p.span()),
+                        "parameter.prior",
+                        format!(
+                            "parameter '{name}' has no prior: add prior = {{ dist = \"uniform\", \
+                             low = ..., high = ... }} (or normal, lognormal, truncnormal)"
+                        ),
+                    ));
+                }
+            };
+            names.push(name);
+            marginals.push(marginal);
+        }
+        Ok((names, marginals))
+    }
+
+    pub(super) fn marginal(
+        &self,
+        prior: &Spanned<RawPrior>,
+        name: &str,
+        index: usize,
+    ) -> Result<Marginal> {
+        let raw = prior.get_ref();
+        let dist = raw.dist.get_ref().as_str();
+        let key = "parameter.prior";
+        let needs: &[&str] = match dist {
+            "uniform" => &["low", "high"],
+            "normal" | "lognormal" => &["mu", "sigma"],
+            "truncnormal" => &["mu", "sigma", "low", "high"],
+            other => {
+                return Err(self.error(
+                    Some(raw.dist.span()),
+                    "parameter.prior.dist",
+                    format!(
+                        "parameter '{name}': unknown distribution '{other}': use uniform, \
+                         normal, lognormal or truncnormal"
+                    ),
+                ));
+            }
+        };
+        let given = [
+            ("low", raw.low),
+            ("high", raw.high),
+            ("mu", raw.mu),
+            ("sigma", raw.sigma),
+        ];
+        for (k, v) in given {
+            if v.is_some() != needs.contains(&k) {
+                return Err(self.error(
+                    Some(prior.span()),
+                    &format!("{key}.{k}"),
+                    format!(
+                        "parameter '{name}': a {dist} prior takes exactly {}",
+                        needs.join(", ")
+                    ),
+                ));
+            }
+        }
+        let v = |x: Option<f64>| x.unwrap_or(f64::NAN);
+        let marginal = match dist {
+            "uniform" => Marginal::Uniform {
+                low: v(raw.low),
+                high: v(raw.high),
+            },
+            "normal" => Marginal::Normal {
+                mu: v(raw.mu),
+                sigma: v(raw.sigma),
+            },
+            "lognormal" => Marginal::LogNormal {
+                mu: v(raw.mu),
+                sigma: v(raw.sigma),
+            },
+            _ => Marginal::TruncatedNormal {
+                mu: v(raw.mu),
+                sigma: v(raw.sigma),
+                low: v(raw.low),
+                high: v(raw.high),
+            },
+        };
+        marginal
+            .check(index)
+            .map_err(|e| self.error(Some(prior.span()), key, format!("parameter '{name}': {e}")))?;
+        Ok(marginal)
+    }
+
+    pub(super) fn signals(
+        &self,
+        raw: Option<&Spanned<RawSignals>>,
+        base: Option<&ModelSpec>,
+    ) -> Result<Signals> {
+        let empty = RawSignals {
+            inputs: None,
+            outputs: None,
+            samples: None,
+            sample_time: None,
+        };
+        let s = raw.map_or(&empty, Spanned::get_ref);
+        let whole = raw.map(Spanned::span);
+        let names = |given: &Option<Spanned<Vec<String>>>,
+                     key: &str,
+                     base: Option<&[String]>|
+         -> Result<Vec<String>> {
+            match (given, base) {
+                (Some(list), Some(base)) if list.get_ref().len() != base.len() => Err(self.error(
+                    Some(list.span()),
+                    key,
+                    format!(
+                        "the built-in source has {} ({}); rename them one for one",
+                        base.len(),
+                        base.join(", ")
+                    ),
+                )),
+                (Some(list), _) => {
+                    let mut seen: Vec<&String> = Vec::new();
+                    for n in list.get_ref() {
+                        if n.trim().is_empty() || seen.contains(&n) {
+                            return Err(self.error(
+                                Some(list.span()),
+                                key,
+                                format!(
+                                    "'{n}' is empty or used twice: each signal needs its own name"
+                                ),
+                            ));
+                        }
+                        seen.push(n);
+                    }
+                    Ok(list.get_ref().clone())
+                }
+                (None, Some(base)) => Ok(base.to_vec()),
+                (None, None) if key == "signals.inputs" => Ok(Vec::new()),
+                (None, None) => Err(self.error(
+                    whole.clone(),
+                    key,
+                    "name the measured outputs, e.g. outputs = [\"y\"]".into(),
+                )),
+            }
+        };
+        let inputs = names(
+            &s.inputs,
+            "signals.inputs",
+            base.map(ModelSpec::input_names),
+        )?;
+        let outputs = names(
+            &s.outputs,
+            "signals.outputs",
+            base.map(ModelSpec::output_names),
+        )?;
+        if outputs.is_empty() {
+            return Err(self.error(
+                whole,
+                "signals.outputs",
+                "at least one output: an estimator learns from what is measured".into(),
+            ));
+        }
+        let samples = match (&s.samples, base) {
+            (Some(n), _) => usize::try_from(*n.get_ref())
+                .ok()
+                .filter(|n| *n >= 1)
+                .ok_or_else(|| {
+                    self.error(
+                        Some(n.span()),
+                        "signals.samples",
+                        format!(
+                            "{} samples: give a record length of at least 1",
+                            n.get_ref()
+                        ),
+                    )
+                })?,
+            (None, Some(base)) => base.n_samples(),
+            (None, None) => {
+                return Err(self.error(
+                    whole,
+                    "signals.samples",
+                    "give the record length, samples = N".into(),
+                ));
+            }
+        };
+        let sample_time = match (&s.sample_time, base) {
+            (Some(t), Some(base)) if t.get_ref().to_bits() != base.sample_time().to_bits() => {
+                return Err(self.error(
+                    Some(t.span()),
+                    "signals.sample_time",
+                    format!(
+                        "the built-in source samples every {}: leave sample_time out",
+                        base.sample_time()
+                    ),
+                ));
+            }
+            (Some(t), _) if !(t.get_ref().is_finite() && *t.get_ref() > 0.0) => {
+                return Err(self.error(
+                    Some(t.span()),
+                    "signals.sample_time",
+                    format!("{}: give a finite time > 0 between samples", t.get_ref()),
+                ));
+            }
+            (Some(t), _) => *t.get_ref(),
+            (None, Some(base)) => base.sample_time(),
+            (None, None) => 1.0,
+        };
+        Ok(Signals {
+            inputs,
+            outputs,
+            samples,
+            sample_time,
+        })
+    }
+
+    pub(super) fn output_noise(
+        &self,
+        noise: Option<&Spanned<RawNoise>>,
+        outputs: usize,
+    ) -> Result<Vec<f64>> {
+        let Some(sd) = noise.and_then(|n| n.get_ref().output_sd.as_ref()) else {
+            return Ok(vec![0.0; outputs]);
+        };
+        let values = match sd.get_ref() {
+            OneOrMany::One(v) => vec![*v; outputs],
+            OneOrMany::Many(v) => v.clone(),
+        };
+        if values.len() != outputs || values.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(self.error(
+                Some(sd.span()),
+                "noise.output_sd",
+                format!(
+                    "{values:?}: give one standard deviation >= 0 for all outputs, or a list of \
+                     {outputs} (one per output)"
+                ),
+            ));
+        }
+        Ok(values)
+    }
+
+    pub(super) fn presets(&self, raw: &[Spanned<RawPreset>]) -> Result<Vec<(String, Preset)>> {
+        let mut presets: Vec<(String, Preset)> = Vec::new();
+        for p in raw {
+            let r = p.get_ref();
+            let name = r.name.get_ref().trim().to_string();
+            if name.is_empty() || presets.iter().any(|(n, _)| *n == name) {
+                return Err(self.error(
+                    Some(r.name.span()),
+                    "preset.name",
+                    format!("'{name}' is empty or used twice: every preset needs its own name"),
+                ));
+            }
+            let compressor: CompressorConfig =
+                r.compress
+                    .get_ref()
+                    .parse()
+                    .map_err(|e: twostage_compress::CompressError| {
+                        self.error(Some(r.compress.span()), "preset.compress", e.to_string())
+                    })?;
+            let regressor: RegressorConfig =
+                r.fit
+                    .get_ref()
+                    .parse()
+                    .map_err(|e: twostage_fit::FitError| {
+                        self.error(Some(r.fit.span()), "preset.fit", e.to_string())
+                    })?;
+            let simulations = match &r.sims {
+                Some(m) => usize::try_from(*m.get_ref())
+                    .ok()
+                    .filter(|m| *m >= 2)
+                    .ok_or_else(|| {
+                        self.error(
+                            Some(m.span()),
+                            "preset.sims",
+                            format!("{}: give at least 2 training simulations", m.get_ref()),
+                        )
+                    })?,
+                None => DEFAULT_PRESET_SIMULATIONS,
+            };
+            presets.push((
+                name,
+                Preset {
+                    compressor,
+                    regressor,
+                    simulations,
+                },
+            ));
+        }
+        Ok(presets)
+    }
+}

@@ -1,0 +1,498 @@
+//! Model files: a model described in TOML, so that the command line trains
+//! estimators for models other than the built-in ones. The file names the
+//! parameters and their priors, the signals, the input, the measurement
+//! noise, the presets, and where simulations come from. Every mistake is an
+//! [`Error::ModelFile`] naming the file, the line, the key and what is
+//! accepted. The annotated [`TEMPLATE`] is the reference;
+//! docs/your-own-model.md walks through it.
+
+use std::path::{Path, PathBuf};
+
+use toml::Spanned;
+use twostage_fmi::{FmiError, FmuSimulator, InterfaceKind};
+use twostage_models::{
+    BuiltinModel, BuiltinOverrides, ExternalSimulator, InputSignal, ModelSpec, Prior, Simulator,
+};
+
+use crate::error::{Error, Result};
+use crate::preset::Preset;
+
+/// An annotated model file, as `twostage models --template` prints it.
+pub const TEMPLATE: &str = include_str!("../model_file_template.toml");
+
+/// The simulations of a preset that does not say.
+pub(super) const DEFAULT_PRESET_SIMULATIONS: usize = 2000;
+
+/// Where a model file's simulations come from.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum ModelSource {
+    /// A built-in model, with some of its settings replaced.
+    Builtin {
+        /// Which one.
+        model: BuiltinModel,
+        /// Its settings as the file changes them.
+        overrides: BuiltinOverrides,
+    },
+    /// Another program speaking the protocol of docs/protocol.md.
+    Command {
+        /// The program and its arguments.
+        command: Vec<String>,
+        /// Where it runs: the model file's folder (or the caller's).
+        dir: Option<std::path::PathBuf>,
+        /// The longest wait for a record.
+        timeout: std::time::Duration,
+        /// Experiments per request.
+        batch: usize,
+    },
+    /// An FMU (FMI 2.0 or 3.0), docs/fmu.md.
+    Fmu {
+        /// The FMU, relative paths resolved against the model file's folder.
+        path: PathBuf,
+        /// Co-simulation or model exchange (`None`: co-simulation if the
+        /// FMU has it).
+        interface: Option<InterfaceKind>,
+        /// Communication or integration steps per sample.
+        step_divisor: usize,
+        /// The simulation time of the first sample.
+        start_time: f64,
+        /// FMU variables set before initialization in every experiment.
+        starts: Vec<(String, f64)>,
+        /// FMU inputs driven with white Gaussian noise: name and standard
+        /// deviation, drawn in this order at every sample.
+        noise_inputs: Vec<(String, f64)>,
+        /// The design of the measured inputs.
+        input: Option<InputSignal>,
+    },
+    /// None: the file describes charts simulated elsewhere.
+    ChartsOnly,
+}
+
+/// A model described by a model file.
+///
+/// ```
+/// use twostage_sources::ModelFile;
+/// let file = ModelFile::parse(
+///     r#"
+///     [model]
+///     name = "short-benchmark"
+///     [source]
+///     builtin = "benchmark"
+///     [[parameter]]
+///     name = "theta"
+///     prior = { dist = "truncnormal", mu = 0.0, sigma = 0.3, low = -0.9, high = 0.9 }
+///     [signals]
+///     samples = 300
+///     [[preset]]
+///     name = "small"
+///     compress = "arx:3,3"
+///     fit = "mlp:6"
+///     sims = 800
+///     "#,
+///     "short.toml",
+/// )?;
+/// let simulator = file.simulator()?;
+/// assert_eq!(simulator.spec().n_samples(), 300);
+/// assert_eq!(file.preset("small")?.simulations, 800);
+/// # Ok::<(), twostage_sources::Error>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct ModelFile {
+    origin: String,
+    description: String,
+    source: ModelSource,
+    spec: ModelSpec,
+    output_sd: Vec<f64>,
+    presets: Vec<(String, Preset)>,
+    /// Where each name the source must know was written: (name, key, line).
+    name_lines: Vec<(String, &'static str, usize)>,
+    /// The line of `fmu = ...`.
+    fmu_line: Option<usize>,
+    /// Identifies the file's text (shards record it).
+    fingerprint: u64,
+}
+
+impl ModelFile {
+    /// Read and check a model file.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if it cannot be read, [`Error::ModelFile`] for every
+    /// mistake in it.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|cause| Error::Io {
+            path: path.display().to_string(),
+            cause,
+        })?;
+        let mut file = Self::parse(&text, &path.display().to_string())?;
+        // A command runs beside its model file, so that `python3 sim.py` works
+        // from any folder; an FMU is found beside it.
+        let folder = path.parent().map(|p| {
+            if p.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                p
+            }
+        });
+        match &mut file.source {
+            ModelSource::Command { dir, .. } => *dir = folder.map(Path::to_path_buf),
+            ModelSource::Fmu { path: fmu, .. } => {
+                if let Some(folder) = folder.filter(|_| fmu.is_relative()) {
+                    *fmu = folder.join(&*fmu);
+                }
+            }
+            _ => {}
+        }
+        Ok(file)
+    }
+
+    /// Check the text of a model file; `origin` names it in messages.
+    ///
+    /// # Errors
+    /// [`Error::ModelFile`] naming the line, the key and what is accepted.
+    pub fn parse(text: &str, origin: &str) -> Result<Self> {
+        let at = Locator { text, origin };
+        let raw: RawFile = toml::from_str(text).map_err(|e| Error::ModelFile {
+            file: origin.to_string(),
+            line: e.span().map(|s| at.line(s.start)),
+            key: String::new(),
+            message: e.message().to_string(),
+        })?;
+        let mut source = at.source(raw.source.as_ref(), raw.noise.as_ref(), raw.input.as_ref())?;
+        let builtin = match &source {
+            ModelSource::Builtin { model, overrides } => {
+                Some((*model, model.build_with(overrides)?))
+            }
+            ModelSource::Command { .. } | ModelSource::Fmu { .. } | ModelSource::ChartsOnly => None,
+        };
+        let base = builtin.as_ref().map(|(_, sim)| sim.spec());
+        let (names, marginals) = at.parameters(&raw.parameter, base)?;
+        let signals = at.signals(raw.signals.as_ref(), base)?;
+        if let ModelSource::Builtin { overrides, .. } = &mut source
+            && base.is_some_and(|b| b.n_samples() != signals.samples)
+        {
+            overrides.n_samples = Some(signals.samples);
+        }
+        let prior =
+            Prior::new(marginals).map_err(|e| at.error(None, "parameter", e.to_string()))?;
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        let inputs: Vec<&str> = signals.inputs.iter().map(String::as_str).collect();
+        let outputs: Vec<&str> = signals.outputs.iter().map(String::as_str).collect();
+        let spec = ModelSpec::new(
+            raw.model.name.get_ref(),
+            &names,
+            prior,
+            signals.sample_time,
+            signals.samples,
+        )
+        .map_err(|e| at.error(Some(raw.model.name.span()), "model", e.to_string()))?
+        .with_signals(&inputs, &outputs);
+        let spec = match base {
+            Some(b) => spec.with_notes(b.input_note(), b.noise_note()),
+            None => spec,
+        };
+        if let (ModelSource::Fmu { .. }, None) = (
+            &source,
+            raw.signals
+                .as_ref()
+                .and_then(|s| s.get_ref().sample_time.as_ref()),
+        ) {
+            return Err(at.error(
+                raw.signals.as_ref().map(Spanned::span),
+                "signals.sample_time",
+                "an FMU runs in its own time unit: give the time between samples, \
+                 sample_time = T"
+                    .into(),
+            ));
+        }
+        if let ModelSource::Fmu { input, .. } = &source {
+            let span = raw.signals.as_ref().map(Spanned::span);
+            if input.is_none() && !signals.inputs.is_empty() {
+                return Err(at.error(
+                    span,
+                    "signals.inputs",
+                    "the FMU's inputs need a design: add an [input] (white, chicane or fixed)"
+                        .into(),
+                ));
+            }
+            if let (Some(_), true) = (input, signals.inputs.is_empty()) {
+                return Err(at.error(
+                    raw.input.as_ref().map(Spanned::span),
+                    "input",
+                    "[input] drives the measured inputs, but [signals] names none".into(),
+                ));
+            }
+        }
+        let spec = match &source {
+            ModelSource::Fmu {
+                input,
+                noise_inputs,
+                ..
+            } => spec.with_notes(
+                &input
+                    .as_ref()
+                    .map(InputSignal::describe)
+                    .unwrap_or_default(),
+                &noise_inputs
+                    .iter()
+                    .map(|(name, sd)| format!("{name} ~ N(0, {sd}^2)"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            ),
+            _ => spec,
+        };
+        let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
+        let presets = at.presets(&raw.preset)?;
+        let name_lines = at.name_lines(&raw);
+        let fmu_line = raw
+            .source
+            .as_ref()
+            .and_then(|s| s.get_ref().fmu.as_ref())
+            .map(|f| at.line(f.span().start));
+        Ok(Self {
+            origin: origin.to_string(),
+            description: raw.model.description.unwrap_or_default(),
+            source,
+            spec,
+            output_sd,
+            presets,
+            name_lines,
+            fmu_line,
+            fingerprint: crate::fingerprint(text.as_bytes()),
+        })
+    }
+
+    /// The model's name, parameters, prior, sampling and signals.
+    pub fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    /// The model's name.
+    pub fn name(&self) -> &str {
+        self.spec.name()
+    }
+
+    /// A hash of the file's text ([`crate::fingerprint`]): shards simulated
+    /// from it record it, and training checks it.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    /// What the file says the model is, for people.
+    pub fn description(&self) -> &str {
+        &self.description
+    }
+
+    /// Where simulations come from.
+    pub fn source(&self) -> &ModelSource {
+        &self.source
+    }
+
+    /// The simulator the file describes.
+    ///
+    /// # Errors
+    /// [`Error::ModelFile`] for a file without a source (it describes
+    /// charts simulated elsewhere).
+    pub fn simulator(&self) -> Result<Box<dyn Simulator>> {
+        match &self.source {
+            ModelSource::Builtin { model, overrides } => Ok(Box::new(FileSimulator {
+                inner: model.build_with(overrides)?,
+                spec: self.spec.clone(),
+                output_sd: self.output_sd.clone(),
+            })),
+            ModelSource::Command {
+                command,
+                dir,
+                timeout,
+                batch,
+            } => {
+                let mut external = ExternalSimulator::new(self.spec.clone(), command.clone())?
+                    .timeout(*timeout)
+                    .batch(*batch);
+                if let Some(dir) = dir {
+                    external = external.current_dir(dir);
+                }
+                Ok(Box::new(FileSimulator {
+                    inner: Box::new(external),
+                    spec: self.spec.clone(),
+                    output_sd: self.output_sd.clone(),
+                }))
+            }
+            ModelSource::Fmu {
+                path,
+                interface,
+                step_divisor,
+                start_time,
+                starts,
+                noise_inputs,
+                input,
+            } => {
+                let mut builder = FmuSimulator::builder(path, self.spec.clone())
+                    .step_divisor(*step_divisor)
+                    .start_time(*start_time);
+                if let Some(kind) = interface {
+                    builder = builder.interface(*kind);
+                }
+                if let Some(input) = input {
+                    builder = builder.input(input.clone());
+                }
+                for (name, sd) in noise_inputs {
+                    builder = builder.noise_input(name, *sd);
+                }
+                for (name, value) in starts {
+                    builder = builder.start(name, *value);
+                }
+                let fmu = builder.build().map_err(|e| self.fmu_error(e))?;
+                Ok(Box::new(FileSimulator {
+                    inner: Box::new(fmu),
+                    spec: self.spec.clone(),
+                    output_sd: self.output_sd.clone(),
+                }))
+            }
+            ModelSource::ChartsOnly => Err(Error::ModelFile {
+                file: self.origin.clone(),
+                line: None,
+                key: "source".into(),
+                message: "the file has no [source], so nothing can be simulated: add one \
+                          (a file without it describes charts simulated elsewhere, which this \
+                          command cannot use)"
+                    .into(),
+            }),
+        }
+    }
+
+    /// The file's model simulated by `source`, a simulator the caller
+    /// supplies (a Python function, say): the file gives the names, prior,
+    /// signals and measurement noise, `source` the records. Only a file
+    /// without a `[source]` of its own takes one.
+    ///
+    /// # Errors
+    /// [`Error::ModelFile`] when the file names its own source, or when
+    /// `source` simulates records of another shape than the file's.
+    pub fn simulator_with(&self, source: Box<dyn Simulator>) -> Result<Box<dyn Simulator>> {
+        let error = |key: &str, message: String| Error::ModelFile {
+            file: self.origin.clone(),
+            line: None,
+            key: key.into(),
+            message,
+        };
+        if !matches!(self.source, ModelSource::ChartsOnly) {
+            return Err(error(
+                "source",
+                "the file names its own [source]: leave it out to simulate with the one given \
+                 here"
+                    .into(),
+            ));
+        }
+        let (mine, theirs) = (&self.spec, source.spec());
+        if mine.n_params() != theirs.n_params()
+            || mine.input_names().len() != theirs.input_names().len()
+            || mine.output_names().len() != theirs.output_names().len()
+            || mine.n_samples() != theirs.n_samples()
+        {
+            return Err(error(
+                "signals",
+                format!(
+                    "the given simulator has {} parameters, {} inputs, {} outputs and {} \
+                     samples; the file says {}, {}, {} and {}",
+                    theirs.n_params(),
+                    theirs.input_names().len(),
+                    theirs.output_names().len(),
+                    theirs.n_samples(),
+                    mine.n_params(),
+                    mine.input_names().len(),
+                    mine.output_names().len(),
+                    mine.n_samples()
+                ),
+            ));
+        }
+        Ok(Box::new(FileSimulator {
+            inner: source,
+            spec: self.spec.clone(),
+            output_sd: self.output_sd.clone(),
+        }))
+    }
+
+    /// An FMU's complaint, placed at the line of the name it concerns (or
+    /// of `fmu = ...`).
+    fn fmu_error(&self, e: FmiError) -> Error {
+        let (key, line) = match &e {
+            FmiError::Variable { name, .. } => self
+                .name_lines
+                .iter()
+                .rfind(|(n, _, _)| n == name)
+                .map_or(("source.fmu", self.fmu_line), |(_, key, line)| {
+                    (*key, Some(*line))
+                }),
+            _ => ("source.fmu", self.fmu_line),
+        };
+        Error::ModelFile {
+            file: self.origin.clone(),
+            line,
+            key: key.into(),
+            message: e.to_string(),
+        }
+    }
+
+    /// The model as charts read from files need it: its spec, without
+    /// simulating (a file without a source has nothing to simulate with;
+    /// one with a source simulates as [`ModelFile::simulator`] does).
+    pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
+        match self.source {
+            ModelSource::ChartsOnly => Ok(Box::new(ChartsOnly {
+                spec: self.spec.clone(),
+                origin: self.origin.clone(),
+            })),
+            _ => self.simulator(),
+        }
+    }
+
+    /// The file's presets, in its order (a built-in source's own come on
+    /// top through the facade's named model).
+    pub fn preset_names(&self) -> impl Iterator<Item = &str> {
+        self.presets.iter().map(|(name, _)| name.as_str())
+    }
+
+    /// A preset by name.
+    ///
+    /// # Errors
+    /// [`Error::NotAvailable`] naming the presets that exist.
+    pub fn preset(&self, name: &str) -> Result<Preset> {
+        self.presets
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.clone())
+            .ok_or_else(|| Error::NotAvailable {
+                what: "preset",
+                name: name.to_string(),
+                model: self.name().to_string(),
+                available: if self.presets.is_empty() {
+                    "none (add a [[preset]], or give the stages on the command line)".into()
+                } else {
+                    self.preset_names().collect::<Vec<_>>().join(", ")
+                },
+            })
+    }
+}
+
+mod fmu_template;
+mod locator;
+mod raw;
+mod simulator;
+
+pub use fmu_template::fmu_model_file;
+use locator::Locator;
+use raw::RawFile;
+use simulator::{ChartsOnly, FileSimulator};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_template_is_a_valid_model_file() {
+        let file = ModelFile::parse(TEMPLATE, "template.toml").unwrap();
+        assert!(file.simulator().is_ok());
+        assert!(file.preset_names().count() >= 1);
+    }
+}

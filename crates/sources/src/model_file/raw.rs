@@ -1,0 +1,133 @@
+//! The file as TOML gives it: unknown keys are refused with their line.
+
+use std::collections::BTreeMap;
+use std::ops::Range;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+// ---- The file as TOML gives it (unknown keys are refused with their line).
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawFile {
+    pub(super) model: RawModel,
+    pub(super) source: Option<Spanned<RawSource>>,
+    #[serde(default)]
+    pub(super) parameter: Vec<Spanned<RawParameter>>,
+    pub(super) signals: Option<Spanned<RawSignals>>,
+    pub(super) input: Option<Spanned<RawInput>>,
+    pub(super) noise: Option<Spanned<RawNoise>>,
+    #[serde(default)]
+    pub(super) preset: Vec<Spanned<RawPreset>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawModel {
+    pub(super) name: Spanned<String>,
+    pub(super) description: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawSource {
+    pub(super) builtin: Option<Spanned<String>>,
+    pub(super) command: Option<Spanned<Vec<String>>>,
+    pub(super) fmu: Option<Spanned<String>>,
+    pub(super) timeout_seconds: Option<Spanned<f64>>,
+    pub(super) batch: Option<Spanned<i64>>,
+    pub(super) interface: Option<Spanned<String>>,
+    pub(super) step_divisor: Option<Spanned<i64>>,
+    pub(super) start_time: Option<Spanned<f64>>,
+    pub(super) start: Option<Spanned<BTreeMap<String, f64>>>,
+}
+
+impl RawSource {
+    /// The first key given that only an FMU source takes.
+    pub(super) fn fmu_key(&self) -> Option<(&'static str, Range<usize>)> {
+        [
+            (
+                "source.interface",
+                self.interface.as_ref().map(Spanned::span),
+            ),
+            (
+                "source.step_divisor",
+                self.step_divisor.as_ref().map(Spanned::span),
+            ),
+            (
+                "source.start_time",
+                self.start_time.as_ref().map(Spanned::span),
+            ),
+            ("source.start", self.start.as_ref().map(Spanned::span)),
+        ]
+        .into_iter()
+        .find_map(|(key, span)| span.map(|s| (key, s)))
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawParameter {
+    pub(super) name: Spanned<String>,
+    pub(super) prior: Option<Spanned<RawPrior>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawPrior {
+    pub(super) dist: Spanned<String>,
+    pub(super) low: Option<f64>,
+    pub(super) high: Option<f64>,
+    pub(super) mu: Option<f64>,
+    pub(super) sigma: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawSignals {
+    pub(super) inputs: Option<Spanned<Vec<String>>>,
+    pub(super) outputs: Option<Spanned<Vec<String>>>,
+    pub(super) samples: Option<Spanned<i64>>,
+    pub(super) sample_time: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawInput {
+    pub(super) signal: Spanned<String>,
+    pub(super) sd: Option<f64>,
+    pub(super) amplitude: Option<f64>,
+    pub(super) values: Option<Vec<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawNoise {
+    pub(super) model: Option<bool>,
+    pub(super) output_sd: Option<Spanned<OneOrMany>>,
+    pub(super) inputs: Option<Spanned<Vec<RawNoiseInput>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawNoiseInput {
+    pub(super) name: String,
+    pub(super) sd: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+pub(super) enum OneOrMany {
+    One(f64),
+    Many(Vec<f64>),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawPreset {
+    pub(super) name: Spanned<String>,
+    pub(super) compress: Spanned<String>,
+    pub(super) fit: Spanned<String>,
+    pub(super) sims: Option<Spanned<i64>>,
+}

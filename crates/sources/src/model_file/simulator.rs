@@ -1,0 +1,97 @@
+//! The simulators a model file makes: its source under the file's names and
+//! noise, or none for a file that describes charts.
+
+use twostage_models::{ExperimentRng, IoData, ModelSpec, Simulator};
+
+/// A model file's simulator: the source's, under the file's name, prior
+/// and signal names, with the file's measurement noise added.
+pub(super) struct FileSimulator {
+    pub(super) inner: Box<dyn Simulator>,
+    pub(super) spec: ModelSpec,
+    pub(super) output_sd: Vec<f64>,
+}
+
+impl Simulator for FileSimulator {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    fn simulate(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        out: &mut IoData,
+    ) -> twostage_models::Result<()> {
+        self.inner.simulate(theta, rng, out)?;
+        self.measured(rng, out)
+    }
+
+    fn batch_size(&self) -> usize {
+        self.inner.batch_size()
+    }
+
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<twostage_models::Result<()>> {
+        let mut results = self.inner.simulate_batch(thetas, rngs, outs);
+        for ((result, rng), out) in results.iter_mut().zip(rngs.iter_mut()).zip(outs.iter_mut()) {
+            if result.is_ok() {
+                *result = self.measured(rng, out);
+            }
+        }
+        results
+    }
+}
+
+impl FileSimulator {
+    /// Check the source's record against the file and add the file's
+    /// measurement noise.
+    fn measured(&self, rng: &mut ExperimentRng, out: &mut IoData) -> twostage_models::Result<()> {
+        let (n, want) = (out.n_samples(), self.spec.n_samples());
+        if n != want || out.n_outputs() != self.output_sd.len() {
+            return Err(twostage_models::SimError::InvalidData(format!(
+                "the source gave {n} samples of {} outputs, the model file says {want} of {}",
+                out.n_outputs(),
+                self.output_sd.len()
+            )));
+        }
+        // After the source's own draws, from the same stream: experiment i
+        // of seed s stays the same bits.
+        for (j, &sd) in self.output_sd.iter().enumerate() {
+            if sd > 0.0 {
+                for y in out.output_mut(j) {
+                    let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
+                    *y += sd * e;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The model of a file without a source: a spec, and a refusal to simulate.
+pub(super) struct ChartsOnly {
+    pub(super) spec: ModelSpec,
+    pub(super) origin: String,
+}
+
+impl Simulator for ChartsOnly {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    fn simulate(
+        &self,
+        _: &[f64],
+        _: &mut ExperimentRng,
+        _: &mut IoData,
+    ) -> twostage_models::Result<()> {
+        Err(twostage_models::SimError::InvalidData(format!(
+            "{} has no [source]: its charts come from files, it cannot simulate",
+            self.origin
+        )))
+    }
+}
