@@ -1,6 +1,6 @@
 /* The FMI 2.0 callbacks that must be C: the variadic logger formats the
  * FMU's message with its arguments and hands the text to Rust
- * (twostage_fmi_log, in src/ffi.rs); the memory callbacks are the C
+ * (twostage_fmi_log, in src/ffi/log.rs); the memory callbacks are the C
  * library's. Written from the signatures of the FMI 2.0 standard, section
  * 2.1.5 (fmi2CallbackFunctions). */
 #include <stdarg.h>
