@@ -11,8 +11,8 @@
 //!   setContinuousStates, and completedIntegratorStep).
 //! - `fmu_chart`: 400 benchmark records through the FMI 2.0 FMU on 1 and 2
 //!   threads (one instance per thread), and through its once-per-process
-//!   variant in 2 worker processes (this bench binary, started with
-//!   `--twostage-fmu-worker`).
+//!   variant in 2 worker processes (this bench binary, started as an FMU
+//!   worker).
 
 #[path = "../../crates/fmi/tests/common/mod.rs"]
 mod fmus;
@@ -135,19 +135,10 @@ fn pendulum_record(c: &mut Criterion) {
     );
 }
 
-const WORKER_FLAG: &str = "--twostage-fmu-worker";
-
 fn chart(c: &mut Criterion) {
     const RECORDS: usize = 400;
     let built = fmus::build(fmus::Model::Benchmark, FmiVersion::V2);
     let once = fmus::build(fmus::Model::BenchmarkOnce, FmiVersion::V2);
-    twostage::fmi::use_worker_processes(vec![
-        std::env::current_exe()
-            .unwrap_or_else(|e| panic!("{e}"))
-            .display()
-            .to_string(),
-        WORKER_FLAG.into(),
-    ]);
     let sims = [
         ("fmi2_cs_threads", benchmark_fmu(&built.path)),
         ("fmi2_cs_workers", benchmark_fmu(&once.path)),
@@ -188,11 +179,7 @@ criterion_group! {
 }
 fn main() {
     // The bench binary is also the worker of the once-per-process FMU.
-    if std::env::args().any(|a| a == WORKER_FLAG) {
-        twostage::fmi::serve_worker(std::io::stdin().lock(), std::io::stdout().lock())
-            .unwrap_or_else(|e| panic!("{e}"));
-        return;
-    }
+    twostage::fmi::serve_workers_from_this_program();
     records();
     charts();
     Criterion::default().configure_from_args().final_summary();

@@ -14,10 +14,6 @@ pub enum FmuCommand {
     /// List the variables that can be parameters, inputs and outputs (units, start
     /// values), and optionally write a starting model file.
     Inspect(InspectArgs),
-    /// Serve experiments to a parent twostage over stdin and stdout (for FMUs that
-    /// allow one instance per process; started by twostage itself).
-    #[command(hide = true)]
-    Worker,
 }
 
 /// Arguments of `twostage fmu inspect`.
@@ -33,26 +29,10 @@ pub struct InspectArgs {
     pub locals: bool,
 }
 
-/// Let FMUs that allow one instance per process run in worker processes
-/// of this very binary (`twostage fmu worker`).
-pub fn serve_workers_from_this_binary() {
-    if let Ok(exe) = std::env::current_exe() {
-        twostage::fmi::use_worker_processes(vec![
-            exe.display().to_string(),
-            "fmu".into(),
-            "worker".into(),
-        ]);
-    }
-}
-
 /// Run an FMU command.
 pub fn run(command: &FmuCommand, out: &mut impl Write) -> Result<()> {
     match command {
         FmuCommand::Inspect(args) => inspect(args, out),
-        FmuCommand::Worker => {
-            twostage::fmi::serve_worker(std::io::stdin().lock(), std::io::stdout().lock())?;
-            Ok(())
-        }
     }
 }
 

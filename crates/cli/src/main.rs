@@ -89,13 +89,15 @@ pub fn usage(message: String) -> anyhow::Error {
 }
 
 fn main() -> ExitCode {
+    // Started as an FMU worker, serve the parent and exit; else let
+    // once-per-process FMUs run in worker processes of this binary.
+    twostage::fmi::serve_workers_from_this_program();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // clap prints help and version to stdout (exit 0) and usage errors
         // to stderr (exit 2).
         Err(e) => e.exit(),
     };
-    fmu::serve_workers_from_this_binary();
     let result = match &cli.command {
         Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
         Command::Models(args) => models::models(args, &mut io::stdout().lock()),

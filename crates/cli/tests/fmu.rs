@@ -117,8 +117,33 @@ fn inspect_answers_a_file_that_is_not_an_fmu() {
     );
 }
 
+/// The binary is its own FMU worker: started with `TWOSTAGE_FMU_WORKER`
+/// set it serves a parent on stdin and stdout (here one that says nothing,
+/// which it names), instead of parsing its arguments.
+#[test]
+fn the_binary_serves_as_an_fmu_worker_when_started_as_one() {
+    use std::process::{Command, Stdio};
+    let out = Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .env("TWOSTAGE_FMU_WORKER", "1")
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("the parent did not start with a set-up"),
+        "{}",
+        text(&out.stderr)
+    );
+    // Started without it, the same binary is the command line.
+    let out = Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+}
+
 /// An FMU that allows one instance per process trains through worker
-/// processes of the binary (`twostage fmu worker`), to the same estimator
+/// processes of the binary (started as an FMU worker), to the same estimator
 /// as the same FMU without the restriction.
 #[test]
 fn a_once_per_process_fmu_trains_in_worker_processes_to_the_same_estimator() {

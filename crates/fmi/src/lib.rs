@@ -42,6 +42,8 @@ mod archive;
 mod description;
 mod error;
 mod ffi;
+mod run;
+mod setup;
 mod simulator;
 mod worker;
 
@@ -51,5 +53,5 @@ pub use description::{
     Variability, Variable,
 };
 pub use error::{FmiError, Result};
-pub use simulator::{Execution, Fmu, FmuSimulator, FmuSimulatorBuilder, use_worker_processes};
-pub use worker::serve_worker;
+pub use simulator::{Execution, Fmu, FmuSimulator, FmuSimulatorBuilder};
+pub use worker::{serve_worker, serve_workers_from_this_program};

@@ -14,15 +14,54 @@
 
 use std::io::{BufReader, Read, Write};
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Mutex, OnceLock, PoisonError};
 
 use twostage_models::IoData;
 
 use crate::error::{FmiError, Result};
-use crate::simulator::{Loaded, Setup};
+use crate::setup::{Loaded, Setup};
 
 /// Starts every frame.
 const MARKER: &[u8; 8] = b"TSFMUwk1";
+/// Set in a worker's environment by the parent that starts it: the one
+/// way a program learns that it is to serve as a worker.
+const WORKER_ENV: &str = "TWOSTAGE_FMU_WORKER";
+
+/// This program, when it said it can serve workers
+/// ([`serve_workers_from_this_program`]).
+static THIS_PROGRAM: OnceLock<Vec<String>> = OnceLock::new();
+
+/// Make this program the worker of FMUs that may be instantiated only once
+/// per process. Call it first thing in `main`: started as a worker (by a
+/// parent that set `TWOSTAGE_FMU_WORKER`), it serves the parent on stdin
+/// and stdout and exits the process; otherwise it returns at once, and
+/// such FMUs then run in worker processes of this very program instead of
+/// one experiment at a time in this one. A program that never calls it
+/// keeps them in process (a builder may still name a worker program,
+/// [`FmuSimulatorBuilder::worker_processes`](crate::FmuSimulatorBuilder::worker_processes)).
+///
+/// ```
+/// // First thing in `main`; then the program, whose FMU simulators may
+/// // now use workers.
+/// twostage_fmi::serve_workers_from_this_program();
+/// ```
+pub fn serve_workers_from_this_program() {
+    if std::env::var_os(WORKER_ENV).is_some() {
+        let served = serve_worker(std::io::stdin().lock(), std::io::stdout().lock());
+        if let Err(e) = &served {
+            eprintln!("error: {e}");
+        }
+        std::process::exit(i32::from(served.is_err()));
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        let _ = THIS_PROGRAM.set(vec![exe.display().to_string()]);
+    }
+}
+
+/// The worker program of this process, if it can serve workers.
+pub(crate) fn this_program() -> Option<Vec<String>> {
+    THIS_PROGRAM.get().cloned()
+}
 /// The largest frame accepted (a record of 2^27 values).
 const MAX_FRAME: usize = 1 << 30;
 
@@ -99,9 +138,7 @@ fn read_frame<T: serde::de::DeserializeOwned>(
 /// set-up and then experiments from `input`, answers on `output`, and
 /// returns at the end of `input`.
 ///
-/// A program that embeds twostage can be its own worker: call this when
-/// started with a worker argument, and name that command in
-/// [`use_worker_processes`](crate::use_worker_processes).
+/// [`serve_workers_from_this_program`] calls it in a worker process.
 ///
 /// # Errors
 /// Only when the pipes fail; every FMU failure is sent to the parent.
@@ -236,6 +273,7 @@ impl WorkerPool {
     fn spawn(&self) -> Result<WorkerProcess> {
         let mut child = Command::new(&self.command[0])
             .args(&self.command[1..])
+            .env(WORKER_ENV, "1")
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
