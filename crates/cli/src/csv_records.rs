@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use twostage::SignalNames;
-use twostage::models::IoData;
+use twostage::models::{IoData, SignalColumn};
 
 /// One record read from a file, or why it could not be.
 pub struct ReadRecord {
@@ -40,37 +40,10 @@ fn siso() -> SignalNames {
     }
 }
 
-/// Where each column after `experiment` goes: (is an input, index), and
-/// its name; `None` if the header names other signals.
-fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<(bool, usize)>> {
-    let generic = |prefix: &str, n: usize| -> Vec<String> {
-        if n == 1 {
-            vec![prefix.to_string()]
-        } else {
-            (1..=n).map(|j| format!("{prefix}{j}")).collect()
-        }
-    };
-    let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
-    for (inputs, outputs) in [
-        (signals.inputs.clone(), signals.outputs.clone()),
-        (generic("u", n_u), generic("y", n_y)),
-    ] {
-        let mut found = Vec::with_capacity(header.len());
-        for name in header {
-            if let Some(j) = inputs.iter().position(|s| s == name) {
-                found.push((true, j));
-            } else if let Some(j) = outputs.iter().position(|s| s == name) {
-                found.push((false, j));
-            }
-        }
-        let mut distinct = found.clone();
-        distinct.sort_unstable();
-        distinct.dedup();
-        if found.len() == header.len() && distinct.len() == n_u + n_y && header.len() == n_u + n_y {
-            return Some(found);
-        }
-    }
-    None
+/// Where each column after `experiment` goes; `None` if the header names
+/// other signals.
+fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<SignalColumn>> {
+    twostage::models::signal_columns(header, &signals.inputs, &signals.outputs)
 }
 
 /// Parse the text of a CSV file called `name`; records without an
@@ -127,9 +100,12 @@ pub fn parse(
             order.len() - 1
         });
         let entry = &mut data[slot];
-        for (c, &(input, j)) in placed.iter().enumerate() {
+        for (c, placed) in placed.iter().enumerate() {
             let text = values[usize::from(long) + c];
-            let column = if input { j } else { n_u + j };
+            let column = match *placed {
+                SignalColumn::Input(j) => j,
+                SignalColumn::Output(j) => n_u + j,
+            };
             let value = text.parse::<f64>().ok().filter(|v| v.is_finite());
             if value.is_none() && entry.1.is_none() {
                 entry.1 = Some(format!(

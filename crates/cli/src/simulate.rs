@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::RunSettings;
-use twostage_models::{IoData, Simulator, experiment_rng, run_experiment};
+use twostage_models::{IoData, Simulator, experiment_rng, generic_signal_names, run_experiment};
 
 use crate::model_arg::ModelArgs;
 use crate::number::{format_f64, parse_list};
@@ -239,15 +239,8 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
 
 /// `u,y` for SISO records; `u1,u2,...` and `y1,...` when there are several.
 fn signal_header(record: &IoData) -> String {
-    let names = |prefix: &str, n: usize| -> Vec<String> {
-        if n == 1 {
-            vec![prefix.to_string()]
-        } else {
-            (1..=n).map(|j| format!("{prefix}{j}")).collect()
-        }
-    };
-    let mut all = names("u", record.n_inputs());
-    all.extend(names("y", record.n_outputs()));
+    let mut all = generic_signal_names("u", record.n_inputs());
+    all.extend(generic_signal_names("y", record.n_outputs()));
     all.join(",")
 }
 

@@ -51,6 +51,7 @@ mod ode;
 mod pacejka;
 mod prior;
 mod rng;
+mod signals;
 mod simulator;
 mod sobol;
 
@@ -73,6 +74,7 @@ pub use pacejka::{
 };
 pub use prior::{Design, Prior, Sampling, random_permutation};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
+pub use signals::{SignalColumn, generic_signal_names, signal_columns};
 pub use simulator::{ModelSpec, Simulator};
 
 /// Simulate experiment `index` of the chart `(design, seed)`: draw its

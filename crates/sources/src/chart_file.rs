@@ -16,7 +16,7 @@ use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 
-use twostage_models::{IoData, ModelSpec};
+use twostage_models::{IoData, ModelSpec, SignalColumn};
 
 use crate::error::{Error, Result};
 
@@ -343,8 +343,8 @@ impl ChartFiles {
             for (c, field) in fields[1..].iter().enumerate() {
                 let value = file.number(field, number, &columns[c].1)?;
                 match columns[c].0 {
-                    Signal::Input(j) => record.input_mut(j)[*k] = value,
-                    Signal::Output(j) => record.output_mut(j)[*k] = value,
+                    SignalColumn::Input(j) => record.input_mut(j)[*k] = value,
+                    SignalColumn::Output(j) => record.output_mut(j)[*k] = value,
                 }
             }
             *k += 1;
@@ -452,50 +452,23 @@ fn read_all(
         .map_err(|e| located.error(None, format!("{e}: save float64 arrays (numpy's default)")))
 }
 
-/// Where a column's values go.
-#[derive(Debug, Clone, Copy)]
-enum Signal {
-    Input(usize),
-    Output(usize),
-}
-
 /// The data columns after `experiment`, by the model's signal names or by
-/// the generic `u,y` (`u1,u2,...,y1,...`) of `twostage simulate`; `None` if
-/// the header is neither.
-fn signal_columns(spec: &ModelSpec, header: &str) -> Option<Vec<(Signal, String)>> {
+/// the generic `u,y` (`u1,u2,...,y1,...`) of `twostage simulate`, each with
+/// its name for messages; `None` if the header is neither.
+fn signal_columns(spec: &ModelSpec, header: &str) -> Option<Vec<(SignalColumn, String)>> {
     let found: Vec<&str> = header.split(',').map(str::trim).collect();
     let (first, rest) = found.split_first()?;
     if *first != "experiment" {
         return None;
     }
-    let generic = |prefix: &str, n: usize| -> Vec<String> {
-        if n == 1 {
-            vec![prefix.to_string()]
-        } else {
-            (1..=n).map(|j| format!("{prefix}{j}")).collect()
-        }
-    };
-    let (n_u, n_y) = (spec.input_names().len(), spec.output_names().len());
-    for (inputs, outputs) in [
-        (spec.input_names().to_vec(), spec.output_names().to_vec()),
-        (generic("u", n_u), generic("y", n_y)),
-    ] {
-        let mut columns = Vec::with_capacity(rest.len());
-        for name in rest {
-            if let Some(j) = inputs.iter().position(|s| s == name) {
-                columns.push((Signal::Input(j), (*name).to_string()));
-            } else if let Some(j) = outputs.iter().position(|s| s == name) {
-                columns.push((Signal::Output(j), (*name).to_string()));
-            }
-        }
-        let mut named: Vec<&str> = rest.to_vec();
-        named.sort_unstable();
-        named.dedup();
-        if columns.len() == rest.len() && named.len() == rest.len() && rest.len() == n_u + n_y {
-            return Some(columns);
-        }
-    }
-    None
+    let columns = twostage_models::signal_columns(rest, spec.input_names(), spec.output_names())?;
+    Some(
+        columns
+            .into_iter()
+            .zip(rest)
+            .map(|(column, name)| (column, (*name).to_string()))
+            .collect(),
+    )
 }
 
 /// A file being read, for its messages.

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::Predictor;
-use twostage_models::{IoData, Marginal};
+use twostage_models::{IoData, Marginal, generic_signal_names};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
@@ -276,18 +276,9 @@ impl Estimator {
     /// The names of the input and output signals (`u`, `y`, or `u1`, `u2`,
     /// ... for files before format version 3).
     pub fn signal_names(&self) -> SignalNames {
-        self.signal_names.clone().unwrap_or_else(|| {
-            let generic = |prefix: &str, n: usize| -> Vec<String> {
-                if n == 1 {
-                    vec![prefix.to_string()]
-                } else {
-                    (1..=n).map(|j| format!("{prefix}{j}")).collect()
-                }
-            };
-            SignalNames {
-                inputs: generic("u", self.shape.n_inputs),
-                outputs: generic("y", self.shape.n_outputs),
-            }
+        self.signal_names.clone().unwrap_or_else(|| SignalNames {
+            inputs: generic_signal_names("u", self.shape.n_inputs),
+            outputs: generic_signal_names("y", self.shape.n_outputs),
         })
     }
     /// The record shape it was trained on.
