@@ -8,6 +8,7 @@
 //! would estimate something other than what the CLI estimates from the same
 //! numbers. Every rejection is a `ValueError` naming the argument and, for
 //! a bad value, its index.
+#![deny(missing_docs)]
 
 use std::path::PathBuf;
 

@@ -18,6 +18,7 @@
 //! ts_assessment a;
 //! int rc = ts_stream_finish(&s, theta, 1, half, 1, &a);
 //! ```
+#![deny(missing_docs)]
 #![cfg_attr(not(feature = "std"), no_std)]
 // Unsafe code, as a C API must be (the FMU loader's FFI in crates/fmi is the
 // project's only other): it takes raw pointers. Each
