@@ -63,5 +63,14 @@ impl From<twostage::Error> for BaselineError {
     }
 }
 
+/// A refinement's own errors (a start of the wrong length, say), as the
+/// facade wraps them: what a [`twostage::ResidualModel`] of this crate
+/// returns.
+impl From<twostage::RefineError> for BaselineError {
+    fn from(error: twostage::RefineError) -> Self {
+        twostage::Error::from(error).into()
+    }
+}
+
 /// Shorthand for results of this crate.
 pub type Result<T> = std::result::Result<T, BaselineError>;

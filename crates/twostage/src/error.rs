@@ -31,6 +31,9 @@ pub enum Error {
     /// or too many failed simulations.
     #[error(transparent)]
     Source(#[from] SourceError),
+    /// A refinement refused its settings or failed numerically.
+    #[error(transparent)]
+    Refine(#[from] twostage_refine::RefineError),
     /// A builder setting is out of range.
     #[error("invalid {name} = {value}: {reason}")]
     InvalidSetting {

@@ -52,10 +52,8 @@ mod error;
 mod estimator;
 mod file;
 mod legacy;
-mod moments;
 mod named_model;
 mod profile;
-mod refine;
 mod request;
 mod runtime_export;
 mod settings;
@@ -70,17 +68,18 @@ pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
 };
 pub use file::{FORMAT_VERSION, MAGIC, write_whole};
-pub use moments::WeightedMoments;
 pub use named_model::NamedModel;
 pub use profile::{
     ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka, recommended_benchmark,
     recommended_pacejka,
 };
-pub use refine::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use settings::{DEFAULT_SEED, RunSettings};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
+pub use twostage_refine::{
+    Descent, LocalPosterior, RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments,
+};
 
 pub use twostage_sources::{
     ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,
@@ -92,6 +91,7 @@ pub use twostage_compress as compress;
 pub use twostage_fit as fit;
 pub use twostage_fmi as fmi;
 pub use twostage_models as models;
+pub use twostage_refine as refine;
 pub use twostage_runtime as runtime;
 pub use twostage_sources as sources;
 pub use twostage_validate as validate;

@@ -7,7 +7,7 @@
 /// same order give the same bits).
 ///
 /// ```
-/// use twostage::WeightedMoments;
+/// use twostage_refine::WeightedMoments;
 /// // Weights 1, 3 on 0 and 2: mean 1.5, variance 0.75.
 /// let mut moments = WeightedMoments::new(1);
 /// moments.add(1.0, &[0.0]);

@@ -3,7 +3,7 @@
 //! to a neighbourhood of the estimate ([`Refinement::refine`]), or the
 //! posterior mean over that neighbourhood ([`Refinement::local_posterior`]).
 //! TS picks the neighbourhood (its calibrated intervals,
-//! [`Estimator::neighbourhood`](crate::Estimator::neighbourhood)), the
+//! the estimator's `neighbourhood`), the
 //! likelihood finds the answer inside it.
 //!
 //! The same descent, started from draws of the prior instead, is the
@@ -15,23 +15,23 @@ use std::ops::ControlFlow;
 use twostage_fit::{Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use twostage_models::{IoData, Prior};
 
-use crate::error::Error;
+use crate::error::RefineError as Error;
 use crate::moments::WeightedMoments;
 
 /// A model whose prediction errors on a record can be computed at any theta:
 /// the loss is the sum of their squares.
 ///
 /// ```
-/// use twostage::ResidualModel;
-/// use twostage::models::{IoData, Prior};
+/// use twostage_models::{IoData, Prior};
+/// use twostage_refine::{RefineError, ResidualModel};
 /// /// Outputs `theta` plus white noise: the residuals are `y_k - theta`.
 /// struct ConstantMean(Prior);
 /// impl ResidualModel for ConstantMean {
-///     type Error = twostage::Error;
+///     type Error = RefineError;
 ///     fn prior(&self) -> &Prior {
 ///         &self.0
 ///     }
-///     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> twostage::Result<()> {
+///     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
 ///         for (r, y) in r.iter_mut().zip(record.output(0)) {
 ///             *r = y - theta[0];
 ///         }
@@ -39,7 +39,7 @@ use crate::moments::WeightedMoments;
 ///     }
 /// }
 /// # let _ = ConstantMean(Prior::uniform_box(&[0.0], &[1.0])?);
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub trait ResidualModel: Send + Sync {
     /// What a failed evaluation returns; the refinement's own errors (a
@@ -123,13 +123,13 @@ pub struct Descent {
 /// | `max_iterations` | 50 | >= 1 per descent |
 ///
 /// ```
-/// use twostage::{RefineStarts, Refinement, ResidualModel};
-/// use twostage::models::{IoData, Prior};
+/// use twostage_models::{IoData, Prior};
+/// use twostage_refine::{RefineError, RefineStarts, Refinement, ResidualModel};
 /// # struct ConstantMean(Prior);
 /// # impl ResidualModel for ConstantMean {
-/// #     type Error = twostage::Error;
+/// #     type Error = RefineError;
 /// #     fn prior(&self) -> &Prior { &self.0 }
-/// #     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> twostage::Result<()> {
+/// #     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
 /// #         for (r, y) in r.iter_mut().zip(record.output(0)) { *r = y - theta[0]; }
 /// #         Ok(())
 /// #     }
@@ -144,7 +144,7 @@ pub struct Descent {
 /// // Confined to 0.1 +- 0.2 the search stops at the box's face, 0.3.
 /// let capped = refinement.refine(&record, &[0.1], &[0.2], RefineStarts::Centre)?;
 /// assert!((capped.theta[0] - 0.3).abs() < 1e-12);
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug, Clone)]
 pub struct Refinement<M> {

@@ -1,0 +1,38 @@
+//! The one error type of this crate.
+
+use thiserror::Error;
+
+/// What a refinement refuses or cannot compute; a [`ResidualModel`]'s own
+/// error converts from it.
+///
+/// [`ResidualModel`]: crate::ResidualModel
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum RefineError {
+    /// A setting is out of range.
+    #[error("invalid {name} = {value}: {reason}")]
+    InvalidSetting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: String,
+        /// The valid range.
+        reason: String,
+    },
+    /// A vector given with a record (a start, a radius) has the wrong length.
+    #[error("{what} has {found} values where {expected} are needed, one per parameter")]
+    Length {
+        /// Which vector.
+        what: &'static str,
+        /// Its length.
+        found: usize,
+        /// The number of parameters.
+        expected: usize,
+    },
+    /// A computation on a record gave no finite answer.
+    #[error("numerical failure: {what}")]
+    Numerical {
+        /// What failed, and where.
+        what: String,
+    },
+}

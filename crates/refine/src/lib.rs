@@ -1,0 +1,20 @@
+//! Refining a parameter estimate with a least-squares loss through the
+//! model, inside a neighbourhood of it: Levenberg-Marquardt descents
+//! ([`Refinement::refine`]) or the posterior mean over the neighbourhood
+//! ([`Refinement::local_posterior`]). The two-stage estimator picks the
+//! neighbourhood (its calibrated intervals); the loss finds the answer
+//! inside it. The same descent, started from draws of the prior, is the
+//! prediction-error method of the paper's Section 2.2.
+//!
+//! The crate knows models and the one Levenberg-Marquardt solver, not the
+//! estimator: any [`ResidualModel`] (an exact likelihood's prediction
+//! errors, a simulation's output errors) can be refined.
+#![deny(missing_docs)]
+
+mod error;
+mod moments;
+mod refinement;
+
+pub use error::RefineError;
+pub use moments::WeightedMoments;
+pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
