@@ -432,8 +432,7 @@ fn train(
         (Some(name), None, None) if simulator.is_none() => NamedModel::builtin(name),
         (None, Some(path), None) => NamedModel::file(path),
         (None, None, Some(text)) => twostage::ModelFile::parse(text, "model_toml")
-            .map(|file| NamedModel::File(Box::new(file)))
-            .map_err(twostage::Error::from),
+            .map(|file| NamedModel::File(Box::new(file))),
         (Some(_), None, None) => {
             return Err(PyValueError::new_err(
                 "a simulator needs a model file without [source] (model_file= or model_toml=)                  for its parameter names, priors and signals, not a built-in model",

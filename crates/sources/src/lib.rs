@@ -29,7 +29,9 @@ mod chart;
 mod chart_file;
 mod error;
 mod model_file;
+mod named_model;
 mod preset;
+mod profile;
 mod progress;
 mod records;
 mod roles;
@@ -41,7 +43,12 @@ pub use chart::{
 pub use chart_file::ChartFiles;
 pub use error::{Error, Result};
 pub use model_file::{ModelFile, ModelSource, TEMPLATE, fmu_model_file};
+pub use named_model::NamedModel;
 pub use preset::Preset;
+pub use profile::{
+    ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka, recommended_benchmark,
+    recommended_pacejka,
+};
 pub use progress::{Progress, Silent, Stage};
 pub use records::{ForModel, RecordSource, Records, RunShape};
 pub use roles::ChartRole;

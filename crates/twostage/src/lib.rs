@@ -52,8 +52,6 @@ mod error;
 mod estimator;
 mod file;
 mod legacy;
-mod named_model;
-mod profile;
 mod request;
 mod runtime_export;
 mod settings;
@@ -68,11 +66,6 @@ pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
 };
 pub use file::{FORMAT_VERSION, MAGIC, write_whole};
-pub use named_model::NamedModel;
-pub use profile::{
-    ClassicMethod, ModelProfile, paper_benchmark, paper_pacejka, recommended_benchmark,
-    recommended_pacejka,
-};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use settings::{DEFAULT_SEED, RunSettings};
 pub use twostage_compress::CompressorConfig;
@@ -85,6 +78,10 @@ pub use twostage_sources::{
     ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,
     Progress, RecordSource, ShardIndex, ShardPlan, ShardedChart, Silent, Stage,
     TEMPLATE as MODEL_FILE_TEMPLATE, compress_chart, fingerprint, fmu_model_file, simulate_shard,
+};
+pub use twostage_sources::{
+    ClassicMethod, ModelProfile, NamedModel, paper_benchmark, paper_pacejka, recommended_benchmark,
+    recommended_pacejka,
 };
 
 pub use twostage_compress as compress;

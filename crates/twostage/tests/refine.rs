@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used)]
 
 use twostage::models::{IoData, Prior};
-use twostage::{Error, RefineStarts, Refinement, ResidualModel};
+use twostage::{Error, RefineError, RefineStarts, Refinement, ResidualModel};
 
 /// y_k = theta + noise.
 struct ConstantMean {
@@ -101,11 +101,11 @@ fn bad_neighbourhoods_are_named() {
     assert!(
         matches!(
             e,
-            Error::Length {
+            Error::Refine(RefineError::Length {
                 what: "the centre",
                 found: 2,
                 expected: 1
-            }
+            })
         ),
         "{e}"
     );
@@ -121,11 +121,11 @@ fn bad_neighbourhoods_are_named() {
     assert!(
         matches!(
             e,
-            Error::Length {
+            Error::Refine(RefineError::Length {
                 what: "the start",
                 found: 0,
                 expected: 1
-            }
+            })
         ),
         "{e}"
     );
@@ -155,7 +155,10 @@ fn a_loss_that_is_nowhere_finite_is_an_error_not_a_nan_mean() {
     let (data, _, _) = data();
     let local = Refinement::new(Diverges(Prior::uniform_box(&[0.0], &[1.0]).unwrap()));
     let e = local.local_posterior(&data, &[0.5], &[0.1], 5).unwrap_err();
-    assert!(matches!(e, Error::Numerical { .. }), "{e}");
+    assert!(
+        matches!(e, Error::Refine(RefineError::Numerical { .. })),
+        "{e}"
+    );
 }
 
 #[test]

@@ -7,22 +7,22 @@ use std::path::Path;
 use twostage_models::{BuiltinModel, Simulator};
 
 use crate::error::{Error, Result};
+use crate::fingerprint;
+use crate::model_file::{ModelFile, ModelSource};
+use crate::preset::Preset;
 use crate::profile::ModelProfile;
-use twostage_sources::Preset;
-use twostage_sources::fingerprint;
-use twostage_sources::{ModelFile, ModelSource};
 
 /// A built-in model or a model file.
 ///
 /// ```
-/// use twostage::NamedModel;
+/// use twostage_sources::NamedModel;
 /// let model = NamedModel::builtin("benchmark")?;
 /// assert_eq!(model.name(), "benchmark");
 /// // A built-in model's default preset is the paper's.
 /// assert_eq!(model.preset(None)?.simulations, 1500);
 /// assert!(NamedModel::builtin("pendulum").is_err());
 /// // A model file with a built-in source keeps that model's presets.
-/// let file = twostage::ModelFile::parse(
+/// let file = twostage_sources::ModelFile::parse(
 ///     "[model]\nname = \"short\"\n[source]\nbuiltin = \"benchmark\"\n\
 ///      [signals]\nsamples = 300\n[[preset]]\nname = \"small\"\ncompress = \"arx:3,3\"\n\
 ///      fit = \"mlp:6\"\nsims = 800\n",
@@ -32,7 +32,7 @@ use twostage_sources::{ModelFile, ModelSource};
 /// assert_eq!(short.preset_names(), ["small", "paper", "recommended"]);
 /// assert_eq!(short.preset(None)?.simulations, 800);
 /// assert_eq!(short.preset(Some("paper"))?.simulations, 1500);
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 #[derive(Debug)]
 pub enum NamedModel {
@@ -89,7 +89,7 @@ impl NamedModel {
                 value: "true".into(),
                 reason: "is for built-in models; a model file says `[noise] model = false`".into(),
             }),
-            Self::File(file) => Ok(file.simulator()?),
+            Self::File(file) => file.simulator(),
         }
     }
 
@@ -101,7 +101,7 @@ impl NamedModel {
     pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
         match self {
             Self::Builtin(model) => Ok(model.build(false)?),
-            Self::File(file) => Ok(file.chart_model()?),
+            Self::File(file) => file.chart_model(),
         }
     }
 
@@ -137,7 +137,7 @@ impl NamedModel {
                     .or_else(|| names.first().cloned())
                     .unwrap_or_else(|| "default".into());
                 if file.preset_names().any(|n| n == name) {
-                    return Ok(file.preset(&name)?);
+                    return file.preset(&name);
                 }
                 match self.builtin_profile() {
                     Some(profile) if profile.preset_names().any(|n| n == name) => {

@@ -13,19 +13,19 @@ use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::BuiltinModel;
 
 use crate::error::{Error, Result};
+use crate::preset::Preset;
 use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
-use twostage_sources::Preset;
 
 /// A classic estimation method of the paper (Sections 2 and 5), or an
 /// exact reference, by its command-line name.
 ///
 /// ```
-/// use twostage::ClassicMethod;
+/// use twostage_sources::ClassicMethod;
 /// let pf: ClassicMethod = "pf".parse()?;
 /// assert_eq!(pf, ClassicMethod::ParticleFilter);
 /// assert!("kalman".parse::<ClassicMethod>().is_err());
-/// # Ok::<(), twostage::Error>(())
+/// # Ok::<(), twostage_sources::Error>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ClassicMethod {
@@ -138,15 +138,15 @@ impl ModelProfile {
     /// The entry of a built-in model.
     ///
     /// ```
-    /// use twostage::{ClassicMethod, ModelProfile};
-    /// use twostage::models::BuiltinModel;
+    /// use twostage_sources::{ClassicMethod, ModelProfile};
+    /// use twostage_models::BuiltinModel;
     /// let car = ModelProfile::of(BuiltinModel::Pacejka);
     /// assert_eq!(car.preset("paper")?.simulations, 2000);
     /// assert!(car.classic_method("pem").is_ok());
     /// // Not "the benchmark's EKF": a clear refusal.
     /// let refused = car.classic_method("ekf").unwrap_err().to_string();
     /// assert!(refused.contains("not available for pacejka"), "{refused}");
-    /// # Ok::<(), twostage::Error>(())
+    /// # Ok::<(), twostage_sources::Error>(())
     /// ```
     pub fn of(model: BuiltinModel) -> &'static ModelProfile {
         // Exhaustive: a new built-in model does not compile without its entry.
