@@ -92,13 +92,22 @@ fn the_filters_estimate_an_easy_theta_and_report_a_spread() {
 #[test]
 fn records_that_are_not_siso_or_finite_are_refused() {
     let record = twostage_models::IoData::zeros(10, 1, 2);
+    let e = KalmanEstimator::ekf(InitialCovariance::Eq6)
+        .estimate(&record)
+        .unwrap_err();
     assert!(
-        KalmanEstimator::ekf(InitialCovariance::Eq6)
-            .estimate(&record)
-            .is_err()
+        matches!(&e, twostage_baselines::BaselineError::Shape { found, .. } if found == "1 and 2"),
+        "{e}"
     );
-    let bad = twostage_models::IoData::siso(&[0.0, 1.0], &[0.0, f64::NAN]);
-    assert!(bad.is_err());
+    let mut bad = twostage_models::IoData::zeros(10, 1, 1);
+    bad.output_mut(0)[3] = f64::NAN;
+    let e = KalmanEstimator::ekf(InitialCovariance::Eq6)
+        .estimate(&bad)
+        .unwrap_err();
+    assert!(
+        e.to_string().contains("non-finite value (NaN) at sample 3"),
+        "the bad sample is named: {e}"
+    );
 }
 
 #[test]

@@ -88,5 +88,16 @@ fn the_filter_likelihood_equals_the_direct_gaussian_density() {
 #[test]
 fn mimo_and_non_finite_records_are_refused() {
     let record = IoData::zeros(10, 2, 1);
-    assert!(benchmark_kalman(0.1, &record).is_err());
+    let e = benchmark_kalman(0.1, &record).unwrap_err();
+    assert!(
+        matches!(&e, twostage_baselines::BaselineError::Shape { found, .. } if found == "2 and 1"),
+        "{e}"
+    );
+    let mut nan = IoData::zeros(10, 1, 1);
+    nan.output_mut(0)[3] = f64::NAN;
+    let e = benchmark_kalman(0.1, &nan).unwrap_err();
+    assert!(
+        e.to_string().contains("non-finite value (NaN) at sample 3"),
+        "the bad sample is named: {e}"
+    );
 }

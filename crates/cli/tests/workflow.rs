@@ -500,10 +500,17 @@ fn learning_curve_rows_and_auto_usage() {
         .map(|l| l.split(',').next().unwrap())
         .collect();
     assert_eq!(sizes, ["50", "100", "200"]);
-    for l in &lines[1..] {
-        let rmse: f64 = l.split(',').nth(2).unwrap().parse().unwrap();
-        assert!(rmse > 0.0 && rmse < 0.6, "{l}");
-    }
+    let rmse: Vec<f64> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    // A constant guess of uniform [-0.9, 0.9] has RMSE 0.52: every point
+    // must learn far more than that, and more simulations must help.
+    assert!(rmse.iter().all(|r| *r > 0.0 && *r < 0.26), "{table}");
+    assert!(
+        rmse[2] < rmse[0],
+        "the curve falls from m = 50 to 200: {table}"
+    );
     assert!(std::fs::read_to_string(&svg).unwrap().starts_with("<svg"));
     // --auto searches the structure: it cannot be combined with a fixed one.
     let out = twostage(&[

@@ -229,10 +229,15 @@ fn degenerate_records_are_refused_with_their_cause() {
 
 #[test]
 fn invalid_orders_are_refused() {
-    assert!(Arx::new(0, 0).is_err());
-    assert!(Arx::new(65, 1).is_err());
-    assert!(Arx::new(1, 1).unwrap().with_delay(100).is_err());
-    assert!(Arx::new(1, 1).unwrap().with_signals(1, 0).is_err());
+    let setting = |result: Result<Arx, CompressError>| match result {
+        Err(CompressError::InvalidSetting { name, value, .. }) => (name, value),
+        other => panic!("expected an invalid setting, got {other:?}"),
+    };
+    assert_eq!(setting(Arx::new(0, 0)), ("na + nb", "0".into()));
+    assert_eq!(setting(Arx::new(65, 1)), ("na", "65".into()));
+    let one = Arx::new(1, 1).unwrap();
+    assert_eq!(setting(one.with_delay(100)), ("delay", "100".into()));
+    assert_eq!(setting(one.with_signals(1, 0)), ("outputs", "0".into()));
 }
 
 #[test]

@@ -71,7 +71,10 @@ fn ridge_refuses_collinear_features_without_a_penalty() {
         .unwrap_err();
     assert!(matches!(err, FitError::RankDeficient { .. }), "{err}");
     assert!(Ridge::new(1e-3).unwrap().fit(x.view(), y.view()).is_ok());
-    assert!(Ridge::new(-1.0).is_err());
+    assert!(matches!(
+        Ridge::new(-1.0),
+        Err(FitError::InvalidSetting { name: "lambda", .. })
+    ));
     let mut bad = y.clone();
     bad[[4, 0]] = f64::NAN;
     let err = Ridge::default().fit(x.view(), bad.view()).unwrap_err();
@@ -195,14 +198,21 @@ fn noisy_targets_stop_early_on_the_held_out_set() {
 fn invalid_settings_name_themselves() {
     let err = MlpParams::new(&[]).unwrap().check().unwrap_err();
     assert!(err.to_string().contains("hidden layers"), "{err}");
-    assert!(MlpParams::new(&[300]).unwrap().check().is_err());
-    assert!(MlpParams::new(&[5]).unwrap().restarts(0).check().is_err());
-    assert!(
-        MlpParams::new(&[5])
-            .unwrap()
-            .validation_fraction(0.9)
-            .check()
-            .is_err()
+    let setting = |params: MlpParams| match params.check() {
+        Err(FitError::InvalidSetting { name, value, .. }) => (name, value),
+        other => panic!("expected an invalid setting, got {other:?}"),
+    };
+    assert_eq!(
+        setting(MlpParams::new(&[300]).unwrap()),
+        ("hidden layer width", "300".into())
+    );
+    assert_eq!(
+        setting(MlpParams::new(&[5]).unwrap().restarts(0)),
+        ("restarts", "0".into())
+    );
+    assert_eq!(
+        setting(MlpParams::new(&[5]).unwrap().validation_fraction(0.9)),
+        ("validation_fraction", "0.9".into())
     );
     let net = MlpParams::new(&[3]).unwrap().check().unwrap();
     let err = net
@@ -213,7 +223,11 @@ fn invalid_settings_name_themselves() {
         .fit(uniform(50, 2, 1).view(), uniform(50, 1, 2).view())
         .unwrap();
     let mut out = [0.0; 2];
-    assert!(fitted.predict_into(&[0.0, 0.0], &mut out).is_err());
+    let e = fitted.predict_into(&[0.0, 0.0], &mut out).unwrap_err();
+    assert!(
+        matches!(e, FitError::ShapeMismatch(_)),
+        "one feature, not two: {e}"
+    );
 }
 
 #[test]
@@ -266,15 +280,22 @@ fn adam_fits_a_smooth_function() {
     let p = net.predict(x.view()).unwrap();
     let rmse = ((&p - &t).mapv(|v| v * v).sum() / 400.0).sqrt();
     assert!(rmse < 0.05, "Adam RMSE {rmse}");
+    let refused = MlpParams::new(&[4])
+        .unwrap()
+        .trainer(Trainer::Adam {
+            learning_rate: 0.0,
+            batch_size: 8,
+            epochs: 5,
+        })
+        .check();
     assert!(
-        MlpParams::new(&[4])
-            .unwrap()
-            .trainer(Trainer::Adam {
-                learning_rate: 0.0,
-                batch_size: 8,
-                epochs: 5
+        matches!(
+            refused,
+            Err(FitError::InvalidSetting {
+                name: "learning_rate",
+                ..
             })
-            .check()
-            .is_err()
+        ),
+        "{refused:?}"
     );
 }

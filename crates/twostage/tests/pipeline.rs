@@ -194,7 +194,12 @@ fn bad_records_fail_alone_in_a_batch() {
     assert!(e1.contains("u is constant"), "{e1}");
     let e2 = results[2].as_ref().unwrap_err().to_string();
     assert!(e2.contains("too short"), "{e2}");
-    assert!(estimator.estimate(&[1.0, 2.0], &[1.0]).is_err());
+    let e = estimator.estimate(&[1.0, 2.0], &[1.0]).unwrap_err();
+    assert!(
+        matches!(&e, Error::Simulation(twostage::models::SimError::InvalidData(m))
+            if m.contains("u has 2 samples but y has 1")),
+        "u and y of different lengths: {e}"
+    );
 }
 
 /// The benchmark, failing for theta above a threshold.
@@ -269,9 +274,16 @@ fn failed_simulations_are_dropped_and_counted_up_to_a_limit() {
 #[test]
 fn invalid_builder_settings_are_refused() {
     let model = small_benchmark();
-    assert!(TwoStage::builder(&model).simulations(5).train().is_err());
-    assert!(TwoStage::builder(&model).alpha(1.5).train().is_err());
-    assert!(TwoStage::builder(&model).delta(0.0).train().is_err());
+    let refused = |builder: TwoStage<'_, _>| -> (&'static str, String) {
+        match builder.train() {
+            Err(Error::InvalidSetting { name, value, .. }) => (name, value),
+            other => panic!("expected an invalid setting, got {other:?}"),
+        }
+    };
+    let base = || TwoStage::builder(&model);
+    assert_eq!(refused(base().simulations(5)), ("simulations", "5".into()));
+    assert_eq!(refused(base().alpha(1.5)), ("alpha", "1.5".into()));
+    assert_eq!(refused(base().delta(0.0)), ("delta", "0".into()));
 }
 
 #[test]

@@ -267,10 +267,30 @@ mod tests {
 
     #[test]
     fn bad_input_is_refused() {
-        assert!(BettingBound::from_squared_errors(&[], 1.0, 0.1).is_err());
-        assert!(BettingBound::from_squared_errors(&[0.1, f64::NAN], 1.0, 0.1).is_err());
-        assert!(BettingBound::from_squared_errors(&[0.1, 2.0], 1.0, 0.1).is_err());
-        assert!(BettingBound::from_squared_errors(&[0.1], 1.0, 0.0).is_err());
-        assert!(BettingBound::from_squared_errors(&[0.1], 0.0, 0.1).is_err());
+        use crate::ValidateError;
+        let refused = |errors: &[f64], sigma: f64, delta: f64| {
+            BettingBound::from_squared_errors(errors, sigma, delta)
+                .expect_err("bad input is refused")
+        };
+        assert!(matches!(
+            refused(&[], 1.0, 0.1),
+            ValidateError::InvalidErrors(m) if m.contains("no validation errors")
+        ));
+        assert!(matches!(
+            refused(&[0.1, f64::NAN], 1.0, 0.1),
+            ValidateError::InvalidErrors(m) if m.contains("squared error 1 is NaN")
+        ));
+        assert!(matches!(
+            refused(&[0.1, 2.0], 1.0, 0.1),
+            ValidateError::AboveSigma { index: 1, .. }
+        ));
+        assert!(matches!(
+            refused(&[0.1], 1.0, 0.0),
+            ValidateError::InvalidSetting { name: "delta", .. }
+        ));
+        assert!(matches!(
+            refused(&[0.1], 0.0, 0.1),
+            ValidateError::InvalidSetting { name: "sigma", .. }
+        ));
     }
 }

@@ -492,7 +492,18 @@ mod tests {
     #[test]
     fn the_template_is_a_valid_model_file() {
         let file = ModelFile::parse(TEMPLATE, "template.toml").unwrap();
-        assert!(file.simulator().is_ok());
-        assert!(file.preset_names().count() >= 1);
+        // It simulates a record of its own shape, and names a preset.
+        let simulator = file.simulator().unwrap();
+        let mut record = simulator.spec().new_record();
+        simulator
+            .simulate(
+                &[0.2],
+                &mut twostage_models::experiment_rng(1, 0),
+                &mut record,
+            )
+            .unwrap();
+        assert_eq!((record.n_samples(), record.n_inputs()), (500, 1));
+        assert!(record.output(0).iter().all(|y| y.is_finite()));
+        assert_eq!(file.preset_names().collect::<Vec<_>>(), ["default"]);
     }
 }
