@@ -2,7 +2,9 @@
 //! many (`experiment,u,y`, long format), with the columns named as the
 //! estimator's signals (`u`, `y` for the built-in models; a model file's
 //! names otherwise, or `u1,..,y1,..` as `simulate` writes them), in any
-//! order. Every problem names the file, the row and the column.
+//! order, and optionally a `time` (or `t`) column, which must step by the
+//! model's sample time. Every problem names the file, the row and the
+//! column.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -18,25 +20,37 @@ pub struct ReadRecord {
     pub record: Result<IoData, String>,
 }
 
-/// Read every record of one CSV file with columns named as `signals`.
+/// How a model's records are laid out in a file: the names of its signals,
+/// and the time between samples that a `time` column must step by.
+pub struct RecordFormat {
+    /// The columns' names.
+    pub signals: SignalNames,
+    /// Seconds between samples.
+    pub sample_time: f64,
+}
+
+/// Read every record of one CSV file laid out as `format`.
 ///
 /// # Errors
 /// A file that cannot be read or has no usable header: one line naming it.
-pub fn read(path: &Path, signals: &SignalNames) -> Result<Vec<ReadRecord>, String> {
+pub fn read(path: &Path, format: &RecordFormat) -> Result<Vec<ReadRecord>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let name = path.display().to_string();
     let stem = path
         .file_stem()
         .map_or_else(|| name.clone(), |s| s.to_string_lossy().into_owned());
-    parse(&text, &name, &stem, signals)
+    parse(&text, &name, &stem, format)
 }
 
-/// The SISO signals `u`, `y`.
+/// The SISO signals `u`, `y`, sampled every second.
 #[cfg(test)]
-fn siso() -> SignalNames {
-    SignalNames {
-        inputs: vec!["u".into()],
-        outputs: vec!["y".into()],
+fn siso() -> RecordFormat {
+    RecordFormat {
+        signals: SignalNames {
+            inputs: vec!["u".into()],
+            outputs: vec!["y".into()],
+        },
+        sample_time: 1.0,
     }
 }
 
@@ -55,15 +69,20 @@ pub fn parse(
     text: &str,
     name: &str,
     stem: &str,
-    signals: &SignalNames,
+    format: &RecordFormat,
 ) -> Result<Vec<ReadRecord>, String> {
+    let signals = &format.signals;
     let all: Vec<&str> = signals
         .inputs
         .iter()
         .chain(&signals.outputs)
         .map(String::as_str)
         .collect();
-    let expected = format!("{} or experiment,{}", all.join(","), all.join(","));
+    let expected = format!(
+        "{} or experiment,{} (with a time or t column if you like)",
+        all.join(","),
+        all.join(",")
+    );
     let mut lines = text
         .lines()
         .enumerate()
@@ -75,15 +94,23 @@ pub fn parse(
     };
     let fields: Vec<&str> = header.split(',').map(str::trim).collect();
     let long = fields.first() == Some(&"experiment");
-    let placed = columns(&fields[usize::from(long)..], signals)
+    let first = usize::from(long);
+    // A time column is checked, not read into the record.
+    let time = fields[first..]
+        .iter()
+        .position(|f| *f == "time" || *f == "t")
+        .map(|c| first + c);
+    let signal_at: Vec<usize> = (first..fields.len()).filter(|c| Some(*c) != time).collect();
+    let signal_fields: Vec<&str> = signal_at.iter().map(|&c| fields[c]).collect();
+    let placed = columns(&signal_fields, signals)
         .ok_or_else(|| format!("{name}: row 1: header '{header}' is not {expected}"))?;
     let width = fields.len();
     let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
     // Records in the order their experiment first appears: one column of
-    // values per signal, and the first problem.
+    // values per signal, the last time seen, and the first problem.
     let mut order: Vec<String> = Vec::new();
     let mut slots: HashMap<String, usize> = HashMap::new();
-    let mut data: Vec<(Vec<Vec<f64>>, Option<String>)> = Vec::new();
+    let mut data: Vec<(Vec<Vec<f64>>, Option<f64>, Option<String>)> = Vec::new();
     for (index, line) in lines {
         let row = index + 1;
         let values: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -96,21 +123,45 @@ pub fn parse(
         let id = if long { values[0] } else { stem };
         let slot = *slots.entry(id.to_string()).or_insert_with(|| {
             order.push(id.to_string());
-            data.push((vec![Vec::new(); n_u + n_y], None));
+            data.push((vec![Vec::new(); n_u + n_y], None, None));
             order.len() - 1
         });
         let entry = &mut data[slot];
-        for (c, placed) in placed.iter().enumerate() {
-            let text = values[usize::from(long) + c];
+        if let Some(c) = time {
+            let now = values[c].parse::<f64>().ok().filter(|v| v.is_finite());
+            let problem = match (now, entry.1) {
+                (None, _) => Some(format!("'{}' is not a finite time", values[c])),
+                (Some(now), Some(before))
+                    if ((now - before) - format.sample_time).abs()
+                        > 1e-6 * format.sample_time.abs() =>
+                {
+                    Some(format!(
+                        "time steps by {} from the row before; the model samples every {}",
+                        now - before,
+                        format.sample_time
+                    ))
+                }
+                _ => None,
+            };
+            if let (Some(problem), None) = (problem, &entry.2) {
+                entry.2 = Some(format!(
+                    "{name}: row {row}, column {}: {problem}",
+                    fields[c]
+                ));
+            }
+            entry.1 = now;
+        }
+        for (placed, &c) in placed.iter().zip(&signal_at) {
+            let text = values[c];
             let column = match *placed {
                 SignalColumn::Input(j) => j,
                 SignalColumn::Output(j) => n_u + j,
             };
             let value = text.parse::<f64>().ok().filter(|v| v.is_finite());
-            if value.is_none() && entry.1.is_none() {
-                entry.1 = Some(format!(
+            if value.is_none() && entry.2.is_none() {
+                entry.2 = Some(format!(
                     "{name}: row {row}, column {}: '{text}' is not a finite number",
-                    fields[usize::from(long) + c]
+                    fields[c]
                 ));
             }
             // Keep the lengths aligned so later rows still parse.
@@ -120,7 +171,7 @@ pub fn parse(
     Ok(order
         .into_iter()
         .zip(data)
-        .map(|(id, (columns, problem))| ReadRecord {
+        .map(|(id, (columns, _, problem))| ReadRecord {
             record: match problem {
                 Some(p) => Err(p),
                 None => {
@@ -257,7 +308,8 @@ mod tests {
         let problem = |text: &str| parse(text, "f.csv", "f", &siso()).err().unwrap_or_default();
         assert_eq!(
             problem("\n \n"),
-            "f.csv: the file is empty; expected a header u,y or experiment,u,y"
+            "f.csv: the file is empty; expected a header u,y or experiment,u,y (with a time or t \
+             column if you like)"
         );
         assert!(problem("t,y\n1,2\n").starts_with("f.csv: row 1: header 't,y'"));
         assert_eq!(
@@ -276,13 +328,51 @@ mod tests {
         );
     }
 
+    /// A time column is checked against the sample time, not read as a
+    /// signal; a step that is not the model's names its row.
+    #[test]
+    fn a_time_column_steps_by_the_sample_time() {
+        let format = RecordFormat {
+            sample_time: 0.02,
+            ..siso()
+        };
+        let text = "time,u,y\n0,1,2\n0.02,3,4\n0.04,5,6\n";
+        let records = parse(text, "f.csv", "f", &format).expect("valid");
+        assert_eq!(
+            values(&records[0]),
+            (
+                [1f64, 3.0, 5.0].map(f64::to_bits).to_vec(),
+                [2f64, 4.0, 6.0].map(f64::to_bits).to_vec()
+            )
+        );
+        // Each experiment's time is its own; `t` is a time column too.
+        let text = "experiment,u,t,y\na,1,5,2\nb,1,0,2\na,3,5.02,4\nb,3,0.03,4\n";
+        let records = parse(text, "f.csv", "f", &format).expect("valid header");
+        assert!(records[0].record.is_ok());
+        assert_eq!(
+            records[1].record.as_ref().err().map(String::as_str),
+            Some(
+                "f.csv: row 5, column t: time steps by 0.03 from the row before; the model \
+                 samples every 0.02"
+            )
+        );
+        let records = parse("t,u,y\nnow,1,2\n", "f.csv", "f", &format).expect("valid header");
+        assert_eq!(
+            records[0].record.as_ref().err().map(String::as_str),
+            Some("f.csv: row 2, column t: 'now' is not a finite time")
+        );
+    }
+
     /// Columns are found by the model's names, in any order, several
     /// inputs and outputs; the generic names work too.
     #[test]
     fn named_signals_in_any_order() {
-        let signals = SignalNames {
-            inputs: vec!["force".into()],
-            outputs: vec!["x".into(), "v".into()],
+        let signals = RecordFormat {
+            signals: SignalNames {
+                inputs: vec!["force".into()],
+                outputs: vec!["x".into(), "v".into()],
+            },
+            sample_time: 1.0,
         };
         let text = "experiment,v,force,x\na,1,2,3\na,4,5,6\n";
         let records = parse(text, "f.csv", "f", &signals).expect("valid");
@@ -305,16 +395,20 @@ mod tests {
             .unwrap_or_default();
         assert_eq!(
             e,
-            "f.csv: row 1: header 'force,x' is not force,x,v or experiment,force,x,v"
+            "f.csv: row 1: header 'force,x' is not force,x,v or experiment,force,x,v (with a time \
+             or t column if you like)"
         );
         let e = parse("force,x,x\n1,2,3\n", "f.csv", "f", &signals)
             .err()
             .unwrap_or_default();
         assert!(e.starts_with("f.csv: row 1: header"), "{e}");
         // No input at all: outputs only.
-        let autonomous = SignalNames {
-            inputs: vec![],
-            outputs: vec!["I".into()],
+        let autonomous = RecordFormat {
+            signals: SignalNames {
+                inputs: vec![],
+                outputs: vec!["I".into()],
+            },
+            sample_time: 3.0,
         };
         let records = parse("I\n0.1\n0.2\n", "f.csv", "f", &autonomous).expect("valid");
         let r = records[0].record.as_ref().expect("a record");

@@ -108,7 +108,7 @@ struct Chosen {
     names: Vec<String>,
     method: Method,
     trained: Option<usize>,
-    signals: SignalNames,
+    format: csv_records::RecordFormat,
 }
 
 /// The method chosen on the command line, ready to estimate records.
@@ -118,7 +118,10 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         let estimator = Estimator::load(path)?;
         let names = estimator.param_names().to_vec();
         let trained = estimator.record_shape().n_samples;
-        let signals = estimator.signal_names();
+        let format = csv_records::RecordFormat {
+            signals: estimator.signal_names(),
+            sample_time: estimator.record_shape().sample_time,
+        };
         let mut refine = if args.refine {
             Some(refinement(&estimator)?)
         } else {
@@ -126,7 +129,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         };
         return Ok(Chosen {
             names,
-            signals,
+            format,
             trained: Some(trained),
             method: Box::new(move |record: &IoData| {
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
@@ -162,9 +165,12 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
     let model: BuiltinModel = model.parse().map_err(|e| usage(format!("{e}")))?;
     let simulator = model.build(false)?;
     let names = simulator.param_names().to_vec();
-    let signals = SignalNames {
-        inputs: simulator.spec().input_names().to_vec(),
-        outputs: simulator.spec().output_names().to_vec(),
+    let format = csv_records::RecordFormat {
+        signals: SignalNames {
+            inputs: simulator.spec().input_names().to_vec(),
+            outputs: simulator.spec().output_names().to_vec(),
+        },
+        sample_time: simulator.spec().sample_time(),
     };
     let initial_covariance = match args.p0.as_str() {
         "eq6" => b::InitialCovariance::Eq6,
@@ -183,7 +189,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
     let estimator = b::classic_estimator(model, method, &settings)?;
     Ok(Chosen {
         names,
-        signals,
+        format,
         trained: None,
         method: Box::new(move |record: &IoData| {
             estimator
@@ -204,12 +210,12 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
         names,
         method: mut estimate_one,
         trained: trained_samples,
-        signals,
+        format,
     } = method(args)?;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     for path in &args.data {
-        for read in csv_records::read(path, &signals).map_err(|e| anyhow::anyhow!(e))? {
+        for read in csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
                 let n = record.n_samples();
                 match trained_samples {
