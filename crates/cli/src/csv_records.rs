@@ -60,6 +60,14 @@ fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<SignalColumn>> 
     twostage::models::signal_columns(header, &signals.inputs, &signals.outputs)
 }
 
+/// One record as its rows arrive: a column of values per signal, the last
+/// time seen, and the first problem.
+struct Partial {
+    columns: Vec<Vec<f64>>,
+    last_time: Option<f64>,
+    problem: Option<String>,
+}
+
 /// Parse the text of a CSV file called `name`; records without an
 /// `experiment` column take `stem` as their id.
 ///
@@ -106,11 +114,10 @@ pub fn parse(
         .ok_or_else(|| format!("{name}: row 1: header '{header}' is not {expected}"))?;
     let width = fields.len();
     let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
-    // Records in the order their experiment first appears: one column of
-    // values per signal, the last time seen, and the first problem.
+    // Records in the order their experiment first appears.
     let mut order: Vec<String> = Vec::new();
     let mut slots: HashMap<String, usize> = HashMap::new();
-    let mut data: Vec<(Vec<Vec<f64>>, Option<f64>, Option<String>)> = Vec::new();
+    let mut data: Vec<Partial> = Vec::new();
     for (index, line) in lines {
         let row = index + 1;
         let values: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -123,13 +130,17 @@ pub fn parse(
         let id = if long { values[0] } else { stem };
         let slot = *slots.entry(id.to_string()).or_insert_with(|| {
             order.push(id.to_string());
-            data.push((vec![Vec::new(); n_u + n_y], None, None));
+            data.push(Partial {
+                columns: vec![Vec::new(); n_u + n_y],
+                last_time: None,
+                problem: None,
+            });
             order.len() - 1
         });
         let entry = &mut data[slot];
         if let Some(c) = time {
             let now = values[c].parse::<f64>().ok().filter(|v| v.is_finite());
-            let problem = match (now, entry.1) {
+            let problem = match (now, entry.last_time) {
                 (None, _) => Some(format!("'{}' is not a finite time", values[c])),
                 (Some(now), Some(before))
                     if ((now - before) - format.sample_time).abs()
@@ -143,13 +154,13 @@ pub fn parse(
                 }
                 _ => None,
             };
-            if let (Some(problem), None) = (problem, &entry.2) {
-                entry.2 = Some(format!(
+            if let (Some(problem), None) = (problem, &entry.problem) {
+                entry.problem = Some(format!(
                     "{name}: row {row}, column {}: {problem}",
                     fields[c]
                 ));
             }
-            entry.1 = now;
+            entry.last_time = now;
         }
         for (placed, &c) in placed.iter().zip(&signal_at) {
             let text = values[c];
@@ -158,38 +169,45 @@ pub fn parse(
                 SignalColumn::Output(j) => n_u + j,
             };
             let value = text.parse::<f64>().ok().filter(|v| v.is_finite());
-            if value.is_none() && entry.2.is_none() {
-                entry.2 = Some(format!(
+            if value.is_none() && entry.problem.is_none() {
+                entry.problem = Some(format!(
                     "{name}: row {row}, column {}: '{text}' is not a finite number",
                     fields[c]
                 ));
             }
             // Keep the lengths aligned so later rows still parse.
-            entry.0[column].push(value.unwrap_or(0.0));
+            entry.columns[column].push(value.unwrap_or(0.0));
         }
     }
     Ok(order
         .into_iter()
         .zip(data)
-        .map(|(id, (columns, _, problem))| ReadRecord {
-            record: match problem {
-                Some(p) => Err(p),
-                None => {
-                    let n = columns.first().map_or(0, Vec::len);
-                    let mut record = IoData::zeros(n, n_u, n_y);
-                    for (c, values) in columns.iter().enumerate() {
-                        let target = if c < n_u {
-                            record.input_mut(c)
-                        } else {
-                            record.output_mut(c - n_u)
-                        };
-                        target.copy_from_slice(values);
+        .map(
+            |(
+                id,
+                Partial {
+                    columns, problem, ..
+                },
+            )| ReadRecord {
+                record: match problem {
+                    Some(p) => Err(p),
+                    None => {
+                        let n = columns.first().map_or(0, Vec::len);
+                        let mut record = IoData::zeros(n, n_u, n_y);
+                        for (c, values) in columns.iter().enumerate() {
+                            let target = if c < n_u {
+                                record.input_mut(c)
+                            } else {
+                                record.output_mut(c - n_u)
+                            };
+                            target.copy_from_slice(values);
+                        }
+                        Ok(record)
                     }
-                    Ok(record)
-                }
+                },
+                id,
             },
-            id,
-        })
+        )
         .collect())
 }
 

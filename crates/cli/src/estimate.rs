@@ -204,8 +204,9 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
     })
 }
 
-/// Run `twostage estimate`; returns how many records failed.
-pub fn estimate(args: &EstimateArgs) -> Result<usize> {
+/// Run `twostage estimate`; returns how many records were estimated and
+/// how many failed.
+pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let Chosen {
         names,
         method: mut estimate_one,
@@ -218,19 +219,20 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
         for read in csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
                 let n = record.n_samples();
-                match trained_samples {
-                    // The estimate is still defined, but the validation
-                    // error and the intervals were measured for another N.
-                    Some(trained) if n != trained => eprintln!(
+                let estimated = estimate_one(&record)
+                    .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
+                // The estimate is still defined, but the validation error
+                // and the intervals were measured for another N (said only
+                // of a record that was estimated: a failed one says why).
+                if let Some(trained) = trained_samples.filter(|t| *t != n) {
+                    eprintln!(
                         "warning: {}: experiment {}: {n} samples, the estimator was trained \
                          and validated on N = {trained}; its accuracy and intervals may not hold",
                         path.display(),
                         read.id
-                    ),
-                    _ => {}
+                    );
                 }
-                estimate_one(&record)
-                    .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))
+                Ok(estimated)
             });
             match outcome {
                 Ok(estimated) => {
@@ -253,6 +255,14 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
             }
         }
     }
+    let outcome = Outcome {
+        estimated: rows.len(),
+        failed,
+    };
+    if rows.is_empty() && failed > 0 {
+        // Nothing to write: an empty table would read as a result.
+        return Ok(outcome);
+    }
     let text = if args.format == "json" {
         json(&names, &rows)?
     } else {
@@ -262,7 +272,31 @@ pub fn estimate(args: &EstimateArgs) -> Result<usize> {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => std::io::stdout().lock().write_all(text.as_bytes())?,
     }
-    Ok(failed)
+    Ok(outcome)
+}
+
+/// How many records were estimated, and how many could not be.
+pub struct Outcome {
+    /// Records estimated and written.
+    pub estimated: usize,
+    /// Records that could not be (each said on stderr).
+    pub failed: usize,
+}
+
+impl Outcome {
+    /// The closing line when some record failed; `None` when none did.
+    pub fn failure(&self) -> Option<String> {
+        match (self.failed, self.estimated) {
+            (0, _) => None,
+            (failed, 0) => Some(format!(
+                "no record could be estimated ({failed} listed above); nothing was written"
+            )),
+            (failed, estimated) => Some(format!(
+                "{failed} record(s) could not be estimated (listed above); the other \
+                 {estimated} were, and are written"
+            )),
+        }
+    }
 }
 
 fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {

@@ -109,13 +109,11 @@ fn main() -> ExitCode {
         Command::Slurm(args) => slurm::slurm(args, &mut io::stdout().lock()),
         Command::Export(args) => export::export(args, &mut io::stdout().lock()),
         Command::Fmu { command } => fmu::run(command, &mut io::stdout().lock()),
-        Command::Estimate(args) => match estimate::estimate(args) {
-            Ok(0) => Ok(()),
-            Ok(failed) => Err(anyhow::anyhow!(
-                "{failed} record(s) could not be estimated (listed above); the others were"
-            )),
-            Err(e) => Err(e),
-        },
+        Command::Estimate(args) => estimate::estimate(args).and_then(|outcome| {
+            outcome
+                .failure()
+                .map_or(Ok(()), |message| Err(anyhow::anyhow!(message)))
+        }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

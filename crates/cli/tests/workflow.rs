@@ -199,6 +199,28 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     );
     assert!(estimates.lines().nth(1).unwrap().starts_with("a,"));
     assert!(estimates.lines().nth(1).unwrap().ends_with(",true"));
+    assert!(
+        err.contains("1 record(s) could not be estimated (listed above); the other 1 were"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("experiment b: 300 samples"),
+        "a record that fails is not also warned about its length: {err}"
+    );
+    // When no record can be estimated, nothing is written: an empty table
+    // would read as a result.
+    let short = dir.join("short.csv");
+    std::fs::write(&short, "u,y\n0,1\n1,0\n0,1\n").unwrap();
+    let out = twostage(&["estimate", "--estimator", path(&file), path(&short)]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = text(&out.stderr);
+    assert!(text(&out.stdout).is_empty(), "{}", text(&out.stdout));
+    assert!(err.contains("too short"), "{err}");
+    assert!(!err.contains("warning"), "one message for one record: {err}");
+    assert!(
+        err.contains("no record could be estimated (1 listed above); nothing was written"),
+        "{err}"
+    );
 }
 
 #[test]
