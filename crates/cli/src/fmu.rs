@@ -40,6 +40,16 @@ fn inspect(args: &InspectArgs, out: &mut impl Write) -> Result<()> {
     let fmu = Fmu::open(&args.fmu)?;
     let md = fmu.description();
     describe(md, args.locals, out)?;
+    // Said before any file is written: a model file of an FMU that cannot
+    // run here would not train here either.
+    let runs_here = fmu.binary_here();
+    match &runs_here {
+        Ok(binary) => writeln!(out, "binary: {}", binary.display())?,
+        Err(_) => writeln!(
+            out,
+            "binary: none for this platform, so it cannot be simulated here"
+        )?,
+    }
     if let Some(path) = &args.write {
         // The model file names the FMU as the user did, relative to the
         // model file's folder when both sit in the same one.
@@ -73,7 +83,9 @@ fn inspect(args: &InspectArgs, out: &mut impl Write) -> Result<()> {
             path.display()
         )?;
     }
-    Ok(())
+    // Inspecting an FMU for another platform is fine; the exit code says
+    // that it cannot run here.
+    runs_here.map(drop).map_err(anyhow::Error::new)
 }
 
 fn same_folder(a: &std::path::Path, b: &std::path::Path) -> bool {

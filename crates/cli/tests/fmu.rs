@@ -117,6 +117,68 @@ fn inspect_answers_a_file_that_is_not_an_fmu() {
     );
 }
 
+/// An FMU built for another platform is described, and the exit code and
+/// a line say it cannot run here; a binary that does not load says the
+/// loader's reason, not only that loading failed.
+#[test]
+fn an_fmu_that_cannot_run_here_says_so() {
+    let dir = scratch("fmu-elsewhere");
+    let elsewhere = fmus::build_with(fmus::Model::Benchmark, FmiVersion::V2, |root| {
+        let binaries = root.join("binaries");
+        let here = std::fs::read_dir(&binaries)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        std::fs::rename(here, binaries.join("win64")).unwrap();
+    });
+    let copy = dir.join("elsewhere.fmu");
+    std::fs::copy(&elsewhere.path, &copy).unwrap();
+    let out = twostage(&["fmu", "inspect", path(&copy)]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("binary: none for this platform"),
+        "{}",
+        text(&out.stdout)
+    );
+    assert!(
+        text(&out.stderr).contains("found binaries for win64"),
+        "{}",
+        text(&out.stderr)
+    );
+    // A binary that is not a shared library: the loader says why.
+    let broken = fmus::build_with(fmus::Model::Benchmark, FmiVersion::V2, |root| {
+        let binaries = root.join("binaries");
+        let here = std::fs::read_dir(&binaries)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let library = std::fs::read_dir(&here)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        std::fs::write(library, b"not a shared library").unwrap();
+    });
+    let simulator = twostage::fmi::FmuSimulator::builder(
+        &broken.path,
+        twostage::models::Simulator::spec(&twostage::models::Benchmark::new()).clone(),
+    )
+    .input(twostage::models::InputSignal::white_gaussian(1.0).unwrap())
+    .build()
+    .unwrap_err()
+    .to_string();
+    assert!(simulator.contains("cannot be loaded"), "{simulator}");
+    assert!(
+        simulator.contains("file too short") || simulator.contains("invalid ELF header"),
+        "the loader's own reason: {simulator}"
+    );
+}
+
 /// The binary is its own FMU worker: started with `TWOSTAGE_FMU_WORKER`
 /// set it serves a parent on stdin and stdout (here one that says nothing,
 /// which it names), instead of parsing its arguments.

@@ -216,7 +216,10 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     let err = text(&out.stderr);
     assert!(text(&out.stdout).is_empty(), "{}", text(&out.stdout));
     assert!(err.contains("too short"), "{err}");
-    assert!(!err.contains("warning"), "one message for one record: {err}");
+    assert!(
+        !err.contains("warning"),
+        "one message for one record: {err}"
+    );
     assert!(
         err.contains("no record could be estimated (1 listed above); nothing was written"),
         "{err}"

@@ -185,7 +185,7 @@ impl Roles {
                     path: origin.into(),
                     name: name.into(),
                     message: format!(
-                        "it is a {}{}: twostage uses real scalar variables only",
+                        "its type is {}{}: twostage uses real scalar variables only",
                         variable.type_name,
                         if variable.type_name == "Float64" {
                             " array"

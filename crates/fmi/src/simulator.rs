@@ -48,6 +48,19 @@ impl Fmu {
     pub fn description(&self) -> &ModelDescription {
         &self.unpacked.description
     }
+
+    /// The shared library this platform would load (of the co-simulation
+    /// interface, else model exchange), without loading it.
+    ///
+    /// # Errors
+    /// [`FmiError::NoBinary`] naming the file looked for and the platforms
+    /// the FMU has: it cannot be simulated here.
+    pub fn binary_here(&self) -> Result<std::path::PathBuf> {
+        let md = &self.unpacked.description;
+        let interface = md.co_simulation.as_ref().or(md.model_exchange.as_ref());
+        let identifier = interface.map_or(md.model_name.as_str(), |i| i.model_identifier.as_str());
+        self.unpacked.binary(identifier)
+    }
 }
 
 /// How an [`FmuSimulator`] drives its FMU; see [`FmuSimulator::builder`].

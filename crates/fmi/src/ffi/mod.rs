@@ -28,6 +28,21 @@ use crate::error::{FmiError, Result};
 use api::{Api, Call, Handle, Unsupported};
 use log::{Log, status_word};
 
+/// An error and every cause under it, as one line: the loader's own reason
+/// ("undefined symbol: ...") is a cause of libloading's "dlopen failed".
+fn chain(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut cause = error.source();
+    while let Some(inner) = cause {
+        let more = inner.to_string();
+        if !text.contains(&more) {
+            text = format!("{text}: {more}");
+        }
+        cause = inner.source();
+    }
+    text
+}
+
 /// The named functions of a library, each required by the standard.
 struct Symbols<'l> {
     library: &'l Library,
@@ -82,8 +97,8 @@ impl Binary {
         };
         // SAFETY: loading runs the library's initializers; an FMU binary is
         // code the user chose to run, as a simulator is.
-        let library =
-            unsafe { Library::new(path) }.map_err(|e| fail(format!("cannot be loaded: {e}")))?;
+        let library = unsafe { Library::new(path) }
+            .map_err(|e| fail(format!("cannot be loaded: {}", chain(&e))))?;
         let api: Box<dyn Api> = match version {
             FmiVersion::V2 => Box::new(fmi2::Fmi2::load(
                 &library,
