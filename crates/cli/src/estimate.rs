@@ -10,6 +10,7 @@ use twostage::models::{BuiltinModel, IoData};
 use twostage::{Estimator, ModelProfile, Refinement, SignalNames};
 
 use crate::number::format_f64;
+use crate::options::{InitialCovariance, TableFormat};
 use crate::{csv_records, usage};
 
 /// Options of `twostage estimate`.
@@ -32,11 +33,13 @@ pub struct EstimateArgs {
     model_file: Option<PathBuf>,
     /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
     /// (indirect inference through the TS preset's ARX) or bayes.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(
+        twostage::ClassicMethod::ALL.map(|m| m.name())
+    ))]
     method: Option<String>,
-    /// EKF/UKF initial covariance: eq6 or eq7 (the paper's).
-    #[arg(long, default_value = "eq6")]
-    p0: String,
+    /// EKF/UKF initial covariance: the paper's eq. (6) or (7).
+    #[arg(long, value_enum, default_value_t = InitialCovariance::Eq6)]
+    p0: InitialCovariance,
     /// Particle filter: number of particles (default 1000 benchmark, 500 car).
     #[arg(long)]
     particles: Option<usize>,
@@ -49,9 +52,9 @@ pub struct EstimateArgs {
     /// CSV files: header u,y (one record) or experiment,u,y (many).
     #[arg(required = true)]
     data: Vec<PathBuf>,
-    /// Output format: csv or json.
-    #[arg(long, value_parser = ["csv", "json"], default_value = "csv")]
-    format: String,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = TableFormat::Csv)]
+    format: TableFormat,
     /// Write the estimates here instead of standard output.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -172,11 +175,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         },
         sample_time: simulator.spec().sample_time(),
     };
-    let initial_covariance = match args.p0.as_str() {
-        "eq6" => b::InitialCovariance::Eq6,
-        "eq7" => b::InitialCovariance::Eq7,
-        other => return Err(usage(format!("--p0 '{other}': use eq6 or eq7"))),
-    };
+    let initial_covariance = args.p0.into();
     let method = ModelProfile::of(model)
         .classic_method(name)
         .map_err(|e| usage(e.to_string()))?;
@@ -263,7 +262,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         // Nothing to write: an empty table would read as a result.
         return Ok(outcome);
     }
-    let text = if args.format == "json" {
+    let text = if args.format == TableFormat::Json {
         json(&names, &rows)?
     } else {
         csv(&names, &rows)?

@@ -11,6 +11,7 @@ mod inspect;
 mod model_arg;
 mod models;
 mod number;
+mod options;
 mod simulate;
 mod slurm;
 mod specs;
@@ -47,10 +48,10 @@ enum Command {
     Inspect {
         /// The estimator file.
         file: std::path::PathBuf,
-        /// Print what the file holds as JSON: the training, the priors and
-        /// the validation report with its certificates.
-        #[arg(long)]
-        json: bool,
+        /// As JSON: the training, the priors and the validation report
+        /// with its certificates.
+        #[command(flatten)]
+        format: options::FormatArgs,
     },
     /// Estimate the parameters of recorded experiments (CSV u,y or experiment,u,y).
     Estimate(estimate::EstimateArgs),
@@ -103,7 +104,9 @@ fn main() -> ExitCode {
         Command::Models(args) => models::models(args, &mut io::stdout().lock()),
         Command::Simulate(args) => simulate::simulate(args),
         Command::Train(args) => train::train(args, &mut io::stdout().lock()),
-        Command::Inspect { file, json } => inspect::inspect(file, *json, &mut io::stdout().lock()),
+        Command::Inspect { file, format } => {
+            inspect::inspect(file, format.json(), &mut io::stdout().lock())
+        }
         Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
         Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
         Command::Slurm(args) => slurm::slurm(args, &mut io::stdout().lock()),

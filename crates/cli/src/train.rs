@@ -85,6 +85,11 @@ pub struct TrainArgs {
     /// Print nothing but errors.
     #[arg(long)]
     quiet: bool,
+    /// The report on stdout as text, or as JSON (what `inspect --format
+    /// json` prints of the file written; the search's candidates and the
+    /// timings stay on the text report).
+    #[command(flatten)]
+    format: crate::options::FormatArgs,
 }
 
 impl TrainArgs {
@@ -165,12 +170,16 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
             anyhow::Error::new(e).context("training")
         }
     })?;
-    if let (Some(outcome), false) = (trained.search(), args.quiet) {
+    let text = !args.quiet && !args.format.json();
+    if let (Some(outcome), true) = (trained.search(), text) {
         writeln!(out, "{outcome}")?;
     }
     let estimator = trained.into_estimator();
     estimator.save(&args.out)?;
-    if !args.quiet {
+    if args.format.json() && !args.quiet {
+        return crate::inspect::inspect(&args.out, true, out);
+    }
+    if text {
         writeln!(
             out,
             "trained in {:.2} s; wrote {}",

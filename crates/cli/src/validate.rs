@@ -50,9 +50,8 @@ pub struct ValidateArgs {
     /// of a built-in model).
     #[arg(long, value_name = "PATH")]
     model_file: Option<PathBuf>,
-    /// Print the report as JSON instead of text.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    format: crate::options::FormatArgs,
 }
 
 /// Run `twostage validate`.
@@ -156,7 +155,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         };
         let ratio = certified_ratio(&report);
         if ratio <= k {
-            if !args.json {
+            if !args.format.json() {
                 writeln!(
                     out,
                     "--target-rmse {k}: met with r = {r} (every certified RMSE within {ratio:.3} \
@@ -166,7 +165,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
             break report;
         }
         if r == most {
-            if !args.json {
+            if !args.format.json() {
                 writeln!(
                     out,
                     "--target-rmse {k}: not met with r = {r} = --max-sims (a certified RMSE is \
@@ -177,7 +176,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
         r = r.saturating_mul(2).min(most);
     };
-    if args.json {
+    if args.format.json() {
         writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {
         writeln!(out, "{report}")?;
@@ -220,7 +219,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         };
         let svg = twostage_plot::estimates_vs_truth(&title, &panels)?;
         twostage::write_whole(path, svg.as_bytes())?;
-        if !args.json {
+        if !args.format.json() {
             writeln!(out, "wrote {}", path.display())?;
         }
     }

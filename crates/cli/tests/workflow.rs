@@ -101,8 +101,11 @@ fn train_inspect_and_estimate_recorded_experiments() {
     }
     // The same in JSON: the certificate is at least what was observed and
     // at most Theorem 1's bound at the same confidence.
-    let out = twostage(&["inspect", "--json", path(&file)]);
+    let out = twostage(&["inspect", "--format", "json", path(&file)]);
     assert!(out.status.success(), "{}", text(&out.stderr));
+    // `--json` is the same as `--format json`, kept for scripts.
+    let alias = twostage(&["inspect", "--json", path(&file)]);
+    assert_eq!(alias.stdout, out.stdout);
     let json: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
     let validation = &json["validation"];
     let observed = validation["total"]["empirical_mse"].as_f64().unwrap();
@@ -153,6 +156,45 @@ fn train_inspect_and_estimate_recorded_experiments() {
     assert_eq!(
         text(&out.stderr).matches("out of distribution").count(),
         flagged
+    );
+}
+
+/// Every command that prints a report takes `--format text|json`: train
+/// prints the JSON `inspect` prints of the file it wrote.
+#[test]
+fn reports_come_as_text_or_json() {
+    let dir = scratch("formats");
+    let file = dir.join("lin.tsest");
+    let out = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "100",
+        "--fit",
+        "linear",
+        "--validate",
+        "50",
+        "--calibrate",
+        "0",
+        "--format",
+        "json",
+        "--out",
+        path(&file),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let trained: serde_json::Value = serde_json::from_str(&text(&out.stdout)).unwrap();
+    assert_eq!(trained["validation"]["total"]["r"], 50, "{trained}");
+    let inspected = twostage(&["inspect", "--format", "json", path(&file)]);
+    assert_eq!(inspected.stdout, out.stdout);
+    let text_report = twostage(&["inspect", "--format", "text", path(&file)]);
+    assert!(serde_json::from_slice::<serde_json::Value>(&text_report.stdout).is_err());
+    let out = twostage(&["inspect", "--format", "yaml", path(&file)]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("possible values: text, json"),
+        "{}",
+        text(&out.stderr)
     );
 }
 
