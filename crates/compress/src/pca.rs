@@ -201,60 +201,31 @@ impl OutputPca {
                 *v -= a;
             }
         }
-        // Principal directions are the leading eigenvectors of X'X (d x d),
-        // or X' times those of XX' (m x m), whichever is smaller. Each is
-        // checked for variance before it is kept: directions with none are
-        // rounding noise (and, through X', not even orthogonal to the rest).
+        // Principal directions are the leading right singular vectors of
+        // X, by a thin SVD: the Gram matrix's eigenvectors would square
+        // the condition number. Each is checked for variance before it is
+        // kept: directions with none are rounding noise.
         let total: f64 = x.iter().map(|v| v * v).sum();
         let tolerance = 1e-20 * total;
-        let mut basis = vec![0.0; self.components * d];
-        let no_convergence = || CompressError::RankDeficient {
-            structure: self.to_string(),
-            cause: "the eigendecomposition of the outputs' Gram matrix did not converge \
-                    (non-finite or wildly scaled outputs?)"
-                .into(),
-        };
-        let weak = |i: usize| CompressError::RankDeficient {
-            structure: self.to_string(),
-            cause: format!(
-                "the training outputs vary in only {i} directions: ask for at most {i} components"
-            ),
-        };
-        if d <= m {
-            let vectors = leading_eigenvectors(&gram(&x, m, d, false), d, self.components)
-                .ok_or_else(no_convergence)?;
-            for (i, (out, v)) in basis
-                .chunks_exact_mut(d)
-                .zip(vectors.chunks_exact(d))
-                .enumerate()
-            {
-                let variance: f64 = x
-                    .chunks_exact(d)
-                    .map(|row| row.iter().zip(v).map(|(a, b)| a * b).sum::<f64>().powi(2))
-                    .sum();
-                if variance.is_nan() || variance <= tolerance {
-                    return Err(weak(i));
+        let (vectors, variances) =
+            leading_directions(&x, m, d, self.components).ok_or_else(|| {
+                CompressError::RankDeficient {
+                    structure: self.to_string(),
+                    cause: "the singular value decomposition of the outputs did not converge \
+                            (non-finite or wildly scaled outputs?)"
+                        .into(),
                 }
-                out.copy_from_slice(v);
-            }
-        } else {
-            let u = leading_eigenvectors(&gram(&x, m, d, true), m, self.components)
-                .ok_or_else(no_convergence)?;
-            for (i, (vi, ui)) in basis.chunks_exact_mut(d).zip(u.chunks_exact(m)).enumerate() {
-                for (row, w) in x.chunks_exact(d).zip(ui) {
-                    for (a, b) in vi.iter_mut().zip(row) {
-                        *a += w * b;
-                    }
-                }
-                // |X' u|^2 = u' X X' u: the variance along the direction.
-                let variance = vi.iter().map(|a| a * a).sum::<f64>();
-                if variance.is_nan() || variance <= tolerance {
-                    return Err(weak(i));
-                }
-                let norm = variance.sqrt();
-                vi.iter_mut().for_each(|a| *a /= norm);
-            }
+            })?;
+        if let Some(i) = variances.iter().position(|v| v.is_nan() || *v <= tolerance) {
+            return Err(CompressError::RankDeficient {
+                structure: self.to_string(),
+                cause: format!(
+                    "the training outputs vary in only {i} directions: ask for at most {i} \
+                     components"
+                ),
+            });
         }
+        let basis = vectors;
         self.n_samples = n;
         self.n_outputs = ny;
         self.mean = mean;
@@ -292,64 +263,45 @@ impl OutputPca {
     }
 }
 
-/// `X'X` (d x d) or, with `dual`, `XX'` (m x m) of the row-major m x d `x`.
-fn gram(x: &[f64], m: usize, d: usize, dual: bool) -> Vec<f64> {
-    if dual {
-        let mut g = vec![0.0; m * m];
-        for a in 0..m {
-            for b in 0..=a {
-                let ra = &x[a * d..(a + 1) * d];
-                let rb = &x[b * d..(b + 1) * d];
-                let v: f64 = ra.iter().zip(rb).map(|(p, q)| p * q).sum();
-                g[a * m + b] = v;
-                g[b * m + a] = v;
-            }
-        }
-        g
-    } else {
-        let mut g = vec![0.0; d * d];
-        for row in x.chunks_exact(d) {
-            for a in 0..d {
-                let ra = row[a];
-                if ra == 0.0 {
-                    continue;
-                }
-                for (gab, rb) in g[a * d..(a + 1) * d].iter_mut().zip(row) {
-                    *gab += ra * rb;
-                }
-            }
-        }
-        g
-    }
-}
-
-/// The `k` leading eigenvectors (row-major, k x s, largest eigenvalue
-/// first) of the symmetric positive semi-definite s x s matrix `a`, by
-/// faer's symmetric eigendecomposition on one thread (bitwise reproducible
-/// on a given processor), each with a fixed sign: its largest entry
-/// positive. `None` if the decomposition does not converge.
-fn leading_eigenvectors(a: &[f64], s: usize, k: usize) -> Option<Vec<f64>> {
+/// The `k` leading right singular vectors of the row-major m x d matrix
+/// `x` (row-major, k x d, largest singular value first), each with a fixed
+/// sign (its largest entry positive), and the variance along each (its
+/// squared singular value), by faer's thin SVD on one thread (bitwise
+/// reproducible on a given processor). `None` if it does not converge, or
+/// if `x` has fewer than `k` singular values.
+fn leading_directions(x: &[f64], m: usize, d: usize, k: usize) -> Option<(Vec<f64>, Vec<f64>)> {
     use faer::dyn_stack::{MemBuffer, MemStack};
-    use faer::linalg::evd::{ComputeEigenvectors, self_adjoint_evd, self_adjoint_evd_scratch};
-    let matrix = faer::Mat::from_fn(s, s, |i, j| a[i * s + j]);
-    let mut values = faer::diag::Diag::<f64>::zeros(s);
-    let mut vectors = faer::Mat::<f64>::zeros(s, s);
-    let scratch =
-        self_adjoint_evd_scratch::<f64>(s, ComputeEigenvectors::Yes, Par::Seq, Default::default());
-    self_adjoint_evd(
+    use faer::linalg::svd::{ComputeSvdVectors, svd, svd_scratch};
+    let rank = m.min(d);
+    if k > rank {
+        return None;
+    }
+    let matrix = faer::Mat::from_fn(m, d, |i, j| x[i * d + j]);
+    let mut values = faer::diag::Diag::<f64>::zeros(rank);
+    let mut v = faer::Mat::<f64>::zeros(d, rank);
+    let scratch = svd_scratch::<f64>(
+        m,
+        d,
+        ComputeSvdVectors::No,
+        ComputeSvdVectors::Thin,
+        Par::Seq,
+        Default::default(),
+    );
+    svd(
         matrix.as_ref(),
         values.as_mut(),
-        Some(vectors.as_mut()),
+        None,
+        Some(v.as_mut()),
         Par::Seq,
         MemStack::new(&mut MemBuffer::new(scratch)),
         Default::default(),
     )
     .ok()?;
-    // faer sorts the eigenvalues in nondecreasing order: take the last k.
-    let mut leading = vec![0.0; k * s];
-    for (out, column) in leading.chunks_exact_mut(s).zip((0..s).rev()) {
-        for (o, r) in out.iter_mut().zip(0..s) {
-            *o = vectors[(r, column)];
+    // faer sorts the singular values in nonincreasing order.
+    let mut leading = vec![0.0; k * d];
+    for (column, out) in leading.chunks_exact_mut(d).enumerate() {
+        for (o, r) in out.iter_mut().zip(0..d) {
+            *o = v[(r, column)];
         }
         let sign = out
             .iter()
@@ -358,7 +310,8 @@ fn leading_eigenvectors(a: &[f64], s: usize, k: usize) -> Option<Vec<f64>> {
             .map_or(1.0, f64::signum);
         out.iter_mut().for_each(|v| *v *= sign);
     }
-    Some(leading)
+    let variances = (0..k).map(|i| values[i] * values[i]).collect();
+    Some((leading, variances))
 }
 
 impl std::fmt::Display for OutputPca {

@@ -119,3 +119,32 @@ fn misuse_gets_an_error_naming_the_cause() {
         "{e}"
     );
 }
+
+/// A direction whose variance is 1e-14 of the leading one's is still
+/// recovered to 1e-6: the SVD of the records keeps the condition number,
+/// where the Gram matrix's eigenvectors (its square, 1e28) would lose the
+/// second direction to rounding.
+#[test]
+fn a_weak_direction_is_recovered_beside_a_strong_one() {
+    let (n, m) = (6, 40);
+    let strong: Vec<f64> = (0..n).map(|k| if k < 3 { 1.0 } else { 0.0 }).collect();
+    let weak: Vec<f64> = (0..n).map(|k| if k >= 3 { 1.0 } else { 0.0 }).collect();
+    let norm = 3f64.sqrt();
+    let records: Vec<Array2<f64>> = (0..m)
+        .map(|i| {
+            // Scores of zero mean: +-1 and +-1e-7, in a pattern that keeps
+            // them uncorrelated.
+            let a = if i % 2 == 0 { 1.0 } else { -1.0 };
+            let b = if (i / 2) % 2 == 0 { 1e-7 } else { -1e-7 };
+            Array2::from_shape_fn((n, 1), |(k, _)| a * strong[k] + b * weak[k])
+        })
+        .collect();
+    let views: Vec<_> = records.iter().map(|r| r.view()).collect();
+    let pca = OutputPca::new(2).unwrap().fit(&views).unwrap();
+    let directions: Vec<&[f64]> = pca.directions().collect();
+    for (found, truth) in directions.iter().zip([&strong, &weak]) {
+        for (f, t) in found.iter().zip(truth) {
+            assert!((f - t / norm).abs() < 1e-6, "{found:?} vs {truth:?}");
+        }
+    }
+}
