@@ -44,40 +44,12 @@ pub enum Error {
         /// The valid range.
         reason: String,
     },
-    /// A vector given with a record (a start, a radius) has the wrong length.
-    #[error("{what} has {found} values where {expected} are needed, one per parameter")]
-    Length {
-        /// Which vector.
-        what: &'static str,
-        /// Its length.
-        found: usize,
-        /// The number of parameters.
-        expected: usize,
-    },
-    /// A computation on a record gave no finite answer.
-    #[error("numerical failure: {what}")]
-    Numerical {
-        /// What failed, and where.
-        what: String,
-    },
     /// The estimator uses a structure the microcontroller runtime does not
     /// evaluate.
     #[error("this estimator cannot be exported to the runtime: {reason}")]
     NotExportable {
         /// What the runtime lacks and what to train instead.
         reason: String,
-    },
-    /// A model has no preset or method of that name (another model may).
-    #[error("{what} '{name}' is not available for {model}: it has {available}")]
-    NotAvailable {
-        /// "preset" or "method".
-        what: &'static str,
-        /// The name asked for.
-        name: String,
-        /// The model.
-        model: String,
-        /// What the model has instead.
-        available: String,
     },
     /// A record or output slot does not fit the estimator.
     #[error(
@@ -197,9 +169,9 @@ pub type Result<T> = std::result::Result<T, Error>;
 
 impl Error {
     /// Whether the error is in what was asked for: a setting out of range,
-    /// a structure that does not parse or fit the model, a preset or
-    /// method the model lacks, a model file, chart or shard that is not
-    /// what it should be. The command line exits with 2 on these.
+    /// a structure that does not parse or fit the model, a preset the model
+    /// lacks, a model file, chart or shard that is not what it should be.
+    /// The command line exits with 2 on these.
     ///
     /// ```
     /// use twostage::CompressorConfig;
@@ -210,7 +182,6 @@ impl Error {
         matches!(
             self,
             Self::InvalidSetting { .. }
-                | Self::NotAvailable { .. }
                 | Self::Compression(CompressError::InvalidSetting { .. })
                 | Self::Fit(FitError::InvalidSetting { .. })
         ) || matches!(self, Self::Source(e) if e.is_setting())
