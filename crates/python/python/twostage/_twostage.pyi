@@ -12,6 +12,9 @@ __version__: str
 _Array = npt.NDArray[np.float64]
 
 class Estimator:
+    """The native estimator. ``twostage.Estimator`` wraps it: use that one,
+    whose ``assess`` returns a dict; this one's returns the raw tuple the
+    wrapper reads."""
     @staticmethod
     def load(path: Union[str, PathLike[str]]) -> Estimator: ...
     @staticmethod
@@ -34,7 +37,10 @@ class Estimator:
     def estimate(self, u: Optional[_Array], y: _Array) -> _Array: ...
     def assess(
         self, u: Optional[_Array], y: _Array
-    ) -> Tuple[_Array, Optional[_Array], Optional[Union[float, _Array]], Optional[float]]: ...
+    ) -> Tuple[_Array, Optional[_Array], Optional[Union[float, _Array]], Optional[float]]:
+        """(theta, interval half-widths, feature distance, distance
+        threshold): ``twostage.Estimator.assess`` makes the dict of these."""
+        ...
 
 def train(
     model: Optional[str] = None,
