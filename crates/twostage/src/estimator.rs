@@ -11,6 +11,7 @@ use twostage_validate::{ConformalIntervals, ValidationReport};
 use crate::adaptive::AdaptiveIntervals;
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
+use crate::layout::{EstimatorFields, Stages, V1, V2, V3};
 use crate::space::{rows_to_estimates, to_estimate};
 use twostage_compress::CompressorConfig;
 use twostage_fit::{FittedRegressor, RegressorConfig};
@@ -64,8 +65,11 @@ impl EstimateWorkspace {
 
 /// A trained two-stage estimator: `theta_hat = clip(h(g(u, y)))`, explicit,
 /// with no iteration and no tuning at estimate time.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "EstimatorFields")]
+///
+/// Serialized (the file's payload, the JSON export) as its fields in this
+/// order; files are read through the layouts of `layout.rs`, which check
+/// them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Estimator {
     pub(crate) param_names: Vec<String>,
     pub(crate) lower: Vec<f64>,
@@ -99,83 +103,90 @@ pub struct SignalNames {
     pub outputs: Vec<String>,
 }
 
-/// What a file stores. Each component has checked its own invariants while
-/// decoding; this adds the ones between components, so that a decoded
-/// estimator estimates (or errs) and never indexes out of range.
-#[derive(Deserialize)]
-pub(crate) struct EstimatorFields {
-    pub(crate) param_names: Vec<String>,
-    pub(crate) lower: Vec<f64>,
-    pub(crate) upper: Vec<f64>,
-    pub(crate) shape: RecordShape,
-    pub(crate) compressor: CompressorConfig,
-    pub(crate) regressor: FittedRegressor,
-    pub(crate) training: TrainingInfo,
-    pub(crate) intervals: Option<ConformalIntervals>,
-    pub(crate) validation: Option<ValidationReport>,
-    pub(crate) envelope: Option<FeatureEnvelope>,
-    pub(crate) adaptive: Option<AdaptiveIntervals>,
-    pub(crate) marginals: Vec<Marginal>,
-    pub(crate) signal_names: Option<SignalNames>,
-}
-
 impl TryFrom<EstimatorFields> for Estimator {
     type Error = FileError;
+    /// Each component has checked its own invariants while decoding;
+    /// this adds the ones between components, so that a decoded estimator
+    /// estimates (or errs) and never indexes out of range.
     fn try_from(f: EstimatorFields) -> std::result::Result<Self, FileError> {
+        let V3 {
+            v2:
+                V2 {
+                    v1:
+                        V1 {
+                            stages:
+                                Stages {
+                                    param_names,
+                                    lower,
+                                    upper,
+                                    shape,
+                                    compressor,
+                                    regressor,
+                                    training,
+                                },
+                            intervals,
+                            validation,
+                        },
+                    envelope,
+                    adaptive,
+                },
+            marginals,
+            signal_names,
+        } = f;
         let bad = |what: String| Err(FileError::Inconsistent { what });
-        let q = f.param_names.len();
-        if q == 0 || f.lower.len() != q || f.upper.len() != q {
+        let q = param_names.len();
+        if q == 0 || lower.len() != q || upper.len() != q {
             return bad(format!(
                 "{q} parameter names, {} lower and {} upper bounds",
-                f.lower.len(),
-                f.upper.len()
+                lower.len(),
+                upper.len()
             ));
         }
-        if let Some(j) = (0..q).find(|&j| {
-            !(f.lower[j].is_finite() && f.upper[j].is_finite() && f.lower[j] < f.upper[j])
-        }) {
+        if let Some(j) =
+            (0..q).find(|&j| !(lower[j].is_finite() && upper[j].is_finite() && lower[j] < upper[j]))
+        {
             return bad(format!(
                 "the box [{}, {}] of {}",
-                f.lower[j], f.upper[j], f.param_names[j]
+                lower[j], upper[j], param_names[j]
             ));
         }
-        if f.marginals.len() != q {
-            return bad(format!("{} priors for {q} parameters", f.marginals.len()));
+        if marginals.len() != q {
+            return bad(format!("{} priors for {q} parameters", marginals.len()));
         }
-        for (j, marginal) in f.marginals.iter().enumerate() {
+        for (j, marginal) in marginals.iter().enumerate() {
             if marginal.check(j).is_err() {
-                return bad(format!("the prior {marginal:?} of {}", f.param_names[j]));
+                return bad(format!("the prior {marginal:?} of {}", param_names[j]));
             }
             // The box is the prior's range; a clip outside it would leave
             // the support (a log-normal's estimate must stay > 0).
             let (low, high) = marginal.range();
             let slack = 1e-9 * (high - low);
-            if !(f.lower[j] >= low - slack && f.upper[j] <= high + slack) {
+            if !(lower[j] >= low - slack && upper[j] <= high + slack) {
                 return bad(format!(
                     "the box [{}, {}] of {} outside its prior's range [{low}, {high}]",
-                    f.lower[j], f.upper[j], f.param_names[j]
+                    lower[j], upper[j], param_names[j]
                 ));
             }
         }
-        if f.regressor.n_outputs() != q || f.regressor.n_inputs() != f.compressor.n_features() {
+        if regressor.n_outputs() != q || regressor.n_inputs() != compressor.n_features() {
             return bad(format!(
                 "stage 2 maps {} features to {} parameters, stage 1 gives {} features for {q}",
-                f.regressor.n_inputs(),
-                f.regressor.n_outputs(),
-                f.compressor.n_features()
+                regressor.n_inputs(),
+                regressor.n_outputs(),
+                compressor.n_features()
             ));
         }
-        if let Some(envelope) = &f.envelope
-            && envelope.dim() != f.compressor.n_features()
+        if let Some(envelope) = &envelope
+            && envelope.dim() != compressor.n_features()
         {
             return bad(format!(
                 "a feature envelope of {} features for {}",
                 envelope.dim(),
-                f.compressor.n_features()
+                compressor.n_features()
             ));
         }
-        if let Some(adaptive) = &f.adaptive
-            && (adaptive.dim() != q || adaptive.n_features() != f.compressor.n_features())
+        if let Some(adaptive) = &adaptive
+            && (adaptive.dim() != q || adaptive.n_features() != compressor.n_features())
         {
             return bad(format!(
                 "adaptive intervals for {} parameters and {} features",
@@ -183,18 +194,18 @@ impl TryFrom<EstimatorFields> for Estimator {
                 adaptive.n_features()
             ));
         }
-        if let Some(names) = &f.signal_names
-            && (names.inputs.len() != f.shape.n_inputs || names.outputs.len() != f.shape.n_outputs)
+        if let Some(names) = &signal_names
+            && (names.inputs.len() != shape.n_inputs || names.outputs.len() != shape.n_outputs)
         {
             return bad(format!(
                 "{} input and {} output names for records of {} and {}",
                 names.inputs.len(),
                 names.outputs.len(),
-                f.shape.n_inputs,
-                f.shape.n_outputs
+                shape.n_inputs,
+                shape.n_outputs
             ));
         }
-        if let Some(intervals) = &f.intervals {
+        if let Some(intervals) = &intervals {
             let widths = intervals.half_widths();
             if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
                 return bad(format!(
@@ -203,19 +214,19 @@ impl TryFrom<EstimatorFields> for Estimator {
             }
         }
         Ok(Self {
-            param_names: f.param_names,
-            lower: f.lower,
-            upper: f.upper,
-            shape: f.shape,
-            compressor: f.compressor,
-            regressor: f.regressor,
-            training: f.training,
-            intervals: f.intervals,
-            validation: f.validation,
-            envelope: f.envelope,
-            adaptive: f.adaptive,
-            marginals: f.marginals,
-            signal_names: f.signal_names,
+            param_names,
+            lower,
+            upper,
+            shape,
+            compressor,
+            regressor,
+            training,
+            intervals,
+            validation,
+            envelope,
+            adaptive,
+            marginals,
+            signal_names,
         })
     }
 }

@@ -15,6 +15,7 @@ use std::path::Path;
 
 use crate::error::{Error, FileError, Result};
 use crate::estimator::Estimator;
+use crate::layout::{EstimatorFields, V1, V2, V3, ValidationReportV3};
 
 /// The first eight bytes of every estimator file.
 pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
@@ -23,7 +24,7 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// Version 2 added the feature envelope and the adaptive intervals, version
 /// 3 the parameters' priors, version 4 the betting certificate of the
 /// validation report; older files load without them (uniform priors, no
-/// certificate). The layouts of older versions live in `legacy.rs`.
+/// certificate). Every version's layout lives in `layout.rs`.
 pub const FORMAT_VERSION: u32 = 4;
 const HEADER: usize = 24;
 
@@ -115,22 +116,21 @@ impl Estimator {
             }
             .into());
         }
-        fn decode<'a, F>(payload: &'a [u8]) -> std::result::Result<Estimator, String>
-        where
-            F: serde::Deserialize<'a>,
-            Estimator: TryFrom<F, Error = FileError>,
-        {
-            postcard::from_bytes::<F>(payload)
-                .map_err(|e| e.to_string())
-                .and_then(|fields| Estimator::try_from(fields).map_err(|e| e.to_string()))
+        // Each version's layout, carried forward to today's.
+        fn read<'a, F: serde::Deserialize<'a>>(
+            payload: &'a [u8],
+        ) -> std::result::Result<F, String> {
+            postcard::from_bytes::<F>(payload).map_err(|e| e.to_string())
         }
-        let decoded = match version {
-            1 => decode::<crate::legacy::EstimatorFieldsV1>(payload),
-            2 => decode::<crate::legacy::EstimatorFieldsV2>(payload),
-            3 => decode::<crate::legacy::EstimatorFieldsV3>(payload),
-            _ => postcard::from_bytes(payload).map_err(|e| e.to_string()),
+        let fields: std::result::Result<EstimatorFields, String> = match version {
+            1 => read::<V1<ValidationReportV3>>(payload).map(|v1| V3::from(V2::from(v1)).into()),
+            2 => read::<V2<ValidationReportV3>>(payload).map(|v2| V3::from(v2).into()),
+            3 => read::<V3<ValidationReportV3>>(payload).map(Into::into),
+            _ => read::<EstimatorFields>(payload),
         };
-        decoded.map_err(|reason| FileError::Undecodable { reason }.into())
+        fields
+            .and_then(|fields| Estimator::try_from(fields).map_err(|e| e.to_string()))
+            .map_err(|reason| FileError::Undecodable { reason }.into())
     }
 
     /// Write the estimator file to `path`, whole or not at all

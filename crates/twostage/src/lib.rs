@@ -51,7 +51,7 @@ mod envelope;
 mod error;
 mod estimator;
 mod file;
-mod legacy;
+mod layout;
 mod request;
 mod runtime_export;
 mod settings;

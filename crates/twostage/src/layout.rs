@@ -1,0 +1,171 @@
+//! What estimator files store, version by version, and how each becomes
+//! today's. Postcard is not self-describing, and it writes a nested struct
+//! as its fields in order: each version's layout is the previous one's
+//! nested, plus what the version added, so every field is named once.
+//! A file is read with its version's layout, carried forward one version
+//! at a time, and checked as a whole into an [`Estimator`].
+
+use serde::Deserialize;
+use twostage_models::Marginal;
+use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, ValidationReport};
+
+use crate::adaptive::AdaptiveIntervals;
+use crate::envelope::FeatureEnvelope;
+use crate::estimator::{RecordShape, SignalNames, TrainingInfo};
+use twostage_compress::CompressorConfig;
+use twostage_fit::FittedRegressor;
+
+/// A parameter's validation before format version 4: no betting
+/// certificate.
+#[derive(Deserialize)]
+pub(crate) struct ParameterReportV3 {
+    name: String,
+    mse: f64,
+    rmse: f64,
+    bias: f64,
+    r2: f64,
+    max_abs_error: f64,
+    hoeffding: HoeffdingBound,
+    interval_half_width: Option<f64>,
+    interval_coverage: Option<f64>,
+}
+
+/// The validation report before format version 4.
+#[derive(Deserialize)]
+pub(crate) struct ValidationReportV3 {
+    parameters: Vec<ParameterReportV3>,
+    total: HoeffdingBound,
+    intervals: Option<ConformalIntervals>,
+}
+
+impl From<ValidationReportV3> for ValidationReport {
+    fn from(r: ValidationReportV3) -> Self {
+        Self {
+            parameters: r
+                .parameters
+                .into_iter()
+                .map(|p| ParameterReport {
+                    name: p.name,
+                    mse: p.mse,
+                    rmse: p.rmse,
+                    bias: p.bias,
+                    r2: p.r2,
+                    max_abs_error: p.max_abs_error,
+                    hoeffding: p.hoeffding,
+                    certified: None,
+                    interval_half_width: p.interval_half_width,
+                    interval_coverage: p.interval_coverage,
+                })
+                .collect(),
+            total: r.total,
+            certified_total: None,
+            intervals: r.intervals,
+        }
+    }
+}
+
+/// What every version stores first: the two stages and what they were
+/// trained on.
+#[derive(Deserialize)]
+pub(crate) struct Stages {
+    pub(crate) param_names: Vec<String>,
+    pub(crate) lower: Vec<f64>,
+    pub(crate) upper: Vec<f64>,
+    pub(crate) shape: RecordShape,
+    pub(crate) compressor: CompressorConfig,
+    pub(crate) regressor: FittedRegressor,
+    pub(crate) training: TrainingInfo,
+}
+
+/// Format version 1: the stages, the conformal intervals and the
+/// validation report (`R`, the report's layout of the version).
+#[derive(Deserialize)]
+pub(crate) struct V1<R> {
+    pub(crate) stages: Stages,
+    pub(crate) intervals: Option<ConformalIntervals>,
+    pub(crate) validation: Option<R>,
+}
+
+/// Format version 2 adds the feature envelope and the adaptive intervals.
+#[derive(Deserialize)]
+pub(crate) struct V2<R> {
+    pub(crate) v1: V1<R>,
+    pub(crate) envelope: Option<FeatureEnvelope>,
+    pub(crate) adaptive: Option<AdaptiveIntervals>,
+}
+
+/// Format version 3 adds each parameter's prior and the signal names;
+/// version 4, today's, has the same layout with a report that carries
+/// certificates.
+#[derive(Deserialize)]
+pub(crate) struct V3<R> {
+    pub(crate) v2: V2<R>,
+    pub(crate) marginals: Vec<Marginal>,
+    pub(crate) signal_names: Option<SignalNames>,
+}
+
+/// Today's layout (format version 4).
+pub(crate) type EstimatorFields = V3<ValidationReport>;
+
+impl From<V1<ValidationReportV3>> for V2<ValidationReportV3> {
+    /// No envelope, no adaptive intervals.
+    fn from(v1: V1<ValidationReportV3>) -> Self {
+        Self {
+            v1,
+            envelope: None,
+            adaptive: None,
+        }
+    }
+}
+
+impl From<V2<ValidationReportV3>> for V3<ValidationReportV3> {
+    /// Every prior uniform on the box; the generic signal names.
+    fn from(v2: V2<ValidationReportV3>) -> Self {
+        let stages = &v2.v1.stages;
+        let marginals = stages
+            .lower
+            .iter()
+            .zip(&stages.upper)
+            .map(|(&low, &high)| Marginal::Uniform { low, high })
+            .collect();
+        Self {
+            v2,
+            marginals,
+            signal_names: None,
+        }
+    }
+}
+
+impl From<V3<ValidationReportV3>> for EstimatorFields {
+    /// The report without certificates.
+    fn from(v3: V3<ValidationReportV3>) -> Self {
+        let V3 {
+            v2:
+                V2 {
+                    v1:
+                        V1 {
+                            stages,
+                            intervals,
+                            validation,
+                        },
+                    envelope,
+                    adaptive,
+                },
+            marginals,
+            signal_names,
+        } = v3;
+        Self {
+            v2: V2 {
+                v1: V1 {
+                    stages,
+                    intervals,
+                    validation: validation.map(ValidationReport::from),
+                },
+                envelope,
+                adaptive,
+            },
+            marginals,
+            signal_names,
+        }
+    }
+}
