@@ -91,16 +91,27 @@ pub fn parse(
         all.join(","),
         all.join(",")
     );
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let Some((_, header)) = lines.next() else {
+    // Every row, header first, as the shared CSV reader gives it.
+    let mut rows: Vec<(usize, Vec<String>)> = Vec::new();
+    twostage::sources::csv_rows::for_each_row(
+        text.as_bytes(),
+        |line, fields| {
+            rows.push((line, fields.iter().map(str::to_string).collect()));
+            Ok(())
+        },
+        |line, e| match line {
+            Some(line) => format!("{name}: row {line}: {e}"),
+            None => format!("{name}: {e}"),
+        },
+    )?;
+    let mut rows = rows.into_iter();
+    let Some((_, fields)) = rows.next() else {
         return Err(format!(
             "{name}: the file is empty; expected a header {expected}"
         ));
     };
-    let fields: Vec<&str> = header.split(',').map(str::trim).collect();
+    let header = fields.join(",");
+    let fields: Vec<&str> = fields.iter().map(String::as_str).collect();
     let long = fields.first() == Some(&"experiment");
     let first = usize::from(long);
     // A time column is checked, not read into the record.
@@ -118,9 +129,8 @@ pub fn parse(
     let mut order: Vec<String> = Vec::new();
     let mut slots: HashMap<String, usize> = HashMap::new();
     let mut data: Vec<Partial> = Vec::new();
-    for (index, line) in lines {
-        let row = index + 1;
-        let values: Vec<&str> = line.split(',').map(str::trim).collect();
+    for (row, values) in rows {
+        let values: Vec<&str> = values.iter().map(String::as_str).collect();
         if values.len() != width {
             return Err(format!(
                 "{name}: row {row}: {} values, the header has {width}",

@@ -1,7 +1,6 @@
 //! `twostage estimate`: estimates of recorded experiments by an estimator
 //! file or a classic method.
 
-use std::fmt::Write as _;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -299,35 +298,35 @@ impl Outcome {
 }
 
 fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
+    use twostage::sources::csv_rows::row;
     let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
     let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
-    let mut text = String::from("experiment");
-    for n in names {
-        write!(text, ",{n}")?;
-    }
+    let mut header = vec!["experiment".to_string()];
+    header.extend(names.iter().cloned());
     if with_intervals {
         for n in names {
-            write!(text, ",{n}_lo,{n}_hi")?;
+            header.push(format!("{n}_lo"));
+            header.push(format!("{n}_hi"));
         }
     }
     if with_distance {
-        text.push_str(",feature_distance,out_of_distribution");
+        header.extend(["feature_distance".into(), "out_of_distribution".into()]);
     }
-    text.push('\n');
+    let mut text = row(&header);
     for (id, e) in rows {
-        write!(text, "{id}")?;
-        for t in &e.theta {
-            write!(text, ",{}", format_f64(*t))?;
-        }
+        let mut fields = vec![id.clone()];
+        fields.extend(e.theta.iter().map(|t| format_f64(*t)));
         if let Some(widths) = &e.widths {
             for (t, w) in e.theta.iter().zip(widths) {
-                write!(text, ",{},{}", format_f64(t - w), format_f64(t + w))?;
+                fields.push(format_f64(t - w));
+                fields.push(format_f64(t + w));
             }
         }
         if let Some((d, _)) = e.distance {
-            write!(text, ",{},{}", format_f64(d), e.out_of_distribution())?;
+            fields.push(format_f64(d));
+            fields.push(e.out_of_distribution().to_string());
         }
-        text.push('\n');
+        text.push_str(&row(&fields));
     }
     Ok(text)
 }

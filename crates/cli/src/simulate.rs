@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::RunSettings;
+use twostage::sources::csv_rows::row;
 use twostage_models::{IoData, Simulator, experiment_rng, generic_signal_names, run_experiment};
 
 use crate::model_arg::ModelArgs;
@@ -200,8 +201,20 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
         ))
     };
     let (mut data, mut truth) = (open(&data_path)?, open(&truth_path)?);
-    writeln!(data, "experiment,{}", signal_header(&spec.new_record()))?;
-    writeln!(truth, "experiment,{}", spec.param_names().join(","))?;
+    let record = spec.new_record();
+    let signals = generic_signal_names("u", record.n_inputs())
+        .into_iter()
+        .chain(generic_signal_names("y", record.n_outputs()));
+    write!(
+        data,
+        "{}",
+        row(std::iter::once("experiment".to_string()).chain(signals))
+    )?;
+    write!(
+        truth,
+        "{}",
+        row(std::iter::once("experiment").chain(spec.param_names().iter().map(String::as_str)))
+    )?;
     for start in (0..count).step_by(BLOCK) {
         let end = (start + BLOCK).min(count);
         let block: Vec<(String, String)> = (start..end)
@@ -239,9 +252,10 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
 
 /// `u,y` for SISO records; `u1,u2,...` and `y1,...` when there are several.
 fn signal_header(record: &IoData) -> String {
-    let mut all = generic_signal_names("u", record.n_inputs());
-    all.extend(generic_signal_names("y", record.n_outputs()));
-    all.join(",")
+    let all = generic_signal_names("u", record.n_inputs())
+        .into_iter()
+        .chain(generic_signal_names("y", record.n_outputs()));
+    row(all).trim_end().to_string()
 }
 
 fn push_rows(text: &mut String, experiment: Option<usize>, record: &IoData) {

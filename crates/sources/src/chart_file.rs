@@ -13,7 +13,7 @@
 //! the line and column of a CSV.
 
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use twostage_models::{IoData, ModelSpec, SignalColumn};
@@ -72,29 +72,27 @@ impl ChartFiles {
         }
         let path = dir.join("truth.csv");
         let file = Located::new(&path);
-        let mut lines = file.lines()?;
         let q = spec.n_params();
-        let header = lines
-            .next()
-            .ok_or_else(|| file.error(None, "the file is empty; expected a header".into()))??;
         let expected: Vec<&str> = std::iter::once("experiment")
             .chain(spec.param_names().iter().map(String::as_str))
             .collect();
-        let found: Vec<&str> = header.1.split(',').map(str::trim).collect();
-        if found != expected {
-            return Err(file.error(
-                Some(header.0),
-                format!(
-                    "header '{}': expected '{}' (the model's parameters, in order)",
-                    header.1,
-                    expected.join(",")
-                ),
-            ));
-        }
         let (mut ids, mut thetas, mut seen) = (Vec::new(), Vec::new(), HashMap::new());
-        for line in lines {
-            let (number, text) = line?;
-            let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+        let mut header = false;
+        file.rows(|number, fields| {
+            if !header {
+                header = true;
+                if fields.iter().ne(expected.iter().copied()) {
+                    return Err(file.error(
+                        Some(number),
+                        format!(
+                            "header '{}': expected '{}' (the model's parameters, in order)",
+                            fields.iter().collect::<Vec<_>>().join(","),
+                            expected.join(",")
+                        ),
+                    ));
+                }
+                return Ok(());
+            }
             if fields.len() != q + 1 {
                 return Err(file.error(
                     Some(number),
@@ -108,10 +106,14 @@ impl ChartFiles {
                     format!("experiment '{id}' again (first on line {first})"),
                 ));
             }
-            for (j, field) in fields[1..].iter().enumerate() {
+            for (j, field) in fields.iter().skip(1).enumerate() {
                 thetas.push(file.number(field, number, expected[j + 1])?);
             }
             ids.push(id);
+            Ok(())
+        })?;
+        if !header {
+            return Err(file.error(None, "the file is empty; expected a header".into()));
         }
         if ids.is_empty() {
             return Err(file.error(None, "no experiment: the header is alone".into()));
@@ -242,26 +244,6 @@ impl ChartFiles {
         }
         let path = self.dir.join("data.csv");
         let file = Located::new(&path);
-        let mut lines = file.lines()?;
-        let header = lines
-            .next()
-            .ok_or_else(|| file.error(None, "the file is empty; expected a header".into()))??;
-        let columns = signal_columns(spec, &header.1).ok_or_else(|| {
-            file.error(
-                Some(header.0),
-                format!(
-                    "header '{}': expected experiment, then the inputs and outputs ({}), or u,y \
-                     as `twostage simulate` writes them",
-                    header.1,
-                    spec.input_names()
-                        .iter()
-                        .chain(spec.output_names())
-                        .cloned()
-                        .collect::<Vec<_>>()
-                        .join(",")
-                ),
-            )
-        })?;
         let rows: HashMap<&str, usize> = self
             .ids
             .iter()
@@ -294,11 +276,29 @@ impl ChartFiles {
                 }
                 Ok(())
             };
-        let mut last_line = header.0;
-        for line in lines {
-            let (number, text) = line?;
+        let mut columns: Option<Vec<(SignalColumn, String)>> = None;
+        let mut last_line = 0;
+        file.rows(|number, fields| {
             last_line = number;
-            let fields: Vec<&str> = text.split(',').map(str::trim).collect();
+            let Some(columns) = &columns else {
+                let header = fields.iter().collect::<Vec<_>>().join(",");
+                columns = Some(signal_columns(spec, &header).ok_or_else(|| {
+                    file.error(
+                        Some(number),
+                        format!(
+                            "header '{header}': expected experiment, then the inputs and outputs \
+                             ({}), or u,y as `twostage simulate` writes them",
+                            spec.input_names()
+                                .iter()
+                                .chain(spec.output_names())
+                                .cloned()
+                                .collect::<Vec<_>>()
+                                .join(",")
+                        ),
+                    )
+                })?);
+                return Ok(());
+            };
             if fields.len() != columns.len() + 1 {
                 return Err(file.error(
                     Some(number),
@@ -309,7 +309,7 @@ impl ChartFiles {
                     ),
                 ));
             }
-            let id = fields[0];
+            let id = &fields[0];
             let same = current.is_some_and(|(row, _, _)| self.ids[row] == id);
             if !same {
                 finish(current, &record, number)?;
@@ -332,7 +332,7 @@ impl ChartFiles {
                 current = Some((row, number, 0));
             }
             let Some((_, _, k)) = current.as_mut() else {
-                continue;
+                return Ok(());
             };
             if *k >= n {
                 return Err(file.error(
@@ -340,7 +340,7 @@ impl ChartFiles {
                     format!("experiment '{id}' has more than the model's {n} samples"),
                 ));
             }
-            for (c, field) in fields[1..].iter().enumerate() {
+            for (c, field) in fields.iter().skip(1).enumerate() {
                 let value = file.number(field, number, &columns[c].1)?;
                 match columns[c].0 {
                     SignalColumn::Input(j) => record.input_mut(j)[*k] = value,
@@ -348,6 +348,10 @@ impl ChartFiles {
                 }
             }
             *k += 1;
+            Ok(())
+        })?;
+        if columns.is_none() {
+            return Err(file.error(None, "the file is empty; expected a header".into()));
         }
         finish(current, &record, last_line + 1)?;
         if let Some(row) = done.iter().position(|d| !d) {
@@ -498,23 +502,16 @@ impl<'p> Located<'p> {
         }
     }
 
-    /// The non-empty lines with their 1-based numbers.
-    fn lines(&self) -> Result<impl Iterator<Item = Result<(usize, String)>> + 'static> {
+    /// Visit the file's rows (the header first) with their 1-based line
+    /// numbers and trimmed fields.
+    fn rows(&self, visit: impl FnMut(usize, &csv::StringRecord) -> Result<()>) -> Result<()> {
         let file = std::fs::File::open(&self.path).map_err(|cause| Error::Io {
             path: self.path.display().to_string(),
             cause,
         })?;
-        let path = self.path.to_path_buf();
-        Ok(BufReader::new(file)
-            .lines()
-            .enumerate()
-            .map(move |(i, line)| {
-                line.map(|l| (i + 1, l)).map_err(|cause| Error::Io {
-                    path: path.display().to_string(),
-                    cause,
-                })
-            })
-            .filter(|l| l.as_ref().map_or(true, |(_, text)| !text.trim().is_empty())))
+        crate::csv_rows::for_each_row(BufReader::new(file), visit, |line, message| {
+            self.error(line, format!("cannot be read: {message}"))
+        })
     }
 
     fn number(&self, field: &str, line: usize, column: &str) -> Result<f64> {

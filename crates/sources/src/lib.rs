@@ -27,6 +27,7 @@
 
 mod chart;
 mod chart_file;
+pub mod csv_rows;
 mod error;
 mod model_file;
 mod named_model;

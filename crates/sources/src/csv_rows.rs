@@ -1,0 +1,202 @@
+//! CSV rows as the project's readers take them, on the csv crate: fields
+//! trimmed, quotes honoured, blank lines skipped, each row with the line
+//! it starts on (1-based), so every message can name it.
+
+use std::cell::RefCell;
+use std::collections::VecDeque;
+use std::io::Read;
+use std::rc::Rc;
+
+/// Line breaks (`\r` and `\n`, by byte offset) not yet counted: the csv
+/// crate says where a record's parse began, which is before any blank
+/// lines it skipped, so the rows' true lines are counted here.
+type Breaks = Rc<RefCell<VecDeque<(u64, u8)>>>;
+
+/// A reader that notes the offset of every line break it passes on.
+struct NotingBreaks<R> {
+    inner: R,
+    offset: u64,
+    breaks: Breaks,
+}
+
+impl<R: Read> Read for NotingBreaks<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        let mut breaks = self.breaks.borrow_mut();
+        for (i, b) in buf[..n].iter().enumerate() {
+            if *b == b'\n' || *b == b'\r' {
+                breaks.push_back((self.offset + i as u64, *b));
+            }
+        }
+        self.offset += n as u64;
+        Ok(n)
+    }
+}
+
+/// Visit each row of `input` (the header first) with its line number and
+/// its fields, in one reused record; stop at the first error `visit`
+/// returns. Rows may have any number of fields: the caller says what it
+/// expected.
+///
+/// ```
+/// let mut rows = Vec::new();
+/// twostage_sources::csv_rows::for_each_row(
+///     "u, y\n\n1,\"2\"\n".as_bytes(),
+///     |line, fields| {
+///         rows.push((line, fields.iter().map(str::to_string).collect::<Vec<_>>()));
+///         Ok::<(), String>(())
+///     },
+///     |line, e| format!("line {line:?}: {e}"),
+/// )?;
+/// assert_eq!(rows[0], (1, vec!["u".to_string(), "y".to_string()]));
+/// assert_eq!(rows[1], (3, vec!["1".to_string(), "2".to_string()]));
+/// # Ok::<(), String>(())
+/// ```
+///
+/// # Errors
+/// What `visit` returns, or what `unreadable` makes of a row that cannot
+/// be read (bytes that are not UTF-8, a read that fails), with its line
+/// when known.
+pub fn for_each_row<R: Read, E>(
+    input: R,
+    mut visit: impl FnMut(usize, &csv::StringRecord) -> Result<(), E>,
+    unreadable: impl Fn(Option<usize>, String) -> E,
+) -> Result<(), E> {
+    let breaks: Breaks = Rc::default();
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(NotingBreaks {
+            inner: input,
+            offset: 0,
+            breaks: Rc::clone(&breaks),
+        });
+    let mut record = csv::StringRecord::new();
+    // Line breaks counted so far: the line of a row is one more than the
+    // breaks before its first byte.
+    let mut counted = 0usize;
+    let mut line_at = |start: u64| -> usize {
+        let mut start = start;
+        let mut breaks = breaks.borrow_mut();
+        while let Some(&(offset, byte)) = breaks.front() {
+            if offset > start {
+                break;
+            }
+            // A break at the row's start is a blank line the csv crate
+            // skipped: the row begins after it.
+            if offset == start {
+                start += 1;
+            }
+            counted += usize::from(byte == b'\n');
+            breaks.pop_front();
+        }
+        counted + 1
+    };
+    loop {
+        match reader.read_record(&mut record) {
+            Ok(false) => return Ok(()),
+            Ok(true) => {
+                let line = record.position().map_or(0, |p| line_at(p.byte()));
+                // A line of blanks reads as one empty field: skip it as the
+                // csv crate skips an empty line.
+                if record.len() == 1 && record[0].is_empty() {
+                    continue;
+                }
+                visit(line, &record)?;
+            }
+            Err(e) => {
+                let line = e.position().map(|p| line_at(p.byte()));
+                return Err(unreadable(line, e.to_string()));
+            }
+        }
+    }
+}
+
+/// One row of CSV text: the fields joined by commas, each quoted only
+/// where it must be (a comma, a quote, a line break), and a line break.
+///
+/// ```
+/// use twostage_sources::csv_rows::row;
+/// assert_eq!(row(["experiment", "u", "y"]), "experiment,u,y\n");
+/// assert_eq!(row(["a,b", "1"]), "\"a,b\",1\n");
+/// ```
+pub fn row<I, S>(fields: I) -> String
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<[u8]>,
+{
+    let mut writer = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    // Writing to memory cannot fail; an empty row would be the only loss.
+    let _ = writer.write_record(fields);
+    String::from_utf8(writer.into_inner().unwrap_or_default()).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows(text: &str) -> Result<Vec<(usize, Vec<String>)>, String> {
+        let mut out = Vec::new();
+        for_each_row(
+            text.as_bytes(),
+            |line, fields| {
+                out.push((line, fields.iter().map(str::to_string).collect()));
+                Ok(())
+            },
+            |line, e| format!("{line:?}: {e}"),
+        )?;
+        Ok(out)
+    }
+
+    #[test]
+    fn rows_after_blank_lines_keep_their_line() {
+        let lines =
+            |text: &str| -> Vec<usize> { rows(text).unwrap().iter().map(|(l, _)| *l).collect() };
+        assert_eq!(lines("u,y\n1,2\n\n3\n"), [1, 2, 4]);
+        assert_eq!(lines("u,y\r\n1,2\r\n\r\n\r\n3\r\n4,5"), [1, 2, 5, 6]);
+        assert_eq!(lines("\n\nu\n\"a\nb\"\n\nc\n"), [3, 4, 7]);
+    }
+
+    #[test]
+    fn lines_are_counted_through_blank_lines_and_quotes() {
+        let text = "a,b\n\n  \n1, 2\n\"x\ny\",3\n4,5,6\n";
+        let got = rows(text).unwrap();
+        let lines: Vec<usize> = got.iter().map(|(l, _)| *l).collect();
+        assert_eq!(lines, [1, 4, 5, 7]);
+        assert_eq!(got[1].1, ["1", "2"]);
+        assert_eq!(got[2].1, ["x\ny", "3"]);
+        assert_eq!(got[3].1, ["4", "5", "6"], "the caller checks the width");
+    }
+
+    #[test]
+    fn bytes_that_are_not_text_name_their_line() {
+        let e = {
+            let mut bytes = b"a,b\n1,2\n".to_vec();
+            bytes.extend_from_slice(&[0xff, b',', b'1', b'\n']);
+            let mut count = 0;
+            for_each_row(
+                bytes.as_slice(),
+                |_, _| {
+                    count += 1;
+                    Ok(())
+                },
+                |line, e| format!("{line:?}: {e}"),
+            )
+            .unwrap_err()
+        };
+        assert!(e.starts_with("Some(3)"), "{e}");
+    }
+
+    #[test]
+    fn rows_quote_only_where_they_must_and_read_back() {
+        let text = row(["plain", "with,comma", "with \"quote\""]);
+        assert_eq!(text, "plain,\"with,comma\",\"with \"\"quote\"\"\"\n");
+        assert_eq!(
+            rows(&text).unwrap()[0].1,
+            ["plain", "with,comma", "with \"quote\""]
+        );
+    }
+}
