@@ -221,16 +221,41 @@ impl TrainingRequest {
     /// seed, the training (the request's or the preset's m), calibration
     /// and validation sizes, and the compressor of compressed shards.
     ///
+    /// ```
+    /// use twostage::{ModelFile, NamedModel, RunSettings, TrainingRequest};
+    /// // A model file without presets: the size is the request's.
+    /// let file = ModelFile::parse(
+    ///     "[model]\nname = \"sir\"\n[[parameter]]\nname = \"beta\"\n\
+    ///      prior = { dist = \"uniform\", low = 0.1, high = 1.0 }\n\
+    ///      [signals]\ninputs = []\noutputs = [\"I\"]\nsamples = 10\n",
+    ///     "sir.toml",
+    /// )?;
+    /// let request = TrainingRequest {
+    ///     simulations: Some(800),
+    ///     settings: RunSettings { validation: 100, ..RunSettings::default() },
+    ///     ..TrainingRequest::default()
+    /// };
+    /// let plan = request.shard_plan(&NamedModel::File(Box::new(file)))?;
+    /// assert_eq!(plan.counts, [800, 4000, 100]);
+    /// assert_eq!(plan.seed, 1);
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
     /// # Errors
-    /// An unknown preset or a structure that does not parse.
+    /// No size given and an unknown preset (or a model without presets).
     pub fn shard_plan(&self, model: &NamedModel) -> Result<ShardPlan> {
-        let preset = self.preset(model)?;
+        // A model without presets shards as well when the size is given:
+        // shards hold records, not a structure.
+        let simulations = match self.simulations {
+            Some(m) => m,
+            None => self.preset(model)?.simulations,
+        };
         Ok(ShardPlan {
             model: model.name().to_string(),
             model_fingerprint: model.fingerprint(),
             seed: self.settings.seed_or_default(),
             counts: [
-                preset.simulations,
+                simulations,
                 self.settings.calibration,
                 self.settings.validation,
             ],
