@@ -65,6 +65,9 @@ struct Estimated {
     theta: Vec<f64>,
     widths: Option<Vec<f64>>,
     distance: Option<(f64, f64)>,
+    /// Samples outside their output's transform, when the estimator
+    /// transforms its outputs.
+    floored: Option<Vec<twostage::compress::FlooredSample>>,
 }
 
 impl Estimated {
@@ -124,6 +127,10 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             signals: estimator.signal_names(),
             sample_time: estimator.record_shape().sample_time,
         };
+        let transforms = matches!(
+            estimator.compressor(),
+            twostage::compress::CompressorConfig::Transformed(_)
+        );
         let mut refine = if args.refine {
             Some(refinement(&estimator)?)
         } else {
@@ -147,6 +154,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     theta,
                     widths,
+                    floored: transforms.then_some(a.floored_samples),
                 })
             }),
         });
@@ -196,6 +204,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     theta: e.theta,
                     widths: None,
                     distance: None,
+                    floored: None,
                 })
                 .map_err(|e| e.to_string())
         }),
@@ -213,6 +222,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     } = method(args)?;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
+    let output_names = format.signals.outputs.clone();
     for path in &args.data {
         for read in csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
@@ -242,6 +252,29 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                              and the intervals do not cover it (is it the same model and input?)",
                             path.display(),
                             read.id
+                        );
+                    }
+                    if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
+                        let listed: Vec<String> = floored
+                            .iter()
+                            .take(5)
+                            .map(|f| {
+                                let signal = output_names
+                                    .get(f.output)
+                                    .map_or("?", String::as_str);
+                                format!("{signal} = {} at sample {}", f.value, f.sample + 1)
+                            })
+                            .collect();
+                        eprintln!(
+                            "warning: {}: experiment {}: {} sample(s) outside the domain of the \
+                             estimator's output transform ({}{}), taken at the smallest value \
+                             the training records had; the estimate and its intervals do not \
+                             speak for them",
+                            path.display(),
+                            read.id,
+                            floored.len(),
+                            listed.join(", "),
+                            if floored.len() > 5 { ", ..." } else { "" }
                         );
                     }
                     rows.push((read.id, estimated));
@@ -312,6 +345,10 @@ fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
     if with_distance {
         header.extend(["feature_distance".into(), "out_of_distribution".into()]);
     }
+    let with_floored = rows.iter().any(|(_, e)| e.floored.is_some());
+    if with_floored {
+        header.push("untransformed_samples".into());
+    }
     let mut text = row(&header);
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
@@ -325,6 +362,9 @@ fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
         if let Some((d, _)) = e.distance {
             fields.push(format_f64(d));
             fields.push(e.out_of_distribution().to_string());
+        }
+        if with_floored {
+            fields.push(e.floored.as_ref().map_or(0, Vec::len).to_string());
         }
         text.push_str(&row(&fields));
     }
@@ -347,6 +387,9 @@ fn json(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
             if let Some((d, _)) = e.distance {
                 object.insert("feature_distance".into(), d.into());
                 object.insert("out_of_distribution".into(), e.out_of_distribution().into());
+            }
+            if let Some(floored) = &e.floored {
+                object.insert("untransformed_samples".into(), floored.len().into());
             }
             serde_json::Value::Object(object)
         })

@@ -164,6 +164,17 @@ impl Arx {
     }
 }
 
+impl Arx {
+    /// The specification `arx:NA,NB` (`ar:NA` without input lags), when
+    /// the structure has one (not for another delay than 1).
+    pub fn spec(&self) -> Option<String> {
+        (self.delay == 1).then(|| match self.nb {
+            0 => format!("ar:{}", self.na),
+            nb => format!("arx:{},{nb}", self.na),
+        })
+    }
+}
+
 impl std::fmt::Display for Arx {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "ARX({}, {}", self.na, self.nb)?;

@@ -5,7 +5,11 @@ use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{CompressError as Error, Result};
-use crate::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace, signal_rms};
+use crate::transform::TRANSFORM_RECORDS;
+use crate::{
+    Arx, Compressor, Narx, OutputPca, RawRecord, SignalTransform, Transformed, Workspace,
+    signal_rms,
+};
 
 /// The compression map g of stage 1.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -19,6 +23,8 @@ pub enum CompressorConfig {
     Pca(OutputPca),
     /// The record itself, for very short records (`raw`).
     Raw(RawRecord),
+    /// Output transforms (`log+`, `log1p+`...), then one of the above.
+    Transformed(Transformed),
 }
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
@@ -70,8 +76,34 @@ impl CompressorConfig {
             }
             Self::Pca(pca) if pca.is_fitted() => Self::Pca(pca.clone().with_inputs(n_inputs)?),
             Self::Raw(_) => Self::Raw(RawRecord::new(n_samples, n_inputs, n_outputs)?),
+            Self::Transformed(t) => Self::Transformed(t.shaped(
+                n_outputs,
+                t.inner().for_shape(n_inputs, n_outputs, n_samples)?,
+            )?),
             other => other.clone(),
         })
+    }
+
+    /// The specification the command line and model files write for this
+    /// compressor (`arx:5,5`, `log+pca:8`...), when it has one (not for an
+    /// ARX delay or NARX pure powers, which only the library sets).
+    ///
+    /// ```
+    /// use twostage_compress::CompressorConfig;
+    /// for spec in ["arx:5,5", "ar:3", "narx:2,2,2", "pca:8", "raw", "log+ar:2"] {
+    ///     let c: CompressorConfig = spec.parse()?;
+    ///     assert_eq!(c.spec().as_deref(), Some(spec));
+    /// }
+    /// # Ok::<(), twostage_compress::CompressError>(())
+    /// ```
+    pub fn spec(&self) -> Option<String> {
+        match self {
+            Self::Arx(arx) => arx.spec(),
+            Self::Narx(narx) => narx.spec(),
+            Self::Pca(pca) => Some(format!("pca:{}", pca.components())),
+            Self::Raw(_) => Some("raw".into()),
+            Self::Transformed(t) => t.spec(),
+        }
     }
 
     /// How many training records [`CompressorConfig::prepared`] uses: 0
@@ -80,6 +112,9 @@ impl CompressorConfig {
         match self {
             CompressorConfig::Pca(pca) if !pca.is_fitted() => PCA_RECORDS,
             CompressorConfig::Narx(narx) if narx.has_unit_scales() => NARX_SCALE_RECORDS,
+            CompressorConfig::Transformed(t) if !t.is_prepared() => {
+                TRANSFORM_RECORDS.max(t.inner().records_to_prepare())
+            }
             _ => 0,
         }
     }
@@ -122,6 +157,10 @@ impl CompressorConfig {
                 let outputs = rms(take.iter().map(|(_, y)| signal_rms(y.view())).collect());
                 CompressorConfig::Narx(narx.clone().with_scales(&inputs, &outputs)?)
             }
+            CompressorConfig::Transformed(t) if !t.is_prepared() => {
+                let take = records.len().min(TRANSFORM_RECORDS);
+                CompressorConfig::Transformed(t.prepared(&records[..take])?)
+            }
             other => other.clone(),
         })
     }
@@ -134,6 +173,7 @@ impl std::fmt::Display for CompressorConfig {
             Self::Narx(narx) => narx.fmt(f),
             Self::Pca(pca) => pca.fmt(f),
             Self::Raw(raw) => raw.fmt(f),
+            Self::Transformed(t) => t.fmt(f),
         }
     }
 }
@@ -158,7 +198,9 @@ impl std::str::FromStr for CompressorConfig {
     /// A stage-1 specification as the command line and model files write
     /// it: `arx:NA,NB`, `ar:NA` (outputs only, for a model without input),
     /// `narx:NA,NB,DEG`, `pca:K`, or `raw` (the record itself, for very
-    /// short records).
+    /// short records), each after output transforms when written
+    /// `T+SPEC`: `T` is `id`, `log` or `log1p` for every output, or one per
+    /// output separated by commas (`log+pca:8`, `log,id+ar:2`).
     ///
     /// ```
     /// use twostage_compress::{Compressor, CompressorConfig};
@@ -169,6 +211,13 @@ impl std::str::FromStr for CompressorConfig {
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
         const WHAT: &str = "compressor";
+        if let Some((transforms, rest)) = spec.split_once('+') {
+            let outputs = transforms
+                .split(',')
+                .map(str::parse::<SignalTransform>)
+                .collect::<Result<Vec<_>>>()?;
+            return Ok(Self::Transformed(Transformed::new(outputs, rest.parse()?)?));
+        }
         if spec.trim() == "raw" {
             // Shaped by the model (`for_shape`): one sample of one output until then.
             return Ok(Self::Raw(RawRecord::new(1, 0, 1)?));
@@ -176,7 +225,9 @@ impl std::str::FromStr for CompressorConfig {
         let (kind, orders) = spec.split_once(':').ok_or_else(|| Error::InvalidSetting {
             name: WHAT,
             value: spec.to_string(),
-            reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw".into(),
+            reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw, after \
+                     output transforms as log+SPEC"
+                .into(),
         })?;
         Ok(match kind.trim() {
             "arx" => {
@@ -225,6 +276,7 @@ impl Compressor for CompressorConfig {
             Self::Narx(c) => c.n_features(),
             Self::Pca(c) => c.n_features(),
             Self::Raw(c) => c.n_features(),
+            Self::Transformed(c) => c.n_features(),
         }
     }
 
@@ -240,6 +292,7 @@ impl Compressor for CompressorConfig {
             Self::Narx(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Pca(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Raw(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Transformed(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -250,11 +303,14 @@ impl Compressor for CompressorConfig {
         work: &mut Workspace,
         alpha: &mut [f64],
     ) -> Result<()> {
+        // The list speaks of the record compressed last, whatever did it.
+        work.floored.clear();
         match self {
             Self::Arx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Narx(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Pca(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Raw(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Transformed(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -264,6 +320,7 @@ impl Compressor for CompressorConfig {
             Self::Narx(c) => c.feature_names(),
             Self::Pca(c) => c.feature_names(),
             Self::Raw(c) => c.feature_names(),
+            Self::Transformed(c) => c.feature_names(),
         }
     }
 }

@@ -83,6 +83,23 @@ pub enum CompressError {
         /// The structure, e.g. `PCA(20)`.
         structure: String,
     },
+    /// A sample lies outside the domain of its output's transform.
+    #[error(
+        "{signal} is {value} at sample {index}: its transform {transform} takes {domain}; train \
+         with another transform (id, or log1p for signals that reach zero), or repair the sample"
+    )]
+    OutsideTransform {
+        /// Which signal, e.g. `y2`.
+        signal: String,
+        /// The sample index.
+        index: usize,
+        /// The value.
+        value: f64,
+        /// The transform, e.g. `log`.
+        transform: &'static str,
+        /// What the transform takes.
+        domain: &'static str,
+    },
     /// The output buffer has the wrong length.
     #[error("the feature buffer has {got} slots, the compressor produces {expected}")]
     BufferLength {

@@ -12,6 +12,8 @@
 //!   powers) on scaled signals, for strongly nonlinear systems.
 //! - [`OutputPca`]: the leading principal components of the output record,
 //!   for experiments that all apply the same input.
+//! - [`Transformed`]: logarithms (or `ln(1 + y)`) of the outputs before
+//!   any of the above, for signals that span decades.
 //! - [`Workspace`]: scratch space so that compressing record after record
 //!   allocates nothing.
 //!
@@ -44,6 +46,7 @@ mod narx;
 mod pca;
 mod raw;
 mod signals;
+mod transform;
 mod workspace;
 
 use ndarray::ArrayView2;
@@ -54,6 +57,7 @@ pub use error::{CompressError, Result};
 pub use narx::{Narx, signal_rms};
 pub use pca::OutputPca;
 pub use raw::{MAX_RAW_FEATURES, RawRecord};
+pub use transform::{FlooredSample, SignalTransform, TRANSFORM_RECORDS, Transformed};
 pub use workspace::{RANK_TOLERANCE, Workspace};
 
 /// The compression map g: a record `(u, y)` to features `alpha` in `R^n`.

@@ -287,6 +287,15 @@ impl Narx {
     }
 }
 
+impl Narx {
+    /// The specification `narx:NA,NB,DEG`, when the structure has one (not
+    /// for pure powers or another delay than 1).
+    pub fn spec(&self) -> Option<String> {
+        (!self.pure_powers && self.delay == 1)
+            .then(|| format!("narx:{},{},{}", self.na, self.nb, self.degree))
+    }
+}
+
 impl std::fmt::Display for Narx {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "NARX({}, {}, degree {}", self.na, self.nb, self.degree)?;

@@ -5,6 +5,7 @@ use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::{Mat, Par};
 
 use crate::fast::FastScratch;
+use crate::transform::FlooredSample;
 use twostage_kernels::lagged::LaggedColumn;
 
 /// The rank test of every least-squares solve, here and in the
@@ -38,6 +39,10 @@ pub struct Workspace {
     pub(crate) fast: FastScratch,
     /// Regressor columns of the fast path.
     pub(crate) columns: Vec<LaggedColumn>,
+    /// Outputs after their transforms ([`crate::Transformed`]).
+    pub(crate) transformed: Vec<f64>,
+    /// Samples the last estimate-path compression could not transform.
+    pub(crate) floored: Vec<FlooredSample>,
     q_coeff: Mat<f64>,
     mem: MemBuffer,
     mem_req: StackReq,
@@ -68,10 +73,21 @@ impl Workspace {
             norms: Vec::new(),
             fast: FastScratch::default(),
             columns: Vec::new(),
+            transformed: Vec::new(),
+            floored: Vec::new(),
             q_coeff: Mat::zeros(1, 0),
             mem: MemBuffer::new(StackReq::EMPTY),
             mem_req: StackReq::EMPTY,
         }
+    }
+
+    /// The samples the last [`Compressor::compress_fast_into`] could not
+    /// transform and took at their output's floor instead (empty unless
+    /// the compressor transforms its outputs).
+    ///
+    /// [`Compressor::compress_fast_into`]: crate::Compressor::compress_fast_into
+    pub fn floored_samples(&self) -> &[FlooredSample] {
+        &self.floored
     }
 
     /// Make room for a `rows x cols` least-squares problem.

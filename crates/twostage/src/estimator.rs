@@ -3,7 +3,7 @@
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use twostage_compress::{Compressor, Workspace};
+use twostage_compress::{Compressor, FlooredSample, Workspace};
 use twostage_fit::Predictor;
 use twostage_models::{IoData, Marginal, generic_signal_names};
 use twostage_validate::{ConformalIntervals, ValidationReport};
@@ -247,6 +247,11 @@ pub struct Assessment {
     pub feature_distance: Option<f64>,
     /// The distance that 99.9% of the training features stay within.
     pub distance_threshold: Option<f64>,
+    /// Samples outside the domain of their output's transform (a zero
+    /// where the estimator takes logarithms): each was taken at the
+    /// smallest value the training records had instead. Empty when the
+    /// estimator does not transform its outputs or every sample could be.
+    pub floored_samples: Vec<FlooredSample>,
 }
 
 impl Assessment {
@@ -482,6 +487,7 @@ impl Estimator {
             half_widths: self.intervals.as_ref().map(|c| c.half_widths().to_vec()),
             feature_distance: self.envelope.as_ref().map(|e| e.distance(&work.features)),
             distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),
+            floored_samples: work.compress.floored_samples().to_vec(),
         })
     }
 
