@@ -1,11 +1,19 @@
-//! Progress bars for training runs: one indicatif bar per stage on stderr,
-//! hidden when stderr is not a terminal (indicatif checks) or on --quiet.
+//! Progress of training runs on stderr: one indicatif bar per stage when
+//! stderr is a terminal; plain lines when it is not (a notebook, CI, a log
+//! file), at least every 10 s while a stage runs, so that a long search is
+//! never silent; nothing on --quiet.
 
-use std::sync::Mutex;
+use std::io::{IsTerminal, Write};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 use twostage::{Progress, Stage};
+
+/// Where plain lines go: stderr, or a buffer in tests.
+type Sink = Arc<Mutex<dyn Write + Send>>;
 
 /// Draws the stages of [`twostage::TwoStage::train`], and times them.
 pub struct Bars {
@@ -14,25 +22,130 @@ pub struct Bars {
     /// When the running stage began, and each stage's wall time so far
     /// (in `Stage` order; a stage may run more than once, as in --auto).
     clock: Mutex<(Option<Instant>, [Duration; 4])>,
+    /// The plain-line log, when stderr is not a terminal.
+    log: Option<PlainLog>,
 }
 
+/// What the plain-line log knows of the run, shared with its ticker.
+struct LogState {
+    started: Instant,
+    sink: Sink,
+    /// The running stage's words, its steps done and total (0: unknown).
+    stage: Mutex<Option<&'static str>>,
+    done: AtomicUsize,
+    total: AtomicUsize,
+    status: Mutex<Option<String>>,
+    stop: AtomicBool,
+}
+
+/// A ticker thread that writes the state every `interval`.
+struct PlainLog {
+    state: Arc<LogState>,
+    ticker: Option<JoinHandle<()>>,
+}
+
+fn lock<T: ?Sized>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // A poisoned lock only means another thread panicked mid-draw: the
+    // display is cosmetic, keep going with whatever it holds.
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+impl LogState {
+    /// One line: elapsed time, then what runs.
+    fn line(&self, what: &str) {
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let mut sink = lock(&self.sink);
+        let _ = writeln!(sink, "[{elapsed:>6.1} s] {what}");
+        let _ = sink.flush();
+    }
+
+    /// The running stage and status in words.
+    fn now(&self) -> Option<String> {
+        let stage = (*lock(&self.stage))?;
+        let (done, total) = (
+            self.done.load(Ordering::Relaxed),
+            self.total.load(Ordering::Relaxed),
+        );
+        let mut text = if total > 0 {
+            format!("{stage}: {done}/{total} sims")
+        } else {
+            stage.to_string()
+        };
+        if let Some(status) = lock(&self.status).as_ref() {
+            text = format!("{text}; {status}");
+        }
+        Some(text)
+    }
+}
+
+impl PlainLog {
+    fn start(sink: Sink, interval: Duration) -> Self {
+        let state = Arc::new(LogState {
+            started: Instant::now(),
+            sink,
+            stage: Mutex::new(None),
+            done: AtomicUsize::new(0),
+            total: AtomicUsize::new(0),
+            status: Mutex::new(None),
+            stop: AtomicBool::new(false),
+        });
+        let shared = Arc::clone(&state);
+        let ticker = std::thread::spawn(move || {
+            let step = Duration::from_millis(50).min(interval);
+            let mut last = Instant::now();
+            while !shared.stop.load(Ordering::Relaxed) {
+                std::thread::sleep(step);
+                if last.elapsed() >= interval {
+                    last = Instant::now();
+                    if let Some(now) = shared.now() {
+                        shared.line(&now);
+                    }
+                }
+            }
+        });
+        Self {
+            state,
+            ticker: Some(ticker),
+        }
+    }
+}
+
+impl Drop for PlainLog {
+    fn drop(&mut self) {
+        self.state.stop.store(true, Ordering::Relaxed);
+        if let Some(ticker) = self.ticker.take() {
+            let _ = ticker.join();
+        }
+    }
+}
+
+/// How often a plain log repeats the running stage.
+const PLAIN_INTERVAL: Duration = Duration::from_secs(10);
+
 impl Bars {
-    /// Bars on stderr, or none at all when `quiet`.
+    /// Bars on stderr (plain lines when it is not a terminal), or nothing
+    /// at all when `quiet`.
     pub fn new(quiet: bool) -> Self {
+        let log = (!quiet && !std::io::stderr().is_terminal()).then(|| {
+            let sink: Sink = Arc::new(Mutex::new(std::io::stderr()));
+            PlainLog::start(sink, PLAIN_INTERVAL)
+        });
+        Self::with_log(quiet, log)
+    }
+
+    fn with_log(quiet: bool, log: Option<PlainLog>) -> Self {
         Self {
             current: Mutex::new(None),
             quiet,
             clock: Mutex::new((None, [Duration::ZERO; 4])),
+            log,
         }
     }
 
     /// The wall time of each stage that ran, as "simulate + compress
     /// 1.200 s, fit 3.400 s, ...".
     pub fn phase_times(&self) -> String {
-        let clock = self
-            .clock
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let clock = lock(&self.clock);
         STAGES
             .iter()
             .zip(clock.1)
@@ -43,10 +156,7 @@ impl Bars {
     }
 
     fn tick(&self, stage: Stage, starting: bool) {
-        let mut clock = self
-            .clock
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut clock = lock(&self.clock);
         if starting {
             clock.0 = Some(Instant::now());
         } else if let Some(began) = clock.0.take() {
@@ -55,13 +165,7 @@ impl Bars {
     }
 
     fn with_bar(&self, f: impl FnOnce(&mut Option<ProgressBar>)) {
-        // A poisoned lock only means another thread panicked mid-draw: the
-        // bar is cosmetic, keep going with whatever it holds.
-        let mut guard = self
-            .current
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        f(&mut guard);
+        f(&mut lock(&self.current));
     }
 }
 
@@ -98,7 +202,7 @@ fn what(stage: Stage) -> &'static str {
 
 impl Progress for Bars {
     fn begin(&self, stage: Stage, total: usize) {
-        let bar = if self.quiet {
+        let bar = if self.quiet || self.log.is_some() {
             ProgressBar::hidden()
         } else if total == 0 {
             let spinner = ProgressBar::new_spinner().with_style(
@@ -118,6 +222,17 @@ impl Progress for Bars {
         bar.set_message(what(stage));
         self.with_bar(|current| *current = Some(bar));
         self.tick(stage, true);
+        if let Some(log) = &self.log {
+            let state = &log.state;
+            *lock(&state.stage) = Some(what(stage));
+            *lock(&state.status) = None;
+            state.done.store(0, Ordering::Relaxed);
+            state.total.store(total, Ordering::Relaxed);
+            state.line(&match total {
+                0 => what(stage).to_string(),
+                n => format!("{}: {n} sims", what(stage)),
+            });
+        }
     }
 
     fn advance(&self, _stage: Stage, done: usize) {
@@ -126,6 +241,9 @@ impl Progress for Bars {
                 bar.inc(done as u64);
             }
         });
+        if let Some(log) = &self.log {
+            log.state.done.fetch_add(done, Ordering::Relaxed);
+        }
     }
 
     fn end(&self, stage: Stage) {
@@ -135,11 +253,64 @@ impl Progress for Bars {
                 bar.finish();
             }
         });
+        if let Some(log) = &self.log {
+            *lock(&log.state.stage) = None;
+        }
     }
 
     fn note(&self, message: &str) {
         if !self.quiet {
             eprintln!("{message}");
         }
+    }
+
+    fn status(&self, message: &str) {
+        self.with_bar(|current| {
+            if let Some(bar) = current {
+                bar.set_message(message.to_string());
+            }
+        });
+        if let Some(log) = &self.log {
+            *lock(&log.state.status) = Some(message.to_string());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Without a terminal, a stage that runs for a while is repeated with
+    /// its status at every interval, and nothing is written after the end.
+    #[test]
+    fn a_plain_log_repeats_the_running_stage() {
+        let buffer = Arc::new(Mutex::new(Vec::<u8>::new()));
+        let sink: Sink = buffer.clone();
+        let bars = Bars::with_log(
+            false,
+            Some(PlainLog::start(sink, Duration::from_millis(100))),
+        );
+        bars.begin(Stage::Fitting, 0);
+        bars.status("round 1: candidate 2 of 9, budget 120 s");
+        let status = "fitting stage 2; round 1: candidate 2 of 9, budget 120 s";
+        let repeats = || {
+            let text = String::from_utf8(lock(&buffer).clone()).unwrap();
+            text.lines().filter(|l| l.ends_with(status)).count()
+        };
+        // However slow the machine: the lines come while the stage runs.
+        let waited = Instant::now();
+        while repeats() < 3 && waited.elapsed() < Duration::from_secs(20) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(repeats() >= 3);
+        bars.end(Stage::Fitting);
+        let written_at_end = lock(&buffer).len();
+        std::thread::sleep(Duration::from_millis(300));
+        drop(bars);
+        let text = String::from_utf8(lock(&buffer).clone()).unwrap();
+        let first = text.lines().next().unwrap_or_default();
+        assert_eq!(first.split("] ").nth(1), Some("fitting stage 2"), "{text}");
+        // Between stages there is nothing to repeat.
+        assert_eq!(lock(&buffer).len(), written_at_end, "{text}");
     }
 }

@@ -259,9 +259,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             .iter()
                             .take(5)
                             .map(|f| {
-                                let signal = output_names
-                                    .get(f.output)
-                                    .map_or("?", String::as_str);
+                                let signal = output_names.get(f.output).map_or("?", String::as_str);
                                 format!("{signal} = {} at sample {}", f.value, f.sample + 1)
                             })
                             .collect();

@@ -94,6 +94,16 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
         None => writeln!(out, "  not validated")?,
     }
     write!(out, "{}", trust_summary(&e))?;
+    if let Some(block) = e.preset_block("again") {
+        writeln!(
+            out,
+            "  to train this structure again, add to the model file (or give its compress and \
+             fit):"
+        )?;
+        for line in block.lines() {
+            writeln!(out, "    {line}")?;
+        }
+    }
     Ok(())
 }
 

@@ -36,15 +36,18 @@ pub struct TrainArgs {
     /// parameter's range) (default: the preset's).
     #[arg(long)]
     fit: Option<String>,
-    /// Search compressors and networks by held-out error instead of using
-    /// the preset (with --budget-seconds or --budget-sims; default 120 s).
+    /// Search compressors, output transforms and networks by held-out
+    /// error instead of using the preset (with --budget-seconds or
+    /// --budget-sims; default 120 s). On a --chart the search fits and
+    /// scores on the chart's training records, no new simulation. A model
+    /// without presets searches even without --auto.
     #[arg(long, conflicts_with_all = ["compress", "fit", "sims"])]
     auto: bool,
     /// --auto: wall-clock seconds for the search (machine-dependent outcome).
     #[arg(long, requires = "auto", conflicts_with = "budget_sims")]
     budget_seconds: Option<f64>,
-    /// --auto: simulations in the chart, every candidate evaluated
-    /// (reproducible outcome).
+    /// --auto: simulations in the chart (with --chart: its first records),
+    /// every candidate evaluated (reproducible outcome).
     #[arg(long, requires = "auto")]
     budget_sims: Option<usize>,
     /// Seed of every random choice (default 1; with shards, theirs).
@@ -70,7 +73,7 @@ pub struct TrainArgs {
     /// --shard` (a pattern such as 'DIR/shard-*', quoted): their training,
     /// calibration and validation records, seed and sizes, merged into the
     /// estimator a single machine would train (docs/cluster.md).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["auto", "sims"])]
+    #[arg(long, value_name = "DIR", conflicts_with = "sims")]
     chart: Option<PathBuf>,
     /// With --chart: validate on this chart instead of held-out records.
     #[arg(long, value_name = "DIR", requires = "chart")]
@@ -153,11 +156,15 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
                 .into(),
         ));
     }
+    let searching = request
+        .search_budget(model.named())
+        .map_err(|e| usage(e.to_string()))?
+        .is_some();
     if !args.quiet {
         eprintln!(
             "training the {} estimator ({})...",
             model.name(),
-            request.steps()
+            request.steps(searching)
         );
     }
     let start = std::time::Instant::now();
@@ -173,6 +180,12 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     let text = !args.quiet && !args.format.json();
     if let (Some(outcome), true) = (trained.search(), text) {
         writeln!(out, "{outcome}")?;
+        if let Some(block) = outcome.estimator.preset_block("searched") {
+            writeln!(
+                out,
+                "to train this design again without searching, add to the model file:\n{block}"
+            )?;
+        }
     }
     let estimator = trained.into_estimator();
     estimator.save(&args.out)?;

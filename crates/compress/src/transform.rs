@@ -382,11 +382,7 @@ impl Transformed {
         let mut buffer = std::mem::take(&mut work.transformed);
         let mut floored = std::mem::take(&mut work.floored);
         let outcome = self
-            .transform_into(
-                outputs,
-                &mut buffer,
-                estimate_path.then_some(&mut floored),
-            )
+            .transform_into(outputs, &mut buffer, estimate_path.then_some(&mut floored))
             .and_then(|()| {
                 let z = ArrayView2::from_shape(outputs.dim(), &buffer)
                     .unwrap_or_else(|_| unreachable!("one value per sample and output"));
@@ -478,7 +474,14 @@ mod tests {
         bad[[3, 0]] = -2.0;
         let e = c.compress(u.view(), bad.view()).unwrap_err();
         assert!(
-            matches!(&e, CompressError::OutsideTransform { index: 3, transform: "log", .. }),
+            matches!(
+                &e,
+                CompressError::OutsideTransform {
+                    index: 3,
+                    transform: "log",
+                    ..
+                }
+            ),
             "{e}"
         );
         let mut work = Workspace::new();

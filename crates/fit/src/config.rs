@@ -99,6 +99,36 @@ impl std::str::FromStr for RegressorConfig {
 }
 
 impl RegressorConfig {
+    /// The specification the command line and model files write for this
+    /// method (`linear`, `mlp:20,20`, `piecewise:4,20`), when one gives it
+    /// back exactly (not for a ridge penalty, trainer or restarts other
+    /// than the defaults, which only the library sets).
+    ///
+    /// ```
+    /// use twostage_fit::RegressorConfig;
+    /// for spec in ["linear", "mlp:20,20", "piecewise:4,20"] {
+    ///     let r: RegressorConfig = spec.parse()?;
+    ///     assert_eq!(r.spec().as_deref(), Some(spec));
+    /// }
+    /// # Ok::<(), twostage_fit::FitError>(())
+    /// ```
+    pub fn spec(&self) -> Option<String> {
+        let sizes = |hidden: &[usize]| -> String {
+            let text: Vec<String> = hidden.iter().map(usize::to_string).collect();
+            text.join(",")
+        };
+        let text = match self {
+            Self::Linear(_) => "linear".to_string(),
+            Self::Mlp(m) => format!("mlp:{}", sizes(m.params().hidden())),
+            Self::Piecewise(p) => format!(
+                "piecewise:{},{}",
+                p.pieces(),
+                sizes(p.global().params().hidden())
+            ),
+        };
+        (text.parse::<Self>().ok().as_ref() == Some(self)).then_some(text)
+    }
+
     /// Fit stage 2 on features `x` and parameters `y`; `seed` seeds the
     /// network's initial weights and held-out split, so that the run's one
     /// seed decides every random choice.

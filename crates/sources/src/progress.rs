@@ -69,6 +69,12 @@ pub trait Progress: Sync {
     fn note(&self, message: &str) {
         let _ = message;
     }
+    /// What a long stage is doing now, replacing the last status (the
+    /// automatic design: its round, candidate and budget); shown on the
+    /// bar, or repeated by a plain log line every few seconds.
+    fn status(&self, message: &str) {
+        let _ = message;
+    }
 }
 
 /// The observer that shows nothing.

@@ -9,7 +9,8 @@ use twostage_compress::Workspace;
 use twostage_models::{IoData, ModelSpec, Prior, Simulator};
 
 use crate::chart::{
-    CompressedChart, ExperimentFailure, compress_chart_observed, simulate_records, within_allowance,
+    CompressedChart, ExperimentFailure, StoredChart, compress_chart_observed, simulate_records,
+    within_allowance,
 };
 use crate::chart_file::ChartFiles;
 use crate::error::{Error, Result};
@@ -305,6 +306,68 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
             self.max_failure_fraction,
         )?;
         Ok(Some(chart))
+    }
+
+    /// Every training record, uncompressed, with its parameters, in design
+    /// (or chart) order, and how many experiments failed: for an automatic
+    /// design, which compresses them many ways. Simulated records are
+    /// simulated now (the run's training count, with progress); failed
+    /// ones are held within the run's allowance.
+    ///
+    /// # Errors
+    /// Too many failed records, shards that hold features, or a file
+    /// problem of the source.
+    pub fn stored_training(&self) -> Result<(StoredChart, usize)> {
+        let count = self.counts[ChartRole::Training.slot()];
+        match &self.kind {
+            Kind::Simulated => {
+                let design = ChartRole::Training.design(&self.training_prior, count, self.seed)?;
+                let chart = simulate_records(
+                    self.simulator,
+                    &design,
+                    count,
+                    self.max_failure_fraction,
+                    Some((Stage::Training, self.progress)),
+                )?;
+                let failed = count - chart.records.len();
+                Ok((chart, failed))
+            }
+            Kind::Shards(chart) => {
+                let (stored, failures) = chart.training_records()?;
+                within_allowance(
+                    ChartRole::Training.label(),
+                    &failures,
+                    stored.records.len() + failures.len(),
+                    self.max_failure_fraction,
+                )?;
+                Ok((stored, failures.len()))
+            }
+            Kind::Files { chart, roles, .. } => {
+                let q = self.spec().n_params();
+                let mut kept: Vec<(usize, IoData)> = Vec::with_capacity(count);
+                chart.for_each_record(self.spec(), |row, record| {
+                    if roles[row] == ChartRole::Training {
+                        kept.push((row, record.clone()));
+                    }
+                    Ok(())
+                })?;
+                kept.sort_by_key(|(row, _)| *row);
+                let thetas: Vec<f64> = kept
+                    .iter()
+                    .flat_map(|(row, _)| chart.theta(*row).iter().copied())
+                    .collect();
+                let records: Vec<IoData> = kept.into_iter().map(|(_, r)| r).collect();
+                let thetas = ndarray::Array2::from_shape_vec((records.len(), q), thetas)
+                    .unwrap_or_else(|_| unreachable!("q values per kept record"));
+                Ok((StoredChart { thetas, records }, 0))
+            }
+        }
+    }
+
+    /// Training records the run has (simulated: asked for; read: those
+    /// left after the held-out ones).
+    pub fn training_count(&self) -> usize {
+        self.counts[ChartRole::Training.slot()]
     }
 
     /// How the training records were drawn, for the estimator's record.

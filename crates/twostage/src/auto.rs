@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 
 use ndarray::{Array2, Axis};
 use rayon::prelude::*;
-use twostage_compress::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace};
+use twostage_compress::{
+    Arx, Compressor, Narx, OutputPca, RawRecord, SignalTransform, Transformed, Workspace,
+};
 use twostage_fit::{MlpParams, Piecewise};
 use twostage_models::{IoData, Simulator};
 
@@ -42,6 +44,16 @@ pub enum Budget {
     Simulations(usize),
 }
 
+impl Budget {
+    /// The budget in words, e.g. "a 120 s budget" or "5000 simulations".
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Seconds(t) => format!("a {t} s budget"),
+            Self::Simulations(m) => format!("{m} simulations, every candidate"),
+        }
+    }
+}
+
 impl Default for Budget {
     /// Two minutes.
     fn default() -> Self {
@@ -56,6 +68,9 @@ pub struct CandidateReport {
     pub compressor: String,
     /// Stage 2.
     pub regressor: String,
+    /// Both stages as the command line writes them (`log+pca:8 mlp:20`),
+    /// or as they read where a stage has no such form.
+    pub design: String,
     /// Search round: 1 compares compressors with one network, 2 compares
     /// networks on the best compressors.
     pub round: usize,
@@ -110,14 +125,11 @@ impl std::fmt::Display for AutoOutcome {
             let mark = if i == self.best { "*" } else { " " };
             let rmse: Vec<String> = c.rmse.iter().map(|r| format!("{r:.4e}")).collect();
             match &c.note {
-                Some(note) => {
-                    writeln!(f, " {mark} {:<28} {:<14} {note}", c.compressor, c.regressor)?
-                }
+                Some(note) => writeln!(f, " {mark} {:<28} {note}", c.design)?,
                 None => writeln!(
                     f,
-                    " {mark} {:<28} {:<14} score {:.4}  RMSE [{}]  {:.1} s on {} rows",
-                    c.compressor,
-                    c.regressor,
+                    " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows",
+                    c.design,
                     c.score,
                     rmse.join(", "),
                     c.seconds,
@@ -232,14 +244,47 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
 
     /// Run the search, keep the best candidate, calibrate and validate it.
     ///
+    /// The records are the builder's source: simulated (the chart size
+    /// follows from the budget), or read from chart files or raw shards
+    /// (every training record of the source, or the first
+    /// [`Budget::Simulations`] of them; no new simulation), calibrated and
+    /// validated on the source's held-out records as a preset would be.
+    ///
     /// # Errors
-    /// An invalid budget, too many failed simulations, or no candidate
-    /// that could be fitted.
+    /// An invalid budget, a budget too short for calibration and
+    /// validation, too many failed simulations, a chart too small, shards
+    /// that hold features, or no candidate that could be fitted.
     pub fn run(self) -> Result<AutoOutcome> {
         let start = Instant::now();
-        let (m, deadline) = self.chart_size(start)?;
-        let chart = self.base.stored_chart(m)?;
-        let (medium, networks) = match self.networks.clone() {
+        let AutoDesign {
+            base,
+            budget,
+            compressors,
+            networks,
+            screening_rows,
+        } = self;
+        let base = base.adopting_source()?;
+        base.settings_ref().check()?;
+        let simulates = base.record_source().simulates();
+        let (m, deadline) = chart_size(budget, &base, simulates, start)?;
+        let base = if simulates { base.simulations(m) } else { base };
+        let records = base.open_records()?;
+        let (mut chart, failures) = records.stored_training()?;
+        if !simulates && chart.records.len() > m {
+            chart.records.truncate(m);
+            chart.thetas = chart.thetas.slice(ndarray::s![..m, ..]).to_owned();
+        }
+        if chart.records.len() < MIN_SEARCH_RECORDS {
+            return Err(Error::InvalidSetting {
+                name: "training records",
+                value: chart.records.len().to_string(),
+                reason: format!(
+                    "the automatic design needs at least {MIN_SEARCH_RECORDS} to fit on and \
+                     score its candidates: give a larger chart, or hold out fewer records"
+                ),
+            });
+        }
+        let (medium, networks) = match networks {
             Some(pair) => pair,
             None => (
                 network(&[20])?,
@@ -251,19 +296,24 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 ],
             ),
         };
-        let spec = self.base.simulator().spec();
-        let compressors = self.compressors.clone().unwrap_or_else(|| {
-            candidate_compressors(
+        let spec = base.simulator().spec();
+        let compressors = match compressors {
+            Some(list) => list
+                .into_iter()
+                .filter_map(|c| c.for_model(spec).ok())
+                .collect(),
+            None => candidate_compressors(
                 spec.output_names().len(),
                 spec.input_names().len(),
                 spec.n_samples(),
-            )
-        });
-        let mut search = Search::new(&self.base, &chart, deadline, self.screening_rows);
-        self.base.observer().begin(Stage::Fitting, 0);
+                output_transforms(&chart.records),
+            ),
+        };
+        let mut search = Search::new(&base, &chart, (budget, deadline), screening_rows);
+        base.observer().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
-        let best = search.best(&self.budget)?;
+        let best = search.best(&budget)?;
         let Winner {
             compressor,
             features,
@@ -271,73 +321,114 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             regressor,
             refitted,
         } = search.winner(best)?;
-        self.base.observer().end(Stage::Fitting);
+        base.observer().end(Stage::Fitting);
         let search_seconds = start.elapsed().as_secs_f64();
-        let estimator = self.base.finish(
+        let kept = chart.records.len();
+        let estimator = base.finish(
             compressor,
             regressor,
             TrainedOn {
                 features: features.view(),
-                simulations: m,
-                failures: m - chart.thetas.nrows(),
-                sampling: format!("{:?}", spec.prior().sampling()),
+                simulations: kept + failures,
+                failures,
+                sampling: records.sampling(),
                 regressor: regressor_config,
             },
-            &self.base.open_records()?,
+            &records,
         )?;
         Ok(AutoOutcome {
             estimator,
             candidates: search.candidates,
             best,
-            simulations: m,
+            simulations: kept + failures,
             search_seconds,
             refitted,
         })
     }
+}
 
-    /// The number of simulations in the stored chart and the deadline: a
-    /// simulation budget as given; a time budget spends a fifth on the
-    /// chart (sized by a timed pilot), the rest on fits. Either way the
-    /// records must fit in memory.
-    fn chart_size(&self, start: Instant) -> Result<(usize, Option<Instant>)> {
-        let spec = self.base.simulator().spec();
-        let record_bytes =
-            spec.n_samples() * (spec.input_names().len() + spec.output_names().len()) * 8;
-        let memory_cap = (MAX_CHART_BYTES / record_bytes.max(1)).max(100);
-        let (m, deadline) = match self.budget {
-            Budget::Simulations(m) => (m, None),
-            Budget::Seconds(t) => {
-                if !(t.is_finite() && t > 0.0) {
+/// The number of training records of a search and the deadline of its
+/// fits. Simulated: a simulation budget as given; a time budget keeps what
+/// calibration and validation will take (timed by a pilot) and spends a
+/// fifth of the rest on the chart. Read from files: every training record,
+/// or the first of a simulation budget. Either way the records must fit in
+/// memory.
+fn chart_size<S: Simulator + ?Sized>(
+    budget: Budget,
+    base: &TwoStage<'_, S>,
+    simulates: bool,
+    start: Instant,
+) -> Result<(usize, Option<Instant>)> {
+    let spec = base.simulator().spec();
+    let record_bytes =
+        spec.n_samples() * (spec.input_names().len() + spec.output_names().len()) * 8;
+    let memory_cap = (MAX_CHART_BYTES / record_bytes.max(1)).max(100);
+    let (m, deadline) = match budget {
+        Budget::Simulations(m) => (m, None),
+        Budget::Seconds(t) => {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(Error::InvalidSetting {
+                    name: "budget seconds",
+                    value: t.to_string(),
+                    reason: "must be finite and > 0".into(),
+                });
+            }
+            if simulates {
+                let per_simulation = base.pilot_seconds_per_simulation()?;
+                let held_out = base.settings_ref().calibration + base.settings_ref().validation;
+                // Simulating and compressing the held-out records, with
+                // a margin for the intervals' own fits.
+                let reserve = 1.2 * per_simulation * held_out as f64 + 1.0;
+                if reserve > 0.5 * t {
                     return Err(Error::InvalidSetting {
                         name: "budget seconds",
-                        value: t.to_string(),
-                        reason: "must be finite and > 0".into(),
+                        value: format!("{t}"),
+                        reason: format!(
+                            "calibration and validation alone take about {reserve:.0} s \
+                                 ({held_out} simulations): give at least {:.0} s, or fewer \
+                                 calibration and validation records",
+                            (2.0 * reserve).ceil()
+                        ),
                     });
                 }
-                let per_simulation = self.base.pilot_seconds_per_simulation()?;
-                let affordable = (0.2 * t / per_simulation).min(SIMULATIONS_PER_BUDGET_SECOND * t);
+                let search = t - reserve;
+                let affordable =
+                    (0.2 * search / per_simulation).min(SIMULATIONS_PER_BUDGET_SECOND * search);
                 (
                     (affordable as usize).max(500).min(memory_cap),
-                    Some(start + Duration::from_secs_f64(t)),
+                    Some(start + Duration::from_secs_f64(search)),
                 )
+            } else {
+                // The held-out records of a chart are compressed once
+                // by the winner: a small share of the budget.
+                (usize::MAX, Some(start + Duration::from_secs_f64(0.95 * t)))
             }
-        };
-        if m < 50 || m > memory_cap {
-            return Err(Error::InvalidSetting {
-                name: "budget simulations",
-                value: m.to_string(),
-                reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
-            });
         }
-        Ok((m, deadline))
+    };
+    if !simulates {
+        return Ok((m.min(memory_cap), deadline));
     }
+    if m < 50 || m > memory_cap {
+        return Err(Error::InvalidSetting {
+            name: "budget simulations",
+            value: m.to_string(),
+            reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
+        });
+    }
+    Ok((m, deadline))
 }
+
+/// Training records a search needs at least: a fifth of them score the
+/// candidates.
+const MIN_SEARCH_RECORDS: usize = 50;
 
 /// The candidates of one automatic design: what was tried, on which stored
 /// chart, and what each fit gave.
 struct Search<'s, 'a, S: Simulator + ?Sized> {
     base: &'s TwoStage<'a, S>,
     chart: &'s StoredChart,
+    /// The run's budget (for the progress lines).
+    budget: Budget,
     deadline: Option<Instant>,
     /// Round 1's fitting rows at most.
     screening_rows: usize,
@@ -355,7 +446,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     fn new(
         base: &'s TwoStage<'a, S>,
         chart: &'s StoredChart,
-        deadline: Option<Instant>,
+        (budget, deadline): (Budget, Option<Instant>),
         screening_rows: usize,
     ) -> Self {
         let prior = base.simulator().spec().prior();
@@ -369,6 +460,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         Self {
             base,
             chart,
+            budget,
             deadline,
             screening_rows,
             fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
@@ -383,9 +475,14 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// about costs yet: each starts unless the deadline has passed.
     fn round_one(&mut self, compressors: &[CompressorConfig], medium: &RegressorConfig) {
         let rows = self.fit_rows.min(self.screening_rows);
+        let count = compressors.len();
         let outcomes: Vec<_> = compressors
             .par_iter()
-            .map(|c| self.evaluate(c, medium, rows, self.deadline.map(|d| (d, 0.0)), 1))
+            .enumerate()
+            .map(|(k, c)| {
+                self.tell(1, k, count, c, medium);
+                self.evaluate(c, medium, rows, self.deadline.map(|d| (d, 0.0)), 1)
+            })
             .collect();
         for (report, outcome) in outcomes {
             self.record(report, outcome, medium.clone());
@@ -435,15 +532,40 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         // (no deadline) evaluates the same list in the same order anywhere.
         pairs.sort_by(|a, b| a.2.total_cmp(&b.2));
         let rows = self.fit_rows;
+        let count = pairs.len();
         let outcomes: Vec<_> = pairs
             .par_iter()
-            .map(|(c, net, cost)| {
+            .enumerate()
+            .map(|(k, (c, net, cost))| {
+                self.tell(2, k, count, c, net);
                 self.evaluate(c, net, rows, self.deadline.map(|d| (d, cost + reserve)), 2)
             })
             .collect();
         for ((report, outcome), (_, net, _)) in outcomes.into_iter().zip(pairs) {
             self.record(report, outcome, net);
         }
+    }
+
+    /// Tell the observer which candidate starts, and how much of the
+    /// budget is spent.
+    fn tell(
+        &self,
+        round: usize,
+        k: usize,
+        count: usize,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+    ) {
+        // The log line gives the time; the budget says how much there is.
+        let budget = match self.budget {
+            Budget::Seconds(t) => format!("budget {t:.0} s"),
+            Budget::Simulations(_) => "every candidate runs".to_string(),
+        };
+        self.base.observer().status(&format!(
+            "search round {round}, candidate {} of {count}: {}; {budget}",
+            k + 1,
+            design(compressor, regressor)
+        ));
     }
 
     fn evaluate(
@@ -569,6 +691,15 @@ struct Winner {
     refitted: bool,
 }
 
+/// Both stages as the command line writes them, for reports and progress.
+fn design(compressor: &CompressorConfig, regressor: &RegressorConfig) -> String {
+    format!(
+        "{} {}",
+        compressor.spec().unwrap_or_else(|| compressor.to_string()),
+        regressor.spec().unwrap_or_else(|| regressor.to_string())
+    )
+}
+
 /// Weights and biases of a network candidate on n features and q outputs:
 /// the cost of a Levenberg-Marquardt fit grows with its power 1.5 (above).
 fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
@@ -608,10 +739,15 @@ fn network(hidden: &[usize]) -> Result<RegressorConfig> {
 /// when its coefficients would be more than a quarter of the samples.
 /// Unfitted compressors (NARX scales, PCA directions) are fitted on the
 /// chart's fitting rows before use.
+///
+/// With `transforms`, every structure is tried a second time on the
+/// transformed outputs: the held-out risk, not a rule, decides whether
+/// logarithms pay.
 fn candidate_compressors(
     n_outputs: usize,
     n_inputs: usize,
     n_samples: usize,
+    transforms: Option<Vec<SignalTransform>>,
 ) -> Vec<CompressorConfig> {
     let fits = |coefficients: usize| 4 * coefficients <= n_samples;
     let mut list: Vec<CompressorConfig> = Vec::new();
@@ -643,7 +779,51 @@ fn candidate_compressors(
     {
         list.push(CompressorConfig::Raw(raw));
     }
+    if let Some(transforms) = transforms {
+        let transformed: Vec<CompressorConfig> = list
+            .iter()
+            .filter_map(|c| Transformed::new(transforms.clone(), c.clone()).ok())
+            .map(CompressorConfig::Transformed)
+            .collect();
+        list.extend(transformed);
+    }
     list
+}
+
+/// The transform a careful human would try on each output, judged from
+/// the training records: the logarithm where an output is always
+/// positive, `ln(1 + y)` where it is never negative but reaches zero (a
+/// count), none where it goes negative; `None` when no output would be
+/// transformed. Only the outputs that span more than a decade are
+/// transformed: on a narrow range the logarithm is nearly linear and
+/// changes nothing a network cannot absorb.
+fn output_transforms(records: &[IoData]) -> Option<Vec<SignalTransform>> {
+    let n_outputs = records.first()?.n_outputs();
+    let transforms: Vec<SignalTransform> = (0..n_outputs)
+        .map(|j| {
+            let (mut low, mut high, mut low_positive) = (f64::INFINITY, 0.0f64, f64::INFINITY);
+            for record in records {
+                for &v in record.output(j) {
+                    low = low.min(v);
+                    high = high.max(v);
+                    if v > 0.0 {
+                        low_positive = low_positive.min(v);
+                    }
+                }
+            }
+            let spans_decades = high > 10.0 * low_positive;
+            match () {
+                _ if !spans_decades || !low.is_finite() => SignalTransform::Identity,
+                _ if low > 0.0 => SignalTransform::Log,
+                _ if low == 0.0 => SignalTransform::Log1p,
+                _ => SignalTransform::Identity,
+            }
+        })
+        .collect();
+    transforms
+        .iter()
+        .any(|t| *t != SignalTransform::Identity)
+        .then_some(transforms)
 }
 
 /// The longest record (in values) whose raw samples the search tries as
@@ -681,6 +861,7 @@ fn evaluate<S: Simulator + ?Sized>(
     let mut report = CandidateReport {
         compressor: compressor.to_string(),
         regressor: regressor.to_string(),
+        design: design(compressor, regressor),
         round,
         rmse: Vec::new(),
         score: f64::INFINITY,
@@ -758,10 +939,10 @@ mod shape_tests {
     /// run on it.
     #[test]
     fn the_candidates_fit_the_records_shape() {
-        let siso = candidate_compressors(1, 1, 1000);
+        let siso = candidate_compressors(1, 1, 1000, None);
         assert_eq!(siso.len(), 6 + 1 + 3);
         assert!(siso.iter().all(|c| !matches!(c, CompressorConfig::Raw(_))));
-        let short = candidate_compressors(1, 0, 10);
+        let short = candidate_compressors(1, 0, 10, None);
         let shown = names(&short);
         assert!(
             short.iter().all(|c| c.n_features() * 4 <= 10
@@ -774,7 +955,7 @@ mod shape_tests {
         );
         assert!(!shown.iter().any(|s| s.contains("NARX")), "{shown:?}");
         // Two outputs, no input, a long record: ARs, PCAs, no raw.
-        let mimo = candidate_compressors(2, 0, 400);
+        let mimo = candidate_compressors(2, 0, 400, None);
         assert!(
             mimo.iter()
                 .any(|c| matches!(c, CompressorConfig::Arx(a) if a.nb() == 0))

@@ -19,7 +19,7 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_sources::ChartRole;
 use twostage_sources::ForModel;
 use twostage_sources::paper_benchmark;
-use twostage_sources::{Preset, StoredChart, simulate_records};
+use twostage_sources::{Preset, simulate_records};
 use twostage_sources::{Progress, Silent, Stage};
 use twostage_sources::{RecordSource, Records, RunShape};
 
@@ -260,7 +260,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
 
     /// The builder with the seed and sizes of the shards it trains on
     /// (checked against the model and the builder's seed), or as it is.
-    fn adopting_source(mut self) -> Result<Self> {
+    pub(crate) fn adopting_source(mut self) -> Result<Self> {
         let RecordSource::Shards(chart) = self.records else {
             return Ok(self);
         };
@@ -452,16 +452,13 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
     }
 
-    /// Simulate m experiments of the training design and keep the records
-    /// (failed experiments are dropped, within the failure allowance).
-    pub(crate) fn stored_chart(&self, m: usize) -> Result<StoredChart> {
-        let design = self.simulator.prior().design(m, self.seed_value())?;
-        Ok(simulate_records(
-            self.simulator,
-            &design,
-            m,
-            self.settings.max_failure_fraction,
-            Some((Stage::Training, self.progress)),
-        )?)
+    /// The run's settings.
+    pub(crate) fn settings_ref(&self) -> &RunSettings {
+        &self.settings
+    }
+
+    /// Where the records come from.
+    pub(crate) fn record_source(&self) -> RecordSource<'a> {
+        self.records
     }
 }

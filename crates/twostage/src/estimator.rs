@@ -322,6 +322,37 @@ impl Estimator {
         self.intervals.as_ref()
     }
 
+    /// The `[[preset]]` block of a model file that trains this estimator's
+    /// structure again (stage 1, stage 2 and the training size), named
+    /// `name`; `None` when a stage has no specification (a structure only
+    /// the library can set).
+    ///
+    /// ```
+    /// # use twostage::TwoStage;
+    /// # use twostage::models::Benchmark;
+    /// # let model = Benchmark::builder().n_samples(200).build()?;
+    /// let estimator = TwoStage::builder(&model)
+    ///     .compressor("log1p+arx:2,2".parse::<twostage::CompressorConfig>()?)
+    ///     .simulations(100).calibration(0).validation(0).linear(1e-6)?.train();
+    /// // The benchmark's output goes negative: log1p refuses it, by sample.
+    /// assert!(estimator.is_err());
+    /// let estimator = TwoStage::builder(&model)
+    ///     .compressor("arx:2,2".parse::<twostage::CompressorConfig>()?)
+    ///     .simulations(100).calibration(0).validation(0).linear(1e-6)?.train()?;
+    /// let block = estimator.preset_block("mine").unwrap();
+    /// assert!(block.contains("compress = \"arx:2,2\""), "{block}");
+    /// assert!(block.contains("sims = 100"), "{block}");
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    pub fn preset_block(&self, name: &str) -> Option<String> {
+        let compress = self.compressor.spec()?;
+        let fit = self.training.regressor.spec()?;
+        Some(format!(
+            "[[preset]]\nname = \"{name}\"\ncompress = \"{compress}\"\nfit = \"{fit}\"\nsims = {}\n",
+            self.training.simulations
+        ))
+    }
+
     /// The neighbourhood a [`Refinement`](crate::Refinement) of this
     /// estimator's estimates searches: `scale` times the calibrated
     /// intervals' half-widths, one radius per parameter. TS has already

@@ -19,7 +19,7 @@ use twostage_fit::RegressorConfig;
 use twostage_sources::NamedModel;
 use twostage_sources::Progress;
 use twostage_sources::RecordSource;
-use twostage_sources::{ChartFiles, Preset};
+use twostage_sources::{ChartFiles, DEFAULT_PRESET_SIMULATIONS, Preset};
 use twostage_sources::{ShardPlan, ShardedChart};
 
 /// A chart folder (CSV or NumPy files), and how the estimator file names
@@ -182,29 +182,43 @@ impl Trained {
 
 impl TrainingRequest {
     /// The steps the run takes, for a line such as "training the benchmark
-    /// estimator (simulate, compress, fit, calibrate, validate)".
-    pub fn steps(&self) -> &'static str {
-        match (&self.records, &self.search) {
-            (RecordsRequest::Simulated, None) => "simulate, compress, fit, calibrate, validate",
-            (RecordsRequest::Simulated, Some(_)) => {
-                "simulate, search compressors and networks, calibrate, validate"
-            }
-            (RecordsRequest::Chart { .. }, _) => {
-                "read the chart, compress, fit, calibrate, validate"
-            }
-            (RecordsRequest::Shards { .. }, _) => {
-                "merge the shards, compress, fit, calibrate, validate"
-            }
-        }
+    /// estimator (simulate, compress, fit, calibrate, validate)";
+    /// `searching` as [`Self::search_budget`] says.
+    pub fn steps(&self, searching: bool) -> String {
+        let read = match &self.records {
+            RecordsRequest::Simulated => "simulate",
+            RecordsRequest::Chart { .. } => "read the chart",
+            RecordsRequest::Shards { .. } => "merge the shards",
+        };
+        let build = if searching {
+            "search transforms, compressors and networks"
+        } else {
+            "compress, fit"
+        };
+        format!("{read}, {build}, calibrate, validate")
     }
 
     /// The preset the request trains on `model`: the named (or default)
-    /// one with the request's structure and size put in.
+    /// one with the request's structure and size put in. A model without
+    /// presets takes both stages from the request, and
+    /// [`DEFAULT_PRESET_SIMULATIONS`] unless the request gives m.
     ///
     /// # Errors
-    /// An unknown preset, or a structure that does not parse.
+    /// An unknown preset, a model without presets and a request that does
+    /// not give both stages, or a structure that does not parse.
     pub fn preset(&self, model: &NamedModel) -> Result<Preset> {
-        let mut preset = model.preset(self.preset.as_deref())?;
+        let mut preset = match (&self.compress, &self.fit) {
+            (Some(compress), Some(fit))
+                if self.preset.is_none() && model.preset_names().is_empty() =>
+            {
+                Preset {
+                    compressor: compress.parse::<CompressorConfig>()?,
+                    regressor: fit.parse::<RegressorConfig>()?,
+                    simulations: DEFAULT_PRESET_SIMULATIONS,
+                }
+            }
+            _ => model.preset(self.preset.as_deref())?,
+        };
         if let Some(m) = self.simulations {
             preset.simulations = m;
         }
@@ -215,6 +229,34 @@ impl TrainingRequest {
             preset.regressor = spec.parse::<RegressorConfig>()?;
         }
         Ok(preset)
+    }
+
+    /// The search this request runs: the one it asks for, or, when it
+    /// names no design and the model has no preset, the automatic design
+    /// at the default budget (`None`: train the preset).
+    ///
+    /// # Errors
+    /// A search asked for together with a design (preset, size, stages).
+    pub fn search_budget(&self, model: &NamedModel) -> Result<Option<Budget>> {
+        let design_given = [
+            ("preset", self.preset.is_some()),
+            ("simulations", self.simulations.is_some()),
+            ("compress", self.compress.is_some()),
+            ("fit", self.fit.is_some()),
+        ];
+        let named = design_given.iter().find(|(_, given)| *given);
+        match (self.search, named) {
+            (Some(budget), Some((name, _))) => Err(Error::InvalidSetting {
+                name: "search",
+                value: format!("{budget:?} with a {name}"),
+                reason: "the automatic design chooses the structure and the chart size itself: \
+                         leave out the preset, simulations, compress and fit"
+                    .into(),
+            }),
+            (Some(budget), None) => Ok(Some(budget)),
+            (None, None) if model.preset_names().is_empty() => Ok(Some(Budget::default())),
+            (None, _) => Ok(None),
+        }
     }
 
     /// The chart of this request's run as shards hold it: the model, the
@@ -279,28 +321,50 @@ impl TrainingRequest {
 
     /// Train the request on `model` with `simulator` (which simulates the
     /// model `model` describes, e.g. a Python function behind a model file
-    /// without a source).
+    /// without a source): the preset, or the automatic design
+    /// ([`Self::search_budget`]), on the request's records, whatever their
+    /// source.
     ///
     /// # Errors
-    /// A search asked for with a preset's settings or on records read from
-    /// files; an unknown preset or a structure that does not parse; shards
-    /// of another model description; what [`TwoStage::train`] or
-    /// [`TwoStage::auto`] report.
+    /// A search asked for with a design; an unknown preset or a structure
+    /// that does not parse; shards of another model description; what
+    /// [`TwoStage::train`] or [`TwoStage::auto`] report.
     pub fn train_with(
         &self,
         model: &NamedModel,
         simulator: &dyn Simulator,
         progress: &dyn Progress,
     ) -> Result<Trained> {
-        if let Some(budget) = self.search {
-            return self.search(budget, simulator, progress);
+        let search = self.search_budget(model)?;
+        if let (Some(budget), None) = (search, self.search) {
+            progress.note(&format!(
+                "{} has no preset: searching for a design (automatic design, {}); add the \
+                 [[preset]] printed at the end to the model file to train it again without \
+                 searching",
+                model.name(),
+                budget.describe()
+            ));
         }
         let builder = TwoStage::builder(simulator)
-            .preset(self.preset(model)?)
             .settings(self.settings.clone())
             .progress(progress);
-        let estimator = match &self.records {
-            RecordsRequest::Simulated => builder.train()?,
+        let builder = match search {
+            Some(_) => builder,
+            None => builder.preset(self.preset(model)?),
+        };
+        let run = |builder: TwoStage<'_, dyn Simulator>| -> Result<Trained> {
+            Ok(match search {
+                Some(budget) => Trained::Searched(
+                    TwoStage::auto(simulator)
+                        .budget(budget)
+                        .settings(|_| builder)
+                        .run()?,
+                ),
+                None => Trained::Designed(builder.train()?),
+            })
+        };
+        match &self.records {
+            RecordsRequest::Simulated => run(builder),
             RecordsRequest::Chart {
                 training,
                 calibration,
@@ -314,13 +378,11 @@ impl TrainingRequest {
                     open(calibration)?,
                     open(validation)?,
                 );
-                builder
-                    .records(RecordSource::Files {
-                        training: &training,
-                        calibration: calibration.as_ref(),
-                        validation: validation.as_ref(),
-                    })
-                    .train()?
+                run(builder.records(RecordSource::Files {
+                    training: &training,
+                    calibration: calibration.as_ref(),
+                    validation: validation.as_ref(),
+                }))
             }
             RecordsRequest::Shards { pattern } => {
                 let chart = ShardedChart::open(pattern)?;
@@ -346,48 +408,8 @@ impl TrainingRequest {
                     plan.counts[2],
                     plan.seed
                 ));
-                builder.records(RecordSource::Shards(&chart)).train()?
+                run(builder.records(RecordSource::Shards(&chart)))
             }
-        };
-        Ok(Trained::Designed(estimator))
-    }
-
-    /// The automatic design of the request.
-    fn search(
-        &self,
-        budget: Budget,
-        simulator: &dyn Simulator,
-        progress: &dyn Progress,
-    ) -> Result<Trained> {
-        let design_given = [
-            ("preset", self.preset.is_some()),
-            ("simulations", self.simulations.is_some()),
-            ("compress", self.compress.is_some()),
-            ("fit", self.fit.is_some()),
-        ];
-        if let Some((name, _)) = design_given.iter().find(|(_, given)| *given) {
-            return Err(Error::InvalidSetting {
-                name: "search",
-                value: format!("{budget:?} with a {name}"),
-                reason: "the automatic design chooses the structure and the chart size itself: \
-                         leave out the preset, simulations, compress and fit"
-                    .into(),
-            });
         }
-        if self.records != RecordsRequest::Simulated {
-            return Err(Error::InvalidSetting {
-                name: "search",
-                value: format!("{budget:?}"),
-                reason: "the automatic design simulates its own chart: train records read from \
-                         files with a preset (compress and fit)"
-                    .into(),
-            });
-        }
-        let settings = self.settings.clone();
-        let outcome = TwoStage::auto(simulator)
-            .budget(budget)
-            .settings(|b| b.settings(settings).progress(progress))
-            .run()?;
-        Ok(Trained::Searched(outcome))
     }
 }

@@ -20,8 +20,9 @@ use crate::preset::Preset;
 /// An annotated model file, as `twostage models --template` prints it.
 pub const TEMPLATE: &str = include_str!("../model_file_template.toml");
 
-/// The simulations of a preset that does not say.
-pub(super) const DEFAULT_PRESET_SIMULATIONS: usize = 2000;
+/// The simulations of a preset that does not say (and of stages given on
+/// the command line for a model without presets).
+pub const DEFAULT_PRESET_SIMULATIONS: usize = 2000;
 
 /// Where a model file's simulations come from.
 #[derive(Debug, Clone, PartialEq)]

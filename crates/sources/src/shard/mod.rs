@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
 use twostage_models::{IoData, Simulator};
 
-use crate::chart::{CompressedChart, ExperimentFailure, simulate_range};
+use crate::chart::{CompressedChart, ExperimentFailure, StoredChart, simulate_range};
 use crate::error::{Error, Result};
 use crate::records::ForModel;
 use crate::roles::ChartRole;
@@ -452,6 +452,44 @@ impl ShardedChart {
             indices,
             failures,
         })
+    }
+
+    /// Every kept training record with its parameters (raw shards only),
+    /// for an automatic design that compresses them many ways; failed
+    /// experiments are listed.
+    pub(crate) fn training_records(&self) -> Result<(StoredChart, Vec<ExperimentFailure>)> {
+        if let Some(compressor) = &self.header.plan.compressor {
+            return Err(Error::Shards {
+                what: self.pattern.clone(),
+                message: format!(
+                    "the shards hold features of {compressor}, the automatic design needs the \
+                     records themselves: simulate the shards without --compress, or train with \
+                     --compress {compressor} and a --fit"
+                ),
+            });
+        }
+        let [samples, n_u, n_y] = self.header.shape;
+        let q = self.header.param_names.len();
+        let (mut thetas, mut records, mut failures) = (Vec::new(), Vec::new(), Vec::new());
+        self.for_each(ChartRole::Training, |index, stored| {
+            match stored {
+                Stored::Kept { theta, values } => {
+                    let mut record = IoData::zeros(samples, n_u, n_y);
+                    unflatten(&values, &mut record)?;
+                    thetas.extend_from_slice(&theta);
+                    records.push(record);
+                }
+                Stored::Failed { theta, error } => failures.push(ExperimentFailure {
+                    index,
+                    theta,
+                    error,
+                }),
+            }
+            Ok(())
+        })?;
+        let thetas = Array2::from_shape_vec((records.len(), q), thetas)
+            .unwrap_or_else(|_| unreachable!("q values per kept record"));
+        Ok((StoredChart { thetas, records }, failures))
     }
 
     /// The first `count` training records that were simulated (raw shards
