@@ -181,6 +181,14 @@ impl PyEstimator {
         (shape.n_samples, shape.n_inputs, shape.n_outputs)
     }
 
+    /// The `[[preset]]` block of a model file that trains this structure
+    /// again without searching, named `name`; None when a stage has no
+    /// command-line form.
+    #[pyo3(signature = (name = "searched"))]
+    fn preset_block(&self, name: &str) -> Option<String> {
+        self.inner.preset_block(name)
+    }
+
     /// The model's name.
     #[getter]
     fn model(&self) -> String {
@@ -404,9 +412,13 @@ impl PyEstimator {
 /// a Python function simulating the model a source-less model file
 /// describes, in batches of `batch_size`. The command line's defaults: the
 /// same arguments and seed give the same file as `twostage train`.
-/// `progress` is called as `progress(event, stage, count)`.
+/// `auto` searches the design (within `budget_seconds`, or on
+/// `budget_sims` simulations with every candidate), as `--auto` does; a
+/// model without presets searches anyway. `progress` is called as
+/// `progress(event, stage, count)`, and as `progress("note" or "status",
+/// message, 0)` for the run's messages.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None))]
 #[allow(clippy::too_many_arguments)]
 fn train(
     py: Python<'_>,
@@ -427,7 +439,26 @@ fn train(
     chart: Option<(PathBuf, Option<String>)>,
     validate_chart: Option<(PathBuf, Option<String>)>,
     calibrate_chart: Option<(PathBuf, Option<String>)>,
+    auto: bool,
+    budget_seconds: Option<f64>,
+    budget_sims: Option<usize>,
 ) -> PyResult<PyEstimator> {
+    let search = match (auto, budget_seconds, budget_sims) {
+        (false, None, None) => None,
+        (false, _, _) => {
+            return Err(PyValueError::new_err(
+                "budget_seconds and budget_sims go with auto=True (the automatic design)",
+            ));
+        }
+        (true, Some(_), Some(_)) => {
+            return Err(PyValueError::new_err(
+                "give budget_seconds or budget_sims, not both",
+            ));
+        }
+        (true, None, Some(m)) => Some(twostage::Budget::Simulations(m)),
+        (true, Some(t), None) => Some(twostage::Budget::Seconds(t)),
+        (true, None, None) => Some(twostage::Budget::default()),
+    };
     let named = match (model, model_file, model_toml) {
         (Some(name), None, None) if simulator.is_none() => NamedModel::builtin(name),
         (None, Some(path), None) => NamedModel::file(path),
@@ -476,7 +507,7 @@ fn train(
         simulations: sims,
         compress: compress.map(str::to_string),
         fit: fit.map(str::to_string),
-        search: None,
+        search,
         settings: RunSettings {
             seed,
             validation: validate.unwrap_or(defaults.validation),

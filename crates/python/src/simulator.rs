@@ -260,6 +260,15 @@ impl PythonProgress {
         });
     }
 
+    /// A message of the run, as `(event, message, 0)`.
+    fn say(&self, event: &str, message: &str) {
+        Python::attach(|py| {
+            if let Err(e) = self.callback.bind(py).call1((event, message, 0)) {
+                e.print(py);
+            }
+        });
+    }
+
     fn flush(&self, stage: twostage::Stage) {
         let done = self.pending.swap(0, std::sync::atomic::Ordering::Relaxed);
         if done > 0 {
@@ -290,5 +299,13 @@ impl twostage::Progress for PythonProgress {
     fn end(&self, stage: twostage::Stage) {
         self.flush(stage);
         self.tell("end", stage, 0);
+    }
+
+    fn note(&self, message: &str) {
+        self.say("note", message);
+    }
+
+    fn status(&self, message: &str) {
+        self.say("status", message);
     }
 }

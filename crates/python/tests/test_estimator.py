@@ -212,3 +212,67 @@ def test_files_that_cannot_be_read_say_why(tmp_path):
         twostage.Estimator.load(junk)
     with pytest.raises(ValueError, match="pendulum"):
         twostage.train(model="pendulum", sims=10)
+
+
+GROWTH_MODEL = """
+[model]
+name = "growth"
+[[parameter]]
+name = "rate"
+prior = { dist = "uniform", low = 0.1, high = 0.5 }
+[[parameter]]
+name = "size"
+prior = { dist = "uniform", low = 1.0, high = 10.0 }
+[signals]
+inputs = []
+outputs = ["n"]
+samples = 10
+"""
+
+
+def growth_chart(m, seed):
+    """Populations n_k = size * exp(rate k) with multiplicative noise: always
+    positive, spanning decades (no preset in the model file)."""
+    rng = np.random.default_rng(seed)
+    theta = np.column_stack([rng.uniform(0.1, 0.5, m), rng.uniform(1.0, 10.0, m)])
+    k = np.arange(10)
+    n = theta[:, 1:2] * np.exp(theta[:, 0:1] * k) * rng.lognormal(0.0, 0.1, (m, 10))
+    return theta, None, n[:, :, None]
+
+
+def test_the_automatic_design_on_a_chart_is_the_cli_s(tmp_path):
+    """A model file without presets and a chart from numpy: Python's
+    automatic design and the command line's `--chart --auto` choose the
+    same design and write the same file; the search tried the logarithm
+    of the populations, and the design comes back as a [[preset]]."""
+    model = tmp_path / "growth.toml"
+    model.write_text(GROWTH_MODEL)
+    chart = growth_chart(600, 3)
+    sizes = dict(validate=100, calibrate=100)
+    folder = tmp_path / "chart"
+    folder.mkdir()
+    for name, array in zip(("theta", "inputs", "outputs"), chart):
+        if array is not None:
+            np.save(folder / ("%s.npy" % name), array)
+    notes = []
+    from_python = twostage.train(
+        model_file=model, chart=str(folder), auto=True, budget_sims=400, **sizes,
+        progress=lambda event, what, count: notes.append((event, what)),
+    )
+    assert any(e == "status" and "search round 1" in w for e, w in notes), notes
+    out = tmp_path / "cli.tsest"
+    report = cli(
+        "train", "--model-file", str(model), "--chart", str(folder), "--auto",
+        "--budget-sims", "400", "--validate", "100", "--calibrate", "100",
+        "--out", str(out),
+    )
+    assert "log+raw" in report and "log+pca:8" in report, report
+    assert out.read_bytes() == from_python.to_bytes()
+    block = from_python.preset_block()
+    assert block is not None and 'compress = "' in block and "sims = 400" in block, block
+    # The block trains the same structure again, with no search.
+    model.write_text(GROWTH_MODEL + block)
+    again = twostage.train(model_file=model, chart=chart, progress=False, **sizes)
+    assert again.preset_block() == block
+    with pytest.raises(ValueError, match="budget_seconds and budget_sims go with auto"):
+        twostage.train(model_file=model, chart=chart, budget_sims=400)

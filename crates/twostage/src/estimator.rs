@@ -338,7 +338,8 @@ impl Estimator {
     /// assert!(estimator.is_err());
     /// let estimator = TwoStage::builder(&model)
     ///     .compressor("arx:2,2".parse::<twostage::CompressorConfig>()?)
-    ///     .simulations(100).calibration(0).validation(0).linear(1e-6)?.train()?;
+    ///     .regressor("mlp:3".parse()?)
+    ///     .simulations(100).calibration(0).validation(0).train()?;
     /// let block = estimator.preset_block("mine").unwrap();
     /// assert!(block.contains("compress = \"arx:2,2\""), "{block}");
     /// assert!(block.contains("sims = 100"), "{block}");

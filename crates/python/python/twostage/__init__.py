@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import tempfile
 from os import PathLike
 from typing import Any, Callable, Optional, Union
@@ -97,6 +98,12 @@ class Estimator:
     def model(self) -> str:
         """The name of the model it was trained on."""
         return self._native.model
+
+    def preset_block(self, name: str = "searched") -> Optional[str]:
+        """The ``[[preset]]`` block of a model file that trains this
+        structure again without searching (after ``auto=True``), or None
+        when a stage has no command-line form."""
+        return self._native.preset_block(name)
 
     def estimate(
         self, u: Optional[npt.NDArray[np.float64]], y: npt.NDArray[np.float64]
@@ -175,7 +182,12 @@ class _TqdmProgress:
         self._bars = {}
 
     def __call__(self, event, stage, count):
-        if event == "begin":
+        if event == "note":
+            self._tqdm.write(stage, file=sys.stderr)
+        elif event == "status":
+            for bar in self._bars.values():
+                bar.set_postfix_str(stage, refresh=True)
+        elif event == "begin":
             self._bars[stage] = self._tqdm(total=count or None, desc=stage, unit="sim")
         elif event == "advance" and stage in self._bars:
             self._bars[stage].update(count)
@@ -183,12 +195,18 @@ class _TqdmProgress:
             self._bars.pop(stage).close()
 
 
+def _notes_only(event, message, count):
+    """Without tqdm: the run's messages still reach stderr."""
+    if event == "note":
+        print(message, file=sys.stderr)
+
+
 def _progress(progress):
     if progress is True:
         try:
             from tqdm.auto import tqdm
         except ImportError:
-            return None
+            return _notes_only
         return _TqdmProgress(tqdm)
     if progress is False or progress is None:
         return None
@@ -214,6 +232,9 @@ def train(
     chart: Any = None,
     validate_chart: Any = None,
     calibrate_chart: Any = None,
+    auto: bool = False,
+    budget_seconds: Optional[float] = None,
+    budget_sims: Optional[int] = None,
 ) -> Estimator:
     """Train an estimator with the command line's defaults: the same
     arguments and seed give the same file, bit for bit, as ``twostage
@@ -245,8 +266,17 @@ def train(
     flags do; ``seed``, ``validate``, ``calibrate`` and ``alpha`` left as
     None take the command line's defaults (1, 1000, 4000, 0.1), which the
     Rust side holds once. ``progress=True`` shows tqdm bars when tqdm is installed;
-    a callable receives ``(event, stage, count)``. The simulation,
-    compression and fitting run in Rust without the GIL.
+    a callable receives ``(event, stage, count)``, and ``("note", message,
+    0)`` or ``("status", message, 0)`` for the run's messages. The
+    simulation, compression and fitting run in Rust without the GIL.
+
+    ``auto=True`` searches output transforms, compressors and networks by
+    held-out error instead of training a preset, within ``budget_seconds``
+    (default 120) or on ``budget_sims`` simulations with every candidate
+    evaluated (reproducible), as ``twostage train --auto`` does; on a
+    ``chart`` it fits and scores on the chart's own records. A model
+    without presets searches even without ``auto``. The design found is
+    ``estimator.preset_block()``, to paste into the model file.
     """
     with tempfile.TemporaryDirectory(prefix="twostage-chart-") as scratch:
         charts = {
@@ -272,6 +302,9 @@ def train(
             calibrate=calibrate,
             alpha=alpha,
             progress=_progress(progress),
+            auto=auto,
+            budget_seconds=budget_seconds,
+            budget_sims=budget_sims,
             **charts,
         )
     return Estimator(native)
