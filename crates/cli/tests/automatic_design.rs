@@ -1,0 +1,165 @@
+//! The automatic design through the command line's doors: a model file
+//! without presets trained on a chart searches by itself and says so, the
+//! design comes back as a `[[preset]]`, an output transform travels with
+//! the estimator to the measured record, and a budget too short is said
+//! before anything runs.
+
+mod common;
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use common::{path, scratch, text, twostage};
+
+const GROWTH: &str = r#"
+[model]
+name = "growth"
+[[parameter]]
+name = "rate"
+prior = { dist = "uniform", low = 0.1, high = 0.5 }
+[[parameter]]
+name = "size"
+prior = { dist = "uniform", low = 1.0, high = 10.0 }
+[signals]
+inputs = []
+outputs = ["n"]
+samples = 10
+"#;
+
+/// A uniform number in [0, 1) from a counter (splitmix64), so the chart
+/// needs no random crate and is the same everywhere.
+fn uniform(counter: u64) -> f64 {
+    let mut z = counter.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    (z ^ (z >> 31)) as f64 / 2f64.powi(64)
+}
+
+/// Populations size * exp(rate k) with multiplicative noise: positive,
+/// spanning more than a decade.
+fn growth(rate: f64, size: f64, noise: impl Fn(usize) -> f64) -> Vec<f64> {
+    (0..10)
+        .map(|k| size * (rate * k as f64).exp() * (0.1 * noise(k)).exp())
+        .collect()
+}
+
+/// A chart of `m` growth records in the CSV layout.
+fn write_chart(dir: &Path, m: usize) {
+    std::fs::create_dir_all(dir).unwrap();
+    let (mut truth, mut data) = ("experiment,rate,size\n".to_string(), "experiment,n\n".to_string());
+    for e in 0..m as u64 {
+        let rate = 0.1 + 0.4 * uniform(3 * e);
+        let size = 1.0 + 9.0 * uniform(3 * e + 1);
+        writeln!(truth, "{e},{rate},{size}").unwrap();
+        let noise = |k: usize| uniform(1_000_003 * (e + 1) + k as u64) * 3.46 - 1.73;
+        for value in growth(rate, size, noise) {
+            writeln!(data, "{e},{value}").unwrap();
+        }
+    }
+    std::fs::write(dir.join("truth.csv"), truth).unwrap();
+    std::fs::write(dir.join("data.csv"), data).unwrap();
+}
+
+#[test]
+fn a_model_without_presets_searches_on_its_chart_and_says_so() {
+    let dir = scratch("auto-no-preset");
+    let model = dir.join("growth.toml");
+    std::fs::write(&model, GROWTH).unwrap();
+    write_chart(&dir.join("chart"), 500);
+    let est = dir.join("growth.tsest");
+    let out = twostage(&[
+        "train", "--model-file", path(&model), "--chart", path(&dir.join("chart")),
+        "--validate", "100", "--calibrate", "100", "--out", path(&est),
+    ]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("growth has no preset: searching for a design"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("read the chart, search transforms"), "{stderr}");
+    // Every candidate applies to an input-less record: none failed.
+    assert!(!stdout.contains("failed"), "{stdout}");
+    assert!(stdout.contains("log+raw"), "the logarithm was tried:\n{stdout}");
+    let block = stdout
+        .split("add to the model file:\n")
+        .nth(1)
+        .unwrap_or_else(|| panic!("a [[preset]] block in\n{stdout}"));
+    assert!(block.starts_with("[[preset]]\nname = \"searched\"\ncompress = \""), "{block}");
+    let inspected = twostage(&["inspect", path(&est)]);
+    let inspected = text(&inspected.stdout);
+    assert!(inspected.contains("to train this structure again"), "{inspected}");
+    let compress_line = block.lines().nth(2).unwrap_or_default();
+    assert!(inspected.contains(compress_line), "{compress_line} in\n{inspected}");
+}
+
+#[test]
+fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
+    let dir = scratch("auto-log-floor");
+    let model = dir.join("growth.toml");
+    std::fs::write(&model, GROWTH).unwrap();
+    write_chart(&dir.join("chart"), 400);
+    let est = dir.join("log.tsest");
+    let out = twostage(&[
+        "train", "--model-file", path(&model), "--chart", path(&dir.join("chart")),
+        "--compress", "log+raw", "--fit", "mlp:4", "--validate", "50", "--calibrate", "50",
+        "--out", path(&est), "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let mut records = "experiment,n\n".to_string();
+    for (e, values) in [
+        growth(0.3, 5.0, |_| 0.0),
+        growth(0.3, 5.0, |_| 0.0)
+            .into_iter()
+            .enumerate()
+            .map(|(k, v)| match k {
+                3 => 0.0,
+                6 => -2.0,
+                _ => v,
+            })
+            .collect(),
+    ]
+    .iter()
+    .enumerate()
+    {
+        for v in values {
+            writeln!(records, "{e},{v}").unwrap();
+        }
+    }
+    let data = dir.join("measured.csv");
+    std::fs::write(&data, records).unwrap();
+    let out = twostage(&["estimate", "--estimator", path(&est), path(&data)]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    let header: Vec<&str> = stdout.lines().next().unwrap().split(',').collect();
+    let column = header
+        .iter()
+        .position(|h| *h == "untransformed_samples")
+        .unwrap_or_else(|| panic!("the column in {stdout}"));
+    let counts: Vec<&str> = stdout
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(column).unwrap())
+        .collect();
+    assert_eq!(counts, ["0", "2"], "{stdout}");
+    assert!(
+        stderr.contains("experiment 1: 2 sample(s) outside the domain")
+            && stderr.contains("n = 0 at sample 4")
+            && stderr.contains("n = -2 at sample 7"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("experiment 0"), "{stderr}");
+}
+
+#[test]
+fn a_budget_too_short_for_calibration_and_validation_is_said_first() {
+    let dir = scratch("auto-short-budget");
+    let out = twostage(&[
+        "train", "--model", "benchmark", "--auto", "--budget-seconds", "0.5",
+        "--out", path(&dir.join("never.tsest")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("calibration and validation alone take about"), "{stderr}");
+    assert!(!dir.join("never.tsest").exists());
+}
