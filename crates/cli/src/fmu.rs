@@ -51,18 +51,20 @@ fn inspect(args: &InspectArgs, out: &mut impl Write) -> Result<()> {
         )?,
     }
     if let Some(path) = &args.write {
-        // The model file names the FMU as the user did, relative to the
-        // model file's folder when both sit in the same one.
-        let fmu_name = match (path.parent(), args.fmu.parent()) {
-            (Some(a), Some(b)) if same_folder(a, b) => args.fmu.file_name().map_or_else(
-                || args.fmu.display().to_string(),
-                |n| n.to_string_lossy().into_owned(),
-            ),
-            _ => std::path::absolute(&args.fmu)
-                .unwrap_or_else(|_| args.fmu.clone())
-                .display()
-                .to_string(),
+        // The model file names the FMU relative to its own folder, as the
+        // model file's reader resolves it: the pair can move together.
+        let folder = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."));
+        let fmu_path = match (
+            std::fs::canonicalize(folder),
+            std::fs::canonicalize(&args.fmu),
+        ) {
+            (Ok(folder), Ok(fmu)) => pathdiff::diff_paths(&fmu, &folder).unwrap_or(fmu),
+            _ => std::path::absolute(&args.fmu).unwrap_or_else(|_| args.fmu.clone()),
         };
+        let fmu_name = fmu_path.display().to_string();
         let text = twostage::fmu_model_file(md, &fmu_name);
         let mut file = std::fs::OpenOptions::new()
             .write(true)
@@ -86,18 +88,6 @@ fn inspect(args: &InspectArgs, out: &mut impl Write) -> Result<()> {
     // Inspecting an FMU for another platform is fine; the exit code says
     // that it cannot run here.
     runs_here.map(drop).map_err(anyhow::Error::new)
-}
-
-fn same_folder(a: &std::path::Path, b: &std::path::Path) -> bool {
-    let canonical = |p: &std::path::Path| {
-        let p = if p.as_os_str().is_empty() {
-            std::path::Path::new(".")
-        } else {
-            p
-        };
-        std::fs::canonicalize(p).ok()
-    };
-    canonical(a).is_some_and(|a| Some(a) == canonical(b))
 }
 
 fn describe(md: &ModelDescription, locals: bool, out: &mut impl Write) -> Result<()> {

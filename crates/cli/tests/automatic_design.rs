@@ -46,7 +46,10 @@ fn growth(rate: f64, size: f64, noise: impl Fn(usize) -> f64) -> Vec<f64> {
 /// A chart of `m` growth records in the CSV layout.
 fn write_chart(dir: &Path, m: usize) {
     std::fs::create_dir_all(dir).unwrap();
-    let (mut truth, mut data) = ("experiment,rate,size\n".to_string(), "experiment,n\n".to_string());
+    let (mut truth, mut data) = (
+        "experiment,rate,size\n".to_string(),
+        "experiment,n\n".to_string(),
+    );
     for e in 0..m as u64 {
         let rate = 0.1 + 0.4 * uniform(3 * e);
         let size = 1.0 + 9.0 * uniform(3 * e + 1);
@@ -68,8 +71,17 @@ fn a_model_without_presets_searches_on_its_chart_and_says_so() {
     write_chart(&dir.join("chart"), 500);
     let est = dir.join("growth.tsest");
     let out = twostage(&[
-        "train", "--model-file", path(&model), "--chart", path(&dir.join("chart")),
-        "--validate", "100", "--calibrate", "100", "--out", path(&est),
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        path(&dir.join("chart")),
+        "--validate",
+        "100",
+        "--calibrate",
+        "100",
+        "--out",
+        path(&est),
     ]);
     let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
     assert!(out.status.success(), "{stderr}");
@@ -77,20 +89,35 @@ fn a_model_without_presets_searches_on_its_chart_and_says_so() {
         stderr.contains("growth has no preset: searching for a design"),
         "{stderr}"
     );
-    assert!(stderr.contains("read the chart, search transforms"), "{stderr}");
+    assert!(
+        stderr.contains("read the chart, search transforms"),
+        "{stderr}"
+    );
     // Every candidate applies to an input-less record: none failed.
     assert!(!stdout.contains("failed"), "{stdout}");
-    assert!(stdout.contains("log+raw"), "the logarithm was tried:\n{stdout}");
+    assert!(
+        stdout.contains("log+raw"),
+        "the logarithm was tried:\n{stdout}"
+    );
     let block = stdout
         .split("add to the model file:\n")
         .nth(1)
         .unwrap_or_else(|| panic!("a [[preset]] block in\n{stdout}"));
-    assert!(block.starts_with("[[preset]]\nname = \"searched\"\ncompress = \""), "{block}");
+    assert!(
+        block.starts_with("[[preset]]\nname = \"searched\"\ncompress = \""),
+        "{block}"
+    );
     let inspected = twostage(&["inspect", path(&est)]);
     let inspected = text(&inspected.stdout);
-    assert!(inspected.contains("to train this structure again"), "{inspected}");
+    assert!(
+        inspected.contains("to train this structure again"),
+        "{inspected}"
+    );
     let compress_line = block.lines().nth(2).unwrap_or_default();
-    assert!(inspected.contains(compress_line), "{compress_line} in\n{inspected}");
+    assert!(
+        inspected.contains(compress_line),
+        "{compress_line} in\n{inspected}"
+    );
 }
 
 #[test]
@@ -101,9 +128,22 @@ fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
     write_chart(&dir.join("chart"), 400);
     let est = dir.join("log.tsest");
     let out = twostage(&[
-        "train", "--model-file", path(&model), "--chart", path(&dir.join("chart")),
-        "--compress", "log+raw", "--fit", "mlp:4", "--validate", "50", "--calibrate", "50",
-        "--out", path(&est), "--quiet",
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        path(&dir.join("chart")),
+        "--compress",
+        "log+raw",
+        "--fit",
+        "mlp:4",
+        "--validate",
+        "50",
+        "--calibrate",
+        "50",
+        "--out",
+        path(&est),
+        "--quiet",
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let mut records = "experiment,n\n".to_string();
@@ -155,11 +195,20 @@ fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
 fn a_budget_too_short_for_calibration_and_validation_is_said_first() {
     let dir = scratch("auto-short-budget");
     let out = twostage(&[
-        "train", "--model", "benchmark", "--auto", "--budget-seconds", "0.5",
-        "--out", path(&dir.join("never.tsest")),
+        "train",
+        "--model",
+        "benchmark",
+        "--auto",
+        "--budget-seconds",
+        "0.5",
+        "--out",
+        path(&dir.join("never.tsest")),
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     let stderr = text(&out.stderr);
-    assert!(stderr.contains("calibration and validation alone take about"), "{stderr}");
+    assert!(
+        stderr.contains("calibration and validation alone take about"),
+        "{stderr}"
+    );
     assert!(!dir.join("never.tsest").exists());
 }

@@ -14,9 +14,11 @@ use twostage::fmi::FmiVersion;
 fn inspect_lists_the_roles_and_writes_a_model_file_that_trains_and_validates() {
     let fmu = fmus::build(fmus::Model::Benchmark, FmiVersion::V3);
     let dir = scratch("fmu-inspect");
-    let copy = dir.join("benchmark.fmu");
+    std::fs::create_dir_all(dir.join("fmus")).unwrap();
+    std::fs::create_dir_all(dir.join("models")).unwrap();
+    let copy = dir.join("fmus/benchmark.fmu");
     std::fs::copy(&fmu.path, &copy).unwrap();
-    let model = dir.join("benchmark.toml");
+    let model = dir.join("models/benchmark.toml");
 
     let out = twostage(&["fmu", "inspect", path(&copy), "--write", path(&model)]);
     let listing = text(&out.stdout);
@@ -52,7 +54,7 @@ fn inspect_lists_the_roles_and_writes_a_model_file_that_trains_and_validates() {
     // and ARX refuses the rank-deficient regressors) and drops fail_at.
     let written = std::fs::read_to_string(&model).unwrap();
     assert!(
-        written.contains("fmu = \"benchmark.fmu\"") && written.contains("samples = 300"),
+        written.contains("fmu = \"../fmus/benchmark.fmu\"") && written.contains("samples = 300"),
         "{written}"
     );
     let fail_at = "[[parameter]]\nname = \"fail_at\"\n# CHECK: start value -1: fail the step at this time\nprior = { dist = \"uniform\", low = -1.5, high = -0.5 }\n";
@@ -61,9 +63,20 @@ fn inspect_lists_the_roles_and_writes_a_model_file_that_trains_and_validates() {
         .replace(fail_at, "")
         .replace("inputs = [\"u\", \"v2\", \"v11\", \"v12\"]", "inputs = [\"u\"]")
         .replace(
-            "[[preset]]",
-            "[noise]\ninputs = [{ name = \"v2\", sd = 0.3 }, { name = \"v11\", sd = 1.0 }, { name = \"v12\", sd = 1.0 }]\n\n[[preset]]",
+            "# No [[preset]]",
+            "[noise]\ninputs = [{ name = \"v2\", sd = 0.3 }, { name = \"v11\", sd = 1.0 }, { name = \"v12\", sd = 1.0 }]\n\n# No [[preset]]",
         );
+    assert!(
+        !written.contains("\n[[preset]]"),
+        "no preset to train: {written}"
+    );
+    // The model file and its FMU move together: the path is relative.
+    let moved = dir.join("moved");
+    std::fs::create_dir_all(moved.join("models")).unwrap();
+    std::fs::create_dir_all(moved.join("fmus")).unwrap();
+    std::fs::rename(&copy, moved.join("fmus/benchmark.fmu")).unwrap();
+    let copy = moved.join("fmus/benchmark.fmu");
+    let model = moved.join("models/benchmark.toml");
     std::fs::write(&model, edited).unwrap();
     let estimator = dir.join("e.tsest");
     let out = twostage(&[
@@ -80,6 +93,12 @@ fn inspect_lists_the_roles_and_writes_a_model_file_that_trains_and_validates() {
         path(&estimator),
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr)
+            .contains("has no preset: searching for a design (automatic design, 400 simulations"),
+        "{}",
+        text(&out.stderr)
+    );
     let out = twostage(&[
         "validate",
         "--estimator",

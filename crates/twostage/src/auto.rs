@@ -879,9 +879,22 @@ fn evaluate<S: Simulator + ?Sized>(
         return (report, None);
     }
     let start = Instant::now();
+    // A structure the records cannot take (an autoregression of a
+    // noise-free decay is rank deficient) does not apply; only a fit that
+    // went wrong failed.
+    let compressed = compressor
+        .prepared_on(&chart.records[..fit_rows])
+        .map_err(Error::from)
+        .and_then(|c| compress_all(&c, &chart.records).map(|f| (c, f)));
+    let (compressor, features) = match compressed {
+        Ok(pair) => pair,
+        Err(e) => {
+            report.seconds = start.elapsed().as_secs_f64();
+            report.note = Some(format!("does not apply to these records: {e}"));
+            return (report, None);
+        }
+    };
     let outcome = (|| -> Result<(Vec<f64>, CompressorConfig, FittedRegressor)> {
-        let compressor = compressor.prepared_on(&chart.records[..fit_rows])?;
-        let features = compress_all(&compressor, &chart.records)?;
         let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
         let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);
         let (x_fit, t_fit) = (
@@ -909,7 +922,7 @@ fn evaluate<S: Simulator + ?Sized>(
                 (sq / t_held.nrows().max(1) as f64).sqrt()
             })
             .collect();
-        Ok((rmse, compressor, fitted))
+        Ok((rmse, compressor.clone(), fitted))
     })();
     report.seconds = start.elapsed().as_secs_f64();
     match outcome {

@@ -233,7 +233,8 @@ impl TrainingRequest {
 
     /// The search this request runs: the one it asks for, or, when it
     /// names no design and the model has no preset, the automatic design
-    /// at the default budget (`None`: train the preset).
+    /// at the default budget, or on the request's simulations when it
+    /// gives only those (`None`: train the preset).
     ///
     /// # Errors
     /// A search asked for together with a design (preset, size, stages).
@@ -254,7 +255,19 @@ impl TrainingRequest {
                     .into(),
             }),
             (Some(budget), None) => Ok(Some(budget)),
-            (None, None) if model.preset_names().is_empty() => Ok(Some(Budget::default())),
+            // No preset to train: search, on the simulations asked for
+            // (every candidate) or within the default time.
+            (None, _)
+                if model.preset_names().is_empty()
+                    && self.preset.is_none()
+                    && self.compress.is_none()
+                    && self.fit.is_none() =>
+            {
+                Ok(Some(
+                    self.simulations
+                        .map_or_else(Budget::default, Budget::Simulations),
+                ))
+            }
             (None, _) => Ok(None),
         }
     }

@@ -156,15 +156,13 @@ signal = "white"
 sd = 1.0"#
         );
     }
-    let compress = if inputs.is_empty() { "ar:4" } else { "arx:4,4" };
     let _ = writeln!(
         out,
         r#"
-[[preset]]
-name = "default"
-compress = "{compress}"
-fit = "mlp:10"
-sims = 2000"#
+# No [[preset]]: `twostage train` searches the design by itself (the
+# automatic design, 120 s; `--sims M` searches on M simulations instead)
+# and prints the [[preset]] block to paste here to train it again without
+# searching."#
     );
     out
 }
