@@ -3,6 +3,7 @@
 //! design comes back as a `[[preset]]`, an output transform travels with
 //! the estimator to the measured record, and a budget too short is said
 //! before anything runs.
+#![allow(clippy::unwrap_used)]
 
 mod common;
 
