@@ -68,11 +68,11 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
     writeln!(out, "  stage 1     {}", e.compressor())?;
     let network = match e.regressor() {
         FittedRegressor::Mlp(net) => format!(
-            "{}; layers {:?}, {} weights, best restart stopped by {:?}",
+            "{}; layers {:?}, {} weights; trained by {}",
             t.regressor,
             net.sizes(),
             net.n_parameters(),
-            net.best_restart().reason
+            net.training_summary()
         ),
         _ => t.regressor.to_string(),
     };

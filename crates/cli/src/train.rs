@@ -200,6 +200,9 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
             args.out.display()
         )?;
         writeln!(out, "phases: {}", bars.phase_times())?;
+        if let Some(trained_by) = estimator.regressor().training_summary() {
+            writeln!(out, "stage 2: {trained_by}")?;
+        }
         let sampling = &estimator.training().sampling;
         if sampling.starts_with("the chart") {
             // The certificate covers records drawn as the chart's were.

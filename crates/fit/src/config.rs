@@ -160,6 +160,21 @@ pub enum FittedRegressor {
     Piecewise(FittedPiecewise),
 }
 
+impl FittedRegressor {
+    /// How the networks were trained (trainer, stop reason, restarts), in
+    /// words; `None` for a linear map. Networks by pieces say it of their
+    /// global network.
+    pub fn training_summary(&self) -> Option<String> {
+        match self {
+            Self::Linear(_) => None,
+            Self::Mlp(m) => Some(m.training_summary()),
+            Self::Piecewise(p) => {
+                Some(format!("global network: {}", p.global().training_summary()))
+            }
+        }
+    }
+}
+
 impl Predictor for FittedRegressor {
     fn n_inputs(&self) -> usize {
         match self {

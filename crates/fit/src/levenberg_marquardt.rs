@@ -34,6 +34,19 @@ pub enum TerminationReason {
     Converged,
     /// Adam's epoch budget ran out.
     MaxEpochs,
+    /// Adam's held-out loss did not improve for `patience` epochs (before
+    /// this variant, Adam said [`Self::EarlyStopping`]).
+    EpochsWithoutImprovement,
+}
+
+impl TerminationReason {
+    /// The trainer that stops for this reason: Adam's reasons are its own.
+    pub fn trainer(self) -> &'static str {
+        match self {
+            Self::MaxEpochs | Self::EpochsWithoutImprovement => "Adam",
+            _ => "Levenberg-Marquardt",
+        }
+    }
 }
 
 /// A nonlinear least-squares problem: minimize the cost of the residuals

@@ -86,6 +86,8 @@ pub struct CandidateReport {
     pub fit_rows: usize,
     /// Why it has no score, if it has none (skipped for time, or failed).
     pub note: Option<String>,
+    /// How its network was trained (trainer, stop reason, restarts).
+    pub trained_by: Option<String>,
 }
 
 /// The result of [`AutoDesign::run`].
@@ -128,12 +130,15 @@ impl std::fmt::Display for AutoOutcome {
                 Some(note) => writeln!(f, " {mark} {:<28} {note}", c.design)?,
                 None => writeln!(
                     f,
-                    " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows",
+                    " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows{}",
                     c.design,
                     c.score,
                     rmse.join(", "),
                     c.seconds,
-                    c.fit_rows
+                    c.fit_rows,
+                    c.trained_by
+                        .as_ref()
+                        .map_or_else(String::new, |t| format!("; {t}"))
                 )?,
             }
         }
@@ -862,6 +867,7 @@ fn evaluate<S: Simulator + ?Sized>(
         compressor: compressor.to_string(),
         regressor: regressor.to_string(),
         design: design(compressor, regressor),
+        trained_by: None,
         round,
         rmse: Vec::new(),
         score: f64::INFINITY,
@@ -927,6 +933,7 @@ fn evaluate<S: Simulator + ?Sized>(
     report.seconds = start.elapsed().as_secs_f64();
     match outcome {
         Ok((rmse, compressor, fitted)) => {
+            report.trained_by = fitted.training_summary();
             report.score = rmse.iter().zip(prior_sd).map(|(r, sd)| r / sd).sum::<f64>()
                 / rmse.len().max(1) as f64;
             report.rmse = rmse;

@@ -99,6 +99,28 @@ impl FittedMlp {
     pub fn best_restart(&self) -> &RestartReport {
         &self.reports[self.best]
     }
+    /// How the kept network was trained, in words: "Levenberg-Marquardt,
+    /// stopped by Converged (best of 4 restarts by Levenberg-Marquardt)",
+    /// naming both trainers when [`crate::Trainer::Auto`] ran both.
+    pub fn training_summary(&self) -> String {
+        let best = self.best_restart();
+        let lm = self
+            .reports
+            .iter()
+            .filter(|r| r.reason.trainer() == "Levenberg-Marquardt")
+            .count();
+        let restarts = match (lm, self.reports.len() - lm) {
+            (0, adam) => format!("{adam} restarts by Adam"),
+            (lm, 0) => format!("{lm} restarts by Levenberg-Marquardt"),
+            (lm, adam) => format!("{lm} restarts by Levenberg-Marquardt, {adam} by Adam"),
+        };
+        format!(
+            "{}, stopped by {:?} (best of {restarts})",
+            best.reason.trainer(),
+            best.reason
+        )
+    }
+
     /// Layer sizes, input first.
     pub fn sizes(&self) -> &[usize] {
         &self.sizes

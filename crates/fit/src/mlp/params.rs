@@ -12,8 +12,10 @@ use super::MAX_WIDTH;
 #[non_exhaustive]
 pub enum Trainer {
     /// Levenberg-Marquardt while its Jacobian (samples x outputs x weights)
-    /// stays under 2e7 entries and the network under 1000 weights, Adam
-    /// beyond.
+    /// stays under 2e7 entries and the network under 1000 weights. On more
+    /// samples, Levenberg-Marquardt on as many as it takes and Adam on all
+    /// of them, the lowest held-out error kept (decision 032); Adam alone
+    /// for larger networks.
     Auto,
     /// Levenberg-Marquardt on the full training set.
     LevenbergMarquardt,
@@ -31,7 +33,7 @@ pub enum Trainer {
 impl std::fmt::Display for Trainer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Self::Auto => f.write_str("Levenberg-Marquardt (Adam for large problems)"),
+            Self::Auto => f.write_str("Levenberg-Marquardt (and Adam beyond its size)"),
             Self::LevenbergMarquardt => f.write_str("Levenberg-Marquardt"),
             Self::Adam {
                 learning_rate,

@@ -76,21 +76,58 @@ impl BestHeldOut {
     }
 }
 
-/// Whether Levenberg-Marquardt is used for this problem size.
-fn use_levenberg_marquardt(trainer: Trainer, rows: usize, n_params: usize) -> bool {
+/// The largest Jacobian (residuals x weights) Levenberg-Marquardt takes
+/// under [`Trainer::Auto`]: beyond it each iteration's products cost more
+/// than Adam's whole run.
+const MAX_JACOBIAN_ENTRIES: usize = 20_000_000;
+/// The most weights Levenberg-Marquardt takes under [`Trainer::Auto`].
+const MAX_LM_WEIGHTS: usize = 1000;
+
+/// How the restarts of one fit are trained.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Plan {
+    /// Every restart by Levenberg-Marquardt on every training row.
+    LevenbergMarquardt,
+    /// Every restart by Adam.
+    Adam,
+    /// [`Trainer::Auto`] on more rows than Levenberg-Marquardt takes: its
+    /// restarts on the first `lm_rows` training rows, as many by Adam on
+    /// every row, the lowest held-out error winning; so a larger chart is
+    /// never worse on held-out rows than the largest one LM could take.
+    Both {
+        /// Training rows of the Levenberg-Marquardt restarts.
+        lm_rows: usize,
+    },
+}
+
+/// The plan for `trainer` on `rows` training samples of `q` targets and a
+/// network of `n_params` weights.
+fn plan(trainer: Trainer, rows: usize, q: usize, n_params: usize, max_jacobian: usize) -> Plan {
     match trainer {
-        Trainer::LevenbergMarquardt => true,
-        Trainer::Adam { .. } => false,
-        Trainer::Auto => n_params <= 1000 && rows.saturating_mul(n_params) <= 20_000_000,
+        Trainer::LevenbergMarquardt => Plan::LevenbergMarquardt,
+        Trainer::Adam { .. } => Plan::Adam,
+        Trainer::Auto if n_params > MAX_LM_WEIGHTS => Plan::Adam,
+        Trainer::Auto => {
+            let lm_rows = max_jacobian / (q.max(1) * n_params.max(1));
+            if rows <= lm_rows {
+                Plan::LevenbergMarquardt
+            } else {
+                Plan::Both { lm_rows }
+            }
+        }
     }
 }
 
-fn train_one(problem: &Problem<'_>, mlp: &MlpParams, restart: usize) -> (Vec<f64>, RestartReport) {
+fn train_one(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    levenberg_marquardt: bool,
+) -> (Vec<f64>, RestartReport) {
     let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
     rng.set_stream(restart as u64 + 1);
     let params = initial_parameters(problem.sizes, &mut rng);
-    let q = *problem.sizes.last().unwrap_or(&1);
-    if use_levenberg_marquardt(mlp.trainer, problem.train.len() * q, problem.n_params()) {
+    if levenberg_marquardt {
         train_levenberg_marquardt(problem, mlp, restart, params)
     } else {
         let (learning_rate, batch_size, epochs) = match mlp.trainer {
@@ -152,7 +189,7 @@ fn train_adam(
         }
         let held = problem.mse(&params, held_out);
         if best.observe(held, &params) {
-            reason = TerminationReason::EarlyStopping;
+            reason = TerminationReason::EpochsWithoutImprovement;
             break;
         }
     }
@@ -319,6 +356,19 @@ impl Regressor for Mlp {
     type Model = FittedMlp;
 
     fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedMlp> {
+        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES)
+    }
+}
+
+impl Mlp {
+    /// [`Regressor::fit`] with Levenberg-Marquardt's Jacobian limited to
+    /// `max_jacobian` entries under [`Trainer::Auto`].
+    fn fit_within(
+        &self,
+        x: ArrayView2<'_, f64>,
+        y: ArrayView2<'_, f64>,
+        max_jacobian: usize,
+    ) -> Result<FittedMlp> {
         check::training_data(x, y)?;
         let p = &self.params;
         let (m, n_in) = x.dim();
@@ -365,11 +415,33 @@ impl Regressor for Mlp {
             held_out,
             decay: p.weight_decay,
         };
-        let _ = n_params;
-        let runs: Vec<(Vec<f64>, RestartReport)> = (0..p.restarts)
-            .into_par_iter()
-            .map(|r| train_one(&problem, p, r))
-            .collect();
+        let plan = plan(p.trainer, train.len(), q, n_params, max_jacobian);
+        let first_rows = match plan {
+            Plan::Both { lm_rows } => Problem {
+                train: &train[..lm_rows.clamp(2, train.len())],
+                offsets: problem.offsets.clone(),
+                ..problem
+            },
+            _ => Problem {
+                offsets: problem.offsets.clone(),
+                ..problem
+            },
+        };
+        // Restart r < restarts as the plan says first; in `Both`, restarts
+        // r >= restarts by Adam (seed streams of their own).
+        let runs: Vec<(Vec<f64>, RestartReport)> = match plan {
+            Plan::LevenbergMarquardt | Plan::Adam => (0..p.restarts)
+                .into_par_iter()
+                .map(|r| train_one(&problem, p, r, plan == Plan::LevenbergMarquardt))
+                .collect(),
+            Plan::Both { .. } => (0..2 * p.restarts)
+                .into_par_iter()
+                .map(|r| match r < p.restarts {
+                    true => train_one(&first_rows, p, r, true),
+                    false => train_one(&problem, p, r, false),
+                })
+                .collect(),
+        };
         // The lowest held-out loss wins; ties go to the lower index, so the
         // choice does not depend on scheduling.
         let best = runs
@@ -400,16 +472,69 @@ mod tests {
     use super::*;
 
     #[test]
-    fn auto_picks_levenberg_marquardt_for_small_problems_only() {
-        assert!(use_levenberg_marquardt(Trainer::Auto, 3000, 222));
-        assert!(!use_levenberg_marquardt(Trainer::Auto, 200_000, 222));
-        assert!(!use_levenberg_marquardt(Trainer::Auto, 100, 5000));
-        assert!(use_levenberg_marquardt(
-            Trainer::LevenbergMarquardt,
-            200_000,
-            5000
-        ));
-        assert!(!use_levenberg_marquardt(Trainer::ADAM, 10, 10));
+    fn auto_runs_both_trainers_where_levenberg_marquardt_alone_would_not_fit() {
+        let limit = MAX_JACOBIAN_ENTRIES;
+        assert_eq!(
+            plan(Trainer::Auto, 3000, 1, 222, limit),
+            Plan::LevenbergMarquardt
+        );
+        // 20e6 / (7 * 487) = 5866 rows for LM, Adam on all 6800.
+        assert_eq!(
+            plan(Trainer::Auto, 6800, 7, 487, limit),
+            Plan::Both { lm_rows: 5866 }
+        );
+        assert_eq!(plan(Trainer::Auto, 100, 1, 5000, limit), Plan::Adam);
+        assert_eq!(
+            plan(Trainer::LevenbergMarquardt, 200_000, 1, 5000, limit),
+            Plan::LevenbergMarquardt
+        );
+        assert_eq!(plan(Trainer::ADAM, 10, 1, 10, limit), Plan::Adam);
+    }
+
+    /// Beyond the limit both trainers run, each restart says which by its
+    /// stop reason, and the kept network is the lowest held-out error of
+    /// all of them; the Levenberg-Marquardt restarts are those a plain LM
+    /// fit of the smaller share would run.
+    #[test]
+    fn both_trainers_compete_on_the_same_held_out_rows() {
+        use ndarray::Array2;
+        let x = Array2::from_shape_fn((400, 2), |(i, j)| {
+            ((i * 37 + j * 11) % 97) as f64 / 48.0 - 1.0
+        });
+        let y = Array2::from_shape_fn((400, 1), |(i, _)| {
+            (x[[i, 0]] * 2.0).sin() + x[[i, 1]] * x[[i, 1]]
+        });
+        let mlp = MlpParams::new(&[6])
+            .unwrap()
+            .restarts(2)
+            .trainer(Trainer::Auto)
+            .check()
+            .unwrap();
+        // 19 weights: 2000 entries leave LM 105 of the 340 training rows.
+        let both = mlp.fit_within(x.view(), y.view(), 2000).unwrap();
+        assert_eq!(both.reports.len(), 4);
+        let trainers: Vec<&str> = both.reports.iter().map(|r| r.reason.trainer()).collect();
+        assert_eq!(
+            trainers,
+            ["Levenberg-Marquardt", "Levenberg-Marquardt", "Adam", "Adam"]
+        );
+        let lowest = both
+            .reports
+            .iter()
+            .map(|r| r.validation_mse)
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(both.best_restart().validation_mse, lowest);
+        // Under the limit: LM alone, as before.
+        let alone = mlp
+            .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES)
+            .unwrap();
+        assert_eq!(alone.reports.len(), 2);
+        assert!(
+            alone
+                .reports
+                .iter()
+                .all(|r| r.reason.trainer() == "Levenberg-Marquardt")
+        );
     }
 
     /// The tiled products against a plain triple loop, with a width that
