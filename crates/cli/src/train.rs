@@ -27,12 +27,15 @@ pub struct TrainArgs {
     /// Stage 1: arx:NA,NB, ar:NA (outputs only, for a model without
     /// input), narx:NA,NB,DEG, pca:K (output principal components; only
     /// for models whose experiments share one input) or raw (the record
-    /// itself, for records of tens of samples) (default: the preset's).
-    /// ARX orders apply to each of the model's inputs and outputs.
+    /// itself, for records of tens of samples), each after output
+    /// transforms when written log+SPEC or log1p+SPEC (log,id+SPEC: one
+    /// per output) (default: the preset's). ARX orders apply to each of
+    /// the model's inputs and outputs.
     #[arg(long)]
     compress: Option<String>,
-    /// Stage 2: linear, mlp:H[,H...] hidden sizes, or piecewise:K,H (a
-    /// global H-unit network routing to K experts by pieces of the first
+    /// Stage 2: linear, mlp:H[,H...] hidden sizes, ensemble:H[,H...] (the
+    /// network's independently seeded restarts averaged), or piecewise:K,H
+    /// (a global H-unit network routing to K experts by pieces of the first
     /// parameter's range) (default: the preset's).
     #[arg(long)]
     fit: Option<String>,

@@ -226,7 +226,9 @@ fn every_source_writes_the_file_it_always_wrote() {
             ("chart-csv", &chart, 0xd311f0c2cc0cd1ad),
             ("model-file-preset", &model_file, 0x20c00cc29fd6bd2c),
             ("shards", &shards, 0x581fca65e42bcf4a),
-            ("auto-sims", &auto, 0xcd51098186e891d5),
+            // Changed on purpose by issue 27: round 3 averages the winner's
+            // restarts, and here the average wins (was 0xcd51098186e891d5).
+            ("auto-sims", &auto, 0x410462e30805ad0f),
         ],
         &dir,
     );

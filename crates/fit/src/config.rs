@@ -44,7 +44,12 @@ impl std::fmt::Display for RegressorConfig {
             Self::Linear(r) => write!(f, "linear (ridge lambda {:e})", r.lambda()),
             Self::Mlp(m) => write!(
                 f,
-                "MLP {:?} tanh, {}",
+                "{}MLP {:?} tanh, {}",
+                if m.params().is_ensemble() {
+                    "averaged restarts of "
+                } else {
+                    ""
+                },
                 m.params().hidden(),
                 m.params().trainer_choice()
             ),
@@ -62,9 +67,10 @@ impl std::str::FromStr for RegressorConfig {
     type Err = Error;
 
     /// A stage-2 specification as the command line and model files write
-    /// it: `linear`, `mlp:H[,H...]` (hidden sizes) or `piecewise:K,H` (a
-    /// global H-unit network routing to K experts by pieces of the first
-    /// parameter's range).
+    /// it: `linear`, `mlp:H[,H...]` (hidden sizes), `ensemble:H[,H...]`
+    /// (the same network's restarts, independently seeded, averaged) or
+    /// `piecewise:K,H` (a global H-unit network routing to K experts by
+    /// pieces of the first parameter's range).
     ///
     /// ```
     /// use twostage_fit::RegressorConfig;
@@ -82,18 +88,26 @@ impl std::str::FromStr for RegressorConfig {
             let mlp = MlpParams::new(&[c[1]]).and_then(MlpParams::check)?;
             return Ok(Self::Piecewise(Piecewise::new(mlp.clone(), mlp, c[0])?));
         }
-        let hidden = spec
-            .trim()
-            .strip_prefix("mlp:")
-            .ok_or_else(|| Error::InvalidSetting {
-                name: WHAT,
-                value: spec.to_string(),
-                reason: "use linear, mlp:H[,H...] or piecewise:PIECES,H".into(),
-            })?;
+        let trimmed = spec.trim();
+        let (hidden, ensemble) = match (
+            trimmed.strip_prefix("mlp:"),
+            trimmed.strip_prefix("ensemble:"),
+        ) {
+            (Some(hidden), _) => (hidden, false),
+            (None, Some(hidden)) => (hidden, true),
+            (None, None) => {
+                return Err(Error::InvalidSetting {
+                    name: WHAT,
+                    value: spec.to_string(),
+                    reason: "use linear, mlp:H[,H...], ensemble:H[,H...] or piecewise:PIECES,H"
+                        .into(),
+                });
+            }
+        };
         let n = hidden.split(',').count();
         let sizes = counts(hidden, spec, n, WHAT)?;
         Ok(Self::Mlp(
-            MlpParams::new(&sizes).and_then(MlpParams::check)?,
+            MlpParams::new(&sizes).and_then(|p| p.ensemble(ensemble).check())?,
         ))
     }
 }
@@ -106,7 +120,7 @@ impl RegressorConfig {
     ///
     /// ```
     /// use twostage_fit::RegressorConfig;
-    /// for spec in ["linear", "mlp:20,20", "piecewise:4,20"] {
+    /// for spec in ["linear", "mlp:20,20", "ensemble:20", "piecewise:4,20"] {
     ///     let r: RegressorConfig = spec.parse()?;
     ///     assert_eq!(r.spec().as_deref(), Some(spec));
     /// }
@@ -119,6 +133,9 @@ impl RegressorConfig {
         };
         let text = match self {
             Self::Linear(_) => "linear".to_string(),
+            Self::Mlp(m) if m.params().is_ensemble() => {
+                format!("ensemble:{}", sizes(m.params().hidden()))
+            }
             Self::Mlp(m) => format!("mlp:{}", sizes(m.params().hidden())),
             Self::Piecewise(p) => format!(
                 "piecewise:{},{}",

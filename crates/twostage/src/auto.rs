@@ -72,7 +72,7 @@ pub struct CandidateReport {
     /// or as they read where a stage has no such form.
     pub design: String,
     /// Search round: 1 compares compressors with one network, 2 compares
-    /// networks on the best compressors.
+    /// networks on the best compressors, 3 averages the winner's restarts.
     pub round: usize,
     /// RMSE per parameter on the held-out chart rows (empty when not run).
     pub rmse: Vec<f64>,
@@ -107,6 +107,9 @@ pub struct AutoOutcome {
     /// Whether the winner was refitted on the whole chart (a time budget
     /// may leave only its fit on the first 80% of rows).
     pub refitted: bool,
+    /// The round-2 winner's score at the run's seed and, where the budget
+    /// allowed, at two other seeds: how much the seed alone moves it.
+    pub seed_scores: Vec<f64>,
 }
 
 impl std::fmt::Display for AutoOutcome {
@@ -121,6 +124,21 @@ impl std::fmt::Display for AutoOutcome {
                 f,
                 "(the time budget left no room to refit the winner on the whole chart: \
                  it ships as fitted on the first 80%)"
+            )?;
+        }
+        if let [own, others @ ..] = self.seed_scores.as_slice()
+            && !others.is_empty()
+        {
+            let (low, high) = others
+                .iter()
+                .fold((*own, *own), |(l, h), s| (l.min(*s), h.max(*s)));
+            let listed: Vec<String> = others.iter().map(|s| format!("{s:.4}")).collect();
+            writeln!(
+                f,
+                "the round-2 winner scores {own:.4} at the run's seed and {} at two others: \
+                 the seed moves it by {:.1}%",
+                listed.join(" and "),
+                100.0 * (high - low) / own.max(f64::MIN_POSITIVE)
             )?;
         }
         for (i, c) in self.candidates.iter().enumerate() {
@@ -318,6 +336,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         base.observer().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
+        let seed_scores = search.round_three(search.best(&budget)?);
         let best = search.best(&budget)?;
         let Winner {
             compressor,
@@ -348,6 +367,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             simulations: kept + failures,
             search_seconds,
             refitted,
+            seed_scores,
         })
     }
 }
@@ -581,16 +601,72 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         limit: Option<(Instant, f64)>,
         round: usize,
     ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
+        self.evaluate_seeded(compressor, regressor, rows, limit, (round, 0))
+    }
+
+    /// [`Self::evaluate`] with the network's seed moved by `offset` from
+    /// the run's.
+    fn evaluate_seeded(
+        &self,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+        rows: usize,
+        limit: Option<(Instant, f64)>,
+        (round, offset): (usize, u64),
+    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
         evaluate(
             self.base,
             self.chart,
-            compressor,
-            regressor,
+            (compressor, regressor),
             (rows, self.fit_rows),
             &self.prior_sd,
             limit,
-            round,
+            (round, self.base.seed_value().wrapping_add(offset)),
         )
+    }
+
+    /// Round 3, where the budget allows: the winner's network with its
+    /// restarts averaged (an ensemble of independently seeded networks,
+    /// which competes), and the winner at two other seeds (which does not:
+    /// picking the luckiest seed would fit the held-out rows; it says how
+    /// much the seed matters). Returns the winner's scores at its own and
+    /// the other seeds.
+    fn round_three(&mut self, best: usize) -> Vec<f64> {
+        let Some((compressor, _)) = self.fitted[best].clone() else {
+            return Vec::new();
+        };
+        let network = self.networks_of[best].clone();
+        let winner = &self.candidates[best];
+        let cost = 1.25 * winner.seconds * self.fit_rows as f64 / winner.fit_rows.max(1) as f64;
+        // Each trial and the refit after it must end in time.
+        let limit = self.deadline.map(|d| (d, 2.0 * cost));
+        let mut trials: Vec<(RegressorConfig, u64, bool)> =
+            vec![(network.clone(), 1, false), (network.clone(), 2, false)];
+        if let RegressorConfig::Mlp(mlp) = &network
+            && !mlp.params().is_ensemble()
+            && let Ok(averaged) = mlp.params().clone().ensemble(true).check()
+        {
+            trials.insert(0, (RegressorConfig::Mlp(averaged), 0, true));
+        }
+        let rows = self.fit_rows;
+        let count = trials.len();
+        let outcomes: Vec<_> = trials
+            .par_iter()
+            .enumerate()
+            .map(|(k, (net, offset, _))| {
+                self.tell(3, k, count, &compressor, net);
+                self.evaluate_seeded(&compressor, net, rows, limit, (3, *offset))
+            })
+            .collect();
+        let mut scores = vec![self.candidates[best].score];
+        for ((report, outcome), (net, _, competes)) in outcomes.into_iter().zip(trials) {
+            if competes {
+                self.record(report, outcome, net);
+            } else if report.note.is_none() {
+                scores.push(report.score);
+            }
+        }
+        scores
     }
 
     fn record(
@@ -852,16 +928,14 @@ fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Arr
 
 /// Compress, fit on the first `rows` rows, score on the rows from
 /// `held_out` on (`rows <= held_out`).
-#[allow(clippy::too_many_arguments)]
 fn evaluate<S: Simulator + ?Sized>(
     base: &TwoStage<'_, S>,
     chart: &StoredChart,
-    compressor: &CompressorConfig,
-    regressor: &RegressorConfig,
+    (compressor, regressor): (&CompressorConfig, &RegressorConfig),
     (fit_rows, held_out): (usize, usize),
     prior_sd: &[f64],
     deadline: Option<(Instant, f64)>,
-    round: usize,
+    (round, seed): (usize, u64),
 ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
     let mut report = CandidateReport {
         compressor: compressor.to_string(),
@@ -909,7 +983,7 @@ fn evaluate<S: Simulator + ?Sized>(
         );
         let prior = base.simulator().spec().prior();
         let z_fit = to_learning_space(t_fit, prior.marginals());
-        let fitted = regressor.fit(x_fit, z_fit.view(), base.seed_value())?;
+        let fitted = regressor.fit(x_fit, z_fit.view(), seed)?;
         let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?;
         rows_to_estimates(
             &mut estimates,

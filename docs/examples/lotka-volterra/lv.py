@@ -78,10 +78,11 @@ def reference(observed, k, seed):
     the second round's effective sample sizes."""
     rng = np.random.default_rng(seed)
     theta = prior(rng, k)
-    w = log_likelihood(observed, populations(theta))
+    clean = np.concatenate([populations(theta[j:j + 20000]) for j in range(0, k, 20000)])
     means, sds, ess = [], [], []
     for i in range(len(observed)):
-        p = np.exp(w[i] - w[i].max())
+        w = log_likelihood(observed[i:i + 1], clean)[0]
+        p = np.exp(w - w.max())
         p /= p.sum()
         z = np.log(theta)
         mean = p @ z

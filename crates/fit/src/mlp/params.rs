@@ -158,6 +158,11 @@ impl MlpParams {
         self
     }
 
+    /// Whether the restarts' networks are averaged ([`MlpParams::ensemble`]).
+    pub fn is_ensemble(&self) -> bool {
+        self.ensemble
+    }
+
     /// The trainer set by [`MlpParams::trainer`] (default [`Trainer::Auto`]).
     pub fn trainer_choice(&self) -> Trainer {
         self.trainer

@@ -523,7 +523,10 @@ mod tests {
             .iter()
             .map(|r| r.validation_mse)
             .fold(f64::INFINITY, f64::min);
-        assert_eq!(both.best_restart().validation_mse.to_bits(), lowest.to_bits());
+        assert_eq!(
+            both.best_restart().validation_mse.to_bits(),
+            lowest.to_bits()
+        );
         // Under the limit: LM alone, as before.
         let alone = mlp
             .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES)
