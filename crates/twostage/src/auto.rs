@@ -105,7 +105,7 @@ pub struct AutoOutcome {
     /// Seconds of the search (without calibration and validation).
     pub search_seconds: f64,
     /// Whether the winner was refitted on the whole chart (a time budget
-    /// may leave only its fit on the first 80% of rows).
+    /// may leave only the fit it was scored with).
     pub refitted: bool,
     /// The round-2 winner's score at the run's seed and, where the budget
     /// allowed, at two other seeds: how much the seed alone moves it.
@@ -122,8 +122,9 @@ impl std::fmt::Display for AutoOutcome {
         if !self.refitted {
             writeln!(
                 f,
-                "(the time budget left no room to refit the winner on the whole chart: \
-                 it ships as fitted on the first 80%)"
+                "(the time budget left no room to refit the winner on the whole chart: it ships \
+                 as fitted on the {} rows it was scored with)",
+                self.candidates[self.best].fit_rows
             )?;
         }
         if let [own, others @ ..] = self.seed_scores.as_slice()
@@ -269,7 +270,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     ///
     /// The records are the builder's source: simulated (the chart size
     /// follows from the budget), or read from chart files or raw shards
-    /// (every training record of the source, or the first
+    /// (its first training records, as many as the budget affords, or the first
     /// [`Budget::Simulations`] of them; no new simulation), calibrated and
     /// validated on the source's held-out records as a preset would be.
     ///
@@ -294,6 +295,11 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let records = base.open_records()?;
         let (mut chart, failures) = records.stored_training()?;
         if !simulates && chart.records.len() > m {
+            base.observer().note(&format!(
+                "the search fits and scores on the first {m} of the chart's {} training records \
+                 (as many as its budget affords; a larger budget uses more)",
+                chart.records.len()
+            ));
             chart.records.truncate(m);
             chart.thetas = chart.thetas.slice(ndarray::s![..m, ..]).to_owned();
         }
@@ -375,9 +381,9 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
 /// The number of training records of a search and the deadline of its
 /// fits. Simulated: a simulation budget as given; a time budget keeps what
 /// calibration and validation will take (timed by a pilot) and spends a
-/// fifth of the rest on the chart. Read from files: every training record,
-/// or the first of a simulation budget. Either way the records must fit in
-/// memory.
+/// fifth of the rest on the chart. Read from files: the first training
+/// records, as many as a simulation budget says, or as a time budget would
+/// simulate. Either way the records must fit in memory.
 fn chart_size<S: Simulator + ?Sized>(
     budget: Budget,
     base: &TwoStage<'_, S>,
@@ -424,9 +430,15 @@ fn chart_size<S: Simulator + ?Sized>(
                     Some(start + Duration::from_secs_f64(search)),
                 )
             } else {
-                // The held-out records of a chart are compressed once
-                // by the winner: a small share of the budget.
-                (usize::MAX, Some(start + Duration::from_secs_f64(0.95 * t)))
+                // The fits, not the records, cost the time: a chart gives
+                // the search as many records as a simulated search of this
+                // budget would chart. The held-out records are compressed
+                // once by the winner: a small share of the budget.
+                let records = (SIMULATIONS_PER_BUDGET_SECOND * t) as usize;
+                (
+                    records.max(MIN_SEARCH_RECORDS),
+                    Some(start + Duration::from_secs_f64(0.95 * t)),
+                )
             }
         }
     };
@@ -526,15 +538,17 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .candidates
             .first()
             .map_or(self.fit_rows, |c| c.fit_rows);
-        let growth = self.fit_rows as f64 / screened.max(1) as f64;
-        let reserve = ranked
-            .first()
-            .map_or(0.0, |&i| 1.25 * growth * self.candidates[i].seconds);
+        // The refit of the winner on the whole chart, from round 1's best.
+        let all_rows = self.chart.thetas.nrows() as f64;
+        let reserve = ranked.first().map_or(0.0, |&i| {
+            1.25 * self.candidates[i].seconds * all_rows / screened.max(1) as f64
+        });
         let mut trials: Vec<&RegressorConfig> = Vec::new();
         if screened < self.fit_rows {
             trials.push(medium);
         }
         trials.extend(networks);
+        // Each pair's cost on `screened` rows.
         let mut pairs: Vec<(CompressorConfig, RegressorConfig, f64)> = ranked
             .iter()
             .take(2)
@@ -542,7 +556,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 let (c, _) = self.fitted[i].as_ref()?;
                 let n = c.n_features();
                 let base_size = network_size(medium, n, q);
-                let seconds = self.candidates[i].seconds * growth;
+                let seconds = self.candidates[i].seconds;
                 Some(trials.iter().map(move |net| {
                     // Levenberg-Marquardt's products grow with the square
                     // of the weights, its iterations less: the fits of the
@@ -553,10 +567,18 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             })
             .flatten()
             .collect();
+        let rows = self.round_two_rows(&pairs, screened, reserve);
+        if rows == screened {
+            // Round 1's network on these rows is scored already.
+            pairs.retain(|(_, net, _)| net != medium);
+        }
+        let growth = rows as f64 / screened.max(1) as f64;
+        for pair in &mut pairs {
+            pair.2 *= growth;
+        }
         // Stable: equal costs keep the order above, so a simulation budget
         // (no deadline) evaluates the same list in the same order anywhere.
         pairs.sort_by(|a, b| a.2.total_cmp(&b.2));
-        let rows = self.fit_rows;
         let count = pairs.len();
         let outcomes: Vec<_> = pairs
             .par_iter()
@@ -569,6 +591,35 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         for ((report, outcome), (_, net, _)) in outcomes.into_iter().zip(pairs) {
             self.record(report, outcome, net);
         }
+    }
+
+    /// The rows round 2 fits on: every fitting row when its candidates
+    /// (costs on `screened` rows, growing with the rows) fit in the time
+    /// left after the winner's refit (`reserve`) on the cores there are,
+    /// else as many as do, but never fewer than round 1 screened. Without a
+    /// deadline, every fitting row. Fewer rows for all of round 2 beat
+    /// skipping most of its candidates: they compare on equal terms, and
+    /// the winner is refitted on the whole chart.
+    fn round_two_rows(
+        &self,
+        pairs: &[(CompressorConfig, RegressorConfig, f64)],
+        screened: usize,
+        reserve: f64,
+    ) -> usize {
+        let Some(deadline) = self.deadline else {
+            return self.fit_rows;
+        };
+        let left = deadline
+            .saturating_duration_since(Instant::now())
+            .as_secs_f64()
+            - reserve;
+        let costs: f64 = pairs.iter().map(|p| p.2).sum();
+        affordable_rows(
+            costs / rayon::current_num_threads().max(1) as f64,
+            left,
+            screened,
+            self.fit_rows,
+        )
     }
 
     /// Tell the observer which candidate starts, and how much of the
@@ -637,9 +688,11 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         };
         let network = self.networks_of[best].clone();
         let winner = &self.candidates[best];
-        let cost = 1.25 * winner.seconds * self.fit_rows as f64 / winner.fit_rows.max(1) as f64;
-        // Each trial and the refit after it must end in time.
-        let limit = self.deadline.map(|d| (d, 2.0 * cost));
+        // Each trial, and the winner's refit on the whole chart after it,
+        // must end in time.
+        let refit = 1.25 * winner.seconds * self.chart.thetas.nrows() as f64
+            / winner.fit_rows.max(1) as f64;
+        let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
         let mut trials: Vec<(RegressorConfig, u64, bool)> =
             vec![(network.clone(), 1, false), (network.clone(), 2, false)];
         if let RegressorConfig::Mlp(mlp) = &network
@@ -648,7 +701,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         {
             trials.insert(0, (RegressorConfig::Mlp(averaged), 0, true));
         }
-        let rows = self.fit_rows;
+        let rows = self.candidates[best].fit_rows;
         let count = trials.len();
         let outcomes: Vec<_> = trials
             .par_iter()
@@ -694,18 +747,17 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         ranked
     }
 
-    /// The best candidate's index: among those fitted on every fitting
-    /// row (a screened fit is not compared with them), or, if none was,
-    /// among all.
+    /// The best candidate's index: among those fitted on the most rows
+    /// (round 2's and 3's; a screened round-1 fit is not compared with
+    /// them), or, if round 1 alone was fitted, among all.
     fn best(&self, budget: &Budget) -> Result<usize> {
-        let full = (0..self.candidates.len()).any(|i| {
-            self.candidates[i].note.is_none() && self.candidates[i].fit_rows == self.fit_rows
-        });
+        let fitted = |i: &usize| self.candidates[*i].note.is_none();
+        let most_rows = (0..self.candidates.len())
+            .filter(fitted)
+            .map(|i| self.candidates[i].fit_rows)
+            .max();
         (0..self.candidates.len())
-            .filter(|&i| {
-                self.candidates[i].note.is_none()
-                    && (!full || self.candidates[i].fit_rows == self.fit_rows)
-            })
+            .filter(|i| fitted(i) && Some(self.candidates[*i].fit_rows) == most_rows)
             .min_by(|&a, &b| {
                 self.candidates[a]
                     .score
@@ -725,7 +777,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     }
 
     /// The winner, refitted on the whole chart if there is time for it,
-    /// else with its fit on the first 80% of rows as it is.
+    /// else with the fit it was scored with.
     fn winner(&self, best: usize) -> Result<Winner> {
         let (compressor, held_out_fit) =
             self.fitted[best]
@@ -736,7 +788,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     reason: "the best candidate lost its fit".into(),
                 })?;
         let regressor_config = self.networks_of[best].clone();
-        let refit_cost = 1.25 * self.candidates[best].seconds * self.fit_rows as f64
+        let refit_cost = 1.25 * self.candidates[best].seconds * self.chart.thetas.nrows() as f64
             / self.candidates[best].fit_rows.max(1) as f64;
         let refitted = self
             .deadline
@@ -760,6 +812,19 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             refitted,
         })
     }
+}
+
+/// Rows a round can fit on in `left` seconds when it costs `seconds` of
+/// wall time on `screened` rows and grows linearly with them: all `rows`
+/// if they fit, else as many as 80% of the time affords (the costs are
+/// estimates), but never fewer than `screened`.
+fn affordable_rows(seconds: f64, left: f64, screened: usize, rows: usize) -> usize {
+    let per_row = seconds / screened.max(1) as f64;
+    if !(per_row > 0.0) {
+        return rows;
+    }
+    let affordable = (0.8 * left / per_row).max(0.0) as usize;
+    affordable.clamp(screened.min(rows), rows)
 }
 
 /// What the search ships: the winning structure, fitted.
@@ -1026,6 +1091,20 @@ mod shape_tests {
 
     fn names(list: &[CompressorConfig]) -> Vec<String> {
         list.iter().map(ToString::to_string).collect()
+    }
+
+    /// Round 2 fits every row when it can, as many as the time affords when
+    /// it cannot, and never fewer than round 1 screened.
+    #[test]
+    fn round_two_takes_the_rows_its_time_affords() {
+        // 100 s on 4000 rows: 32000 rows would take 800 s.
+        assert_eq!(affordable_rows(100.0, 1000.0, 4000, 32000), 32000);
+        assert_eq!(affordable_rows(100.0, 500.0, 4000, 32000), 16000);
+        assert_eq!(affordable_rows(100.0, 10.0, 4000, 32000), 4000);
+        assert_eq!(affordable_rows(100.0, -5.0, 4000, 32000), 4000);
+        // Round 1 fitted every row already: nothing more to take.
+        assert_eq!(affordable_rows(100.0, 10.0, 240, 240), 240);
+        assert_eq!(affordable_rows(0.0, 10.0, 4000, 32000), 32000);
     }
 
     /// The built-in models' search is what it was; a short record without
