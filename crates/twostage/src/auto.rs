@@ -820,7 +820,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
 /// estimates), but never fewer than `screened`.
 fn affordable_rows(seconds: f64, left: f64, screened: usize, rows: usize) -> usize {
     let per_row = seconds / screened.max(1) as f64;
-    if !(per_row > 0.0) {
+    if per_row.is_nan() || per_row <= 0.0 {
         return rows;
     }
     let affordable = (0.8 * left / per_row).max(0.0) as usize;
