@@ -50,10 +50,10 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
-    /// An estimator of the benchmark against the Bayes posterior mean on
-    /// the same fresh records: both RMSEs and their ratio.
+    /// An estimator of a built-in model against the Bayes posterior mean on
+    /// the same fresh records: both RMSEs and their ratio, per parameter.
     BayesGap {
-        /// The estimator file (trained on the built-in benchmark).
+        /// The estimator file (trained on the built-in benchmark or car).
         #[arg(long)]
         estimator: PathBuf,
         /// Fresh test records.

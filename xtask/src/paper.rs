@@ -139,7 +139,7 @@ struct Section {
     notes: Vec<String>,
 }
 
-pub(crate) fn test_records<S: Simulator>(
+pub(crate) fn test_records<S: Simulator + ?Sized>(
     model: &S,
     count: usize,
     seed: u64,

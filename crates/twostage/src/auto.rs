@@ -110,6 +110,10 @@ pub struct AutoOutcome {
     /// The round-2 winner's score at the run's seed and, where the budget
     /// allowed, at two other seeds: how much the seed alone moves it.
     pub seed_scores: Vec<f64>,
+    /// The round-2 winner fitted on half its rows (how many, and its
+    /// score), where the budget allowed: a learning curve's last step,
+    /// which says whether more records would pay.
+    pub half_rows: Option<(usize, f64)>,
 }
 
 impl std::fmt::Display for AutoOutcome {
@@ -140,6 +144,18 @@ impl std::fmt::Display for AutoOutcome {
                  the seed moves it by {:.1}%",
                 listed.join(" and "),
                 100.0 * (high - low) / own.max(f64::MIN_POSITIVE)
+            )?;
+        }
+        if let (Some((rows, half)), Some(own)) = (self.half_rows, self.seed_scores.first()) {
+            writeln!(
+                f,
+                "on half its records ({rows}) the round-2 winner scores {half:.4} against \
+                 {own:.4}: more records would {}",
+                if half > 1.03 * own {
+                    "pay"
+                } else {
+                    "hardly pay"
+                }
             )?;
         }
         for (i, c) in self.candidates.iter().enumerate() {
@@ -212,7 +228,9 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     ///     .networks(net(6)?, vec![net(3)?])
     ///     .settings(|b| b.calibration(100).validation(100))
     ///     .run()?;
-    /// assert_eq!(outcome.candidates.len(), 4);
+    /// // 2 compressors with one network, the other network on both, then
+    /// // the winner's restarts averaged.
+    /// assert_eq!(outcome.candidates.len(), 5);
     /// let best = &outcome.candidates[outcome.best];
     /// assert!(outcome.candidates.iter().all(|c| c.note.is_some() || c.score >= best.score));
     /// println!("{outcome}");
@@ -342,7 +360,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         base.observer().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
-        let seed_scores = search.round_three(search.best(&budget)?);
+        let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
         let best = search.best(&budget)?;
         let Winner {
             compressor,
@@ -374,6 +392,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             search_seconds,
             refitted,
             seed_scores,
+            half_rows,
         })
     }
 }
@@ -680,46 +699,56 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// restarts averaged (an ensemble of independently seeded networks,
     /// which competes), and the winner at two other seeds (which does not:
     /// picking the luckiest seed would fit the held-out rows; it says how
-    /// much the seed matters). Returns the winner's scores at its own and
-    /// the other seeds.
-    fn round_three(&mut self, best: usize) -> Vec<f64> {
+    /// much the seed matters), and the winner on half its rows (does more
+    /// data pay?). Returns the winner's scores at its own and the other
+    /// seeds, and its rows and score on half the rows.
+    fn round_three(&mut self, best: usize) -> (Vec<f64>, Option<(usize, f64)>) {
         let Some((compressor, _)) = self.fitted[best].clone() else {
-            return Vec::new();
+            return (Vec::new(), None);
         };
         let network = self.networks_of[best].clone();
         let winner = &self.candidates[best];
+        let rows = winner.fit_rows;
         // Each trial, and the winner's refit on the whole chart after it,
         // must end in time.
-        let refit = 1.25 * winner.seconds * self.chart.thetas.nrows() as f64
-            / winner.fit_rows.max(1) as f64;
+        let refit = 1.25 * winner.seconds * self.chart.thetas.nrows() as f64 / rows.max(1) as f64;
         let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
-        let mut trials: Vec<(RegressorConfig, u64, bool)> =
-            vec![(network.clone(), 1, false), (network.clone(), 2, false)];
+        // (network, seed offset, whether it competes, rows)
+        let mut trials: Vec<(RegressorConfig, u64, bool, usize)> = vec![
+            (network.clone(), 1, false, rows),
+            (network.clone(), 2, false, rows),
+            (network.clone(), 0, false, rows / 2),
+        ];
         if let RegressorConfig::Mlp(mlp) = &network
             && !mlp.params().is_ensemble()
             && let Ok(averaged) = mlp.params().clone().ensemble(true).check()
         {
-            trials.insert(0, (RegressorConfig::Mlp(averaged), 0, true));
+            trials.insert(0, (RegressorConfig::Mlp(averaged), 0, true, rows));
         }
-        let rows = self.candidates[best].fit_rows;
         let count = trials.len();
         let outcomes: Vec<_> = trials
             .par_iter()
             .enumerate()
-            .map(|(k, (net, offset, _))| {
+            .map(|(k, (net, offset, _, rows))| {
                 self.tell(3, k, count, &compressor, net);
-                self.evaluate_seeded(&compressor, net, rows, limit, (3, *offset))
+                self.evaluate_seeded(&compressor, net, *rows, limit, (3, *offset))
             })
             .collect();
         let mut scores = vec![self.candidates[best].score];
-        for ((report, outcome), (net, _, competes)) in outcomes.into_iter().zip(trials) {
+        let mut half = None;
+        for ((report, outcome), (net, _, competes, trial_rows)) in outcomes.into_iter().zip(trials)
+        {
             if competes {
                 self.record(report, outcome, net);
-            } else if report.note.is_none() {
+            } else if report.note.is_some() {
+                // Skipped for time: nothing to say.
+            } else if trial_rows < rows {
+                half = Some((trial_rows, report.score));
+            } else {
                 scores.push(report.score);
             }
         }
-        scores
+        (scores, half)
     }
 
     fn record(
