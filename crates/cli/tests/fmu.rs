@@ -295,3 +295,50 @@ sims = 300
     let listing = text(&twostage(&["fmu", "inspect", path(&dir.join("once.fmu"))]).stdout);
     assert!(listing.contains("worker processes"), "{listing}");
 }
+
+/// Every test FMU with a parameter to estimate: the file `fmu inspect
+/// --write` saves trains as written, with no edit and no preset (the
+/// automatic design on a few simulations), whatever its interface.
+#[test]
+fn every_written_model_file_trains_as_written() {
+    for (model, version, name) in [
+        (fmus::Model::Pendulum, FmiVersion::V2, "pendulum"),
+        (fmus::Model::Integrator(false), FmiVersion::V2, "integrator"),
+        (fmus::Model::Benchmark, FmiVersion::V3, "benchmark"),
+    ] {
+        let fmu = fmus::build(model, version);
+        let dir = scratch(&format!("fmu-as-written-{name}"));
+        let model_file = dir.join(format!("{name}.toml"));
+        let out = twostage(&[
+            "fmu",
+            "inspect",
+            path(&fmu.path),
+            "--write",
+            path(&model_file),
+        ]);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let estimator = dir.join("e.tsest");
+        let out = twostage(&[
+            "train",
+            "--model-file",
+            path(&model_file),
+            "--sims",
+            "300",
+            "--validate",
+            "60",
+            "--calibrate",
+            "0",
+            "--out",
+            path(&estimator),
+        ]);
+        let stderr = text(&out.stderr);
+        assert!(out.status.success(), "{name}: {stderr}");
+        assert!(
+            stderr.contains("has no preset: searching"),
+            "{name}: {stderr}"
+        );
+        let report = text(&out.stdout);
+        assert!(report.contains("[[preset]]"), "{name}: {report}");
+        assert!(!report.contains("failed:"), "{name}: {report}");
+    }
+}

@@ -105,8 +105,10 @@ pub struct AutoOutcome {
     /// Seconds of the search (without calibration and validation).
     pub search_seconds: f64,
     /// Whether the winner was refitted on the whole chart (a time budget
-    /// may leave only the fit it was scored with).
+    /// may leave room for fewer rows, or only the fit it was scored with).
     pub refitted: bool,
+    /// The chart rows the shipped network was fitted on.
+    pub fitted_rows: usize,
     /// The round-2 winner's score at the run's seed and, where the budget
     /// allowed, at two other seeds: how much the seed alone moves it.
     pub seed_scores: Vec<f64>,
@@ -127,8 +129,8 @@ impl std::fmt::Display for AutoOutcome {
             writeln!(
                 f,
                 "(the time budget left no room to refit the winner on the whole chart: it ships \
-                 as fitted on the {} rows it was scored with)",
-                self.candidates[self.best].fit_rows
+                 fitted on {} of its {} records)",
+                self.fitted_rows, self.simulations
             )?;
         }
         if let [own, others @ ..] = self.seed_scores.as_slice()
@@ -203,6 +205,9 @@ const HELD_OUT: f64 = 0.2;
 /// ARX orders 2 to 4 score within 2% of each other, round 2's networks
 /// move the score by 10%); the time saved goes to round 2 on every row.
 const SCREENING_ROWS: usize = 4000;
+/// How a network's fit time grows with its weights, for round 2's cost
+/// estimates (see `round_two`).
+const COST_EXPONENT: f64 = 1.2;
 /// Memory allowed for the stored records.
 const MAX_CHART_BYTES: usize = 2 << 30;
 
@@ -367,7 +372,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             features,
             regressor_config,
             regressor,
-            refitted,
+            fitted_rows,
         } = search.winner(best)?;
         base.observer().end(Stage::Fitting);
         let search_seconds = start.elapsed().as_secs_f64();
@@ -390,7 +395,8 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             best,
             simulations: kept + failures,
             search_seconds,
-            refitted,
+            refitted: fitted_rows == chart.records.len(),
+            fitted_rows,
             seed_scores,
             half_rows,
         })
@@ -557,10 +563,13 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .candidates
             .first()
             .map_or(self.fit_rows, |c| c.fit_rows);
-        // The refit of the winner on the whole chart, from round 1's best.
+        // The refit of the winner on the whole chart, from round 1's best,
+        // but at most 45% of the time left: round 2 gets the rest, and the
+        // refit takes as many rows as its time affords.
         let all_rows = self.chart.thetas.nrows() as f64;
         let reserve = ranked.first().map_or(0.0, |&i| {
-            1.25 * self.candidates[i].seconds * all_rows / screened.max(1) as f64
+            let refit = 1.25 * self.candidates[i].seconds * all_rows / screened.max(1) as f64;
+            refit.min(0.45 * self.seconds_left())
         });
         let mut trials: Vec<&RegressorConfig> = Vec::new();
         if screened < self.fit_rows {
@@ -578,9 +587,12 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 let seconds = self.candidates[i].seconds;
                 Some(trials.iter().map(move |net| {
                     // Levenberg-Marquardt's products grow with the square
-                    // of the weights, its iterations less: the fits of the
-                    // benchmark's search grew as size^1.4 to size^1.5.
-                    let scale = (network_size(net, n, q) / base_size).powf(1.5);
+                    // of the weights, its iterations less: on 16000 rows
+                    // the benchmark's fits grew as size^1.4 to size^1.5, on
+                    // the 4000 of a screened round as size^0.6 to size^1.1
+                    // (other costs weigh more there). Round 2 sizes its rows
+                    // by these estimates, so they aim at the middle.
+                    let scale = (network_size(net, n, q) / base_size).powf(COST_EXPONENT);
                     (c.clone(), (*net).clone(), seconds * scale)
                 }))
             })
@@ -711,7 +723,8 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let rows = winner.fit_rows;
         // Each trial, and the winner's refit on the whole chart after it,
         // must end in time.
-        let refit = 1.25 * winner.seconds * self.chart.thetas.nrows() as f64 / rows.max(1) as f64;
+        let refit = (1.25 * winner.seconds * self.chart.thetas.nrows() as f64 / rows.max(1) as f64)
+            .min(0.45 * self.seconds_left());
         let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
         // (network, seed offset, whether it competes, rows)
         let mut trials: Vec<(RegressorConfig, u64, bool, usize)> = vec![
@@ -805,8 +818,16 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             })
     }
 
-    /// The winner, refitted on the whole chart if there is time for it,
-    /// else with the fit it was scored with.
+    /// Seconds until the deadline (infinite without one).
+    fn seconds_left(&self) -> f64 {
+        self.deadline.map_or(f64::INFINITY, |d| {
+            d.saturating_duration_since(Instant::now()).as_secs_f64()
+        })
+    }
+
+    /// The winner, refitted on the whole chart, or on as many of its first
+    /// rows as the time left affords; with the fit it was scored with when
+    /// that is not more rows.
     fn winner(&self, best: usize) -> Result<Winner> {
         let (compressor, held_out_fit) =
             self.fitted[best]
@@ -817,28 +838,36 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     reason: "the best candidate lost its fit".into(),
                 })?;
         let regressor_config = self.networks_of[best].clone();
-        let refit_cost = 1.25 * self.candidates[best].seconds * self.chart.thetas.nrows() as f64
-            / self.candidates[best].fit_rows.max(1) as f64;
-        let refitted = self
-            .deadline
-            .is_none_or(|d| Instant::now() + Duration::from_secs_f64(refit_cost) <= d);
+        let scored_rows = self.candidates[best].fit_rows;
+        let all_rows = self.chart.thetas.nrows();
+        let refit_rows = match self.deadline {
+            None => all_rows,
+            Some(_) => affordable_rows(
+                1.25 * self.candidates[best].seconds,
+                self.seconds_left(),
+                scored_rows,
+                all_rows,
+            ),
+        };
         let features = compress_all(&compressor, &self.chart.records)?;
-        let regressor = if refitted {
+        let (regressor, fitted_rows) = if refit_rows > scored_rows {
             let marginals = self.base.simulator().spec().prior().marginals();
-            regressor_config.fit(
-                features.view(),
-                to_learning_space(self.chart.thetas.view(), marginals).view(),
+            let rows = ndarray::s![..refit_rows, ..];
+            let fitted = regressor_config.fit(
+                features.slice(rows),
+                to_learning_space(self.chart.thetas.slice(rows), marginals).view(),
                 self.base.seed_value(),
-            )?
+            )?;
+            (fitted, refit_rows)
         } else {
-            held_out_fit
+            (held_out_fit, scored_rows)
         };
         Ok(Winner {
             compressor,
             features,
             regressor_config,
             regressor,
-            refitted,
+            fitted_rows,
         })
     }
 }
@@ -863,7 +892,8 @@ struct Winner {
     features: Array2<f64>,
     regressor_config: RegressorConfig,
     regressor: FittedRegressor,
-    refitted: bool,
+    /// The chart rows the shipped network was fitted on.
+    fitted_rows: usize,
 }
 
 /// Both stages as the command line writes them, for reports and progress.
@@ -876,7 +906,8 @@ fn design(compressor: &CompressorConfig, regressor: &RegressorConfig) -> String 
 }
 
 /// Weights and biases of a network candidate on n features and q outputs:
-/// the cost of a Levenberg-Marquardt fit grows with its power 1.5 (above).
+/// the cost of a Levenberg-Marquardt fit grows with its power
+/// [`COST_EXPONENT`] or so (round 2).
 fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
         RegressorConfig::Mlp(mlp) => {

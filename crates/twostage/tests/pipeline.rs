@@ -444,7 +444,11 @@ fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
     assert_eq!(outcome.seed_scores.len(), 3, "{outcome}");
     assert!(outcome.seed_scores.iter().all(|s| s.is_finite()));
     // And on half its 240 fitting rows: does more data pay?
-    assert_eq!(outcome.half_rows.map(|(rows, _)| rows), Some(120), "{outcome}");
+    assert_eq!(
+        outcome.half_rows.map(|(rows, _)| rows),
+        Some(120),
+        "{outcome}"
+    );
     let best = &outcome.candidates[outcome.best];
     assert!(scored.iter().all(|c| c.score >= best.score), "{outcome}");
     assert!(outcome.candidates.iter().any(|c| c.round == 2), "{outcome}");
