@@ -196,7 +196,9 @@ pub struct AutoDesign<'a, S: ?Sized> {
 /// Largest chart a time budget chooses per second of budget: the default
 /// search's fits, not its simulations, dominate its cost, and they grow
 /// with m; on 2 cores they take about 100 s at m = 8000 (docs/accuracy.md),
-/// so 120 s buys 8000 simulations and 300 s 20000.
+/// so 120 s buys 8000 simulations and 300 s 20000. (16000 per 120 s was
+/// tried: the refit then had time for only 6607 of them, 1.24 times the
+/// Bayes RMSE against 1.21 to 1.29 at 8000.)
 const SIMULATIONS_PER_BUDGET_SECOND: f64 = 8000.0 / 120.0;
 /// Share of the chart held out to score candidates.
 const HELD_OUT: f64 = 0.2;
@@ -568,7 +570,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         // refit takes as many rows as its time affords.
         let all_rows = self.chart.thetas.nrows() as f64;
         let reserve = ranked.first().map_or(0.0, |&i| {
-            let refit = 1.25 * self.candidates[i].seconds * all_rows / screened.max(1) as f64;
+            let refit = refit_seconds(self.candidates[i].seconds, screened, all_rows as usize);
             refit.min(0.45 * self.seconds_left())
         });
         let mut trials: Vec<&RegressorConfig> = Vec::new();
@@ -723,7 +725,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let rows = winner.fit_rows;
         // Each trial, and the winner's refit on the whole chart after it,
         // must end in time.
-        let refit = (1.25 * winner.seconds * self.chart.thetas.nrows() as f64 / rows.max(1) as f64)
+        let refit = refit_seconds(winner.seconds, rows, self.chart.thetas.nrows())
             .min(0.45 * self.seconds_left());
         let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
         // (network, seed offset, whether it competes, rows)
@@ -843,7 +845,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let refit_rows = match self.deadline {
             None => all_rows,
             Some(_) => affordable_rows(
-                1.25 * self.candidates[best].seconds,
+                refit_seconds(self.candidates[best].seconds, scored_rows, scored_rows),
                 self.seconds_left(),
                 scored_rows,
                 all_rows,
@@ -870,6 +872,14 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             fitted_rows,
         })
     }
+}
+
+/// The seconds a refit on `rows` rows takes, from a candidate's `seconds`
+/// on `scored` rows: with a margin of a quarter, growing with the rows, and
+/// on the whole machine, where the candidate shared it with the others of
+/// its round (each round runs at least as many candidates as threads).
+fn refit_seconds(seconds: f64, scored: usize, rows: usize) -> f64 {
+    1.25 * seconds * rows as f64 / scored.max(1) as f64 / rayon::current_num_threads().max(1) as f64
 }
 
 /// Rows a round can fit on in `left` seconds when it costs `seconds` of
