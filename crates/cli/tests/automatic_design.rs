@@ -64,12 +64,19 @@ fn write_chart(dir: &Path, m: usize) {
     std::fs::write(dir.join("data.csv"), data).unwrap();
 }
 
-#[test]
-fn a_model_without_presets_searches_on_its_chart_and_says_so() {
-    let dir = scratch("auto-no-preset");
+/// A scratch folder with the growth model file and a chart of `m` records
+/// in it; the model file's path.
+fn growth_folder(name: &str, m: usize) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = scratch(name);
     let model = dir.join("growth.toml");
     std::fs::write(&model, GROWTH).unwrap();
-    write_chart(&dir.join("chart"), 500);
+    write_chart(&dir.join("chart"), m);
+    (dir, model)
+}
+
+#[test]
+fn a_model_without_presets_searches_on_its_chart_and_says_so() {
+    let (dir, model) = growth_folder("auto-no-preset", 500);
     let est = dir.join("growth.tsest");
     let out = twostage(&[
         "train",
@@ -123,10 +130,7 @@ fn a_model_without_presets_searches_on_its_chart_and_says_so() {
 
 #[test]
 fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
-    let dir = scratch("auto-log-floor");
-    let model = dir.join("growth.toml");
-    std::fs::write(&model, GROWTH).unwrap();
-    write_chart(&dir.join("chart"), 400);
+    let (dir, model) = growth_folder("auto-log-floor", 400);
     let est = dir.join("log.tsest");
     let out = twostage(&[
         "train",
