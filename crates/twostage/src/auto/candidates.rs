@@ -1,0 +1,192 @@
+//! The candidates a careful human would try: stage-1 structures shaped
+//! for the records, the output transforms the records call for, the
+//! networks, and how each is named and weighed.
+
+use twostage_compress::{
+    Arx, Compressor, CompressorConfig, Narx, OutputPca, RawRecord, SignalTransform, Transformed,
+};
+use twostage_fit::{MlpParams, Piecewise, RegressorConfig};
+use twostage_models::IoData;
+
+use crate::error::Result;
+
+/// Both stages as the command line writes them, for reports and progress.
+pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig) -> String {
+    format!(
+        "{} {}",
+        compressor.spec().unwrap_or_else(|| compressor.to_string()),
+        regressor.spec().unwrap_or_else(|| regressor.to_string())
+    )
+}
+
+/// Weights and biases of a network candidate on n features and q outputs:
+/// the cost of a Levenberg-Marquardt fit grows with its power
+/// [`COST_EXPONENT`] or so (round 2).
+pub(super) fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
+    match regressor {
+        RegressorConfig::Mlp(mlp) => {
+            let mut sizes = vec![n];
+            sizes.extend_from_slice(mlp.params().hidden());
+            sizes.push(q);
+            twostage_fit::n_parameters(&sizes) as f64
+        }
+        // The global network on every row, then experts that together see
+        // the rows about 1.5 times (their margins overlap).
+        RegressorConfig::Piecewise(p) => {
+            2.5 * network_size(&RegressorConfig::Mlp(p.global().clone()), n, q)
+        }
+        _ => (n * q + q) as f64,
+    }
+}
+
+pub(super) fn pieces(count: usize, hidden: &[usize]) -> Result<RegressorConfig> {
+    let mlp = MlpParams::new(hidden)?.check()?;
+    Ok(RegressorConfig::Piecewise(Piecewise::new(
+        mlp.clone(),
+        mlp,
+        count,
+    )?))
+}
+
+pub(super) fn network(hidden: &[usize]) -> Result<RegressorConfig> {
+    Ok(RegressorConfig::Mlp(MlpParams::new(hidden)?.check()?))
+}
+
+/// Stage-1 candidates that fit the records' shape: ARX orders (AR on the
+/// outputs for a model without input), a quadratic NARX for one input and
+/// one output, output PCAs, and the raw record when it has at most
+/// [`RAW_CANDIDATE_VALUES`] values. A least-squares structure is left out
+/// when its coefficients would be more than a quarter of the samples.
+/// Unfitted compressors (NARX scales, PCA directions) are fitted on the
+/// chart's fitting rows before use.
+///
+/// With `transforms`, every structure is tried a second time on the
+/// transformed outputs: the held-out risk, not a rule, decides whether
+/// logarithms pay.
+pub(super) fn candidate_compressors(
+    n_outputs: usize,
+    n_inputs: usize,
+    n_samples: usize,
+    transforms: Option<Vec<SignalTransform>>,
+) -> Vec<CompressorConfig> {
+    let fits = |coefficients: usize| 4 * coefficients <= n_samples;
+    let mut list: Vec<CompressorConfig> = Vec::new();
+    for order in [2, 3, 4, 5, 6, 8] {
+        let input_lags = if n_inputs == 0 { 0 } else { order };
+        if let Ok(arx) =
+            Arx::new(order, input_lags).and_then(|a| a.with_signals(n_inputs, n_outputs))
+            && fits(order * n_outputs + input_lags * n_inputs)
+        {
+            list.push(arx.into());
+        }
+    }
+    if (n_inputs, n_outputs) == (1, 1)
+        && let Ok(narx) = Narx::new(2, 2, 2)
+        && fits(narx.n_features())
+    {
+        list.push(narx.into());
+    }
+    for k in [8, 12, 16] {
+        if let Ok(pca) = OutputPca::new(k)
+            && k < n_samples * n_outputs
+        {
+            list.push(pca.into());
+        }
+    }
+    let values = n_samples * (n_inputs + n_outputs);
+    if values <= RAW_CANDIDATE_VALUES
+        && let Ok(raw) = RawRecord::new(n_samples, n_inputs, n_outputs)
+    {
+        list.push(CompressorConfig::Raw(raw));
+    }
+    if let Some(transforms) = transforms {
+        let transformed: Vec<CompressorConfig> = list
+            .iter()
+            .filter_map(|c| Transformed::new(transforms.clone(), c.clone()).ok())
+            .map(CompressorConfig::Transformed)
+            .collect();
+        list.extend(transformed);
+    }
+    list
+}
+
+/// The transform a careful human would try on each output, judged from
+/// the training records: the logarithm where an output is always
+/// positive, `ln(1 + y)` where it is never negative but reaches zero (a
+/// count), none where it goes negative; `None` when no output would be
+/// transformed. Only the outputs that span more than a decade are
+/// transformed: on a narrow range the logarithm is nearly linear and
+/// changes nothing a network cannot absorb.
+pub(super) fn output_transforms(records: &[IoData]) -> Option<Vec<SignalTransform>> {
+    let n_outputs = records.first()?.n_outputs();
+    let transforms: Vec<SignalTransform> = (0..n_outputs)
+        .map(|j| {
+            let (mut low, mut high, mut low_positive) = (f64::INFINITY, 0.0f64, f64::INFINITY);
+            for record in records {
+                for &v in record.output(j) {
+                    low = low.min(v);
+                    high = high.max(v);
+                    if v > 0.0 {
+                        low_positive = low_positive.min(v);
+                    }
+                }
+            }
+            let spans_decades = high > 10.0 * low_positive;
+            match () {
+                _ if !spans_decades || !low.is_finite() => SignalTransform::Identity,
+                _ if low > 0.0 => SignalTransform::Log,
+                _ if low == 0.0 => SignalTransform::Log1p,
+                _ => SignalTransform::Identity,
+            }
+        })
+        .collect();
+    transforms
+        .iter()
+        .any(|t| *t != SignalTransform::Identity)
+        .then_some(transforms)
+}
+
+/// The longest record (in values) whose raw samples the search tries as
+/// features.
+const RAW_CANDIDATE_VALUES: usize = 256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(list: &[CompressorConfig]) -> Vec<String> {
+        list.iter().map(ToString::to_string).collect()
+    }
+
+    /// The built-in models' search is what it was; a short record without
+    /// input gets autoregressions and its raw samples, nothing that cannot
+    /// run on it.
+    #[test]
+    fn the_candidates_fit_the_records_shape() {
+        let siso = candidate_compressors(1, 1, 1000, None);
+        assert_eq!(siso.len(), 6 + 1 + 3);
+        assert!(siso.iter().all(|c| !matches!(c, CompressorConfig::Raw(_))));
+        let short = candidate_compressors(1, 0, 10, None);
+        let shown = names(&short);
+        assert!(
+            short.iter().all(|c| c.n_features() * 4 <= 10
+                || matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Pca(_))),
+            "{shown:?}"
+        );
+        assert!(
+            matches!(short.last(), Some(CompressorConfig::Raw(r)) if r.n_samples() == 10),
+            "{shown:?}"
+        );
+        assert!(!shown.iter().any(|s| s.contains("NARX")), "{shown:?}");
+        // Two outputs, no input, a long record: ARs, PCAs, no raw.
+        let mimo = candidate_compressors(2, 0, 400, None);
+        assert!(
+            mimo.iter()
+                .any(|c| matches!(c, CompressorConfig::Arx(a) if a.nb() == 0))
+        );
+        assert!(
+            mimo.iter()
+                .all(|c| !matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Narx(_)))
+        );
+    }
+}

@@ -1,0 +1,480 @@
+//! Automatic design: search stage-1 structures and network sizes by
+//! validation error on simulated data, so that no human picks the ARX
+//! order or the network (the paper leaves both to "a few trial-and-error
+//! attempts").
+//!
+//! The chart is simulated once and its records kept; every candidate
+//! compressor compresses them, every candidate network fits the same rows,
+//! and all are scored on the same held-out rows. The winner is refitted on
+//! the whole chart, then calibrated and validated on fresh simulations like
+//! any trained estimator (so the final report is not biased by the
+//! selection).
+
+use std::time::{Duration, Instant};
+
+use twostage_models::Simulator;
+
+use crate::builder::{TrainedOn, TwoStage};
+use crate::error::{Error, Result};
+use crate::estimator::Estimator;
+use twostage_compress::CompressorConfig;
+use twostage_fit::RegressorConfig;
+use twostage_sources::ForModel;
+use twostage_sources::Stage;
+
+mod candidates;
+mod search;
+
+use candidates::{candidate_compressors, network, output_transforms, pieces};
+use search::{Search, Winner};
+
+/// How much the search may spend.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Budget {
+    /// Wall-clock seconds for the whole search (chart, fits, refit;
+    /// calibration and validation come on top). The chart size follows
+    /// from a timed pilot, and candidates that would not finish in time are
+    /// skipped, so the outcome depends on the machine.
+    Seconds(f64),
+    /// A chart of exactly this many simulations, and every candidate
+    /// evaluated: the same seed gives the same estimator on any machine.
+    Simulations(usize),
+}
+
+impl Budget {
+    /// The budget in words, e.g. "a 120 s budget" or "5000 simulations".
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Seconds(t) => format!("a {t} s budget"),
+            Self::Simulations(m) => format!("{m} simulations, every candidate"),
+        }
+    }
+}
+
+impl Default for Budget {
+    /// Two minutes.
+    fn default() -> Self {
+        Self::Seconds(120.0)
+    }
+}
+
+/// One candidate structure and how it scored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CandidateReport {
+    /// Stage 1.
+    pub compressor: String,
+    /// Stage 2.
+    pub regressor: String,
+    /// Both stages as the command line writes them (`log+pca:8 mlp:20`),
+    /// or as they read where a stage has no such form.
+    pub design: String,
+    /// Search round: 1 compares compressors with one network, 2 compares
+    /// networks on the best compressors, 3 averages the winner's restarts.
+    pub round: usize,
+    /// RMSE per parameter on the held-out chart rows (empty when not run).
+    pub rmse: Vec<f64>,
+    /// Mean over parameters of RMSE / prior standard deviation (lower is
+    /// better; 1 means nothing learned).
+    pub score: f64,
+    /// Seconds spent compressing and fitting it.
+    pub seconds: f64,
+    /// Chart rows its network was fitted on: all the fitting rows, or a
+    /// screening share of them in round 1 of a large chart.
+    pub fit_rows: usize,
+    /// Why it has no score, if it has none (skipped for time, or failed).
+    pub note: Option<String>,
+    /// How its network was trained (trainer, stop reason, restarts).
+    pub trained_by: Option<String>,
+}
+
+/// The result of [`AutoDesign::run`].
+#[derive(Debug)]
+pub struct AutoOutcome {
+    /// The best candidate, refitted on the whole chart, calibrated and
+    /// validated.
+    pub estimator: Estimator,
+    /// Every candidate, in the order tried.
+    pub candidates: Vec<CandidateReport>,
+    /// Index of the winner in `candidates`.
+    pub best: usize,
+    /// Simulations in the chart.
+    pub simulations: usize,
+    /// Seconds of the search (without calibration and validation).
+    pub search_seconds: f64,
+    /// Whether the winner was refitted on the whole chart (a time budget
+    /// may leave room for fewer rows, or only the fit it was scored with).
+    pub refitted: bool,
+    /// The chart rows the shipped network was fitted on.
+    pub fitted_rows: usize,
+    /// The round-2 winner's score at the run's seed and, where the budget
+    /// allowed, at two other seeds: how much the seed alone moves it.
+    pub seed_scores: Vec<f64>,
+    /// The round-2 winner fitted on half its rows (how many, and its
+    /// score), where the budget allowed: a learning curve's last step,
+    /// which says whether more records would pay.
+    pub half_rows: Option<(usize, f64)>,
+}
+
+impl std::fmt::Display for AutoOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "automatic design on m = {} simulations ({:.1} s), held-out RMSE per candidate:",
+            self.simulations, self.search_seconds
+        )?;
+        if !self.refitted {
+            writeln!(
+                f,
+                "(the time budget left no room to refit the winner on the whole chart: it ships \
+                 fitted on {} of its {} records)",
+                self.fitted_rows, self.simulations
+            )?;
+        }
+        if let [own, others @ ..] = self.seed_scores.as_slice()
+            && !others.is_empty()
+        {
+            let (low, high) = others
+                .iter()
+                .fold((*own, *own), |(l, h), s| (l.min(*s), h.max(*s)));
+            let listed: Vec<String> = others.iter().map(|s| format!("{s:.4}")).collect();
+            writeln!(
+                f,
+                "the round-2 winner scores {own:.4} at the run's seed and {} at two others: \
+                 the seed moves it by {:.1}%",
+                listed.join(" and "),
+                100.0 * (high - low) / own.max(f64::MIN_POSITIVE)
+            )?;
+        }
+        if let (Some((rows, half)), Some(own)) = (self.half_rows, self.seed_scores.first()) {
+            writeln!(
+                f,
+                "on half its records ({rows}) the round-2 winner scores {half:.4} against \
+                 {own:.4}: more records would {}",
+                if half > 1.03 * own {
+                    "pay"
+                } else {
+                    "hardly pay"
+                }
+            )?;
+        }
+        for (i, c) in self.candidates.iter().enumerate() {
+            let mark = if i == self.best { "*" } else { " " };
+            let rmse: Vec<String> = c.rmse.iter().map(|r| format!("{r:.4e}")).collect();
+            match &c.note {
+                Some(note) => writeln!(f, " {mark} {:<28} {note}", c.design)?,
+                None => writeln!(
+                    f,
+                    " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows{}",
+                    c.design,
+                    c.score,
+                    rmse.join(", "),
+                    c.seconds,
+                    c.fit_rows,
+                    c.trained_by
+                        .as_ref()
+                        .map_or_else(String::new, |t| format!("; {t}"))
+                )?,
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Builder of an automatic design for one simulator; see [`TwoStage::auto`].
+#[derive(Debug)]
+pub struct AutoDesign<'a, S: ?Sized> {
+    base: TwoStage<'a, S>,
+    budget: Budget,
+    compressors: Option<Vec<CompressorConfig>>,
+    networks: Option<(RegressorConfig, Vec<RegressorConfig>)>,
+    screening_rows: usize,
+}
+
+/// Largest chart a time budget chooses per second of budget: the default
+/// search's fits, not its simulations, dominate its cost, and they grow
+/// with m; on 2 cores they take about 100 s at m = 8000 (docs/accuracy.md),
+/// so 120 s buys 8000 simulations and 300 s 20000. (16000 per 120 s was
+/// tried: the refit then had time for only 6607 of them, 1.24 times the
+/// Bayes RMSE against 1.21 to 1.29 at 8000.)
+const SIMULATIONS_PER_BUDGET_SECOND: f64 = 8000.0 / 120.0;
+/// Fitting rows round 1 uses at most: it only picks the compressors worth
+/// round 2, and the best few are close (on the benchmark at m = 20000 the
+/// ARX orders 2 to 4 score within 2% of each other, round 2's networks
+/// move the score by 10%); the time saved goes to round 2 on every row.
+const SCREENING_ROWS: usize = 4000;
+/// Memory allowed for the stored records.
+const MAX_CHART_BYTES: usize = 2 << 30;
+
+impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
+    /// An automatic design for `simulator`: the settings of the builder
+    /// (seed, calibration, validation, progress...) apply, the compressor,
+    /// regressor and m are searched.
+    ///
+    /// ```
+    /// use twostage::{Budget, RegressorConfig, TwoStage};
+    /// use twostage::compress::Arx;
+    /// use twostage::fit::MlpParams;
+    /// use twostage::models::Benchmark;
+    ///
+    /// let model = Benchmark::builder().n_samples(300).build()?;
+    /// let net = |h: usize| -> Result<RegressorConfig, twostage::Error> {
+    ///     Ok(RegressorConfig::Mlp(MlpParams::new(&[h])?.restarts(2).check()?))
+    /// };
+    /// let outcome = TwoStage::auto(&model)
+    ///     .budget(Budget::Simulations(400))
+    ///     // A small search for the example; the defaults search more.
+    ///     .compressors(vec![Arx::new(2, 2)?.into(), Arx::new(4, 4)?.into()])
+    ///     .networks(net(6)?, vec![net(3)?])
+    ///     .settings(|b| b.calibration(100).validation(100))
+    ///     .run()?;
+    /// // 2 compressors with one network, the other network on both, then
+    /// // the winner's restarts averaged.
+    /// assert_eq!(outcome.candidates.len(), 5);
+    /// let best = &outcome.candidates[outcome.best];
+    /// assert!(outcome.candidates.iter().all(|c| c.note.is_some() || c.score >= best.score));
+    /// println!("{outcome}");
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    pub fn auto(simulator: &'a S) -> AutoDesign<'a, S> {
+        AutoDesign {
+            base: TwoStage::builder(simulator),
+            budget: Budget::default(),
+            compressors: None,
+            networks: None,
+            screening_rows: SCREENING_ROWS,
+        }
+    }
+}
+
+impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
+    /// The search budget (default: 120 seconds).
+    pub fn budget(mut self, budget: Budget) -> Self {
+        self.budget = budget;
+        self
+    }
+
+    /// Replace the round-1 compressors (default: ARX(n, n) for n = 2, 3, 4,
+    /// 5, 6, 8, NARX(2, 2, 2), output PCA with 8, 12, 16 components).
+    pub fn compressors(mut self, compressors: Vec<CompressorConfig>) -> Self {
+        self.compressors = Some(compressors);
+        self
+    }
+
+    /// Replace the networks: `first` for round 1, `others` for round 2
+    /// (default: MLP `[20]`; then `[10]`, `[40]`, `[20, 20]`, and 4 pieces of `[20]`).
+    pub fn networks(mut self, first: RegressorConfig, others: Vec<RegressorConfig>) -> Self {
+        self.networks = Some((first, others));
+        self
+    }
+
+    /// Fitting rows of round 1, which only ranks the compressors (default
+    /// 4000): on a larger chart the round-1 fits see only this many, and
+    /// round 2 fits its networks, the round-1 network among them, on every
+    /// fitting row; only full fits compete for the win.
+    pub fn screening_rows(mut self, rows: usize) -> Self {
+        self.screening_rows = rows.max(1);
+        self
+    }
+
+    /// Change the shared settings (seed, calibration, validation, alpha,
+    /// delta, progress) through the ordinary builder.
+    pub fn settings(mut self, f: impl FnOnce(TwoStage<'a, S>) -> TwoStage<'a, S>) -> Self {
+        self.base = f(self.base);
+        self
+    }
+
+    /// Run the search, keep the best candidate, calibrate and validate it.
+    ///
+    /// The records are the builder's source: simulated (the chart size
+    /// follows from the budget), or read from chart files or raw shards
+    /// (its first training records, as many as the budget affords, or the first
+    /// [`Budget::Simulations`] of them; no new simulation), calibrated and
+    /// validated on the source's held-out records as a preset would be.
+    ///
+    /// # Errors
+    /// An invalid budget, a budget too short for calibration and
+    /// validation, too many failed simulations, a chart too small, shards
+    /// that hold features, or no candidate that could be fitted.
+    pub fn run(self) -> Result<AutoOutcome> {
+        let start = Instant::now();
+        let AutoDesign {
+            base,
+            budget,
+            compressors,
+            networks,
+            screening_rows,
+        } = self;
+        let base = base.adopting_source()?;
+        base.settings_ref().check()?;
+        let simulates = base.record_source().simulates();
+        let (m, deadline) = chart_size(budget, &base, simulates, start)?;
+        let base = if simulates { base.simulations(m) } else { base };
+        let records = base.open_records()?;
+        let (mut chart, failures) = records.stored_training()?;
+        if !simulates && chart.records.len() > m {
+            base.observer().note(&format!(
+                "the search fits and scores on the first {m} of the chart's {} training records \
+                 (as many as its budget affords; a larger budget uses more)",
+                chart.records.len()
+            ));
+            chart.records.truncate(m);
+            chart.thetas = chart.thetas.slice(ndarray::s![..m, ..]).to_owned();
+        }
+        if chart.records.len() < MIN_SEARCH_RECORDS {
+            return Err(Error::InvalidSetting {
+                name: "training records",
+                value: chart.records.len().to_string(),
+                reason: format!(
+                    "the automatic design needs at least {MIN_SEARCH_RECORDS} to fit on and \
+                     score its candidates: give a larger chart, or hold out fewer records"
+                ),
+            });
+        }
+        let (medium, networks) = match networks {
+            Some(pair) => pair,
+            None => (
+                network(&[20])?,
+                vec![
+                    network(&[10])?,
+                    network(&[40])?,
+                    network(&[20, 20])?,
+                    pieces(4, &[20])?,
+                ],
+            ),
+        };
+        let spec = base.simulator().spec();
+        let compressors = match compressors {
+            Some(list) => list
+                .into_iter()
+                .filter_map(|c| c.for_model(spec).ok())
+                .collect(),
+            None => candidate_compressors(
+                spec.output_names().len(),
+                spec.input_names().len(),
+                spec.n_samples(),
+                output_transforms(&chart.records),
+            ),
+        };
+        let mut search = Search::new(&base, &chart, (budget, deadline), screening_rows);
+        base.observer().begin(Stage::Fitting, 0);
+        search.round_one(&compressors, &medium);
+        search.round_two(&medium, &networks);
+        let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
+        let best = search.best(&budget)?;
+        let Winner {
+            compressor,
+            features,
+            regressor_config,
+            regressor,
+            fitted_rows,
+        } = search.winner(best)?;
+        base.observer().end(Stage::Fitting);
+        let search_seconds = start.elapsed().as_secs_f64();
+        let kept = chart.records.len();
+        let estimator = base.finish(
+            compressor,
+            regressor,
+            TrainedOn {
+                features: features.view(),
+                simulations: kept + failures,
+                failures,
+                sampling: records.sampling(),
+                regressor: regressor_config,
+            },
+            &records,
+        )?;
+        Ok(AutoOutcome {
+            estimator,
+            candidates: search.candidates,
+            best,
+            simulations: kept + failures,
+            search_seconds,
+            refitted: fitted_rows == chart.records.len(),
+            fitted_rows,
+            seed_scores,
+            half_rows,
+        })
+    }
+}
+
+/// The number of training records of a search and the deadline of its
+/// fits. Simulated: a simulation budget as given; a time budget keeps what
+/// calibration and validation will take (timed by a pilot) and spends a
+/// fifth of the rest on the chart. Read from files: the first training
+/// records, as many as a simulation budget says, or as a time budget would
+/// simulate. Either way the records must fit in memory.
+fn chart_size<S: Simulator + ?Sized>(
+    budget: Budget,
+    base: &TwoStage<'_, S>,
+    simulates: bool,
+    start: Instant,
+) -> Result<(usize, Option<Instant>)> {
+    let spec = base.simulator().spec();
+    let record_bytes =
+        spec.n_samples() * (spec.input_names().len() + spec.output_names().len()) * 8;
+    let memory_cap = (MAX_CHART_BYTES / record_bytes.max(1)).max(100);
+    let (m, deadline) = match budget {
+        Budget::Simulations(m) => (m, None),
+        Budget::Seconds(t) => {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(Error::InvalidSetting {
+                    name: "budget seconds",
+                    value: t.to_string(),
+                    reason: "must be finite and > 0".into(),
+                });
+            }
+            if simulates {
+                let per_simulation = base.pilot_seconds_per_simulation()?;
+                let held_out = base.settings_ref().calibration + base.settings_ref().validation;
+                // Simulating and compressing the held-out records, with
+                // a margin for the intervals' own fits.
+                let reserve = 1.2 * per_simulation * held_out as f64 + 1.0;
+                if reserve > 0.5 * t {
+                    return Err(Error::InvalidSetting {
+                        name: "budget seconds",
+                        value: format!("{t}"),
+                        reason: format!(
+                            "calibration and validation alone take about {reserve:.0} s \
+                                 ({held_out} simulations): give at least {:.0} s, or fewer \
+                                 calibration and validation records",
+                            (2.0 * reserve).ceil()
+                        ),
+                    });
+                }
+                let search = t - reserve;
+                let affordable =
+                    (0.2 * search / per_simulation).min(SIMULATIONS_PER_BUDGET_SECOND * search);
+                (
+                    (affordable as usize).max(500).min(memory_cap),
+                    Some(start + Duration::from_secs_f64(search)),
+                )
+            } else {
+                // The fits, not the records, cost the time: a chart gives
+                // the search as many records as a simulated search of this
+                // budget would chart. The held-out records are compressed
+                // once by the winner: a small share of the budget.
+                let records = (SIMULATIONS_PER_BUDGET_SECOND * t) as usize;
+                (
+                    records.max(MIN_SEARCH_RECORDS),
+                    Some(start + Duration::from_secs_f64(0.95 * t)),
+                )
+            }
+        }
+    };
+    if !simulates {
+        return Ok((m.min(memory_cap), deadline));
+    }
+    if m < 50 || m > memory_cap {
+        return Err(Error::InvalidSetting {
+            name: "budget simulations",
+            value: m.to_string(),
+            reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
+        });
+    }
+    Ok((m, deadline))
+}
+
+/// Training records a search needs at least: a fifth of them score the
+/// candidates.
+const MIN_SEARCH_RECORDS: usize = 50;

@@ -1,0 +1,571 @@
+//! One automatic design's candidates: its three rounds on a stored chart,
+//! what each costs and scores, and the winner it ships.
+
+use std::time::{Duration, Instant};
+
+use ndarray::{Array2, Axis};
+use rayon::prelude::*;
+use twostage_compress::{Compressor, CompressorConfig, Workspace};
+use twostage_fit::{FittedRegressor, RegressorConfig};
+use twostage_models::{IoData, Simulator};
+use twostage_sources::{ForModel, StoredChart};
+
+use super::candidates::{design, network_size};
+use super::{Budget, CandidateReport};
+use crate::builder::TwoStage;
+use crate::error::{Error, Result};
+use crate::space::{rows_to_estimates, to_learning_space};
+
+/// Share of the chart held out to score candidates.
+const HELD_OUT: f64 = 0.2;
+/// How a network's fit time grows with its weights, for round 2's cost
+/// estimates (see `round_two`).
+const COST_EXPONENT: f64 = 1.2;
+
+/// The candidates of one automatic design: what was tried, on which stored
+/// chart, and what each fit gave.
+pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
+    base: &'s TwoStage<'a, S>,
+    chart: &'s StoredChart,
+    /// The run's budget (for the progress lines).
+    budget: Budget,
+    deadline: Option<Instant>,
+    /// Round 1's fitting rows at most.
+    screening_rows: usize,
+    /// Rows of the chart the candidates are fitted on; the rest score them.
+    fit_rows: usize,
+    /// The prior's standard deviation per parameter: RMSEs are scored in
+    /// its units, so that parameters of different scales weigh alike.
+    prior_sd: Vec<f64>,
+    pub(super) candidates: Vec<CandidateReport>,
+    fitted: Vec<Option<(CompressorConfig, FittedRegressor)>>,
+    networks_of: Vec<RegressorConfig>,
+}
+
+impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
+    pub(super) fn new(
+        base: &'s TwoStage<'a, S>,
+        chart: &'s StoredChart,
+        (budget, deadline): (Budget, Option<Instant>),
+        screening_rows: usize,
+    ) -> Self {
+        let prior = base.simulator().spec().prior();
+        let prior_sd = prior
+            .lower()
+            .iter()
+            .zip(prior.upper())
+            .map(|(lo, hi)| (hi - lo) / 12f64.sqrt())
+            .collect();
+        let rows = chart.thetas.nrows();
+        Self {
+            base,
+            chart,
+            budget,
+            deadline,
+            screening_rows,
+            fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
+            prior_sd,
+            candidates: Vec::new(),
+            fitted: Vec::new(),
+            networks_of: Vec::new(),
+        }
+    }
+
+    /// Round 1: every compressor with one medium network. Nothing is known
+    /// about costs yet: each starts unless the deadline has passed.
+    pub(super) fn round_one(&mut self, compressors: &[CompressorConfig], medium: &RegressorConfig) {
+        let rows = self.fit_rows.min(self.screening_rows);
+        let count = compressors.len();
+        let outcomes: Vec<_> = compressors
+            .par_iter()
+            .enumerate()
+            .map(|(k, c)| {
+                self.tell(1, k, count, c, medium);
+                self.evaluate(c, medium, rows, self.deadline.map(|d| (d, 0.0)), 1)
+            })
+            .collect();
+        for (report, outcome) in outcomes {
+            self.record(report, outcome, medium.clone());
+        }
+    }
+
+    /// Round 2: the other networks on the two best compressors (and the
+    /// round-1 network again when round 1 only screened a share of the
+    /// rows), on every fitting row. Cheapest first, each started only if
+    /// its cost (the round-1 time scaled by the network's size and the
+    /// rows) leaves time to refit the best candidate found so far.
+    pub(super) fn round_two(&mut self, medium: &RegressorConfig, networks: &[RegressorConfig]) {
+        let q = self.chart.thetas.ncols();
+        let ranked = self.ranked();
+        let screened = self
+            .candidates
+            .first()
+            .map_or(self.fit_rows, |c| c.fit_rows);
+        // The refit of the winner on the whole chart, from round 1's best,
+        // but at most 45% of the time left: round 2 gets the rest, and the
+        // refit takes as many rows as its time affords.
+        let all_rows = self.chart.thetas.nrows() as f64;
+        let reserve = ranked.first().map_or(0.0, |&i| {
+            let refit = refit_seconds(self.candidates[i].seconds, screened, all_rows as usize);
+            refit.min(0.45 * self.seconds_left())
+        });
+        let mut trials: Vec<&RegressorConfig> = Vec::new();
+        if screened < self.fit_rows {
+            trials.push(medium);
+        }
+        trials.extend(networks);
+        // Each pair's cost on `screened` rows.
+        let mut pairs: Vec<(CompressorConfig, RegressorConfig, f64)> = ranked
+            .iter()
+            .take(2)
+            .filter_map(|&i| {
+                let (c, _) = self.fitted[i].as_ref()?;
+                let n = c.n_features();
+                let base_size = network_size(medium, n, q);
+                let seconds = self.candidates[i].seconds;
+                Some(trials.iter().map(move |net| {
+                    // Levenberg-Marquardt's products grow with the square
+                    // of the weights, its iterations less: on 16000 rows
+                    // the benchmark's fits grew as size^1.4 to size^1.5, on
+                    // the 4000 of a screened round as size^0.6 to size^1.1
+                    // (other costs weigh more there). Round 2 sizes its rows
+                    // by these estimates, so they aim at the middle.
+                    let scale = (network_size(net, n, q) / base_size).powf(COST_EXPONENT);
+                    (c.clone(), (*net).clone(), seconds * scale)
+                }))
+            })
+            .flatten()
+            .collect();
+        let rows = self.round_two_rows(&pairs, screened, reserve);
+        if rows == screened {
+            // Round 1's network on these rows is scored already.
+            pairs.retain(|(_, net, _)| net != medium);
+        }
+        let growth = rows as f64 / screened.max(1) as f64;
+        for pair in &mut pairs {
+            pair.2 *= growth;
+        }
+        // Stable: equal costs keep the order above, so a simulation budget
+        // (no deadline) evaluates the same list in the same order anywhere.
+        pairs.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let count = pairs.len();
+        let outcomes: Vec<_> = pairs
+            .par_iter()
+            .enumerate()
+            .map(|(k, (c, net, cost))| {
+                self.tell(2, k, count, c, net);
+                self.evaluate(c, net, rows, self.deadline.map(|d| (d, cost + reserve)), 2)
+            })
+            .collect();
+        for ((report, outcome), (_, net, _)) in outcomes.into_iter().zip(pairs) {
+            self.record(report, outcome, net);
+        }
+    }
+
+    /// The rows round 2 fits on: every fitting row when its candidates
+    /// (costs on `screened` rows, growing with the rows) fit in the time
+    /// left after the winner's refit (`reserve`) on the cores there are,
+    /// else as many as do, but never fewer than round 1 screened. Without a
+    /// deadline, every fitting row. Fewer rows for all of round 2 beat
+    /// skipping most of its candidates: they compare on equal terms, and
+    /// the winner is refitted on the whole chart.
+    fn round_two_rows(
+        &self,
+        pairs: &[(CompressorConfig, RegressorConfig, f64)],
+        screened: usize,
+        reserve: f64,
+    ) -> usize {
+        let Some(deadline) = self.deadline else {
+            return self.fit_rows;
+        };
+        let left = deadline
+            .saturating_duration_since(Instant::now())
+            .as_secs_f64()
+            - reserve;
+        let costs: f64 = pairs.iter().map(|p| p.2).sum();
+        affordable_rows(
+            costs / rayon::current_num_threads().max(1) as f64,
+            left,
+            screened,
+            self.fit_rows,
+        )
+    }
+
+    /// Tell the observer which candidate starts, and how much of the
+    /// budget is spent.
+    fn tell(
+        &self,
+        round: usize,
+        k: usize,
+        count: usize,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+    ) {
+        // The log line gives the time; the budget says how much there is.
+        let budget = match self.budget {
+            Budget::Seconds(t) => format!("budget {t:.0} s"),
+            Budget::Simulations(_) => "every candidate runs".to_string(),
+        };
+        self.base.observer().status(&format!(
+            "search round {round}, candidate {} of {count}: {}; {budget}",
+            k + 1,
+            design(compressor, regressor)
+        ));
+    }
+
+    fn evaluate(
+        &self,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+        rows: usize,
+        limit: Option<(Instant, f64)>,
+        round: usize,
+    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
+        self.evaluate_seeded(compressor, regressor, rows, limit, (round, 0))
+    }
+
+    /// [`Self::evaluate`] with the network's seed moved by `offset` from
+    /// the run's.
+    fn evaluate_seeded(
+        &self,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+        rows: usize,
+        limit: Option<(Instant, f64)>,
+        (round, offset): (usize, u64),
+    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
+        evaluate(
+            self.base,
+            self.chart,
+            (compressor, regressor),
+            (rows, self.fit_rows),
+            &self.prior_sd,
+            limit,
+            (round, self.base.seed_value().wrapping_add(offset)),
+        )
+    }
+
+    /// Round 3, where the budget allows: the winner's network with its
+    /// restarts averaged (an ensemble of independently seeded networks,
+    /// which competes), and the winner at two other seeds (which does not:
+    /// picking the luckiest seed would fit the held-out rows; it says how
+    /// much the seed matters), and the winner on half its rows (does more
+    /// data pay?). Returns the winner's scores at its own and the other
+    /// seeds, and its rows and score on half the rows.
+    pub(super) fn round_three(&mut self, best: usize) -> (Vec<f64>, Option<(usize, f64)>) {
+        let Some((compressor, _)) = self.fitted[best].clone() else {
+            return (Vec::new(), None);
+        };
+        let network = self.networks_of[best].clone();
+        let winner = &self.candidates[best];
+        let rows = winner.fit_rows;
+        // Each trial, and the winner's refit on the whole chart after it,
+        // must end in time.
+        let refit = refit_seconds(winner.seconds, rows, self.chart.thetas.nrows())
+            .min(0.45 * self.seconds_left());
+        let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
+        // (network, seed offset, whether it competes, rows)
+        let mut trials: Vec<(RegressorConfig, u64, bool, usize)> = vec![
+            (network.clone(), 1, false, rows),
+            (network.clone(), 2, false, rows),
+            (network.clone(), 0, false, rows / 2),
+        ];
+        if let RegressorConfig::Mlp(mlp) = &network
+            && !mlp.params().is_ensemble()
+            && let Ok(averaged) = mlp.params().clone().ensemble(true).check()
+        {
+            trials.insert(0, (RegressorConfig::Mlp(averaged), 0, true, rows));
+        }
+        let count = trials.len();
+        let outcomes: Vec<_> = trials
+            .par_iter()
+            .enumerate()
+            .map(|(k, (net, offset, _, rows))| {
+                self.tell(3, k, count, &compressor, net);
+                self.evaluate_seeded(&compressor, net, *rows, limit, (3, *offset))
+            })
+            .collect();
+        let mut scores = vec![self.candidates[best].score];
+        let mut half = None;
+        for ((report, outcome), (net, _, competes, trial_rows)) in outcomes.into_iter().zip(trials)
+        {
+            if competes {
+                self.record(report, outcome, net);
+            } else if report.note.is_some() {
+                // Skipped for time: nothing to say.
+            } else if trial_rows < rows {
+                half = Some((trial_rows, report.score));
+            } else {
+                scores.push(report.score);
+            }
+        }
+        (scores, half)
+    }
+
+    fn record(
+        &mut self,
+        report: CandidateReport,
+        outcome: Option<(CompressorConfig, FittedRegressor)>,
+        network: RegressorConfig,
+    ) {
+        self.candidates.push(report);
+        self.fitted.push(outcome);
+        self.networks_of.push(network);
+    }
+
+    /// The candidates that were fitted, best score first (ties keep the
+    /// order in which they were tried).
+    fn ranked(&self) -> Vec<usize> {
+        let mut ranked: Vec<usize> = (0..self.candidates.len())
+            .filter(|&i| self.candidates[i].note.is_none())
+            .collect();
+        ranked.sort_by(|&a, &b| {
+            self.candidates[a]
+                .score
+                .total_cmp(&self.candidates[b].score)
+        });
+        ranked
+    }
+
+    /// The best candidate's index: among those fitted on the most rows
+    /// (round 2's and 3's; a screened round-1 fit is not compared with
+    /// them), or, if round 1 alone was fitted, among all.
+    pub(super) fn best(&self, budget: &Budget) -> Result<usize> {
+        let fitted = |i: &usize| self.candidates[*i].note.is_none();
+        let most_rows = (0..self.candidates.len())
+            .filter(fitted)
+            .map(|i| self.candidates[i].fit_rows)
+            .max();
+        (0..self.candidates.len())
+            .filter(|i| fitted(i) && Some(self.candidates[*i].fit_rows) == most_rows)
+            .min_by(|&a, &b| {
+                self.candidates[a]
+                    .score
+                    .total_cmp(&self.candidates[b].score)
+            })
+            .ok_or_else(|| Error::InvalidSetting {
+                name: "budget",
+                value: format!("{budget:?}"),
+                reason: format!(
+                    "no candidate could be fitted within it (first: {})",
+                    self.candidates
+                        .first()
+                        .and_then(|c| c.note.clone())
+                        .unwrap_or_default()
+                ),
+            })
+    }
+
+    /// Seconds until the deadline (infinite without one).
+    fn seconds_left(&self) -> f64 {
+        self.deadline.map_or(f64::INFINITY, |d| {
+            d.saturating_duration_since(Instant::now()).as_secs_f64()
+        })
+    }
+
+    /// The winner, refitted on the whole chart, or on as many of its first
+    /// rows as the time left affords; with the fit it was scored with when
+    /// that is not more rows.
+    pub(super) fn winner(&self, best: usize) -> Result<Winner> {
+        let (compressor, held_out_fit) =
+            self.fitted[best]
+                .clone()
+                .ok_or_else(|| Error::InvalidSetting {
+                    name: "budget",
+                    value: String::new(),
+                    reason: "the best candidate lost its fit".into(),
+                })?;
+        let regressor_config = self.networks_of[best].clone();
+        let scored_rows = self.candidates[best].fit_rows;
+        let all_rows = self.chart.thetas.nrows();
+        let refit_rows = match self.deadline {
+            None => all_rows,
+            Some(_) => affordable_rows(
+                refit_seconds(self.candidates[best].seconds, scored_rows, scored_rows),
+                self.seconds_left(),
+                scored_rows,
+                all_rows,
+            ),
+        };
+        let features = compress_all(&compressor, &self.chart.records)?;
+        let (regressor, fitted_rows) = if refit_rows > scored_rows {
+            let marginals = self.base.simulator().spec().prior().marginals();
+            let rows = ndarray::s![..refit_rows, ..];
+            let fitted = regressor_config.fit(
+                features.slice(rows),
+                to_learning_space(self.chart.thetas.slice(rows), marginals).view(),
+                self.base.seed_value(),
+            )?;
+            (fitted, refit_rows)
+        } else {
+            (held_out_fit, scored_rows)
+        };
+        Ok(Winner {
+            compressor,
+            features,
+            regressor_config,
+            regressor,
+            fitted_rows,
+        })
+    }
+}
+
+/// The seconds a refit on `rows` rows takes, from a candidate's `seconds`
+/// on `scored` rows: with a margin of a quarter, growing with the rows, and
+/// on the whole machine, where the candidate shared it with the others of
+/// its round (each round runs at least as many candidates as threads).
+fn refit_seconds(seconds: f64, scored: usize, rows: usize) -> f64 {
+    1.25 * seconds * rows as f64 / scored.max(1) as f64 / rayon::current_num_threads().max(1) as f64
+}
+
+/// Rows a round can fit on in `left` seconds when it costs `seconds` of
+/// wall time on `screened` rows and grows linearly with them: all `rows`
+/// if they fit, else as many as 80% of the time affords (the costs are
+/// estimates), but never fewer than `screened`.
+fn affordable_rows(seconds: f64, left: f64, screened: usize, rows: usize) -> usize {
+    let per_row = seconds / screened.max(1) as f64;
+    if per_row.is_nan() || per_row <= 0.0 {
+        return rows;
+    }
+    let affordable = (0.8 * left / per_row).max(0.0) as usize;
+    affordable.clamp(screened.min(rows), rows)
+}
+
+/// What the search ships: the winning structure, fitted.
+pub(super) struct Winner {
+    pub(super) compressor: CompressorConfig,
+    /// The whole chart's features under the winning compressor.
+    pub(super) features: Array2<f64>,
+    pub(super) regressor_config: RegressorConfig,
+    pub(super) regressor: FittedRegressor,
+    /// The chart rows the shipped network was fitted on.
+    pub(super) fitted_rows: usize,
+}
+
+/// Features of every record, in parallel (row i is record i).
+fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Array2<f64>> {
+    let n = compressor.n_features();
+    let mut features = vec![0.0; records.len() * n];
+    features
+        .par_chunks_mut(n.max(1))
+        .zip(records.par_iter())
+        .map_init(Workspace::new, |work, (alpha, record)| {
+            compressor.compress_into(record.inputs(), record.outputs(), work, alpha)
+        })
+        .collect::<twostage_compress::Result<Vec<()>>>()?;
+    Ok(Array2::from_shape_vec((records.len(), n), features)
+        .unwrap_or_else(|_| unreachable!("n features per record")))
+}
+
+/// Compress, fit on the first `rows` rows, score on the rows from
+/// `held_out` on (`rows <= held_out`).
+fn evaluate<S: Simulator + ?Sized>(
+    base: &TwoStage<'_, S>,
+    chart: &StoredChart,
+    (compressor, regressor): (&CompressorConfig, &RegressorConfig),
+    (fit_rows, held_out): (usize, usize),
+    prior_sd: &[f64],
+    deadline: Option<(Instant, f64)>,
+    (round, seed): (usize, u64),
+) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
+    let mut report = CandidateReport {
+        compressor: compressor.to_string(),
+        regressor: regressor.to_string(),
+        design: design(compressor, regressor),
+        trained_by: None,
+        round,
+        rmse: Vec::new(),
+        score: f64::INFINITY,
+        seconds: 0.0,
+        fit_rows,
+        note: None,
+    };
+    // (deadline, estimated seconds): skip what would not finish in time.
+    if let Some((deadline, cost)) = deadline
+        && Instant::now() + Duration::from_secs_f64(cost) > deadline
+    {
+        report.note = Some(format!(
+            "skipped: about {cost:.0} s would overrun the time budget"
+        ));
+        return (report, None);
+    }
+    let start = Instant::now();
+    // A structure the records cannot take (an autoregression of a
+    // noise-free decay is rank deficient) does not apply; only a fit that
+    // went wrong failed.
+    let compressed = compressor
+        .prepared_on(&chart.records[..fit_rows])
+        .map_err(Error::from)
+        .and_then(|c| compress_all(&c, &chart.records).map(|f| (c, f)));
+    let (compressor, features) = match compressed {
+        Ok(pair) => pair,
+        Err(e) => {
+            report.seconds = start.elapsed().as_secs_f64();
+            report.note = Some(format!("does not apply to these records: {e}"));
+            return (report, None);
+        }
+    };
+    let outcome = (|| -> Result<(Vec<f64>, CompressorConfig, FittedRegressor)> {
+        let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
+        let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);
+        let (x_fit, t_fit) = (
+            x_fit.slice_move(ndarray::s![..fit_rows, ..]),
+            t_fit.slice_move(ndarray::s![..fit_rows, ..]),
+        );
+        let prior = base.simulator().spec().prior();
+        let z_fit = to_learning_space(t_fit, prior.marginals());
+        let fitted = regressor.fit(x_fit, z_fit.view(), seed)?;
+        let mut estimates = twostage_fit::Predictor::predict(&fitted, x_held)?;
+        rows_to_estimates(
+            &mut estimates,
+            prior.marginals(),
+            prior.lower(),
+            prior.upper(),
+        );
+        let rmse = (0..t_held.ncols())
+            .map(|j| {
+                let sq: f64 = t_held
+                    .column(j)
+                    .iter()
+                    .zip(estimates.column(j))
+                    .map(|(t, e)| (t - e).powi(2))
+                    .sum();
+                (sq / t_held.nrows().max(1) as f64).sqrt()
+            })
+            .collect();
+        Ok((rmse, compressor.clone(), fitted))
+    })();
+    report.seconds = start.elapsed().as_secs_f64();
+    match outcome {
+        Ok((rmse, compressor, fitted)) => {
+            report.trained_by = fitted.training_summary();
+            report.score = rmse.iter().zip(prior_sd).map(|(r, sd)| r / sd).sum::<f64>()
+                / rmse.len().max(1) as f64;
+            report.rmse = rmse;
+            (report, Some((compressor, fitted)))
+        }
+        Err(e) => {
+            report.note = Some(format!("failed: {e}"));
+            (report, None)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Round 2 fits every row when it can, as many as the time affords when
+    /// it cannot, and never fewer than round 1 screened.
+    #[test]
+    fn round_two_takes_the_rows_its_time_affords() {
+        // 100 s on 4000 rows: 32000 rows would take 800 s.
+        assert_eq!(affordable_rows(100.0, 1000.0, 4000, 32000), 32000);
+        assert_eq!(affordable_rows(100.0, 500.0, 4000, 32000), 16000);
+        assert_eq!(affordable_rows(100.0, 10.0, 4000, 32000), 4000);
+        assert_eq!(affordable_rows(100.0, -5.0, 4000, 32000), 4000);
+        // Round 1 fitted every row already: nothing more to take.
+        assert_eq!(affordable_rows(100.0, 10.0, 240, 240), 240);
+        assert_eq!(affordable_rows(0.0, 10.0, 4000, 32000), 32000);
+    }
+}
