@@ -248,21 +248,24 @@ impl PyEstimator {
         Option<Bound<'py, PyAny>>,
         Option<Bound<'py, PyAny>>,
         Option<f64>,
+        Option<Bound<'py, PyAny>>,
     )> {
         let q = self.inner.param_names().len();
         let estimator = &self.inner;
-        // Per record: theta, half-widths (NaN when none), distance (NaN when none).
-        let width = 2 * q + 1;
+        // Per record: theta, half-widths (NaN when none), distance (NaN
+        // when none), samples outside the output transform.
+        let width = 2 * q + 2;
         let (values, single) = self.each_record(py, u, y, width, |u, y, work, out| {
             let assessment = estimator.assess_with(u, y, work)?;
             let (theta, rest) = out.split_at_mut(q);
             theta.copy_from_slice(&assessment.theta);
-            let (widths, distance) = rest.split_at_mut(q);
+            let (widths, rest) = rest.split_at_mut(q);
             match assessment.interval_half_widths() {
                 Some(w) => widths.copy_from_slice(w),
                 None => widths.fill(f64::NAN),
             }
-            distance[0] = assessment.feature_distance.unwrap_or(f64::NAN);
+            rest[0] = assessment.feature_distance.unwrap_or(f64::NAN);
+            rest[1] = assessment.floored_samples.len() as f64;
             Ok(())
         })?;
         let column = |from: usize, to: usize| -> Vec<f64> {
@@ -270,6 +273,19 @@ impl PyEstimator {
                 .chunks_exact(width)
                 .flat_map(|row| row[from..to].iter().copied())
                 .collect()
+        };
+        // One number per record: a float, or an array for a batch.
+        let per_record = |values: Vec<f64>| -> Bound<'py, PyAny> {
+            if single {
+                values[0]
+                    .into_pyobject(py)
+                    .map(|v| v.into_any())
+                    .unwrap_or_else(|e| match e {})
+            } else {
+                ndarray::Array1::from_vec(values)
+                    .into_pyarray(py)
+                    .into_any()
+            }
         };
         let theta = rows(py, column(0, q), q, single);
         let widths = (self.inner.intervals().is_some()
@@ -279,17 +295,13 @@ impl PyEstimator {
             .inner
             .envelope()
             .map(twostage::FeatureEnvelope::threshold);
-        let distance = threshold.map(|_| {
-            let d = column(2 * q, width);
-            if single {
-                d[0].into_pyobject(py)
-                    .map(|v| v.into_any())
-                    .unwrap_or_else(|e| match e {})
-            } else {
-                ndarray::Array1::from_vec(d).into_pyarray(py).into_any()
-            }
-        });
-        Ok((theta, widths, distance, threshold))
+        let distance = threshold.map(|_| per_record(column(2 * q, 2 * q + 1)));
+        let transforms = matches!(
+            self.inner.compressor(),
+            twostage::CompressorConfig::Transformed(_)
+        );
+        let floored = transforms.then(|| per_record(column(2 * q + 1, width)));
+        Ok((theta, widths, distance, threshold, floored))
     }
 }
 

@@ -276,3 +276,29 @@ def test_the_automatic_design_on_a_chart_is_the_cli_s(tmp_path):
     assert again.preset_block() == block
     with pytest.raises(ValueError, match="budget_seconds and budget_sims go with auto"):
         twostage.train(model_file=model, chart=chart, budget_sims=400)
+
+
+def test_assess_says_which_records_a_log_could_not_take(tmp_path):
+    """An estimator of log-transformed outputs takes a zero at the smallest
+    training value and says so per record; one without transforms says
+    None."""
+    model = tmp_path / "growth.toml"
+    model.write_text(GROWTH_MODEL)
+    theta, _, outputs = growth_chart(400, 5)
+    est = twostage.train(
+        model_file=model, chart=(theta, None, outputs), compress="log+raw", fit="mlp:3",
+        validate=50, calibrate=50, progress=False,
+    )
+    clean = outputs[:2].copy()
+    broken = clean.copy()
+    broken[1, 3, 0] = 0.0
+    assessed = est.assess(None, broken)
+    assert assessed["untransformed_samples"].tolist() == [0.0, 1.0]
+    assert np.all(np.isfinite(assessed["theta"]))
+    one = est.assess(None, broken[1])
+    assert one["untransformed_samples"] == 1.0
+    plain = twostage.train(model="benchmark", sims=100, validate=0, calibrate=0,
+                           progress=False)
+    n = plain.record_shape[0]
+    u, y = np.random.default_rng(1).standard_normal((2, n, 1))
+    assert plain.assess(u, y)["untransformed_samples"] is None

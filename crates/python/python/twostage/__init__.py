@@ -142,10 +142,15 @@ class Estimator:
         - ``feature_distance``: the record's Mahalanobis distance from the
           training features, ``distance_threshold`` the distance 99.9% of
           them stay within, ``out_of_distribution`` whether it is beyond
-          (None without a feature envelope).
+          (None without a feature envelope);
+        - ``untransformed_samples``: for an estimator that transforms its
+          outputs (``log+...``), how many samples of the record lay outside
+          the transform's domain (a zero under a logarithm) and were taken
+          at the smallest training value instead; the estimate does not
+          speak for them. None for an estimator without transforms.
         """
         u, y = self._columns(u, y)
-        theta, widths, distance, threshold = self._native.assess(u, y)
+        theta, widths, distance, threshold, floored = self._native.assess(u, y)
         result = {
             "theta": theta,
             "lower": None if widths is None else theta - widths,
@@ -153,6 +158,7 @@ class Estimator:
             "feature_distance": distance,
             "distance_threshold": threshold,
             "out_of_distribution": None if distance is None else distance > threshold,
+            "untransformed_samples": floored,
         }
         return result
 

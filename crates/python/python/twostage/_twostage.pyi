@@ -38,9 +38,16 @@ class Estimator:
     def estimate(self, u: Optional[_Array], y: _Array) -> _Array: ...
     def assess(
         self, u: Optional[_Array], y: _Array
-    ) -> Tuple[_Array, Optional[_Array], Optional[Union[float, _Array]], Optional[float]]:
+    ) -> Tuple[
+        _Array,
+        Optional[_Array],
+        Optional[Union[float, _Array]],
+        Optional[float],
+        Optional[Union[float, _Array]],
+    ]:
         """(theta, interval half-widths, feature distance, distance
-        threshold): ``twostage.Estimator.assess`` makes the dict of these."""
+        threshold, samples outside the output transform):
+        ``twostage.Estimator.assess`` makes the dict of these."""
         ...
 
 def train(
