@@ -217,3 +217,29 @@ fn a_budget_too_short_for_calibration_and_validation_is_said_first() {
     );
     assert!(!dir.join("never.tsest").exists());
 }
+
+#[test]
+fn a_chart_too_small_to_search_on_says_how_many_it_needs() {
+    let (dir, model) = growth_folder("auto-small-chart", 40);
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        path(&dir.join("chart")),
+        "--auto",
+        "--validate",
+        "10",
+        "--calibrate",
+        "10",
+        "--out",
+        path(&dir.join("never.tsest")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("training records = 20") && stderr.contains("at least 50"),
+        "{stderr}"
+    );
+    assert!(!dir.join("never.tsest").exists());
+}
