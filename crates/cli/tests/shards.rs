@@ -183,3 +183,49 @@ fn slurm_writes_an_array_script_and_the_merge_command() {
     );
     assert!(charts.join("logs").is_dir());
 }
+
+/// The automatic design reads raw shards' records as it reads its own
+/// simulations: the searched file is the single machine's byte for byte.
+#[test]
+fn a_search_on_raw_shards_is_the_single_machine_search() {
+    let dir = scratch("cli-shards-auto");
+    let model = dir.join("model.toml");
+    std::fs::write(&model, MODEL).unwrap();
+    let sizes = ["--validate", "100", "--calibrate", "100", "--seed", "3"];
+    let single = dir.join("single.tsest");
+    let mut args = vec![
+        "train",
+        "--model-file",
+        path(&model),
+        "--auto",
+        "--budget-sims",
+        "300",
+    ];
+    args.extend(sizes);
+    args.extend(["--out", path(&single), "--quiet"]);
+    run(&args);
+    let shards = dir.join("shards");
+    for shard in ["0/2", "1/2"] {
+        run(&shard_args(path(&model), path(&shards), shard));
+    }
+    let merged = dir.join("merged.tsest");
+    let pattern = format!("{}/shard-*", path(&shards));
+    run(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        &pattern,
+        "--auto",
+        "--budget-sims",
+        "300",
+        "--out",
+        path(&merged),
+        "--quiet",
+    ]);
+    assert_eq!(
+        std::fs::read(&merged).unwrap(),
+        std::fs::read(&single).unwrap(),
+        "the same search on the same records"
+    );
+}
