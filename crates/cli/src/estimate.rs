@@ -127,10 +127,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             signals: estimator.signal_names(),
             sample_time: estimator.record_shape().sample_time,
         };
-        let transforms = matches!(
-            estimator.compressor(),
-            twostage::compress::CompressorConfig::Transformed(_)
-        );
+        let transforms = estimator.transforms_outputs();
         let mut refine = if args.refine {
             Some(refinement(&estimator)?)
         } else {

@@ -296,11 +296,10 @@ impl PyEstimator {
             .envelope()
             .map(twostage::FeatureEnvelope::threshold);
         let distance = threshold.map(|_| per_record(column(2 * q, 2 * q + 1)));
-        let transforms = matches!(
-            self.inner.compressor(),
-            twostage::CompressorConfig::Transformed(_)
-        );
-        let floored = transforms.then(|| per_record(column(2 * q + 1, width)));
+        let floored = self
+            .inner
+            .transforms_outputs()
+            .then(|| per_record(column(2 * q + 1, width)));
         Ok((theta, widths, distance, threshold, floored))
     }
 }

@@ -454,6 +454,13 @@ impl Estimator {
         Ok(theta)
     }
 
+    /// Whether the estimator transforms its outputs before stage 1 (then
+    /// [`Assessment::floored_samples`] says which samples it could not
+    /// take as they were).
+    pub fn transforms_outputs(&self) -> bool {
+        matches!(self.compressor, CompressorConfig::Transformed(_))
+    }
+
     /// The adaptive intervals, when calibrated.
     pub fn adaptive_intervals(&self) -> Option<&AdaptiveIntervals> {
         self.adaptive.as_ref()
