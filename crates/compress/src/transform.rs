@@ -175,6 +175,13 @@ impl Transformed {
         &self.inner
     }
 
+    /// Per output, the smallest value of its transform's domain the
+    /// training records showed: what an estimate takes in place of a
+    /// sample outside the domain (empty until prepared).
+    pub fn floors(&self) -> &[f64] {
+        &self.floors
+    }
+
     /// Whether the floors of the estimate path are set.
     pub fn is_prepared(&self) -> bool {
         self.floors.len() == self.outputs.len()

@@ -52,6 +52,10 @@ typedef struct {
   // The distance 99.9% of training features stay within (NaN without
   // an envelope).
   double distance_threshold;
+  // Output samples outside their transform's domain (a logarithm of a
+  // non-positive value), taken at the smallest value training showed
+  // (0 when the estimator does not transform its outputs).
+  uint32_t untransformed_samples;
 } ts_assessment;
 
 #ifdef __cplusplus

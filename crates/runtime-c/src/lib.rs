@@ -89,6 +89,10 @@ pub struct TsAssessment {
     /// The distance 99.9% of training features stay within (NaN without
     /// an envelope).
     pub distance_threshold: f64,
+    /// Output samples outside their transform's domain (a logarithm of a
+    /// non-positive value), taken at the smallest value training showed
+    /// (0 when the estimator does not transform its outputs).
+    pub untransformed_samples: u32,
 }
 
 fn code(result: Result<(), Error>) -> i32 {
@@ -346,6 +350,8 @@ pub unsafe extern "C" fn ts_stream_finish(
                     out_of_distribution: i32::from(a.out_of_distribution()),
                     feature_distance: a.feature_distance.unwrap_or(f64::NAN),
                     distance_threshold: a.distance_threshold.unwrap_or(f64::NAN),
+                    untransformed_samples: u32::try_from(a.untransformed_samples)
+                        .unwrap_or(u32::MAX),
                 };
             }
             TS_OK

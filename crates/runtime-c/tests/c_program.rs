@@ -145,6 +145,7 @@ fn a_c_program_prints_the_rust_estimates() {
             number(6).to_bits(),
             host.distance_threshold.unwrap().to_bits()
         );
+        assert_eq!(fields[7], host.floored_samples.len().to_string());
     }
     assert!(estimator.assess(&records[7]).unwrap().out_of_distribution());
     assert_eq!(

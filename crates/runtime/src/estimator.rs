@@ -5,9 +5,10 @@ use twostage_kernels::Values;
 use crate::bytes::{Cursor, LeF64s, u32_at};
 use crate::error::Error;
 use crate::format::{
-    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, HEADER_BYTES, MAGIC, MAX_EXPERTS,
-    MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
-    TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_OUTPUT_TRANSFORMS,
+    HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK,
+    REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY,
+    TRANSFORM_LOG, VERSION,
 };
 use crate::network::Network;
 
@@ -85,6 +86,10 @@ pub struct Estimator<'a> {
     pub(crate) conformal: Option<LeF64s<'a>>,
     pub(crate) adaptive: Option<Adaptive<'a>>,
     pub(crate) envelope: Option<Envelope<'a>>,
+    /// Where the output transforms' codes start in the blob (0: none);
+    /// an offset rather than two slices keeps the view within the C
+    /// API's opaque storage.
+    output_transforms_at: usize,
     blob: &'a [u8],
     max_width: usize,
 }
@@ -140,7 +145,8 @@ impl<'a> Estimator<'a> {
                 at: CHECKSUM_FROM,
             });
         }
-        if flags & !(FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE) != 0 || r1 != 0 || r2 != 0 {
+        let known = FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE | FLAG_OUTPUT_TRANSFORMS;
+        if flags & !known != 0 || r1 != 0 || r2 != 0 {
             return Err(Error::Invalid {
                 field: "flags",
                 at: flags_at,
@@ -264,6 +270,11 @@ impl<'a> Estimator<'a> {
         } else {
             None
         };
+        let output_transforms_at = if flags & FLAG_OUTPUT_TRANSFORMS != 0 {
+            read_output_transforms(&mut c, n_outputs)?
+        } else {
+            0
+        };
         if c.at != blob.len() {
             return Err(Error::TrailingBytes { at: c.at });
         }
@@ -282,6 +293,7 @@ impl<'a> Estimator<'a> {
             conformal,
             adaptive,
             envelope,
+            output_transforms_at,
             blob,
             max_width: 0,
         };
@@ -369,6 +381,34 @@ impl<'a> Estimator<'a> {
         u32_at(self.transforms, 4 * j) == Some(TRANSFORM_LOG)
     }
 
+    /// Whether an estimate transforms the output samples (logarithms)
+    /// before stage 1: a sample outside a transform's domain is then
+    /// replaced by the smallest value training showed, and counted in
+    /// [`crate::Assessment::untransformed_samples`].
+    pub fn transforms_outputs(&self) -> bool {
+        self.output_transforms_at != 0
+    }
+
+    /// Output `j`'s sample as stage 1 takes it: transformed, and
+    /// `Err(transformed floor)` for a sample outside the domain.
+    pub(crate) fn output_sample(&self, j: usize, value: f64) -> Result<f64, f64> {
+        if self.output_transforms_at == 0 {
+            return Ok(value);
+        }
+        let code = u32_at(self.blob, self.output_transforms_at + 4 * j);
+        let floors_at = floors_offset(self.output_transforms_at, self.n_outputs);
+        let floor = Cursor::new(self.blob, floors_at + 8 * j)
+            .f64("floor")
+            .unwrap_or(f64::NAN);
+        match code {
+            Some(SIGNAL_LOG) if value > 0.0 => Ok(libm::log(value)),
+            Some(SIGNAL_LOG) => Err(libm::log(floor)),
+            Some(SIGNAL_LOG1P) if value > -1.0 => Ok(libm::log1p(value)),
+            Some(SIGNAL_LOG1P) => Err(libm::log1p(floor)),
+            _ => Ok(value),
+        }
+    }
+
     /// How many `f64` a [`crate::Stream`] of this estimator needs as its
     /// workspace: the past samples of each signal, the normal equations
     /// of each output in double-double, and the scratch of the final
@@ -376,4 +416,36 @@ impl<'a> Estimator<'a> {
     pub fn workspace_len(&self) -> usize {
         crate::stream::Layout::of(self).total
     }
+}
+
+/// Where the floors follow `n_outputs` codes starting at `codes_at` (the
+/// codes are padded to 8 bytes).
+fn floors_offset(codes_at: usize, n_outputs: usize) -> usize {
+    (codes_at + 4 * n_outputs).div_ceil(8) * 8
+}
+
+/// The output transforms' codes and floors (each floor inside its
+/// transform's domain); their offset.
+fn read_output_transforms(c: &mut Cursor<'_>, n_outputs: usize) -> Result<usize, Error> {
+    let at = c.at;
+    let codes = c.u32s(n_outputs)?;
+    let floors_at = c.at;
+    let floors = c.finite("output transform floor", n_outputs)?;
+    debug_assert_eq!(floors_at, floors_offset(at, n_outputs));
+    for j in 0..n_outputs {
+        let floor = floors.at(j);
+        let valid = match u32_at(codes, 4 * j) {
+            Some(SIGNAL_IDENTITY) => true,
+            Some(SIGNAL_LOG) => floor > 0.0,
+            Some(SIGNAL_LOG1P) => floor > -1.0,
+            _ => false,
+        };
+        if !valid {
+            return Err(Error::Invalid {
+                field: "output transform code or floor",
+                at,
+            });
+        }
+    }
+    Ok(at)
 }

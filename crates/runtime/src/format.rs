@@ -20,7 +20,9 @@
 //! the global one and each expert); the conformal half-widths (flag 1);
 //! the adaptive floors, quantiles and difficulty network (flag 2); the
 //! envelope's threshold, mean and row-major lower Cholesky factor (flag
-//! 4). A network is: the count of its layer sizes and of its ensemble
+//! 4); the output signals' transform codes (`u32`, one per output) and
+//! their floors (`f64`, one per output: what a sample outside the
+//! transform's domain is replaced by) (flag 8). A network is: the count of its layer sizes and of its ensemble
 //! members (`u32`), the sizes (`u32`), the feature means and scales, the
 //! target means and scales, then each member's weights and biases, layer
 //! by layer (row-major weights, then biases). A linear map is a network
@@ -42,6 +44,9 @@ pub const FLAG_ADAPTIVE: u32 = 2;
 /// Flag: a feature envelope follows.
 pub const FLAG_ENVELOPE: u32 = 4;
 
+/// Flag: the output signals are transformed before stage 1.
+pub const FLAG_OUTPUT_TRANSFORMS: u32 = 8;
+
 /// Regressor kind: one network (an MLP ensemble, or a linear map).
 pub const REGRESSOR_NETWORK: u32 = 1;
 /// Regressor kind: a global network routing to experts by pieces of the
@@ -52,6 +57,13 @@ pub const REGRESSOR_PIECEWISE: u32 = 2;
 pub const TRANSFORM_IDENTITY: u32 = 0;
 /// Transform code: the network learned its logarithm.
 pub const TRANSFORM_LOG: u32 = 1;
+
+/// Output transform code: the signal as it is.
+pub const SIGNAL_IDENTITY: u32 = 0;
+/// Output transform code: its natural logarithm (positive samples).
+pub const SIGNAL_LOG: u32 = 1;
+/// Output transform code: `ln(1 + y)` (samples above -1).
+pub const SIGNAL_LOG1P: u32 = 2;
 
 /// Most parameters.
 pub const MAX_PARAMETERS: usize = 64;

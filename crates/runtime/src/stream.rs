@@ -8,10 +8,12 @@ use crate::correlations::{Memory, Shape, load, store};
 use crate::dd::Dd;
 use crate::error::Error;
 use crate::estimator::{Estimator, Regressor};
+use crate::format::MAX_SIGNALS;
 
-/// Words at the start of the workspace: samples pushed, the state, and
-/// the sample that was not finite (for a failed stream).
-const STATUS_WORDS: usize = 3;
+/// Words at the start of the workspace: samples pushed, the state, the
+/// sample that was not finite (for a failed stream), and the output
+/// samples an output transform could not take.
+const STATUS_WORDS: usize = 4;
 const OPEN: f64 = 0.0;
 const FAILED: f64 = 2.0;
 
@@ -85,6 +87,10 @@ pub struct Assessment {
     pub feature_distance: Option<f64>,
     /// The distance 99.9% of training features stay within.
     pub distance_threshold: Option<f64>,
+    /// Output samples outside their transform's domain (a logarithm of a
+    /// non-positive value), replaced by the smallest value training
+    /// showed: 0 unless the estimator transforms its outputs.
+    pub untransformed_samples: usize,
 }
 
 impl Assessment {
@@ -219,11 +225,24 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             self.set_state(FAILED, samples);
             return Err(Error::NotFinite { sample: samples });
         }
+        // Each output once through its transform: `current` is asked for
+        // a signal many times per sample.
+        let mut taken = [0.0; MAX_SIGNALS];
+        let mut untransformed = 0;
+        for ((slot, y), j) in taken.iter_mut().zip(outputs).zip(0..) {
+            *slot = e.output_sample(j, *y).unwrap_or_else(|floor| {
+                untransformed += 1;
+                floor
+            });
+        }
+        if let Some(count) = self.status.get_mut(3) {
+            *count += f64::from(untransformed);
+        }
         let layout = Layout::of(e);
         let (mut memory, _, _) = layout.split(self.work);
         let current = |signal: usize| -> f64 {
             if signal < e.n_outputs {
-                outputs.get(signal)
+                taken.get(signal)
             } else {
                 inputs.get(signal - e.n_outputs)
             }
@@ -332,6 +351,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             intervals,
             feature_distance,
             distance_threshold: e.envelope.map(|envelope| envelope.threshold),
+            untransformed_samples: self.status.get(3).map_or(0, |c| *c as usize),
         })
     }
 }

@@ -7,6 +7,8 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
+mod common;
+
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::Arx;
 use twostage::models::{
@@ -21,6 +23,18 @@ use twostage_runtime::{Estimator, Intervals, Stream};
 /// side's theta against the estimate through QR's coefficients; the flag
 /// must agree wherever the distance is not within 1e-9 of the threshold.
 fn disagreement(host: &twostage::Estimator, model: &dyn Simulator, count: u64) -> [f64; 5] {
+    disagreement_on(host, model, count, &|_, _| {})
+}
+
+/// As [`disagreement`], on records `spoil` may change after simulating
+/// them (record index, record); the samples an output transform could
+/// not take must be the host's too.
+fn disagreement_on(
+    host: &twostage::Estimator,
+    model: &dyn Simulator,
+    count: u64,
+    spoil: &dyn Fn(u64, &mut IoData),
+) -> [f64; 5] {
     let blob = host.to_runtime().unwrap();
     let runtime = Estimator::from_bytes(&blob).unwrap();
     let mut work = vec![0.0; runtime.workspace_len()];
@@ -41,6 +55,7 @@ fn disagreement(host: &twostage::Estimator, model: &dyn Simulator, count: u64) -
         model
             .simulate(&truth, &mut experiment_rng(78, i), &mut record)
             .unwrap();
+        spoil(i, &mut record);
         let expected = host.assess(&record).unwrap();
         let mut stream = Stream::new(&runtime, &mut work).unwrap();
         for (u, y) in record
@@ -54,6 +69,7 @@ fn disagreement(host: &twostage::Estimator, model: &dyn Simulator, count: u64) -
                 .unwrap();
         }
         let got = stream.finish(&mut theta, &mut widths).unwrap();
+        assert_eq!(got.untransformed_samples, expected.floored_samples.len());
         let exact = through_qr(host, &record);
         for j in 0..q {
             let width = host.upper()[j] - host.lower()[j];
@@ -92,9 +108,21 @@ fn disagreement(host: &twostage::Estimator, model: &dyn Simulator, count: u64) -
 fn through_qr(host: &twostage::Estimator, record: &IoData) -> Vec<f64> {
     use twostage::compress::Compressor;
     use twostage::fit::Predictor;
+    // A sample an output transform cannot take counts at its floor, as
+    // on the estimate path.
+    let mut outputs = record.outputs().to_owned();
+    if let twostage::compress::CompressorConfig::Transformed(t) = host.compressor() {
+        for (j, mut column) in outputs.columns_mut().into_iter().enumerate() {
+            for v in column.iter_mut() {
+                if !t.transforms()[j].accepts(*v) {
+                    *v = t.floors()[j];
+                }
+            }
+        }
+    }
     let features = host
         .compressor()
-        .compress(record.inputs(), record.outputs())
+        .compress(record.inputs(), outputs.view())
         .unwrap();
     let mut theta = vec![0.0; host.param_names().len()];
     host.regressor()
@@ -286,4 +314,109 @@ fn an_output_only_model_agrees() {
     let ar = Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap();
     let estimator = structured(&model, ar, "mlp:4", 6);
     check("output only, ar:3", &estimator, &model);
+}
+
+/// One input; a positive output spanning decades (the exponential of an
+/// ARX process, multiplicative noise) and a count-like one that is zero
+/// about half the time.
+struct Positive {
+    spec: ModelSpec,
+}
+
+impl Simulator for Positive {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+    fn simulate(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
+        let n = self.spec.n_samples();
+        out.resize(n, 1, 2);
+        for v in out.input_mut(0).iter_mut() {
+            *v = StandardNormal.sample(rng);
+        }
+        let u = out.input(0).to_vec();
+        let (mut s, mut y0, mut y1) = (0.0, vec![0.0; n], vec![0.0; n]);
+        for k in 1..n {
+            let e: f64 = StandardNormal.sample(rng);
+            s = theta[0] * s + theta[1] * u[k - 1] + 0.2 * e;
+            y0[k] = (1.5 * s).exp();
+            y1[k] = (3.0 * (s - 0.2)).max(0.0);
+        }
+        y0[0] = 1.0;
+        out.output_mut(0).copy_from_slice(&y0);
+        out.output_mut(1).copy_from_slice(&y1);
+        Ok(())
+    }
+}
+
+#[test]
+fn output_transforms_agree_and_floor_the_same_samples() {
+    let prior = Prior::uniform_box(&[0.2, 0.5], &[0.8, 1.5]).unwrap();
+    let model = Positive {
+        spec: ModelSpec::new("positive", &["a", "b"], prior, 1.0, 200)
+            .unwrap()
+            .with_signals(&["u"], &["level", "count"]),
+    };
+    let compressor: twostage::compress::CompressorConfig = "log,log1p+arx:2,2".parse().unwrap();
+    let host = TwoStage::builder(&model)
+        .compressor(compressor)
+        .regressor("mlp:6".parse().unwrap())
+        .simulations(400)
+        .validation(0)
+        .calibration(200)
+        .seed(5)
+        .train()
+        .unwrap();
+    check("log and log1p of the outputs", &host, &model);
+    // Samples a logarithm cannot take: the runtime floors and counts the
+    // very samples the host does, and the estimates still agree.
+    let spoiled = disagreement_on(&host, &model, 12, &|i, record| {
+        record.output_mut(0)[3 + i as usize] = -0.5;
+        if i % 2 == 0 {
+            record.output_mut(0)[40] = 0.0;
+            record.output_mut(1)[60] = -1.5;
+        }
+    });
+    assert!(spoiled[0] <= 1e-9 && spoiled[3] <= 1e-10, "{spoiled:?}");
+    // A blob without the flag is read as one that does not transform.
+    let runtime_blob = host.to_runtime().unwrap();
+    assert!(
+        Estimator::from_bytes(&runtime_blob)
+            .unwrap()
+            .transforms_outputs()
+    );
+    let plain = trained(&Benchmark::new(), twostage::recommended_benchmark(), 300);
+    let plain_blob = plain.to_runtime().unwrap();
+    assert!(
+        !Estimator::from_bytes(&plain_blob)
+            .unwrap()
+            .transforms_outputs()
+    );
+    // The section is last: two codes padded to 8 bytes, then two floors.
+    // A floor outside its transform's domain, or an unknown code, is
+    // refused where the section starts.
+    let section = runtime_blob.len() - 24;
+    let refused = |change: &dyn Fn(&mut Vec<u8>)| {
+        let mut blob = runtime_blob.clone();
+        change(&mut blob);
+        common::seal(&mut blob);
+        Estimator::from_bytes(&blob).unwrap_err()
+    };
+    let named = twostage_runtime::Error::Invalid {
+        field: "output transform code or floor",
+        at: section,
+    };
+    let floor_at = section + 8;
+    assert_eq!(
+        refused(&|b| b[floor_at..floor_at + 8].copy_from_slice(&(-1.0f64).to_le_bytes())),
+        named
+    );
+    assert_eq!(
+        refused(&|b| b[section..section + 4].copy_from_slice(&7u32.to_le_bytes())),
+        named
+    );
 }

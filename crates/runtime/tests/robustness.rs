@@ -6,12 +6,16 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
+mod common;
+
 use std::sync::OnceLock;
+
+use common::seal;
 
 use proptest::prelude::*;
 use twostage::TwoStage;
 use twostage::models::{Benchmark, Simulator, experiment_rng};
-use twostage_runtime::format::{CHECKSUM_FROM, HEADER_BYTES};
+use twostage_runtime::format::CHECKSUM_FROM;
 use twostage_runtime::{Error, Estimator, Stream};
 
 /// A network estimator and a piecewise one, with intervals and envelope.
@@ -43,17 +47,6 @@ fn record() -> (Vec<f64>, Vec<f64>) {
         .simulate(&[0.5], &mut experiment_rng(5, 0), &mut record)
         .unwrap();
     (record.input(0).to_vec(), record.output(0).to_vec())
-}
-
-/// Set the length and checksum of a blob to its bytes.
-fn seal(blob: &mut [u8]) {
-    if blob.len() < HEADER_BYTES {
-        return;
-    }
-    let length = u32::try_from(blob.len()).unwrap();
-    blob[8..12].copy_from_slice(&length.to_le_bytes());
-    let crc = twostage_runtime::format::checksum(&blob[CHECKSUM_FROM..]);
-    blob[12..16].copy_from_slice(&crc.to_le_bytes());
 }
 
 /// Whatever the blob, reading it and (if it reads) estimating ends in a

@@ -5,14 +5,15 @@ use twostage_compress::Compressor;
 use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
 use twostage_models::Transform;
 use twostage_runtime::format::{
-    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, HEADER_BYTES, MAGIC, MAX_EXPERTS,
-    MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK,
-    REGRESSOR_PIECEWISE, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_OUTPUT_TRANSFORMS,
+    HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS,
+    MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG,
+    SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
 };
 
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
-use twostage_compress::CompressorConfig;
+use twostage_compress::{CompressorConfig, SignalTransform, Transformed};
 use twostage_fit::FittedRegressor;
 
 /// Little-endian sections, each starting at a multiple of 8 bytes.
@@ -98,6 +99,32 @@ impl Writer {
     }
 }
 
+impl Writer {
+    /// Each output's transform code, then its floor.
+    fn output_transforms(&mut self, transformed: &Transformed, n_outputs: usize) -> Result<()> {
+        let (codes, floors) = (transformed.transforms(), transformed.floors());
+        if codes.len() != n_outputs || floors.len() != n_outputs {
+            return Err(refuse(format!(
+                "{} output transforms with {} floors for {n_outputs} outputs: the estimator's \
+                 compressor was not prepared on its training records; train it again",
+                codes.len(),
+                floors.len()
+            )));
+        }
+        let codes: Vec<usize> = codes
+            .iter()
+            .map(|t| match t {
+                SignalTransform::Identity => SIGNAL_IDENTITY as usize,
+                SignalTransform::Log => SIGNAL_LOG as usize,
+                SignalTransform::Log1p => SIGNAL_LOG1P as usize,
+            })
+            .collect();
+        self.u32s(&codes)?;
+        self.f64s(floors);
+        Ok(())
+    }
+}
+
 fn refuse(reason: String) -> Error {
     Error::NotExportable { reason }
 }
@@ -107,7 +134,7 @@ impl Estimator {
     /// ([`twostage_runtime`]): versioned, checksummed, read in place. The
     /// runtime streams ARX and AR compressors; stage 2 may be any of the
     /// project's (linear, MLP, piecewise), with the intervals and the
-    /// envelope.
+    /// envelope; output transforms (`log+arx:...`) go with the ARX.
     ///
     /// ```
     /// use twostage::TwoStage;
@@ -125,7 +152,11 @@ impl Estimator {
     /// [`Error::NotExportable`] for a NARX, PCA or raw compressor, or sizes
     /// beyond the runtime's limits ([`twostage_runtime::format`]).
     pub fn to_runtime(&self) -> Result<Vec<u8>> {
-        let CompressorConfig::Arx(arx) = &self.compressor else {
+        let (transformed, stage1) = match &self.compressor {
+            CompressorConfig::Transformed(t) => (Some(t), t.inner()),
+            other => (None, other),
+        };
+        let CompressorConfig::Arx(arx) = stage1 else {
             return Err(refuse(format!(
                 "the runtime streams ARX and AR compressors only, this estimator uses {}; \
                  train with --compress arx:NA,NB (or ar:NA)",
@@ -162,6 +193,9 @@ impl Estimator {
         }
         if self.envelope.is_some() {
             flags |= FLAG_ENVELOPE;
+        }
+        if transformed.is_some() {
+            flags |= FLAG_OUTPUT_TRANSFORMS;
         }
         let (kind, experts) = match &self.regressor {
             FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),
@@ -226,6 +260,9 @@ impl Estimator {
             w.f64s(&[envelope.threshold()]);
             w.f64s(mean);
             w.f64s(factor);
+        }
+        if let Some(transformed) = transformed {
+            w.output_transforms(transformed, shape.n_outputs)?;
         }
         debug_assert_eq!(self.compressor.n_features(), self.regressor.n_inputs());
         let length = w.bytes.len();

@@ -85,8 +85,8 @@ int main(int argc, char **argv) {
         if (rc == TS_OK) {
             for (size_t j = 0; j < q; j++) printf(" %.17g", theta[j]);
             for (size_t j = 0; j < q; j++) printf(" %.17g", widths[j]);
-            printf(" %d %d %.17g %.17g", a.intervals, a.out_of_distribution, a.feature_distance,
-                   a.distance_threshold);
+            printf(" %d %d %.17g %.17g %u", a.intervals, a.out_of_distribution, a.feature_distance,
+                   a.distance_threshold, (unsigned)a.untransformed_samples);
         } else {
             printf(" %s", ts_error_message(rc));
         }
