@@ -7,7 +7,9 @@ through the protocol, vectorized over each batch:
 
 with u, v11, v12 ~ N(0, 1) and v2 ~ N(0, 0.1), x(0) = 0. Each experiment
 draws from numpy's generator seeded by [seed, index], so experiment i of a
-chart is the same whatever the batch it comes in.
+chart is the same whatever the batch it comes in. Served with protocol 2
+(`protocol = 2` under [source]) it also runs without noise and on a given
+input.
 """
 
 import os
@@ -21,7 +23,7 @@ from twostage_protocol import serve  # noqa: E402
 N_SAMPLES = 1000
 
 
-def batch(thetas, seeds, indices):
+def batch(thetas, seeds, indices, noiseless=False, input=None):
     theta = np.asarray(thetas, dtype=float)[:, 0]
     b = theta.size
     u = np.empty((b, N_SAMPLES))
@@ -30,6 +32,10 @@ def batch(thetas, seeds, indices):
         rng = np.random.default_rng([seed, index])
         u[j] = rng.standard_normal(N_SAMPLES)
         noise[j] = rng.standard_normal((3, N_SAMPLES))
+    if input is not None:
+        u[:] = np.asarray(input, dtype=float)[:, 0]
+    if noiseless:
+        noise[:] = 0.0
     a = (1 - theta**2) * np.sin(50 * theta**2)
     c = theta / (1 + theta**2)
     x1 = np.zeros(b)

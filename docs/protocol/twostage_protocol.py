@@ -1,5 +1,5 @@
-"""The twostage simulator protocol, version 1: serve a Python simulator to
-`twostage` over standard input and output (docs/protocol.md).
+"""The twostage simulator protocol, versions 1 and 2: serve a Python
+simulator to `twostage` over standard input and output (docs/protocol.md).
 
     from twostage_protocol import serve
 
@@ -13,11 +13,17 @@
 A simulator that vectorizes gives `serve(batch=f)` instead, with
 f(thetas, seeds, indices) -> (inputs, outputs) of shapes [b][N][n_u] and
 [b][N][n_y]. Pure Python: no package is needed.
+
+Version 2 (the model file says `protocol = 2` under [source]) calls the
+function with two more keywords: `noiseless` (True: leave every noise out,
+return the model's own response) and `input` (None, or the N rows of n_u
+values to apply instead of the simulator's own input; return them as the
+inputs). A version 1 simulator never sees them.
 """
 
 import sys
 
-VERSION = 1
+VERSIONS = (1, 2)
 
 
 class Shape:
@@ -53,9 +59,10 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
     stdin = stdin or sys.stdin
     stdout = stdout or sys.stdout
     greeting = stdin.readline().split()
-    if len(greeting) != 6 or greeting[0] != "twostage" or int(greeting[1]) != VERSION:
-        sys.stderr.write("not a twostage %d greeting: %r\n" % (VERSION, greeting))
+    if len(greeting) != 6 or greeting[0] != "twostage" or int(greeting[1]) not in VERSIONS:
+        sys.stderr.write("not a twostage greeting of version 1 or 2: %r\n" % (greeting,))
         sys.exit(2)
+    version = int(greeting[1])
     shape = Shape(*(int(v) for v in greeting[2:]))
     stdout.write("ready\n")
     stdout.flush()
@@ -64,7 +71,7 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
         words = line.split()
         if not words or words[0] == "quit":
             return
-        if words[0] != "batch" or len(words) != 2:
+        if words[0] != "batch" or len(words) != (2 if version == 1 else 4):
             sys.stderr.write("unknown request %r\n" % line)
             sys.exit(2)
         jobs = []
@@ -72,11 +79,18 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
             values = stdin.readline().split()
             index, seed = int(values[0]), int(values[1])
             jobs.append((index, seed, [float(v) for v in values[2:]]))
+        # Version 2: `noise`/`noiseless`, then `own`/`given` and the input.
+        conditions = {}
+        if version >= 2:
+            given = None
+            if words[3] == "given":
+                given = [[float(v) for v in stdin.readline().split()] for _ in range(shape.n)]
+            conditions = {"noiseless": words[2] == "noiseless", "input": given}
         out = []
         if batch is not None:
             try:
                 inputs, outputs = batch(
-                    [j[2] for j in jobs], [j[1] for j in jobs], [j[0] for j in jobs]
+                    [j[2] for j in jobs], [j[1] for j in jobs], [j[0] for j in jobs], **conditions
                 )
                 for b, (index, _, _) in enumerate(jobs):
                     out += _record(index, inputs[b] if shape.n_u else None, outputs[b], shape)
@@ -85,7 +99,7 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
         else:
             for index, seed, theta in jobs:
                 try:
-                    inputs, outputs = simulate(theta, seed, index)
+                    inputs, outputs = simulate(theta, seed, index, **conditions)
                     out += _record(index, inputs, outputs, shape)
                 except Exception as e:  # this experiment fails, the others go on
                     out.append("error %d %s" % (index, _one_line(e)))

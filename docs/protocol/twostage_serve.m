@@ -1,6 +1,6 @@
 function twostage_serve(simulate)
   % TWOSTAGE_SERVE  Serve a simulator to twostage over the protocol of
-  % docs/protocol.md (version 1), reading requests on standard input and
+  % docs/protocol.md (version 1 or 2), reading requests on standard input and
   % writing records on standard output. Octave (octave-cli); the same code
   % is MATLAB syntax, but MATLAB has no standard input to read from.
   %
@@ -10,12 +10,16 @@ function twostage_serve(simulate)
   % n x n_y matrices (n_u may be 0). Draw every random number from seed and
   % index, e.g. randn("state", twostage_seed_state(seed, index)), so that
   % experiment i of a chart is always the same. An error thrown by
-  % simulate fails that experiment only.
+  % simulate fails that experiment only. Under version 2 (protocol = 2 in
+  % the model file) it is called simulate(theta, seed, index, n, noiseless,
+  % u): noiseless true leaves every noise out, u is the n x n_u input to
+  % apply (return it as the inputs) or [] for the simulator's own.
   greeting = strsplit(strtrim(next_line()), " ");
-  if numel(greeting) != 6 || !strcmp(greeting{1}, "twostage") || !strcmp(greeting{2}, "1")
-    fprintf(stderr, "not a twostage 1 greeting: %s\n", strjoin(greeting, " "));
+  if numel(greeting) != 6 || !strcmp(greeting{1}, "twostage") || !any(strcmp(greeting{2}, {"1", "2"}))
+    fprintf(stderr, "not a twostage greeting of version 1 or 2: %s\n", strjoin(greeting, " "));
     exit(2);
   end
+  version = str2double(greeting{2});
   shape = str2double(greeting(3:6));
   nu = shape(2); ny = shape(3); n = shape(4);
   fprintf(stdout, "ready\n");
@@ -27,13 +31,32 @@ function twostage_serve(simulate)
     end
     words = strsplit(strtrim(line), " ");
     count = str2double(words{2});
+    jobs = cell(count, 1);
     for k = 1:count
-      job = strsplit(strtrim(next_line()), " ");
+      jobs{k} = strsplit(strtrim(next_line()), " ");
+    end
+    noiseless = false;
+    given = [];
+    if version >= 2
+      noiseless = strcmp(words{3}, "noiseless");
+      if strcmp(words{4}, "given")
+        given = zeros(n, nu);
+        for t = 1:n
+          given(t, :) = str2double(strsplit(strtrim(next_line()), " "));
+        end
+      end
+    end
+    for k = 1:count
+      job = jobs{k};
       index = job{1};
       seed = job{2};
       theta = str2double(job(3:end));
       try
-        [u, y] = simulate(theta, seed, str2double(index), n);
+        if version >= 2
+          [u, y] = simulate(theta, seed, str2double(index), n, noiseless, given);
+        else
+          [u, y] = simulate(theta, seed, str2double(index), n);
+        end
         if rows(y) != n || columns(y) != ny || (nu > 0 && (rows(u) != n || columns(u) != nu))
           error("the record is %dx%d and %dx%d, the model has %d samples of %d input(s) and %d output(s)",
                 rows(u), columns(u), rows(y), columns(y), n, nu, ny);

@@ -4,7 +4,9 @@ use std::path::Path;
 use std::sync::Arc;
 
 use rand_distr::{Distribution, StandardNormal};
-use twostage_models::{ExperimentRng, InputSignal, IoData, ModelSpec, SimError, Simulator};
+use twostage_models::{
+    Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec, SimError, Simulator,
+};
 
 use crate::archive::Unpacked;
 use crate::description::{InterfaceKind, ModelDescription};
@@ -300,17 +302,49 @@ impl Simulator for FmuSimulator {
         rng: &mut ExperimentRng,
         out: &mut IoData,
     ) -> twostage_models::Result<()> {
+        self.simulate_under(theta, rng, Conditions::default(), out)
+    }
+
+    /// Noise-free: the noise inputs held at zero; a given input replaces
+    /// the input design.
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            noiseless: true,
+            given_input: true,
+        }
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> twostage_models::Result<()> {
         let spec = &self.spec;
         spec.prior().check(theta, spec.param_names(), true)?;
+        conditions.check_input(spec)?;
         let n = spec.n_samples();
         out.resize(n, spec.input_names().len(), spec.output_names().len());
         // Every draw comes first, in a fixed order (each input whole, then
         // the noise inputs sample by sample), so that the FMU's run is a
         // function of the experiment's stream alone.
-        if let Some(input) = &self.input {
-            for j in 0..spec.input_names().len() {
-                input.fill(spec.sample_time(), rng, out.input_mut(j))?;
+        match (conditions.input, &self.input) {
+            (Some(given), _) => {
+                for j in 0..spec.input_names().len() {
+                    out.input_mut(j).copy_from_slice(given.input(j));
+                }
             }
+            (None, Some(input)) => {
+                for j in 0..spec.input_names().len() {
+                    input.fill(spec.sample_time(), rng, out.input_mut(j))?;
+                }
+            }
+            (None, None) => {}
+        }
+        if conditions.noiseless {
+            let noise = vec![0.0; n * self.noise_sd.len()];
+            return self.run(theta, &noise, out);
         }
         let mut noise = Vec::with_capacity(n * self.noise_sd.len());
         for _ in 0..n {
@@ -319,9 +353,18 @@ impl Simulator for FmuSimulator {
                 noise.push(sd * e);
             }
         }
+        self.run(theta, &noise, out)
+    }
+}
+
+impl FmuSimulator {
+    /// Run the FMU on the record's inputs and `noise`; a non-finite output
+    /// is the run's divergence.
+    fn run(&self, theta: &[f64], noise: &[f64], out: &mut IoData) -> twostage_models::Result<()> {
+        let spec = &self.spec;
         match &self.engine {
-            Engine::InProcess(engine) => engine.run(&self.plan, theta, &noise, out)?,
-            Engine::Workers(pool) => pool.run(theta, &noise, out)?,
+            Engine::InProcess(engine) => engine.run(&self.plan, theta, noise, out)?,
+            Engine::Workers(pool) => pool.run(theta, noise, out)?,
         }
         for j in 0..out.n_outputs() {
             if let Some(k) = out.output(j).iter().position(|y| !y.is_finite()) {

@@ -7,7 +7,7 @@ use crate::error::{Result, SimError};
 use crate::input::InputSignal;
 use crate::prior::Prior;
 use crate::rng::ExperimentRng;
-use crate::simulator::{ModelSpec, Simulator, check_theta};
+use crate::simulator::{Capabilities, Conditions, ModelSpec, Simulator, check_theta};
 
 /// Default record length of the paper's benchmark.
 pub const BENCHMARK_SAMPLES: usize = 1000;
@@ -148,18 +148,40 @@ impl Simulator for Benchmark {
     }
 
     fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
+        self.simulate_under(theta, rng, Conditions::default(), out)
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            noiseless: true,
+            given_input: true,
+        }
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<()> {
         check_theta(&self.spec, theta)?;
+        conditions.check_input(&self.spec)?;
         let th = theta[0];
         let (a, b) = Self::coefficients(th);
         let n = self.spec.n_samples();
         out.resize(n, 1, 1);
         let (u, y) = out.siso_mut();
-        self.input.fill(1.0, rng, u)?;
+        match conditions.input {
+            Some(given) => u.copy_from_slice(given.input(0)),
+            None => self.input.fill(1.0, rng, u)?,
+        }
+        let noisy = self.noisy && !conditions.noiseless;
         let measurement_sd = MEASUREMENT_NOISE_VARIANCE.sqrt();
         let process_sd = PROCESS_NOISE_VARIANCE.sqrt();
         let (mut x1, mut x2) = (0.0f64, 0.0f64);
         for k in 0..n {
-            let (v2, v11, v12) = if self.noisy {
+            let (v2, v11, v12) = if noisy {
                 let v2: f64 = StandardNormal.sample(rng);
                 let v11: f64 = StandardNormal.sample(rng);
                 let v12: f64 = StandardNormal.sample(rng);

@@ -17,10 +17,12 @@ use std::time::{Duration, Instant};
 use crate::data::IoData;
 use crate::error::{Result, SimError};
 use crate::rng::ExperimentRng;
-use crate::simulator::{ModelSpec, Simulator, check_theta};
+use crate::simulator::{Capabilities, Conditions, ModelSpec, Simulator, check_theta};
 
-/// The protocol version this build speaks (the first word of the greeting).
-pub const PROTOCOL_VERSION: u32 = 1;
+/// The newest protocol version this build speaks (the second word of the
+/// greeting); a model file chooses it with `protocol = 2`, and version 1
+/// is still served for the simulators written for it.
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// How many lines of a process's standard error an error message quotes.
 const STDERR_LINES: usize = 5;
@@ -57,6 +59,7 @@ impl ExternalJob<'_> {
 /// | `timeout` | 60 s | > 0: per record, and for the greeting |
 /// | `batch` | 1 | >= 1 experiments per request |
 /// | `current_dir` | the caller's | a folder |
+/// | `protocol` | 1 | 1, or 2 (noise-free runs and given inputs) |
 ///
 /// ```no_run
 /// use twostage_models::{ExternalSimulator, ModelSpec, Prior, Simulator, experiment_rng};
@@ -74,6 +77,7 @@ pub struct ExternalSimulator {
     current_dir: Option<PathBuf>,
     timeout: Duration,
     batch: usize,
+    protocol: u32,
     idle: Mutex<Vec<Process>>,
 }
 
@@ -97,6 +101,7 @@ impl ExternalSimulator {
             current_dir: None,
             timeout: Duration::from_secs(60),
             batch: 1,
+            protocol: 1,
             idle: Mutex::new(Vec::new()),
         })
     }
@@ -120,6 +125,23 @@ impl ExternalSimulator {
         self
     }
 
+    /// Speak protocol `version` (1 or 2): version 2 adds noise-free runs
+    /// and given inputs to each request (docs/protocol.md).
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for another version.
+    pub fn protocol(mut self, version: u32) -> Result<Self> {
+        if !(1..=PROTOCOL_VERSION).contains(&version) {
+            return Err(SimError::InvalidSetting {
+                name: "protocol",
+                value: version.to_string(),
+                reason: format!("this build speaks versions 1 to {PROTOCOL_VERSION}"),
+            });
+        }
+        self.protocol = version;
+        Ok(self)
+    }
+
     /// The command, as one line for messages.
     fn command_line(&self) -> String {
         self.command.join(" ")
@@ -129,6 +151,24 @@ impl ExternalSimulator {
     /// order: a process that fails mid-batch fails the rest of the batch,
     /// and the next request starts a fresh one.
     pub fn simulate_batch(&self, jobs: &[ExternalJob<'_>], outs: &mut [IoData]) -> Vec<Result<()>> {
+        self.simulate_jobs(jobs, Conditions::default(), outs)
+    }
+
+    /// As [`ExternalSimulator::simulate_batch`], under `conditions`
+    /// (protocol 2 for anything but a plain experiment).
+    pub fn simulate_jobs(
+        &self,
+        jobs: &[ExternalJob<'_>],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        let refused = self
+            .capabilities()
+            .check(&conditions, self.spec.name())
+            .and_then(|()| conditions.check_input(&self.spec));
+        if let Err(e) = refused {
+            return jobs.iter().map(|_| Err(e.clone())).collect();
+        }
         if jobs.len() != outs.len() {
             let e =
                 SimError::InvalidData(format!("{} jobs for {} records", jobs.len(), outs.len()));
@@ -145,7 +185,7 @@ impl ExternalSimulator {
             let batch: Vec<ExternalJob<'_>> = sent.iter().map(|&i| jobs[i]).collect();
             let mut records: Vec<IoData> =
                 sent.iter().map(|&i| std::mem::take(&mut outs[i])).collect();
-            let answers = self.request(&batch, &mut records);
+            let answers = self.request(&batch, conditions, &mut records);
             for ((&i, record), answer) in sent.iter().zip(records).zip(answers) {
                 outs[i] = record;
                 results[i] = Some(answer);
@@ -158,13 +198,18 @@ impl ExternalSimulator {
     }
 
     /// One request to a process of the pool, one result per job.
-    fn request(&self, jobs: &[ExternalJob<'_>], outs: &mut [IoData]) -> Vec<Result<()>> {
+    fn request(
+        &self,
+        jobs: &[ExternalJob<'_>],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
         let mut process = match self.checkout() {
             Ok(p) => p,
             Err(e) => return jobs.iter().map(|_| Err(e.clone())).collect(),
         };
         let mut results = Vec::with_capacity(jobs.len());
-        match self.exchange(&mut process, jobs, outs, &mut results) {
+        match self.exchange(&mut process, jobs, conditions, outs, &mut results) {
             Ok(()) => self.checkin(process),
             Err(e) => {
                 let e = self.with_stderr(e, &process);
@@ -183,18 +228,13 @@ impl ExternalSimulator {
         &self,
         process: &mut Process,
         jobs: &[ExternalJob<'_>],
+        conditions: Conditions<'_>,
         outs: &mut [IoData],
         results: &mut Vec<Result<()>>,
     ) -> Result<()> {
-        let mut request = format!("batch {}\n", jobs.len());
-        for job in jobs {
-            let _ = write!(request, "{} {}", job.index, job.seed);
-            for t in job.theta {
-                let _ = write!(request, " {t:?}");
-            }
-            request.push('\n');
-        }
-        process.send(&request).map_err(|e| self.failure(&e))?;
+        process
+            .send(&self.request_text(jobs, conditions))
+            .map_err(|e| self.failure(&e))?;
         let (n, n_u, n_y) = (
             self.spec.n_samples(),
             self.spec.input_names().len(),
@@ -248,7 +288,73 @@ impl ExternalSimulator {
                     )));
                 }
             }
-            results.push(Ok(()));
+            results.push(self.given_input_kept(job.index, conditions, out));
+        }
+        Ok(())
+    }
+
+    /// The request's text: `batch B` (version 1), or `batch B NOISE
+    /// INPUT` then, for a given input, its N lines (version 2).
+    fn request_text(&self, jobs: &[ExternalJob<'_>], conditions: Conditions<'_>) -> String {
+        let mut request = format!("batch {}", jobs.len());
+        if self.protocol >= 2 {
+            let noise = if conditions.noiseless {
+                "noiseless"
+            } else {
+                "noise"
+            };
+            let input = if self.given_input(conditions).is_some() {
+                "given"
+            } else {
+                "own"
+            };
+            let _ = write!(request, " {noise} {input}");
+        }
+        request.push('\n');
+        for job in jobs {
+            let _ = write!(request, "{} {}", job.index, job.seed);
+            for t in job.theta {
+                let _ = write!(request, " {t:?}");
+            }
+            request.push('\n');
+        }
+        if let Some(given) = self.given_input(conditions) {
+            for k in 0..given.n_samples() {
+                let row: Vec<String> = (0..given.n_inputs())
+                    .map(|j| format!("{:?}", given.input(j)[k]))
+                    .collect();
+                request.push_str(&row.join(" "));
+                request.push('\n');
+            }
+        }
+        request
+    }
+
+    /// The input to send: none for a model without inputs.
+    fn given_input<'c>(&self, conditions: Conditions<'c>) -> Option<&'c IoData> {
+        conditions
+            .input
+            .filter(|_| !self.spec.input_names().is_empty())
+    }
+
+    /// A record must carry the input it was given: a simulator that
+    /// ignored it would pass off a response to another input.
+    fn given_input_kept(&self, index: u64, conditions: Conditions<'_>, out: &IoData) -> Result<()> {
+        let Some(given) = conditions.input else {
+            return Ok(());
+        };
+        for j in 0..given.n_inputs() {
+            let (sent, back) = (given.input(j), out.input(j));
+            if let Some(k) = (0..sent.len()).find(|&k| sent[k].to_bits() != back[k].to_bits()) {
+                return Err(self.failure(&format!(
+                    "experiment {index} returned input {} = {:?} at sample {k} where it was \
+                     given {:?}: a request with `given` input must simulate (and return) that \
+                     input",
+                    self.spec.input_names()[j],
+                    back[k],
+                    sent[k]
+                )));
+            }
         }
         Ok(())
     }
@@ -347,7 +453,8 @@ impl ExternalSimulator {
         };
         let spec = &self.spec;
         let greeting = format!(
-            "twostage {PROTOCOL_VERSION} {} {} {} {}\n",
+            "twostage {} {} {} {} {}\n",
+            self.protocol,
             spec.n_params(),
             spec.input_names().len(),
             spec.output_names().len(),
@@ -390,6 +497,44 @@ impl Simulator for ExternalSimulator {
         self.batch
     }
 
+    /// Noise-free runs and given inputs with protocol 2.
+    fn capabilities(&self) -> Capabilities {
+        let v2 = self.protocol >= 2;
+        Capabilities {
+            noiseless: v2,
+            given_input: v2,
+        }
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<()> {
+        self.simulate_batch_under(
+            &[theta],
+            std::slice::from_mut(rng),
+            conditions,
+            std::slice::from_mut(out),
+        )
+        .pop()
+        .unwrap_or_else(|| Err(self.failure("no answer")))
+    }
+
+    /// One request for the block under `conditions`.
+    fn simulate_batch_under(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        let jobs = jobs_of(thetas, rngs);
+        self.simulate_jobs(&jobs, conditions, outs)
+    }
+
     /// One request for the block; each experiment's index and seed come
     /// from its stream ([`ExternalJob::stream_of`]).
     fn simulate_batch(
@@ -398,14 +543,7 @@ impl Simulator for ExternalSimulator {
         rngs: &mut [ExperimentRng],
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
-        let jobs: Vec<ExternalJob<'_>> = thetas
-            .iter()
-            .zip(rngs.iter())
-            .map(|(theta, rng)| {
-                let (index, seed) = ExternalJob::stream_of(rng);
-                ExternalJob { index, seed, theta }
-            })
-            .collect();
+        let jobs = jobs_of(thetas, rngs);
         ExternalSimulator::simulate_batch(self, &jobs, outs)
     }
 
@@ -418,6 +556,19 @@ impl Simulator for ExternalSimulator {
             .pop()
             .unwrap_or_else(|| Err(self.failure("no answer")))
     }
+}
+
+/// Each experiment's job: its parameters, and the index and seed its
+/// stream stands for.
+fn jobs_of<'t>(thetas: &[&'t [f64]], rngs: &[ExperimentRng]) -> Vec<ExternalJob<'t>> {
+    thetas
+        .iter()
+        .zip(rngs)
+        .map(|(theta, rng)| {
+            let (index, seed) = ExternalJob::stream_of(rng);
+            ExternalJob { index, seed, theta }
+        })
+        .collect()
 }
 
 impl Drop for ExternalSimulator {

@@ -92,6 +92,12 @@ impl InputSignal {
         })
     }
 
+    /// Whether it is a fixed sampled signal (the same samples in every
+    /// experiment, whatever the sample time).
+    pub fn is_fixed(&self) -> bool {
+        matches!(self.kind, Kind::Fixed(_))
+    }
+
     /// Whether every experiment sees the same input.
     pub fn is_deterministic(&self) -> bool {
         !matches!(self.kind, Kind::WhiteGaussian { .. })
@@ -158,8 +164,23 @@ impl InputSignal {
     pub fn value_at(&self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
         match &self.kind {
             Kind::Chicane { amplitude } => chicane(*amplitude, t),
-            Kind::WhiteGaussian { .. } | Kind::Fixed(_) => interpolate(samples, t / sample_time),
+            Kind::WhiteGaussian { .. } | Kind::Fixed(_) => {
+                Self::sampled_value_at(t, sample_time, samples)
+            }
         }
+    }
+
+    /// A sampled signal (a measured input, say) at continuous time `t`:
+    /// linear between samples, held after the last, as
+    /// [`InputSignal::value_at`] takes sampled designs.
+    ///
+    /// ```
+    /// use twostage_models::InputSignal;
+    /// assert_eq!(InputSignal::sampled_value_at(0.75, 0.5, &[0.0, 1.0, 3.0]), 2.0);
+    /// assert_eq!(InputSignal::sampled_value_at(9.0, 0.5, &[0.0, 1.0, 3.0]), 3.0);
+    /// ```
+    pub fn sampled_value_at(t: f64, sample_time: f64, samples: &[f64]) -> f64 {
+        interpolate(samples, t / sample_time)
     }
 }
 

@@ -75,7 +75,7 @@ pub use pacejka::{
 pub use prior::{Design, Prior, Sampling, random_permutation};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
 pub use signals::{SignalColumn, generic_signal_names, signal_columns};
-pub use simulator::{ModelSpec, Simulator};
+pub use simulator::{Capabilities, Conditions, ModelSpec, NoiseFree, Simulator};
 
 /// Simulate experiment `index` of the chart `(design, seed)`: draw its
 /// parameter vector into `theta` and its record into `out`.

@@ -10,7 +10,7 @@ use crate::input::InputSignal;
 use crate::ode::{OdeSystem, Rk4};
 use crate::prior::Prior;
 use crate::rng::ExperimentRng;
-use crate::simulator::{ModelSpec, Simulator, check_theta};
+use crate::simulator::{Capabilities, Conditions, ModelSpec, Simulator, check_theta};
 
 /// Vehicle constants (spec/pacejka-car.md, "Constants").
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -295,13 +295,16 @@ impl PacejkaCarBuilder {
 }
 
 impl PacejkaCar {
-    fn dynamics<'a>(&'a self, theta: &[f64], inputs: &'a [f64]) -> CarDynamics<'a> {
+    /// The equations at `theta` on the sampled steer `inputs`; `given`:
+    /// the samples are a given record's (interpolated between samples),
+    /// not the car's own input design.
+    fn dynamics<'a>(&'a self, theta: &[f64], inputs: &'a [f64], given: bool) -> CarDynamics<'a> {
         CarDynamics {
             vehicle: &self.vehicle,
             tire: &self.tire,
             p_k1: theta[0],
             p_k2: theta[1],
-            input: &self.input,
+            input: (!given).then_some(&self.input),
             samples: inputs,
             loads: self.vehicle.axle_loads(),
         }
@@ -311,7 +314,7 @@ impl PacejkaCar {
     /// `(beta, r, phi, p)` at time `k Ts`; `inputs` are the sampled steer
     /// (used between samples when the input is not the chicane).
     pub fn output_at(&self, theta: &[f64], k: usize, state: &[f64; 4], inputs: &[f64]) -> f64 {
-        self.dynamics(theta, inputs)
+        self.dynamics(theta, inputs, false)
             .lateral_acceleration(k as f64 * PACEJKA_SAMPLE_TIME, state)
     }
 
@@ -327,11 +330,14 @@ impl PacejkaCar {
         inputs: &[f64],
         rk4: &mut Rk4,
     ) {
-        let dynamics = self.dynamics(theta, inputs);
+        Self::step(&self.dynamics(theta, inputs, false), k, state, rk4);
+    }
+
+    fn step(dynamics: &CarDynamics<'_>, k: usize, state: &mut [f64; 4], rk4: &mut Rk4) {
         let h = PACEJKA_SAMPLE_TIME / PACEJKA_STEPS_PER_SAMPLE as f64;
         let first = k * PACEJKA_STEPS_PER_SAMPLE;
         for j in first..first + PACEJKA_STEPS_PER_SAMPLE {
-            rk4.step(&dynamics, j as f64 * h, h, state);
+            rk4.step(dynamics, j as f64 * h, h, state);
         }
     }
 
@@ -376,7 +382,8 @@ struct CarDynamics<'a> {
     tire: &'a Tire,
     p_k1: f64,
     p_k2: f64,
-    input: &'a InputSignal,
+    /// The car's own input design; `None`: `samples` are a given input's.
+    input: Option<&'a InputSignal>,
     samples: &'a [f64],
     /// Static axle loads (N_f, N_r).
     loads: (f64, f64),
@@ -398,9 +405,17 @@ impl CarDynamics<'_> {
         (front + rear, v.lf * front - v.lr * rear)
     }
 
+    /// The steer at time t.
+    fn steer(&self, t: f64) -> f64 {
+        match self.input {
+            Some(input) => input.value_at(t, PACEJKA_SAMPLE_TIME, self.samples),
+            None => InputSignal::sampled_value_at(t, PACEJKA_SAMPLE_TIME, self.samples),
+        }
+    }
+
     /// Lateral acceleration a_y at time t and state x.
     fn lateral_acceleration(&self, t: f64, x: &[f64]) -> f64 {
-        let delta = self.input.value_at(t, PACEJKA_SAMPLE_TIME, self.samples);
+        let delta = self.steer(t);
         self.force_and_moment(delta, x).0 / self.vehicle.mass
     }
 }
@@ -412,7 +427,7 @@ impl OdeSystem for CarDynamics<'_> {
 
     fn rhs(&self, t: f64, x: &[f64], dx: &mut [f64]) {
         let v = self.vehicle;
-        let delta = self.input.value_at(t, PACEJKA_SAMPLE_TIME, self.samples);
+        let delta = self.steer(t);
         let (force, moment) = self.force_and_moment(delta, x);
         let a_y = force / v.mass;
         let (r, phi, p) = (x[1], x[2], x[3]);
@@ -433,17 +448,43 @@ impl Simulator for PacejkaCar {
     }
 
     fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
+        self.simulate_under(theta, rng, Conditions::default(), out)
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            noiseless: true,
+            given_input: true,
+        }
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<()> {
         check_theta(&self.spec, theta)?;
+        conditions.check_input(&self.spec)?;
         let n = self.spec.n_samples();
         out.resize(n, 1, 1);
         let (u, y) = out.siso_mut();
-        self.input.fill(PACEJKA_SAMPLE_TIME, rng, u)?;
+        match conditions.input {
+            Some(given) => u.copy_from_slice(given.input(0)),
+            None => self.input.fill(PACEJKA_SAMPLE_TIME, rng, u)?,
+        }
+        let dynamics = self.dynamics(theta, u, conditions.input.is_some());
         let mut rk4 = Rk4::new(4);
         let mut x = [0.0f64; 4];
-        let noise_sd = self.noise_variance.sqrt();
+        let noise_sd = if conditions.noiseless {
+            0.0
+        } else {
+            self.noise_variance.sqrt()
+        };
         for (k, y_k) in y.iter_mut().enumerate() {
             if k > 0 {
-                self.advance(theta, k - 1, &mut x, u, &mut rk4);
+                Self::step(&dynamics, k - 1, &mut x, &mut rk4);
                 if x.iter().any(|v| !v.is_finite()) {
                     return Err(SimError::Diverged {
                         theta: theta.to_vec(),
@@ -451,7 +492,7 @@ impl Simulator for PacejkaCar {
                     });
                 }
             }
-            let a_y = self.output_at(theta, k, &x, u);
+            let a_y = dynamics.lateral_acceleration(k as f64 * PACEJKA_SAMPLE_TIME, &x);
             if !a_y.is_finite() {
                 return Err(SimError::Diverged {
                     theta: theta.to_vec(),

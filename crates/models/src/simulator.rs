@@ -1,7 +1,7 @@
 //! The `Simulator` trait: what the two-stage method needs of a model.
 
 use crate::data::IoData;
-use crate::error::Result;
+use crate::error::{Result, SimError};
 use crate::prior::Prior;
 use crate::rng::ExperimentRng;
 
@@ -143,6 +143,206 @@ impl ModelSpec {
     }
 }
 
+/// What a simulation is asked for besides theta and its random stream:
+/// the model's response without noise, on a given input. The default is
+/// an experiment as training simulates it (the model's noise, the
+/// simulator's own input design).
+///
+/// ```
+/// use twostage_models::{experiment_rng, Benchmark, Conditions, Simulator};
+/// let model = Benchmark::new();
+/// let mut measured = model.spec().new_record();
+/// model.simulate(&[0.3], &mut experiment_rng(1, 0), &mut measured)?;
+/// // The noise-free response of the same system to the measured input.
+/// let mut response = model.spec().new_record();
+/// let conditions = Conditions { noiseless: true, input: Some(&measured) };
+/// model.simulate_under(&[0.3], &mut experiment_rng(2, 0), conditions, &mut response)?;
+/// assert_eq!(response.input(0), measured.input(0));
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Conditions<'a> {
+    /// No noise at all: neither process nor measurement noise, so the
+    /// record is the model's own response (what an output-error fit
+    /// compares a measured record with).
+    pub noiseless: bool,
+    /// Apply this record's inputs instead of the simulator's own input
+    /// design (its outputs are not read).
+    pub input: Option<&'a IoData>,
+}
+
+impl Conditions<'_> {
+    /// An experiment as training simulates it.
+    pub fn is_plain(&self) -> bool {
+        !self.noiseless && self.input.is_none()
+    }
+
+    /// The given input's samples of signal `j`, checked against `spec`:
+    /// the record must hold the model's inputs and samples.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidData`] naming the counts expected and given.
+    pub fn check_input(&self, spec: &ModelSpec) -> Result<()> {
+        let Some(record) = self.input else {
+            return Ok(());
+        };
+        let (n, n_u) = (spec.n_samples(), spec.input_names().len());
+        if record.n_samples() != n || record.n_inputs() != n_u {
+            return Err(SimError::InvalidData(format!(
+                "the given input has {} samples of {} signal(s); the model {} simulates {n}                  samples of {n_u} ({}): give a record of that length with those inputs",
+                record.n_samples(),
+                record.n_inputs(),
+                spec.name(),
+                spec.input_names().join(", ")
+            )));
+        }
+        if let Some((j, k)) = (0..n_u).find_map(|j| {
+            record
+                .input(j)
+                .iter()
+                .position(|v| !v.is_finite())
+                .map(|k| (j, k))
+        }) {
+            return Err(SimError::InvalidData(format!(
+                "the given input {} is not a finite number at sample {k}",
+                spec.input_names()[j]
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Which [`Conditions`] a simulator can honour.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Capabilities {
+    /// It can simulate without noise.
+    pub noiseless: bool,
+    /// It can apply a given input.
+    pub given_input: bool,
+}
+
+impl Capabilities {
+    /// Whether `conditions` can be honoured; the error says which part
+    /// cannot and why it matters.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] naming the condition.
+    pub fn check(&self, conditions: &Conditions<'_>, model: &str) -> Result<()> {
+        if conditions.noiseless && !self.noiseless {
+            return Err(SimError::InvalidSetting {
+                name: "noiseless",
+                value: "true".into(),
+                reason: format!(
+                    "the simulator of {model} cannot simulate without its noise; a command                      source can when it speaks protocol 2 (`protocol = 2` under [source],                      docs/protocol.md)"
+                ),
+            });
+        }
+        if conditions.input.is_some() && !self.given_input {
+            return Err(SimError::InvalidSetting {
+                name: "input",
+                value: "a given record".into(),
+                reason: format!(
+                    "the simulator of {model} makes its own input and cannot apply a given                      one; a command source can when it speaks protocol 2 (`protocol = 2`                      under [source], docs/protocol.md)"
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A simulator without its noise: every experiment runs under
+/// `Conditions { noiseless: true, .. }`, for any source that can
+/// ([`Capabilities::noiseless`]).
+///
+/// ```
+/// use twostage_models::{experiment_rng, Benchmark, NoiseFree, Simulator};
+/// let quiet = NoiseFree::new(Box::new(Benchmark::new()))?;
+/// let (mut a, mut b) = (quiet.spec().new_record(), quiet.spec().new_record());
+/// quiet.simulate(&[0.3], &mut experiment_rng(1, 0), &mut a)?;
+/// // The same input (seed 1, experiment 0), with the noise: another output.
+/// Benchmark::new().simulate(&[0.3], &mut experiment_rng(1, 0), &mut b)?;
+/// assert_eq!(a.input(0), b.input(0));
+/// assert_ne!(a.output(0), b.output(0));
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+pub struct NoiseFree {
+    inner: Box<dyn Simulator>,
+}
+
+impl NoiseFree {
+    /// `inner` without its noise.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] when `inner` cannot simulate without
+    /// noise (the message says what can).
+    pub fn new(inner: Box<dyn Simulator>) -> Result<Self> {
+        let conditions = Conditions {
+            noiseless: true,
+            input: None,
+        };
+        inner
+            .capabilities()
+            .check(&conditions, inner.spec().name())?;
+        Ok(Self { inner })
+    }
+}
+
+impl Simulator for NoiseFree {
+    fn spec(&self) -> &ModelSpec {
+        self.inner.spec()
+    }
+
+    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
+        self.simulate_under(theta, rng, Conditions::default(), out)
+    }
+
+    fn batch_size(&self) -> usize {
+        self.inner.batch_size()
+    }
+
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        self.simulate_batch_under(thetas, rngs, Conditions::default(), outs)
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        self.inner.capabilities()
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<()> {
+        let conditions = Conditions {
+            noiseless: true,
+            ..conditions
+        };
+        self.inner.simulate_under(theta, rng, conditions, out)
+    }
+
+    fn simulate_batch_under(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        let conditions = Conditions {
+            noiseless: true,
+            ..conditions
+        };
+        self.inner
+            .simulate_batch_under(thetas, rngs, conditions, outs)
+    }
+}
+
 /// A simulator of the system `P(theta)`: given a parameter vector and a
 /// random stream, it produces one experiment's input/output record.
 ///
@@ -193,6 +393,53 @@ pub trait Simulator: Send + Sync {
             .zip(rngs.iter_mut())
             .zip(outs.iter_mut())
             .map(|((theta, rng), out)| self.simulate(theta, rng, out))
+            .collect()
+    }
+
+    /// Which [`Conditions`] [`Simulator::simulate_under`] honours
+    /// (default: none beyond a plain experiment).
+    fn capabilities(&self) -> Capabilities {
+        Capabilities::default()
+    }
+
+    /// Simulate one experiment under `conditions` (noise-free, on a given
+    /// input). Default: a plain experiment through
+    /// [`Simulator::simulate`], and a refusal of anything else.
+    ///
+    /// # Errors
+    /// Conditions the simulator cannot honour
+    /// ([`Capabilities::check`]), a given input of the wrong shape, and
+    /// those of [`Simulator::simulate`].
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<()> {
+        // Nothing beyond a plain experiment passes the default check.
+        Capabilities::default().check(&conditions, self.spec().name())?;
+        self.simulate(theta, rng, out)
+    }
+
+    /// A block of experiments under the same `conditions`, one result
+    /// each (a command source sends them in one request). Default: one
+    /// by one through [`Simulator::simulate_under`].
+    fn simulate_batch_under(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        if conditions.is_plain() {
+            return self.simulate_batch(thetas, rngs, outs);
+        }
+        thetas
+            .iter()
+            .zip(rngs.iter_mut())
+            .zip(outs.iter_mut())
+            .map(|((theta, rng), out)| self.simulate_under(theta, rng, conditions, out))
             .collect()
     }
 

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use twostage_models::{BuiltinModel, Simulator};
+use twostage_models::{BuiltinModel, NoiseFree, Simulator};
 
 use crate::error::{Error, Result};
 use crate::fingerprint;
@@ -76,19 +76,19 @@ impl NamedModel {
         }
     }
 
-    /// The simulator, with or without the built-in model's own noise.
+    /// The simulator, with or without its noise: `noiseless` turns off
+    /// every noise, the model's and the model file's measurement noise,
+    /// for any source that can run without it (built-in models, FMUs,
+    /// commands speaking protocol 2).
     ///
     /// # Errors
-    /// `noiseless` for a model file (its `[noise]` table decides), or what
-    /// starting the model file's source reports.
+    /// `noiseless` for a source that cannot (a command speaking protocol
+    /// 1: the message says how to upgrade it), or what starting the model
+    /// file's source reports.
     pub fn simulator(&self, noiseless: bool) -> Result<Box<dyn Simulator>> {
         match self {
             Self::Builtin(model) => Ok(model.build(noiseless)?),
-            Self::File(_) if noiseless => Err(Error::InvalidSetting {
-                name: "noiseless",
-                value: "true".into(),
-                reason: "is for built-in models; a model file says `[noise] model = false`".into(),
-            }),
+            Self::File(file) if noiseless => Ok(Box::new(NoiseFree::new(file.simulator()?)?)),
             Self::File(file) => file.simulator(),
         }
     }

@@ -472,3 +472,183 @@ fn the_octave_benchmark_speaks_the_protocol() {
         "Octave {octave_rmse} vs built-in {built_in}"
     );
 }
+
+/// The numpy benchmark's model file speaking `protocol`, with `extra`
+/// lines under [source] and after it.
+fn numpy_benchmark_file(protocol: u32, extra: &str) -> twostage::ModelFile {
+    twostage::ModelFile::parse(
+        &format!(
+            r#"[model]
+name = "numpy-benchmark"
+[source]
+command = [{:?}, {:?}]
+batch = 4
+protocol = {protocol}
+{extra}
+[[parameter]]
+name = "theta"
+prior = {{ dist = "uniform", low = -0.9, high = 0.9 }}
+[signals]
+inputs = ["u"]
+outputs = ["y"]
+samples = 1000
+"#,
+            python(),
+            protocol_dir().join("benchmark_numpy.py").to_str().unwrap()
+        ),
+        "numpy.toml",
+    )
+    .unwrap()
+}
+
+/// Protocol 2: a noise-free run on a given input through the numpy client
+/// is the built-in benchmark's noise-free response to that input, for every
+/// experiment of a batch; a fixed `[input]` reaches the simulator; a
+/// version 1 simulator is told what it lacks.
+#[test]
+fn protocol_two_runs_noise_free_on_a_given_input() {
+    use twostage::models::{Benchmark, Conditions};
+    let builtin = Benchmark::new();
+    let mut measured = builtin.spec().new_record();
+    builtin
+        .simulate(&[0.2], &mut experiment_rng(5, 0), &mut measured)
+        .unwrap();
+    let quiet = Conditions {
+        noiseless: true,
+        input: Some(&measured),
+    };
+    let numpy = numpy_benchmark_file(2, "").simulator().unwrap();
+    let thetas: Vec<Vec<f64>> = [-0.7, -0.1, 0.3, 0.8, 0.55]
+        .iter()
+        .map(|t| vec![*t])
+        .collect();
+    let theta_refs: Vec<&[f64]> = thetas.iter().map(Vec::as_slice).collect();
+    let mut rngs: Vec<_> = (0..5).map(|i| experiment_rng(9, i)).collect();
+    let mut records = vec![IoData::default(); 5];
+    let results = numpy.simulate_batch_under(&theta_refs, &mut rngs, quiet, &mut records);
+    for ((theta, result), record) in thetas.iter().zip(results).zip(&records) {
+        result.unwrap();
+        let mut expected = builtin.spec().new_record();
+        builtin
+            .simulate_under(theta, &mut experiment_rng(1, 0), quiet, &mut expected)
+            .unwrap();
+        assert_eq!(record.input(0), measured.input(0));
+        let worst = record
+            .output(0)
+            .iter()
+            .zip(expected.output(0))
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst <= 1e-9,
+            "theta {theta:?}: numpy and built-in differ by {worst}"
+        );
+    }
+    // With its noise, on the same input: another record.
+    let mut noisy = IoData::default();
+    let given = Conditions {
+        noiseless: false,
+        input: Some(&measured),
+    };
+    numpy
+        .simulate_under(&[0.3], &mut experiment_rng(9, 2), given, &mut noisy)
+        .unwrap();
+    assert_eq!(noisy.input(0), measured.input(0));
+    assert_ne!(noisy.output(0), records[2].output(0));
+
+    // A fixed [input] is handed over with every plain request.
+    let values: Vec<String> = (0..1000)
+        .map(|k| format!("{}", (k % 7) as f64 - 3.0))
+        .collect();
+    let fixed = numpy_benchmark_file(
+        2,
+        &format!(
+            "[input]\nsignal = \"fixed\"\nvalues = [{}]",
+            values.join(", ")
+        ),
+    );
+    let mut record = IoData::default();
+    fixed
+        .simulator()
+        .unwrap()
+        .simulate(&[0.3], &mut experiment_rng(1, 3), &mut record)
+        .unwrap();
+    assert_eq!(
+        record.input(0)[..8],
+        [-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0, -3.0]
+    );
+
+    // Version 1 cannot: the message says how to get there.
+    let old = numpy_benchmark_file(1, "").simulator().unwrap();
+    let refused = old
+        .simulate_under(&[0.3], &mut experiment_rng(1, 0), quiet, &mut record)
+        .unwrap_err()
+        .to_string();
+    assert!(refused.contains("protocol = 2"), "{refused}");
+    let named = twostage::NamedModel::File(Box::new(numpy_benchmark_file(1, "")));
+    let refused = named.simulator(true).err().unwrap().to_string();
+    assert!(refused.contains("protocol = 2"), "{refused}");
+}
+
+/// A version 2 simulator that ignores the input it is given fails that
+/// experiment, saying so: its record answers another question.
+#[test]
+fn a_simulator_that_ignores_the_given_input_is_caught() {
+    let dir = script(
+        "external-ignores-input",
+        r#"
+def simulate(theta, seed, index, noiseless=False, input=None):
+    rng = random.Random(seed * 1000003 + index)
+    u = [rng.gauss(0, 1) for _ in range(20)]
+    return [[v] for v in u], [[theta[0] * v] for v in u]
+
+serve(simulate)
+"#,
+    );
+    let spec = ModelSpec::new(
+        "ignores",
+        &["k"],
+        Prior::uniform_box(&[0.0], &[1.0]).unwrap(),
+        1.0,
+        20,
+    )
+    .unwrap()
+    .with_signals(&["u"], &["y"]);
+    let sim = ExternalSimulator::new(spec.clone(), vec![python(), "sim.py".into()])
+        .unwrap()
+        .current_dir(&dir)
+        .protocol(2)
+        .unwrap();
+    let mut given = spec.new_record();
+    given.input_mut(0).fill(0.5);
+    let conditions = twostage::models::Conditions {
+        noiseless: true,
+        input: Some(&given),
+    };
+    let mut record = IoData::default();
+    let e = sim
+        .simulate_under(&[0.5], &mut experiment_rng(1, 0), conditions, &mut record)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("returned input u") && e.contains("given 0.5"),
+        "{e}"
+    );
+    // A record of another length is refused before anything is sent.
+    let short = IoData::zeros(7, 1, 1);
+    let conditions = twostage::models::Conditions {
+        noiseless: true,
+        input: Some(&short),
+    };
+    let e = sim
+        .simulate_under(&[0.5], &mut experiment_rng(1, 0), conditions, &mut record)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("7 samples") && e.contains("20"), "{e}");
+    assert!(
+        ExternalSimulator::new(spec, vec!["x".into()])
+            .unwrap()
+            .protocol(3)
+            .is_err()
+    );
+}

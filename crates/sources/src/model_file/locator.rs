@@ -7,7 +7,9 @@ use toml::Spanned;
 use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
 use twostage_fmi::InterfaceKind;
-use twostage_models::{BuiltinModel, BuiltinOverrides, InputSignal, Marginal, ModelSpec};
+use twostage_models::{
+    BuiltinModel, BuiltinOverrides, InputSignal, Marginal, ModelSpec, PROTOCOL_VERSION,
+};
 
 use super::raw::*;
 use super::{DEFAULT_PRESET_SIMULATIONS, ModelSource};
@@ -97,6 +99,13 @@ impl Locator<'_> {
                 Some(b.span()),
                 "source.batch",
                 "a built-in model runs in this process: the batch is for a command".into(),
+            ));
+        }
+        if let Some(p) = &raw.protocol {
+            return Err(self.error(
+                Some(p.span()),
+                "source.protocol",
+                "a built-in model runs in this process: the protocol is for a command".into(),
             ));
         }
         let model: BuiltinModel =
@@ -309,14 +318,49 @@ impl Locator<'_> {
                 "give the program and its arguments, e.g. [\"python3\", \"sim.py\"]".into(),
             ));
         }
-        if let Some(input) = input {
-            return Err(self.error(
-                Some(input.span()),
-                "input",
-                "a command makes its own input and returns it with the outputs: leave [input] out"
-                    .into(),
-            ));
-        }
+        let protocol = match &raw.protocol {
+            None => 1,
+            Some(p) => u32::try_from(*p.get_ref())
+                .ok()
+                .filter(|v| (1..=PROTOCOL_VERSION).contains(v))
+                .ok_or_else(|| {
+                    self.error(
+                        Some(p.span()),
+                        "source.protocol",
+                        format!(
+                            "{}: give the protocol version the simulator speaks, 1 to \
+                             {PROTOCOL_VERSION} (docs/protocol.md)",
+                            p.get_ref()
+                        ),
+                    )
+                })?,
+        };
+        let input = match input {
+            None => None,
+            Some(i) if protocol < 2 => {
+                return Err(self.error(
+                    Some(i.span()),
+                    "input",
+                    "a command speaking protocol 1 makes its own input and returns it with the \
+                     outputs: leave [input] out, or say `protocol = 2` under [source] and serve \
+                     version 2, which hands the simulator the input with every request"
+                        .into(),
+                ));
+            }
+            Some(i) => {
+                let signal = self.input(i)?;
+                if !signal.is_fixed() {
+                    return Err(self.error(
+                        Some(i.span()),
+                        "input.signal",
+                        "a command is handed one input for every experiment: give signal = \
+                         \"fixed\" with the values (a measured input, say)"
+                            .into(),
+                    ));
+                }
+                Some(signal)
+            }
+        };
         if let Some(noise) = noise.filter(|n| n.get_ref().model.is_some()) {
             return Err(self.error(
                 Some(noise.span()),
@@ -358,6 +402,8 @@ impl Locator<'_> {
             dir: None,
             timeout,
             batch,
+            protocol,
+            input,
         })
     }
 

@@ -45,6 +45,10 @@ pub enum ModelSource {
         timeout: std::time::Duration,
         /// Experiments per request.
         batch: usize,
+        /// The protocol version it speaks (1 or 2).
+        protocol: u32,
+        /// The fixed input handed to it with every request (protocol 2).
+        input: Option<InputSignal>,
     },
     /// An FMU (FMI 2.0 or 3.0), docs/fmu.md.
     Fmu {
@@ -300,23 +304,32 @@ impl ModelFile {
                 inner: model.build_with(overrides)?,
                 spec: self.spec.clone(),
                 output_sd: self.output_sd.clone(),
+                fixed_input: None,
             })),
             ModelSource::Command {
                 command,
                 dir,
                 timeout,
                 batch,
+                protocol,
+                input,
             } => {
                 let mut external = ExternalSimulator::new(self.spec.clone(), command.clone())?
                     .timeout(*timeout)
-                    .batch(*batch);
+                    .batch(*batch)
+                    .protocol(*protocol)?;
                 if let Some(dir) = dir {
                     external = external.current_dir(dir);
                 }
+                let fixed_input = input
+                    .as_ref()
+                    .map(|signal| self.fixed_record(signal))
+                    .transpose()?;
                 Ok(Box::new(FileSimulator {
                     inner: Box::new(external),
                     spec: self.spec.clone(),
                     output_sd: self.output_sd.clone(),
+                    fixed_input,
                 }))
             }
             ModelSource::Fmu {
@@ -348,6 +361,7 @@ impl ModelFile {
                     inner: Box::new(fmu),
                     spec: self.spec.clone(),
                     output_sd: self.output_sd.clone(),
+                    fixed_input: None,
                 }))
             }
             ModelSource::ChartsOnly => Err(Error::ModelFile {
@@ -411,7 +425,27 @@ impl ModelFile {
             inner: source,
             spec: self.spec.clone(),
             output_sd: self.output_sd.clone(),
+            fixed_input: None,
         }))
+    }
+
+    /// The record of the file's shape whose every input is the fixed
+    /// `signal` (the outputs are not read).
+    fn fixed_record(&self, signal: &InputSignal) -> Result<twostage_models::IoData> {
+        let mut record = self.spec.new_record();
+        // A fixed signal draws nothing: any stream serves.
+        let mut rng = twostage_models::experiment_rng(0, 0);
+        for j in 0..record.n_inputs() {
+            signal
+                .fill(self.spec.sample_time(), &mut rng, record.input_mut(j))
+                .map_err(|e| Error::ModelFile {
+                    file: self.origin.clone(),
+                    line: None,
+                    key: "input.values".into(),
+                    message: e.to_string(),
+                })?;
+        }
+        Ok(record)
     }
 
     /// An FMU's complaint, placed at the line of the name it concerns (or

@@ -37,6 +37,7 @@ pub(super) struct RawSource {
     pub(super) fmu: Option<Spanned<String>>,
     pub(super) timeout_seconds: Option<Spanned<f64>>,
     pub(super) batch: Option<Spanned<i64>>,
+    pub(super) protocol: Option<Spanned<i64>>,
     pub(super) interface: Option<Spanned<String>>,
     pub(super) step_divisor: Option<Spanned<i64>>,
     pub(super) start_time: Option<Spanned<f64>>,

@@ -1,7 +1,7 @@
 //! The simulators a model file makes: its source under the file's names and
 //! noise, or none for a file that describes charts.
 
-use twostage_models::{ExperimentRng, IoData, ModelSpec, Simulator};
+use twostage_models::{Capabilities, Conditions, ExperimentRng, IoData, ModelSpec, Simulator};
 
 /// A model file's simulator: the source's, under the file's name, prior
 /// and signal names, with the file's measurement noise added.
@@ -9,6 +9,10 @@ pub(super) struct FileSimulator {
     pub(super) inner: Box<dyn Simulator>,
     pub(super) spec: ModelSpec,
     pub(super) output_sd: Vec<f64>,
+    /// The input the file fixes for a source that is handed it (a command
+    /// speaking protocol 2): every experiment gets it unless the caller
+    /// gives another.
+    pub(super) fixed_input: Option<IoData>,
 }
 
 impl Simulator for FileSimulator {
@@ -22,8 +26,42 @@ impl Simulator for FileSimulator {
         rng: &mut ExperimentRng,
         out: &mut IoData,
     ) -> twostage_models::Result<()> {
-        self.inner.simulate(theta, rng, out)?;
-        self.measured(rng, out)
+        self.simulate_under(theta, rng, Conditions::default(), out)
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        self.inner.capabilities()
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> twostage_models::Result<()> {
+        let conditions = self.with_fixed_input(conditions);
+        self.inner.simulate_under(theta, rng, conditions, out)?;
+        self.measured(rng, conditions, out)
+    }
+
+    fn simulate_batch_under(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<twostage_models::Result<()>> {
+        let conditions = self.with_fixed_input(conditions);
+        let mut results = self
+            .inner
+            .simulate_batch_under(thetas, rngs, conditions, outs);
+        for ((result, rng), out) in results.iter_mut().zip(rngs.iter_mut()).zip(outs.iter_mut()) {
+            if result.is_ok() {
+                *result = self.measured(rng, conditions, out);
+            }
+        }
+        results
     }
 
     fn batch_size(&self) -> usize {
@@ -36,20 +74,31 @@ impl Simulator for FileSimulator {
         rngs: &mut [ExperimentRng],
         outs: &mut [IoData],
     ) -> Vec<twostage_models::Result<()>> {
-        let mut results = self.inner.simulate_batch(thetas, rngs, outs);
-        for ((result, rng), out) in results.iter_mut().zip(rngs.iter_mut()).zip(outs.iter_mut()) {
-            if result.is_ok() {
-                *result = self.measured(rng, out);
-            }
-        }
-        results
+        self.simulate_batch_under(thetas, rngs, Conditions::default(), outs)
     }
 }
 
 impl FileSimulator {
+    /// The caller's conditions, with the file's fixed input where the
+    /// caller gives none.
+    fn with_fixed_input<'c>(&'c self, conditions: Conditions<'c>) -> Conditions<'c> {
+        match (&conditions.input, &self.fixed_input) {
+            (None, Some(fixed)) => Conditions {
+                input: Some(fixed),
+                ..conditions
+            },
+            _ => conditions,
+        }
+    }
+
     /// Check the source's record against the file and add the file's
-    /// measurement noise.
-    fn measured(&self, rng: &mut ExperimentRng, out: &mut IoData) -> twostage_models::Result<()> {
+    /// measurement noise (none for a noise-free run).
+    fn measured(
+        &self,
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> twostage_models::Result<()> {
         let (n, want) = (out.n_samples(), self.spec.n_samples());
         if n != want || out.n_outputs() != self.output_sd.len() {
             return Err(twostage_models::SimError::InvalidData(format!(
@@ -57,6 +106,9 @@ impl FileSimulator {
                 out.n_outputs(),
                 self.output_sd.len()
             )));
+        }
+        if conditions.noiseless {
+            return Ok(());
         }
         // After the source's own draws, from the same stream: experiment i
         // of seed s stays the same bits.
