@@ -12,6 +12,7 @@ mod model_arg;
 mod models;
 mod number;
 mod options;
+mod predict;
 mod simulate;
 mod slurm;
 mod specs;

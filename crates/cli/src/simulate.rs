@@ -8,11 +8,11 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::RunSettings;
 use twostage::sources::csv_rows::row;
-use twostage_models::{IoData, Simulator, experiment_rng, generic_signal_names, run_experiment};
+use twostage_models::{IoData, Simulator, experiment_rng, run_experiment};
 
 use crate::model_arg::ModelArgs;
 use crate::number::{format_f64, parse_list};
-use crate::usage;
+use crate::{predict, usage};
 
 /// Options of `twostage simulate`, already parsed by clap.
 #[derive(Debug, clap::Args)]
@@ -30,7 +30,9 @@ pub struct SimulateArgs {
     /// experiment I of a `--count` run can be simulated again alone.
     #[arg(long, default_value_t = 0, requires = "theta")]
     experiment: u64,
-    /// Simulate without noise (benchmark: v11 = v12 = v2 = 0; car: no sensor noise).
+    /// Simulate without noise: the model's own response (built-in models,
+    /// FMUs with their noise inputs at zero, commands speaking protocol 2;
+    /// a model file's measurement noise is left out too).
     #[arg(long)]
     noiseless: bool,
     /// Accept a --theta outside the model's prior box.
@@ -64,6 +66,17 @@ pub struct SimulateArgs {
     /// With --count: the folder that receives data.csv and truth.csv.
     #[arg(long, requires = "count")]
     out_dir: Option<PathBuf>,
+    /// Simulate at each row of this estimate CSV (as `twostage estimate`
+    /// writes it: `experiment` and one column per parameter), one
+    /// experiment per row, to predict or to compare with a record; the
+    /// CSV goes to --out or standard output.
+    #[arg(long, value_name = "ESTIMATES.csv", conflicts_with_all = ["theta", "count", "shard"])]
+    at: Option<PathBuf>,
+    /// With --at: apply the inputs of this record CSV (the model's signal
+    /// columns; one record for every row, or one per experiment id of the
+    /// estimates) instead of the model's own input design.
+    #[arg(long, value_name = "RECORD.csv", requires = "at")]
+    input: Option<PathBuf>,
 }
 
 /// Run `twostage simulate`.
@@ -73,12 +86,15 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
     if let (Some(shard), Some(count)) = (&args.shard, args.count) {
         return one_shard(&model, sim.as_ref(), shard, count, args);
     }
-    if args.out.is_some() && args.theta.is_none() {
+    if args.out.is_some() && args.theta.is_none() && args.at.is_none() {
         return Err(usage(
             "--out goes with --theta (a CSV file) or --shard (a folder); --count writes to \
              --out-dir"
                 .into(),
         ));
+    }
+    if let Some(at) = &args.at {
+        return at_estimates(sim.as_ref(), at, args);
     }
     match (&args.theta, args.count, &args.out_dir) {
         (Some(theta), None, None) => one_experiment(sim.as_ref(), theta, args),
@@ -117,13 +133,57 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
     )
     .with_context(|| format!("simulating {} at theta = {theta:?}", spec.name()))?;
     let mut text = String::with_capacity(record.n_samples() * 48);
-    text.push_str(&signal_header(&record));
+    text.push_str(&signal_header(spec));
     text.push('\n');
     push_rows(&mut text, None, &record);
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => io::stdout().lock().write_all(text.as_bytes())?,
     }
+    Ok(())
+}
+
+/// `--at ESTIMATES.csv [--input RECORD.csv]`.
+fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<()> {
+    let spec = sim.spec();
+    let rows = predict::read_rows(at, spec.param_names())?;
+    let inputs = match &args.input {
+        None => predict::Inputs::Own,
+        Some(path) => predict::Inputs::read(
+            path,
+            twostage::SignalNames {
+                inputs: spec.input_names().to_vec(),
+                outputs: spec.output_names().to_vec(),
+            },
+            spec.sample_time(),
+            &rows,
+        )?,
+    };
+    let start = std::time::Instant::now();
+    let records =
+        predict::simulate_rows(sim, &rows, &inputs, args.noiseless, args.seed.unwrap_or(0))?;
+    let text = predict::records_csv(sim, &rows, &records);
+    match &args.out {
+        Some(path) => twostage::write_whole(path, text.as_bytes())?,
+        None => io::stdout().lock().write_all(text.as_bytes())?,
+    }
+    eprintln!(
+        "simulated {} at {} estimate(s) of {}{}{} in {:.1} s",
+        spec.name(),
+        rows.len(),
+        at.display(),
+        if args.input.is_some() {
+            ", on the given input"
+        } else {
+            ""
+        },
+        if args.noiseless {
+            ", without noise"
+        } else {
+            ""
+        },
+        start.elapsed().as_secs_f64()
+    );
     Ok(())
 }
 
@@ -201,10 +261,11 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
         ))
     };
     let (mut data, mut truth) = (open(&data_path)?, open(&truth_path)?);
-    let record = spec.new_record();
-    let signals = generic_signal_names("u", record.n_inputs())
-        .into_iter()
-        .chain(generic_signal_names("y", record.n_outputs()));
+    let signals = spec
+        .input_names()
+        .iter()
+        .chain(spec.output_names())
+        .cloned();
     write!(
         data,
         "{}",
@@ -250,12 +311,12 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
     Ok(())
 }
 
-/// `u,y` for SISO records; `u1,u2,...` and `y1,...` when there are several.
-fn signal_header(record: &IoData) -> String {
-    let all = generic_signal_names("u", record.n_inputs())
-        .into_iter()
-        .chain(generic_signal_names("y", record.n_outputs()));
-    row(all).trim_end().to_string()
+/// The model's signal names (`estimate` reads them, and the generic
+/// `u,y` names, back).
+fn signal_header(spec: &twostage_models::ModelSpec) -> String {
+    row(spec.input_names().iter().chain(spec.output_names()))
+        .trim_end()
+        .to_string()
 }
 
 fn push_rows(text: &mut String, experiment: Option<usize>, record: &IoData) {

@@ -76,7 +76,8 @@ fn one_noiseless_car_record_matches_the_golden_values() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let (header, rows) = read_csv(&stdout(&out));
-    assert_eq!(header, "u,y");
+    // Columns named as the car's signals.
+    assert_eq!(header, "delta,a_y");
     assert_eq!(rows.len(), 500);
     // pacejka-golden.csv, t = 6 s and t = 4 s.
     assert!((rows[300][1] - 5.98522057067).abs() < 1e-8);
@@ -138,7 +139,7 @@ fn count_mode_writes_long_format_data_and_truth_that_reproduce() {
     assert!(out.status.success(), "{}", stderr(&out));
     let (data_header, data) = read_file(&dir.join("data.csv"));
     let (truth_header, truth) = read_file(&dir.join("truth.csv"));
-    assert_eq!(data_header, "experiment,u,y");
+    assert_eq!(data_header, "experiment,delta,a_y");
     assert_eq!(truth_header, "experiment,pK1,pK2");
     assert_eq!(data.len(), 300 * 500);
     assert_eq!(truth.len(), 300);
@@ -227,4 +228,106 @@ fn outside_the_prior_works_when_allowed_and_divergence_fails_cleanly() {
         "{err}"
     );
     assert!(stdout(&bad).is_empty(), "no partial CSV on failure");
+}
+
+/// The benchmark's noise-free response to `u` at `theta`, from eq. (5)
+/// written out here: x1' = x1/2 + u, x2' = a x1 - theta x2 + b u, y = x2.
+fn benchmark_response(theta: f64, u: &[f64]) -> Vec<f64> {
+    let a = (1.0 - theta * theta) * (50.0 * theta * theta).sin();
+    let b = theta / (1.0 + theta * theta);
+    let (mut x1, mut x2) = (0.0f64, 0.0f64);
+    u.iter()
+        .map(|&u| {
+            let y = x2;
+            (x1, x2) = (0.5 * x1 + u, a * x1 - theta * x2 + b * u);
+            y
+        })
+        .collect()
+}
+
+#[test]
+fn simulate_at_estimates_predicts_on_a_measured_input() {
+    let dir = scratch("simulate_at");
+    let record = dir.join("record.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--theta",
+        "0.3",
+        "--seed",
+        "4",
+        "--out",
+        record.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (_, measured) = read_file(&record);
+    let u: Vec<f64> = measured.iter().map(|r| r[0]).collect();
+    // Rows as `estimate` writes them, with a record it could not estimate.
+    let estimates = dir.join("estimates.csv");
+    std::fs::write(
+        &estimates,
+        "experiment,theta,theta_lo,theta_hi\nA,0.3,0.2,0.4\nfailed,,,\nB,-0.55,-0.6,-0.5\n",
+    )
+    .unwrap();
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--at",
+        estimates.to_str().unwrap(),
+        "--input",
+        record.to_str().unwrap(),
+        "--noiseless",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("experiment failed) has no estimate: skipped"));
+    let text = stdout(&out);
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("experiment,u,y"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2000);
+    for (id, theta, part) in [("A", 0.3, &rows[..1000]), ("B", -0.55, &rows[1000..])] {
+        let expected = benchmark_response(theta, &u);
+        for (k, row) in part.iter().enumerate() {
+            assert_eq!(row[0], id);
+            assert_eq!(row[1].parse::<f64>().unwrap().to_bits(), u[k].to_bits());
+            let y: f64 = row[2].parse().unwrap();
+            assert!(
+                (y - expected[k]).abs() <= 1e-9 * (1.0 + expected[k].abs()),
+                "{id} {k}"
+            );
+        }
+    }
+    // Mistakes are named: a missing parameter column, a value that is not
+    // a number (with its line), an input of another length.
+    std::fs::write(&estimates, "experiment,gain\nA,0.3\n").unwrap();
+    let at = [
+        "simulate",
+        "--model",
+        "benchmark",
+        "--at",
+        estimates.to_str().unwrap(),
+    ];
+    let out = twostage(&at);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("no column `theta`"),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::write(&estimates, "experiment,theta\nA,0.3\nB,abc\n").unwrap();
+    let out = twostage(&at);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("line 3, column theta: \"abc\""),
+        "{}",
+        stderr(&out)
+    );
+    let short = dir.join("short.csv");
+    std::fs::write(&short, "u,y\n1,0\n2,0\n").unwrap();
+    std::fs::write(&estimates, "experiment,theta\nA,0.3\n").unwrap();
+    let out = twostage(&[&at[..], &["--input", short.to_str().unwrap()]].concat());
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("2 samples"), "{}", stderr(&out));
 }

@@ -29,6 +29,14 @@ pub enum RefineError {
         /// The number of parameters.
         expected: usize,
     },
+    /// Simulating the model at the estimate failed.
+    #[error("{what}: {source}")]
+    Simulation {
+        /// Which run failed.
+        what: &'static str,
+        /// What the simulator said.
+        source: twostage_models::SimError,
+    },
     /// A computation on a record gave no finite answer.
     #[error("numerical failure: {what}")]
     Numerical {

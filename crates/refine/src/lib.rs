@@ -11,10 +11,12 @@
 //! errors, a simulation's output errors) can be refined.
 #![deny(missing_docs)]
 
+mod check;
 mod error;
 mod moments;
 mod refinement;
 
+pub use check::{EXPLAINED_LEVEL, RecordCheck, check_record};
 pub use error::RefineError;
 pub use moments::WeightedMoments;
 pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};

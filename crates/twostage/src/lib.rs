@@ -71,7 +71,8 @@ pub use settings::{DEFAULT_SEED, RunSettings};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
-    Descent, LocalPosterior, RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments,
+    Descent, EXPLAINED_LEVEL, LocalPosterior, RecordCheck, RefineError, RefineStarts, Refinement,
+    ResidualModel, WeightedMoments, check_record,
 };
 
 pub use twostage_sources::{

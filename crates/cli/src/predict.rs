@@ -1,0 +1,218 @@
+//! `twostage simulate --at ESTIMATES.csv`: the model at given parameters,
+//! one experiment per row of an estimate CSV, on a measured input where
+//! the source can take one, to predict or to compare with a record.
+
+use std::path::Path;
+
+use anyhow::{Result, bail};
+use rayon::prelude::*;
+use twostage::SignalNames;
+use twostage::models::{Conditions, IoData, Simulator, experiment_rng};
+use twostage::sources::csv_rows::{for_each_row, row};
+
+use crate::csv_records;
+use crate::number::format_f64;
+use crate::usage;
+
+/// One row of an estimate CSV: the experiment's id and its parameters.
+pub struct Row {
+    /// The `experiment` column (or the row's number when there is none).
+    pub id: String,
+    /// The parameter vector, in the model's order.
+    pub theta: Vec<f64>,
+}
+
+/// The rows of an estimate CSV (as `estimate` writes it): an optional
+/// `experiment` column and one column per parameter, named as the model
+/// names them; other columns are ignored. A row whose parameters are
+/// empty (a record `estimate` could not estimate) is skipped with a note.
+///
+/// # Errors
+/// A missing parameter column, a value that is not a finite number (file,
+/// line, column), or no row at all.
+pub fn read_rows(path: &Path, names: &[String]) -> Result<Vec<Row>> {
+    let file = path.display().to_string();
+    let reader = std::fs::File::open(path).map_err(|e| usage(format!("{file}: {e}")))?;
+    let mut columns: Option<(Option<usize>, Vec<usize>)> = None;
+    let mut rows = Vec::new();
+    for_each_row(
+        std::io::BufReader::new(reader),
+        |line, fields| -> Result<(), String> {
+            let Some((id_column, theta_columns)) = &columns else {
+                let header: Vec<&str> = fields.iter().collect();
+                let find = |name: &str| header.iter().position(|h| *h == name);
+                let theta_columns = names
+                    .iter()
+                    .map(|n| {
+                        find(n).ok_or_else(|| {
+                            format!(
+                                "{file}, line {line}: no column `{n}`; an estimate CSV names \
+                                 the model's parameters ({}) in its header, as `twostage \
+                                 estimate` writes it",
+                                names.join(", ")
+                            )
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                columns = Some((find("experiment"), theta_columns));
+                return Ok(());
+            };
+            let id = id_column
+                .and_then(|c| fields.get(c))
+                .map_or_else(|| (rows.len() + 1).to_string(), str::to_string);
+            let cells: Vec<&str> = theta_columns
+                .iter()
+                .map(|&c| fields.get(c).unwrap_or(""))
+                .collect();
+            if cells.iter().all(|c| c.is_empty()) {
+                eprintln!("note: {file}, line {line} (experiment {id}) has no estimate: skipped");
+                return Ok(());
+            }
+            let theta = cells
+                .iter()
+                .zip(names)
+                .map(|(cell, name)| {
+                    cell.parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| {
+                            format!(
+                                "{file}, line {line}, column {name}: {cell:?} is not a finite \
+                                 number"
+                            )
+                        })
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            rows.push(Row { id, theta });
+            Ok(())
+        },
+        |line, e| format!("{file}, line {line:?}: {e}"),
+    )
+    .map_err(usage)?;
+    if rows.is_empty() {
+        return Err(usage(format!("{file} holds no estimate to simulate at")));
+    }
+    Ok(rows)
+}
+
+/// The given inputs: none, one record for every row, or one per row
+/// matched by experiment id.
+pub enum Inputs {
+    /// The simulator's own input design.
+    Own,
+    /// The same record for every row.
+    One(IoData),
+    /// Each row's own record, in the rows' order.
+    PerRow(Vec<IoData>),
+}
+
+impl Inputs {
+    /// The inputs of the record CSV at `path` for `rows`: a file of one
+    /// record serves every row; a file of many must hold one whose
+    /// experiment id is each row's.
+    ///
+    /// # Errors
+    /// A file that cannot be read, a record that cannot be (file, row,
+    /// column), or a row without its record.
+    pub fn read(path: &Path, signals: SignalNames, sample_time: f64, rows: &[Row]) -> Result<Self> {
+        let format = csv_records::RecordFormat {
+            signals,
+            sample_time,
+        };
+        let mut records = csv_records::read(path, &format).map_err(usage)?;
+        let checked = |r: csv_records::ReadRecord| -> Result<(String, IoData)> {
+            r.record
+                .map(|record| (r.id.clone(), record))
+                .map_err(|e| usage(format!("--input: {e}")))
+        };
+        if records.len() == 1 {
+            let (_, record) = checked(records.remove(0))?;
+            return Ok(Self::One(record));
+        }
+        let mut by_id: std::collections::HashMap<String, IoData> =
+            records.into_iter().map(checked).collect::<Result<_>>()?;
+        let per_row = rows
+            .iter()
+            .map(|row| {
+                by_id.remove(&row.id).ok_or_else(|| {
+                    usage(format!(
+                        "--input {} holds no record of experiment {}: give one record for \
+                         every row, or one per experiment of the estimates",
+                        path.display(),
+                        row.id
+                    ))
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self::PerRow(per_row))
+    }
+
+    fn of(&self, row: usize) -> Option<&IoData> {
+        match self {
+            Self::Own => None,
+            Self::One(record) => Some(record),
+            Self::PerRow(records) => records.get(row),
+        }
+    }
+}
+
+/// Simulate `sim` at every row (experiment stream `i` of `seed` for row
+/// `i`), in requests of the simulator's batch size wherever rows share an
+/// input, in parallel; the records in the rows' order.
+///
+/// # Errors
+/// The first row that fails, named by its experiment id.
+pub fn simulate_rows(
+    sim: &dyn Simulator,
+    rows: &[Row],
+    inputs: &Inputs,
+    noiseless: bool,
+    seed: u64,
+) -> Result<Vec<IoData>> {
+    let batch = match inputs {
+        Inputs::PerRow(_) => 1,
+        Inputs::Own | Inputs::One(_) => sim.batch_size().max(1),
+    };
+    let starts: Vec<usize> = (0..rows.len()).step_by(batch).collect();
+    let blocks: Vec<Vec<IoData>> = starts
+        .par_iter()
+        .map(|&start| -> Result<Vec<IoData>> {
+            let block = &rows[start..(start + batch).min(rows.len())];
+            let thetas: Vec<&[f64]> = block.iter().map(|r| r.theta.as_slice()).collect();
+            let mut rngs: Vec<_> = (start..start + block.len())
+                .map(|i| experiment_rng(seed, i as u64))
+                .collect();
+            let mut records = vec![IoData::default(); block.len()];
+            let conditions = Conditions {
+                noiseless,
+                input: inputs.of(start),
+            };
+            let results = sim.simulate_batch_under(&thetas, &mut rngs, conditions, &mut records);
+            for (row, result) in block.iter().zip(results) {
+                if let Err(e) = result {
+                    bail!("simulating experiment {} at {:?}: {e}", row.id, row.theta);
+                }
+            }
+            Ok(records)
+        })
+        .collect::<Result<_>>()?;
+    Ok(blocks.into_iter().flatten().collect())
+}
+
+/// The records as one CSV: `experiment`, then the model's signal names.
+pub fn records_csv(sim: &dyn Simulator, rows: &[Row], records: &[IoData]) -> String {
+    let spec = sim.spec();
+    let mut text = row(std::iter::once("experiment")
+        .chain(spec.input_names().iter().map(String::as_str))
+        .chain(spec.output_names().iter().map(String::as_str)));
+    for (r, record) in rows.iter().zip(records) {
+        for k in 0..record.n_samples() {
+            let values = (0..record.n_inputs())
+                .map(|j| record.input(j)[k])
+                .chain((0..record.n_outputs()).map(|j| record.output(j)[k]))
+                .map(format_f64);
+            text.push_str(&row(std::iter::once(r.id.clone()).chain(values)));
+        }
+    }
+    text
+}

@@ -1,0 +1,243 @@
+//! Does the model, at an estimate, explain the record it came from? The
+//! noise-free simulation on the record's own input, its fit to the
+//! record, and how typical that misfit is of the model's own noisy
+//! records at the estimate (`twostage estimate --check`).
+
+use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
+
+use crate::RefineError;
+
+/// At or below this tail probability a record is not explained by the
+/// model at its estimate (a 1% test: about one good record in a hundred
+/// is flagged). It takes at least 99 of the model's own records to reach.
+pub const EXPLAINED_LEVEL: f64 = 0.01;
+
+/// How one record compares with the model's response at its estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordCheck {
+    /// Per output: the RMS of record minus noise-free simulation.
+    pub rms: Vec<f64>,
+    /// Per output: the normalized fit, `100 (1 - |y - y_sim| / |y -
+    /// mean(y)|)` percent, as system identification tools report it.
+    pub fit_percent: Vec<f64>,
+    /// The share of the model's own records at the estimate (noisy, on
+    /// the same input) whose misfit is at least the record's: small means
+    /// the record is not what the model makes at this estimate.
+    pub tail_probability: f64,
+    /// The noise-free simulation, for plots.
+    pub simulated: IoData,
+}
+
+impl RecordCheck {
+    /// Whether the model at the estimate explains the record.
+    pub fn explained(&self) -> bool {
+        self.tail_probability > EXPLAINED_LEVEL
+    }
+}
+
+/// Mean square of `a - b` per output.
+fn mean_squares(a: &IoData, b: &IoData) -> Vec<f64> {
+    (0..a.n_outputs())
+        .map(|j| {
+            let (x, y) = (a.output(j), b.output(j));
+            x.iter().zip(y).map(|(p, q)| (p - q) * (p - q)).sum::<f64>() / x.len().max(1) as f64
+        })
+        .collect()
+}
+
+/// Check `record` against `sim` at `theta`: one noise-free run on the
+/// record's input and `noisy` runs with the model's noise (streams
+/// `seed`, 0..noisy), whose misfits to the noise-free run are the
+/// reference the record's misfit is ranked among.
+///
+/// ```
+/// use twostage_models::{experiment_rng, PacejkaCar, Simulator};
+/// use twostage_refine::check_record;
+/// let car = PacejkaCar::builder().n_samples(300).build()?;
+/// let mut record = car.spec().new_record();
+/// car.simulate(&[-35.0, -1.1], &mut experiment_rng(7, 0), &mut record)?;
+/// // At the truth the record is one of the model's own.
+/// let right = check_record(&car, &record, &[-35.0, -1.1], 99, 1)?;
+/// assert!(right.explained() && right.fit_percent[0] > 95.0);
+/// // Far from it, the record's misfit exceeds every one of the model's.
+/// let wrong = check_record(&car, &record, &[-25.0, -1.1], 99, 1)?;
+/// assert!(!wrong.explained() && wrong.tail_probability == 0.01);
+/// // Though the fit alone (95% against 97%) would not have said so.
+/// assert!(wrong.fit_percent[0] > 90.0);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// # Errors
+/// What simulating says: a record of another length or inputs than the
+/// model's, a source that cannot run without noise or on a given input,
+/// a run that fails.
+pub fn check_record(
+    sim: &dyn Simulator,
+    record: &IoData,
+    theta: &[f64],
+    noisy: usize,
+    seed: u64,
+) -> Result<RecordCheck, RefineError> {
+    let quiet = Conditions {
+        noiseless: true,
+        input: Some(record),
+    };
+    let mut simulated = IoData::default();
+    sim.simulate_under(
+        theta,
+        &mut experiment_rng(seed, u64::MAX),
+        quiet,
+        &mut simulated,
+    )
+    .map_err(|source| RefineError::Simulation {
+        what: "the noise-free simulation at the estimate",
+        source,
+    })?;
+    let record_ms = mean_squares(record, &simulated);
+    let with_noise = Conditions {
+        noiseless: false,
+        input: Some(record),
+    };
+    let mut own = IoData::default();
+    let mut reference = Vec::with_capacity(noisy);
+    for i in 0..noisy {
+        sim.simulate_under(
+            theta,
+            &mut experiment_rng(seed, i as u64),
+            with_noise,
+            &mut own,
+        )
+        .map_err(|source| RefineError::Simulation {
+            what: "a simulation with the model's noise at the estimate",
+            source,
+        })?;
+        reference.push(mean_squares(&own, &simulated));
+    }
+    // Each output's misfit in units of the model's own (so that outputs of
+    // different scales weigh alike), summed over the outputs.
+    let n_y = record.n_outputs();
+    let scale: Vec<f64> = (0..n_y)
+        .map(|j| reference.iter().map(|r| r[j]).sum::<f64>() / noisy.max(1) as f64)
+        .collect();
+    let statistic = |ms: &[f64]| -> f64 {
+        ms.iter()
+            .zip(&scale)
+            .map(|(m, s)| {
+                if *s > 0.0 {
+                    m / s
+                } else if *m > 0.0 {
+                    f64::INFINITY
+                } else {
+                    0.0
+                }
+            })
+            .sum()
+    };
+    let observed = statistic(&record_ms);
+    let at_least = reference
+        .iter()
+        .filter(|r| statistic(r) >= observed)
+        .count();
+    let tail_probability = (at_least + 1) as f64 / (noisy + 1) as f64;
+    let fit_percent = (0..n_y)
+        .map(|j| {
+            let y = record.output(j);
+            let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
+            let spread = y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>();
+            let misfit = record_ms[j] * y.len() as f64;
+            if spread > 0.0 {
+                100.0 * (1.0 - (misfit / spread).sqrt())
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    Ok(RecordCheck {
+        rms: record_ms.iter().map(|m| m.sqrt()).collect(),
+        fit_percent,
+        tail_probability,
+        simulated,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use twostage_models::{Capabilities, ModelSpec, Prior, SimError};
+
+    /// y = theta u + 0.1 e, on the given input.
+    struct Gain(ModelSpec);
+
+    impl Simulator for Gain {
+        fn spec(&self) -> &ModelSpec {
+            &self.0
+        }
+        fn simulate(
+            &self,
+            _: &[f64],
+            _: &mut twostage_models::ExperimentRng,
+            _: &mut IoData,
+        ) -> Result<(), SimError> {
+            Err(SimError::InvalidData("given inputs only".into()))
+        }
+        fn capabilities(&self) -> Capabilities {
+            Capabilities {
+                noiseless: true,
+                given_input: true,
+            }
+        }
+        fn simulate_under(
+            &self,
+            theta: &[f64],
+            rng: &mut twostage_models::ExperimentRng,
+            conditions: Conditions<'_>,
+            out: &mut IoData,
+        ) -> Result<(), SimError> {
+            let given = conditions
+                .input
+                .ok_or(SimError::InvalidData("no input".into()))?;
+            out.resize(given.n_samples(), 1, 1);
+            out.input_mut(0).copy_from_slice(given.input(0));
+            let u = given.input(0).to_vec();
+            for (y, u) in out.output_mut(0).iter_mut().zip(u) {
+                let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
+                *y = theta[0] * u + if conditions.noiseless { 0.0 } else { 0.1 * e };
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_fit_and_the_misfit_are_the_hand_computed_ones() {
+        let spec = ModelSpec::new(
+            "gain",
+            &["k"],
+            Prior::uniform_box(&[0.0], &[5.0]).unwrap(),
+            1.0,
+            4,
+        )
+        .unwrap()
+        .with_signals(&["u"], &["y"]);
+        let model = Gain(spec);
+        // u = 1, -1, 2, 0; y = 2 u + 0.5: the misfit at k = 2 is 0.5 at
+        // every sample, y's mean is 1.5 and its squared spread sums to 20.
+        let u = [1.0, -1.0, 2.0, 0.0];
+        let y: Vec<f64> = u.iter().map(|u| 2.0 * u + 0.5).collect();
+        let record = IoData::siso(&u, &y).unwrap();
+        let check = check_record(&model, &record, &[2.0], 199, 3).unwrap();
+        assert!((check.rms[0] - 0.5).abs() < 1e-15);
+        let expected = 100.0 * (1.0 - (4.0 * 0.25f64 / 20.0).sqrt());
+        assert!((check.fit_percent[0] - expected).abs() < 1e-12);
+        // A misfit five times the noise: none of the model's own records
+        // reaches it.
+        assert_eq!(check.tail_probability.to_bits(), (1.0f64 / 200.0).to_bits());
+        assert!(!check.explained());
+        // The exact response is explained by every one of them.
+        let exact = IoData::siso(&u, &u.map(|u| 2.0 * u)).unwrap();
+        let check = check_record(&model, &exact, &[2.0], 199, 3).unwrap();
+        assert_eq!(
+            (check.rms[0], check.fit_percent[0], check.tail_probability),
+            (0.0, 100.0, 1.0)
+        );
+    }
+}
