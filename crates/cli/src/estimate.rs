@@ -5,8 +5,9 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
+use twostage::models::Simulator;
 use twostage::models::{BuiltinModel, IoData};
-use twostage::{Estimator, ModelProfile, Refinement, SignalNames};
+use twostage::{Estimator, ModelProfile, RecordCheck, Refinement, SignalNames};
 
 use crate::number::format_f64;
 use crate::options::{InitialCovariance, TableFormat};
@@ -16,8 +17,19 @@ use crate::{csv_records, usage};
 #[derive(Debug, clap::Args)]
 pub struct EstimateArgs {
     /// The estimator file written by `twostage train`.
-    #[arg(long, conflicts_with_all = ["model", "model_file", "method"])]
+    #[arg(long, conflicts_with_all = ["model", "method"])]
     estimator: Option<PathBuf>,
+    /// With --estimator: check each estimate against its record: the
+    /// model's noise-free response at the estimate on the record's input,
+    /// its RMS residual and normalized fit per output, and the share of
+    /// the model's own records at the estimate that miss by as much (a
+    /// record at or below 1% is not explained, said on stderr). Needs the
+    /// model: the estimator's built-in one, or --model-file.
+    #[arg(long, requires = "estimator")]
+    check: bool,
+    /// With --check: the model's own records each record is ranked among.
+    #[arg(long, default_value_t = 199, requires = "check")]
+    check_sims: usize,
     /// With --estimator of a built-in model: refine each estimate by the
     /// posterior mean of the prediction-error likelihood over twice its
     /// interval (about 1 ms per benchmark record, 0.4 s per car record).
@@ -26,9 +38,10 @@ pub struct EstimateArgs {
     /// With --method: the model the records come from (benchmark or pacejka).
     #[arg(long, requires = "method", conflicts_with = "model_file")]
     model: Option<String>,
-    /// With --method: a model file the records come from (the classic
-    /// methods exist for the built-in models only: it says so).
-    #[arg(long, value_name = "PATH", requires = "method")]
+    /// The model file the records come from: for --check with an
+    /// estimator of a model file, or with --method (the classic methods
+    /// exist for the built-in models only: it says so).
+    #[arg(long, value_name = "PATH")]
     model_file: Option<PathBuf>,
     /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
     /// (indirect inference through the TS preset's ARX) or bayes.
@@ -68,6 +81,9 @@ struct Estimated {
     /// Samples outside their output's transform, when the estimator
     /// transforms its outputs.
     floored: Option<Vec<twostage::compress::FlooredSample>>,
+    /// With --check: how the model at the estimate explains the record, or
+    /// why it could not be simulated.
+    check: Option<Result<RecordCheck, String>>,
 }
 
 impl Estimated {
@@ -106,6 +122,30 @@ fn refinement(estimator: &Estimator) -> Result<Refine> {
     }))
 }
 
+/// The model an estimator's records come from, to check them against:
+/// `--model-file`, else the estimator's built-in model.
+fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box<dyn Simulator>> {
+    let named = match &args.model_file {
+        Some(path) => twostage::NamedModel::file(path).map_err(|e| usage(e.to_string()))?,
+        None => twostage::NamedModel::builtin(&estimator.training().model).map_err(|_| {
+            usage(format!(
+                "--check simulates the model: this estimator is of '{}', give its \
+                 --model-file",
+                estimator.training().model
+            ))
+        })?,
+    };
+    if named.name() != estimator.training().model {
+        return Err(usage(format!(
+            "--model-file describes '{}', the estimator was trained on '{}': give the model \
+             file it was trained from",
+            named.name(),
+            estimator.training().model
+        )));
+    }
+    named.simulator(false).map_err(|e| usage(e.to_string()))
+}
+
 /// What a record is estimated with: the parameter names, the method, the
 /// record length an estimator file was trained and validated on, and the
 /// signals (the CSV columns) it reads.
@@ -128,6 +168,11 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             sample_time: estimator.record_shape().sample_time,
         };
         let transforms = estimator.transforms_outputs();
+        let checker = if args.check {
+            Some((model_of(&estimator, args)?, args.check_sims, args.seed))
+        } else {
+            None
+        };
         let mut refine = if args.refine {
             Some(refinement(&estimator)?)
         } else {
@@ -147,11 +192,16 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     Some(refine) => refine(record, &a.theta)?,
                     None => a.theta,
                 };
+                let check = checker.as_ref().map(|(model, sims, seed)| {
+                    twostage::check_record(model.as_ref(), record, &theta, *sims, *seed)
+                        .map_err(|e| e.to_string())
+                });
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     theta,
                     widths,
                     floored: transforms.then_some(a.floored_samples),
+                    check,
                 })
             }),
         });
@@ -202,6 +252,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     widths: None,
                     distance: None,
                     floored: None,
+                    check: None,
                 })
                 .map_err(|e| e.to_string())
         }),
@@ -272,6 +323,27 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             if floored.len() > 5 { ", ..." } else { "" }
                         );
                     }
+                    match &estimated.check {
+                        Some(Err(e)) => eprintln!(
+                            "warning: {}: experiment {}: --check could not simulate the model at \
+                             the estimate ({e}); the estimate is kept, unchecked",
+                            path.display(),
+                            read.id
+                        ),
+                        Some(Ok(c)) if !c.explained() => eprintln!(
+                            "warning: {}: experiment {}: not explained by the model at its \
+                             estimate: RMS residual {}, fit {} %, and at most {:.1}% of the \
+                             model's own records there miss by as much; do not trust this \
+                             estimate (a model that does not fit, another input than training's, \
+                             or a poor estimate: try --refine, and see docs/real-data.md)",
+                            path.display(),
+                            read.id,
+                            list(&c.rms),
+                            list(&c.fit_percent),
+                            100.0 * c.tail_probability
+                        ),
+                        _ => {}
+                    }
                     rows.push((read.id, estimated));
                 }
                 Err(problem) => {
@@ -290,9 +362,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         return Ok(outcome);
     }
     let text = if args.format == TableFormat::Json {
-        json(&names, &rows)?
+        json(&names, &rows, &output_names)?
     } else {
-        csv(&names, &rows)?
+        csv(&names, &rows, &output_names)?
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
@@ -325,7 +397,42 @@ impl Outcome {
     }
 }
 
-fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
+/// Numbers for a message, comma separated, to four significant digits.
+fn list(values: &[f64]) -> String {
+    let shown: Vec<String> = values.iter().map(|v| format!("{v:.4}")).collect();
+    shown.join(", ")
+}
+
+/// The check's columns: per output its RMS residual and fit, then the
+/// tail probability and whether the record is explained.
+fn check_header(outputs: &[String]) -> Vec<String> {
+    let mut header = Vec::new();
+    for y in outputs {
+        header.push(format!("{y}_rms"));
+        header.push(format!("{y}_fit_percent"));
+    }
+    header.extend(["check_tail_probability".into(), "explained".into()]);
+    header
+}
+
+/// The check's values for one record (empty where it could not be run).
+fn check_fields(outputs: usize, check: Option<&Result<RecordCheck, String>>) -> Vec<String> {
+    match check {
+        Some(Ok(c)) => {
+            let mut fields = Vec::new();
+            for (rms, fit) in c.rms.iter().zip(&c.fit_percent) {
+                fields.push(format_f64(*rms));
+                fields.push(format_f64(*fit));
+            }
+            fields.push(format_f64(c.tail_probability));
+            fields.push(c.explained().to_string());
+            fields
+        }
+        _ => vec![String::new(); 2 * outputs + 2],
+    }
+}
+
+fn csv(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Result<String> {
     use twostage::sources::csv_rows::row;
     let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
     let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
@@ -344,6 +451,10 @@ fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
     if with_floored {
         header.push("untransformed_samples".into());
     }
+    let with_check = rows.iter().any(|(_, e)| e.check.is_some());
+    if with_check {
+        header.extend(check_header(outputs));
+    }
     let mut text = row(&header);
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
@@ -361,12 +472,15 @@ fn csv(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
         if with_floored {
             fields.push(e.floored.as_ref().map_or(0, Vec::len).to_string());
         }
+        if with_check {
+            fields.extend(check_fields(outputs.len(), e.check.as_ref()));
+        }
         text.push_str(&row(&fields));
     }
     Ok(text)
 }
 
-fn json(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
+fn json(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Result<String> {
     let records: Vec<serde_json::Value> = rows
         .iter()
         .map(|(id, e)| {
@@ -385,6 +499,20 @@ fn json(names: &[String], rows: &[(String, Estimated)]) -> Result<String> {
             }
             if let Some(floored) = &e.floored {
                 object.insert("untransformed_samples".into(), floored.len().into());
+            }
+            match &e.check {
+                Some(Ok(c)) => {
+                    for (j, y) in outputs.iter().enumerate() {
+                        object.insert(format!("{y}_rms"), c.rms[j].into());
+                        object.insert(format!("{y}_fit_percent"), c.fit_percent[j].into());
+                    }
+                    object.insert("check_tail_probability".into(), c.tail_probability.into());
+                    object.insert("explained".into(), c.explained().into());
+                }
+                Some(Err(e)) => {
+                    object.insert("check_error".into(), e.clone().into());
+                }
+                None => {}
             }
             serde_json::Value::Object(object)
         })

@@ -686,3 +686,113 @@ fn refinement_moves_estimates_towards_the_bayes_ones() {
     let out = twostage(&["estimate", "--refine", path(&records)]);
     assert_eq!(out.status.code(), Some(2), "--refine needs --estimator");
 }
+
+/// `estimate --check` passes the model's own records and flags one the
+/// model does not make (the same input, the output delayed by 0.1 s, as
+/// a sensor with an unknown lag would give), with columns per output and
+/// a line on stderr naming it.
+#[test]
+fn check_passes_the_model_s_records_and_flags_an_alien_one() {
+    let dir = scratch("check");
+    let file = dir.join("car.tsest");
+    let out = twostage(&[
+        "train",
+        "--model",
+        "pacejka",
+        "--compress",
+        "arx:2,2",
+        "--fit",
+        "mlp:10",
+        "--sims",
+        "1000",
+        "--validate",
+        "0",
+        "--calibrate",
+        "100",
+        "--quiet",
+        "--out",
+        path(&file),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let data = dir.join("data");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "pacejka",
+        "--count",
+        "20",
+        "--seed",
+        "9",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let data = data.join("data.csv");
+    let csv = std::fs::read_to_string(&data).unwrap();
+    let first: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .filter(|l| l.starts_with("0,"))
+        .map(|l| l.split(',').skip(1).map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let mut alien = String::from("delta,a_y\n");
+    for (k, row) in first.iter().enumerate() {
+        alien.push_str(&format!("{},{}\n", row[0], first[k.saturating_sub(10)][1]));
+    }
+    let alien_path = dir.join("alien.csv");
+    std::fs::write(&alien_path, alien).unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--check",
+        path(&data),
+        path(&alien_path),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    let mut lines = table.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (explained, fit) = (column("explained"), column("a_y_fit_percent"));
+    assert!(header.contains(&"a_y_rms") && header.contains(&"check_tail_probability"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 21);
+    let passed = rows[..20].iter().filter(|r| r[explained] == "true").count();
+    // A 1% test: one in a hundred of the model's records fails it.
+    assert!(
+        passed >= 18,
+        "{passed} of 20 of the model's own records explained\n{table}"
+    );
+    assert_eq!(rows[20][0], "alien");
+    assert_eq!(rows[20][explained], "false", "{table}");
+    let fit: f64 = rows[20][fit].parse().unwrap();
+    assert!(fit.is_finite());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("experiment alien: not explained"),
+        "{stderr}"
+    );
+    // The model file given must be the estimator's model.
+    let benchmark = dir.join("benchmark.toml");
+    std::fs::write(
+        &benchmark,
+        "[model]\nname = \"other\"\n[source]\nbuiltin = \"benchmark\"\n",
+    )
+    .unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--check",
+        "--model-file",
+        path(&benchmark),
+        path(&alien_path),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("trained on 'pacejka'"),
+        "{}",
+        text(&out.stderr)
+    );
+}
