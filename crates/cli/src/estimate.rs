@@ -335,7 +335,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                              estimate: RMS residual {}, fit {} %, and at most {:.1}% of the \
                              model's own records there miss by as much; do not trust this \
                              estimate (a model that does not fit, another input than training's, \
-                             or a poor estimate: try --refine, and see docs/real-data.md)",
+                             or a poor estimate; see docs/decisions/033-real-records.md)",
                             path.display(),
                             read.id,
                             list(&c.rms),
