@@ -177,8 +177,8 @@ impl Conditions<'_> {
         !self.noiseless && self.input.is_none()
     }
 
-    /// The given input's samples of signal `j`, checked against `spec`:
-    /// the record must hold the model's inputs and samples.
+    /// Check the given input (if any) against `spec`: the record must
+    /// hold the model's inputs and samples, all finite.
     ///
     /// # Errors
     /// [`SimError::InvalidData`] naming the counts expected and given.
@@ -189,7 +189,8 @@ impl Conditions<'_> {
         let (n, n_u) = (spec.n_samples(), spec.input_names().len());
         if record.n_samples() != n || record.n_inputs() != n_u {
             return Err(SimError::InvalidData(format!(
-                "the given input has {} samples of {} signal(s); the model {} simulates {n}                  samples of {n_u} ({}): give a record of that length with those inputs",
+                "the given input has {} samples of {} signal(s); the model {} simulates {n} \
+                 samples of {n_u} ({}): give a record of that length with those inputs",
                 record.n_samples(),
                 record.n_inputs(),
                 spec.name(),
@@ -233,7 +234,9 @@ impl Capabilities {
                 name: "noiseless",
                 value: "true".into(),
                 reason: format!(
-                    "the simulator of {model} cannot simulate without its noise; a command                      source can when it speaks protocol 2 (`protocol = 2` under [source],                      docs/protocol.md)"
+                    "the simulator of {model} cannot simulate without its noise; a command \
+                     source can when it speaks protocol 2 (`protocol = 2` under [source], \
+                     docs/protocol.md)"
                 ),
             });
         }
@@ -242,7 +245,9 @@ impl Capabilities {
                 name: "input",
                 value: "a given record".into(),
                 reason: format!(
-                    "the simulator of {model} makes its own input and cannot apply a given                      one; a command source can when it speaks protocol 2 (`protocol = 2`                      under [source], docs/protocol.md)"
+                    "the simulator of {model} makes its own input and cannot apply a given \
+                     one; a command source can when it speaks protocol 2 (`protocol = 2` \
+                     under [source], docs/protocol.md)"
                 ),
             });
         }
