@@ -73,7 +73,11 @@ pub struct PredictionError<M> {
     name: String,
 }
 
-impl<M: ResidualModel<Error = BaselineError>> PredictionError<M> {
+impl<M: ResidualModel> PredictionError<M>
+where
+    BaselineError: From<M::Error>,
+    M::Error: Send,
+{
     /// PE with `starts` random starts.
     pub fn new(model: M, starts: usize) -> Self {
         Self {
@@ -115,7 +119,7 @@ impl<M: ResidualModel<Error = BaselineError>> PredictionError<M> {
     /// # Errors
     /// A bad record, or a start of the wrong length.
     pub fn descend(&self, record: &IoData, start: Vec<f64>) -> Result<Descent> {
-        self.search.descend(record, start)
+        Ok(self.search.descend(record, start)?)
     }
 
     /// Run every descent and return them all, best first.
@@ -132,18 +136,24 @@ impl<M: ResidualModel<Error = BaselineError>> PredictionError<M> {
         }
         let prior = self.model().prior();
         let design = prior.design(self.starts, self.seed)?;
-        let mut descents = Vec::with_capacity(self.starts);
-        for i in 0..self.starts {
-            let mut start = vec![0.0; prior.dim()];
-            design.fill_theta(i, &mut start)?;
-            descents.push(self.search.descend(record, start)?);
-        }
+        let starts = (0..self.starts)
+            .map(|i| {
+                let mut start = vec![0.0; prior.dim()];
+                design.fill_theta(i, &mut start).map(|()| start)
+            })
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let mut descents = self.search.descents_from(record, starts)?;
+        // Stable: equal losses keep the starts' order.
         descents.sort_by(|a, b| a.loss.total_cmp(&b.loss));
         Ok(descents)
     }
 }
 
-impl<M: ResidualModel<Error = BaselineError>> RecordEstimator for PredictionError<M> {
+impl<M: ResidualModel> RecordEstimator for PredictionError<M>
+where
+    BaselineError: From<M::Error>,
+    M::Error: Send,
+{
     fn name(&self) -> &str {
         &self.name
     }

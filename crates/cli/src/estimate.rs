@@ -5,9 +5,10 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
+use twostage::fit::TerminationReason;
 use twostage::models::Simulator;
 use twostage::models::{BuiltinModel, IoData};
-use twostage::{Estimator, ModelProfile, RecordCheck, Refinement, SignalNames};
+use twostage::{Estimator, ModelProfile, OutputError, RecordCheck, Refinement, SignalNames};
 
 use crate::number::format_f64;
 use crate::options::{InitialCovariance, TableFormat};
@@ -30,9 +31,14 @@ pub struct EstimateArgs {
     /// With --check: the model's own records each record is ranked among.
     #[arg(long, default_value_t = 199, requires = "check")]
     check_sims: usize,
-    /// With --estimator of a built-in model: refine each estimate by the
-    /// posterior mean of the prediction-error likelihood over twice its
-    /// interval (about 1 ms per benchmark record, 0.4 s per car record).
+    /// With --estimator: refine each estimate through the model. A
+    /// built-in model: the posterior mean of its prediction-error
+    /// likelihood over twice the interval (about 1 ms per benchmark
+    /// record, 0.4 s per car record). Any other model (--model-file): an
+    /// output-error fit, Levenberg-Marquardt on the record minus the
+    /// noise-free simulation, in the prior's box, from the estimate and
+    /// two starts inside its interval (in parallel); `refine_stop` says
+    /// why the best descent stopped.
     #[arg(long, requires = "estimator")]
     refine: bool,
     /// With --method: the model the records come from (benchmark or pacejka).
@@ -44,9 +50,12 @@ pub struct EstimateArgs {
     #[arg(long, value_name = "PATH")]
     model_file: Option<PathBuf>,
     /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
-    /// (indirect inference through the TS preset's ARX) or bayes.
+    /// (indirect inference through the TS preset's ARX) or bayes for a
+    /// built-in model; oe (a multi-start output-error fit: --starts draws
+    /// from the prior, Levenberg-Marquardt on the record minus the
+    /// noise-free simulation) for any model, --model or --model-file.
     #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(
-        twostage::ClassicMethod::ALL.map(|m| m.name())
+        twostage::ClassicMethod::ALL.map(|m| m.name()).into_iter().chain([OUTPUT_ERROR])
     ))]
     method: Option<String>,
     /// EKF/UKF initial covariance: the paper's eq. (6) or (7).
@@ -55,7 +64,8 @@ pub struct EstimateArgs {
     /// Particle filter: number of particles (default 1000 benchmark, 500 car).
     #[arg(long)]
     particles: Option<usize>,
-    /// Prediction error and indirect inference: number of random starts.
+    /// Prediction error, indirect inference and output error: number of
+    /// random starts.
     #[arg(long, default_value_t = 5)]
     starts: usize,
     /// Seed of the random methods.
@@ -84,6 +94,10 @@ struct Estimated {
     /// With --check: how the model at the estimate explains the record, or
     /// why it could not be simulated.
     check: Option<Result<RecordCheck, String>>,
+    /// With --refine: why an output-error descent stopped (`Ok(None)` for
+    /// a posterior mean), or why the refinement failed (the TS estimate
+    /// is kept).
+    refined: Option<Result<Option<TerminationReason>, String>>,
 }
 
 impl Estimated {
@@ -95,31 +109,84 @@ impl Estimated {
 /// Estimates one record, or says why it cannot.
 type Method = Box<dyn FnMut(&IoData) -> Result<Estimated, String>>;
 
-/// Refines a TS estimate of one record.
-type Refine = Box<dyn FnMut(&IoData, &[f64]) -> Result<Vec<f64>, String>>;
+/// Refines a TS estimate of one record from the estimate and the record's
+/// interval half-widths: the refined estimate and, for a descent, why it
+/// stopped.
+type Refine = Box<dyn FnMut(&IoData, &[f64], Option<&[f64]>) -> Result<Refined, String>>;
 
-/// The local posterior refinement for an estimator of a built-in model:
-/// over twice its 90% (or calibrated) interval, with the model's own number
-/// of grid points per axis.
-fn refinement(estimator: &Estimator) -> Result<Refine> {
-    let model: BuiltinModel = estimator.training().model.parse().map_err(|_| {
-        usage(format!(
-            "--refine needs the likelihood of the model, known for the built-in models only; \
-             this estimator is of '{}'",
-            estimator.training().model
-        ))
-    })?;
+/// A refined estimate.
+struct Refined {
+    theta: Vec<f64>,
+    /// Why the output-error descent stopped (`None` for the posterior mean).
+    stop: Option<TerminationReason>,
+}
+
+/// The refinement of an estimator's estimates: a built-in model's local
+/// posterior (over twice its calibrated interval, the model's own grid),
+/// or for any other model an output-error fit through its simulator.
+fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<Refine> {
     let radius = estimator
         .neighbourhood(2.0)
         .map_err(|e| usage(format!("--refine: {e}")))?;
-    let points = ModelProfile::of(model).refinement_points();
-    let local = Refinement::new(twostage_baselines::exact_likelihood(model)?);
-    Ok(Box::new(move |record: &IoData, start: &[f64]| {
-        Ok(local
-            .local_posterior(record, start, &radius, points)
-            .map_err(|e| e.to_string())?
-            .mean)
-    }))
+    if args.model_file.is_none()
+        && let Ok(model) = estimator.training().model.parse::<BuiltinModel>()
+    {
+        let points = ModelProfile::of(model).refinement_points();
+        let local = Refinement::new(twostage_baselines::exact_likelihood(model)?);
+        return Ok(Box::new(move |record: &IoData, start: &[f64], _| {
+            let mean = local
+                .local_posterior(record, start, &radius, points)
+                .map_err(|e| e.to_string())?
+                .mean;
+            Ok(Refined {
+                theta: mean,
+                stop: None,
+            })
+        }));
+    }
+    let fit = Refinement::new(
+        OutputError::new(model_of(estimator, args)?)
+            .map_err(|e| usage(format!("--refine: {e}")))?,
+    );
+    Ok(Box::new(
+        move |record: &IoData, start: &[f64], widths: Option<&[f64]>| {
+            // The record's own interval where it has one (adaptive).
+            let widths =
+                widths.map_or_else(|| radius.iter().map(|r| r / 2.0).collect(), <[f64]>::to_vec);
+            let descents = fit
+                .descents_from(record, refine_starts(start, &widths))
+                .map_err(|e| e.to_string())?;
+            let best = descents
+                .into_iter()
+                .reduce(|best, d| if d.loss < best.loss { d } else { best })
+                .ok_or_else(|| "no start".to_string())?;
+            Ok(Refined {
+                theta: best.theta,
+                stop: Some(best.stop),
+            })
+        },
+    ))
+}
+
+/// Where an output-error refinement starts: the estimate, and two corners
+/// of half its interval on either side (alternating signs across the
+/// parameters), so that a start lies off each axis the estimate may be
+/// wrong along. The descents are bounded by the prior, not the interval:
+/// on a real record the model's best fit may lie outside an interval
+/// calibrated on the model's own records.
+fn refine_starts(estimate: &[f64], half_widths: &[f64]) -> Vec<Vec<f64>> {
+    let corner = |sign: f64| -> Vec<f64> {
+        estimate
+            .iter()
+            .zip(half_widths)
+            .enumerate()
+            .map(|(j, (t, w))| {
+                let alternate = if j % 2 == 0 { 1.0 } else { -1.0 };
+                t + sign * alternate * 0.5 * w
+            })
+            .collect()
+    };
+    vec![estimate.to_vec(), corner(1.0), corner(-1.0)]
 }
 
 /// The model an estimator's records come from, to check them against:
@@ -144,6 +211,57 @@ fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box<dyn Simula
         )));
     }
     named.simulator(false).map_err(|e| usage(e.to_string()))
+}
+
+/// The name of the multi-start output-error fit among the methods.
+const OUTPUT_ERROR: &str = "oe";
+
+/// `--method oe`: a multi-start output-error fit of any model that can
+/// run without noise on a given input.
+fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
+    let named = match (&args.model_file, &args.model) {
+        (Some(path), _) => twostage::NamedModel::file(path),
+        (None, Some(model)) => twostage::NamedModel::builtin(model),
+        (None, None) => {
+            return Err(usage(
+                "--method oe fits a model: give --model M or --model-file F".into(),
+            ));
+        }
+    }
+    .map_err(|e| usage(e.to_string()))?;
+    let simulator = named.simulator(false).map_err(|e| usage(e.to_string()))?;
+    let spec = simulator.spec().clone();
+    let fit = OutputError::new(simulator).map_err(|e| usage(format!("--method oe: {e}")))?;
+    let oe = twostage_baselines::PredictionError::new(fit, args.starts)
+        .seed(args.seed)
+        .named(OUTPUT_ERROR);
+    Ok(Chosen {
+        names: spec.param_names().to_vec(),
+        format: csv_records::RecordFormat {
+            signals: SignalNames {
+                inputs: spec.input_names().to_vec(),
+                outputs: spec.output_names().to_vec(),
+            },
+            sample_time: spec.sample_time(),
+        },
+        trained: None,
+        method: Box::new(move |record: &IoData| {
+            let best = oe
+                .descents(record)
+                .map_err(|e| e.to_string())?
+                .into_iter()
+                .next()
+                .ok_or_else(|| "no start".to_string())?;
+            Ok(Estimated {
+                theta: best.theta,
+                widths: None,
+                distance: None,
+                floored: None,
+                check: None,
+                refined: Some(Ok(Some(best.stop))),
+            })
+        }),
+    })
 }
 
 /// What a record is estimated with: the parameter names, the method, the
@@ -174,7 +292,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             None
         };
         let mut refine = if args.refine {
-            Some(refinement(&estimator)?)
+            Some(refinement(&estimator, args)?)
         } else {
             None
         };
@@ -188,9 +306,13 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 // record; the fixed ones are the fallback. Both were
                 // calibrated for the TS estimate, not a refined one.
                 let widths = a.interval_half_widths().map(<[f64]>::to_vec);
-                let theta = match refine.as_mut() {
-                    Some(refine) => refine(record, &a.theta)?,
-                    None => a.theta,
+                // A refinement that fails keeps the TS estimate, and says so.
+                let (theta, refined) = match refine.as_mut() {
+                    Some(refine) => match refine(record, &a.theta, widths.as_deref()) {
+                        Ok(r) => (r.theta, Some(Ok(r.stop))),
+                        Err(e) => (a.theta, Some(Err(e))),
+                    },
+                    None => (a.theta, None),
                 };
                 let check = checker.as_ref().map(|(model, sims, seed)| {
                     twostage::check_record(model.as_ref(), record, &theta, *sims, *seed)
@@ -202,9 +324,13 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     widths,
                     floored: transforms.then_some(a.floored_samples),
                     check,
+                    refined,
                 })
             }),
         });
+    }
+    if args.method.as_deref() == Some(OUTPUT_ERROR) {
+        return output_error_method(args);
     }
     if let (Some(path), Some(name)) = (&args.model_file, &args.method) {
         let file = twostage::ModelFile::load(path).map_err(|e| usage(e.to_string()))?;
@@ -253,6 +379,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     distance: None,
                     floored: None,
                     check: None,
+                    refined: None,
                 })
                 .map_err(|e| e.to_string())
         }),
@@ -322,6 +449,21 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             listed.join(", "),
                             if floored.len() > 5 { ", ..." } else { "" }
                         );
+                    }
+                    match &estimated.refined {
+                        Some(Err(e)) => eprintln!(
+                            "warning: {}: experiment {}: --refine failed ({e}); the two-stage \
+                             estimate is kept",
+                            path.display(),
+                            read.id
+                        ),
+                        Some(Ok(Some(TerminationReason::MaxIterations))) => eprintln!(
+                            "warning: {}: experiment {}: --refine did not converge within its \
+                             iterations; the estimate is the best point it reached",
+                            path.display(),
+                            read.id
+                        ),
+                        _ => {}
                     }
                     match &estimated.check {
                         Some(Err(e)) => eprintln!(
@@ -397,6 +539,16 @@ impl Outcome {
     }
 }
 
+/// Why the refinement stopped, for the table: the descent's reason, or
+/// `failed` (the TS estimate kept).
+fn refine_stop(refined: Option<&Result<Option<TerminationReason>, String>>) -> String {
+    match refined {
+        Some(Ok(Some(stop))) => format!("{stop:?}"),
+        Some(Err(_)) => "failed".into(),
+        _ => String::new(),
+    }
+}
+
 /// Numbers for a message, comma separated, to four significant digits.
 fn list(values: &[f64]) -> String {
     let shown: Vec<String> = values.iter().map(|v| format!("{v:.4}")).collect();
@@ -455,6 +607,12 @@ fn csv(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Re
     if with_check {
         header.extend(check_header(outputs));
     }
+    let with_stop = rows
+        .iter()
+        .any(|(_, e)| matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))));
+    if with_stop {
+        header.push("refine_stop".into());
+    }
     let mut text = row(&header);
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
@@ -474,6 +632,9 @@ fn csv(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Re
         }
         if with_check {
             fields.extend(check_fields(outputs.len(), e.check.as_ref()));
+        }
+        if with_stop {
+            fields.push(refine_stop(e.refined.as_ref()));
         }
         text.push_str(&row(&fields));
     }
@@ -499,6 +660,9 @@ fn json(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> R
             }
             if let Some(floored) = &e.floored {
                 object.insert("untransformed_samples".into(), floored.len().into());
+            }
+            if matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))) {
+                object.insert("refine_stop".into(), refine_stop(e.refined.as_ref()).into());
             }
             match &e.check {
                 Some(Ok(c)) => {

@@ -147,7 +147,8 @@ impl Inputs {
         Ok(Self::PerRow(per_row))
     }
 
-    fn of(&self, row: usize) -> Option<&IoData> {
+    /// Row `row`'s given record, if any.
+    pub fn of(&self, row: usize) -> Option<&IoData> {
         match self {
             Self::Own => None,
             Self::One(record) => Some(record),

@@ -163,6 +163,26 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
     let records =
         predict::simulate_rows(sim, &rows, &inputs, args.noiseless, args.seed.unwrap_or(0))?;
     let text = predict::records_csv(sim, &rows, &records);
+    // Against a record's own outputs: the prediction error a user validates
+    // an identified model by.
+    for (i, (row, record)) in rows.iter().zip(&records).enumerate() {
+        if let Some(measured) = inputs.of(i) {
+            let parts: Vec<String> = spec
+                .output_names()
+                .iter()
+                .enumerate()
+                .map(|(j, name)| {
+                    let (rms, fit) = twostage::output_fit(measured.output(j), record.output(j));
+                    format!("{name} RMS {rms:.4}, fit {fit:.1}%")
+                })
+                .collect();
+            eprintln!(
+                "experiment {}: against the given record's outputs: {}",
+                row.id,
+                parts.join("; ")
+            );
+        }
+    }
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => io::stdout().lock().write_all(text.as_bytes())?,

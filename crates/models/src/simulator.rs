@@ -459,6 +459,56 @@ pub trait Simulator: Send + Sync {
     }
 }
 
+/// A simulator behind a reference or a box is the simulator: callers that
+/// own theirs (a `Box<dyn Simulator>` from a model file) and callers that
+/// borrow one share the generic code that takes `S: Simulator`.
+macro_rules! forward_simulator {
+    ($($pointer:ty),*) => {$(
+        impl<S: Simulator + ?Sized> Simulator for $pointer {
+            fn spec(&self) -> &ModelSpec {
+                (**self).spec()
+            }
+            fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
+                (**self).simulate(theta, rng, out)
+            }
+            fn batch_size(&self) -> usize {
+                (**self).batch_size()
+            }
+            fn simulate_batch(
+                &self,
+                thetas: &[&[f64]],
+                rngs: &mut [ExperimentRng],
+                outs: &mut [IoData],
+            ) -> Vec<Result<()>> {
+                (**self).simulate_batch(thetas, rngs, outs)
+            }
+            fn capabilities(&self) -> Capabilities {
+                (**self).capabilities()
+            }
+            fn simulate_under(
+                &self,
+                theta: &[f64],
+                rng: &mut ExperimentRng,
+                conditions: Conditions<'_>,
+                out: &mut IoData,
+            ) -> Result<()> {
+                (**self).simulate_under(theta, rng, conditions, out)
+            }
+            fn simulate_batch_under(
+                &self,
+                thetas: &[&[f64]],
+                rngs: &mut [ExperimentRng],
+                conditions: Conditions<'_>,
+                outs: &mut [IoData],
+            ) -> Vec<Result<()>> {
+                (**self).simulate_batch_under(thetas, rngs, conditions, outs)
+            }
+        }
+    )*};
+}
+
+forward_simulator!(&S, Box<S>);
+
 /// Check the length and finiteness of theta for `spec` (not the box:
 /// simulators may be run outside their prior on purpose).
 pub(crate) fn check_theta(spec: &ModelSpec, theta: &[f64]) -> Result<()> {

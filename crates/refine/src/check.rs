@@ -35,6 +35,34 @@ impl RecordCheck {
     }
 }
 
+/// How well `simulated` follows `measured` (one signal): the RMS of their
+/// difference, and the normalized fit `100 (1 - |y - y_sim| / |y - mean
+/// y|)` percent (NaN for a constant record) that system identification
+/// tools report.
+///
+/// ```
+/// let (rms, fit) = twostage_refine::output_fit(&[1.0, 3.0], &[1.0, 2.0]);
+/// // |y - y_sim| = 1, |y - mean y| = sqrt(2).
+/// assert_eq!(rms, 0.5f64.sqrt());
+/// assert!((fit - 100.0 * (1.0 - 0.5f64.sqrt())).abs() < 1e-12);
+/// ```
+pub fn output_fit(measured: &[f64], simulated: &[f64]) -> (f64, f64) {
+    let n = measured.len().max(1) as f64;
+    let misfit: f64 = measured
+        .iter()
+        .zip(simulated)
+        .map(|(y, s)| (y - s) * (y - s))
+        .sum();
+    let mean = measured.iter().sum::<f64>() / n;
+    let spread: f64 = measured.iter().map(|v| (v - mean) * (v - mean)).sum();
+    let fit = if spread > 0.0 {
+        100.0 * (1.0 - (misfit / spread).sqrt())
+    } else {
+        f64::NAN
+    };
+    ((misfit / n).sqrt(), fit)
+}
+
 /// Mean square of `a - b` per output.
 fn mean_squares(a: &IoData, b: &IoData) -> Vec<f64> {
     (0..a.n_outputs())
@@ -139,21 +167,11 @@ pub fn check_record(
         .filter(|r| statistic(r) >= observed)
         .count();
     let tail_probability = (at_least + 1) as f64 / (noisy + 1) as f64;
-    let fit_percent = (0..n_y)
-        .map(|j| {
-            let y = record.output(j);
-            let mean = y.iter().sum::<f64>() / y.len().max(1) as f64;
-            let spread = y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>();
-            let misfit = record_ms[j] * y.len() as f64;
-            if spread > 0.0 {
-                100.0 * (1.0 - (misfit / spread).sqrt())
-            } else {
-                f64::NAN
-            }
-        })
-        .collect();
+    let (rms, fit_percent) = (0..n_y)
+        .map(|j| output_fit(record.output(j), simulated.output(j)))
+        .unzip();
     Ok(RecordCheck {
-        rms: record_ms.iter().map(|m| m.sqrt()).collect(),
+        rms,
         fit_percent,
         tail_probability,
         simulated,

@@ -14,9 +14,11 @@
 mod check;
 mod error;
 mod moments;
+mod output_error;
 mod refinement;
 
-pub use check::{EXPLAINED_LEVEL, RecordCheck, check_record};
+pub use check::{EXPLAINED_LEVEL, RecordCheck, check_record, output_fit};
 pub use error::RefineError;
 pub use moments::WeightedMoments;
+pub use output_error::OutputError;
 pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};

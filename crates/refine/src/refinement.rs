@@ -183,6 +183,48 @@ impl<M: ResidualModel> Refinement<M> {
         self.descend_within(record, start, &vec![0.0; q], &vec![1.0; q])
     }
 
+    /// One descent in the prior box from each of `starts`, run in
+    /// parallel, in the starts' order (the same whatever the thread
+    /// count: each descent is a function of its start alone).
+    ///
+    /// ```
+    /// # use twostage_models::{IoData, Prior};
+    /// # use twostage_refine::{RefineError, Refinement, ResidualModel};
+    /// # struct ConstantMean(Prior);
+    /// # impl ResidualModel for ConstantMean {
+    /// #     type Error = RefineError;
+    /// #     fn prior(&self) -> &Prior { &self.0 }
+    /// #     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
+    /// #         for (r, y) in r.iter_mut().zip(record.output(0)) { *r = y - theta[0]; }
+    /// #         Ok(())
+    /// #     }
+    /// # }
+    /// let fit = Refinement::new(ConstantMean(Prior::uniform_box(&[0.0], &[1.0])?));
+    /// let record = IoData::siso(&[0.0; 4], &[0.2, 0.4, 0.5, 0.5])?;
+    /// let descents = fit.descents_from(&record, vec![vec![0.1], vec![0.9]])?;
+    /// // Both find the sample mean, each from its own start.
+    /// assert_eq!(descents[1].start, [0.9]);
+    /// assert!(descents.iter().all(|d| (d.theta[0] - 0.4).abs() < 1e-6));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// The first start (in order) whose descent fails.
+    pub fn descents_from(
+        &self,
+        record: &IoData,
+        starts: Vec<Vec<f64>>,
+    ) -> Result<Vec<Descent>, M::Error>
+    where
+        M::Error: Send,
+    {
+        use rayon::prelude::*;
+        starts
+            .into_par_iter()
+            .map(|start| self.descend(record, start))
+            .collect()
+    }
+
     /// A local refinement of `start` (a TS estimate, say): descents
     /// confined to the box `start +- radius` (within the prior), keeping the
     /// lowest loss. The loss of an oscillating model has many basins; a good

@@ -134,6 +134,70 @@ where
     String::from_utf8(writer.into_inner().unwrap_or_default()).unwrap_or_default()
 }
 
+/// The columns named `names` of the CSV file at `path` (a header row,
+/// then numbers; other columns are ignored), each as a vector of its
+/// values.
+///
+/// ```
+/// let dir = std::env::temp_dir().join("twostage-read-columns-doc");
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let path = dir.join("record.csv");
+/// std::fs::write(&path, "t,u,y\n0,1.5,9\n1,-2,9\n").unwrap();
+/// let columns = twostage_sources::csv_rows::read_columns(&path, &["u".to_string()])?;
+/// assert_eq!(columns, [vec![1.5, -2.0]]);
+/// let missing = twostage_sources::csv_rows::read_columns(&path, &["v".to_string()]);
+/// assert!(missing.unwrap_err().contains("no column `v`"));
+/// # Ok::<(), String>(())
+/// ```
+///
+/// # Errors
+/// A file that cannot be read, a missing column, or a value that is not a
+/// finite number, named by file, line and column.
+pub fn read_columns(path: &std::path::Path, names: &[String]) -> Result<Vec<Vec<f64>>, String> {
+    let file = path.display().to_string();
+    let reader = std::fs::File::open(path).map_err(|e| format!("{file}: {e}"))?;
+    let mut at: Option<Vec<usize>> = None;
+    let mut columns = vec![Vec::new(); names.len()];
+    for_each_row(
+        std::io::BufReader::new(reader),
+        |line, fields| {
+            let Some(at) = &at else {
+                let header: Vec<&str> = fields.iter().collect();
+                at = Some(
+                    names
+                        .iter()
+                        .map(|name| {
+                            header.iter().position(|h| h == name).ok_or_else(|| {
+                                format!(
+                                    "{file}, line {line}: no column `{name}` (the header has {})",
+                                    header.join(", ")
+                                )
+                            })
+                        })
+                        .collect::<Result<_, _>>()?,
+                );
+                return Ok(());
+            };
+            for ((column, &c), name) in columns.iter_mut().zip(at).zip(names) {
+                let cell = fields.get(c).unwrap_or("");
+                let value = cell
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        format!(
+                            "{file}, line {line}, column {name}: {cell:?} is not a finite number"
+                        )
+                    })?;
+                column.push(value);
+            }
+            Ok(())
+        },
+        |line, e| format!("{file}, line {line:?}: {e}"),
+    )?;
+    Ok(columns)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

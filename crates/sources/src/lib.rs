@@ -44,7 +44,7 @@ pub use chart::{
 pub use chart_file::ChartFiles;
 pub use error::{Error, Result};
 pub use model_file::{
-    DEFAULT_PRESET_SIMULATIONS, ModelFile, ModelSource, TEMPLATE, fmu_model_file,
+    CommandInput, DEFAULT_PRESET_SIMULATIONS, ModelFile, ModelSource, TEMPLATE, fmu_model_file,
 };
 pub use named_model::NamedModel;
 pub use preset::Preset;

@@ -584,7 +584,10 @@ fn protocol_two_runs_noise_free_on_a_given_input() {
         .simulate_under(&[0.3], &mut experiment_rng(1, 0), quiet, &mut record)
         .unwrap_err()
         .to_string();
-    assert!(refused.contains("protocol = 2") && !refused.contains("  "), "{refused}");
+    assert!(
+        refused.contains("protocol = 2") && !refused.contains("  "),
+        "{refused}"
+    );
     let named = twostage::NamedModel::File(Box::new(numpy_benchmark_file(1, "")));
     let refused = named.simulator(true).err().unwrap().to_string();
     assert!(refused.contains("protocol = 2"), "{refused}");
@@ -644,7 +647,10 @@ serve(simulate)
         .simulate_under(&[0.5], &mut experiment_rng(1, 0), conditions, &mut record)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("7 samples") && e.contains("20") && !e.contains("  "), "{e}");
+    assert!(
+        e.contains("7 samples") && e.contains("20") && !e.contains("  "),
+        "{e}"
+    );
     assert!(
         ExternalSimulator::new(spec, vec!["x".into()])
             .unwrap()

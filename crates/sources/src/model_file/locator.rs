@@ -12,7 +12,7 @@ use twostage_models::{
 };
 
 use super::raw::*;
-use super::{DEFAULT_PRESET_SIMULATIONS, ModelSource};
+use super::{CommandInput, DEFAULT_PRESET_SIMULATIONS, ModelSource};
 use crate::error::{Error, Result};
 use crate::preset::Preset;
 
@@ -347,19 +347,7 @@ impl Locator<'_> {
                         .into(),
                 ));
             }
-            Some(i) => {
-                let signal = self.input(i)?;
-                if !signal.is_fixed() {
-                    return Err(self.error(
-                        Some(i.span()),
-                        "input.signal",
-                        "a command is handed one input for every experiment: give signal = \
-                         \"fixed\" with the values (a measured input, say)"
-                            .into(),
-                    ));
-                }
-                Some(signal)
-            }
+            Some(i) => Some(self.command_input(i)?),
         };
         if let Some(noise) = noise.filter(|n| n.get_ref().model.is_some()) {
             return Err(self.error(
@@ -407,8 +395,56 @@ impl Locator<'_> {
         })
     }
 
+    /// A command's fixed input: `values` for every input signal, or a
+    /// CSV `file` whose columns are named as the model's inputs.
+    fn command_input(&self, input: &Spanned<RawInput>) -> Result<CommandInput> {
+        let raw = input.get_ref();
+        let fixed_only = || {
+            self.error(
+                Some(raw.signal.span()),
+                "input.signal",
+                "a command is handed one input for every experiment: give signal = \"fixed\" \
+                 with its values, or with file = \"record.csv\" (a measured input)"
+                    .into(),
+            )
+        };
+        if raw.signal.get_ref() != "fixed" {
+            return Err(fixed_only());
+        }
+        match (&raw.file, &raw.values) {
+            (Some(file), None) if raw.sd.is_none() && raw.amplitude.is_none() => {
+                Ok(CommandInput::File {
+                    path: PathBuf::from(file.get_ref()),
+                    line: self.line(file.span().start),
+                })
+            }
+            (Some(file), _) => Err(self.error(
+                Some(file.span()),
+                "input.file",
+                "a fixed input takes either values or a file, not both".into(),
+            )),
+            (None, _) => {
+                let signal = self.input(input)?;
+                if signal.is_fixed() {
+                    Ok(CommandInput::Values(signal))
+                } else {
+                    Err(fixed_only())
+                }
+            }
+        }
+    }
+
     pub(super) fn input(&self, input: &Spanned<RawInput>) -> Result<InputSignal> {
         let raw = input.get_ref();
+        if let Some(file) = &raw.file {
+            return Err(self.error(
+                Some(file.span()),
+                "input.file",
+                "a measured input read from a file is handed to a command speaking protocol 2; \
+                 give this source the values instead (values = [...])"
+                    .into(),
+            ));
+        }
         let kind = raw.signal.get_ref().as_str();
         let here = || Some(input.span());
         let (needed, signal) = match kind {

@@ -48,7 +48,7 @@ pub enum ModelSource {
         /// The protocol version it speaks (1 or 2).
         protocol: u32,
         /// The fixed input handed to it with every request (protocol 2).
-        input: Option<InputSignal>,
+        input: Option<CommandInput>,
     },
     /// An FMU (FMI 2.0 or 3.0), docs/fmu.md.
     Fmu {
@@ -71,6 +71,21 @@ pub enum ModelSource {
     },
     /// None: the file describes charts simulated elsewhere.
     ChartsOnly,
+}
+
+/// The input a model file fixes for a command source (protocol 2).
+#[derive(Debug, Clone, PartialEq)]
+pub enum CommandInput {
+    /// The same values for every input signal.
+    Values(InputSignal),
+    /// A CSV file (a measured record, say) whose columns named as the
+    /// model's inputs are read; other columns are ignored.
+    File {
+        /// The file, relative paths resolved against the model file's folder.
+        path: PathBuf,
+        /// The line of `file = ...` in the model file.
+        line: usize,
+    },
 }
 
 /// A model described by a model file.
@@ -228,6 +243,15 @@ impl ModelFile {
                 ));
             }
         }
+        if let (ModelSource::Command { input: Some(_), .. }, true) =
+            (&source, signals.inputs.is_empty())
+        {
+            return Err(at.error(
+                raw.input.as_ref().map(Spanned::span),
+                "input",
+                "[input] gives the measured inputs, but [signals] names none".into(),
+            ));
+        }
         let spec = match &source {
             ModelSource::Fmu {
                 input,
@@ -323,7 +347,7 @@ impl ModelFile {
                 }
                 let fixed_input = input
                     .as_ref()
-                    .map(|signal| self.fixed_record(signal))
+                    .map(|input| self.fixed_record(input, dir.as_deref()))
                     .transpose()?;
                 Ok(Box::new(FileSimulator {
                     inner: Box::new(external),
@@ -429,21 +453,60 @@ impl ModelFile {
         }))
     }
 
-    /// The record of the file's shape whose every input is the fixed
-    /// `signal` (the outputs are not read).
-    fn fixed_record(&self, signal: &InputSignal) -> Result<twostage_models::IoData> {
+    /// The record of the file's shape whose inputs are the fixed ones
+    /// (the outputs are not read).
+    fn fixed_record(
+        &self,
+        input: &CommandInput,
+        dir: Option<&Path>,
+    ) -> Result<twostage_models::IoData> {
         let mut record = self.spec.new_record();
-        // A fixed signal draws nothing: any stream serves.
-        let mut rng = twostage_models::experiment_rng(0, 0);
-        for j in 0..record.n_inputs() {
-            signal
-                .fill(self.spec.sample_time(), &mut rng, record.input_mut(j))
-                .map_err(|e| Error::ModelFile {
-                    file: self.origin.clone(),
-                    line: None,
-                    key: "input.values".into(),
-                    message: e.to_string(),
-                })?;
+        match input {
+            CommandInput::Values(signal) => {
+                // A fixed signal draws nothing: any stream serves.
+                let mut rng = twostage_models::experiment_rng(0, 0);
+                for j in 0..record.n_inputs() {
+                    signal
+                        .fill(self.spec.sample_time(), &mut rng, record.input_mut(j))
+                        .map_err(|e| Error::ModelFile {
+                            file: self.origin.clone(),
+                            line: None,
+                            key: "input.values".into(),
+                            message: e.to_string(),
+                        })?;
+                }
+            }
+            CommandInput::File { path, line } => {
+                let path = match dir {
+                    Some(dir) if path.is_relative() => dir.join(path),
+                    _ => path.clone(),
+                };
+                let columns = crate::csv_rows::read_columns(&path, self.spec.input_names())
+                    .map_err(|message| Error::ModelFile {
+                        file: self.origin.clone(),
+                        line: Some(*line),
+                        key: "input.file".into(),
+                        message,
+                    })?;
+                let n = self.spec.n_samples();
+                for (j, column) in columns.iter().enumerate() {
+                    if column.len() != n {
+                        return Err(Error::ModelFile {
+                            file: self.origin.clone(),
+                            line: Some(*line),
+                            key: "input.file".into(),
+                            message: format!(
+                                "{} holds {} samples of {}; [signals] says samples = {n}: give \
+                                 a record of that length or change samples",
+                                path.display(),
+                                column.len(),
+                                self.spec.input_names()[j]
+                            ),
+                        });
+                    }
+                    record.input_mut(j).copy_from_slice(column);
+                }
+            }
         }
         Ok(record)
     }

@@ -100,6 +100,7 @@ pub(super) struct RawInput {
     pub(super) sd: Option<f64>,
     pub(super) amplitude: Option<f64>,
     pub(super) values: Option<Vec<f64>>,
+    pub(super) file: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
