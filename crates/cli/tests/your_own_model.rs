@@ -75,15 +75,7 @@ fn a_python_simulator_trains_from_the_shell() {
 
 #[test]
 fn a_chart_simulated_in_numpy_trains_from_the_shell() {
-    // As `cargo xtask test` sets it, else the environment it made, else python3.
-    let python = std::env::var("TWOSTAGE_PYTHON").unwrap_or_else(|_| {
-        let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/venv/bin/python");
-        if venv.exists() {
-            venv.to_string_lossy().into_owned()
-        } else {
-            "python3".into()
-        }
-    });
+    let python = common::python();
     let dir = scratch("your-own-model-numpy");
     let chart = dir.join("chart");
     let made = Command::new(&python)

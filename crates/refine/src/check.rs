@@ -126,20 +126,24 @@ pub fn check_record(
         noiseless: false,
         input: Some(record),
     };
-    let mut own = IoData::default();
+    // In the source's batches: a command answers a batch in one request.
+    let batch = sim.batch_size().max(1);
     let mut reference = Vec::with_capacity(noisy);
-    for i in 0..noisy {
-        sim.simulate_under(
-            theta,
-            &mut experiment_rng(seed, i as u64),
-            with_noise,
-            &mut own,
-        )
-        .map_err(|source| RefineError::Simulation {
-            what: "a simulation with the model's noise at the estimate",
-            source,
-        })?;
-        reference.push(mean_squares(&own, &simulated));
+    for first in (0..noisy).step_by(batch) {
+        let count = batch.min(noisy - first);
+        let thetas = vec![theta; count];
+        let mut rngs: Vec<_> = (first..first + count)
+            .map(|i| experiment_rng(seed, i as u64))
+            .collect();
+        let mut own = vec![IoData::default(); count];
+        let results = sim.simulate_batch_under(&thetas, &mut rngs, with_noise, &mut own);
+        for (result, own) in results.into_iter().zip(&own) {
+            result.map_err(|source| RefineError::Simulation {
+                what: "a simulation with the model's noise at the estimate",
+                source,
+            })?;
+            reference.push(mean_squares(own, &simulated));
+        }
     }
     // Each output's misfit in units of the model's own (so that outputs of
     // different scales weigh alike), summed over the outputs.

@@ -29,3 +29,17 @@ pub fn scratch(name: &str) -> PathBuf {
 pub fn path(p: &Path) -> &str {
     p.to_str().expect("test paths are UTF-8")
 }
+
+/// The Python to run simulators with: `TWOSTAGE_PYTHON` (as `cargo xtask
+/// test` sets it), else the environment it made, else python3.
+#[allow(dead_code)]
+pub fn python() -> String {
+    std::env::var("TWOSTAGE_PYTHON").unwrap_or_else(|_| {
+        let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../target/venv/bin/python");
+        if venv.exists() {
+            venv.to_string_lossy().into_owned()
+        } else {
+            "python3".into()
+        }
+    })
+}

@@ -1,0 +1,169 @@
+//! docs/real-data.md, run: a two-tank model identified from a "measured"
+//! record of a plant it does not match (a leak it lacks, coloured sensor
+//! noise), checked, refined, and validated by predicting another record.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{path, python, scratch, text, twostage};
+
+fn example() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../docs/examples/tanks")
+}
+
+/// The guide's model file in `dir`, its simulator named by absolute path
+/// and run with the test's Python.
+fn model_file(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(example().join("tanks.toml")).unwrap();
+    let simulator = example().join("tanks.py");
+    let command = format!("[{:?}, {:?}]", python(), simulator.to_str().unwrap());
+    let text = text.replace(r#"["python3", "tanks.py"]"#, &command);
+    assert!(
+        text.contains(&command),
+        "the guide's model file names its command otherwise"
+    );
+    let file = dir.join("tanks.toml");
+    std::fs::write(&file, text).unwrap();
+    file
+}
+
+/// The RMS `simulate --at ... --input validation.csv` reports.
+fn validation_rms(model: &Path, estimates: &Path, validation: &Path) -> f64 {
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(model),
+        "--at",
+        path(estimates),
+        "--input",
+        path(validation),
+        "--noiseless",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    let rms = stderr
+        .split("level RMS ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .unwrap_or_else(|| panic!("no RMS in {stderr}"));
+    rms.parse().unwrap()
+}
+
+/// One CSV row of `estimate`'s table as (header, values).
+fn table(out: &std::process::Output) -> (Vec<String>, Vec<String>) {
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    let mut lines = stdout.lines();
+    let split = |l: &str| l.split(',').map(str::to_string).collect::<Vec<_>>();
+    (split(lines.next().unwrap()), split(lines.next().unwrap()))
+}
+
+#[test]
+fn a_mismatched_model_is_checked_refined_and_validated() {
+    let dir = scratch("real-data");
+    let made = Command::new(python())
+        .arg(example().join("make_data.py"))
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", text(&made.stderr));
+    let (estimation, validation) = (dir.join("estimation.csv"), dir.join("validation.csv"));
+    let model = model_file(&dir);
+    let estimator = dir.join("tanks.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--compress",
+        "pca:8",
+        "--fit",
+        "mlp:10",
+        "--sims",
+        "1500",
+        "--validate",
+        "0",
+        "--calibrate",
+        "300",
+        "--quiet",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    // Two-stage alone, checked against its record.
+    let ts = dir.join("ts.csv");
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--check",
+        "--out",
+        path(&ts),
+        path(&estimation),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // Refined through the model, and the multi-start output-error fit.
+    let refined = dir.join("refined.csv");
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--refine",
+        "--out",
+        path(&refined),
+        path(&estimation),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let oe = dir.join("oe.csv");
+    let out = twostage(&[
+        "estimate",
+        "--method",
+        "oe",
+        "--model-file",
+        path(&model),
+        "--starts",
+        "4",
+        "--out",
+        path(&oe),
+        path(&estimation),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stop = std::fs::read_to_string(&refined).unwrap();
+    assert!(
+        stop.lines().next().unwrap().ends_with("refine_stop"),
+        "{stop}"
+    );
+
+    // Validation: each estimate predicts the other record's level.
+    let [ts_rms, refined_rms, oe_rms] =
+        [&ts, &refined, &oe].map(|estimates| validation_rms(&model, estimates, &validation));
+    assert!(
+        refined_rms <= ts_rms && refined_rms <= 1.02 * oe_rms,
+        "validation RMS: two-stage {ts_rms}, refined {refined_rms}, output error {oe_rms}"
+    );
+
+    // The estimator learned the estimation record's input: on the
+    // validation record (another input) its estimate is not explained.
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--check",
+        path(&validation),
+    ]);
+    let (header, row) = table(&out);
+    let explained = header.iter().position(|h| h == "explained").unwrap();
+    assert_eq!(row[explained], "false");
+    assert!(text(&out.stderr).contains("not explained"));
+}
