@@ -31,6 +31,10 @@ pub struct EstimateArgs {
     /// With --check: the model's own records each record is ranked among.
     #[arg(long, default_value_t = 199, requires = "check")]
     check_sims: usize,
+    /// With --check: write DIR/EXPERIMENT.svg for each record, its outputs
+    /// beside the model's noise-free response at the estimate.
+    #[arg(long, value_name = "DIR", requires = "check")]
+    plot: Option<PathBuf>,
     /// With --estimator: refine each estimate through the model. A
     /// built-in model: the posterior mean of its prediction-error
     /// likelihood over twice the interval (about 1 ms per benchmark
@@ -398,6 +402,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     let output_names = format.signals.outputs.clone();
+    let sample_time = format.sample_time;
     for path in &args.data {
         for read in csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))? {
             let outcome = read.record.and_then(|record| {
@@ -415,10 +420,10 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         read.id
                     );
                 }
-                Ok(estimated)
+                Ok((record, estimated))
             });
             match outcome {
-                Ok(estimated) => {
+                Ok((record, estimated)) => {
                     if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
                         eprintln!(
                             "warning: {}: experiment {}: out of distribution: its features lie \
@@ -464,6 +469,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             read.id
                         ),
                         _ => {}
+                    }
+                    if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
+                        plot_check(dir, &read.id, &record, check, &output_names, sample_time)?;
                     }
                     match &estimated.check {
                         Some(Err(e)) => eprintln!(
@@ -547,6 +555,50 @@ fn refine_stop(refined: Option<&Result<Option<TerminationReason>, String>>) -> S
         Some(Err(_)) => "failed".into(),
         _ => String::new(),
     }
+}
+
+/// `DIR/ID.svg`: the record's outputs beside the model's noise-free
+/// response at its estimate.
+fn plot_check(
+    dir: &std::path::Path,
+    id: &str,
+    record: &IoData,
+    check: &RecordCheck,
+    outputs: &[String],
+    sample_time: f64,
+) -> Result<()> {
+    let traces: Vec<twostage_plot::Trace<'_>> = outputs
+        .iter()
+        .enumerate()
+        .map(|(j, name)| twostage_plot::Trace {
+            name,
+            measured: record.output(j),
+            simulated: check.simulated.output(j),
+        })
+        .collect();
+    let verdict = if check.explained() {
+        "explained"
+    } else {
+        "not explained"
+    };
+    let title = format!("{id}: {verdict} by the model at its estimate");
+    let svg = twostage_plot::record_vs_simulation(&title, sample_time, &traces)
+        .map_err(|e| anyhow::anyhow!("--plot: {id}: {e}"))?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("--plot: creating {}: {e}", dir.display()))?;
+    // An id is the user's text: keep the file name to safe characters.
+    let name: String = id
+        .chars()
+        .map(|c| {
+            if c.is_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    twostage::write_whole(dir.join(format!("{name}.svg")), svg.as_bytes())?;
+    Ok(())
 }
 
 /// Numbers for a message, comma separated, to four significant digits.

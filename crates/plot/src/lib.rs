@@ -351,3 +351,107 @@ mod tests {
         assert!(learning_curve("curve", &[]).is_err());
     }
 }
+
+/// One output signal of a record beside the model's simulation of it.
+#[derive(Debug, Clone, Copy)]
+pub struct Trace<'a> {
+    /// The signal's name.
+    pub name: &'a str,
+    /// The measured samples.
+    pub measured: &'a [f64],
+    /// The simulated samples (same length).
+    pub simulated: &'a [f64],
+}
+
+/// Draw each output's record (black) and simulation (blue) against time,
+/// one panel per output, and return the SVG text.
+///
+/// ```
+/// use twostage_plot::{Trace, record_vs_simulation};
+/// let trace = Trace { name: "level", measured: &[1.0, 2.0, 2.5], simulated: &[1.0, 1.8, 2.6] };
+/// let svg = record_vs_simulation("record 7", 2.0, &[trace])?;
+/// assert!(svg.starts_with("<svg") && svg.contains("record 7") && svg.contains("level"));
+/// # Ok::<(), twostage_plot::PlotError>(())
+/// ```
+///
+/// # Errors
+/// [`PlotError::Data`] for no traces, mismatched or empty signals, or
+/// no finite sample; [`PlotError::Drawing`] if the backend fails.
+pub fn record_vs_simulation(
+    title: &str,
+    sample_time: f64,
+    traces: &[Trace<'_>],
+) -> Result<String, PlotError> {
+    if traces.is_empty() {
+        return Err(PlotError::Data("no outputs to draw".into()));
+    }
+    for t in traces {
+        if t.measured.len() != t.simulated.len() || t.measured.is_empty() {
+            return Err(PlotError::Data(format!(
+                "{}: {} measured and {} simulated samples",
+                t.name,
+                t.measured.len(),
+                t.simulated.len()
+            )));
+        }
+    }
+    let mut svg = String::new();
+    {
+        let height = 260 * traces.len() as u32;
+        let root = SVGBackend::with_string(&mut svg, (720, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(drawing)?;
+        let root = root.titled(title, ("sans-serif", 20)).map_err(drawing)?;
+        let areas = root.split_evenly((traces.len(), 1));
+        for (area, t) in areas.iter().zip(traces) {
+            let finite = t
+                .measured
+                .iter()
+                .chain(t.simulated)
+                .filter(|v| v.is_finite());
+            let (lo, hi) = finite.fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(*v), b.max(*v)));
+            if lo > hi {
+                return Err(PlotError::Data(format!("{}: no finite sample", t.name)));
+            }
+            let pad = if hi > lo { 0.05 * (hi - lo) } else { 1.0 };
+            let end = sample_time * (t.measured.len() - 1).max(1) as f64;
+            let mut chart = ChartBuilder::on(area)
+                .caption(t.name, ("sans-serif", 15))
+                .margin(12)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..end, lo - pad..hi + pad)
+                .map_err(drawing)?;
+            chart
+                .configure_mesh()
+                .x_desc("time")
+                .draw()
+                .map_err(drawing)?;
+            let line = |values: &[f64]| -> Vec<(f64, f64)> {
+                values
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.is_finite())
+                    .map(|(k, v)| (sample_time * k as f64, *v))
+                    .collect()
+            };
+            chart
+                .draw_series(LineSeries::new(line(t.measured), BLACK.stroke_width(1)))
+                .map_err(drawing)?
+                .label("record")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
+            chart
+                .draw_series(LineSeries::new(line(t.simulated), BLUE.stroke_width(2)))
+                .map_err(drawing)?
+                .label("model at the estimate, noise-free")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(drawing)?;
+        }
+        root.present().map_err(drawing)?;
+    }
+    Ok(svg)
+}
