@@ -97,6 +97,7 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
 
     // Two-stage alone, checked against its record.
     let ts = dir.join("ts.csv");
+    let plots = dir.join("plots");
     let out = twostage(&[
         "estimate",
         "--estimator",
@@ -104,11 +105,18 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "--model-file",
         path(&model),
         "--check",
+        "--plot",
+        path(&plots),
         "--out",
         path(&ts),
         path(&estimation),
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
+    let svg = std::fs::read_to_string(plots.join("estimation.svg")).unwrap();
+    assert!(
+        svg.starts_with("<svg") && svg.contains("estimation: not explained"),
+        "{svg:.200}"
+    );
     // Refined through the model, and the multi-start output-error fit.
     let refined = dir.join("refined.csv");
     let out = twostage(&[
