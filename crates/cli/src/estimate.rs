@@ -473,6 +473,22 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                     if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
                         plot_check(dir, &read.id, &record, check, &output_names, sample_time)?;
                     }
+                    if let Some(Ok(RecordCheck {
+                        input_differs_at: Some((j, k)),
+                        ..
+                    })) = &estimated.check
+                    {
+                        eprintln!(
+                            "warning: {}: experiment {}: its input {} differs from the one every \
+                             training record had (from sample {}): the estimator learned that \
+                             input and does not read this one, so its estimate is not for this \
+                             record; train on this experiment's input, or on an input design",
+                            path.display(),
+                            read.id,
+                            format.signals.inputs.get(*j).map_or("?", String::as_str),
+                            k + 1
+                        );
+                    }
                     match &estimated.check {
                         Some(Err(e)) => eprintln!(
                             "warning: {}: experiment {}: --check could not simulate the model at \
@@ -601,6 +617,14 @@ fn plot_check(
     Ok(())
 }
 
+/// Whether the record's input is the one every training record had
+/// (`None` when the model's inputs vary from experiment to experiment).
+fn input_as_trained(check: &RecordCheck) -> Option<bool> {
+    check
+        .input_shared
+        .then_some(check.input_differs_at.is_none())
+}
+
 /// Numbers for a message, comma separated, to four significant digits.
 fn list(values: &[f64]) -> String {
     let shown: Vec<String> = values.iter().map(|v| format!("{v:.4}")).collect();
@@ -615,7 +639,11 @@ fn check_header(outputs: &[String]) -> Vec<String> {
         header.push(format!("{y}_rms"));
         header.push(format!("{y}_fit_percent"));
     }
-    header.extend(["check_tail_probability".into(), "explained".into()]);
+    header.extend([
+        "check_tail_probability".into(),
+        "explained".into(),
+        "input_as_trained".into(),
+    ]);
     header
 }
 
@@ -630,9 +658,10 @@ fn check_fields(outputs: usize, check: Option<&Result<RecordCheck, String>>) -> 
             }
             fields.push(format_f64(c.tail_probability));
             fields.push(c.explained().to_string());
+            fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
             fields
         }
-        _ => vec![String::new(); 2 * outputs + 2],
+        _ => vec![String::new(); 2 * outputs + 3],
     }
 }
 
@@ -724,6 +753,9 @@ fn json(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> R
                     }
                     object.insert("check_tail_probability".into(), c.tail_probability.into());
                     object.insert("explained".into(), c.explained().into());
+                    if let Some(same) = input_as_trained(c) {
+                        object.insert("input_as_trained".into(), same.into());
+                    }
                 }
                 Some(Err(e)) => {
                     object.insert("check_error".into(), e.clone().into());

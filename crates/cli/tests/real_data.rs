@@ -171,7 +171,19 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         path(&validation),
     ]);
     let (header, row) = table(&out);
-    let explained = header.iter().position(|h| h == "explained").unwrap();
-    assert_eq!(row[explained], "false");
+    let column = |name: &str| header.iter().position(|h| h == name).unwrap();
+    assert_eq!(row[column("explained")], "false");
     assert!(text(&out.stderr).contains("not explained"));
+    // And it says why: the record's input is not the one it learned.
+    assert_eq!(row[column("input_as_trained")], "false");
+    assert!(
+        text(&out.stderr).contains("its input pump differs from the one every training record had"),
+        "{}",
+        text(&out.stderr)
+    );
+    let ts_table = std::fs::read_to_string(&ts).unwrap();
+    assert!(
+        ts_table.lines().nth(1).unwrap().ends_with(",true"),
+        "{ts_table}"
+    );
 }

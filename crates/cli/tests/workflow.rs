@@ -755,9 +755,12 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let (explained, fit) = (column("explained"), column("a_y_fit_percent"));
+    // Every record is on the chicane the estimator was trained on.
+    let same_input = column("input_as_trained");
     assert!(header.contains(&"a_y_rms") && header.contains(&"check_tail_probability"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 21);
+    assert!(rows.iter().all(|r| r[same_input] == "true"), "{table}");
     let passed = rows[..20].iter().filter(|r| r[explained] == "true").count();
     // A 1% test: one in a hundred of the model's records fails it.
     assert!(

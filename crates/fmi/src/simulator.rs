@@ -314,6 +314,10 @@ impl Simulator for FmuSimulator {
         }
     }
 
+    fn shared_input(&self) -> Option<IoData> {
+        self.input.as_ref()?.shared_record(&self.spec)
+    }
+
     fn simulate_under(
         &self,
         theta: &[f64],

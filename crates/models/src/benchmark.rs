@@ -158,6 +158,10 @@ impl Simulator for Benchmark {
         }
     }
 
+    fn shared_input(&self) -> Option<IoData> {
+        self.input.shared_record(&self.spec)
+    }
+
     fn simulate_under(
         &self,
         theta: &[f64],

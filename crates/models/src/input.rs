@@ -98,6 +98,23 @@ impl InputSignal {
         matches!(self.kind, Kind::Fixed(_))
     }
 
+    /// The record of `spec`'s shape whose every input is this signal,
+    /// when the signal is the same in every experiment (`None` for white
+    /// noise, or a fixed signal too short for the record).
+    pub fn shared_record(&self, spec: &crate::ModelSpec) -> Option<crate::IoData> {
+        if !self.is_deterministic() {
+            return None;
+        }
+        let mut record = spec.new_record();
+        // A deterministic signal draws nothing: any stream serves.
+        let mut rng = crate::experiment_rng(0, 0);
+        for j in 0..record.n_inputs() {
+            self.fill(spec.sample_time(), &mut rng, record.input_mut(j))
+                .ok()?;
+        }
+        (record.n_inputs() > 0).then_some(record)
+    }
+
     /// Whether every experiment sees the same input.
     pub fn is_deterministic(&self) -> bool {
         !matches!(self.kind, Kind::WhiteGaussian { .. })

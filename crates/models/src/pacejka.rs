@@ -458,6 +458,10 @@ impl Simulator for PacejkaCar {
         }
     }
 
+    fn shared_input(&self) -> Option<IoData> {
+        self.input.shared_record(&self.spec)
+    }
+
     fn simulate_under(
         &self,
         theta: &[f64],

@@ -318,6 +318,10 @@ impl Simulator for NoiseFree {
         self.inner.capabilities()
     }
 
+    fn shared_input(&self) -> Option<IoData> {
+        self.inner.shared_input()
+    }
+
     fn simulate_under(
         &self,
         theta: &[f64],
@@ -448,6 +452,15 @@ pub trait Simulator: Send + Sync {
             .collect()
     }
 
+    /// The input every experiment gets, when the simulator's design gives
+    /// all of them the same one (a fixed or deterministic signal): an
+    /// estimator trained on its records learned that input, and a record
+    /// with another is not one it can speak for. `None` when inputs vary
+    /// (or the model has none).
+    fn shared_input(&self) -> Option<IoData> {
+        None
+    }
+
     /// The parameter names, in the order of theta.
     fn param_names(&self) -> &[String] {
         self.spec().param_names()
@@ -484,6 +497,9 @@ macro_rules! forward_simulator {
             }
             fn capabilities(&self) -> Capabilities {
                 (**self).capabilities()
+            }
+            fn shared_input(&self) -> Option<IoData> {
+                (**self).shared_input()
             }
             fn simulate_under(
                 &self,

@@ -26,6 +26,13 @@ pub struct RecordCheck {
     pub tail_probability: f64,
     /// The noise-free simulation, for plots.
     pub simulated: IoData,
+    /// When the model gives every experiment the same input (so an
+    /// estimator trained on it learned that input): where the record's
+    /// input first differs from it, as (input signal, sample). `None`
+    /// when it is the same, or when the model's inputs vary.
+    pub input_differs_at: Option<(usize, usize)>,
+    /// Whether the model gives every experiment the same input.
+    pub input_shared: bool,
 }
 
 impl RecordCheck {
@@ -33,6 +40,22 @@ impl RecordCheck {
     pub fn explained(&self) -> bool {
         self.tail_probability > EXPLAINED_LEVEL
     }
+}
+
+/// Where `record`'s inputs first differ from `shared`'s, as (signal,
+/// sample), beyond rounding (1e-9 of the signal's largest magnitude).
+fn first_difference(record: &IoData, shared: &IoData) -> Option<(usize, usize)> {
+    (0..shared.n_inputs()).find_map(|j| {
+        let (a, b) = (record.input(j), shared.input(j));
+        let scale = 1e-9 * (1.0 + b.iter().fold(0.0f64, |m, v| m.max(v.abs())));
+        if a.len() != b.len() {
+            return Some((j, a.len().min(b.len())));
+        }
+        a.iter()
+            .zip(b)
+            .position(|(x, y)| (x - y).abs() > scale)
+            .map(|k| (j, k))
+    })
 }
 
 /// How well `simulated` follows `measured` (one signal): the RMS of their
@@ -171,6 +194,11 @@ pub fn check_record(
         .filter(|r| statistic(r) >= observed)
         .count();
     let tail_probability = (at_least + 1) as f64 / (noisy + 1) as f64;
+    let shared = sim
+        .shared_input()
+        .filter(|shared| shared.n_inputs() == record.n_inputs());
+    let input_shared = shared.is_some();
+    let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
     let (rms, fit_percent) = (0..n_y)
         .map(|j| output_fit(record.output(j), simulated.output(j)))
         .unzip();
@@ -179,6 +207,8 @@ pub fn check_record(
         fit_percent,
         tail_probability,
         simulated,
+        input_differs_at,
+        input_shared,
     })
 }
 
@@ -254,6 +284,8 @@ mod tests {
         // reaches it.
         assert_eq!(check.tail_probability.to_bits(), (1.0f64 / 200.0).to_bits());
         assert!(!check.explained());
+        // Its inputs vary from experiment to experiment: nothing to compare.
+        assert!(!check.input_shared && check.input_differs_at.is_none());
         // The exact response is explained by every one of them.
         let exact = IoData::siso(&u, &u.map(|u| 2.0 * u)).unwrap();
         let check = check_record(&model, &exact, &[2.0], 199, 3).unwrap();

@@ -33,6 +33,12 @@ impl Simulator for FileSimulator {
         self.inner.capabilities()
     }
 
+    fn shared_input(&self) -> Option<IoData> {
+        self.fixed_input
+            .clone()
+            .or_else(|| self.inner.shared_input())
+    }
+
     fn simulate_under(
         &self,
         theta: &[f64],
