@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 use crate::error::{CompressError as Error, Result};
 use crate::transform::TRANSFORM_RECORDS;
 use crate::{
-    Arx, Compressor, Narx, OutputPca, RawRecord, SignalTransform, Transformed, Workspace,
-    signal_rms,
+    Arx, Compressor, Narx, OutputPca, RawRecord, SignalTransform, Transformed, WithLevel,
+    Workspace, signal_rms,
 };
 
 /// The compression map g of stage 1.
@@ -25,6 +25,9 @@ pub enum CompressorConfig {
     Raw(RawRecord),
     /// Output transforms (`log+`, `log1p+`...), then one of the above.
     Transformed(Transformed),
+    /// One of the above, then each output's first sample and mean
+    /// (`SPEC+level`).
+    Leveled(WithLevel),
 }
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
@@ -80,6 +83,10 @@ impl CompressorConfig {
                 n_outputs,
                 t.inner().for_shape(n_inputs, n_outputs, n_samples)?,
             )?),
+            Self::Leveled(l) => Self::Leveled(l.shaped(
+                n_outputs,
+                l.inner().for_shape(n_inputs, n_outputs, n_samples)?,
+            )?),
             other => other.clone(),
         })
     }
@@ -90,7 +97,7 @@ impl CompressorConfig {
     ///
     /// ```
     /// use twostage_compress::CompressorConfig;
-    /// for spec in ["arx:5,5", "ar:3", "narx:2,2,2", "pca:8", "raw", "log+ar:2"] {
+    /// for spec in ["arx:5,5", "ar:3", "narx:2,2,2", "pca:8", "raw", "log+ar:2", "log+arx:2,2+level"] {
     ///     let c: CompressorConfig = spec.parse()?;
     ///     assert_eq!(c.spec().as_deref(), Some(spec));
     /// }
@@ -103,6 +110,7 @@ impl CompressorConfig {
             Self::Pca(pca) => Some(format!("pca:{}", pca.components())),
             Self::Raw(_) => Some("raw".into()),
             Self::Transformed(t) => t.spec(),
+            Self::Leveled(l) => l.spec(),
         }
     }
 
@@ -115,6 +123,7 @@ impl CompressorConfig {
             CompressorConfig::Transformed(t) if !t.is_prepared() => {
                 TRANSFORM_RECORDS.max(t.inner().records_to_prepare())
             }
+            CompressorConfig::Leveled(l) => l.inner().records_to_prepare(),
             _ => 0,
         }
     }
@@ -161,6 +170,10 @@ impl CompressorConfig {
                 let take = records.len().min(TRANSFORM_RECORDS);
                 CompressorConfig::Transformed(t.prepared(&records[..take])?)
             }
+            CompressorConfig::Leveled(l) if l.inner().records_to_prepare() > 0 => {
+                let n_outputs = records.first().map_or(1, |(_, y)| y.ncols());
+                CompressorConfig::Leveled(WithLevel::new(l.inner().prepared(records)?, n_outputs)?)
+            }
             other => other.clone(),
         })
     }
@@ -174,6 +187,7 @@ impl std::fmt::Display for CompressorConfig {
             Self::Pca(pca) => pca.fmt(f),
             Self::Raw(raw) => raw.fmt(f),
             Self::Transformed(t) => t.fmt(f),
+            Self::Leveled(l) => l.fmt(f),
         }
     }
 }
@@ -211,6 +225,10 @@ impl std::str::FromStr for CompressorConfig {
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
         const WHAT: &str = "compressor";
+        if let Some(inner) = spec.trim().strip_suffix("+level") {
+            // Shaped by the model (`for_shape`): one output until then.
+            return Ok(Self::Leveled(WithLevel::new(inner.parse()?, 1)?));
+        }
         if let Some((transforms, rest)) = spec.split_once('+') {
             let outputs = transforms
                 .split(',')
@@ -277,6 +295,7 @@ impl Compressor for CompressorConfig {
             Self::Pca(c) => c.n_features(),
             Self::Raw(c) => c.n_features(),
             Self::Transformed(c) => c.n_features(),
+            Self::Leveled(c) => c.n_features(),
         }
     }
 
@@ -293,6 +312,7 @@ impl Compressor for CompressorConfig {
             Self::Pca(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Raw(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Transformed(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Leveled(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -311,6 +331,7 @@ impl Compressor for CompressorConfig {
             Self::Pca(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Raw(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Transformed(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Leveled(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -321,6 +342,7 @@ impl Compressor for CompressorConfig {
             Self::Pca(c) => c.feature_names(),
             Self::Raw(c) => c.feature_names(),
             Self::Transformed(c) => c.feature_names(),
+            Self::Leveled(c) => c.feature_names(),
         }
     }
 }

@@ -458,7 +458,10 @@ impl Estimator {
     /// [`Assessment::floored_samples`] says which samples it could not
     /// take as they were).
     pub fn transforms_outputs(&self) -> bool {
-        matches!(self.compressor, CompressorConfig::Transformed(_))
+        match &self.compressor {
+            CompressorConfig::Leveled(l) => matches!(l.inner(), CompressorConfig::Transformed(_)),
+            c => matches!(c, CompressorConfig::Transformed(_)),
+        }
     }
 
     /// The adaptive intervals, when calibrated.

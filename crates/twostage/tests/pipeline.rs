@@ -430,10 +430,13 @@ fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
         .collect();
     assert_eq!(
         scored.len(),
-        9,
-        "4 compressors, then 2 networks on the best 2, then the winner's restarts \
-         averaged:\n{outcome}"
+        10,
+        "4 compressors, then 2 networks on the best 2, then the winner's ARX with the \
+         record's level and its restarts averaged:\n{outcome}"
     );
+    let leveled = &outcome.candidates[outcome.candidates.len() - 2];
+    assert_eq!(leveled.round, 3, "{outcome}");
+    assert!(leveled.design.contains("+level"), "{outcome}");
     let averaged = outcome.candidates.last().unwrap();
     assert_eq!(averaged.round, 3, "{outcome}");
     assert!(

@@ -229,8 +229,8 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     ///     .settings(|b| b.calibration(100).validation(100))
     ///     .run()?;
     /// // 2 compressors with one network, the other network on both, then
-    /// // the winner's restarts averaged.
-    /// assert_eq!(outcome.candidates.len(), 5);
+    /// // the winner's ARX with the record's level, and its restarts averaged.
+    /// assert_eq!(outcome.candidates.len(), 6);
     /// let best = &outcome.candidates[outcome.best];
     /// assert!(outcome.candidates.iter().all(|c| c.note.is_some() || c.score >= best.score));
     /// println!("{outcome}");

@@ -264,30 +264,44 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let refit = refit_seconds(winner.seconds, rows, self.chart.thetas.nrows())
             .min(0.45 * self.seconds_left());
         let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
-        // (network, seed offset, whether it competes, rows)
-        let mut trials: Vec<(RegressorConfig, u64, bool, usize)> = vec![
-            (network.clone(), 1, false, rows),
-            (network.clone(), 2, false, rows),
-            (network.clone(), 0, false, rows / 2),
+        // (compressor, network, seed offset, whether it competes, rows)
+        let mut trials: Vec<(CompressorConfig, RegressorConfig, u64, bool, usize)> = vec![
+            (compressor.clone(), network.clone(), 1, false, rows),
+            (compressor.clone(), network.clone(), 2, false, rows),
+            (compressor.clone(), network.clone(), 0, false, rows / 2),
         ];
         if let RegressorConfig::Mlp(mlp) = &network
             && !mlp.params().is_ensemble()
             && let Ok(averaged) = mlp.params().clone().ensemble(true).check()
         {
-            trials.insert(0, (RegressorConfig::Mlp(averaged), 0, true, rows));
+            trials.insert(
+                0,
+                (
+                    compressor.clone(),
+                    RegressorConfig::Mlp(averaged),
+                    0,
+                    true,
+                    rows,
+                ),
+            );
+        }
+        let n_outputs = self.base.simulator().spec().output_names().len();
+        if let Some(leveled) = with_level(&compressor, n_outputs) {
+            trials.insert(0, (leveled, network.clone(), 0, true, rows));
         }
         let count = trials.len();
         let outcomes: Vec<_> = trials
             .par_iter()
             .enumerate()
-            .map(|(k, (net, offset, _, rows))| {
-                self.tell(3, k, count, &compressor, net);
-                self.evaluate_seeded(&compressor, net, *rows, limit, (3, *offset))
+            .map(|(k, (stage1, net, offset, _, rows))| {
+                self.tell(3, k, count, stage1, net);
+                self.evaluate_seeded(stage1, net, *rows, limit, (3, *offset))
             })
             .collect();
         let mut scores = vec![self.candidates[best].score];
         let mut half = None;
-        for ((report, outcome), (net, _, competes, trial_rows)) in outcomes.into_iter().zip(trials)
+        for ((report, outcome), (_, net, _, competes, trial_rows)) in
+            outcomes.into_iter().zip(trials)
         {
             if competes {
                 self.record(report, outcome, net);
@@ -440,6 +454,24 @@ pub(super) struct Winner {
     pub(super) regressor: FittedRegressor,
     /// The chart rows the shipped network was fitted on.
     pub(super) fitted_rows: usize,
+}
+
+/// The winner's stage 1 with each output's first sample and mean
+/// appended, where its features discard the record's level (ARX and NARX
+/// coefficients, also of transformed outputs): what a careful human adds
+/// when an initial state or an offset is to be estimated. The held-out
+/// risk decides whether it pays.
+fn with_level(compressor: &CompressorConfig, n_outputs: usize) -> Option<CompressorConfig> {
+    let stage1 = match compressor {
+        CompressorConfig::Transformed(t) => t.inner(),
+        other => other,
+    };
+    if !matches!(stage1, CompressorConfig::Arx(_) | CompressorConfig::Narx(_)) {
+        return None;
+    }
+    twostage_compress::WithLevel::new(compressor.clone(), n_outputs)
+        .ok()
+        .map(CompressorConfig::Leveled)
 }
 
 /// Features of every record, in parallel (row i is record i).
