@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::RunSettings;
 use twostage::sources::csv_rows::row;
-use twostage_models::{IoData, Simulator, experiment_rng, run_experiment};
+use twostage_models::{IoData, Simulator, experiment_rng, run_experiments};
 
 use crate::model_arg::ModelArgs;
 use crate::number::{format_f64, parse_list};
@@ -296,23 +296,36 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
         "{}",
         row(std::iter::once("experiment").chain(spec.param_names().iter().map(String::as_str)))
     )?;
+    // A command source answers a request of its batch at once.
+    let batch = sim.batch_size().clamp(1, BLOCK);
+    let q = spec.n_params();
     for start in (0..count).step_by(BLOCK) {
         let end = (start + BLOCK).min(count);
-        let block: Vec<(String, String)> = (start..end)
+        let block: Vec<Vec<(String, String)>> = (start..end)
+            .step_by(batch)
+            .collect::<Vec<_>>()
             .into_par_iter()
-            .map_init(
-                || (vec![0.0; spec.n_params()], IoData::default()),
-                |(theta, record), i| -> Result<(String, String)> {
-                    run_experiment(sim, &design, i, theta, record)
-                        .with_context(|| format!("simulating experiment {i}"))?;
-                    let mut rows = String::with_capacity(record.n_samples() * 56);
-                    push_rows(&mut rows, Some(i), record);
-                    let values: Vec<String> = theta.iter().map(|v| format_f64(*v)).collect();
-                    Ok((rows, format!("{i},{}\n", values.join(","))))
-                },
-            )
+            .map(|first| -> Result<Vec<(String, String)>> {
+                let n = batch.min(end - first);
+                let (mut thetas, mut records) = (vec![0.0; n * q], vec![IoData::default(); n]);
+                let results = run_experiments(sim, &design, first, &mut thetas, &mut records);
+                results
+                    .into_iter()
+                    .zip(&records)
+                    .zip(thetas.chunks_exact(q.max(1)))
+                    .enumerate()
+                    .map(|(k, ((result, record), theta))| {
+                        let i = first + k;
+                        result.with_context(|| format!("simulating experiment {i}"))?;
+                        let mut rows = String::with_capacity(record.n_samples() * 56);
+                        push_rows(&mut rows, Some(i), record);
+                        let values: Vec<String> = theta.iter().map(|v| format_f64(*v)).collect();
+                        Ok((rows, format!("{i},{}\n", values.join(","))))
+                    })
+                    .collect()
+            })
             .collect::<Result<_>>()?;
-        for (rows, truth_row) in block {
+        for (rows, truth_row) in block.into_iter().flatten() {
             data.write_all(rows.as_bytes())?;
             truth.write_all(truth_row.as_bytes())?;
         }

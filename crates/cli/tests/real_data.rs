@@ -187,3 +187,101 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "{ts_table}"
     );
 }
+
+/// A simulator that fails whenever it is asked to run without noise: the
+/// check and the refinement fail for each record, say so, and keep its
+/// two-stage estimate.
+#[test]
+fn a_simulator_failing_during_check_and_refine_keeps_the_estimates() {
+    let dir = scratch("real-data-failing");
+    std::fs::write(
+        dir.join("gain.py"),
+        format!(
+            r#"import sys, random
+sys.path.insert(0, {:?})
+from twostage_protocol import serve
+
+def simulate(theta, seed, index, noiseless=False, input=None):
+    if noiseless:
+        raise RuntimeError("the noise-free solver diverged")
+    rng = random.Random(seed * 1000003 + index)
+    u = [rng.gauss(0, 1) for _ in range(40)]
+    return [[v] for v in u], [[theta[0] * v + 0.1 * rng.gauss(0, 1)] for v in u]
+
+serve(simulate)
+"#,
+            example().join("../../protocol").to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let model = dir.join("gain.toml");
+    std::fs::write(
+        &model,
+        format!(
+            "[model]\nname = \"gain\"\n[source]\ncommand = [{:?}, \"gain.py\"]\nprotocol = 2\n\
+             [[parameter]]\nname = \"k\"\nprior = {{ dist = \"uniform\", low = 0.0, high = 2.0 }}\n\
+             [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 40\n",
+            python()
+        ),
+    )
+    .unwrap();
+    let estimator = dir.join("gain.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--compress",
+        "arx:1,1",
+        "--fit",
+        "linear",
+        "--sims",
+        "300",
+        "--validate",
+        "0",
+        "--calibrate",
+        "100",
+        "--quiet",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let data = dir.join("data");
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&model),
+        "--count",
+        "3",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--check",
+        "--refine",
+        path(&data.join("data.csv")),
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("--refine failed").count(), 3, "{stderr}");
+    assert_eq!(
+        stderr.matches("--check could not simulate").count(),
+        3,
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("the noise-free solver diverged"),
+        "{stderr}"
+    );
+    let (header, row) = table(&out);
+    let column = |name: &str| header.iter().position(|h| h == name).unwrap();
+    assert_eq!(row[column("refine_stop")], "failed");
+    assert_eq!(row[column("explained")], "");
+    let k: f64 = row[column("k")].parse().unwrap();
+    assert!((0.0..=2.0).contains(&k));
+}

@@ -71,6 +71,52 @@ fn a_python_simulator_trains_from_the_shell() {
         "200",
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
+    // Records of the model itself, checked and refined through protocol 2
+    // (sir.py runs without noise when asked): explained, and refined
+    // by an output-error fit that stops for a reason.
+    let data = dir.join("records");
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&model),
+        "--count",
+        "6",
+        "--seed",
+        "5",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--check",
+        "--refine",
+        path(&data.join("data.csv")),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
+    let explained = header.iter().position(|h| *h == "explained").unwrap();
+    let stop = header.iter().position(|h| *h == "refine_stop").unwrap();
+    let rows: Vec<Vec<&str>> = table
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 6);
+    assert!(
+        rows.iter().filter(|r| r[explained] == "true").count() >= 5,
+        "{table}"
+    );
+    assert!(
+        rows.iter()
+            .all(|r| !r[stop].is_empty() && r[stop] != "failed"),
+        "{table}"
+    );
 }
 
 #[test]

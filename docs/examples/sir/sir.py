@@ -6,6 +6,9 @@
 from S = 0.99, I = 0.01, integrated with 100 Euler steps a day. The
 measured output is the infected share every 3 days, with 5% multiplicative
 noise drawn from (seed, index): experiment i of a chart is always the same.
+It speaks protocol 2 (sir.toml says `protocol = 2`): asked for a
+noise-free run, it returns the infected share itself, which `twostage
+estimate --check` and `--refine` compare with a measured record.
 """
 
 import os
@@ -29,10 +32,11 @@ def infected(beta, gamma):
     return out
 
 
-def simulate(theta, seed, index):
+def simulate(theta, seed, index, noiseless=False, input=None):
     beta, gamma = theta
     rng = random.Random(seed * 1000003 + index)
-    y = [v * (1 + 0.05 * rng.gauss(0, 1)) for v in infected(beta, gamma)]
+    noise = 0.0 if noiseless else 0.05
+    y = [v * (1 + noise * rng.gauss(0, 1)) for v in infected(beta, gamma)]
     return [], [[v] for v in y]
 
 
