@@ -5,6 +5,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
+use rayon::prelude::*;
 use twostage::fit::TerminationReason;
 use twostage::models::Simulator;
 use twostage::models::{BuiltinModel, IoData};
@@ -110,13 +111,16 @@ impl Estimated {
     }
 }
 
+/// A record with its estimate, or why it has none.
+type RecordOutcome = Result<(IoData, Estimated), String>;
+
 /// Estimates one record, or says why it cannot.
-type Method = Box<dyn FnMut(&IoData) -> Result<Estimated, String>>;
+type Method = Box<dyn Fn(&IoData) -> Result<Estimated, String> + Send + Sync>;
 
 /// Refines a TS estimate of one record from the estimate and the record's
 /// interval half-widths: the refined estimate and, for a descent, why it
 /// stopped.
-type Refine = Box<dyn FnMut(&IoData, &[f64], Option<&[f64]>) -> Result<Refined, String>>;
+type Refine = Box<dyn Fn(&IoData, &[f64], Option<&[f64]>) -> Result<Refined, String> + Send + Sync>;
 
 /// A refined estimate.
 struct Refined {
@@ -295,7 +299,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         } else {
             None
         };
-        let mut refine = if args.refine {
+        let refine = if args.refine {
             Some(refinement(&estimator, args)?)
         } else {
             None
@@ -311,7 +315,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 // calibrated for the TS estimate, not a refined one.
                 let widths = a.interval_half_widths().map(<[f64]>::to_vec);
                 // A refinement that fails keeps the TS estimate, and says so.
-                let (theta, refined) = match refine.as_mut() {
+                let (theta, refined) = match refine.as_ref() {
                     Some(refine) => match refine(record, &a.theta, widths.as_deref()) {
                         Ok(r) => (r.theta, Some(Ok(r.stop))),
                         Err(e) => (a.theta, Some(Err(e))),
@@ -395,7 +399,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
 pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let Chosen {
         names,
-        method: mut estimate_one,
+        method: estimate_one,
         trained: trained_samples,
         format,
     } = method(args)?;
@@ -404,24 +408,35 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let output_names = format.signals.outputs.clone();
     let sample_time = format.sample_time;
     for path in &args.data {
-        for read in csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))? {
-            let outcome = read.record.and_then(|record| {
-                let n = record.n_samples();
-                let estimated = estimate_one(&record)
-                    .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
-                // The estimate is still defined, but the validation error
-                // and the intervals were measured for another N (said only
-                // of a record that was estimated: a failed one says why).
-                if let Some(trained) = trained_samples.filter(|t| *t != n) {
-                    eprintln!(
-                        "warning: {}: experiment {}: {n} samples, the estimator was trained \
-                         and validated on N = {trained}; its accuracy and intervals may not hold",
-                        path.display(),
-                        read.id
-                    );
-                }
-                Ok((record, estimated))
-            });
+        let reads = csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))?;
+        // The records in parallel (a check or a refinement simulates the
+        // model many times per record), reported in their order: each
+        // estimate depends on its record alone.
+        let estimates: Vec<(String, RecordOutcome)> = reads
+            .into_par_iter()
+            .map(|read| {
+                let estimated = read.record.and_then(|record| {
+                    let estimated = estimate_one(&record)
+                        .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
+                    Ok((record, estimated))
+                });
+                (read.id, estimated)
+            })
+            .collect();
+        for (id, outcome) in estimates {
+            // The estimate is still defined, but the validation error and
+            // the intervals were measured for another N (said only of a
+            // record that was estimated: a failed one says why).
+            if let (Ok((record, _)), Some(trained)) = (&outcome, trained_samples)
+                && record.n_samples() != trained
+            {
+                eprintln!(
+                    "warning: {}: experiment {id}: {} samples, the estimator was trained and \
+                     validated on N = {trained}; its accuracy and intervals may not hold",
+                    path.display(),
+                    record.n_samples()
+                );
+            }
             match outcome {
                 Ok((record, estimated)) => {
                     if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
@@ -431,7 +446,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                              the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
                              and the intervals do not cover it (is it the same model and input?)",
                             path.display(),
-                            read.id
+                            id
                         );
                     }
                     if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
@@ -449,7 +464,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                              the training records had; the estimate and its intervals do not \
                              speak for them",
                             path.display(),
-                            read.id,
+                            id,
                             floored.len(),
                             listed.join(", "),
                             if floored.len() > 5 { ", ..." } else { "" }
@@ -460,18 +475,18 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             "warning: {}: experiment {}: --refine failed ({e}); the two-stage \
                              estimate is kept",
                             path.display(),
-                            read.id
+                            id
                         ),
                         Some(Ok(Some(TerminationReason::MaxIterations))) => eprintln!(
                             "warning: {}: experiment {}: --refine did not converge within its \
                              iterations; the estimate is the best point it reached",
                             path.display(),
-                            read.id
+                            id
                         ),
                         _ => {}
                     }
                     if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
-                        plot_check(dir, &read.id, &record, check, &output_names, sample_time)?;
+                        plot_check(dir, &id, &record, check, &output_names, sample_time)?;
                     }
                     if let Some(Ok(RecordCheck {
                         input_differs_at: Some((j, k)),
@@ -484,7 +499,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                              input and does not read this one, so its estimate is not for this \
                              record; train on this experiment's input, or on an input design",
                             path.display(),
-                            read.id,
+                            id,
                             format.signals.inputs.get(*j).map_or("?", String::as_str),
                             k + 1
                         );
@@ -494,7 +509,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             "warning: {}: experiment {}: --check could not simulate the model at \
                              the estimate ({e}); the estimate is kept, unchecked",
                             path.display(),
-                            read.id
+                            id
                         ),
                         Some(Ok(c)) if !c.explained() => eprintln!(
                             "warning: {}: experiment {}: not explained by the model at its \
@@ -503,14 +518,14 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                              estimate (a model that does not fit, another input than training's, \
                              or a poor estimate; see docs/decisions/033-real-records.md)",
                             path.display(),
-                            read.id,
+                            id,
                             list(&c.rms),
                             list(&c.fit_percent),
                             100.0 * c.tail_probability
                         ),
                         _ => {}
                     }
-                    rows.push((read.id, estimated));
+                    rows.push((id, estimated));
                 }
                 Err(problem) => {
                     failed += 1;

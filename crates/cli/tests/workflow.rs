@@ -776,6 +776,20 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
         stderr.contains("experiment alien: not explained"),
         "{stderr}"
     );
+    // Records are checked in parallel: one thread gives the same table.
+    let alone = std::process::Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .args([
+            "estimate",
+            "--estimator",
+            path(&file),
+            "--check",
+            path(&data),
+            path(&alien_path),
+        ])
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .unwrap();
+    assert_eq!(text(&alone.stdout), table);
     // The model file given must be the estimator's model.
     let benchmark = dir.join("benchmark.toml");
     std::fs::write(
