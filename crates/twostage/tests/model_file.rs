@@ -372,3 +372,66 @@ fn presets_and_inputs_are_checked_too() {
             .contains("used twice")
     );
 }
+
+/// `[input] signal = "fixed", file = "record.csv"` hands a built-in model
+/// the measured input, read from the file's column named as the input
+/// (beside the model file), in every experiment; `--check` can then tell a
+/// record on another input. A missing column is named with the file.
+#[test]
+fn a_measured_input_from_a_file_drives_a_built_in_model() {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("measured-input");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let u: Vec<f64> = (0..50)
+        .map(|k| ((k * 7) % 11) as f64 / 10.0 - 0.5)
+        .collect();
+    let mut csv = String::from("time,u,y\n");
+    for (k, v) in u.iter().enumerate() {
+        csv.push_str(&format!("{k},{v:?},0\n"));
+    }
+    std::fs::write(dir.join("record.csv"), csv).unwrap();
+    let text = "[model]\nname = \"short\"\n[source]\nbuiltin = \"benchmark\"\n\
+                [input]\nsignal = \"fixed\"\nfile = \"record.csv\"\n[signals]\nsamples = 50\n";
+    std::fs::write(dir.join("short.toml"), text).unwrap();
+    let file = ModelFile::load(dir.join("short.toml")).unwrap();
+    let sim = file.simulator().unwrap();
+    let mut record = sim.spec().new_record();
+    sim.simulate(&[0.3], &mut experiment_rng(1, 4), &mut record)
+        .unwrap();
+    assert_eq!(record.input(0), u.as_slice());
+    assert_eq!(sim.shared_input().unwrap().input(0), u.as_slice());
+    // The same system on the same input, by the built-in model given it.
+    let builtin = Benchmark::builder().n_samples(50).build().unwrap();
+    let mut expected = builtin.spec().new_record();
+    let quiet = twostage::models::Conditions {
+        noiseless: true,
+        input: Some(&record),
+    };
+    builtin
+        .simulate_under(&[0.3], &mut experiment_rng(1, 4), quiet, &mut expected)
+        .unwrap();
+    let mut got = sim.spec().new_record();
+    sim.simulate_under(
+        &[0.3],
+        &mut experiment_rng(1, 4),
+        twostage::models::Conditions {
+            noiseless: true,
+            input: None,
+        },
+        &mut got,
+    )
+    .unwrap();
+    assert_eq!(got.output(0), expected.output(0));
+    // A file without the input's column.
+    std::fs::write(dir.join("record.csv"), "time,v\n0,1\n").unwrap();
+    let e = ModelFile::load(dir.join("short.toml"))
+        .unwrap()
+        .simulator()
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("no column `u`") && e.contains("input.file"),
+        "{e}"
+    );
+}

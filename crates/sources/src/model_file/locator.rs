@@ -115,7 +115,12 @@ impl Locator<'_> {
                     self.error(Some(name.span()), "source.builtin", e.to_string())
                 })?;
         let noiseless = noise.is_some_and(|n| n.get_ref().model == Some(false));
-        let input = input.map(|i| self.input(i)).transpose()?;
+        // A measured input from a file is handed over by the model file's
+        // simulator (`measured_input`), not designed by the source.
+        let input = input
+            .filter(|i| i.get_ref().file.is_none())
+            .map(|i| self.input(i))
+            .transpose()?;
         Ok(ModelSource::Builtin {
             model,
             overrides: BuiltinOverrides {
@@ -246,7 +251,10 @@ impl Locator<'_> {
             start_time,
             starts,
             noise_inputs,
-            input: input.map(|i| self.input(i)).transpose()?,
+            input: input
+                .filter(|i| i.get_ref().file.is_none())
+                .map(|i| self.input(i))
+                .transpose()?,
         })
     }
 
@@ -395,6 +403,19 @@ impl Locator<'_> {
         })
     }
 
+    /// A measured input from a CSV `file` (`signal = "fixed"`), for a
+    /// built-in or FMU source; `None` for any other `[input]` (the
+    /// source's own design).
+    pub(super) fn measured_input(
+        &self,
+        input: Option<&Spanned<RawInput>>,
+    ) -> Result<Option<CommandInput>> {
+        match input {
+            Some(i) if i.get_ref().file.is_some() => self.command_input(i).map(Some),
+            _ => Ok(None),
+        }
+    }
+
     /// A command's fixed input: `values` for every input signal, or a
     /// CSV `file` whose columns are named as the model's inputs.
     fn command_input(&self, input: &Spanned<RawInput>) -> Result<CommandInput> {
@@ -436,15 +457,6 @@ impl Locator<'_> {
 
     pub(super) fn input(&self, input: &Spanned<RawInput>) -> Result<InputSignal> {
         let raw = input.get_ref();
-        if let Some(file) = &raw.file {
-            return Err(self.error(
-                Some(file.span()),
-                "input.file",
-                "a measured input read from a file is handed to a command speaking protocol 2; \
-                 give this source the values instead (values = [...])"
-                    .into(),
-            ));
-        }
         let kind = raw.signal.get_ref().as_str();
         let here = || Some(input.span());
         let (needed, signal) = match kind {

@@ -128,6 +128,9 @@ pub struct ModelFile {
     name_lines: Vec<(String, &'static str, usize)>,
     /// The line of `fmu = ...`.
     fmu_line: Option<usize>,
+    /// A measured input from a file, for a built-in or FMU source (a
+    /// command's is in its [`ModelSource::Command`]).
+    measured_input: Option<CommandInput>,
     /// Identifies the file's text (shards record it).
     fingerprint: u64,
 }
@@ -163,6 +166,13 @@ impl ModelFile {
             }
             _ => {}
         }
+        // A measured input's file is found beside the model file too.
+        if let (Some(CommandInput::File { path: input, .. }), Some(folder)) =
+            (&mut file.measured_input, folder)
+            && input.is_relative()
+        {
+            *input = folder.join(&*input);
+        }
         Ok(file)
     }
 
@@ -179,6 +189,12 @@ impl ModelFile {
             message: e.message().to_string(),
         })?;
         let mut source = at.source(raw.source.as_ref(), raw.noise.as_ref(), raw.input.as_ref())?;
+        let measured_input = match source {
+            ModelSource::Builtin { .. } | ModelSource::Fmu { .. } => {
+                at.measured_input(raw.input.as_ref())?
+            }
+            _ => None,
+        };
         let builtin = match &source {
             ModelSource::Builtin { model, overrides } => {
                 Some((*model, model.build_with(overrides)?))
@@ -227,7 +243,7 @@ impl ModelFile {
         }
         if let ModelSource::Fmu { input, .. } = &source {
             let span = raw.signals.as_ref().map(Spanned::span);
-            if input.is_none() && !signals.inputs.is_empty() {
+            if input.is_none() && measured_input.is_none() && !signals.inputs.is_empty() {
                 return Err(at.error(
                     span,
                     "signals.inputs",
@@ -243,9 +259,9 @@ impl ModelFile {
                 ));
             }
         }
-        if let (ModelSource::Command { input: Some(_), .. }, true) =
-            (&source, signals.inputs.is_empty())
-        {
+        let fixes_input = matches!(source, ModelSource::Command { input: Some(_), .. })
+            || measured_input.is_some();
+        if fixes_input && signals.inputs.is_empty() {
             return Err(at.error(
                 raw.input.as_ref().map(Spanned::span),
                 "input",
@@ -287,6 +303,7 @@ impl ModelFile {
             presets,
             name_lines,
             fmu_line,
+            measured_input,
             fingerprint: crate::fingerprint(text.as_bytes()),
         })
     }
@@ -328,7 +345,7 @@ impl ModelFile {
                 inner: model.build_with(overrides)?,
                 spec: self.spec.clone(),
                 output_sd: self.output_sd.clone(),
-                fixed_input: None,
+                fixed_input: self.measured_record()?,
             })),
             ModelSource::Command {
                 command,
@@ -385,7 +402,7 @@ impl ModelFile {
                     inner: Box::new(fmu),
                     spec: self.spec.clone(),
                     output_sd: self.output_sd.clone(),
-                    fixed_input: None,
+                    fixed_input: self.measured_record()?,
                 }))
             }
             ModelSource::ChartsOnly => Err(Error::ModelFile {
@@ -451,6 +468,15 @@ impl ModelFile {
             output_sd: self.output_sd.clone(),
             fixed_input: None,
         }))
+    }
+
+    /// The measured input a built-in or FMU source is handed, if the file
+    /// names one.
+    fn measured_record(&self) -> Result<Option<twostage_models::IoData>> {
+        self.measured_input
+            .as_ref()
+            .map(|input| self.fixed_record(input, None))
+            .transpose()
     }
 
     /// The record of the file's shape whose inputs are the fixed ones
