@@ -513,13 +513,25 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         ),
                         Some(Ok(c)) if !c.explained() => eprintln!(
                             "warning: {}: experiment {}: not explained by the model at its \
-                             estimate: RMS residual {}, fit {} %, and at most {:.1}% of the \
-                             model's own records there miss by as much; do not trust this \
-                             estimate (a model that does not fit, another input than training's, \
-                             or a poor estimate; see docs/decisions/033-real-records.md)",
+                             estimate: RMS residual {}, fit {} %, where the model fits {} % near \
+                             it, and at most {:.1}% of its own records there miss by as much; do \
+                             not trust this estimate (another input than training's, or a poor \
+                             estimate: try --refine; docs/real-data.md)",
                             path.display(),
                             id,
                             list(&c.rms),
+                            list(&c.fit_percent),
+                            list(&c.best_fit_percent),
+                            100.0 * c.tail_probability
+                        ),
+                        Some(Ok(c)) if !c.model_consistent() => eprintln!(
+                            "note: {}: experiment {}: the estimate fits the record as well as the \
+                             model can near it (fit {} %), but not to the model's own noise (at \
+                             most {:.1}% of its records miss by as much): the model is not exact \
+                             for this record; judge it by predicting a record it was not fitted \
+                             to (docs/real-data.md)",
+                            path.display(),
+                            id,
                             list(&c.fit_percent),
                             100.0 * c.tail_probability
                         ),
@@ -656,6 +668,8 @@ fn check_header(outputs: &[String]) -> Vec<String> {
     }
     header.extend([
         "check_tail_probability".into(),
+        "model_consistent".into(),
+        "loss_over_best".into(),
         "explained".into(),
         "input_as_trained".into(),
     ]);
@@ -672,11 +686,13 @@ fn check_fields(outputs: usize, check: Option<&Result<RecordCheck, String>>) -> 
                 fields.push(format_f64(*fit));
             }
             fields.push(format_f64(c.tail_probability));
+            fields.push(c.model_consistent().to_string());
+            fields.push(format_f64(c.loss_ratio));
             fields.push(c.explained().to_string());
             fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
             fields
         }
-        _ => vec![String::new(); 2 * outputs + 3],
+        _ => vec![String::new(); 2 * outputs + 5],
     }
 }
 
@@ -767,6 +783,8 @@ fn json(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> R
                         object.insert(format!("{y}_fit_percent"), c.fit_percent[j].into());
                     }
                     object.insert("check_tail_probability".into(), c.tail_probability.into());
+                    object.insert("model_consistent".into(), c.model_consistent().into());
+                    object.insert("loss_over_best".into(), c.loss_ratio.into());
                     object.insert("explained".into(), c.explained().into());
                     if let Some(same) = input_as_trained(c) {
                         object.insert("input_as_trained".into(), same.into());

@@ -17,7 +17,7 @@ mod moments;
 mod output_error;
 mod refinement;
 
-pub use check::{EXPLAINED_LEVEL, RecordCheck, check_record, output_fit};
+pub use check::{EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, check_record, output_fit};
 pub use error::RefineError;
 pub use moments::WeightedMoments;
 pub use output_error::OutputError;
