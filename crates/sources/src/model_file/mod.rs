@@ -600,6 +600,7 @@ impl ModelFile {
 }
 
 mod fmu_template;
+mod input;
 mod locator;
 mod raw;
 mod simulator;

@@ -9,11 +9,17 @@ use rayon::prelude::*;
 use twostage::fit::TerminationReason;
 use twostage::models::Simulator;
 use twostage::models::{BuiltinModel, IoData};
-use twostage::{Estimator, ModelProfile, OutputError, RecordCheck, Refinement, SignalNames};
+use twostage::{Estimator, ModelProfile, OutputError, RecordCheck, SignalNames};
 
 use crate::number::format_f64;
 use crate::options::{InitialCovariance, TableFormat};
 use crate::{csv_records, usage};
+
+mod columns;
+mod refine;
+
+use columns::{check_fields, check_header, input_as_trained, list, plot_check, refine_stop};
+use refine::{model_of, refinement};
 
 /// Options of `twostage estimate`.
 #[derive(Debug, clap::Args)]
@@ -116,110 +122,6 @@ type RecordOutcome = Result<(IoData, Estimated), String>;
 
 /// Estimates one record, or says why it cannot.
 type Method = Box<dyn Fn(&IoData) -> Result<Estimated, String> + Send + Sync>;
-
-/// Refines a TS estimate of one record from the estimate and the record's
-/// interval half-widths: the refined estimate and, for a descent, why it
-/// stopped.
-type Refine = Box<dyn Fn(&IoData, &[f64], Option<&[f64]>) -> Result<Refined, String> + Send + Sync>;
-
-/// A refined estimate.
-struct Refined {
-    theta: Vec<f64>,
-    /// Why the output-error descent stopped (`None` for the posterior mean).
-    stop: Option<TerminationReason>,
-}
-
-/// The refinement of an estimator's estimates: a built-in model's local
-/// posterior (over twice its calibrated interval, the model's own grid),
-/// or for any other model an output-error fit through its simulator.
-fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<Refine> {
-    let radius = estimator
-        .neighbourhood(2.0)
-        .map_err(|e| usage(format!("--refine: {e}")))?;
-    if args.model_file.is_none()
-        && let Ok(model) = estimator.training().model.parse::<BuiltinModel>()
-    {
-        let points = ModelProfile::of(model).refinement_points();
-        let local = Refinement::new(twostage_baselines::exact_likelihood(model)?);
-        return Ok(Box::new(move |record: &IoData, start: &[f64], _| {
-            let mean = local
-                .local_posterior(record, start, &radius, points)
-                .map_err(|e| e.to_string())?
-                .mean;
-            Ok(Refined {
-                theta: mean,
-                stop: None,
-            })
-        }));
-    }
-    let fit = Refinement::new(
-        OutputError::new(model_of(estimator, args)?)
-            .map_err(|e| usage(format!("--refine: {e}")))?,
-    );
-    Ok(Box::new(
-        move |record: &IoData, start: &[f64], widths: Option<&[f64]>| {
-            // The record's own interval where it has one (adaptive).
-            let widths =
-                widths.map_or_else(|| radius.iter().map(|r| r / 2.0).collect(), <[f64]>::to_vec);
-            let descents = fit
-                .descents_from(record, refine_starts(start, &widths))
-                .map_err(|e| e.to_string())?;
-            let best = descents
-                .into_iter()
-                .reduce(|best, d| if d.loss < best.loss { d } else { best })
-                .ok_or_else(|| "no start".to_string())?;
-            Ok(Refined {
-                theta: best.theta,
-                stop: Some(best.stop),
-            })
-        },
-    ))
-}
-
-/// Where an output-error refinement starts: the estimate, and two corners
-/// of half its interval on either side (alternating signs across the
-/// parameters), so that a start lies off each axis the estimate may be
-/// wrong along. The descents are bounded by the prior, not the interval:
-/// on a real record the model's best fit may lie outside an interval
-/// calibrated on the model's own records.
-fn refine_starts(estimate: &[f64], half_widths: &[f64]) -> Vec<Vec<f64>> {
-    let corner = |sign: f64| -> Vec<f64> {
-        estimate
-            .iter()
-            .zip(half_widths)
-            .enumerate()
-            .map(|(j, (t, w))| {
-                let alternate = if j % 2 == 0 { 1.0 } else { -1.0 };
-                t + sign * alternate * 0.5 * w
-            })
-            .collect()
-    };
-    vec![estimate.to_vec(), corner(1.0), corner(-1.0)]
-}
-
-/// The model an estimator's records come from, to check them against:
-/// `--model-file`, else the estimator's built-in model.
-fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box<dyn Simulator>> {
-    let named = match &args.model_file {
-        Some(path) => twostage::NamedModel::file(path).map_err(|e| usage(e.to_string()))?,
-        None => twostage::NamedModel::builtin(&estimator.training().model).map_err(|_| {
-            usage(format!(
-                "--check simulates the model: this estimator is of '{}', give its \
-                 --model-file",
-                estimator.training().model
-            ))
-        })?,
-    };
-    if named.name() != estimator.training().model {
-        return Err(usage(format!(
-            "--model-file describes '{}', the estimator was trained on '{}': give the model \
-             file it was trained from",
-            named.name(),
-            estimator.training().model
-        )));
-    }
-    named.simulator(false).map_err(|e| usage(e.to_string()))
-}
 
 /// The name of the multi-start output-error fit among the methods.
 const OUTPUT_ERROR: &str = "oe";
@@ -587,112 +489,6 @@ impl Outcome {
                  {estimated} were, and are written"
             )),
         }
-    }
-}
-
-/// Why the refinement stopped, for the table: the descent's reason, or
-/// `failed` (the TS estimate kept).
-fn refine_stop(refined: Option<&Result<Option<TerminationReason>, String>>) -> String {
-    match refined {
-        Some(Ok(Some(stop))) => format!("{stop:?}"),
-        Some(Err(_)) => "failed".into(),
-        _ => String::new(),
-    }
-}
-
-/// `DIR/ID.svg`: the record's outputs beside the model's noise-free
-/// response at its estimate.
-fn plot_check(
-    dir: &std::path::Path,
-    id: &str,
-    record: &IoData,
-    check: &RecordCheck,
-    outputs: &[String],
-    sample_time: f64,
-) -> Result<()> {
-    let traces: Vec<twostage_plot::Trace<'_>> = outputs
-        .iter()
-        .enumerate()
-        .map(|(j, name)| twostage_plot::Trace {
-            name,
-            measured: record.output(j),
-            simulated: check.simulated.output(j),
-        })
-        .collect();
-    let verdict = if check.explained() {
-        "explained"
-    } else {
-        "not explained"
-    };
-    let title = format!("{id}: {verdict} by the model at its estimate");
-    let svg = twostage_plot::record_vs_simulation(&title, sample_time, &traces)
-        .map_err(|e| anyhow::anyhow!("--plot: {id}: {e}"))?;
-    std::fs::create_dir_all(dir)
-        .map_err(|e| anyhow::anyhow!("--plot: creating {}: {e}", dir.display()))?;
-    // An id is the user's text: keep the file name to safe characters.
-    let name: String = id
-        .chars()
-        .map(|c| {
-            if c.is_alphanumeric() || "-_.".contains(c) {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    twostage::write_whole(dir.join(format!("{name}.svg")), svg.as_bytes())?;
-    Ok(())
-}
-
-/// Whether the record's input is the one every training record had
-/// (`None` when the model's inputs vary from experiment to experiment).
-fn input_as_trained(check: &RecordCheck) -> Option<bool> {
-    check
-        .input_shared
-        .then_some(check.input_differs_at.is_none())
-}
-
-/// Numbers for a message, comma separated, to four significant digits.
-fn list(values: &[f64]) -> String {
-    let shown: Vec<String> = values.iter().map(|v| format!("{v:.4}")).collect();
-    shown.join(", ")
-}
-
-/// The check's columns: per output its RMS residual and fit, then the
-/// tail probability and whether the record is explained.
-fn check_header(outputs: &[String]) -> Vec<String> {
-    let mut header = Vec::new();
-    for y in outputs {
-        header.push(format!("{y}_rms"));
-        header.push(format!("{y}_fit_percent"));
-    }
-    header.extend([
-        "check_tail_probability".into(),
-        "model_consistent".into(),
-        "loss_over_best".into(),
-        "explained".into(),
-        "input_as_trained".into(),
-    ]);
-    header
-}
-
-/// The check's values for one record (empty where it could not be run).
-fn check_fields(outputs: usize, check: Option<&Result<RecordCheck, String>>) -> Vec<String> {
-    match check {
-        Some(Ok(c)) => {
-            let mut fields = Vec::new();
-            for (rms, fit) in c.rms.iter().zip(&c.fit_percent) {
-                fields.push(format_f64(*rms));
-                fields.push(format_f64(*fit));
-            }
-            fields.push(format_f64(c.tail_probability));
-            fields.push(c.model_consistent().to_string());
-            fields.push(format_f64(c.loss_ratio));
-            fields.push(c.explained().to_string());
-            fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
-            fields
-        }
-        _ => vec![String::new(); 2 * outputs + 5],
     }
 }
 

@@ -1,0 +1,118 @@
+//! What `--check` and `--refine` add to the table, the messages and the
+//! plots.
+
+use anyhow::Result;
+use twostage::RecordCheck;
+use twostage::fit::TerminationReason;
+use twostage::models::IoData;
+
+use crate::number::format_f64;
+
+/// Why the refinement stopped, for the table: the descent's reason, or
+/// `failed` (the TS estimate kept).
+pub(super) fn refine_stop(refined: Option<&Result<Option<TerminationReason>, String>>) -> String {
+    match refined {
+        Some(Ok(Some(stop))) => format!("{stop:?}"),
+        Some(Err(_)) => "failed".into(),
+        _ => String::new(),
+    }
+}
+
+/// `DIR/ID.svg`: the record's outputs beside the model's noise-free
+/// response at its estimate.
+pub(super) fn plot_check(
+    dir: &std::path::Path,
+    id: &str,
+    record: &IoData,
+    check: &RecordCheck,
+    outputs: &[String],
+    sample_time: f64,
+) -> Result<()> {
+    let traces: Vec<twostage_plot::Trace<'_>> = outputs
+        .iter()
+        .enumerate()
+        .map(|(j, name)| twostage_plot::Trace {
+            name,
+            measured: record.output(j),
+            simulated: check.simulated.output(j),
+        })
+        .collect();
+    let verdict = if check.explained() {
+        "explained"
+    } else {
+        "not explained"
+    };
+    let title = format!("{id}: {verdict} by the model at its estimate");
+    let svg = twostage_plot::record_vs_simulation(&title, sample_time, &traces)
+        .map_err(|e| anyhow::anyhow!("--plot: {id}: {e}"))?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("--plot: creating {}: {e}", dir.display()))?;
+    // An id is the user's text: keep the file name to safe characters.
+    let name: String = id
+        .chars()
+        .map(|c| {
+            if c.is_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    twostage::write_whole(dir.join(format!("{name}.svg")), svg.as_bytes())?;
+    Ok(())
+}
+
+/// Whether the record's input is the one every training record had
+/// (`None` when the model's inputs vary from experiment to experiment).
+pub(super) fn input_as_trained(check: &RecordCheck) -> Option<bool> {
+    check
+        .input_shared
+        .then_some(check.input_differs_at.is_none())
+}
+
+/// Numbers for a message, comma separated, to four significant digits.
+pub(super) fn list(values: &[f64]) -> String {
+    let shown: Vec<String> = values.iter().map(|v| format!("{v:.4}")).collect();
+    shown.join(", ")
+}
+
+/// The check's columns: per output its RMS residual and fit, then the
+/// tail probability and whether the record is explained.
+pub(super) fn check_header(outputs: &[String]) -> Vec<String> {
+    let mut header = Vec::new();
+    for y in outputs {
+        header.push(format!("{y}_rms"));
+        header.push(format!("{y}_fit_percent"));
+    }
+    header.extend([
+        "check_tail_probability".into(),
+        "model_consistent".into(),
+        "loss_over_best".into(),
+        "explained".into(),
+        "input_as_trained".into(),
+    ]);
+    header
+}
+
+/// The check's values for one record (empty where it could not be run).
+pub(super) fn check_fields(
+    outputs: usize,
+    check: Option<&Result<RecordCheck, String>>,
+) -> Vec<String> {
+    match check {
+        Some(Ok(c)) => {
+            let mut fields = Vec::new();
+            for (rms, fit) in c.rms.iter().zip(&c.fit_percent) {
+                fields.push(format_f64(*rms));
+                fields.push(format_f64(*fit));
+            }
+            fields.push(format_f64(c.tail_probability));
+            fields.push(c.model_consistent().to_string());
+            fields.push(format_f64(c.loss_ratio));
+            fields.push(c.explained().to_string());
+            fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
+            fields
+        }
+        _ => vec![String::new(); 2 * outputs + 5],
+    }
+}
