@@ -164,6 +164,79 @@ impl RegressorConfig {
             Self::Piecewise(p) => FittedRegressor::Piecewise(p.with_seed(seed).fit(x, y)?),
         })
     }
+
+    /// [`Self::fit`] from `start`, a fit of this configuration, trained
+    /// further on `x` and `y` (typically more rows; [`crate::Mlp::fit_from`],
+    /// [`crate::Piecewise::fit_from`]), or anew without one; the networks'
+    /// training stopped at `stop_by` if given and not ended by then
+    /// ([`crate::Mlp::stopped_by`]). Trained further, the fit is never worse
+    /// than `start` on its held-out rows however early it stops; anew, a
+    /// fit stopped early may be poor (an ensemble member or an expert of
+    /// one step), and its caller judges it. A linear map is fitted in one
+    /// solve and ignores both. `seed` seeds the held-out split as in
+    /// [`Self::fit`].
+    ///
+    /// ```
+    /// use std::time::Instant;
+    /// use ndarray::Array2;
+    /// use twostage_fit::{FittedRegressor, RegressorConfig};
+    ///
+    /// let x = Array2::from_shape_fn((600, 1), |(i, _)| i as f64 / 300.0 - 1.0);
+    /// let y = x.mapv(|v| (3.0 * v).sin());
+    /// let net: RegressorConfig = "mlp:8".parse()?;
+    /// let few = ndarray::s![..150, ..];
+    /// let start = net.fit(x.slice(few), y.slice(few), 1)?;
+    /// // Stopped at once: anew, every restart takes one step; trained
+    /// // further, each network keeps its best held-out weights.
+    /// let steps = |f: &FittedRegressor| match f {
+    ///     FittedRegressor::Mlp(m) => m.reports().iter().map(|r| r.iterations).max(),
+    ///     _ => None,
+    /// };
+    /// let anew = net.fit_from(None, (x.view(), y.view()), 1, Some(Instant::now()))?;
+    /// assert_eq!(steps(&anew), Some(1));
+    /// let further = net.fit_from(Some(&start), (x.view(), y.view()), 1, Some(Instant::now()))?;
+    /// assert_eq!(steps(&further), Some(1));
+    /// let other: RegressorConfig = "piecewise:2,8".parse()?;
+    /// assert!(other.fit_from(Some(&start), (x.view(), y.view()), 1, None).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A `start` of another configuration, or what the fit reports.
+    pub fn fit_from(
+        &self,
+        start: Option<&FittedRegressor>,
+        (x, y): (ArrayView2<'_, f64>, ArrayView2<'_, f64>),
+        seed: u64,
+        stop_by: Option<std::time::Instant>,
+    ) -> Result<FittedRegressor> {
+        let stopped = |m: &crate::Mlp| match stop_by {
+            Some(t) => m.with_seed(seed).stopped_by(t),
+            None => m.with_seed(seed),
+        };
+        let pieces = |p: &crate::Piecewise| match stop_by {
+            Some(t) => p.with_seed(seed).stopped_by(t),
+            None => p.with_seed(seed),
+        };
+        Ok(match (self, start) {
+            (Self::Linear(r), _) => FittedRegressor::Linear(r.fit(x, y)?),
+            (Self::Mlp(m), None) => FittedRegressor::Mlp(stopped(m).fit(x, y)?),
+            (Self::Mlp(m), Some(FittedRegressor::Mlp(s))) => {
+                FittedRegressor::Mlp(stopped(m).fit_from(s, x, y)?)
+            }
+            (Self::Piecewise(p), None) => FittedRegressor::Piecewise(pieces(p).fit(x, y)?),
+            (Self::Piecewise(p), Some(FittedRegressor::Piecewise(s))) => {
+                FittedRegressor::Piecewise(pieces(p).fit_from(s, x, y)?)
+            }
+            _ => {
+                return Err(crate::FitError::InvalidSetting {
+                    name: "start",
+                    value: format!("{self}"),
+                    reason: "the start was fitted by another kind of regressor".into(),
+                });
+            }
+        })
+    }
 }
 
 /// A fitted stage-2 map h.

@@ -108,6 +108,64 @@ impl Piecewise {
             ..self.clone()
         }
     }
+
+    /// Train `start` further on `x` and `y` ([`Mlp::fit_from`] for the
+    /// global network and each expert, on the rows of its piece as `start`
+    /// cut them): never worse than `start` on each network's held-out rows,
+    /// however early [`Self::stopped_by`] stops it.
+    ///
+    /// # Errors
+    /// A `start` of another shape, or a piece without rows to train on.
+    pub fn fit_from(
+        &self,
+        start: &FittedPiecewise,
+        x: ArrayView2<'_, f64>,
+        y: ArrayView2<'_, f64>,
+    ) -> Result<FittedPiecewise> {
+        if start.experts.len() != self.pieces {
+            return Err(FitError::InvalidSetting {
+                name: "start",
+                value: format!("{} pieces", start.experts.len()),
+                reason: format!("this regressor has {} pieces", self.pieces),
+            });
+        }
+        let global = self.global.fit_from(&start.global, x, y)?;
+        let margin = self.margin * start.width;
+        let first = y.column(0);
+        let mut experts = Vec::with_capacity(self.pieces);
+        for (piece, expert_start) in start.experts.iter().enumerate() {
+            let from = start.start + piece as f64 * start.width - margin;
+            let to = start.start + (piece + 1) as f64 * start.width + margin;
+            let rows = piece_rows(first, from, to);
+            let expert = self.expert.with_seed(
+                self.expert
+                    .params()
+                    .seed_value()
+                    .wrapping_add(piece as u64 + 1),
+            );
+            experts.push(expert.fit_from(
+                expert_start,
+                x.select(Axis(0), &rows).view(),
+                y.select(Axis(0), &rows).view(),
+            )?);
+        }
+        Ok(FittedPiecewise {
+            global,
+            experts,
+            start: start.start,
+            width: start.width,
+        })
+    }
+
+    /// The same regressor with every network's training stopped at
+    /// `stop_by` ([`Mlp::stopped_by`]).
+    pub fn stopped_by(&self, stop_by: std::time::Instant) -> Self {
+        Self {
+            global: self.global.stopped_by(stop_by),
+            expert: self.expert.stopped_by(stop_by),
+            ..self.clone()
+        }
+    }
 }
 
 /// A fitted [`Piecewise`] regressor.
@@ -199,12 +257,7 @@ impl Regressor for Piecewise {
         for piece in 0..self.pieces {
             let from = lo + piece as f64 * width - margin;
             let to = lo + (piece + 1) as f64 * width + margin;
-            let rows: Vec<usize> = first
-                .iter()
-                .enumerate()
-                .filter(|(_, v)| (from..=to).contains(*v))
-                .map(|(i, _)| i)
-                .collect();
+            let rows = piece_rows(first, from, to);
             let expert = self.expert.with_seed(
                 self.expert
                     .params()
@@ -223,6 +276,16 @@ impl Regressor for Piecewise {
             width,
         })
     }
+}
+
+/// The rows whose first target lies in `from..=to`: one piece's.
+fn piece_rows(first: ndarray::ArrayView1<'_, f64>, from: f64, to: f64) -> Vec<usize> {
+    first
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| (from..=to).contains(*v))
+        .map(|(i, _)| i)
+        .collect()
 }
 
 impl Predictor for FittedPiecewise {
@@ -278,5 +341,80 @@ mod tests {
         }
         let small = MlpParams::new(&[2]).unwrap().check().unwrap();
         assert!(Piecewise::new(small.clone(), small, 1).is_err());
+    }
+
+    /// Trained further on more rows, the pieces get better; stopped at
+    /// once, they stay as good as they were (each keeps its best held-out
+    /// weights, the start's among them), never a network of one step.
+    #[test]
+    fn trained_further_never_gets_worse() {
+        let t = Array2::from_shape_fn((1200, 1), |(i, _)| ((i * 7919) % 1200) as f64 / 600.0 - 1.0);
+        let x = t.mapv(|v| v + 0.3 * (4.0 * v).sin());
+        let net = MlpParams::new(&[6]).unwrap().seed(2).check().unwrap();
+        let piecewise = Piecewise::new(net.clone(), net, 3).unwrap();
+        let few = ndarray::s![..150, ..];
+        let start = piecewise.fit(x.slice(few), t.slice(few)).unwrap();
+        let mse = |f: &FittedPiecewise| {
+            let p = crate::Predictor::predict(f, x.view()).unwrap();
+            (&p - &t).mapv(|e| e * e).mean().unwrap()
+        };
+        let further = piecewise.fit_from(&start, x.view(), t.view()).unwrap();
+        assert!(
+            mse(&further) < mse(&start),
+            "{} {}",
+            mse(&further),
+            mse(&start)
+        );
+        let stopped = piecewise
+            .stopped_by(std::time::Instant::now())
+            .fit_from(&start, x.view(), t.view())
+            .unwrap();
+        assert!(
+            mse(&stopped) < 1.1 * mse(&start),
+            "{} {}",
+            mse(&stopped),
+            mse(&start)
+        );
+        let (a, b) = (start.pieces_start_width(), stopped.pieces_start_width());
+        assert_eq!(
+            (a.0.to_bits(), a.1.to_bits()),
+            (b.0.to_bits(), b.1.to_bits())
+        );
+        let other = Piecewise::new(
+            MlpParams::new(&[6]).unwrap().check().unwrap(),
+            MlpParams::new(&[6]).unwrap().check().unwrap(),
+            4,
+        )
+        .unwrap();
+        assert!(other.fit_from(&start, x.view(), t.view()).is_err());
+    }
+
+    /// A stop time reaches the global network and every expert, by either
+    /// trainer: past it, each restart takes one step (one epoch for Adam).
+    #[test]
+    fn a_stop_time_stops_every_network() {
+        let t = Array2::from_shape_fn((300, 1), |(i, _)| i as f64 / 150.0 - 1.0);
+        let x = t.mapv(|v| v + 0.2 * (5.0 * v).sin());
+        for trainer in [crate::Trainer::LevenbergMarquardt, crate::Trainer::ADAM] {
+            let net = MlpParams::new(&[4])
+                .unwrap()
+                .trainer(trainer)
+                .check()
+                .unwrap();
+            let piecewise = Piecewise::new(net.clone(), net, 3).unwrap();
+            let steps = |f: &FittedPiecewise| -> Vec<usize> {
+                std::iter::once(&f.global)
+                    .chain(&f.experts)
+                    .flat_map(|n| n.reports().iter().map(|r| r.iterations))
+                    .collect()
+            };
+            let stopped = piecewise
+                .stopped_by(std::time::Instant::now())
+                .fit(x.view(), t.view())
+                .unwrap();
+            assert!(steps(&stopped).iter().all(|&s| s == 1), "{trainer:?}");
+            let whole = piecewise.fit(x.view(), t.view()).unwrap();
+            assert!(steps(&whole).iter().all(|&s| s > 1), "{trainer:?}");
+        }
     }
 }

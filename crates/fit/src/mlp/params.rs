@@ -93,6 +93,10 @@ pub struct MlpParams {
     pub(super) seed: u64,
     pub(super) ensemble: bool,
     pub(super) trainer: Trainer,
+    /// When training stops, whatever its rules say (not stored: a bound
+    /// of one run, not a property of the network).
+    #[serde(skip)]
+    pub(super) stop_by: Option<std::time::Instant>,
 }
 
 impl MlpParams {
@@ -112,6 +116,7 @@ impl MlpParams {
             seed: 0,
             ensemble: false,
             trainer: Trainer::Auto,
+            stop_by: None,
         })
     }
     /// The hidden layer sizes.
@@ -278,6 +283,17 @@ impl Mlp {
     pub fn with_seed(&self, seed: u64) -> Self {
         let mut params = self.params.clone();
         params.seed = seed;
+        Self { params }
+    }
+
+    /// The same network, its training stopped at `stop_by` if it has not
+    /// ended by then: every restart keeps its best held-out weights so far,
+    /// and a restart that starts later takes one step. For a fit that must
+    /// end within a time budget; the caller sees the time and decides
+    /// whether such a fit is worth keeping.
+    pub fn stopped_by(&self, stop_by: std::time::Instant) -> Self {
+        let mut params = self.params.clone();
+        params.stop_by = Some(stop_by);
         Self { params }
     }
 }

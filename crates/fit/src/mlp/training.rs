@@ -118,6 +118,12 @@ fn plan(trainer: Trainer, rows: usize, q: usize, n_params: usize, max_jacobian: 
     }
 }
 
+/// Whether the training's time is up (`Mlp::stopped_by`).
+fn out_of_time(mlp: &MlpParams) -> bool {
+    mlp.stop_by
+        .is_some_and(|stop_by| std::time::Instant::now() >= stop_by)
+}
+
 fn train_one(
     problem: &Problem<'_>,
     mlp: &MlpParams,
@@ -127,6 +133,32 @@ fn train_one(
     let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
     rng.set_stream(restart as u64 + 1);
     let params = initial_parameters(problem.sizes, &mut rng);
+    train_with(problem, mlp, restart, params, &mut rng, levenberg_marquardt)
+}
+
+/// One restart from given weights (a fit continued from an earlier one),
+/// Adam's batches drawn from the restart's own stream.
+fn train_from(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    params: Vec<f64>,
+    levenberg_marquardt: bool,
+) -> (Vec<f64>, RestartReport) {
+    let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
+    rng.set_stream(restart as u64 + 1);
+    train_with(problem, mlp, restart, params, &mut rng, levenberg_marquardt)
+}
+
+/// One restart from `params` by either trainer.
+fn train_with(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    params: Vec<f64>,
+    rng: &mut ChaCha8Rng,
+    levenberg_marquardt: bool,
+) -> (Vec<f64>, RestartReport) {
     if levenberg_marquardt {
         train_levenberg_marquardt(problem, mlp, restart, params)
     } else {
@@ -143,7 +175,7 @@ fn train_one(
             mlp,
             restart,
             params,
-            &mut rng,
+            rng,
             (learning_rate, batch_size, epochs),
         )
     }
@@ -192,6 +224,9 @@ fn train_adam(
             reason = TerminationReason::EpochsWithoutImprovement;
             break;
         }
+        if out_of_time(mlp) {
+            break;
+        }
     }
     let (validation_mse, kept) = (best.loss, best.params);
     let report = RestartReport {
@@ -226,7 +261,7 @@ fn train_levenberg_marquardt(
         .max_damping(1e10);
     let Ok(minimum) = solver.minimize(&mut least_squares, &params, |iterate| {
         let held = problem.mse(iterate.x, held_out);
-        if best.observe(held, iterate.x) {
+        if best.observe(held, iterate.x) || out_of_time(mlp) {
             ControlFlow::Break(())
         } else {
             ControlFlow::Continue(())
@@ -356,18 +391,59 @@ impl Regressor for Mlp {
     type Model = FittedMlp;
 
     fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedMlp> {
-        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES)
+        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, None)
     }
 }
 
 impl Mlp {
+    /// Train `start` further on `x` and `y` (typically more rows than it
+    /// was fitted on): each of its networks (the kept one, or every member
+    /// of an ensemble) is one restart that starts from its weights, with
+    /// `start`'s scaling of features and targets, by the trainer this
+    /// network's settings choose for these rows, on a held-out split of
+    /// these rows. A restart keeps its best held-out weights, the start's
+    /// among them, so the result is never worse than `start` on the
+    /// held-out rows, however early [`Mlp::stopped_by`] stops it: a fit that
+    /// can be cut short at any time.
+    ///
+    /// ```
+    /// use ndarray::Array2;
+    /// use twostage_fit::{MlpParams, Predictor, Regressor};
+    ///
+    /// let x = Array2::from_shape_fn((800, 1), |(i, _)| i as f64 / 400.0 - 1.0);
+    /// let y = x.mapv(|v| (3.0 * v).sin());
+    /// let net = MlpParams::new(&[8])?.seed(3).check()?;
+    /// let rows = ndarray::s![..100, ..];
+    /// let start = net.fit(x.slice(rows), y.slice(rows))?;
+    /// let further = net.fit_from(&start, x.view(), y.view())?;
+    /// let mse = |f: &twostage_fit::FittedMlp| -> Result<f64, twostage_fit::FitError> {
+    ///     let p = f.predict(x.view())?;
+    ///     Ok((&p - &y).mapv(|e| e * e).mean().unwrap_or(f64::NAN))
+    /// };
+    /// assert!(mse(&further)? <= mse(&start)?);
+    /// # Ok::<(), twostage_fit::FitError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A `start` of other layer sizes, or what a fit reports.
+    pub fn fit_from(
+        &self,
+        start: &FittedMlp,
+        x: ArrayView2<'_, f64>,
+        y: ArrayView2<'_, f64>,
+    ) -> Result<FittedMlp> {
+        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Some(start))
+    }
+
     /// [`Regressor::fit`] with Levenberg-Marquardt's Jacobian limited to
-    /// `max_jacobian` entries under [`Trainer::Auto`].
+    /// `max_jacobian` entries under [`Trainer::Auto`], from scratch or
+    /// further from `start` ([`Mlp::fit_from`]).
     fn fit_within(
         &self,
         x: ArrayView2<'_, f64>,
         y: ArrayView2<'_, f64>,
         max_jacobian: usize,
+        start: Option<&FittedMlp>,
     ) -> Result<FittedMlp> {
         check::training_data(x, y)?;
         let p = &self.params;
@@ -393,8 +469,19 @@ impl Mlp {
                 why: "training and held-out sets both need samples".into(),
             });
         }
-        let features = Standardizer::fit(x);
-        let targets = Standardizer::fit(y);
+        if let Some(start) = start
+            && start.sizes != sizes
+        {
+            return Err(FitError::InvalidSetting {
+                name: "start",
+                value: format!("layer sizes {:?}", start.sizes),
+                reason: format!("this network and these data have layer sizes {sizes:?}"),
+            });
+        }
+        let (features, targets) = match start {
+            Some(start) => (start.features.clone(), start.targets.clone()),
+            None => (Standardizer::fit(x), Standardizer::fit(y)),
+        };
         // Standard layout so rows are contiguous slices.
         let xs = features.transform(x).as_standard_layout().to_owned();
         let ts = targets.transform(y);
@@ -429,12 +516,22 @@ impl Mlp {
         };
         // Restart r < restarts as the plan says first; in `Both`, restarts
         // r >= restarts by Adam (seed streams of their own).
-        let runs: Vec<(Vec<f64>, RestartReport)> = match plan {
-            Plan::LevenbergMarquardt | Plan::Adam => (0..p.restarts)
+        let runs: Vec<(Vec<f64>, RestartReport)> = match (start, plan) {
+            // Further from a start: its networks, by LM (on the rows LM
+            // takes) unless the plan is Adam alone.
+            (Some(start), _) => start
+                .members
+                .par_iter()
+                .enumerate()
+                .map(|(r, weights)| {
+                    train_from(&first_rows, p, r, weights.clone(), plan != Plan::Adam)
+                })
+                .collect(),
+            (None, Plan::LevenbergMarquardt | Plan::Adam) => (0..p.restarts)
                 .into_par_iter()
                 .map(|r| train_one(&problem, p, r, plan == Plan::LevenbergMarquardt))
                 .collect(),
-            Plan::Both { .. } => (0..2 * p.restarts)
+            (None, Plan::Both { .. }) => (0..2 * p.restarts)
                 .into_par_iter()
                 .map(|r| match r < p.restarts {
                     true => train_one(&first_rows, p, r, true),
@@ -451,7 +548,8 @@ impl Mlp {
             .map(|(i, _)| i)
             .unwrap_or(0);
         let (members, reports): (Vec<Vec<f64>>, Vec<RestartReport>) = runs.into_iter().unzip();
-        let members = if p.ensemble {
+        let members = if p.ensemble || start.is_some() {
+            // A start's networks were its members: each continued is one.
             members
         } else {
             vec![members[best].clone()]
@@ -511,7 +609,7 @@ mod tests {
             .check()
             .unwrap();
         // 19 weights: 2000 entries leave LM 105 of the 340 training rows.
-        let both = mlp.fit_within(x.view(), y.view(), 2000).unwrap();
+        let both = mlp.fit_within(x.view(), y.view(), 2000, None).unwrap();
         assert_eq!(both.reports.len(), 4);
         let trainers: Vec<&str> = both.reports.iter().map(|r| r.reason.trainer()).collect();
         assert_eq!(
@@ -529,7 +627,7 @@ mod tests {
         );
         // Under the limit: LM alone, as before.
         let alone = mlp
-            .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES)
+            .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES, None)
             .unwrap();
         assert_eq!(alone.reports.len(), 2);
         assert!(
