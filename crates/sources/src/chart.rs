@@ -288,9 +288,27 @@ pub fn simulate_records<S: Simulator + ?Sized>(
     max_failure_fraction: f64,
     progress: Option<(Stage, &dyn Progress)>,
 ) -> Result<StoredChart> {
-    let count = count.min(design.len());
+    simulate_stored(
+        simulator,
+        design,
+        0..count.min(design.len()),
+        max_failure_fraction,
+        progress,
+    )
+}
+
+/// [`simulate_records`] of the experiments `range` of `design`, the
+/// allowance taken on the range alone.
+pub(crate) fn simulate_stored<S: Simulator + ?Sized>(
+    simulator: &S,
+    design: &Design,
+    range: std::ops::Range<usize>,
+    max_failure_fraction: f64,
+    progress: Option<(Stage, &dyn Progress)>,
+) -> Result<StoredChart> {
+    let count = range.len();
     let q = design.prior().dim();
-    let outcomes = simulate_range(simulator, design, 0..count, progress);
+    let outcomes = simulate_range(simulator, design, range, progress);
     let stage = progress.map_or("simulation", |(stage, _)| stage.label());
     let (mut thetas, mut records, mut failures) = (Vec::new(), Vec::new(), Vec::new());
     for outcome in outcomes {

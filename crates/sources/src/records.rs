@@ -6,11 +6,11 @@
 use std::cell::RefCell;
 
 use twostage_compress::Workspace;
-use twostage_models::{IoData, ModelSpec, Prior, Simulator};
+use twostage_models::{IoData, ModelSpec, Prior, Sampling, Simulator};
 
 use crate::chart::{
     CompressedChart, ExperimentFailure, StoredChart, compress_chart_observed, simulate_records,
-    within_allowance,
+    simulate_stored, within_allowance,
 };
 use crate::chart_file::ChartFiles;
 use crate::error::{Error, Result};
@@ -364,6 +364,41 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
         }
     }
 
+    /// Whether [`Self::more_training`] can simulate more training records:
+    /// the source simulates, and its sampling draws each experiment on its
+    /// own (uniform draws or Sobol points, where the first experiments of
+    /// a larger design are the smaller design's; a Latin hypercube of more
+    /// experiments is another design).
+    pub fn can_grow(&self) -> bool {
+        matches!(self.kind, Kind::Simulated)
+            && !matches!(self.training_prior.sampling(), Sampling::LatinHypercube)
+    }
+
+    /// The training experiments `from..to` of the run's design, simulated
+    /// now with progress, and how many of them failed (held within the
+    /// run's allowance on these alone): appended to the first `from` of
+    /// [`Self::stored_training`], they are the chart a run of `to`
+    /// training simulations stores. `None` where the source cannot grow
+    /// ([`Self::can_grow`]).
+    ///
+    /// # Errors
+    /// Too many failed records, or a malformed prior.
+    pub fn more_training(&self, from: usize, to: usize) -> Result<Option<(StoredChart, usize)>> {
+        if !self.can_grow() || to <= from {
+            return Ok(None);
+        }
+        let design = ChartRole::Training.design(&self.training_prior, to, self.seed)?;
+        let chart = simulate_stored(
+            self.simulator,
+            &design,
+            from..to,
+            self.max_failure_fraction,
+            Some((Stage::Training, self.progress)),
+        )?;
+        let failed = (to - from) - chart.records.len();
+        Ok(Some((chart, failed)))
+    }
+
     /// Training records the run has (simulated: asked for; read: those
     /// left after the held-out ones).
     pub fn training_count(&self) -> usize {
@@ -457,4 +492,49 @@ fn chart_parts(
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::progress::Silent;
+    use twostage_models::Benchmark;
+
+    fn records<'a>(model: &'a Benchmark, sampling: Sampling, m: usize) -> Records<'a, Benchmark> {
+        Records::open(
+            model,
+            RecordSource::Simulated,
+            RunShape {
+                training_prior: model.spec().prior().clone().with_sampling(sampling),
+                counts: [m, 0, 0],
+                seed: 11,
+                max_failure_fraction: 0.0,
+                progress: &Silent,
+            },
+        )
+        .unwrap()
+    }
+
+    /// Grown by `more_training`, a chart is the very chart a run of the
+    /// larger count stores, where the sampling allows; a Latin hypercube
+    /// does not grow.
+    #[test]
+    fn more_training_extends_the_chart_a_larger_run_stores() {
+        let model = Benchmark::builder().n_samples(40).build().unwrap();
+        for sampling in [Sampling::Uniform, Sampling::Sobol] {
+            let (small, _) = records(&model, sampling, 30).stored_training().unwrap();
+            let (more, failed) = records(&model, sampling, 30)
+                .more_training(30, 75)
+                .unwrap()
+                .unwrap();
+            assert_eq!((more.records.len(), failed), (45, 0));
+            let (whole, _) = records(&model, sampling, 75).stored_training().unwrap();
+            let grown: Vec<&IoData> = small.records.iter().chain(&more.records).collect();
+            assert!(grown.iter().zip(&whole.records).all(|(a, b)| *a == b));
+            assert_eq!(more.thetas, whole.thetas.slice(ndarray::s![30.., ..]));
+        }
+        let lhs = records(&model, Sampling::LatinHypercube, 30);
+        assert!(!lhs.can_grow());
+        assert!(lhs.more_training(30, 75).unwrap().is_none());
+    }
 }
