@@ -103,7 +103,8 @@ pub struct AutoOutcome {
     /// Seconds of the search (without calibration and validation).
     pub search_seconds: f64,
     /// Whether the winner was refitted on the whole chart (a time budget
-    /// may leave room for fewer rows, or only the fit it was scored with).
+    /// may leave room for fewer rows, or only the fit it was scored with),
+    /// all but the records that compared its final fits (`final_scores`).
     pub refitted: bool,
     /// The chart rows the shipped network was fitted on.
     pub fitted_rows: usize,
@@ -114,6 +115,31 @@ pub struct AutoOutcome {
     /// score), where the budget allowed: a learning curve's last step,
     /// which says whether more records would pay.
     pub half_rows: Option<(usize, f64)>,
+    /// Simulations added after the search for the winner's final fit
+    /// (counted in `simulations`), where more records pay and the time
+    /// left afforded them.
+    pub added_simulations: usize,
+    /// The records of a final fit that was still running at the deadline
+    /// and was stopped: it ships trained as far as it got from the fit the
+    /// winner was scored with (no worse than that on its held-out rows).
+    pub late_refit: Option<usize>,
+    /// How the round-2 winner's fit time grew with its rows (the exponent,
+    /// from its half-rows and seed trials timed alone), where measured: the
+    /// final fit's rows follow from it.
+    pub rows_exponent: Option<f64>,
+    /// The held-out scores of the final fit trained further from the
+    /// winner's and of a fit anew, on the last fifth of the added records
+    /// (seen by neither), where the time left afforded both: the lower
+    /// shipped.
+    pub final_scores: Option<(f64, f64)>,
+}
+
+/// Whether a score of `half` on half the rows against `own` on all of them
+/// says more records would pay: the learning curve still falls. Time a
+/// search would leave unused then goes to more records, trained further
+/// from the winner's fit, which cannot make it worse on held-out rows.
+fn more_records_pay(half: f64, own: f64) -> bool {
+    half > own
 }
 
 impl std::fmt::Display for AutoOutcome {
@@ -123,7 +149,13 @@ impl std::fmt::Display for AutoOutcome {
             "automatic design on m = {} simulations ({:.1} s), held-out RMSE per candidate:",
             self.simulations, self.search_seconds
         )?;
-        if !self.refitted {
+        if let Some(rows) = self.late_refit {
+            writeln!(
+                f,
+                "(the winner's final fit on {rows} records was stopped at the time budget's end: \
+                 it ships trained as far as it got from the fit it was scored with)"
+            )?;
+        } else if !self.refitted {
             writeln!(
                 f,
                 "(the time budget left no room to refit the winner on the whole chart: it ships \
@@ -151,10 +183,39 @@ impl std::fmt::Display for AutoOutcome {
                 f,
                 "on half its records ({rows}) the round-2 winner scores {half:.4} against \
                  {own:.4}: more records would {}",
+                // The seed alone moves a score by 1 to 2%.
                 if half > 1.03 * own {
                     "pay"
+                } else if more_records_pay(half, *own) {
+                    "pay a little"
                 } else {
-                    "hardly pay"
+                    "not pay"
+                }
+            )?;
+        }
+        if let Some(exponent) = self.rows_exponent {
+            writeln!(
+                f,
+                "its fit time grows as rows^{exponent:.2} (half its rows and all of them, timed alone)"
+            )?;
+        }
+        if self.added_simulations > 0 {
+            writeln!(
+                f,
+                "so the winner's final fit took {} more simulations: fitted on {} records",
+                self.added_simulations, self.fitted_rows
+            )?;
+        }
+        if let Some((further, anew)) = self.final_scores {
+            writeln!(
+                f,
+                "on the last {} added records, seen by no fit, the winner trained further scores \
+                 {further:.4} and fitted anew {anew:.4}: the {} ships",
+                self.simulations - self.fitted_rows,
+                if anew < further {
+                    "fit anew"
+                } else {
+                    "fit trained further"
                 }
             )?;
         }
@@ -308,7 +369,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let base = base.adopting_source()?;
         base.settings_ref().check()?;
         let simulates = base.record_source().simulates();
-        let (m, deadline) = chart_size(budget, &base, simulates, start)?;
+        let (m, deadline, per_simulation) = chart_size(budget, &base, simulates, start)?;
         let base = if simulates { base.simulations(m) } else { base };
         let records = base.open_records()?;
         let (mut chart, failures) = records.stored_training()?;
@@ -356,22 +417,56 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 output_transforms(&chart.records),
             ),
         };
-        let mut search = Search::new(&base, &chart, (budget, deadline), screening_rows);
+        let mut search = Search::new(
+            &base,
+            &chart,
+            (budget, deadline),
+            screening_rows,
+            records.can_grow(),
+        );
         base.observer().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
         let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
         let best = search.best(&budget)?;
+        let more_pay = half_rows
+            .zip(seed_scores.first())
+            .is_some_and(|((_, half), own)| more_records_pay(half, *own));
+        let rows = search.final_rows(
+            best,
+            more_pay,
+            per_simulation.unwrap_or(f64::INFINITY),
+            chart_memory_cap(spec),
+        );
+        let more = if rows > chart.records.len() {
+            let added = rows - chart.records.len();
+            base.observer().note(&format!(
+                "more records pay: simulating {added} more for the winner's final fit"
+            ));
+            let more = records.more_training(m, m + added)?;
+            // The simulations ended their own stage: the fit goes on.
+            base.observer().begin(Stage::Fitting, 0);
+            more
+        } else {
+            None
+        };
+        let (added_simulations, added_failures) = more
+            .as_ref()
+            .map_or((0, 0), |(c, failed)| (c.records.len() + failed, *failed));
         let Winner {
             compressor,
             features,
             regressor_config,
             regressor,
             fitted_rows,
-        } = search.winner(best)?;
+            late_refit,
+            anew: final_scores,
+        } = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         base.observer().end(Stage::Fitting);
+        let rows_exponent = search.rows_exponent();
         let search_seconds = start.elapsed().as_secs_f64();
-        let kept = chart.records.len();
+        let failures = failures + added_failures;
+        let kept = features.nrows();
         let estimator = base.finish(
             compressor,
             regressor,
@@ -390,30 +485,40 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             best,
             simulations: kept + failures,
             search_seconds,
-            refitted: fitted_rows == chart.records.len(),
+            refitted: fitted_rows == kept || final_scores.is_some(),
             fitted_rows,
             seed_scores,
             half_rows,
+            added_simulations,
+            late_refit,
+            rows_exponent,
+            final_scores,
         })
     }
 }
 
-/// The number of training records of a search and the deadline of its
-/// fits. Simulated: a simulation budget as given; a time budget keeps what
-/// calibration and validation will take (timed by a pilot) and spends a
-/// fifth of the rest on the chart. Read from files: the first training
-/// records, as many as a simulation budget says, or as a time budget would
-/// simulate. Either way the records must fit in memory.
+/// The most records of `spec`'s model a search keeps in memory.
+fn chart_memory_cap(spec: &twostage_models::ModelSpec) -> usize {
+    let record_bytes =
+        spec.n_samples() * (spec.input_names().len() + spec.output_names().len()) * 8;
+    (MAX_CHART_BYTES / record_bytes.max(1)).max(100)
+}
+
+/// The number of training records of a search, the deadline of its fits
+/// and, for a time budget on simulated records, the pilot's wall seconds
+/// per simulation. Simulated: a simulation budget as given; a time budget
+/// keeps what calibration and validation will take (timed by a pilot) and
+/// spends a fifth of the rest on the chart. Read from files: the first
+/// training records, as many as a simulation budget says, or as a time
+/// budget would simulate. Either way the records must fit in memory.
 fn chart_size<S: Simulator + ?Sized>(
     budget: Budget,
     base: &TwoStage<'_, S>,
     simulates: bool,
     start: Instant,
-) -> Result<(usize, Option<Instant>)> {
-    let spec = base.simulator().spec();
-    let record_bytes =
-        spec.n_samples() * (spec.input_names().len() + spec.output_names().len()) * 8;
-    let memory_cap = (MAX_CHART_BYTES / record_bytes.max(1)).max(100);
+) -> Result<(usize, Option<Instant>, Option<f64>)> {
+    let memory_cap = chart_memory_cap(base.simulator().spec());
+    let mut per_simulation = None;
     let (m, deadline) = match budget {
         Budget::Simulations(m) => (m, None),
         Budget::Seconds(t) => {
@@ -425,7 +530,9 @@ fn chart_size<S: Simulator + ?Sized>(
                 });
             }
             if simulates {
-                let per_simulation = base.pilot_seconds_per_simulation()?;
+                let pilot = base.pilot_seconds_per_simulation()?;
+                per_simulation = Some(pilot);
+                let per_simulation = pilot;
                 let held_out = base.settings_ref().calibration + base.settings_ref().validation;
                 // Simulating and compressing the held-out records, with
                 // a margin for the intervals' own fits.
@@ -463,7 +570,7 @@ fn chart_size<S: Simulator + ?Sized>(
         }
     };
     if !simulates {
-        return Ok((m.min(memory_cap), deadline));
+        return Ok((m.min(memory_cap), deadline, None));
     }
     if m < 50 || m > memory_cap {
         return Err(Error::InvalidSetting {
@@ -472,7 +579,7 @@ fn chart_size<S: Simulator + ?Sized>(
             reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
         });
     }
-    Ok((m, deadline))
+    Ok((m, deadline, per_simulation))
 }
 
 /// Training records a search needs at least: a fifth of them score the
