@@ -220,12 +220,28 @@ pub fn serve_worker(input: impl Read, output: impl Write) -> Result<()> {
 /// One worker process.
 struct WorkerProcess {
     child: Child,
-    stdin: ChildStdin,
+    /// Closed first when the worker is let go.
+    stdin: Option<ChildStdin>,
     stdout: BufReader<ChildStdout>,
 }
 
+/// How long a worker let go may take to clean up (remove the FMU it
+/// unpacked) before it is killed.
+const WORKER_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
+
 impl Drop for WorkerProcess {
     fn drop(&mut self) {
+        // Its input closed, a worker ends its loop and removes the FMU it
+        // unpacked; killed, it would leave the directory behind. One that
+        // hangs (a crashed FMU) is killed after the grace period.
+        drop(self.stdin.take());
+        let start = std::time::Instant::now();
+        while start.elapsed() < WORKER_GRACE {
+            if !matches!(self.child.try_wait(), Ok(None)) {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
@@ -284,7 +300,7 @@ impl WorkerPool {
         };
         let mut worker = WorkerProcess {
             child,
-            stdin,
+            stdin: Some(stdin),
             stdout: BufReader::new(stdout),
         };
         match self.call(&mut worker, &ToWorker::Setup(self.setup.clone()))? {
@@ -296,7 +312,10 @@ impl WorkerPool {
 
     /// Send one message and wait for the answer.
     fn call(&self, worker: &mut WorkerProcess, message: &ToWorker) -> Result<FromWorker> {
-        let sent = write_frame(&mut worker.stdin, message);
+        let sent = match worker.stdin.as_mut() {
+            Some(stdin) => write_frame(stdin, message),
+            None => Err(std::io::Error::from(std::io::ErrorKind::BrokenPipe)),
+        };
         let answer = sent.and_then(|()| read_frame(&mut worker.stdout));
         match answer {
             Ok(Some(reply)) => Ok(reply),

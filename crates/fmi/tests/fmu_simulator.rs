@@ -126,6 +126,43 @@ fn experiments_are_the_same_bits_whatever_the_thread_count_and_instance_policy()
     assert_eq!(chart(&workers, 4), one);
 }
 
+/// A worker let go removes the FMU it unpacked: its input is closed and it
+/// ends its loop (killed, it would leave the directory in the temporary
+/// folder, one per worker and run).
+#[test]
+fn workers_let_go_leave_no_unpacked_fmu_behind() {
+    let once = build(Model::BenchmarkOnce, FmiVersion::V2);
+    let temporary = tempfile::tempdir().unwrap();
+    let command = vec![
+        "env".to_string(),
+        format!("TMPDIR={}", temporary.path().display()),
+        env!("CARGO_BIN_EXE_twostage-fmu-worker").to_string(),
+    ];
+    let workers = FmuSimulator::builder(&once.path, benchmark_spec("benchmark-fmu"))
+        .input(InputSignal::white_gaussian(1.0).unwrap())
+        .noise_input("v2", 0.1f64.sqrt())
+        .noise_input("v11", 1.0)
+        .noise_input("v12", 1.0)
+        .worker_processes(command)
+        .build()
+        .unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(3)
+        .build()
+        .unwrap();
+    let outputs: Vec<f64> = pool.install(|| {
+        (0..12u64)
+            .into_par_iter()
+            .map(|i| simulate(&workers, 0.1, 3, i).output(0)[5])
+            .collect()
+    });
+    assert!(outputs.iter().all(|y| y.is_finite()));
+    let unpacked = || std::fs::read_dir(temporary.path()).unwrap().count();
+    assert!(unpacked() >= 1, "the workers unpack into TMPDIR");
+    drop(workers);
+    assert_eq!(unpacked(), 0, "every worker removed its FMU");
+}
+
 #[test]
 fn a_crashing_fmu_in_a_worker_fails_only_its_experiments() {
     let once = build(Model::BenchmarkOnce, FmiVersion::V3);
