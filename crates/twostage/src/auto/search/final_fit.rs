@@ -1,0 +1,331 @@
+//! The winner's final fit: on the chart, or on more records simulated for
+//! it where the learning curve says they pay (decision 034), trained
+//! further from its scored fit and anew where the time affords, the better
+//! on added records no fit saw.
+
+use std::time::Instant;
+
+use ndarray::{Array2, Axis};
+use twostage_compress::CompressorConfig;
+use twostage_fit::{FittedRegressor, RegressorConfig};
+use twostage_models::Simulator;
+use twostage_sources::StoredChart;
+
+use super::{
+    ROWS_EXPONENT, Search, affordable_rows, compress_all, design, fit_seconds, held_out_score,
+};
+use crate::error::{Error, Result};
+use crate::space::to_learning_space;
+
+impl<S: Simulator + ?Sized> Search<'_, '_, S> {
+    /// The records the winner's final fit takes: more than the chart's
+    /// where the source can simulate them, the half-rows trial says more
+    /// records pay (`more_records`), and the time left affords simulating
+    /// them (`per_simulation` wall seconds each) and fitting on all, at
+    /// most four times the chart (a learning curve says little beyond
+    /// that) and `cap`; else the chart's, or as many of them as the time
+    /// left affords. Without a deadline, the chart's.
+    pub(in crate::auto) fn final_rows(
+        &self,
+        best: usize,
+        more_records: bool,
+        per_simulation: f64,
+        cap: usize,
+    ) -> usize {
+        let chart_rows = self.chart.thetas.nrows();
+        if self.deadline.is_none() {
+            return chart_rows;
+        }
+        let winner = &self.candidates[best];
+        let scored = winner.fit_rows;
+        // The fit on the scored rows with the machine to itself.
+        let fit = self.solo_seconds[best].map_or_else(
+            || fit_seconds(winner.seconds, scored, scored),
+            |seconds| 1.25 * seconds,
+        );
+        let exponent = self.rows_exponent.unwrap_or(ROWS_EXPONENT);
+        if self.grows && more_records {
+            rows_for_final_fit(
+                self.seconds_left(),
+                (per_simulation, fit, scored),
+                exponent,
+                chart_rows,
+                cap.min(4 * chart_rows),
+            )
+        } else {
+            affordable_rows(fit, self.seconds_left(), scored, chart_rows)
+        }
+    }
+
+    /// The winner, refitted on the first `final_rows` of the chart and the
+    /// `more` records simulated for it ([`Self::final_rows`]); with the fit
+    /// it was scored with when that is not more rows, or when the refit
+    /// did not end by the deadline.
+    pub(in crate::auto) fn winner(
+        &self,
+        best: usize,
+        more: Option<&StoredChart>,
+        final_rows: usize,
+    ) -> Result<Winner> {
+        let (compressor, held_out_fit) =
+            self.fitted[best]
+                .clone()
+                .ok_or_else(|| Error::InvalidSetting {
+                    name: "budget",
+                    value: String::new(),
+                    reason: "the best candidate lost its fit".into(),
+                })?;
+        let regressor_config = self.networks_of[best].clone();
+        let scored_rows = self.candidates[best].fit_rows;
+        let grown;
+        let (records, thetas) = match more {
+            Some(more) => {
+                let mut thetas = self.chart.thetas.clone();
+                thetas
+                    .append(Axis(0), more.thetas.view())
+                    .map_err(|e| Error::InvalidSetting {
+                        name: "records",
+                        value: String::new(),
+                        reason: format!("the added records do not match the chart: {e}"),
+                    })?;
+                grown = [self.chart.records.as_slice(), more.records.as_slice()].concat();
+                (grown.as_slice(), thetas)
+            }
+            None => (self.chart.records.as_slice(), self.chart.thetas.clone()),
+        };
+        let refit_rows = final_rows.min(thetas.nrows());
+        let features = compress_all(&compressor, records)?;
+        let mut winner = Winner {
+            compressor,
+            features,
+            regressor_config,
+            regressor: held_out_fit,
+            fitted_rows: scored_rows,
+            late_refit: None,
+            anew: None,
+        };
+        if refit_rows <= scored_rows {
+            return Ok(winner);
+        }
+        let marginals = self.base.simulator().spec().prior().marginals();
+        let seed = self.base.seed_value();
+        let Some(deadline) = self.deadline else {
+            let rows = ndarray::s![..refit_rows, ..];
+            let z = to_learning_space(thetas.slice(rows), marginals);
+            winner.regressor =
+                winner
+                    .regressor_config
+                    .fit(winner.features.slice(rows), z.view(), seed)?;
+            winner.fitted_rows = refit_rows;
+            return Ok(winner);
+        };
+        // Under a time budget the winner is trained further from the fit it
+        // was scored with: cheaper than anew, and a fit that can stop at
+        // the deadline (the costs are estimates) and still be no worse than
+        // its start. Where records were added and the time left affords a
+        // fit anew too, both leave out the last fifth of the added records
+        // (seen by no fit; at most 2000: the fits are compared on the same
+        // records, so their difference is measured well before their
+        // scores are) and the better on them ships.
+        let added = more.map_or(0, |m| m.records.len());
+        let compared = (added / 5)
+            .min(MAX_COMPARED_RECORDS)
+            .min(refit_rows.saturating_sub(scored_rows));
+        let anew_affordable = compared >= MIN_COMPARED_RECORDS
+            && self.fit_estimate(best, refit_rows - compared) < 0.9 * self.seconds_left();
+        let train_rows = if anew_affordable {
+            refit_rows - compared
+        } else {
+            refit_rows
+        };
+        let rows = ndarray::s![..train_rows, ..];
+        let (x, z) = (
+            winner.features.slice(rows),
+            to_learning_space(thetas.slice(rows), marginals),
+        );
+        let design = design(&winner.compressor, &winner.regressor_config);
+        self.base.observer().status(&format!(
+            "final fit: {design} trained further on {train_rows} records; {}",
+            self.budget_words()
+        ));
+        let continued = winner.regressor_config.fit_from(
+            Some(&winner.regressor),
+            (x, z.view()),
+            seed,
+            Some(deadline),
+        )?;
+        let mut late = Instant::now() >= deadline;
+        let mut chosen = continued;
+        if anew_affordable && !late {
+            self.base.observer().status(&format!(
+                "final fit: {design} anew on {train_rows} records; {}",
+                self.budget_words()
+            ));
+            let anew =
+                winner
+                    .regressor_config
+                    .fit_from(None, (x, z.view()), seed, Some(deadline))?;
+            let anew_late = Instant::now() >= deadline;
+            let rows = ndarray::s![train_rows..refit_rows, ..];
+            let (x_held, t_held) = (winner.features.slice(rows), thetas.slice(rows));
+            let scores = (
+                self.held_out_score(&chosen, x_held, t_held)?.1,
+                self.held_out_score(&anew, x_held, t_held)?.1,
+            );
+            if scores.1 < scores.0 {
+                chosen = anew;
+                late = anew_late;
+            }
+            winner.anew = Some(scores);
+        }
+        winner.regressor = chosen;
+        winner.fitted_rows = train_rows;
+        winner.late_refit = late.then_some(train_rows);
+        Ok(winner)
+    }
+
+    /// The seconds a fit anew of candidate `best` on `rows` rows takes on
+    /// the whole machine, from its time alone where round 3 measured it.
+    fn fit_estimate(&self, best: usize, rows: usize) -> f64 {
+        let winner = &self.candidates[best];
+        let scored = winner.fit_rows;
+        let exponent = self.rows_exponent.unwrap_or(ROWS_EXPONENT);
+        let growth = (rows as f64 / scored.max(1) as f64).powf(exponent);
+        match self.solo_seconds[best] {
+            Some(seconds) => 1.25 * seconds * growth,
+            None => fit_seconds(winner.seconds, scored, rows),
+        }
+    }
+
+    /// RMSE per parameter of `fitted` on features `x` against parameters
+    /// `thetas`, and the candidates' score (their mean in prior standard
+    /// deviations).
+    fn held_out_score(
+        &self,
+        fitted: &FittedRegressor,
+        x: ndarray::ArrayView2<'_, f64>,
+        thetas: ndarray::ArrayView2<'_, f64>,
+    ) -> Result<(Vec<f64>, f64)> {
+        held_out_score(self.base, fitted, x, thetas, &self.prior_sd)
+    }
+}
+
+/// Records a fit anew and a fit trained further are compared on, at least.
+const MIN_COMPARED_RECORDS: usize = 200;
+/// Records a fit anew and a fit trained further are compared on, at most.
+const MAX_COMPARED_RECORDS: usize = 2000;
+
+/// The exponent of a fit's cost in its rows from two timings `(rows,
+/// seconds)`, within 1.2 and 2.2 (what the benchmark's fits measured;
+/// two timings of one fit each are noisy).
+pub(super) fn measured_exponent(
+    (rows_a, seconds_a): (usize, f64),
+    (rows_b, seconds_b): (usize, f64),
+) -> f64 {
+    let exponent = (seconds_b / seconds_a).ln() / (rows_b as f64 / rows_a as f64).ln();
+    if exponent.is_finite() {
+        exponent.clamp(1.2, 2.2)
+    } else {
+        ROWS_EXPONENT
+    }
+}
+
+/// Rows a final fit can take in `left` seconds, simulating each beyond
+/// the chart's `chart_rows` in `per_simulation` seconds and fitting all in
+/// `fit` seconds on `measured` rows, growing as rows^`exponent`: as many
+/// as 80% of the time affords (the costs are estimates), between
+/// `chart_rows` and `cap`.
+fn rows_for_final_fit(
+    left: f64,
+    (per_simulation, fit, measured): (f64, f64, usize),
+    exponent: f64,
+    chart_rows: usize,
+    cap: usize,
+) -> usize {
+    let cost = |rows: usize| {
+        let growth = (rows as f64 / measured.max(1) as f64).powf(exponent);
+        rows.saturating_sub(chart_rows) as f64 * per_simulation + fit * growth
+    };
+    let within = |rows: usize| cost(rows) <= 0.8 * left;
+    if !(per_simulation >= 0.0 && fit >= 0.0 && left.is_finite() && within(chart_rows)) {
+        return chart_rows;
+    }
+    // The cost grows with the rows: bisect for the last affordable count.
+    let (mut low, mut high) = (chart_rows, cap.max(chart_rows));
+    if within(high) {
+        return high;
+    }
+    while high - low > 1 {
+        let middle = low + (high - low) / 2;
+        if within(middle) {
+            low = middle;
+        } else {
+            high = middle;
+        }
+    }
+    low
+}
+
+/// What the search ships: the winning structure, fitted.
+pub(in crate::auto) struct Winner {
+    pub(in crate::auto) compressor: CompressorConfig,
+    /// The whole chart's features under the winning compressor.
+    pub(in crate::auto) features: Array2<f64>,
+    pub(in crate::auto) regressor_config: RegressorConfig,
+    pub(in crate::auto) regressor: FittedRegressor,
+    /// The chart rows the shipped network was fitted on.
+    pub(in crate::auto) fitted_rows: usize,
+    /// The rows of a refit stopped at the deadline (it ships trained as
+    /// far as it got).
+    pub(in crate::auto) late_refit: Option<usize>,
+    /// The held-out scores of the fit trained further and of the fit
+    /// anew, where both ran (the lower shipped).
+    pub(in crate::auto) anew: Option<(f64, f64)>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The final fit takes the rows its time affords, simulations
+    /// included, between the chart's and the cap.
+    #[test]
+    fn the_final_fit_takes_the_rows_its_time_affords() {
+        // No simulation cost: the fit alone, as for round 2.
+        let fit = 10.0;
+        let twice = fit * 2f64.powf(ROWS_EXPONENT) / 0.8;
+        let rows = rows_for_final_fit(twice, (0.0, fit, 4000), ROWS_EXPONENT, 4000, 32000);
+        assert!(rows.abs_diff(8000) <= 1, "{rows}");
+        // 1 ms per simulation on top: 4000 more rows cost 4 s more.
+        let rows = rows_for_final_fit(
+            twice + 4.0 / 0.8,
+            (1e-3, fit, 4000),
+            ROWS_EXPONENT,
+            4000,
+            32000,
+        );
+        assert!(rows.abs_diff(8000) <= 1, "{rows}");
+        assert_eq!(
+            rows_for_final_fit(1e6, (1e-3, fit, 4000), ROWS_EXPONENT, 4000, 16000),
+            16000
+        );
+        // Not even the chart's rows fit: the chart's, no more.
+        assert_eq!(
+            rows_for_final_fit(1.0, (1e-3, fit, 4000), ROWS_EXPONENT, 4000, 16000),
+            4000
+        );
+        // Grown as rows^1.5: 1.6 times the rows for 1.6^1.5 the time.
+        let grown = fit * 1.6f64.powf(1.5) / 0.8;
+        let rows = rows_for_final_fit(grown, (0.0, fit, 4000), 1.5, 4000, 32000);
+        assert!(rows.abs_diff(6400) <= 1, "{rows}");
+        assert!((measured_exponent((2000, 1.0), (4000, 4.0)) - 2.0).abs() < 1e-12);
+        assert!((measured_exponent((2000, 1.0), (4000, 2.0f64.powf(1.5))) - 1.5).abs() < 1e-12);
+        assert!((measured_exponent((2000, 1.0), (4000, 1.0)) - 1.2).abs() < 1e-12);
+        assert!((measured_exponent((2000, 1.0), (4000, 100.0)) - 2.2).abs() < 1e-12);
+        assert!((measured_exponent((2000, 0.0), (4000, 0.0)) - ROWS_EXPONENT).abs() < 1e-12);
+        assert_eq!(
+            rows_for_final_fit(f64::INFINITY, (1e-3, fit, 80), ROWS_EXPONENT, 80, 320),
+            80
+        );
+    }
+}
