@@ -58,9 +58,10 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     }
 
     /// The winner, refitted on the first `final_rows` of the chart and the
-    /// `more` records simulated for it ([`Self::final_rows`]); with the fit
-    /// it was scored with when that is not more rows, or when the refit
-    /// did not end by the deadline.
+    /// `more` records simulated for it ([`Self::final_rows`]), or with the
+    /// fit it was scored with when that is not more rows. Under a time
+    /// budget the refit is trained further from that fit, stopped at the
+    /// deadline if need be, and fitted anew too where the time affords.
     pub(in crate::auto) fn winner(
         &self,
         best: usize,
