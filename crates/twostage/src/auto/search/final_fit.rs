@@ -11,9 +11,7 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::Simulator;
 use twostage_sources::StoredChart;
 
-use super::{
-    ROWS_EXPONENT, Search, affordable_rows, compress_all, design, fit_seconds, held_out_score,
-};
+use super::{ROWS_EXPONENT, Search, compress_all, design, fit_seconds, held_out_score};
 use crate::error::{Error, Result};
 use crate::space::to_learning_space;
 
@@ -23,8 +21,9 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// records pay (`more_records`), and the time left affords simulating
     /// them (`per_simulation` wall seconds each) and fitting on all, at
     /// most four times the chart (a learning curve says little beyond
-    /// that) and `cap`; else the chart's, or as many of them as the time
-    /// left affords. Without a deadline, the chart's.
+    /// that) and `cap`; else the chart's (trained further from the scored
+    /// fit, which the deadline may stop at any time without making it
+    /// worse, so no row need be left out for time).
     pub(in crate::auto) fn final_rows(
         &self,
         best: usize,
@@ -53,7 +52,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
                 cap.min(4 * chart_rows),
             )
         } else {
-            affordable_rows(fit, self.seconds_left(), scored, chart_rows)
+            chart_rows
         }
     }
 
