@@ -137,12 +137,7 @@ impl Piecewise {
             let from = start.start + piece as f64 * start.width - margin;
             let to = start.start + (piece + 1) as f64 * start.width + margin;
             let rows = piece_rows(first, from, to);
-            let expert = self.expert.with_seed(
-                self.expert
-                    .params()
-                    .seed_value()
-                    .wrapping_add(piece as u64 + 1),
-            );
+            let expert = self.expert_of(piece);
             experts.push(expert.fit_from(
                 expert_start,
                 x.select(Axis(0), &rows).view(),
@@ -155,6 +150,16 @@ impl Piecewise {
             start: start.start,
             width: start.width,
         })
+    }
+
+    /// The expert of `piece`, seeded apart from the others.
+    fn expert_of(&self, piece: usize) -> Mlp {
+        self.expert.with_seed(
+            self.expert
+                .params()
+                .seed_value()
+                .wrapping_add(piece as u64 + 1),
+        )
     }
 
     /// The same regressor with every network's training stopped at
@@ -258,12 +263,7 @@ impl Regressor for Piecewise {
             let from = lo + piece as f64 * width - margin;
             let to = lo + (piece + 1) as f64 * width + margin;
             let rows = piece_rows(first, from, to);
-            let expert = self.expert.with_seed(
-                self.expert
-                    .params()
-                    .seed_value()
-                    .wrapping_add(piece as u64 + 1),
-            );
+            let expert = self.expert_of(piece);
             experts.push(expert.fit(
                 x.select(Axis(0), &rows).view(),
                 y.select(Axis(0), &rows).view(),

@@ -58,7 +58,7 @@ mod settings;
 mod space;
 
 pub use adaptive::AdaptiveIntervals;
-pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport};
+pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFits};
 pub use builder::TwoStage;
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};

@@ -130,8 +130,7 @@ fn train_one(
     restart: usize,
     levenberg_marquardt: bool,
 ) -> (Vec<f64>, RestartReport) {
-    let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
-    rng.set_stream(restart as u64 + 1);
+    let mut rng = restart_rng(mlp, restart);
     let params = initial_parameters(problem.sizes, &mut rng);
     train_with(problem, mlp, restart, params, &mut rng, levenberg_marquardt)
 }
@@ -145,9 +144,22 @@ fn train_from(
     params: Vec<f64>,
     levenberg_marquardt: bool,
 ) -> (Vec<f64>, RestartReport) {
+    train_with(
+        problem,
+        mlp,
+        restart,
+        params,
+        &mut restart_rng(mlp, restart),
+        levenberg_marquardt,
+    )
+}
+
+/// The stream of restart `restart`: its initial weights, then Adam's
+/// batches.
+fn restart_rng(mlp: &MlpParams, restart: usize) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
     rng.set_stream(restart as u64 + 1);
-    train_with(problem, mlp, restart, params, &mut rng, levenberg_marquardt)
+    rng
 }
 
 /// One restart from `params` by either trainer.

@@ -26,6 +26,7 @@ mod candidates;
 mod search;
 
 use candidates::{candidate_compressors, network, output_transforms, pieces};
+pub use search::FinalFits;
 use search::{Search, Winner};
 
 /// How much the search may spend.
@@ -104,7 +105,7 @@ pub struct AutoOutcome {
     pub search_seconds: f64,
     /// Whether the winner was refitted on the whole chart (a time budget
     /// may leave room for fewer rows, or only the fit it was scored with),
-    /// all but the records that compared its final fits (`final_scores`).
+    /// all but the records that compared its final fits (`final_fits`).
     pub refitted: bool,
     /// The chart rows the shipped network was fitted on.
     pub fitted_rows: usize,
@@ -131,7 +132,7 @@ pub struct AutoOutcome {
     /// winner's and of a fit anew, on the last fifth of the added records
     /// (seen by neither), where the time left afforded both: the lower
     /// shipped.
-    pub final_scores: Option<(f64, f64)>,
+    pub final_fits: Option<FinalFits>,
 }
 
 /// Whether a score of `half` on half the rows against `own` on all of them
@@ -206,12 +207,16 @@ impl std::fmt::Display for AutoOutcome {
                 self.added_simulations, self.fitted_rows
             )?;
         }
-        if let Some((further, anew)) = self.final_scores {
+        if let Some(FinalFits {
+            compared,
+            further,
+            anew,
+        }) = self.final_fits
+        {
             writeln!(
                 f,
-                "on the last {} added records, seen by no fit, the winner trained further scores \
-                 {further:.4} and fitted anew {anew:.4}: the {} ships",
-                self.simulations - self.fitted_rows,
+                "on the last {compared} added records, seen by no fit, the winner trained further \
+                 scores {further:.4} and fitted anew {anew:.4}: the {} ships",
                 if anew < further {
                     "fit anew"
                 } else {
@@ -460,7 +465,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             regressor,
             fitted_rows,
             late_refit,
-            anew: final_scores,
+            final_fits,
         } = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         base.observer().end(Stage::Fitting);
         let rows_exponent = search.rows_exponent();
@@ -485,14 +490,14 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             best,
             simulations: kept + failures,
             search_seconds,
-            refitted: fitted_rows == kept || final_scores.is_some(),
+            refitted: fitted_rows == kept || final_fits.is_some(),
             fitted_rows,
             seed_scores,
             half_rows,
             added_simulations,
             late_refit,
             rows_exponent,
-            final_scores,
+            final_fits,
         })
     }
 }

@@ -18,6 +18,7 @@ use super::{Budget, CandidateReport};
 use crate::builder::TwoStage;
 use crate::error::{Error, Result};
 use crate::space::{rows_to_estimates, to_learning_space};
+pub use final_fit::FinalFits;
 pub(super) use final_fit::Winner;
 use final_fit::measured_exponent;
 

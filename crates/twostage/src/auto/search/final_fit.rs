@@ -32,28 +32,17 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         cap: usize,
     ) -> usize {
         let chart_rows = self.chart.thetas.nrows();
-        if self.deadline.is_none() {
+        if !(self.deadline.is_some() && self.grows && more_records) {
             return chart_rows;
         }
-        let winner = &self.candidates[best];
-        let scored = winner.fit_rows;
-        // The fit on the scored rows with the machine to itself.
-        let fit = self.solo_seconds[best].map_or_else(
-            || fit_seconds(winner.seconds, scored, scored),
-            |seconds| 1.25 * seconds,
-        );
-        let exponent = self.rows_exponent.unwrap_or(ROWS_EXPONENT);
-        if self.grows && more_records {
-            rows_for_final_fit(
-                self.seconds_left(),
-                (per_simulation, fit, scored),
-                exponent,
-                chart_rows,
-                cap.min(4 * chart_rows),
-            )
-        } else {
-            chart_rows
-        }
+        let scored = self.candidates[best].fit_rows;
+        rows_for_final_fit(
+            self.seconds_left(),
+            (per_simulation, self.fit_estimate(best, scored), scored),
+            self.cost_exponent(),
+            chart_rows,
+            cap.min(4 * chart_rows),
+        )
     }
 
     /// The winner, refitted on the first `final_rows` of the chart and the
@@ -102,7 +91,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             regressor: held_out_fit,
             fitted_rows: scored_rows,
             late_refit: None,
-            anew: None,
+            final_fits: None,
         };
         if refit_rows <= scored_rows {
             return Ok(winner);
@@ -168,15 +157,19 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             let anew_late = Instant::now() >= deadline;
             let rows = ndarray::s![train_rows..refit_rows, ..];
             let (x_held, t_held) = (winner.features.slice(rows), thetas.slice(rows));
-            let scores = (
-                self.held_out_score(&chosen, x_held, t_held)?.1,
-                self.held_out_score(&anew, x_held, t_held)?.1,
-            );
-            if scores.1 < scores.0 {
+            let score = |fitted: &FittedRegressor| -> Result<f64> {
+                Ok(held_out_score(self.base, fitted, x_held, t_held, &self.prior_sd)?.1)
+            };
+            let fits = FinalFits {
+                compared,
+                further: score(&chosen)?,
+                anew: score(&anew)?,
+            };
+            if fits.anew < fits.further {
                 chosen = anew;
                 late = anew_late;
             }
-            winner.anew = Some(scores);
+            winner.final_fits = Some(fits);
         }
         winner.regressor = chosen;
         winner.fitted_rows = train_rows;
@@ -189,25 +182,30 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     fn fit_estimate(&self, best: usize, rows: usize) -> f64 {
         let winner = &self.candidates[best];
         let scored = winner.fit_rows;
-        let exponent = self.rows_exponent.unwrap_or(ROWS_EXPONENT);
-        let growth = (rows as f64 / scored.max(1) as f64).powf(exponent);
+        let growth = (rows as f64 / scored.max(1) as f64).powf(self.cost_exponent());
         match self.solo_seconds[best] {
             Some(seconds) => 1.25 * seconds * growth,
             None => fit_seconds(winner.seconds, scored, rows),
         }
     }
 
-    /// RMSE per parameter of `fitted` on features `x` against parameters
-    /// `thetas`, and the candidates' score (their mean in prior standard
-    /// deviations).
-    fn held_out_score(
-        &self,
-        fitted: &FittedRegressor,
-        x: ndarray::ArrayView2<'_, f64>,
-        thetas: ndarray::ArrayView2<'_, f64>,
-    ) -> Result<(Vec<f64>, f64)> {
-        held_out_score(self.base, fitted, x, thetas, &self.prior_sd)
+    /// How a fit's time grows with its rows: as round 3 measured it, or
+    /// [`ROWS_EXPONENT`].
+    fn cost_exponent(&self) -> f64 {
+        self.rows_exponent.unwrap_or(ROWS_EXPONENT)
     }
+}
+
+/// The winner's two final fits under a time budget, where both ran: trained
+/// further from its scored fit and fitted anew, scored on added records.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FinalFits {
+    /// The added records (seen by neither fit) they were scored on.
+    pub compared: usize,
+    /// The held-out score of the winner trained further from its fit.
+    pub further: f64,
+    /// The held-out score of the winner fitted anew.
+    pub anew: f64,
 }
 
 /// Records a fit anew and a fit trained further are compared on, at least.
@@ -278,9 +276,9 @@ pub(in crate::auto) struct Winner {
     /// The rows of a refit stopped at the deadline (it ships trained as
     /// far as it got).
     pub(in crate::auto) late_refit: Option<usize>,
-    /// The held-out scores of the fit trained further and of the fit
-    /// anew, where both ran (the lower shipped).
-    pub(in crate::auto) anew: Option<(f64, f64)>,
+    /// The fit trained further and the fit anew, where both ran (the
+    /// lower score shipped).
+    pub(in crate::auto) final_fits: Option<FinalFits>,
 }
 
 #[cfg(test)]
