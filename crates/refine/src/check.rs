@@ -5,6 +5,7 @@
 
 use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
 
+use crate::output_error::write_output_errors;
 use crate::refinement::{Refinement, ResidualModel};
 use crate::{OutputError, RefineError};
 
@@ -230,8 +231,9 @@ pub fn check_record(
     // descent from it, in the prior's box.
     let search = Refinement::new(OutputError::new(sim)?);
     let best = search.descend(record, theta.to_vec())?;
+    // The loss at the estimate, from the noise-free run already made.
     let mut residuals = vec![0.0; search.model().n_residuals(record)];
-    search.model().residuals(theta, record, &mut residuals)?;
+    write_output_errors(record, &simulated, &mut residuals)?;
     let at_estimate: f64 = residuals.iter().map(|r| r * r).sum();
     let loss_ratio = if best.loss > 0.0 {
         at_estimate / best.loss

@@ -13,6 +13,7 @@
 
 mod check;
 mod error;
+mod lockstep;
 mod moments;
 mod output_error;
 mod refinement;
@@ -22,3 +23,5 @@ pub use error::RefineError;
 pub use moments::WeightedMoments;
 pub use output_error::OutputError;
 pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
+/// Why a descent stopped ([`Descent::stop`]).
+pub use twostage_fit::TerminationReason;

@@ -74,37 +74,186 @@ impl<S: Simulator> ResidualModel for OutputError<S> {
         record: &IoData,
         residuals: &mut [f64],
     ) -> Result<(), RefineError> {
-        let quiet = Conditions {
-            noiseless: true,
-            input: Some(record),
-        };
         let mut response = IoData::default();
-        // A noise-free run draws nothing that matters: any stream serves.
-        self.simulator
-            .simulate_under(theta, &mut experiment_rng(0, 0), quiet, &mut response)
-            .map_err(|source| RefineError::Simulation {
-                what: "the noise-free simulation of an output-error fit",
-                source,
-            })?;
-        let n = record.n_samples();
-        for j in 0..record.n_outputs() {
-            let y = record.output(j);
-            let mean = y.iter().sum::<f64>() / n.max(1) as f64;
-            let spread =
-                (y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n.max(1) as f64).sqrt();
-            let scale = if spread > 0.0 { 1.0 / spread } else { 1.0 };
-            for ((r, y), s) in residuals[j * n..(j + 1) * n]
-                .iter_mut()
-                .zip(y)
-                .zip(response.output(j))
-            {
-                *r = scale * (y - s);
-            }
-        }
-        Ok(())
+        self.simulate_quietly(theta, record, &mut response)?;
+        write_output_errors(record, &response, residuals)
     }
 
     fn n_residuals(&self, record: &IoData) -> usize {
         record.n_samples() * record.n_outputs()
     }
+
+    /// The pairs of each record (by its input) in the simulator's batches:
+    /// a command source gets one request per batch of points, whatever
+    /// the descents they come from; a simulator that takes one experiment
+    /// at a time (built-in, FMU) runs the points on the threads.
+    fn residuals_batch(
+        &self,
+        pairs: &[(&[f64], &IoData)],
+        residuals: &mut [Vec<f64>],
+    ) -> Vec<Result<(), RefineError>> {
+        use rayon::prelude::*;
+        let batch = self.simulator.batch_size();
+        let mut results: Vec<Result<(), RefineError>> = vec![Ok(()); pairs.len()];
+        let mut responses = vec![IoData::default(); pairs.len()];
+        if batch <= 1 {
+            results
+                .par_iter_mut()
+                .zip(responses.par_iter_mut())
+                .zip(pairs)
+                .for_each(|((result, response), (theta, record))| {
+                    *result = self.simulate_quietly(theta, record, response);
+                });
+        } else {
+            for group in same_input_groups(pairs) {
+                for chunk in group.chunks(batch) {
+                    let record = pairs[chunk[0]].1;
+                    let thetas: Vec<&[f64]> = chunk.iter().map(|&k| pairs[k].0).collect();
+                    // A noise-free run draws nothing that matters: any streams serve.
+                    let mut rngs: Vec<_> = (0..chunk.len())
+                        .map(|k| experiment_rng(0, k as u64))
+                        .collect();
+                    let mut outs = vec![IoData::default(); chunk.len()];
+                    let answers = self.simulator.simulate_batch_under(
+                        &thetas,
+                        &mut rngs,
+                        quietly_on(record),
+                        &mut outs,
+                    );
+                    for ((&k, answer), out) in chunk.iter().zip(answers).zip(outs) {
+                        results[k] = answer.map_err(simulation_error);
+                        responses[k] = out;
+                    }
+                }
+            }
+        }
+        for (((result, response), (_, record)), r) in results
+            .iter_mut()
+            .zip(&responses)
+            .zip(pairs)
+            .zip(residuals.iter_mut())
+        {
+            if result.is_ok() {
+                r.resize(self.n_residuals(record), 0.0);
+                *result = write_output_errors(record, response, r);
+            }
+        }
+        results
+    }
+
+    /// A batched simulator asks for three trial dampings at once: a
+    /// request costs it about the same for one point as for three.
+    fn trials_at_once(&self) -> usize {
+        if self.simulator.batch_size() > 1 {
+            3
+        } else {
+            1
+        }
+    }
+}
+
+impl<S: Simulator> OutputError<S> {
+    /// The noise-free response at `theta` to `record`'s input.
+    fn simulate_quietly(
+        &self,
+        theta: &[f64],
+        record: &IoData,
+        response: &mut IoData,
+    ) -> Result<(), RefineError> {
+        // A noise-free run draws nothing that matters: any stream serves.
+        self.simulator
+            .simulate_under(
+                theta,
+                &mut experiment_rng(0, 0),
+                quietly_on(record),
+                response,
+            )
+            .map_err(simulation_error)
+    }
+}
+
+/// Noise-free, on the record's input.
+fn quietly_on(record: &IoData) -> Conditions<'_> {
+    Conditions {
+        noiseless: true,
+        input: Some(record),
+    }
+}
+
+fn simulation_error(source: twostage_models::SimError) -> RefineError {
+    RefineError::Simulation {
+        what: "the noise-free simulation of an output-error fit",
+        source,
+    }
+}
+
+/// The indices of `pairs` grouped by their records' inputs (the same
+/// record, or one with the same input samples), in order of first
+/// appearance: each group can go to the simulator as one request.
+fn same_input_groups(pairs: &[(&[f64], &IoData)]) -> Vec<Vec<usize>> {
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (k, (_, record)) in pairs.iter().enumerate() {
+        let same = groups.iter_mut().find(|group| {
+            let other = pairs[group[0]].1;
+            std::ptr::eq(other, *record) || same_inputs(other, record)
+        });
+        match same {
+            Some(group) => group.push(k),
+            None => groups.push(vec![k]),
+        }
+    }
+    groups
+}
+
+/// Whether two records hold the same input samples, bit for bit.
+fn same_inputs(a: &IoData, b: &IoData) -> bool {
+    a.n_samples() == b.n_samples()
+        && a.n_inputs() == b.n_inputs()
+        && (0..a.n_inputs()).all(|j| {
+            a.input(j)
+                .iter()
+                .zip(b.input(j))
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        })
+}
+
+/// For each output (scaled by the record's own spread of that output, so
+/// that outputs in other units weigh alike) and each sample: record minus
+/// simulation.
+///
+/// # Errors
+/// A response of another shape than the record (a simulator that returned
+/// another length).
+pub(crate) fn write_output_errors(
+    record: &IoData,
+    response: &IoData,
+    residuals: &mut [f64],
+) -> Result<(), RefineError> {
+    let n = record.n_samples();
+    if response.n_samples() != n || response.n_outputs() != record.n_outputs() {
+        return Err(RefineError::Numerical {
+            what: format!(
+                "the simulation returned {} samples of {} output(s) for a record of {n} \
+                 samples of {}",
+                response.n_samples(),
+                response.n_outputs(),
+                record.n_outputs()
+            ),
+        });
+    }
+    for j in 0..record.n_outputs() {
+        let y = record.output(j);
+        let mean = y.iter().sum::<f64>() / n.max(1) as f64;
+        let spread =
+            (y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n.max(1) as f64).sqrt();
+        let scale = if spread > 0.0 { 1.0 / spread } else { 1.0 };
+        for ((r, y), s) in residuals[j * n..(j + 1) * n]
+            .iter_mut()
+            .zip(y)
+            .zip(response.output(j))
+        {
+            *r = scale * (y - s);
+        }
+    }
+    Ok(())
 }

@@ -10,12 +10,11 @@
 //! prediction-error method of the paper's Section 2.2; the baselines build
 //! it (and indirect inference) on [`Refinement::descend`].
 
-use std::ops::ControlFlow;
-
-use twostage_fit::{Damping, LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use twostage_fit::TerminationReason;
 use twostage_models::{IoData, Prior};
 
 use crate::error::RefineError as Error;
+use crate::lockstep::{self, DescentJob};
 use crate::moments::WeightedMoments;
 
 /// A model whose prediction errors on a record can be computed at any theta:
@@ -44,7 +43,7 @@ use crate::moments::WeightedMoments;
 pub trait ResidualModel: Send + Sync {
     /// What a failed evaluation returns; the refinement's own errors (a
     /// start of the wrong length, say) convert into it.
-    type Error: From<Error>;
+    type Error: From<Error> + Send;
 
     /// The prior box: the model is not evaluated outside it.
     fn prior(&self) -> &Prior;
@@ -66,9 +65,40 @@ pub trait ResidualModel: Send + Sync {
     fn n_residuals(&self, record: &IoData) -> usize {
         record.n_samples()
     }
+
+    /// The residuals of many `(theta, record)` pairs, one result each,
+    /// into `residuals[k]` (resized to the pair's
+    /// [`ResidualModel::n_residuals`]): what one round of the descents
+    /// under way needs. Each pair's residuals must be those
+    /// [`ResidualModel::residuals`] gives it alone. Default: the pairs in
+    /// parallel on the threads; a model behind a process sends them in its
+    /// batches ([`crate::OutputError`]).
+    fn residuals_batch(
+        &self,
+        pairs: &[(&[f64], &IoData)],
+        residuals: &mut [Vec<f64>],
+    ) -> Vec<Result<(), Self::Error>> {
+        use rayon::prelude::*;
+        pairs
+            .par_iter()
+            .zip(residuals.par_iter_mut())
+            .map(|((theta, record), r)| {
+                r.resize(self.n_residuals(record), 0.0);
+                self.residuals(theta, record, r)
+            })
+            .collect()
+    }
+
+    /// How many trial steps of increasing damping a descent asks for at
+    /// once (default 1). More suits a model for which a few points cost
+    /// about what one does (a batch to a process); the descent ends at the
+    /// same point either way.
+    fn trials_at_once(&self) -> usize {
+        1
+    }
 }
 
-impl<E: From<Error>> ResidualModel for Box<dyn ResidualModel<Error = E>> {
+impl<E: From<Error> + Send> ResidualModel for Box<dyn ResidualModel<Error = E>> {
     type Error = E;
     fn prior(&self) -> &Prior {
         (**self).prior()
@@ -78,6 +108,16 @@ impl<E: From<Error>> ResidualModel for Box<dyn ResidualModel<Error = E>> {
     }
     fn n_residuals(&self, record: &IoData) -> usize {
         (**self).n_residuals(record)
+    }
+    fn residuals_batch(
+        &self,
+        pairs: &[(&[f64], &IoData)],
+        residuals: &mut [Vec<f64>],
+    ) -> Vec<Result<(), E>> {
+        (**self).residuals_batch(pairs, residuals)
+    }
+    fn trials_at_once(&self) -> usize {
+        (**self).trials_at_once()
     }
 }
 
@@ -179,8 +219,8 @@ impl<M: ResidualModel> Refinement<M> {
     /// # Errors
     /// A bad record, or a start of the wrong length.
     pub fn descend(&self, record: &IoData, start: Vec<f64>) -> Result<Descent, M::Error> {
-        let q = self.model.prior().dim();
-        self.descend_within(record, start, &vec![0.0; q], &vec![1.0; q])
+        let mut found = self.descents_from(record, vec![start])?;
+        Ok(found.remove(0))
     }
 
     /// One descent in the prior box from each of `starts`, run in
@@ -214,14 +254,19 @@ impl<M: ResidualModel> Refinement<M> {
         &self,
         record: &IoData,
         starts: Vec<Vec<f64>>,
-    ) -> Result<Vec<Descent>, M::Error>
-    where
-        M::Error: Send,
-    {
-        use rayon::prelude::*;
-        starts
-            .into_par_iter()
-            .map(|start| self.descend(record, start))
+    ) -> Result<Vec<Descent>, M::Error> {
+        let q = self.model.prior().dim();
+        let jobs = starts
+            .into_iter()
+            .map(|start| DescentJob {
+                record,
+                start,
+                lo: vec![0.0; q],
+                hi: vec![1.0; q],
+            })
+            .collect();
+        lockstep::descend_together(&self.model, self.max_iterations, jobs)
+            .into_iter()
             .collect()
     }
 
@@ -255,7 +300,12 @@ impl<M: ResidualModel> Refinement<M> {
             .map(|j| (unit(j, start[j] - radius[j]), unit(j, start[j] + radius[j])))
             .collect();
         let (lo, hi): (Vec<f64>, Vec<f64>) = outer.iter().copied().unzip();
-        let mut best = self.descend_within(record, start.to_vec(), &lo, &hi)?;
+        let mut jobs = vec![DescentJob {
+            record,
+            start: start.to_vec(),
+            lo: lo.clone(),
+            hi: hi.clone(),
+        }];
         if starts == RefineStarts::CentreAndAxes {
             for j in 0..q {
                 for side in [-1.0, 1.0] {
@@ -269,14 +319,29 @@ impl<M: ResidualModel> Refinement<M> {
                     } else {
                         l[j] = middle;
                     }
-                    let descent = self.descend_within(record, from, &l, &h)?;
-                    if descent.loss < best.loss {
-                        best = descent;
-                    }
+                    jobs.push(DescentJob {
+                        record,
+                        start: from,
+                        lo: l,
+                        hi: h,
+                    });
                 }
             }
         }
-        Ok(best)
+        // The lowest loss; the first of equals, in the order of the starts.
+        let mut best: Option<Descent> = None;
+        for descent in lockstep::descend_together(&self.model, self.max_iterations, jobs) {
+            let descent = descent?;
+            if best.as_ref().is_none_or(|b| descent.loss < b.loss) {
+                best = Some(descent);
+            }
+        }
+        best.ok_or_else(|| {
+            Error::Numerical {
+                what: "a refinement without a descent".into(),
+            }
+            .into()
+        })
     }
 
     /// The posterior mean over the box `centre +- radius` (within the
@@ -359,70 +424,6 @@ impl<M: ResidualModel> Refinement<M> {
             evaluations: total,
         })
     }
-
-    /// Levenberg-Marquardt from `start`, with every iterate in the box
-    /// `[lo, hi]` of unit-box coordinates.
-    fn descend_within(
-        &self,
-        record: &IoData,
-        start: Vec<f64>,
-        lo: &[f64],
-        hi: &[f64],
-    ) -> Result<Descent, M::Error> {
-        let prior = self.model.prior();
-        if start.len() != prior.dim() {
-            return Err(Error::Length {
-                what: "the start",
-                found: start.len(),
-                expected: prior.dim(),
-            }
-            .into());
-        }
-        if self.max_iterations == 0 {
-            return Err(Error::InvalidSetting {
-                name: "iterations per descent",
-                value: "0".into(),
-                reason: "at least 1".into(),
-            }
-            .into());
-        }
-        let unit: Vec<f64> = start
-            .iter()
-            .zip(prior.lower().iter().zip(prior.upper()))
-            .map(|(t, (lo, hi))| (t - lo) / (hi - lo))
-            .collect();
-        let mut problem = PredictionErrors {
-            model: &self.model,
-            record,
-            lo,
-            hi,
-            theta: Vec::with_capacity(unit.len()),
-            unit_lower: vec![0.0; unit.len()],
-            unit_upper: vec![1.0; unit.len()],
-        };
-        // Marquardt's scaling: the parameters' sensitivities differ by
-        // orders of magnitude (the car's pK1 and pK2).
-        let solver = LevenbergMarquardt::new()
-            .max_iterations(self.max_iterations)
-            .tolerance(1e-10)
-            .damping(Damping::Diagonal { floor: 1e-12 })
-            .initial_damping(1e-3)
-            .max_damping(1e12f64.next_down());
-        let found = solver.minimize(&mut problem, &unit, |_| ControlFlow::Continue(()))?;
-        let theta = found
-            .x
-            .iter()
-            .zip(prior.lower().iter().zip(prior.upper()))
-            .map(|(si, (lo, hi))| lo + si * (hi - lo))
-            .collect();
-        Ok(Descent {
-            start,
-            theta,
-            loss: found.cost,
-            iterations: found.iterations,
-            stop: found.reason,
-        })
-    }
 }
 
 /// A centre and a radius that fit `q` parameters, with radii >= 0.
@@ -444,45 +445,4 @@ fn check_neighbourhood(q: usize, centre: &[f64], radius: &[f64]) -> Result<(), E
         });
     }
     Ok(())
-}
-
-/// The prediction errors of one record as a least-squares problem in the
-/// prior box's unit coordinates, confined to the sub-box `[lo, hi]`.
-struct PredictionErrors<'a, M> {
-    model: &'a M,
-    record: &'a IoData,
-    lo: &'a [f64],
-    hi: &'a [f64],
-    theta: Vec<f64>,
-    /// The whole prior box in unit coordinates: zeros and ones.
-    unit_lower: Vec<f64>,
-    unit_upper: Vec<f64>,
-}
-
-impl<M: ResidualModel> LeastSquaresProblem for PredictionErrors<'_, M> {
-    type Error = M::Error;
-
-    fn residuals(&mut self, s: &[f64], r: &mut Vec<f64>) -> Result<(), M::Error> {
-        let prior = self.model.prior();
-        self.theta.clear();
-        self.theta.extend(
-            s.iter()
-                .zip(prior.lower().iter().zip(prior.upper()))
-                .map(|(si, (lo, hi))| lo + si * (hi - lo)),
-        );
-        r.resize(self.model.n_residuals(self.record), 0.0);
-        self.model.residuals(&self.theta, self.record, r)
-    }
-
-    /// The prior box, in unit coordinates: the model is not defined
-    /// outside it, so the finite differences step inward at its faces.
-    fn domain(&self) -> Option<(&[f64], &[f64])> {
-        Some((&self.unit_lower, &self.unit_upper))
-    }
-
-    fn project(&self, s: &mut [f64]) {
-        for ((v, lo), hi) in s.iter_mut().zip(self.lo).zip(self.hi) {
-            *v = v.clamp(*lo, *hi);
-        }
-    }
 }

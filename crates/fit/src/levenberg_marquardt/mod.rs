@@ -10,10 +10,13 @@
 
 use std::ops::ControlFlow;
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt;
-use faer::{Mat, MatMut, Par};
 use serde::{Deserialize, Serialize};
+
+mod differences;
+mod run;
+
+pub use differences::CentralDifferences;
+pub use run::{Evaluation, LmRun, ModelAt, Need};
 
 /// Why an iterative fit stopped.
 ///
@@ -37,6 +40,9 @@ pub enum TerminationReason {
     /// Adam's held-out loss did not improve for `patience` epochs (before
     /// this variant, Adam said [`Self::EarlyStopping`]).
     EpochsWithoutImprovement,
+    /// An evaluation of the model failed during the run (a simulation that
+    /// broke off, say): the last accepted point is the answer.
+    EvaluationFailed,
 }
 
 impl TerminationReason {
@@ -89,28 +95,12 @@ pub trait LeastSquaresProblem {
         jtj: &mut [f64],
         jtr: &mut [f64],
     ) -> Result<(), Self::Error> {
-        let n = x.len();
-        let rows = r.len();
-        let mut columns = vec![0.0; n * rows];
-        let (mut point, mut plus, mut minus) = (x.to_vec(), Vec::new(), Vec::new());
-        for (j, column) in columns.chunks_exact_mut(rows.max(1)).enumerate().take(n) {
-            let h = 1e-6 * x[j].abs().max(1.0);
-            let (mut up, mut down) = (x[j] + h, x[j] - h);
-            if let Some((lower, upper)) = self.domain() {
-                up = up.min(upper[j]);
-                down = down.max(lower[j]);
-            }
-            point[j] = up;
-            self.residuals(&point, &mut plus)?;
-            point[j] = down;
-            self.residuals(&point, &mut minus)?;
-            point[j] = x[j];
-            let width = up - down;
-            for ((c, p), m) in column.iter_mut().zip(&plus).zip(&minus) {
-                *c = (p - m) / width;
-            }
+        let (differences, points) = CentralDifferences::at(x, self.domain());
+        let mut values = vec![Vec::new(); points.len()];
+        for (point, value) in points.iter().zip(&mut values) {
+            self.residuals(point, value)?;
         }
-        normal_products(&columns, r, jtj, jtr);
+        differences.products(&values, r, jtj, jtr);
         Ok(())
     }
 
@@ -290,126 +280,29 @@ impl LevenbergMarquardt {
         start: &[f64],
         mut observe: impl FnMut(&Iterate<'_>) -> ControlFlow<()>,
     ) -> Result<Minimum, P::Error> {
-        let n = start.len();
-        let mut x = start.to_vec();
-        problem.project(&mut x);
-        let (mut r, mut trial_r) = (Vec::new(), Vec::new());
-        problem.residuals(&x, &mut r)?;
-        let mut cost = problem.cost(&x, &r);
-        let mut jtj = vec![0.0; n * n];
-        let mut jtr = vec![0.0; n];
-        // faer's blocked factorization: the scalar kernel of the estimator's
-        // small systems is latency-bound at a network's hundreds of weights.
-        let mut factor = Mat::<f64>::zeros(n, n);
-        let mut scratch = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
-            n,
-            Par::Seq,
-            Default::default(),
-        ));
-        let mut step = vec![0.0; n];
-        let mut trial = vec![0.0; n];
-        let mut mu = self.initial_damping;
-        let mut reason = TerminationReason::MaxIterations;
-        let mut iterations = 0;
-        for _ in 0..self.max_iterations {
-            iterations += 1;
-            problem.gauss_newton(&x, &r, &mut jtj, &mut jtr)?;
-            let mut accepted = false;
-            while mu <= self.max_damping {
-                if self.damped_step(&jtj, &jtr, mu, &mut factor, &mut scratch, &mut step) {
-                    for ((t, a), s) in trial.iter_mut().zip(&x).zip(&step) {
-                        *t = a + s;
+        let mut run = self.run(start.to_vec(), 1);
+        loop {
+            match run.need() {
+                Need::Evaluations => {
+                    for point in run.evaluations_mut() {
+                        problem.project(&mut point.x);
+                        problem.residuals(&point.x, &mut point.residuals)?;
+                        point.cost = problem.cost(&point.x, &point.residuals);
                     }
-                    problem.project(&mut trial);
-                    problem.residuals(&trial, &mut trial_r)?;
-                    let trial_cost = problem.cost(&trial, &trial_r);
-                    if trial_cost < cost {
-                        let relative = (cost - trial_cost) / cost.max(f64::MIN_POSITIVE);
-                        std::mem::swap(&mut x, &mut trial);
-                        std::mem::swap(&mut r, &mut trial_r);
-                        cost = trial_cost;
-                        mu = (mu / 10.0).max(self.min_damping);
-                        accepted = true;
-                        if relative < self.tolerance {
-                            reason = TerminationReason::Converged;
-                        }
-                        break;
-                    }
+                    run.evaluated();
                 }
-                mu *= 10.0;
-            }
-            if !accepted {
-                reason = TerminationReason::DampingLimit;
-                break;
-            }
-            let iterate = Iterate {
-                iteration: iterations,
-                x: &x,
-                cost,
-                damping: mu,
-            };
-            if observe(&iterate).is_break() {
-                reason = TerminationReason::EarlyStopping;
-                break;
-            }
-            if reason == TerminationReason::Converged {
-                break;
+                Need::Model => {
+                    let model = run.model_mut();
+                    problem.gauss_newton(model.x, model.residuals, model.jtj, model.jtr)?;
+                    run.modelled();
+                }
+                Need::Observe => {
+                    let stop = observe(&run.iterate()).is_break();
+                    run.proceed(stop);
+                }
+                Need::Done => return Ok(run.finish()),
             }
         }
-        Ok(Minimum {
-            x,
-            cost,
-            iterations,
-            reason,
-        })
-    }
-
-    /// Solve `(J'J + D(mu)) step = -J'r` by Cholesky (on one thread, so
-    /// the step does not depend on the thread count); false when the damped
-    /// matrix is not positive definite.
-    fn damped_step(
-        &self,
-        jtj: &[f64],
-        jtr: &[f64],
-        mu: f64,
-        factor: &mut Mat<f64>,
-        scratch: &mut MemBuffer,
-        step: &mut [f64],
-    ) -> bool {
-        let n = jtr.len();
-        for i in 0..n {
-            for j in 0..i {
-                factor[(i, j)] = jtj[i * n + j];
-            }
-            let diagonal = jtj[i * n + i];
-            factor[(i, i)] = match self.damping {
-                Damping::Identity => diagonal + mu,
-                Damping::Diagonal { floor } => diagonal + mu * (diagonal + floor),
-            };
-        }
-        let factored = llt::factor::cholesky_in_place(
-            factor.as_mut(),
-            Default::default(),
-            Par::Seq,
-            MemStack::new(scratch),
-            Default::default(),
-        );
-        // faer refuses every pivot that is not `> 0`, NaN included.
-        if factored.is_err() {
-            return false;
-        }
-        for (s, g) in step.iter_mut().zip(jtr) {
-            *s = -g;
-        }
-        llt::solve::solve_in_place(
-            factor.as_ref(),
-            MatMut::from_column_major_slice_mut(step, n, 1),
-            Par::Seq,
-            MemStack::new(&mut MemBuffer::new(
-                llt::solve::solve_in_place_scratch::<f64>(n, 1, Par::Seq),
-            )),
-        );
-        true
     }
 }
 
@@ -524,6 +417,74 @@ mod tests {
             .minimize(&mut problem, &[0.0], |_| ControlFlow::Continue(()))
             .unwrap();
         assert!((found.x[0] - 0.5).abs() < 1e-6, "{found:?}");
+    }
+
+    /// Rosenbrock as least squares, counting its evaluations.
+    struct Rosenbrock(usize);
+    impl LeastSquaresProblem for Rosenbrock {
+        type Error = ();
+        fn residuals(&mut self, x: &[f64], r: &mut Vec<f64>) -> Result<(), ()> {
+            self.0 += 1;
+            r.clear();
+            r.extend([10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]]);
+            Ok(())
+        }
+    }
+
+    /// Drive a run by hand, asking for `trials` dampings at once: the
+    /// minimum and the number of requests for trial points.
+    fn by_hand(trials: usize, start: &[f64]) -> (Minimum, usize) {
+        let mut problem = Rosenbrock(0);
+        let mut run = LevenbergMarquardt::new().run(start.to_vec(), trials);
+        let mut requests = 0;
+        loop {
+            match run.need() {
+                Need::Evaluations => {
+                    requests += 1;
+                    for point in run.evaluations_mut() {
+                        problem.residuals(&point.x, &mut point.residuals).unwrap();
+                        point.cost = problem.cost(&point.x, &point.residuals);
+                    }
+                    run.evaluated();
+                }
+                Need::Model => {
+                    let m = run.model_mut();
+                    problem
+                        .gauss_newton(m.x, m.residuals, m.jtj, m.jtr)
+                        .unwrap();
+                    run.modelled();
+                }
+                Need::Observe => run.proceed(false),
+                Need::Done => return (run.finish(), requests),
+            }
+        }
+    }
+
+    #[test]
+    fn trial_dampings_asked_together_end_at_the_same_bits() {
+        // From far off, many steps are refused before one is taken.
+        let start = [-3.0, 8.0];
+        let mut problem = Rosenbrock(0);
+        let alone = LevenbergMarquardt::new()
+            .minimize(&mut problem, &start, |_| ControlFlow::Continue(()))
+            .unwrap();
+        assert!((alone.x[0] - 1.0).abs() < 1e-6, "{alone:?}");
+        let (one, one_requests) = by_hand(1, &start);
+        let (three, three_requests) = by_hand(3, &start);
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        for found in [&one, &three] {
+            assert_eq!(bits(&found.x), bits(&alone.x));
+            assert_eq!(found.cost.to_bits(), alone.cost.to_bits());
+            assert_eq!(
+                (found.iterations, found.reason),
+                (alone.iterations, alone.reason)
+            );
+        }
+        // Refused steps cost no extra request when asked together.
+        assert!(
+            three_requests < one_requests,
+            "{three_requests} vs {one_requests}"
+        );
     }
 
     #[test]

@@ -1,0 +1,219 @@
+//! Many Levenberg-Marquardt descents run in lockstep: each round gathers
+//! what every descent needs (its start, the central-difference points of
+//! its Jacobian, its trial steps) and hands them to the model in one
+//! batch, so that a simulator behind a process is asked once per round for
+//! all starts and records, not once per point. Each descent's arithmetic
+//! is that of a descent run alone: the batching changes the number of
+//! requests, never the result.
+
+use twostage_fit::{
+    CentralDifferences, Damping, LevenbergMarquardt, LmRun, Need, TerminationReason,
+};
+use twostage_models::{IoData, Prior};
+
+use crate::error::RefineError as Error;
+use crate::refinement::{Descent, ResidualModel};
+
+/// One descent to run: a record, a start (parameter values) and the box of
+/// unit-box coordinates `[lo, hi]` its iterates stay in.
+pub(crate) struct DescentJob<'a> {
+    pub(crate) record: &'a IoData,
+    pub(crate) start: Vec<f64>,
+    pub(crate) lo: Vec<f64>,
+    pub(crate) hi: Vec<f64>,
+}
+
+/// The solver every refinement descent uses. Marquardt's scaling: the
+/// parameters' sensitivities differ by orders of magnitude (the car's pK1
+/// and pK2).
+pub(crate) fn solver(max_iterations: usize) -> LevenbergMarquardt {
+    LevenbergMarquardt::new()
+        .max_iterations(max_iterations)
+        .tolerance(1e-10)
+        .damping(Damping::Diagonal { floor: 1e-12 })
+        .initial_damping(1e-3)
+        .max_damping(1e12f64.next_down())
+}
+
+/// Unit-box coordinates to parameter values.
+pub(crate) fn to_theta(prior: &Prior, unit: &[f64]) -> Vec<f64> {
+    unit.iter()
+        .zip(prior.lower().iter().zip(prior.upper()))
+        .map(|(si, (lo, hi))| lo + si * (hi - lo))
+        .collect()
+}
+
+/// Parameter values to unit-box coordinates.
+pub(crate) fn to_unit(prior: &Prior, theta: &[f64]) -> Vec<f64> {
+    theta
+        .iter()
+        .zip(prior.lower().iter().zip(prior.upper()))
+        .map(|(t, (lo, hi))| (t - lo) / (hi - lo))
+        .collect()
+}
+
+/// A descent under way, or the error that ended it before it began.
+enum Slot<'a, E> {
+    Running {
+        job: DescentJob<'a>,
+        run: Box<LmRun>,
+        /// The Jacobian's differences while their points are out.
+        differences: Option<CentralDifferences>,
+    },
+    Failed(E),
+}
+
+/// Run `jobs` together, one result per job in order. A start the model
+/// cannot evaluate fails its own descent only; a trial step it cannot
+/// evaluate is refused (the descent goes on with more damping); a failed
+/// Jacobian point ends its descent at its last accepted point
+/// ([`TerminationReason::EvaluationFailed`]).
+pub(crate) fn descend_together<M: ResidualModel>(
+    model: &M,
+    max_iterations: usize,
+    jobs: Vec<DescentJob<'_>>,
+) -> Vec<Result<Descent, M::Error>> {
+    let prior = model.prior();
+    let q = prior.dim();
+    let solver = solver(max_iterations);
+    let trials = model.trials_at_once();
+    let mut slots: Vec<Slot<'_, M::Error>> = jobs
+        .into_iter()
+        .map(|job| {
+            if job.start.len() != q {
+                return Slot::Failed(
+                    Error::Length {
+                        what: "the start",
+                        found: job.start.len(),
+                        expected: q,
+                    }
+                    .into(),
+                );
+            }
+            if max_iterations == 0 {
+                return Slot::Failed(
+                    Error::InvalidSetting {
+                        name: "iterations per descent",
+                        value: "0".into(),
+                        reason: "at least 1".into(),
+                    }
+                    .into(),
+                );
+            }
+            let run = Box::new(solver.run(to_unit(prior, &job.start), trials));
+            Slot::Running {
+                job,
+                run,
+                differences: None,
+            }
+        })
+        .collect();
+    // The differences never step outside the prior box, where the model is
+    // not defined.
+    let (zeros, ones) = (vec![0.0; q], vec![1.0; q]);
+    loop {
+        let mut points: Vec<Vec<f64>> = Vec::new();
+        let mut records: Vec<&IoData> = Vec::new();
+        // Each asking descent and how many of the points are its own, in order.
+        let mut askers: Vec<(usize, usize)> = Vec::new();
+        for (d, slot) in slots.iter_mut().enumerate() {
+            let Slot::Running {
+                job,
+                run,
+                differences,
+            } = slot
+            else {
+                continue;
+            };
+            if run.need() == Need::Observe {
+                run.proceed(false);
+            }
+            let before = points.len();
+            match run.need() {
+                Need::Evaluations => {
+                    for point in run.evaluations_mut() {
+                        for ((v, lo), hi) in point.x.iter_mut().zip(&job.lo).zip(&job.hi) {
+                            *v = v.clamp(*lo, *hi);
+                        }
+                        points.push(to_theta(prior, &point.x));
+                    }
+                }
+                Need::Model => {
+                    let (central, at) =
+                        CentralDifferences::at(run.model_mut().x, Some((&zeros, &ones)));
+                    points.extend(at.iter().map(|point| to_theta(prior, point)));
+                    *differences = Some(central);
+                }
+                Need::Observe | Need::Done => {}
+            }
+            if points.len() > before {
+                records.resize(points.len(), job.record);
+                askers.push((d, points.len() - before));
+            }
+        }
+        if points.is_empty() {
+            break;
+        }
+        let pairs: Vec<(&[f64], &IoData)> = points
+            .iter()
+            .map(Vec::as_slice)
+            .zip(records.iter().copied())
+            .collect();
+        let mut values = vec![Vec::new(); points.len()];
+        let results = model.residuals_batch(&pairs, &mut values);
+        let mut answers = results.into_iter().zip(values);
+        for (d, count) in askers {
+            let mine: Vec<_> = answers.by_ref().take(count).collect();
+            let Slot::Running {
+                run, differences, ..
+            } = &mut slots[d]
+            else {
+                continue;
+            };
+            if let Some(central) = differences.take() {
+                if mine.iter().any(|(result, _)| result.is_err()) {
+                    run.abandon(TerminationReason::EvaluationFailed);
+                } else {
+                    let columns: Vec<Vec<f64>> = mine.into_iter().map(|(_, v)| v).collect();
+                    let m = run.model_mut();
+                    central.products(&columns, m.residuals, m.jtj, m.jtr);
+                    run.modelled();
+                }
+                continue;
+            }
+            let starting = !run.started();
+            let mut start_failed = None;
+            for ((result, value), point) in mine.into_iter().zip(run.evaluations_mut()) {
+                match result {
+                    Ok(()) => {
+                        point.cost = value.iter().map(|v| v * v).sum();
+                        point.residuals = value;
+                    }
+                    Err(e) if starting => start_failed = Some(e),
+                    // A trial the model cannot evaluate is a refused step.
+                    Err(_) => point.cost = f64::INFINITY,
+                }
+            }
+            match start_failed {
+                Some(e) => slots[d] = Slot::Failed(e),
+                None => run.evaluated(),
+            }
+        }
+    }
+    slots
+        .into_iter()
+        .map(|slot| match slot {
+            Slot::Failed(e) => Err(e),
+            Slot::Running { job, run, .. } => {
+                let found = run.finish();
+                Ok(Descent {
+                    start: job.start,
+                    theta: to_theta(prior, &found.x),
+                    loss: found.cost,
+                    iterations: found.iterations,
+                    stop: found.reason,
+                })
+            }
+        })
+        .collect()
+}

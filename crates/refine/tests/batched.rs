@@ -1,0 +1,197 @@
+//! Output-error descents through a simulator that counts its requests:
+//! the descents of a refinement go to it together, a round at a time, and
+//! end where each descent alone ends.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use twostage_models::{
+    Capabilities, Conditions, ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator,
+    experiment_rng,
+};
+use twostage_refine::{OutputError, Refinement, TerminationReason};
+
+/// `y(t) = a y(t-1) + b u(t-1)` on the given input, noise-free only; it
+/// counts requests and points, and fails at `b` above `fail_above`.
+struct FirstOrder {
+    spec: ModelSpec,
+    batch: usize,
+    fail_above: f64,
+    requests: AtomicUsize,
+    points: AtomicUsize,
+}
+
+impl FirstOrder {
+    fn new(batch: usize, fail_above: f64) -> Self {
+        let prior = Prior::uniform_box(&[0.0, 0.1], &[0.95, 3.0]).unwrap();
+        let spec = ModelSpec::new("first-order", &["a", "b"], prior, 1.0, 300)
+            .unwrap()
+            .with_signals(&["u"], &["y"]);
+        Self {
+            spec,
+            batch,
+            fail_above,
+            requests: AtomicUsize::new(0),
+            points: AtomicUsize::new(0),
+        }
+    }
+
+    fn respond(&self, theta: &[f64], input: &IoData, out: &mut IoData) -> Result<(), SimError> {
+        self.points.fetch_add(1, Ordering::Relaxed);
+        if theta[1] > self.fail_above {
+            return Err(SimError::InvalidData(format!("b = {} breaks it", theta[1])));
+        }
+        let n = input.n_samples();
+        out.resize(n, 1, 1);
+        out.input_mut(0).copy_from_slice(input.input(0));
+        let mut y = 0.0;
+        for t in 0..n {
+            out.output_mut(0)[t] = y;
+            y = theta[0] * y + theta[1] * input.input(0)[t];
+        }
+        Ok(())
+    }
+}
+
+impl Simulator for FirstOrder {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+    fn simulate(&self, _: &[f64], _: &mut ExperimentRng, _: &mut IoData) -> Result<(), SimError> {
+        Err(SimError::InvalidData("given inputs only".into()))
+    }
+    fn batch_size(&self) -> usize {
+        self.batch
+    }
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            noiseless: true,
+            given_input: true,
+        }
+    }
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        _: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
+        self.requests.fetch_add(1, Ordering::Relaxed);
+        let input = conditions
+            .input
+            .ok_or(SimError::InvalidData("no input".into()))?;
+        self.respond(theta, input, out)
+    }
+    fn simulate_batch_under(
+        &self,
+        thetas: &[&[f64]],
+        _: &mut [ExperimentRng],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<(), SimError>> {
+        assert!(
+            thetas.len() <= self.batch,
+            "a request larger than the batch"
+        );
+        self.requests.fetch_add(1, Ordering::Relaxed);
+        let Some(input) = conditions.input else {
+            return vec![Err(SimError::InvalidData("no input".into())); thetas.len()];
+        };
+        thetas
+            .iter()
+            .zip(outs)
+            .map(|(theta, out)| self.respond(theta, input, out))
+            .collect()
+    }
+}
+
+/// A record of the system at a = 0.8, b = 1.5 with a little output noise.
+fn record() -> IoData {
+    use rand::RngExt;
+    let model = FirstOrder::new(1, f64::INFINITY);
+    let mut rng = experiment_rng(11, 0);
+    let u: Vec<f64> = (0..300).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let input = IoData::siso(&u, &vec![0.0; 300]).unwrap();
+    let mut out = IoData::default();
+    model.respond(&[0.8, 1.5], &input, &mut out).unwrap();
+    for y in out.output_mut(0) {
+        *y += 0.05 * rng.random_range(-1.0..1.0);
+    }
+    out
+}
+
+fn bits(x: &[f64]) -> Vec<u64> {
+    x.iter().map(|v| v.to_bits()).collect()
+}
+
+#[test]
+fn descents_asked_together_end_where_each_ends_alone_in_far_fewer_requests() {
+    let record = record();
+    let starts = vec![vec![0.5, 1.0], vec![0.9, 2.5], vec![0.2, 0.5]];
+    // Each start alone, one point per request.
+    let alone: Vec<_> = starts
+        .iter()
+        .map(|start| {
+            let model = FirstOrder::new(1, f64::INFINITY);
+            let fit = Refinement::new(OutputError::new(&model).unwrap());
+            let found = fit.descend(&record, start.clone()).unwrap();
+            (found, model.requests.into_inner())
+        })
+        .collect();
+    let one_at_a_time: usize = alone.iter().map(|(_, requests)| requests).sum();
+    // All three together, through a simulator that takes 50 a request.
+    let batched = FirstOrder::new(50, f64::INFINITY);
+    let fit = Refinement::new(OutputError::new(&batched).unwrap());
+    let together = fit.descents_from(&record, starts).unwrap();
+    for ((found, _), with) in alone.iter().zip(&together) {
+        assert_eq!(bits(&with.theta), bits(&found.theta));
+        assert_eq!(with.loss.to_bits(), found.loss.to_bits());
+        assert_eq!((with.iterations, with.stop), (found.iterations, found.stop));
+        assert!((with.theta[0] - 0.8).abs() < 0.01 && (with.theta[1] - 1.5).abs() < 0.02);
+    }
+    let requests = batched.requests.load(Ordering::Relaxed);
+    let points = batched.points.load(Ordering::Relaxed);
+    // A round asks for every descent's Jacobian (4 points each) or trial
+    // steps (3 each): two requests per iteration of the longest descent,
+    // and one more where all three dampings were refused, where one at a
+    // time each point was a request.
+    let longest = together.iter().map(|d| d.iterations).max().unwrap();
+    assert!(
+        requests <= 3 * longest + 1,
+        "{requests} requests for {longest} iterations"
+    );
+    assert!(
+        requests * 5 < one_at_a_time,
+        "{requests} requests batched against {one_at_a_time} one at a time"
+    );
+    // The trial dampings asked for beside the one taken cost some points.
+    assert!(points <= 2 * one_at_a_time, "{points} points");
+}
+
+#[test]
+fn a_point_the_simulator_cannot_run_is_a_refused_step_not_a_lost_batch() {
+    let record = record();
+    // b above 2.0 fails: the descent from b = 2.9 must step down into the
+    // region that runs; the one from 1.0 is unaffected by its batch mate's
+    // failures.
+    let model = FirstOrder::new(50, 2.0);
+    let fit = Refinement::new(OutputError::new(&model).unwrap());
+    let found = fit.descents_from(&record, vec![vec![0.5, 1.0], vec![0.85, 2.9]]);
+    let found = found.unwrap_err();
+    // The start itself cannot run: that descent, and so the call, fails
+    // with the simulator's reason.
+    assert!(found.to_string().contains("b = 2.9 breaks it"), "{found}");
+    let from_inside = fit
+        .descents_from(&record, vec![vec![0.5, 1.0], vec![0.75, 1.99]])
+        .unwrap();
+    for descent in &from_inside {
+        assert!((descent.theta[1] - 1.5).abs() < 0.02, "{descent:?}");
+        assert_ne!(descent.stop, TerminationReason::EvaluationFailed);
+    }
+    // A Jacobian point outside what the simulator can run ends that
+    // descent where it stands, with its reason.
+    let edge = FirstOrder::new(50, 1.5 + 1e-7);
+    let fit = Refinement::new(OutputError::new(&edge).unwrap());
+    let stopped = fit.descend(&record, vec![0.8, 1.5]).unwrap();
+    assert_eq!(stopped.stop, TerminationReason::EvaluationFailed);
+    assert!((stopped.theta[1] - 1.5).abs() < 1e-12, "{stopped:?}");
+}
