@@ -17,6 +17,7 @@ mod lockstep;
 mod moments;
 mod output_error;
 mod refinement;
+mod uncertainty;
 
 pub use check::{EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, check_record, output_fit};
 pub use error::RefineError;
@@ -25,3 +26,4 @@ pub use output_error::OutputError;
 pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
 /// Why a descent stopped ([`Descent::stop`]).
 pub use twostage_fit::TerminationReason;
+pub use uncertainty::LocalUncertainty;

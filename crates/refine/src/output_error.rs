@@ -84,9 +84,10 @@ impl<S: Simulator> ResidualModel for OutputError<S> {
     }
 
     /// The pairs of each record (by its input) in the simulator's batches:
-    /// a command source gets one request per batch of points, whatever
-    /// the descents they come from; a simulator that takes one experiment
-    /// at a time (built-in, FMU) runs the points on the threads.
+    /// a command source gets one request per batch of points (at most its
+    /// `batch`, split over the threads when fewer), whatever the descents
+    /// they come from; a simulator that takes one experiment at a time
+    /// (built-in, FMU) runs the points on the threads.
     fn residuals_batch(
         &self,
         pairs: &[(&[f64], &IoData)],
@@ -105,8 +106,22 @@ impl<S: Simulator> ResidualModel for OutputError<S> {
                     *result = self.simulate_quietly(theta, record, response);
                 });
         } else {
-            for group in same_input_groups(pairs) {
-                for chunk in group.chunks(batch) {
+            // Requests of at most `batch` points, spread over the threads so
+            // that a simulator that does not vectorize uses every core.
+            let threads = rayon::current_num_threads().max(1);
+            let chunks: Vec<Vec<usize>> = same_input_groups(pairs)
+                .into_iter()
+                .flat_map(|group| {
+                    let size = batch.min(group.len().div_ceil(threads)).max(1);
+                    group
+                        .chunks(size)
+                        .map(<[usize]>::to_vec)
+                        .collect::<Vec<_>>()
+                })
+                .collect();
+            let answered: Vec<_> = chunks
+                .par_iter()
+                .map(|chunk| {
                     let record = pairs[chunk[0]].1;
                     let thetas: Vec<&[f64]> = chunk.iter().map(|&k| pairs[k].0).collect();
                     // A noise-free run draws nothing that matters: any streams serve.
@@ -120,10 +135,13 @@ impl<S: Simulator> ResidualModel for OutputError<S> {
                         quietly_on(record),
                         &mut outs,
                     );
-                    for ((&k, answer), out) in chunk.iter().zip(answers).zip(outs) {
-                        results[k] = answer.map_err(simulation_error);
-                        responses[k] = out;
-                    }
+                    (answers, outs)
+                })
+                .collect();
+            for (chunk, (answers, outs)) in chunks.iter().zip(answered) {
+                for ((&k, answer), out) in chunk.iter().zip(answers).zip(outs) {
+                    results[k] = answer.map_err(simulation_error);
+                    responses[k] = out;
                 }
             }
         }

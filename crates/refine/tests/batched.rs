@@ -2,6 +2,9 @@
 //! the descents of a refinement go to it together, a round at a time, and
 //! end where each descent alone ends.
 
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use twostage_models::{
@@ -138,10 +141,18 @@ fn descents_asked_together_end_where_each_ends_alone_in_far_fewer_requests() {
         })
         .collect();
     let one_at_a_time: usize = alone.iter().map(|(_, requests)| requests).sum();
-    // All three together, through a simulator that takes 50 a request.
+    // All three together, through a simulator that takes 50 a request, on
+    // one thread (more threads split a round's points over as many
+    // requests, so that a simulator that does not vectorize uses them).
     let batched = FirstOrder::new(50, f64::INFINITY);
     let fit = Refinement::new(OutputError::new(&batched).unwrap());
-    let together = fit.descents_from(&record, starts).unwrap();
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let together = one_thread
+        .install(|| fit.descents_from(&record, starts.clone()))
+        .unwrap();
     for ((found, _), with) in alone.iter().zip(&together) {
         assert_eq!(bits(&with.theta), bits(&found.theta));
         assert_eq!(with.loss.to_bits(), found.loss.to_bits());
@@ -165,6 +176,20 @@ fn descents_asked_together_end_where_each_ends_alone_in_far_fewer_requests() {
     );
     // The trial dampings asked for beside the one taken cost some points.
     assert!(points <= 2 * one_at_a_time, "{points} points");
+    // On two threads each round is two requests, and the same bits.
+    let split = FirstOrder::new(50, f64::INFINITY);
+    let fit = Refinement::new(OutputError::new(&split).unwrap());
+    let two_threads = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let again = two_threads
+        .install(|| fit.descents_from(&record, starts))
+        .unwrap();
+    for (a, b) in again.iter().zip(&together) {
+        assert_eq!(bits(&a.theta), bits(&b.theta));
+    }
+    assert_eq!(split.requests.load(Ordering::Relaxed), 2 * requests);
 }
 
 #[test]

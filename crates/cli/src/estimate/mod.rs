@@ -109,6 +109,8 @@ struct Estimated {
     /// a posterior mean), or why the refinement failed (the TS estimate
     /// is kept).
     refined: Option<Result<Option<TerminationReason>, String>>,
+    /// With --refine: why the refined estimate has no interval of its own.
+    interval_failure: Option<String>,
 }
 
 impl Estimated {
@@ -169,6 +171,7 @@ fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
                 floored: None,
                 check: None,
                 refined: Some(Ok(Some(best.stop))),
+                interval_failure: None,
             })
         }),
     })
@@ -216,13 +219,22 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 // record; the fixed ones are the fallback. Both were
                 // calibrated for the TS estimate, not a refined one.
                 let widths = a.interval_half_widths().map(<[f64]>::to_vec);
-                // A refinement that fails keeps the TS estimate, and says so.
-                let (theta, refined) = match refine.as_ref() {
+                // A refinement that fails keeps the TS estimate, and says so;
+                // one that succeeds brings its own interval (NaN where the
+                // record does not determine it, said on stderr).
+                let (theta, widths, refined, interval) = match refine.as_ref() {
                     Some(refine) => match refine(record, &a.theta, widths.as_deref()) {
-                        Ok(r) => (r.theta, Some(Ok(r.stop))),
-                        Err(e) => (a.theta, Some(Err(e))),
+                        Ok(r) => {
+                            let q = r.theta.len();
+                            let (own, why) = match r.half_widths {
+                                Ok(w) => (w, None),
+                                Err(e) => (vec![f64::NAN; q], Some(e)),
+                            };
+                            (r.theta, Some(own), Some(Ok(r.stop)), why)
+                        }
+                        Err(e) => (a.theta, widths, Some(Err(e)), None),
                     },
-                    None => (a.theta, None),
+                    None => (a.theta, widths, None, None),
                 };
                 let check = checker.as_ref().map(|(model, sims, seed)| {
                     twostage::check_record(model.as_ref(), record, &theta, *sims, *seed)
@@ -235,6 +247,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     floored: transforms.then_some(a.floored_samples),
                     check,
                     refined,
+                    interval_failure: interval,
                 })
             }),
         });
@@ -290,6 +303,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     floored: None,
                     check: None,
                     refined: None,
+                    interval_failure: None,
                 })
                 .map_err(|e| e.to_string())
         }),
@@ -386,6 +400,26 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             id
                         ),
                         _ => {}
+                    }
+                    if let Some(e) = &estimated.interval_failure {
+                        eprintln!(
+                            "warning: {}: experiment {}: the refined estimate has no interval \
+                             ({e}); its _lo and _hi are NaN",
+                            path.display(),
+                            id
+                        );
+                    }
+                    if let (Some(Ok(_)), Some(Ok(check))) = (&estimated.refined, &estimated.check)
+                        && !check.model_consistent()
+                    {
+                        eprintln!(
+                            "note: {}: experiment {}: the model does not make this record \
+                             exactly (model_consistent false): the refined interval covers this \
+                             record's noise about the model's best fit, not the error of the \
+                             model itself, so the plant's true values may lie outside it",
+                            path.display(),
+                            id
+                        );
                     }
                     if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
                         plot_check(dir, &id, &record, check, &output_names, sample_time)?;

@@ -20,6 +20,9 @@ pub(super) struct Refined {
     pub(super) theta: Vec<f64>,
     /// Why the output-error descent stopped (`None` for the posterior mean).
     pub(super) stop: Option<TerminationReason>,
+    /// The refined estimate's own interval half-widths, at the level of the
+    /// estimator's intervals, or why it has none.
+    pub(super) half_widths: Result<Vec<f64>, String>,
 }
 
 /// The refinement of an estimator's estimates: a built-in model's local
@@ -29,18 +32,23 @@ pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<R
     let radius = estimator
         .neighbourhood(2.0)
         .map_err(|e| usage(format!("--refine: {e}")))?;
+    // A neighbourhood exists only where the estimator has intervals.
+    let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
     if args.model_file.is_none()
         && let Ok(model) = estimator.training().model.parse::<BuiltinModel>()
     {
         let points = ModelProfile::of(model).refinement_points();
         let local = Refinement::new(twostage_baselines::exact_likelihood(model)?);
         return Ok(Box::new(move |record: &IoData, start: &[f64], _| {
-            let mean = local
+            // The posterior's own spread: its sd, under a normal
+            // approximation at the intervals' level.
+            let posterior = local
                 .local_posterior(record, start, &radius, points)
-                .map_err(|e| e.to_string())?
-                .mean;
+                .map_err(|e| e.to_string())?;
+            let z = twostage::models::standard_normal_quantile(1.0 - alpha / 2.0);
             Ok(Refined {
-                theta: mean,
+                half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
+                theta: posterior.mean,
                 stop: None,
             })
         }));
@@ -61,9 +69,16 @@ pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<R
                 .into_iter()
                 .reduce(|best, d| if d.loss < best.loss { d } else { best })
                 .ok_or_else(|| "no start".to_string())?;
+            // Its own uncertainty, from the loss's curvature there and the
+            // residuals' variance and autocorrelation.
+            let half_widths = fit
+                .uncertainty(record, &best.theta)
+                .map(|u| u.half_widths(alpha))
+                .map_err(|e| e.to_string());
             Ok(Refined {
                 theta: best.theta,
                 stop: Some(best.stop),
+                half_widths,
             })
         },
     ))
