@@ -14,6 +14,21 @@ pub fn format_f64(v: f64) -> String {
     }
 }
 
+/// `v` to four significant digits, for people: plain decimals from 1e-3
+/// to 1e5, scientific notation outside (a residual of 1.8e-6 m must not
+/// print as 0.0000).
+pub fn four_digits(v: f64) -> String {
+    let magnitude = v.abs();
+    if v == 0.0 || !v.is_finite() {
+        format!("{v}")
+    } else if (1e-3..1e5).contains(&magnitude) {
+        let decimals = (3 - magnitude.log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 /// Parse a comma-separated list of numbers, e.g. `-35,-1.1`.
 pub fn parse_list(text: &str, what: &str) -> Result<Vec<f64>, String> {
     text.split(',')
@@ -32,6 +47,16 @@ pub fn parse_list(text: &str, what: &str) -> Result<Vec<f64>, String> {
 mod tests {
     use super::*;
     use twostage_models::{StreamPurpose, stream_rng};
+
+    #[test]
+    fn four_digits_keep_small_values_readable() {
+        assert_eq!(four_digits(1.8e-6), "1.800e-6");
+        assert_eq!(four_digits(0.26281), "0.2628");
+        assert_eq!(four_digits(-12.3456), "-12.35");
+        assert_eq!(four_digits(0.0012345), "0.001234");
+        assert_eq!(four_digits(123456.0), "1.235e5");
+        assert_eq!(four_digits(0.0), "0");
+    }
 
     #[test]
     fn every_value_reads_back_to_the_same_bits() {

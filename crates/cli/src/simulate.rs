@@ -11,7 +11,7 @@ use twostage::sources::csv_rows::row;
 use twostage_models::{IoData, Simulator, experiment_rng, run_experiments};
 
 use crate::model_arg::ModelArgs;
-use crate::number::{format_f64, parse_list};
+use crate::number::{format_f64, four_digits, parse_list};
 use crate::{predict, usage};
 
 /// Options of `twostage simulate`, already parsed by clap.
@@ -173,7 +173,7 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
                 .enumerate()
                 .map(|(j, name)| {
                     let (rms, fit) = twostage::output_fit(measured.output(j), record.output(j));
-                    format!("{name} RMS {rms:.4}, fit {fit:.1}%")
+                    format!("{name} RMS {}, fit {fit:.1}%", four_digits(rms))
                 })
                 .collect();
             eprintln!(

@@ -150,6 +150,30 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         stop.lines().next().unwrap().ends_with("refine_stop"),
         "{stop}"
     );
+    // The refined row's interval is its own (from the loss's curvature
+    // and the residuals), not the two-stage one moved to the refined point.
+    let field = |text: &str, name: &str| -> f64 {
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let row: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let at = header.iter().position(|h| *h == name).unwrap();
+        row[at].parse().unwrap()
+    };
+    let two_stage = std::fs::read_to_string(&ts).unwrap();
+    for name in ["k", "a1", "a2", "h0"] {
+        let width =
+            |text: &str| field(text, &format!("{name}_hi")) - field(text, &format!("{name}_lo"));
+        let (own, moved) = (width(&stop), width(&two_stage));
+        let centre = field(&stop, name);
+        assert!(
+            own.is_finite() && own > 0.0 && (own - moved).abs() > 1e-6 * moved,
+            "{name}: refined width {own}, two-stage {moved}"
+        );
+        assert!(
+            field(&stop, &format!("{name}_lo")) < centre
+                && centre < field(&stop, &format!("{name}_hi"))
+        );
+    }
 
     // Validation: each estimate predicts the other record's level.
     let [ts_rms, refined_rms, oe_rms] =

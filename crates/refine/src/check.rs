@@ -3,6 +3,7 @@
 //! record, and how typical that misfit is of the model's own noisy
 //! records at the estimate (`twostage estimate --check`).
 
+use rayon::prelude::*;
 use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
 
 use crate::output_error::write_output_errors;
@@ -174,24 +175,32 @@ pub fn check_record(
         noiseless: false,
         input: Some(record),
     };
-    // In the source's batches: a command answers a batch in one request.
-    let batch = sim.batch_size().max(1);
+    // In the source's batches (a command answers a batch in one request),
+    // spread over the threads so that a simulator that does not vectorize
+    // uses every core; experiment i's stream is (seed, i) whatever the split.
+    let threads = rayon::current_num_threads().max(1);
+    let size = sim.batch_size().max(1).min(noisy.div_ceil(threads)).max(1);
+    let firsts: Vec<usize> = (0..noisy).step_by(size).collect();
+    let runs: Vec<Vec<(Result<(), _>, IoData)>> = firsts
+        .par_iter()
+        .map(|&first| {
+            let count = size.min(noisy - first);
+            let thetas = vec![theta; count];
+            let mut rngs: Vec<_> = (first..first + count)
+                .map(|i| experiment_rng(seed, i as u64))
+                .collect();
+            let mut own = vec![IoData::default(); count];
+            let results = sim.simulate_batch_under(&thetas, &mut rngs, with_noise, &mut own);
+            results.into_iter().zip(own).collect()
+        })
+        .collect();
     let mut reference = Vec::with_capacity(noisy);
-    for first in (0..noisy).step_by(batch) {
-        let count = batch.min(noisy - first);
-        let thetas = vec![theta; count];
-        let mut rngs: Vec<_> = (first..first + count)
-            .map(|i| experiment_rng(seed, i as u64))
-            .collect();
-        let mut own = vec![IoData::default(); count];
-        let results = sim.simulate_batch_under(&thetas, &mut rngs, with_noise, &mut own);
-        for (result, own) in results.into_iter().zip(&own) {
-            result.map_err(|source| RefineError::Simulation {
-                what: "a simulation with the model's noise at the estimate",
-                source,
-            })?;
-            reference.push(mean_squares(own, &simulated));
-        }
+    for (result, own) in runs.into_iter().flatten() {
+        result.map_err(|source| RefineError::Simulation {
+            what: "a simulation with the model's noise at the estimate",
+            source,
+        })?;
+        reference.push(mean_squares(&own, &simulated));
     }
     // Each output's misfit in units of the model's own (so that outputs of
     // different scales weigh alike), summed over the outputs.
