@@ -223,9 +223,11 @@ impl<M: ResidualModel> Refinement<M> {
         Ok(found.remove(0))
     }
 
-    /// One descent in the prior box from each of `starts`, run in
-    /// parallel, in the starts' order (the same whatever the thread
-    /// count: each descent is a function of its start alone).
+    /// One descent in the prior box from each of `starts`, in the starts'
+    /// order. The descents run in lockstep: each round's points of all of
+    /// them go to the model as one batch
+    /// ([`ResidualModel::residuals_batch`]); each descent is still a
+    /// function of its start alone, the same whatever the thread count.
     ///
     /// ```
     /// # use twostage_models::{IoData, Prior};

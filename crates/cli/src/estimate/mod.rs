@@ -48,7 +48,8 @@ pub struct EstimateArgs {
     /// record, 0.4 s per car record). Any other model (--model-file): an
     /// output-error fit, Levenberg-Marquardt on the record minus the
     /// noise-free simulation, in the prior's box, from the estimate and
-    /// two starts inside its interval (in parallel); `refine_stop` says
+    /// two starts inside its interval (their simulations batched together);
+    /// its own interval in _lo/_hi (decision 035); `refine_stop` says
     /// why the best descent stopped.
     #[arg(long, requires = "estimator")]
     refine: bool,
