@@ -1,14 +1,19 @@
 //! The uncertainty of a least-squares estimate from its record alone: the
 //! local curvature of the loss (the Jacobian of the residuals) with the
-//! residuals' own variance and autocorrelation, as a heteroskedasticity-
-//! and autocorrelation-consistent (HAC) sandwich: the Bartlett kernel
-//! (Newey and West, 1987, Econometrica 55(3)) on AR(1)-prewhitened scores
-//! (Andrews and Monahan, 1992, Econometrica 60(4)), the bandwidth by
-//! Andrews' AR(1) plug-in rule (1991, Econometrica 59(3), sec. 6, with the
-//! Bartlett constant 1.1447). Output
-//! errors of a model with process noise, or of one that misses part of the
-//! plant, are correlated in time: the classic `s^2 (J'J)^-1` would then be
-//! several times too narrow.
+//! residuals' own variance and autocorrelation, as the sandwich
+//! `(J'J)^-1 J' Gamma J (J'J)^-1` of least squares under stationary
+//! coloured noise (Ljung, System Identification, 2nd ed., 1999, sec. 9.3),
+//! `Gamma` the autocovariances of an autoregressive model of the residuals
+//! (Yule-Walker, the order by BIC). Output errors of a model with process
+//! noise, or of one that misses part of the plant, are correlated in time:
+//! the classic `s^2 (J'J)^-1` would then be several times too narrow.
+//!
+//! Not a kernel (HAC) estimate of the scores' long-run variance: a
+//! parameter that only a few samples determine (an initial state, seen in
+//! the first samples' transient) has scores on those samples alone, whose
+//! fitted residuals are near zero; the kernel estimate was then many times
+//! too narrow (decision 035). The noise model is estimated from all the
+//! samples, whatever the parameter.
 
 use twostage_fit::CentralDifferences;
 use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
@@ -25,8 +30,9 @@ pub struct LocalUncertainty {
     pub sd: Vec<f64>,
     /// The correlation matrix of the parameters (row-major q x q).
     pub correlation: Vec<f64>,
-    /// The lags of the residuals' autocorrelation taken in (0: white).
-    pub bandwidth: usize,
+    /// The order of the autoregressive model of the residuals (0: white;
+    /// of several outputs, the largest).
+    pub noise_order: usize,
 }
 
 impl LocalUncertainty {
@@ -42,11 +48,11 @@ impl<M: ResidualModel> Refinement<M> {
     /// The covariance of the least-squares estimate `theta` of `record`
     /// from the record alone: `A^-1 B A^-1` with `A = J'J` (central
     /// differences, the `2q` points asked for in one batch with `theta`
-    /// itself) and `B` the Bartlett-weighted sum of the autocovariances of
-    /// the scores `J_t' r_t` up to a bandwidth chosen from their lag-one
-    /// autocorrelation. Residuals of several outputs (the model's
-    /// `n_residuals` a multiple of the record's samples) are summed per
-    /// sample before their autocovariances are taken. Meant for the minimum
+    /// itself) and `B = J' Gamma J`, `Gamma` the autocovariances of an
+    /// autoregressive model of the residuals (order by BIC, at most 20,
+    /// variance scaled by `T / (T - q)`). Residuals of several outputs (the
+    /// model's `n_residuals` a multiple of the record's samples) each get
+    /// their own noise model. Meant for the minimum
     /// of the loss (a refined estimate): elsewhere the gradient is not
     /// zero and the sandwich does not apply.
     ///
@@ -68,7 +74,7 @@ impl<M: ResidualModel> Refinement<M> {
     /// let fit = Refinement::new(ConstantMean(Prior::uniform_box(&[-5.0], &[5.0])?));
     /// let record = IoData::siso(&[0.0; 4], &[1.0, 0.0, -1.0, 0.0])?;
     /// let local = fit.uncertainty(&record, &[0.0])?;
-    /// assert_eq!(local.bandwidth, 0);
+    /// assert_eq!(local.noise_order, 0);
     /// assert!((local.sd[0] - (2.0f64 / 3.0).sqrt() / 2.0).abs() < 1e-6, "{local:?}");
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
@@ -109,7 +115,7 @@ impl<M: ResidualModel> Refinement<M> {
         let columns = differences.jacobian(&values, n);
         let samples = record.n_samples().max(1);
         let length = if n % samples == 0 { samples } else { n };
-        let (covariance, bandwidth) = sandwich(&columns, &residuals, q, length)?;
+        let (covariance, noise_order) = sandwich(&columns, &residuals, q, length)?;
         // Back from unit coordinates to the parameters' own.
         let span: Vec<f64> = (0..q)
             .map(|j| prior.upper()[j] - prior.lower()[j])
@@ -132,14 +138,14 @@ impl<M: ResidualModel> Refinement<M> {
         Ok(LocalUncertainty {
             sd,
             correlation,
-            bandwidth,
+            noise_order,
         })
     }
 }
 
 /// `A^-1 B A^-1` (row-major q x q) for the Jacobian `columns` (each `n`
-/// long) and residuals `r`, whose index `k` is time `k % length`; and the
-/// bandwidth used.
+/// long) and residuals `r`, whose index `k` is time `k % length` of output
+/// `k / length`; and the largest autoregressive order taken.
 fn sandwich(
     columns: &[f64],
     r: &[f64],
@@ -147,71 +153,31 @@ fn sandwich(
     length: usize,
 ) -> Result<(Vec<f64>, usize), Error> {
     let n = r.len();
-    // The scores per time: g_t = sum over the blocks of J_k' r_k.
-    let mut scores = vec![0.0; length * q];
-    for a in 0..q {
-        let column = &columns[a * n..(a + 1) * n];
-        for (k, (j, e)) in column.iter().zip(r).enumerate() {
-            scores[(k % length) * q + a] += j * e;
-        }
-    }
-    // Prewhitened (Andrews and Monahan, 1992, Econometrica 60(4)): each
-    // score series' AR(1) part is taken out, the kernel estimate made on
-    // what is left, and the AR(1) part put back; the kernel estimate alone
-    // is far too narrow for strongly correlated series.
-    let rho: Vec<f64> = (0..q)
-        .map(|a| {
-            let (mut lagged, mut square) = (0.0, 0.0);
-            for t in 1..length {
-                lagged += scores[t * q + a] * scores[(t - 1) * q + a];
-                square += scores[(t - 1) * q + a] * scores[(t - 1) * q + a];
-            }
-            // Bounded away from a unit root, where nothing is estimable.
-            if square > 0.0 {
-                (lagged / square).clamp(-0.97, 0.97)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    // The first score has no predecessor: it stands as it is.
-    let whitened: Vec<f64> = (0..length)
-        .flat_map(|t| {
-            let (rho, scores) = (&rho, &scores);
-            (0..q).map(move |a| {
-                let before = if t > 0 { scores[(t - 1) * q + a] } else { 0.0 };
-                scores[t * q + a] - rho[a] * before
-            })
-        })
-        .collect();
-    let bandwidth = andrews_bandwidth(&whitened, q, length);
     let mut meat = vec![0.0; q * q];
-    for lag in 0..=bandwidth {
-        let weight = 1.0 - lag as f64 / (bandwidth + 1) as f64;
-        for t in lag..length {
-            let now = &whitened[t * q..(t + 1) * q];
-            let then = &whitened[(t - lag) * q..(t - lag + 1) * q];
+    let mut largest_order = 0;
+    // Each output's residuals are their own stationary process; the
+    // outputs' cross-correlation is not modelled.
+    for (block, residuals) in r.chunks(length).enumerate() {
+        let offset = block * length;
+        let noise = NoiseModel::fit(residuals, q);
+        largest_order = largest_order.max(noise.order);
+        let jacobian = |a: usize| &columns[a * n + offset..a * n + offset + residuals.len()];
+        // B = J' Gamma J with Gamma Toeplitz in the autocovariances.
+        for (lag, gamma) in noise.autocovariance.iter().enumerate() {
             for a in 0..q {
                 for b in 0..q {
-                    let product = now[a] * then[b];
-                    meat[a * q + b] += if lag == 0 {
-                        product
+                    let (ja, jb) = (jacobian(a), jacobian(b));
+                    let products: f64 = if lag == 0 {
+                        ja.iter().zip(jb).map(|(x, y)| x * y).sum()
                     } else {
-                        // Gamma_l + Gamma_l': both orders of the pair.
-                        weight * (product + then[a] * now[b])
+                        ja[lag..].iter().zip(jb).map(|(x, y)| x * y).sum::<f64>()
+                            + jb[lag..].iter().zip(ja).map(|(x, y)| x * y).sum::<f64>()
                     };
+                    meat[a * q + b] += gamma * products;
                 }
             }
         }
     }
-    // Recoloured.
-    for a in 0..q {
-        for b in 0..q {
-            meat[a * q + b] /= (1.0 - rho[a]) * (1.0 - rho[b]);
-        }
-    }
-    // A small-sample correction: q parameters were fitted to the residuals.
-    let correction = length as f64 / (length.saturating_sub(q).max(1)) as f64;
     let mut bread = vec![0.0; q * q];
     for a in 0..q {
         for b in 0..q {
@@ -244,45 +210,99 @@ fn sandwich(
         // Row a of (A^-1 B) A^-1 = A^-1 (row a of A^-1 B)' since A is symmetric.
         let mut row: Vec<f64> = half[a * q..(a + 1) * q].to_vec();
         solve_cholesky_in_place(&factor, q, &mut row);
-        for b in 0..q {
-            covariance[a * q + b] = correction * row[b];
-        }
+        covariance[a * q..(a + 1) * q].copy_from_slice(&row);
     }
-    Ok((covariance, bandwidth))
+    Ok((covariance, largest_order))
 }
 
-/// Andrews' bandwidth for the Bartlett kernel from AR(1) fits of each
-/// series (`length` rows of `q`): `1.1447 (alpha T)^(1/3)` with `alpha = sum 4 rho^2 s^4 / ((1 -
-/// rho)^6 (1 + rho)^2) / sum s^4 / (1 - rho)^4`, below the series length.
-fn andrews_bandwidth(series_rows: &[f64], q: usize, length: usize) -> usize {
-    if length < 3 {
-        return 0;
-    }
-    let (mut numerator, mut denominator) = (0.0, 0.0);
-    for a in 0..q {
-        let series = |t: usize| series_rows[t * q + a];
-        let (mut lagged, mut square) = (0.0, 0.0);
-        for t in 1..length {
-            lagged += series(t) * series(t - 1);
-            square += series(t - 1) * series(t - 1);
+/// A stationary autoregressive model of one output's residuals: its order
+/// by the Bayesian information criterion, its coefficients by Yule-Walker
+/// (Levinson-Durbin), which keeps it stationary; and the autocovariances
+/// it implies, up to the lag where they have died out (or the record's
+/// length).
+struct NoiseModel {
+    order: usize,
+    autocovariance: Vec<f64>,
+}
+
+impl NoiseModel {
+    /// The model of `residuals`, left by a fit of `fitted` parameters.
+    fn fit(residuals: &[f64], fitted: usize) -> Self {
+        let t = residuals.len();
+        let most = (t / 10).min(20);
+        // Biased sample autocovariances, positive definite as a Toeplitz
+        // matrix: the Yule-Walker model is stationary.
+        let sample: Vec<f64> = (0..=most)
+            .map(|lag| {
+                residuals[lag..]
+                    .iter()
+                    .zip(residuals)
+                    .map(|(x, y)| x * y)
+                    .sum::<f64>()
+                    / t as f64
+            })
+            .collect();
+        // The residuals of a fit are smaller than the noise by q of T
+        // degrees of freedom.
+        let correction = t as f64 / t.saturating_sub(fitted).max(1) as f64;
+        let variance = sample[0] * correction;
+        if variance.is_nan() || variance <= 0.0 || variance.is_infinite() {
+            return Self {
+                order: 0,
+                autocovariance: vec![variance.max(0.0)],
+            };
         }
-        if square <= 0.0 {
-            continue;
+        // Levinson-Durbin, keeping the order of least BIC.
+        let mut coefficients: Vec<f64> = Vec::new();
+        let mut innovation = sample[0];
+        let mut best = (t as f64 * innovation.ln(), Vec::new());
+        for p in 1..=most {
+            let reflection = (sample[p]
+                - coefficients
+                    .iter()
+                    .enumerate()
+                    .map(|(i, a)| a * sample[p - 1 - i])
+                    .sum::<f64>())
+                / innovation;
+            if !reflection.is_finite() || reflection.abs() >= 1.0 {
+                break;
+            }
+            let previous = coefficients.clone();
+            coefficients.push(reflection);
+            for i in 0..p - 1 {
+                coefficients[i] = previous[i] - reflection * previous[p - 2 - i];
+            }
+            innovation *= 1.0 - reflection * reflection;
+            if innovation <= 0.0 {
+                break;
+            }
+            let criterion = t as f64 * innovation.ln() + p as f64 * (t as f64).ln();
+            if criterion < best.0 {
+                best = (criterion, coefficients.clone());
+            }
         }
-        // Bounded away from a unit root, where the rule has no answer.
-        let rho = (lagged / square).clamp(-0.97, 0.97);
-        let innovation = (1..length)
-            .map(|t| (series(t) - rho * series(t - 1)).powi(2))
-            .sum::<f64>()
-            / (length - 1) as f64;
-        let s4 = innovation * innovation;
-        numerator += 4.0 * rho * rho * s4 / ((1.0 - rho).powi(6) * (1.0 + rho).powi(2));
-        denominator += s4 / (1.0 - rho).powi(4);
+        let coefficients = best.1;
+        let order = coefficients.len();
+        // Yule-Walker reproduces the sample autocovariances up to the
+        // order; the model's recursion carries them on.
+        let mut autocovariance: Vec<f64> =
+            sample[..=order].iter().map(|g| g * correction).collect();
+        while order > 0 && autocovariance.len() < t {
+            let lag = autocovariance.len();
+            let next: f64 = coefficients
+                .iter()
+                .enumerate()
+                .map(|(i, a)| a * autocovariance[lag - 1 - i])
+                .sum();
+            autocovariance.push(next);
+            // Died out: the tail of a stationary model decays geometrically.
+            if next.abs() < 1e-9 * variance {
+                break;
+            }
+        }
+        Self {
+            order,
+            autocovariance,
+        }
     }
-    if denominator <= 0.0 {
-        return 0;
-    }
-    let alpha = numerator / denominator;
-    let bandwidth = 1.1447 * (alpha * length as f64).cbrt();
-    (bandwidth.floor() as usize).min(length - 1)
 }

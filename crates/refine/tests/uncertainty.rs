@@ -100,3 +100,62 @@ fn intervals_under_autocorrelated_noise_cover_as_often_as_they_say() {
         share(naive_covered)
     );
 }
+
+/// y_t = a u_t + h 0.5^t + e_t: h, like an initial state, shows in the
+/// first few samples only.
+struct Transient(Prior);
+
+impl ResidualModel for Transient {
+    type Error = RefineError;
+    fn prior(&self) -> &Prior {
+        &self.0
+    }
+    fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
+        let mut decay = 1.0;
+        for ((r, u), y) in r.iter_mut().zip(record.input(0)).zip(record.output(0)) {
+            *r = y - theta[0] * u - theta[1] * decay;
+            decay *= 0.5;
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn a_parameter_that_only_the_first_samples_determine_is_covered_as_often_as_said() {
+    let fit = Refinement::new(Transient(
+        Prior::uniform_box(&[-10.0, -10.0], &[10.0, 10.0]).unwrap(),
+    ));
+    let truth = [2.0, 3.0];
+    let (replications, n) = (1000, 300);
+    let mut covered = [0usize; 2];
+    for k in 0..replications {
+        let mut rng = experiment_rng(6, k as u64);
+        let u = ar1(0.5, n, &mut rng);
+        let y: Vec<f64> = u
+            .iter()
+            .enumerate()
+            .map(|(t, u)| {
+                let e: f64 =
+                    rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
+                truth[0] * u + truth[1] * 0.5f64.powi(t as i32) + 0.2 * e
+            })
+            .collect();
+        // Least squares by the normal equations of the two regressors.
+        let decay: Vec<f64> = (0..n).map(|t| 0.5f64.powi(t as i32)).collect();
+        let dot = |x: &[f64], z: &[f64]| x.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
+        let (suu, sud, sdd) = (dot(&u, &u), dot(&u, &decay), dot(&decay, &decay));
+        let (suy, sdy) = (dot(&u, &y), dot(&decay, &y));
+        let det = suu * sdd - sud * sud;
+        let theta = [(sdd * suy - sud * sdy) / det, (suu * sdy - sud * suy) / det];
+        let record = IoData::siso(&u, &y).unwrap();
+        let local = fit.uncertainty(&record, &theta).unwrap();
+        let w = local.half_widths(0.1);
+        for j in 0..2 {
+            covered[j] += usize::from((theta[j] - truth[j]).abs() <= w[j]);
+        }
+    }
+    for (j, c) in covered.iter().enumerate() {
+        let share = *c as f64 / replications as f64;
+        assert!((0.85..=0.95).contains(&share), "parameter {j}: {share}");
+    }
+}
