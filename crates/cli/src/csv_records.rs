@@ -60,6 +60,41 @@ fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<SignalColumn>> 
     twostage::models::signal_columns(header, &signals.inputs, &signals.outputs)
 }
 
+/// What a header lacks and has too many of, against the model's signals
+/// (the order of the columns does not matter).
+fn header_difference(fields: &[&str], signals: &[&str]) -> String {
+    let missing: Vec<&str> = signals
+        .iter()
+        .filter(|s| !fields.contains(s))
+        .copied()
+        .collect();
+    let extra: Vec<&str> = fields
+        .iter()
+        .filter(|f| !signals.contains(f))
+        .copied()
+        .collect();
+    let twice: Vec<&str> = signals
+        .iter()
+        .filter(|s| fields.iter().filter(|f| f == s).count() > 1)
+        .copied()
+        .collect();
+    let mut parts = Vec::new();
+    if !missing.is_empty() {
+        parts.push(format!("missing {}", missing.join(", ")));
+    }
+    if !extra.is_empty() {
+        parts.push(format!(
+            "extra {} (not a signal of the model: remove the column)",
+            extra.join(", ")
+        ));
+    }
+    if !twice.is_empty() {
+        parts.push(format!("more than once {}", twice.join(", ")));
+    }
+    parts.push("the columns may come in any order".into());
+    parts.join("; ")
+}
+
 /// One record as its rows arrive: a column of values per signal, the last
 /// time seen, and the first problem.
 struct Partial {
@@ -121,8 +156,12 @@ pub fn parse(
         .map(|c| first + c);
     let signal_at: Vec<usize> = (first..fields.len()).filter(|c| Some(*c) != time).collect();
     let signal_fields: Vec<&str> = signal_at.iter().map(|&c| fields[c]).collect();
-    let placed = columns(&signal_fields, signals)
-        .ok_or_else(|| format!("{name}: row 1: header '{header}' is not {expected}"))?;
+    let placed = columns(&signal_fields, signals).ok_or_else(|| {
+        format!(
+            "{name}: row 1: header '{header}' is not {expected}: {}",
+            header_difference(&signal_fields, &all)
+        )
+    })?;
     let width = fields.len();
     let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
     // Records in the order their experiment first appears.
@@ -424,12 +463,28 @@ mod tests {
         assert_eq!(
             e,
             "f.csv: row 1: header 'force,x' is not force,x,v or experiment,force,x,v (with a time \
-             or t column if you like)"
+             or t column if you like): missing v; the columns may come in any order"
         );
         let e = parse("force,x,x\n1,2,3\n", "f.csv", "f", &signals)
             .err()
             .unwrap_or_default();
-        assert!(e.starts_with("f.csv: row 1: header"), "{e}");
+        assert!(
+            e.ends_with("missing v; more than once x; the columns may come in any order"),
+            "{e}"
+        );
+        // The right columns in another order, and one the model does not
+        // have: the message names that one, not the order.
+        let e = parse("t,v,pulse,force,x\n0,1,2,3,4\n", "f.csv", "f", &signals)
+            .err()
+            .unwrap_or_default();
+        assert!(
+            e.ends_with(
+                "extra pulse (not a signal of the model: remove the column); the columns may come \
+                 in any order"
+            ),
+            "{e}"
+        );
+        assert!(parse("t,v,force,x\n0,1,2,3\n", "f.csv", "f", &signals).is_ok());
         // No input at all: outputs only.
         let autonomous = RecordFormat {
             signals: SignalNames {

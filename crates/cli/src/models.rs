@@ -72,7 +72,7 @@ fn describe(named: &NamedModel, out: &mut dyn Write) -> Result<()> {
         "  presets   {} (train --preset)",
         none_if_empty(&presets.join(", "))
     )?;
-    let methods: Vec<&str> = match named {
+    let mut methods: Vec<&str> = match named {
         NamedModel::Builtin(model) => ModelProfile::of(*model)
             .classic_methods()
             .iter()
@@ -80,6 +80,13 @@ fn describe(named: &NamedModel, out: &mut dyn Write) -> Result<()> {
             .collect(),
         NamedModel::File(_) => Vec::new(),
     };
+    // The output-error fit needs only a noise-free run on a given input.
+    if named
+        .simulator(false)
+        .is_ok_and(|s| twostage::OutputError::new(s).is_ok())
+    {
+        methods.push("oe");
+    }
     writeln!(
         out,
         "  methods   {} (estimate --method)",

@@ -35,8 +35,8 @@ pub struct SimulateArgs {
     /// a model file's measurement noise is left out too).
     #[arg(long)]
     noiseless: bool,
-    /// Accept a --theta outside the model's prior box.
-    #[arg(long, requires = "theta")]
+    /// Accept a --theta, or --at values, outside the model's prior box.
+    #[arg(long)]
     allow_outside_prior: bool,
     /// With --theta: write the CSV here instead of standard output. With
     /// --shard: the folder that receives the shard file.
@@ -90,6 +90,13 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
         return Err(usage(
             "--out goes with --theta (a CSV file) or --shard (a folder); --count writes to \
              --out-dir"
+                .into(),
+        ));
+    }
+    if args.allow_outside_prior && args.theta.is_none() && args.at.is_none() {
+        return Err(usage(
+            "--allow-outside-prior goes with --theta or --at, the values given; draws from the \
+             prior (--count) lie in it"
                 .into(),
         ));
     }
@@ -147,6 +154,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
 fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<()> {
     let spec = sim.spec();
     let rows = predict::read_rows(at, spec.param_names())?;
+    predict::refuse_outside_prior(&rows, spec, at, args.allow_outside_prior)?;
     let inputs = match &args.input {
         None => predict::Inputs::Own,
         Some(path) => predict::Inputs::read(

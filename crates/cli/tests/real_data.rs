@@ -234,6 +234,45 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "{header:?}\n{row:?}"
     );
     assert!(text(&out.stderr).contains("the model is not exact for this record"));
+
+    // The refined values checked by --at give the same check as --refine
+    // --check: the same model at the same point on the same record.
+    let out = twostage(&[
+        "estimate",
+        "--model-file",
+        path(&model),
+        "--at",
+        path(&refined),
+        "--check",
+        path(&estimation),
+    ]);
+    let (at_header, at_row) = table(&out);
+    for name in [
+        "k",
+        "h0",
+        "level_rms",
+        "level_fit_percent",
+        "check_tail_probability",
+        "loss_over_best",
+        "explained",
+    ] {
+        let at_column = at_header.iter().position(|h| h == name).unwrap();
+        assert_eq!(at_row[at_column], row[column(name)], "{name}");
+    }
+
+    // `models` says what a user must know before estimating: the input is
+    // fixed, and which methods the model offers.
+    let out = twostage(&["models", "--model-file", path(&model)]);
+    let described = text(&out.stdout);
+    assert!(
+        described
+            .contains("input     fixed for every experiment: the pump column of estimation.csv"),
+        "{described}"
+    );
+    assert!(
+        described.contains("methods   oe (estimate --method)"),
+        "{described}"
+    );
 }
 
 /// A simulator that fails whenever it is asked to run without noise: the

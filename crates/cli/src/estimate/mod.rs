@@ -27,13 +27,13 @@ pub struct EstimateArgs {
     /// The estimator file written by `twostage train`.
     #[arg(long, conflicts_with_all = ["model", "method"])]
     estimator: Option<PathBuf>,
-    /// With --estimator: check each estimate against its record: the
-    /// model's noise-free response at the estimate on the record's input,
-    /// its RMS residual and normalized fit per output, and the share of
-    /// the model's own records at the estimate that miss by as much (a
-    /// record at or below 1% is not explained, said on stderr). Needs the
-    /// model: the estimator's built-in one, or --model-file.
-    #[arg(long, requires = "estimator")]
+    /// Check each estimate (or --at's given values) against its record:
+    /// the model's noise-free response there on the record's input, its
+    /// RMS residual and normalized fit per output, and the share of the
+    /// model's own records there that miss by as much (a record at or
+    /// below 1% is not explained, said on stderr). Needs the model: an
+    /// estimator's built-in one, or --model / --model-file.
+    #[arg(long)]
     check: bool,
     /// With --check: the model's own records each record is ranked among.
     #[arg(long, default_value_t = 199, requires = "check")]
@@ -53,14 +53,30 @@ pub struct EstimateArgs {
     /// why the best descent stopped.
     #[arg(long, requires = "estimator")]
     refine: bool,
-    /// With --method: the model the records come from (benchmark or pacejka).
-    #[arg(long, requires = "method", conflicts_with = "model_file")]
+    /// With --method or --at: the built-in model the records come from
+    /// (benchmark or pacejka).
+    #[arg(long, conflicts_with = "model_file")]
     model: Option<String>,
     /// The model file the records come from: for --check with an
-    /// estimator of a model file, or with --method (the classic methods
-    /// exist for the built-in models only: it says so).
+    /// estimator of a model file, with --at, or with --method (the classic
+    /// methods exist for the built-in models only: it says so).
     #[arg(long, value_name = "PATH")]
     model_file: Option<PathBuf>,
+    /// Check given parameter values instead of estimating them (a
+    /// published value, another tool's estimate): a CSV with a column per
+    /// parameter, as `estimate` writes it, its rows matched to the records
+    /// by `experiment`, or one row for every record. Needs --check and the
+    /// model (--model or --model-file).
+    #[arg(
+        long,
+        value_name = "VALUES.csv",
+        conflicts_with_all = ["estimator", "method", "refine"],
+        requires = "check"
+    )]
+    at: Option<PathBuf>,
+    /// With --at: accept values outside the model's prior box.
+    #[arg(long, requires = "at")]
+    allow_outside_prior: bool,
     /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
     /// (indirect inference through the TS preset's ARX) or bayes for a
     /// built-in model; oe (a multi-start output-error fit: --starts draws
@@ -70,19 +86,20 @@ pub struct EstimateArgs {
         twostage::ClassicMethod::ALL.map(|m| m.name()).into_iter().chain([OUTPUT_ERROR])
     ))]
     method: Option<String>,
-    /// EKF/UKF initial covariance: the paper's eq. (6) or (7).
-    #[arg(long, value_enum, default_value_t = InitialCovariance::Eq6)]
-    p0: InitialCovariance,
+    /// EKF/UKF initial covariance: the paper's eq. (6) or (7) (default eq6).
+    #[arg(long, value_enum)]
+    p0: Option<InitialCovariance>,
     /// Particle filter: number of particles (default 1000 benchmark, 500 car).
     #[arg(long)]
     particles: Option<usize>,
     /// Prediction error, indirect inference and output error: number of
-    /// random starts.
-    #[arg(long, default_value_t = 5)]
-    starts: usize,
-    /// Seed of the random methods.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    /// random starts (default 5).
+    #[arg(long)]
+    starts: Option<usize>,
+    /// Seed of the random methods (pf, pem, ii, oe) and of --check's own
+    /// records of the model (default 0).
+    #[arg(long)]
+    seed: Option<u64>,
     /// CSV files: header u,y (one record) or experiment,u,y (many).
     #[arg(required = true)]
     data: Vec<PathBuf>,
@@ -123,42 +140,106 @@ impl Estimated {
 /// A record with its estimate, or why it has none.
 type RecordOutcome = Result<(IoData, Estimated), String>;
 
-/// Estimates one record, or says why it cannot.
-type Method = Box<dyn Fn(&IoData) -> Result<Estimated, String> + Send + Sync>;
+/// Estimates one record (its experiment id and data), or says why it
+/// cannot.
+type Method = Box<dyn Fn(&str, &IoData) -> Result<Estimated, String> + Send + Sync>;
 
 /// The name of the multi-start output-error fit among the methods.
 const OUTPUT_ERROR: &str = "oe";
 
-/// `--method oe`: a multi-start output-error fit of any model that can
-/// run without noise on a given input.
-fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
-    let named = match (&args.model_file, &args.model) {
+/// The model named by --model or --model-file, which `what` needs.
+fn named_model(args: &EstimateArgs, what: &str) -> Result<twostage::NamedModel> {
+    match (&args.model_file, &args.model) {
         (Some(path), _) => twostage::NamedModel::file(path),
         (None, Some(model)) => twostage::NamedModel::builtin(model),
         (None, None) => {
-            return Err(usage(
-                "--method oe fits a model: give --model M or --model-file F".into(),
-            ));
+            return Err(usage(format!(
+                "{what} simulates the model: give --model M or --model-file F"
+            )));
         }
     }
-    .map_err(|e| usage(e.to_string()))?;
+    .map_err(|e| usage(e.to_string()))
+}
+
+/// Refuses an option that the chosen way of estimating would not read:
+/// an option silently ignored reads as one that worked.
+fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
+    let method = args.method.as_deref();
+    let running = match (method, &args.estimator, &args.at) {
+        (Some(m), _, _) => format!("--method {m}"),
+        (None, Some(_), _) => "an estimator".to_string(),
+        (None, None, Some(_)) => "--at".to_string(),
+        (None, None, None) => return Ok(()),
+    };
+    let is = |names: &[&str]| method.is_some_and(|m| names.contains(&m));
+    let refuse = |option: &str, readers: &str| {
+        Err(usage(format!(
+            "{option} is read by {readers}; {running} does not read it: leave it out"
+        )))
+    };
+    if args.model.is_some() && method.is_none() && args.at.is_none() {
+        return refuse(
+            "--model",
+            "--method and --at (an estimator knows its model)",
+        );
+    }
+    if args.p0.is_some() && !is(&["ekf", "ukf"]) {
+        return refuse("--p0", "--method ekf and ukf");
+    }
+    if args.particles.is_some() && !is(&["pf"]) {
+        return refuse("--particles", "--method pf");
+    }
+    if args.starts.is_some() && !is(&["pem", "ii", OUTPUT_ERROR]) {
+        return refuse("--starts", "--method pem, ii and oe");
+    }
+    if args.seed.is_some() && !args.check && !is(&["pf", "pem", "ii", OUTPUT_ERROR]) {
+        return refuse("--seed", "--method pf, pem, ii and oe, and --check");
+    }
+    Ok(())
+}
+
+/// The signals of a model's records, as its CSV files name them.
+fn record_format(spec: &twostage::models::ModelSpec) -> csv_records::RecordFormat {
+    csv_records::RecordFormat {
+        signals: SignalNames {
+            inputs: spec.input_names().to_vec(),
+            outputs: spec.output_names().to_vec(),
+        },
+        sample_time: spec.sample_time(),
+    }
+}
+
+/// An estimate that is nothing but its parameters.
+fn bare(theta: Vec<f64>) -> Estimated {
+    Estimated {
+        theta,
+        widths: None,
+        distance: None,
+        floored: None,
+        check: None,
+        refined: None,
+        interval_failure: None,
+    }
+}
+
+/// `--method oe`: a multi-start output-error fit of any model that can
+/// run without noise on a given input.
+fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
+    let named = named_model(args, "--method oe")?;
     let simulator = named.simulator(false).map_err(|e| usage(e.to_string()))?;
-    let spec = simulator.spec().clone();
+    let format = record_format(simulator.spec());
+    let names = simulator.spec().param_names().to_vec();
+    let checker = check_model(args)?;
     let fit = OutputError::new(simulator).map_err(|e| usage(format!("--method oe: {e}")))?;
-    let oe = twostage_baselines::PredictionError::new(fit, args.starts)
-        .seed(args.seed)
+    let oe = twostage_baselines::PredictionError::new(fit, args.starts.unwrap_or(DEFAULT_STARTS))
+        .seed(args.seed.unwrap_or(0))
         .named(OUTPUT_ERROR);
     Ok(Chosen {
-        names: spec.param_names().to_vec(),
-        format: csv_records::RecordFormat {
-            signals: SignalNames {
-                inputs: spec.input_names().to_vec(),
-                outputs: spec.output_names().to_vec(),
-            },
-            sample_time: spec.sample_time(),
-        },
+        names,
+        format,
         trained: None,
-        method: Box::new(move |record: &IoData| {
+        checker,
+        method: Box::new(move |_, record: &IoData| {
             let best = oe
                 .descents(record)
                 .map_err(|e| e.to_string())?
@@ -166,31 +247,82 @@ fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
                 .next()
                 .ok_or_else(|| "no start".to_string())?;
             Ok(Estimated {
-                theta: best.theta,
-                widths: None,
-                distance: None,
-                floored: None,
-                check: None,
                 refined: Some(Ok(Some(best.stop))),
-                interval_failure: None,
+                ..bare(best.theta)
             })
         }),
     })
 }
 
+/// `--at VALUES.csv`: given values, one row for every record or a row per
+/// experiment, to be checked.
+fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<Chosen> {
+    let named = named_model(args, "--at")?;
+    let simulator = named.simulator(false).map_err(|e| usage(e.to_string()))?;
+    let spec = simulator.spec().clone();
+    let rows = crate::predict::read_rows(path, spec.param_names())?;
+    crate::predict::refuse_outside_prior(&rows, &spec, path, args.allow_outside_prior)?;
+    let file = path.display().to_string();
+    let one = (rows.len() == 1).then(|| rows[0].theta.clone());
+    let mut by_id = std::collections::HashMap::new();
+    if one.is_none() {
+        for row in rows {
+            let id = row.id.clone();
+            if by_id.insert(row.id, row.theta).is_some() {
+                return Err(usage(format!(
+                    "{file}: experiment {id} has two rows of values: give one per experiment"
+                )));
+            }
+        }
+    }
+    let values = move |id: &str| match &one {
+        Some(theta) => Ok(theta.clone()),
+        None => by_id.get(id).cloned().ok_or_else(|| {
+            format!(
+                "{file} has no row for experiment {id}: give a row per experiment, or a single \
+                 row for every record"
+            )
+        }),
+    };
+    Ok(Chosen {
+        names: spec.param_names().to_vec(),
+        format: record_format(&spec),
+        trained: None,
+        checker: Some(simulator),
+        method: Box::new(move |id, _| values(id).map(bare)),
+    })
+}
+
+/// The model --check simulates for --method and --at: --model or
+/// --model-file.
+fn check_model(args: &EstimateArgs) -> Result<Option<Box<dyn Simulator>>> {
+    if !args.check {
+        return Ok(None);
+    }
+    let named = named_model(args, "--check")?;
+    Ok(Some(
+        named.simulator(false).map_err(|e| usage(e.to_string()))?,
+    ))
+}
+
+/// Starts of the multi-start methods when --starts is not given.
+const DEFAULT_STARTS: usize = 5;
+
 /// What a record is estimated with: the parameter names, the method, the
-/// record length an estimator file was trained and validated on, and the
-/// signals (the CSV columns) it reads.
+/// record length an estimator file was trained and validated on, the
+/// signals (the CSV columns) it reads, and the model --check simulates.
 struct Chosen {
     names: Vec<String>,
     method: Method,
     trained: Option<usize>,
     format: csv_records::RecordFormat,
+    checker: Option<Box<dyn Simulator>>,
 }
 
 /// The method chosen on the command line, ready to estimate records.
 fn method(args: &EstimateArgs) -> Result<Chosen> {
     use twostage_baselines as b;
+    refuse_what_does_not_apply(args)?;
     if let Some(path) = &args.estimator {
         let estimator = Estimator::load(path)?;
         let names = estimator.param_names().to_vec();
@@ -201,7 +333,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         };
         let transforms = estimator.transforms_outputs();
         let checker = if args.check {
-            Some((model_of(&estimator, args)?, args.check_sims, args.seed))
+            Some(model_of(&estimator, args)?)
         } else {
             None
         };
@@ -214,7 +346,8 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             names,
             format,
             trained: Some(trained),
-            method: Box::new(move |record: &IoData| {
+            checker,
+            method: Box::new(move |_, record: &IoData| {
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
                 // The adaptive intervals have the same level and follow the
                 // record; the fixed ones are the fallback. Both were
@@ -237,21 +370,20 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     },
                     None => (a.theta, widths, None, None),
                 };
-                let check = checker.as_ref().map(|(model, sims, seed)| {
-                    twostage::check_record(model.as_ref(), record, &theta, *sims, *seed)
-                        .map_err(|e| e.to_string())
-                });
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     theta,
                     widths,
                     floored: transforms.then_some(a.floored_samples),
-                    check,
+                    check: None,
                     refined,
                     interval_failure: interval,
                 })
             }),
         });
+    }
+    if let Some(path) = &args.at {
+        return given_values(args, path);
     }
     if args.method.as_deref() == Some(OUTPUT_ERROR) {
         return output_error_method(args);
@@ -266,46 +398,34 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
     }
     let (Some(model), Some(name)) = (&args.model, &args.method) else {
         return Err(usage(
-            "give --estimator FILE, or --model M --method ekf|ukf|pf|pem|ii|bayes".into(),
+            "give --estimator FILE, --model M --method ekf|ukf|pf|pem|ii|bayes, or --model M \
+             --at VALUES.csv --check"
+                .into(),
         ));
     };
     let model: BuiltinModel = model.parse().map_err(|e| usage(format!("{e}")))?;
     let simulator = model.build(false)?;
     let names = simulator.param_names().to_vec();
-    let format = csv_records::RecordFormat {
-        signals: SignalNames {
-            inputs: simulator.spec().input_names().to_vec(),
-            outputs: simulator.spec().output_names().to_vec(),
-        },
-        sample_time: simulator.spec().sample_time(),
-    };
-    let initial_covariance = args.p0.into();
+    let format = record_format(simulator.spec());
     let method = ModelProfile::of(model)
         .classic_method(name)
         .map_err(|e| usage(e.to_string()))?;
     let settings = b::MethodSettings {
-        initial_covariance,
+        initial_covariance: args.p0.unwrap_or(InitialCovariance::Eq6).into(),
         particles: args.particles,
-        starts: args.starts,
-        seed: args.seed,
+        starts: args.starts.unwrap_or(DEFAULT_STARTS),
+        seed: args.seed.unwrap_or(0),
     };
     let estimator = b::classic_estimator(model, method, &settings)?;
     Ok(Chosen {
         names,
         format,
         trained: None,
-        method: Box::new(move |record: &IoData| {
+        checker: check_model(args)?,
+        method: Box::new(move |_, record: &IoData| {
             estimator
                 .estimate(record)
-                .map(|e| Estimated {
-                    theta: e.theta,
-                    widths: None,
-                    distance: None,
-                    floored: None,
-                    check: None,
-                    refined: None,
-                    interval_failure: None,
-                })
+                .map(|e| bare(e.theta))
                 .map_err(|e| e.to_string())
         }),
     })
@@ -319,7 +439,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         method: estimate_one,
         trained: trained_samples,
         format,
+        checker,
     } = method(args)?;
+    let seed = args.seed.unwrap_or(0);
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     let output_names = format.signals.outputs.clone();
@@ -333,8 +455,18 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             .into_par_iter()
             .map(|read| {
                 let estimated = read.record.and_then(|record| {
-                    let estimated = estimate_one(&record)
+                    let mut estimated = estimate_one(&read.id, &record)
                         .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
+                    estimated.check = checker.as_ref().map(|model| {
+                        twostage::check_record(
+                            model.as_ref(),
+                            &record,
+                            &estimated.theta,
+                            args.check_sims,
+                            seed,
+                        )
+                        .map_err(|e| e.to_string())
+                    });
                     Ok((record, estimated))
                 });
                 (read.id, estimated)
@@ -425,10 +557,15 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                     if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
                         plot_check(dir, &id, &record, check, &output_names, sample_time)?;
                     }
-                    if let Some(Ok(RecordCheck {
-                        input_differs_at: Some((j, k)),
-                        ..
-                    })) = &estimated.check
+                    // Only an estimator learned one input; a check simulates on
+                    // the record's own.
+                    if let (
+                        Some(Ok(RecordCheck {
+                            input_differs_at: Some((j, k)),
+                            ..
+                        })),
+                        Some(_),
+                    ) = (&estimated.check, trained_samples)
                     {
                         eprintln!(
                             "warning: {}: experiment {}: its input {} differs from the one every \

@@ -88,6 +88,21 @@ pub enum CommandInput {
     },
 }
 
+/// How `models` describes an input the file fixes.
+fn fixed_input_note(fixed: &CommandInput, inputs: &[&str]) -> String {
+    match fixed {
+        CommandInput::Values(signal) => {
+            format!("fixed for every experiment: {}", signal.describe())
+        }
+        CommandInput::File { path, .. } => format!(
+            "fixed for every experiment: the {} column{} of {}",
+            inputs.join(", "),
+            if inputs.len() == 1 { "" } else { "s" },
+            path.display()
+        ),
+    }
+}
+
 /// A model described by a model file.
 ///
 /// ```
@@ -287,6 +302,36 @@ impl ModelFile {
             _ => spec,
         };
         let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
+        // What `models` says of the input and noise: a fixed input is the
+        // one thing a user must know before estimating a record of another.
+        let fixed = match (&source, &measured_input) {
+            (ModelSource::Command { input, .. }, _) => input.as_ref(),
+            (_, measured) => measured.as_ref(),
+        };
+        let input_note = match (fixed, &source) {
+            (Some(fixed), _) => fixed_input_note(fixed, &inputs),
+            (None, ModelSource::Command { .. }) if !inputs.is_empty() => {
+                "the simulator's own, drawn per experiment".to_string()
+            }
+            (None, _) => spec.input_note().to_string(),
+        };
+        let mut noise_note = match &source {
+            ModelSource::Command { .. } => "the simulator's own".to_string(),
+            _ => spec.noise_note().to_string(),
+        };
+        if output_sd.iter().any(|sd| *sd > 0.0) {
+            let added: Vec<String> = outputs
+                .iter()
+                .zip(&output_sd)
+                .map(|(y, sd)| format!("{y} sd {sd}"))
+                .collect();
+            noise_note = format!(
+                "{noise_note}{}white Gaussian added to the outputs: {}",
+                if noise_note.is_empty() { "" } else { "; " },
+                added.join(", ")
+            );
+        }
+        let spec = spec.with_notes(&input_note, &noise_note);
         let presets = at.presets(&raw.preset)?;
         let name_lines = at.name_lines(&raw);
         let fmu_line = raw

@@ -1,0 +1,251 @@
+//! `estimate --at VALUES.csv --check`: given parameter values (a published
+//! value, another tool's estimate) checked against records, and the
+//! options that would not apply refused.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{path, scratch, text, twostage};
+
+/// `count` benchmark records of seed 21 under `dir/data`.
+fn records(dir: &Path, count: usize) -> PathBuf {
+    let data = dir.join("data");
+    let count = count.to_string();
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        &count,
+        "--seed",
+        "21",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    data
+}
+
+/// The table's rows as maps from column to value.
+fn table(csv: &str) -> Vec<std::collections::HashMap<String, String>> {
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(str::to_string))
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
+    let dir = scratch("check-values");
+    let data = records(&dir, 4);
+    let (truth, records) = (data.join("truth.csv"), data.join("data.csv"));
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&truth),
+        "--check",
+        "--check-sims",
+        "99",
+        path(&records),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows = table(&text(&out.stdout));
+    let truth_rows = table(&std::fs::read_to_string(&truth).unwrap());
+    assert_eq!(rows.len(), 4);
+    for (row, truth) in rows.iter().zip(&truth_rows) {
+        // Each record is checked at its own row's values.
+        assert_eq!(row["experiment"], truth["experiment"]);
+        let (given, written) = (
+            truth["theta"].parse::<f64>().unwrap(),
+            row["theta"].parse::<f64>().unwrap(),
+        );
+        assert_eq!(given.to_bits(), written.to_bits());
+        assert_eq!(row["explained"], "true", "{row:?}");
+    }
+
+    // One row for every record: a value far from all four truths.
+    let far = dir.join("far.csv");
+    let truths: Vec<f64> = truth_rows
+        .iter()
+        .map(|r| r["theta"].parse().unwrap())
+        .collect();
+    let value = if truths.iter().all(|t| (t - 0.85).abs() > 0.3) {
+        0.85
+    } else {
+        -0.85
+    };
+    std::fs::write(&far, format!("theta\n{value}\n")).unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&far),
+        "--check",
+        "--check-sims",
+        "99",
+        path(&records),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows = table(&text(&out.stdout));
+    assert_eq!(rows.len(), 4);
+    let unexplained = rows.iter().filter(|r| r["explained"] == "false").count();
+    assert!(unexplained >= 3, "{rows:?}");
+    assert!(text(&out.stderr).contains("not explained"));
+
+    // A file of several rows must have one per record: the record without
+    // its row is named, the others are checked.
+    let partial = dir.join("partial.csv");
+    let mut lines: Vec<&str> = std::fs::read_to_string(&truth)
+        .unwrap()
+        .leak()
+        .lines()
+        .collect();
+    lines.remove(2);
+    std::fs::write(&partial, lines.join("\n") + "\n").unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&partial),
+        "--check",
+        path(&records),
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("experiment 1") && stderr.contains("has no row for experiment 1"),
+        "{stderr}"
+    );
+    assert_eq!(table(&text(&out.stdout)).len(), 3);
+}
+
+#[test]
+fn values_outside_the_prior_or_without_a_parameter_are_refused_and_named() {
+    let dir = scratch("check-values-refused");
+    let data = records(&dir, 1);
+    let records = data.join("data.csv");
+    let outside = dir.join("outside.csv");
+    std::fs::write(&outside, "experiment,theta\n0,1.5\n").unwrap();
+    let run = |values: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "estimate",
+            "--model",
+            "benchmark",
+            "--at",
+            path(values),
+            "--check",
+        ];
+        args.extend(extra);
+        args.push(path(&records));
+        twostage(&args)
+    };
+    let out = run(&outside, &[]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("theta")
+            && stderr.contains("1.5")
+            && stderr.contains("--allow-outside-prior"),
+        "{stderr}"
+    );
+    // Accepted when asked for: the model runs there, and the check says how
+    // it fits.
+    let out = run(&outside, &["--allow-outside-prior"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(table(&text(&out.stdout))[0]["theta"], "1.5");
+
+    let nameless = dir.join("nameless.csv");
+    std::fs::write(&nameless, "experiment,k\n0,0.1\n").unwrap();
+    let out = run(&nameless, &[]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains("no column `theta`"), "{stderr}");
+}
+
+#[test]
+fn the_classic_methods_take_check_and_options_that_do_not_apply_are_refused() {
+    let dir = scratch("check-methods");
+    let data = records(&dir, 2);
+    let records = data.join("data.csv");
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--method",
+        "ekf",
+        "--check",
+        "--check-sims",
+        "49",
+        path(&records),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows = table(&text(&out.stdout));
+    assert_eq!(rows.len(), 2);
+    for row in &rows {
+        let tail: f64 = row["check_tail_probability"].parse().unwrap();
+        assert!((0.0..=1.0).contains(&tail), "{row:?}");
+        assert!(row["y_rms"].parse::<f64>().unwrap() > 0.0);
+    }
+
+    let refused = |args: &[&str], option: &str| {
+        let mut all = vec!["estimate"];
+        all.extend(args);
+        all.push(path(&records));
+        let out = twostage(&all);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let stderr = text(&out.stderr);
+        assert!(stderr.contains(option), "{args:?}: {stderr}");
+    };
+    refused(
+        &["--model", "benchmark", "--method", "ekf", "--starts", "3"],
+        "--starts",
+    );
+    refused(
+        &["--model", "benchmark", "--method", "pem", "--p0", "eq7"],
+        "--p0",
+    );
+    refused(
+        &[
+            "--model",
+            "benchmark",
+            "--method",
+            "ekf",
+            "--particles",
+            "10",
+        ],
+        "--particles",
+    );
+    refused(
+        &["--model", "benchmark", "--method", "ukf", "--seed", "3"],
+        "--seed",
+    );
+    // --at without --check would only echo the values.
+    refused(
+        &[
+            "--model",
+            "benchmark",
+            "--at",
+            path(&data.join("truth.csv")),
+        ],
+        "--check",
+    );
+}
