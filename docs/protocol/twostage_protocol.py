@@ -21,6 +21,7 @@ values to apply instead of the simulator's own input; return them as the
 inputs). A version 1 simulator never sees them.
 """
 
+import inspect
 import sys
 
 VERSIONS = (1, 2)
@@ -52,6 +53,25 @@ def _one_line(text):
     return " ".join(str(text).split()) or "failed"
 
 
+def _require_keywords(function):
+    """Protocol 2 hands every call `noiseless` and `input`: say so at once,
+    not as a failure of every experiment."""
+    try:
+        parameters = inspect.signature(function).parameters
+    except (TypeError, ValueError):  # a builtin or C function: trust it
+        return
+    if any(p.kind == p.VAR_KEYWORD for p in parameters.values()):
+        return
+    missing = [k for k in ("noiseless", "input") if k not in parameters]
+    if missing:
+        sys.stderr.write(
+            "protocol 2 calls %s with the two keywords noiseless and input; it lacks %s: "
+            "define it as def %s(..., noiseless=False, input=None) (docs/protocol.md)\n"
+            % (function.__name__, " and ".join(missing), function.__name__)
+        )
+        sys.exit(2)
+
+
 def serve(simulate=None, batch=None, stdin=None, stdout=None):
     """Answer requests until `quit` or the end of input."""
     if (simulate is None) == (batch is None):
@@ -63,6 +83,8 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
         sys.stderr.write("not a twostage greeting of version 1 or 2: %r\n" % (greeting,))
         sys.exit(2)
     version = int(greeting[1])
+    if version >= 2:
+        _require_keywords(simulate or batch)
     shape = Shape(*(int(v) for v in greeting[2:]))
     stdout.write("ready\n")
     stdout.flush()

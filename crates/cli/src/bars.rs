@@ -142,17 +142,22 @@ impl Bars {
         }
     }
 
-    /// The wall time of each stage that ran, as "simulate + compress
-    /// 1.200 s, fit 3.400 s, ...".
-    pub fn phase_times(&self) -> String {
+    /// The wall time of each stage that ran, and what the run spent
+    /// outside them, summing to `total`: "simulate + compress 1.200 s,
+    /// fit 3.400 s, ..., other 0.300 s (...)". `other` names where that
+    /// time goes: `outside`.
+    pub fn phase_times(&self, total: Duration, outside: &str) -> String {
         let clock = lock(&self.clock);
-        STAGES
+        let mut parts: Vec<String> = STAGES
             .iter()
             .zip(clock.1)
             .filter(|(_, time)| !time.is_zero())
             .map(|(stage, time)| format!("{} {:.3} s", phase(*stage), time.as_secs_f64()))
-            .collect::<Vec<_>>()
-            .join(", ")
+            .collect();
+        let timed: Duration = clock.1.iter().sum();
+        let other = total.saturating_sub(timed);
+        parts.push(format!("other {:.3} s ({outside})", other.as_secs_f64()));
+        parts.join(", ")
     }
 
     fn tick(&self, stage: Stage, starting: bool) {

@@ -196,13 +196,19 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         return crate::inspect::inspect(&args.out, true, out);
     }
     if text {
+        let total = start.elapsed();
         writeln!(
             out,
-            "trained in {:.2} s; wrote {}",
-            start.elapsed().as_secs_f64(),
+            "trained in {:.3} s; wrote {}",
+            total.as_secs_f64(),
             args.out.display()
         )?;
-        writeln!(out, "phases: {}", bars.phase_times())?;
+        let outside = if searching {
+            "the design search's own work, starting the simulator, writing the file"
+        } else {
+            "starting the simulator, writing the file"
+        };
+        writeln!(out, "phases: {}", bars.phase_times(total, outside))?;
         if let Some(trained_by) = estimator.regressor().training_summary() {
             writeln!(out, "stage 2: {trained_by}")?;
         }

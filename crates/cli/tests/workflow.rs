@@ -81,9 +81,33 @@ fn train_inspect_and_estimate_recorded_experiments() {
         .find(|l| l.starts_with("phases: "))
         .map(str::to_owned)
         .unwrap_or_else(|| panic!("{}", text(&out.stdout)));
-    let order = ["simulate + compress ", "fit ", "calibrate ", "validate "]
-        .map(|p| phases.find(p).unwrap_or_else(|| panic!("{p} in {phases}")));
+    let order = [
+        "simulate + compress ",
+        "fit ",
+        "calibrate ",
+        "validate ",
+        "other ",
+    ]
+    .map(|p| phases.find(p).unwrap_or_else(|| panic!("{p} in {phases}")));
     assert!(order.is_sorted(), "{phases}");
+    // They account for the whole run.
+    let seconds = |text: &str| -> f64 { text.trim().trim_end_matches(" s").parse().unwrap() };
+    let words: Vec<&str> = phases.split_whitespace().collect();
+    let sum: f64 = words
+        .windows(2)
+        .filter(|w| w[1] == "s" || w[1] == "s,")
+        .map(|w| seconds(w[0]))
+        .sum();
+    let total = text(&out.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("trained in "))
+        .and_then(|l| l.split(" s;").next())
+        .map(seconds)
+        .unwrap();
+    assert!(
+        (sum - total).abs() <= 0.004,
+        "{phases}: {sum} s of {total} s"
+    );
 
     let out = twostage(&["inspect", path(&file)]);
     assert!(out.status.success(), "{}", text(&out.stderr));

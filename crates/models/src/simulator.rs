@@ -235,8 +235,11 @@ impl Capabilities {
                 value: "true".into(),
                 reason: format!(
                     "the simulator of {model} cannot simulate without its noise; a command \
-                     source can when it speaks protocol 2 (`protocol = 2` under [source], \
-                     docs/protocol.md)"
+                     source can when it speaks protocol 2: `protocol = 2` under [source], and \
+                     its function takes the two keywords `noiseless` and `input` (with \
+                     docs/protocol/twostage_protocol.py: `def simulate(theta, seed, index, \
+                     noiseless=False, input=None)`, or `def batch(thetas, seeds, indices, \
+                     noiseless=False, input=None)`; docs/protocol.md)"
                 ),
             });
         }
@@ -246,8 +249,10 @@ impl Capabilities {
                 value: "a given record".into(),
                 reason: format!(
                     "the simulator of {model} makes its own input and cannot apply a given \
-                     one; a command source can when it speaks protocol 2 (`protocol = 2` \
-                     under [source], docs/protocol.md)"
+                     one; a command source can when it speaks protocol 2: `protocol = 2` under \
+                     [source], and its function takes the two keywords `noiseless` and `input` \
+                     (with docs/protocol/twostage_protocol.py: `def simulate(theta, seed, \
+                     index, noiseless=False, input=None)`; docs/protocol.md)"
                 ),
             });
         }

@@ -585,12 +585,45 @@ fn protocol_two_runs_noise_free_on_a_given_input() {
         .unwrap_err()
         .to_string();
     assert!(
-        refused.contains("protocol = 2") && !refused.contains("  "),
+        refused.contains("protocol = 2")
+            && refused.contains("noiseless=False, input=None")
+            && !refused.contains("  "),
         "{refused}"
     );
     let named = twostage::NamedModel::File(Box::new(numpy_benchmark_file(1, "")));
     let refused = named.simulator(true).err().unwrap().to_string();
     assert!(refused.contains("protocol = 2"), "{refused}");
+}
+
+/// A protocol-2 simulator whose function lacks the two keywords is told
+/// so at once, by name, not once per experiment as a failure.
+#[test]
+fn a_protocol_two_function_without_its_keywords_is_told_which() {
+    let dir = script(
+        "external-no-keywords",
+        "def simulate(theta, seed, index, noiseless=False):\n    return [[0.0]] * 50, [[0.0]] * 50\n\nserve(simulate)\n",
+    );
+    let spec = ModelSpec::new(
+        "gain",
+        &["k"],
+        Prior::uniform_box(&[-0.4], &[0.9]).unwrap(),
+        1.0,
+        50,
+    )
+    .unwrap();
+    let sim = ExternalSimulator::new(spec, vec![python(), "sim.py".into()])
+        .unwrap()
+        .current_dir(&dir)
+        .protocol(2)
+        .unwrap();
+    let error = run(&sim, 0.5, 0).unwrap_err().to_string();
+    assert!(
+        error.contains(
+            "protocol 2 calls simulate with the two keywords noiseless and input; it \
+                        lacks input"
+        ),
+        "{error}"
+    );
 }
 
 /// A version 2 simulator that ignores the input it is given fails that
@@ -657,4 +690,56 @@ serve(simulate)
             .protocol(3)
             .is_err()
     );
+}
+
+/// docs/protocol.md's simulator faster than its records: on an input given
+/// at the record's rate, its noise-free record is the plant's exact
+/// discretization at the record's step (each input held over the step),
+/// so the holding and the reading at the record's instants are right.
+#[test]
+fn a_simulator_faster_than_its_records_answers_at_the_records_rate() {
+    use twostage::models::Conditions;
+    let spec = ModelSpec::new(
+        "fast",
+        &["k", "tau"],
+        Prior::uniform_box(&[0.1, 0.01], &[5.0, 1.0]).unwrap(),
+        0.01,
+        200,
+    )
+    .unwrap()
+    .with_signals(&["u"], &["y"]);
+    let sim = ExternalSimulator::new(
+        spec,
+        vec![
+            python(),
+            protocol_dir()
+                .join("fast_inner_loop.py")
+                .to_string_lossy()
+                .into_owned(),
+        ],
+    )
+    .unwrap()
+    .protocol(2)
+    .unwrap();
+    let u: Vec<f64> = (0..200).map(|k| ((k / 37) % 3) as f64 - 1.0).collect();
+    let given = IoData::siso(&u, &vec![0.0; 200]).unwrap();
+    let (k, tau) = (2.0, 0.05);
+    let mut record = IoData::default();
+    sim.simulate_under(
+        &[k, tau],
+        &mut experiment_rng(1, 0),
+        Conditions {
+            noiseless: true,
+            input: Some(&given),
+        },
+        &mut record,
+    )
+    .unwrap();
+    assert_eq!(record.input(0), &u[..]);
+    let a = (-0.01f64 / tau).exp();
+    let mut x = 0.0;
+    for (n, (y, u)) in record.output(0).iter().zip(&u).enumerate() {
+        assert!((y - x).abs() < 1e-12, "sample {n}: {y} against {x}");
+        x = a * x + (1.0 - a) * k * u;
+    }
 }
