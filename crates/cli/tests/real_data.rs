@@ -223,11 +223,19 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         path(&model),
         "--refine",
         "--check",
+        "--correlation",
         path(&estimation),
     ]);
     let (header, row) = table(&out);
     let column = |name: &str| header.iter().position(|h| h == name).unwrap();
     assert_eq!(row[column("explained")], "true", "{header:?}\n{row:?}");
+    // The refined estimate's correlations, one column per pair.
+    let pairs: Vec<&String> = header.iter().filter(|h| h.starts_with("corr_")).collect();
+    assert_eq!(pairs.len(), 6, "{header:?}");
+    for name in ["corr_k_a1", "corr_k_h0", "corr_a2_h0"] {
+        let r: f64 = row[column(name)].parse().unwrap();
+        assert!((-1.0..=1.0).contains(&r) && r != 0.0, "{name} {r}");
+    }
     assert_eq!(
         row[column("model_consistent")],
         "false",

@@ -21,6 +21,8 @@ pub struct WeightedMoments {
     mass: f64,
     first: Vec<f64>,
     second: Vec<f64>,
+    /// The weighted products of coordinates a < b, row by row.
+    cross: Vec<f64>,
 }
 
 impl WeightedMoments {
@@ -30,6 +32,7 @@ impl WeightedMoments {
             mass: 0.0,
             first: vec![0.0; q],
             second: vec![0.0; q],
+            cross: vec![0.0; q * q.saturating_sub(1) / 2],
         }
     }
 
@@ -40,6 +43,13 @@ impl WeightedMoments {
         for ((m1, m2), t) in self.first.iter_mut().zip(&mut self.second).zip(theta) {
             *m1 += w * t;
             *m2 += w * t * t;
+        }
+        let mut pair = 0;
+        for (a, ta) in theta.iter().enumerate() {
+            for tb in &theta[a + 1..] {
+                self.cross[pair] += w * ta * tb;
+                pair += 1;
+            }
         }
     }
 
@@ -54,6 +64,42 @@ impl WeightedMoments {
             .map(|(m2, m)| (m2 / self.mass - m * m).max(0.0).sqrt())
             .collect();
         (mean, sd)
+    }
+
+    /// The posterior correlation matrix (row-major q x q; 0 off the
+    /// diagonal where a coordinate does not vary).
+    ///
+    /// ```
+    /// use twostage_refine::WeightedMoments;
+    /// // Equal weights on (0, 0), (1, 2), (2, 4): perfectly correlated.
+    /// let mut moments = WeightedMoments::new(2);
+    /// for t in [[0.0, 0.0], [1.0, 2.0], [2.0, 4.0]] {
+    ///     moments.add(1.0, &t);
+    /// }
+    /// let r = moments.correlation();
+    /// assert!((r[1] - 1.0).abs() < 1e-12 && r[1] == r[2] && r[0] == 1.0);
+    /// ```
+    pub fn correlation(&self) -> Vec<f64> {
+        let q = self.first.len();
+        let (mean, sd) = self.mean_and_sd();
+        let mut r = vec![0.0; q * q];
+        let mut pair = 0;
+        for a in 0..q {
+            r[a * q + a] = 1.0;
+            for b in a + 1..q {
+                let covariance = self.cross[pair] / self.mass - mean[a] * mean[b];
+                let scale = sd[a] * sd[b];
+                let value = if scale > 0.0 {
+                    (covariance / scale).clamp(-1.0, 1.0)
+                } else {
+                    0.0
+                };
+                r[a * q + b] = value;
+                r[b * q + a] = value;
+                pair += 1;
+            }
+        }
+        r
     }
 }
 
@@ -70,5 +116,42 @@ mod tests {
         }
         let (mean, sd) = m.mean_and_sd();
         assert!((mean[0] - 1.0).abs() < 1e-15 && (sd[0] - 0.5f64.sqrt()).abs() < 1e-15);
+    }
+
+    /// The running sums' correlation against a two-pass computation
+    /// (centred products) on uneven weights in three coordinates.
+    #[test]
+    fn correlation_matches_a_two_pass_computation() {
+        let points: Vec<(f64, [f64; 3])> = (0..40)
+            .map(|i| {
+                let x = i as f64 / 7.0;
+                (
+                    1.0 + (i % 5) as f64,
+                    [x.sin(), 0.3 * x + x.cos(), (x * x) % 3.0],
+                )
+            })
+            .collect();
+        let mut m = WeightedMoments::new(3);
+        for (w, t) in &points {
+            m.add(*w, t);
+        }
+        let mass: f64 = points.iter().map(|p| p.0).sum();
+        let mean: Vec<f64> = (0..3)
+            .map(|a| points.iter().map(|(w, t)| w * t[a]).sum::<f64>() / mass)
+            .collect();
+        let cov = |a: usize, b: usize| {
+            points
+                .iter()
+                .map(|(w, t)| w * (t[a] - mean[a]) * (t[b] - mean[b]))
+                .sum::<f64>()
+                / mass
+        };
+        let r = m.correlation();
+        for a in 0..3 {
+            for b in 0..3 {
+                let expected = cov(a, b) / (cov(a, a) * cov(b, b)).sqrt();
+                assert!((r[a * 3 + b] - expected).abs() < 1e-12, "{a},{b}");
+            }
+        }
     }
 }

@@ -128,6 +128,8 @@ pub struct LocalPosterior {
     pub mean: Vec<f64>,
     /// The posterior standard deviation over the box.
     pub sd: Vec<f64>,
+    /// The posterior correlation matrix (row-major q x q).
+    pub correlation: Vec<f64>,
     /// Loss evaluations spent.
     pub evaluations: usize,
 }
@@ -423,6 +425,7 @@ impl<M: ResidualModel> Refinement<M> {
         Ok(LocalPosterior {
             mean,
             sd,
+            correlation: moments.correlation(),
             evaluations: total,
         })
     }

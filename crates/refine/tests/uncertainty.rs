@@ -159,3 +159,39 @@ fn a_parameter_that_only_the_first_samples_determine_is_covered_as_often_as_said
         assert!((0.85..=0.95).contains(&share), "parameter {j}: {share}");
     }
 }
+
+#[test]
+fn the_reported_correlation_is_the_estimates_own() {
+    let fit = Refinement::new(Line(
+        Prior::uniform_box(&[-10.0, -10.0], &[10.0, 10.0]).unwrap(),
+    ));
+    let (replications, n) = (1000, 300);
+    let (mut estimates, mut reported) = (Vec::new(), 0.0);
+    for k in 0..replications {
+        let mut rng = experiment_rng(7, k as u64);
+        // An input away from zero: intercept and slope trade off.
+        let u: Vec<f64> = ar1(0.7, n, &mut rng).iter().map(|v| 2.0 + v).collect();
+        let e = ar1(0.5, n, &mut rng);
+        let y: Vec<f64> = u
+            .iter()
+            .zip(&e)
+            .map(|(u, e)| 1.0 + 2.0 * u + 0.5 * e)
+            .collect();
+        let theta = least_squares(&u, &y);
+        let local = fit
+            .uncertainty(&IoData::siso(&u, &y).unwrap(), &theta)
+            .unwrap();
+        reported += local.correlation[1] / replications as f64;
+        estimates.push(theta);
+    }
+    let mean = |j: usize| estimates.iter().map(|t| t[j]).sum::<f64>() / replications as f64;
+    let (ma, mb) = (mean(0), mean(1));
+    let moment = |f: &dyn Fn(&[f64; 2]) -> f64| estimates.iter().map(f).sum::<f64>();
+    let empirical = moment(&|t| (t[0] - ma) * (t[1] - mb))
+        / (moment(&|t| (t[0] - ma).powi(2)) * moment(&|t| (t[1] - mb).powi(2))).sqrt();
+    assert!(empirical < -0.5, "{empirical}");
+    assert!(
+        (reported - empirical).abs() < 0.05,
+        "reported {reported}, Monte Carlo {empirical}"
+    );
+}

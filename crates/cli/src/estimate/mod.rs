@@ -53,6 +53,11 @@ pub struct EstimateArgs {
     /// why the best descent stopped.
     #[arg(long, requires = "estimator")]
     refine: bool,
+    /// With --refine: add the refined estimate's parameter correlations,
+    /// a column `corr_A_B` per pair of parameters (empty where the
+    /// refined estimate has no interval).
+    #[arg(long, requires = "refine")]
+    correlation: bool,
     /// With --method or --at: the built-in model the records come from
     /// (benchmark or pacejka).
     #[arg(long, conflicts_with = "model_file")]
@@ -129,6 +134,8 @@ struct Estimated {
     refined: Option<Result<Option<TerminationReason>, String>>,
     /// With --refine: why the refined estimate has no interval of its own.
     interval_failure: Option<String>,
+    /// With --refine: the refined estimate's correlation matrix.
+    correlation: Option<Vec<f64>>,
 }
 
 impl Estimated {
@@ -219,6 +226,7 @@ fn bare(theta: Vec<f64>) -> Estimated {
         check: None,
         refined: None,
         interval_failure: None,
+        correlation: None,
     }
 }
 
@@ -356,7 +364,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 // A refinement that fails keeps the TS estimate, and says so;
                 // one that succeeds brings its own interval (NaN where the
                 // record does not determine it, said on stderr).
-                let (theta, widths, refined, interval) = match refine.as_ref() {
+                let (theta, widths, refined, interval, correlation) = match refine.as_ref() {
                     Some(refine) => match refine(record, &a.theta, widths.as_deref()) {
                         Ok(r) => {
                             let q = r.theta.len();
@@ -364,11 +372,11 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                                 Ok(w) => (w, None),
                                 Err(e) => (vec![f64::NAN; q], Some(e)),
                             };
-                            (r.theta, Some(own), Some(Ok(r.stop)), why)
+                            (r.theta, Some(own), Some(Ok(r.stop)), why, r.correlation)
                         }
-                        Err(e) => (a.theta, widths, Some(Err(e)), None),
+                        Err(e) => (a.theta, widths, Some(Err(e)), None, None),
                     },
-                    None => (a.theta, widths, None, None),
+                    None => (a.theta, widths, None, None, None),
                 };
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
@@ -378,6 +386,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                     check: None,
                     refined,
                     interval_failure: interval,
+                    correlation,
                 })
             }),
         });
@@ -442,6 +451,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         checker,
     } = method(args)?;
     let seed = args.seed.unwrap_or(0);
+    let with_correlation = args.correlation;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
     let output_names = format.signals.outputs.clone();
@@ -629,9 +639,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         return Ok(outcome);
     }
     let text = if args.format == TableFormat::Json {
-        json(&names, &rows, &output_names)?
+        json(&names, &rows, &output_names, with_correlation)?
     } else {
-        csv(&names, &rows, &output_names)?
+        csv(&names, &rows, &output_names, with_correlation)?
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
@@ -664,7 +674,22 @@ impl Outcome {
     }
 }
 
-fn csv(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Result<String> {
+/// The pairs of parameters a correlation column names, `corr_A_B` with A
+/// before B, with their place in the row-major matrix.
+fn correlation_pairs(names: &[String]) -> Vec<(String, usize)> {
+    let q = names.len();
+    (0..q)
+        .flat_map(|a| (a + 1..q).map(move |b| (a, b)))
+        .map(|(a, b)| (format!("corr_{}_{}", names[a], names[b]), a * q + b))
+        .collect()
+}
+
+fn csv(
+    names: &[String],
+    rows: &[(String, Estimated)],
+    outputs: &[String],
+    with_correlation: bool,
+) -> Result<String> {
     use twostage::sources::csv_rows::row;
     let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
     let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
@@ -693,6 +718,12 @@ fn csv(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Re
     if with_stop {
         header.push("refine_stop".into());
     }
+    let pairs = if with_correlation {
+        correlation_pairs(names)
+    } else {
+        Vec::new()
+    };
+    header.extend(pairs.iter().map(|(name, _)| name.clone()));
     let mut text = row(&header);
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
@@ -716,12 +747,29 @@ fn csv(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Re
         if with_stop {
             fields.push(refine_stop(e.refined.as_ref()));
         }
+        for (_, at) in &pairs {
+            fields.push(
+                e.correlation
+                    .as_ref()
+                    .map_or_else(String::new, |r| format_f64(r[*at])),
+            );
+        }
         text.push_str(&row(&fields));
     }
     Ok(text)
 }
 
-fn json(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> Result<String> {
+fn json(
+    names: &[String],
+    rows: &[(String, Estimated)],
+    outputs: &[String],
+    with_correlation: bool,
+) -> Result<String> {
+    let pairs = if with_correlation {
+        correlation_pairs(names)
+    } else {
+        Vec::new()
+    };
     let records: Vec<serde_json::Value> = rows
         .iter()
         .map(|(id, e)| {
@@ -743,6 +791,11 @@ fn json(names: &[String], rows: &[(String, Estimated)], outputs: &[String]) -> R
             }
             if matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))) {
                 object.insert("refine_stop".into(), refine_stop(e.refined.as_ref()).into());
+            }
+            if let Some(r) = &e.correlation {
+                for (name, at) in &pairs {
+                    object.insert(name.clone(), r[*at].into());
+                }
             }
             match &e.check {
                 Some(Ok(c)) => {

@@ -23,6 +23,9 @@ pub(super) struct Refined {
     /// The refined estimate's own interval half-widths, at the level of the
     /// estimator's intervals, or why it has none.
     pub(super) half_widths: Result<Vec<f64>, String>,
+    /// The parameters' correlation matrix (row-major), where the interval
+    /// has one.
+    pub(super) correlation: Option<Vec<f64>>,
 }
 
 /// The refinement of an estimator's estimates: a built-in model's local
@@ -48,6 +51,7 @@ pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<R
             let z = twostage::models::standard_normal_quantile(1.0 - alpha / 2.0);
             Ok(Refined {
                 half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
+                correlation: Some(posterior.correlation),
                 theta: posterior.mean,
                 stop: None,
             })
@@ -71,14 +75,17 @@ pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<R
                 .ok_or_else(|| "no start".to_string())?;
             // Its own uncertainty, from the loss's curvature there and the
             // residuals' variance and autocorrelation.
-            let half_widths = fit
+            let local = fit
                 .uncertainty(record, &best.theta)
-                .map(|u| u.half_widths(alpha))
                 .map_err(|e| e.to_string());
             Ok(Refined {
                 theta: best.theta,
                 stop: Some(best.stop),
-                half_widths,
+                half_widths: local
+                    .as_ref()
+                    .map(|u| u.half_widths(alpha))
+                    .map_err(Clone::clone),
+                correlation: local.ok().map(|u| u.correlation),
             })
         },
     ))
