@@ -41,6 +41,7 @@ mod indirect;
 mod kalman;
 mod particle;
 mod pem;
+mod refiner;
 mod suite;
 
 pub use augmented::{
@@ -56,6 +57,7 @@ pub use indirect::{
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
 pub use pem::{BenchmarkPredictor, PredictionError};
+pub use refiner::{EstimateRefiner, RefinedEstimate, estimator_model, refine_starts};
 pub use suite::{MethodSettings, classic_estimator, exact_likelihood};
 pub use twostage_fit::TerminationReason;
 

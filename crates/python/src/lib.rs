@@ -23,7 +23,9 @@ use twostage::{
 };
 
 mod simulator;
+mod through_model;
 use simulator::{PythonProgress, PythonSimulator};
+use through_model::{check_dict, named_model, one_record};
 
 /// A twostage error as the Python exception a caller would expect: a file
 /// that cannot be read is an `OSError`, everything else a `ValueError`.
@@ -302,6 +304,94 @@ impl PyEstimator {
             .then(|| per_record(column(2 * q + 1, width)));
         Ok((theta, widths, distance, threshold, floored))
     }
+
+    /// Check one record's estimate against the record (`twostage estimate
+    /// --check`): `theta`, or the estimator's own estimate when None,
+    /// simulated without noise on the record's input and ranked among
+    /// `sims` of the model's own records of `seed`. The model: the
+    /// estimator's built-in one, or its model file (`model_file` or
+    /// `model_toml`).
+    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=199, seed=0))]
+    #[allow(clippy::too_many_arguments)]
+    fn check<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+        theta: Option<Vec<f64>>,
+        model_file: Option<PathBuf>,
+        model_toml: Option<&str>,
+        sims: usize,
+        seed: u64,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let named = named_model(None, model_file, model_toml)?;
+        let sim = twostage_baselines::estimator_model(&self.inner, named.as_ref())
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let shape = self.inner.record_shape();
+        let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
+        let theta = match theta {
+            Some(theta) => theta,
+            None => self.inner.assess(&record).map_err(to_python)?.theta,
+        };
+        let checked = through_model::check(py, sim.as_ref(), &record, &theta, sims, seed)?;
+        check_dict(py, &checked)
+    }
+
+    /// Refine one record's estimate through the model (`twostage estimate
+    /// --refine`): a dict of the refined `theta`, its own interval
+    /// `half_widths` (None, with `interval_error` saying why, where the
+    /// record does not determine a parameter), the `correlation` matrix,
+    /// and `stop`, why the output-error descent stopped (None for a
+    /// built-in model's posterior mean). Raises ValueError when the model
+    /// cannot be evaluated near the estimate: the two-stage estimate
+    /// stands.
+    #[pyo3(signature = (u, y, *, model_file=None, model_toml=None))]
+    fn refine<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+        model_file: Option<PathBuf>,
+        model_toml: Option<&str>,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let named = named_model(None, model_file, model_toml)?;
+        let refiner = twostage_baselines::EstimateRefiner::new(&self.inner, named.as_ref())
+            .map_err(|e| PyValueError::new_err(format!("refine: {e}")))?;
+        let shape = self.inner.record_shape();
+        let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
+        let first = self.inner.assess(&record).map_err(to_python)?;
+        let refined = py
+            .detach(|| refiner.refine(&record, &first.theta, first.interval_half_widths()))
+            .map_err(|e| {
+                PyValueError::new_err(format!(
+                    "the refinement failed ({e}); the two-stage estimate stands"
+                ))
+            })?;
+        let q = refined.theta.len();
+        let dict = pyo3::types::PyDict::new(py);
+        dict.set_item("theta", refined.theta.into_pyarray(py))?;
+        match refined.half_widths {
+            Ok(w) => {
+                dict.set_item("half_widths", w.into_pyarray(py))?;
+                dict.set_item("interval_error", py.None())?;
+            }
+            Err(e) => {
+                dict.set_item("half_widths", py.None())?;
+                dict.set_item("interval_error", e)?;
+            }
+        }
+        match refined.correlation {
+            Some(r) => dict.set_item(
+                "correlation",
+                ndarray::Array2::from_shape_vec((q, q), r)
+                    .map_err(shape_error)?
+                    .into_pyarray(py),
+            )?,
+            None => dict.set_item("correlation", py.None())?,
+        }
+        dict.set_item("stop", refined.stop.map(|s| format!("{s:?}")))?;
+        Ok(dict)
+    }
 }
 
 /// Why a record was not estimated.
@@ -563,6 +653,8 @@ fn train(
 fn _twostage(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<PyEstimator>()?;
     module.add_function(wrap_pyfunction!(train, module)?)?;
+    module.add_function(wrap_pyfunction!(through_model::check_values, module)?)?;
+    module.add_function(wrap_pyfunction!(through_model::predict, module)?)?;
     module.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -365,7 +365,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
                 // one that succeeds brings its own interval (NaN where the
                 // record does not determine it, said on stderr).
                 let (theta, widths, refined, interval, correlation) = match refine.as_ref() {
-                    Some(refine) => match refine(record, &a.theta, widths.as_deref()) {
+                    Some(refine) => match refine.refine(record, &a.theta, widths.as_deref()) {
                         Ok(r) => {
                             let q = r.theta.len();
                             let (own, why) = match r.half_widths {

@@ -31,9 +31,17 @@ import numpy.typing as npt
 
 from ._twostage import Estimator as _NativeEstimator
 from ._twostage import __version__
+from ._twostage import check_values as _check_values
+from ._twostage import predict as _predict
 from ._twostage import train as _train
 
-__all__ = ["Estimator", "train", "__version__"]
+__all__ = ["Estimator", "check", "predict", "train", "__version__"]
+
+_Path = Optional[Union[str, PathLike[str]]]
+
+
+def _path(path: _Path) -> Optional[str]:
+    return None if path is None else str(path)
 
 
 class Estimator:
@@ -161,6 +169,66 @@ class Estimator:
             "untransformed_samples": floored,
         }
         return result
+
+    def check(
+        self,
+        u: Optional[npt.NDArray[np.float64]],
+        y: npt.NDArray[np.float64],
+        theta: Optional[Any] = None,
+        *,
+        model_file: _Path = None,
+        model_toml: Optional[str] = None,
+        sims: int = 199,
+        seed: int = 0,
+    ) -> dict[str, Any]:
+        """Check one record's estimate against the record, as ``twostage
+        estimate --check`` does: the model at ``theta`` (None: this
+        estimator's own estimate) simulated without noise on the record's
+        input, ranked among ``sims`` of the model's own records there.
+        The model is the estimator's built-in one, or its model file
+        (``model_file`` or ``model_toml``). Returns a dict of the
+        command's check columns (``rms``, ``fit_percent`` and
+        ``best_fit_percent`` per output, ``check_tail_probability``,
+        ``model_consistent``, ``loss_over_best``, ``explained``,
+        ``input_as_trained``) and the noise-free response ``simulated``
+        [N, n_y]."""
+        u, y = self._columns(u, y)
+        if theta is not None:
+            theta = [float(t) for t in np.asarray(theta, dtype=np.float64).ravel()]
+        return self._native.check(
+            u, y, theta, model_file=_path(model_file), model_toml=model_toml, sims=sims, seed=seed
+        )
+
+    def refine(
+        self,
+        u: Optional[npt.NDArray[np.float64]],
+        y: npt.NDArray[np.float64],
+        *,
+        model_file: _Path = None,
+        model_toml: Optional[str] = None,
+    ) -> dict[str, Any]:
+        """Refine one record's estimate through the model, as ``twostage
+        estimate --refine`` does: a built-in model's posterior mean under
+        its exact likelihood, or with a model file an output-error fit
+        through its simulator from the estimate and two starts in its
+        interval. Returns a dict: ``theta``; ``lower`` and ``upper``, the
+        refined estimate's own interval at the estimator's level (None,
+        with ``interval_error`` saying why, where the record does not
+        determine a parameter); ``correlation`` [q, q]; ``stop``, why the
+        descent stopped (None for a posterior mean). The interval covers
+        the record's noise about the model's best fit: where ``check``
+        finds the record not ``model_consistent``, the plant's values may
+        lie outside it. Raises ValueError when the model cannot be
+        evaluated near the estimate."""
+        u, y = self._columns(u, y)
+        refined = self._native.refine(
+            u, y, model_file=_path(model_file), model_toml=model_toml
+        )
+        widths = refined.pop("half_widths")
+        theta = refined["theta"]
+        refined["lower"] = None if widths is None else theta - widths
+        refined["upper"] = None if widths is None else theta + widths
+        return refined
 
     @property
     def validation(self) -> Optional[dict[str, Any]]:
@@ -314,6 +382,77 @@ def train(
             **charts,
         )
     return Estimator(native)
+
+
+def _signal(array, name):
+    """A lone signal given as a 1-D array [N], as the [N, 1] column the
+    native side reads."""
+    if isinstance(array, np.ndarray) and array.ndim == 1:
+        return array.reshape(-1, 1)
+    return array
+
+
+def check(
+    theta: Any,
+    u: Optional[npt.NDArray[np.float64]],
+    y: npt.NDArray[np.float64],
+    *,
+    model: Optional[str] = None,
+    model_file: _Path = None,
+    model_toml: Optional[str] = None,
+    sims: int = 199,
+    seed: int = 0,
+    allow_outside_prior: bool = False,
+) -> dict[str, Any]:
+    """Check given parameter values (a published value, another tool's
+    fit) against one record, as ``twostage estimate --at VALUES --check``
+    does; the model is ``model`` (built-in), ``model_file`` or
+    ``model_toml``. Values outside the prior's box raise ValueError naming
+    the parameter, unless ``allow_outside_prior``. Returns the dict of
+    ``Estimator.check``."""
+    theta = [float(t) for t in np.asarray(theta, dtype=np.float64).ravel()]
+    return _check_values(
+        theta,
+        _signal(u, "u"),
+        _signal(y, "y"),
+        model=model,
+        model_file=_path(model_file),
+        model_toml=model_toml,
+        sims=sims,
+        seed=seed,
+        allow_outside_prior=allow_outside_prior,
+    )
+
+
+def predict(
+    theta: Any,
+    u: Optional[npt.NDArray[np.float64]] = None,
+    *,
+    model: Optional[str] = None,
+    model_file: _Path = None,
+    model_toml: Optional[str] = None,
+    noiseless: bool = True,
+    seed: int = 0,
+    experiment: int = 0,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The model's record at ``theta`` on the input ``u`` ([N, n_u], or
+    [N] for one input; None: the model's own input design), as ``twostage
+    simulate --at --input`` writes it: without noise unless
+    ``noiseless=False`` (then experiment ``experiment`` of ``seed``'s
+    noise, as row ``experiment`` of the command's estimates). Returns
+    ``(u [N, n_u], y [N, n_y])``: compare ``y`` with a record the fit did
+    not see to validate an estimate."""
+    theta = [float(t) for t in np.asarray(theta, dtype=np.float64).ravel()]
+    return _predict(
+        theta,
+        _signal(u, "u"),
+        model=model,
+        model_file=_path(model_file),
+        model_toml=model_toml,
+        noiseless=noiseless,
+        seed=seed,
+        experiment=experiment,
+    )
 
 
 def _chart_folder(chart, folder):

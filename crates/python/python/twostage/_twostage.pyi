@@ -49,6 +49,49 @@ class Estimator:
         threshold, samples outside the output transform):
         ``twostage.Estimator.assess`` makes the dict of these."""
         ...
+    def check(
+        self,
+        u: Optional[_Array],
+        y: _Array,
+        theta: Optional[list[float]] = None,
+        *,
+        model_file: Optional[str] = None,
+        model_toml: Optional[str] = None,
+        sims: int = 199,
+        seed: int = 0,
+    ) -> dict[str, Any]: ...
+    def refine(
+        self,
+        u: Optional[_Array],
+        y: _Array,
+        *,
+        model_file: Optional[str] = None,
+        model_toml: Optional[str] = None,
+    ) -> dict[str, Any]: ...
+
+def check_values(
+    theta: list[float],
+    u: Optional[_Array],
+    y: _Array,
+    *,
+    model: Optional[str] = None,
+    model_file: Optional[str] = None,
+    model_toml: Optional[str] = None,
+    sims: int = 199,
+    seed: int = 0,
+    allow_outside_prior: bool = False,
+) -> dict[str, Any]: ...
+def predict(
+    theta: list[float],
+    u: Optional[_Array] = None,
+    *,
+    model: Optional[str] = None,
+    model_file: Optional[str] = None,
+    model_toml: Optional[str] = None,
+    noiseless: bool = True,
+    seed: int = 0,
+    experiment: int = 0,
+) -> Tuple[_Array, _Array]: ...
 
 def train(
     model: Optional[str] = None,

@@ -1,0 +1,224 @@
+//! Refining a two-stage estimate of one record through its model, as the
+//! command line's `estimate --refine` and the Python package's
+//! `Estimator.refine` both do: a built-in model's local posterior under its
+//! exact likelihood, or for any other model an output-error fit through its
+//! simulator, each with the refined estimate's own interval (decision 035).
+
+use twostage::fit::TerminationReason;
+use twostage::models::{BuiltinModel, IoData, Simulator};
+use twostage::{Estimator, ModelProfile, NamedModel, OutputError, Refinement, ResidualModel};
+
+use crate::error::{BaselineError, Result};
+use crate::suite::exact_likelihood;
+
+/// A refined estimate of one record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefinedEstimate {
+    /// The refined parameters.
+    pub theta: Vec<f64>,
+    /// Why the output-error descent stopped (`None` for a posterior mean).
+    pub stop: Option<TerminationReason>,
+    /// The refined estimate's own interval half-widths, at the level of the
+    /// estimator's intervals, or why it has none (the record does not
+    /// determine some parameter).
+    pub half_widths: std::result::Result<Vec<f64>, String>,
+    /// The parameters' correlation matrix (row-major q x q), where the
+    /// interval has one.
+    pub correlation: Option<Vec<f64>>,
+}
+
+/// How an estimator's estimates are refined: see [`EstimateRefiner::new`].
+pub struct EstimateRefiner {
+    how: How,
+    /// The neighbourhood of a record without an interval of its own: the
+    /// estimator's calibrated radius, twice its interval.
+    radius: Vec<f64>,
+    /// The level of the intervals (`1 - alpha`), the estimator's.
+    alpha: f64,
+}
+
+enum How {
+    Posterior {
+        local: Refinement<Box<dyn ResidualModel<Error = BaselineError>>>,
+        points: usize,
+    },
+    OutputError(Refinement<OutputError<Box<dyn Simulator>>>),
+}
+
+impl EstimateRefiner {
+    /// The refinement of `estimator`'s estimates. Without a model file
+    /// (`model_file` `None`) a built-in model's estimates are refined to
+    /// the posterior mean of its exact likelihood over twice the
+    /// calibrated interval (the model's own grid), its interval the
+    /// posterior mean plus or minus `z` posterior sds; with one, by an
+    /// output-error fit through the file's simulator from the estimate and
+    /// two starts inside its interval, its interval a sandwich from the
+    /// record's residuals.
+    ///
+    /// ```
+    /// use twostage::TwoStage;
+    /// use twostage::models::{Benchmark, Simulator, experiment_rng};
+    /// use twostage_baselines::EstimateRefiner;
+    /// let estimator = TwoStage::builder(&Benchmark::new())
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
+    /// let refiner = EstimateRefiner::new(&estimator, None)?;
+    /// let mut record = Benchmark::new().spec().new_record();
+    /// Benchmark::new().simulate(&[0.3], &mut experiment_rng(8, 0), &mut record)?;
+    /// let first = estimator.assess(&record)?;
+    /// let refined = refiner.refine(&record, &first.theta, first.interval_half_widths())?;
+    /// assert!(refined.half_widths.is_ok() && refined.stop.is_none());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// An estimator without intervals (no neighbourhood to refine in), a
+    /// model file of another model than the estimator's, or a model that
+    /// cannot run without noise on a given input.
+    pub fn new(estimator: &Estimator, model_file: Option<&NamedModel>) -> Result<Self> {
+        let radius = estimator.neighbourhood(2.0).map_err(boxed)?;
+        // A neighbourhood exists only where the estimator has intervals.
+        let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
+        if model_file.is_none()
+            && let Ok(model) = estimator.training().model.parse::<BuiltinModel>()
+        {
+            return Ok(Self {
+                how: How::Posterior {
+                    local: Refinement::new(exact_likelihood(model)?),
+                    points: ModelProfile::of(model).refinement_points(),
+                },
+                radius,
+                alpha,
+            });
+        }
+        let simulator = estimator_model(estimator, model_file)?;
+        let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
+        Ok(Self {
+            how: How::OutputError(Refinement::new(fit)),
+            radius,
+            alpha,
+        })
+    }
+
+    /// Refines `estimate` of `record`, its interval `half_widths` where the
+    /// record has its own (adaptive intervals), else half the
+    /// neighbourhood.
+    ///
+    /// # Errors
+    /// The model cannot be evaluated near the estimate: the two-stage
+    /// estimate is then the caller's to keep.
+    pub fn refine(
+        &self,
+        record: &IoData,
+        estimate: &[f64],
+        half_widths: Option<&[f64]>,
+    ) -> std::result::Result<RefinedEstimate, String> {
+        let z = twostage::models::standard_normal_quantile(1.0 - self.alpha / 2.0);
+        match &self.how {
+            How::Posterior { local, points } => {
+                let posterior = local
+                    .local_posterior(record, estimate, &self.radius, *points)
+                    .map_err(|e| e.to_string())?;
+                Ok(RefinedEstimate {
+                    half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
+                    correlation: Some(posterior.correlation),
+                    theta: posterior.mean,
+                    stop: None,
+                })
+            }
+            How::OutputError(fit) => {
+                let widths = half_widths.map_or_else(
+                    || self.radius.iter().map(|r| r / 2.0).collect(),
+                    <[f64]>::to_vec,
+                );
+                let descents = fit
+                    .descents_from(record, refine_starts(estimate, &widths))
+                    .map_err(|e| e.to_string())?;
+                let best = descents
+                    .into_iter()
+                    .reduce(|best, d| if d.loss < best.loss { d } else { best })
+                    .ok_or_else(|| "no start".to_string())?;
+                // Its own uncertainty, from the loss's curvature there and
+                // the residuals' variance and autocorrelation.
+                let local = fit
+                    .uncertainty(record, &best.theta)
+                    .map_err(|e| e.to_string());
+                Ok(RefinedEstimate {
+                    theta: best.theta,
+                    stop: Some(best.stop),
+                    half_widths: local
+                        .as_ref()
+                        .map(|u| u.half_widths(self.alpha))
+                        .map_err(Clone::clone),
+                    correlation: local.ok().map(|u| u.correlation),
+                })
+            }
+        }
+    }
+}
+
+/// Where an output-error refinement starts: the estimate, and two corners
+/// of half its interval on either side (alternating signs across the
+/// parameters), so that a start lies off each axis the estimate may be
+/// wrong along. The descents are bounded by the prior, not the interval:
+/// on a real record the model's best fit may lie outside an interval
+/// calibrated on the model's own records.
+pub fn refine_starts(estimate: &[f64], half_widths: &[f64]) -> Vec<Vec<f64>> {
+    let corner = |sign: f64| -> Vec<f64> {
+        estimate
+            .iter()
+            .zip(half_widths)
+            .enumerate()
+            .map(|(j, (t, w))| {
+                let alternate = if j % 2 == 0 { 1.0 } else { -1.0 };
+                t + sign * alternate * 0.5 * w
+            })
+            .collect()
+    };
+    vec![estimate.to_vec(), corner(1.0), corner(-1.0)]
+}
+
+/// The model `estimator`'s records come from, noise-free capable, to check
+/// or refine them against: `model_file`, else the estimator's built-in
+/// model.
+///
+/// # Errors
+/// An estimator of a model file without `model_file`, or a model file of
+/// another model.
+pub fn estimator_model(
+    estimator: &Estimator,
+    model_file: Option<&NamedModel>,
+) -> Result<Box<dyn Simulator>> {
+    let trained_on = &estimator.training().model;
+    let builtin;
+    let named = match model_file {
+        Some(named) => named,
+        None => {
+            builtin =
+                NamedModel::builtin(trained_on).map_err(|_| BaselineError::InvalidSetting {
+                    name: "model file",
+                    value: "none".into(),
+                    expected: format!(
+                        "this estimator is of '{trained_on}', not a built-in model: give the model \
+                     file it was trained from"
+                    ),
+                })?;
+            &builtin
+        }
+    };
+    if named.name() != trained_on {
+        return Err(BaselineError::InvalidSetting {
+            name: "model file",
+            value: format!("'{}'", named.name()),
+            expected: format!(
+                "the estimator was trained on '{trained_on}': give the model file it was \
+                 trained from"
+            ),
+        });
+    }
+    named.simulator(false).map_err(|e| boxed(e.into()))
+}
+
+fn boxed(e: twostage::Error) -> BaselineError {
+    BaselineError::TwoStage(Box::new(e))
+}

@@ -1,0 +1,165 @@
+"""Check, refine and predict from Python against the command line's
+numbers on the same records: ``estimate --check``, ``estimate --refine``
+(a built-in model's posterior, and an output-error fit through a model
+file), ``estimate --at --check`` and ``simulate --at --input --noiseless``.
+
+The command line binary comes from TWOSTAGE_CLI (``cargo xtask test`` sets
+it to the one it built).
+"""
+
+import json
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import twostage
+
+CLI = os.environ.get("TWOSTAGE_CLI")
+
+
+def cli(*args):
+    if not CLI:
+        pytest.fail(
+            "TWOSTAGE_CLI is not set: run the suite with `cargo xtask test`, "
+            "or point it at a built `twostage` binary"
+        )
+    done = subprocess.run([CLI, *args], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+# A model file of the benchmark, shorter records: its estimates refine by
+# an output-error fit through the file's simulator, not the posterior.
+SHORT = """
+[model]
+name = "short-benchmark"
+[source]
+builtin = "benchmark"
+[[parameter]]
+name = "theta"
+prior = { dist = "uniform", low = -0.9, high = 0.9 }
+[signals]
+samples = 300
+"""
+
+
+def records(folder):
+    """The records of a ``simulate --count`` folder as u, y [b, N, 1], and
+    the truth [b, q]."""
+    data = np.loadtxt(folder / "data.csv", delimiter=",", skiprows=1)
+    experiments = np.unique(data[:, 0]).astype(int)
+    u = np.stack([data[data[:, 0] == e, 1:2] for e in experiments])
+    y = np.stack([data[data[:, 0] == e, 2:3] for e in experiments])
+    truth = np.loadtxt(folder / "truth.csv", delimiter=",", skiprows=1, ndmin=2)[:, 1:]
+    return u, y, truth
+
+
+CHECK_COLUMNS = ["check_tail_probability", "model_consistent", "loss_over_best", "explained"]
+
+
+def same_check(from_python, row):
+    assert from_python["rms"].tolist() == [row["y_rms"]]
+    assert from_python["fit_percent"].tolist() == [row["y_fit_percent"]]
+    for name in CHECK_COLUMNS:
+        assert from_python[name] == row[name], name
+
+
+@pytest.fixture(scope="module")
+def benchmark(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("through-model")
+    estimator = twostage.train(model="benchmark", sims=300, validate=0, calibrate=200, seed=3)
+    path = folder / "bench.tsest"
+    estimator.save(path)
+    cli("simulate", "--model", "benchmark", "--count", "3", "--seed", "17",
+        "--out-dir", str(folder / "records"))
+    return estimator, path, folder / "records"
+
+
+def test_check_and_refine_are_the_cli_s(benchmark):
+    estimator, path, folder = benchmark
+    u, y, _ = records(folder)
+    data = str(folder / "data.csv")
+    checked = json.loads(cli("estimate", "--estimator", str(path), "--check",
+                             "--check-sims", "99", "--format", "json", data))
+    refined = json.loads(cli("estimate", "--estimator", str(path), "--refine",
+                             "--format", "json", data))
+    for k in range(3):
+        same_check(estimator.check(u[k], y[k], sims=99), checked[k])
+        ours = estimator.refine(u[k], y[k])
+        assert ours["theta"].tolist() == [refined[k]["theta"]]
+        assert ours["lower"].tolist() == [refined[k]["theta_lo"]]
+        assert ours["upper"].tolist() == [refined[k]["theta_hi"]]
+        assert ours["stop"] is None and ours["correlation"].tolist() == [[1.0]]
+        # A check of the refined values is the command's check of them.
+        again = estimator.check(u[k], y[k], ours["theta"], sims=99)
+        assert again["simulated"].shape == (1000, 1)
+
+
+def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
+    model = tmp_path / "short.toml"
+    model.write_text(SHORT)
+    estimator = twostage.train(model_toml=SHORT, sims=300, validate=0, calibrate=200, seed=4)
+    path = tmp_path / "short.tsest"
+    estimator.save(path)
+    cli("simulate", "--model-file", str(model), "--count", "2", "--seed", "8",
+        "--out-dir", str(tmp_path / "records"))
+    u, y, _ = records(tmp_path / "records")
+    refined = json.loads(cli("estimate", "--estimator", str(path), "--model-file", str(model),
+                             "--refine", "--correlation", "--format", "json",
+                             str(tmp_path / "records" / "data.csv")))
+    for k in range(2):
+        ours = estimator.refine(u[k], y[k], model_file=model)
+        assert ours["theta"].tolist() == [refined[k]["theta"]]
+        assert ours["lower"].tolist() == [refined[k]["theta_lo"]]
+        assert ours["upper"].tolist() == [refined[k]["theta_hi"]]
+        assert ours["stop"] == refined[k]["refine_stop"]
+    # The file's text does as well as the file.
+    assert estimator.refine(u[0], y[0], model_toml=SHORT)["theta"].tolist() == [refined[0]["theta"]]
+    # Without the model file the estimator's model is unknown: said.
+    with pytest.raises(ValueError, match="give the model file it was trained from"):
+        estimator.refine(u[0], y[0])
+
+
+def test_given_values_are_checked_and_predicted_as_the_cli_does(benchmark, tmp_path):
+    _, _, folder = benchmark
+    u, y, truth = records(folder)
+    checked = json.loads(cli("estimate", "--model", "benchmark", "--at",
+                             str(folder / "truth.csv"), "--check", "--check-sims", "99",
+                             "--format", "json", str(folder / "data.csv")))
+    predicted = tmp_path / "predicted.csv"
+    cli("simulate", "--model", "benchmark", "--at", str(folder / "truth.csv"), "--input",
+        str(folder / "data.csv"), "--noiseless", "--out", str(predicted))
+    from_cli = np.loadtxt(predicted, delimiter=",", skiprows=1)
+    for k in range(3):
+        same_check(twostage.check(truth[k], u[k], y[k], model="benchmark", sims=99), checked[k])
+        given_u, simulated = twostage.predict(truth[k], u[k], model="benchmark")
+        rows = from_cli[from_cli[:, 0] == k]
+        assert given_u[:, 0].tolist() == u[k][:, 0].tolist()
+        assert simulated[:, 0].tolist() == rows[:, 2].tolist()
+    # The model's own input design, and its noise, as the command draws them.
+    own_u, own_y = twostage.predict([0.3], model="benchmark", noiseless=False, seed=2)
+    assert own_u.shape == (1000, 1) and own_y.shape == (1000, 1)
+    again = twostage.predict([0.3], model="benchmark", noiseless=False, seed=2)
+    assert again[1].tolist() == own_y.tolist()
+
+
+def test_bad_values_and_arrays_are_named(benchmark):
+    estimator, _, folder = benchmark
+    u, y, _ = records(folder)
+    with pytest.raises(ValueError, match="theta.*1.5.*allow_outside_prior"):
+        twostage.check([1.5], u[0], y[0], model="benchmark")
+    outside = twostage.check([1.5], u[0], y[0], model="benchmark", allow_outside_prior=True,
+                             sims=49)
+    assert outside["explained"] in (True, False)
+    with pytest.raises(ValueError, match="theta has 2 values, the model has 1"):
+        twostage.predict([0.1, 0.2], u[0], model="benchmark")
+    with pytest.raises(ValueError, match="u is a batch"):
+        estimator.refine(u, y)
+    bad = y[0].copy()
+    bad[7, 0] = np.nan
+    with pytest.raises(ValueError, match=r"y\[7, 0\] is NaN"):
+        estimator.check(u[0], bad)
+    with pytest.raises(ValueError, match="give model=, model_file= or model_toml="):
+        twostage.predict([0.1], u[0])
