@@ -261,12 +261,21 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "level_rms",
         "level_fit_percent",
         "check_tail_probability",
-        "loss_over_best",
         "explained",
     ] {
         let at_column = at_header.iter().position(|h| h == name).unwrap();
         assert_eq!(at_row[at_column], row[column(name)], "{name}");
     }
+    // --refine --check knows the converged refinement is the best fit (1);
+    // --at descends again from the given values and finds the same point.
+    let at_ratio: f64 = at_row[at_header
+        .iter()
+        .position(|h| h == "loss_over_best")
+        .unwrap()]
+    .parse()
+    .unwrap();
+    assert_eq!(row[column("loss_over_best")], "1");
+    assert!((at_ratio - 1.0).abs() < 1e-9, "{at_ratio}");
 
     // `models` says what a user must know before estimating: the input is
     // fixed, and which methods the model offers.

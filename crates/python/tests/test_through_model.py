@@ -56,7 +56,13 @@ def records(folder):
     return u, y, truth
 
 
-CHECK_COLUMNS = ["check_tail_probability", "model_consistent", "loss_over_best", "explained"]
+CHECK_COLUMNS = [
+    "check_tail_probability",
+    "check_runs",
+    "model_consistent",
+    "loss_over_best",
+    "explained",
+]
 
 
 def same_check(from_python, row):

@@ -19,7 +19,10 @@ mod output_error;
 mod refinement;
 mod uncertainty;
 
-pub use check::{EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, check_record, output_fit};
+pub use check::{
+    EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_best_fit, check_record,
+    output_fit,
+};
 pub use error::RefineError;
 pub use moments::WeightedMoments;
 pub use output_error::OutputError;

@@ -72,8 +72,8 @@ pub use twostage_compress::CompressorConfig;
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
     Descent, EXPLAINED_LEVEL, LocalPosterior, LocalUncertainty, OutputError, RecordCheck,
-    RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments, check_record,
-    output_fit,
+    RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments, check_best_fit,
+    check_record, output_fit,
 };
 
 pub use twostage_sources::{

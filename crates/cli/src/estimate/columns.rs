@@ -86,6 +86,7 @@ pub(super) fn check_header(outputs: &[String]) -> Vec<String> {
     }
     header.extend([
         "check_tail_probability".into(),
+        "check_runs".into(),
         "model_consistent".into(),
         "loss_over_best".into(),
         "explained".into(),
@@ -107,12 +108,13 @@ pub(super) fn check_fields(
                 fields.push(format_f64(*fit));
             }
             fields.push(format_f64(c.tail_probability));
+            fields.push(c.reference_runs.to_string());
             fields.push(c.model_consistent().to_string());
             fields.push(format_f64(c.loss_ratio));
             fields.push(c.explained().to_string());
             fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
             fields
         }
-        _ => vec![String::new(); 2 * outputs + 5],
+        _ => vec![String::new(); 2 * outputs + 6],
     }
 }
