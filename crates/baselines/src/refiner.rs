@@ -8,6 +8,9 @@ use twostage::fit::TerminationReason;
 use twostage::models::{BuiltinModel, IoData, Simulator};
 use twostage::{Estimator, ModelProfile, NamedModel, OutputError, Refinement, ResidualModel};
 
+use rayon::prelude::*;
+use twostage::refine::Descent;
+
 use crate::error::{BaselineError, Result};
 use crate::suite::exact_likelihood;
 
@@ -26,6 +29,10 @@ pub struct RefinedEstimate {
     /// interval has one.
     pub correlation: Option<Vec<f64>>,
 }
+
+/// A record to refine: the record, its two-stage estimate, and that
+/// estimate's interval half-widths where the record has its own.
+pub type ToRefine<'a> = (&'a IoData, &'a [f64], Option<&'a [f64]>);
 
 /// How an estimator's estimates are refined: see [`EstimateRefiner::new`].
 pub struct EstimateRefiner {
@@ -113,49 +120,108 @@ impl EstimateRefiner {
         estimate: &[f64],
         half_widths: Option<&[f64]>,
     ) -> std::result::Result<RefinedEstimate, String> {
+        self.refine_many(&[(record, estimate, half_widths)])
+            .pop()
+            .unwrap_or_else(|| unreachable!("one result per record"))
+    }
+
+    /// [`EstimateRefiner::refine`] of many records, one result per record
+    /// in order: an output-error fit runs the descents of up to
+    /// [`RECORDS_TOGETHER`] records in one lockstep and their intervals in
+    /// one batch, so that a simulator costing the same for one point as
+    /// for a batch is asked for full batches across the records; a
+    /// built-in model's posteriors run over the threads. Each record's
+    /// result is the one it gets alone.
+    pub fn refine_many(
+        &self,
+        items: &[ToRefine<'_>],
+    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
         let z = twostage::models::standard_normal_quantile(1.0 - self.alpha / 2.0);
         match &self.how {
-            How::Posterior { local, points } => {
-                let posterior = local
-                    .local_posterior(record, estimate, &self.radius, *points)
-                    .map_err(|e| e.to_string())?;
-                Ok(RefinedEstimate {
-                    half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
-                    correlation: Some(posterior.correlation),
-                    theta: posterior.mean,
-                    stop: None,
+            How::Posterior { local, points } => items
+                .par_iter()
+                .map(|(record, estimate, _)| {
+                    let posterior = local
+                        .local_posterior(record, estimate, &self.radius, *points)
+                        .map_err(|e| e.to_string())?;
+                    Ok(RefinedEstimate {
+                        half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
+                        correlation: Some(posterior.correlation),
+                        theta: posterior.mean,
+                        stop: None,
+                    })
                 })
-            }
-            How::OutputError(fit) => {
+                .collect(),
+            How::OutputError(fit) => items
+                .chunks(RECORDS_TOGETHER)
+                .flat_map(|chunk| self.output_error(fit, chunk))
+                .collect(),
+        }
+    }
+
+    /// The output-error refinement of `items`, together.
+    fn output_error(
+        &self,
+        fit: &Refinement<OutputError<Box<dyn Simulator>>>,
+        items: &[ToRefine<'_>],
+    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+        let jobs = items
+            .iter()
+            .map(|(record, estimate, half_widths)| {
+                // The record's own interval where it has one (adaptive).
                 let widths = half_widths.map_or_else(
                     || self.radius.iter().map(|r| r / 2.0).collect(),
                     <[f64]>::to_vec,
                 );
-                let descents = fit
-                    .descents_from(record, refine_starts(estimate, &widths))
-                    .map_err(|e| e.to_string())?;
-                let best = descents
+                (*record, refine_starts(estimate, &widths))
+            })
+            .collect();
+        let best: Vec<std::result::Result<Descent, String>> = fit
+            .descents_of_records(jobs)
+            .into_iter()
+            .map(|descents| {
+                descents
+                    .map_err(|e| e.to_string())?
                     .into_iter()
                     .reduce(|best, d| if d.loss < best.loss { d } else { best })
-                    .ok_or_else(|| "no start".to_string())?;
-                // Its own uncertainty, from the loss's curvature there and
-                // the residuals' variance and autocorrelation.
-                let local = fit
-                    .uncertainty(record, &best.theta)
+                    .ok_or_else(|| "no start".to_string())
+            })
+            .collect();
+        // Their own uncertainty, from the loss's curvature there and the
+        // residuals' variance and autocorrelation, in one batch.
+        let refined: Vec<(&IoData, &[f64])> = items
+            .iter()
+            .zip(&best)
+            .filter_map(|((record, _, _), best)| {
+                Some((*record, best.as_ref().ok()?.theta.as_slice()))
+            })
+            .collect();
+        let mut local = fit.uncertainties(&refined).into_iter();
+        best.into_iter()
+            .map(|best| {
+                let best = best?;
+                let local = local
+                    .next()
+                    .unwrap_or_else(|| unreachable!("one per refined record"))
                     .map_err(|e| e.to_string());
                 Ok(RefinedEstimate {
-                    theta: best.theta,
-                    stop: Some(best.stop),
                     half_widths: local
                         .as_ref()
                         .map(|u| u.half_widths(self.alpha))
                         .map_err(Clone::clone),
                     correlation: local.ok().map(|u| u.correlation),
+                    theta: best.theta,
+                    stop: Some(best.stop),
                 })
-            }
-        }
+            })
+            .collect()
     }
 }
+
+/// How many records an output-error refinement runs in one lockstep: their
+/// points fill a simulator's batches; more would only hold more residuals
+/// in memory at once.
+pub const RECORDS_TOGETHER: usize = 64;
 
 /// Where an output-error refinement starts: the estimate, and two corners
 /// of half its interval on either side (alternating signs across the

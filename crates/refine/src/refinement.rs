@@ -274,6 +274,58 @@ impl<M: ResidualModel> Refinement<M> {
             .collect()
     }
 
+    /// [`Refinement::descents_from`] for many records at once: every
+    /// record's descents run in one lockstep, so a model that evaluates a
+    /// batch of points at the price of one (a vectorized simulator, a
+    /// source of several cores) gets full batches across the records. One
+    /// result per record, in order, each the descents of its starts or the
+    /// first of them that failed; a record's failure leaves the others'.
+    ///
+    /// ```
+    /// use twostage_models::{IoData, Prior};
+    /// use twostage_refine::{RefineError, Refinement, ResidualModel};
+    /// # struct ConstantMean(Prior);
+    /// # impl ResidualModel for ConstantMean {
+    /// #     type Error = RefineError;
+    /// #     fn prior(&self) -> &Prior { &self.0 }
+    /// #     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
+    /// #         for (r, y) in r.iter_mut().zip(record.output(0)) { *r = y - theta[0]; }
+    /// #         Ok(())
+    /// #     }
+    /// # }
+    /// let fit = Refinement::new(ConstantMean(Prior::uniform_box(&[0.0], &[1.0])?));
+    /// let a = IoData::siso(&[0.0; 2], &[0.2, 0.4])?;
+    /// let b = IoData::siso(&[0.0; 2], &[0.7, 0.9])?;
+    /// let both = fit.descents_of_records(vec![(&a, vec![vec![0.5]]), (&b, vec![vec![0.5], vec![0.1]])]);
+    /// assert!((both[0].as_ref().unwrap()[0].theta[0] - 0.3).abs() < 1e-6);
+    /// assert_eq!(both[1].as_ref().unwrap().len(), 2);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn descents_of_records(
+        &self,
+        records: Vec<(&IoData, Vec<Vec<f64>>)>,
+    ) -> Vec<Result<Vec<Descent>, M::Error>> {
+        let q = self.model.prior().dim();
+        let counts: Vec<usize> = records.iter().map(|(_, starts)| starts.len()).collect();
+        let jobs = records
+            .into_iter()
+            .flat_map(|(record, starts)| {
+                starts.into_iter().map(move |start| DescentJob {
+                    record,
+                    start,
+                    lo: vec![0.0; q],
+                    hi: vec![1.0; q],
+                })
+            })
+            .collect();
+        let mut results =
+            lockstep::descend_together(&self.model, self.max_iterations, jobs).into_iter();
+        counts
+            .into_iter()
+            .map(|count| results.by_ref().take(count).collect())
+            .collect()
+    }
+
     /// A local refinement of `start` (a TS estimate, say): descents
     /// confined to the box `start +- radius` (within the prior), keeping the
     /// lowest loss. The loss of an oscillating model has many basins; a good

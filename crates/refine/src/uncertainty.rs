@@ -88,58 +88,113 @@ impl<M: ResidualModel> Refinement<M> {
         record: &IoData,
         theta: &[f64],
     ) -> Result<LocalUncertainty, M::Error> {
+        self.uncertainties(&[(record, theta)])
+            .pop()
+            .unwrap_or_else(|| unreachable!("one result per estimate"))
+    }
+
+    /// [`Refinement::uncertainty`] of many estimates, each of its own
+    /// record, their `2q + 1` points each asked for in one batch (as the
+    /// descents of [`Refinement::descents_of_records`] are): one result per
+    /// estimate, in order.
+    pub fn uncertainties(
+        &self,
+        estimates: &[(&IoData, &[f64])],
+    ) -> Vec<Result<LocalUncertainty, M::Error>> {
         let model = self.model();
         let prior = model.prior();
         let q = prior.dim();
-        if theta.len() != q {
-            return Err(Error::Length {
-                what: "the estimate",
-                found: theta.len(),
-                expected: q,
-            }
-            .into());
-        }
-        let unit = to_unit(prior, theta);
         let (zeros, ones) = (vec![0.0; q], vec![1.0; q]);
-        let (differences, points) = CentralDifferences::at(&unit, Some((&zeros, &ones)));
-        let thetas: Vec<Vec<f64>> = std::iter::once(theta.to_vec())
-            .chain(points.iter().map(|p| to_theta(prior, p)))
-            .collect();
-        let pairs: Vec<(&[f64], &IoData)> = thetas.iter().map(|t| (t.as_slice(), record)).collect();
-        let mut values = vec![Vec::new(); thetas.len()];
-        for result in model.residuals_batch(&pairs, &mut values) {
-            result?;
+        // Each estimate's differences, or why it has none.
+        let mut prepared = Vec::with_capacity(estimates.len());
+        let mut thetas: Vec<Vec<f64>> = Vec::new();
+        let mut records: Vec<&IoData> = Vec::new();
+        for (record, theta) in estimates {
+            if theta.len() != q {
+                prepared.push(Err(Error::Length {
+                    what: "the estimate",
+                    found: theta.len(),
+                    expected: q,
+                }));
+                continue;
+            }
+            let unit = to_unit(prior, theta);
+            let (differences, points) = CentralDifferences::at(&unit, Some((&zeros, &ones)));
+            let first = thetas.len();
+            thetas.push(theta.to_vec());
+            thetas.extend(points.iter().map(|p| to_theta(prior, p)));
+            records.resize(thetas.len(), record);
+            prepared.push(Ok((differences, first)));
         }
-        let residuals = values.remove(0);
-        let n = residuals.len();
-        let columns = differences.jacobian(&values, n);
-        let samples = record.n_samples().max(1);
-        let length = if n % samples == 0 { samples } else { n };
-        let (covariance, noise_order) = sandwich(&columns, &residuals, q, length)?;
-        // Back from unit coordinates to the parameters' own.
+        let pairs: Vec<(&[f64], &IoData)> = thetas
+            .iter()
+            .map(Vec::as_slice)
+            .zip(records.iter().copied())
+            .collect();
+        let mut values = vec![Vec::new(); thetas.len()];
+        let mut results: Vec<Option<M::Error>> = model
+            .residuals_batch(&pairs, &mut values)
+            .into_iter()
+            .map(Result::err)
+            .collect();
         let span: Vec<f64> = (0..q)
             .map(|j| prior.upper()[j] - prior.lower()[j])
             .collect();
-        let sd_unit: Vec<f64> = (0..q)
-            .map(|j| covariance[j * q + j].max(0.0).sqrt())
-            .collect();
-        let sd = sd_unit.iter().zip(&span).map(|(s, w)| s * w).collect();
-        let correlation = (0..q * q)
-            .map(|k| {
-                let (a, b) = (k / q, k % q);
-                let scale = sd_unit[a] * sd_unit[b];
-                if scale > 0.0 {
-                    covariance[k] / scale
-                } else {
-                    f64::from(u8::from(a == b))
+        prepared
+            .into_iter()
+            .zip(estimates)
+            .map(|(prepared, (record, _))| {
+                let (differences, first) = prepared?;
+                let count = 2 * q + 1;
+                if let Some(e) = results[first..first + count]
+                    .iter_mut()
+                    .find_map(Option::take)
+                {
+                    return Err(e);
                 }
+                let mut mine: Vec<Vec<f64>> = values[first..first + count]
+                    .iter_mut()
+                    .map(std::mem::take)
+                    .collect();
+                let residuals = mine.remove(0);
+                let n = residuals.len();
+                let columns = differences.jacobian(&mine, n);
+                let samples = record.n_samples().max(1);
+                let length = if n.is_multiple_of(samples) {
+                    samples
+                } else {
+                    n
+                };
+                let (covariance, noise_order) = sandwich(&columns, &residuals, q, length)?;
+                Ok(local_uncertainty(&covariance, &span, noise_order))
             })
-            .collect();
-        Ok(LocalUncertainty {
-            sd,
-            correlation,
-            noise_order,
+            .collect()
+    }
+}
+
+/// The sds and correlations of a covariance in unit coordinates, back in
+/// the parameters' own (`span` the prior box's widths).
+fn local_uncertainty(covariance: &[f64], span: &[f64], noise_order: usize) -> LocalUncertainty {
+    let q = span.len();
+    let sd_unit: Vec<f64> = (0..q)
+        .map(|j| covariance[j * q + j].max(0.0).sqrt())
+        .collect();
+    let sd = sd_unit.iter().zip(span).map(|(s, w)| s * w).collect();
+    let correlation = (0..q * q)
+        .map(|k| {
+            let (a, b) = (k / q, k % q);
+            let scale = sd_unit[a] * sd_unit[b];
+            if scale > 0.0 {
+                covariance[k] / scale
+            } else {
+                f64::from(u8::from(a == b))
+            }
         })
+        .collect();
+    LocalUncertainty {
+        sd,
+        correlation,
+        noise_order,
     }
 }
 

@@ -220,3 +220,75 @@ fn a_point_the_simulator_cannot_run_is_a_refused_step_not_a_lost_batch() {
     assert_eq!(stopped.stop, TerminationReason::EvaluationFailed);
     assert!((stopped.theta[1] - 1.5).abs() < 1e-12, "{stopped:?}");
 }
+
+/// Records of one input with their own noise (the input of `record()`).
+fn records_of_one_input(count: u64) -> Vec<IoData> {
+    use rand::RngExt;
+    let base = record();
+    (0..count)
+        .map(|k| {
+            let mut out = base.clone();
+            let mut rng = experiment_rng(12, k);
+            for y in out.output_mut(0) {
+                *y += 0.05 * rng.random_range(-1.0..1.0);
+            }
+            out
+        })
+        .collect()
+}
+
+#[test]
+fn records_refined_together_end_where_each_ends_alone_in_fewer_requests() {
+    let records = records_of_one_input(4);
+    let starts = vec![vec![0.5, 1.0], vec![0.9, 2.5]];
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let alone_model = FirstOrder::new(50, f64::INFINITY);
+    let fit = Refinement::new(OutputError::new(&alone_model).unwrap());
+    let (alone, alone_local): (Vec<_>, Vec<_>) = one_thread.install(|| {
+        records
+            .iter()
+            .map(|r| {
+                let found = fit.descents_from(r, starts.clone()).unwrap();
+                let local = fit.uncertainty(r, &found[0].theta).unwrap();
+                (found, local)
+            })
+            .unzip()
+    });
+    let alone_requests = alone_model.requests.load(Ordering::Relaxed);
+    let together_model = FirstOrder::new(50, f64::INFINITY);
+    let fit = Refinement::new(OutputError::new(&together_model).unwrap());
+    let (together, together_local) = one_thread.install(|| {
+        let found: Vec<Vec<_>> = fit
+            .descents_of_records(records.iter().map(|r| (r, starts.clone())).collect())
+            .into_iter()
+            .map(Result::unwrap)
+            .collect();
+        let estimates: Vec<(&IoData, &[f64])> = records
+            .iter()
+            .zip(&found)
+            .map(|(r, d)| (r, d[0].theta.as_slice()))
+            .collect();
+        let local: Vec<_> = fit
+            .uncertainties(&estimates)
+            .into_iter()
+            .map(Result::unwrap)
+            .collect();
+        (found, local)
+    });
+    for (a, b) in alone.iter().flatten().zip(together.iter().flatten()) {
+        assert_eq!(bits(&a.theta), bits(&b.theta));
+        assert_eq!((a.iterations, a.stop), (b.iterations, b.stop));
+    }
+    for (a, b) in alone_local.iter().zip(&together_local) {
+        assert_eq!(bits(&a.sd), bits(&b.sd));
+        assert_eq!(bits(&a.correlation), bits(&b.correlation));
+    }
+    let together_requests = together_model.requests.load(Ordering::Relaxed);
+    assert!(
+        2 * together_requests < alone_requests,
+        "{together_requests} requests together against {alone_requests} record by record"
+    );
+}

@@ -250,6 +250,7 @@ fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
         format,
         trained: None,
         checker,
+        refiner: None,
         method: Box::new(move |_, record: &IoData| {
             let best = oe
                 .descents(record)
@@ -300,6 +301,7 @@ fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<Chosen> {
         format: record_format(&spec),
         trained: None,
         checker: Some(simulator),
+        refiner: None,
         method: Box::new(move |id, _| values(id).map(bare)),
     })
 }
@@ -328,6 +330,9 @@ struct Chosen {
     trained: Option<usize>,
     format: csv_records::RecordFormat,
     checker: Option<Box<dyn Simulator>>,
+    /// With --refine: the refinement of an estimator's estimates, run over
+    /// a file's records together.
+    refiner: Option<twostage_baselines::EstimateRefiner>,
 }
 
 /// The method chosen on the command line, ready to estimate records.
@@ -348,7 +353,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         } else {
             None
         };
-        let refine = if args.refine {
+        let refiner = if args.refine {
             Some(refinement(&estimator, args)?)
         } else {
             None
@@ -358,38 +363,18 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             format,
             trained: Some(trained),
             checker,
+            refiner,
             method: Box::new(move |_, record: &IoData| {
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
                 // The adaptive intervals have the same level and follow the
                 // record; the fixed ones are the fallback. Both were
                 // calibrated for the TS estimate, not a refined one.
-                let widths = a.interval_half_widths().map(<[f64]>::to_vec);
-                // A refinement that fails keeps the TS estimate, and says so;
-                // one that succeeds brings its own interval (NaN where the
-                // record does not determine it, said on stderr).
-                let (theta, widths, refined, interval, correlation) = match refine.as_ref() {
-                    Some(refine) => match refine.refine(record, &a.theta, widths.as_deref()) {
-                        Ok(r) => {
-                            let q = r.theta.len();
-                            let (own, why) = match r.half_widths {
-                                Ok(w) => (w, None),
-                                Err(e) => (vec![f64::NAN; q], Some(e)),
-                            };
-                            (r.theta, Some(own), Some(Ok(r.stop)), why, r.correlation)
-                        }
-                        Err(e) => (a.theta, widths, Some(Err(e)), None, None),
-                    },
-                    None => (a.theta, widths, None, None, None),
-                };
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
-                    theta,
-                    widths,
+                    widths: a.interval_half_widths().map(<[f64]>::to_vec),
+                    theta: a.theta,
                     floored: transforms.then_some(a.floored_samples),
-                    check: None,
-                    refined,
-                    interval_failure: interval,
-                    correlation,
+                    ..bare(Vec::new())
                 })
             }),
         });
@@ -434,6 +419,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         format,
         trained: None,
         checker: check_model(args)?,
+        refiner: None,
         method: Box::new(move |_, record: &IoData| {
             estimator
                 .estimate(record)
@@ -452,6 +438,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         trained: trained_samples,
         format,
         checker,
+        refiner,
     } = method(args)?;
     let seed = args.seed.unwrap_or(0);
     let with_correlation = args.correlation;
@@ -461,41 +448,49 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let sample_time = format.sample_time;
     for path in &args.data {
         let reads = csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))?;
-        // The records in parallel (a check or a refinement simulates the
-        // model many times per record), reported in their order: each
-        // estimate depends on its record alone.
-        let estimates: Vec<(String, RecordOutcome)> = reads
+        // The records in parallel, reported in their order: each estimate
+        // depends on its record alone.
+        let mut estimates: Vec<(String, RecordOutcome)> = reads
             .into_par_iter()
             .map(|read| {
                 let estimated = read.record.and_then(|record| {
-                    let mut estimated = estimate_one(&read.id, &record)
+                    let estimated = estimate_one(&read.id, &record)
                         .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
-                    // An output-error refinement that converged is the best
-                    // fit near itself: the check need not descend again.
-                    let at_best = matches!(
-                        estimated.refined,
-                        Some(Ok(Some(TerminationReason::Converged)))
-                    );
-                    estimated.check = checker.as_ref().map(|model| {
-                        let check = if at_best {
-                            twostage::check_best_fit
-                        } else {
-                            twostage::check_record
-                        };
-                        check(
-                            model.as_ref(),
-                            &record,
-                            &estimated.theta,
-                            args.check_sims,
-                            seed,
-                        )
-                        .map_err(|e| e.to_string())
-                    });
                     Ok((record, estimated))
                 });
                 (read.id, estimated)
             })
             .collect();
+        if let Some(refiner) = &refiner {
+            refine_together(refiner, &mut estimates);
+        }
+        // A check simulates the model many times per record.
+        estimates.par_iter_mut().for_each(|(_, outcome)| {
+            let (Some(model), Ok((record, estimated))) = (&checker, outcome) else {
+                return;
+            };
+            // An output-error refinement that converged is the best fit near
+            // itself: the check need not descend again.
+            let at_best = matches!(
+                estimated.refined,
+                Some(Ok(Some(TerminationReason::Converged)))
+            );
+            let check = if at_best {
+                twostage::check_best_fit
+            } else {
+                twostage::check_record
+            };
+            estimated.check = Some(
+                check(
+                    model.as_ref(),
+                    record,
+                    &estimated.theta,
+                    args.check_sims,
+                    seed,
+                )
+                .map_err(|e| e.to_string()),
+            );
+        });
         for (id, outcome) in estimates {
             // The estimate is still defined, but the validation error and
             // the intervals were measured for another N (said only of a
@@ -662,6 +657,42 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         None => std::io::stdout().lock().write_all(text.as_bytes())?,
     }
     Ok(outcome)
+}
+
+/// Refines the estimated records of a file together (their simulations in
+/// shared batches): a refinement that fails keeps the TS estimate, and says
+/// so; one that succeeds brings its own interval (NaN where the record does
+/// not determine it, said on stderr).
+fn refine_together(
+    refiner: &twostage_baselines::EstimateRefiner,
+    estimates: &mut [(String, RecordOutcome)],
+) {
+    let items: Vec<twostage_baselines::ToRefine<'_>> = estimates
+        .iter()
+        .filter_map(|(_, outcome)| outcome.as_ref().ok())
+        .map(|(record, e)| (record, e.theta.as_slice(), e.widths.as_deref()))
+        .collect();
+    let refined = refiner.refine_many(&items);
+    let estimated = estimates
+        .iter_mut()
+        .filter_map(|(_, outcome)| outcome.as_mut().ok());
+    for ((_, e), result) in estimated.zip(refined) {
+        match result {
+            Ok(r) => {
+                let q = r.theta.len();
+                let (own, why) = match r.half_widths {
+                    Ok(w) => (w, None),
+                    Err(why) => (vec![f64::NAN; q], Some(why)),
+                };
+                e.theta = r.theta;
+                e.widths = Some(own);
+                e.refined = Some(Ok(r.stop));
+                e.interval_failure = why;
+                e.correlation = r.correlation;
+            }
+            Err(why) => e.refined = Some(Err(why)),
+        }
+    }
 }
 
 /// How many records were estimated, and how many could not be.
