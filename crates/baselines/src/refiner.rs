@@ -107,6 +107,16 @@ impl EstimateRefiner {
         })
     }
 
+    /// The simulator an output-error refinement runs (`None` for a
+    /// posterior): a check of the refined estimates can share it, and its
+    /// processes.
+    pub fn simulator(&self) -> Option<&dyn Simulator> {
+        match &self.how {
+            How::OutputError(fit) => Some(fit.model().simulator().as_ref()),
+            How::Posterior { .. } => None,
+        }
+    }
+
     /// Refines `estimate` of `record`, its interval `half_widths` where the
     /// record has its own (adaptive intervals), else half the
     /// neighbourhood.

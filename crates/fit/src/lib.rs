@@ -41,8 +41,8 @@ pub use config::{FittedRegressor, RegressorConfig};
 pub use covariance::CovarianceFactor;
 pub use error::{FitError, Result};
 pub use levenberg_marquardt::{
-    CentralDifferences, Damping, Evaluation, Iterate, LeastSquaresProblem, LevenbergMarquardt,
-    LmRun, Minimum, ModelAt, Need, TerminationReason, normal_products,
+    CentralDifferences, Damping, Evaluation, ForwardDifferences, Iterate, LeastSquaresProblem,
+    LevenbergMarquardt, LmRun, Minimum, ModelAt, Need, TerminationReason, normal_products,
 };
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, n_parameters};

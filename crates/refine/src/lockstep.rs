@@ -1,5 +1,5 @@
 //! Many Levenberg-Marquardt descents run in lockstep: each round gathers
-//! what every descent needs (its start, the central-difference points of
+//! what every descent needs (its start, the forward-difference points of
 //! its Jacobian, its trial steps) and hands them to the model in one
 //! batch, so that a simulator behind a process is asked once per round for
 //! all starts and records, not once per point. Each descent's arithmetic
@@ -7,7 +7,7 @@
 //! requests, never the result.
 
 use twostage_fit::{
-    CentralDifferences, Damping, LevenbergMarquardt, LmRun, Need, TerminationReason,
+    Damping, ForwardDifferences, LevenbergMarquardt, LmRun, Need, TerminationReason,
 };
 use twostage_models::{IoData, Prior};
 
@@ -58,7 +58,7 @@ enum Slot<'a, E> {
         job: DescentJob<'a>,
         run: Box<LmRun>,
         /// The Jacobian's differences while their points are out.
-        differences: Option<CentralDifferences>,
+        differences: Option<ForwardDifferences>,
     },
     Failed(E),
 }
@@ -139,10 +139,12 @@ pub(crate) fn descend_together<M: ResidualModel>(
                     }
                 }
                 Need::Model => {
-                    let (central, at) =
-                        CentralDifferences::at(run.model_mut().x, Some((&zeros, &ones)));
+                    // Forward: q points a Jacobian, not 2q (the residuals
+                    // at the point are the descent's own).
+                    let (forward, at) =
+                        ForwardDifferences::at(run.model_mut().x, Some((&zeros, &ones)));
                     points.extend(at.iter().map(|point| to_theta(prior, point)));
-                    *differences = Some(central);
+                    *differences = Some(forward);
                 }
                 Need::Observe | Need::Done => {}
             }
@@ -170,13 +172,13 @@ pub(crate) fn descend_together<M: ResidualModel>(
             else {
                 continue;
             };
-            if let Some(central) = differences.take() {
+            if let Some(forward) = differences.take() {
                 if mine.iter().any(|(result, _)| result.is_err()) {
                     run.abandon(TerminationReason::EvaluationFailed);
                 } else {
                     let columns: Vec<Vec<f64>> = mine.into_iter().map(|(_, v)| v).collect();
                     let m = run.model_mut();
-                    central.products(&columns, m.residuals, m.jtj, m.jtr);
+                    forward.products(&columns, m.residuals, m.jtj, m.jtr);
                     run.modelled();
                 }
                 continue;

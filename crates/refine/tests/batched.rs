@@ -161,7 +161,7 @@ fn descents_asked_together_end_where_each_ends_alone_in_far_fewer_requests() {
     }
     let requests = batched.requests.load(Ordering::Relaxed);
     let points = batched.points.load(Ordering::Relaxed);
-    // A round asks for every descent's Jacobian (4 points each) or trial
+    // A round asks for every descent's Jacobian (2 points each) or trial
     // steps (3 each): two requests per iteration of the longest descent,
     // and one more where all three dampings were refused, where one at a
     // time each point was a request.
@@ -171,7 +171,7 @@ fn descents_asked_together_end_where_each_ends_alone_in_far_fewer_requests() {
         "{requests} requests for {longest} iterations"
     );
     assert!(
-        requests * 5 < one_at_a_time,
+        requests * 4 < one_at_a_time,
         "{requests} requests batched against {one_at_a_time} one at a time"
     );
     // The trial dampings asked for beside the one taken cost some points.

@@ -464,9 +464,16 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         if let Some(refiner) = &refiner {
             refine_together(refiner, &mut estimates);
         }
-        // A check simulates the model many times per record.
+        // A check simulates the model many times per record; after an
+        // output-error refinement, through the refinement's simulator (its
+        // processes are already running).
+        let check_model: Option<&dyn Simulator> = refiner
+            .as_ref()
+            .and_then(|r| r.simulator())
+            .filter(|_| checker.is_some())
+            .or(checker.as_deref());
         estimates.par_iter_mut().for_each(|(_, outcome)| {
-            let (Some(model), Ok((record, estimated))) = (&checker, outcome) else {
+            let (Some(model), Ok((record, estimated))) = (check_model, outcome) else {
                 return;
             };
             // An output-error refinement that converged is the best fit near
@@ -481,14 +488,8 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 twostage::check_record
             };
             estimated.check = Some(
-                check(
-                    model.as_ref(),
-                    record,
-                    &estimated.theta,
-                    args.check_sims,
-                    seed,
-                )
-                .map_err(|e| e.to_string()),
+                check(model, record, &estimated.theta, args.check_sims, seed)
+                    .map_err(|e| e.to_string()),
             );
         });
         for (id, outcome) in estimates {

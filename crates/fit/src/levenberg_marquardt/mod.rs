@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 mod differences;
 mod run;
 
-pub use differences::CentralDifferences;
+pub use differences::{CentralDifferences, ForwardDifferences};
 pub use run::{Evaluation, LmRun, ModelAt, Need};
 
 /// Why an iterative fit stopped.
