@@ -70,9 +70,13 @@ pub(super) fn input_as_trained(check: &RecordCheck) -> Option<bool> {
         .then_some(check.input_differs_at.is_none())
 }
 
-/// Numbers for a message, comma separated, to four significant digits.
+/// Numbers for a message, comma separated, to four significant digits
+/// (a residual of 1.8e-6 must not read 0.0000).
 pub(super) fn list(values: &[f64]) -> String {
-    let shown: Vec<String> = values.iter().map(|v| format!("{v:.4}")).collect();
+    let shown: Vec<String> = values
+        .iter()
+        .map(|v| crate::number::four_digits(*v))
+        .collect();
     shown.join(", ")
 }
 
@@ -116,5 +120,16 @@ pub(super) fn check_fields(
             fields
         }
         _ => vec![String::new(); 2 * outputs + 6],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A message's numbers keep their significant digits, however small.
+    #[test]
+    fn a_small_residual_reads_as_itself() {
+        assert_eq!(list(&[1.8e-6, 91.7]), "1.800e-6, 91.70");
     }
 }
