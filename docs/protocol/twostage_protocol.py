@@ -36,16 +36,20 @@ class Shape:
 
 def _record(index, inputs, outputs, shape):
     """The answer lines of one experiment, checked against the shape."""
+    # Plain lists of Python floats first: a numpy array's `tolist` is many
+    # times faster than indexing it sample by sample.
+    inputs = inputs.tolist() if hasattr(inputs, "tolist") else inputs
+    outputs = outputs.tolist() if hasattr(outputs, "tolist") else outputs
     lines = ["record %d" % index]
     for k in range(shape.n):
-        row = [float(v) for v in (inputs[k] if shape.n_u else [])]
-        row += [float(v) for v in outputs[k]]
+        row = list(inputs[k]) if shape.n_u else []
+        row += outputs[k]
         if len(row) != shape.n_u + shape.n_y:
             raise ValueError(
                 "sample %d has %d values, the model has %d input(s) and %d output(s)"
                 % (k, len(row), shape.n_u, shape.n_y)
             )
-        lines.append(" ".join(repr(v) for v in row))
+        lines.append(" ".join(map(repr, map(float, row))))
     return lines
 
 

@@ -6,26 +6,13 @@ it to the one it built).
 """
 
 import json
-import os
-import subprocess
 
 import numpy as np
 import pytest
 
 import twostage
+from command_line import cli
 
-CLI = os.environ.get("TWOSTAGE_CLI")
-
-
-def cli(*args):
-    if not CLI:
-        pytest.fail(
-            "TWOSTAGE_CLI is not set: run the suite with `cargo xtask test`, "
-            "or point it at a built `twostage` binary"
-        )
-    done = subprocess.run([CLI, *args], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-    return done.stdout
 
 
 SMALL = dict(sims=300, validate=100, calibrate=100, seed=5)

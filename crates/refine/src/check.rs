@@ -522,20 +522,17 @@ mod tests {
                     / n as f64
             };
             let observed = misfit(&y);
+            let noisy = Conditions {
+                noiseless: false,
+                input: Some(&record),
+            };
             let at_least = (0..199u64)
                 .filter(|i| {
-                    let mut rng = experiment_rng(5, *i);
-                    let own: Vec<f64> = u
-                        .iter()
-                        .map(|u| {
-                            let e: f64 = rand_distr::Distribution::sample(
-                                &rand_distr::StandardNormal,
-                                &mut rng,
-                            );
-                            2.0 * u + 0.1 * e
-                        })
-                        .collect();
-                    misfit(&own) >= observed
+                    let mut own = IoData::default();
+                    model
+                        .simulate_under(&[2.0], &mut experiment_rng(5, *i), noisy, &mut own)
+                        .unwrap();
+                    misfit(own.output(0)) >= observed
                 })
                 .count();
             let full = (at_least + 1) as f64 / 200.0;

@@ -603,19 +603,7 @@ fn a_protocol_two_function_without_its_keywords_is_told_which() {
         "external-no-keywords",
         "def simulate(theta, seed, index, noiseless=False):\n    return [[0.0]] * 50, [[0.0]] * 50\n\nserve(simulate)\n",
     );
-    let spec = ModelSpec::new(
-        "gain",
-        &["k"],
-        Prior::uniform_box(&[-0.4], &[0.9]).unwrap(),
-        1.0,
-        50,
-    )
-    .unwrap();
-    let sim = ExternalSimulator::new(spec, vec![python(), "sim.py".into()])
-        .unwrap()
-        .current_dir(&dir)
-        .protocol(2)
-        .unwrap();
+    let sim = gain(&dir).protocol(2).unwrap();
     let error = run(&sim, 0.5, 0).unwrap_err().to_string();
     assert!(
         error.contains(
