@@ -173,6 +173,20 @@ fn values_outside_the_prior_or_without_a_parameter_are_refused_and_named() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     assert_eq!(table(&text(&out.stdout))[0]["theta"], "1.5");
 
+    // `simulate --at` refuses them alike.
+    let out = twostage(&["simulate", "--model", "benchmark", "--at", path(&outside)]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--allow-outside-prior"));
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&outside),
+        "--allow-outside-prior",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
     let nameless = dir.join("nameless.csv");
     std::fs::write(&nameless, "experiment,k\n0,0.1\n").unwrap();
     let out = run(&nameless, &[]);

@@ -242,6 +242,12 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "{header:?}\n{row:?}"
     );
     assert!(text(&out.stderr).contains("the model is not exact for this record"));
+    // And the refined interval says what it covers there.
+    assert!(
+        text(&out.stderr).contains("the refined interval covers this record's noise"),
+        "{}",
+        text(&out.stderr)
+    );
 
     // The refined values checked by --at give the same check as --refine
     // --check: the same model at the same point on the same record.
