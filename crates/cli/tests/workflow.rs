@@ -840,3 +840,41 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
         text(&out.stderr)
     );
 }
+
+/// An interval never leaves the prior's box: a record near its edge gets
+/// an interval that stops at the edge, as the Python package's does.
+#[test]
+fn intervals_stay_inside_the_prior() {
+    let dir = scratch("intervals-in-prior");
+    let file = dir.join("linear.tsest");
+    let out = train_linear(&file, "300", "200");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let record = dir.join("edge.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--theta",
+        "0.89",
+        "--out",
+        path(&record),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&["estimate", "--estimator", path(&file), path(&record)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    let row: Vec<f64> = table
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .skip(1)
+        .take(3)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let (theta, lo, hi) = (row[0], row[1], row[2]);
+    assert!(lo < theta && theta <= hi, "{table}");
+    assert!(lo >= -0.9 && hi <= 0.9, "{table}");
+    // Cut at the edge: a linear stage 2 on 300 records is not that sure.
+    assert_eq!(hi.to_bits(), 0.9f64.to_bits(), "{table}");
+}

@@ -271,6 +271,39 @@ impl Assessment {
     }
 }
 
+/// The interval `theta +- half_widths` kept inside the prior's box
+/// `[lower, upper]`: a parameter cannot leave its prior's support (a
+/// positive one never goes below zero), and neither does its interval;
+/// what is cut off held no probability, so the coverage stays.
+///
+/// ```
+/// let (lo, hi) = twostage::interval_in_box(&[0.1, 2.0], &[0.3, 0.5], &[0.0, 1.0], &[5.0, 2.2]);
+/// assert_eq!((lo, hi), (vec![0.0, 1.5], vec![0.4, 2.2]));
+/// // No interval is no interval.
+/// let (lo, _) = twostage::interval_in_box(&[0.1], &[f64::NAN], &[0.0], &[1.0]);
+/// assert!(lo[0].is_nan());
+/// ```
+pub fn interval_in_box(
+    theta: &[f64],
+    half_widths: &[f64],
+    lower: &[f64],
+    upper: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    theta
+        .iter()
+        .zip(half_widths)
+        .zip(lower.iter().zip(upper))
+        .map(|((t, w), (lo, hi))| {
+            // A missing interval (NaN) stays missing: `max` would take the box.
+            if w.is_nan() {
+                (f64::NAN, f64::NAN)
+            } else {
+                ((t - w).max(*lo), (t + w).min(*hi))
+            }
+        })
+        .unzip()
+}
+
 impl Estimator {
     /// Parameter names, in the order of theta.
     pub fn param_names(&self) -> &[String] {

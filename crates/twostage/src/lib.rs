@@ -64,6 +64,7 @@ pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
 pub use error::{Error, FileError, Result};
 pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
+    interval_in_box,
 };
 pub use file::{FORMAT_VERSION, MAGIC, write_whole};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};

@@ -251,6 +251,7 @@ fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
         trained: None,
         checker,
         refiner: None,
+        prior_box: None,
         method: Box::new(move |_, record: &IoData| {
             let best = oe
                 .descents(record)
@@ -302,6 +303,7 @@ fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<Chosen> {
         trained: None,
         checker: Some(simulator),
         refiner: None,
+        prior_box: None,
         method: Box::new(move |id, _| values(id).map(bare)),
     })
 }
@@ -333,6 +335,25 @@ struct Chosen {
     /// With --refine: the refinement of an estimator's estimates, run over
     /// a file's records together.
     refiner: Option<twostage_baselines::EstimateRefiner>,
+    /// The prior's box, which the intervals stay inside.
+    prior_box: Option<PriorBox>,
+}
+
+/// The lower and upper corners of a prior's box.
+type PriorBox = (Vec<f64>, Vec<f64>);
+
+/// A row's interval as written: `theta +- widths` inside the prior's box.
+fn interval(e: &Estimated, prior_box: Option<&PriorBox>) -> Option<(Vec<f64>, Vec<f64>)> {
+    let widths = e.widths.as_ref()?;
+    Some(match prior_box {
+        Some((lower, upper)) => twostage::interval_in_box(&e.theta, widths, lower, upper),
+        None => e
+            .theta
+            .iter()
+            .zip(widths)
+            .map(|(t, w)| (t - w, t + w))
+            .unzip(),
+    })
 }
 
 /// The method chosen on the command line, ready to estimate records.
@@ -358,12 +379,14 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         } else {
             None
         };
+        let prior_box = Some((estimator.lower().to_vec(), estimator.upper().to_vec()));
         return Ok(Chosen {
             names,
             format,
             trained: Some(trained),
             checker,
             refiner,
+            prior_box,
             method: Box::new(move |_, record: &IoData| {
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
                 // The adaptive intervals have the same level and follow the
@@ -420,6 +443,7 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
         trained: None,
         checker: check_model(args)?,
         refiner: None,
+        prior_box: None,
         method: Box::new(move |_, record: &IoData| {
             estimator
                 .estimate(record)
@@ -439,6 +463,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         format,
         checker,
         refiner,
+        prior_box,
     } = method(args)?;
     let seed = args.seed.unwrap_or(0);
     let with_correlation = args.correlation;
@@ -649,9 +674,21 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         return Ok(outcome);
     }
     let text = if args.format == TableFormat::Json {
-        json(&names, &rows, &output_names, with_correlation)?
+        json(
+            &names,
+            &rows,
+            &output_names,
+            with_correlation,
+            prior_box.as_ref(),
+        )?
     } else {
-        csv(&names, &rows, &output_names, with_correlation)?
+        csv(
+            &names,
+            &rows,
+            &output_names,
+            with_correlation,
+            prior_box.as_ref(),
+        )?
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
@@ -735,6 +772,7 @@ fn csv(
     rows: &[(String, Estimated)],
     outputs: &[String],
     with_correlation: bool,
+    prior_box: Option<&PriorBox>,
 ) -> Result<String> {
     use twostage::sources::csv_rows::row;
     let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
@@ -774,10 +812,10 @@ fn csv(
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
         fields.extend(e.theta.iter().map(|t| format_f64(*t)));
-        if let Some(widths) = &e.widths {
-            for (t, w) in e.theta.iter().zip(widths) {
-                fields.push(format_f64(t - w));
-                fields.push(format_f64(t + w));
+        if let Some((lo, hi)) = interval(e, prior_box) {
+            for (lo, hi) in lo.iter().zip(&hi) {
+                fields.push(format_f64(*lo));
+                fields.push(format_f64(*hi));
             }
         }
         if let Some((d, _)) = e.distance {
@@ -810,6 +848,7 @@ fn json(
     rows: &[(String, Estimated)],
     outputs: &[String],
     with_correlation: bool,
+    prior_box: Option<&PriorBox>,
 ) -> Result<String> {
     let pairs = if with_correlation {
         correlation_pairs(names)
@@ -821,11 +860,12 @@ fn json(
         .map(|(id, e)| {
             let mut object = serde_json::Map::new();
             object.insert("experiment".into(), id.clone().into());
+            let bounds = interval(e, prior_box);
             for (j, n) in names.iter().enumerate() {
                 object.insert(n.clone(), e.theta[j].into());
-                if let Some(w) = &e.widths {
-                    object.insert(format!("{n}_lo"), (e.theta[j] - w[j]).into());
-                    object.insert(format!("{n}_hi"), (e.theta[j] + w[j]).into());
+                if let Some((lo, hi)) = &bounds {
+                    object.insert(format!("{n}_lo"), lo[j].into());
+                    object.insert(format!("{n}_hi"), hi[j].into());
                 }
             }
             if let Some((d, _)) = e.distance {

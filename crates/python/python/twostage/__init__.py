@@ -146,6 +146,7 @@ class Estimator:
 
         - ``theta``: the estimates ([q] or [b, q]);
         - ``lower``, ``upper``: the 90% (or the trained level's) interval,
+          inside the prior's box (never outside a parameter's support),
           adaptive where calibrated, else conformal; None when uncalibrated;
         - ``feature_distance``: the record's Mahalanobis distance from the
           training features, ``distance_threshold`` the distance 99.9% of
@@ -159,10 +160,11 @@ class Estimator:
         """
         u, y = self._columns(u, y)
         theta, widths, distance, threshold, floored = self._native.assess(u, y)
+        lower, upper = self._interval(theta, widths)
         result = {
             "theta": theta,
-            "lower": None if widths is None else theta - widths,
-            "upper": None if widths is None else theta + widths,
+            "lower": lower,
+            "upper": upper,
             "feature_distance": distance,
             "distance_threshold": threshold,
             "out_of_distribution": None if distance is None else distance > threshold,
@@ -225,10 +227,18 @@ class Estimator:
             u, y, model_file=_path(model_file), model_toml=model_toml
         )
         widths = refined.pop("half_widths")
-        theta = refined["theta"]
-        refined["lower"] = None if widths is None else theta - widths
-        refined["upper"] = None if widths is None else theta + widths
+        refined["lower"], refined["upper"] = self._interval(refined["theta"], widths)
         return refined
+
+    def _interval(self, theta, widths):
+        """``theta +- widths`` inside the prior's box, as the command line
+        writes it (``twostage::interval_in_box``): a parameter's interval
+        never leaves its prior's support."""
+        if widths is None:
+            return None, None
+        lower = np.maximum(theta - widths, np.asarray(self.lower))
+        upper = np.minimum(theta + widths, np.asarray(self.upper))
+        return lower, upper
 
     @property
     def validation(self) -> Optional[dict[str, Any]]:
