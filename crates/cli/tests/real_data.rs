@@ -249,6 +249,31 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         text(&out.stderr)
     );
 
+    // --refine=auto refines exactly the records whose two-stage estimate
+    // the check does not explain (this one), to the same point.
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--refine=auto",
+        path(&estimation),
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains(
+            "--refine=auto: the check explains 0 of 1 two-stage estimates; refining experiment(s) \
+             estimation"
+        ),
+        "{stderr}"
+    );
+    let (auto_header, auto_row) = table(&out);
+    for name in ["k", "a1", "a2", "h0", "explained", "refine_stop"] {
+        let at = auto_header.iter().position(|h| h == name).unwrap();
+        assert_eq!(auto_row[at], row[column(name)], "{name}");
+    }
+
     // The refined values checked by --at give the same check as --refine
     // --check: the same model at the same point on the same record.
     let out = twostage(&[

@@ -878,3 +878,69 @@ fn intervals_stay_inside_the_prior() {
     // Cut at the edge: a linear stage 2 on 300 records is not that sure.
     assert_eq!(hi.to_bits(), 0.9f64.to_bits(), "{table}");
 }
+
+/// `--refine=auto` refines exactly the records `--check` does not explain,
+/// names them, and keeps the others' two-stage estimates.
+#[test]
+fn refine_auto_refines_what_the_check_does_not_explain() {
+    let dir = scratch("refine-auto");
+    let file = dir.join("linear.tsest");
+    let out = train_linear(&file, "300", "200");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let data = simulate_records(&dir, 12, 31);
+    let records = path(&data.join("data.csv")).to_string();
+    let rows = |out: &Output| -> Vec<Vec<String>> {
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        text(&out.stdout)
+            .lines()
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect()
+    };
+    let checked = rows(&twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--check",
+        "--check-sims",
+        "99",
+        &records,
+    ]));
+    let at = |rows: &[Vec<String>], name: &str| rows[0].iter().position(|h| h == name).unwrap();
+    let unexplained: Vec<String> = checked[1..]
+        .iter()
+        .filter(|r| r[at(&checked, "explained")] == "false")
+        .map(|r| r[0].clone())
+        .collect();
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--refine=auto",
+        "--check-sims",
+        "99",
+        &records,
+    ]);
+    let stderr = text(&out.stderr);
+    let auto = rows(&out);
+    let expected = if unexplained.is_empty() {
+        "refining none".to_string()
+    } else {
+        format!("refining experiment(s) {}", unexplained.join(", "))
+    };
+    assert!(
+        stderr.contains(&format!(
+            "the check explains {} of 12 two-stage estimates; {expected}",
+            12 - unexplained.len()
+        )),
+        "{stderr}"
+    );
+    // The explained keep their two-stage estimate, bit for bit.
+    for (before, after) in checked[1..].iter().zip(&auto[1..]) {
+        let same = before[1] == after[1];
+        assert_eq!(
+            same,
+            !unexplained.contains(&before[0]),
+            "{before:?} {after:?}"
+        );
+    }
+}

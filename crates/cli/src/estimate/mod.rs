@@ -38,12 +38,12 @@ pub struct EstimateArgs {
     /// With --check: the most of the model's own records each record is
     /// ranked among; the runs stop early (at 19, 39 or 99) once enough of
     /// them miss by as much as the record that the verdict cannot change
-    /// (`check_runs` says how many ran).
-    #[arg(long, default_value_t = 199, requires = "check")]
-    check_sims: usize,
+    /// (`check_runs` says how many ran). Default 199.
+    #[arg(long)]
+    check_sims: Option<usize>,
     /// With --check: write DIR/EXPERIMENT.svg for each record, its outputs
     /// beside the model's noise-free response at the estimate.
-    #[arg(long, value_name = "DIR", requires = "check")]
+    #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
     /// With --estimator: refine each estimate through the model. A
     /// built-in model: the posterior mean of its prediction-error
@@ -53,9 +53,19 @@ pub struct EstimateArgs {
     /// noise-free simulation, in the prior's box, from the estimate and
     /// two starts inside its interval (their simulations batched together);
     /// its own interval in _lo/_hi (decision 035); `refine_stop` says
-    /// why the best descent stopped.
-    #[arg(long, requires = "estimator")]
-    refine: bool,
+    /// why the best descent stopped. `--refine=auto`: check every
+    /// two-stage estimate (as --check) and refine only the records it
+    /// does not explain, named on stderr; the others keep their
+    /// two-stage estimate, and every row carries the check's columns.
+    #[arg(
+        long,
+        requires = "estimator",
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "all",
+        value_enum
+    )]
+    refine: Option<RefineWhich>,
     /// With --refine: add the refined estimate's parameter correlations,
     /// a column `corr_A_B` per pair of parameters (empty where the
     /// refined estimate has no interval).
@@ -117,6 +127,23 @@ pub struct EstimateArgs {
     /// Write the estimates here instead of standard output.
     #[arg(long)]
     out: Option<PathBuf>,
+}
+
+/// Which records `--refine` refines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum RefineWhich {
+    /// Every record.
+    All,
+    /// The records whose two-stage estimate the check does not explain.
+    Auto,
+}
+
+impl EstimateArgs {
+    /// Whether the records are checked: --check, or `--refine=auto`, which
+    /// checks to choose.
+    fn checks(&self) -> bool {
+        self.check || self.refine == Some(RefineWhich::Auto)
+    }
 }
 
 /// One record's estimate, its interval half-widths and its feature
@@ -187,6 +214,9 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
             "{option} is read by {readers}; {running} does not read it: leave it out"
         )))
     };
+    if (args.check_sims.is_some() || args.plot.is_some()) && !args.checks() {
+        return refuse("--check-sims and --plot", "--check and --refine=auto");
+    }
     if args.model.is_some() && method.is_none() && args.at.is_none() {
         return refuse(
             "--model",
@@ -202,7 +232,7 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
     if args.starts.is_some() && !is(&["pem", "ii", OUTPUT_ERROR]) {
         return refuse("--starts", "--method pem, ii and oe");
     }
-    if args.seed.is_some() && !args.check && !is(&["pf", "pem", "ii", OUTPUT_ERROR]) {
+    if args.seed.is_some() && !args.checks() && !is(&["pf", "pem", "ii", OUTPUT_ERROR]) {
         return refuse("--seed", "--method pf, pem, ii and oe, and --check");
     }
     Ok(())
@@ -320,6 +350,10 @@ fn check_model(args: &EstimateArgs) -> Result<Option<Box<dyn Simulator>>> {
     ))
 }
 
+/// The most runs of the model's own records a check ranks a record among
+/// when --check-sims is not given.
+const DEFAULT_CHECK_SIMS: usize = 199;
+
 /// Starts of the multi-start methods when --starts is not given.
 const DEFAULT_STARTS: usize = 5;
 
@@ -369,12 +403,12 @@ fn method(args: &EstimateArgs) -> Result<Chosen> {
             sample_time: estimator.record_shape().sample_time,
         };
         let transforms = estimator.transforms_outputs();
-        let checker = if args.check {
+        let checker = if args.checks() {
             Some(model_of(&estimator, args)?)
         } else {
             None
         };
-        let refiner = if args.refine {
+        let refiner = if args.refine.is_some() {
             Some(refinement(&estimator, args)?)
         } else {
             None
@@ -466,6 +500,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         prior_box,
     } = method(args)?;
     let seed = args.seed.unwrap_or(0);
+    let check_sims = args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS);
     let with_correlation = args.correlation;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
@@ -486,9 +521,6 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 (read.id, estimated)
             })
             .collect();
-        if let Some(refiner) = &refiner {
-            refine_together(refiner, &mut estimates);
-        }
         // A check simulates the model many times per record; after an
         // output-error refinement, through the refinement's simulator (its
         // processes are already running).
@@ -497,26 +529,60 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             .and_then(|r| r.simulator())
             .filter(|_| checker.is_some())
             .or(checker.as_deref());
-        estimates.par_iter_mut().for_each(|(_, outcome)| {
-            let (Some(model), Ok((record, estimated))) = (check_model, outcome) else {
+        let check_all = |estimates: &mut Vec<(String, RecordOutcome)>, only: &[bool]| {
+            let Some(model) = check_model else {
                 return;
             };
-            // An output-error refinement that converged is the best fit near
-            // itself: the check need not descend again.
-            let at_best = matches!(
-                estimated.refined,
-                Some(Ok(Some(TerminationReason::Converged)))
-            );
-            let check = if at_best {
-                twostage::check_best_fit
-            } else {
-                twostage::check_record
-            };
-            estimated.check = Some(
-                check(model, record, &estimated.theta, args.check_sims, seed)
-                    .map_err(|e| e.to_string()),
-            );
-        });
+            estimates
+                .par_iter_mut()
+                .zip(only)
+                .filter(|(_, only)| **only)
+                .for_each(|((_, outcome), _)| {
+                    if let Ok((record, estimated)) = outcome {
+                        estimated.check = Some(check(model, record, estimated, check_sims, seed));
+                    }
+                });
+        };
+        let everyone = vec![true; estimates.len()];
+        match (&refiner, args.refine) {
+            (Some(refiner), Some(RefineWhich::Auto)) => {
+                // The two-stage estimates first; the records the check does
+                // not explain are refined, and checked again.
+                check_all(&mut estimates, &everyone);
+                let unexplained: Vec<bool> = estimates
+                    .iter()
+                    .map(|(_, outcome)| {
+                        matches!(outcome, Ok((_, e)) if matches!(&e.check, Some(Ok(c)) if !c.explained()))
+                    })
+                    .collect();
+                let ids: Vec<&str> = estimates
+                    .iter()
+                    .zip(&unexplained)
+                    .filter(|(_, u)| **u)
+                    .map(|((id, _), _)| id.as_str())
+                    .collect();
+                eprintln!(
+                    "note: {}: --refine=auto: the check explains {} of {} two-stage estimates; \
+                     refining {}{}",
+                    path.display(),
+                    everyone.len() - ids.len(),
+                    everyone.len(),
+                    if ids.is_empty() {
+                        "none"
+                    } else {
+                        "experiment(s) "
+                    },
+                    list_ids(&ids)
+                );
+                refine_together(refiner, &mut estimates, &unexplained);
+                check_all(&mut estimates, &unexplained);
+            }
+            (Some(refiner), _) => {
+                refine_together(refiner, &mut estimates, &everyone);
+                check_all(&mut estimates, &everyone);
+            }
+            (None, _) => check_all(&mut estimates, &everyone),
+        }
         for (id, outcome) in estimates {
             // The estimate is still defined, but the validation error and
             // the intervals were measured for another N (said only of a
@@ -704,16 +770,21 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
 fn refine_together(
     refiner: &twostage_baselines::EstimateRefiner,
     estimates: &mut [(String, RecordOutcome)],
+    only: &[bool],
 ) {
     let items: Vec<twostage_baselines::ToRefine<'_>> = estimates
         .iter()
-        .filter_map(|(_, outcome)| outcome.as_ref().ok())
+        .zip(only)
+        .filter(|(_, only)| **only)
+        .filter_map(|((_, outcome), _)| outcome.as_ref().ok())
         .map(|(record, e)| (record, e.theta.as_slice(), e.widths.as_deref()))
         .collect();
     let refined = refiner.refine_many(&items);
     let estimated = estimates
         .iter_mut()
-        .filter_map(|(_, outcome)| outcome.as_mut().ok());
+        .zip(only)
+        .filter(|(_, only)| **only)
+        .filter_map(|((_, outcome), _)| outcome.as_mut().ok());
     for ((_, e), result) in estimated.zip(refined) {
         match result {
             Ok(r) => {
@@ -730,6 +801,37 @@ fn refine_together(
             }
             Err(why) => e.refined = Some(Err(why)),
         }
+    }
+}
+
+/// Checks one record's estimate; an output-error refinement that converged
+/// is the best fit near itself, and the check need not descend again.
+fn check(
+    model: &dyn Simulator,
+    record: &IoData,
+    estimated: &Estimated,
+    sims: usize,
+    seed: u64,
+) -> Result<RecordCheck, String> {
+    let at_best = matches!(
+        estimated.refined,
+        Some(Ok(Some(TerminationReason::Converged)))
+    );
+    let check = if at_best {
+        twostage::check_best_fit
+    } else {
+        twostage::check_record
+    };
+    check(model, record, &estimated.theta, sims, seed).map_err(|e| e.to_string())
+}
+
+/// Experiment ids for a message: the first ten, and how many more.
+fn list_ids(ids: &[&str]) -> String {
+    let shown = ids.iter().take(10).copied().collect::<Vec<_>>().join(", ");
+    if ids.len() > 10 {
+        format!("{shown} and {} more", ids.len() - 10)
+    } else {
+        shown
     }
 }
 
