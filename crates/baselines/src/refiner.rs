@@ -146,6 +146,16 @@ impl EstimateRefiner {
         &self,
         items: &[ToRefine<'_>],
     ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+        self.refine_many_reporting(items, &|_| {})
+    }
+
+    /// [`EstimateRefiner::refine_many`], calling `done(k)` as each `k`
+    /// more records are refined (for a progress display).
+    pub fn refine_many_reporting(
+        &self,
+        items: &[ToRefine<'_>],
+        done: &(dyn Fn(usize) + Sync),
+    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
         let z = twostage::models::standard_normal_quantile(1.0 - self.alpha / 2.0);
         match &self.how {
             How::Posterior { local, points } => items
@@ -154,6 +164,7 @@ impl EstimateRefiner {
                     let posterior = local
                         .local_posterior(record, estimate, &self.radius, *points)
                         .map_err(|e| e.to_string())?;
+                    done(1);
                     Ok(RefinedEstimate {
                         half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
                         correlation: Some(posterior.correlation),
@@ -164,7 +175,11 @@ impl EstimateRefiner {
                 .collect(),
             How::OutputError(fit) => items
                 .chunks(RECORDS_TOGETHER)
-                .flat_map(|chunk| self.output_error(fit, chunk))
+                .flat_map(|chunk| {
+                    let refined = self.output_error(fit, chunk);
+                    done(chunk.len());
+                    refined
+                })
                 .collect(),
         }
     }

@@ -30,8 +30,10 @@ pub struct Bars {
 struct LogState {
     started: Instant,
     sink: Sink,
-    /// The running stage's words, its steps done and total (0: unknown).
+    /// The running stage's words, its steps done and total (0: unknown),
+    /// and what a step is (sims, records).
     stage: Mutex<Option<&'static str>>,
+    unit: Mutex<&'static str>,
     done: AtomicUsize,
     total: AtomicUsize,
     status: Mutex<Option<String>>,
@@ -67,7 +69,7 @@ impl LogState {
             self.total.load(Ordering::Relaxed),
         );
         let mut text = if total > 0 {
-            format!("{stage}: {done}/{total} sims")
+            format!("{stage}: {done}/{total} {}", *lock(&self.unit))
         } else {
             stage.to_string()
         };
@@ -84,6 +86,7 @@ impl PlainLog {
             started: Instant::now(),
             sink,
             stage: Mutex::new(None),
+            unit: Mutex::new("sims"),
             done: AtomicUsize::new(0),
             total: AtomicUsize::new(0),
             status: Mutex::new(None),
@@ -94,7 +97,11 @@ impl PlainLog {
             let step = Duration::from_millis(50).min(interval);
             let mut last = Instant::now();
             while !shared.stop.load(Ordering::Relaxed) {
-                std::thread::sleep(step);
+                // Woken early by the drop: a finished command does not wait.
+                std::thread::park_timeout(step);
+                if shared.stop.load(Ordering::Relaxed) {
+                    break;
+                }
                 if last.elapsed() >= interval {
                     last = Instant::now();
                     if let Some(now) = shared.now() {
@@ -114,6 +121,7 @@ impl Drop for PlainLog {
     fn drop(&mut self) {
         self.state.stop.store(true, Ordering::Relaxed);
         if let Some(ticker) = self.ticker.take() {
+            ticker.thread().unpark();
             let _ = ticker.join();
         }
     }
@@ -171,6 +179,57 @@ impl Bars {
 
     fn with_bar(&self, f: impl FnOnce(&mut Option<ProgressBar>)) {
         f(&mut lock(&self.current));
+    }
+
+    /// A step of a command other than training (`what`, over `total`
+    /// `unit`s: "refining", 12 "records"): a bar on a terminal; without
+    /// one, a line every 10 s while it runs and none before, so that a
+    /// quick command stays quiet and a long one is never silent.
+    pub fn begin_step(&self, what: &'static str, total: usize, unit: &'static str) {
+        let bar = if self.quiet || self.log.is_some() {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::new(total as u64).with_style(
+                ProgressStyle::with_template(&format!(
+                    "  {{msg:<24}} {{bar:20}} {{pos}}/{{len}} {unit}, {{elapsed}} (eta {{eta}})"
+                ))
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            )
+        };
+        bar.set_message(what);
+        self.with_bar(|current| *current = Some(bar));
+        if let Some(log) = &self.log {
+            let state = &log.state;
+            *lock(&state.stage) = Some(what);
+            *lock(&state.unit) = unit;
+            *lock(&state.status) = None;
+            state.done.store(0, Ordering::Relaxed);
+            state.total.store(total, Ordering::Relaxed);
+        }
+    }
+
+    /// `done` more steps of the running one.
+    pub fn advance_step(&self, done: usize) {
+        self.with_bar(|current| {
+            if let Some(bar) = current {
+                bar.inc(done as u64);
+            }
+        });
+        if let Some(log) = &self.log {
+            log.state.done.fetch_add(done, Ordering::Relaxed);
+        }
+    }
+
+    /// The running step has ended.
+    pub fn end_step(&self) {
+        self.with_bar(|current| {
+            if let Some(bar) = current.take() {
+                bar.finish_and_clear();
+            }
+        });
+        if let Some(log) = &self.log {
+            *lock(&log.state.stage) = None;
+        }
     }
 }
 
@@ -230,6 +289,7 @@ impl Progress for Bars {
         if let Some(log) = &self.log {
             let state = &log.state;
             *lock(&state.stage) = Some(what(stage));
+            *lock(&state.unit) = "sims";
             *lock(&state.status) = None;
             state.done.store(0, Ordering::Relaxed);
             state.total.store(total, Ordering::Relaxed);
@@ -317,5 +377,32 @@ mod tests {
         assert_eq!(first.split("] ").nth(1), Some("fitting stage 2"), "{text}");
         // Between stages there is nothing to repeat.
         assert_eq!(lock(&buffer).len(), written_at_end, "{text}");
+    }
+
+    /// A command's step (not training) is silent at first, then repeats
+    /// its records done; its end stops the lines.
+    #[test]
+    fn a_long_step_is_never_silent_and_a_short_one_says_nothing() {
+        let buffer = Arc::new(Mutex::new(Vec::<u8>::new()));
+        let sink: Sink = buffer.clone();
+        let bars = Bars::with_log(
+            false,
+            Some(PlainLog::start(sink, Duration::from_millis(100))),
+        );
+        bars.begin_step("refining", 3, "records");
+        assert!(lock(&buffer).is_empty(), "a line before the first interval");
+        bars.advance_step(1);
+        let text = || String::from_utf8(lock(&buffer).clone()).unwrap();
+        let waited = Instant::now();
+        while !text().contains("refining: 1/3 records")
+            && waited.elapsed() < Duration::from_secs(20)
+        {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(text().contains("] refining: 1/3 records"), "{}", text());
+        bars.end_step();
+        let at_end = lock(&buffer).len();
+        std::thread::sleep(Duration::from_millis(300));
+        assert_eq!(lock(&buffer).len(), at_end, "{}", text());
     }
 }

@@ -168,8 +168,18 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
         )?,
     };
     let start = std::time::Instant::now();
-    let records =
-        predict::simulate_rows(sim, &rows, &inputs, args.noiseless, args.seed.unwrap_or(0))?;
+    // Progress: a bar on a terminal, else a line every 10 s of a long run.
+    let bars = crate::bars::Bars::new(false);
+    bars.begin_step("simulating at estimates", rows.len(), "records");
+    let records = predict::simulate_rows(
+        sim,
+        &rows,
+        &inputs,
+        args.noiseless,
+        args.seed.unwrap_or(0),
+        &|k| bars.advance_step(k),
+    )?;
+    bars.end_step();
     let text = predict::records_csv(sim, &rows, &records);
     // Against a record's own outputs: the prediction error a user validates
     // an identified model by.

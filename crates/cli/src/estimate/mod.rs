@@ -501,6 +501,8 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     } = method(args)?;
     let seed = args.seed.unwrap_or(0);
     let check_sims = args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS);
+    // Progress: a bar on a terminal, else a line every 10 s of a long step.
+    let bars = crate::bars::Bars::new(false);
     let with_correlation = args.correlation;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
@@ -510,6 +512,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         let reads = csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))?;
         // The records in parallel, reported in their order: each estimate
         // depends on its record alone.
+        bars.begin_step("estimating", reads.len(), "records");
         let mut estimates: Vec<(String, RecordOutcome)> = reads
             .into_par_iter()
             .map(|read| {
@@ -518,9 +521,11 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
                     Ok((record, estimated))
                 });
+                bars.advance_step(1);
                 (read.id, estimated)
             })
             .collect();
+        bars.end_step();
         // A check simulates the model many times per record; after an
         // output-error refinement, through the refinement's simulator (its
         // processes are already running).
@@ -533,6 +538,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             let Some(model) = check_model else {
                 return;
             };
+            bars.begin_step("checking", only.iter().filter(|o| **o).count(), "records");
             estimates
                 .par_iter_mut()
                 .zip(only)
@@ -541,7 +547,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                     if let Ok((record, estimated)) = outcome {
                         estimated.check = Some(check(model, record, estimated, check_sims, seed));
                     }
+                    bars.advance_step(1);
                 });
+            bars.end_step();
         };
         let everyone = vec![true; estimates.len()];
         match (&refiner, args.refine) {
@@ -574,11 +582,11 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                     },
                     list_ids(&ids)
                 );
-                refine_together(refiner, &mut estimates, &unexplained);
+                refine_together(refiner, &mut estimates, &unexplained, &bars);
                 check_all(&mut estimates, &unexplained);
             }
             (Some(refiner), _) => {
-                refine_together(refiner, &mut estimates, &everyone);
+                refine_together(refiner, &mut estimates, &everyone, &bars);
                 check_all(&mut estimates, &everyone);
             }
             (None, _) => check_all(&mut estimates, &everyone),
@@ -771,6 +779,7 @@ fn refine_together(
     refiner: &twostage_baselines::EstimateRefiner,
     estimates: &mut [(String, RecordOutcome)],
     only: &[bool],
+    bars: &crate::bars::Bars,
 ) {
     let items: Vec<twostage_baselines::ToRefine<'_>> = estimates
         .iter()
@@ -779,7 +788,9 @@ fn refine_together(
         .filter_map(|((_, outcome), _)| outcome.as_ref().ok())
         .map(|(record, e)| (record, e.theta.as_slice(), e.widths.as_deref()))
         .collect();
-    let refined = refiner.refine_many(&items);
+    bars.begin_step("refining", items.len(), "records");
+    let refined = refiner.refine_many_reporting(&items, &|k| bars.advance_step(k));
+    bars.end_step();
     let estimated = estimates
         .iter_mut()
         .zip(only)
