@@ -46,7 +46,12 @@ pub struct TrainArgs {
     /// without presets searches even without --auto.
     #[arg(long, conflicts_with_all = ["compress", "fit", "sims"])]
     auto: bool,
-    /// --auto: wall-clock seconds for the search (machine-dependent outcome).
+    /// --auto: wall-clock seconds for the whole run (machine-dependent
+    /// outcome): a pilot simulation times the model, the calibration and
+    /// validation records (--calibrate, --validate) are reserved first,
+    /// the search and final fit get the rest. A budget below twice that
+    /// reserve is refused with the smallest it accepts (with the defaults,
+    /// about 4 s for the benchmark and 52 s for the car on 2 cores).
     #[arg(long, requires = "auto", conflicts_with = "budget_sims")]
     budget_seconds: Option<f64>,
     /// --auto: simulations in the chart (with --chart: its first records),
