@@ -26,12 +26,17 @@ N_SAMPLES = 1000
 def batch(thetas, seeds, indices, noiseless=False, input=None):
     theta = np.asarray(thetas, dtype=float)[:, 0]
     b = theta.size
-    u = np.empty((b, N_SAMPLES))
-    noise = np.empty((b, 3, N_SAMPLES))
+    # A given input sets the record's length (a longer validation record,
+    # say); the model's own input is N_SAMPLES long.
+    n = N_SAMPLES if input is None else len(input)
+    u = np.empty((b, n))
+    noise = np.empty((b, 3, n))
     for j, (seed, index) in enumerate(zip(seeds, indices)):
         rng = np.random.default_rng([seed, index])
-        u[j] = rng.standard_normal(N_SAMPLES)
-        noise[j] = rng.standard_normal((3, N_SAMPLES))
+        own = rng.standard_normal(N_SAMPLES)
+        if input is None:
+            u[j] = own
+        noise[j] = rng.standard_normal((3, n))
     if input is not None:
         u[:] = np.asarray(input, dtype=float)[:, 0]
     if noiseless:
@@ -40,8 +45,8 @@ def batch(thetas, seeds, indices, noiseless=False, input=None):
     c = theta / (1 + theta**2)
     x1 = np.zeros(b)
     x2 = np.zeros(b)
-    y = np.empty((b, N_SAMPLES))
-    for k in range(N_SAMPLES):
+    y = np.empty((b, n))
+    for k in range(n):
         y[:, k] = x2 + np.sqrt(0.1) * noise[:, 2, k]
         x1, x2 = (
             0.5 * x1 + u[:, k] + noise[:, 0, k],

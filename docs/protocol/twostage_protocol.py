@@ -33,6 +33,10 @@ class Shape:
     def __init__(self, q, n_u, n_y, n):
         self.q, self.n_u, self.n_y, self.n = q, n_u, n_y, n
 
+    def samples(self, n):
+        """The same shape for records of n samples."""
+        return Shape(self.q, self.n_u, self.n_y, n)
+
 
 def _record(index, inputs, outputs, shape):
     """The answer lines of one experiment, checked against the shape."""
@@ -40,6 +44,11 @@ def _record(index, inputs, outputs, shape):
     # times faster than indexing it sample by sample.
     inputs = inputs.tolist() if hasattr(inputs, "tolist") else inputs
     outputs = outputs.tolist() if hasattr(outputs, "tolist") else outputs
+    if len(outputs) != shape.n or (shape.n_u and len(inputs) != shape.n):
+        raise ValueError(
+            "the record has %d samples, the request asked for %d (a given input of %d samples: "
+            "simulate its length)" % (len(outputs), shape.n, shape.n)
+        )
     lines = ["record %d" % index]
     for k in range(shape.n):
         row = list(inputs[k]) if shape.n_u else []
@@ -97,7 +106,7 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
         words = line.split()
         if not words or words[0] == "quit":
             return
-        if words[0] != "batch" or len(words) != (2 if version == 1 else 4):
+        if words[0] != "batch" or len(words) not in ((2,) if version == 1 else (4, 5)):
             sys.stderr.write("unknown request %r\n" % line)
             sys.exit(2)
         jobs = []
@@ -105,12 +114,16 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
             values = stdin.readline().split()
             index, seed = int(values[0]), int(values[1])
             jobs.append((index, seed, [float(v) for v in values[2:]]))
-        # Version 2: `noise`/`noiseless`, then `own`/`given` and the input.
+        # Version 2: `noise`/`noiseless`, then `own`/`given` and the input;
+        # a fifth word is the records' length when it is not the greeting's.
         conditions = {}
+        asked = shape
         if version >= 2:
+            if len(words) == 5:
+                asked = shape.samples(int(words[4]))
             given = None
             if words[3] == "given":
-                given = [[float(v) for v in stdin.readline().split()] for _ in range(shape.n)]
+                given = [[float(v) for v in stdin.readline().split()] for _ in range(asked.n)]
             conditions = {"noiseless": words[2] == "noiseless", "input": given}
         out = []
         if batch is not None:
@@ -119,14 +132,14 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
                     [j[2] for j in jobs], [j[1] for j in jobs], [j[0] for j in jobs], **conditions
                 )
                 for b, (index, _, _) in enumerate(jobs):
-                    out += _record(index, inputs[b] if shape.n_u else None, outputs[b], shape)
+                    out += _record(index, inputs[b] if shape.n_u else None, outputs[b], asked)
             except Exception as e:  # every experiment of the batch fails
                 out = ["error %d %s" % (j[0], _one_line(e)) for j in jobs]
         else:
             for index, seed, theta in jobs:
                 try:
                     inputs, outputs = simulate(theta, seed, index, **conditions)
-                    out += _record(index, inputs, outputs, shape)
+                    out += _record(index, inputs, outputs, asked)
                 except Exception as e:  # this experiment fails, the others go on
                     out.append("error %d %s" % (index, _one_line(e)))
         stdout.write("\n".join(out) + "\n")

@@ -37,11 +37,16 @@ function twostage_serve(simulate)
     end
     noiseless = false;
     given = [];
+    asked = n;
     if version >= 2
       noiseless = strcmp(words{3}, "noiseless");
+      % A fifth word: the records' length, when not the greeting's.
+      if numel(words) >= 5
+        asked = str2double(words{5});
+      end
       if strcmp(words{4}, "given")
-        given = zeros(n, nu);
-        for t = 1:n
+        given = zeros(asked, nu);
+        for t = 1:asked
           given(t, :) = str2double(strsplit(strtrim(next_line()), " "));
         end
       end
@@ -53,16 +58,16 @@ function twostage_serve(simulate)
       theta = str2double(job(3:end));
       try
         if version >= 2
-          [u, y] = simulate(theta, seed, str2double(index), n, noiseless, given);
+          [u, y] = simulate(theta, seed, str2double(index), asked, noiseless, given);
         else
           [u, y] = simulate(theta, seed, str2double(index), n);
         end
-        if rows(y) != n || columns(y) != ny || (nu > 0 && (rows(u) != n || columns(u) != nu))
-          error("the record is %dx%d and %dx%d, the model has %d samples of %d input(s) and %d output(s)",
-                rows(u), columns(u), rows(y), columns(y), n, nu, ny);
+        if rows(y) != asked || columns(y) != ny || (nu > 0 && (rows(u) != asked || columns(u) != nu))
+          error("the record is %dx%d and %dx%d, the request asked for %d samples of %d input(s) and %d output(s)",
+                rows(u), columns(u), rows(y), columns(y), asked, nu, ny);
         end
         fprintf(stdout, "record %s\n", index);
-        values = [reshape(u, n, nu), y]';
+        values = [reshape(u, asked, nu), y]';
         fprintf(stdout, [repmat("%.17g ", 1, nu + ny - 1), "%.17g\n"], values);
       catch err
         fprintf(stdout, "error %s %s\n", index, strrep(err.message, "\n", " "));

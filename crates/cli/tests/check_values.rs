@@ -263,3 +263,63 @@ fn the_classic_methods_take_check_and_options_that_do_not_apply_are_refused() {
         "--check",
     );
 }
+
+/// A record longer than the model's (a validation record, say) is
+/// predicted and checked at its own length.
+#[test]
+fn a_record_of_another_length_is_predicted_and_checked() {
+    let dir = scratch("check-values-length");
+    let long = dir.join("long.toml");
+    std::fs::write(
+        &long,
+        "[model]\nname = \"benchmark\"\n[source]\nbuiltin = \"benchmark\"\n[[parameter]]\n\
+         name = \"theta\"\nprior = { dist = \"uniform\", low = -0.9, high = 0.9 }\n\
+         [signals]\nsamples = 2500\n",
+    )
+    .unwrap();
+    let data = dir.join("long");
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&long),
+        "--count",
+        "2",
+        "--seed",
+        "4",
+        "--out-dir",
+        path(&data),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (truth, records) = (data.join("truth.csv"), data.join("data.csv"));
+    let predicted = dir.join("predicted.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&truth),
+        "--input",
+        path(&records),
+        "--noiseless",
+        "--out",
+        path(&predicted),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows = std::fs::read_to_string(&predicted).unwrap().lines().count();
+    assert_eq!(rows, 1 + 2 * 2500);
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&truth),
+        "--check",
+        "--check-sims",
+        "99",
+        path(&records),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    for row in table(&text(&out.stdout)) {
+        assert_eq!(row["explained"], "true", "{row:?}");
+    }
+}

@@ -327,8 +327,7 @@ impl Simulator for FmuSimulator {
     ) -> twostage_models::Result<()> {
         let spec = &self.spec;
         spec.prior().check(theta, spec.param_names(), true)?;
-        conditions.check_input(spec)?;
-        let n = spec.n_samples();
+        let n = conditions.check_input(spec)?;
         out.resize(n, spec.input_names().len(), spec.output_names().len());
         // Every draw comes first, in a fixed order (each input whole, then
         // the noise inputs sample by sample), so that the FMU's run is a

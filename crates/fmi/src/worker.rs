@@ -70,6 +70,9 @@ enum ToWorker {
     Setup(Setup),
     Run {
         theta: Vec<f64>,
+        /// The record's length (a given input's may differ from the
+        /// model's).
+        samples: usize,
         /// Each input's samples in turn.
         inputs: Vec<f64>,
         /// The noise inputs, sample by sample.
@@ -171,17 +174,19 @@ pub fn serve_worker(input: impl Read, output: impl Write) -> Result<()> {
         }
     };
     write_frame(&mut output, &FromWorker::Ready).map_err(pipe)?;
-    let (n, n_u, n_y) = (setup.n_samples, setup.inputs.len(), setup.outputs.len());
-    let mut record = IoData::zeros(n, n_u, n_y);
+    let (n_u, n_y) = (setup.inputs.len(), setup.outputs.len());
+    let mut record = IoData::zeros(setup.n_samples, n_u, n_y);
     while let Some(message) = read_frame::<ToWorker>(&mut input).map_err(pipe)? {
         let ToWorker::Run {
             theta,
+            samples: n,
             inputs,
             noise,
         } = message
         else {
             continue;
         };
+        record.resize(n, n_u, n_y);
         let reply = if inputs.len() != n * n_u {
             FromWorker::Failed {
                 message: format!(
@@ -356,6 +361,7 @@ impl WorkerPool {
         let (n, n_y) = (out.n_samples(), out.n_outputs());
         let message = ToWorker::Run {
             theta: theta.to_vec(),
+            samples: n,
             inputs: (0..out.n_inputs())
                 .flat_map(|j| out.input(j).iter().copied())
                 .collect(),

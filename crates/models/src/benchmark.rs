@@ -170,10 +170,10 @@ impl Simulator for Benchmark {
         out: &mut IoData,
     ) -> Result<()> {
         check_theta(&self.spec, theta)?;
-        conditions.check_input(&self.spec)?;
+        let n = conditions.check_input(&self.spec)?;
         let th = theta[0];
         let (a, b) = Self::coefficients(th);
-        let n = self.spec.n_samples();
+
         out.resize(n, 1, 1);
         let (u, y) = out.siso_mut();
         match conditions.input {

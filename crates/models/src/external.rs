@@ -236,7 +236,7 @@ impl ExternalSimulator {
             .send(&self.request_text(jobs, conditions))
             .map_err(|e| self.failure(&e))?;
         let (n, n_u, n_y) = (
-            self.spec.n_samples(),
+            self.samples(conditions),
             self.spec.input_names().len(),
             self.spec.output_names().len(),
         );
@@ -293,8 +293,18 @@ impl ExternalSimulator {
         Ok(())
     }
 
+    /// The samples of each record of a request: a given record's length,
+    /// else the model's.
+    fn samples(&self, conditions: Conditions<'_>) -> usize {
+        conditions
+            .input
+            .map_or(self.spec.n_samples(), IoData::n_samples)
+    }
+
     /// The request's text: `batch B` (version 1), or `batch B NOISE
-    /// INPUT` then, for a given input, its N lines (version 2).
+    /// INPUT` then, for a given input, its N lines (version 2); a record
+    /// of another length than the greeting's N adds it, `batch B NOISE
+    /// INPUT N2`, and the records answer with N2 samples.
     fn request_text(&self, jobs: &[ExternalJob<'_>], conditions: Conditions<'_>) -> String {
         let mut request = format!("batch {}", jobs.len());
         if self.protocol >= 2 {
@@ -309,6 +319,10 @@ impl ExternalSimulator {
                 "own"
             };
             let _ = write!(request, " {noise} {input}");
+            let samples = self.samples(conditions);
+            if samples != self.spec.n_samples() {
+                let _ = write!(request, " {samples}");
+            }
         }
         request.push('\n');
         for job in jobs {

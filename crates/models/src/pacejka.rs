@@ -470,8 +470,8 @@ impl Simulator for PacejkaCar {
         out: &mut IoData,
     ) -> Result<()> {
         check_theta(&self.spec, theta)?;
-        conditions.check_input(&self.spec)?;
-        let n = self.spec.n_samples();
+        let n = conditions.check_input(&self.spec)?;
+
         out.resize(n, 1, 1);
         let (u, y) = out.siso_mut();
         match conditions.input {

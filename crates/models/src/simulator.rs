@@ -177,20 +177,32 @@ impl Conditions<'_> {
         !self.noiseless && self.input.is_none()
     }
 
-    /// Check the given input (if any) against `spec`: the record must
-    /// hold the model's inputs and samples, all finite.
+    /// Check the given input (if any) against `spec` and say how many
+    /// samples to simulate: the given record's, of any length (a
+    /// validation record longer than the training records, say), else the
+    /// model's. The record must hold the model's inputs, all finite.
+    ///
+    /// ```
+    /// use twostage_models::{Benchmark, Conditions, IoData, Simulator};
+    /// let model = Benchmark::new();
+    /// let long = IoData::siso(&vec![0.5; 3000], &vec![0.0; 3000])?;
+    /// let given = Conditions { noiseless: true, input: Some(&long) };
+    /// assert_eq!(given.check_input(model.spec())?, 3000);
+    /// assert_eq!(Conditions::default().check_input(model.spec())?, 1000);
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
     ///
     /// # Errors
     /// [`SimError::InvalidData`] naming the counts expected and given.
-    pub fn check_input(&self, spec: &ModelSpec) -> Result<()> {
+    pub fn check_input(&self, spec: &ModelSpec) -> Result<usize> {
         let Some(record) = self.input else {
-            return Ok(());
+            return Ok(spec.n_samples());
         };
-        let (n, n_u) = (spec.n_samples(), spec.input_names().len());
-        if record.n_samples() != n || record.n_inputs() != n_u {
+        let n_u = spec.input_names().len();
+        if record.n_samples() == 0 || record.n_inputs() != n_u {
             return Err(SimError::InvalidData(format!(
-                "the given input has {} samples of {} signal(s); the model {} simulates {n} \
-                 samples of {n_u} ({}): give a record of that length with those inputs",
+                "the given input has {} samples of {} signal(s); the model {} takes {n_u} \
+                 ({}): give a record with those inputs",
                 record.n_samples(),
                 record.n_inputs(),
                 spec.name(),
@@ -209,7 +221,7 @@ impl Conditions<'_> {
                 spec.input_names()[j]
             )));
         }
-        Ok(())
+        Ok(record.n_samples())
     }
 }
 

@@ -126,7 +126,8 @@ impl<E: From<Error> + Send> ResidualModel for Box<dyn ResidualModel<Error = E>> 
 pub struct LocalPosterior {
     /// The posterior mean over the box.
     pub mean: Vec<f64>,
-    /// The posterior standard deviation over the box.
+    /// The posterior standard deviation over the box, at least the grid's
+    /// resolution (a uniform cell's, spacing / sqrt 12).
     pub sd: Vec<f64>,
     /// The posterior correlation matrix (row-major q x q).
     pub correlation: Vec<f64>,
@@ -412,6 +413,32 @@ impl<M: ResidualModel> Refinement<M> {
     /// Bayes-optimal estimate does: with a TS estimate as centre it comes
     /// close to the global posterior mean at a fraction of its cost.
     ///
+    /// A posterior narrower than the grid's spacing lands on one point: its
+    /// sd is reported at the grid's resolution, never below.
+    ///
+    /// ```
+    /// use twostage_models::{IoData, Prior};
+    /// use twostage_refine::{RefineError, Refinement, ResidualModel};
+    /// # struct ConstantMean(Prior);
+    /// # impl ResidualModel for ConstantMean {
+    /// #     type Error = RefineError;
+    /// #     fn prior(&self) -> &Prior { &self.0 }
+    /// #     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
+    /// #         for (r, y) in r.iter_mut().zip(record.output(0)) { *r = y - theta[0]; }
+    /// #         Ok(())
+    /// #     }
+    /// # }
+    /// let fit = Refinement::new(ConstantMean(Prior::uniform_box(&[-1.0], &[1.0])?));
+    /// // 2000 samples within 1e-4 of 0.3: a posterior far narrower than a
+    /// // grid of 0.1 over [0, 0.6].
+    /// let y: Vec<f64> = (0..2000).map(|k| 0.3 + 1e-4 * ((k % 3) as f64 - 1.0)).collect();
+    /// let record = IoData::siso(&vec![0.0; 2000], &y)?;
+    /// let posterior = fit.local_posterior(&record, &[0.3], &[0.3], 7)?;
+    /// assert!((posterior.mean[0] - 0.3).abs() < 1e-9);
+    /// assert!((posterior.sd[0] - 0.1 / 12f64.sqrt()).abs() < 1e-12);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
     /// # Errors
     /// A bad record, `centre` or `radius` of the wrong length, a negative or
     /// NaN radius, fewer than 2 points per axis or more than 2^20 in all, a
@@ -474,6 +501,17 @@ impl<M: ResidualModel> Refinement<M> {
             moments.add((-(loss - best) / (2.0 * variance)).exp(), t);
         }
         let (mean, sd) = moments.mean_and_sd();
+        // A posterior narrower than the grid resolves to one point: its sd
+        // is then not known below the spacing, and reported at a uniform
+        // cell's (spacing / sqrt 12), never as zero.
+        let sd = sd
+            .iter()
+            .zip(&axes)
+            .map(|(s, axis)| {
+                let spacing = axis.get(1).zip(axis.first()).map_or(0.0, |(b, a)| b - a);
+                s.max(spacing / 12f64.sqrt())
+            })
+            .collect();
         Ok(LocalPosterior {
             mean,
             sd,

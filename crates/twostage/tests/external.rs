@@ -731,3 +731,60 @@ fn a_simulator_faster_than_its_records_answers_at_the_records_rate() {
         x = a * x + (1.0 - a) * k * u;
     }
 }
+
+/// A given input of another length than the model's: the command answers
+/// with that many samples (protocol 2 says the length per request), the
+/// same response as the built-in model gives on it, noisy or not.
+#[test]
+fn a_record_of_another_length_is_simulated_at_its_length() {
+    use twostage::models::{Benchmark, Conditions};
+    let builtin = Benchmark::new();
+    let u: Vec<f64> = (0..1500).map(|k| ((k * 13) % 7) as f64 - 3.0).collect();
+    let long = IoData::siso(&u, &vec![0.0; 1500]).unwrap();
+    let numpy = numpy_benchmark_file(2, "").simulator().unwrap();
+    let quiet = Conditions {
+        noiseless: true,
+        input: Some(&long),
+    };
+    let mut from_numpy = IoData::default();
+    numpy
+        .simulate_under(&[0.4], &mut experiment_rng(3, 0), quiet, &mut from_numpy)
+        .unwrap();
+    let mut built_in = IoData::default();
+    builtin
+        .simulate_under(&[0.4], &mut experiment_rng(3, 0), quiet, &mut built_in)
+        .unwrap();
+    assert_eq!(from_numpy.n_samples(), 1500);
+    assert_eq!(built_in.n_samples(), 1500);
+    let worst = from_numpy
+        .output(0)
+        .iter()
+        .zip(built_in.output(0))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(worst <= 1e-9, "numpy and built-in differ by {worst}");
+    // With noise too: a record of the given length.
+    let noisy = Conditions {
+        noiseless: false,
+        input: Some(&long),
+    };
+    numpy
+        .simulate_under(&[0.4], &mut experiment_rng(3, 1), noisy, &mut from_numpy)
+        .unwrap();
+    assert_eq!(from_numpy.n_samples(), 1500);
+    // A shorter one as well.
+    let short = IoData::siso(&u[..200], &[0.0; 200]).unwrap();
+    let quiet_short = Conditions {
+        noiseless: true,
+        input: Some(&short),
+    };
+    numpy
+        .simulate_under(
+            &[0.4],
+            &mut experiment_rng(3, 0),
+            quiet_short,
+            &mut from_numpy,
+        )
+        .unwrap();
+    assert_eq!(from_numpy.output(0), &built_in.output(0)[..200]);
+}

@@ -52,14 +52,15 @@ def position(theta, r):
 
 def batch(thetas, seeds, indices, noiseless=False, input=None):
     b = len(thetas)
-    u = np.empty((b, SAMPLES))
-    y = np.empty((b, SAMPLES))
+    # A given input sets the record's length (a longer validation record).
+    n = SAMPLES if input is None else len(input)
+    u = np.empty((b, n))
+    y = np.empty((b, n))
     for j, (theta, seed, index) in enumerate(zip(thetas, seeds, indices)):
         rng = np.random.default_rng([seed, index])
-        u[j] = reference(rng, SAMPLES)
-        noise = rng.standard_normal(SAMPLES)
-        if input is not None:
-            u[j] = np.asarray(input, dtype=float)[:, 0]
+        own = reference(rng, SAMPLES)
+        noise = rng.standard_normal(n)
+        u[j] = own if input is None else np.asarray(input, dtype=float)[:, 0]
         y[j] = position(theta, u[j].tolist())
         if not noiseless:
             y[j] += NOISE_SD * noise

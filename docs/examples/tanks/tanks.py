@@ -58,12 +58,16 @@ def levels(theta, u, leak=0.0):
 def batch(thetas, seeds, indices, noiseless=False, input=None):
     theta = np.asarray(thetas, dtype=float)
     b = theta.shape[0]
-    u = np.empty((b, SAMPLES))
-    noise = np.empty((b, SAMPLES))
+    # A given input sets the record's length (a longer validation record).
+    n = SAMPLES if input is None else len(input)
+    u = np.empty((b, n))
+    noise = np.empty((b, n))
     for j, (seed, index) in enumerate(zip(seeds, indices)):
         rng = np.random.default_rng([seed, index])
-        u[j] = steps(rng, SAMPLES)
-        noise[j] = rng.standard_normal(SAMPLES)
+        own = steps(rng, SAMPLES)
+        if input is None:
+            u[j] = own
+        noise[j] = rng.standard_normal(n)
     if input is not None:
         u[:] = np.asarray(input, dtype=float)[:, 0]
     y = levels(theta, u)[:, :, 1]

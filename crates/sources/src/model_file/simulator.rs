@@ -105,7 +105,11 @@ impl FileSimulator {
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> twostage_models::Result<()> {
-        let (n, want) = (out.n_samples(), self.spec.n_samples());
+        let n = out.n_samples();
+        // A given record sets the length; otherwise the file's.
+        let want = conditions
+            .input
+            .map_or(self.spec.n_samples(), IoData::n_samples);
         if n != want || out.n_outputs() != self.output_sd.len() {
             return Err(twostage_models::SimError::InvalidData(format!(
                 "the source gave {n} samples of {} outputs, the model file says {want} of {}",
