@@ -22,6 +22,64 @@ model = false
 output_sd = 0.5
 "#;
 
+/// `output_ar` colours the file's noise: the difference from the
+/// noise-free model is AR(1) of that coefficient with the sd of
+/// `output_sd`, measured over many samples.
+#[test]
+fn the_files_output_noise_can_be_coloured() {
+    let file = ModelFile::parse(
+        &GOOD.replace("output_sd = 0.5", "output_sd = 0.5\noutput_ar = 0.9"),
+        "ar.toml",
+    )
+    .unwrap();
+    let simulator = file.simulator().unwrap();
+    let noiseless = Benchmark::builder()
+        .n_samples(300)
+        .noiseless(true)
+        .build()
+        .unwrap();
+    let spec = file.spec();
+    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
+    let (mut square, mut lagged, mut count) = (0.0, 0.0, 0.0);
+    for i in 0..200 {
+        simulator
+            .simulate(&[0.3], &mut experiment_rng(6, i), &mut noisy)
+            .unwrap();
+        noiseless
+            .simulate(&[0.3], &mut experiment_rng(6, i), &mut clean)
+            .unwrap();
+        let e: Vec<f64> = noisy
+            .output(0)
+            .iter()
+            .zip(clean.output(0))
+            .map(|(a, b)| a - b)
+            .collect();
+        square += e.iter().map(|v| v * v).sum::<f64>();
+        lagged += e.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
+        count += e.len() as f64;
+    }
+    let (variance, rho) = (square / count, lagged / square);
+    assert!(
+        (variance.sqrt() - 0.5).abs() < 0.03,
+        "sd {}",
+        variance.sqrt()
+    );
+    assert!((rho - 0.9).abs() < 0.02, "lag-one correlation {rho}");
+    // Noise-free runs leave it out: the model's own response.
+    let quiet = twostage::models::Conditions {
+        noiseless: true,
+        input: Some(&clean),
+    };
+    simulator
+        .simulate_under(&[0.3], &mut experiment_rng(6, 0), quiet, &mut noisy)
+        .unwrap();
+    let mut reference = spec.new_record();
+    noiseless
+        .simulate_under(&[0.3], &mut experiment_rng(6, 0), quiet, &mut reference)
+        .unwrap();
+    assert_eq!(noisy.output(0), reference.output(0));
+}
+
 #[test]
 fn a_built_in_source_takes_the_files_names_prior_length_and_noise() {
     let file = ModelFile::parse(GOOD, "good.toml").unwrap();
@@ -278,6 +336,20 @@ fn every_mistake_names_its_line_and_key() {
             Some(14),
             "noise.output_sd",
             ">= 0",
+        ),
+        (
+            "output_sd = 0.5",
+            "output_sd = 0.5\noutput_ar = 1.0",
+            Some(15),
+            "noise.output_ar",
+            "in (-1, 1)",
+        ),
+        (
+            "output_sd = 0.5",
+            "output_ar = 0.5",
+            Some(14),
+            "noise.output_ar",
+            "add output_sd",
         ),
         (
             "[[parameter]]",

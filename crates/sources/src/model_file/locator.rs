@@ -655,6 +655,42 @@ impl Locator<'_> {
         })
     }
 
+    /// `[noise] output_ar`: each output's noise as AR(1) of this
+    /// coefficient (its sd still `output_sd`), one for all or one per
+    /// output, each in (-1, 1); none: white.
+    pub(super) fn output_correlation(
+        &self,
+        noise: Option<&Spanned<RawNoise>>,
+        outputs: usize,
+        output_sd: &[f64],
+    ) -> Result<Vec<f64>> {
+        let Some(ar) = noise.and_then(|n| n.get_ref().output_ar.as_ref()) else {
+            return Ok(vec![0.0; outputs]);
+        };
+        let values = match ar.get_ref() {
+            OneOrMany::One(v) => vec![*v; outputs],
+            OneOrMany::Many(v) => v.clone(),
+        };
+        if values.len() != outputs || values.iter().any(|v| !(v.is_finite() && v.abs() < 1.0)) {
+            return Err(self.error(
+                Some(ar.span()),
+                "noise.output_ar",
+                format!(
+                    "{values:?}: give one AR(1) coefficient in (-1, 1) for all outputs, or a \
+                     list of {outputs} (one per output)"
+                ),
+            ));
+        }
+        if output_sd.iter().all(|sd| *sd == 0.0) {
+            return Err(self.error(
+                Some(ar.span()),
+                "noise.output_ar",
+                "colours the output noise of `output_sd`, which is not given: add output_sd".into(),
+            ));
+        }
+        Ok(values)
+    }
+
     pub(super) fn output_noise(
         &self,
         noise: Option<&Spanned<RawNoise>>,

@@ -138,6 +138,8 @@ pub struct ModelFile {
     source: ModelSource,
     spec: ModelSpec,
     output_sd: Vec<f64>,
+    /// Per output, the AR(1) coefficient of that noise (0: white).
+    output_ar: Vec<f64>,
     presets: Vec<(String, Preset)>,
     /// Where each name the source must know was written: (name, key, line).
     name_lines: Vec<(String, &'static str, usize)>,
@@ -302,6 +304,7 @@ impl ModelFile {
             _ => spec,
         };
         let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
+        let output_ar = at.output_correlation(raw.noise.as_ref(), outputs.len(), &output_sd)?;
         // What `models` says of the input and noise: a fixed input is the
         // one thing a user must know before estimating a record of another.
         let fixed = match (&source, &measured_input) {
@@ -322,8 +325,14 @@ impl ModelFile {
         if output_sd.iter().any(|sd| *sd > 0.0) {
             let added: Vec<String> = outputs
                 .iter()
-                .zip(&output_sd)
-                .map(|(y, sd)| format!("{y} sd {sd}"))
+                .zip(output_sd.iter().zip(&output_ar))
+                .map(|(y, (sd, a))| {
+                    if *a == 0.0 {
+                        format!("{y} sd {sd}")
+                    } else {
+                        format!("{y} sd {sd} AR(1) {a}")
+                    }
+                })
                 .collect();
             noise_note = format!(
                 "{noise_note}{}white Gaussian added to the outputs: {}",
@@ -345,6 +354,7 @@ impl ModelFile {
             source,
             spec,
             output_sd,
+            output_ar,
             presets,
             name_lines,
             fmu_line,
@@ -390,6 +400,7 @@ impl ModelFile {
                 inner: model.build_with(overrides)?,
                 spec: self.spec.clone(),
                 output_sd: self.output_sd.clone(),
+                output_ar: self.output_ar.clone(),
                 fixed_input: self.measured_record()?,
             })),
             ModelSource::Command {
@@ -415,6 +426,7 @@ impl ModelFile {
                     inner: Box::new(external),
                     spec: self.spec.clone(),
                     output_sd: self.output_sd.clone(),
+                    output_ar: self.output_ar.clone(),
                     fixed_input,
                 }))
             }
@@ -447,6 +459,7 @@ impl ModelFile {
                     inner: Box::new(fmu),
                     spec: self.spec.clone(),
                     output_sd: self.output_sd.clone(),
+                    output_ar: self.output_ar.clone(),
                     fixed_input: self.measured_record()?,
                 }))
             }
@@ -511,6 +524,7 @@ impl ModelFile {
             inner: source,
             spec: self.spec.clone(),
             output_sd: self.output_sd.clone(),
+            output_ar: self.output_ar.clone(),
             fixed_input: None,
         }))
     }

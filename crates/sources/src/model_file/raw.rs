@@ -108,6 +108,7 @@ pub(super) struct RawInput {
 pub(super) struct RawNoise {
     pub(super) model: Option<bool>,
     pub(super) output_sd: Option<Spanned<OneOrMany>>,
+    pub(super) output_ar: Option<Spanned<OneOrMany>>,
     pub(super) inputs: Option<Spanned<Vec<RawNoiseInput>>>,
 }
 

@@ -9,6 +9,8 @@ pub(super) struct FileSimulator {
     pub(super) inner: Box<dyn Simulator>,
     pub(super) spec: ModelSpec,
     pub(super) output_sd: Vec<f64>,
+    /// Per output, the AR(1) coefficient of that noise (0: white).
+    pub(super) output_ar: Vec<f64>,
     /// The input the file fixes for a source that is handed it (a command
     /// speaking protocol 2): every experiment gets it unless the caller
     /// gives another.
@@ -122,11 +124,20 @@ impl FileSimulator {
         }
         // After the source's own draws, from the same stream: experiment i
         // of seed s stays the same bits.
-        for (j, &sd) in self.output_sd.iter().enumerate() {
+        // AR(1) of stationary sd `sd`: e_0 = sd z_0, e_k = a e_(k-1) + sd
+        // sqrt(1 - a^2) z_k; white (a = 0) is the same bits as ever.
+        for (j, (&sd, &a)) in self.output_sd.iter().zip(&self.output_ar).enumerate() {
             if sd > 0.0 {
-                for y in out.output_mut(j) {
-                    let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
-                    *y += sd * e;
+                let innovation = sd * (1.0 - a * a).sqrt();
+                let mut e = 0.0;
+                for (k, y) in out.output_mut(j).iter_mut().enumerate() {
+                    let z: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
+                    e = if k == 0 {
+                        sd * z
+                    } else {
+                        a * e + innovation * z
+                    };
+                    *y += e;
                 }
             }
         }
