@@ -507,3 +507,69 @@ fn a_measured_input_from_a_file_drives_a_built_in_model() {
         "{e}"
     );
 }
+
+/// A fixed input can be a window of a larger file: a named column, a row
+/// range; a window outside the file, or a column that is not there, is
+/// named with the key, the file and the valid range.
+#[test]
+fn a_measured_input_is_a_window_of_a_larger_file() {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("input-window");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let long: Vec<f64> = (0..200).map(|k| (k as f64 * 0.37).sin()).collect();
+    let mut csv = String::from("t,voltage,position\n");
+    for (k, v) in long.iter().enumerate() {
+        csv.push_str(&format!("{k},{v:?},0\n"));
+    }
+    std::fs::write(dir.join("long.csv"), csv).unwrap();
+    let model = |window: &str| {
+        let text = format!(
+            "[model]\nname = \"short\"\n[source]\nbuiltin = \"benchmark\"\n[input]\n\
+             signal = \"fixed\"\nfile = \"long.csv\"\n{window}\n[signals]\nsamples = 50\n"
+        );
+        std::fs::write(dir.join("short.toml"), text).unwrap();
+        ModelFile::load(dir.join("short.toml")).and_then(|f| f.simulator())
+    };
+    let sim = model("columns = [\"voltage\"]\nrows = [101, 150]").unwrap();
+    assert_eq!(sim.shared_input().unwrap().input(0), &long[100..150]);
+    let mut record = sim.spec().new_record();
+    sim.simulate(&[0.3], &mut experiment_rng(1, 0), &mut record)
+        .unwrap();
+    assert_eq!(record.input(0), &long[100..150]);
+    for (window, key, says) in [
+        (
+            "columns = [\"voltage\"]\nrows = [180, 229]",
+            "input.rows",
+            "data rows are 1 to 200",
+        ),
+        (
+            "columns = [\"current\"]\nrows = [1, 50]",
+            "input.file",
+            "no column `current`",
+        ),
+        (
+            "columns = [\"voltage\"]\nrows = [0, 49]",
+            "input.rows",
+            "counted from 1",
+        ),
+        ("rows = [1, 50]", "input.file", "no column `u`"),
+    ] {
+        let e = model(window).err().unwrap().to_string();
+        assert!(
+            e.contains(key) && e.contains(says) && e.contains("short.toml"),
+            "{window}: {e}"
+        );
+    }
+    // A window without a file has nothing to choose from.
+    std::fs::write(
+        dir.join("short.toml"),
+        "[model]\nname = \"short\"\n[source]\nbuiltin = \"benchmark\"\n[input]\n\
+         signal = \"white\"\nrows = [1, 50]\n[signals]\nsamples = 50\n",
+    )
+    .unwrap();
+    let e = ModelFile::load(dir.join("short.toml"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("input.rows") && e.contains("give file"), "{e}");
+}

@@ -41,11 +41,27 @@ impl Locator<'_> {
         if raw.signal.get_ref() != "fixed" {
             return Err(fixed_only());
         }
+        self.window_needs_a_file(raw)?;
         match (&raw.file, &raw.values) {
             (Some(file), None) if raw.sd.is_none() && raw.amplitude.is_none() => {
+                if let Some(rows) = &raw.rows {
+                    let [first, last] = *rows.get_ref();
+                    if first == 0 || last < first {
+                        return Err(self.error(
+                            Some(rows.span()),
+                            "input.rows",
+                            format!(
+                                "[{first}, {last}]: give the first and last data rows to read, \
+                                 counted from 1 after the header, first <= last"
+                            ),
+                        ));
+                    }
+                }
                 Ok(CommandInput::File {
                     path: PathBuf::from(file.get_ref()),
                     line: self.line(file.span().start),
+                    columns: raw.columns.as_ref().map(|c| c.get_ref().clone()),
+                    rows: raw.rows.as_ref().map(|r| *r.get_ref()),
                 })
             }
             (Some(file), _) => Err(self.error(
@@ -64,8 +80,28 @@ impl Locator<'_> {
         }
     }
 
+    /// `columns` and `rows` choose part of an input file: without one they
+    /// would be ignored, so they are refused.
+    fn window_needs_a_file(&self, raw: &RawInput) -> Result<()> {
+        let window_without_file = raw
+            .columns
+            .as_ref()
+            .map(|c| (c.span(), "input.columns"))
+            .or(raw.rows.as_ref().map(|r| (r.span(), "input.rows")))
+            .filter(|_| raw.file.is_none());
+        match window_without_file {
+            Some((span, key)) => Err(self.error(
+                Some(span),
+                key,
+                "chooses part of an input file: give file = \"record.csv\" too".into(),
+            )),
+            None => Ok(()),
+        }
+    }
+
     pub(super) fn input(&self, input: &Spanned<RawInput>) -> Result<InputSignal> {
         let raw = input.get_ref();
+        self.window_needs_a_file(raw)?;
         let kind = raw.signal.get_ref().as_str();
         let here = || Some(input.span());
         let (needed, signal) = match kind {

@@ -85,6 +85,12 @@ pub enum CommandInput {
         path: PathBuf,
         /// The line of `file = ...` in the model file.
         line: usize,
+        /// The columns to read, in the order of the model's inputs (`None`:
+        /// the columns named as the inputs).
+        columns: Option<Vec<String>>,
+        /// The data rows to read, first and last from 1, inclusive (`None`:
+        /// all of them).
+        rows: Option<[usize; 2]>,
     },
 }
 
@@ -94,12 +100,22 @@ fn fixed_input_note(fixed: &CommandInput, inputs: &[&str]) -> String {
         CommandInput::Values(signal) => {
             format!("fixed for every experiment: {}", signal.describe())
         }
-        CommandInput::File { path, .. } => format!(
-            "fixed for every experiment: the {} column{} of {}",
-            inputs.join(", "),
-            if inputs.len() == 1 { "" } else { "s" },
-            path.display()
-        ),
+        CommandInput::File {
+            path,
+            columns,
+            rows,
+            ..
+        } => {
+            let names = columns
+                .as_ref()
+                .map_or_else(|| inputs.join(", "), |c| c.join(", "));
+            format!(
+                "fixed for every experiment: the {names} column{} of {}{}",
+                if inputs.len() == 1 { "" } else { "s" },
+                path.display(),
+                rows.map_or_else(String::new, |[a, b]| format!(", rows {a} to {b}"))
+            )
+        }
     }
 }
 
@@ -561,18 +577,53 @@ impl ModelFile {
                         })?;
                 }
             }
-            CommandInput::File { path, line } => {
+            CommandInput::File {
+                path,
+                line,
+                columns: chosen,
+                rows,
+            } => {
                 let path = match dir {
                     Some(dir) if path.is_relative() => dir.join(path),
                     _ => path.clone(),
                 };
-                let columns = crate::csv_rows::read_columns(&path, self.spec.input_names())
-                    .map_err(|message| Error::ModelFile {
-                        file: self.origin.clone(),
-                        line: Some(*line),
-                        key: "input.file".into(),
-                        message,
-                    })?;
+                let names = chosen.as_deref().unwrap_or(self.spec.input_names());
+                let error = |key: &str, message: String| Error::ModelFile {
+                    file: self.origin.clone(),
+                    line: Some(*line),
+                    key: key.into(),
+                    message,
+                };
+                if names.len() != self.spec.input_names().len() {
+                    return Err(error(
+                        "input.columns",
+                        format!(
+                            "{} column(s) for the model's {} input(s) ({}): give one per input, \
+                             in their order",
+                            names.len(),
+                            self.spec.input_names().len(),
+                            self.spec.input_names().join(", ")
+                        ),
+                    ));
+                }
+                let mut columns = crate::csv_rows::read_columns(&path, names)
+                    .map_err(|message| error("input.file", message))?;
+                if let Some([first, last]) = *rows {
+                    let available = columns.first().map_or(0, Vec::len);
+                    if last > available {
+                        return Err(error(
+                            "input.rows",
+                            format!(
+                                "[{first}, {last}] lies outside {}, whose data rows are 1 to \
+                                 {available}",
+                                path.display()
+                            ),
+                        ));
+                    }
+                    for column in &mut columns {
+                        *column = column[first - 1..last].to_vec();
+                    }
+                }
                 let n = self.spec.n_samples();
                 for (j, column) in columns.iter().enumerate() {
                     if column.len() != n {

@@ -101,6 +101,10 @@ pub(super) struct RawInput {
     pub(super) amplitude: Option<f64>,
     pub(super) values: Option<Vec<f64>>,
     pub(super) file: Option<Spanned<String>>,
+    /// The file's columns to read, in the order of the model's inputs.
+    pub(super) columns: Option<Spanned<Vec<String>>>,
+    /// The file's data rows to read, first and last (from 1), inclusive.
+    pub(super) rows: Option<Spanned<[usize; 2]>>,
 }
 
 #[derive(Deserialize)]
