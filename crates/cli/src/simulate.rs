@@ -77,6 +77,11 @@ pub struct SimulateArgs {
     /// estimates) instead of the model's own input design.
     #[arg(long, value_name = "RECORD.csv", requires = "at")]
     input: Option<PathBuf>,
+    /// With --input: score the prediction from this sample on (counted
+    /// from 0), leaving out the first samples of a transient; the CSV still
+    /// holds every sample.
+    #[arg(long, value_name = "K", requires = "input")]
+    score_from: Option<usize>,
 }
 
 /// Run `twostage simulate`.
@@ -185,18 +190,35 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
     // an identified model by.
     for (i, (row, record)) in rows.iter().zip(&records).enumerate() {
         if let Some(measured) = inputs.of(i) {
+            let from = args.score_from.unwrap_or(0);
+            if from >= measured.n_samples() {
+                return Err(usage(format!(
+                    "--score-from {from}: the record of experiment {} has {} samples (0 to {})",
+                    row.id,
+                    measured.n_samples(),
+                    measured.n_samples().saturating_sub(1)
+                )));
+            }
             let parts: Vec<String> = spec
                 .output_names()
                 .iter()
                 .enumerate()
                 .map(|(j, name)| {
-                    let (rms, fit) = twostage::output_fit(measured.output(j), record.output(j));
+                    let (rms, fit) = twostage::output_fit(
+                        &measured.output(j)[from..],
+                        &record.output(j)[from..],
+                    );
                     format!("{name} RMS {}, fit {fit:.1}%", four_digits(rms))
                 })
                 .collect();
             eprintln!(
-                "experiment {}: against the given record's outputs: {}",
+                "experiment {}: against the given record's outputs{}: {}",
                 row.id,
+                if from > 0 {
+                    format!(" from sample {from}")
+                } else {
+                    String::new()
+                },
                 parts.join("; ")
             );
         }

@@ -323,3 +323,67 @@ fn a_record_of_another_length_is_predicted_and_checked() {
         assert_eq!(row["explained"], "true", "{row:?}");
     }
 }
+
+/// `simulate --at --input --score-from K` scores the prediction on samples
+/// K and after: the RMS it prints is the one computed here from the files.
+#[test]
+fn a_prediction_is_scored_from_the_sample_asked() {
+    let dir = scratch("score-from");
+    let data = records(&dir, 1);
+    let (truth, record) = (data.join("truth.csv"), data.join("data.csv"));
+    let predicted = dir.join("predicted.csv");
+    let run = |from: &str| {
+        twostage(&[
+            "simulate",
+            "--model",
+            "benchmark",
+            "--at",
+            path(&truth),
+            "--input",
+            path(&record),
+            "--noiseless",
+            "--score-from",
+            from,
+            "--out",
+            path(&predicted),
+        ])
+    };
+    let out = run("100");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    let printed: f64 = stderr
+        .split("from sample 100: y RMS ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .unwrap_or_else(|| panic!("{stderr}"))
+        .parse()
+        .unwrap();
+    let column = |file: &std::path::Path| -> Vec<f64> {
+        std::fs::read_to_string(file)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+            .collect()
+    };
+    let (measured, simulated) = (column(&record), column(&predicted));
+    assert_eq!(simulated.len(), 1000, "the CSV holds every sample");
+    let tail: Vec<f64> = measured[100..]
+        .iter()
+        .zip(&simulated[100..])
+        .map(|(a, b)| (a - b) * (a - b))
+        .collect();
+    let rms = (tail.iter().sum::<f64>() / tail.len() as f64).sqrt();
+    assert!(
+        (printed - rms).abs() <= 1e-3 * rms,
+        "{printed} against {rms}"
+    );
+    // Past the record's end: named, with the valid range.
+    let out = run("1000");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("has 1000 samples (0 to 999)"),
+        "{}",
+        text(&out.stderr)
+    );
+}
