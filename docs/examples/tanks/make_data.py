@@ -3,7 +3,9 @@ not tanks.py's model. Its lower tank also leaks (a loss proportional to
 its level, which the model lacks), its sensor noise is coloured (AR(1),
 0.7) rather than white, and its upper tank overflows at 30. It writes
 estimation.csv and validation.csv (pump,level; 400 samples every 2 s),
-each on its own pump steps, and truth.txt with the plant's constants.
+each on its own pump steps, validation_long.csv (1600 samples: a record
+four times the estimation window, which the model simulates at its own
+length), and truth.txt with the plant's constants.
 
     python3 make_data.py [DIR]
 """
@@ -19,15 +21,15 @@ from tanks import SAMPLES, levels, steps  # noqa: E402
 PLANT = {"k": 1.2, "a1": 0.9, "a2": 0.8, "h0": 4.0, "leak": 0.02}
 
 
-def record(seed):
+def record(seed, n=SAMPLES):
     rng = np.random.default_rng(seed)
-    u = steps(rng, SAMPLES)
+    u = steps(rng, n)
     theta = np.array([[PLANT["k"], PLANT["a1"], PLANT["a2"], PLANT["h0"]]])
     h = levels(theta, u[None, :], leak=PLANT["leak"])[0]
     h = np.minimum(h, 30.0)
-    e = np.zeros(SAMPLES)
-    white = 0.05 * rng.standard_normal(SAMPLES)
-    for t in range(1, SAMPLES):
+    e = np.zeros(n)
+    white = 0.05 * rng.standard_normal(n)
+    for t in range(1, n):
         e[t] = 0.7 * e[t - 1] + white[t]
     return u, h[:, 1] + e
 
@@ -35,8 +37,12 @@ def record(seed):
 def main():
     out = sys.argv[1] if len(sys.argv) > 1 else "."
     os.makedirs(out, exist_ok=True)
-    for name, seed in (("estimation", 11), ("validation", 12)):
-        u, y = record(seed)
+    for name, seed, n in (
+        ("estimation", 11, SAMPLES),
+        ("validation", 12, SAMPLES),
+        ("validation_long", 13, 4 * SAMPLES),
+    ):
+        u, y = record(seed, n)
         with open(os.path.join(out, name + ".csv"), "w") as f:
             f.write("pump,level\n")
             for a, b in zip(u, y):
