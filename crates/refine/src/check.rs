@@ -411,18 +411,23 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_fit_and_the_misfit_are_the_hand_computed_ones() {
+    /// The gain model with records of `n` samples.
+    fn gain(n: usize) -> Gain {
         let spec = ModelSpec::new(
             "gain",
             &["k"],
             Prior::uniform_box(&[0.0], &[5.0]).unwrap(),
             1.0,
-            4,
+            n,
         )
         .unwrap()
         .with_signals(&["u"], &["y"]);
-        let model = Gain(spec);
+        Gain(spec)
+    }
+
+    #[test]
+    fn the_fit_and_the_misfit_are_the_hand_computed_ones() {
+        let model = gain(4);
         // u = 1, -1, 2, 0; y = 2 u + 0.5: the misfit at k = 2 is 0.5 at
         // every sample, y's mean is 1.5 and its squared spread sums to 20.
         let u = [1.0, -1.0, 2.0, 0.0];
@@ -486,16 +491,7 @@ mod tests {
     #[test]
     fn stopping_early_keeps_the_full_runs_verdict() {
         let n = 50;
-        let spec = ModelSpec::new(
-            "gain",
-            &["k"],
-            Prior::uniform_box(&[0.0], &[5.0]).unwrap(),
-            1.0,
-            n,
-        )
-        .unwrap()
-        .with_signals(&["u"], &["y"]);
-        let model = Gain(spec);
+        let model = gain(n);
         let u: Vec<f64> = (0..n).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
         let (mut early, mut flagged) = (0, 0);
         for k in 0..60u64 {
