@@ -308,10 +308,11 @@ impl PyEstimator {
     /// Check one record's estimate against the record (`twostage estimate
     /// --check`): `theta`, or the estimator's own estimate when None,
     /// simulated without noise on the record's input and ranked among
-    /// `sims` of the model's own records of `seed`. The model: the
+    /// `sims` of the model's own records of `seed`, scored from sample
+    /// `score_from` on. The model: the
     /// estimator's built-in one, or its model file (`model_file` or
     /// `model_toml`).
-    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=199, seed=0))]
+    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=199, seed=0, score_from=0))]
     #[allow(clippy::too_many_arguments)]
     fn check<'py>(
         &self,
@@ -323,6 +324,7 @@ impl PyEstimator {
         model_toml: Option<&str>,
         sims: usize,
         seed: u64,
+        score_from: usize,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         let named = named_model(None, model_file, model_toml)?;
         let sim = twostage_baselines::estimator_model(&self.inner, named.as_ref())
@@ -333,7 +335,8 @@ impl PyEstimator {
             Some(theta) => theta,
             None => self.inner.assess(&record).map_err(to_python)?.theta,
         };
-        let checked = through_model::check(py, sim.as_ref(), &record, &theta, sims, seed)?;
+        let checked =
+            through_model::check(py, sim.as_ref(), &record, &theta, (sims, seed, score_from))?;
         check_dict(py, &checked)
     }
 

@@ -174,17 +174,23 @@ pub(crate) fn check_dict<'py>(
     Ok(dict)
 }
 
-/// Checks `theta` of `sim` against `record` without the GIL.
+/// Checks `theta` of `sim` against `record` without the GIL, scored from
+/// sample `score_from` on.
 pub(crate) fn check(
     py: Python<'_>,
     sim: &dyn Simulator,
     record: &IoData,
     theta: &[f64],
-    sims: usize,
-    seed: u64,
+    (sims, seed, score_from): (usize, u64, usize),
 ) -> PyResult<RecordCheck> {
     parameters(theta, sim)?;
-    py.detach(|| twostage::check_record(sim, record, theta, sims, seed))
+    let plan = twostage::CheckPlan {
+        noisy: sims,
+        seed,
+        score_from,
+        at_best_fit: false,
+    };
+    py.detach(|| twostage::check_with(sim, record, theta, plan))
         .map_err(|e| PyValueError::new_err(format!("the check could not simulate: {e}")))
 }
 
@@ -192,7 +198,7 @@ pub(crate) fn check(
 /// --check`): a dict of the check's columns, the noise-free response in
 /// `simulated`.
 #[pyfunction]
-#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=199, seed=0, allow_outside_prior=false))]
+#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=199, seed=0, allow_outside_prior=false, score_from=0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check_values<'py>(
     py: Python<'py>,
@@ -205,6 +211,7 @@ pub(crate) fn check_values<'py>(
     sims: usize,
     seed: u64,
     allow_outside_prior: bool,
+    score_from: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
     let named = named_model(model, model_file, model_toml)?.ok_or_else(|| {
         PyValueError::new_err(
@@ -224,7 +231,7 @@ pub(crate) fn check_values<'py>(
         spec.input_names().len(),
         spec.output_names().len(),
     )?;
-    let checked = check(py, sim.as_ref(), &record, &theta, sims, seed)?;
+    let checked = check(py, sim.as_ref(), &record, &theta, (sims, seed, score_from))?;
     check_dict(py, &checked)
 }
 

@@ -131,14 +131,78 @@ pub fn output_fit(measured: &[f64], simulated: &[f64]) -> (f64, f64) {
     ((misfit / n).sqrt(), fit)
 }
 
-/// Mean square of `a - b` per output.
-fn mean_squares(a: &IoData, b: &IoData) -> Vec<f64> {
+/// Mean square of `a - b` per output, from sample `from` on.
+fn mean_squares(a: &IoData, b: &IoData, from: usize) -> Vec<f64> {
     (0..a.n_outputs())
         .map(|j| {
-            let (x, y) = (a.output(j), b.output(j));
+            let (x, y) = (&a.output(j)[from..], &b.output(j)[from..]);
             x.iter().zip(y).map(|(p, q)| (p - q) * (p - q)).sum::<f64>() / x.len().max(1) as f64
         })
         .collect()
+}
+
+/// How a record is checked: see [`check_with`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CheckPlan {
+    /// The most noisy runs of the model the record is ranked among.
+    pub noisy: usize,
+    /// The seed of their streams.
+    pub seed: u64,
+    /// Score from this sample on (the misfits, fits and the tail
+    /// probability); the first samples of a transient are left out. The
+    /// best fit is still fitted to the whole record.
+    pub score_from: usize,
+    /// The estimate is already the output-error best fit near itself (a
+    /// converged refinement): no descent is run to find it again.
+    pub at_best_fit: bool,
+}
+
+/// [`check_record`] as `plan` says: its scoring window, and whether the
+/// estimate is its own best fit.
+///
+/// ```
+/// use twostage_models::{experiment_rng, Benchmark, Simulator};
+/// use twostage_refine::{CheckPlan, check_with};
+/// let model = Benchmark::new();
+/// let mut record = model.spec().new_record();
+/// model.simulate(&[0.3], &mut experiment_rng(7, 0), &mut record)?;
+/// let plan = CheckPlan { noisy: 99, seed: 1, score_from: 100, at_best_fit: false };
+/// let check = check_with(&model, &record, &[0.3], plan)?;
+/// assert!(check.explained());
+/// // A window past the record is named.
+/// let past = CheckPlan { score_from: 1000, ..plan };
+/// assert!(check_with(&model, &record, &[0.3], past).is_err());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// # Errors
+/// As [`check_record`], and a window that starts past the record.
+pub fn check_with(
+    sim: &dyn Simulator,
+    record: &IoData,
+    theta: &[f64],
+    plan: CheckPlan,
+) -> Result<RecordCheck, RefineError> {
+    if plan.score_from >= record.n_samples() {
+        return Err(RefineError::InvalidSetting {
+            name: "score from",
+            value: plan.score_from.to_string(),
+            reason: format!(
+                "the record has {} samples (0 to {})",
+                record.n_samples(),
+                record.n_samples().saturating_sub(1)
+            ),
+        });
+    }
+    check(
+        sim,
+        record,
+        theta,
+        plan.noisy,
+        plan.seed,
+        !plan.at_best_fit,
+        plan.score_from,
+    )
 }
 
 /// Check `record` against `sim` at `theta`: one noise-free run on the
@@ -174,7 +238,7 @@ pub fn check_record(
     noisy: usize,
     seed: u64,
 ) -> Result<RecordCheck, RefineError> {
-    check(sim, record, theta, noisy, seed, true)
+    check(sim, record, theta, noisy, seed, true, 0)
 }
 
 /// [`check_record`] of an estimate that is already the output-error best
@@ -191,7 +255,7 @@ pub fn check_best_fit(
     noisy: usize,
     seed: u64,
 ) -> Result<RecordCheck, RefineError> {
-    check(sim, record, theta, noisy, seed, false)
+    check(sim, record, theta, noisy, seed, false, 0)
 }
 
 fn check(
@@ -201,6 +265,7 @@ fn check(
     noisy: usize,
     seed: u64,
     descend: bool,
+    from: usize,
 ) -> Result<RecordCheck, RefineError> {
     let quiet = Conditions {
         noiseless: true,
@@ -217,7 +282,7 @@ fn check(
         what: "the noise-free simulation at the estimate",
         source,
     })?;
-    let record_ms = mean_squares(record, &simulated);
+    let record_ms = mean_squares(record, &simulated, from);
     let with_noise = Conditions {
         noiseless: false,
         input: Some(record),
@@ -250,7 +315,7 @@ fn check(
                     what: "a simulation with the model's noise at the estimate",
                     source,
                 })?;
-                Ok(mean_squares(&own, &simulated))
+                Ok(mean_squares(&own, &simulated, from))
             })
             .collect()
     };
@@ -305,7 +370,7 @@ fn check(
     let input_shared = shared.is_some();
     let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
     let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..n_y)
-        .map(|j| output_fit(record.output(j), simulated.output(j)))
+        .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
         .unzip();
     if !descend {
         return Ok(RecordCheck {
@@ -348,7 +413,7 @@ fn check(
         source,
     })?;
     let best_fit_percent = (0..n_y)
-        .map(|j| output_fit(record.output(j), best_response.output(j)).1)
+        .map(|j| output_fit(&record.output(j)[from..], &best_response.output(j)[from..]).1)
         .collect();
     Ok(RecordCheck {
         rms,
@@ -547,5 +612,40 @@ mod tests {
         }
         assert!(early >= 10, "{early} of 60 stopped early");
         assert!(flagged >= 10, "{flagged} of 60 not consistent");
+    }
+
+    /// A scoring window leaves out the samples before it: a record whose
+    /// first two samples are far off and the rest exact is explained from
+    /// sample 2 on, and not as a whole.
+    #[test]
+    fn a_scoring_window_leaves_out_the_transient() {
+        let model = gain(20);
+        let u: Vec<f64> = (0..20).map(|k| (k % 4) as f64 - 1.5).collect();
+        let mut y: Vec<f64> = u.iter().map(|u| 2.0 * u).collect();
+        y[0] += 5.0;
+        y[1] -= 5.0;
+        let record = IoData::siso(&u, &y).unwrap();
+        let plan = CheckPlan {
+            noisy: 199,
+            seed: 2,
+            score_from: 0,
+            at_best_fit: false,
+        };
+        let whole = check_with(&model, &record, &[2.0], plan).unwrap();
+        assert!(!whole.model_consistent());
+        let windowed = check_with(
+            &model,
+            &record,
+            &[2.0],
+            CheckPlan {
+                score_from: 2,
+                ..plan
+            },
+        )
+        .unwrap();
+        assert_eq!((windowed.rms[0], windowed.fit_percent[0]), (0.0, 100.0));
+        assert!(windowed.model_consistent() && windowed.explained());
+        // The whole-record RMS is the hand-computed one: sqrt(50 / 20).
+        assert!((whole.rms[0] - 2.5f64.sqrt()).abs() < 1e-12);
     }
 }

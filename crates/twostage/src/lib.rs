@@ -72,9 +72,9 @@ pub use settings::{DEFAULT_SEED, RunSettings};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
-    Descent, EXPLAINED_LEVEL, LocalPosterior, LocalUncertainty, OutputError, RecordCheck,
-    RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments, check_best_fit,
-    check_record, output_fit,
+    CheckPlan, Descent, EXPLAINED_LEVEL, LocalPosterior, LocalUncertainty, OutputError,
+    RecordCheck, RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments,
+    check_best_fit, check_record, check_with, output_fit,
 };
 
 pub use twostage_sources::{

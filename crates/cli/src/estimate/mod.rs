@@ -45,6 +45,11 @@ pub struct EstimateArgs {
     /// beside the model's noise-free response at the estimate.
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
+    /// With --check: score from this sample on (counted from 0), leaving
+    /// out the first samples of a transient: the misfits, fits and tail
+    /// probability; the best fit is still fitted to the whole record.
+    #[arg(long, value_name = "K")]
+    score_from: Option<usize>,
     /// With --estimator: refine each estimate through the model. A
     /// built-in model: the posterior mean of its prediction-error
     /// likelihood over twice the interval (about 1 ms per benchmark
@@ -214,8 +219,13 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
             "{option} is read by {readers}; {running} does not read it: leave it out"
         )))
     };
-    if (args.check_sims.is_some() || args.plot.is_some()) && !args.checks() {
-        return refuse("--check-sims and --plot", "--check and --refine=auto");
+    if (args.check_sims.is_some() || args.plot.is_some() || args.score_from.is_some())
+        && !args.checks()
+    {
+        return refuse(
+            "--check-sims, --plot and --score-from",
+            "--check and --refine=auto",
+        );
     }
     if args.model.is_some() && method.is_none() && args.at.is_none() {
         return refuse(
@@ -500,7 +510,12 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         prior_box,
     } = method(args)?;
     let seed = args.seed.unwrap_or(0);
-    let check_sims = args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS);
+    let plan = twostage::CheckPlan {
+        noisy: args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS),
+        seed,
+        score_from: args.score_from.unwrap_or(0),
+        at_best_fit: false,
+    };
     // Progress: a bar on a terminal, else a line every 10 s of a long step.
     let bars = crate::bars::Bars::new(false);
     let with_correlation = args.correlation;
@@ -545,7 +560,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 .filter(|(_, only)| **only)
                 .for_each(|((_, outcome), _)| {
                     if let Ok((record, estimated)) = outcome {
-                        estimated.check = Some(check(model, record, estimated, check_sims, seed));
+                        estimated.check = Some(check(model, record, estimated, plan));
                     }
                     bars.advance_step(1);
                 });
@@ -821,19 +836,22 @@ fn check(
     model: &dyn Simulator,
     record: &IoData,
     estimated: &Estimated,
-    sims: usize,
-    seed: u64,
+    plan: twostage::CheckPlan,
 ) -> Result<RecordCheck, String> {
-    let at_best = matches!(
+    let at_best_fit = matches!(
         estimated.refined,
         Some(Ok(Some(TerminationReason::Converged)))
     );
-    let check = if at_best {
-        twostage::check_best_fit
-    } else {
-        twostage::check_record
-    };
-    check(model, record, &estimated.theta, sims, seed).map_err(|e| e.to_string())
+    twostage::check_with(
+        model,
+        record,
+        &estimated.theta,
+        twostage::CheckPlan {
+            at_best_fit,
+            ..plan
+        },
+    )
+    .map_err(|e| e.to_string())
 }
 
 /// Experiment ids for a message: the first ten, and how many more.

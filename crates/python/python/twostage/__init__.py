@@ -182,11 +182,13 @@ class Estimator:
         model_toml: Optional[str] = None,
         sims: int = 199,
         seed: int = 0,
+        score_from: int = 0,
     ) -> dict[str, Any]:
         """Check one record's estimate against the record, as ``twostage
         estimate --check`` does: the model at ``theta`` (None: this
         estimator's own estimate) simulated without noise on the record's
-        input, ranked among ``sims`` of the model's own records there.
+        input, ranked among ``sims`` of the model's own records there,
+        scored from sample ``score_from`` on (``--score-from``).
         The model is the estimator's built-in one, or its model file
         (``model_file`` or ``model_toml``). Returns a dict of the
         command's check columns (``rms``, ``fit_percent`` and
@@ -198,7 +200,14 @@ class Estimator:
         if theta is not None:
             theta = [float(t) for t in np.asarray(theta, dtype=np.float64).ravel()]
         return self._native.check(
-            u, y, theta, model_file=_path(model_file), model_toml=model_toml, sims=sims, seed=seed
+            u,
+            y,
+            theta,
+            model_file=_path(model_file),
+            model_toml=model_toml,
+            sims=sims,
+            seed=seed,
+            score_from=score_from,
         )
 
     def refine(
@@ -413,6 +422,7 @@ def check(
     sims: int = 199,
     seed: int = 0,
     allow_outside_prior: bool = False,
+    score_from: int = 0,
 ) -> dict[str, Any]:
     """Check given parameter values (a published value, another tool's
     fit) against one record, as ``twostage estimate --at VALUES --check``
@@ -431,6 +441,7 @@ def check(
         sims=sims,
         seed=seed,
         allow_outside_prior=allow_outside_prior,
+        score_from=score_from,
     )
 
 

@@ -59,6 +59,7 @@ class Estimator:
         model_toml: Optional[str] = None,
         sims: int = 199,
         seed: int = 0,
+        score_from: int = 0,
     ) -> dict[str, Any]: ...
     def refine(
         self,
@@ -80,6 +81,7 @@ def check_values(
     sims: int = 199,
     seed: int = 0,
     allow_outside_prior: bool = False,
+    score_from: int = 0,
 ) -> dict[str, Any]: ...
 def predict(
     theta: list[float],
