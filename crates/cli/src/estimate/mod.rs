@@ -606,6 +606,10 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             }
             (None, _) => check_all(&mut estimates, &everyone),
         }
+        // A failure every record shares (a simulator that does not start)
+        // is said once, with the others counted: 200 identical lines would
+        // hide everything else.
+        let mut repeated = RepeatedFailures::default();
         for (id, outcome) in estimates {
             // The estimate is still defined, but the validation error and
             // the intervals were measured for another N (said only of a
@@ -654,7 +658,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         );
                     }
                     match &estimated.refined {
-                        Some(Err(e)) => eprintln!(
+                        Some(Err(e)) if repeated.first("--refine", e, &id) => eprintln!(
                             "warning: {}: experiment {}: --refine failed ({e}); the two-stage \
                              estimate is kept",
                             path.display(),
@@ -713,7 +717,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         );
                     }
                     match &estimated.check {
-                        Some(Err(e)) => eprintln!(
+                        Some(Err(e)) if repeated.first("--check", e, &id) => eprintln!(
                             "warning: {}: experiment {}: --check could not simulate the model at \
                              the estimate ({e}); the estimate is kept, unchecked",
                             path.display(),
@@ -753,6 +757,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 }
             }
         }
+        repeated.summarize(&path.display().to_string());
     }
     let outcome = Outcome {
         estimated: rows.len(),
@@ -861,6 +866,48 @@ fn list_ids(ids: &[&str]) -> String {
         format!("{shown} and {} more", ids.len() - 10)
     } else {
         shown
+    }
+}
+
+/// Failures of --refine or --check seen before: the first of each kind
+/// and message is said in full, the others only counted.
+#[derive(Default)]
+struct RepeatedFailures {
+    /// (what failed, message) -> (the first experiment, the others).
+    seen: std::collections::BTreeMap<(&'static str, String), (String, Vec<String>)>,
+}
+
+impl RepeatedFailures {
+    /// Whether this failure is the first of its kind and message (to be
+    /// said in full); a repeat is counted.
+    fn first(&mut self, what: &'static str, message: &str, id: &str) -> bool {
+        match self.seen.get_mut(&(what, message.to_string())) {
+            Some((_, others)) => {
+                others.push(id.to_string());
+                false
+            }
+            None => {
+                self.seen
+                    .insert((what, message.to_string()), (id.to_string(), Vec::new()));
+                true
+            }
+        }
+    }
+
+    /// One line per repeated failure: how many more records, which.
+    fn summarize(&self, file: &str) {
+        for ((what, _), (first, others)) in &self.seen {
+            if others.is_empty() {
+                continue;
+            }
+            let ids: Vec<&str> = others.iter().map(String::as_str).collect();
+            eprintln!(
+                "warning: {file}: {what} failed as for experiment {first} in {} more \
+                 experiment(s): {}",
+                others.len(),
+                list_ids(&ids)
+            );
+        }
     }
 }
 
