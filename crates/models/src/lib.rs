@@ -40,6 +40,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod ar_noise;
 mod benchmark;
 mod builtin;
 mod data;
@@ -55,6 +56,7 @@ mod signals;
 mod simulator;
 mod sobol;
 
+pub use ar_noise::ArNoise;
 pub use benchmark::{
     BENCHMARK_SAMPLES, Benchmark, BenchmarkBuilder, MEASUREMENT_NOISE_VARIANCE,
     PROCESS_NOISE_VARIANCE,

@@ -17,7 +17,7 @@
 
 use twostage_fit::CentralDifferences;
 use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
-use twostage_models::IoData;
+use twostage_models::{ArNoise, IoData};
 
 use crate::error::RefineError as Error;
 use crate::lockstep::{to_theta, to_unit};
@@ -214,11 +214,13 @@ fn sandwich(
     // outputs' cross-correlation is not modelled.
     for (block, residuals) in r.chunks(length).enumerate() {
         let offset = block * length;
-        let noise = NoiseModel::fit(residuals, q);
-        largest_order = largest_order.max(noise.order);
+        // Order by BIC up to 20: the same model a model file's coloured
+        // noise is made of.
+        let noise = ArNoise::fit(residuals, 20, q);
+        largest_order = largest_order.max(noise.order());
         let jacobian = |a: usize| &columns[a * n + offset..a * n + offset + residuals.len()];
         // B = J' Gamma J with Gamma Toeplitz in the autocovariances.
-        for (lag, gamma) in noise.autocovariance.iter().enumerate() {
+        for (lag, gamma) in noise.autocovariances(residuals.len()).iter().enumerate() {
             for a in 0..q {
                 for b in 0..q {
                     let (ja, jb) = (jacobian(a), jacobian(b));
@@ -268,96 +270,4 @@ fn sandwich(
         covariance[a * q..(a + 1) * q].copy_from_slice(&row);
     }
     Ok((covariance, largest_order))
-}
-
-/// A stationary autoregressive model of one output's residuals: its order
-/// by the Bayesian information criterion, its coefficients by Yule-Walker
-/// (Levinson-Durbin), which keeps it stationary; and the autocovariances
-/// it implies, up to the lag where they have died out (or the record's
-/// length).
-struct NoiseModel {
-    order: usize,
-    autocovariance: Vec<f64>,
-}
-
-impl NoiseModel {
-    /// The model of `residuals`, left by a fit of `fitted` parameters.
-    fn fit(residuals: &[f64], fitted: usize) -> Self {
-        let t = residuals.len();
-        let most = (t / 10).min(20);
-        // Biased sample autocovariances, positive definite as a Toeplitz
-        // matrix: the Yule-Walker model is stationary.
-        let sample: Vec<f64> = (0..=most)
-            .map(|lag| {
-                residuals[lag..]
-                    .iter()
-                    .zip(residuals)
-                    .map(|(x, y)| x * y)
-                    .sum::<f64>()
-                    / t as f64
-            })
-            .collect();
-        // The residuals of a fit are smaller than the noise by q of T
-        // degrees of freedom.
-        let correction = t as f64 / t.saturating_sub(fitted).max(1) as f64;
-        let variance = sample[0] * correction;
-        if variance.is_nan() || variance <= 0.0 || variance.is_infinite() {
-            return Self {
-                order: 0,
-                autocovariance: vec![variance.max(0.0)],
-            };
-        }
-        // Levinson-Durbin, keeping the order of least BIC.
-        let mut coefficients: Vec<f64> = Vec::new();
-        let mut innovation = sample[0];
-        let mut best = (t as f64 * innovation.ln(), Vec::new());
-        for p in 1..=most {
-            let reflection = (sample[p]
-                - coefficients
-                    .iter()
-                    .enumerate()
-                    .map(|(i, a)| a * sample[p - 1 - i])
-                    .sum::<f64>())
-                / innovation;
-            if !reflection.is_finite() || reflection.abs() >= 1.0 {
-                break;
-            }
-            let previous = coefficients.clone();
-            coefficients.push(reflection);
-            for i in 0..p - 1 {
-                coefficients[i] = previous[i] - reflection * previous[p - 2 - i];
-            }
-            innovation *= 1.0 - reflection * reflection;
-            if innovation <= 0.0 {
-                break;
-            }
-            let criterion = t as f64 * innovation.ln() + p as f64 * (t as f64).ln();
-            if criterion < best.0 {
-                best = (criterion, coefficients.clone());
-            }
-        }
-        let coefficients = best.1;
-        let order = coefficients.len();
-        // Yule-Walker reproduces the sample autocovariances up to the
-        // order; the model's recursion carries them on.
-        let mut autocovariance: Vec<f64> =
-            sample[..=order].iter().map(|g| g * correction).collect();
-        while order > 0 && autocovariance.len() < t {
-            let lag = autocovariance.len();
-            let next: f64 = coefficients
-                .iter()
-                .enumerate()
-                .map(|(i, a)| a * autocovariance[lag - 1 - i])
-                .sum();
-            autocovariance.push(next);
-            // Died out: the tail of a stationary model decays geometrically.
-            if next.abs() < 1e-9 * variance {
-                break;
-            }
-        }
-        Self {
-            order,
-            autocovariance,
-        }
-    }
 }

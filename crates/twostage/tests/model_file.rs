@@ -573,3 +573,111 @@ fn a_measured_input_is_a_window_of_a_larger_file() {
         .to_string();
     assert!(e.contains("input.rows") && e.contains("give file"), "{e}");
 }
+
+/// `output_residual` shapes the file's output noise like a measured
+/// residual: the noise the model adds has the residual's variance and
+/// autocorrelations; mistakes name the key and the file.
+#[test]
+fn the_output_noise_can_take_a_measured_residuals_spectrum() {
+    use twostage::models::ArNoise;
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("residual-noise");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // A residual with two lags of memory: e_k = 1.2 e_(k-1) - 0.5 e_(k-2) + z_k.
+    let mut residual = vec![0.0; 4000];
+    let (mut rng, mut e1, mut e2) = (experiment_rng(9, 0), 0.0, 0.0);
+    for v in residual.iter_mut() {
+        let z: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
+        let e = 1.2 * e1 - 0.5 * e2 + 0.1 * z;
+        (e2, e1) = (e1, e);
+        *v = e;
+    }
+    let mut csv = String::from("t,position\n");
+    for (k, v) in residual.iter().enumerate() {
+        csv.push_str(&format!("{k},{v:?}\n"));
+    }
+    std::fs::write(dir.join("residual.csv"), csv).unwrap();
+    let text = |noise: &str| GOOD.replace("output_sd = 0.5", noise);
+    std::fs::write(
+        dir.join("shaped.toml"),
+        text("output_residual = \"residual.csv\""),
+    )
+    .unwrap();
+    let file = ModelFile::load(dir.join("shaped.toml")).unwrap();
+    let simulator = file.simulator().unwrap();
+    let noiseless = Benchmark::builder()
+        .n_samples(300)
+        .noiseless(true)
+        .build()
+        .unwrap();
+    let spec = file.spec();
+    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
+    let mut added = Vec::new();
+    for i in 0..100 {
+        simulator
+            .simulate(&[0.3], &mut experiment_rng(2, i), &mut noisy)
+            .unwrap();
+        noiseless
+            .simulate(&[0.3], &mut experiment_rng(2, i), &mut clean)
+            .unwrap();
+        added.extend(
+            noisy
+                .output(0)
+                .iter()
+                .zip(clean.output(0))
+                .map(|(a, b)| a - b),
+        );
+    }
+    // The same autocorrelations as the residual's, to sampling error.
+    let correlations = |x: &[f64]| -> [f64; 3] {
+        let c0: f64 = x.iter().map(|v| v * v).sum();
+        let lag = |l: usize| x[l..].iter().zip(x).map(|(a, b)| a * b).sum::<f64>() / c0;
+        [c0 / x.len() as f64, lag(1), lag(2)]
+    };
+    let (want, got) = (correlations(&residual), correlations(&added));
+    assert!(
+        (got[0] / want[0] - 1.0).abs() < 0.15,
+        "variance {got:?} against {want:?}"
+    );
+    assert!(
+        (got[1] - want[1]).abs() < 0.03 && (got[2] - want[2]).abs() < 0.05,
+        "{got:?} {want:?}"
+    );
+    assert!(ArNoise::fit(&residual, 20, 0).order() >= 2);
+    // Mistakes: together with output_sd; a column that is not there; too
+    // short a residual.
+    std::fs::write(
+        dir.join("both.toml"),
+        text("output_sd = 0.5\noutput_residual = \"residual.csv\""),
+    )
+    .unwrap();
+    let e = ModelFile::load(dir.join("both.toml"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("noise.output_residual") && e.contains("leave out output_sd"),
+        "{e}"
+    );
+    std::fs::write(dir.join("short.csv"), "position\n0.1\n0.2\n").unwrap();
+    std::fs::write(dir.join("other.csv"), "velocity\n0.1\n").unwrap();
+    for (csv, says) in [
+        ("short.csv", "at least 50"),
+        ("other.csv", "no column `position`"),
+    ] {
+        std::fs::write(
+            dir.join("bad.toml"),
+            text(&format!("output_residual = \"{csv}\"")),
+        )
+        .unwrap();
+        let e = ModelFile::load(dir.join("bad.toml"))
+            .and_then(|f| f.simulator())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("noise.output_residual") && e.contains(says) && e.contains("bad.toml"),
+            "{e}"
+        );
+    }
+}

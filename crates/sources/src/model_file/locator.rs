@@ -691,6 +691,40 @@ impl Locator<'_> {
         Ok(values)
     }
 
+    /// `[noise] output_residual = "residual.csv"`: output noise shaped
+    /// like a measured residual (columns named as the outputs), instead of
+    /// `output_sd`.
+    pub(super) fn output_residual(
+        &self,
+        noise: Option<&Spanned<RawNoise>>,
+        output_sd: &[f64],
+    ) -> Result<Option<(std::path::PathBuf, usize)>> {
+        let Some(file) = noise.and_then(|n| n.get_ref().output_residual.as_ref()) else {
+            return Ok(None);
+        };
+        let colliding = noise.and_then(|n| {
+            let raw = n.get_ref();
+            raw.output_ar.as_ref().map(|a| a.span()).or(raw
+                .output_sd
+                .as_ref()
+                .filter(|_| output_sd.iter().any(|sd| *sd > 0.0))
+                .map(|s| s.span()))
+        });
+        if let Some(span) = colliding {
+            return Err(self.error(
+                Some(span),
+                "noise.output_residual",
+                "shapes the output noise from a measured residual: leave out output_sd and \
+                 output_ar, or the residual"
+                    .into(),
+            ));
+        }
+        Ok(Some((
+            std::path::PathBuf::from(file.get_ref()),
+            self.line(file.span().start),
+        )))
+    }
+
     pub(super) fn output_noise(
         &self,
         noise: Option<&Spanned<RawNoise>>,

@@ -156,6 +156,9 @@ pub struct ModelFile {
     output_sd: Vec<f64>,
     /// Per output, the AR(1) coefficient of that noise (0: white).
     output_ar: Vec<f64>,
+    /// A measured residual whose spectrum the output noise takes
+    /// (`[noise] output_residual`), with the line that names it.
+    output_residual: Option<(PathBuf, usize)>,
     presets: Vec<(String, Preset)>,
     /// Where each name the source must know was written: (name, key, line).
     name_lines: Vec<(String, &'static str, usize)>,
@@ -198,6 +201,12 @@ impl ModelFile {
                 }
             }
             _ => {}
+        }
+        // A measured residual's file, likewise.
+        if let (Some((residual, _)), Some(folder)) = (&mut file.output_residual, folder)
+            && residual.is_relative()
+        {
+            *residual = folder.join(&*residual);
         }
         // A measured input's file is found beside the model file too.
         if let (Some(CommandInput::File { path: input, .. }), Some(folder)) =
@@ -321,6 +330,7 @@ impl ModelFile {
         };
         let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
         let output_ar = at.output_correlation(raw.noise.as_ref(), outputs.len(), &output_sd)?;
+        let output_residual = at.output_residual(raw.noise.as_ref(), &output_sd)?;
         // What `models` says of the input and noise: a fixed input is the
         // one thing a user must know before estimating a record of another.
         let fixed = match (&source, &measured_input) {
@@ -338,6 +348,14 @@ impl ModelFile {
             ModelSource::Command { .. } => "the simulator's own".to_string(),
             _ => spec.noise_note().to_string(),
         };
+        if let Some((path, _)) = &output_residual {
+            noise_note = format!(
+                "{noise_note}{}added to the outputs: noise shaped like the residual in {} (an \
+                 AR model of it)",
+                if noise_note.is_empty() { "" } else { "; " },
+                path.display()
+            );
+        }
         if output_sd.iter().any(|sd| *sd > 0.0) {
             let added: Vec<String> = outputs
                 .iter()
@@ -371,6 +389,7 @@ impl ModelFile {
             spec,
             output_sd,
             output_ar,
+            output_residual,
             presets,
             name_lines,
             fmu_line,
@@ -415,8 +434,7 @@ impl ModelFile {
             ModelSource::Builtin { model, overrides } => Ok(Box::new(FileSimulator {
                 inner: model.build_with(overrides)?,
                 spec: self.spec.clone(),
-                output_sd: self.output_sd.clone(),
-                output_ar: self.output_ar.clone(),
+                output_noise: self.output_noise()?,
                 fixed_input: self.measured_record()?,
             })),
             ModelSource::Command {
@@ -441,8 +459,7 @@ impl ModelFile {
                 Ok(Box::new(FileSimulator {
                     inner: Box::new(external),
                     spec: self.spec.clone(),
-                    output_sd: self.output_sd.clone(),
-                    output_ar: self.output_ar.clone(),
+                    output_noise: self.output_noise()?,
                     fixed_input,
                 }))
             }
@@ -474,8 +491,7 @@ impl ModelFile {
                 Ok(Box::new(FileSimulator {
                     inner: Box::new(fmu),
                     spec: self.spec.clone(),
-                    output_sd: self.output_sd.clone(),
-                    output_ar: self.output_ar.clone(),
+                    output_noise: self.output_noise()?,
                     fixed_input: self.measured_record()?,
                 }))
             }
@@ -539,10 +555,46 @@ impl ModelFile {
         Ok(Box::new(FileSimulator {
             inner: source,
             spec: self.spec.clone(),
-            output_sd: self.output_sd.clone(),
-            output_ar: self.output_ar.clone(),
+            output_noise: self.output_noise()?,
             fixed_input: None,
         }))
+    }
+
+    /// Each output's noise: shaped like the measured residual (an AR model
+    /// of it, order by BIC), else `output_sd` with its `output_ar`.
+    fn output_noise(&self) -> Result<Vec<twostage_models::ArNoise>> {
+        let Some((path, line)) = &self.output_residual else {
+            return Ok(self
+                .output_sd
+                .iter()
+                .zip(&self.output_ar)
+                .map(|(sd, a)| twostage_models::ArNoise::ar1(*a, *sd))
+                .collect());
+        };
+        let error = |message: String| Error::ModelFile {
+            file: self.origin.clone(),
+            line: Some(*line),
+            key: "noise.output_residual".into(),
+            message,
+        };
+        let columns =
+            crate::csv_rows::read_columns(path, self.spec.output_names()).map_err(error)?;
+        columns
+            .iter()
+            .zip(self.spec.output_names())
+            .map(|(column, name)| {
+                if column.len() < 50 {
+                    return Err(error(format!(
+                        "{} holds {} samples of {name}: a residual's spectrum needs at least 50",
+                        path.display(),
+                        column.len()
+                    )));
+                }
+                let mean = column.iter().sum::<f64>() / column.len() as f64;
+                let centred: Vec<f64> = column.iter().map(|v| v - mean).collect();
+                Ok(twostage_models::ArNoise::fit(&centred, 20, 0))
+            })
+            .collect()
     }
 
     /// The measured input a built-in or FMU source is handed, if the file

@@ -113,6 +113,7 @@ pub(super) struct RawNoise {
     pub(super) model: Option<bool>,
     pub(super) output_sd: Option<Spanned<OneOrMany>>,
     pub(super) output_ar: Option<Spanned<OneOrMany>>,
+    pub(super) output_residual: Option<Spanned<String>>,
     pub(super) inputs: Option<Spanned<Vec<RawNoiseInput>>>,
 }
 

@@ -8,9 +8,8 @@ use twostage_models::{Capabilities, Conditions, ExperimentRng, IoData, ModelSpec
 pub(super) struct FileSimulator {
     pub(super) inner: Box<dyn Simulator>,
     pub(super) spec: ModelSpec,
-    pub(super) output_sd: Vec<f64>,
-    /// Per output, the AR(1) coefficient of that noise (0: white).
-    pub(super) output_ar: Vec<f64>,
+    /// Per output, the noise the file adds (white of sd 0: none).
+    pub(super) output_noise: Vec<twostage_models::ArNoise>,
     /// The input the file fixes for a source that is handed it (a command
     /// speaking protocol 2): every experiment gets it unless the caller
     /// gives another.
@@ -112,11 +111,11 @@ impl FileSimulator {
         let want = conditions
             .input
             .map_or(self.spec.n_samples(), IoData::n_samples);
-        if n != want || out.n_outputs() != self.output_sd.len() {
+        if n != want || out.n_outputs() != self.output_noise.len() {
             return Err(twostage_models::SimError::InvalidData(format!(
                 "the source gave {n} samples of {} outputs, the model file says {want} of {}",
                 out.n_outputs(),
-                self.output_sd.len()
+                self.output_noise.len()
             )));
         }
         if conditions.noiseless {
@@ -124,19 +123,14 @@ impl FileSimulator {
         }
         // After the source's own draws, from the same stream: experiment i
         // of seed s stays the same bits.
-        // AR(1) of stationary sd `sd`: e_0 = sd z_0, e_k = a e_(k-1) + sd
-        // sqrt(1 - a^2) z_k; white (a = 0) is the same bits as ever.
-        for (j, (&sd, &a)) in self.output_sd.iter().zip(&self.output_ar).enumerate() {
-            if sd > 0.0 {
-                let innovation = sd * (1.0 - a * a).sqrt();
-                let mut e = 0.0;
-                for (k, y) in out.output_mut(j).iter_mut().enumerate() {
-                    let z: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
-                    e = if k == 0 {
-                        sd * z
-                    } else {
-                        a * e + innovation * z
-                    };
+        // White noise is `sd z` to the bit, as ever; AR(1) starts
+        // stationary; a residual's AR model after a burn-in.
+        let mut path = Vec::new();
+        for (j, noise) in self.output_noise.iter().enumerate() {
+            if noise.variance() > 0.0 {
+                path.resize(n, 0.0);
+                noise.fill(rng, &mut path);
+                for (y, e) in out.output_mut(j).iter_mut().zip(&path) {
                     *y += e;
                 }
             }
