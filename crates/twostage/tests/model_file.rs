@@ -22,6 +22,39 @@ model = false
 output_sd = 0.5
 "#;
 
+/// The noise a file of GOOD's model adds: its records at 0.3 minus the
+/// noiseless benchmark's on the same streams (`runs` experiments of
+/// `seed`), one after another.
+fn added_noise(file: &ModelFile, runs: u64, seed: u64) -> Vec<f64> {
+    let simulator = file.simulator().unwrap();
+    let noiseless = Benchmark::builder()
+        .n_samples(300)
+        .noiseless(true)
+        .build()
+        .unwrap();
+    let spec = file.spec();
+    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
+    let mut added = Vec::new();
+    for i in 0..runs {
+        simulator
+            .simulate(&[0.3], &mut experiment_rng(seed, i), &mut noisy)
+            .unwrap();
+        noiseless
+            .simulate(&[0.3], &mut experiment_rng(seed, i), &mut clean)
+            .unwrap();
+        assert_eq!(noisy.n_samples(), 300);
+        assert!(noisy.input(0) == clean.input(0), "the same input stream");
+        added.extend(
+            noisy
+                .output(0)
+                .iter()
+                .zip(clean.output(0))
+                .map(|(a, b)| a - b),
+        );
+    }
+    added
+}
+
 /// `output_ar` colours the file's noise: the difference from the
 /// noise-free model is AR(1) of that coefficient with the sd of
 /// `output_sd`, measured over many samples.
@@ -32,32 +65,14 @@ fn the_files_output_noise_can_be_coloured() {
         "ar.toml",
     )
     .unwrap();
-    let simulator = file.simulator().unwrap();
-    let noiseless = Benchmark::builder()
-        .n_samples(300)
-        .noiseless(true)
-        .build()
-        .unwrap();
-    let spec = file.spec();
-    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
-    let (mut square, mut lagged, mut count) = (0.0, 0.0, 0.0);
-    for i in 0..200 {
-        simulator
-            .simulate(&[0.3], &mut experiment_rng(6, i), &mut noisy)
-            .unwrap();
-        noiseless
-            .simulate(&[0.3], &mut experiment_rng(6, i), &mut clean)
-            .unwrap();
-        let e: Vec<f64> = noisy
-            .output(0)
-            .iter()
-            .zip(clean.output(0))
-            .map(|(a, b)| a - b)
-            .collect();
+    // One series per record: no lag across records.
+    let added = added_noise(&file, 200, 6);
+    let (mut square, mut lagged) = (0.0, 0.0);
+    for e in added.chunks(300) {
         square += e.iter().map(|v| v * v).sum::<f64>();
         lagged += e.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
-        count += e.len() as f64;
     }
+    let count = added.len() as f64;
     let (variance, rho) = (square / count, lagged / square);
     assert!(
         (variance.sqrt() - 0.5).abs() < 0.03,
@@ -66,18 +81,28 @@ fn the_files_output_noise_can_be_coloured() {
     );
     assert!((rho - 0.9).abs() < 0.02, "lag-one correlation {rho}");
     // Noise-free runs leave it out: the model's own response.
+    let simulator = file.simulator().unwrap();
+    let noiseless = Benchmark::builder()
+        .n_samples(300)
+        .noiseless(true)
+        .build()
+        .unwrap();
+    let mut given = file.spec().new_record();
+    noiseless
+        .simulate(&[0.3], &mut experiment_rng(6, 0), &mut given)
+        .unwrap();
     let quiet = twostage::models::Conditions {
         noiseless: true,
-        input: Some(&clean),
+        input: Some(&given),
     };
+    let (mut ours, mut reference) = (file.spec().new_record(), file.spec().new_record());
     simulator
-        .simulate_under(&[0.3], &mut experiment_rng(6, 0), quiet, &mut noisy)
+        .simulate_under(&[0.3], &mut experiment_rng(6, 0), quiet, &mut ours)
         .unwrap();
-    let mut reference = spec.new_record();
     noiseless
         .simulate_under(&[0.3], &mut experiment_rng(6, 0), quiet, &mut reference)
         .unwrap();
-    assert_eq!(noisy.output(0), reference.output(0));
+    assert_eq!(ours.output(0), reference.output(0));
 }
 
 #[test]
@@ -99,31 +124,9 @@ fn a_built_in_source_takes_the_files_names_prior_length_and_noise() {
     assert!(matches!(file.source(), ModelSource::Builtin { .. }));
     // The file's noise is the only noise: the difference from the noiseless
     // benchmark (same stream, same input) is white with sd 0.5.
-    let simulator = file.simulator().unwrap();
-    let noiseless = Benchmark::builder()
-        .n_samples(300)
-        .noiseless(true)
-        .build()
-        .unwrap();
-    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
-    let mut sum_sq = 0.0;
+    let added = added_noise(&file, 20, 4);
+    let sum_sq: f64 = added.iter().map(|e| e * e).sum();
     let runs = 20;
-    for i in 0..runs {
-        simulator
-            .simulate(&[0.3], &mut experiment_rng(4, i), &mut noisy)
-            .unwrap();
-        noiseless
-            .simulate(&[0.3], &mut experiment_rng(4, i), &mut clean)
-            .unwrap();
-        assert_eq!(noisy.n_samples(), 300);
-        assert!(noisy.input(0) == clean.input(0), "the same input stream");
-        sum_sq += noisy
-            .output(0)
-            .iter()
-            .zip(clean.output(0))
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>();
-    }
     // 6000 draws: the sample sd is within 3% of 0.5 with overwhelming odds.
     let sd = (sum_sq / (runs as f64 * 300.0)).sqrt();
     assert!((sd / 0.5 - 1.0).abs() < 0.03, "noise sd {sd}");
@@ -604,30 +607,7 @@ fn the_output_noise_can_take_a_measured_residuals_spectrum() {
     )
     .unwrap();
     let file = ModelFile::load(dir.join("shaped.toml")).unwrap();
-    let simulator = file.simulator().unwrap();
-    let noiseless = Benchmark::builder()
-        .n_samples(300)
-        .noiseless(true)
-        .build()
-        .unwrap();
-    let spec = file.spec();
-    let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
-    let mut added = Vec::new();
-    for i in 0..100 {
-        simulator
-            .simulate(&[0.3], &mut experiment_rng(2, i), &mut noisy)
-            .unwrap();
-        noiseless
-            .simulate(&[0.3], &mut experiment_rng(2, i), &mut clean)
-            .unwrap();
-        added.extend(
-            noisy
-                .output(0)
-                .iter()
-                .zip(clean.output(0))
-                .map(|(a, b)| a - b),
-        );
-    }
+    let added = added_noise(&file, 100, 2);
     // The same autocorrelations as the residual's, to sampling error.
     let correlations = |x: &[f64]| -> [f64; 3] {
         let c0: f64 = x.iter().map(|v| v * v).sum();
