@@ -1,0 +1,181 @@
+//! The table `estimate` writes: CSV or JSON rows of estimates, their
+//! intervals inside the prior's box, the check's columns and the
+//! correlations.
+
+use anyhow::Result;
+
+use super::Estimated;
+use super::columns::{check_fields, check_header, input_as_trained, refine_stop};
+use crate::number::format_f64;
+
+/// The lower and upper corners of a prior's box.
+pub(super) type PriorBox = (Vec<f64>, Vec<f64>);
+
+/// A row's interval as written: `theta +- widths` inside the prior's box.
+pub(super) fn interval(
+    e: &Estimated,
+    prior_box: Option<&PriorBox>,
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let widths = e.widths.as_ref()?;
+    Some(match prior_box {
+        Some((lower, upper)) => twostage::interval_in_box(&e.theta, widths, lower, upper),
+        None => e
+            .theta
+            .iter()
+            .zip(widths)
+            .map(|(t, w)| (t - w, t + w))
+            .unzip(),
+    })
+}
+
+/// The pairs of parameters a correlation column names, `corr_A_B` with A
+/// before B, with their place in the row-major matrix.
+pub(super) fn correlation_pairs(names: &[String]) -> Vec<(String, usize)> {
+    let q = names.len();
+    (0..q)
+        .flat_map(|a| (a + 1..q).map(move |b| (a, b)))
+        .map(|(a, b)| (format!("corr_{}_{}", names[a], names[b]), a * q + b))
+        .collect()
+}
+
+pub(super) fn csv(
+    names: &[String],
+    rows: &[(String, Estimated)],
+    outputs: &[String],
+    with_correlation: bool,
+    prior_box: Option<&PriorBox>,
+) -> Result<String> {
+    use twostage::sources::csv_rows::row;
+    let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
+    let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
+    let mut header = vec!["experiment".to_string()];
+    header.extend(names.iter().cloned());
+    if with_intervals {
+        for n in names {
+            header.push(format!("{n}_lo"));
+            header.push(format!("{n}_hi"));
+        }
+    }
+    if with_distance {
+        header.extend(["feature_distance".into(), "out_of_distribution".into()]);
+    }
+    let with_floored = rows.iter().any(|(_, e)| e.floored.is_some());
+    if with_floored {
+        header.push("untransformed_samples".into());
+    }
+    let with_check = rows.iter().any(|(_, e)| e.check.is_some());
+    if with_check {
+        header.extend(check_header(outputs));
+    }
+    let with_stop = rows
+        .iter()
+        .any(|(_, e)| matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))));
+    if with_stop {
+        header.push("refine_stop".into());
+    }
+    let pairs = if with_correlation {
+        correlation_pairs(names)
+    } else {
+        Vec::new()
+    };
+    header.extend(pairs.iter().map(|(name, _)| name.clone()));
+    let mut text = row(&header);
+    for (id, e) in rows {
+        let mut fields = vec![id.clone()];
+        fields.extend(e.theta.iter().map(|t| format_f64(*t)));
+        if let Some((lo, hi)) = interval(e, prior_box) {
+            for (lo, hi) in lo.iter().zip(&hi) {
+                fields.push(format_f64(*lo));
+                fields.push(format_f64(*hi));
+            }
+        }
+        if let Some((d, _)) = e.distance {
+            fields.push(format_f64(d));
+            fields.push(e.out_of_distribution().to_string());
+        }
+        if with_floored {
+            fields.push(e.floored.as_ref().map_or(0, Vec::len).to_string());
+        }
+        if with_check {
+            fields.extend(check_fields(outputs.len(), e.check.as_ref()));
+        }
+        if with_stop {
+            fields.push(refine_stop(e.refined.as_ref()));
+        }
+        for (_, at) in &pairs {
+            fields.push(
+                e.correlation
+                    .as_ref()
+                    .map_or_else(String::new, |r| format_f64(r[*at])),
+            );
+        }
+        text.push_str(&row(&fields));
+    }
+    Ok(text)
+}
+
+pub(super) fn json(
+    names: &[String],
+    rows: &[(String, Estimated)],
+    outputs: &[String],
+    with_correlation: bool,
+    prior_box: Option<&PriorBox>,
+) -> Result<String> {
+    let pairs = if with_correlation {
+        correlation_pairs(names)
+    } else {
+        Vec::new()
+    };
+    let records: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|(id, e)| {
+            let mut object = serde_json::Map::new();
+            object.insert("experiment".into(), id.clone().into());
+            let bounds = interval(e, prior_box);
+            for (j, n) in names.iter().enumerate() {
+                object.insert(n.clone(), e.theta[j].into());
+                if let Some((lo, hi)) = &bounds {
+                    object.insert(format!("{n}_lo"), lo[j].into());
+                    object.insert(format!("{n}_hi"), hi[j].into());
+                }
+            }
+            if let Some((d, _)) = e.distance {
+                object.insert("feature_distance".into(), d.into());
+                object.insert("out_of_distribution".into(), e.out_of_distribution().into());
+            }
+            if let Some(floored) = &e.floored {
+                object.insert("untransformed_samples".into(), floored.len().into());
+            }
+            if matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))) {
+                object.insert("refine_stop".into(), refine_stop(e.refined.as_ref()).into());
+            }
+            if let Some(r) = &e.correlation {
+                for (name, at) in &pairs {
+                    object.insert(name.clone(), r[*at].into());
+                }
+            }
+            match &e.check {
+                Some(Ok(c)) => {
+                    for (j, y) in outputs.iter().enumerate() {
+                        object.insert(format!("{y}_rms"), c.rms[j].into());
+                        object.insert(format!("{y}_fit_percent"), c.fit_percent[j].into());
+                    }
+                    object.insert("check_tail_probability".into(), c.tail_probability.into());
+                    object.insert("check_runs".into(), c.reference_runs.into());
+                    object.insert("model_consistent".into(), c.model_consistent().into());
+                    object.insert("loss_over_best".into(), c.loss_ratio.into());
+                    object.insert("explained".into(), c.explained().into());
+                    if let Some(same) = input_as_trained(c) {
+                        object.insert("input_as_trained".into(), same.into());
+                    }
+                }
+                Some(Err(e)) => {
+                    object.insert("check_error".into(), e.clone().into());
+                }
+                None => {}
+            }
+            serde_json::Value::Object(object)
+        })
+        .collect();
+    Ok(serde_json::to_string_pretty(&records)? + "\n")
+}
