@@ -764,6 +764,7 @@ impl ModelFile {
 mod fmu_template;
 mod input;
 mod locator;
+mod noise;
 mod raw;
 mod simulator;
 
