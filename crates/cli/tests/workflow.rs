@@ -233,8 +233,8 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     assert!(text(&out.stdout).is_empty(), "--quiet prints nothing");
     let data = dir.join("long.csv");
     let mut csv = String::from("experiment,u,y\n");
-    for e in ["a", "b"] {
-        for k in 0..300 {
+    for (e, n) in [("a", 1000), ("b", 1000), ("c", 300)] {
+        for k in 0..n {
             let u = ((k * 7919 + 13) % 17) as f64 / 8.0 - 1.0;
             let y = if e == "b" && k == 100 {
                 "nan".to_string()
@@ -248,12 +248,15 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     let out = twostage(&["estimate", "--estimator", path(&file), path(&data)]);
     assert_eq!(out.status.code(), Some(1));
     let err = text(&out.stderr);
-    assert!(err.contains("row 402, column y: 'nan'"), "{err}");
+    assert!(err.contains("row 1102, column y: 'nan'"), "{err}");
+    // The two-stage estimate keeps the estimator's length, and says how to
+    // get an estimate of the record anyway.
     assert!(
         err.contains(
-            "experiment a: 300 samples, the estimator was trained and validated on N = 1000"
-        ),
-        "a record of another length is estimated with a warning: {err}"
+            "experiment c: 300 samples; this estimator reads records of N = 1000, as it was \
+             trained and validated: estimate a window of 1000 samples"
+        ) && err.contains("--refine"),
+        "{err}"
     );
     assert!(
         err.contains("experiment a: out of distribution"),
@@ -268,12 +271,30 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     assert!(estimates.lines().nth(1).unwrap().starts_with("a,"));
     assert!(estimates.lines().nth(1).unwrap().ends_with(",true"));
     assert!(
-        err.contains("1 record(s) could not be estimated (listed above); the other 1 were"),
+        err.contains("2 record(s) could not be estimated (listed above); the other 1 were"),
+        "{err}"
+    );
+    // With --refine (an estimator with intervals, which size its
+    // neighbourhood) the record of another length is fitted at its own.
+    let calibrated = dir.join("calibrated.tsest");
+    let out = train_linear(&calibrated, "200", "100");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&calibrated),
+        "--refine",
+        path(&data),
+    ]);
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("experiment c: 300 samples, the estimator was trained and validated on N = 1000: its estimate only starts the refinement"),
         "{err}"
     );
     assert!(
-        !err.contains("experiment b: 300 samples"),
-        "a record that fails is not also warned about its length: {err}"
+        text(&out.stdout).lines().any(|l| l.starts_with("c,")),
+        "{}",
+        text(&out.stdout)
     );
     // When no record can be estimated, nothing is written: an empty table
     // would read as a result.
@@ -283,7 +304,10 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     assert_eq!(out.status.code(), Some(1));
     let err = text(&out.stderr);
     assert!(text(&out.stdout).is_empty(), "{}", text(&out.stdout));
-    assert!(err.contains("too short"), "{err}");
+    assert!(
+        err.contains("3 samples; this estimator reads records of N = 1000"),
+        "{err}"
+    );
     assert!(
         !err.contains("warning"),
         "one message for one record: {err}"

@@ -224,7 +224,8 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         } else {
             None
         };
-        let refiner = if args.refine.is_some() {
+        let refines = args.refine.is_some();
+        let refiner = if refines {
             Some(refinement(&estimator, args)?)
         } else {
             None
@@ -238,6 +239,18 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
             refiner,
             prior_box,
             method: Box::new(move |_, record: &IoData| {
+                // The two-stage estimate keeps the estimator's length; a
+                // refinement fits a record of any length, from it.
+                let n = record.n_samples();
+                if n != trained && !refines {
+                    return Err(format!(
+                        "{n} samples; this estimator reads records of N = {trained}, as it was \
+                         trained and validated: estimate a window of {trained} samples of it \
+                         (cut the record, or a model file's [input] rows), train on records of \
+                         {n}, or refine through the model, which fits any length (--refine, \
+                         --refine=auto)"
+                    ));
+                }
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
                 // The adaptive intervals have the same level and follow the
                 // record; the fixed ones are the fallback. Both were

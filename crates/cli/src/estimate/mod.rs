@@ -266,10 +266,17 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 // The two-stage estimates first; the records the check does
                 // not explain are refined, and checked again.
                 check_all(&mut estimates, &everyone);
+                // A record of another length than the estimator's is
+                // refined whatever the check says: the two-stage estimate
+                // keeps its length.
                 let unexplained: Vec<bool> = estimates
                     .iter()
-                    .map(|(_, outcome)| {
-                        matches!(outcome, Ok((_, e)) if matches!(&e.check, Some(Ok(c)) if !c.explained()))
+                    .map(|(_, outcome)| match outcome {
+                        Ok((record, e)) => {
+                            matches!(&e.check, Some(Ok(c)) if !c.explained())
+                                || trained_samples.is_some_and(|n| n != record.n_samples())
+                        }
+                        Err(_) => false,
                     })
                     .collect();
                 let ids: Vec<&str> = estimates
@@ -278,11 +285,17 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                     .filter(|(_, u)| **u)
                     .map(|((id, _), _)| id.as_str())
                     .collect();
+                let explained = estimates
+                    .iter()
+                    .filter(|(_, outcome)| {
+                        matches!(outcome, Ok((_, e)) if matches!(&e.check, Some(Ok(c)) if c.explained()))
+                    })
+                    .count();
                 eprintln!(
                     "note: {}: --refine=auto: the check explains {} of {} two-stage estimates; \
                      refining {}{}",
                     path.display(),
-                    everyone.len() - ids.len(),
+                    explained,
                     everyone.len(),
                     if ids.is_empty() {
                         "none"
@@ -312,8 +325,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 && record.n_samples() != trained
             {
                 eprintln!(
-                    "warning: {}: experiment {id}: {} samples, the estimator was trained and \
-                     validated on N = {trained}; its accuracy and intervals may not hold",
+                    "note: {}: experiment {id}: {} samples, the estimator was trained and \
+                     validated on N = {trained}: its estimate only starts the refinement, \
+                     which fits the record at its own length",
                     path.display(),
                     record.n_samples()
                 );
