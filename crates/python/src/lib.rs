@@ -333,7 +333,12 @@ impl PyEstimator {
         let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
         let theta = match theta {
             Some(theta) => theta,
-            None => self.inner.assess(&record).map_err(to_python)?.theta,
+            None => {
+                if let Some(refusal) = self.inner.length_refusal(record.n_samples()) {
+                    return Err(PyValueError::new_err(refusal));
+                }
+                self.inner.assess(&record).map_err(to_python)?.theta
+            }
         };
         let checked =
             through_model::check(py, sim.as_ref(), &record, &theta, (sims, seed, score_from))?;
@@ -466,6 +471,9 @@ impl PyEstimator {
         };
         let y_view = as_batch(&y_array)?;
         let (b, n) = (y_view.shape()[0], y_view.shape()[1]);
+        if let Some(refusal) = self.inner.length_refusal(n) {
+            return Err(PyValueError::new_err(refusal));
+        }
         let (u_array, u_single) = records("u", u, shape.n_inputs, (!single).then_some(b))?;
         if u_array.is_some() && u_single != single {
             return Err(PyValueError::new_err(

@@ -165,3 +165,10 @@ def test_bad_values_and_arrays_are_named(benchmark):
         estimator.check(u[0], bad)
     with pytest.raises(ValueError, match="give model=, model_file= or model_toml="):
         twostage.predict([0.1], u[0])
+    # The two-stage estimate keeps the estimator's length, as on the
+    # command line; a refinement fits the record at its own.
+    with pytest.raises(ValueError, match="this estimator reads records of N = 1000"):
+        estimator.estimate(u[0][:300], y[0][:300])
+    longer_u = np.concatenate([u[0], u[0]])
+    longer_y = np.concatenate([y[0], y[0]])
+    assert estimator.refine(longer_u, longer_y)["theta"].shape == (1,)

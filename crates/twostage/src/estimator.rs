@@ -334,6 +334,32 @@ impl Estimator {
     pub fn record_shape(&self) -> &RecordShape {
         &self.shape
     }
+    /// Why a record of `n_samples` gets no two-stage estimate from this
+    /// estimator, and what to do instead; `None` for its own length. The
+    /// estimate keeps the length the estimator was trained and validated
+    /// on (decision 037): its accuracy and intervals hold for no other.
+    ///
+    /// ```
+    /// use twostage::{TwoStage, models::Benchmark};
+    /// let est = TwoStage::builder(&Benchmark::new())
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(100).validation(0).calibration(0).train()?;
+    /// assert!(est.length_refusal(1000).is_none());
+    /// assert!(est.length_refusal(300).unwrap().contains("a window of 1000 samples"));
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    pub fn length_refusal(&self, n_samples: usize) -> Option<String> {
+        let trained = self.shape.n_samples;
+        (n_samples != trained).then(|| {
+            format!(
+                "{n_samples} samples; this estimator reads records of N = {trained}, as it was \
+                 trained and validated: estimate a window of {trained} samples of it (cut the \
+                 record, or a model file's [input] rows), train on records of {n_samples}, or \
+                 refine through the model, which fits any length (`--refine` or \
+                 `--refine=auto` on the command line, `Estimator.refine` in Python)"
+            )
+        })
+    }
     /// The stage-1 compressor.
     pub fn compressor(&self) -> &CompressorConfig {
         &self.compressor

@@ -241,15 +241,10 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
             method: Box::new(move |_, record: &IoData| {
                 // The two-stage estimate keeps the estimator's length; a
                 // refinement fits a record of any length, from it.
-                let n = record.n_samples();
-                if n != trained && !refines {
-                    return Err(format!(
-                        "{n} samples; this estimator reads records of N = {trained}, as it was \
-                         trained and validated: estimate a window of {trained} samples of it \
-                         (cut the record, or a model file's [input] rows), train on records of \
-                         {n}, or refine through the model, which fits any length (--refine, \
-                         --refine=auto)"
-                    ));
+                if let Some(refusal) = estimator.length_refusal(record.n_samples())
+                    && !refines
+                {
+                    return Err(refusal);
                 }
                 let a = estimator.assess(record).map_err(|e| e.to_string())?;
                 // The adaptive intervals have the same level and follow the
