@@ -194,15 +194,7 @@ pub fn check_with(
             ),
         });
     }
-    check(
-        sim,
-        record,
-        theta,
-        plan.noisy,
-        plan.seed,
-        !plan.at_best_fit,
-        plan.score_from,
-    )
+    check(sim, record, theta, plan)
 }
 
 /// Check `record` against `sim` at `theta`: one noise-free run on the
@@ -238,35 +230,31 @@ pub fn check_record(
     noisy: usize,
     seed: u64,
 ) -> Result<RecordCheck, RefineError> {
-    check(sim, record, theta, noisy, seed, true, 0)
-}
-
-/// [`check_record`] of an estimate that is already the output-error best
-/// fit near itself (a refinement that converged there): the descent that
-/// would find it again is not run, and the estimate is its own best fit
-/// (`loss_ratio` 1, `best_theta` the estimate).
-///
-/// # Errors
-/// As [`check_record`].
-pub fn check_best_fit(
-    sim: &dyn Simulator,
-    record: &IoData,
-    theta: &[f64],
-    noisy: usize,
-    seed: u64,
-) -> Result<RecordCheck, RefineError> {
-    check(sim, record, theta, noisy, seed, false, 0)
+    check_with(
+        sim,
+        record,
+        theta,
+        CheckPlan {
+            noisy,
+            seed,
+            score_from: 0,
+            at_best_fit: false,
+        },
+    )
 }
 
 fn check(
     sim: &dyn Simulator,
     record: &IoData,
     theta: &[f64],
-    noisy: usize,
-    seed: u64,
-    descend: bool,
-    from: usize,
+    plan: CheckPlan,
 ) -> Result<RecordCheck, RefineError> {
+    let CheckPlan {
+        noisy,
+        seed,
+        score_from: from,
+        at_best_fit,
+    } = plan;
     let quiet = Conditions {
         noiseless: true,
         input: Some(record),
@@ -372,7 +360,7 @@ fn check(
     let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..n_y)
         .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
         .unzip();
-    if !descend {
+    if at_best_fit {
         return Ok(RecordCheck {
             best_fit_percent: fit_percent.clone(),
             rms,
@@ -521,7 +509,18 @@ mod tests {
         let best = [13.0 / 6.0];
         let (full, skipped) = (
             check_record(&model, &record, &best, 199, 3).unwrap(),
-            check_best_fit(&model, &record, &best, 199, 3).unwrap(),
+            check_with(
+                &model,
+                &record,
+                &best,
+                CheckPlan {
+                    noisy: 199,
+                    seed: 3,
+                    score_from: 0,
+                    at_best_fit: true,
+                },
+            )
+            .unwrap(),
         );
         assert!(
             (full.loss_ratio - 1.0).abs() < 1e-9

@@ -20,8 +20,8 @@ mod refinement;
 mod uncertainty;
 
 pub use check::{
-    CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_best_fit,
-    check_record, check_with, output_fit,
+    CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_record,
+    check_with, output_fit,
 };
 pub use error::RefineError;
 pub use moments::WeightedMoments;

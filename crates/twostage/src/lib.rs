@@ -74,7 +74,7 @@ pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
     CheckPlan, Descent, EXPLAINED_LEVEL, LocalPosterior, LocalUncertainty, OutputError,
     RecordCheck, RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments,
-    check_best_fit, check_record, check_with, output_fit,
+    check_record, check_with, output_fit,
 };
 
 pub use twostage_sources::{
