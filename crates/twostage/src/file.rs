@@ -183,6 +183,12 @@ impl Estimator {
 /// disk during the write leaves whatever was at `path` before (an
 /// estimator it replaces, say) instead of a file cut short.
 ///
+/// A path that is not a regular file (`/dev/null`, a FIFO, a terminal) is
+/// written through, never replaced: renaming over `/dev/null` as root
+/// would turn the device into a file that every later reader of
+/// `/dev/null` sees. A symbolic link keeps pointing where it did; the file
+/// it names is replaced.
+///
 /// ```
 /// let path = std::env::temp_dir().join(format!("whole-{}.txt", std::process::id()));
 /// twostage::write_whole(&path, b"one")?;
@@ -201,13 +207,18 @@ pub fn write_whole(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
         path: path.display().to_string(),
         cause,
     };
-    let dir = match path.parent() {
+    let target = match std::fs::metadata(path) {
+        Ok(existing) if !existing.is_file() => return std::fs::write(path, bytes).map_err(io),
+        Ok(_) => std::fs::canonicalize(path).map_err(io)?,
+        Err(_) => path.to_path_buf(),
+    };
+    let dir = match target.parent() {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
         _ => Path::new("."),
     };
     let mut file = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
     file.write_all(bytes).map_err(io)?;
     file.as_file().sync_all().map_err(io)?;
-    file.persist(path).map_err(|e| io(e.error))?;
+    file.persist(&target).map_err(|e| io(e.error))?;
     Ok(())
 }
