@@ -16,7 +16,11 @@
 //! intervals) and validation (the paper's Theorem 1) on fresh simulations.
 //!
 //! The pieces live in their own crates, re-exported here: [`models`]
-//! (simulators), [`compress`] (stage 1), [`fit`] (stage 2), [`validate`].
+//! (simulators), [`compress`] (stage 1), [`fit`] (stage 2), [`validate`],
+//! [`sources`] (where records come from), [`estimator`] (the trained
+//! estimator and its file), [`train`] (the builder and its run), [`auto`]
+//! (the automatic design). This crate holds only the training request
+//! that every door (command line, Python, shards) builds.
 //!
 //! # Example
 //!
@@ -44,38 +48,23 @@
 //! ```
 #![deny(missing_docs)]
 
-mod adaptive;
-mod auto;
-mod builder;
-mod envelope;
-mod error;
-mod estimator;
-mod file;
-mod layout;
 mod request;
-mod runtime_export;
-mod settings;
-mod space;
 
-pub use adaptive::AdaptiveIntervals;
-pub use auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFits};
-pub use builder::TwoStage;
-pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
-pub use error::{Error, FileError, Result};
-pub use estimator::{
-    Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
-    interval_in_box,
-};
-pub use file::{FORMAT_VERSION, MAGIC, write_whole};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
-pub use settings::{DEFAULT_SEED, RunSettings};
+pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFits};
 pub use twostage_compress::CompressorConfig;
+pub use twostage_estimator::{
+    AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, Error, EstimateWorkspace, Estimator,
+    FORMAT_VERSION, FeatureEnvelope, FileError, MAGIC, RecordShape, Result, SignalNames,
+    TrainingInfo, interval_in_box, write_whole,
+};
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
     CheckPlan, Descent, EXPLAINED_LEVEL, LocalPosterior, LocalUncertainty, OutputError,
     RecordCheck, RefineError, RefineStarts, Refinement, ResidualModel, WeightedMoments,
     check_record, check_with, output_fit,
 };
+pub use twostage_train::{DEFAULT_SEED, Run, RunSettings, TrainedOn, TwoStage};
 
 pub use twostage_sources::{
     ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,
@@ -87,11 +76,14 @@ pub use twostage_sources::{
     recommended_pacejka,
 };
 
+pub use twostage_auto as auto;
 pub use twostage_compress as compress;
+pub use twostage_estimator as estimator;
 pub use twostage_fit as fit;
 pub use twostage_fmi as fmi;
 pub use twostage_models as models;
 pub use twostage_refine as refine;
 pub use twostage_runtime as runtime;
 pub use twostage_sources as sources;
+pub use twostage_train as train;
 pub use twostage_validate as validate;

@@ -9,18 +9,16 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use twostage_models::Simulator;
 
-use crate::auto::{AutoOutcome, Budget};
-use crate::builder::TwoStage;
-use crate::error::{Error, Result};
-use crate::estimator::Estimator;
-use crate::settings::RunSettings;
+use twostage_auto::{AutoDesign, AutoOutcome, Budget};
 use twostage_compress::CompressorConfig;
+use twostage_estimator::{Error, Estimator, Result};
 use twostage_fit::RegressorConfig;
 use twostage_sources::NamedModel;
 use twostage_sources::Progress;
 use twostage_sources::RecordSource;
 use twostage_sources::{ChartFiles, DEFAULT_PRESET_SIMULATIONS, Preset};
 use twostage_sources::{ShardPlan, ShardedChart};
+use twostage_train::{RunSettings, TwoStage};
 
 /// A chart folder (CSV or NumPy files), and how the estimator file names
 /// it when not by its folder.
@@ -341,7 +339,7 @@ impl TrainingRequest {
     /// # Errors
     /// A search asked for with a design; an unknown preset or a structure
     /// that does not parse; shards of another model description; what
-    /// [`TwoStage::train`] or [`TwoStage::auto`] report.
+    /// [`TwoStage::train`] or [`AutoDesign`] report.
     pub fn train_with(
         &self,
         model: &NamedModel,
@@ -368,7 +366,7 @@ impl TrainingRequest {
         let run = |builder: TwoStage<'_, dyn Simulator>| -> Result<Trained> {
             Ok(match search {
                 Some(budget) => Trained::Searched(
-                    TwoStage::auto(simulator)
+                    AutoDesign::new(simulator)
                         .budget(budget)
                         .settings(|_| builder)
                         .run()?,

@@ -10,7 +10,7 @@ use twostage::fit::MlpParams;
 use twostage::models::{
     Benchmark, ExperimentRng, IoData, ModelSpec, SimError, Simulator, experiment_rng,
 };
-use twostage::{Error, Estimator, FileError, RegressorConfig, TwoStage};
+use twostage::{AutoDesign, Error, Estimator, FileError, RegressorConfig, TwoStage};
 
 fn small_benchmark() -> Benchmark {
     Benchmark::builder().n_samples(400).build().unwrap()
@@ -409,7 +409,7 @@ fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
         )
     };
     let run = || {
-        TwoStage::auto(&model)
+        AutoDesign::new(&model)
             .budget(twostage::Budget::Simulations(300))
             .compressors(vec![
                 Arx::new(2, 2).unwrap().into(),
@@ -489,7 +489,7 @@ fn a_screened_first_round_only_ranks_the_compressors() {
                 .unwrap(),
         )
     };
-    let outcome = TwoStage::auto(&model)
+    let outcome = AutoDesign::new(&model)
         .budget(twostage::Budget::Simulations(300))
         .screening_rows(100)
         .compressors(vec![

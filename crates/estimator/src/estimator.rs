@@ -5,10 +5,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, FlooredSample, Workspace};
 use twostage_fit::Predictor;
-use twostage_models::{IoData, Marginal, generic_signal_names};
+use twostage_models::{IoData, Marginal, ModelSpec, generic_signal_names};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
-use crate::adaptive::AdaptiveIntervals;
+use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
 use crate::layout::{EstimatorFields, Stages, V1, V2, V3};
@@ -413,7 +413,7 @@ impl Estimator {
         ))
     }
 
-    /// The neighbourhood a [`Refinement`](crate::Refinement) of this
+    /// The neighbourhood a [`Refinement`](twostage_refine::Refinement) of this
     /// estimator's estimates searches: `scale` times the calibrated
     /// intervals' half-widths, one radius per parameter. TS has already
     /// found the right region; the radius says how far its error goes.
@@ -607,65 +607,149 @@ impl Estimator {
 
     /// Estimates for every row of a compressed chart's features (out of the
     /// learning space, clipped).
-    pub(crate) fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
+    ///
+    /// ```
+    /// # use twostage::{TwoStage, models::Benchmark};
+    /// # let model = Benchmark::builder().n_samples(200).build()?;
+    /// # let estimator = TwoStage::builder(&model).simulations(100).validation(0).calibration(0).linear(1e-6)?.train()?;
+    /// use twostage::compress::Compressor;
+    /// let features = ndarray::Array2::zeros((3, estimator.compressor().n_features()));
+    /// let estimates = estimator.predict_features(features.view())?;
+    /// assert_eq!(estimates.dim(), (3, 1));
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// Features of another width than the compressor writes.
+    pub fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
         let mut out = self.regressor.predict(features)?;
         rows_to_estimates(&mut out, &self.marginals, &self.lower, &self.upper);
         Ok(out)
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use twostage_compress::Arx;
-    use twostage_models::{PacejkaCar, Simulator, experiment_rng};
-
-    use super::*;
-    use crate::TwoStage;
-
-    #[test]
-    fn the_fast_path_estimates_as_the_qr_solution_on_the_car() {
-        // The car's chicane makes the paper's ARX(4, 4) regressors nearly
-        // collinear; the fast path refines them, and the estimate agrees
-        // with the one through QR's coefficients to 1e-9.
-        let car = PacejkaCar::new();
-        let estimator = TwoStage::builder(&car)
-            .compressor(Arx::new(4, 4).unwrap())
-            .simulations(200)
-            .validation(0)
-            .calibration(0)
-            .seed(5)
-            .linear(1e-6)
-            .unwrap()
-            .train()
-            .unwrap();
-        let mut work = EstimateWorkspace::new();
-        let mut record = IoData::default();
-        for i in 0..5u64 {
-            let theta = [-26.0 - 3.0 * i as f64, -0.95 - 0.04 * i as f64];
-            car.simulate(&theta, &mut experiment_rng(9, i), &mut record)
-                .unwrap();
-            let mut fast = [0.0; 2];
-            estimator
-                .estimate_into(record.inputs(), record.outputs(), &mut work, &mut fast)
-                .unwrap();
-            let features = estimator
-                .compressor
-                .compress(record.inputs(), record.outputs())
-                .unwrap();
-            let mut exact = [0.0; 2];
-            estimator
-                .regressor
-                .predict_into(&features, &mut exact)
-                .unwrap();
-            to_estimate(
-                &mut exact,
-                &estimator.marginals,
-                &estimator.lower,
-                &estimator.upper,
-            );
-            for (f, e) in fast.iter().zip(&exact) {
-                assert!((f - e).abs() <= 1e-9 * e.abs(), "{fast:?} vs {exact:?}");
-            }
+/// Building an estimator out of its fitted stages, then calibrating and
+/// validating it on held-out records: the steps every training ends with.
+impl Estimator {
+    /// The estimator of `spec`'s parameters made of the fitted stages,
+    /// before calibration and validation: no intervals, no report, and the
+    /// envelope of the features it was fitted on (`trained_on`).
+    ///
+    /// ```
+    /// use twostage::{Estimator, TrainingInfo, RegressorConfig};
+    /// use twostage::compress::Arx;
+    /// use twostage::fit::Ridge;
+    /// use twostage::models::{Benchmark, Simulator};
+    ///
+    /// let model = Benchmark::builder().n_samples(100).build()?;
+    /// let compressor = twostage::CompressorConfig::from(Arx::new(1, 1)?);
+    /// let features = ndarray::Array2::from_shape_fn((30, 2), |(i, j)| (i * (j + 1)) as f64);
+    /// let thetas = ndarray::Array2::from_shape_fn((30, 1), |(i, _)| i as f64 / 40.0);
+    /// let config = RegressorConfig::Linear(Ridge::new(1e-6)?);
+    /// let fitted = config.fit(features.view(), thetas.view(), 1)?;
+    /// let training = TrainingInfo {
+    ///     model: model.spec().name().to_string(),
+    ///     simulations: 30,
+    ///     failures: 0,
+    ///     seed: 1,
+    ///     sampling: "Random".into(),
+    ///     regressor: config,
+    ///     version: "0.1.0".into(),
+    /// };
+    /// let estimator = Estimator::from_stages(model.spec(), compressor, fitted, training, features.view());
+    /// assert!(estimator.intervals().is_none() && estimator.validation().is_none());
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    pub fn from_stages(
+        spec: &ModelSpec,
+        compressor: CompressorConfig,
+        regressor: FittedRegressor,
+        training: TrainingInfo,
+        trained_on: ArrayView2<'_, f64>,
+    ) -> Self {
+        let prior = spec.prior();
+        Self {
+            param_names: spec.param_names().to_vec(),
+            lower: prior.lower().to_vec(),
+            upper: prior.upper().to_vec(),
+            shape: RecordShape {
+                n_samples: spec.n_samples(),
+                n_inputs: spec.input_names().len(),
+                n_outputs: spec.output_names().len(),
+                sample_time: spec.sample_time(),
+            },
+            compressor,
+            regressor,
+            training,
+            intervals: None,
+            validation: None,
+            envelope: FeatureEnvelope::fit(trained_on),
+            adaptive: None,
+            marginals: prior.marginals().to_vec(),
+            signal_names: Some(SignalNames {
+                inputs: spec.input_names().to_vec(),
+                outputs: spec.output_names().to_vec(),
+            }),
         }
+    }
+
+    /// Calibrate the intervals at miscoverage `alpha` on held-out records,
+    /// given by their true parameters and their features: conformal
+    /// intervals always, feature-adaptive ones from 100 records on (fitted
+    /// with `seed`), and the out-of-distribution envelope's threshold.
+    ///
+    /// # Errors
+    /// An `alpha` outside (0, 1), or an adaptive fit that fails.
+    pub fn calibrate(
+        &mut self,
+        truth: ArrayView2<'_, f64>,
+        features: ArrayView2<'_, f64>,
+        alpha: f64,
+        seed: u64,
+    ) -> Result<()> {
+        let estimates = self.predict_features(features)?;
+        let residuals = &truth - &estimates;
+        if let Some(envelope) = self.envelope.as_mut() {
+            envelope.recalibrate(features);
+        }
+        if residuals.nrows() >= MIN_ADAPTIVE_CALIBRATION {
+            self.adaptive = Some(AdaptiveIntervals::calibrate(
+                features,
+                residuals.view(),
+                alpha,
+                seed,
+            )?);
+        }
+        self.intervals = Some(ConformalIntervals::calibrate(residuals.view(), alpha)?);
+        Ok(())
+    }
+
+    /// Validate on held-out records that calibration did not see, given by
+    /// their true parameters and their features: the report of Theorem 1
+    /// with confidence `1 - delta`, and the coverage of the intervals
+    /// calibrated before.
+    ///
+    /// # Errors
+    /// A `delta` outside (0, 1), or records of another width.
+    pub fn validate(
+        &mut self,
+        truth: ArrayView2<'_, f64>,
+        features: ArrayView2<'_, f64>,
+        delta: f64,
+    ) -> Result<()> {
+        let estimates = self.predict_features(features)?;
+        if let Some(adaptive) = self.adaptive.as_mut() {
+            adaptive.validate(features, (&truth - &estimates).view())?;
+        }
+        self.validation = Some(ValidationReport::new(
+            &self.param_names,
+            truth,
+            estimates.view(),
+            &self.lower,
+            &self.upper,
+            delta,
+            self.intervals.clone(),
+        )?);
+        Ok(())
     }
 }

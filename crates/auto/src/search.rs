@@ -10,17 +10,17 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::{IoData, Simulator};
 use twostage_sources::{ForModel, StoredChart};
 
-use super::candidates::{design, network_size};
+use crate::candidates::{design, network_size};
 
 mod final_fit;
 
-use super::{Budget, CandidateReport};
-use crate::builder::TwoStage;
-use crate::error::{Error, Result};
-use crate::space::{rows_to_estimates, to_learning_space};
+use crate::{Budget, CandidateReport};
 pub use final_fit::FinalFits;
 pub(super) use final_fit::Winner;
 use final_fit::measured_exponent;
+use twostage_estimator::space::{rows_to_estimates, to_learning_space};
+use twostage_estimator::{Error, Result};
+use twostage_sources::Progress;
 
 /// Share of the chart held out to score candidates.
 const HELD_OUT: f64 = 0.2;
@@ -38,10 +38,41 @@ const COST_EXPONENT: f64 = 1.2;
 /// the whole final fit.
 const ROWS_EXPONENT: f64 = 2.0;
 
+/// What the search reads of its run, shared by its parallel fits (the
+/// run's records, a cache, are not).
+pub(crate) struct Scope<'a, S: ?Sized> {
+    simulator: &'a S,
+    seed: u64,
+    progress: &'a dyn Progress,
+}
+
+impl<'a, S: Simulator + ?Sized> Scope<'a, S> {
+    /// The scope of `run`.
+    pub(crate) fn of(run: &twostage_train::Run<'a, S>) -> Self {
+        Self {
+            simulator: run.simulator(),
+            seed: run.seed(),
+            progress: run.progress(),
+        }
+    }
+
+    fn simulator(&self) -> &'a S {
+        self.simulator
+    }
+
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    fn progress(&self) -> &'a dyn Progress {
+        self.progress
+    }
+}
+
 /// The candidates of one automatic design: what was tried, on which stored
 /// chart, and what each fit gave.
 pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
-    base: &'s TwoStage<'a, S>,
+    base: &'s Scope<'a, S>,
     chart: &'s StoredChart,
     /// The run's budget (for the progress lines).
     budget: Budget,
@@ -73,7 +104,7 @@ pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
 
 impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     pub(super) fn new(
-        base: &'s TwoStage<'a, S>,
+        base: &'s Scope<'a, S>,
         chart: &'s StoredChart,
         (budget, deadline): (Budget, Option<Instant>),
         screening_rows: usize,
@@ -239,7 +270,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         compressor: &CompressorConfig,
         regressor: &RegressorConfig,
     ) {
-        self.base.observer().status(&format!(
+        self.base.progress().status(&format!(
             "search round {round}, candidate {} of {count}: {}; {}",
             k + 1,
             design(compressor, regressor),
@@ -283,7 +314,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             (rows, self.fit_rows),
             &self.prior_sd,
             limit,
-            (round, self.base.seed_value().wrapping_add(offset)),
+            (round, self.base.seed().wrapping_add(offset)),
         )
     }
 
@@ -445,7 +476,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
 /// RMSE per parameter of `fitted` on features `x` against parameters
 /// `thetas`, and its mean in units of `prior_sd`.
 fn held_out_score<S: Simulator + ?Sized>(
-    base: &TwoStage<'_, S>,
+    base: &Scope<'_, S>,
     fitted: &FittedRegressor,
     x: ndarray::ArrayView2<'_, f64>,
     thetas: ndarray::ArrayView2<'_, f64>,
@@ -539,7 +570,7 @@ fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Arr
 /// Compress, fit on the first `rows` rows, score on the rows from
 /// `held_out` on (`rows <= held_out`).
 fn evaluate<S: Simulator + ?Sized>(
-    base: &TwoStage<'_, S>,
+    base: &Scope<'_, S>,
     chart: &StoredChart,
     (compressor, regressor): (&CompressorConfig, &RegressorConfig),
     (fit_rows, held_out): (usize, usize),

@@ -9,25 +9,32 @@
 //! the whole chart, then calibrated and validated on fresh simulations like
 //! any trained estimator (so the final report is not biased by the
 //! selection).
+//!
+//! The search trains through the training crate's public seam: it sizes
+//! the chart from the builder ([`TwoStage::simulator`],
+//! [`TwoStage::run_settings`]), prepares the run
+//! ([`TwoStage::prepare`]), fits its candidates on the run's records, and
+//! ships the winner through [`Run::finish`](twostage_train::Run::finish).
+#![deny(missing_docs)]
 
 use std::time::{Duration, Instant};
 
+use twostage_estimator::{Error, Estimator, Result};
 use twostage_models::Simulator;
+use twostage_train::{RunSettings, TrainedOn, TwoStage};
 
-use crate::builder::{TrainedOn, TwoStage};
-use crate::error::{Error, Result};
-use crate::estimator::Estimator;
 use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
 use twostage_sources::ForModel;
 use twostage_sources::Stage;
+use twostage_sources::simulate_records;
 
 mod candidates;
 mod search;
 
 use candidates::{candidate_compressors, network, output_transforms, pieces};
 pub use search::FinalFits;
-use search::{Search, Winner};
+use search::{Scope, Search, Winner};
 
 /// How much the search may spend.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -247,7 +254,7 @@ impl std::fmt::Display for AutoOutcome {
     }
 }
 
-/// Builder of an automatic design for one simulator; see [`TwoStage::auto`].
+/// Builder of an automatic design for one simulator; see [`AutoDesign::new`].
 #[derive(Debug)]
 pub struct AutoDesign<'a, S: ?Sized> {
     base: TwoStage<'a, S>,
@@ -272,13 +279,13 @@ const SCREENING_ROWS: usize = 4000;
 /// Memory allowed for the stored records.
 const MAX_CHART_BYTES: usize = 2 << 30;
 
-impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
+impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     /// An automatic design for `simulator`: the settings of the builder
     /// (seed, calibration, validation, progress...) apply, the compressor,
     /// regressor and m are searched.
     ///
     /// ```
-    /// use twostage::{Budget, RegressorConfig, TwoStage};
+    /// use twostage::{AutoDesign, Budget, RegressorConfig};
     /// use twostage::compress::Arx;
     /// use twostage::fit::MlpParams;
     /// use twostage::models::Benchmark;
@@ -287,7 +294,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// let net = |h: usize| -> Result<RegressorConfig, twostage::Error> {
     ///     Ok(RegressorConfig::Mlp(MlpParams::new(&[h])?.restarts(2).check()?))
     /// };
-    /// let outcome = TwoStage::auto(&model)
+    /// let outcome = AutoDesign::new(&model)
     ///     .budget(Budget::Simulations(400))
     ///     // A small search for the example; the defaults search more.
     ///     .compressors(vec![Arx::new(2, 2)?.into(), Arx::new(4, 4)?.into()])
@@ -302,8 +309,8 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// println!("{outcome}");
     /// # Ok::<(), twostage::Error>(())
     /// ```
-    pub fn auto(simulator: &'a S) -> AutoDesign<'a, S> {
-        AutoDesign {
+    pub fn new(simulator: &'a S) -> Self {
+        Self {
             base: TwoStage::builder(simulator),
             budget: Budget::default(),
             compressors: None,
@@ -371,15 +378,30 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             networks,
             screening_rows,
         } = self;
-        let base = base.adopting_source()?;
-        base.settings_ref().check()?;
+        // A simulated chart's size follows from the budget before the run
+        // opens it; a chart or shards on disk bring their own, adopted by
+        // the run.
         let simulates = base.record_source().simulates();
-        let (m, deadline, per_simulation) = chart_size(budget, &base, simulates, start)?;
-        let base = if simulates { base.simulations(m) } else { base };
-        let records = base.open_records()?;
+        let (run, m, deadline, per_simulation) = if simulates {
+            base.run_settings().check()?;
+            let (m, deadline, per_simulation) = chart_size(
+                budget,
+                base.simulator(),
+                base.run_settings(),
+                Sizing::Simulated,
+                start,
+            )?;
+            (base.simulations(m).prepare()?, m, deadline, per_simulation)
+        } else {
+            let run = base.prepare()?;
+            let (m, deadline, per_simulation) =
+                chart_size(budget, run.simulator(), run.settings(), Sizing::Read, start)?;
+            (run, m, deadline, per_simulation)
+        };
+        let records = run.records();
         let (mut chart, failures) = records.stored_training()?;
         if !simulates && chart.records.len() > m {
-            base.observer().note(&format!(
+            run.progress().note(&format!(
                 "the search fits and scores on the first {m} of the chart's {} training records \
                  (as many as its budget affords; a larger budget uses more)",
                 chart.records.len()
@@ -409,7 +431,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 ],
             ),
         };
-        let spec = base.simulator().spec();
+        let spec = run.simulator().spec();
         let compressors = match compressors {
             Some(list) => list
                 .into_iter()
@@ -422,14 +444,15 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 output_transforms(&chart.records),
             ),
         };
+        let scope = Scope::of(&run);
         let mut search = Search::new(
-            &base,
+            &scope,
             &chart,
             (budget, deadline),
             screening_rows,
             records.can_grow(),
         );
-        base.observer().begin(Stage::Fitting, 0);
+        run.progress().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
         let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
@@ -445,12 +468,12 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         );
         let more = if rows > chart.records.len() {
             let added = rows - chart.records.len();
-            base.observer().note(&format!(
+            run.progress().note(&format!(
                 "more records pay: simulating {added} more for the winner's final fit"
             ));
             let more = records.more_training(m, m + added)?;
             // The simulations ended their own stage: the fit goes on.
-            base.observer().begin(Stage::Fitting, 0);
+            run.progress().begin(Stage::Fitting, 0);
             more
         } else {
             None
@@ -467,22 +490,20 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             late_refit,
             final_fits,
         } = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
-        base.observer().end(Stage::Fitting);
+        run.progress().end(Stage::Fitting);
         let rows_exponent = search.rows_exponent();
         let search_seconds = start.elapsed().as_secs_f64();
         let failures = failures + added_failures;
         let kept = features.nrows();
-        let estimator = base.finish(
+        let estimator = run.finish(
             compressor,
             regressor,
             TrainedOn {
                 features: features.view(),
                 simulations: kept + failures,
                 failures,
-                sampling: records.sampling(),
                 regressor: regressor_config,
             },
-            &records,
         )?;
         Ok(AutoOutcome {
             estimator,
@@ -518,11 +539,13 @@ fn chart_memory_cap(spec: &twostage_models::ModelSpec) -> usize {
 /// budget would simulate. Either way the records must fit in memory.
 fn chart_size<S: Simulator + ?Sized>(
     budget: Budget,
-    base: &TwoStage<'_, S>,
-    simulates: bool,
+    simulator: &S,
+    settings: &RunSettings,
+    sizing: Sizing,
     start: Instant,
 ) -> Result<(usize, Option<Instant>, Option<f64>)> {
-    let memory_cap = chart_memory_cap(base.simulator().spec());
+    let simulates = sizing == Sizing::Simulated;
+    let memory_cap = chart_memory_cap(simulator.spec());
     let mut per_simulation = None;
     let (m, deadline) = match budget {
         Budget::Simulations(m) => (m, None),
@@ -535,10 +558,10 @@ fn chart_size<S: Simulator + ?Sized>(
                 });
             }
             if simulates {
-                let pilot = base.pilot_seconds_per_simulation()?;
+                let pilot = pilot_seconds_per_simulation(simulator, settings.seed_or_default())?;
                 per_simulation = Some(pilot);
                 let per_simulation = pilot;
-                let held_out = base.settings_ref().calibration + base.settings_ref().validation;
+                let held_out = settings.calibration + settings.validation;
                 // Simulating and compressing the held-out records, with
                 // a margin for the intervals' own fits.
                 let reserve = 1.2 * per_simulation * held_out as f64 + 1.0;
@@ -585,6 +608,28 @@ fn chart_size<S: Simulator + ?Sized>(
         });
     }
     Ok((m, deadline, per_simulation))
+}
+
+/// Where a search's training records come from, for its chart size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Sizing {
+    /// Simulated as the run goes: as many as the budget affords.
+    Simulated,
+    /// Read from a chart or shards: the first of them.
+    Read,
+}
+
+/// Streams of the timing pilot, apart from the training chart's.
+const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
+
+/// Parallel throughput of `simulator` in wall seconds per simulation, from
+/// a small timed pilot.
+fn pilot_seconds_per_simulation<S: Simulator + ?Sized>(simulator: &S, seed: u64) -> Result<f64> {
+    let pilot = 64;
+    let design = simulator.prior().design(pilot, seed ^ PILOT_SEED)?;
+    let start = Instant::now();
+    simulate_records(simulator, &design, pilot, 0.0, None)?;
+    Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
 }
 
 /// Training records a search needs at least: a fifth of them score the

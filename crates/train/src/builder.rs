@@ -1,39 +1,18 @@
-//! Training: the `TwoStage` builder and its one `train`, whatever the
-//! source of the records (the presets are in the per-model table,
-//! `profile.rs`; the run's settings and their defaults in `settings.rs`).
+//! The `TwoStage` builder: what a training run is asked for (the presets
+//! are in the per-model table of the sources crate; the run's settings and
+//! their defaults in `settings.rs`). [`TwoStage::prepare`] turns it into a
+//! [`Run`], which trains it.
 
-use std::time::Instant;
-
+use twostage_estimator::{Error, Estimator, Result};
 use twostage_fit::Ridge;
 use twostage_models::{Sampling, Simulator};
-use twostage_validate::{ConformalIntervals, ValidationReport};
 
-use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
-use crate::envelope::FeatureEnvelope;
-use crate::error::{Error, Result};
-use crate::estimator::{Estimator, RecordShape, SignalNames, TrainingInfo};
+use crate::run::Run;
 use crate::settings::RunSettings;
-use crate::space::to_learning_space;
 use twostage_compress::CompressorConfig;
-use twostage_fit::{FittedRegressor, RegressorConfig};
-use twostage_sources::ChartRole;
-use twostage_sources::ForModel;
+use twostage_fit::RegressorConfig;
 use twostage_sources::paper_benchmark;
-use twostage_sources::{Preset, simulate_records};
-use twostage_sources::{Progress, Silent, Stage};
-use twostage_sources::{RecordSource, Records, RunShape};
-
-/// What the fitted stages were trained on, for the estimator's record.
-pub(crate) struct TrainedOn<'f> {
-    pub(crate) features: ndarray::ArrayView2<'f, f64>,
-    pub(crate) simulations: usize,
-    pub(crate) failures: usize,
-    pub(crate) sampling: String,
-    pub(crate) regressor: RegressorConfig,
-}
-
-/// Streams of the timing pilot, apart from the training chart's.
-const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
+use twostage_sources::{Preset, Progress, RecordSource, Records, RunShape, Silent};
 
 /// Builder of a two-stage estimator for one simulator.
 ///
@@ -47,7 +26,7 @@ const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
 /// | `seed`, `calibration`, `alpha`, `validation`, `delta`, `max_failure_fraction` | [`RunSettings::default`] | as [`RunSettings`] says |
 ///
 /// The compressor, regressor and m are the paper's benchmark preset
-/// ([`paper_benchmark`](crate::paper_benchmark)) until set.
+/// ([`paper_benchmark`](twostage_sources::paper_benchmark)) until set.
 ///
 /// ```
 /// use twostage::{Estimator, TwoStage};
@@ -208,7 +187,8 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
 
     /// Compress the training records, fit stage 2, then calibrate the
     /// intervals and validate on the calibration and validation records,
-    /// whatever their source ([`Self::records`]).
+    /// whatever their source ([`Self::records`]): [`Self::prepare`], then
+    /// [`Run::fit`].
     ///
     /// Simulated calibration and validation parameters are drawn i.i.d.
     /// uniform from the prior whatever the training design, because
@@ -221,46 +201,55 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     /// many failed records, a file problem of the source
     /// ([`Error::Source`]), or a failed fit.
     pub fn train(self) -> Result<Estimator> {
-        let run = self.adopting_source()?;
-        run.settings.check()?;
-        if run.records.simulates() && run.simulations < 10 {
+        self.prepare()?.fit()
+    }
+
+    /// The run this builder asks for: a shard chart's seed and sizes
+    /// adopted (checked against the model and the builder's seed), the
+    /// settings checked, the records opened. Its [`Run::fit`] is
+    /// [`Self::train`]; a search fits many structures on its records and
+    /// ends with [`Run::finish`].
+    ///
+    /// ```
+    /// use twostage::TwoStage;
+    /// use twostage::models::Benchmark;
+    ///
+    /// let model = Benchmark::builder().n_samples(200).build()?;
+    /// let run = TwoStage::builder(&model).simulations(100).seed(4).prepare()?;
+    /// assert_eq!(run.seed(), 4);
+    /// assert_eq!(run.records().training_count(), 100);
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// Invalid settings, fewer than 10 simulations, shards of another model
+    /// or seed, or a source that cannot be opened.
+    pub fn prepare(self) -> Result<Run<'a, S>> {
+        let builder = self.adopting_source()?;
+        builder.settings.check()?;
+        if builder.records.simulates() && builder.simulations < 10 {
             return Err(Error::InvalidSetting {
                 name: "simulations",
-                value: run.simulations.to_string(),
+                value: builder.simulations.to_string(),
                 reason: "at least 10".into(),
             });
         }
-        let records = run.open_records()?;
-        let compressor = records.prepare(run.shaped_compressor()?)?;
-        let training = records
-            .compressed(ChartRole::Training, &compressor)?
-            .unwrap_or_default();
-        run.progress.begin(Stage::Fitting, 0);
-        let targets = to_learning_space(
-            training.thetas.view(),
-            run.simulator.spec().prior().marginals(),
-        );
-        let regressor =
-            run.regressor
-                .fit(training.features.view(), targets.view(), run.seed_value());
-        run.progress.end(Stage::Fitting);
-        run.finish(
-            compressor,
-            regressor?,
-            TrainedOn {
-                features: training.features.view(),
-                simulations: training.total(),
-                failures: training.failures.len(),
-                sampling: records.sampling(),
-                regressor: run.regressor.clone(),
-            },
-            &records,
-        )
+        let records = builder.open_records()?;
+        let mut settings = builder.settings;
+        settings.seed = Some(settings.seed_or_default());
+        Ok(Run::new(
+            builder.simulator,
+            builder.compressor,
+            builder.regressor,
+            settings,
+            records,
+            builder.progress,
+        ))
     }
 
     /// The builder with the seed and sizes of the shards it trains on
     /// (checked against the model and the builder's seed), or as it is.
-    pub(crate) fn adopting_source(mut self) -> Result<Self> {
+    fn adopting_source(mut self) -> Result<Self> {
         let RecordSource::Shards(chart) = self.records else {
             return Ok(self);
         };
@@ -297,7 +286,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
     }
 
     /// The builder's record source, opened for its run.
-    pub(crate) fn open_records(&self) -> Result<Records<'a, S>> {
+    fn open_records(&self) -> Result<Records<'a, S>> {
         Ok(Records::open(
             self.simulator,
             self.records,
@@ -315,99 +304,6 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         )?)
     }
 
-    /// Assemble the estimator from its fitted stages, then calibrate its
-    /// intervals and validate it on the calibration and validation records
-    /// of `records`.
-    pub(crate) fn finish(
-        &self,
-        compressor: CompressorConfig,
-        regressor: FittedRegressor,
-        trained: TrainedOn<'_>,
-        records: &Records<'a, S>,
-    ) -> Result<Estimator> {
-        let spec = self.simulator.spec();
-        let prior = spec.prior();
-        let mut estimator = Estimator {
-            param_names: spec.param_names().to_vec(),
-            lower: prior.lower().to_vec(),
-            upper: prior.upper().to_vec(),
-            shape: RecordShape {
-                n_samples: spec.n_samples(),
-                n_inputs: spec.input_names().len(),
-                n_outputs: spec.output_names().len(),
-                sample_time: spec.sample_time(),
-            },
-            compressor,
-            regressor,
-            training: TrainingInfo {
-                model: spec.name().to_string(),
-                simulations: trained.simulations,
-                failures: trained.failures,
-                seed: self.seed_value(),
-                sampling: trained.sampling,
-                regressor: trained.regressor,
-                version: env!("CARGO_PKG_VERSION").to_string(),
-            },
-            intervals: None,
-            validation: None,
-            envelope: FeatureEnvelope::fit(trained.features),
-            adaptive: None,
-            marginals: prior.marginals().to_vec(),
-            signal_names: Some(SignalNames {
-                inputs: spec.input_names().to_vec(),
-                outputs: spec.output_names().to_vec(),
-            }),
-        };
-        // Truths, estimates and features of the records of a role.
-        let estimated = |role: ChartRole, estimator: &Estimator| -> Result<_> {
-            records
-                .compressed(role, estimator.compressor())?
-                .map(|chart| {
-                    let estimates = estimator.predict_features(chart.features.view())?;
-                    Ok((chart.thetas, estimates, chart.features))
-                })
-                .transpose()
-        };
-        let calibration = estimated(ChartRole::Calibration, &estimator)?;
-        let intervals = if let Some((truth, estimates, features)) = calibration {
-            let residuals = &truth - &estimates;
-            if let Some(envelope) = estimator.envelope.as_mut() {
-                envelope.recalibrate(features.view());
-            }
-            if residuals.nrows() >= MIN_ADAPTIVE_CALIBRATION {
-                estimator.adaptive = Some(AdaptiveIntervals::calibrate(
-                    features.view(),
-                    residuals.view(),
-                    self.settings.alpha,
-                    self.seed_value(),
-                )?);
-            }
-            Some(ConformalIntervals::calibrate(
-                residuals.view(),
-                self.settings.alpha,
-            )?)
-        } else {
-            None
-        };
-        estimator.intervals = intervals.clone();
-        let validation = estimated(ChartRole::Validation, &estimator)?;
-        if let Some((truth, estimates, features)) = validation {
-            if let Some(adaptive) = estimator.adaptive.as_mut() {
-                adaptive.validate(features.view(), (&truth - &estimates).view())?;
-            }
-            estimator.validation = Some(ValidationReport::new(
-                spec.param_names(),
-                truth.view(),
-                estimates.view(),
-                prior.lower(),
-                prior.upper(),
-                self.settings.delta,
-                intervals,
-            )?);
-        }
-        Ok(estimator)
-    }
-
     /// The prior the training chart is drawn from: the model's, with the
     /// builder's sampling if one was set.
     fn training_prior(&self) -> twostage_models::Prior {
@@ -418,47 +314,45 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         }
     }
 
-    /// The compressor for the model's number of inputs and outputs.
-    fn shaped_compressor(&self) -> Result<CompressorConfig> {
-        Ok(self.compressor.for_model(self.simulator.spec())?)
+    /// The seed of every random choice.
+    fn seed_value(&self) -> u64 {
+        self.settings.seed_or_default()
     }
 }
 
+/// What the builder holds so far, for a search that sizes its run before
+/// preparing it.
 impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
-    /// The simulator (read by the automatic design).
-    pub(crate) fn simulator(&self) -> &'a S {
+    /// The simulator.
+    ///
+    /// ```
+    /// # use twostage::{TwoStage, models::{Benchmark, Simulator}};
+    /// let model = Benchmark::new();
+    /// assert_eq!(TwoStage::builder(&model).simulator().spec().name(), model.spec().name());
+    /// ```
+    pub fn simulator(&self) -> &'a S {
         self.simulator
     }
 
-    /// The seed of every random choice.
-    pub(crate) fn seed_value(&self) -> u64 {
-        self.settings.seed_or_default()
-    }
-
-    /// The progress observer.
-    pub(crate) fn observer(&self) -> &'a dyn Progress {
-        self.progress
-    }
-
-    /// Parallel throughput of the simulator, from a small timed pilot.
-    pub(crate) fn pilot_seconds_per_simulation(&self) -> Result<f64> {
-        let pilot = 64;
-        let design = self
-            .simulator
-            .prior()
-            .design(pilot, self.seed_value() ^ PILOT_SEED)?;
-        let start = Instant::now();
-        simulate_records(self.simulator, &design, pilot, 0.0, None)?;
-        Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
-    }
-
-    /// The run's settings.
-    pub(crate) fn settings_ref(&self) -> &RunSettings {
+    /// The run settings as set so far (a shard chart's seed and sizes are
+    /// adopted only by [`Self::prepare`]).
+    ///
+    /// ```
+    /// # use twostage::{TwoStage, models::Benchmark};
+    /// let model = Benchmark::new();
+    /// assert_eq!(TwoStage::builder(&model).calibration(7).run_settings().calibration, 7);
+    /// ```
+    pub fn run_settings(&self) -> &RunSettings {
         &self.settings
     }
 
     /// Where the records come from.
-    pub(crate) fn record_source(&self) -> RecordSource<'a> {
+    ///
+    /// ```
+    /// # use twostage::{TwoStage, models::Benchmark};
+    /// assert!(TwoStage::builder(&Benchmark::new()).record_source().simulates());
+    /// ```
+    pub fn record_source(&self) -> RecordSource<'a> {
         self.records
     }
 }

@@ -9,10 +9,20 @@ use twostage_models::{Marginal, Transform};
 
 /// The training parameters in the learning space (a copy; the identity
 /// columns are copied as they are).
-pub(crate) fn to_learning_space(
-    thetas: ArrayView2<'_, f64>,
-    marginals: &[Marginal],
-) -> Array2<f64> {
+///
+/// ```
+/// use ndarray::array;
+/// use twostage::estimator::space::to_learning_space;
+/// use twostage::models::Marginal;
+///
+/// let marginals = [
+///     Marginal::Uniform { low: 0.0, high: 1.0 },
+///     Marginal::LogNormal { mu: 0.0, sigma: 1.0 },
+/// ];
+/// let learned = to_learning_space(array![[0.5, 1.0]].view(), &marginals);
+/// assert_eq!(learned, array![[0.5, 0.0]]);
+/// ```
+pub fn to_learning_space(thetas: ArrayView2<'_, f64>, marginals: &[Marginal]) -> Array2<f64> {
     let mut out = thetas.to_owned();
     for (mut column, marginal) in out.columns_mut().into_iter().zip(marginals) {
         let transform = marginal.transform();
@@ -25,8 +35,18 @@ pub(crate) fn to_learning_space(
 
 /// A network output back to a parameter vector: out of the learning space,
 /// then clipped to the prior's box (a NaN becomes the box's centre).
+///
+/// ```
+/// use twostage::estimator::space::to_estimate;
+/// use twostage::models::Marginal;
+///
+/// let mut theta = [2.0, f64::NAN];
+/// let uniform = Marginal::Uniform { low: 0.0, high: 1.0 };
+/// to_estimate(&mut theta, &[uniform, uniform], &[0.0, 0.0], &[1.0, 4.0]);
+/// assert_eq!(theta, [1.0, 2.0]);
+/// ```
 #[inline]
-pub(crate) fn to_estimate(theta: &mut [f64], marginals: &[Marginal], lower: &[f64], upper: &[f64]) {
+pub fn to_estimate(theta: &mut [f64], marginals: &[Marginal], lower: &[f64], upper: &[f64]) {
     for (t, marginal) in theta.iter_mut().zip(marginals) {
         *t = marginal.transform().inverse(*t);
     }
@@ -35,7 +55,17 @@ pub(crate) fn to_estimate(theta: &mut [f64], marginals: &[Marginal], lower: &[f6
 
 /// [`to_estimate`] for every row of a matrix of network outputs (rows made
 /// contiguous first if they are not; `predict` already returns them so).
-pub(crate) fn rows_to_estimates(
+///
+/// ```
+/// use ndarray::array;
+/// use twostage::estimator::space::rows_to_estimates;
+/// use twostage::models::Marginal;
+///
+/// let mut rows = array![[-3.0], [0.5]];
+/// rows_to_estimates(&mut rows, &[Marginal::Uniform { low: 0.0, high: 1.0 }], &[0.0], &[1.0]);
+/// assert_eq!(rows, array![[0.0], [0.5]]);
+/// ```
+pub fn rows_to_estimates(
     estimates: &mut Array2<f64>,
     marginals: &[Marginal],
     lower: &[f64],

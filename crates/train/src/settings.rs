@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
+use twostage_estimator::{Error, Result};
 
 /// The seed of a run that names none (and trains on no shards, which
 /// bring their own).

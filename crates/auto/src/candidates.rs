@@ -8,7 +8,7 @@ use twostage_compress::{
 use twostage_fit::{MlpParams, Piecewise, RegressorConfig};
 use twostage_models::IoData;
 
-use crate::error::Result;
+use twostage_estimator::Result;
 
 /// Both stages as the command line writes them, for reports and progress.
 pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig) -> String {

@@ -12,8 +12,8 @@ use twostage_models::Simulator;
 use twostage_sources::StoredChart;
 
 use super::{ROWS_EXPONENT, Search, compress_all, design, fit_seconds, held_out_score};
-use crate::error::{Error, Result};
-use crate::space::to_learning_space;
+use twostage_estimator::space::to_learning_space;
+use twostage_estimator::{Error, Result};
 
 impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The records the winner's final fit takes: more than the chart's
@@ -24,7 +24,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// that) and `cap`; else the chart's (trained further from the scored
     /// fit, which the deadline may stop at any time without making it
     /// worse, so no row need be left out for time).
-    pub(in crate::auto) fn final_rows(
+    pub(crate) fn final_rows(
         &self,
         best: usize,
         more_records: bool,
@@ -50,7 +50,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// fit it was scored with when that is not more rows. Under a time
     /// budget the refit is trained further from that fit, stopped at the
     /// deadline if need be, and fitted anew too where the time affords.
-    pub(in crate::auto) fn winner(
+    pub(crate) fn winner(
         &self,
         best: usize,
         more: Option<&StoredChart>,
@@ -97,7 +97,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             return Ok(winner);
         }
         let marginals = self.base.simulator().spec().prior().marginals();
-        let seed = self.base.seed_value();
+        let seed = self.base.seed();
         let Some(deadline) = self.deadline else {
             let rows = ndarray::s![..refit_rows, ..];
             let z = to_learning_space(thetas.slice(rows), marginals);
@@ -133,7 +133,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             to_learning_space(thetas.slice(rows), marginals),
         );
         let design = design(&winner.compressor, &winner.regressor_config);
-        self.base.observer().status(&format!(
+        self.base.progress().status(&format!(
             "final fit: {design} trained further on {train_rows} records; {}",
             self.budget_words()
         ));
@@ -146,7 +146,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         let mut late = Instant::now() >= deadline;
         let mut chosen = continued;
         if anew_affordable && !late {
-            self.base.observer().status(&format!(
+            self.base.progress().status(&format!(
                 "final fit: {design} anew on {train_rows} records; {}",
                 self.budget_words()
             ));
@@ -265,20 +265,20 @@ fn rows_for_final_fit(
 }
 
 /// What the search ships: the winning structure, fitted.
-pub(in crate::auto) struct Winner {
-    pub(in crate::auto) compressor: CompressorConfig,
+pub(crate) struct Winner {
+    pub(crate) compressor: CompressorConfig,
     /// The whole chart's features under the winning compressor.
-    pub(in crate::auto) features: Array2<f64>,
-    pub(in crate::auto) regressor_config: RegressorConfig,
-    pub(in crate::auto) regressor: FittedRegressor,
+    pub(crate) features: Array2<f64>,
+    pub(crate) regressor_config: RegressorConfig,
+    pub(crate) regressor: FittedRegressor,
     /// The chart rows the shipped network was fitted on.
-    pub(in crate::auto) fitted_rows: usize,
+    pub(crate) fitted_rows: usize,
     /// The rows of a refit stopped at the deadline (it ships trained as
     /// far as it got).
-    pub(in crate::auto) late_refit: Option<usize>,
+    pub(crate) late_refit: Option<usize>,
     /// The fit trained further and the fit anew, where both ran (the
     /// lower score shipped).
-    pub(in crate::auto) final_fits: Option<FinalFits>,
+    pub(crate) final_fits: Option<FinalFits>,
 }
 
 #[cfg(test)]

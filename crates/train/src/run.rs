@@ -1,0 +1,188 @@
+//! One training run, prepared from a builder: the seam between what a
+//! training is asked for and how its stages are chosen. [`Run::fit`] fits
+//! the builder's one structure; a search (the automatic design) fits many
+//! on [`Run::records`] and ships its winner through [`Run::finish`].
+
+use twostage_estimator::space::to_learning_space;
+use twostage_estimator::{Estimator, Result, TrainingInfo};
+use twostage_fit::{FittedRegressor, RegressorConfig};
+use twostage_models::Simulator;
+use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};
+
+use crate::settings::RunSettings;
+use twostage_compress::CompressorConfig;
+
+/// What the fitted stages were trained on, for the estimator's record.
+#[derive(Debug, Clone)]
+pub struct TrainedOn<'f> {
+    /// The features of the records the network was fitted on.
+    pub features: ndarray::ArrayView2<'f, f64>,
+    /// Training simulations, failed ones included.
+    pub simulations: usize,
+    /// Training simulations that failed and were dropped.
+    pub failures: usize,
+    /// The stage-2 method as configured.
+    pub regressor: RegressorConfig,
+}
+
+/// A training run: settings checked, seed fixed, records opened. Made by
+/// [`TwoStage::prepare`](crate::TwoStage::prepare).
+pub struct Run<'a, S: ?Sized> {
+    simulator: &'a S,
+    compressor: CompressorConfig,
+    regressor: RegressorConfig,
+    settings: RunSettings,
+    records: Records<'a, S>,
+    progress: &'a dyn Progress,
+}
+
+impl<S: ?Sized> std::fmt::Debug for Run<'_, S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Run")
+            .field("compressor", &self.compressor)
+            .field("regressor", &self.regressor)
+            .field("settings", &self.settings)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a, S: Simulator + ?Sized> Run<'a, S> {
+    pub(crate) fn new(
+        simulator: &'a S,
+        compressor: CompressorConfig,
+        regressor: RegressorConfig,
+        settings: RunSettings,
+        records: Records<'a, S>,
+        progress: &'a dyn Progress,
+    ) -> Self {
+        Self {
+            simulator,
+            compressor,
+            regressor,
+            settings,
+            records,
+            progress,
+        }
+    }
+
+    /// The simulator.
+    pub fn simulator(&self) -> &'a S {
+        self.simulator
+    }
+
+    /// The seed of every random choice of the run.
+    pub fn seed(&self) -> u64 {
+        self.settings.seed_or_default()
+    }
+
+    /// The run's settings, its seed fixed and, for shards, their sizes.
+    pub fn settings(&self) -> &RunSettings {
+        &self.settings
+    }
+
+    /// The progress observer.
+    pub fn progress(&self) -> &'a dyn Progress {
+        self.progress
+    }
+
+    /// The run's records, each role's compressed on request.
+    pub fn records(&self) -> &Records<'a, S> {
+        &self.records
+    }
+
+    /// Compress the training records with the builder's compressor, fit
+    /// its stage 2 on them, then [`Self::finish`].
+    ///
+    /// ```
+    /// use twostage::TwoStage;
+    /// use twostage::models::Benchmark;
+    ///
+    /// let model = Benchmark::builder().n_samples(200).build()?;
+    /// let builder = || TwoStage::builder(&model).simulations(100).calibration(0).validation(0).linear(1e-6);
+    /// let trained = builder()?.train()?;
+    /// let fitted = builder()?.prepare()?.fit()?;
+    /// assert_eq!(trained.to_bytes()?, fitted.to_bytes()?);
+    /// # Ok::<(), twostage::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A compressor that does not fit the model or its records, too many
+    /// failed records, or a failed fit.
+    pub fn fit(&self) -> Result<Estimator> {
+        let compressor = self
+            .records
+            .prepare(self.compressor.for_model(self.simulator.spec())?)?;
+        let training = self
+            .records
+            .compressed(ChartRole::Training, &compressor)?
+            .unwrap_or_default();
+        self.progress.begin(Stage::Fitting, 0);
+        let targets = to_learning_space(
+            training.thetas.view(),
+            self.simulator.spec().prior().marginals(),
+        );
+        let regressor = self
+            .regressor
+            .fit(training.features.view(), targets.view(), self.seed());
+        self.progress.end(Stage::Fitting);
+        self.finish(
+            compressor,
+            regressor?,
+            TrainedOn {
+                features: training.features.view(),
+                simulations: training.total(),
+                failures: training.failures.len(),
+                regressor: self.regressor.clone(),
+            },
+        )
+    }
+
+    /// Assemble the estimator from its fitted stages, then calibrate its
+    /// intervals and validate it on the calibration and validation records
+    /// of the run.
+    ///
+    /// # Errors
+    /// Held-out records that cannot be compressed or estimated, or
+    /// calibration and validation settings out of range.
+    pub fn finish(
+        &self,
+        compressor: CompressorConfig,
+        regressor: FittedRegressor,
+        trained: TrainedOn<'_>,
+    ) -> Result<Estimator> {
+        let spec = self.simulator.spec();
+        let training = TrainingInfo {
+            model: spec.name().to_string(),
+            simulations: trained.simulations,
+            failures: trained.failures,
+            seed: self.seed(),
+            sampling: self.records.sampling(),
+            regressor: trained.regressor,
+            version: env!("CARGO_PKG_VERSION").to_string(),
+        };
+        let mut estimator =
+            Estimator::from_stages(spec, compressor, regressor, training, trained.features);
+        if let Some(chart) = self
+            .records
+            .compressed(ChartRole::Calibration, estimator.compressor())?
+        {
+            estimator.calibrate(
+                chart.thetas.view(),
+                chart.features.view(),
+                self.settings.alpha,
+                self.seed(),
+            )?;
+        }
+        if let Some(chart) = self
+            .records
+            .compressed(ChartRole::Validation, estimator.compressor())?
+        {
+            estimator.validate(
+                chart.thetas.view(),
+                chart.features.view(),
+                self.settings.delta,
+            )?;
+        }
+        Ok(estimator)
+    }
+}
