@@ -30,6 +30,7 @@ use twostage_sources::Stage;
 use twostage_sources::simulate_records;
 
 mod candidates;
+mod cost;
 mod search;
 
 use candidates::{candidate_compressors, network, output_transforms, pieces};
@@ -90,10 +91,53 @@ pub struct CandidateReport {
     /// Chart rows its network was fitted on: all the fitting rows, or a
     /// screening share of them in round 1 of a large chart.
     pub fit_rows: usize,
-    /// Why it has no score, if it has none (skipped for time, or failed).
-    pub note: Option<String>,
+    /// Whether it was scored, and why not if it was not.
+    pub status: Status,
     /// How its network was trained (trainer, stop reason, restarts).
     pub trained_by: Option<String>,
+}
+
+/// Whether a candidate was scored, and why not if it was not.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Status {
+    /// Fitted, and scored on the held-out rows.
+    Scored,
+    /// Not started: about `seconds` would have overrun the time budget.
+    Skipped {
+        /// Its estimated cost.
+        seconds: f64,
+    },
+    /// Its stage 1 does not apply to these records (an autoregression of
+    /// a noise-free decay is rank deficient, say): why.
+    NotApplicable(String),
+    /// Its fit went wrong: why.
+    Failed(String),
+}
+
+impl Status {
+    /// Whether the candidate has a score.
+    ///
+    /// ```
+    /// assert!(twostage::auto::Status::Scored.is_scored());
+    /// assert!(!twostage::auto::Status::Failed("diverged".into()).is_scored());
+    /// ```
+    pub fn is_scored(&self) -> bool {
+        matches!(self, Self::Scored)
+    }
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Scored => write!(f, "scored"),
+            Self::Skipped { seconds } => write!(
+                f,
+                "skipped: about {seconds:.0} s would overrun the time budget"
+            ),
+            Self::NotApplicable(why) => write!(f, "does not apply to these records: {why}"),
+            Self::Failed(why) => write!(f, "failed: {why}"),
+        }
+    }
 }
 
 /// The result of [`AutoDesign::run`].
@@ -234,9 +278,8 @@ impl std::fmt::Display for AutoOutcome {
         for (i, c) in self.candidates.iter().enumerate() {
             let mark = if i == self.best { "*" } else { " " };
             let rmse: Vec<String> = c.rmse.iter().map(|r| format!("{r:.4e}")).collect();
-            match &c.note {
-                Some(note) => writeln!(f, " {mark} {:<28} {note}", c.design)?,
-                None => writeln!(
+            match &c.status {
+                Status::Scored => writeln!(
                     f,
                     " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows{}",
                     c.design,
@@ -248,6 +291,7 @@ impl std::fmt::Display for AutoOutcome {
                         .as_ref()
                         .map_or_else(String::new, |t| format!("; {t}"))
                 )?,
+                status => writeln!(f, " {mark} {:<28} {status}", c.design)?,
             }
         }
         Ok(())
@@ -305,7 +349,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     /// // the winner's ARX with the record's level, and its restarts averaged.
     /// assert_eq!(outcome.candidates.len(), 6);
     /// let best = &outcome.candidates[outcome.best];
-    /// assert!(outcome.candidates.iter().all(|c| c.note.is_some() || c.score >= best.score));
+    /// assert!(outcome.candidates.iter().all(|c| !c.status.is_scored() || c.score >= best.score));
     /// println!("{outcome}");
     /// # Ok::<(), twostage::Error>(())
     /// ```
@@ -435,7 +479,14 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let compressors = match compressors {
             Some(list) => list
                 .into_iter()
-                .filter_map(|c| c.for_model(spec).ok())
+                .filter_map(|c| match c.for_model(spec) {
+                    Ok(shaped) => Some(shaped),
+                    Err(e) => {
+                        run.progress()
+                            .note(&format!("the candidate {c} is left out: {e}"));
+                        None
+                    }
+                })
                 .collect(),
             None => candidate_compressors(
                 spec.output_names().len(),
@@ -507,7 +558,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         )?;
         Ok(AutoOutcome {
             estimator,
-            candidates: search.candidates,
+            candidates: search.reports(),
             best,
             simulations: kept + failures,
             search_seconds,

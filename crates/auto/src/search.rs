@@ -14,30 +14,19 @@ use crate::candidates::{design, network_size};
 
 mod final_fit;
 
-use crate::{Budget, CandidateReport};
+use crate::cost::{
+    COST_EXPONENT, COST_MARGIN, REFIT_SHARE, affordable_rows, fit_seconds, measured_exponent,
+    rows_growth,
+};
+use crate::{Budget, CandidateReport, Status};
 pub use final_fit::FinalFits;
 pub(super) use final_fit::Winner;
-use final_fit::measured_exponent;
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
 use twostage_estimator::{Error, Result};
 use twostage_sources::Progress;
 
 /// Share of the chart held out to score candidates.
 const HELD_OUT: f64 = 0.2;
-/// How a network's fit time grows with its weights, for round 2's cost
-/// estimates (see `round_two`).
-const COST_EXPONENT: f64 = 1.2;
-/// How a network's fit time grows with its rows: Levenberg-Marquardt's
-/// products grow linearly with them, and its iterations to the held-out
-/// minimum grow too (until its iteration limit). Measured on the benchmark
-/// (2 cores, candidates timed while sharing the machine): MLP [20] from
-/// 4000 to 6342 rows as rows^1.5, [20, 20] from 6342 to 15941 rows as
-/// rows^1.8, the average of four [20, 20] from 4242 to 21010 as rows^1.7,
-/// [20, 20] from 4164 to 13991 as rows^2.2 with the share of the machine
-/// taken as half: the upper end, as fits that would not end in time cost
-/// the whole final fit.
-const ROWS_EXPONENT: f64 = 2.0;
-
 /// What the search reads of its run, shared by its parallel fits (the
 /// run's records, a cache, are not).
 pub(crate) struct Scope<'a, S: ?Sized> {
@@ -88,18 +77,46 @@ pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
     /// fit (a time budget on a growable source): round 2 then keeps time
     /// for it.
     grows: bool,
-    pub(super) candidates: Vec<CandidateReport>,
-    /// Per candidate, its fit's seconds with the machine to itself, where
-    /// known (round 3 runs alone; the round-2 winner's seed trials time
-    /// it): a refit's cost follows from these far better than from a
-    /// round's shared time.
-    solo_seconds: Vec<Option<f64>>,
+    /// Every candidate, in the order tried.
+    candidates: Vec<Candidate>,
     /// How the round-2 winner's fit time grew from half its rows to all of
     /// them, both timed alone in round 3: the exponent of its cost in the
     /// rows, where measured.
     rows_exponent: Option<f64>,
-    fitted: Vec<Option<(CompressorConfig, FittedRegressor)>>,
-    networks_of: Vec<RegressorConfig>,
+}
+
+/// One candidate of a search: its report, its network as configured, its
+/// fit where it was scored, and its fit's time alone where measured.
+struct Candidate {
+    report: CandidateReport,
+    network: RegressorConfig,
+    /// The prepared stage 1 and the fitted stage 2, where it was scored.
+    fitted: Option<(CompressorConfig, FittedRegressor)>,
+    /// Its fit's seconds with the machine to itself, where known (round 3
+    /// runs alone; the round-2 winner's seed trials time it): a refit's
+    /// cost follows from these far better than from a round's shared time.
+    solo_seconds: Option<f64>,
+}
+
+/// What a round-3 trial is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TrialRole {
+    /// The winner on half its rows: does more data pay?
+    HalfRows,
+    /// Another structure built from the winner, which competes.
+    Rival,
+    /// The winner at another seed: how much the seed alone moves it.
+    OtherSeed,
+}
+
+/// A round-3 trial: a structure, its network's seed offset from the run's,
+/// its rows, and what it is for.
+struct Trial {
+    compressor: CompressorConfig,
+    network: RegressorConfig,
+    seed_offset: u64,
+    rows: usize,
+    role: TrialRole,
 }
 
 impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
@@ -128,10 +145,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             prior_sd,
             grows: grows && deadline.is_some(),
             candidates: Vec::new(),
-            solo_seconds: Vec::new(),
             rows_exponent: None,
-            fitted: Vec::new(),
-            networks_of: Vec::new(),
         }
     }
 
@@ -164,7 +178,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let screened = self
             .candidates
             .first()
-            .map_or(self.fit_rows, |c| c.fit_rows);
+            .map_or(self.fit_rows, |c| c.report.fit_rows);
         // The refit of the winner on the whole chart, from round 1's best,
         // but at most 45% of the time left: round 2 gets the rest, and the
         // refit takes as many rows as its time affords. A source that can
@@ -174,8 +188,12 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         // reach 1.09 times the Bayes RMSE on 16000 records, 1.21 on 8000).
         let all_rows = self.chart.thetas.nrows() as f64;
         let reserve = ranked.first().map_or(0.0, |&i| {
-            let refit = fit_seconds(self.candidates[i].seconds, screened, all_rows as usize);
-            let share = 0.45 * self.seconds_left();
+            let refit = fit_seconds(
+                self.candidates[i].report.seconds,
+                screened,
+                all_rows as usize,
+            );
+            let share = REFIT_SHARE * self.seconds_left();
             if self.grows { share } else { refit.min(share) }
         });
         let mut trials: Vec<&RegressorConfig> = Vec::new();
@@ -188,10 +206,10 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .iter()
             .take(2)
             .filter_map(|&i| {
-                let (c, _) = self.fitted[i].as_ref()?;
+                let (c, _) = self.candidates[i].fitted.as_ref()?;
                 let n = c.n_features();
                 let base_size = network_size(medium, n, q);
-                let seconds = self.candidates[i].seconds;
+                let seconds = self.candidates[i].report.seconds;
                 Some(trials.iter().map(move |net| {
                     // Levenberg-Marquardt's products grow with the square
                     // of the weights, its iterations less: on 16000 rows
@@ -326,40 +344,46 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// data pay?). Returns the winner's scores at its own and the other
     /// seeds, and its rows and score on half the rows.
     pub(super) fn round_three(&mut self, best: usize) -> (Vec<f64>, Option<(usize, f64)>) {
-        let Some((compressor, _)) = self.fitted[best].clone() else {
+        let Some((compressor, _)) = self.candidates[best].fitted.clone() else {
             return (Vec::new(), None);
         };
-        let network = self.networks_of[best].clone();
-        let winner = &self.candidates[best];
+        let network = self.candidates[best].network.clone();
+        let winner = &self.candidates[best].report;
         let rows = winner.fit_rows;
         // Each trial, and the winner's refit on the whole chart after it,
         // must end in time.
         let refit = fit_seconds(winner.seconds, rows, self.chart.thetas.nrows())
-            .min(0.45 * self.seconds_left());
-        let limit = self.deadline.map(|d| (d, 1.25 * winner.seconds + refit));
-        // (compressor, network, seed offset, whether it competes, rows)
+            .min(REFIT_SHARE * self.seconds_left());
+        let limit = self
+            .deadline
+            .map(|d| (d, COST_MARGIN * winner.seconds + refit));
+        let trial = |compressor: &CompressorConfig, network: &RegressorConfig, role, rows| Trial {
+            compressor: compressor.clone(),
+            network: network.clone(),
+            seed_offset: 0,
+            rows,
+            role,
+        };
         // The half-rows trial first: the cheapest, and the one that decides
         // whether the final fit takes more records.
-        let mut trials: Vec<(CompressorConfig, RegressorConfig, u64, bool, usize)> =
-            vec![(compressor.clone(), network.clone(), 0, false, rows / 2)];
+        let mut trials = vec![trial(&compressor, &network, TrialRole::HalfRows, rows / 2)];
         let n_outputs = self.base.simulator().spec().output_names().len();
         if let Some(leveled) = with_level(&compressor, n_outputs) {
-            trials.push((leveled, network.clone(), 0, true, rows));
+            trials.push(trial(&leveled, &network, TrialRole::Rival, rows));
         }
         if let RegressorConfig::Mlp(mlp) = &network
             && !mlp.params().is_ensemble()
             && let Ok(averaged) = mlp.params().clone().ensemble(true).check()
         {
-            trials.push((
-                compressor.clone(),
-                RegressorConfig::Mlp(averaged),
-                0,
-                true,
-                rows,
-            ));
+            let averaged = RegressorConfig::Mlp(averaged);
+            trials.push(trial(&compressor, &averaged, TrialRole::Rival, rows));
         }
-        trials.push((compressor.clone(), network.clone(), 1, false, rows));
-        trials.push((compressor.clone(), network.clone(), 2, false, rows));
+        for seed_offset in [1, 2] {
+            trials.push(Trial {
+                seed_offset,
+                ..trial(&compressor, &network, TrialRole::OtherSeed, rows)
+            });
+        }
         // One after the other, each on the whole machine (its restarts and
         // products run in parallel): their times are then what the final
         // fit's cost is estimated from.
@@ -367,36 +391,39 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let outcomes: Vec<_> = trials
             .iter()
             .enumerate()
-            .map(|(k, (stage1, net, offset, _, rows))| {
-                self.tell(3, k, count, stage1, net);
-                self.evaluate_seeded(stage1, net, *rows, limit, (3, *offset))
+            .map(|(k, t)| {
+                self.tell(3, k, count, &t.compressor, &t.network);
+                self.evaluate_seeded(&t.compressor, &t.network, t.rows, limit, (3, t.seed_offset))
             })
             .collect();
-        let mut scores = vec![self.candidates[best].score];
+        let mut scores = vec![self.candidates[best].report.score];
         let mut seed_seconds = Vec::new();
         let (mut half, mut half_seconds) = (None, None);
-        for ((report, outcome), (_, net, _, competes, trial_rows)) in
-            outcomes.into_iter().zip(trials)
-        {
-            if competes {
-                let seconds = report.note.is_none().then_some(report.seconds);
-                self.record(report, outcome, net);
-                if let Some(last) = self.solo_seconds.last_mut() {
-                    *last = seconds;
+        for ((report, outcome), trial) in outcomes.into_iter().zip(trials) {
+            let scored = report.status.is_scored();
+            match trial.role {
+                TrialRole::Rival => {
+                    let seconds = scored.then_some(report.seconds);
+                    self.record(report, outcome, trial.network);
+                    if let Some(last) = self.candidates.last_mut() {
+                        last.solo_seconds = seconds;
+                    }
                 }
-            } else if report.note.is_some() {
                 // Skipped for time: nothing to say.
-            } else if trial_rows < rows {
-                half = Some((trial_rows, report.score));
-                half_seconds = Some(report.seconds);
-            } else {
-                scores.push(report.score);
-                seed_seconds.push(report.seconds);
+                _ if !scored => {}
+                TrialRole::HalfRows => {
+                    half = Some((trial.rows, report.score));
+                    half_seconds = Some(report.seconds);
+                }
+                TrialRole::OtherSeed => {
+                    scores.push(report.score);
+                    seed_seconds.push(report.seconds);
+                }
             }
         }
         if !seed_seconds.is_empty() {
             let seconds = seed_seconds.iter().sum::<f64>() / seed_seconds.len() as f64;
-            self.solo_seconds[best] = Some(seconds);
+            self.candidates[best].solo_seconds = Some(seconds);
             self.rows_exponent = half_seconds
                 .zip(half)
                 .map(|(t, (r, _))| measured_exponent((r, t), (rows, seconds)));
@@ -407,45 +434,49 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     fn record(
         &mut self,
         report: CandidateReport,
-        outcome: Option<(CompressorConfig, FittedRegressor)>,
+        fitted: Option<(CompressorConfig, FittedRegressor)>,
         network: RegressorConfig,
     ) {
-        self.candidates.push(report);
-        self.solo_seconds.push(None);
-        self.fitted.push(outcome);
-        self.networks_of.push(network);
+        self.candidates.push(Candidate {
+            report,
+            network,
+            fitted,
+            solo_seconds: None,
+        });
+    }
+
+    /// Every candidate's report, in the order tried.
+    pub(super) fn reports(&self) -> Vec<CandidateReport> {
+        self.candidates.iter().map(|c| c.report.clone()).collect()
     }
 
     /// The candidates that were fitted, best score first (ties keep the
     /// order in which they were tried).
     fn ranked(&self) -> Vec<usize> {
         let mut ranked: Vec<usize> = (0..self.candidates.len())
-            .filter(|&i| self.candidates[i].note.is_none())
+            .filter(|&i| self.candidates[i].report.status.is_scored())
             .collect();
-        ranked.sort_by(|&a, &b| {
-            self.candidates[a]
-                .score
-                .total_cmp(&self.candidates[b].score)
-        });
+        ranked.sort_by(|&a, &b| self.report(a).score.total_cmp(&self.report(b).score));
         ranked
+    }
+
+    /// Candidate `i`'s report.
+    fn report(&self, i: usize) -> &CandidateReport {
+        &self.candidates[i].report
     }
 
     /// The best candidate's index: among those fitted on the most rows
     /// (round 2's and 3's; a screened round-1 fit is not compared with
     /// them), or, if round 1 alone was fitted, among all.
     pub(super) fn best(&self, budget: &Budget) -> Result<usize> {
-        let fitted = |i: &usize| self.candidates[*i].note.is_none();
+        let fitted = |i: &usize| self.report(*i).status.is_scored();
         let most_rows = (0..self.candidates.len())
             .filter(fitted)
-            .map(|i| self.candidates[i].fit_rows)
+            .map(|i| self.report(i).fit_rows)
             .max();
         (0..self.candidates.len())
-            .filter(|i| fitted(i) && Some(self.candidates[*i].fit_rows) == most_rows)
-            .min_by(|&a, &b| {
-                self.candidates[a]
-                    .score
-                    .total_cmp(&self.candidates[b].score)
-            })
+            .filter(|i| fitted(i) && Some(self.report(*i).fit_rows) == most_rows)
+            .min_by(|&a, &b| self.report(a).score.total_cmp(&self.report(b).score))
             .ok_or_else(|| Error::InvalidSetting {
                 name: "budget",
                 value: format!("{budget:?}"),
@@ -453,7 +484,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     "no candidate could be fitted within it (first: {})",
                     self.candidates
                         .first()
-                        .and_then(|c| c.note.clone())
+                        .map(|c| c.report.status.to_string())
                         .unwrap_or_default()
                 ),
             })
@@ -504,34 +535,6 @@ fn held_out_score<S: Simulator + ?Sized>(
     let score =
         rmse.iter().zip(prior_sd).map(|(r, sd)| r / sd).sum::<f64>() / rmse.len().max(1) as f64;
     Ok((rmse, score))
-}
-
-/// How much longer a fit on `rows` rows takes than on `measured` rows.
-fn rows_growth(measured: usize, rows: usize) -> f64 {
-    (rows as f64 / measured.max(1) as f64).powf(ROWS_EXPONENT)
-}
-
-/// The seconds a fit on `rows` rows takes on the whole machine, from a
-/// candidate's `seconds` on `measured` rows: with a margin of a quarter,
-/// growing with the rows ([`ROWS_EXPONENT`]), and on the whole machine,
-/// where the candidate shared it with the others of its round (each round
-/// runs at least as many candidates as threads).
-fn fit_seconds(seconds: f64, measured: usize, rows: usize) -> f64 {
-    1.25 * seconds * rows_growth(measured, rows) / rayon::current_num_threads().max(1) as f64
-}
-
-/// Rows a round can fit on in `left` seconds when it costs `seconds` of
-/// wall time on `screened` rows and grows with them as
-/// [`ROWS_EXPONENT`] says: all `rows` if they fit, else as many as 80% of
-/// the time affords (the costs are estimates), but never fewer than
-/// `screened`.
-fn affordable_rows(seconds: f64, left: f64, screened: usize, rows: usize) -> usize {
-    if !(seconds.is_finite() && seconds > 0.0) {
-        return rows;
-    }
-    let growth = (0.8 * left / seconds).max(0.0);
-    let affordable = screened as f64 * growth.powf(1.0 / ROWS_EXPONENT);
-    (affordable.min(usize::MAX as f64) as usize).clamp(screened.min(rows), rows)
 }
 
 /// The winner's stage 1 with each output's first sample and mean
@@ -588,15 +591,13 @@ fn evaluate<S: Simulator + ?Sized>(
         score: f64::INFINITY,
         seconds: 0.0,
         fit_rows,
-        note: None,
+        status: Status::Scored,
     };
     // (deadline, estimated seconds): skip what would not finish in time.
     if let Some((deadline, cost)) = deadline
         && Instant::now() + Duration::from_secs_f64(cost) > deadline
     {
-        report.note = Some(format!(
-            "skipped: about {cost:.0} s would overrun the time budget"
-        ));
+        report.status = Status::Skipped { seconds: cost };
         return (report, None);
     }
     let start = Instant::now();
@@ -611,7 +612,7 @@ fn evaluate<S: Simulator + ?Sized>(
         Ok(pair) => pair,
         Err(e) => {
             report.seconds = start.elapsed().as_secs_f64();
-            report.note = Some(format!("does not apply to these records: {e}"));
+            report.status = Status::NotApplicable(e.to_string());
             return (report, None);
         }
     };
@@ -637,33 +638,8 @@ fn evaluate<S: Simulator + ?Sized>(
             (report, Some((compressor, fitted)))
         }
         Err(e) => {
-            report.note = Some(format!("failed: {e}"));
+            report.status = Status::Failed(e.to_string());
             (report, None)
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Round 2 fits every row when it can, as many as the time affords when
-    /// it cannot, and never fewer than round 1 screened.
-    #[test]
-    fn round_two_takes_the_rows_its_time_affords() {
-        // Twice the rows take 2^ROWS_EXPONENT times as long: 100 s on 4000
-        // rows, so 8000 rows in 80% of `twice`.
-        let twice = 100.0 * 2f64.powf(ROWS_EXPONENT) / 0.8;
-        assert!(affordable_rows(100.0, twice, 4000, 32000).abs_diff(8000) <= 1);
-        assert_eq!(affordable_rows(100.0, 2.0 * twice, 4000, 6000), 6000);
-        assert_eq!(affordable_rows(100.0, 10.0, 4000, 32000), 4000);
-        assert_eq!(affordable_rows(100.0, -5.0, 4000, 32000), 4000);
-        // Round 1 fitted every row already: nothing more to take.
-        assert_eq!(affordable_rows(100.0, 10.0, 240, 240), 240);
-        assert_eq!(affordable_rows(0.0, 10.0, 4000, 32000), 32000);
-        // A fit on twice the rows, on the whole machine, with a margin.
-        let threads = rayon::current_num_threads() as f64;
-        let expected = 1.25 * 10.0 * 2f64.powf(ROWS_EXPONENT) / threads;
-        assert!((fit_seconds(10.0, 4000, 8000) - expected).abs() < 1e-12);
     }
 }

@@ -76,6 +76,13 @@ pub enum Error {
         /// What is wrong with it.
         error: FileError,
     },
+    /// The automatic design went wrong inside, not in what was asked of
+    /// it (the command line exits with 1, not 2).
+    #[error("the automatic design failed: {what}")]
+    Search {
+        /// What went wrong.
+        what: String,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {cause}")]
     Io {

@@ -426,7 +426,7 @@ fn the_automatic_design_keeps_its_best_candidate_and_is_reproducible() {
     let scored: Vec<&twostage::CandidateReport> = outcome
         .candidates
         .iter()
-        .filter(|c| c.note.is_none())
+        .filter(|c| c.status.is_scored())
         .collect();
     assert_eq!(
         scored.len(),

@@ -11,7 +11,8 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::Simulator;
 use twostage_sources::StoredChart;
 
-use super::{ROWS_EXPONENT, Search, compress_all, design, fit_seconds, held_out_score};
+use super::{Search, compress_all, design, held_out_score};
+use crate::cost::{ANEW_SHARE, COST_MARGIN, ROWS_EXPONENT, fit_seconds, rows_for_final_fit};
 use twostage_estimator::space::to_learning_space;
 use twostage_estimator::{Error, Result};
 
@@ -35,7 +36,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         if !(self.deadline.is_some() && self.grows && more_records) {
             return chart_rows;
         }
-        let scored = self.candidates[best].fit_rows;
+        let scored = self.candidates[best].report.fit_rows;
         rows_for_final_fit(
             self.seconds_left(),
             (per_simulation, self.fit_estimate(best, scored), scored),
@@ -57,25 +58,24 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         final_rows: usize,
     ) -> Result<Winner> {
         let (compressor, held_out_fit) =
-            self.fitted[best]
+            self.candidates[best]
+                .fitted
                 .clone()
-                .ok_or_else(|| Error::InvalidSetting {
-                    name: "budget",
-                    value: String::new(),
-                    reason: "the best candidate lost its fit".into(),
+                .ok_or_else(|| Error::Search {
+                    what: "the best candidate has no fit to ship".into(),
                 })?;
-        let regressor_config = self.networks_of[best].clone();
-        let scored_rows = self.candidates[best].fit_rows;
+        let regressor_config = self.candidates[best].network.clone();
+        let scored_rows = self.candidates[best].report.fit_rows;
         let grown;
         let (records, thetas) = match more {
             Some(more) => {
                 let mut thetas = self.chart.thetas.clone();
                 thetas
                     .append(Axis(0), more.thetas.view())
-                    .map_err(|e| Error::InvalidSetting {
-                        name: "records",
-                        value: String::new(),
-                        reason: format!("the added records do not match the chart: {e}"),
+                    .map_err(|e| Error::Search {
+                        what: format!(
+                            "the records added for the final fit do not match the chart: {e}"
+                        ),
                     })?;
                 grown = [self.chart.records.as_slice(), more.records.as_slice()].concat();
                 (grown.as_slice(), thetas)
@@ -121,7 +121,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             .min(MAX_COMPARED_RECORDS)
             .min(refit_rows.saturating_sub(scored_rows));
         let anew_affordable = compared >= MIN_COMPARED_RECORDS
-            && self.fit_estimate(best, refit_rows - compared) < 0.9 * self.seconds_left();
+            && self.fit_estimate(best, refit_rows - compared) < ANEW_SHARE * self.seconds_left();
         let train_rows = if anew_affordable {
             refit_rows - compared
         } else {
@@ -180,11 +180,11 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The seconds a fit anew of candidate `best` on `rows` rows takes on
     /// the whole machine, from its time alone where round 3 measured it.
     fn fit_estimate(&self, best: usize, rows: usize) -> f64 {
-        let winner = &self.candidates[best];
+        let winner = &self.candidates[best].report;
         let scored = winner.fit_rows;
         let growth = (rows as f64 / scored.max(1) as f64).powf(self.cost_exponent());
-        match self.solo_seconds[best] {
-            Some(seconds) => 1.25 * seconds * growth,
+        match self.candidates[best].solo_seconds {
+            Some(seconds) => COST_MARGIN * seconds * growth,
             None => fit_seconds(winner.seconds, scored, rows),
         }
     }
@@ -213,57 +213,6 @@ const MIN_COMPARED_RECORDS: usize = 200;
 /// Records a fit anew and a fit trained further are compared on, at most.
 const MAX_COMPARED_RECORDS: usize = 2000;
 
-/// The exponent of a fit's cost in its rows from two timings `(rows,
-/// seconds)`, within 1.2 and 2.2 (what the benchmark's fits measured;
-/// two timings of one fit each are noisy).
-pub(super) fn measured_exponent(
-    (rows_a, seconds_a): (usize, f64),
-    (rows_b, seconds_b): (usize, f64),
-) -> f64 {
-    let exponent = (seconds_b / seconds_a).ln() / (rows_b as f64 / rows_a as f64).ln();
-    if exponent.is_finite() {
-        exponent.clamp(1.2, 2.2)
-    } else {
-        ROWS_EXPONENT
-    }
-}
-
-/// Rows a final fit can take in `left` seconds, simulating each beyond
-/// the chart's `chart_rows` in `per_simulation` seconds and fitting all in
-/// `fit` seconds on `measured` rows, growing as rows^`exponent`: as many
-/// as 80% of the time affords (the costs are estimates), between
-/// `chart_rows` and `cap`.
-fn rows_for_final_fit(
-    left: f64,
-    (per_simulation, fit, measured): (f64, f64, usize),
-    exponent: f64,
-    chart_rows: usize,
-    cap: usize,
-) -> usize {
-    let cost = |rows: usize| {
-        let growth = (rows as f64 / measured.max(1) as f64).powf(exponent);
-        rows.saturating_sub(chart_rows) as f64 * per_simulation + fit * growth
-    };
-    let within = |rows: usize| cost(rows) <= 0.8 * left;
-    if !(per_simulation >= 0.0 && fit >= 0.0 && left.is_finite() && within(chart_rows)) {
-        return chart_rows;
-    }
-    // The cost grows with the rows: bisect for the last affordable count.
-    let (mut low, mut high) = (chart_rows, cap.max(chart_rows));
-    if within(high) {
-        return high;
-    }
-    while high - low > 1 {
-        let middle = low + (high - low) / 2;
-        if within(middle) {
-            low = middle;
-        } else {
-            high = middle;
-        }
-    }
-    low
-}
-
 /// What the search ships: the winning structure, fitted.
 pub(crate) struct Winner {
     pub(crate) compressor: CompressorConfig,
@@ -279,51 +228,4 @@ pub(crate) struct Winner {
     /// The fit trained further and the fit anew, where both ran (the
     /// lower score shipped).
     pub(crate) final_fits: Option<FinalFits>,
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The final fit takes the rows its time affords, simulations
-    /// included, between the chart's and the cap.
-    #[test]
-    fn the_final_fit_takes_the_rows_its_time_affords() {
-        // No simulation cost: the fit alone, as for round 2.
-        let fit = 10.0;
-        let twice = fit * 2f64.powf(ROWS_EXPONENT) / 0.8;
-        let rows = rows_for_final_fit(twice, (0.0, fit, 4000), ROWS_EXPONENT, 4000, 32000);
-        assert!(rows.abs_diff(8000) <= 1, "{rows}");
-        // 1 ms per simulation on top: 4000 more rows cost 4 s more.
-        let rows = rows_for_final_fit(
-            twice + 4.0 / 0.8,
-            (1e-3, fit, 4000),
-            ROWS_EXPONENT,
-            4000,
-            32000,
-        );
-        assert!(rows.abs_diff(8000) <= 1, "{rows}");
-        assert_eq!(
-            rows_for_final_fit(1e6, (1e-3, fit, 4000), ROWS_EXPONENT, 4000, 16000),
-            16000
-        );
-        // Not even the chart's rows fit: the chart's, no more.
-        assert_eq!(
-            rows_for_final_fit(1.0, (1e-3, fit, 4000), ROWS_EXPONENT, 4000, 16000),
-            4000
-        );
-        // Grown as rows^1.5: 1.6 times the rows for 1.6^1.5 the time.
-        let grown = fit * 1.6f64.powf(1.5) / 0.8;
-        let rows = rows_for_final_fit(grown, (0.0, fit, 4000), 1.5, 4000, 32000);
-        assert!(rows.abs_diff(6400) <= 1, "{rows}");
-        assert!((measured_exponent((2000, 1.0), (4000, 4.0)) - 2.0).abs() < 1e-12);
-        assert!((measured_exponent((2000, 1.0), (4000, 2.0f64.powf(1.5))) - 1.5).abs() < 1e-12);
-        assert!((measured_exponent((2000, 1.0), (4000, 1.0)) - 1.2).abs() < 1e-12);
-        assert!((measured_exponent((2000, 1.0), (4000, 100.0)) - 2.2).abs() < 1e-12);
-        assert!((measured_exponent((2000, 0.0), (4000, 0.0)) - ROWS_EXPONENT).abs() < 1e-12);
-        assert_eq!(
-            rows_for_final_fit(f64::INFINITY, (1e-3, fit, 80), ROWS_EXPONENT, 80, 320),
-            80
-        );
-    }
 }

@@ -1,0 +1,176 @@
+//! What the search's fits cost, in one place: how a fit's time grows with
+//! its network and its rows, the margins its estimates carry, and the
+//! shares of the time left that its plans may spend. Every number here was
+//! measured on the benchmark on 2 cores (docs/accuracy.md, decision 034).
+
+/// How a network's fit time grows with its weights, for round 2's cost
+/// estimates (see `round_two`).
+pub(crate) const COST_EXPONENT: f64 = 1.2;
+/// How a network's fit time grows with its rows: Levenberg-Marquardt's
+/// products grow linearly with them, and its iterations to the held-out
+/// minimum grow too (until its iteration limit). Measured on the benchmark
+/// (2 cores, candidates timed while sharing the machine): MLP [20] from
+/// 4000 to 6342 rows as rows^1.5, [20, 20] from 6342 to 15941 rows as
+/// rows^1.8, the average of four [20, 20] from 4242 to 21010 as rows^1.7,
+/// [20, 20] from 4164 to 13991 as rows^2.2 with the share of the machine
+/// taken as half: the upper end, as fits that would not end in time cost
+/// the whole final fit.
+pub(crate) const ROWS_EXPONENT: f64 = 2.0;
+/// Estimates of a fit's seconds carry a margin of a quarter: a fit that
+/// would not end in time costs the whole fit.
+pub(crate) const COST_MARGIN: f64 = 1.25;
+/// Plans (round 2's rows, the final fit's records) spend at most this
+/// share of the time they have: their costs are estimates.
+pub(crate) const PLANNED_SHARE: f64 = 0.8;
+/// The winner's refit keeps at most this share of the time left when
+/// round 2 or 3 starts; the rounds get the rest.
+pub(crate) const REFIT_SHARE: f64 = 0.45;
+/// A fit anew beside the fit trained further starts only if its estimate
+/// is below this share of the time left.
+pub(crate) const ANEW_SHARE: f64 = 0.9;
+
+/// How much longer a fit on `rows` rows takes than on `measured` rows.
+pub(crate) fn rows_growth(measured: usize, rows: usize) -> f64 {
+    (rows as f64 / measured.max(1) as f64).powf(ROWS_EXPONENT)
+}
+
+/// The seconds a fit on `rows` rows takes on the whole machine, from a
+/// candidate's `seconds` on `measured` rows: with a margin of a quarter,
+/// growing with the rows ([`ROWS_EXPONENT`]), and on the whole machine,
+/// where the candidate shared it with the others of its round (each round
+/// runs at least as many candidates as threads).
+pub(crate) fn fit_seconds(seconds: f64, measured: usize, rows: usize) -> f64 {
+    COST_MARGIN * seconds * rows_growth(measured, rows) / rayon::current_num_threads().max(1) as f64
+}
+
+/// Rows a round can fit on in `left` seconds when it costs `seconds` of
+/// wall time on `screened` rows and grows with them as
+/// [`ROWS_EXPONENT`] says: all `rows` if they fit, else as many as 80% of
+/// the time affords (the costs are estimates), but never fewer than
+/// `screened`.
+pub(crate) fn affordable_rows(seconds: f64, left: f64, screened: usize, rows: usize) -> usize {
+    if !(seconds.is_finite() && seconds > 0.0) {
+        return rows;
+    }
+    let growth = (PLANNED_SHARE * left / seconds).max(0.0);
+    let affordable = screened as f64 * growth.powf(1.0 / ROWS_EXPONENT);
+    (affordable.min(usize::MAX as f64) as usize).clamp(screened.min(rows), rows)
+}
+
+/// The exponent of a fit's cost in its rows from two timings `(rows,
+/// seconds)`, within 1.2 and 2.2 (what the benchmark's fits measured;
+/// two timings of one fit each are noisy).
+pub(crate) fn measured_exponent(
+    (rows_a, seconds_a): (usize, f64),
+    (rows_b, seconds_b): (usize, f64),
+) -> f64 {
+    let exponent = (seconds_b / seconds_a).ln() / (rows_b as f64 / rows_a as f64).ln();
+    if exponent.is_finite() {
+        exponent.clamp(1.2, 2.2)
+    } else {
+        ROWS_EXPONENT
+    }
+}
+
+/// Rows a final fit can take in `left` seconds, simulating each beyond
+/// the chart's `chart_rows` in `per_simulation` seconds and fitting all in
+/// `fit` seconds on `measured` rows, growing as rows^`exponent`: as many
+/// as 80% of the time affords (the costs are estimates), between
+/// `chart_rows` and `cap`.
+pub(crate) fn rows_for_final_fit(
+    left: f64,
+    (per_simulation, fit, measured): (f64, f64, usize),
+    exponent: f64,
+    chart_rows: usize,
+    cap: usize,
+) -> usize {
+    let cost = |rows: usize| {
+        let growth = (rows as f64 / measured.max(1) as f64).powf(exponent);
+        rows.saturating_sub(chart_rows) as f64 * per_simulation + fit * growth
+    };
+    let within = |rows: usize| cost(rows) <= PLANNED_SHARE * left;
+    if !(per_simulation >= 0.0 && fit >= 0.0 && left.is_finite() && within(chart_rows)) {
+        return chart_rows;
+    }
+    // The cost grows with the rows: bisect for the last affordable count.
+    let (mut low, mut high) = (chart_rows, cap.max(chart_rows));
+    if within(high) {
+        return high;
+    }
+    while high - low > 1 {
+        let middle = low + (high - low) / 2;
+        if within(middle) {
+            low = middle;
+        } else {
+            high = middle;
+        }
+    }
+    low
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Round 2 fits every row when it can, as many as the time affords when
+    /// it cannot, and never fewer than round 1 screened.
+    #[test]
+    fn round_two_takes_the_rows_its_time_affords() {
+        // Twice the rows take 2^ROWS_EXPONENT times as long: 100 s on 4000
+        // rows, so 8000 rows in 80% of `twice`.
+        let twice = 100.0 * 2f64.powf(ROWS_EXPONENT) / PLANNED_SHARE;
+        assert!(affordable_rows(100.0, twice, 4000, 32000).abs_diff(8000) <= 1);
+        assert_eq!(affordable_rows(100.0, 2.0 * twice, 4000, 6000), 6000);
+        assert_eq!(affordable_rows(100.0, 10.0, 4000, 32000), 4000);
+        assert_eq!(affordable_rows(100.0, -5.0, 4000, 32000), 4000);
+        // Round 1 fitted every row already: nothing more to take.
+        assert_eq!(affordable_rows(100.0, 10.0, 240, 240), 240);
+        assert_eq!(affordable_rows(0.0, 10.0, 4000, 32000), 32000);
+        // A fit on twice the rows, on the whole machine, with a margin.
+        let threads = rayon::current_num_threads() as f64;
+        let expected = COST_MARGIN * 10.0 * 2f64.powf(ROWS_EXPONENT) / threads;
+        assert!((fit_seconds(10.0, 4000, 8000) - expected).abs() < 1e-12);
+    }
+
+    /// The final fit takes the rows its time affords, simulations
+    /// included, between the chart's and the cap.
+    #[test]
+    fn the_final_fit_takes_the_rows_its_time_affords() {
+        // No simulation cost: the fit alone, as for round 2.
+        let fit = 10.0;
+        let twice = fit * 2f64.powf(ROWS_EXPONENT) / PLANNED_SHARE;
+        let rows = rows_for_final_fit(twice, (0.0, fit, 4000), ROWS_EXPONENT, 4000, 32000);
+        assert!(rows.abs_diff(8000) <= 1, "{rows}");
+        // 1 ms per simulation on top: 4000 more rows cost 4 s more.
+        let rows = rows_for_final_fit(
+            twice + 4.0 / PLANNED_SHARE,
+            (1e-3, fit, 4000),
+            ROWS_EXPONENT,
+            4000,
+            32000,
+        );
+        assert!(rows.abs_diff(8000) <= 1, "{rows}");
+        assert_eq!(
+            rows_for_final_fit(1e6, (1e-3, fit, 4000), ROWS_EXPONENT, 4000, 16000),
+            16000
+        );
+        // Not even the chart's rows fit: the chart's, no more.
+        assert_eq!(
+            rows_for_final_fit(1.0, (1e-3, fit, 4000), ROWS_EXPONENT, 4000, 16000),
+            4000
+        );
+        // Grown as rows^1.5: 1.6 times the rows for 1.6^1.5 the time.
+        let grown = fit * 1.6f64.powf(1.5) / PLANNED_SHARE;
+        let rows = rows_for_final_fit(grown, (0.0, fit, 4000), 1.5, 4000, 32000);
+        assert!(rows.abs_diff(6400) <= 1, "{rows}");
+        assert!((measured_exponent((2000, 1.0), (4000, 4.0)) - 2.0).abs() < 1e-12);
+        assert!((measured_exponent((2000, 1.0), (4000, 2.0f64.powf(1.5))) - 1.5).abs() < 1e-12);
+        assert!((measured_exponent((2000, 1.0), (4000, 1.0)) - 1.2).abs() < 1e-12);
+        assert!((measured_exponent((2000, 1.0), (4000, 100.0)) - 2.2).abs() < 1e-12);
+        assert!((measured_exponent((2000, 0.0), (4000, 0.0)) - ROWS_EXPONENT).abs() < 1e-12);
+        assert_eq!(
+            rows_for_final_fit(f64::INFINITY, (1e-3, fit, 80), ROWS_EXPONENT, 80, 320),
+            80
+        );
+    }
+}
