@@ -6,6 +6,9 @@
 //! UKF, particle filter, prediction error with 1, 5 and 10 starts, the
 //! two-stage estimator, and the Bayes-optimal references.
 //!
+//! `cargo xtask crates` draws the crates and their arrows, and finds the
+//! circles among each crate's modules.
+//!
 //! `cargo xtask test` runs the whole test suite with what its external
 //! programs need (a Python virtual environment with numpy under target/).
 
@@ -19,6 +22,7 @@ use clap::{Parser, Subcommand};
 use twostage::models::{Benchmark, Simulator};
 
 mod bayes_gap;
+mod crates;
 mod paper;
 mod test;
 
@@ -63,6 +67,13 @@ enum Command {
         #[arg(long, default_value_t = 2026)]
         seed: u64,
     },
+    /// The workspace's crates: lines, workspace dependencies, and circles
+    /// among each crate's top-level modules (Markdown, for docs/crates.md).
+    Crates {
+        /// Fail if any crate has a module circle.
+        #[arg(long)]
+        check: bool,
+    },
     /// Simulate and compress a large benchmark chart; report throughput and
     /// peak memory (the bounded-memory claim of DESIGN.md).
     ChartScale {
@@ -81,6 +92,7 @@ fn main() -> ExitCode {
         Command::ReproducePaper { quick, out, seed } => paper::reproduce(quick, &out, seed),
         Command::ChartScale { sims, threads } => chart_scale(sims, threads),
         Command::Test { args } => test::run(&args),
+        Command::Crates { check } => crates::run(check),
         Command::BayesGap {
             estimator,
             records,

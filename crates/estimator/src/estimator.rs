@@ -2,7 +2,7 @@
 
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use twostage_compress::{Compressor, FlooredSample, Workspace};
 use twostage_fit::Predictor;
 use twostage_models::{IoData, Marginal, ModelSpec, generic_signal_names};
@@ -13,40 +13,9 @@ use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
 use crate::layout::{EstimatorFields, Stages, V1, V2, V3};
 use crate::space::{rows_to_estimates, to_estimate};
+pub use crate::stored::{RecordShape, SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
-use twostage_fit::{FittedRegressor, RegressorConfig};
-
-/// What the estimator was trained on, for people and for audits.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TrainingInfo {
-    /// The model's name.
-    pub model: String,
-    /// Number of training simulations m.
-    pub simulations: usize,
-    /// Simulations that failed and were dropped.
-    pub failures: usize,
-    /// The training seed.
-    pub seed: u64,
-    /// The design that placed the training parameters.
-    pub sampling: String,
-    /// The stage-2 method as configured.
-    pub regressor: RegressorConfig,
-    /// The twostage version that trained it.
-    pub version: String,
-}
-
-/// The signals and sampling a record must have.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RecordShape {
-    /// Samples per record the estimator was trained on.
-    pub n_samples: usize,
-    /// Input signals.
-    pub n_inputs: usize,
-    /// Output signals.
-    pub n_outputs: usize,
-    /// Sampling time.
-    pub sample_time: f64,
-}
+use twostage_fit::FittedRegressor;
 
 /// Scratch space for [`Estimator::estimate_into`]: keep one per thread and
 /// estimates allocate nothing.
@@ -92,15 +61,6 @@ pub struct Estimator {
     /// The names of the input and output signals, the columns `estimate`
     /// reads (format version 3 on; earlier files are `u`, `y`).
     pub(crate) signal_names: Option<SignalNames>,
-}
-
-/// The names of a model's input and output signals.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct SignalNames {
-    /// Input names, in the order of the record's input columns.
-    pub inputs: Vec<String>,
-    /// Output names.
-    pub outputs: Vec<String>,
 }
 
 impl TryFrom<EstimatorFields> for Estimator {

@@ -11,7 +11,7 @@ use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, Val
 
 use crate::adaptive::AdaptiveIntervals;
 use crate::envelope::FeatureEnvelope;
-use crate::estimator::{RecordShape, SignalNames, TrainingInfo};
+use crate::stored::{RecordShape, SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
 use twostage_fit::FittedRegressor;
 

@@ -18,6 +18,7 @@ mod file;
 mod layout;
 mod runtime_export;
 pub mod space;
+mod stored;
 
 pub use adaptive::AdaptiveIntervals;
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};

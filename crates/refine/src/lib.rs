@@ -17,6 +17,7 @@ mod lockstep;
 mod moments;
 mod output_error;
 mod refinement;
+mod residual;
 mod uncertainty;
 
 pub use check::{

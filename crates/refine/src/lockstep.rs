@@ -12,7 +12,7 @@ use twostage_fit::{
 use twostage_models::{IoData, Prior};
 
 use crate::error::RefineError as Error;
-use crate::refinement::{Descent, ResidualModel};
+use crate::residual::{Descent, ResidualModel};
 
 /// One descent to run: a record, a start (parameter values) and the box of
 /// unit-box coordinates `[lo, hi]` its iterates stay in.
