@@ -34,7 +34,7 @@ mod cost;
 mod search;
 
 use candidates::{candidate_compressors, network, output_transforms, pieces};
-pub use search::FinalFits;
+pub use search::{FinalFit, FinalFits};
 use search::{Scope, Search, Winner};
 
 /// How much the search may spend.
@@ -152,14 +152,13 @@ pub struct AutoOutcome {
     pub best: usize,
     /// Simulations in the chart.
     pub simulations: usize,
+    /// The simulations among them that failed (left out of every fit).
+    pub failures: usize,
     /// Seconds of the search (without calibration and validation).
     pub search_seconds: f64,
-    /// Whether the winner was refitted on the whole chart (a time budget
-    /// may leave room for fewer rows, or only the fit it was scored with),
-    /// all but the records that compared its final fits (`final_fits`).
-    pub refitted: bool,
-    /// The chart rows the shipped network was fitted on.
-    pub fitted_rows: usize,
+    /// How the shipped network was fitted: as scored, anew, trained
+    /// further, or both and the better shipped; on how many rows.
+    pub final_fit: FinalFit,
     /// The round-2 winner's score at the run's seed and, where the budget
     /// allowed, at two other seeds: how much the seed alone moves it.
     pub seed_scores: Vec<f64>,
@@ -171,19 +170,10 @@ pub struct AutoOutcome {
     /// (counted in `simulations`), where more records pay and the time
     /// left afforded them.
     pub added_simulations: usize,
-    /// The records of a final fit that was still running at the deadline
-    /// and was stopped: it ships trained as far as it got from the fit the
-    /// winner was scored with (no worse than that on its held-out rows).
-    pub late_refit: Option<usize>,
     /// How the round-2 winner's fit time grew with its rows (the exponent,
     /// from its half-rows and seed trials timed alone), where measured: the
     /// final fit's rows follow from it.
     pub rows_exponent: Option<f64>,
-    /// The held-out scores of the final fit trained further from the
-    /// winner's and of a fit anew, on the last fifth of the added records
-    /// (seen by neither), where the time left afforded both: the lower
-    /// shipped.
-    pub final_fits: Option<FinalFits>,
 }
 
 /// Whether a score of `half` on half the rows against `own` on all of them
@@ -201,18 +191,21 @@ impl std::fmt::Display for AutoOutcome {
             "automatic design on m = {} simulations ({:.1} s), held-out RMSE per candidate:",
             self.simulations, self.search_seconds
         )?;
-        if let Some(rows) = self.late_refit {
+        let fitted_rows = self.final_fit.rows();
+        if self.final_fit.stopped() {
             writeln!(
                 f,
-                "(the winner's final fit on {rows} records was stopped at the time budget's end: \
-                 it ships trained as far as it got from the fit it was scored with)"
+                "(the winner's final fit on {fitted_rows} records was stopped at the time budget's \
+                 end: it ships trained as far as it got from the fit it was scored with)"
             )?;
-        } else if !self.refitted {
+        } else if !matches!(self.final_fit, FinalFit::Compared { .. })
+            && fitted_rows < self.simulations - self.failures
+        {
             writeln!(
                 f,
                 "(the time budget left no room to refit the winner on the whole chart: it ships \
                  fitted on {} of its {} records)",
-                self.fitted_rows, self.simulations
+                fitted_rows, self.simulations
             )?;
         }
         if let [own, others @ ..] = self.seed_scores.as_slice()
@@ -255,14 +248,18 @@ impl std::fmt::Display for AutoOutcome {
             writeln!(
                 f,
                 "so the winner's final fit took {} more simulations: fitted on {} records",
-                self.added_simulations, self.fitted_rows
+                self.added_simulations, fitted_rows
             )?;
         }
-        if let Some(FinalFits {
-            compared,
-            further,
-            anew,
-        }) = self.final_fits
+        if let FinalFit::Compared {
+            fits:
+                FinalFits {
+                    compared,
+                    further,
+                    anew,
+                },
+            ..
+        } = self.final_fit
         {
             writeln!(
                 f,
@@ -537,9 +534,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             features,
             regressor_config,
             regressor,
-            fitted_rows,
-            late_refit,
-            final_fits,
+            final_fit,
         } = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         run.progress().end(Stage::Fitting);
         let rows_exponent = search.rows_exponent();
@@ -562,14 +557,12 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             best,
             simulations: kept + failures,
             search_seconds,
-            refitted: fitted_rows == kept || final_fits.is_some(),
-            fitted_rows,
+            failures,
+            final_fit,
             seed_scores,
             half_rows,
             added_simulations,
-            late_refit,
             rows_exponent,
-            final_fits,
         })
     }
 }

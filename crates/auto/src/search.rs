@@ -19,8 +19,8 @@ use crate::cost::{
     rows_growth,
 };
 use crate::{Budget, CandidateReport, Status};
-pub use final_fit::FinalFits;
 pub(super) use final_fit::Winner;
+pub use final_fit::{FinalFit, FinalFits};
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
 use twostage_estimator::{Error, Result};
 use twostage_sources::Progress;
@@ -58,9 +58,10 @@ impl<'a, S: Simulator + ?Sized> Scope<'a, S> {
     }
 }
 
-/// The candidates of one automatic design: what was tried, on which stored
-/// chart, and what each fit gave.
-pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
+/// What a search is given and never changes while its rounds run: its
+/// run, its chart, its budget and the rows it fits and scores on. The
+/// rounds read it in parallel; their results live in [`Search`].
+pub(super) struct Plan<'s, 'a, S: Simulator + ?Sized> {
     base: &'s Scope<'a, S>,
     chart: &'s StoredChart,
     /// The run's budget (for the progress lines).
@@ -77,6 +78,12 @@ pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
     /// fit (a time budget on a growable source): round 2 then keeps time
     /// for it.
     grows: bool,
+}
+
+/// The candidates of one automatic design: what was tried under its
+/// [`Plan`], and what each fit gave.
+pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
+    plan: Plan<'s, 'a, S>,
     /// Every candidate, in the order tried.
     candidates: Vec<Candidate>,
     /// How the round-2 winner's fit time grew from half its rows to all of
@@ -136,14 +143,16 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .collect();
         let rows = chart.thetas.nrows();
         Self {
-            base,
-            chart,
-            budget,
-            deadline,
-            screening_rows,
-            fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
-            prior_sd,
-            grows: grows && deadline.is_some(),
+            plan: Plan {
+                base,
+                chart,
+                budget,
+                deadline,
+                screening_rows,
+                fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
+                prior_sd,
+                grows: grows && deadline.is_some(),
+            },
             candidates: Vec::new(),
             rows_exponent: None,
         }
@@ -152,14 +161,15 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// Round 1: every compressor with one medium network. Nothing is known
     /// about costs yet: each starts unless the deadline has passed.
     pub(super) fn round_one(&mut self, compressors: &[CompressorConfig], medium: &RegressorConfig) {
-        let rows = self.fit_rows.min(self.screening_rows);
+        let rows = self.plan.fit_rows.min(self.plan.screening_rows);
         let count = compressors.len();
         let outcomes: Vec<_> = compressors
             .par_iter()
             .enumerate()
             .map(|(k, c)| {
-                self.tell(1, k, count, c, medium);
-                self.evaluate(c, medium, rows, self.deadline.map(|d| (d, 0.0)), 1)
+                self.plan.tell(1, k, count, c, medium);
+                self.plan
+                    .evaluate(c, medium, rows, self.plan.deadline.map(|d| (d, 0.0)), 1, 0)
             })
             .collect();
         for (report, outcome) in outcomes {
@@ -173,12 +183,12 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// its cost (the round-1 time scaled by the network's size and the
     /// rows) leaves time to refit the best candidate found so far.
     pub(super) fn round_two(&mut self, medium: &RegressorConfig, networks: &[RegressorConfig]) {
-        let q = self.chart.thetas.ncols();
+        let q = self.plan.chart.thetas.ncols();
         let ranked = self.ranked();
         let screened = self
             .candidates
             .first()
-            .map_or(self.fit_rows, |c| c.report.fit_rows);
+            .map_or(self.plan.fit_rows, |c| c.report.fit_rows);
         // The refit of the winner on the whole chart, from round 1's best,
         // but at most 45% of the time left: round 2 gets the rest, and the
         // refit takes as many rows as its time affords. A source that can
@@ -186,18 +196,22 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         // where its learning curve still falls, rows pay more than a
         // finer comparison of networks (the benchmark's 4 pieces of [20]
         // reach 1.09 times the Bayes RMSE on 16000 records, 1.21 on 8000).
-        let all_rows = self.chart.thetas.nrows() as f64;
+        let all_rows = self.plan.chart.thetas.nrows() as f64;
         let reserve = ranked.first().map_or(0.0, |&i| {
             let refit = fit_seconds(
                 self.candidates[i].report.seconds,
                 screened,
                 all_rows as usize,
             );
-            let share = REFIT_SHARE * self.seconds_left();
-            if self.grows { share } else { refit.min(share) }
+            let share = REFIT_SHARE * self.plan.seconds_left();
+            if self.plan.grows {
+                share
+            } else {
+                refit.min(share)
+            }
         });
         let mut trials: Vec<&RegressorConfig> = Vec::new();
-        if screened < self.fit_rows {
+        if screened < self.plan.fit_rows {
             trials.push(medium);
         }
         trials.extend(networks);
@@ -223,7 +237,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             })
             .flatten()
             .collect();
-        let rows = self.round_two_rows(&pairs, screened, reserve);
+        let rows = self.plan.round_two_rows(&pairs, screened, reserve);
         if rows == screened {
             // Round 1's network on these rows is scored already.
             pairs.retain(|(_, net, _)| net != medium);
@@ -240,100 +254,20 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .par_iter()
             .enumerate()
             .map(|(k, (c, net, cost))| {
-                self.tell(2, k, count, c, net);
-                self.evaluate(c, net, rows, self.deadline.map(|d| (d, cost + reserve)), 2)
+                self.plan.tell(2, k, count, c, net);
+                self.plan.evaluate(
+                    c,
+                    net,
+                    rows,
+                    self.plan.deadline.map(|d| (d, cost + reserve)),
+                    2,
+                    0,
+                )
             })
             .collect();
         for ((report, outcome), (_, net, _)) in outcomes.into_iter().zip(pairs) {
             self.record(report, outcome, net);
         }
-    }
-
-    /// The rows round 2 fits on: every fitting row when its candidates
-    /// (costs on `screened` rows, growing with the rows) fit in the time
-    /// left after the winner's refit (`reserve`) on the cores there are,
-    /// else as many as do, but never fewer than round 1 screened. Without a
-    /// deadline, every fitting row. Fewer rows for all of round 2 beat
-    /// skipping most of its candidates: they compare on equal terms, and
-    /// the winner is refitted on the whole chart.
-    fn round_two_rows(
-        &self,
-        pairs: &[(CompressorConfig, RegressorConfig, f64)],
-        screened: usize,
-        reserve: f64,
-    ) -> usize {
-        let Some(deadline) = self.deadline else {
-            return self.fit_rows;
-        };
-        let left = deadline
-            .saturating_duration_since(Instant::now())
-            .as_secs_f64()
-            - reserve;
-        let costs: f64 = pairs.iter().map(|p| p.2).sum();
-        affordable_rows(
-            costs / rayon::current_num_threads().max(1) as f64,
-            left,
-            screened,
-            self.fit_rows,
-        )
-    }
-
-    /// Tell the observer which candidate starts, and how much of the
-    /// budget is spent.
-    fn tell(
-        &self,
-        round: usize,
-        k: usize,
-        count: usize,
-        compressor: &CompressorConfig,
-        regressor: &RegressorConfig,
-    ) {
-        self.base.progress().status(&format!(
-            "search round {round}, candidate {} of {count}: {}; {}",
-            k + 1,
-            design(compressor, regressor),
-            self.budget_words()
-        ));
-    }
-
-    /// The budget for a progress line (the line gives the time).
-    fn budget_words(&self) -> String {
-        match self.budget {
-            Budget::Seconds(t) => format!("budget {t:.0} s"),
-            Budget::Simulations(_) => "every candidate runs".to_string(),
-        }
-    }
-
-    fn evaluate(
-        &self,
-        compressor: &CompressorConfig,
-        regressor: &RegressorConfig,
-        rows: usize,
-        limit: Option<(Instant, f64)>,
-        round: usize,
-    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
-        self.evaluate_seeded(compressor, regressor, rows, limit, (round, 0))
-    }
-
-    /// [`Self::evaluate`] with the network's seed moved by `offset` from
-    /// the run's.
-    fn evaluate_seeded(
-        &self,
-        compressor: &CompressorConfig,
-        regressor: &RegressorConfig,
-        rows: usize,
-        limit: Option<(Instant, f64)>,
-        (round, offset): (usize, u64),
-    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
-        evaluate(
-            self.base,
-            self.chart,
-            (compressor, regressor),
-            (rows, self.fit_rows),
-            &self.prior_sd,
-            limit,
-            (round, self.base.seed().wrapping_add(offset)),
-        )
     }
 
     /// Round 3, where the budget allows: the winner's network with its
@@ -352,9 +286,10 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let rows = winner.fit_rows;
         // Each trial, and the winner's refit on the whole chart after it,
         // must end in time.
-        let refit = fit_seconds(winner.seconds, rows, self.chart.thetas.nrows())
-            .min(REFIT_SHARE * self.seconds_left());
+        let refit = fit_seconds(winner.seconds, rows, self.plan.chart.thetas.nrows())
+            .min(REFIT_SHARE * self.plan.seconds_left());
         let limit = self
+            .plan
             .deadline
             .map(|d| (d, COST_MARGIN * winner.seconds + refit));
         let trial = |compressor: &CompressorConfig, network: &RegressorConfig, role, rows| Trial {
@@ -367,7 +302,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         // The half-rows trial first: the cheapest, and the one that decides
         // whether the final fit takes more records.
         let mut trials = vec![trial(&compressor, &network, TrialRole::HalfRows, rows / 2)];
-        let n_outputs = self.base.simulator().spec().output_names().len();
+        let n_outputs = self.plan.base.simulator().spec().output_names().len();
         if let Some(leveled) = with_level(&compressor, n_outputs) {
             trials.push(trial(&leveled, &network, TrialRole::Rival, rows));
         }
@@ -392,8 +327,9 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .iter()
             .enumerate()
             .map(|(k, t)| {
-                self.tell(3, k, count, &t.compressor, &t.network);
-                self.evaluate_seeded(&t.compressor, &t.network, t.rows, limit, (3, t.seed_offset))
+                self.plan.tell(3, k, count, &t.compressor, &t.network);
+                self.plan
+                    .evaluate(&t.compressor, &t.network, t.rows, limit, 3, t.seed_offset)
             })
             .collect();
         let mut scores = vec![self.candidates[best].report.score];
@@ -479,7 +415,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .min_by(|&a, &b| self.report(a).score.total_cmp(&self.report(b).score))
             .ok_or_else(|| Error::InvalidSetting {
                 name: "budget",
-                value: format!("{budget:?}"),
+                value: budget.describe(),
                 reason: format!(
                     "no candidate could be fitted within it (first: {})",
                     self.candidates
@@ -495,6 +431,141 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     pub(super) fn rows_exponent(&self) -> Option<f64> {
         self.rows_exponent
     }
+}
+
+impl<S: Simulator + ?Sized> Plan<'_, '_, S> {
+    /// The rows round 2 fits on: every fitting row when its candidates
+    /// (costs on `screened` rows, growing with the rows) fit in the time
+    /// left after the winner's refit (`reserve`) on the cores there are,
+    /// else as many as do, but never fewer than round 1 screened. Without a
+    /// deadline, every fitting row. Fewer rows for all of round 2 beat
+    /// skipping most of its candidates: they compare on equal terms, and
+    /// the winner is refitted on the whole chart.
+    fn round_two_rows(
+        &self,
+        pairs: &[(CompressorConfig, RegressorConfig, f64)],
+        screened: usize,
+        reserve: f64,
+    ) -> usize {
+        let Some(deadline) = self.deadline else {
+            return self.fit_rows;
+        };
+        let left = deadline
+            .saturating_duration_since(Instant::now())
+            .as_secs_f64()
+            - reserve;
+        let costs: f64 = pairs.iter().map(|p| p.2).sum();
+        affordable_rows(
+            costs / rayon::current_num_threads().max(1) as f64,
+            left,
+            screened,
+            self.fit_rows,
+        )
+    }
+
+    /// Tell the observer which candidate starts, and how much of the
+    /// budget is spent.
+    fn tell(
+        &self,
+        round: usize,
+        k: usize,
+        count: usize,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+    ) {
+        self.base.progress().status(&format!(
+            "search round {round}, candidate {} of {count}: {}; {}",
+            k + 1,
+            design(compressor, regressor),
+            self.budget_words()
+        ));
+    }
+
+    /// The budget for a progress line (the line gives the time).
+    fn budget_words(&self) -> String {
+        match self.budget {
+            Budget::Seconds(t) => format!("budget {t:.0} s"),
+            Budget::Simulations(_) => "every candidate runs".to_string(),
+        }
+    }
+
+    /// Compress the chart with `compressor`, fit `regressor` on the first
+    /// `rows` fitting rows at the run's seed moved by `seed_offset`, and
+    /// score it on the held-out rows; skipped when `limit` (a deadline and
+    /// the fit's estimated seconds) says it would not end in time.
+    fn evaluate(
+        &self,
+        compressor: &CompressorConfig,
+        regressor: &RegressorConfig,
+        rows: usize,
+        limit: Option<(Instant, f64)>,
+        round: usize,
+        seed_offset: u64,
+    ) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
+        let (chart, held_out) = (self.chart, self.fit_rows);
+        let seed = self.base.seed().wrapping_add(seed_offset);
+        let mut report = CandidateReport {
+            compressor: compressor.to_string(),
+            regressor: regressor.to_string(),
+            design: design(compressor, regressor),
+            trained_by: None,
+            round,
+            rmse: Vec::new(),
+            score: f64::INFINITY,
+            seconds: 0.0,
+            fit_rows: rows,
+            status: Status::Scored,
+        };
+        // (deadline, estimated seconds): skip what would not finish in time.
+        if let Some((deadline, cost)) = limit
+            && Instant::now() + Duration::from_secs_f64(cost) > deadline
+        {
+            report.status = Status::Skipped { seconds: cost };
+            return (report, None);
+        }
+        let start = Instant::now();
+        // A structure the records cannot take (an autoregression of a
+        // noise-free decay is rank deficient) does not apply; only a fit that
+        // went wrong failed.
+        let compressed = compressor
+            .prepared_on(&chart.records[..rows])
+            .map_err(Error::from)
+            .and_then(|c| compress_all(&c, &chart.records).map(|f| (c, f)));
+        let (compressor, features) = match compressed {
+            Ok(pair) => pair,
+            Err(e) => {
+                report.seconds = start.elapsed().as_secs_f64();
+                report.status = Status::NotApplicable(e.to_string());
+                return (report, None);
+            }
+        };
+        let outcome = (|| -> Result<(Vec<f64>, f64, CompressorConfig, FittedRegressor)> {
+            let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
+            let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);
+            let (x_fit, t_fit) = (
+                x_fit.slice_move(ndarray::s![..rows, ..]),
+                t_fit.slice_move(ndarray::s![..rows, ..]),
+            );
+            let prior = self.base.simulator().spec().prior();
+            let z_fit = to_learning_space(t_fit, prior.marginals());
+            let fitted = regressor.fit(x_fit, z_fit.view(), seed)?;
+            let (rmse, score) = self.score(&fitted, x_held, t_held)?;
+            Ok((rmse, score, compressor.clone(), fitted))
+        })();
+        report.seconds = start.elapsed().as_secs_f64();
+        match outcome {
+            Ok((rmse, score, compressor, fitted)) => {
+                report.trained_by = fitted.training_summary();
+                report.score = score;
+                report.rmse = rmse;
+                (report, Some((compressor, fitted)))
+            }
+            Err(e) => {
+                report.status = Status::Failed(e.to_string());
+                (report, None)
+            }
+        }
+    }
 
     /// Seconds until the deadline (infinite without one).
     fn seconds_left(&self) -> f64 {
@@ -502,39 +573,42 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             d.saturating_duration_since(Instant::now()).as_secs_f64()
         })
     }
-}
 
-/// RMSE per parameter of `fitted` on features `x` against parameters
-/// `thetas`, and its mean in units of `prior_sd`.
-fn held_out_score<S: Simulator + ?Sized>(
-    base: &Scope<'_, S>,
-    fitted: &FittedRegressor,
-    x: ndarray::ArrayView2<'_, f64>,
-    thetas: ndarray::ArrayView2<'_, f64>,
-    prior_sd: &[f64],
-) -> Result<(Vec<f64>, f64)> {
-    let prior = base.simulator().spec().prior();
-    let mut estimates = twostage_fit::Predictor::predict(fitted, x)?;
-    rows_to_estimates(
-        &mut estimates,
-        prior.marginals(),
-        prior.lower(),
-        prior.upper(),
-    );
-    let rmse: Vec<f64> = (0..thetas.ncols())
-        .map(|j| {
-            let sq: f64 = thetas
-                .column(j)
-                .iter()
-                .zip(estimates.column(j))
-                .map(|(t, e)| (t - e).powi(2))
-                .sum();
-            (sq / thetas.nrows().max(1) as f64).sqrt()
-        })
-        .collect();
-    let score =
-        rmse.iter().zip(prior_sd).map(|(r, sd)| r / sd).sum::<f64>() / rmse.len().max(1) as f64;
-    Ok((rmse, score))
+    /// RMSE per parameter of `fitted` on features `x` against parameters
+    /// `thetas`, and its mean in units of the prior's sd.
+    fn score(
+        &self,
+        fitted: &FittedRegressor,
+        x: ndarray::ArrayView2<'_, f64>,
+        thetas: ndarray::ArrayView2<'_, f64>,
+    ) -> Result<(Vec<f64>, f64)> {
+        let prior = self.base.simulator().spec().prior();
+        let mut estimates = twostage_fit::Predictor::predict(fitted, x)?;
+        rows_to_estimates(
+            &mut estimates,
+            prior.marginals(),
+            prior.lower(),
+            prior.upper(),
+        );
+        let rmse: Vec<f64> = (0..thetas.ncols())
+            .map(|j| {
+                let sq: f64 = thetas
+                    .column(j)
+                    .iter()
+                    .zip(estimates.column(j))
+                    .map(|(t, e)| (t - e).powi(2))
+                    .sum();
+                (sq / thetas.nrows().max(1) as f64).sqrt()
+            })
+            .collect();
+        let score = rmse
+            .iter()
+            .zip(&self.prior_sd)
+            .map(|(r, sd)| r / sd)
+            .sum::<f64>()
+            / rmse.len().max(1) as f64;
+        Ok((rmse, score))
+    }
 }
 
 /// The winner's stage 1 with each output's first sample and mean
@@ -568,78 +642,4 @@ fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Arr
         .collect::<twostage_compress::Result<Vec<()>>>()?;
     Ok(Array2::from_shape_vec((records.len(), n), features)
         .unwrap_or_else(|_| unreachable!("n features per record")))
-}
-
-/// Compress, fit on the first `rows` rows, score on the rows from
-/// `held_out` on (`rows <= held_out`).
-fn evaluate<S: Simulator + ?Sized>(
-    base: &Scope<'_, S>,
-    chart: &StoredChart,
-    (compressor, regressor): (&CompressorConfig, &RegressorConfig),
-    (fit_rows, held_out): (usize, usize),
-    prior_sd: &[f64],
-    deadline: Option<(Instant, f64)>,
-    (round, seed): (usize, u64),
-) -> (CandidateReport, Option<(CompressorConfig, FittedRegressor)>) {
-    let mut report = CandidateReport {
-        compressor: compressor.to_string(),
-        regressor: regressor.to_string(),
-        design: design(compressor, regressor),
-        trained_by: None,
-        round,
-        rmse: Vec::new(),
-        score: f64::INFINITY,
-        seconds: 0.0,
-        fit_rows,
-        status: Status::Scored,
-    };
-    // (deadline, estimated seconds): skip what would not finish in time.
-    if let Some((deadline, cost)) = deadline
-        && Instant::now() + Duration::from_secs_f64(cost) > deadline
-    {
-        report.status = Status::Skipped { seconds: cost };
-        return (report, None);
-    }
-    let start = Instant::now();
-    // A structure the records cannot take (an autoregression of a
-    // noise-free decay is rank deficient) does not apply; only a fit that
-    // went wrong failed.
-    let compressed = compressor
-        .prepared_on(&chart.records[..fit_rows])
-        .map_err(Error::from)
-        .and_then(|c| compress_all(&c, &chart.records).map(|f| (c, f)));
-    let (compressor, features) = match compressed {
-        Ok(pair) => pair,
-        Err(e) => {
-            report.seconds = start.elapsed().as_secs_f64();
-            report.status = Status::NotApplicable(e.to_string());
-            return (report, None);
-        }
-    };
-    let outcome = (|| -> Result<(Vec<f64>, f64, CompressorConfig, FittedRegressor)> {
-        let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
-        let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);
-        let (x_fit, t_fit) = (
-            x_fit.slice_move(ndarray::s![..fit_rows, ..]),
-            t_fit.slice_move(ndarray::s![..fit_rows, ..]),
-        );
-        let prior = base.simulator().spec().prior();
-        let z_fit = to_learning_space(t_fit, prior.marginals());
-        let fitted = regressor.fit(x_fit, z_fit.view(), seed)?;
-        let (rmse, score) = held_out_score(base, &fitted, x_held, t_held, prior_sd)?;
-        Ok((rmse, score, compressor.clone(), fitted))
-    })();
-    report.seconds = start.elapsed().as_secs_f64();
-    match outcome {
-        Ok((rmse, score, compressor, fitted)) => {
-            report.trained_by = fitted.training_summary();
-            report.score = score;
-            report.rmse = rmse;
-            (report, Some((compressor, fitted)))
-        }
-        Err(e) => {
-            report.status = Status::Failed(e.to_string());
-            (report, None)
-        }
-    }
 }

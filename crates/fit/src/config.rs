@@ -263,6 +263,18 @@ impl FittedRegressor {
             }
         }
     }
+
+    /// Whether the fit's time ran out (`stop_by` of
+    /// [`RegressorConfig::fit_from`]) before some network ended its
+    /// training on its own: it ships trained as far as it got.
+    pub fn stopped_at_deadline(&self) -> bool {
+        let stopped = |m: &FittedMlp| m.reports().iter().any(|r| r.reason.is_deadline());
+        match self {
+            Self::Linear(_) => false,
+            Self::Mlp(m) => stopped(m),
+            Self::Piecewise(p) => stopped(p.global()) || p.experts().iter().any(stopped),
+        }
+    }
 }
 
 impl Predictor for FittedRegressor {

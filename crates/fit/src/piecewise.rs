@@ -390,7 +390,8 @@ mod tests {
     }
 
     /// A stop time reaches the global network and every expert, by either
-    /// trainer: past it, each restart takes one step (one epoch for Adam).
+    /// trainer: past it, each restart takes one step (one epoch for Adam)
+    /// and says the deadline stopped it; a whole fit says nothing of it.
     #[test]
     fn a_stop_time_stops_every_network() {
         let t = Array2::from_shape_fn((300, 1), |(i, _)| i as f64 / 150.0 - 1.0);
@@ -413,8 +414,21 @@ mod tests {
                 .fit(x.view(), t.view())
                 .unwrap();
             assert!(steps(&stopped).iter().all(|&s| s == 1), "{trainer:?}");
+            let reasons = |f: &FittedPiecewise| -> Vec<crate::TerminationReason> {
+                std::iter::once(&f.global)
+                    .chain(&f.experts)
+                    .flat_map(|n| n.reports().iter().map(|r| r.reason))
+                    .collect()
+            };
+            assert!(
+                reasons(&stopped).iter().all(|r| r.is_deadline()),
+                "{trainer:?}: {:?}",
+                reasons(&stopped)
+            );
+            assert!(crate::FittedRegressor::Piecewise(stopped).stopped_at_deadline());
             let whole = piecewise.fit(x.view(), t.view()).unwrap();
             assert!(steps(&whole).iter().all(|&s| s > 1), "{trainer:?}");
+            assert!(!crate::FittedRegressor::Piecewise(whole).stopped_at_deadline());
         }
     }
 }

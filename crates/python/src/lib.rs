@@ -397,7 +397,7 @@ impl PyEstimator {
             )?,
             None => dict.set_item("correlation", py.None())?,
         }
-        dict.set_item("stop", refined.stop.map(|s| format!("{s:?}")))?;
+        dict.set_item("stop", refined.stop.map(|s| s.name()))?;
         Ok(dict)
     }
 }

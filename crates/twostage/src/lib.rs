@@ -51,7 +51,7 @@
 mod request;
 
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
-pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFits};
+pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, Error, EstimateWorkspace, Estimator,

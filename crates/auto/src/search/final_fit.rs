@@ -11,7 +11,7 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::Simulator;
 use twostage_sources::StoredChart;
 
-use super::{Search, compress_all, design, held_out_score};
+use super::{Search, compress_all, design};
 use crate::cost::{ANEW_SHARE, COST_MARGIN, ROWS_EXPONENT, fit_seconds, rows_for_final_fit};
 use twostage_estimator::space::to_learning_space;
 use twostage_estimator::{Error, Result};
@@ -32,13 +32,13 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         per_simulation: f64,
         cap: usize,
     ) -> usize {
-        let chart_rows = self.chart.thetas.nrows();
-        if !(self.deadline.is_some() && self.grows && more_records) {
+        let chart_rows = self.plan.chart.thetas.nrows();
+        if !(self.plan.deadline.is_some() && self.plan.grows && more_records) {
             return chart_rows;
         }
         let scored = self.candidates[best].report.fit_rows;
         rows_for_final_fit(
-            self.seconds_left(),
+            self.plan.seconds_left(),
             (per_simulation, self.fit_estimate(best, scored), scored),
             self.cost_exponent(),
             chart_rows,
@@ -69,7 +69,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         let grown;
         let (records, thetas) = match more {
             Some(more) => {
-                let mut thetas = self.chart.thetas.clone();
+                let mut thetas = self.plan.chart.thetas.clone();
                 thetas
                     .append(Axis(0), more.thetas.view())
                     .map_err(|e| Error::Search {
@@ -77,10 +77,13 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
                             "the records added for the final fit do not match the chart: {e}"
                         ),
                     })?;
-                grown = [self.chart.records.as_slice(), more.records.as_slice()].concat();
+                grown = [self.plan.chart.records.as_slice(), more.records.as_slice()].concat();
                 (grown.as_slice(), thetas)
             }
-            None => (self.chart.records.as_slice(), self.chart.thetas.clone()),
+            None => (
+                self.plan.chart.records.as_slice(),
+                self.plan.chart.thetas.clone(),
+            ),
         };
         let refit_rows = final_rows.min(thetas.nrows());
         let features = compress_all(&compressor, records)?;
@@ -89,23 +92,21 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             features,
             regressor_config,
             regressor: held_out_fit,
-            fitted_rows: scored_rows,
-            late_refit: None,
-            final_fits: None,
+            final_fit: FinalFit::AsScored { rows: scored_rows },
         };
         if refit_rows <= scored_rows {
             return Ok(winner);
         }
-        let marginals = self.base.simulator().spec().prior().marginals();
-        let seed = self.base.seed();
-        let Some(deadline) = self.deadline else {
+        let marginals = self.plan.base.simulator().spec().prior().marginals();
+        let seed = self.plan.base.seed();
+        let Some(deadline) = self.plan.deadline else {
             let rows = ndarray::s![..refit_rows, ..];
             let z = to_learning_space(thetas.slice(rows), marginals);
             winner.regressor =
                 winner
                     .regressor_config
                     .fit(winner.features.slice(rows), z.view(), seed)?;
-            winner.fitted_rows = refit_rows;
+            winner.final_fit = FinalFit::Anew { rows: refit_rows };
             return Ok(winner);
         };
         // Under a time budget the winner is trained further from the fit it
@@ -121,7 +122,8 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             .min(MAX_COMPARED_RECORDS)
             .min(refit_rows.saturating_sub(scored_rows));
         let anew_affordable = compared >= MIN_COMPARED_RECORDS
-            && self.fit_estimate(best, refit_rows - compared) < ANEW_SHARE * self.seconds_left();
+            && self.fit_estimate(best, refit_rows - compared)
+                < ANEW_SHARE * self.plan.seconds_left();
         let train_rows = if anew_affordable {
             refit_rows - compared
         } else {
@@ -133,9 +135,9 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             to_learning_space(thetas.slice(rows), marginals),
         );
         let design = design(&winner.compressor, &winner.regressor_config);
-        self.base.progress().status(&format!(
+        self.plan.base.progress().status(&format!(
             "final fit: {design} trained further on {train_rows} records; {}",
-            self.budget_words()
+            self.plan.budget_words()
         ));
         let continued = winner.regressor_config.fit_from(
             Some(&winner.regressor),
@@ -143,37 +145,44 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             seed,
             Some(deadline),
         )?;
-        let mut late = Instant::now() >= deadline;
-        let mut chosen = continued;
-        if anew_affordable && !late {
-            self.base.progress().status(&format!(
-                "final fit: {design} anew on {train_rows} records; {}",
-                self.budget_words()
-            ));
-            let anew =
-                winner
-                    .regressor_config
-                    .fit_from(None, (x, z.view()), seed, Some(deadline))?;
-            let anew_late = Instant::now() >= deadline;
-            let rows = ndarray::s![train_rows..refit_rows, ..];
-            let (x_held, t_held) = (winner.features.slice(rows), thetas.slice(rows));
-            let score = |fitted: &FittedRegressor| -> Result<f64> {
-                Ok(held_out_score(self.base, fitted, x_held, t_held, &self.prior_sd)?.1)
+        // A fit anew starts only while time is left: the one trained
+        // further may have used it all.
+        if !(anew_affordable && Instant::now() < deadline) {
+            winner.final_fit = FinalFit::TrainedFurther {
+                rows: train_rows,
+                stopped: continued.stopped_at_deadline(),
             };
-            let fits = FinalFits {
-                compared,
-                further: score(&chosen)?,
-                anew: score(&anew)?,
-            };
-            if fits.anew < fits.further {
-                chosen = anew;
-                late = anew_late;
-            }
-            winner.final_fits = Some(fits);
+            winner.regressor = continued;
+            return Ok(winner);
         }
+        self.plan.base.progress().status(&format!(
+            "final fit: {design} anew on {train_rows} records; {}",
+            self.plan.budget_words()
+        ));
+        let anew = winner
+            .regressor_config
+            .fit_from(None, (x, z.view()), seed, Some(deadline))?;
+        let rows = ndarray::s![train_rows..refit_rows, ..];
+        let (x_held, t_held) = (winner.features.slice(rows), thetas.slice(rows));
+        let score = |fitted: &FittedRegressor| -> Result<f64> {
+            Ok(self.plan.score(fitted, x_held, t_held)?.1)
+        };
+        let fits = FinalFits {
+            compared,
+            further: score(&continued)?,
+            anew: score(&anew)?,
+        };
+        let chosen = if fits.anew < fits.further {
+            anew
+        } else {
+            continued
+        };
+        winner.final_fit = FinalFit::Compared {
+            rows: train_rows,
+            fits,
+            stopped: chosen.stopped_at_deadline(),
+        };
         winner.regressor = chosen;
-        winner.fitted_rows = train_rows;
-        winner.late_refit = late.then_some(train_rows);
         Ok(winner)
     }
 
@@ -213,6 +222,61 @@ const MIN_COMPARED_RECORDS: usize = 200;
 /// Records a fit anew and a fit trained further are compared on, at most.
 const MAX_COMPARED_RECORDS: usize = 2000;
 
+/// How the winner's shipped network was fitted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FinalFit {
+    /// The fit the winner was scored with ships: a final fit would have
+    /// had no more rows (the search scored it on the whole chart, or the
+    /// time budget left no room for more).
+    AsScored {
+        /// The rows it was fitted on.
+        rows: usize,
+    },
+    /// Fitted anew on more rows (no time budget to stop it).
+    Anew {
+        /// The rows it was fitted on.
+        rows: usize,
+    },
+    /// Trained further from the fit it was scored with, on more rows.
+    TrainedFurther {
+        /// The rows it was trained on.
+        rows: usize,
+        /// Whether the time budget's end stopped it: it ships trained as
+        /// far as it got, no worse than its start on its held-out rows.
+        stopped: bool,
+    },
+    /// Trained further and fitted anew on the same rows, the better on
+    /// added records seen by neither shipped.
+    Compared {
+        /// The rows both were trained on.
+        rows: usize,
+        /// Their scores.
+        fits: FinalFits,
+        /// Whether the time budget's end stopped the one that ships.
+        stopped: bool,
+    },
+}
+
+impl FinalFit {
+    /// The rows the shipped network was fitted on.
+    pub fn rows(&self) -> usize {
+        match *self {
+            Self::AsScored { rows }
+            | Self::Anew { rows }
+            | Self::TrainedFurther { rows, .. }
+            | Self::Compared { rows, .. } => rows,
+        }
+    }
+
+    /// Whether the time budget's end stopped the shipped fit.
+    pub fn stopped(&self) -> bool {
+        match *self {
+            Self::AsScored { .. } | Self::Anew { .. } => false,
+            Self::TrainedFurther { stopped, .. } | Self::Compared { stopped, .. } => stopped,
+        }
+    }
+}
+
 /// What the search ships: the winning structure, fitted.
 pub(crate) struct Winner {
     pub(crate) compressor: CompressorConfig,
@@ -220,12 +284,6 @@ pub(crate) struct Winner {
     pub(crate) features: Array2<f64>,
     pub(crate) regressor_config: RegressorConfig,
     pub(crate) regressor: FittedRegressor,
-    /// The chart rows the shipped network was fitted on.
-    pub(crate) fitted_rows: usize,
-    /// The rows of a refit stopped at the deadline (it ships trained as
-    /// far as it got).
-    pub(crate) late_refit: Option<usize>,
-    /// The fit trained further and the fit anew, where both ran (the
-    /// lower score shipped).
-    pub(crate) final_fits: Option<FinalFits>,
+    /// How `regressor` was fitted.
+    pub(crate) final_fit: FinalFit,
 }

@@ -12,7 +12,7 @@ use crate::number::format_f64;
 /// `failed` (the TS estimate kept).
 pub(super) fn refine_stop(refined: Option<&Result<Option<TerminationReason>, String>>) -> String {
     match refined {
-        Some(Ok(Some(stop))) => format!("{stop:?}"),
+        Some(Ok(Some(stop))) => stop.name().to_string(),
         Some(Err(_)) => "failed".into(),
         _ => String::new(),
     }

@@ -43,13 +43,41 @@ pub enum TerminationReason {
     /// An evaluation of the model failed during the run (a simulation that
     /// broke off, say): the last accepted point is the answer.
     EvaluationFailed,
+    /// Levenberg-Marquardt's iterations ran until the training's time was
+    /// up (`Mlp::stopped_by`): the best weights so far are the answer.
+    Deadline,
+    /// Adam's epochs ran until the training's time was up: the best
+    /// weights so far are the answer.
+    EpochsUntilDeadline,
 }
 
 impl TerminationReason {
+    /// The reason's name as tables and reports write it. Stable: a variant
+    /// renamed in the code keeps its name here, so files written before
+    /// still read the same.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::EarlyStopping => "EarlyStopping",
+            Self::MaxIterations => "MaxIterations",
+            Self::DampingLimit => "DampingLimit",
+            Self::Converged => "Converged",
+            Self::MaxEpochs => "MaxEpochs",
+            Self::EpochsWithoutImprovement => "EpochsWithoutImprovement",
+            Self::EvaluationFailed => "EvaluationFailed",
+            Self::Deadline => "Deadline",
+            Self::EpochsUntilDeadline => "EpochsUntilDeadline",
+        }
+    }
+
+    /// Whether the training's time ran out before the trainer's own end.
+    pub fn is_deadline(self) -> bool {
+        matches!(self, Self::Deadline | Self::EpochsUntilDeadline)
+    }
+
     /// The trainer that stops for this reason: Adam's reasons are its own.
     pub fn trainer(self) -> &'static str {
         match self {
-            Self::MaxEpochs | Self::EpochsWithoutImprovement => "Adam",
+            Self::MaxEpochs | Self::EpochsWithoutImprovement | Self::EpochsUntilDeadline => "Adam",
             _ => "Levenberg-Marquardt",
         }
     }
@@ -309,6 +337,35 @@ impl LevenbergMarquardt {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Tables and reports write these names: they stay what they were when
+    /// a reason was added, whatever the variants are called in the code;
+    /// and every reason's place in a stored file (its serde index) stays.
+    #[test]
+    fn reasons_keep_their_names_and_places() {
+        let all = [
+            (TerminationReason::EarlyStopping, "EarlyStopping"),
+            (TerminationReason::MaxIterations, "MaxIterations"),
+            (TerminationReason::DampingLimit, "DampingLimit"),
+            (TerminationReason::Converged, "Converged"),
+            (TerminationReason::MaxEpochs, "MaxEpochs"),
+            (
+                TerminationReason::EpochsWithoutImprovement,
+                "EpochsWithoutImprovement",
+            ),
+            (TerminationReason::EvaluationFailed, "EvaluationFailed"),
+            (TerminationReason::Deadline, "Deadline"),
+            (
+                TerminationReason::EpochsUntilDeadline,
+                "EpochsUntilDeadline",
+            ),
+        ];
+        for (index, (reason, name)) in all.into_iter().enumerate() {
+            assert_eq!(reason.name(), name);
+            let stored = postcard::to_allocvec(&reason).unwrap();
+            assert_eq!(stored, vec![u8::try_from(index).unwrap()], "{name}");
+        }
+    }
 
     /// A linear problem r = A x - b: one Gauss-Newton step from anywhere
     /// lands on the least-squares solution, found independently here from

@@ -115,9 +115,9 @@ impl FittedMlp {
             (lm, adam) => format!("{lm} restarts by Levenberg-Marquardt, {adam} by Adam"),
         };
         format!(
-            "{}, stopped by {:?} (best of {restarts})",
+            "{}, stopped by {} (best of {restarts})",
             best.reason.trainer(),
-            best.reason
+            best.reason.name()
         )
     }
 

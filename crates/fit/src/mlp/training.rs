@@ -237,6 +237,7 @@ fn train_adam(
             break;
         }
         if out_of_time(mlp) {
+            reason = TerminationReason::EpochsUntilDeadline;
             break;
         }
     }
@@ -271,9 +272,13 @@ fn train_levenberg_marquardt(
         .damping(Damping::Identity)
         .initial_damping(1e-3)
         .max_damping(1e10);
+    let mut timed_out = false;
     let Ok(minimum) = solver.minimize(&mut least_squares, &params, |iterate| {
         let held = problem.mse(iterate.x, held_out);
-        if best.observe(held, iterate.x) || out_of_time(mlp) {
+        if best.observe(held, iterate.x) {
+            ControlFlow::Break(())
+        } else if out_of_time(mlp) {
+            timed_out = true;
             ControlFlow::Break(())
         } else {
             ControlFlow::Continue(())
@@ -283,7 +288,11 @@ fn train_levenberg_marquardt(
     let report = RestartReport {
         restart,
         iterations: minimum.iterations,
-        reason: minimum.reason,
+        reason: if timed_out {
+            TerminationReason::Deadline
+        } else {
+            minimum.reason
+        },
         train_mse: problem.mse(&kept, problem.train),
         validation_mse,
     };
