@@ -83,10 +83,9 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
         t.simulations,
         t.failures,
         t.seed,
-        if t.sampling.starts_with("the chart") {
-            format!("from {}", t.sampling)
-        } else {
-            format!("simulated, {} design", t.sampling)
+        match t.chart() {
+            Some(chart) => format!("from {chart}"),
+            None => format!("simulated, {} design", t.sampling),
         }
     )?;
     match e.validation() {

@@ -217,10 +217,9 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         if let Some(trained_by) = estimator.regressor().training_summary() {
             writeln!(out, "stage 2: {trained_by}")?;
         }
-        let sampling = &estimator.training().sampling;
-        if sampling.starts_with("the chart") {
+        if let Some(chart) = estimator.training().chart() {
             // The certificate covers records drawn as the chart's were.
-            writeln!(out, "trained on {sampling}")?;
+            writeln!(out, "trained on {chart}")?;
         }
         if let Some(report) = estimator.validation() {
             writeln!(out, "{report}")?;

@@ -13,9 +13,10 @@ use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
 use crate::layout::{EstimatorFields, Stages, V1, V2, V3};
 use crate::space::{rows_to_estimates, to_estimate};
-pub use crate::stored::{RecordShape, SignalNames, TrainingInfo};
+pub use crate::stored::{SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
 use twostage_fit::FittedRegressor;
+pub use twostage_models::RecordShape;
 
 /// Scratch space for [`Estimator::estimate_into`]: keep one per thread and
 /// estimates allocate nothing.
@@ -632,12 +633,7 @@ impl Estimator {
             param_names: spec.param_names().to_vec(),
             lower: prior.lower().to_vec(),
             upper: prior.upper().to_vec(),
-            shape: RecordShape {
-                n_samples: spec.n_samples(),
-                n_inputs: spec.input_names().len(),
-                n_outputs: spec.output_names().len(),
-                sample_time: spec.sample_time(),
-            },
+            shape: spec.record_shape(),
             compressor,
             regressor,
             training,

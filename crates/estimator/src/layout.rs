@@ -11,9 +11,10 @@ use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, Val
 
 use crate::adaptive::AdaptiveIntervals;
 use crate::envelope::FeatureEnvelope;
-use crate::stored::{RecordShape, SignalNames, TrainingInfo};
+use crate::stored::{SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
 use twostage_fit::FittedRegressor;
+use twostage_models::RecordShape;
 
 /// A parameter's validation before format version 4: no betting
 /// certificate.

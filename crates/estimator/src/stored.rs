@@ -1,7 +1,7 @@
 //! The plain records an estimator stores about itself: what it was
-//! trained on, the records it takes, and their signals' names. Both the
-//! estimator and the file layouts read them, so they stand apart from
-//! both.
+//! trained on and its signals' names (the records it takes are a
+//! [`twostage_models::RecordShape`]). Both the estimator and the file
+//! layouts read them, so they stand apart from both.
 
 use serde::{Deserialize, Serialize};
 use twostage_fit::RegressorConfig;
@@ -17,7 +17,9 @@ pub struct TrainingInfo {
     pub failures: usize,
     /// The training seed.
     pub seed: u64,
-    /// The design that placed the training parameters.
+    /// The design that placed the training parameters (its name, as
+    /// [`twostage_models::Sampling::name`] writes it), or the chart the
+    /// records were read from ([`Self::chart`]).
     pub sampling: String,
     /// The stage-2 method as configured.
     pub regressor: RegressorConfig,
@@ -25,17 +27,14 @@ pub struct TrainingInfo {
     pub version: String,
 }
 
-/// The signals and sampling a record must have.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RecordShape {
-    /// Samples per record the estimator was trained on.
-    pub n_samples: usize,
-    /// Input signals.
-    pub n_inputs: usize,
-    /// Output signals.
-    pub n_outputs: usize,
-    /// Sampling time.
-    pub sample_time: f64,
+impl TrainingInfo {
+    /// The chart the training records were read from, described, where
+    /// they were not simulated.
+    pub fn chart(&self) -> Option<&str> {
+        self.sampling
+            .starts_with(twostage_sources::CHART_WORDS)
+            .then_some(self.sampling.as_str())
+    }
 }
 
 /// The names of a model's input and output signals.

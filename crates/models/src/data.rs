@@ -182,3 +182,18 @@ mod tests {
         assert!(data.output(1).iter().all(|v| v.to_bits() == 0));
     }
 }
+
+/// The signals and sampling a record must have: one shape for a model's
+/// records, an estimator's and a shard's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct RecordShape {
+    /// Samples per record the estimator was trained on.
+    pub n_samples: usize,
+    /// Input signals.
+    pub n_inputs: usize,
+    /// Output signals.
+    pub n_outputs: usize,
+    /// Sampling time.
+    pub sample_time: f64,
+}

@@ -62,7 +62,7 @@ pub use benchmark::{
     PROCESS_NOISE_VARIANCE,
 };
 pub use builtin::{BuiltinModel, BuiltinOverrides};
-pub use data::IoData;
+pub use data::{IoData, RecordShape};
 pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;

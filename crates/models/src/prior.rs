@@ -9,7 +9,10 @@ use crate::rng::{ExperimentRng, StreamPurpose, stream_rng};
 use crate::sobol::{self, Sobol};
 
 /// How the `m` parameter vectors of a chart are placed in the prior box.
+///
+/// Stored in shard files by its serde index: new designs go at the end.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[non_exhaustive]
 pub enum Sampling {
     /// Independent uniform draws (the paper's choice, Section 4.1).
@@ -22,6 +25,25 @@ pub enum Sampling {
     /// [`Prior::MAX_SOBOL_DIMENSION`] parameters) with a random digital shift
     /// drawn from the seed, so that designs of different seeds differ.
     Sobol,
+}
+
+impl Sampling {
+    /// The design's name as files and reports write it ("Uniform",
+    /// "LatinHypercube", "Sobol"). Stable: a variant renamed in the code
+    /// keeps its name here.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Uniform => "Uniform",
+            Self::LatinHypercube => "LatinHypercube",
+            Self::Sobol => "Sobol",
+        }
+    }
+}
+
+impl std::fmt::Display for Sampling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// A prior of independent parameters, each with its [`Marginal`]
@@ -386,6 +408,18 @@ pub fn random_permutation(m: usize, rng: &mut ExperimentRng) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Estimator files hold these names (written before they existed as
+    /// the designs' debug text): they never change.
+    #[test]
+    fn designs_keep_the_names_files_hold() {
+        let names: Vec<&str> = [Sampling::Uniform, Sampling::LatinHypercube, Sampling::Sobol]
+            .iter()
+            .map(|s| s.name())
+            .collect();
+        assert_eq!(names, ["Uniform", "LatinHypercube", "Sobol"]);
+        assert_eq!(Sampling::Sobol.to_string(), "Sobol");
+    }
 
     fn draws(prior: &Prior, m: usize, seed: u64) -> Vec<Vec<f64>> {
         let design = prior.design(m, seed).unwrap();

@@ -133,6 +133,17 @@ impl ModelSpec {
     pub fn noise_note(&self) -> &str {
         &self.noise_note
     }
+    /// The shape of this model's records: samples, signals, sampling
+    /// time.
+    pub fn record_shape(&self) -> crate::RecordShape {
+        crate::RecordShape {
+            n_samples: self.n_samples,
+            n_inputs: self.input_names.len(),
+            n_outputs: self.output_names.len(),
+            sample_time: self.sample_time,
+        }
+    }
+
     /// A zero record of this model's shape.
     pub fn new_record(&self) -> IoData {
         IoData::zeros(

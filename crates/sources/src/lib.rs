@@ -53,6 +53,6 @@ pub use profile::{
     recommended_pacejka,
 };
 pub use progress::{Progress, Silent, Stage};
-pub use records::{ForModel, RecordSource, Records, RunShape};
-pub use roles::ChartRole;
+pub use records::{CHART_WORDS, ForModel, RecordSource, Records, RunShape};
+pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};

@@ -15,7 +15,7 @@ use crate::chart::{
 use crate::chart_file::ChartFiles;
 use crate::error::{Error, Result};
 use crate::progress::{Progress, Stage};
-use crate::roles::{ChartRole, held_out_roles};
+use crate::roles::{ChartRole, RoleCounts, held_out_roles};
 use crate::shard::ShardedChart;
 use twostage_compress::CompressorConfig;
 
@@ -92,6 +92,10 @@ fn stage(role: ChartRole) -> Stage {
     }
 }
 
+/// How an estimator's record of its training begins where the records
+/// were read from a chart, not simulated ([`Records::sampling`]).
+pub const CHART_WORDS: &str = "the chart";
+
 /// A source opened for one run: it knows the run's sizes, seed and
 /// failure allowance, and hands out each role's records compressed.
 pub struct Records<'a, S: ?Sized> {
@@ -99,7 +103,7 @@ pub struct Records<'a, S: ?Sized> {
     kind: Kind<'a>,
     training_prior: Prior,
     /// Records of the training, calibration and validation roles.
-    counts: [usize; 3],
+    counts: RoleCounts,
     seed: u64,
     max_failure_fraction: f64,
     progress: &'a dyn Progress,
@@ -124,7 +128,7 @@ pub struct RunShape<'a> {
     /// The prior the training records are drawn from, as it samples.
     pub training_prior: Prior,
     /// Training simulations, calibration and validation records asked for.
-    pub counts: [usize; 3],
+    pub counts: RoleCounts,
     /// The run's seed.
     pub seed: u64,
     /// Share of failed records tolerated per role.
@@ -155,8 +159,16 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                 validation,
             } => {
                 let m = training.len();
-                let held_calibration = if calibration.is_some() { 0 } else { counts[1] };
-                let held_validation = if validation.is_some() { 0 } else { counts[2] };
+                let held_calibration = if calibration.is_some() {
+                    0
+                } else {
+                    counts.calibration
+                };
+                let held_validation = if validation.is_some() {
+                    0
+                } else {
+                    counts.validation
+                };
                 let held = held_validation + held_calibration;
                 if m < held + 10 {
                     return Err(Error::InvalidSetting {
@@ -171,7 +183,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                         ),
                     });
                 }
-                counts = [m - held, held_calibration, held_validation];
+                counts = RoleCounts::new(m - held, held_calibration, held_validation);
                 Kind::Files {
                     chart: training,
                     own: [None, calibration, validation],
@@ -208,14 +220,13 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
             Kind::Shards(chart) => match &chart.plan().compressor {
                 Some(stored_text) => {
                     let stored: CompressorConfig = stored_text.parse()?;
-                    let stored = stored.for_model(self.spec())?;
-                    if stored.to_string() != compressor.to_string() {
+                    if stored.for_model(self.spec())? != compressor {
                         return Err(Error::Shards {
                             what: chart.pattern().to_string(),
                             message: format!(
-                                "the shards hold features of {stored_text} ({stored}), the \
-                                 training asks for {compressor}: train with --compress \
-                                 {stored_text} (or simulate raw shards)"
+                                "the shards hold features of {stored_text}, the training asks \
+                                 for {compressor}: train with --compress {stored_text} (or \
+                                 simulate raw shards)"
                             ),
                         });
                     }
@@ -226,8 +237,11 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
             },
             _ if count == 0 => Ok(compressor),
             Kind::Simulated => {
-                let design =
-                    ChartRole::Training.design(&self.training_prior, self.counts[0], self.seed)?;
+                let design = ChartRole::Training.design(
+                    &self.training_prior,
+                    self.counts.training,
+                    self.seed,
+                )?;
                 let chart = simulate_records(self.simulator, &design, count, 0.0, None)?;
                 compressor.prepared_on(&chart.records)
             }
@@ -263,7 +277,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
         role: ChartRole,
         compressor: &CompressorConfig,
     ) -> Result<Option<CompressedChart>> {
-        let count = self.counts[role.slot()];
+        let count = self.counts[role];
         let chart = match &self.kind {
             Kind::Files { own, .. } if own[role.slot()].is_some() => {
                 let given = own[role.slot()].unwrap_or_else(|| unreachable!("checked above"));
@@ -318,7 +332,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     /// Too many failed records, shards that hold features, or a file
     /// problem of the source.
     pub fn stored_training(&self) -> Result<(StoredChart, usize)> {
-        let count = self.counts[ChartRole::Training.slot()];
+        let count = self.counts.training;
         match &self.kind {
             Kind::Simulated => {
                 let design = ChartRole::Training.design(&self.training_prior, count, self.seed)?;
@@ -402,27 +416,28 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     /// Training records the run has (simulated: asked for; read: those
     /// left after the held-out ones).
     pub fn training_count(&self) -> usize {
-        self.counts[ChartRole::Training.slot()]
+        self.counts.training
     }
 
-    /// How the training records were drawn, for the estimator's record.
+    /// How the training records were drawn, for the estimator's record:
+    /// the sampling design's name, or [`CHART_WORDS`] and the chart.
     pub fn sampling(&self) -> String {
         match &self.kind {
-            Kind::Simulated => format!("{:?}", self.training_prior.sampling()),
-            Kind::Shards(chart) => chart.sampling().to_string(),
+            Kind::Simulated => self.training_prior.sampling().name().to_string(),
+            Kind::Shards(chart) => chart.sampling().name().to_string(),
             Kind::Files { chart, own, .. } => {
-                let source = |slot: usize| match own[slot] {
-                    Some(c) => format!("the chart {}", c.describe()),
-                    None if self.counts[slot] > 0 => {
-                        format!("{} records held out of it at random", self.counts[slot])
+                let source = |role: ChartRole| match own[role.slot()] {
+                    Some(c) => format!("{CHART_WORDS} {}", c.describe()),
+                    None if self.counts[role] > 0 => {
+                        format!("{} records held out of it at random", self.counts[role])
                     }
                     None => "none".into(),
                 };
                 format!(
-                    "the chart {} (calibration: {}; validation: {})",
+                    "{CHART_WORDS} {} (calibration: {}; validation: {})",
                     chart.describe(),
-                    source(1),
-                    source(2)
+                    source(ChartRole::Calibration),
+                    source(ChartRole::Validation)
                 )
             }
         }
@@ -506,7 +521,7 @@ mod tests {
             RecordSource::Simulated,
             RunShape {
                 training_prior: model.spec().prior().clone().with_sampling(sampling),
-                counts: [m, 0, 0],
+                counts: RoleCounts::new(m, 0, 0),
                 seed: 11,
                 max_failure_fraction: 0.0,
                 progress: &Silent,

@@ -63,6 +63,53 @@ impl ChartRole {
     }
 }
 
+/// How many records each chart of a run holds, one count per
+/// [`ChartRole`].
+///
+/// ```
+/// use twostage_sources::{ChartRole, RoleCounts};
+/// let counts = RoleCounts::new(800, 4000, 100);
+/// assert_eq!(counts[ChartRole::Calibration], 4000);
+/// assert_eq!(counts.total(), 4900);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct RoleCounts {
+    /// Training records (simulations asked for, or the chart's left after
+    /// the held-out ones).
+    pub training: usize,
+    /// Records that calibrate the intervals.
+    pub calibration: usize,
+    /// Records that validate the estimator.
+    pub validation: usize,
+}
+
+impl RoleCounts {
+    /// The counts of the training, calibration and validation charts.
+    pub fn new(training: usize, calibration: usize, validation: usize) -> Self {
+        Self {
+            training,
+            calibration,
+            validation,
+        }
+    }
+
+    /// All records of the run.
+    pub fn total(&self) -> usize {
+        self.training + self.calibration + self.validation
+    }
+}
+
+impl std::ops::Index<ChartRole> for RoleCounts {
+    type Output = usize;
+    fn index(&self, role: ChartRole) -> &usize {
+        match role {
+            ChartRole::Training => &self.training,
+            ChartRole::Calibration => &self.calibration,
+            ChartRole::Validation => &self.validation,
+        }
+    }
+}
+
 /// Roles for the `m` records of one chart read from files: `validation`
 /// and `calibration` of them held out by a seeded permutation (the first
 /// ranks validate, the next calibrate), the rest train. Indexed by the

@@ -266,12 +266,11 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             }
             .into());
         }
-        let [m, calibration, validation] = plan.counts;
         self.settings.seed = Some(plan.seed);
-        self.simulations = m;
-        self.settings.calibration = calibration;
-        self.settings.validation = validation;
-        let sampling = format!("{:?}", self.training_prior().sampling());
+        self.simulations = plan.counts.training;
+        self.settings.calibration = plan.counts.calibration;
+        self.settings.validation = plan.counts.validation;
+        let sampling = self.training_prior().sampling();
         if sampling != chart.sampling() {
             return Err(twostage_sources::Error::Shards {
                 what: chart.pattern().to_string(),
@@ -292,11 +291,11 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             self.records,
             RunShape {
                 training_prior: self.training_prior(),
-                counts: [
+                counts: twostage_sources::RoleCounts::new(
                     self.simulations,
                     self.settings.calibration,
                     self.settings.validation,
-                ],
+                ),
                 seed: self.seed_value(),
                 max_failure_fraction: self.settings.max_failure_fraction,
                 progress: self.progress,

@@ -289,7 +289,7 @@ impl TrainingRequest {
     ///     ..TrainingRequest::default()
     /// };
     /// let plan = request.shard_plan(&NamedModel::File(Box::new(file)))?;
-    /// assert_eq!(plan.counts, [800, 4000, 100]);
+    /// assert_eq!(plan.counts, twostage::sources::RoleCounts::new(800, 4000, 100));
     /// assert_eq!(plan.seed, 1);
     /// # Ok::<(), twostage::Error>(())
     /// ```
@@ -307,11 +307,11 @@ impl TrainingRequest {
             model: model.name().to_string(),
             model_fingerprint: model.fingerprint(),
             seed: self.settings.seed_or_default(),
-            counts: [
+            counts: twostage_sources::RoleCounts::new(
                 simulations,
                 self.settings.calibration,
                 self.settings.validation,
-            ],
+            ),
             compressor: self.compress.clone(),
         })
     }
@@ -414,9 +414,9 @@ impl TrainingRequest {
                     "merging {} shards: {} training, {} calibration and {} validation records, \
                      seed {}",
                     chart.files().len(),
-                    plan.counts[0],
-                    plan.counts[1],
-                    plan.counts[2],
+                    plan.counts.training,
+                    plan.counts.calibration,
+                    plan.counts.validation,
                     plan.seed
                 ));
                 run(builder.records(RecordSource::Shards(&chart)))

@@ -5,13 +5,18 @@
 use std::path::{Path, PathBuf};
 
 use twostage::models::{Benchmark, Simulator};
+use twostage::sources::RoleCounts;
 use twostage::{
     CompressorConfig, RecordSource, RegressorConfig, ShardIndex, ShardPlan, ShardedChart, TwoStage,
     simulate_shard,
 };
 
 const SEED: u64 = 5;
-const COUNTS: [usize; 3] = [240, 120, 80];
+const COUNTS: RoleCounts = RoleCounts {
+    training: 240,
+    calibration: 120,
+    validation: 80,
+};
 
 fn model() -> Benchmark {
     Benchmark::builder().n_samples(200).build().unwrap()
@@ -21,9 +26,9 @@ fn builder<'a>(model: &'a Benchmark, compress: &str) -> TwoStage<'a, Benchmark> 
     TwoStage::builder(model)
         .compressor(compress.parse::<CompressorConfig>().unwrap())
         .regressor("mlp:4".parse::<RegressorConfig>().unwrap())
-        .simulations(COUNTS[0])
-        .calibration(COUNTS[1])
-        .validation(COUNTS[2])
+        .simulations(COUNTS.training)
+        .calibration(COUNTS.calibration)
+        .validation(COUNTS.validation)
         .seed(SEED)
 }
 
@@ -163,6 +168,19 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
         .to_string();
     assert!(
         err.contains("shard-00000-of-00004") && err.contains("ends"),
+        "{err}"
+    );
+
+    // A shard of an older format (its header's first byte, after the
+    // magic and the header's length, is the format): named by it, with
+    // what to do, not misread.
+    let mut older = original.clone();
+    assert_eq!(older[16], 2, "the format this test knows");
+    older[16] = 1;
+    std::fs::write(&files[0], &older).unwrap();
+    let err = open_error(&pattern(&dir));
+    assert!(
+        err.contains("shard format 1, this twostage reads 2") && err.contains("simulate"),
         "{err}"
     );
 

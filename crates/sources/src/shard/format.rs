@@ -6,7 +6,7 @@ use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
-use twostage_models::IoData;
+use twostage_models::{IoData, RecordShape, Sampling};
 
 use super::{ShardIndex, ShardPlan};
 use crate::error::{Error, Result};
@@ -14,16 +14,18 @@ use crate::error::{Error, Result};
 /// Starts every shard file.
 pub(super) const MAGIC: &[u8; 8] = b"TSSHARD\0";
 /// The layout of the header and the records; bumped on any change.
-pub(super) const SHARD_FORMAT: u32 = 1;
+/// Format 2 stores the sampling design, the record shape and the
+/// compressor as typed values (format 1: as text and a bare triple).
+pub(super) const SHARD_FORMAT: u32 = 2;
 /// The header of a shard file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(super) struct Header {
     pub(super) format: u32,
     pub(super) plan: ShardPlan,
-    /// `format!("{:?}")` of the training prior's sampling.
-    pub(super) sampling: String,
+    /// The training prior's sampling design.
+    pub(super) sampling: Sampling,
     pub(super) param_names: Vec<String>,
-    pub(super) shape: [usize; 3],
+    pub(super) shape: RecordShape,
     pub(super) shard: usize,
     pub(super) shards: usize,
 }
@@ -91,6 +93,15 @@ pub(super) fn read_part<R: Read, T: serde::de::DeserializeOwned>(
     input: &mut Checksummed<R>,
     what: &str,
 ) -> std::result::Result<T, String> {
+    let bytes = read_part_bytes(input, what)?;
+    postcard::from_bytes(&bytes).map_err(|e| format!("{what} cannot be read ({e})"))
+}
+
+/// One length-prefixed part's bytes, checksummed.
+pub(super) fn read_part_bytes<R: Read>(
+    input: &mut Checksummed<R>,
+    what: &str,
+) -> std::result::Result<Vec<u8>, String> {
     let mut length = [0u8; 8];
     input
         .inner
@@ -107,7 +118,7 @@ pub(super) fn read_part<R: Read, T: serde::de::DeserializeOwned>(
         .map_err(|e| format!("the file ends inside {what} ({e})"))?;
     input.hasher.update(&length);
     input.hasher.update(&bytes);
-    postcard::from_bytes(&bytes).map_err(|e| format!("{what} cannot be read ({e})"))
+    Ok(bytes)
 }
 
 /// A record's signals back from [`flatten`].
@@ -146,14 +157,20 @@ pub(super) fn read_header(file: &Path) -> Result<Header> {
             "not a twostage shard file (written by twostage simulate --shard)".into(),
         ));
     }
-    let header: Header = read_part(&mut input, "the header").map_err(fail)?;
-    if header.format != SHARD_FORMAT {
+    // The format leads the header in every version: read it alone first,
+    // so that an older header is named by its format, not misread.
+    let bytes = read_part_bytes(&mut input, "the header").map_err(fail)?;
+    let format = postcard::take_from_bytes::<u32>(&bytes)
+        .map_err(|e| fail(format!("the header is damaged: {e}")))?
+        .0;
+    if format != SHARD_FORMAT {
         return Err(fail(format!(
-            "shard format {}, this twostage reads {SHARD_FORMAT}: simulate the shards with \
-             this version",
-            header.format
+            "shard format {format}, this twostage reads {SHARD_FORMAT}: simulate the shards \
+             again with this version (twostage simulate --shard, or twostage slurm)"
         )));
     }
+    let header: Header =
+        postcard::from_bytes(&bytes).map_err(|e| fail(format!("the header is damaged: {e}")))?;
     if header.shards == 0 || header.shard >= header.shards {
         return Err(fail(format!(
             "shard {} of {}: the header is damaged",

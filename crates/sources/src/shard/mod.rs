@@ -17,12 +17,12 @@ use std::path::{Path, PathBuf};
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
-use twostage_models::{IoData, Simulator};
+use twostage_models::{IoData, RecordShape, Sampling, Simulator};
 
 use crate::chart::{CompressedChart, ExperimentFailure, StoredChart, simulate_range};
 use crate::error::{Error, Result};
 use crate::records::ForModel;
-use crate::roles::ChartRole;
+use crate::roles::{ChartRole, RoleCounts};
 use twostage_compress::CompressorConfig;
 
 mod format;
@@ -59,9 +59,10 @@ pub struct ShardPlan {
     /// The seed of the run.
     pub seed: u64,
     /// Records of the training, calibration and validation charts.
-    pub counts: [usize; 3],
-    /// The stage-1 compressor the records were compressed with, or `None`
-    /// for raw records.
+    pub counts: RoleCounts,
+    /// The stage-1 compressor the records were compressed with, as the
+    /// user wrote it (`arx:2,2`; compared by the configuration it parses
+    /// to), or `None` for raw records.
     pub compressor: Option<String>,
 }
 
@@ -71,14 +72,14 @@ pub struct ShardPlan {
 /// preparation: ARX, AR or raw).
 ///
 /// ```
-/// use twostage_sources::{ShardIndex, ShardPlan, ShardedChart, simulate_shard};
+/// use twostage_sources::{RoleCounts, ShardIndex, ShardPlan, ShardedChart, simulate_shard};
 /// use twostage_models::{Benchmark, Simulator};
 /// let model = Benchmark::builder().n_samples(200).build()?;
 /// let plan = ShardPlan {
 ///     model: "benchmark".into(),
 ///     model_fingerprint: 7,
 ///     seed: 3,
-///     counts: [40, 0, 10],
+///     counts: RoleCounts::new(40, 0, 10),
 ///     compressor: Some("arx:2,2".into()),
 /// };
 /// let dir = std::env::temp_dir().join(format!("shards-doc-{}", std::process::id()));
@@ -86,7 +87,7 @@ pub struct ShardPlan {
 ///     simulate_shard(&model, &plan, ShardIndex { index: i, count: 2 }, &dir)?;
 /// }
 /// let chart = ShardedChart::open(&format!("{}/shard-*", dir.display()))?;
-/// assert_eq!(chart.plan().counts, [40, 0, 10]);
+/// assert_eq!(chart.plan().counts, RoleCounts::new(40, 0, 10));
 /// # std::fs::remove_dir_all(&dir).ok();
 /// # Ok::<(), twostage_sources::Error>(())
 /// ```
@@ -123,13 +124,9 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
     let header = Header {
         format: SHARD_FORMAT,
         plan: plan.clone(),
-        sampling: format!("{:?}", spec.prior().sampling()),
+        sampling: spec.prior().sampling(),
         param_names: spec.param_names().to_vec(),
-        shape: [
-            spec.n_samples(),
-            spec.input_names().len(),
-            spec.output_names().len(),
-        ],
+        shape: spec.record_shape(),
         shard: shard.index,
         shards: shard.count,
     };
@@ -150,7 +147,7 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
     out.inner.write_all(MAGIC).map_err(io)?;
     write_part(&mut out, &header).map_err(io)?;
     for role in ChartRole::ALL {
-        let m = plan.counts[role.slot()];
+        let m = plan.counts[role];
         let range = shard.range(m);
         write_part(&mut out, &(range.start as u64, range.end as u64)).map_err(io)?;
         if range.is_empty() {
@@ -299,10 +296,10 @@ impl ShardedChart {
                 .map(|&i| {
                     let shard = ShardIndex { index: i, count: n };
                     let parts: Vec<String> = ChartRole::ALL
-                        .iter()
-                        .filter(|r| first.plan.counts[r.slot()] > 0)
+                        .into_iter()
+                        .filter(|&r| first.plan.counts[r] > 0)
                         .map(|r| {
-                            let range = shard.range(first.plan.counts[r.slot()]);
+                            let range = shard.range(first.plan.counts[r]);
                             format!("{} [{}, {})", r.label(), range.start, range.end)
                         })
                         .collect();
@@ -348,8 +345,8 @@ impl ShardedChart {
     }
 
     /// The training prior's sampling the shards were drawn with.
-    pub fn sampling(&self) -> &str {
-        &self.header.sampling
+    pub fn sampling(&self) -> Sampling {
+        self.header.sampling
     }
 
     /// Check the shards against the model they are trained for.
@@ -357,29 +354,27 @@ impl ShardedChart {
     /// # Errors
     /// [`Error::Shards`] when their parameters or record shape differ.
     pub fn check_model(&self, spec: &twostage_models::ModelSpec) -> Result<()> {
-        let shape = [
-            spec.n_samples(),
-            spec.input_names().len(),
-            spec.output_names().len(),
-        ];
+        let (held, wanted) = (self.header.shape, spec.record_shape());
         let fail = |message: String| Error::Shards {
             what: self.pattern.clone(),
             message,
         };
-        if self.header.param_names != spec.param_names() || self.header.shape != shape {
+        if self.header.param_names != spec.param_names() || held != wanted {
             return Err(fail(format!(
-                "the shards hold {} ({}; {} samples of {} inputs and {} outputs), not the model \
-                 {} ({}; {} samples of {} and {})",
+                "the shards hold {} ({}; {} samples of {} inputs and {} outputs every {} s), not \
+                 the model {} ({}; {} samples of {} and {} every {} s)",
                 self.header.plan.model,
                 self.header.param_names.join(", "),
-                self.header.shape[0],
-                self.header.shape[1],
-                self.header.shape[2],
+                held.n_samples,
+                held.n_inputs,
+                held.n_outputs,
+                held.sample_time,
                 spec.name(),
                 spec.param_names().join(", "),
-                shape[0],
-                shape[1],
-                shape[2]
+                wanted.n_samples,
+                wanted.n_inputs,
+                wanted.n_outputs,
+                wanted.sample_time
             )));
         }
         Ok(())
@@ -393,14 +388,19 @@ impl ShardedChart {
         role: ChartRole,
         compressor: &CompressorConfig,
     ) -> Result<CompressedChart> {
-        let m = self.header.plan.counts[role.slot()];
+        let m = self.header.plan.counts[role];
         let q = self.header.param_names.len();
         let n = compressor.n_features();
         let stored_features = self.header.plan.compressor.is_some();
         let (mut thetas, mut features) = (Vec::with_capacity(m * q), Vec::with_capacity(m * n));
         let (mut indices, mut failures) = (Vec::with_capacity(m), Vec::new());
         let mut work = Workspace::new();
-        let [samples, n_u, n_y] = self.header.shape;
+        let RecordShape {
+            n_samples: samples,
+            n_inputs: n_u,
+            n_outputs: n_y,
+            ..
+        } = self.header.shape;
         let mut record = IoData::zeros(samples, n_u, n_y);
         self.for_each(role, |index, stored| {
             let (theta, values) = match stored {
@@ -468,7 +468,12 @@ impl ShardedChart {
                 ),
             });
         }
-        let [samples, n_u, n_y] = self.header.shape;
+        let RecordShape {
+            n_samples: samples,
+            n_inputs: n_u,
+            n_outputs: n_y,
+            ..
+        } = self.header.shape;
         let q = self.header.param_names.len();
         let (mut thetas, mut records, mut failures) = (Vec::new(), Vec::new(), Vec::new());
         self.for_each(ChartRole::Training, |index, stored| {
@@ -495,7 +500,12 @@ impl ShardedChart {
     /// The first `count` training records that were simulated (raw shards
     /// only), for a compressor fitted on them.
     pub(crate) fn first_training_records(&self, count: usize) -> Result<Vec<IoData>> {
-        let [samples, n_u, n_y] = self.header.shape;
+        let RecordShape {
+            n_samples: samples,
+            n_inputs: n_u,
+            n_outputs: n_y,
+            ..
+        } = self.header.shape;
         let mut records = Vec::with_capacity(count);
         let (mut seen, mut failed) = (0, None);
         self.for_each(ChartRole::Training, |index, stored| {
@@ -557,7 +567,7 @@ impl ShardedChart {
                     index: i,
                     count: self.header.shards,
                 }
-                .range(self.header.plan.counts[r.slot()]);
+                .range(self.header.plan.counts[r]);
                 if range != its {
                     return Err(fail(format!(
                         "its {} records are [{start}, {end}), shard {i} of {} should hold [{}, {})",
@@ -597,9 +607,9 @@ fn describe(header: &Header) -> String {
         "model {}, seed {}, {} training, {} calibration and {} validation records, {}, {} shards",
         header.plan.model,
         header.plan.seed,
-        header.plan.counts[0],
-        header.plan.counts[1],
-        header.plan.counts[2],
+        header.plan.counts.training,
+        header.plan.counts.calibration,
+        header.plan.counts.validation,
         header.plan.compressor.as_deref().map_or_else(
             || "raw records".to_string(),
             |c| format!("compressed by {c}")
