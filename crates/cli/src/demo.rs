@@ -3,6 +3,7 @@
 use std::io::Write;
 use std::time::Instant;
 
+use crate::OrUsage;
 use anyhow::{Context, Result};
 use twostage::models::{Benchmark, Simulator, experiment_rng};
 use twostage::{EstimateWorkspace, TwoStage};
@@ -25,7 +26,7 @@ pub fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<()> {
     model
         .prior()
         .check(&[args.theta], model.param_names(), false)
-        .map_err(|e| crate::usage(format!("--theta: {e}")))?;
+        .usage_context("--theta")?;
     writeln!(
         out,
         "Training the two-stage estimator of the paper's benchmark (eq. 5):\n  \

@@ -38,7 +38,7 @@ pub fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
                 .to_runtime()
                 .with_context(|| format!("exporting {}", args.estimator.display()))?;
             let runtime = twostage::runtime::Estimator::from_bytes(&blob)
-                .map_err(|e| anyhow::anyhow!("the exported blob does not read back: {e}"))?;
+                .context("the exported blob does not read back")?;
             twostage::write_whole(&args.out, &blob)?;
             writeln!(
                 out,

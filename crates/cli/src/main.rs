@@ -75,19 +75,60 @@ enum Command {
 
 /// A mistake in how the command was called: exit code 2, like clap's own.
 #[derive(Debug)]
-pub struct UsageError(String);
+pub enum UsageError {
+    /// Said in words.
+    Said(String),
+    /// A library's error about what the user gave, kept as it is (its
+    /// causes with it).
+    Caused(Box<dyn std::error::Error + Send + Sync>),
+}
 
 impl fmt::Display for UsageError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
+        match self {
+            Self::Said(message) => f.write_str(message),
+            Self::Caused(error) => fmt::Display::fmt(error, f),
+        }
     }
 }
 
-impl std::error::Error for UsageError {}
+impl std::error::Error for UsageError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Said(_) => None,
+            Self::Caused(error) => error.source(),
+        }
+    }
+}
 
 /// Wrap a usage mistake so that `main` exits with code 2.
 pub fn usage(message: String) -> anyhow::Error {
-    anyhow::Error::new(UsageError(message))
+    anyhow::Error::new(UsageError::Said(message))
+}
+
+/// A library's error as a usage mistake (exit code 2), the error kept.
+pub trait OrUsage<T> {
+    /// The error as it is, marked as the user's mistake.
+    ///
+    /// # Errors
+    /// The error of `self`.
+    fn or_usage(self) -> anyhow::Result<T>;
+    /// The error in the context of `what` (an option, a file), marked as
+    /// the user's mistake.
+    ///
+    /// # Errors
+    /// The error of `self`.
+    fn usage_context(self, what: &str) -> anyhow::Result<T>;
+}
+
+impl<T, E: std::error::Error + Send + Sync + 'static> OrUsage<T> for Result<T, E> {
+    fn or_usage(self) -> anyhow::Result<T> {
+        self.map_err(|e| anyhow::Error::new(UsageError::Caused(Box::new(e))))
+    }
+
+    fn usage_context(self, what: &str) -> anyhow::Result<T> {
+        self.map_err(|e| anyhow::Error::new(e).context(UsageError::Said(what.to_string())))
+    }
 }
 
 fn main() -> ExitCode {

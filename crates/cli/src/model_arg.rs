@@ -7,6 +7,7 @@ use anyhow::Result;
 use twostage::models::Simulator;
 use twostage::{NamedModel, Preset};
 
+use crate::OrUsage;
 use crate::usage;
 
 /// The model options shared by the commands that simulate.
@@ -35,9 +36,7 @@ impl ModelArgs {
             (Some(name), None) => NamedModel::builtin(name)
                 .map(Model)
                 .map_err(|e| usage(format!("{e} (see `twostage models`)"))),
-            (None, Some(path)) => NamedModel::file(path)
-                .map(Model)
-                .map_err(|e| usage(e.to_string())),
+            (None, Some(path)) => NamedModel::file(path).map(Model).or_usage(),
             _ => Err(usage("give --model NAME or --model-file PATH".into())),
         }
     }
@@ -56,13 +55,11 @@ impl Model {
 
     /// The simulator, with or without the built-in model's own noise.
     pub fn simulator(&self, noiseless: bool) -> Result<Box<dyn Simulator>> {
-        self.0
-            .simulator(noiseless)
-            .map_err(|e| usage(e.to_string()))
+        self.0.simulator(noiseless).or_usage()
     }
 
     /// A preset by name; `None` is the model's default.
     pub fn preset(&self, name: Option<&str>) -> Result<Preset> {
-        self.0.preset(name).map_err(|e| usage(e.to_string()))
+        self.0.preset(name).or_usage()
     }
 }

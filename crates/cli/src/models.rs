@@ -8,8 +8,8 @@ use anyhow::Result;
 use twostage::models::BuiltinModel;
 use twostage::{ModelProfile, NamedModel};
 
+use crate::OrUsage;
 use crate::number::format_f64;
-use crate::usage;
 
 /// Options of `twostage models`.
 #[derive(Debug, clap::Args)]
@@ -29,7 +29,7 @@ pub fn models(args: &ModelsArgs, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     if let Some(path) = &args.model_file {
-        let named = NamedModel::file(path).map_err(|e| usage(e.to_string()))?;
+        let named = NamedModel::file(path).or_usage()?;
         return describe(&named, out);
     }
     for model in BuiltinModel::ALL {

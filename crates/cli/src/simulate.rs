@@ -10,6 +10,7 @@ use twostage::RunSettings;
 use twostage::sources::csv_rows::row;
 use twostage_models::{IoData, Simulator, experiment_rng, run_experiments};
 
+use crate::OrUsage;
 use crate::model_arg::ModelArgs;
 use crate::number::{format_f64, four_digits, parse_list};
 use crate::{predict, usage};
@@ -264,8 +265,7 @@ fn one_shard(
             "--noiseless changes the model: shards must be the training run's own records".into(),
         ));
     }
-    let index = twostage::ShardIndex::resolve(shard, |name| std::env::var(name).ok())
-        .map_err(|e| usage(e.to_string()))?;
+    let index = twostage::ShardIndex::resolve(shard, |name| std::env::var(name).ok()).or_usage()?;
     // The shards hold the charts of the run `train` makes of this request.
     let request = twostage::TrainingRequest {
         simulations: Some(count),
@@ -278,9 +278,7 @@ fn one_shard(
         },
         ..twostage::TrainingRequest::default()
     };
-    let plan = request
-        .shard_plan(model.named())
-        .map_err(|e| usage(e.to_string()))?;
+    let plan = request.shard_plan(model.named()).or_usage()?;
     let start = std::time::Instant::now();
     let path = twostage::simulate_shard(sim, &plan, index, dir).map_err(|e| {
         if e.is_setting() {

@@ -5,12 +5,12 @@
 use anyhow::Result;
 use twostage::{CompressorConfig, RegressorConfig};
 
-use crate::usage;
+use crate::OrUsage;
 
 pub(crate) fn compressor(spec: &str) -> Result<CompressorConfig> {
-    spec.parse().map_err(|e| usage(format!("--compress: {e}")))
+    spec.parse().usage_context("--compress")
 }
 
 pub(crate) fn regressor(spec: &str) -> Result<RegressorConfig> {
-    spec.parse().map_err(|e| usage(format!("--fit: {e}")))
+    spec.parse().usage_context("--fit")
 }

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use twostage::{Budget, ChartDir, RecordsRequest, RunSettings, TrainingRequest};
 
+use crate::OrUsage;
 use crate::inspect::trust_summary;
 use crate::model_arg::ModelArgs;
 use crate::specs::{compressor, regressor};
@@ -164,10 +165,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
                 .into(),
         ));
     }
-    let searching = request
-        .search_budget(model.named())
-        .map_err(|e| usage(e.to_string()))?
-        .is_some();
+    let searching = request.search_budget(model.named()).or_usage()?.is_some();
     if !args.quiet {
         eprintln!(
             "training the {} estimator ({})...",

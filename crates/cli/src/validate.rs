@@ -10,6 +10,7 @@ use twostage::models::{BuiltinModel, IoData, Sampling, run_experiment};
 use twostage::validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
 use twostage::{EstimateWorkspace, Estimator, ModelFile};
 
+use crate::OrUsage;
 use crate::usage;
 
 /// Most points drawn in the estimate-versus-truth figure.
@@ -60,7 +61,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let trained_on = &estimator.training().model;
     let sim = match &args.model_file {
         Some(path) => {
-            let file = ModelFile::load(path).map_err(|e| usage(e.to_string()))?;
+            let file = ModelFile::load(path).or_usage()?;
             if file.name() != trained_on {
                 return Err(usage(format!(
                     "{} describes '{}', the estimator was trained on '{trained_on}'",
@@ -68,7 +69,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
                     file.name()
                 )));
             }
-            file.simulator().map_err(|e| usage(e.to_string()))?
+            file.simulator().or_usage()?
         }
         None => {
             let model: BuiltinModel = trained_on.parse().map_err(|_| {
@@ -85,8 +86,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let mut r = match (args.sims, args.gamma) {
         (Some(r), _) => r,
         (None, Some(gamma)) => usize::try_from(
-            hoeffding_sample_size(sigma, gamma, args.delta)
-                .map_err(|e| usage(format!("--gamma/--delta: {e}")))?,
+            hoeffding_sample_size(sigma, gamma, args.delta).usage_context("--gamma/--delta")?,
         )
         .map_err(|_| usage("--gamma is too small: the sample size overflows".into()))?,
         (None, None) => 1000,

@@ -1,7 +1,7 @@
 //! What `--check` and `--refine` add to the table, the messages and the
 //! plots.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use twostage::RecordCheck;
 use twostage::fit::TerminationReason;
 use twostage::models::IoData;
@@ -44,9 +44,8 @@ pub(super) fn plot_check(
     };
     let title = format!("{id}: {verdict} by the model at its estimate");
     let svg = twostage_plot::record_vs_simulation(&title, sample_time, &traces)
-        .map_err(|e| anyhow::anyhow!("--plot: {id}: {e}"))?;
-    std::fs::create_dir_all(dir)
-        .map_err(|e| anyhow::anyhow!("--plot: creating {}: {e}", dir.display()))?;
+        .with_context(|| format!("--plot: {id}"))?;
+    std::fs::create_dir_all(dir).with_context(|| format!("--plot: creating {}", dir.display()))?;
     // An id is the user's text: keep the file name to safe characters.
     let name: String = id
         .chars()

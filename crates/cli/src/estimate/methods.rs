@@ -9,6 +9,7 @@ use twostage::{Estimator, ModelProfile, OutputError, SignalNames};
 
 use super::refine::{model_of, refinement};
 use super::{EstimateArgs, Estimated, Method, OUTPUT_ERROR, PriorBox};
+use crate::OrUsage;
 use crate::options::InitialCovariance;
 use crate::{csv_records, usage};
 
@@ -23,7 +24,7 @@ fn named_model(args: &EstimateArgs, what: &str) -> Result<twostage::NamedModel> 
             )));
         }
     }
-    .map_err(|e| usage(e.to_string()))
+    .or_usage()
 }
 
 /// Refuses an option that the chosen way of estimating would not read:
@@ -100,11 +101,11 @@ fn bare(theta: Vec<f64>) -> Estimated {
 /// run without noise on a given input.
 fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
     let named = named_model(args, "--method oe")?;
-    let simulator = named.simulator(false).map_err(|e| usage(e.to_string()))?;
+    let simulator = named.simulator(false).or_usage()?;
     let format = record_format(simulator.spec());
     let names = simulator.spec().param_names().to_vec();
     let checker = check_model(args)?;
-    let fit = OutputError::new(simulator).map_err(|e| usage(format!("--method oe: {e}")))?;
+    let fit = OutputError::new(simulator).usage_context("--method oe")?;
     let oe = twostage_baselines::PredictionError::new(fit, args.starts.unwrap_or(DEFAULT_STARTS))
         .seed(args.seed.unwrap_or(0))
         .named(OUTPUT_ERROR);
@@ -134,7 +135,7 @@ fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
 /// experiment, to be checked.
 fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<Chosen> {
     let named = named_model(args, "--at")?;
-    let simulator = named.simulator(false).map_err(|e| usage(e.to_string()))?;
+    let simulator = named.simulator(false).or_usage()?;
     let spec = simulator.spec().clone();
     let rows = crate::predict::read_rows(path, spec.param_names())?;
     crate::predict::refuse_outside_prior(&rows, &spec, path, args.allow_outside_prior)?;
@@ -178,9 +179,7 @@ fn check_model(args: &EstimateArgs) -> Result<Option<Box<dyn Simulator>>> {
         return Ok(None);
     }
     let named = named_model(args, "--check")?;
-    Ok(Some(
-        named.simulator(false).map_err(|e| usage(e.to_string()))?,
-    ))
+    Ok(Some(named.simulator(false).or_usage()?))
 }
 
 /// The most runs of the model's own records a check ranks a record among
@@ -267,7 +266,7 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         return output_error_method(args);
     }
     if let (Some(path), Some(name)) = (&args.model_file, &args.method) {
-        let file = twostage::ModelFile::load(path).map_err(|e| usage(e.to_string()))?;
+        let file = twostage::ModelFile::load(path).or_usage()?;
         return Err(usage(format!(
             "method '{name}' is not available for {}: the classic methods exist for the \
              built-in models only; train an estimator with `twostage train --model-file`",
@@ -285,9 +284,7 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
     let simulator = model.build(false)?;
     let names = simulator.param_names().to_vec();
     let format = record_format(simulator.spec());
-    let method = ModelProfile::of(model)
-        .classic_method(name)
-        .map_err(|e| usage(e.to_string()))?;
+    let method = ModelProfile::of(model).classic_method(name).or_usage()?;
     let settings = b::MethodSettings {
         initial_covariance: args.p0.unwrap_or(InitialCovariance::Eq6).into(),
         particles: args.particles,

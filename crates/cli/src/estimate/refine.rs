@@ -8,26 +8,25 @@ use twostage::{Estimator, NamedModel};
 use twostage_baselines::EstimateRefiner;
 
 use super::EstimateArgs;
-use crate::usage;
+use crate::OrUsage;
 
 /// The --model-file given, loaded.
 fn model_file(args: &EstimateArgs) -> Result<Option<NamedModel>> {
     args.model_file
         .as_ref()
-        .map(|path| NamedModel::file(path).map_err(|e| usage(e.to_string())))
+        .map(|path| NamedModel::file(path).or_usage())
         .transpose()
 }
 
 /// The refinement of an estimator's estimates (see
 /// [`EstimateRefiner::new`]).
 pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<EstimateRefiner> {
-    EstimateRefiner::new(estimator, model_file(args)?.as_ref())
-        .map_err(|e| usage(format!("--refine: {e}")))
+    EstimateRefiner::new(estimator, model_file(args)?.as_ref()).usage_context("--refine")
 }
 
 /// The model an estimator's records come from, to check them against:
 /// `--model-file`, else the estimator's built-in model.
 pub(super) fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box<dyn Simulator>> {
     twostage_baselines::estimator_model(estimator, model_file(args)?.as_ref())
-        .map_err(|e| usage(format!("--check simulates the model: {e}")))
+        .usage_context("--check simulates the model")
 }
