@@ -17,9 +17,10 @@ use crate::options::{InitialCovariance, TableFormat};
 mod columns;
 mod methods;
 mod refine;
+mod said;
 mod table;
 
-use columns::{list, plot_check};
+use columns::plot_check;
 use methods::{Chosen, DEFAULT_CHECK_SIMS, method};
 use table::{PriorBox, csv, json};
 
@@ -194,91 +195,121 @@ const OUTPUT_ERROR: &str = "oe";
 /// Run `twostage estimate`; returns how many records were estimated and
 /// how many failed.
 pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
-    let Chosen {
-        names,
-        method: estimate_one,
-        trained: trained_samples,
-        format,
-        checker,
-        refiner,
-        prior_box,
-    } = method(args)?;
-    let seed = args.seed.unwrap_or(0);
-    let plan = twostage::CheckPlan {
-        noisy: args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS),
-        seed,
-        score_from: args.score_from.unwrap_or(0),
-        at_best_fit: false,
+    let chosen = method(args)?;
+    // A check simulates the model many times per record; after an
+    // output-error refinement, through the refinement's simulator (its
+    // processes are already running).
+    let check_model: Option<&dyn Simulator> = chosen
+        .refiner
+        .as_ref()
+        .and_then(|r| r.simulator())
+        .filter(|_| chosen.checker.is_some())
+        .or(chosen.checker.as_deref());
+    let session = Session {
+        args,
+        chosen: &chosen,
+        check_model,
+        plan: twostage::CheckPlan {
+            noisy: args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS),
+            seed: args.seed.unwrap_or(0),
+            score_from: args.score_from.unwrap_or(0),
+            at_best_fit: false,
+        },
+        // Progress: a bar on a terminal, else a line every 10 s of a long
+        // step.
+        bars: crate::bars::Bars::new(false),
     };
-    // Progress: a bar on a terminal, else a line every 10 s of a long step.
-    let bars = crate::bars::Bars::new(false);
-    let with_correlation = args.correlation;
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
-    let output_names = format.signals.outputs.clone();
-    let sample_time = format.sample_time;
     for path in &args.data {
-        let reads = csv_records::read(path, &format).map_err(|e| anyhow::anyhow!(e))?;
-        // The records in parallel, reported in their order: each estimate
-        // depends on its record alone.
-        bars.begin_step("estimating", reads.len(), "records");
-        let mut estimates: Vec<(String, RecordOutcome)> = reads
+        let mut estimates = session.estimate_file(path)?;
+        session.check_and_refine(path, &mut estimates);
+        let mut said = said::Said::new(path, &chosen.format, chosen.trained);
+        for (id, outcome) in estimates {
+            said.note_length(&id, &outcome);
+            match outcome {
+                Ok((record, estimated)) => {
+                    said.warnings(&id, &estimated);
+                    if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
+                        let format = &chosen.format;
+                        plot_check(
+                            dir,
+                            &id,
+                            &record,
+                            check,
+                            &format.signals.outputs,
+                            format.sample_time,
+                        )?;
+                    }
+                    said.check(&id, &estimated);
+                    rows.push((id, estimated));
+                }
+                Err(problem) => {
+                    failed += 1;
+                    eprintln!("error: {problem}");
+                }
+            }
+        }
+        said.summarize();
+    }
+    let outcome = Outcome {
+        estimated: rows.len(),
+        failed,
+    };
+    if rows.is_empty() && failed > 0 {
+        // Nothing to write: an empty table would read as a result.
+        return Ok(outcome);
+    }
+    write_table(args, &chosen, &rows)?;
+    Ok(outcome)
+}
+
+/// What every file of one `estimate` run shares: the method, the check's
+/// model and plan, the progress bars.
+struct Session<'a> {
+    args: &'a EstimateArgs,
+    chosen: &'a Chosen,
+    check_model: Option<&'a dyn Simulator>,
+    plan: twostage::CheckPlan,
+    bars: crate::bars::Bars,
+}
+
+impl Session<'_> {
+    /// Every record of the file at `path` estimated, in parallel, reported
+    /// in their order: each estimate depends on its record alone.
+    fn estimate_file(&self, path: &std::path::Path) -> Result<Vec<(String, RecordOutcome)>> {
+        let reads = csv_records::read(path, &self.chosen.format).map_err(anyhow::Error::msg)?;
+        self.bars.begin_step("estimating", reads.len(), "records");
+        let estimates = reads
             .into_par_iter()
             .map(|read| {
                 let estimated = read.record.and_then(|record| {
-                    let estimated = estimate_one(&read.id, &record)
+                    let estimated = (self.chosen.method)(&read.id, &record)
                         .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
                     Ok((record, estimated))
                 });
-                bars.advance_step(1);
+                self.bars.advance_step(1);
                 (read.id, estimated)
             })
             .collect();
-        bars.end_step();
-        // A check simulates the model many times per record; after an
-        // output-error refinement, through the refinement's simulator (its
-        // processes are already running).
-        let check_model: Option<&dyn Simulator> = refiner
-            .as_ref()
-            .and_then(|r| r.simulator())
-            .filter(|_| checker.is_some())
-            .or(checker.as_deref());
-        let check_all = |estimates: &mut Vec<(String, RecordOutcome)>, only: &[bool]| {
-            let Some(model) = check_model else {
-                return;
-            };
-            bars.begin_step("checking", only.iter().filter(|o| **o).count(), "records");
-            estimates
-                .par_iter_mut()
-                .zip(only)
-                .filter(|(_, only)| **only)
-                .for_each(|((_, outcome), _)| {
-                    if let Ok((record, estimated)) = outcome {
-                        estimated.check = Some(check(model, record, estimated, plan));
-                    }
-                    bars.advance_step(1);
-                });
-            bars.end_step();
-        };
+        self.bars.end_step();
+        Ok(estimates)
+    }
+
+    /// The file's estimates checked and refined as asked: with
+    /// `--refine=auto` the two-stage estimates are checked first and only
+    /// the records the check does not explain are refined (and checked
+    /// again).
+    fn check_and_refine(
+        &self,
+        path: &std::path::Path,
+        estimates: &mut [(String, RecordOutcome)],
+    ) {
         let everyone = vec![true; estimates.len()];
-        match (&refiner, args.refine) {
+        match (&self.chosen.refiner, self.args.refine) {
             (Some(refiner), Some(RefineWhich::Auto)) => {
-                // The two-stage estimates first; the records the check does
-                // not explain are refined, and checked again.
-                check_all(&mut estimates, &everyone);
-                // A record of another length than the estimator's is
-                // refined whatever the check says: the two-stage estimate
-                // keeps its length.
-                let unexplained: Vec<bool> = estimates
-                    .iter()
-                    .map(|(_, outcome)| match outcome {
-                        Ok((record, e)) => {
-                            matches!(&e.check, Some(Ok(c)) if !c.explained())
-                                || trained_samples.is_some_and(|n| n != record.n_samples())
-                        }
-                        Err(_) => false,
-                    })
-                    .collect();
+                self.check_all(estimates, &everyone);
+                let unexplained = self.unexplained(estimates);
                 let ids: Vec<&str> = estimates
                     .iter()
                     .zip(&unexplained)
@@ -302,201 +333,70 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                     } else {
                         "experiment(s) "
                     },
-                    list_ids(&ids)
+                    said::list_ids(&ids)
                 );
-                refine_together(refiner, &mut estimates, &unexplained, &bars);
-                check_all(&mut estimates, &unexplained);
+                refine_together(refiner, estimates, &unexplained, &self.bars);
+                self.check_all(estimates, &unexplained);
             }
             (Some(refiner), _) => {
-                refine_together(refiner, &mut estimates, &everyone, &bars);
-                check_all(&mut estimates, &everyone);
+                refine_together(refiner, estimates, &everyone, &self.bars);
+                self.check_all(estimates, &everyone);
             }
-            (None, _) => check_all(&mut estimates, &everyone),
+            (None, _) => self.check_all(estimates, &everyone),
         }
-        // A failure every record shares (a simulator that does not start)
-        // is said once, with the others counted: 200 identical lines would
-        // hide everything else.
-        let mut repeated = RepeatedFailures::default();
-        for (id, outcome) in estimates {
-            // The estimate is still defined, but the validation error and
-            // the intervals were measured for another N (said only of a
-            // record that was estimated: a failed one says why).
-            if let (Ok((record, _)), Some(trained)) = (&outcome, trained_samples)
-                && record.n_samples() != trained
-            {
-                eprintln!(
-                    "note: {}: experiment {id}: {} samples, the estimator was trained and \
-                     validated on N = {trained}: its estimate only starts the refinement, \
-                     which fits the record at its own length",
-                    path.display(),
-                    record.n_samples()
-                );
-            }
-            match outcome {
-                Ok((record, estimated)) => {
-                    if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
-                        eprintln!(
-                            "warning: {}: experiment {}: out of distribution: its features lie \
-                             at Mahalanobis distance {d:.3} from the training features, beyond \
-                             the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
-                             and the intervals do not cover it (is it the same model and input?)",
-                            path.display(),
-                            id
-                        );
-                    }
-                    if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
-                        let listed: Vec<String> = floored
-                            .iter()
-                            .take(5)
-                            .map(|f| {
-                                let signal = output_names.get(f.output).map_or("?", String::as_str);
-                                format!("{signal} = {} at sample {}", f.value, f.sample + 1)
-                            })
-                            .collect();
-                        eprintln!(
-                            "warning: {}: experiment {}: {} sample(s) outside the domain of the \
-                             estimator's output transform ({}{}), taken at the smallest value \
-                             the training records had; the estimate and its intervals do not \
-                             speak for them",
-                            path.display(),
-                            id,
-                            floored.len(),
-                            listed.join(", "),
-                            if floored.len() > 5 { ", ..." } else { "" }
-                        );
-                    }
-                    match &estimated.refined {
-                        Some(Err(e)) if repeated.first("--refine", e, &id) => eprintln!(
-                            "warning: {}: experiment {}: --refine failed ({e}); the two-stage \
-                             estimate is kept",
-                            path.display(),
-                            id
-                        ),
-                        Some(Ok(Some(TerminationReason::MaxIterations))) => eprintln!(
-                            "warning: {}: experiment {}: --refine did not converge within its \
-                             iterations; the estimate is the best point it reached",
-                            path.display(),
-                            id
-                        ),
-                        _ => {}
-                    }
-                    if let Some(e) = &estimated.interval_failure {
-                        eprintln!(
-                            "warning: {}: experiment {}: the refined estimate has no interval \
-                             ({e}); its _lo and _hi are NaN",
-                            path.display(),
-                            id
-                        );
-                    }
-                    if let (Some(Ok(_)), Some(Ok(check))) = (&estimated.refined, &estimated.check)
-                        && !check.model_consistent()
-                    {
-                        eprintln!(
-                            "note: {}: experiment {}: the model does not make this record \
-                             exactly (model_consistent false): the refined interval covers this \
-                             record's noise about the model's best fit, not the error of the \
-                             model itself, so the plant's true values may lie outside it",
-                            path.display(),
-                            id
-                        );
-                    }
-                    if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
-                        plot_check(dir, &id, &record, check, &output_names, sample_time)?;
-                    }
-                    // Only an estimator learned one input; a check simulates on
-                    // the record's own.
-                    if let (
-                        Some(Ok(RecordCheck {
-                            input_differs_at: Some((j, k)),
-                            ..
-                        })),
-                        Some(_),
-                    ) = (&estimated.check, trained_samples)
-                    {
-                        eprintln!(
-                            "warning: {}: experiment {}: its input {} differs from the one every \
-                             training record had (from sample {}): the estimator learned that \
-                             input and does not read this one, so its estimate is not for this \
-                             record; train on this experiment's input, or on an input design",
-                            path.display(),
-                            id,
-                            format.signals.inputs.get(*j).map_or("?", String::as_str),
-                            k + 1
-                        );
-                    }
-                    match &estimated.check {
-                        Some(Err(e)) if repeated.first("--check", e, &id) => eprintln!(
-                            "warning: {}: experiment {}: --check could not simulate the model at \
-                             the estimate ({e}); the estimate is kept, unchecked",
-                            path.display(),
-                            id
-                        ),
-                        Some(Ok(c)) if !c.explained() => eprintln!(
-                            "warning: {}: experiment {}: not explained by the model at its \
-                             estimate: RMS residual {}, fit {} %, where the model fits {} % near \
-                             it, and at most {:.1}% of its own records there miss by as much; do \
-                             not trust this estimate (another input than training's, or a poor \
-                             estimate: try --refine; docs/real-data.md)",
-                            path.display(),
-                            id,
-                            list(&c.rms),
-                            list(&c.fit_percent),
-                            list(&c.best_fit_percent),
-                            100.0 * c.tail_probability
-                        ),
-                        Some(Ok(c)) if !c.model_consistent() => eprintln!(
-                            "note: {}: experiment {}: the estimate fits the record as well as the \
-                             model can near it (fit {} %), but not to the model's own noise (at \
-                             most {:.1}% of its records miss by as much): the model is not exact \
-                             for this record; judge it by predicting a record it was not fitted \
-                             to (docs/real-data.md)",
-                            path.display(),
-                            id,
-                            list(&c.fit_percent),
-                            100.0 * c.tail_probability
-                        ),
-                        _ => {}
-                    }
-                    rows.push((id, estimated));
-                }
-                Err(problem) => {
-                    failed += 1;
-                    eprintln!("error: {problem}");
-                }
-            }
-        }
-        repeated.summarize(&path.display().to_string());
     }
-    let outcome = Outcome {
-        estimated: rows.len(),
-        failed,
-    };
-    if rows.is_empty() && failed > 0 {
-        // Nothing to write: an empty table would read as a result.
-        return Ok(outcome);
+
+    /// The records `--refine=auto` refines: those the check does not
+    /// explain, and any of another length than the estimator's (the
+    /// two-stage estimate keeps its length).
+    fn unexplained(&self, estimates: &[(String, RecordOutcome)]) -> Vec<bool> {
+        estimates
+            .iter()
+            .map(|(_, outcome)| match outcome {
+                Ok((record, e)) => {
+                    matches!(&e.check, Some(Ok(c)) if !c.explained())
+                        || self.chosen.trained.is_some_and(|n| n != record.n_samples())
+                }
+                Err(_) => false,
+            })
+            .collect()
     }
+
+    /// Check the estimates of the records marked in `only`, in parallel.
+    fn check_all(&self, estimates: &mut [(String, RecordOutcome)], only: &[bool]) {
+        let Some(model) = self.check_model else {
+            return;
+        };
+        self.bars
+            .begin_step("checking", only.iter().filter(|o| **o).count(), "records");
+        estimates
+            .par_iter_mut()
+            .zip(only)
+            .filter(|(_, only)| **only)
+            .for_each(|((_, outcome), _)| {
+                if let Ok((record, estimated)) = outcome {
+                    estimated.check = Some(check(model, record, estimated, self.plan));
+                }
+                self.bars.advance_step(1);
+            });
+        self.bars.end_step();
+    }
+}
+
+/// The table of every estimated record, to `--out` or stdout.
+fn write_table(args: &EstimateArgs, chosen: &Chosen, rows: &[(String, Estimated)]) -> Result<()> {
+    let outputs = &chosen.format.signals.outputs;
+    let prior_box = chosen.prior_box.as_ref();
     let text = if args.format == TableFormat::Json {
-        json(
-            &names,
-            &rows,
-            &output_names,
-            with_correlation,
-            prior_box.as_ref(),
-        )?
+        json(&chosen.names, rows, outputs, args.correlation, prior_box)?
     } else {
-        csv(
-            &names,
-            &rows,
-            &output_names,
-            with_correlation,
-            prior_box.as_ref(),
-        )?
+        csv(&chosen.names, rows, outputs, args.correlation, prior_box)?
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => std::io::stdout().lock().write_all(text.as_bytes())?,
     }
-    Ok(outcome)
+    Ok(())
 }
 
 /// Refines the estimated records of a file together (their simulations in
@@ -565,58 +465,6 @@ fn check(
         },
     )
     .map_err(|e| e.to_string())
-}
-
-/// Experiment ids for a message: the first ten, and how many more.
-fn list_ids(ids: &[&str]) -> String {
-    let shown = ids.iter().take(10).copied().collect::<Vec<_>>().join(", ");
-    if ids.len() > 10 {
-        format!("{shown} and {} more", ids.len() - 10)
-    } else {
-        shown
-    }
-}
-
-/// Failures of --refine or --check seen before: the first of each kind
-/// and message is said in full, the others only counted.
-#[derive(Default)]
-struct RepeatedFailures {
-    /// (what failed, message) -> (the first experiment, the others).
-    seen: std::collections::BTreeMap<(&'static str, String), (String, Vec<String>)>,
-}
-
-impl RepeatedFailures {
-    /// Whether this failure is the first of its kind and message (to be
-    /// said in full); a repeat is counted.
-    fn first(&mut self, what: &'static str, message: &str, id: &str) -> bool {
-        match self.seen.get_mut(&(what, message.to_string())) {
-            Some((_, others)) => {
-                others.push(id.to_string());
-                false
-            }
-            None => {
-                self.seen
-                    .insert((what, message.to_string()), (id.to_string(), Vec::new()));
-                true
-            }
-        }
-    }
-
-    /// One line per repeated failure: how many more records, which.
-    fn summarize(&self, file: &str) {
-        for ((what, _), (first, others)) in &self.seen {
-            if others.is_empty() {
-                continue;
-            }
-            let ids: Vec<&str> = others.iter().map(String::as_str).collect();
-            eprintln!(
-                "warning: {file}: {what} failed as for experiment {first} in {} more \
-                 experiment(s): {}",
-                others.len(),
-                list_ids(&ids)
-            );
-        }
-    }
 }
 
 /// How many records were estimated, and how many could not be.

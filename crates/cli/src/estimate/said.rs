@@ -1,0 +1,222 @@
+//! What `estimate` says on stderr about each record: warnings about its
+//! estimate, its refinement and its check, each failure shared by many
+//! records said once.
+
+use std::path::Path;
+
+use twostage::RecordCheck;
+use twostage::fit::TerminationReason;
+
+use super::columns::list;
+use super::{Estimated, RecordOutcome};
+use crate::csv_records::RecordFormat;
+
+/// The messages about one file's records.
+pub(super) struct Said<'a> {
+    file: String,
+    format: &'a RecordFormat,
+    /// The estimator's record length, where an estimator estimates.
+    trained: Option<usize>,
+    repeated: RepeatedFailures,
+}
+
+impl<'a> Said<'a> {
+    pub(super) fn new(path: &Path, format: &'a RecordFormat, trained: Option<usize>) -> Self {
+        Self {
+            file: path.display().to_string(),
+            format,
+            trained,
+            repeated: RepeatedFailures::default(),
+        }
+    }
+
+    /// A record of another length than the estimator's: the estimate is
+    /// still defined, but the validation error and the intervals were
+    /// measured for another N (said only of a record that was estimated:
+    /// a failed one says why).
+    pub(super) fn note_length(&self, id: &str, outcome: &RecordOutcome) {
+        if let (Ok((record, _)), Some(trained)) = (outcome, self.trained)
+            && record.n_samples() != trained
+        {
+            eprintln!(
+                "note: {}: experiment {id}: {} samples, the estimator was trained and \
+                 validated on N = {trained}: its estimate only starts the refinement, \
+                 which fits the record at its own length",
+                self.file,
+                record.n_samples()
+            );
+        }
+    }
+
+    /// Warnings about the estimate itself and its refinement.
+    pub(super) fn warnings(&mut self, id: &str, estimated: &Estimated) {
+        let file = &self.file;
+        if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
+            eprintln!(
+                "warning: {file}: experiment {id}: out of distribution: its features lie \
+                 at Mahalanobis distance {d:.3} from the training features, beyond \
+                 the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
+                 and the intervals do not cover it (is it the same model and input?)"
+            );
+        }
+        if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
+            let outputs = &self.format.signals.outputs;
+            let listed: Vec<String> = floored
+                .iter()
+                .take(5)
+                .map(|f| {
+                    let signal = outputs.get(f.output).map_or("?", String::as_str);
+                    format!("{signal} = {} at sample {}", f.value, f.sample + 1)
+                })
+                .collect();
+            eprintln!(
+                "warning: {file}: experiment {id}: {} sample(s) outside the domain of the \
+                 estimator's output transform ({}{}), taken at the smallest value \
+                 the training records had; the estimate and its intervals do not \
+                 speak for them",
+                floored.len(),
+                listed.join(", "),
+                if floored.len() > 5 { ", ..." } else { "" }
+            );
+        }
+        match &estimated.refined {
+            Some(Err(e)) if self.repeated.first("--refine", e, id) => eprintln!(
+                "warning: {file}: experiment {id}: --refine failed ({e}); the two-stage \
+                 estimate is kept"
+            ),
+            Some(Ok(Some(TerminationReason::MaxIterations))) => eprintln!(
+                "warning: {file}: experiment {id}: --refine did not converge within its \
+                 iterations; the estimate is the best point it reached"
+            ),
+            _ => {}
+        }
+        if let Some(e) = &estimated.interval_failure {
+            eprintln!(
+                "warning: {file}: experiment {id}: the refined estimate has no interval \
+                 ({e}); its _lo and _hi are NaN"
+            );
+        }
+        if let (Some(Ok(_)), Some(Ok(check))) = (&estimated.refined, &estimated.check)
+            && !check.model_consistent()
+        {
+            eprintln!(
+                "note: {file}: experiment {id}: the model does not make this record \
+                 exactly (model_consistent false): the refined interval covers this \
+                 record's noise about the model's best fit, not the error of the \
+                 model itself, so the plant's true values may lie outside it"
+            );
+        }
+    }
+
+    /// What the check found, where it ran.
+    pub(super) fn check(&mut self, id: &str, estimated: &Estimated) {
+        let file = &self.file;
+        // Only an estimator learned one input; a check simulates on the
+        // record's own.
+        if let (
+            Some(Ok(RecordCheck {
+                input_differs_at: Some((j, k)),
+                ..
+            })),
+            Some(_),
+        ) = (&estimated.check, self.trained)
+        {
+            eprintln!(
+                "warning: {file}: experiment {id}: its input {} differs from the one every \
+                 training record had (from sample {}): the estimator learned that \
+                 input and does not read this one, so its estimate is not for this \
+                 record; train on this experiment's input, or on an input design",
+                self.format
+                    .signals
+                    .inputs
+                    .get(*j)
+                    .map_or("?", String::as_str),
+                k + 1
+            );
+        }
+        match &estimated.check {
+            Some(Err(e)) if self.repeated.first("--check", e, id) => eprintln!(
+                "warning: {file}: experiment {id}: --check could not simulate the model at \
+                 the estimate ({e}); the estimate is kept, unchecked"
+            ),
+            Some(Ok(c)) if !c.explained() => eprintln!(
+                "warning: {file}: experiment {id}: not explained by the model at its \
+                 estimate: RMS residual {}, fit {} %, where the model fits {} % near \
+                 it, and at most {:.1}% of its own records there miss by as much; do \
+                 not trust this estimate (another input than training's, or a poor \
+                 estimate: try --refine; docs/real-data.md)",
+                list(&c.rms),
+                list(&c.fit_percent),
+                list(&c.best_fit_percent),
+                100.0 * c.tail_probability
+            ),
+            Some(Ok(c)) if !c.model_consistent() => eprintln!(
+                "note: {file}: experiment {id}: the estimate fits the record as well as the \
+                 model can near it (fit {} %), but not to the model's own noise (at \
+                 most {:.1}% of its records miss by as much): the model is not exact \
+                 for this record; judge it by predicting a record it was not fitted \
+                 to (docs/real-data.md)",
+                list(&c.fit_percent),
+                100.0 * c.tail_probability
+            ),
+            _ => {}
+        }
+    }
+
+    /// One line per failure many records shared.
+    pub(super) fn summarize(&self) {
+        self.repeated.summarize(&self.file);
+    }
+}
+
+/// Experiment ids for a message: the first ten, and how many more.
+pub(super) fn list_ids(ids: &[&str]) -> String {
+    let shown = ids.iter().take(10).copied().collect::<Vec<_>>().join(", ");
+    if ids.len() > 10 {
+        format!("{shown} and {} more", ids.len() - 10)
+    } else {
+        shown
+    }
+}
+
+/// Failures of --refine or --check seen before: the first of each kind
+/// and message is said in full, the others only counted.
+#[derive(Default)]
+struct RepeatedFailures {
+    /// (what failed, message) -> (the first experiment, the others).
+    seen: std::collections::BTreeMap<(&'static str, String), (String, Vec<String>)>,
+}
+
+impl RepeatedFailures {
+    /// Whether this failure is the first of its kind and message (to be
+    /// said in full); a repeat is counted.
+    fn first(&mut self, what: &'static str, message: &str, id: &str) -> bool {
+        match self.seen.get_mut(&(what, message.to_string())) {
+            Some((_, others)) => {
+                others.push(id.to_string());
+                false
+            }
+            None => {
+                self.seen
+                    .insert((what, message.to_string()), (id.to_string(), Vec::new()));
+                true
+            }
+        }
+    }
+
+    /// One line per repeated failure: how many more records, which.
+    fn summarize(&self, file: &str) {
+        for ((what, _), (first, others)) in &self.seen {
+            if others.is_empty() {
+                continue;
+            }
+            let ids: Vec<&str> = others.iter().map(String::as_str).collect();
+            eprintln!(
+                "warning: {file}: {what} failed as for experiment {first} in {} more \
+                 experiment(s): {}",
+                others.len(),
+                list_ids(&ids)
+            );
+        }
+    }
+}
