@@ -31,9 +31,12 @@ use twostage_sources::simulate_records;
 
 mod candidates;
 mod cost;
+mod outcome;
+use outcome::more_records_pay;
 mod search;
 
 use candidates::{candidate_compressors, network, output_transforms, pieces};
+pub use outcome::{AutoOutcome, CandidateReport, Status};
 pub use search::{FinalFit, FinalFits};
 use search::{Scope, Search, Winner};
 
@@ -65,233 +68,6 @@ impl Default for Budget {
     /// Two minutes.
     fn default() -> Self {
         Self::Seconds(120.0)
-    }
-}
-
-/// One candidate structure and how it scored.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CandidateReport {
-    /// Stage 1.
-    pub compressor: String,
-    /// Stage 2.
-    pub regressor: String,
-    /// Both stages as the command line writes them (`log+pca:8 mlp:20`),
-    /// or as they read where a stage has no such form.
-    pub design: String,
-    /// Search round: 1 compares compressors with one network, 2 compares
-    /// networks on the best compressors, 3 averages the winner's restarts.
-    pub round: usize,
-    /// RMSE per parameter on the held-out chart rows (empty when not run).
-    pub rmse: Vec<f64>,
-    /// Mean over parameters of RMSE / prior standard deviation (lower is
-    /// better; 1 means nothing learned).
-    pub score: f64,
-    /// Seconds spent compressing and fitting it.
-    pub seconds: f64,
-    /// Chart rows its network was fitted on: all the fitting rows, or a
-    /// screening share of them in round 1 of a large chart.
-    pub fit_rows: usize,
-    /// Whether it was scored, and why not if it was not.
-    pub status: Status,
-    /// How its network was trained (trainer, stop reason, restarts).
-    pub trained_by: Option<String>,
-}
-
-/// Whether a candidate was scored, and why not if it was not.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Status {
-    /// Fitted, and scored on the held-out rows.
-    Scored,
-    /// Not started: about `seconds` would have overrun the time budget.
-    Skipped {
-        /// Its estimated cost.
-        seconds: f64,
-    },
-    /// Its stage 1 does not apply to these records (an autoregression of
-    /// a noise-free decay is rank deficient, say): why.
-    NotApplicable(String),
-    /// Its fit went wrong: why.
-    Failed(String),
-}
-
-impl Status {
-    /// Whether the candidate has a score.
-    ///
-    /// ```
-    /// assert!(twostage::auto::Status::Scored.is_scored());
-    /// assert!(!twostage::auto::Status::Failed("diverged".into()).is_scored());
-    /// ```
-    pub fn is_scored(&self) -> bool {
-        matches!(self, Self::Scored)
-    }
-}
-
-impl std::fmt::Display for Status {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Scored => write!(f, "scored"),
-            Self::Skipped { seconds } => write!(
-                f,
-                "skipped: about {seconds:.0} s would overrun the time budget"
-            ),
-            Self::NotApplicable(why) => write!(f, "does not apply to these records: {why}"),
-            Self::Failed(why) => write!(f, "failed: {why}"),
-        }
-    }
-}
-
-/// The result of [`AutoDesign::run`].
-#[derive(Debug)]
-pub struct AutoOutcome {
-    /// The best candidate, refitted on the whole chart, calibrated and
-    /// validated.
-    pub estimator: Estimator,
-    /// Every candidate, in the order tried.
-    pub candidates: Vec<CandidateReport>,
-    /// Index of the winner in `candidates`.
-    pub best: usize,
-    /// Simulations in the chart.
-    pub simulations: usize,
-    /// The simulations among them that failed (left out of every fit).
-    pub failures: usize,
-    /// Seconds of the search (without calibration and validation).
-    pub search_seconds: f64,
-    /// How the shipped network was fitted: as scored, anew, trained
-    /// further, or both and the better shipped; on how many rows.
-    pub final_fit: FinalFit,
-    /// The round-2 winner's score at the run's seed and, where the budget
-    /// allowed, at two other seeds: how much the seed alone moves it.
-    pub seed_scores: Vec<f64>,
-    /// The round-2 winner fitted on half its rows (how many, and its
-    /// score), where the budget allowed: a learning curve's last step,
-    /// which says whether more records would pay.
-    pub half_rows: Option<(usize, f64)>,
-    /// Simulations added after the search for the winner's final fit
-    /// (counted in `simulations`), where more records pay and the time
-    /// left afforded them.
-    pub added_simulations: usize,
-    /// How the round-2 winner's fit time grew with its rows (the exponent,
-    /// from its half-rows and seed trials timed alone), where measured: the
-    /// final fit's rows follow from it.
-    pub rows_exponent: Option<f64>,
-}
-
-/// Whether a score of `half` on half the rows against `own` on all of them
-/// says more records would pay: the learning curve still falls. Time a
-/// search would leave unused then goes to more records, trained further
-/// from the winner's fit, which cannot make it worse on held-out rows.
-fn more_records_pay(half: f64, own: f64) -> bool {
-    half > own
-}
-
-impl std::fmt::Display for AutoOutcome {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        writeln!(
-            f,
-            "automatic design on m = {} simulations ({:.1} s), held-out RMSE per candidate:",
-            self.simulations, self.search_seconds
-        )?;
-        let fitted_rows = self.final_fit.rows();
-        if self.final_fit.stopped() {
-            writeln!(
-                f,
-                "(the winner's final fit on {fitted_rows} records was stopped at the time budget's \
-                 end: it ships trained as far as it got from the fit it was scored with)"
-            )?;
-        } else if !matches!(self.final_fit, FinalFit::Compared { .. })
-            && fitted_rows < self.simulations - self.failures
-        {
-            writeln!(
-                f,
-                "(the time budget left no room to refit the winner on the whole chart: it ships \
-                 fitted on {} of its {} records)",
-                fitted_rows, self.simulations
-            )?;
-        }
-        if let [own, others @ ..] = self.seed_scores.as_slice()
-            && !others.is_empty()
-        {
-            let (low, high) = others
-                .iter()
-                .fold((*own, *own), |(l, h), s| (l.min(*s), h.max(*s)));
-            let listed: Vec<String> = others.iter().map(|s| format!("{s:.4}")).collect();
-            writeln!(
-                f,
-                "the round-2 winner scores {own:.4} at the run's seed and {} at two others: \
-                 the seed moves it by {:.1}%",
-                listed.join(" and "),
-                100.0 * (high - low) / own.max(f64::MIN_POSITIVE)
-            )?;
-        }
-        if let (Some((rows, half)), Some(own)) = (self.half_rows, self.seed_scores.first()) {
-            writeln!(
-                f,
-                "on half its records ({rows}) the round-2 winner scores {half:.4} against \
-                 {own:.4}: more records would {}",
-                // The seed alone moves a score by 1 to 2%.
-                if half > 1.03 * own {
-                    "pay"
-                } else if more_records_pay(half, *own) {
-                    "pay a little"
-                } else {
-                    "not pay"
-                }
-            )?;
-        }
-        if let Some(exponent) = self.rows_exponent {
-            writeln!(
-                f,
-                "its fit time grows as rows^{exponent:.2} (half its rows and all of them, timed alone)"
-            )?;
-        }
-        if self.added_simulations > 0 {
-            writeln!(
-                f,
-                "so the winner's final fit took {} more simulations: fitted on {} records",
-                self.added_simulations, fitted_rows
-            )?;
-        }
-        if let FinalFit::Compared {
-            fits:
-                FinalFits {
-                    compared,
-                    further,
-                    anew,
-                },
-            ..
-        } = self.final_fit
-        {
-            writeln!(
-                f,
-                "on the last {compared} added records, seen by no fit, the winner trained further \
-                 scores {further:.4} and fitted anew {anew:.4}: the {} ships",
-                if anew < further {
-                    "fit anew"
-                } else {
-                    "fit trained further"
-                }
-            )?;
-        }
-        for (i, c) in self.candidates.iter().enumerate() {
-            let mark = if i == self.best { "*" } else { " " };
-            let rmse: Vec<String> = c.rmse.iter().map(|r| format!("{r:.4e}")).collect();
-            match &c.status {
-                Status::Scored => writeln!(
-                    f,
-                    " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows{}",
-                    c.design,
-                    c.score,
-                    rmse.join(", "),
-                    c.seconds,
-                    c.fit_rows,
-                    c.trained_by
-                        .as_ref()
-                        .map_or_else(String::new, |t| format!("; {t}"))
-                )?,
-                status => writeln!(f, " {mark} {:<28} {status}", c.design)?,
-            }
-        }
-        Ok(())
     }
 }
 
@@ -419,72 +195,17 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             networks,
             screening_rows,
         } = self;
-        // A simulated chart's size follows from the budget before the run
-        // opens it; a chart or shards on disk bring their own, adopted by
-        // the run.
-        let simulates = base.record_source().simulates();
-        let (run, m, deadline, per_simulation) = if simulates {
-            base.run_settings().check()?;
-            let (m, deadline, per_simulation) = chart_size(
-                budget,
-                base.simulator(),
-                base.run_settings(),
-                Sizing::Simulated,
-                start,
-            )?;
-            (base.simulations(m).prepare()?, m, deadline, per_simulation)
-        } else {
-            let run = base.prepare()?;
-            let (m, deadline, per_simulation) =
-                chart_size(budget, run.simulator(), run.settings(), Sizing::Read, start)?;
-            (run, m, deadline, per_simulation)
-        };
+        let sized = open_run(base, budget, start)?;
+        let run = &sized.run;
         let records = run.records();
-        let (mut chart, failures) = records.stored_training()?;
-        if !simulates && chart.records.len() > m {
-            run.progress().note(&format!(
-                "the search fits and scores on the first {m} of the chart's {} training records \
-                 (as many as its budget affords; a larger budget uses more)",
-                chart.records.len()
-            ));
-            chart.records.truncate(m);
-            chart.thetas = chart.thetas.slice(ndarray::s![..m, ..]).to_owned();
-        }
-        if chart.records.len() < MIN_SEARCH_RECORDS {
-            return Err(Error::InvalidSetting {
-                name: "training records",
-                value: chart.records.len().to_string(),
-                reason: format!(
-                    "the automatic design needs at least {MIN_SEARCH_RECORDS} to fit on and \
-                     score its candidates: give a larger chart, or hold out fewer records"
-                ),
-            });
-        }
+        let (chart, failures) = search_chart(&sized)?;
         let (medium, networks) = match networks {
             Some(pair) => pair,
-            None => (
-                network(&[20])?,
-                vec![
-                    network(&[10])?,
-                    network(&[40])?,
-                    network(&[20, 20])?,
-                    pieces(4, &[20])?,
-                ],
-            ),
+            None => default_networks()?,
         };
         let spec = run.simulator().spec();
         let compressors = match compressors {
-            Some(list) => list
-                .into_iter()
-                .filter_map(|c| match c.for_model(spec) {
-                    Ok(shaped) => Some(shaped),
-                    Err(e) => {
-                        run.progress()
-                            .note(&format!("the candidate {c} is left out: {e}"));
-                        None
-                    }
-                })
-                .collect(),
+            Some(list) => shaped_for_model(list, run),
             None => candidate_compressors(
                 spec.output_names().len(),
                 spec.input_names().len(),
@@ -492,11 +213,11 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                 output_transforms(&chart.records),
             ),
         };
-        let scope = Scope::of(&run);
+        let scope = Scope::of(run);
         let mut search = Search::new(
             &scope,
             &chart,
-            (budget, deadline),
+            (budget, sized.deadline),
             screening_rows,
             records.can_grow(),
         );
@@ -511,60 +232,188 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let rows = search.final_rows(
             best,
             more_pay,
-            per_simulation.unwrap_or(f64::INFINITY),
+            sized.per_simulation.unwrap_or(f64::INFINITY),
             chart_memory_cap(spec),
         );
-        let more = if rows > chart.records.len() {
-            let added = rows - chart.records.len();
-            run.progress().note(&format!(
-                "more records pay: simulating {added} more for the winner's final fit"
-            ));
-            let more = records.more_training(m, m + added)?;
-            // The simulations ended their own stage: the fit goes on.
-            run.progress().begin(Stage::Fitting, 0);
-            more
-        } else {
-            None
-        };
+        let more = more_records(&sized, chart.records.len(), rows)?;
         let (added_simulations, added_failures) = more
             .as_ref()
             .map_or((0, 0), |(c, failed)| (c.records.len() + failed, *failed));
-        let Winner {
-            compressor,
-            features,
-            regressor_config,
-            regressor,
-            final_fit,
-        } = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
+        let winner = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         run.progress().end(Stage::Fitting);
-        let rows_exponent = search.rows_exponent();
         let search_seconds = start.elapsed().as_secs_f64();
         let failures = failures + added_failures;
-        let kept = features.nrows();
-        let estimator = run.finish(
-            compressor,
-            regressor,
-            TrainedOn {
-                features: features.view(),
-                simulations: kept + failures,
-                failures,
-                regressor: regressor_config,
-            },
-        )?;
+        let simulations = winner.features.nrows() + failures;
+        let final_fit = winner.final_fit;
+        let estimator = ship(run, winner, failures)?;
         Ok(AutoOutcome {
             estimator,
             candidates: search.reports(),
             best,
-            simulations: kept + failures,
+            simulations,
             search_seconds,
             failures,
             final_fit,
             seed_scores,
             half_rows,
             added_simulations,
-            rows_exponent,
+            rows_exponent: search.rows_exponent(),
         })
     }
+}
+
+/// A search's run, opened with the chart size and deadline its budget
+/// gives.
+struct SizedRun<'a, S: ?Sized> {
+    run: twostage_train::Run<'a, S>,
+    /// Training records the search takes.
+    m: usize,
+    deadline: Option<Instant>,
+    /// The pilot's wall seconds per simulation, where it ran.
+    per_simulation: Option<f64>,
+    /// Whether the records are simulated (else read).
+    simulates: bool,
+}
+
+/// Open `base`'s run for a search of `budget`. A simulated chart's size
+/// follows from the budget before the run opens it; a chart or shards on
+/// disk bring their own, adopted by the run.
+fn open_run<'a, S: Simulator + ?Sized>(
+    base: TwoStage<'a, S>,
+    budget: Budget,
+    start: Instant,
+) -> Result<SizedRun<'a, S>> {
+    let simulates = base.record_source().simulates();
+    let (run, (m, deadline, per_simulation)) = if simulates {
+        base.run_settings().check()?;
+        let sized = chart_size(
+            budget,
+            base.simulator(),
+            base.run_settings(),
+            Sizing::Simulated,
+            start,
+        )?;
+        (base.simulations(sized.0).prepare()?, sized)
+    } else {
+        let run = base.prepare()?;
+        let sized = chart_size(budget, run.simulator(), run.settings(), Sizing::Read, start)?;
+        (run, sized)
+    };
+    Ok(SizedRun {
+        run,
+        m,
+        deadline,
+        per_simulation,
+        simulates,
+    })
+}
+
+/// The training records the search fits and scores on, and how many
+/// simulations failed: a read chart's first `m` where it has more.
+fn search_chart<S: Simulator + ?Sized>(
+    sized: &SizedRun<'_, S>,
+) -> Result<(twostage_sources::StoredChart, usize)> {
+    let (run, m) = (&sized.run, sized.m);
+    let (mut chart, failures) = run.records().stored_training()?;
+    if !sized.simulates && chart.records.len() > m {
+        run.progress().note(&format!(
+            "the search fits and scores on the first {m} of the chart's {} training records \
+             (as many as its budget affords; a larger budget uses more)",
+            chart.records.len()
+        ));
+        chart.records.truncate(m);
+        chart.thetas = chart.thetas.slice(ndarray::s![..m, ..]).to_owned();
+    }
+    if chart.records.len() < MIN_SEARCH_RECORDS {
+        return Err(Error::InvalidSetting {
+            name: "training records",
+            value: chart.records.len().to_string(),
+            reason: format!(
+                "the automatic design needs at least {MIN_SEARCH_RECORDS} to fit on and \
+                 score its candidates: give a larger chart, or hold out fewer records"
+            ),
+        });
+    }
+    Ok((chart, failures))
+}
+
+/// The medium network of round 1 and the others of round 2.
+fn default_networks() -> Result<(RegressorConfig, Vec<RegressorConfig>)> {
+    Ok((
+        network(&[20])?,
+        vec![
+            network(&[10])?,
+            network(&[40])?,
+            network(&[20, 20])?,
+            pieces(4, &[20])?,
+        ],
+    ))
+}
+
+/// The user's compressors shaped for the run's model; one the model
+/// cannot take is named and left out.
+fn shaped_for_model<S: Simulator + ?Sized>(
+    list: Vec<CompressorConfig>,
+    run: &twostage_train::Run<'_, S>,
+) -> Vec<CompressorConfig> {
+    let spec = run.simulator().spec();
+    list.into_iter()
+        .filter_map(|c| match c.for_model(spec) {
+            Ok(shaped) => Some(shaped),
+            Err(e) => {
+                run.progress()
+                    .note(&format!("the candidate {c} is left out: {e}"));
+                None
+            }
+        })
+        .collect()
+}
+
+/// The records simulated for the winner's final fit where it takes more
+/// `rows` than the chart's `chart_rows`, and how many of them failed.
+fn more_records<S: Simulator + ?Sized>(
+    sized: &SizedRun<'_, S>,
+    chart_rows: usize,
+    rows: usize,
+) -> Result<Option<(twostage_sources::StoredChart, usize)>> {
+    if rows <= chart_rows {
+        return Ok(None);
+    }
+    let (run, m) = (&sized.run, sized.m);
+    let added = rows - chart_rows;
+    run.progress().note(&format!(
+        "more records pay: simulating {added} more for the winner's final fit"
+    ));
+    let more = run.records().more_training(m, m + added)?;
+    // The simulations ended their own stage: the fit goes on.
+    run.progress().begin(Stage::Fitting, 0);
+    Ok(more)
+}
+
+/// The winner, calibrated and validated by the run as a preset would be.
+fn ship<S: Simulator + ?Sized>(
+    run: &twostage_train::Run<'_, S>,
+    winner: Winner,
+    failures: usize,
+) -> Result<Estimator> {
+    let Winner {
+        compressor,
+        features,
+        regressor_config,
+        regressor,
+        ..
+    } = winner;
+    let kept = features.nrows();
+    run.finish(
+        compressor,
+        regressor,
+        TrainedOn {
+            features: features.view(),
+            simulations: kept + failures,
+            failures,
+            regressor: regressor_config,
+        },
+    )
 }
 
 /// The most records of `spec`'s model a search keeps in memory.

@@ -109,6 +109,24 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             winner.final_fit = FinalFit::Anew { rows: refit_rows };
             return Ok(winner);
         };
+        let added = more.map_or(0, |m| m.records.len());
+        self.fit_by_deadline(best, &mut winner, &thetas, (refit_rows, added), deadline)?;
+        Ok(winner)
+    }
+
+    /// The winner's final fit on `refit_rows` under a time budget, of which
+    /// `added` were simulated for it.
+    fn fit_by_deadline(
+        &self,
+        best: usize,
+        winner: &mut Winner,
+        thetas: &Array2<f64>,
+        (refit_rows, added): (usize, usize),
+        deadline: Instant,
+    ) -> Result<()> {
+        let marginals = self.plan.base.simulator().spec().prior().marginals();
+        let seed = self.plan.base.seed();
+        let scored_rows = winner.final_fit.rows();
         // Under a time budget the winner is trained further from the fit it
         // was scored with: cheaper than anew, and a fit that can stop at
         // the deadline (the costs are estimates) and still be no worse than
@@ -117,7 +135,6 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         // (seen by no fit; at most 2000: the fits are compared on the same
         // records, so their difference is measured well before their
         // scores are) and the better on them ships.
-        let added = more.map_or(0, |m| m.records.len());
         let compared = (added / 5)
             .min(MAX_COMPARED_RECORDS)
             .min(refit_rows.saturating_sub(scored_rows));
@@ -153,7 +170,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
                 stopped: continued.stopped_at_deadline(),
             };
             winner.regressor = continued;
-            return Ok(winner);
+            return Ok(());
         }
         self.plan.base.progress().status(&format!(
             "final fit: {design} anew on {train_rows} records; {}",
@@ -183,7 +200,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             stopped: chosen.stopped_at_deadline(),
         };
         winner.regressor = chosen;
-        Ok(winner)
+        Ok(())
     }
 
     /// The seconds a fit anew of candidate `best` on `rows` rows takes on

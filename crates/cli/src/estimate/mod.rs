@@ -300,11 +300,7 @@ impl Session<'_> {
     /// `--refine=auto` the two-stage estimates are checked first and only
     /// the records the check does not explain are refined (and checked
     /// again).
-    fn check_and_refine(
-        &self,
-        path: &std::path::Path,
-        estimates: &mut [(String, RecordOutcome)],
-    ) {
+    fn check_and_refine(&self, path: &std::path::Path, estimates: &mut [(String, RecordOutcome)]) {
         let everyone = vec![true; estimates.len()];
         match (&self.chosen.refiner, self.args.refine) {
             (Some(refiner), Some(RefineWhich::Auto)) => {

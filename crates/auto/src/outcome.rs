@@ -1,0 +1,257 @@
+//! What an automatic design reports: every candidate's score and status,
+//! what round 3 measured, how the winner's final fit went.
+
+use twostage_estimator::Estimator;
+
+use crate::{FinalFit, FinalFits};
+
+/// One candidate structure and how it scored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CandidateReport {
+    /// Stage 1.
+    pub compressor: String,
+    /// Stage 2.
+    pub regressor: String,
+    /// Both stages as the command line writes them (`log+pca:8 mlp:20`),
+    /// or as they read where a stage has no such form.
+    pub design: String,
+    /// Search round: 1 compares compressors with one network, 2 compares
+    /// networks on the best compressors, 3 averages the winner's restarts.
+    pub round: usize,
+    /// RMSE per parameter on the held-out chart rows (empty when not run).
+    pub rmse: Vec<f64>,
+    /// Mean over parameters of RMSE / prior standard deviation (lower is
+    /// better; 1 means nothing learned).
+    pub score: f64,
+    /// Seconds spent compressing and fitting it.
+    pub seconds: f64,
+    /// Chart rows its network was fitted on: all the fitting rows, or a
+    /// screening share of them in round 1 of a large chart.
+    pub fit_rows: usize,
+    /// Whether it was scored, and why not if it was not.
+    pub status: Status,
+    /// How its network was trained (trainer, stop reason, restarts).
+    pub trained_by: Option<String>,
+}
+
+/// Whether a candidate was scored, and why not if it was not.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Status {
+    /// Fitted, and scored on the held-out rows.
+    Scored,
+    /// Not started: about `seconds` would have overrun the time budget.
+    Skipped {
+        /// Its estimated cost.
+        seconds: f64,
+    },
+    /// Its stage 1 does not apply to these records (an autoregression of
+    /// a noise-free decay is rank deficient, say): why.
+    NotApplicable(String),
+    /// Its fit went wrong: why.
+    Failed(String),
+}
+
+impl Status {
+    /// Whether the candidate has a score.
+    ///
+    /// ```
+    /// assert!(twostage::auto::Status::Scored.is_scored());
+    /// assert!(!twostage::auto::Status::Failed("diverged".into()).is_scored());
+    /// ```
+    pub fn is_scored(&self) -> bool {
+        matches!(self, Self::Scored)
+    }
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Scored => write!(f, "scored"),
+            Self::Skipped { seconds } => write!(
+                f,
+                "skipped: about {seconds:.0} s would overrun the time budget"
+            ),
+            Self::NotApplicable(why) => write!(f, "does not apply to these records: {why}"),
+            Self::Failed(why) => write!(f, "failed: {why}"),
+        }
+    }
+}
+
+/// The result of [`AutoDesign::run`].
+#[derive(Debug)]
+pub struct AutoOutcome {
+    /// The best candidate, refitted on the whole chart, calibrated and
+    /// validated.
+    pub estimator: Estimator,
+    /// Every candidate, in the order tried.
+    pub candidates: Vec<CandidateReport>,
+    /// Index of the winner in `candidates`.
+    pub best: usize,
+    /// Simulations in the chart.
+    pub simulations: usize,
+    /// The simulations among them that failed (left out of every fit).
+    pub failures: usize,
+    /// Seconds of the search (without calibration and validation).
+    pub search_seconds: f64,
+    /// How the shipped network was fitted: as scored, anew, trained
+    /// further, or both and the better shipped; on how many rows.
+    pub final_fit: FinalFit,
+    /// The round-2 winner's score at the run's seed and, where the budget
+    /// allowed, at two other seeds: how much the seed alone moves it.
+    pub seed_scores: Vec<f64>,
+    /// The round-2 winner fitted on half its rows (how many, and its
+    /// score), where the budget allowed: a learning curve's last step,
+    /// which says whether more records would pay.
+    pub half_rows: Option<(usize, f64)>,
+    /// Simulations added after the search for the winner's final fit
+    /// (counted in `simulations`), where more records pay and the time
+    /// left afforded them.
+    pub added_simulations: usize,
+    /// How the round-2 winner's fit time grew with its rows (the exponent,
+    /// from its half-rows and seed trials timed alone), where measured: the
+    /// final fit's rows follow from it.
+    pub rows_exponent: Option<f64>,
+}
+
+/// Whether a score of `half` on half the rows against `own` on all of them
+/// says more records would pay: the learning curve still falls. Time a
+/// search would leave unused then goes to more records, trained further
+/// from the winner's fit, which cannot make it worse on held-out rows.
+pub(crate) fn more_records_pay(half: f64, own: f64) -> bool {
+    half > own
+}
+
+impl std::fmt::Display for AutoOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "automatic design on m = {} simulations ({:.1} s), held-out RMSE per candidate:",
+            self.simulations, self.search_seconds
+        )?;
+        self.fmt_shortened_fit(f)?;
+        self.fmt_round_three(f)?;
+        self.fmt_final_fit(f)?;
+        for (i, c) in self.candidates.iter().enumerate() {
+            let mark = if i == self.best { "*" } else { " " };
+            let rmse: Vec<String> = c.rmse.iter().map(|r| format!("{r:.4e}")).collect();
+            match &c.status {
+                Status::Scored => writeln!(
+                    f,
+                    " {mark} {:<28} score {:.4}  RMSE [{}]  {:.1} s on {} rows{}",
+                    c.design,
+                    c.score,
+                    rmse.join(", "),
+                    c.seconds,
+                    c.fit_rows,
+                    c.trained_by
+                        .as_ref()
+                        .map_or_else(String::new, |t| format!("; {t}"))
+                )?,
+                status => writeln!(f, " {mark} {:<28} {status}", c.design)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+impl AutoOutcome {
+    /// A final fit the deadline stopped, or one on fewer records than the
+    /// chart's.
+    fn fmt_shortened_fit(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let fitted_rows = self.final_fit.rows();
+        if self.final_fit.stopped() {
+            writeln!(
+                f,
+                "(the winner's final fit on {fitted_rows} records was stopped at the time budget's \
+                 end: it ships trained as far as it got from the fit it was scored with)"
+            )
+        } else if !matches!(self.final_fit, FinalFit::Compared { .. })
+            && fitted_rows < self.simulations - self.failures
+        {
+            writeln!(
+                f,
+                "(the time budget left no room to refit the winner on the whole chart: it ships \
+                 fitted on {} of its {} records)",
+                fitted_rows, self.simulations
+            )
+        } else {
+            Ok(())
+        }
+    }
+
+    /// What round 3 measured: the seed's effect, the learning curve's last
+    /// step, the fit time's growth.
+    fn fmt_round_three(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if let [own, others @ ..] = self.seed_scores.as_slice()
+            && !others.is_empty()
+        {
+            let (low, high) = others
+                .iter()
+                .fold((*own, *own), |(l, h), s| (l.min(*s), h.max(*s)));
+            let listed: Vec<String> = others.iter().map(|s| format!("{s:.4}")).collect();
+            writeln!(
+                f,
+                "the round-2 winner scores {own:.4} at the run's seed and {} at two others: \
+                 the seed moves it by {:.1}%",
+                listed.join(" and "),
+                100.0 * (high - low) / own.max(f64::MIN_POSITIVE)
+            )?;
+        }
+        if let (Some((rows, half)), Some(own)) = (self.half_rows, self.seed_scores.first()) {
+            writeln!(
+                f,
+                "on half its records ({rows}) the round-2 winner scores {half:.4} against \
+                 {own:.4}: more records would {}",
+                // The seed alone moves a score by 1 to 2%.
+                if half > 1.03 * own {
+                    "pay"
+                } else if more_records_pay(half, *own) {
+                    "pay a little"
+                } else {
+                    "not pay"
+                }
+            )?;
+        }
+        if let Some(exponent) = self.rows_exponent {
+            writeln!(
+                f,
+                "its fit time grows as rows^{exponent:.2} (half its rows and all of them, timed alone)"
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The records added for the final fit, and its two fits compared.
+    fn fmt_final_fit(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.added_simulations > 0 {
+            writeln!(
+                f,
+                "so the winner's final fit took {} more simulations: fitted on {} records",
+                self.added_simulations,
+                self.final_fit.rows()
+            )?;
+        }
+        if let FinalFit::Compared {
+            fits:
+                FinalFits {
+                    compared,
+                    further,
+                    anew,
+                },
+            ..
+        } = self.final_fit
+        {
+            writeln!(
+                f,
+                "on the last {compared} added records, seen by no fit, the winner trained further \
+                 scores {further:.4} and fitted anew {anew:.4}: the {} ships",
+                if anew < further {
+                    "fit anew"
+                } else {
+                    "fit trained further"
+                }
+            )?;
+        }
+        Ok(())
+    }
+}
