@@ -6,12 +6,67 @@ use std::path::PathBuf;
 use toml::Spanned;
 use twostage_models::InputSignal;
 
-use super::CommandInput;
 use super::locator::Locator;
+use super::locator::Signals;
+use super::raw::RawFile;
 use super::raw::RawInput;
+use super::{CommandInput, ModelSource};
 use crate::error::Result;
 
 impl Locator<'_> {
+    /// The inputs a source needs are given: an FMU's time unit and its
+    /// inputs' design, and an `[input]` only where [signals] names
+    /// inputs (`measured`: the file gives a measured input).
+    pub(super) fn check_inputs(
+        &self,
+        raw: &RawFile,
+        source: &ModelSource,
+        signals: &Signals,
+        measured: bool,
+    ) -> Result<()> {
+        if let (ModelSource::Fmu { .. }, None) = (
+            source,
+            raw.signals
+                .as_ref()
+                .and_then(|s| s.get_ref().sample_time.as_ref()),
+        ) {
+            return Err(self.error(
+                raw.signals.as_ref().map(Spanned::span),
+                "signals.sample_time",
+                "an FMU runs in its own time unit: give the time between samples, \
+                 sample_time = T"
+                    .into(),
+            ));
+        }
+        if let ModelSource::Fmu { input, .. } = source {
+            let span = raw.signals.as_ref().map(Spanned::span);
+            if input.is_none() && !measured && !signals.inputs.is_empty() {
+                return Err(self.error(
+                    span,
+                    "signals.inputs",
+                    "the FMU's inputs need a design: add an [input] (white, chicane or fixed)"
+                        .into(),
+                ));
+            }
+            if let (Some(_), true) = (input, signals.inputs.is_empty()) {
+                return Err(self.error(
+                    raw.input.as_ref().map(Spanned::span),
+                    "input",
+                    "[input] drives the measured inputs, but [signals] names none".into(),
+                ));
+            }
+        }
+        let fixes_input = matches!(source, ModelSource::Command { input: Some(_), .. }) || measured;
+        if fixes_input && signals.inputs.is_empty() {
+            return Err(self.error(
+                raw.input.as_ref().map(Spanned::span),
+                "input",
+                "[input] gives the measured inputs, but [signals] names none".into(),
+            ));
+        }
+        Ok(())
+    }
+
     /// A measured input from a CSV `file` (`signal = "fixed"`), for a
     /// built-in or FMU source; `None` for any other `[input]` (the
     /// source's own design).

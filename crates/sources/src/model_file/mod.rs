@@ -8,7 +8,6 @@
 
 use std::path::{Path, PathBuf};
 
-use toml::Spanned;
 use twostage_fmi::{FmiError, FmuSimulator, InterfaceKind};
 use twostage_models::{
     BuiltinModel, BuiltinOverrides, ExternalSimulator, InputSignal, ModelSpec, Prior, Simulator,
@@ -269,47 +268,7 @@ impl ModelFile {
             Some(b) => spec.with_notes(b.input_note(), b.noise_note()),
             None => spec,
         };
-        if let (ModelSource::Fmu { .. }, None) = (
-            &source,
-            raw.signals
-                .as_ref()
-                .and_then(|s| s.get_ref().sample_time.as_ref()),
-        ) {
-            return Err(at.error(
-                raw.signals.as_ref().map(Spanned::span),
-                "signals.sample_time",
-                "an FMU runs in its own time unit: give the time between samples, \
-                 sample_time = T"
-                    .into(),
-            ));
-        }
-        if let ModelSource::Fmu { input, .. } = &source {
-            let span = raw.signals.as_ref().map(Spanned::span);
-            if input.is_none() && measured_input.is_none() && !signals.inputs.is_empty() {
-                return Err(at.error(
-                    span,
-                    "signals.inputs",
-                    "the FMU's inputs need a design: add an [input] (white, chicane or fixed)"
-                        .into(),
-                ));
-            }
-            if let (Some(_), true) = (input, signals.inputs.is_empty()) {
-                return Err(at.error(
-                    raw.input.as_ref().map(Spanned::span),
-                    "input",
-                    "[input] drives the measured inputs, but [signals] names none".into(),
-                ));
-            }
-        }
-        let fixes_input = matches!(source, ModelSource::Command { input: Some(_), .. })
-            || measured_input.is_some();
-        if fixes_input && signals.inputs.is_empty() {
-            return Err(at.error(
-                raw.input.as_ref().map(Spanned::span),
-                "input",
-                "[input] gives the measured inputs, but [signals] names none".into(),
-            ));
-        }
+        at.check_inputs(&raw, &source, &signals, measured_input.is_some())?;
         let spec = match &source {
             ModelSource::Fmu {
                 input,
@@ -344,36 +303,16 @@ impl ModelFile {
             }
             (None, _) => spec.input_note().to_string(),
         };
-        let mut noise_note = match &source {
+        let own_noise = match &source {
             ModelSource::Command { .. } => "the simulator's own".to_string(),
             _ => spec.noise_note().to_string(),
         };
-        if let Some((path, _)) = &output_residual {
-            noise_note = format!(
-                "{noise_note}{}added to the outputs: noise shaped like the residual in {} (an \
-                 AR model of it)",
-                if noise_note.is_empty() { "" } else { "; " },
-                path.display()
-            );
-        }
-        if output_sd.iter().any(|sd| *sd > 0.0) {
-            let added: Vec<String> = outputs
-                .iter()
-                .zip(output_sd.iter().zip(&output_ar))
-                .map(|(y, (sd, a))| {
-                    if *a == 0.0 {
-                        format!("{y} sd {sd}")
-                    } else {
-                        format!("{y} sd {sd} AR(1) {a}")
-                    }
-                })
-                .collect();
-            noise_note = format!(
-                "{noise_note}{}white Gaussian added to the outputs: {}",
-                if noise_note.is_empty() { "" } else { "; " },
-                added.join(", ")
-            );
-        }
+        let noise_note = noise::added_noise_note(
+            own_noise,
+            &outputs,
+            (&output_sd, &output_ar),
+            output_residual.as_ref().map(|(path, _)| path.as_path()),
+        );
         let spec = spec.with_notes(&input_note, &noise_note);
         let presets = at.presets(&raw.preset)?;
         let name_lines = at.name_lines(&raw);

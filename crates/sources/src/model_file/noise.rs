@@ -104,3 +104,42 @@ impl Locator<'_> {
         Ok(values)
     }
 }
+
+/// What a model file's noise note says: the source's own noise, then the
+/// noise the file adds to the outputs (shaped like a residual, or white
+/// Gaussian with its sd and AR(1) coefficient per output).
+pub(super) fn added_noise_note(
+    own: String,
+    outputs: &[&str],
+    (output_sd, output_ar): (&[f64], &[f64]),
+    residual: Option<&std::path::Path>,
+) -> String {
+    let mut note = own;
+    if let Some(path) = residual {
+        note = format!(
+            "{note}{}added to the outputs: noise shaped like the residual in {} (an AR model of \
+             it)",
+            if note.is_empty() { "" } else { "; " },
+            path.display()
+        );
+    }
+    if output_sd.iter().any(|sd| *sd > 0.0) {
+        let added: Vec<String> = outputs
+            .iter()
+            .zip(output_sd.iter().zip(output_ar))
+            .map(|(y, (sd, a))| {
+                if *a == 0.0 {
+                    format!("{y} sd {sd}")
+                } else {
+                    format!("{y} sd {sd} AR(1) {a}")
+                }
+            })
+            .collect();
+        note = format!(
+            "{note}{}white Gaussian added to the outputs: {}",
+            if note.is_empty() { "" } else { "; " },
+            added.join(", ")
+        );
+    }
+    note
+}
