@@ -109,6 +109,14 @@ fn report(folder: &Path) -> Result<CrateReport> {
             .push((relative.to_path_buf(), text));
     }
     let names: BTreeSet<String> = modules.keys().cloned().collect();
+    let root = ["lib.rs", "main.rs"]
+        .iter()
+        .map(|f| src.join(f))
+        .find(|p| p.is_file())
+        .map(fs::read_to_string)
+        .transpose()?
+        .unwrap_or_default();
+    let exports = root_exports(&root);
     let mut uses: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     for (module, files) in &modules {
         let used = uses.entry(module.clone()).or_default();
@@ -118,7 +126,7 @@ fn report(folder: &Path) -> Result<CrateReport> {
             let at_top = relative.components().count() == 1
                 || relative.file_name().is_some_and(|n| n == "mod.rs")
                     && relative.components().count() == 2;
-            for target in referenced_modules(text, at_top) {
+            for target in referenced_modules(text, at_top, &exports) {
                 if target != *module && names.contains(&target) {
                     used.insert(target);
                 }
@@ -157,34 +165,129 @@ fn top_module(relative: &Path) -> Option<String> {
     (!matches!(name.as_str(), "lib" | "main" | "bin")).then_some(name)
 }
 
-/// The top-level modules a file names as `crate::x` (and `super::x` at the
-/// top level), outside comments.
-fn referenced_modules(text: &str, at_top: bool) -> BTreeSet<String> {
-    let mut found = BTreeSet::new();
-    for line in text.lines() {
-        let code = line.split("//").next().unwrap_or("");
-        let mut prefixes = vec!["crate::"];
-        if at_top {
-            prefixes.push("super::");
-        }
-        for prefix in prefixes {
-            let mut rest = code;
-            while let Some(at) = rest.find(prefix) {
-                let preceded_by_word = rest[..at]
-                    .chars()
-                    .next_back()
-                    .is_some_and(|c| c.is_alphanumeric() || c == '_');
-                rest = &rest[at + prefix.len()..];
-                if preceded_by_word {
-                    continue;
+/// A file's code without its `//` comments and its unit tests (a
+/// `#[cfg(test)]` item at the file's top level and all after it: tests
+/// are not part of the crate's build), as one text (use groups span
+/// lines).
+fn code_of(text: &str) -> String {
+    text.lines()
+        .take_while(|line| !line.starts_with("#[cfg(test)]"))
+        .map(|line| line.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The first path segment of each item of a use group that starts right
+/// after its `{` in `rest`, and the text after its `}`.
+fn group_items(rest: &str) -> (Vec<String>, &str) {
+    let mut items = Vec::new();
+    let (mut depth, mut item_start) = (1usize, true);
+    for (at, c) in rest.char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' => {
+                depth -= 1;
+                if depth == 0 {
+                    return (items, &rest[at + 1..]);
                 }
-                let name: String = rest
+            }
+            ',' if depth == 1 => item_start = true,
+            c if item_start && (c.is_alphanumeric() || c == '_') => {
+                let name: String = rest[at..]
                     .chars()
                     .take_while(|c| c.is_alphanumeric() || *c == '_')
                     .collect();
-                if !name.is_empty() {
-                    found.insert(name);
-                }
+                items.push(name);
+                item_start = false;
+            }
+            _ => {}
+        }
+    }
+    (items, "")
+}
+
+/// The names the crate root re-exports (`pub use module::{A, B}`), each
+/// with the top-level module it comes from: a file that names `crate::A`
+/// depends on that module.
+fn root_exports(root: &str) -> BTreeMap<String, String> {
+    let code = code_of(root);
+    let mut exports = BTreeMap::new();
+    let mut rest = code.as_str();
+    while let Some(at) = rest.find("pub use ") {
+        rest = &rest[at + "pub use ".len()..];
+        let module: String = rest
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        let after = &rest[module.len()..];
+        let Some(path) = after.strip_prefix("::") else {
+            continue;
+        };
+        let names = if let Some(group) = path.strip_prefix('{') {
+            // `pub use m::{A, B as C}`: the names as the root shows them.
+            let end = group.find('}').unwrap_or(group.len());
+            group[..end]
+                .split(',')
+                .filter_map(|item| item.split_whitespace().last())
+                .map(|name| name.rsplit("::").next().unwrap_or(name).to_string())
+                .collect::<Vec<_>>()
+        } else {
+            let end = path.find(';').unwrap_or(path.len());
+            let item = &path[..end];
+            vec![
+                item.split_whitespace()
+                    .last()
+                    .map(|n| n.rsplit("::").next().unwrap_or(n).to_string())
+                    .unwrap_or_default(),
+            ]
+        };
+        for name in names.into_iter().filter(|n| !n.is_empty() && n != "*") {
+            exports.insert(name, module.clone());
+        }
+    }
+    exports
+}
+
+/// The top-level modules a file names as `crate::x` (and `super::x` at the
+/// top level), outside comments: directly, in a use group, or through a
+/// name the root re-exports (`exports`).
+fn referenced_modules(
+    text: &str,
+    at_top: bool,
+    exports: &BTreeMap<String, String>,
+) -> BTreeSet<String> {
+    let code = code_of(text);
+    let mut found = BTreeSet::new();
+    let mut prefixes = vec!["crate::"];
+    if at_top {
+        prefixes.push("super::");
+    }
+    let mut note = |name: String| {
+        found.insert(exports.get(&name).cloned().unwrap_or(name));
+    };
+    for prefix in prefixes {
+        let mut rest = code.as_str();
+        while let Some(at) = rest.find(prefix) {
+            let preceded_by_word = rest[..at]
+                .chars()
+                .next_back()
+                .is_some_and(|c| c.is_alphanumeric() || c == '_');
+            rest = &rest[at + prefix.len()..];
+            if preceded_by_word {
+                continue;
+            }
+            if let Some(group) = rest.strip_prefix('{') {
+                let (items, after) = group_items(group);
+                items.into_iter().for_each(&mut note);
+                rest = after;
+                continue;
+            }
+            let name: String = rest
+                .chars()
+                .take_while(|c| c.is_alphanumeric() || *c == '_')
+                .collect();
+            if !name.is_empty() {
+                note(name);
             }
         }
     }
@@ -261,10 +364,31 @@ mod tests {
 
     #[test]
     fn references_are_read_from_code_not_comments() {
-        let text = "use crate::layout::V1;\n// crate::file is only mentioned\nlet x = super::space::f();\nmy_crate::other";
-        let top: Vec<String> = referenced_modules(text, true).into_iter().collect();
+        let text = "use crate::layout::V1;\n// crate::file is only mentioned\nlet x = super::space::f();\nmy_crate::other\n#[cfg(test)]\nmod tests {\n    use crate::tested::T;\n}\n";
+        let none = BTreeMap::new();
+        let top: Vec<String> = referenced_modules(text, true, &none).into_iter().collect();
         assert_eq!(top, ["layout", "space"]);
-        let deep: Vec<String> = referenced_modules(text, false).into_iter().collect();
+        let deep: Vec<String> = referenced_modules(text, false, &none).into_iter().collect();
         assert_eq!(deep, ["layout"]);
+    }
+
+    /// A name the root re-exports leads to its module, also inside a use
+    /// group that spans lines.
+    #[test]
+    fn names_the_root_reexports_lead_to_their_modules() {
+        let root = "mod config;\npub use transform::{SignalTransform, Transformed as Shaped};\npub use arx::Arx;\n// pub use gone::Gone;\n";
+        let exports = root_exports(root);
+        assert_eq!(exports.get("Shaped").map(String::as_str), Some("transform"));
+        assert_eq!(
+            exports.get("SignalTransform").map(String::as_str),
+            Some("transform")
+        );
+        assert_eq!(exports.get("Arx").map(String::as_str), Some("arx"));
+        assert!(!exports.contains_key("Gone"));
+        let text = "use crate::error::Result;\nuse crate::{\n    Arx, Compressor,\n    Shaped, error::{A, B},\n};\n";
+        let found: Vec<String> = referenced_modules(text, false, &exports)
+            .into_iter()
+            .collect();
+        assert_eq!(found, ["Compressor", "arx", "error", "transform"]);
     }
 }

@@ -36,8 +36,7 @@ use outcome::more_records_pay;
 mod search;
 
 use candidates::{candidate_compressors, network, output_transforms, pieces};
-pub use outcome::{AutoOutcome, CandidateReport, Status};
-pub use search::{FinalFit, FinalFits};
+pub use outcome::{AutoOutcome, CandidateReport, FinalFit, FinalFits, Status};
 use search::{Scope, Search, Winner};
 
 /// How much the search may spend.

@@ -3,8 +3,6 @@
 
 use twostage_estimator::Estimator;
 
-use crate::{FinalFit, FinalFits};
-
 /// One candidate structure and how it scored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CandidateReport {
@@ -254,4 +252,71 @@ impl AutoOutcome {
         }
         Ok(())
     }
+}
+
+/// How the winner's shipped network was fitted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FinalFit {
+    /// The fit the winner was scored with ships: a final fit would have
+    /// had no more rows (the search scored it on the whole chart, or the
+    /// time budget left no room for more).
+    AsScored {
+        /// The rows it was fitted on.
+        rows: usize,
+    },
+    /// Fitted anew on more rows (no time budget to stop it).
+    Anew {
+        /// The rows it was fitted on.
+        rows: usize,
+    },
+    /// Trained further from the fit it was scored with, on more rows.
+    TrainedFurther {
+        /// The rows it was trained on.
+        rows: usize,
+        /// Whether the time budget's end stopped it: it ships trained as
+        /// far as it got, no worse than its start on its held-out rows.
+        stopped: bool,
+    },
+    /// Trained further and fitted anew on the same rows, the better on
+    /// added records seen by neither shipped.
+    Compared {
+        /// The rows both were trained on.
+        rows: usize,
+        /// Their scores.
+        fits: FinalFits,
+        /// Whether the time budget's end stopped the one that ships.
+        stopped: bool,
+    },
+}
+
+impl FinalFit {
+    /// The rows the shipped network was fitted on.
+    pub fn rows(&self) -> usize {
+        match *self {
+            Self::AsScored { rows }
+            | Self::Anew { rows }
+            | Self::TrainedFurther { rows, .. }
+            | Self::Compared { rows, .. } => rows,
+        }
+    }
+
+    /// Whether the time budget's end stopped the shipped fit.
+    pub fn stopped(&self) -> bool {
+        match *self {
+            Self::AsScored { .. } | Self::Anew { .. } => false,
+            Self::TrainedFurther { stopped, .. } | Self::Compared { stopped, .. } => stopped,
+        }
+    }
+}
+
+/// The winner's two final fits under a time budget, where both ran: trained
+/// further from its scored fit and fitted anew, scored on added records.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FinalFits {
+    /// The added records (seen by neither fit) they were scored on.
+    pub compared: usize,
+    /// The held-out score of the winner trained further from its fit.
+    pub further: f64,
+    /// The held-out score of the winner fitted anew.
+    pub anew: f64,
 }

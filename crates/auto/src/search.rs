@@ -20,7 +20,6 @@ use crate::cost::{
 };
 use crate::{Budget, CandidateReport, Status};
 pub(super) use final_fit::Winner;
-pub use final_fit::{FinalFit, FinalFits};
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
 use twostage_estimator::{Error, Result};
 use twostage_sources::Progress;

@@ -42,25 +42,24 @@ mod arx;
 mod config;
 mod error;
 mod fast;
-mod level;
 mod narx;
 mod pca;
 mod raw;
 mod signals;
-mod transform;
 mod workspace;
 
 use ndarray::ArrayView2;
 
 pub use arx::Arx;
-pub use config::{CompressorConfig, NARX_SCALE_RECORDS, PCA_RECORDS};
+pub use config::{
+    CompressorConfig, NARX_SCALE_RECORDS, PCA_RECORDS, SignalTransform, TRANSFORM_RECORDS,
+    Transformed, WithLevel,
+};
 pub use error::{CompressError, Result};
-pub use level::WithLevel;
 pub use narx::{Narx, signal_rms};
 pub use pca::OutputPca;
 pub use raw::{MAX_RAW_FEATURES, RawRecord};
-pub use transform::{FlooredSample, SignalTransform, TRANSFORM_RECORDS, Transformed};
-pub use workspace::{RANK_TOLERANCE, Workspace};
+pub use workspace::{FlooredSample, RANK_TOLERANCE, Workspace};
 
 /// The compression map g: a record `(u, y)` to features `alpha` in `R^n`.
 ///

@@ -5,8 +5,19 @@ use faer::linalg::qr::no_pivoting::{factor, solve};
 use faer::{Mat, Par};
 
 use crate::fast::FastScratch;
-use crate::transform::FlooredSample;
 use twostage_kernels::lagged::LaggedColumn;
+
+/// One sample an estimate could not transform: it was replaced by the
+/// smallest value of the transform's domain the training records showed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlooredSample {
+    /// The output signal (0-based).
+    pub output: usize,
+    /// The sample (0-based).
+    pub sample: usize,
+    /// The value the record had there.
+    pub value: f64,
+}
 
 /// The rank test of every least-squares solve, here and in the
 /// microcontroller runtime (see the kernels).

@@ -10,7 +10,6 @@ use twostage_models::{IoData, OdeSystem, Rk4};
 use crate::description::InterfaceKind;
 use crate::error::{FmiError, Result};
 use crate::ffi::{Binary, Component};
-use crate::setup::Roles;
 
 /// Instances in this process: one per concurrent caller, or one shared.
 pub(crate) struct InProcess {
@@ -294,4 +293,16 @@ impl OdeSystem for Derivatives<'_> {
             *self.failure.borrow_mut() = Some(e);
         }
     }
+}
+
+/// The value references of each role.
+#[derive(Debug, Clone)]
+pub(crate) struct Roles {
+    pub(crate) parameters: Vec<u32>,
+    /// The measured inputs, then the noise inputs.
+    pub(crate) inputs: Vec<u32>,
+    pub(crate) n_measured_inputs: usize,
+    pub(crate) outputs: Vec<u32>,
+    pub(crate) start_references: Vec<u32>,
+    pub(crate) start_values: Vec<f64>,
 }

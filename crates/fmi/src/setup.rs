@@ -12,8 +12,10 @@ use crate::description::{
 };
 use crate::error::{FmiError, Result};
 use crate::ffi::Binary;
-use crate::run::{InProcess, Plan};
-use crate::simulator::MAX_STEP_DIVISOR;
+use crate::run::{InProcess, Plan, Roles};
+
+/// The most communication (or integration) steps per sample.
+pub(crate) const MAX_STEP_DIVISOR: usize = 1 << 16;
 
 /// What the FMU is asked to do, by variable name: everything a worker
 /// process needs to set up the same simulation.
@@ -139,18 +141,6 @@ impl Loaded {
         engine.give_back(first);
         Ok(engine)
     }
-}
-
-/// The value references of each role.
-#[derive(Debug, Clone)]
-pub(crate) struct Roles {
-    pub(crate) parameters: Vec<u32>,
-    /// The measured inputs, then the noise inputs.
-    pub(crate) inputs: Vec<u32>,
-    pub(crate) n_measured_inputs: usize,
-    pub(crate) outputs: Vec<u32>,
-    pub(crate) start_references: Vec<u32>,
-    pub(crate) start_values: Vec<f64>,
 }
 
 impl Roles {

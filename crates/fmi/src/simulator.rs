@@ -15,9 +15,6 @@ use crate::run::{InProcess, Plan};
 use crate::setup::{Loaded, Setup};
 use crate::worker::WorkerPool;
 
-/// The most communication (or integration) steps per sample.
-pub(crate) const MAX_STEP_DIVISOR: usize = 1 << 16;
-
 /// An FMU opened for inspection: its description, without loading its
 /// binary.
 ///

@@ -408,14 +408,6 @@ impl<'a> Estimator<'a> {
             _ => Ok(value),
         }
     }
-
-    /// How many `f64` a [`crate::Stream`] of this estimator needs as its
-    /// workspace: the past samples of each signal, the normal equations
-    /// of each output in double-double, and the scratch of the final
-    /// solve and networks.
-    pub fn workspace_len(&self) -> usize {
-        crate::stream::Layout::of(self).total
-    }
 }
 
 /// Where the floors follow `n_outputs` codes starting at `codes_at` (the

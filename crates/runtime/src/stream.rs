@@ -448,3 +448,13 @@ fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usi
     }
     Ok(())
 }
+
+impl Estimator<'_> {
+    /// How many `f64` a [`crate::Stream`] of this estimator needs as its
+    /// workspace: the past samples of each signal, the normal equations
+    /// of each output in double-double, and the scratch of the final
+    /// solve and networks.
+    pub fn workspace_len(&self) -> usize {
+        Layout::of(self).total
+    }
+}

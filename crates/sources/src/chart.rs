@@ -2,8 +2,8 @@
 
 use ndarray::Array2;
 use rayon::prelude::*;
-use twostage_compress::{Compressor, Workspace};
-use twostage_models::{Design, IoData, Simulator, run_experiments};
+use twostage_compress::{Compressor, CompressorConfig, Workspace};
+use twostage_models::{Design, IoData, ModelSpec, Simulator, run_experiments};
 
 use crate::error::{Error, Result};
 use crate::progress::{Progress, Stage};
@@ -326,4 +326,33 @@ pub(crate) fn simulate_stored<S: Simulator + ?Sized>(
             .unwrap_or_else(|_| unreachable!("q values per kept record")),
         records,
     })
+}
+
+/// A stage-1 compressor fitted to a model's records: shaped for its
+/// signals and length, prepared on its whole records.
+pub trait ForModel: Sized {
+    /// The same compressor for the records of `spec`'s model.
+    ///
+    /// # Errors
+    /// A structure the model's signals cannot take.
+    fn for_model(&self, spec: &ModelSpec) -> Result<Self>;
+    /// The compressor with its own parameters fitted on `records`.
+    ///
+    /// # Errors
+    /// What fitting those parameters reports.
+    fn prepared_on(&self, records: &[IoData]) -> Result<Self>;
+}
+
+impl ForModel for CompressorConfig {
+    fn for_model(&self, spec: &ModelSpec) -> Result<Self> {
+        Ok(self.for_shape(
+            spec.input_names().len(),
+            spec.output_names().len(),
+            spec.n_samples(),
+        )?)
+    }
+
+    fn prepared_on(&self, records: &[IoData]) -> Result<Self> {
+        Ok(self.prepared(records.iter().map(|r| (r.inputs(), r.outputs())))?)
+    }
 }

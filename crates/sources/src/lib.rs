@@ -38,6 +38,7 @@ mod records;
 mod roles;
 mod shard;
 
+pub use chart::ForModel;
 pub use chart::{
     CompressedChart, ExperimentFailure, StoredChart, compress_chart, simulate_records,
 };
@@ -53,6 +54,6 @@ pub use profile::{
     recommended_pacejka,
 };
 pub use progress::{Progress, Silent, Stage};
-pub use records::{CHART_WORDS, ForModel, RecordSource, Records, RunShape};
+pub use records::{CHART_WORDS, RecordSource, Records, RunShape};
 pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};

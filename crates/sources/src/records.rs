@@ -9,8 +9,8 @@ use twostage_compress::Workspace;
 use twostage_models::{IoData, ModelSpec, Prior, Sampling, Simulator};
 
 use crate::chart::{
-    CompressedChart, ExperimentFailure, StoredChart, compress_chart_observed, simulate_records,
-    simulate_stored, within_allowance,
+    CompressedChart, ExperimentFailure, ForModel, StoredChart, compress_chart_observed,
+    simulate_records, simulate_stored, within_allowance,
 };
 use crate::chart_file::ChartFiles;
 use crate::error::{Error, Result};
@@ -51,35 +51,6 @@ impl RecordSource<'_> {
     /// Whether the records are simulated as the run goes.
     pub fn simulates(&self) -> bool {
         matches!(self, Self::Simulated)
-    }
-}
-
-/// A stage-1 compressor fitted to a model's records: shaped for its
-/// signals and length, prepared on its whole records.
-pub trait ForModel: Sized {
-    /// The same compressor for the records of `spec`'s model.
-    ///
-    /// # Errors
-    /// A structure the model's signals cannot take.
-    fn for_model(&self, spec: &ModelSpec) -> Result<Self>;
-    /// The compressor with its own parameters fitted on `records`.
-    ///
-    /// # Errors
-    /// What fitting those parameters reports.
-    fn prepared_on(&self, records: &[IoData]) -> Result<Self>;
-}
-
-impl ForModel for CompressorConfig {
-    fn for_model(&self, spec: &ModelSpec) -> Result<Self> {
-        Ok(self.for_shape(
-            spec.input_names().len(),
-            spec.output_names().len(),
-            spec.n_samples(),
-        )?)
-    }
-
-    fn prepared_on(&self, records: &[IoData]) -> Result<Self> {
-        Ok(self.prepared(records.iter().map(|r| (r.inputs(), r.outputs())))?)
     }
 }
 

@@ -13,6 +13,7 @@ use twostage_sources::StoredChart;
 
 use super::{Search, compress_all, design};
 use crate::cost::{ANEW_SHARE, COST_MARGIN, ROWS_EXPONENT, fit_seconds, rows_for_final_fit};
+use crate::outcome::{FinalFit, FinalFits};
 use twostage_estimator::space::to_learning_space;
 use twostage_estimator::{Error, Result};
 
@@ -222,77 +223,10 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     }
 }
 
-/// The winner's two final fits under a time budget, where both ran: trained
-/// further from its scored fit and fitted anew, scored on added records.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FinalFits {
-    /// The added records (seen by neither fit) they were scored on.
-    pub compared: usize,
-    /// The held-out score of the winner trained further from its fit.
-    pub further: f64,
-    /// The held-out score of the winner fitted anew.
-    pub anew: f64,
-}
-
 /// Records a fit anew and a fit trained further are compared on, at least.
 const MIN_COMPARED_RECORDS: usize = 200;
 /// Records a fit anew and a fit trained further are compared on, at most.
 const MAX_COMPARED_RECORDS: usize = 2000;
-
-/// How the winner's shipped network was fitted.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum FinalFit {
-    /// The fit the winner was scored with ships: a final fit would have
-    /// had no more rows (the search scored it on the whole chart, or the
-    /// time budget left no room for more).
-    AsScored {
-        /// The rows it was fitted on.
-        rows: usize,
-    },
-    /// Fitted anew on more rows (no time budget to stop it).
-    Anew {
-        /// The rows it was fitted on.
-        rows: usize,
-    },
-    /// Trained further from the fit it was scored with, on more rows.
-    TrainedFurther {
-        /// The rows it was trained on.
-        rows: usize,
-        /// Whether the time budget's end stopped it: it ships trained as
-        /// far as it got, no worse than its start on its held-out rows.
-        stopped: bool,
-    },
-    /// Trained further and fitted anew on the same rows, the better on
-    /// added records seen by neither shipped.
-    Compared {
-        /// The rows both were trained on.
-        rows: usize,
-        /// Their scores.
-        fits: FinalFits,
-        /// Whether the time budget's end stopped the one that ships.
-        stopped: bool,
-    },
-}
-
-impl FinalFit {
-    /// The rows the shipped network was fitted on.
-    pub fn rows(&self) -> usize {
-        match *self {
-            Self::AsScored { rows }
-            | Self::Anew { rows }
-            | Self::TrainedFurther { rows, .. }
-            | Self::Compared { rows, .. } => rows,
-        }
-    }
-
-    /// Whether the time budget's end stopped the shipped fit.
-    pub fn stopped(&self) -> bool {
-        match *self {
-            Self::AsScored { .. } | Self::Anew { .. } => false,
-            Self::TrainedFurther { stopped, .. } | Self::Compared { stopped, .. } => stopped,
-        }
-    }
-}
 
 /// What the search ships: the winning structure, fitted.
 pub(crate) struct Winner {

@@ -10,6 +10,6 @@ mod network;
 mod params;
 mod training;
 
+pub use network::RestartReport;
 pub use network::{FittedMlp, MAX_WIDTH, n_parameters};
 pub use params::{Mlp, MlpParams, Trainer};
-pub use training::RestartReport;

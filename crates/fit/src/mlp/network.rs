@@ -10,11 +10,26 @@ use serde::{Deserialize, Serialize};
 use twostage_kernels::layer::{Activation, dense_layer};
 
 use crate::Predictor;
+use crate::TerminationReason;
 use crate::check;
 use crate::error::{FitError, Result};
 use crate::standardize::Standardizer;
 
-use super::training::RestartReport;
+/// How one restart went.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RestartReport {
+    /// Restart index.
+    pub restart: usize,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub reason: TerminationReason,
+    /// Training mean squared error (standardized targets) at the kept weights.
+    pub train_mse: f64,
+    /// Held-out mean squared error (standardized targets) at the kept weights
+    /// (the training MSE when nothing is held out).
+    pub validation_mse: f64,
+}
 
 /// The widest layer supported: prediction keeps activations on the stack.
 pub const MAX_WIDTH: usize = 256;

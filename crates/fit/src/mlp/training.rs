@@ -12,7 +12,6 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
 use crate::Regressor;
 use crate::check;
@@ -22,24 +21,10 @@ use crate::levenberg_marquardt::{
 };
 use crate::standardize::Standardizer;
 
-use super::network::{FittedMlp, MAX_WIDTH, Problem, initial_parameters, parameter_count};
+use super::network::{
+    FittedMlp, MAX_WIDTH, Problem, RestartReport, initial_parameters, parameter_count,
+};
 use super::params::{Mlp, MlpParams, Trainer};
-
-/// How one restart went.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RestartReport {
-    /// Restart index.
-    pub restart: usize,
-    /// Iterations taken.
-    pub iterations: usize,
-    /// Why it stopped.
-    pub reason: TerminationReason,
-    /// Training mean squared error (standardized targets) at the kept weights.
-    pub train_mse: f64,
-    /// Held-out mean squared error (standardized targets) at the kept weights
-    /// (the training MSE when nothing is held out).
-    pub validation_mse: f64,
-}
 
 /// Keeps the weights with the lowest held-out loss and says when `patience`
 /// checks have passed without improvement (never, when nothing is held out).

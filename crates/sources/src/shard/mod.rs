@@ -19,9 +19,9 @@ use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
 use twostage_models::{IoData, RecordShape, Sampling, Simulator};
 
+use crate::chart::ForModel;
 use crate::chart::{CompressedChart, ExperimentFailure, StoredChart, simulate_range};
 use crate::error::{Error, Result};
-use crate::records::ForModel;
 use crate::roles::{ChartRole, RoleCounts};
 use twostage_compress::CompressorConfig;
 

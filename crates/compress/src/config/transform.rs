@@ -18,9 +18,10 @@ use std::fmt;
 use ndarray::{ArrayView2, Axis};
 use serde::{Deserialize, Serialize};
 
-use crate::config::CompressorConfig;
+use super::CompressorConfig;
 use crate::error::{CompressError, Result};
 use crate::signals::name;
+use crate::workspace::FlooredSample;
 use crate::{Compressor, Workspace};
 
 /// A map of one output signal, sample by sample.
@@ -96,18 +97,6 @@ impl std::str::FromStr for SignalTransform {
                 reason: "use id, log or log1p".into(),
             })
     }
-}
-
-/// One sample an estimate could not transform: it was replaced by the
-/// smallest value of the transform's domain the training records showed.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FlooredSample {
-    /// The output signal (0-based).
-    pub output: usize,
-    /// The sample (0-based).
-    pub sample: usize,
-    /// The value the record had there.
-    pub value: f64,
 }
 
 /// Records a transform's floors are taken from (the smallest value of its

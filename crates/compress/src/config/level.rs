@@ -10,7 +10,7 @@ use std::fmt;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
-use crate::config::CompressorConfig;
+use super::CompressorConfig;
 use crate::error::{CompressError, Result};
 use crate::signals::name;
 use crate::{Compressor, Workspace};

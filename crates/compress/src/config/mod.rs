@@ -1,15 +1,21 @@
 //! The stage-1 choice as a serializable value, and its specification as
 //! the command line and model files write it (`arx:5,5`, `pca:8`, ...).
+//!
+//! The compressors that wrap another configuration (an output transform,
+//! a record's level appended) live here too: their types and
+//! `CompressorConfig` hold each other.
+
+mod level;
+mod transform;
+
+pub use level::WithLevel;
+pub use transform::{SignalTransform, TRANSFORM_RECORDS, Transformed};
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{CompressError as Error, Result};
-use crate::transform::TRANSFORM_RECORDS;
-use crate::{
-    Arx, Compressor, Narx, OutputPca, RawRecord, SignalTransform, Transformed, WithLevel,
-    Workspace, signal_rms,
-};
+use crate::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace, signal_rms};
 
 /// The compression map g of stage 1.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
