@@ -372,6 +372,29 @@ mod tests {
         assert_eq!(deep, ["layout"]);
     }
 
+    /// The workspace as it stands: no crate has a module circle (what
+    /// `cargo xtask crates --check` says, kept by the test suite).
+    #[test]
+    fn the_workspace_has_no_module_circles() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+        let mut checked = 0;
+        for entry in fs::read_dir(root.join("crates")).unwrap() {
+            let folder = entry.unwrap().path();
+            if !folder.join("Cargo.toml").is_file() {
+                continue;
+            }
+            let report = report(&folder).unwrap();
+            assert!(
+                report.circles.is_empty(),
+                "{}: {:?}",
+                report.package,
+                report.circles
+            );
+            checked += 1;
+        }
+        assert!(checked > 10, "{checked} crates");
+    }
+
     /// A name the root re-exports leads to its module, also inside a use
     /// group that spans lines.
     #[test]
