@@ -249,12 +249,50 @@ fn check(
     theta: &[f64],
     plan: CheckPlan,
 ) -> Result<RecordCheck, RefineError> {
-    let CheckPlan {
-        noisy,
-        seed,
-        score_from: from,
-        at_best_fit,
-    } = plan;
+    let from = plan.score_from;
+    let simulated = noise_free(
+        sim,
+        theta,
+        record,
+        plan.seed,
+        "the noise-free simulation at the estimate",
+    )?;
+    let (tail_probability, reference_runs) = rank_among_own(sim, record, &simulated, theta, plan)?;
+    let shared = sim
+        .shared_input()
+        .filter(|shared| shared.n_inputs() == record.n_inputs());
+    let input_shared = shared.is_some();
+    let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
+    let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..record.n_outputs())
+        .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
+        .unzip();
+    let (loss_ratio, best_fit_percent, best_theta) = if plan.at_best_fit {
+        (1.0, fit_percent.clone(), theta.to_vec())
+    } else {
+        best_fit_near(sim, record, &simulated, theta, plan)?
+    };
+    Ok(RecordCheck {
+        rms,
+        fit_percent,
+        tail_probability,
+        reference_runs,
+        simulated,
+        input_differs_at,
+        input_shared,
+        loss_ratio,
+        best_fit_percent,
+        best_theta,
+    })
+}
+
+/// The model's noise-free response at `theta` on `record`'s input.
+fn noise_free(
+    sim: &dyn Simulator,
+    theta: &[f64],
+    record: &IoData,
+    seed: u64,
+    what: &'static str,
+) -> Result<IoData, RefineError> {
     let quiet = Conditions {
         noiseless: true,
         input: Some(record),
@@ -266,11 +304,27 @@ fn check(
         quiet,
         &mut simulated,
     )
-    .map_err(|source| RefineError::Simulation {
-        what: "the noise-free simulation at the estimate",
-        source,
-    })?;
-    let record_ms = mean_squares(record, &simulated, from);
+    .map_err(|source| RefineError::Simulation { what, source })?;
+    Ok(simulated)
+}
+
+/// The record's misfit to the noise-free response `simulated` ranked
+/// among the misfits of the model's own noisy records at `theta`: the
+/// tail probability, and how many of them ran.
+fn rank_among_own(
+    sim: &dyn Simulator,
+    record: &IoData,
+    simulated: &IoData,
+    theta: &[f64],
+    plan: CheckPlan,
+) -> Result<(f64, usize), RefineError> {
+    let CheckPlan {
+        noisy,
+        seed,
+        score_from: from,
+        ..
+    } = plan;
+    let record_ms = mean_squares(record, simulated, from);
     let with_noise = Conditions {
         noiseless: false,
         input: Some(record),
@@ -303,7 +357,7 @@ fn check(
                     what: "a simulation with the model's noise at the estimate",
                     source,
                 })?;
-                Ok(mean_squares(&own, &simulated, from))
+                Ok(mean_squares(&own, simulated, from))
             })
             .collect()
     };
@@ -319,8 +373,7 @@ fn check(
     // Each output's misfit in units of the model's own over the first
     // block (so that outputs of different scales weigh alike), summed over
     // the outputs.
-    let n_y = record.n_outputs();
-    let scale: Vec<f64> = (0..n_y)
+    let scale: Vec<f64> = (0..record.n_outputs())
         .map(|j| reference.iter().map(|r| r[j]).sum::<f64>() / reference.len().max(1) as f64)
         .collect();
     let statistic = |ms: &[f64]| -> f64 {
@@ -352,35 +405,25 @@ fn check(
         reference.extend(runs(window[0], window[1] - window[0])?);
     }
     let tail_probability = (exceeding(&reference) + 1) as f64 / (reference.len() + 1) as f64;
-    let shared = sim
-        .shared_input()
-        .filter(|shared| shared.n_inputs() == record.n_inputs());
-    let input_shared = shared.is_some();
-    let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
-    let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..n_y)
-        .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
-        .unzip();
-    if at_best_fit {
-        return Ok(RecordCheck {
-            best_fit_percent: fit_percent.clone(),
-            rms,
-            fit_percent,
-            tail_probability,
-            reference_runs: reference.len(),
-            simulated,
-            input_differs_at,
-            input_shared,
-            loss_ratio: 1.0,
-            best_theta: theta.to_vec(),
-        });
-    }
-    // The best fit the model reaches near the estimate: one output-error
-    // descent from it, in the prior's box.
+    Ok((tail_probability, reference.len()))
+}
+
+/// The best fit the model reaches near the estimate (one output-error
+/// descent from it, in the prior's box): the loss at the estimate over the
+/// best fit's, the best fit's fit per output, and where it is.
+fn best_fit_near(
+    sim: &dyn Simulator,
+    record: &IoData,
+    simulated: &IoData,
+    theta: &[f64],
+    plan: CheckPlan,
+) -> Result<(f64, Vec<f64>, Vec<f64>), RefineError> {
+    let from = plan.score_from;
     let search = Refinement::new(OutputError::new(sim)?);
     let best = search.descend(record, theta.to_vec())?;
     // The loss at the estimate, from the noise-free run already made.
     let mut residuals = vec![0.0; search.model().n_residuals(record)];
-    write_output_errors(record, &simulated, &mut residuals)?;
+    write_output_errors(record, simulated, &mut residuals)?;
     let at_estimate: f64 = residuals.iter().map(|r| r * r).sum();
     let loss_ratio = if best.loss > 0.0 {
         at_estimate / best.loss
@@ -389,32 +432,17 @@ fn check(
     } else {
         1.0
     };
-    let mut best_response = IoData::default();
-    sim.simulate_under(
+    let best_response = noise_free(
+        sim,
         &best.theta,
-        &mut experiment_rng(seed, u64::MAX),
-        quiet,
-        &mut best_response,
-    )
-    .map_err(|source| RefineError::Simulation {
-        what: "the noise-free simulation at the best fit",
-        source,
-    })?;
-    let best_fit_percent = (0..n_y)
+        record,
+        plan.seed,
+        "the noise-free simulation at the best fit",
+    )?;
+    let best_fit_percent = (0..record.n_outputs())
         .map(|j| output_fit(&record.output(j)[from..], &best_response.output(j)[from..]).1)
         .collect();
-    Ok(RecordCheck {
-        rms,
-        fit_percent,
-        tail_probability,
-        reference_runs: reference.len(),
-        simulated,
-        input_differs_at,
-        input_shared,
-        loss_ratio,
-        best_fit_percent,
-        best_theta: best.theta,
-    })
+    Ok((loss_ratio, best_fit_percent, best.theta))
 }
 
 #[cfg(test)]
