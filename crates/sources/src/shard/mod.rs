@@ -158,36 +158,7 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
         for start in range.clone().step_by(BLOCK) {
             let block = start..(start + BLOCK).min(range.end);
             for outcome in simulate_range(simulator, &design, block, None) {
-                let stored = match outcome {
-                    Err(failure) => Stored::Failed {
-                        theta: failure.theta,
-                        error: failure.error,
-                    },
-                    Ok((theta, record)) => match &compressor {
-                        None => Stored::Kept {
-                            theta,
-                            values: flatten(&record),
-                        },
-                        Some(c) => {
-                            let mut alpha = vec![0.0; c.n_features()];
-                            match c.compress_into(
-                                record.inputs(),
-                                record.outputs(),
-                                &mut work,
-                                &mut alpha,
-                            ) {
-                                Ok(()) => Stored::Kept {
-                                    theta,
-                                    values: alpha,
-                                },
-                                Err(e) => Stored::Failed {
-                                    theta,
-                                    error: e.to_string(),
-                                },
-                            }
-                        }
-                    },
-                };
+                let stored = stored(outcome, compressor.as_ref(), &mut work);
                 write_part(&mut out, &stored).map_err(io)?;
             }
         }
@@ -201,6 +172,41 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
         cause,
     })?;
     Ok(path)
+}
+
+/// One simulated experiment as a shard stores it: its record, or its
+/// features under `compressor`, or why it failed.
+fn stored(
+    outcome: std::result::Result<(Vec<f64>, IoData), ExperimentFailure>,
+    compressor: Option<&CompressorConfig>,
+    work: &mut Workspace,
+) -> Stored {
+    let (theta, record) = match outcome {
+        Ok(done) => done,
+        Err(failure) => {
+            return Stored::Failed {
+                theta: failure.theta,
+                error: failure.error,
+            };
+        }
+    };
+    let Some(c) = compressor else {
+        return Stored::Kept {
+            theta,
+            values: flatten(&record),
+        };
+    };
+    let mut alpha = vec![0.0; c.n_features()];
+    match c.compress_into(record.inputs(), record.outputs(), work, &mut alpha) {
+        Ok(()) => Stored::Kept {
+            theta,
+            values: alpha,
+        },
+        Err(e) => Stored::Failed {
+            theta,
+            error: e.to_string(),
+        },
+    }
 }
 
 /// A set of shard files that belong together and cover every record.
@@ -244,84 +250,9 @@ impl ShardedChart {
             headers.push(read_header(file)?);
         }
         let first = &headers[0];
-        for (file, header) in files.iter().zip(&headers).skip(1) {
-            let differs = [
-                ("model", header.plan.model != first.plan.model),
-                (
-                    "model file",
-                    header.plan.model_fingerprint != first.plan.model_fingerprint,
-                ),
-                ("seed", header.plan.seed != first.plan.seed),
-                ("chart sizes", header.plan.counts != first.plan.counts),
-                (
-                    "compressor",
-                    header.plan.compressor != first.plan.compressor,
-                ),
-                ("sampling", header.sampling != first.sampling),
-                ("parameters", header.param_names != first.param_names),
-                ("record shape", header.shape != first.shape),
-                ("number of shards", header.shards != first.shards),
-            ]
-            .into_iter()
-            .find(|(_, d)| *d);
-            if let Some((what, _)) = differs {
-                return Err(Error::Shards {
-                    what: file.display().to_string(),
-                    message: format!(
-                        "its {what} differs from {}'s ({}): shards of different charts are mixed; \
-                         keep one chart's shards in a folder",
-                        files[0].display(),
-                        describe(first)
-                    ),
-                });
-            }
-        }
-        let n = first.shards;
-        let mut by_index: Vec<Option<usize>> = vec![None; n];
-        for (k, header) in headers.iter().enumerate() {
-            if let Some(other) = by_index[header.shard] {
-                return Err(fail(format!(
-                    "shard {} of {n} is there twice: {} and {}",
-                    header.shard,
-                    files[other].display(),
-                    files[k].display()
-                )));
-            }
-            by_index[header.shard] = Some(k);
-        }
-        let missing: Vec<usize> = (0..n).filter(|i| by_index[*i].is_none()).collect();
-        if !missing.is_empty() {
-            let ranges: Vec<String> = missing
-                .iter()
-                .map(|&i| {
-                    let shard = ShardIndex { index: i, count: n };
-                    let parts: Vec<String> = ChartRole::ALL
-                        .into_iter()
-                        .filter(|&r| first.plan.counts[r] > 0)
-                        .map(|r| {
-                            let range = shard.range(first.plan.counts[r]);
-                            format!("{} [{}, {})", r.label(), range.start, range.end)
-                        })
-                        .collect();
-                    format!("shard {i} ({})", parts.join(", "))
-                })
-                .collect();
-            return Err(fail(format!(
-                "{} of {n} shard(s) missing: {}; re-run them alone (twostage simulate ... \
-                 --shard I/{n}, or sbatch --array={} on the script twostage slurm wrote)",
-                missing.len(),
-                ranges.join("; "),
-                missing
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join(",")
-            )));
-        }
-        let files = by_index
-            .into_iter()
-            .map(|k| files[k.unwrap_or_else(|| unreachable!("none missing"))].clone())
-            .collect();
+        same_chart(&files, &headers)?;
+        let by_index = in_shard_order(&headers, &files).map_err(fail)?;
+        let files = by_index.into_iter().map(|k| files[k].clone()).collect();
         Ok(Self {
             pattern: pattern.to_string(),
             files,
@@ -600,6 +531,97 @@ impl ShardedChart {
         }
         Ok(())
     }
+}
+
+/// Every shard's header says the same chart as the first's.
+fn same_chart(files: &[PathBuf], headers: &[Header]) -> Result<()> {
+    let first = &headers[0];
+    for (file, header) in files.iter().zip(headers).skip(1) {
+        let differs = [
+            ("model", header.plan.model != first.plan.model),
+            (
+                "model file",
+                header.plan.model_fingerprint != first.plan.model_fingerprint,
+            ),
+            ("seed", header.plan.seed != first.plan.seed),
+            ("chart sizes", header.plan.counts != first.plan.counts),
+            (
+                "compressor",
+                header.plan.compressor != first.plan.compressor,
+            ),
+            ("sampling", header.sampling != first.sampling),
+            ("parameters", header.param_names != first.param_names),
+            ("record shape", header.shape != first.shape),
+            ("number of shards", header.shards != first.shards),
+        ]
+        .into_iter()
+        .find(|(_, d)| *d);
+        if let Some((what, _)) = differs {
+            return Err(Error::Shards {
+                what: file.display().to_string(),
+                message: format!(
+                    "its {what} differs from {}'s ({}): shards of different charts are mixed; \
+                     keep one chart's shards in a folder",
+                    files[0].display(),
+                    describe(first)
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The index into `files` of each shard, in shard order; a shard there
+/// twice or missing is named (with the records a missing one holds and
+/// how to re-run it).
+fn in_shard_order(
+    headers: &[Header],
+    files: &[PathBuf],
+) -> std::result::Result<Vec<usize>, String> {
+    let first = &headers[0];
+    let n = first.shards;
+    let mut by_index: Vec<Option<usize>> = vec![None; n];
+    for (k, header) in headers.iter().enumerate() {
+        if let Some(other) = by_index[header.shard] {
+            return Err(format!(
+                "shard {} of {n} is there twice: {} and {}",
+                header.shard,
+                files[other].display(),
+                files[k].display()
+            ));
+        }
+        by_index[header.shard] = Some(k);
+    }
+    let missing: Vec<usize> = (0..n).filter(|i| by_index[*i].is_none()).collect();
+    if missing.is_empty() {
+        return Ok(by_index.into_iter().flatten().collect());
+    }
+    let ranges: Vec<String> = missing
+        .iter()
+        .map(|&i| {
+            let shard = ShardIndex { index: i, count: n };
+            let parts: Vec<String> = ChartRole::ALL
+                .into_iter()
+                .filter(|&r| first.plan.counts[r] > 0)
+                .map(|r| {
+                    let range = shard.range(first.plan.counts[r]);
+                    format!("{} [{}, {})", r.label(), range.start, range.end)
+                })
+                .collect();
+            format!("shard {i} ({})", parts.join(", "))
+        })
+        .collect();
+    Err(format!(
+        "{} of {n} shard(s) missing: {}; re-run them alone (twostage simulate ... \
+         --shard I/{n}, or sbatch --array={} on the script twostage slurm wrote)",
+        missing.len(),
+        ranges.join("; "),
+        missing
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(",")
+    ))
 }
 
 fn describe(header: &Header) -> String {
