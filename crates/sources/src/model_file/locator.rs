@@ -546,54 +546,17 @@ impl Locator<'_> {
         };
         let s = raw.map_or(&empty, Spanned::get_ref);
         let whole = raw.map(Spanned::span);
-        let names = |given: &Option<Spanned<Vec<String>>>,
-                     key: &str,
-                     base: Option<&[String]>|
-         -> Result<Vec<String>> {
-            match (given, base) {
-                (Some(list), Some(base)) if list.get_ref().len() != base.len() => Err(self.error(
-                    Some(list.span()),
-                    key,
-                    format!(
-                        "the built-in source has {} ({}); rename them one for one",
-                        base.len(),
-                        base.join(", ")
-                    ),
-                )),
-                (Some(list), _) => {
-                    let mut seen: Vec<&String> = Vec::new();
-                    for n in list.get_ref() {
-                        if n.trim().is_empty() || seen.contains(&n) {
-                            return Err(self.error(
-                                Some(list.span()),
-                                key,
-                                format!(
-                                    "'{n}' is empty or used twice: each signal needs its own name"
-                                ),
-                            ));
-                        }
-                        seen.push(n);
-                    }
-                    Ok(list.get_ref().clone())
-                }
-                (None, Some(base)) => Ok(base.to_vec()),
-                (None, None) if key == "signals.inputs" => Ok(Vec::new()),
-                (None, None) => Err(self.error(
-                    whole.clone(),
-                    key,
-                    "name the measured outputs, e.g. outputs = [\"y\"]".into(),
-                )),
-            }
-        };
-        let inputs = names(
-            &s.inputs,
+        let inputs = self.signal_names(
+            s.inputs.as_ref(),
             "signals.inputs",
             base.map(ModelSpec::input_names),
+            whole.clone(),
         )?;
-        let outputs = names(
-            &s.outputs,
+        let outputs = self.signal_names(
+            s.outputs.as_ref(),
             "signals.outputs",
             base.map(ModelSpec::output_names),
+            whole.clone(),
         )?;
         if outputs.is_empty() {
             return Err(self.error(
@@ -602,7 +565,65 @@ impl Locator<'_> {
                 "at least one output: an estimator learns from what is measured".into(),
             ));
         }
-        let samples = match (&s.samples, base) {
+        Ok(Signals {
+            inputs,
+            outputs,
+            samples: self.record_length(s.samples.as_ref(), base, whole)?,
+            sample_time: self.sample_time(s.sample_time.as_ref(), base)?,
+        })
+    }
+
+    /// The names of `[signals]`' `key` (`given`), or the built-in
+    /// source's (`base`): renamed one for one, each its own.
+    fn signal_names(
+        &self,
+        given: Option<&Spanned<Vec<String>>>,
+        key: &str,
+        base: Option<&[String]>,
+        whole: Option<std::ops::Range<usize>>,
+    ) -> Result<Vec<String>> {
+        match (given, base) {
+            (Some(list), Some(base)) if list.get_ref().len() != base.len() => Err(self.error(
+                Some(list.span()),
+                key,
+                format!(
+                    "the built-in source has {} ({}); rename them one for one",
+                    base.len(),
+                    base.join(", ")
+                ),
+            )),
+            (Some(list), _) => {
+                let mut seen: Vec<&String> = Vec::new();
+                for n in list.get_ref() {
+                    if n.trim().is_empty() || seen.contains(&n) {
+                        return Err(self.error(
+                            Some(list.span()),
+                            key,
+                            format!("'{n}' is empty or used twice: each signal needs its own name"),
+                        ));
+                    }
+                    seen.push(n);
+                }
+                Ok(list.get_ref().clone())
+            }
+            (None, Some(base)) => Ok(base.to_vec()),
+            (None, None) if key == "signals.inputs" => Ok(Vec::new()),
+            (None, None) => Err(self.error(
+                whole,
+                key,
+                "name the measured outputs, e.g. outputs = [\"y\"]".into(),
+            )),
+        }
+    }
+
+    /// `[signals] samples`, or the built-in source's record length.
+    fn record_length(
+        &self,
+        given: Option<&Spanned<i64>>,
+        base: Option<&ModelSpec>,
+        whole: Option<std::ops::Range<usize>>,
+    ) -> Result<usize> {
+        match (given, base) {
             (Some(n), _) => usize::try_from(*n.get_ref())
                 .ok()
                 .filter(|n| *n >= 1)
@@ -615,44 +636,39 @@ impl Locator<'_> {
                             n.get_ref()
                         ),
                     )
-                })?,
-            (None, Some(base)) => base.n_samples(),
-            (None, None) => {
-                return Err(self.error(
-                    whole,
-                    "signals.samples",
-                    "give the record length, samples = N".into(),
-                ));
-            }
-        };
-        let sample_time = match (&s.sample_time, base) {
+                }),
+            (None, Some(base)) => Ok(base.n_samples()),
+            (None, None) => Err(self.error(
+                whole,
+                "signals.samples",
+                "give the record length, samples = N".into(),
+            )),
+        }
+    }
+
+    /// `[signals] sample_time`, which a built-in source fixes (1 where
+    /// nothing says it).
+    fn sample_time(&self, given: Option<&Spanned<f64>>, base: Option<&ModelSpec>) -> Result<f64> {
+        match (given, base) {
             (Some(t), Some(base)) if t.get_ref().to_bits() != base.sample_time().to_bits() => {
-                return Err(self.error(
+                Err(self.error(
                     Some(t.span()),
                     "signals.sample_time",
                     format!(
                         "the built-in source samples every {}: leave sample_time out",
                         base.sample_time()
                     ),
-                ));
+                ))
             }
-            (Some(t), _) if !(t.get_ref().is_finite() && *t.get_ref() > 0.0) => {
-                return Err(self.error(
-                    Some(t.span()),
-                    "signals.sample_time",
-                    format!("{}: give a finite time > 0 between samples", t.get_ref()),
-                ));
-            }
-            (Some(t), _) => *t.get_ref(),
-            (None, Some(base)) => base.sample_time(),
-            (None, None) => 1.0,
-        };
-        Ok(Signals {
-            inputs,
-            outputs,
-            samples,
-            sample_time,
-        })
+            (Some(t), _) if !(t.get_ref().is_finite() && *t.get_ref() > 0.0) => Err(self.error(
+                Some(t.span()),
+                "signals.sample_time",
+                format!("{}: give a finite time > 0 between samples", t.get_ref()),
+            )),
+            (Some(t), _) => Ok(*t.get_ref()),
+            (None, Some(base)) => Ok(base.sample_time()),
+            (None, None) => Ok(1.0),
+        }
     }
 
     pub(super) fn presets(&self, raw: &[Spanned<RawPreset>]) -> Result<Vec<(String, Preset)>> {
