@@ -13,7 +13,7 @@ use twostage_runtime::format::{
 
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
-use twostage_compress::{CompressorConfig, SignalTransform, Transformed};
+use twostage_compress::{Arx, CompressorConfig, SignalTransform, Transformed};
 use twostage_fit::FittedRegressor;
 
 /// Little-endian sections, each starting at a multiple of 8 bytes.
@@ -152,6 +152,29 @@ impl Estimator {
     /// [`Error::NotExportable`] for a NARX, PCA or raw compressor, or sizes
     /// beyond the runtime's limits ([`twostage_runtime::format`]).
     pub fn to_runtime(&self) -> Result<Vec<u8>> {
+        let (transformed, arx) = self.runtime_stage1()?;
+        let mut w = Writer {
+            bytes: Vec::with_capacity(4096),
+        };
+        w.bytes.extend_from_slice(&MAGIC);
+        w.u32(VERSION as usize)?;
+        w.u32(0)?; // length, set below
+        w.u32(0)?; // checksum, set below
+        w.header(self, arx, transformed.is_some())?;
+        w.parts(self, transformed)?;
+        debug_assert_eq!(self.compressor.n_features(), self.regressor.n_inputs());
+        let length = w.bytes.len();
+        let length = u32::try_from(length)
+            .map_err(|_| refuse(format!("{length} bytes exceed the format's 4 GiB")))?;
+        w.bytes[8..12].copy_from_slice(&length.to_le_bytes());
+        let crc = twostage_runtime::format::checksum(&w.bytes[CHECKSUM_FROM..]);
+        w.bytes[12..16].copy_from_slice(&crc.to_le_bytes());
+        Ok(w.bytes)
+    }
+
+    /// The ARX stage 1 the runtime streams, and the output transform in
+    /// front of it where there is one; refused beyond the runtime's sizes.
+    fn runtime_stage1(&self) -> Result<(Option<&Transformed>, &Arx)> {
         let (transformed, stage1) = match &self.compressor {
             CompressorConfig::Transformed(t) => (Some(t), t.inner()),
             other => (None, other),
@@ -177,27 +200,29 @@ impl Estimator {
                 shape.n_inputs, shape.n_outputs
             )));
         }
-        let mut w = Writer {
-            bytes: Vec::with_capacity(4096),
-        };
-        w.bytes.extend_from_slice(&MAGIC);
-        w.u32(VERSION as usize)?;
-        w.u32(0)?; // length, set below
-        w.u32(0)?; // checksum, set below
+        Ok((transformed, arx))
+    }
+}
+
+impl Writer {
+    /// The header's fields after the magic, version, length and checksum:
+    /// sizes, the ARX orders, the flags of the optional parts, the kind of
+    /// stage 2.
+    fn header(&mut self, e: &Estimator, arx: &Arx, transforms_outputs: bool) -> Result<()> {
         let mut flags = 0;
-        if self.intervals.is_some() {
+        if e.intervals.is_some() {
             flags |= FLAG_CONFORMAL;
         }
-        if self.adaptive.is_some() {
+        if e.adaptive.is_some() {
             flags |= FLAG_ADAPTIVE;
         }
-        if self.envelope.is_some() {
+        if e.envelope.is_some() {
             flags |= FLAG_ENVELOPE;
         }
-        if transformed.is_some() {
+        if transforms_outputs {
             flags |= FLAG_OUTPUT_TRANSFORMS;
         }
-        let (kind, experts) = match &self.regressor {
+        let (kind, experts) = match &e.regressor {
             FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),
             _ => (REGRESSOR_NETWORK, 0),
         };
@@ -206,8 +231,9 @@ impl Estimator {
                 "{experts} experts, the runtime takes at most {MAX_EXPERTS}"
             )));
         }
+        let shape = &e.shape;
         for v in [
-            q,
+            e.param_names.len(),
             shape.n_inputs,
             shape.n_outputs,
             shape.n_samples,
@@ -220,10 +246,16 @@ impl Estimator {
             0,
             0,
         ] {
-            w.u32(v)?;
+            self.u32(v)?;
         }
-        debug_assert_eq!(w.bytes.len(), HEADER_BYTES);
-        let transforms: Vec<usize> = self
+        debug_assert_eq!(self.bytes.len(), HEADER_BYTES);
+        Ok(())
+    }
+
+    /// The parameters' transforms and box, stage 2, then the optional
+    /// parts in the header's order.
+    fn parts(&mut self, e: &Estimator, transformed: Option<&Transformed>) -> Result<()> {
+        let transforms: Vec<usize> = e
             .marginals
             .iter()
             .map(|m| match m.transform() {
@@ -231,46 +263,39 @@ impl Estimator {
                 Transform::Log => TRANSFORM_LOG as usize,
             })
             .collect();
-        w.u32s(&transforms)?;
-        w.f64s(&self.lower);
-        w.f64s(&self.upper);
-        match &self.regressor {
-            FittedRegressor::Linear(linear) => w.linear(linear)?,
-            FittedRegressor::Mlp(mlp) => w.mlp(mlp)?,
+        self.u32s(&transforms)?;
+        self.f64s(&e.lower);
+        self.f64s(&e.upper);
+        match &e.regressor {
+            FittedRegressor::Linear(linear) => self.linear(linear)?,
+            FittedRegressor::Mlp(mlp) => self.mlp(mlp)?,
             FittedRegressor::Piecewise(piecewise) => {
                 let (start, width) = piecewise.pieces_start_width();
-                w.f64s(&[start, width]);
-                w.mlp(piecewise.global())?;
+                self.f64s(&[start, width]);
+                self.mlp(piecewise.global())?;
                 for expert in piecewise.experts() {
-                    w.mlp(expert)?;
+                    self.mlp(expert)?;
                 }
             }
         }
-        if let Some(intervals) = &self.intervals {
-            w.f64s(intervals.half_widths());
+        if let Some(intervals) = &e.intervals {
+            self.f64s(intervals.half_widths());
         }
-        if let Some(adaptive) = &self.adaptive {
+        if let Some(adaptive) = &e.adaptive {
             let (floor, quantile, difficulty) = adaptive.parts();
-            w.f64s(floor);
-            w.f64s(quantile);
-            w.mlp(difficulty)?;
+            self.f64s(floor);
+            self.f64s(quantile);
+            self.mlp(difficulty)?;
         }
-        if let Some(envelope) = &self.envelope {
+        if let Some(envelope) = &e.envelope {
             let (mean, factor) = envelope.parts();
-            w.f64s(&[envelope.threshold()]);
-            w.f64s(mean);
-            w.f64s(factor);
+            self.f64s(&[envelope.threshold()]);
+            self.f64s(mean);
+            self.f64s(factor);
         }
         if let Some(transformed) = transformed {
-            w.output_transforms(transformed, shape.n_outputs)?;
+            self.output_transforms(transformed, e.shape.n_outputs)?;
         }
-        debug_assert_eq!(self.compressor.n_features(), self.regressor.n_inputs());
-        let length = w.bytes.len();
-        let length = u32::try_from(length)
-            .map_err(|_| refuse(format!("{length} bytes exceed the format's 4 GiB")))?;
-        w.bytes[8..12].copy_from_slice(&length.to_le_bytes());
-        let crc = twostage_runtime::format::checksum(&w.bytes[CHECKSUM_FROM..]);
-        w.bytes[12..16].copy_from_slice(&crc.to_le_bytes());
-        Ok(w.bytes)
+        Ok(())
     }
 }
