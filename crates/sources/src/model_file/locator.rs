@@ -22,6 +22,14 @@ pub(super) struct Signals {
     pub(super) sample_time: f64,
 }
 
+/// How a model file runs its FMU.
+struct FmuRun {
+    step_divisor: usize,
+    start_time: f64,
+    /// Start values of the FMU's variables, by name.
+    starts: Vec<(String, f64)>,
+}
+
 /// Turns byte spans into lines and builds errors.
 pub(super) struct Locator<'t> {
     pub(super) text: &'t str,
@@ -185,6 +193,29 @@ impl Locator<'_> {
                     .map_err(|e| self.error(Some(i.span()), "source.interface", e.to_string()))
             })
             .transpose()?;
+        let FmuRun {
+            step_divisor,
+            start_time,
+            starts,
+        } = self.fmu_run(raw)?;
+        let noise_inputs = self.fmu_noise_inputs(noise)?;
+        Ok(ModelSource::Fmu {
+            path: PathBuf::from(fmu.get_ref()),
+            interface,
+            step_divisor,
+            start_time,
+            starts,
+            noise_inputs,
+            input: input
+                .filter(|i| i.get_ref().file.is_none())
+                .map(|i| self.input(i))
+                .transpose()?,
+        })
+    }
+
+    /// How an FMU is run: its steps per sample, its start time, and the
+    /// start values of its variables.
+    fn fmu_run(&self, raw: &RawSource) -> Result<FmuRun> {
         let step_divisor = match &raw.step_divisor {
             None => 1,
             Some(d) => usize::try_from(*d.get_ref())
@@ -221,6 +252,16 @@ impl Locator<'_> {
                 format!("{name} = {value}: give a finite start value"),
             ));
         }
+        Ok(FmuRun {
+            step_divisor,
+            start_time,
+            starts,
+        })
+    }
+
+    /// An FMU's noise inputs and their standard deviations, each named
+    /// once.
+    fn fmu_noise_inputs(&self, noise: Option<&Spanned<RawNoise>>) -> Result<Vec<(String, f64)>> {
         let mut noise_inputs: Vec<(String, f64)> = Vec::new();
         if let Some(list) = noise.and_then(|n| n.get_ref().inputs.as_ref()) {
             for n in list.get_ref() {
@@ -242,18 +283,7 @@ impl Locator<'_> {
                 noise_inputs.push((name, n.sd));
             }
         }
-        Ok(ModelSource::Fmu {
-            path: PathBuf::from(fmu.get_ref()),
-            interface,
-            step_divisor,
-            start_time,
-            starts,
-            noise_inputs,
-            input: input
-                .filter(|i| i.get_ref().file.is_none())
-                .map(|i| self.input(i))
-                .transpose()?,
-        })
+        Ok(noise_inputs)
     }
 
     /// Where the names a source must know were written.
