@@ -62,17 +62,24 @@ pub(super) fn network(hidden: &[usize]) -> Result<RegressorConfig> {
 ///
 /// With `transforms`, every structure is tried a second time on the
 /// transformed outputs: the held-out risk, not a rule, decides whether
-/// logarithms pay.
+/// logarithms pay. With `inputs_vary` false (an input that never varies
+/// within a record: no regression can fit its lags), the ARX orders
+/// regress on the outputs alone and the NARX is left out.
 pub(super) fn candidate_compressors(
     n_outputs: usize,
     n_inputs: usize,
     n_samples: usize,
     transforms: Option<Vec<SignalTransform>>,
+    inputs_vary: bool,
 ) -> Vec<CompressorConfig> {
     let fits = |coefficients: usize| 4 * coefficients <= n_samples;
     let mut list: Vec<CompressorConfig> = Vec::new();
     for order in [2, 3, 4, 5, 6, 8] {
-        let input_lags = if n_inputs == 0 { 0 } else { order };
+        let input_lags = if n_inputs == 0 || !inputs_vary {
+            0
+        } else {
+            order
+        };
         if let Ok(arx) =
             Arx::new(order, input_lags).and_then(|a| a.with_signals(n_inputs, n_outputs))
             && fits(order * n_outputs + input_lags * n_inputs)
@@ -81,6 +88,7 @@ pub(super) fn candidate_compressors(
         }
     }
     if (n_inputs, n_outputs) == (1, 1)
+        && inputs_vary
         && let Ok(narx) = Narx::new(2, 2, 2)
         && fits(narx.n_features())
     {
@@ -146,6 +154,28 @@ pub(super) fn output_transforms(records: &[IoData]) -> Option<Vec<SignalTransfor
         .then_some(transforms)
 }
 
+/// The inputs that never vary within any of `records` (zero or constant
+/// over every experiment), by index: an ARX or NARX cannot fit their
+/// lags, so its candidates leave them out before the search.
+pub(super) fn constant_inputs(records: &[IoData]) -> Vec<usize> {
+    let Some(first) = records.first() else {
+        return Vec::new();
+    };
+    (0..first.n_inputs())
+        .filter(|&j| {
+            records.iter().all(|record| {
+                let (low, high) = record
+                    .input(j)
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                        (l.min(*v), h.max(*v))
+                    });
+                high - low <= 0.0
+            })
+        })
+        .collect()
+}
+
 /// The longest record (in values) whose raw samples the search tries as
 /// features.
 const RAW_CANDIDATE_VALUES: usize = 256;
@@ -163,10 +193,10 @@ mod tests {
     /// run on it.
     #[test]
     fn the_candidates_fit_the_records_shape() {
-        let siso = candidate_compressors(1, 1, 1000, None);
+        let siso = candidate_compressors(1, 1, 1000, None, true);
         assert_eq!(siso.len(), 6 + 1 + 3);
         assert!(siso.iter().all(|c| !matches!(c, CompressorConfig::Raw(_))));
-        let short = candidate_compressors(1, 0, 10, None);
+        let short = candidate_compressors(1, 0, 10, None, true);
         let shown = names(&short);
         assert!(
             short.iter().all(|c| c.n_features() * 4 <= 10
@@ -179,7 +209,7 @@ mod tests {
         );
         assert!(!shown.iter().any(|s| s.contains("NARX")), "{shown:?}");
         // Two outputs, no input, a long record: ARs, PCAs, no raw.
-        let mimo = candidate_compressors(2, 0, 400, None);
+        let mimo = candidate_compressors(2, 0, 400, None, true);
         assert!(
             mimo.iter()
                 .any(|c| matches!(c, CompressorConfig::Arx(a) if a.nb() == 0))
@@ -188,5 +218,30 @@ mod tests {
             mimo.iter()
                 .all(|c| !matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Narx(_)))
         );
+    }
+
+    /// An input that never varies within a record is found whatever its
+    /// value, and the candidates then regress on the outputs alone: no
+    /// ARX lag of it, no NARX.
+    #[test]
+    fn a_constant_input_leaves_its_regressions_out() {
+        let record = |k: usize| {
+            let mut r = IoData::zeros(50, 3, 1);
+            for (t, v) in r.input_mut(0).iter_mut().enumerate() {
+                *v = ((t * (k + 3)) % 7) as f64;
+            }
+            r.input_mut(2).fill(k as f64 + 0.5);
+            r
+        };
+        let records: Vec<IoData> = (0..4).map(record).collect();
+        assert_eq!(constant_inputs(&records), [1, 2]);
+        assert!(constant_inputs(&records[..0]).is_empty());
+        let held = candidate_compressors(1, 1, 1000, None, false);
+        assert!(held.iter().all(|c| match c {
+            CompressorConfig::Arx(a) => a.nb() == 0,
+            CompressorConfig::Narx(_) => false,
+            _ => true,
+        }));
+        assert!(held.iter().any(|c| matches!(c, CompressorConfig::Arx(_))));
     }
 }

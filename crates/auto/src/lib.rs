@@ -35,7 +35,7 @@ mod outcome;
 use outcome::more_records_pay;
 mod search;
 
-use candidates::{candidate_compressors, network, output_transforms, pieces};
+use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
 pub use outcome::{AutoOutcome, CandidateReport, FinalFit, FinalFits, Status};
 use search::{Scope, Search, Winner};
 
@@ -205,12 +205,28 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let spec = run.simulator().spec();
         let compressors = match compressors {
             Some(list) => shaped_for_model(list, run),
-            None => candidate_compressors(
-                spec.output_names().len(),
-                spec.input_names().len(),
-                spec.n_samples(),
-                output_transforms(&chart.records),
-            ),
+            None => {
+                let constant = constant_inputs(&chart.records);
+                if !constant.is_empty() {
+                    let names: Vec<&str> = constant
+                        .iter()
+                        .map(|&j| spec.input_names().get(j).map_or("?", String::as_str))
+                        .collect();
+                    run.progress().note(&format!(
+                        "the input(s) {} never vary within a training record: the ARX \
+                         candidates regress on the outputs alone and the NARX is left out (no \
+                         regression can fit lags of a constant input)",
+                        names.join(", ")
+                    ));
+                }
+                candidate_compressors(
+                    spec.output_names().len(),
+                    spec.input_names().len(),
+                    spec.n_samples(),
+                    output_transforms(&chart.records),
+                    constant.is_empty(),
+                )
+            }
         };
         let scope = Scope::of(run);
         let mut search = Search::new(
@@ -283,7 +299,7 @@ fn open_run<'a, S: Simulator + ?Sized>(
     start: Instant,
 ) -> Result<SizedRun<'a, S>> {
     let simulates = base.record_source().simulates();
-    let (run, (m, deadline, per_simulation)) = if simulates {
+    let (run, sized) = if simulates {
         base.run_settings().check()?;
         let sized = chart_size(
             budget,
@@ -292,12 +308,37 @@ fn open_run<'a, S: Simulator + ?Sized>(
             Sizing::Simulated,
             start,
         )?;
-        (base.simulations(sized.0).prepare()?, sized)
+        let asked = (
+            base.run_settings().calibration,
+            base.run_settings().validation,
+        );
+        let base = match sized.held_out {
+            Some((calibration, validation)) => base.calibration(calibration).validation(validation),
+            None => base,
+        };
+        let run = base.simulations(sized.m).prepare()?;
+        if let Some((calibration, validation)) = sized.held_out {
+            run.progress().note(&format!(
+                "the budget affords {calibration} calibration and {validation} validation \
+                 records, not the {} and {} asked for (measured {:.2} ms a simulation; they \
+                 count against it): a larger budget keeps them all",
+                asked.0,
+                asked.1,
+                1e3 * sized.per_simulation.unwrap_or(0.0)
+            ));
+        }
+        (run, sized)
     } else {
         let run = base.prepare()?;
         let sized = chart_size(budget, run.simulator(), run.settings(), Sizing::Read, start)?;
         (run, sized)
     };
+    let ChartSize {
+        m,
+        deadline,
+        per_simulation,
+        ..
+    } = sized;
     Ok(SizedRun {
         run,
         m,
@@ -435,10 +476,11 @@ fn chart_size<S: Simulator + ?Sized>(
     settings: &RunSettings,
     sizing: Sizing,
     start: Instant,
-) -> Result<(usize, Option<Instant>, Option<f64>)> {
+) -> Result<ChartSize> {
     let simulates = sizing == Sizing::Simulated;
     let memory_cap = chart_memory_cap(simulator.spec());
     let mut per_simulation = None;
+    let mut held_out_sizes = None;
     let (m, deadline) = match budget {
         Budget::Simulations(m) => (m, None),
         Budget::Seconds(t) => {
@@ -456,18 +498,34 @@ fn chart_size<S: Simulator + ?Sized>(
                 let held_out = settings.calibration + settings.validation;
                 // Simulating and compressing the held-out records, with
                 // a margin for the intervals' own fits.
-                let reserve = 1.2 * per_simulation * held_out as f64 + 1.0;
+                let cost = |records: usize| 1.2 * per_simulation * records as f64 + 1.0;
+                let mut reserve = cost(held_out);
                 if reserve > 0.5 * t {
-                    return Err(Error::InvalidSetting {
-                        name: "budget seconds",
-                        value: format!("{t}"),
-                        reason: format!(
-                            "calibration and validation alone take about {reserve:.0} s \
-                                 ({held_out} simulations): give at least {:.0} s, or fewer \
-                                 calibration and validation records",
-                            (2.0 * reserve).ceil()
-                        ),
-                    });
+                    // Fewer held-out records rather than a refused budget:
+                    // as many as half the budget affords, each set shrunk
+                    // alike, never below MIN_HELD_OUT (or what was asked).
+                    let fits = ((0.5 * t - 1.0) / (1.2 * per_simulation)).max(0.0);
+                    let share = fits / held_out.max(1) as f64;
+                    let shrink = |asked: usize| {
+                        ((asked as f64 * share) as usize).max(asked.min(MIN_HELD_OUT))
+                    };
+                    let (calibration, validation) =
+                        (shrink(settings.calibration), shrink(settings.validation));
+                    reserve = cost(calibration + validation);
+                    if reserve > 0.5 * t {
+                        return Err(Error::InvalidSetting {
+                            name: "budget seconds",
+                            value: format!("{t}"),
+                            reason: format!(
+                                "even {calibration} calibration and {validation} validation \
+                                 records take about {reserve:.0} s here ({:.2} ms a simulation, \
+                                 measured): give at least {:.0} s",
+                                1e3 * per_simulation,
+                                (2.0 * reserve).ceil()
+                            ),
+                        });
+                    }
+                    held_out_sizes = Some((calibration, validation));
                 }
                 let search = t - reserve;
                 let affordable =
@@ -490,7 +548,12 @@ fn chart_size<S: Simulator + ?Sized>(
         }
     };
     if !simulates {
-        return Ok((m.min(memory_cap), deadline, None));
+        return Ok(ChartSize {
+            m: m.min(memory_cap),
+            deadline,
+            per_simulation: None,
+            held_out: None,
+        });
     }
     if m < 50 || m > memory_cap {
         return Err(Error::InvalidSetting {
@@ -499,8 +562,30 @@ fn chart_size<S: Simulator + ?Sized>(
             reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
         });
     }
-    Ok((m, deadline, per_simulation))
+    Ok(ChartSize {
+        m,
+        deadline,
+        per_simulation,
+        held_out: held_out_sizes,
+    })
 }
+
+/// What a budget gives a search.
+struct ChartSize {
+    /// Training records.
+    m: usize,
+    deadline: Option<Instant>,
+    /// The pilot's wall seconds per simulation, where it ran.
+    per_simulation: Option<f64>,
+    /// Calibration and validation records, where a time budget could not
+    /// afford those asked for.
+    held_out: Option<(usize, usize)>,
+}
+
+/// The fewest calibration or validation records a time budget shrinks
+/// them to: the adaptive intervals need 100, and a certificate on fewer
+/// says little.
+const MIN_HELD_OUT: usize = 100;
 
 /// Where a search's training records come from, for its chart size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

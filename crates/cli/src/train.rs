@@ -50,9 +50,11 @@ pub struct TrainArgs {
     /// --auto: wall-clock seconds for the whole run (machine-dependent
     /// outcome): a pilot simulation times the model, the calibration and
     /// validation records (--calibrate, --validate) are reserved first,
-    /// the search and final fit get the rest. A budget below twice that
-    /// reserve is refused with the smallest it accepts (with the defaults,
-    /// about 4 s for the benchmark and 52 s for the car on 2 cores).
+    /// the search and final fit get the rest. Where the reserve would take
+    /// more than half the budget, both sets shrink alike to what half
+    /// affords (at least 100 each, said in a note); a budget too small
+    /// even for those is refused with the smallest it accepts (about 3 s
+    /// for the benchmark and 4 s for the car on 2 cores).
     #[arg(long, requires = "auto", conflicts_with = "budget_sims")]
     budget_seconds: Option<f64>,
     /// --auto: simulations in the chart (with --chart: its first records),
