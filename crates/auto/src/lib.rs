@@ -27,6 +27,7 @@ use twostage_compress::CompressorConfig;
 use twostage_fit::RegressorConfig;
 use twostage_sources::ForModel;
 use twostage_sources::Stage;
+use twostage_sources::StoredChart;
 use twostage_sources::simulate_records;
 
 mod candidates;
@@ -197,7 +198,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let sized = open_run(base, budget, start)?;
         let run = &sized.run;
         let records = run.records();
-        let (chart, failures) = search_chart(&sized)?;
+        let (chart, rest, failures) = search_chart(&sized)?;
         let (medium, networks) = match networks {
             Some(pair) => pair,
             None => default_networks()?,
@@ -244,16 +245,23 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let more_pay = half_rows
             .zip(seed_scores.first())
             .is_some_and(|((_, half), own)| more_records_pay(half, *own));
-        let rows = search.final_rows(
-            best,
-            more_pay,
-            sized.per_simulation.unwrap_or(f64::INFINITY),
-            chart_memory_cap(spec),
-        );
-        let more = more_records(&sized, chart.records.len(), rows)?;
-        let (added_simulations, added_failures) = more
-            .as_ref()
-            .map_or((0, 0), |(c, failed)| (c.records.len() + failed, *failed));
+        let (rows, more) = match rest {
+            // A chart's records past the search's: all to the final fit.
+            Some(rest) => (chart.records.len() + rest.records.len(), Some((rest, 0))),
+            None => {
+                let rows = search.final_rows(
+                    best,
+                    more_pay,
+                    sized.per_simulation.unwrap_or(f64::INFINITY),
+                    chart_memory_cap(spec),
+                );
+                (rows, more_records(&sized, chart.records.len(), rows)?)
+            }
+        };
+        let (added_simulations, added_failures) = match &more {
+            Some((c, failed)) if sized.simulates => (c.records.len() + failed, *failed),
+            _ => (0, 0),
+        };
         let winner = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         run.progress().end(Stage::Fitting);
         let search_seconds = start.elapsed().as_secs_f64();
@@ -352,17 +360,32 @@ fn open_run<'a, S: Simulator + ?Sized>(
 /// simulations failed: a read chart's first `m` where it has more.
 fn search_chart<S: Simulator + ?Sized>(
     sized: &SizedRun<'_, S>,
-) -> Result<(twostage_sources::StoredChart, usize)> {
+) -> Result<(StoredChart, Option<StoredChart>, usize)> {
     let (run, m) = (&sized.run, sized.m);
     let (mut chart, failures) = run.records().stored_training()?;
+    let mut rest = None;
     if !sized.simulates && chart.records.len() > m {
+        // Under a time budget the records past the search's reach the
+        // winner's final fit: a chart cannot grow, and what the user gave
+        // should all be learned from (trained further from the scored fit,
+        // which the deadline may stop without making it worse).
+        let kept = sized.deadline.is_some();
         run.progress().note(&format!(
             "the search fits and scores on the first {m} of the chart's {} training records \
-             (as many as its budget affords; a larger budget uses more)",
-            chart.records.len()
+             (as many as its budget affords){}",
+            chart.records.len(),
+            if kept {
+                "; the winner's final fit takes them all"
+            } else {
+                "; a larger budget uses more"
+            }
         ));
-        chart.records.truncate(m);
+        let tail = StoredChart {
+            thetas: chart.thetas.slice(ndarray::s![m.., ..]).to_owned(),
+            records: chart.records.split_off(m),
+        };
         chart.thetas = chart.thetas.slice(ndarray::s![..m, ..]).to_owned();
+        rest = kept.then_some(tail);
     }
     if chart.records.len() < MIN_SEARCH_RECORDS {
         return Err(Error::InvalidSetting {
@@ -374,7 +397,7 @@ fn search_chart<S: Simulator + ?Sized>(
             ),
         });
     }
-    Ok((chart, failures))
+    Ok((chart, rest, failures))
 }
 
 /// The medium network of round 1 and the others of round 2.
@@ -415,7 +438,7 @@ fn more_records<S: Simulator + ?Sized>(
     sized: &SizedRun<'_, S>,
     chart_rows: usize,
     rows: usize,
-) -> Result<Option<(twostage_sources::StoredChart, usize)>> {
+) -> Result<Option<(StoredChart, usize)>> {
     if rows <= chart_rows {
         return Ok(None);
     }

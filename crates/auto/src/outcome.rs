@@ -221,6 +221,17 @@ impl AutoOutcome {
 
     /// The records added for the final fit, and its two fits compared.
     fn fmt_final_fit(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.added_simulations == 0
+            && let FinalFit::TrainedFurther {
+                rows,
+                stopped: false,
+            } = self.final_fit
+        {
+            writeln!(
+                f,
+                "the winner's final fit: trained further from its scored fit on {rows} records"
+            )?;
+        }
         if self.added_simulations > 0 {
             writeln!(
                 f,

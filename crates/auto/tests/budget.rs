@@ -3,14 +3,16 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
-use std::sync::Mutex;
 use std::time::Duration;
 
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::Arx;
 use twostage::fit::MlpParams;
 use twostage::models::{ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
-use twostage::{AutoDesign, Budget, Progress, RegressorConfig};
+use twostage::{AutoDesign, Budget, RegressorConfig};
+
+mod common;
+use common::Notes;
 
 /// A first-order system that takes 2 ms a record, as a slow simulator
 /// would: the budget's pilot measures it.
@@ -40,15 +42,6 @@ impl Simulator for SlowFirstOrder {
             out.output_mut(0)[k] = y + 0.1 * e;
         }
         Ok(())
-    }
-}
-
-#[derive(Default)]
-struct Notes(Mutex<Vec<String>>);
-
-impl Progress for Notes {
-    fn note(&self, message: &str) {
-        self.0.lock().unwrap().push(message.to_string());
     }
 }
 

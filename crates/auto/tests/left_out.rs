@@ -2,13 +2,14 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
-use std::sync::Mutex;
-
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::{Arx, Narx};
 use twostage::fit::MlpParams;
 use twostage::models::{ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
-use twostage::{AutoDesign, Budget, Progress, RegressorConfig};
+use twostage::{AutoDesign, Budget, RegressorConfig};
+
+mod common;
+use common::Notes;
 
 /// A first-order system seen by two noisy sensors: one input, two
 /// outputs, which a NARX (one input, one output) cannot take.
@@ -41,15 +42,6 @@ impl Simulator for TwoSensors {
             }
         }
         Ok(())
-    }
-}
-
-#[derive(Default)]
-struct Notes(Mutex<Vec<String>>);
-
-impl Progress for Notes {
-    fn note(&self, message: &str) {
-        self.0.lock().unwrap().push(message.to_string());
     }
 }
 

@@ -196,6 +196,41 @@ fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
     assert!(!stderr.contains("experiment 0"), "{stderr}");
 }
 
+/// A time budget that searches on part of a chart still learns from all
+/// of it: the winner's final fit takes every training record.
+#[test]
+fn every_record_of_a_chart_reaches_the_final_fit() {
+    let (dir, model) = growth_folder("auto-whole-chart", 420);
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--chart",
+        path(&dir.join("chart")),
+        "--auto",
+        "--budget-seconds",
+        "3",
+        "--validate",
+        "10",
+        "--calibrate",
+        "10",
+        "--out",
+        path(&dir.join("growth.tsest")),
+    ]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("first 200 of the chart's 400 training records")
+            && stderr.contains("the winner's final fit takes them all"),
+        "{stderr}"
+    );
+    assert!(
+        stdout.contains("trained further from its scored fit on 400 records")
+            || stdout.contains("final fit on 400 records was stopped"),
+        "{stdout}"
+    );
+}
+
 #[test]
 fn a_budget_too_short_for_calibration_and_validation_is_said_first() {
     let dir = scratch("auto-short-budget");
