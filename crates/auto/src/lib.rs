@@ -263,6 +263,9 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             _ => (0, 0),
         };
         let winner = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
+        // A larger network fitted anew on the final records may ship in
+        // the winner's place.
+        let best = winner.candidate;
         run.progress().end(Stage::Fitting);
         let search_seconds = start.elapsed().as_secs_f64();
         let failures = failures + added_failures;

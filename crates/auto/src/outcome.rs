@@ -158,10 +158,20 @@ impl AutoOutcome {
     fn fmt_shortened_fit(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let fitted_rows = self.final_fit.rows();
         if self.final_fit.stopped() {
+            let anew_shipped = matches!(
+                self.final_fit,
+                FinalFit::Compared { fits, .. } if fits.rival < fits.further
+            );
             writeln!(
                 f,
                 "(the winner's final fit on {fitted_rows} records was stopped at the time budget's \
-                 end: it ships trained as far as it got from the fit it was scored with)"
+                 end: it ships {})",
+                if anew_shipped {
+                    "the fit anew as far as it got, better on the added records than the one \
+                     trained further"
+                } else {
+                    "trained as far as it got from the fit it was scored with"
+                }
             )
         } else if !matches!(self.final_fit, FinalFit::Compared { .. })
             && fitted_rows < self.simulations - self.failures
@@ -245,19 +255,30 @@ impl AutoOutcome {
                 FinalFits {
                     compared,
                     further,
-                    anew,
+                    rival,
+                    rival_of,
+                    rival_anew,
                 },
             ..
         } = self.final_fit
         {
+            let rival_design = self
+                .candidates
+                .get(rival_of)
+                .map_or_else(String::new, |c| format!(" as {}", c.design));
             writeln!(
                 f,
                 "on the last {compared} added records, seen by no fit, the winner trained further \
-                 scores {further:.4} and fitted anew {anew:.4}: the {} ships",
-                if anew < further {
-                    "fit anew"
+                 scores {further:.4} and {}{rival_design} {rival:.4}: the {} ships",
+                if rival_anew {
+                    "fitted anew"
                 } else {
-                    "fit trained further"
+                    "trained further"
+                },
+                match (rival < further, rival_anew) {
+                    (true, true) => "fit anew",
+                    (true, false) => "larger network",
+                    (false, _) => "fit trained further",
                 }
             )?;
         }
@@ -288,7 +309,7 @@ pub enum FinalFit {
         /// far as it got, no worse than its start on its held-out rows.
         stopped: bool,
     },
-    /// Trained further and fitted anew on the same rows, the better on
+    /// Trained further and a rival fit on the same rows, the better on
     /// added records seen by neither shipped.
     Compared {
         /// The rows both were trained on.
@@ -320,14 +341,21 @@ impl FinalFit {
     }
 }
 
-/// The winner's two final fits under a time budget, where both ran: trained
-/// further from its scored fit and fitted anew, scored on added records.
+/// The winner's two final fits under a time budget, where both ran: the
+/// winner trained further from its scored fit, and a rival (its network
+/// anew, or a larger network), scored on added records.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FinalFits {
     /// The added records (seen by neither fit) they were scored on.
     pub compared: usize,
     /// The held-out score of the winner trained further from its fit.
     pub further: f64,
-    /// The held-out score of the winner fitted anew.
-    pub anew: f64,
+    /// The held-out score of the rival fit.
+    pub rival: f64,
+    /// The candidate whose network the rival is: a larger one where the
+    /// records grew well past the winner's, or the winner's own.
+    pub rival_of: usize,
+    /// Whether the rival was fitted anew (else trained further from its
+    /// candidate's scored fit).
+    pub rival_anew: bool,
 }

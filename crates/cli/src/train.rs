@@ -43,8 +43,10 @@ pub struct TrainArgs {
     /// Search compressors, output transforms and networks by held-out
     /// error instead of using the preset (with --budget-seconds or
     /// --budget-sims; default 120 s). On a --chart the search fits and
-    /// scores on the chart's training records, no new simulation. A model
-    /// without presets searches even without --auto.
+    /// scores on the chart's training records, no new simulation (under a
+    /// time budget on the first it affords, and the winner's final fit
+    /// learns from them all). A model without presets searches even
+    /// without --auto.
     #[arg(long, conflicts_with_all = ["compress", "fit", "sims"])]
     auto: bool,
     /// --auto: wall-clock seconds for the whole run (machine-dependent
