@@ -75,7 +75,7 @@ impl std::fmt::Display for Status {
     }
 }
 
-/// The result of [`AutoDesign::run`].
+/// The result of [`crate::AutoDesign::run`].
 #[derive(Debug)]
 pub struct AutoOutcome {
     /// The best candidate, refitted on the whole chart, calibrated and
