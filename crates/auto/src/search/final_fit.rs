@@ -279,15 +279,16 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             })
     }
 
-    /// The seconds a fit anew of candidate `best` on `rows` rows takes on
-    /// the whole machine, from its time alone where round 3 measured it.
-    fn fit_estimate(&self, best: usize, rows: usize) -> f64 {
-        let winner = &self.candidates[best].report;
-        let scored = winner.fit_rows;
+    /// The seconds a fit anew of candidate `i` (the winner, or its rival)
+    /// on `rows` rows takes on the whole machine, from its time alone where
+    /// round 3 measured it, else from its round's shared time.
+    fn fit_estimate(&self, i: usize, rows: usize) -> f64 {
+        let report = &self.candidates[i].report;
+        let scored = report.fit_rows;
         let growth = (rows as f64 / scored.max(1) as f64).powf(self.cost_exponent());
-        match self.candidates[best].solo_seconds {
+        match self.candidates[i].solo_seconds {
             Some(seconds) => COST_MARGIN * seconds * growth,
-            None => fit_seconds(winner.seconds, scored, rows),
+            None => fit_seconds(report.seconds, scored, rows),
         }
     }
 
