@@ -37,7 +37,7 @@ use outcome::more_records_pay;
 mod search;
 
 use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
-pub use outcome::{AutoOutcome, CandidateReport, FinalFit, FinalFits, Status};
+pub use outcome::{AutoOutcome, CandidateReport, Continuation, FinalFit, FinalFits, Status};
 use search::{Scope, Search, Winner};
 
 /// How much the search may spend.
@@ -262,13 +262,28 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             Some((c, failed)) if sized.simulates => (c.records.len() + failed, *failed),
             _ => (0, 0),
         };
-        let winner = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
+        let final_start = Instant::now();
+        let mut winner = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         // A larger network fitted anew on the final records may ship in
         // the winner's place.
         let best = winner.candidate;
+        let (steps, step_simulations, step_failures) = if more_pay && sized.simulates {
+            anytime_steps(
+                &sized,
+                &search,
+                &mut winner,
+                (
+                    sized.m + added_simulations,
+                    final_start.elapsed().as_secs_f64(),
+                ),
+            )?
+        } else {
+            (Vec::new(), 0, 0)
+        };
+        let added_simulations = added_simulations + step_simulations;
         run.progress().end(Stage::Fitting);
         let search_seconds = start.elapsed().as_secs_f64();
-        let failures = failures + added_failures;
+        let failures = failures + added_failures + step_failures;
         let simulations = winner.features.nrows() + failures;
         let final_fit = winner.final_fit;
         let estimator = ship(run, winner, failures)?;
@@ -284,6 +299,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             half_rows,
             added_simulations,
             rows_exponent: search.rows_exponent(),
+            steps,
         })
     }
 }
@@ -454,6 +470,47 @@ fn more_records<S: Simulator + ?Sized>(
     // The simulations ended their own stage: the fit goes on.
     run.progress().begin(Stage::Fitting, 0);
     Ok(more)
+}
+
+/// The anytime final fit's steps (decision 042) after the winner's final
+/// fit, which took `last_seconds`: while the search's time lasts, more
+/// records of the run's design from `next` on, the shipped fit trained
+/// further on them; until a step does not pay or the deadline stops one.
+/// The steps, and the simulations they took and how many failed.
+fn anytime_steps<S: Simulator + ?Sized>(
+    sized: &SizedRun<'_, S>,
+    search: &Search<'_, '_, S>,
+    winner: &mut Winner,
+    (mut next, mut last_seconds): (usize, f64),
+) -> Result<(Vec<Continuation>, usize, usize)> {
+    let run = &sized.run;
+    let per_simulation = sized.per_simulation.unwrap_or(f64::INFINITY);
+    let cap = chart_memory_cap(run.simulator().spec());
+    let (mut steps, mut simulations, mut failures) = (Vec::new(), 0, 0);
+    loop {
+        let added = search.next_step_records(winner, last_seconds, per_simulation, cap);
+        if added == 0 {
+            break;
+        }
+        run.progress().note(&format!(
+            "time is left: simulating {added} more records for the final fit"
+        ));
+        let Some((more, failed)) = run.records().more_training(next, next + added)? else {
+            break;
+        };
+        run.progress().begin(Stage::Fitting, 0);
+        next += added;
+        simulations += added;
+        failures += failed;
+        let begun = Instant::now();
+        let step = search.step(winner, &more, added)?;
+        last_seconds = begun.elapsed().as_secs_f64();
+        steps.push(step);
+        if step.stopped || !step.kept() {
+            break;
+        }
+    }
+    Ok((steps, simulations, failures))
 }
 
 /// The winner, calibrated and validated by the run as a preset would be.

@@ -101,14 +101,17 @@ pub struct AutoOutcome {
     /// score), where the budget allowed: a learning curve's last step,
     /// which says whether more records would pay.
     pub half_rows: Option<(usize, f64)>,
-    /// Simulations added after the search for the winner's final fit
-    /// (counted in `simulations`), where more records pay and the time
-    /// left afforded them.
+    /// Simulations added after the search for the winner's final fit and
+    /// its anytime steps (counted in `simulations`), where more records
+    /// pay and the time left afforded them.
     pub added_simulations: usize,
     /// How the round-2 winner's fit time grew with its rows (the exponent,
     /// from its half-rows and seed trials timed alone), where measured: the
     /// final fit's rows follow from it.
     pub rows_exponent: Option<f64>,
+    /// The anytime final fit's steps after the final fit, in order (empty
+    /// where it ended at the deadline, or more records do not pay).
+    pub steps: Vec<Continuation>,
 }
 
 /// Whether a score of `half` on half the rows against `own` on all of them
@@ -242,11 +245,12 @@ impl AutoOutcome {
                 "the winner's final fit: trained further from its scored fit on {rows} records"
             )?;
         }
-        if self.added_simulations > 0 {
+        let stepped: usize = self.steps.iter().map(|s| s.simulations).sum();
+        if self.added_simulations > stepped {
             writeln!(
                 f,
                 "so the winner's final fit took {} more simulations: fitted on {} records",
-                self.added_simulations,
+                self.added_simulations - stepped,
                 self.final_fit.rows()
             )?;
         }
@@ -279,6 +283,28 @@ impl AutoOutcome {
                     (true, true) => "fit anew",
                     (true, false) => "larger network",
                     (false, _) => "fit trained further",
+                }
+            )?;
+        }
+        for step in &self.steps {
+            writeln!(
+                f,
+                "with time left, {} more simulations: trained further on {} records, it scores \
+                 {:.4} against {:.4} before on the last {} added{}: {}",
+                step.simulations,
+                step.rows,
+                step.after,
+                step.before,
+                step.compared,
+                if step.stopped {
+                    " (stopped at the deadline)"
+                } else {
+                    ""
+                },
+                if step.kept() {
+                    "kept"
+                } else {
+                    "the fit before ships"
                 }
             )?;
         }
@@ -338,6 +364,41 @@ impl FinalFit {
             Self::AsScored { .. } | Self::Anew { .. } => false,
             Self::TrainedFurther { stopped, .. } | Self::Compared { stopped, .. } => stopped,
         }
+    }
+}
+
+/// One step of the anytime final fit: where the final fit ended before
+/// the deadline and more records pay, more records are simulated and the
+/// shipped fit trained further on them, kept only where it then scores
+/// better on added records it did not train on.
+///
+/// ```
+/// let step = twostage::auto::Continuation {
+///     simulations: 4000, rows: 14000, compared: 800, before: 0.042, after: 0.040, stopped: false,
+/// };
+/// assert!(step.kept());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Continuation {
+    /// Simulations of this step (any that failed included).
+    pub simulations: usize,
+    /// Records the fit was trained further on: all but the compared ones.
+    pub rows: usize,
+    /// The last added records, left out of its training, on which it was
+    /// compared with the fit before the step.
+    pub compared: usize,
+    /// The fit before the step, scored on the compared records.
+    pub before: f64,
+    /// The fit trained further, scored on them.
+    pub after: f64,
+    /// Whether the deadline stopped it.
+    pub stopped: bool,
+}
+
+impl Continuation {
+    /// Whether the step's fit ships in place of the one before it.
+    pub fn kept(&self) -> bool {
+        self.after < self.before
     }
 }
 

@@ -12,6 +12,7 @@ use twostage_sources::{ForModel, StoredChart};
 
 use crate::candidates::{design, network_size};
 
+mod anytime;
 mod final_fit;
 
 use crate::cost::{
@@ -89,6 +90,10 @@ pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
     /// them, both timed alone in round 3: the exponent of its cost in the
     /// rows, where measured.
     rows_exponent: Option<f64>,
+    /// How much the seed alone moved the round-2 winner's score in round 3
+    /// (the spread of its scores at three seeds over the best), where
+    /// measured.
+    seed_spread: Option<f64>,
 }
 
 /// One candidate of a search: its report, its network as configured, its
@@ -154,6 +159,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             },
             candidates: Vec::new(),
             rows_exponent: None,
+            seed_spread: None,
         }
     }
 
@@ -355,6 +361,12 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     seed_seconds.push(report.seconds);
                 }
             }
+        }
+        if scores.len() > 1 {
+            let (lo, hi) = scores
+                .iter()
+                .fold((f64::INFINITY, 0f64), |(lo, hi), &s| (lo.min(s), hi.max(s)));
+            self.seed_spread = Some((hi - lo) / lo);
         }
         if !seed_seconds.is_empty() {
             let seconds = seed_seconds.iter().sum::<f64>() / seed_seconds.len() as f64;

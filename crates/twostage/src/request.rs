@@ -145,6 +145,10 @@ pub struct TrainingRequest {
 
 /// What a request trained: an estimator, and the candidates of a search.
 #[derive(Debug)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "made once per training run and read at once: a box would only add an indirection"
+)]
 pub enum Trained {
     /// A preset (or the structure the request named), trained.
     Designed(Estimator),
