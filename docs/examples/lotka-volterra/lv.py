@@ -4,6 +4,8 @@ and a reference posterior mean by importance sampling.
 
     python3 lv.py chart OUT [M] [SEED]         # OUT/theta.npy, OUT/outputs.npy
     python3 lv.py reference CHART OUT.npy [K]  # posterior means of CHART's records
+    python3 lv.py csv CHART OUT.csv            # CHART's records for `twostage estimate`
+    python3 lv.py score REF.npy EST.csv        # mean |estimate - mean| / sd
 
 Prey x and predators y: dx/dt = a x - b x y, dy/dt = c x y - d y, from
 x(0) = 20, y(0) = 10, sampled every 1.5 time units (10 samples of each,
@@ -120,8 +122,38 @@ def main():
         means, sds, ess = reference(observed, k, 12345)
         np.save(out, np.stack([means, sds]))
         print("effective sample sizes: min %.0f, median %.0f" % (ess.min(), np.median(ess)))
+    elif command == "csv":
+        outputs = np.load(os.path.join(sys.argv[2], "outputs.npy"))
+        with open(sys.argv[3], "w") as out:
+            out.write("experiment,prey,predators\n")
+            for i, record in enumerate(outputs):
+                for x, y in record:
+                    out.write("%d,%r,%r\n" % (i, x, y))
+    elif command == "score":
+        means, sds = np.load(sys.argv[2])
+        estimates = read_estimates(sys.argv[3], len(means))
+        z = np.abs(estimates - means) / sds
+        print("%d records: mean |z| %.3f; per rate %s" % (
+            len(means), z.mean(), " ".join("%s %.3f" % (n, v) for n, v in zip(NAMES, z.mean(0)))))
     else:
         sys.exit(__doc__)
+
+
+def read_estimates(path, count):
+    """The rates of `twostage estimate`'s CSV, one row per record in order
+    of `experiment` (0 to count - 1)."""
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+        columns = [header.index(n) for n in NAMES]
+        key = header.index("experiment")
+        rows = {}
+        for line in f:
+            cells = line.strip().split(",")
+            rows[int(cells[key])] = [float(cells[j]) for j in columns]
+    missing = [i for i in range(count) if i not in rows]
+    if missing:
+        sys.exit("%s has no estimate for records %s" % (path, missing[:10]))
+    return np.array([rows[i] for i in range(count)])
 
 
 if __name__ == "__main__":
