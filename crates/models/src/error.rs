@@ -19,6 +19,22 @@ pub enum SimError {
         /// The time (in the model's time unit) of the first non-finite state.
         time: f64,
     },
+    /// A state became NaN or infinite (a model written as equations).
+    #[error(
+        "the state {state} became {value} at t = {time} for theta = {theta:?}: the record \
+         fails (counted in the failure allowance); check its equation there, or narrow the \
+         prior to where the model is defined"
+    )]
+    NonFiniteState {
+        /// The state's name.
+        state: String,
+        /// Its value (NaN or infinite).
+        value: f64,
+        /// The time of the first non-finite value.
+        time: f64,
+        /// The parameter vector that was simulated.
+        theta: Vec<f64>,
+    },
     /// A parameter vector of the wrong length was given.
     #[error("expected {expected} parameter values ({names}), got {got}")]
     WrongParameterCount {

@@ -38,14 +38,21 @@ impl Locator<'_> {
                     .into(),
             ));
         }
-        if let ModelSource::Fmu { input, .. } = source {
+        let designed = match source {
+            ModelSource::Fmu { input, .. } => Some((input, "the FMU's inputs")),
+            ModelSource::Equations { input, .. } => Some((input, "the equations' inputs")),
+            _ => None,
+        };
+        if let Some((input, whose)) = designed {
             let span = raw.signals.as_ref().map(Spanned::span);
             if input.is_none() && !measured && !signals.inputs.is_empty() {
                 return Err(self.error(
                     span,
                     "signals.inputs",
-                    "the FMU's inputs need a design: add an [input] (white, chicane or fixed)"
-                        .into(),
+                    format!(
+                        "{whose} need a design: add an [input] (white, chicane or fixed, or a \
+                         measured input file)"
+                    ),
                 ));
             }
             if let (Some(_), true) = (input, signals.inputs.is_empty()) {

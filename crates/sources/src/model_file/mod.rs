@@ -8,6 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
+use twostage_equations::{EquationModel, EquationSimulator, EquationsText};
 use twostage_fmi::{FmiError, FmuSimulator, InterfaceKind};
 use twostage_models::{
     BuiltinModel, BuiltinOverrides, ExternalSimulator, InputSignal, ModelSpec, Prior, Simulator,
@@ -66,6 +67,18 @@ pub enum ModelSource {
         /// deviation, drawn in this order at every sample.
         noise_inputs: Vec<(String, f64)>,
         /// The design of the measured inputs.
+        input: Option<InputSignal>,
+    },
+    /// The model written as equations in the file (`[equations]`,
+    /// decision 043), simulated natively.
+    Equations {
+        /// The equations as written.
+        text: EquationsText,
+        /// Multiplicative log-normal output noise: output, sd, line.
+        lognormal: Vec<(String, f64, usize)>,
+        /// The line of `[equations]`.
+        line: usize,
+        /// The design of the inputs.
         input: Option<InputSignal>,
     },
     /// None: the file describes charts simulated elsewhere.
@@ -166,6 +179,8 @@ pub struct ModelFile {
     /// A measured input from a file, for a built-in or FMU source (a
     /// command's is in its [`ModelSource::Command`]).
     measured_input: Option<CommandInput>,
+    /// The equations compiled, for an equations source.
+    equations: Option<EquationModel>,
     /// Identifies the file's text (shards record it).
     fingerprint: u64,
 }
@@ -229,18 +244,29 @@ impl ModelFile {
             key: String::new(),
             message: e.message().to_string(),
         })?;
-        let mut source = at.source(raw.source.as_ref(), raw.noise.as_ref(), raw.input.as_ref())?;
+        let mut source = match &raw.equations {
+            Some(equations) => at.equations(
+                equations,
+                raw.source.as_ref(),
+                raw.noise.as_ref(),
+                raw.input.as_ref(),
+            )?,
+            None => at.source(raw.source.as_ref(), raw.noise.as_ref(), raw.input.as_ref())?,
+        };
         let measured_input = match source {
-            ModelSource::Builtin { .. } | ModelSource::Fmu { .. } => {
-                at.measured_input(raw.input.as_ref())?
-            }
+            ModelSource::Builtin { .. }
+            | ModelSource::Fmu { .. }
+            | ModelSource::Equations { .. } => at.measured_input(raw.input.as_ref())?,
             _ => None,
         };
         let builtin = match &source {
             ModelSource::Builtin { model, overrides } => {
                 Some((*model, model.build_with(overrides)?))
             }
-            ModelSource::Command { .. } | ModelSource::Fmu { .. } | ModelSource::ChartsOnly => None,
+            ModelSource::Command { .. }
+            | ModelSource::Fmu { .. }
+            | ModelSource::Equations { .. }
+            | ModelSource::ChartsOnly => None,
         };
         let base = builtin.as_ref().map(|(_, sim)| sim.spec());
         let (names, marginals) = at.parameters(&raw.parameter, base)?;
@@ -285,7 +311,28 @@ impl ModelFile {
                     .collect::<Vec<_>>()
                     .join(", "),
             ),
+            ModelSource::Equations {
+                text,
+                lognormal,
+                input,
+                ..
+            } => spec.with_notes(
+                &input
+                    .as_ref()
+                    .map(InputSignal::describe)
+                    .unwrap_or_default(),
+                &equations::noise_note(text, lognormal),
+            ),
             _ => spec,
+        };
+        let compiled = match &source {
+            ModelSource::Equations {
+                text,
+                lognormal,
+                line,
+                ..
+            } => Some(equations::compile(origin, (text, lognormal, *line), &spec)?),
+            _ => None,
         };
         let output_sd = at.output_noise(raw.noise.as_ref(), outputs.len())?;
         let output_ar = at.output_correlation(raw.noise.as_ref(), outputs.len(), &output_sd)?;
@@ -333,6 +380,7 @@ impl ModelFile {
             name_lines,
             fmu_line,
             measured_input,
+            equations: compiled,
             fingerprint: crate::fingerprint(text.as_bytes()),
         })
     }
@@ -429,6 +477,24 @@ impl ModelFile {
                 let fmu = builder.build().map_err(|e| self.fmu_error(e))?;
                 Ok(Box::new(FileSimulator {
                     inner: Box::new(fmu),
+                    spec: self.spec.clone(),
+                    output_noise: self.output_noise()?,
+                    fixed_input: self.measured_record()?,
+                }))
+            }
+            ModelSource::Equations { input, .. } => {
+                let model = self.equations.clone().ok_or_else(|| Error::ModelFile {
+                    file: self.origin.clone(),
+                    line: None,
+                    key: "equations".into(),
+                    message: "the equations were not compiled at load".into(),
+                })?;
+                Ok(Box::new(FileSimulator {
+                    inner: Box::new(EquationSimulator::new(
+                        self.spec.clone(),
+                        model,
+                        input.clone(),
+                    )),
                     spec: self.spec.clone(),
                     output_noise: self.output_noise()?,
                     fixed_input: self.measured_record()?,
@@ -700,6 +766,7 @@ impl ModelFile {
     }
 }
 
+mod equations;
 mod fmu_template;
 mod input;
 mod locator;

@@ -18,8 +18,57 @@ pub(super) struct RawFile {
     pub(super) signals: Option<Spanned<RawSignals>>,
     pub(super) input: Option<Spanned<RawInput>>,
     pub(super) noise: Option<Spanned<RawNoise>>,
+    pub(super) equations: Option<Spanned<RawEquations>>,
     #[serde(default)]
     pub(super) preset: Vec<Spanned<RawPreset>>,
+}
+
+/// `[equations]`: the model written as equations (decision 043).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawEquations {
+    pub(super) time: Option<Spanned<String>>,
+    pub(super) substeps: Option<Spanned<i64>>,
+    pub(super) measure: Option<Spanned<String>>,
+    pub(super) integrator: Option<Spanned<String>>,
+    pub(super) inputs: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(super) states: Vec<Spanned<RawState>>,
+    #[serde(default)]
+    pub(super) define: BTreeMap<String, Spanned<ExpressionText>>,
+    #[serde(default)]
+    pub(super) outputs: BTreeMap<String, Spanned<ExpressionText>>,
+    #[serde(default)]
+    pub(super) lognormal: BTreeMap<String, Spanned<f64>>,
+}
+
+/// One state of `[equations]`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawState {
+    pub(super) name: Spanned<String>,
+    pub(super) initial: Spanned<ExpressionText>,
+    pub(super) derivative: Option<Spanned<ExpressionText>>,
+    pub(super) next: Option<Spanned<ExpressionText>>,
+    pub(super) noise: Option<Spanned<f64>>,
+}
+
+/// A right side: an expression, or a plain number.
+#[derive(Deserialize)]
+#[serde(untagged)]
+pub(super) enum ExpressionText {
+    Text(String),
+    Number(f64),
+}
+
+impl ExpressionText {
+    pub(super) fn text(&self) -> String {
+        match self {
+            Self::Text(t) => t.clone(),
+            // Exact: Rust's shortest representation reads back the same.
+            Self::Number(x) => format!("{x:?}"),
+        }
+    }
 }
 
 #[derive(Deserialize)]

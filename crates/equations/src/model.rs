@@ -1,0 +1,571 @@
+//! A model's equations compiled: the value table's layout, each right
+//! side's slots, the order in which the defined quantities are evaluated,
+//! and a record's response.
+
+use std::cell::{Cell, RefCell};
+
+use exmex::MakeOperators;
+use rand_distr::{Distribution, StandardNormal};
+use twostage_models::{ExperimentRng, IoData, ModelSpec, OdeSystem, Rk4, SimError};
+
+use crate::expression::Expression;
+use crate::ops::{EquationOps, lacks_branch};
+use crate::{EquationError, EquationsText, InputPath, Integrator, Measure, Names, TIME_SLOT, Time};
+
+/// Equations compiled for one model: see the crate's example.
+#[derive(Debug, Clone)]
+pub struct EquationModel {
+    names: Names,
+    time: Time,
+    measure: Measure,
+    integrator: Integrator,
+    input_path: InputPath,
+    sample_time: f64,
+    initial: Vec<Expression>,
+    updates: Vec<Expression>,
+    state_noise: Vec<f64>,
+    /// Every defined quantity (intermediates, then outputs), by slot.
+    defined: Vec<Expression>,
+    /// The defined quantities in an order where each comes after those it
+    /// reads (indices into `defined`).
+    order: Vec<usize>,
+    /// The same order, only those the updates need.
+    update_order: Vec<usize>,
+    /// The outputs' indices in `defined`, in the model's output order.
+    outputs: Vec<usize>,
+    lognormal_sd: Vec<f64>,
+}
+
+impl EquationModel {
+    /// Compile `text` for the model `spec` (its parameters, inputs,
+    /// outputs and sample time).
+    ///
+    /// # Errors
+    /// An [`EquationError`] naming the equation: a syntax error (with its
+    /// position), an unknown name (with the known ones), a name defined
+    /// twice, an output missing or not the model's, an initial value that
+    /// reads a state before it is defined, a cycle among the defined
+    /// quantities, or a setting out of range.
+    pub fn compile(text: &EquationsText, spec: &ModelSpec) -> Result<Self, EquationError> {
+        let fail = |equation: &str, message: String| EquationError {
+            equation: equation.to_string(),
+            position: None,
+            message,
+        };
+        if let Time::Continuous { substeps: 0 } = text.time {
+            return Err(fail("substeps", "must be at least 1".into()));
+        }
+        if text.states.is_empty() && text.outputs.is_empty() {
+            return Err(fail(
+                "equations",
+                "there are no states and no outputs".into(),
+            ));
+        }
+        let states: Vec<String> = text.states.iter().map(|s| s.name.clone()).collect();
+        let defined: Vec<String> = text
+            .definitions
+            .iter()
+            .chain(&text.outputs)
+            .map(|e| e.name.clone())
+            .collect();
+        check_names(spec, &states, &defined)?;
+        let outputs = output_indices(text, spec)?;
+        let names = Names::new(spec.param_names(), spec.input_names(), &states, &defined);
+        let mut initial = Vec::with_capacity(states.len());
+        for (i, state) in text.states.iter().enumerate() {
+            let later = names.states().start + i;
+            let allowed = |slot: usize| {
+                let earlier_state = names.states().contains(&slot) && slot < later;
+                if names.parameters().contains(&slot) || slot == TIME_SLOT || earlier_state {
+                    Ok(())
+                } else if names.states().contains(&slot) {
+                    Err(format!(
+                        "uses the state `{}` before it is defined: an initial value may use the \
+                         parameters and the states listed before it",
+                        names.name(slot)
+                    ))
+                } else {
+                    Err(format!(
+                        "uses `{}`: an initial value may use the parameters and the states \
+                         listed before it",
+                        names.name(slot)
+                    ))
+                }
+            };
+            initial.push(Expression::compile(
+                &format!("{}.initial", state.name),
+                &state.initial,
+                &names,
+                allowed,
+            )?);
+        }
+        let update_key = match text.time {
+            Time::Continuous { .. } => "derivative",
+            Time::Discrete => "next",
+        };
+        let updates = text
+            .states
+            .iter()
+            .map(|s| {
+                Expression::compile(
+                    &format!("{}.{update_key}", s.name),
+                    &s.update,
+                    &names,
+                    |_| Ok(()),
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        for s in &text.states {
+            if !(s.noise_sd.is_finite() && s.noise_sd >= 0.0) {
+                return Err(fail(
+                    &format!("{}.noise", s.name),
+                    format!("must be finite and >= 0, not {}", s.noise_sd),
+                ));
+            }
+        }
+        let defined_expressions = text
+            .definitions
+            .iter()
+            .chain(&text.outputs)
+            .map(|e| Expression::compile(&e.name, &e.text, &names, |_| Ok(())))
+            .collect::<Result<Vec<_>, _>>()?;
+        let first = names.defined().start;
+        let order = evaluation_order(&defined_expressions, first, &defined)?;
+        let needed = needed_by(&updates, &defined_expressions, first);
+        let update_order = order.iter().copied().filter(|&i| needed[i]).collect();
+        let mut lognormal_sd = text.lognormal_sd.clone();
+        lognormal_sd.resize(spec.output_names().len(), 0.0);
+        if let Some((j, sd)) = lognormal_sd
+            .iter()
+            .enumerate()
+            .find(|(_, sd)| !(sd.is_finite() && **sd >= 0.0))
+        {
+            return Err(fail(
+                &format!("{}.lognormal", spec.output_names()[j]),
+                format!("must be finite and >= 0, not {sd}"),
+            ));
+        }
+        Ok(Self {
+            names,
+            time: text.time,
+            measure: text.measure,
+            integrator: text.integrator,
+            input_path: text.inputs,
+            sample_time: spec.sample_time(),
+            initial,
+            updates,
+            state_noise: text.states.iter().map(|s| s.noise_sd).collect(),
+            defined: defined_expressions,
+            order,
+            update_order,
+            outputs,
+            lognormal_sd,
+        })
+    }
+
+    /// Whether the equations draw noise of their own (process noise or
+    /// multiplicative output noise).
+    pub fn is_noisy(&self) -> bool {
+        self.state_noise
+            .iter()
+            .chain(&self.lognormal_sd)
+            .any(|&sd| sd > 0.0)
+    }
+
+    /// The response to the inputs already in `record` (one per model
+    /// input, of any length) at `theta`, written into its outputs; with
+    /// `noise`, the process and multiplicative output noise drawn from it
+    /// (process noise at each step in state order, then the outputs'
+    /// noise at each sample), else none.
+    ///
+    /// # Errors
+    /// [`SimError::NonFiniteState`] naming the state and time where a
+    /// state became NaN or infinite; [`SimError::InvalidData`] where a
+    /// piecewise value had no branch that applied.
+    pub fn respond(
+        &self,
+        theta: &[f64],
+        record: &mut IoData,
+        mut noise: Option<&mut ExperimentRng>,
+    ) -> Result<(), SimError> {
+        let n = record.n_samples();
+        let n_outputs = self.outputs.len();
+        let mut values = vec![0.0; self.names.len()];
+        let parameters = self.names.parameters();
+        values[parameters.clone()].copy_from_slice(theta);
+        let mut scratch = Vec::new();
+        let states = self.names.states();
+        let mut x = vec![0.0; states.len()];
+        for (i, expression) in self.initial.iter().enumerate() {
+            x[i] = expression.eval(&values, &mut scratch);
+            values[states.start + i] = x[i];
+        }
+        self.check_states(&x, 0.0, theta)?;
+        let inputs: Vec<Vec<f64>> = (0..record.n_inputs())
+            .map(|j| record.input(j).to_vec())
+            .collect();
+        let mut y = vec![vec![0.0; n]; n_outputs];
+        let mut rk4 = Rk4::new(x.len());
+        let t_step = self.sample_time;
+        let system = Rhs {
+            model: self,
+            inputs: &inputs,
+            values: RefCell::new(values.clone()),
+            scratch: RefCell::new(Vec::new()),
+            sample: Cell::new(0),
+        };
+        let mut dx = vec![0.0; x.len()];
+        for k in 0..n {
+            let t_k = k as f64 * t_step;
+            if self.measure == Measure::Start {
+                self.measure_outputs(
+                    &mut values,
+                    (t_k, k, &x),
+                    &inputs,
+                    &mut scratch,
+                    (&mut y, k),
+                )?;
+            }
+            system.sample.set(k);
+            match self.time {
+                Time::Continuous { substeps } => {
+                    let h = t_step / substeps as f64;
+                    for s in 0..substeps {
+                        let t = t_k + s as f64 * h;
+                        match self.integrator {
+                            Integrator::Rk4 => rk4.step(&system, t, h, &mut x),
+                            Integrator::Euler => {
+                                system.rhs(t, &x, &mut dx);
+                                for (xi, d) in x.iter_mut().zip(&dx) {
+                                    *xi += h * d;
+                                }
+                            }
+                        }
+                        if let Some(rng) = noise.as_deref_mut() {
+                            for (xi, &sd) in x.iter_mut().zip(&self.state_noise) {
+                                if sd > 0.0 {
+                                    let z: f64 = StandardNormal.sample(rng);
+                                    *xi += sd * h.sqrt() * z;
+                                }
+                            }
+                        }
+                        self.check_states(&x, t + h, theta)?;
+                    }
+                }
+                Time::Discrete => {
+                    self.set_time_and_inputs(&mut values, (t_k, k), &inputs);
+                    values[states.clone()].copy_from_slice(&x);
+                    for &i in &self.update_order {
+                        let v = self.defined[i].eval(&values, &mut scratch);
+                        values[self.names.defined().start + i] = v;
+                    }
+                    for (xi, update) in x.iter_mut().zip(&self.updates) {
+                        *xi = update.eval(&values, &mut scratch);
+                    }
+                    if let Some(rng) = noise.as_deref_mut() {
+                        for (xi, &sd) in x.iter_mut().zip(&self.state_noise) {
+                            if sd > 0.0 {
+                                let z: f64 = StandardNormal.sample(rng);
+                                *xi += sd * z;
+                            }
+                        }
+                    }
+                    self.check_states(&x, t_k + t_step, theta)?;
+                }
+            }
+            if self.measure == Measure::End {
+                let (t, next) = (t_k + t_step, (k + 1).min(n - 1));
+                self.measure_outputs(
+                    &mut values,
+                    (t, next, &x),
+                    &inputs,
+                    &mut scratch,
+                    (&mut y, k),
+                )?;
+            }
+            if let Some(rng) = noise.as_deref_mut() {
+                for (j, &sd) in self.lognormal_sd.iter().enumerate() {
+                    if sd > 0.0 {
+                        let z: f64 = StandardNormal.sample(rng);
+                        y[j][k] *= (sd * z).exp();
+                    }
+                }
+            }
+        }
+        for (j, column) in y.iter().enumerate() {
+            record.output_mut(j).copy_from_slice(column);
+        }
+        Ok(())
+    }
+
+    /// The outputs at time `t` (of input sample `at`) and states `x` into
+    /// sample `k` of `y`.
+    fn measure_outputs(
+        &self,
+        values: &mut [f64],
+        (t, at, x): (f64, usize, &[f64]),
+        inputs: &[Vec<f64>],
+        scratch: &mut Vec<f64>,
+        (y, k): (&mut [Vec<f64>], usize),
+    ) -> Result<(), SimError> {
+        self.set_time_and_inputs(values, (t, at), inputs);
+        values[self.names.states()].copy_from_slice(x);
+        let first = self.names.defined().start;
+        for &i in &self.order {
+            values[first + i] = self.defined[i].eval(values, scratch);
+        }
+        for (j, &i) in self.outputs.iter().enumerate() {
+            let v = values[first + i];
+            if lacks_branch(v) {
+                return Err(SimError::InvalidData(format!(
+                    "the output {} has no branch that applies at t = {t}: end its `if ... then \
+                     ...` with `else ...`",
+                    self.names.name(first + i)
+                )));
+            }
+            y[j][k] = v;
+        }
+        Ok(())
+    }
+
+    /// `t` and the inputs there into the value table: linear between
+    /// samples and held after the last (decision 005), or, held, those of
+    /// the sample interval `k` being simulated.
+    fn set_time_and_inputs(&self, values: &mut [f64], (t, k): (f64, usize), inputs: &[Vec<f64>]) {
+        values[TIME_SLOT] = t;
+        let start = self.names.inputs().start;
+        for (j, samples) in inputs.iter().enumerate() {
+            values[start + j] = match (self.input_path, self.time) {
+                (InputPath::Linear, Time::Continuous { .. }) => {
+                    twostage_models::InputSignal::sampled_value_at(t, self.sample_time, samples)
+                }
+                _ => samples[k.min(samples.len() - 1)],
+            };
+        }
+    }
+
+    fn check_states(&self, x: &[f64], time: f64, theta: &[f64]) -> Result<(), SimError> {
+        match x.iter().position(|v| !v.is_finite() || lacks_branch(*v)) {
+            None => Ok(()),
+            Some(i) => Err(SimError::NonFiniteState {
+                state: self.names.name(self.names.states().start + i).to_string(),
+                value: x[i],
+                time,
+                theta: theta.to_vec(),
+            }),
+        }
+    }
+}
+
+/// The states' derivatives for the RK4 integrator: the value table and
+/// the scratch are cells because the integrator borrows the system
+/// immutably.
+struct Rhs<'a> {
+    model: &'a EquationModel,
+    inputs: &'a [Vec<f64>],
+    values: RefCell<Vec<f64>>,
+    scratch: RefCell<Vec<f64>>,
+    /// The sample interval being integrated (for held inputs).
+    sample: Cell<usize>,
+}
+
+impl OdeSystem for Rhs<'_> {
+    fn dim(&self) -> usize {
+        self.model.updates.len()
+    }
+
+    fn rhs(&self, t: f64, x: &[f64], dx: &mut [f64]) {
+        let model = self.model;
+        let (mut values, mut scratch) = (self.values.borrow_mut(), self.scratch.borrow_mut());
+        model.set_time_and_inputs(&mut values, (t, self.sample.get()), self.inputs);
+        values[model.names.states()].copy_from_slice(x);
+        let first = model.names.defined().start;
+        for &i in &model.update_order {
+            let v = model.defined[i].eval(&values, &mut scratch);
+            values[first + i] = v;
+        }
+        for (d, update) in dx.iter_mut().zip(&model.updates) {
+            *d = update.eval(&values, &mut scratch);
+        }
+    }
+}
+
+/// Names defined twice, or clashing with a parameter, an input, `t` or a
+/// function, are refused.
+fn check_names(
+    spec: &ModelSpec,
+    states: &[String],
+    defined: &[String],
+) -> Result<(), EquationError> {
+    let functions: Vec<&str> = EquationOps::make().iter().map(|op| op.repr()).collect();
+    let mut seen: Vec<(&str, &str)> = vec![("t", "the time")];
+    seen.extend(
+        spec.param_names()
+            .iter()
+            .map(|n| (n.as_str(), "a parameter")),
+    );
+    seen.extend(spec.input_names().iter().map(|n| (n.as_str(), "an input")));
+    let ours = states
+        .iter()
+        .map(|n| (n.as_str(), "a state"))
+        .chain(defined.iter().map(|n| (n.as_str(), "an equation")));
+    for (name, what) in ours {
+        let fail = |message: String| EquationError {
+            equation: name.to_string(),
+            position: None,
+            message,
+        };
+        if !is_identifier(name) {
+            return Err(fail(format!(
+                "`{name}` is not a name: use letters, digits and _, starting with a letter"
+            )));
+        }
+        if functions.contains(&name) {
+            return Err(fail(format!(
+                "`{name}` is a function: give {what} another name"
+            )));
+        }
+        if let Some((_, other)) = seen.iter().find(|(n, _)| *n == name) {
+            return Err(fail(format!(
+                "`{name}` is {what} and already {other}: give each a name of its own"
+            )));
+        }
+        seen.push((name, what));
+    }
+    Ok(())
+}
+
+fn is_identifier(name: &str) -> bool {
+    let mut chars = name.chars();
+    chars.next().is_some_and(|c| c.is_alphabetic() || c == '_')
+        && chars.all(|c| c.is_alphanumeric() || c == '_')
+}
+
+/// For each of the model's outputs, the index of its equation among the
+/// defined quantities (intermediates first).
+fn output_indices(text: &EquationsText, spec: &ModelSpec) -> Result<Vec<usize>, EquationError> {
+    let fail = |equation: &str, message: String| EquationError {
+        equation: equation.to_string(),
+        position: None,
+        message,
+    };
+    let model_outputs = spec.output_names();
+    if let Some(extra) = text
+        .outputs
+        .iter()
+        .find(|e| !model_outputs.contains(&e.name))
+    {
+        return Err(fail(
+            &extra.name,
+            format!(
+                "is not an output of the model (its outputs: {}); an intermediate quantity \
+                 goes among the definitions",
+                model_outputs.join(", ")
+            ),
+        ));
+    }
+    model_outputs
+        .iter()
+        .map(|name| {
+            text.outputs
+                .iter()
+                .position(|e| &e.name == name)
+                .map(|i| text.definitions.len() + i)
+                .ok_or_else(|| {
+                    fail(
+                        name,
+                        "the output has no equation: give one (`NAME = \"...\"` among the \
+                         outputs)"
+                            .into(),
+                    )
+                })
+        })
+        .collect()
+}
+
+/// An order of the defined quantities in which each comes after those it
+/// reads; a cycle is refused, named.
+fn evaluation_order(
+    defined: &[Expression],
+    first: usize,
+    names: &[String],
+) -> Result<Vec<usize>, EquationError> {
+    let reads = |i: usize| -> Vec<usize> {
+        defined[i]
+            .reads()
+            .iter()
+            .filter(|&&s| s >= first)
+            .map(|&s| s - first)
+            .collect()
+    };
+    // 0: not visited, 1: on the current path, 2: done.
+    let mut mark = vec![0u8; defined.len()];
+    let mut order = Vec::with_capacity(defined.len());
+    fn visit(
+        i: usize,
+        reads: &dyn Fn(usize) -> Vec<usize>,
+        mark: &mut [u8],
+        order: &mut Vec<usize>,
+        path: &mut Vec<usize>,
+    ) -> Result<(), Vec<usize>> {
+        match mark[i] {
+            2 => return Ok(()),
+            1 => {
+                let from = path.iter().position(|&p| p == i).unwrap_or(0);
+                let mut cycle = path[from..].to_vec();
+                cycle.push(i);
+                return Err(cycle);
+            }
+            _ => {}
+        }
+        mark[i] = 1;
+        path.push(i);
+        for j in reads(i) {
+            visit(j, reads, mark, order, path)?;
+        }
+        path.pop();
+        mark[i] = 2;
+        order.push(i);
+        Ok(())
+    }
+    for i in 0..defined.len() {
+        visit(i, &reads, &mut mark, &mut order, &mut Vec::new()).map_err(|cycle| {
+            let named: Vec<&str> = cycle.iter().map(|&c| names[c].as_str()).collect();
+            EquationError {
+                equation: named[0].to_string(),
+                position: None,
+                message: format!(
+                    "the equations depend on each other in a cycle: {}; break it (a quantity \
+                     that needs its own past is a state)",
+                    named.join(" -> ")
+                ),
+            }
+        })?;
+    }
+    Ok(order)
+}
+
+/// Which defined quantities the state updates read, directly or through
+/// other defined quantities.
+fn needed_by(updates: &[Expression], defined: &[Expression], first: usize) -> Vec<bool> {
+    let mut needed = vec![false; defined.len()];
+    let mut stack: Vec<usize> = updates
+        .iter()
+        .flat_map(|u| u.reads().iter().copied())
+        .filter(|&s| s >= first)
+        .map(|s| s - first)
+        .collect();
+    while let Some(i) = stack.pop() {
+        if !needed[i] {
+            needed[i] = true;
+            stack.extend(
+                defined[i]
+                    .reads()
+                    .iter()
+                    .filter(|&&s| s >= first)
+                    .map(|&s| s - first),
+            );
+        }
+    }
+    needed
+}

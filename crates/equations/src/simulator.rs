@@ -1,0 +1,131 @@
+//! A model written as equations, as a [`Simulator`]: the input design
+//! draws each experiment's inputs, the equations respond.
+
+use twostage_models::{
+    Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec, SimError, Simulator,
+};
+
+use crate::EquationModel;
+
+/// Equations driven by an input design.
+///
+/// ```
+/// use twostage_equations::{Equation, EquationModel, EquationSimulator, EquationsText, State, Time};
+/// use twostage_models::{experiment_rng, ModelSpec, Prior, Simulator};
+///
+/// // Logistic growth x[k+1] = x[k] + r x[k] (1 - x[k]), observed as is.
+/// let prior = Prior::uniform_box(&[0.1], &[0.5])?;
+/// let spec = ModelSpec::new("logistic", &["r"], prior, 1.0, 30)?.with_signals(&[], &["x_obs"]);
+/// let text = EquationsText {
+///     time: Time::Discrete,
+///     states: vec![State::new("x", "0.01", "x + r * x * (1 - x)")],
+///     outputs: vec![Equation::new("x_obs", "x")],
+///     ..EquationsText::default()
+/// };
+/// let simulator = EquationSimulator::new(spec.clone(), EquationModel::compile(&text, &spec)?, None);
+/// let mut record = simulator.spec().new_record();
+/// simulator.simulate(&[0.3], &mut experiment_rng(1, 0), &mut record)?;
+/// assert!(record.output(0)[29] > 0.5 && record.output(0)[29] < 1.0);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct EquationSimulator {
+    spec: ModelSpec,
+    model: EquationModel,
+    input: Option<InputSignal>,
+}
+
+impl EquationSimulator {
+    /// The equations `model` of `spec`, its inputs drawn by `input` (each
+    /// input in turn, from the experiment's stream); without a design, a
+    /// model with inputs simulates only on a given input
+    /// ([`Conditions::input`]: a measured record).
+    pub fn new(spec: ModelSpec, model: EquationModel, input: Option<InputSignal>) -> Self {
+        Self { spec, model, input }
+    }
+}
+
+impl Simulator for EquationSimulator {
+    fn spec(&self) -> &ModelSpec {
+        &self.spec
+    }
+
+    fn simulate(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
+        self.simulate_under(theta, rng, Conditions::default(), out)
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            noiseless: true,
+            given_input: true,
+        }
+    }
+
+    fn simulate_under(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
+        check_theta(&self.spec, theta)?;
+        let n = conditions.check_input(&self.spec)?;
+        let (n_u, n_y) = (
+            self.spec.input_names().len(),
+            self.spec.output_names().len(),
+        );
+        out.resize(n, n_u, n_y);
+        match (conditions.input, &self.input) {
+            (Some(given), _) => {
+                for j in 0..n_u {
+                    out.input_mut(j).copy_from_slice(given.input(j));
+                }
+            }
+            (None, Some(design)) => {
+                for j in 0..n_u {
+                    design.fill(self.spec.sample_time(), rng, out.input_mut(j))?;
+                }
+            }
+            (None, None) if n_u > 0 => {
+                return Err(SimError::InvalidSetting {
+                    name: "input",
+                    value: self.spec.input_names().join(", "),
+                    reason: "the equations' inputs need an input design ([input]: white, \
+                             chicane or fixed) or a measured input"
+                        .into(),
+                });
+            }
+            (None, None) => {}
+        }
+        let noise = (!conditions.noiseless).then_some(rng);
+        self.model.respond(theta, out, noise)
+    }
+}
+
+/// A parameter vector of the model's length, every value finite.
+fn check_theta(spec: &ModelSpec, theta: &[f64]) -> Result<(), SimError> {
+    if theta.len() != spec.n_params() {
+        return Err(SimError::WrongParameterCount {
+            expected: spec.n_params(),
+            got: theta.len(),
+            names: spec.param_names().join(", "),
+        });
+    }
+    if let Some((name, value)) = spec
+        .param_names()
+        .iter()
+        .zip(theta)
+        .find(|(_, v)| !v.is_finite())
+    {
+        return Err(SimError::NonFiniteParameter {
+            name: name.clone(),
+            value: *value,
+        });
+    }
+    Ok(())
+}
