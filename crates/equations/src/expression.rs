@@ -12,6 +12,9 @@ use crate::{EquationError, Names};
 pub(crate) struct Expression {
     flat: FlatEx<f64, EquationOps>,
     slots: Vec<usize>,
+    /// Where the expression is one name alone (`y = x2`): its slot, read
+    /// without evaluating.
+    alias: Option<usize>,
 }
 
 impl Expression {
@@ -63,7 +66,9 @@ impl Expression {
             allowed(slot).map_err(|why| error(text.find(name.as_str()), why))?;
             slots.push(slot);
         }
-        Ok(Self { flat, slots })
+        let alias =
+            (slots.len() == 1 && flat.unparse().trim() == flat.var_names()[0]).then(|| slots[0]);
+        Ok(Self { flat, slots, alias })
     }
 
     /// The slots this expression reads.
@@ -74,6 +79,9 @@ impl Expression {
     /// Its value with the table `values`; `scratch` holds the gathered
     /// variables (kept by the caller so that nothing is allocated).
     pub(crate) fn eval(&self, values: &[f64], scratch: &mut Vec<f64>) -> f64 {
+        if let Some(slot) = self.alias {
+            return values[slot];
+        }
         scratch.clear();
         scratch.extend(self.slots.iter().map(|&s| values[s]));
         // The variables are exactly the expression's, in its order: exmex

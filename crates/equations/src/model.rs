@@ -26,11 +26,13 @@ pub struct EquationModel {
     state_noise: Vec<f64>,
     /// Every defined quantity (intermediates, then outputs), by slot.
     defined: Vec<Expression>,
-    /// The defined quantities in an order where each comes after those it
-    /// reads (indices into `defined`).
-    order: Vec<usize>,
-    /// The same order, only those the updates need.
+    /// Those that read only parameters (directly or through others like
+    /// them), in order: evaluated once per record.
+    constant_order: Vec<usize>,
+    /// The others the updates need, in order: evaluated at every step.
     update_order: Vec<usize>,
+    /// The others the outputs need, in order: evaluated at every sample.
+    output_order: Vec<usize>,
     /// The outputs' indices in `defined`, in the model's output order.
     outputs: Vec<usize>,
     lognormal_sd: Vec<f64>,
@@ -131,8 +133,19 @@ impl EquationModel {
             .collect::<Result<Vec<_>, _>>()?;
         let first = names.defined().start;
         let order = evaluation_order(&defined_expressions, first, &defined)?;
-        let needed = needed_by(&updates, &defined_expressions, first);
-        let update_order = order.iter().copied().filter(|&i| needed[i]).collect();
+        let constant = per_record(&order, &defined_expressions, &names);
+        let varying = |needed: Vec<bool>| -> Vec<usize> {
+            order
+                .iter()
+                .copied()
+                .filter(|&i| needed[i] && !constant[i])
+                .collect()
+        };
+        let update_reads: Vec<usize> = updates.iter().flat_map(|u| u.reads().to_vec()).collect();
+        let update_order = varying(needed_by(&update_reads, &defined_expressions, first));
+        let output_reads: Vec<usize> = outputs.iter().map(|&i| first + i).collect();
+        let output_order = varying(needed_by(&output_reads, &defined_expressions, first));
+        let constant_order = order.iter().copied().filter(|&i| constant[i]).collect();
         let mut lognormal_sd = text.lognormal_sd.clone();
         lognormal_sd.resize(spec.output_names().len(), 0.0);
         if let Some((j, sd)) = lognormal_sd
@@ -156,8 +169,9 @@ impl EquationModel {
             updates,
             state_noise: text.states.iter().map(|s| s.noise_sd).collect(),
             defined: defined_expressions,
-            order,
+            constant_order,
             update_order,
+            output_order,
             outputs,
             lognormal_sd,
         })
@@ -194,6 +208,10 @@ impl EquationModel {
         let parameters = self.names.parameters();
         values[parameters.clone()].copy_from_slice(theta);
         let mut scratch = Vec::new();
+        let first = self.names.defined().start;
+        for &i in &self.constant_order {
+            values[first + i] = self.defined[i].eval(&values, &mut scratch);
+        }
         let states = self.names.states();
         let mut x = vec![0.0; states.len()];
         for (i, expression) in self.initial.iter().enumerate() {
@@ -256,8 +274,7 @@ impl EquationModel {
                     self.set_time_and_inputs(&mut values, (t_k, k), &inputs);
                     values[states.clone()].copy_from_slice(&x);
                     for &i in &self.update_order {
-                        let v = self.defined[i].eval(&values, &mut scratch);
-                        values[self.names.defined().start + i] = v;
+                        values[first + i] = self.defined[i].eval(&values, &mut scratch);
                     }
                     for (xi, update) in x.iter_mut().zip(&self.updates) {
                         *xi = update.eval(&values, &mut scratch);
@@ -311,7 +328,7 @@ impl EquationModel {
         self.set_time_and_inputs(values, (t, at), inputs);
         values[self.names.states()].copy_from_slice(x);
         let first = self.names.defined().start;
-        for &i in &self.order {
+        for &i in &self.output_order {
             values[first + i] = self.defined[i].eval(values, scratch);
         }
         for (j, &i) in self.outputs.iter().enumerate() {
@@ -545,15 +562,14 @@ fn evaluation_order(
     Ok(order)
 }
 
-/// Which defined quantities the state updates read, directly or through
+/// Which defined quantities the slots `reads` need, directly or through
 /// other defined quantities.
-fn needed_by(updates: &[Expression], defined: &[Expression], first: usize) -> Vec<bool> {
+fn needed_by(reads: &[usize], defined: &[Expression], first: usize) -> Vec<bool> {
     let mut needed = vec![false; defined.len()];
-    let mut stack: Vec<usize> = updates
+    let mut stack: Vec<usize> = reads
         .iter()
-        .flat_map(|u| u.reads().iter().copied())
-        .filter(|&s| s >= first)
-        .map(|s| s - first)
+        .filter(|&&s| s >= first)
+        .map(|&s| s - first)
         .collect();
     while let Some(i) = stack.pop() {
         if !needed[i] {
@@ -568,4 +584,19 @@ fn needed_by(updates: &[Expression], defined: &[Expression], first: usize) -> Ve
         }
     }
     needed
+}
+
+/// Which defined quantities read only parameters (directly or through
+/// others like them): the same all through a record. `order` puts each
+/// after those it reads.
+fn per_record(order: &[usize], defined: &[Expression], names: &Names) -> Vec<bool> {
+    let first = names.defined().start;
+    let mut constant = vec![false; defined.len()];
+    for &i in order {
+        constant[i] = defined[i]
+            .reads()
+            .iter()
+            .all(|&s| names.parameters().contains(&s) || (s >= first && constant[s - first]));
+    }
+    constant
 }

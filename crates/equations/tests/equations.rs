@@ -114,7 +114,11 @@ fn the_functions_and_the_piecewise_value_match_rust() {
     let text = EquationsText {
         time: Time::Discrete,
         states: vec![],
-        definitions: vec![Equation::new("half", "u / 2")],
+        // `root` reads only a parameter: evaluated once per record.
+        definitions: vec![
+            Equation::new("half", "u / 2"),
+            Equation::new("root", "sqrt(p)"),
+        ],
         outputs: vec![
             Equation::new("clip", "if u < -1 then -1 else u > 1 then 1 else u"),
             Equation::new("s", "sat(u, p) + sign(u)"),

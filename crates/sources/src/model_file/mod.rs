@@ -800,4 +800,39 @@ mod tests {
         assert!(record.output(0).iter().all(|y| y.is_finite()));
         assert_eq!(file.preset_names().collect::<Vec<_>>(), ["default"]);
     }
+
+    /// The template's commented `[equations]` example, uncommented into a
+    /// file of its names, loads and simulates: the reference a user
+    /// copies from works.
+    #[test]
+    fn the_templates_equations_example_runs() {
+        let block: Vec<&str> = TEMPLATE
+            .lines()
+            .skip_while(|l| !l.starts_with("#   [equations]"))
+            .take_while(|l| l.starts_with("#   "))
+            .map(|l| &l[4..])
+            .collect();
+        assert!(block.len() > 5, "the template has no [equations] example");
+        let text = format!(
+            "[model]\nname = \"level\"\n[[parameter]]\nname = \"k\"\n\
+             prior = {{ dist = \"uniform\", low = 0.5, high = 2.0 }}\n[[parameter]]\n\
+             name = \"h0\"\nprior = {{ dist = \"uniform\", low = 1.0, high = 3.0 }}\n\
+             [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 40\n\
+             [input]\nsignal = \"white\"\nsd = 0.5\n{}\n",
+            block.join("\n")
+        );
+        let file = ModelFile::parse(&text, "level.toml").unwrap();
+        let simulator = file.simulator().unwrap();
+        let mut record = simulator.spec().new_record();
+        simulator
+            .simulate(
+                &[1.0, 2.0],
+                &mut twostage_models::experiment_rng(1, 0),
+                &mut record,
+            )
+            .unwrap();
+        // The level starts at h0 (measured at the start of sample 0).
+        assert!((record.output(0)[0] - 2.0).abs() < 1e-12);
+        assert!(record.output(0).iter().all(|y| y.is_finite()));
+    }
 }
