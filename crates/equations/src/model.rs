@@ -260,12 +260,7 @@ impl EquationModel {
                             }
                         }
                         if let Some(rng) = noise.as_deref_mut() {
-                            for (xi, &sd) in x.iter_mut().zip(&self.state_noise) {
-                                if sd > 0.0 {
-                                    let z: f64 = StandardNormal.sample(rng);
-                                    *xi += sd * h.sqrt() * z;
-                                }
-                            }
+                            self.add_process_noise(&mut x, rng, h.sqrt());
                         }
                         self.check_states(&x, t + h, theta)?;
                     }
@@ -280,12 +275,7 @@ impl EquationModel {
                         *xi = update.eval(&values, &mut scratch);
                     }
                     if let Some(rng) = noise.as_deref_mut() {
-                        for (xi, &sd) in x.iter_mut().zip(&self.state_noise) {
-                            if sd > 0.0 {
-                                let z: f64 = StandardNormal.sample(rng);
-                                *xi += sd * z;
-                            }
-                        }
+                        self.add_process_noise(&mut x, rng, 1.0);
                     }
                     self.check_states(&x, t_k + t_step, theta)?;
                 }
@@ -313,6 +303,18 @@ impl EquationModel {
             record.output_mut(j).copy_from_slice(column);
         }
         Ok(())
+    }
+
+    /// Each noisy state's process noise over a step: its sd times `scale`
+    /// (the square root of a continuous step's length, 1 in discrete
+    /// time) times a standard normal draw, in state order.
+    fn add_process_noise(&self, x: &mut [f64], rng: &mut ExperimentRng, scale: f64) {
+        for (xi, &sd) in x.iter_mut().zip(&self.state_noise) {
+            if sd > 0.0 {
+                let z: f64 = StandardNormal.sample(rng);
+                *xi += sd * scale * z;
+            }
+        }
     }
 
     /// The outputs at time `t` (of input sample `at`) and states `x` into

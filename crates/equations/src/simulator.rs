@@ -73,7 +73,11 @@ impl Simulator for EquationSimulator {
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
-        check_theta(&self.spec, theta)?;
+        // Length and finiteness, not the box: a simulator may be run
+        // outside its prior on purpose (as the built-in models are).
+        self.spec
+            .prior()
+            .check(theta, self.spec.param_names(), true)?;
         let n = conditions.check_input(&self.spec)?;
         let (n_u, n_y) = (
             self.spec.input_names().len(),
@@ -105,27 +109,4 @@ impl Simulator for EquationSimulator {
         let noise = (!conditions.noiseless).then_some(rng);
         self.model.respond(theta, out, noise)
     }
-}
-
-/// A parameter vector of the model's length, every value finite.
-fn check_theta(spec: &ModelSpec, theta: &[f64]) -> Result<(), SimError> {
-    if theta.len() != spec.n_params() {
-        return Err(SimError::WrongParameterCount {
-            expected: spec.n_params(),
-            got: theta.len(),
-            names: spec.param_names().join(", "),
-        });
-    }
-    if let Some((name, value)) = spec
-        .param_names()
-        .iter()
-        .zip(theta)
-        .find(|(_, v)| !v.is_finite())
-    {
-        return Err(SimError::NonFiniteParameter {
-            name: name.clone(),
-            value: *value,
-        });
-    }
-    Ok(())
 }

@@ -121,6 +121,7 @@ def main():
         observed = np.load(os.path.join(folder, "outputs.npy"))
         means, sds, ess = reference(observed, k, 12345)
         np.save(out, np.stack([means, sds]))
+        np.save(ess_path(out), ess)
         print("effective sample sizes: min %.0f, median %.0f" % (ess.min(), np.median(ess)))
     elif command == "csv":
         outputs = np.load(os.path.join(sys.argv[2], "outputs.npy"))
@@ -128,15 +129,31 @@ def main():
             out.write("experiment,prey,predators\n")
             for i, record in enumerate(outputs):
                 for x, y in record:
-                    out.write("%d,%r,%r\n" % (i, x, y))
+                    out.write("%d,%r,%r\n" % (i, float(x), float(y)))
     elif command == "score":
         means, sds = np.load(sys.argv[2])
         estimates = read_estimates(sys.argv[3], len(means))
-        z = np.abs(estimates - means) / sds
-        print("%d records: mean |z| %.3f; per rate %s" % (
-            len(means), z.mean(), " ".join("%s %.3f" % (n, v) for n, v in zip(NAMES, z.mean(0)))))
+        # A reference whose importance weights collapsed on a few draws is
+        # no reference: such records are left out, and counted.
+        kept = np.ones(len(means), dtype=bool)
+        if os.path.exists(ess_path(sys.argv[2])):
+            kept = np.load(ess_path(sys.argv[2])) >= MIN_ESS
+        z = (np.abs(estimates - means) / sds)[kept]
+        print("%d records (%d left out: effective sample size below %d): mean |z| %.3f; "
+              "per rate %s" % (kept.sum(), (~kept).sum(), MIN_ESS, z.mean(),
+                               " ".join("%s %.3f" % (n, v) for n, v in zip(NAMES, z.mean(0)))))
     else:
         sys.exit(__doc__)
+
+
+# The smallest effective sample size of a record's reference for it to be
+# scored against.
+MIN_ESS = 100
+
+
+def ess_path(reference):
+    """Where the reference's effective sample sizes are kept."""
+    return reference[:-4] + "-ess.npy" if reference.endswith(".npy") else reference + "-ess.npy"
 
 
 def read_estimates(path, count):
