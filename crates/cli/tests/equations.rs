@@ -279,3 +279,89 @@ fn mistakes_in_equations_are_named_with_file_line_and_position() {
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
+
+/// Training arguments shared by the single-machine run and the merge.
+fn small_design<'a>(model: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
+        "train",
+        "--model-file",
+        model,
+        "--compress",
+        "raw",
+        "--fit",
+        "mlp:4",
+        "--out",
+        out,
+        "--quiet",
+    ]
+}
+
+#[test]
+fn an_equations_model_goes_through_shards_and_the_automatic_design() {
+    let dir = scratch("equations-doors");
+    let model = examples().join("sir/sir_equations.toml");
+    let sizes = [
+        "--count",
+        "300",
+        "--validate",
+        "100",
+        "--calibrate",
+        "100",
+        "--seed",
+        "3",
+    ];
+    // Shards merge to the file one machine writes: the equations draw
+    // their noise from each experiment's own stream.
+    let single = dir.join("single.tsest");
+    let mut args = small_design(path(&model), path(&single));
+    args.extend([
+        "--sims",
+        "300",
+        "--validate",
+        "100",
+        "--calibrate",
+        "100",
+        "--seed",
+        "3",
+    ]);
+    let out = twostage(&args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let shards = dir.join("shards");
+    for shard in ["0/2", "1/2"] {
+        let mut args = vec!["simulate", "--model-file", path(&model)];
+        args.extend(sizes);
+        args.extend(["--shard", shard, "--out", path(&shards)]);
+        let out = twostage(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+    let pattern = format!("{}/shard-*", shards.display());
+    let merged = dir.join("merged.tsest");
+    let mut args = small_design(path(&model), path(&merged));
+    args.extend(["--chart", &pattern]);
+    let out = twostage(&args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        std::fs::read(&merged).unwrap() == std::fs::read(&single).unwrap(),
+        "the merged estimator file differs from the single-machine one"
+    );
+    // The automatic design searches an equations model as any other.
+    let searched = dir.join("searched.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--auto",
+        "--budget-seconds",
+        "15",
+        "--validate",
+        "200",
+        "--calibrate",
+        "200",
+        "--out",
+        path(&searched),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report = text(&out.stdout);
+    assert!(report.contains("automatic design on m = "), "{report}");
+    assert!(searched.exists());
+}
