@@ -1,7 +1,7 @@
 //! A model file's `[input]`: the source's own design, or a fixed input
 //! (values, or a measured record's columns) the model file hands over.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use toml::Spanned;
 use twostage_models::InputSignal;
@@ -10,8 +10,8 @@ use super::locator::Locator;
 use super::locator::Signals;
 use super::raw::RawFile;
 use super::raw::RawInput;
-use super::{CommandInput, ModelSource};
-use crate::error::Result;
+use super::{CommandInput, ModelFile, ModelSource};
+use crate::error::{Error, Result};
 
 impl Locator<'_> {
     /// The inputs a source needs are given: an FMU's time unit and its
@@ -201,5 +201,109 @@ impl Locator<'_> {
                 )
             })?
             .map_err(|e| self.error(here(), "input", e.to_string()))
+    }
+}
+
+impl ModelFile {
+    /// The measured input a built-in or FMU source is handed, if the file
+    /// names one.
+    pub(super) fn measured_record(&self) -> Result<Option<twostage_models::IoData>> {
+        self.measured_input
+            .as_ref()
+            .map(|input| self.fixed_record(input, None))
+            .transpose()
+    }
+
+    /// The record of the file's shape whose inputs are the fixed ones
+    /// (the outputs are not read).
+    pub(super) fn fixed_record(
+        &self,
+        input: &CommandInput,
+        dir: Option<&Path>,
+    ) -> Result<twostage_models::IoData> {
+        let mut record = self.spec.new_record();
+        match input {
+            CommandInput::Values(signal) => {
+                // A fixed signal draws nothing: any stream serves.
+                let mut rng = twostage_models::experiment_rng(0, 0);
+                for j in 0..record.n_inputs() {
+                    signal
+                        .fill(self.spec.sample_time(), &mut rng, record.input_mut(j))
+                        .map_err(|e| Error::ModelFile {
+                            file: self.origin.clone(),
+                            line: None,
+                            key: "input.values".into(),
+                            message: e.to_string(),
+                        })?;
+                }
+            }
+            CommandInput::File {
+                path,
+                line,
+                columns: chosen,
+                rows,
+            } => {
+                let path = match dir {
+                    Some(dir) if path.is_relative() => dir.join(path),
+                    _ => path.clone(),
+                };
+                let names = chosen.as_deref().unwrap_or(self.spec.input_names());
+                let error = |key: &str, message: String| Error::ModelFile {
+                    file: self.origin.clone(),
+                    line: Some(*line),
+                    key: key.into(),
+                    message,
+                };
+                if names.len() != self.spec.input_names().len() {
+                    return Err(error(
+                        "input.columns",
+                        format!(
+                            "{} column(s) for the model's {} input(s) ({}): give one per input, \
+                             in their order",
+                            names.len(),
+                            self.spec.input_names().len(),
+                            self.spec.input_names().join(", ")
+                        ),
+                    ));
+                }
+                let mut columns = crate::csv_rows::read_columns(&path, names)
+                    .map_err(|message| error("input.file", message))?;
+                if let Some([first, last]) = *rows {
+                    let available = columns.first().map_or(0, Vec::len);
+                    if last > available {
+                        return Err(error(
+                            "input.rows",
+                            format!(
+                                "[{first}, {last}] lies outside {}, whose data rows are 1 to \
+                                 {available}",
+                                path.display()
+                            ),
+                        ));
+                    }
+                    for column in &mut columns {
+                        *column = column[first - 1..last].to_vec();
+                    }
+                }
+                let n = self.spec.n_samples();
+                for (j, column) in columns.iter().enumerate() {
+                    if column.len() != n {
+                        return Err(Error::ModelFile {
+                            file: self.origin.clone(),
+                            line: Some(*line),
+                            key: "input.file".into(),
+                            message: format!(
+                                "{} holds {} samples of {}; [signals] says samples = {n}: give \
+                                 a record of that length or change samples",
+                                path.display(),
+                                column.len(),
+                                self.spec.input_names()[j]
+                            ),
+                        });
+                    }
+                    record.input_mut(j).copy_from_slice(column);
+                }
+            }
+        }
+        Ok(record)
     }
 }
