@@ -461,12 +461,25 @@ fn more_records<S: Simulator + ?Sized>(
     if rows <= chart_rows {
         return Ok(None);
     }
-    let (run, m) = (&sized.run, sized.m);
     let added = rows - chart_rows;
-    run.progress().note(&format!(
-        "more records pay: simulating {added} more for the winner's final fit"
-    ));
-    let more = run.records().more_training(m, m + added)?;
+    simulate_more(
+        sized,
+        sized.m..sized.m + added,
+        &format!("more records pay: simulating {added} more for the winner's final fit"),
+    )
+}
+
+/// The training experiments `designs` of the run's design, simulated
+/// after a `note`, and how many failed; the fit's stage goes on after
+/// them.
+fn simulate_more<S: Simulator + ?Sized>(
+    sized: &SizedRun<'_, S>,
+    designs: std::ops::Range<usize>,
+    note: &str,
+) -> Result<Option<(StoredChart, usize)>> {
+    let run = &sized.run;
+    run.progress().note(note);
+    let more = run.records().more_training(designs.start, designs.end)?;
     // The simulations ended their own stage: the fit goes on.
     run.progress().begin(Stage::Fitting, 0);
     Ok(more)
@@ -492,13 +505,10 @@ fn anytime_steps<S: Simulator + ?Sized>(
         if added == 0 {
             break;
         }
-        run.progress().note(&format!(
-            "time is left: simulating {added} more records for the final fit"
-        ));
-        let Some((more, failed)) = run.records().more_training(next, next + added)? else {
+        let note = format!("time is left: simulating {added} more records for the final fit");
+        let Some((more, failed)) = simulate_more(sized, next..next + added, &note)? else {
             break;
         };
-        run.progress().begin(Stage::Fitting, 0);
         next += added;
         simulations += added;
         failures += failed;
