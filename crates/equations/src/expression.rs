@@ -1,31 +1,227 @@
-//! One equation's right side, parsed and compiled once by exmex, with
-//! its names resolved to slots of the model's value table.
+//! One equation's right side: parsed once by exmex, its names resolved
+//! to slots of the model's value table, and compiled to instructions
+//! that read and write that table (decision 044).
+
+use std::collections::HashMap;
+use std::sync::Arc;
 
 use exmex::{Express, FlatEx};
 
-use crate::ops::EquationOps;
+use crate::jit::Native;
+use crate::ops::{Binary, EquationOps, Traced, Unary};
 use crate::{EquationError, Names};
 
-/// A compiled right side: exmex's flat expression and, for each of its
-/// variables (in exmex's order), the slot of the value table it reads.
+/// One step of a compiled right side: a function of slots of the value
+/// table (`a`, `b`), written into another (`to`). The four arithmetic
+/// operators have steps of their own so that the commonest instructions
+/// take one dispatch, not two.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub(crate) enum Instruction {
+    Add([u32; 3]),
+    Sub([u32; 3]),
+    Mul([u32; 3]),
+    Div([u32; 3]),
+    Unary(Unary, [u32; 2]),
+    Binary(Binary, [u32; 3]),
+    Copy([u32; 2]),
+}
+
+impl Instruction {
+    /// The instruction computing `f(a, b)` into `to`.
+    fn binary(f: Binary, [a, b, to]: [u32; 3]) -> Self {
+        match f {
+            Binary::Add => Self::Add([a, b, to]),
+            Binary::Sub => Self::Sub([a, b, to]),
+            Binary::Mul => Self::Mul([a, b, to]),
+            Binary::Div => Self::Div([a, b, to]),
+            f => Self::Binary(f, [a, b, to]),
+        }
+    }
+
+    /// The same instruction writing into `to`.
+    fn writing(self, to: u32) -> Self {
+        match self {
+            Self::Add([a, b, _]) => Self::Add([a, b, to]),
+            Self::Sub([a, b, _]) => Self::Sub([a, b, to]),
+            Self::Mul([a, b, _]) => Self::Mul([a, b, to]),
+            Self::Div([a, b, _]) => Self::Div([a, b, to]),
+            Self::Unary(f, [x, _]) => Self::Unary(f, [x, to]),
+            Self::Binary(f, [a, b, _]) => Self::Binary(f, [a, b, to]),
+            Self::Copy([x, _]) => Self::Copy([x, to]),
+        }
+    }
+
+    /// The slots it reads and the one it writes.
+    pub(crate) fn slots(self) -> ([u32; 2], u32) {
+        match self {
+            Self::Add([a, b, to])
+            | Self::Sub([a, b, to])
+            | Self::Mul([a, b, to])
+            | Self::Div([a, b, to])
+            | Self::Binary(_, [a, b, to]) => ([a, b], to),
+            Self::Unary(_, [x, to]) | Self::Copy([x, to]) => ([x, x], to),
+        }
+    }
+}
+
+/// Runs `code` on the value table.
+#[inline]
+fn run(code: &[Instruction], values: &mut [f64]) {
+    for instruction in code {
+        let (slot, value) = match *instruction {
+            Instruction::Add([a, b, to]) => (to, values[a as usize] + values[b as usize]),
+            Instruction::Sub([a, b, to]) => (to, values[a as usize] - values[b as usize]),
+            Instruction::Mul([a, b, to]) => (to, values[a as usize] * values[b as usize]),
+            Instruction::Div([a, b, to]) => (to, values[a as usize] / values[b as usize]),
+            Instruction::Unary(f, [x, to]) => (to, f.apply(values[x as usize])),
+            Instruction::Binary(f, [a, b, to]) => {
+                (to, f.apply(values[a as usize], values[b as usize]))
+            }
+            Instruction::Copy([x, to]) => (to, values[x as usize]),
+        };
+        values[slot as usize] = value;
+    }
+}
+
+/// Several right sides compiled into one run over the value table, each
+/// writing its value into a slot of its own (see [`Expression::append_to`]):
+/// one pass for all the equations of a step. A program may read some
+/// slots from a vector beside the table (the states, as the integrator
+/// holds them) and give some back in another (their derivatives), without
+/// copying them through the table. Once complete, [`Program::compile`]
+/// makes machine code of it.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Program {
+    code: Vec<Instruction>,
+    /// The slots read from the vector `x` of [`Program::run_with`], in its
+    /// order.
+    from_x: Vec<u32>,
+    /// The slots given back in its `out`, in its order.
+    to_out: Vec<u32>,
+    native: Option<Arc<Native>>,
+}
+
+impl Program {
+    /// An empty program reading `from_x` from a vector beside the table
+    /// and giving `to_out` back in another.
+    pub(crate) fn with_vectors(from_x: &[usize], to_out: &[usize]) -> Self {
+        Self {
+            from_x: from_x.iter().map(|&s| slot_index(s)).collect(),
+            to_out: to_out.iter().map(|&s| slot_index(s)).collect(),
+            ..Self::default()
+        }
+    }
+
+    /// Compile it to machine code, where Cranelift can build for this
+    /// processor (else it stays interpreted, the same values).
+    pub(crate) fn compile(&mut self) {
+        self.native = Native::compile(&self.code, &self.from_x, &self.to_out).map(Arc::new);
+    }
+
+    /// Runs it on the value table (a program without vectors).
+    #[inline]
+    pub(crate) fn run(&self, values: &mut [f64]) {
+        self.run_with(values, &[], &mut []);
+    }
+
+    /// Runs it on the value table, its vector slots read from `x` and
+    /// given back in `out`.
+    #[inline]
+    pub(crate) fn run_with(&self, values: &mut [f64], x: &[f64], out: &mut [f64]) {
+        match &self.native {
+            Some(native) => native.run(values, x, out),
+            None => self.interpret(values, x, out),
+        }
+    }
+
+    /// Runs it by the interpreter, compiled or not: what the compiled
+    /// code is tested against. It writes `x` into the table's slots too.
+    pub(crate) fn interpret(&self, values: &mut [f64], x: &[f64], out: &mut [f64]) {
+        for (&slot, &v) in self.from_x.iter().zip(x) {
+            values[slot as usize] = v;
+        }
+        run(&self.code, values);
+        for (v, &slot) in out.iter_mut().zip(&self.to_out) {
+            *v = values[slot as usize];
+        }
+    }
+
+    /// Whether it runs as machine code.
+    #[cfg(test)]
+    pub(crate) fn is_native(&self) -> bool {
+        self.native.is_some()
+    }
+}
+
+/// The value table's layout beyond its named slots: the numbers the
+/// equations write (one slot each, set once per record) and each
+/// instruction's result.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Table {
+    len: usize,
+    numbers: Vec<(usize, f64)>,
+}
+
+impl Table {
+    /// A table whose first `named` slots are the model's names.
+    pub(crate) fn new(named: usize) -> Self {
+        Self {
+            len: named,
+            numbers: Vec::new(),
+        }
+    }
+
+    /// A table of this layout: zeros, with its numbers written.
+    pub(crate) fn values(&self) -> Vec<f64> {
+        let mut values = vec![0.0; self.len];
+        for &(slot, number) in &self.numbers {
+            values[slot] = number;
+        }
+        values
+    }
+
+    /// A slot of its own for a value.
+    pub(crate) fn fresh(&mut self) -> usize {
+        self.len += 1;
+        self.len - 1
+    }
+
+    fn number(&mut self, number: f64) -> usize {
+        if let Some(&(slot, _)) = self
+            .numbers
+            .iter()
+            .find(|(_, n)| n.to_bits() == number.to_bits())
+        {
+            return slot;
+        }
+        let slot = self.fresh();
+        self.numbers.push((slot, number));
+        slot
+    }
+}
+
+/// A compiled right side: its instructions (those that read only what is
+/// fixed through a record apart, once [`Expression::hoist`] has split
+/// them), the slot of its value, and the named slots it reads.
 #[derive(Debug, Clone)]
 pub(crate) struct Expression {
-    flat: FlatEx<f64, EquationOps>,
-    slots: Vec<usize>,
-    /// Where the expression is one name alone (`y = x2`): its slot, read
-    /// without evaluating.
-    alias: Option<usize>,
+    code: Vec<Instruction>,
+    per_record: Vec<Instruction>,
+    result: usize,
+    reads: Vec<usize>,
 }
 
 impl Expression {
-    /// Parse `text`, the right side of the equation called `key`, and
-    /// resolve its names among `names` (those `allowed` for this kind of
-    /// equation; a known name that is not allowed says why).
+    /// Parse `text`, the right side of the equation called `key`, resolve
+    /// its names among `names` (those `allowed` for this kind of
+    /// equation; a known name that is not allowed says why), and compile
+    /// it into `table`'s slots.
     pub(crate) fn compile(
         key: &str,
         text: &str,
         names: &Names,
         allowed: impl Fn(usize) -> Result<(), String>,
+        table: &mut Table,
     ) -> Result<Self, EquationError> {
         let error = |position: Option<usize>, message: String| EquationError {
             equation: key.to_string(),
@@ -53,7 +249,7 @@ impl Expression {
                     .into(),
             ));
         }
-        let flat = FlatEx::<f64, EquationOps>::parse(text)
+        let flat = FlatEx::<Traced, EquationOps>::parse(text)
             .map_err(|e| error(position_of(text, e.msg()), syntax_message(e.msg())))?;
         let mut slots = Vec::with_capacity(flat.var_names().len());
         for name in flat.var_names() {
@@ -66,28 +262,122 @@ impl Expression {
             allowed(slot).map_err(|why| error(text.find(name.as_str()), why))?;
             slots.push(slot);
         }
-        let alias =
-            (slots.len() == 1 && flat.unparse().trim() == flat.var_names()[0]).then(|| slots[0]);
-        Ok(Self { flat, slots, alias })
-    }
-
-    /// The slots this expression reads.
-    pub(crate) fn reads(&self) -> &[usize] {
-        &self.slots
-    }
-
-    /// Its value with the table `values`; `scratch` holds the gathered
-    /// variables (kept by the caller so that nothing is allocated).
-    pub(crate) fn eval(&self, values: &[f64], scratch: &mut Vec<f64>) -> f64 {
-        if let Some(slot) = self.alias {
-            return values[slot];
-        }
-        scratch.clear();
-        scratch.extend(self.slots.iter().map(|&s| values[s]));
+        let variables: Vec<Traced> = slots.iter().map(|&s| Traced::Slot(s)).collect();
         // The variables are exactly the expression's, in its order: exmex
-        // only fails on a count that differs, which `compile` rules out.
-        self.flat.eval(scratch).unwrap_or(f64::NAN)
+        // only fails on a count that differs.
+        let tree = flat
+            .eval(&variables)
+            .map_err(|e| error(None, syntax_message(e.msg())))?;
+        let mut code = Vec::new();
+        let result = lower(&tree, table, &mut code, &mut HashMap::new());
+        slots.sort_unstable();
+        slots.dedup();
+        Ok(Self {
+            code,
+            per_record: Vec::new(),
+            result,
+            reads: slots,
+        })
     }
+
+    /// The named slots this expression reads.
+    pub(crate) fn reads(&self) -> &[usize] {
+        &self.reads
+    }
+
+    /// Set apart the instructions that read only slots `fixed` through a
+    /// record (or numbers, or results of such instructions): they run
+    /// once per record, by [`Expression::prepare`], instead of at every
+    /// evaluation. Slots below `named` are the model's names.
+    pub(crate) fn hoist(&mut self, named: usize, fixed: impl Fn(usize) -> bool) {
+        let mut varying: Vec<usize> = Vec::new();
+        let (mut per_record, mut code) = (Vec::new(), Vec::new());
+        for &instruction in &self.code {
+            let (operands, to) = instruction.slots();
+            let is_fixed = operands.iter().all(|&s| {
+                let s = s as usize;
+                if s < named {
+                    fixed(s)
+                } else {
+                    !varying.contains(&s)
+                }
+            });
+            if is_fixed {
+                per_record.push(instruction);
+            } else {
+                varying.push(to as usize);
+                code.push(instruction);
+            }
+        }
+        self.per_record.extend(per_record);
+        self.code = code;
+    }
+
+    /// Run the instructions set apart by [`Expression::hoist`]: once a
+    /// record, after the fixed slots are written.
+    pub(crate) fn prepare(&self, values: &mut [f64]) {
+        run(&self.per_record, values);
+    }
+
+    /// Append to `program` the instructions that evaluate it at every
+    /// step, its value then written into `slot` (its last instruction
+    /// retargeted, or a copy where it has none of its own).
+    pub(crate) fn append_to(&self, program: &mut Program, slot: usize) {
+        let slot = slot_index(slot);
+        match self.code.split_last() {
+            Some((last, rest)) if last.slots().1 as usize == self.result => {
+                program.code.extend_from_slice(rest);
+                program.code.push(last.writing(slot));
+            }
+            _ => {
+                program.code.extend_from_slice(&self.code);
+                program
+                    .code
+                    .push(Instruction::Copy([slot_index(self.result), slot]));
+            }
+        }
+    }
+
+    /// Its value with the table `values`, whose slots of instruction
+    /// results it writes.
+    #[inline]
+    pub(crate) fn eval(&self, values: &mut [f64]) -> f64 {
+        run(&self.code, values);
+        values[self.result]
+    }
+}
+
+/// Instructions computing `tree` appended to `code`; the slot holding its
+/// value. A part met twice in the tree is computed once (`seen`).
+fn lower(
+    tree: &Traced,
+    table: &mut Table,
+    code: &mut Vec<Instruction>,
+    seen: &mut HashMap<Instruction, usize>,
+) -> usize {
+    let instruction = match tree {
+        Traced::Number(number) => return table.number(*number),
+        Traced::Slot(slot) => return *slot,
+        Traced::Unary(f, x) => Instruction::Unary(*f, [slot_index(lower(x, table, code, seen)), 0]),
+        Traced::Binary(f, a, b) => {
+            let a = slot_index(lower(a, table, code, seen));
+            let b = slot_index(lower(b, table, code, seen));
+            Instruction::binary(*f, [a, b, 0])
+        }
+    };
+    if let Some(&slot) = seen.get(&instruction) {
+        return slot;
+    }
+    let to = table.fresh();
+    seen.insert(instruction, to);
+    code.push(instruction.writing(slot_index(to)));
+    to
+}
+
+/// A slot as an instruction stores it: a model of more than 4 billion
+/// values is not one a record could simulate.
+fn slot_index(slot: usize) -> u32 {
+    u32::try_from(slot).unwrap_or(u32::MAX)
 }
 
 /// Where `text` puts a unary minus before an operand raised to a power

@@ -32,6 +32,7 @@
 #![deny(missing_docs)]
 
 mod expression;
+mod jit;
 mod model;
 mod ops;
 mod simulator;
