@@ -25,7 +25,7 @@ use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{Linkage, Module};
 
-use crate::expression::Instruction;
+use crate::instruction::Instruction;
 use crate::ops::{Binary, Unary};
 
 /// The machine code of one program, and the memory that holds it.

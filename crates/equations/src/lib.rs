@@ -2,9 +2,11 @@
 //! derivatives (continuous time, integrated by the models crate's
 //! fixed-step RK4) or next values (discrete time), named intermediate
 //! quantities and outputs, over the model's parameters, inputs and the
-//! time `t`. Each right side is parsed and compiled once by
-//! [exmex](https://docs.rs/exmex) (decision 043); a record then costs
-//! only evaluations.
+//! time `t`. Each right side is parsed once by
+//! [exmex](https://docs.rs/exmex) (decision 043) and the equations of a
+//! step compiled to machine code by
+//! [Cranelift](https://docs.rs/cranelift-jit) (decision 044); a record
+//! then costs only the model's own arithmetic.
 //!
 //! ```
 //! use twostage_equations::{Equation, EquationModel, EquationsText, State, Time};
@@ -32,6 +34,7 @@
 #![deny(missing_docs)]
 
 mod expression;
+mod instruction;
 mod jit;
 mod model;
 mod ops;
