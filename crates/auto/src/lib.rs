@@ -37,7 +37,9 @@ use outcome::more_records_pay;
 mod search;
 
 use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
-pub use outcome::{AutoOutcome, CandidateReport, Continuation, FinalFit, FinalFits, Status};
+pub use outcome::{
+    AutoOutcome, CandidateReport, Continuation, FinalFit, FinalFits, RivalNetwork, Status,
+};
 use search::{Scope, Search, Winner};
 
 /// How much the search may spend.

@@ -266,10 +266,15 @@ impl AutoOutcome {
             ..
         } = self.final_fit
         {
-            let rival_design = self
-                .candidates
-                .get(rival_of)
-                .map_or_else(String::new, |c| format!(" as {}", c.design));
+            let rival_design = match rival_of {
+                RivalNetwork::Candidate(i) => self
+                    .candidates
+                    .get(i)
+                    .map_or_else(String::new, |c| format!(" as {}", c.design)),
+                RivalNetwork::SizedForRows { width } => {
+                    format!(" as MLP [{width}, {width}], sized for the records")
+                }
+            };
             writeln!(
                 f,
                 "on the last {compared} added records, seen by no fit, the winner trained further \
@@ -280,6 +285,9 @@ impl AutoOutcome {
                     "trained further"
                 },
                 match (rival < further, rival_anew) {
+                    (true, _) if matches!(rival_of, RivalNetwork::SizedForRows { .. }) => {
+                        "network sized for the records"
+                    }
                     (true, true) => "fit anew",
                     (true, false) => "larger network",
                     (false, _) => "fit trained further",
@@ -402,9 +410,24 @@ impl Continuation {
     }
 }
 
+/// The network of the final fit's rival.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RivalNetwork {
+    /// A candidate's (by index): a larger one, or the winner's own.
+    Candidate(usize),
+    /// Two hidden layers of `width` units, as wide as the final fit's
+    /// records afford, on the winner's stage 1, trained by Adam (decision
+    /// 045).
+    SizedForRows {
+        /// The units of each hidden layer.
+        width: usize,
+    },
+}
+
 /// The winner's two final fits under a time budget, where both ran: the
 /// winner trained further from its scored fit, and a rival (its network
-/// anew, or a larger network), scored on added records.
+/// anew, a larger candidate's network, or on many records a network sized
+/// for them), scored on added records.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FinalFits {
     /// The added records (seen by neither fit) they were scored on.
@@ -413,9 +436,10 @@ pub struct FinalFits {
     pub further: f64,
     /// The held-out score of the rival fit.
     pub rival: f64,
-    /// The candidate whose network the rival is: a larger one where the
-    /// records grew well past the winner's, or the winner's own.
-    pub rival_of: usize,
+    /// Whose network the rival is: a network sized for many records, a
+    /// larger candidate's where the records grew well past the winner's,
+    /// or the winner's own.
+    pub rival_of: RivalNetwork,
     /// Whether the rival was fitted anew (else trained further from its
     /// candidate's scored fit).
     pub rival_anew: bool,
