@@ -235,9 +235,9 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     }
 
     /// The fit that competes with the winner trained further on
-    /// `refit_rows`, where `compared` added records can judge them: on
-    /// many records, a network sized for them ([`network_for_rows`]) fitted
-    /// anew; else a larger network ([`Self::larger_network`]) fitted anew
+    /// `refit_rows`, where `compared` added records can judge them: on a
+    /// chart's many records, a network sized for them
+    /// ([`Self::sized_for_rows`]) fitted anew; else a larger network ([`Self::larger_network`]) fitted anew
     /// where the time left affords it, or trained further from its own
     /// scored fit (as cheap as the winner's); without one, the winner's
     /// network anew where affordable.
@@ -269,9 +269,8 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The network sized for `rows` training records on the winner's
     /// stage 1 ([`network_for_rows`]), where the records cannot grow (a
     /// chart) and it is larger than every network the search scored
-    /// there: the search's networks are sized
-    /// for the rows it scores on, and a chart of many records carries
-    /// more than they can learn (decision 045: predator-prey from raw
+    /// there: the search's networks are sized for the rows it scores on,
+    /// and a chart of many records carries more than they can learn (decision 045: predator-prey from raw
     /// populations, [20, 20] trained further on 93,000 records against
     /// [64, 64] by Adam).
     fn sized_for_rows(&self, best: usize, rows: usize) -> Option<(RegressorConfig, usize)> {
@@ -428,7 +427,8 @@ pub(crate) struct Winner {
     /// How `regressor` was fitted.
     pub(crate) final_fit: FinalFit,
     /// The candidate whose structure ships: the winner, or the larger
-    /// network fitted anew that beat it.
+    /// network that beat it (a network sized for the records is no
+    /// candidate: when it ships, the winner's stage 1 stays marked).
     pub(crate) candidate: usize,
 }
 
