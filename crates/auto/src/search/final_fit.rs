@@ -481,8 +481,21 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_rival_is_the_cheapest_larger_network_the_seed_could_have_ranked_first() {
+    /// ARX(NA, NA) prepared for the benchmark of [`with_search`].
+    fn arx_of(order: usize) -> CompressorConfig {
+        let model = Benchmark::builder().n_samples(100).build().unwrap();
+        CompressorConfig::from(Arx::new(order, order).unwrap())
+            .for_model(model.spec())
+            .unwrap()
+    }
+
+    /// `check` given a search over the benchmark whose candidates it sets
+    /// (nothing is fitted), with no deadline in sight, and ARX(2, 2);
+    /// `grows`: whether its source simulates.
+    fn with_search(
+        grows: bool,
+        check: impl FnOnce(&mut Search<'_, '_, Benchmark>, CompressorConfig),
+    ) {
         let model = Benchmark::builder().n_samples(100).build().unwrap();
         let run = TwoStage::builder(&model).simulations(60).prepare().unwrap();
         let chart = StoredChart {
@@ -496,38 +509,40 @@ mod tests {
             &chart,
             (Budget::Seconds(1e6), Some(far)),
             4000,
-            true,
+            grows,
         );
-        let arx = CompressorConfig::from(Arx::new(2, 2).unwrap())
-            .for_model(model.spec())
-            .unwrap();
-        let other = CompressorConfig::from(Arx::new(3, 3).unwrap())
-            .for_model(model.spec())
-            .unwrap();
-        let net = |h: &[usize]| network(h).unwrap();
-        search.candidates = vec![
-            scored(&arx, net(&[20]), 0.0428, 3.8),
-            scored(&arx, net(&[40]), 0.0431, 13.2),
-            scored(&arx, pieces(4, &[20]).unwrap(), 0.0436, 6.0),
-            scored(&arx, net(&[20, 20]), 0.0431, 22.4),
-            // Cheaper still, but not larger, or on another stage 1.
-            scored(&arx, net(&[10]), 0.0430, 1.0),
-            scored(&other, net(&[40]), 0.0420, 2.0),
-        ];
-        // Too few final rows for a larger network to pay: none.
-        assert_eq!(search.larger_network(0, 15_999), None);
-        // Pieces tie with the best larger network (within 2%) and cost
-        // least: they compete.
-        assert_eq!(search.larger_network(0, 16_000), Some(2));
-        // A measured seed spread below 2% still ties them; outside the
-        // tie, the best-scoring larger network.
-        search.seed_spread = Some(0.005);
-        assert_eq!(search.larger_network(0, 16_000), Some(2));
-        search.candidates[2].report.score = 0.0445;
-        assert_eq!(search.larger_network(0, 16_000), Some(1));
-        // A wider seed spread ties them again.
-        search.seed_spread = Some(0.04);
-        assert_eq!(search.larger_network(0, 16_000), Some(2));
+        check(&mut search, arx_of(2));
+    }
+
+    #[test]
+    fn the_rival_is_the_cheapest_larger_network_the_seed_could_have_ranked_first() {
+        with_search(true, |search, arx| {
+            let other = arx_of(3);
+            let net = |h: &[usize]| network(h).unwrap();
+            search.candidates = vec![
+                scored(&arx, net(&[20]), 0.0428, 3.8),
+                scored(&arx, net(&[40]), 0.0431, 13.2),
+                scored(&arx, pieces(4, &[20]).unwrap(), 0.0436, 6.0),
+                scored(&arx, net(&[20, 20]), 0.0431, 22.4),
+                // Cheaper still, but not larger, or on another stage 1.
+                scored(&arx, net(&[10]), 0.0430, 1.0),
+                scored(&other, net(&[40]), 0.0420, 2.0),
+            ];
+            // Too few final rows for a larger network to pay: none.
+            assert_eq!(search.larger_network(0, 15_999), None);
+            // Pieces tie with the best larger network (within 2%) and cost
+            // least: they compete.
+            assert_eq!(search.larger_network(0, 16_000), Some(2));
+            // A measured seed spread below 2% still ties them; outside the
+            // tie, the best-scoring larger network.
+            search.seed_spread = Some(0.005);
+            assert_eq!(search.larger_network(0, 16_000), Some(2));
+            search.candidates[2].report.score = 0.0445;
+            assert_eq!(search.larger_network(0, 16_000), Some(1));
+            // A wider seed spread ties them again.
+            search.seed_spread = Some(0.04);
+            assert_eq!(search.larger_network(0, 16_000), Some(2));
+        });
     }
 
     #[test]
@@ -556,70 +571,52 @@ mod tests {
 
     #[test]
     fn the_sized_network_competes_on_a_chart_where_larger_than_every_scored_one() {
-        let model = Benchmark::builder().n_samples(100).build().unwrap();
-        let run = TwoStage::builder(&model).simulations(60).prepare().unwrap();
-        let chart = StoredChart {
-            thetas: Array2::zeros((60, 1)),
-            records: Vec::new(),
-        };
-        let scope = Scope::of(&run);
-        let far = Instant::now() + Duration::from_secs(1_000_000);
-        let search_of = |grows: bool| {
-            Search::new(
-                &scope,
-                &chart,
-                (Budget::Seconds(1e6), Some(far)),
-                4000,
-                grows,
-            )
-        };
-        let arx = CompressorConfig::from(Arx::new(2, 2).unwrap())
-            .for_model(model.spec())
-            .unwrap();
         let net = |h: &[usize]| network(h).unwrap();
-        let candidates = || {
+        let candidates = |arx: &CompressorConfig| {
             vec![
-                scored(&arx, net(&[20]), 0.0428, 3.8),
-                scored(&arx, net(&[40]), 0.0431, 13.2),
+                scored(arx, net(&[20]), 0.0428, 3.8),
+                scored(arx, net(&[40]), 0.0431, 13.2),
             ]
         };
         // A source that simulates spends the time on more records: the
         // larger candidate competes, trained further or anew.
-        let mut search = search_of(true);
-        search.candidates = candidates();
-        assert!(matches!(
-            search.rival(0, 32_000, 2000).map(|r| r.of),
-            Some(super::RivalNetwork::Candidate(1))
-        ));
+        with_search(true, |search, arx| {
+            search.candidates = candidates(&arx);
+            assert!(matches!(
+                search.rival(0, 32_000, 2000).map(|r| r.of),
+                Some(super::RivalNetwork::Candidate(1))
+            ));
+        });
         // A chart cannot grow.
-        let mut search = search_of(false);
-        search.candidates = candidates();
-        let hidden = |rival: Option<super::Rival>| {
-            rival.map(|r| match (r.network, r.of) {
-                (RegressorConfig::Mlp(mlp), of) => (mlp.params().hidden().to_vec(), of),
-                (_, of) => (Vec::new(), of),
-            })
-        };
-        // 30,000 records: [32, 32] (1249 weights) is larger than [40]
-        // (241): it is the rival, fitted anew.
-        assert_eq!(
-            hidden(search.rival(0, 32_000, 2000)),
-            Some((
-                vec![32, 32],
-                super::RivalNetwork::SizedForRows { width: 32 }
-            ))
-        );
-        // A scored network larger still ([40, 40], 1881 weights) keeps it
-        // out: a larger candidate competes instead (the cheapest of the
-        // tied, [40]).
-        search
-            .candidates
-            .push(scored(&arx, net(&[40, 40]), 0.0429, 30.0));
-        assert_eq!(
-            hidden(search.rival(0, 32_000, 2000)),
-            Some((vec![40], super::RivalNetwork::Candidate(1)))
-        );
-        // Too few records compared: no rival at all.
-        assert_eq!(hidden(search.rival(0, 32_000, 199)), None);
+        with_search(false, |search, arx| {
+            search.candidates = candidates(&arx);
+            let hidden = |rival: Option<super::Rival>| {
+                rival.map(|r| match (r.network, r.of) {
+                    (RegressorConfig::Mlp(mlp), of) => (mlp.params().hidden().to_vec(), of),
+                    (_, of) => (Vec::new(), of),
+                })
+            };
+            // 30,000 records: [32, 32] (1249 weights) is larger than [40]
+            // (241): it is the rival, fitted anew.
+            assert_eq!(
+                hidden(search.rival(0, 32_000, 2000)),
+                Some((
+                    vec![32, 32],
+                    super::RivalNetwork::SizedForRows { width: 32 }
+                ))
+            );
+            // A scored network larger still ([40, 40], 1881 weights) keeps
+            // it out: a larger candidate competes instead (the cheapest of
+            // the tied, [40]).
+            search
+                .candidates
+                .push(scored(&arx, net(&[40, 40]), 0.0429, 30.0));
+            assert_eq!(
+                hidden(search.rival(0, 32_000, 2000)),
+                Some((vec![40], super::RivalNetwork::Candidate(1)))
+            );
+            // Too few records compared: no rival at all.
+            assert_eq!(hidden(search.rival(0, 32_000, 199)), None);
+        });
     }
 }
