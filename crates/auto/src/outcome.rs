@@ -272,7 +272,9 @@ impl AutoOutcome {
                     .get(i)
                     .map_or_else(String::new, |c| format!(" as {}", c.design)),
                 RivalNetwork::SizedForRows { width } => {
-                    format!(" as MLP [{width}, {width}], sized for the records")
+                    format!(
+                        " as MLP [{width}, {width}] (its restarts averaged), sized for the records"
+                    )
                 }
             };
             writeln!(
@@ -417,7 +419,7 @@ pub enum RivalNetwork {
     Candidate(usize),
     /// Two hidden layers of `width` units, as wide as the final fit's
     /// records afford, on the winner's stage 1, trained by Adam (decision
-    /// 045).
+    /// 045), its restarts averaged (decision 046).
     SizedForRows {
         /// The units of each hidden layer.
         width: usize,

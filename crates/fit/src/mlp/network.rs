@@ -116,7 +116,8 @@ impl FittedMlp {
     }
     /// How the kept network was trained, in words: "Levenberg-Marquardt,
     /// stopped by Converged (best of 4 restarts by Levenberg-Marquardt)",
-    /// naming both trainers when [`crate::Trainer::Auto`] ran both.
+    /// naming both trainers when [`crate::Trainer::Auto`] ran both, and
+    /// "average of" for an ensemble.
     pub fn training_summary(&self) -> String {
         let best = self.best_restart();
         let lm = self
@@ -129,8 +130,13 @@ impl FittedMlp {
             (lm, 0) => format!("{lm} restarts by Levenberg-Marquardt"),
             (lm, adam) => format!("{lm} restarts by Levenberg-Marquardt, {adam} by Adam"),
         };
+        let kept = match self.members.len() {
+            1 => format!("best of {restarts}"),
+            // An ensemble keeps them all: the stop named is its best's.
+            _ => format!("average of {restarts}; the stop is the best restart's"),
+        };
         format!(
-            "{}, stopped by {} (best of {restarts})",
+            "{}, stopped by {} ({kept})",
             best.reason.trainer(),
             best.reason.name()
         )
