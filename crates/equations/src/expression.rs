@@ -41,6 +41,44 @@ impl Program {
         }
     }
 
+    /// The program of `code`, reading `from_x` from a vector beside the
+    /// table and giving `to_out` back in another; not yet compiled.
+    pub(crate) fn from_parts(code: Vec<Instruction>, from_x: &[u32], to_out: &[u32]) -> Self {
+        Self {
+            code,
+            from_x: from_x.to_vec(),
+            to_out: to_out.to_vec(),
+            native: None,
+        }
+    }
+
+    /// Its instructions, the slots it reads from `x` and those it gives
+    /// back in `out`.
+    pub(crate) fn parts(&self) -> (&[Instruction], &[u32], &[u32]) {
+        (&self.code, &self.from_x, &self.to_out)
+    }
+
+    /// The same program over `lanes` value tables laid end to end, each
+    /// `stride` slots long, its vectors holding the lanes one after the
+    /// other. Each instruction is followed by its copies for the other
+    /// lanes: their chains are independent, so the processor works on them
+    /// at once where one record's chain would keep it waiting (decision
+    /// 047). Not yet compiled.
+    pub(crate) fn lanes(&self, lanes: usize, stride: usize) -> Self {
+        let by = |lane: usize| slot_index(lane * stride);
+        let code = self
+            .code
+            .iter()
+            .flat_map(|&i| (0..lanes).map(move |lane| i.shifted(by(lane))))
+            .collect();
+        let widen = |slots: &[u32]| -> Vec<u32> {
+            (0..lanes)
+                .flat_map(|lane| slots.iter().map(move |&s| s + by(lane)))
+                .collect()
+        };
+        Self::from_parts(code, &widen(&self.from_x), &widen(&self.to_out))
+    }
+
     /// Compile it to machine code, where Cranelift can build for this
     /// processor (else it stays interpreted, the same values).
     pub(crate) fn compile(&mut self) {
@@ -109,13 +147,19 @@ impl Table {
         values
     }
 
+    /// Its length: one past the last slot.
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
     /// A slot of its own for a value.
     pub(crate) fn fresh(&mut self) -> usize {
         self.len += 1;
         self.len - 1
     }
 
-    fn number(&mut self, number: f64) -> usize {
+    /// The slot holding `number` (one per distinct number).
+    pub(crate) fn number(&mut self, number: f64) -> usize {
         if let Some(&(slot, _)) = self
             .numbers
             .iter()
@@ -305,7 +349,7 @@ fn lower(
 
 /// A slot as an instruction stores it: a model of more than 4 billion
 /// values is not one a record could simulate.
-fn slot_index(slot: usize) -> u32 {
+pub(crate) fn slot_index(slot: usize) -> u32 {
     u32::try_from(slot).unwrap_or(u32::MAX)
 }
 

@@ -44,6 +44,20 @@ impl Instruction {
         }
     }
 
+    /// The same instruction on slots `by` further on (another lane's
+    /// table, laid after the first).
+    pub(crate) fn shifted(self, by: u32) -> Self {
+        match self {
+            Self::Add([a, b, to]) => Self::Add([a + by, b + by, to + by]),
+            Self::Sub([a, b, to]) => Self::Sub([a + by, b + by, to + by]),
+            Self::Mul([a, b, to]) => Self::Mul([a + by, b + by, to + by]),
+            Self::Div([a, b, to]) => Self::Div([a + by, b + by, to + by]),
+            Self::Unary(f, [x, to]) => Self::Unary(f, [x + by, to + by]),
+            Self::Binary(f, [a, b, to]) => Self::Binary(f, [a + by, b + by, to + by]),
+            Self::Copy([x, to]) => Self::Copy([x + by, to + by]),
+        }
+    }
+
     /// The slots it reads and the one it writes.
     pub(crate) fn slots(self) -> ([u32; 2], u32) {
         match self {

@@ -1,6 +1,7 @@
 //! Models written as equations: states with initial values, their
-//! derivatives (continuous time, integrated by the models crate's
-//! fixed-step RK4) or next values (discrete time), named intermediate
+//! derivatives (continuous time, integrated by the fixed-step RK4 of the
+//! models crate, its arithmetic compiled with the equations: decision 047)
+//! or next values (discrete time), named intermediate
 //! quantities and outputs, over the model's parameters, inputs and the
 //! time `t`. Each right side is parsed once by
 //! [exmex](https://docs.rs/exmex) (decision 043) and the equations of a
@@ -35,6 +36,7 @@
 
 mod expression;
 mod instruction;
+mod integrator;
 mod jit;
 mod model;
 mod ops;

@@ -215,16 +215,17 @@ impl Binary {
             Self::Atan2 => a.atan2(b),
             // Spelled out, not f64::min and max, whose choice between
             // equal operands (0 and -0) is left to the compiler: compiled
-            // code does the same comparisons (decision 044).
+            // code does the same one comparison (decisions 044 and 047). A
+            // NaN first operand passes on, as arithmetic passes NaN on.
             Self::Min => {
-                if b < a || a.is_nan() {
+                if b < a {
                     b
                 } else {
                     a
                 }
             }
             Self::Max => {
-                if a < b || a.is_nan() {
+                if a < b {
                     b
                 } else {
                     a

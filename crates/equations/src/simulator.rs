@@ -73,6 +73,68 @@ impl Simulator for EquationSimulator {
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
+        self.inputs_for(theta, rng, conditions, out)?;
+        let noise = (!conditions.noiseless).then_some(rng);
+        self.model.respond(theta, out, noise)
+    }
+
+    fn batch_size(&self) -> usize {
+        BATCH
+    }
+
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<Result<(), SimError>> {
+        self.simulate_batch_under(thetas, rngs, Conditions::default(), outs)
+    }
+
+    fn simulate_batch_under(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        conditions: Conditions<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<(), SimError>> {
+        let ready: Vec<Result<(), SimError>> = thetas
+            .iter()
+            .zip(rngs.iter_mut())
+            .zip(outs.iter_mut())
+            .map(|((theta, rng), out)| self.inputs_for(theta, rng, conditions, out))
+            .collect();
+        if ready.iter().all(Result::is_ok) {
+            let noises = (!conditions.noiseless).then_some(rngs);
+            return self.model.respond_batch(thetas, outs, noises);
+        }
+        // Some could not start: the others one by one.
+        ready
+            .into_iter()
+            .zip(thetas.iter().zip(rngs.iter_mut()).zip(outs.iter_mut()))
+            .map(|(ready, ((theta, rng), out))| {
+                ready?;
+                let noise = (!conditions.noiseless).then_some(rng);
+                self.model.respond(theta, out, noise)
+            })
+            .collect()
+    }
+}
+
+/// Experiments a chart hands the equations at once: a few lanes' worth
+/// ([`crate::model::LANES`]), so that records respond side by side.
+const BATCH: usize = 4 * crate::model::LANES;
+
+impl EquationSimulator {
+    /// `out` shaped for the experiment and its inputs written: the given
+    /// ones, or the design's drawn from `rng`; `theta` checked.
+    fn inputs_for(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<(), SimError> {
         // Length and finiteness, not the box: a simulator may be run
         // outside its prior on purpose (as the built-in models are).
         self.spec
@@ -106,7 +168,6 @@ impl Simulator for EquationSimulator {
             }
             (None, None) => {}
         }
-        let noise = (!conditions.noiseless).then_some(rng);
-        self.model.respond(theta, out, noise)
+        Ok(())
     }
 }
