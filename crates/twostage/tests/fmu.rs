@@ -119,7 +119,10 @@ fn fmu_mistakes_in_a_model_file_name_their_line_and_key() {
     let (line, key, _) = model_file_error(&text);
     assert_eq!(
         (line, key.as_str()),
-        (Some(line_of(&text, "outputs = [\"x9\"]")), "signals.outputs")
+        (
+            Some(line_of(&text, "outputs = [\"x9\"]")),
+            "signals.outputs"
+        )
     );
 
     let text = good.replace("name = \"v11\"", "name = \"theta\"");
