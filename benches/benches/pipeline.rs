@@ -3,13 +3,15 @@
 //!
 //! Groups: `compress` (ARX(5, 5) at N = 250 .. 16000, the cost must grow
 //! linearly), `simulate`, `certify` (the betting certificate of r squared
-//! errors), `train`.
+//! errors), `train` (the two paper presets, and ten Adam epochs of the
+//! [64, 64] network a large chart gets: 5000 records of 40 features).
 
 use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use twostage::TwoStage;
 use twostage::compress::{Arx, Compressor, Workspace};
+use twostage::fit::Regressor;
 use twostage::models::{Benchmark, PacejkaCar, Simulator, experiment_rng};
 use twostage_benches::{config, record, slow_config};
 
@@ -123,7 +125,46 @@ fn train(c: &mut Criterion) {
                 .unwrap_or_else(|e| panic!("{e}"))
         })
     });
+    // The network sized for a large chart (decision 045) trains by Adam:
+    // its epochs are what the search's final fit spends its time on.
+    let (x, t) = adam_problem(5000, 40, 4);
+    let adam = twostage::fit::MlpParams::new(&[64, 64])
+        .and_then(|p| {
+            p.restarts(1)
+                .seed(1)
+                .trainer(twostage::fit::Trainer::Adam {
+                    learning_rate: 1e-3,
+                    batch_size: 64,
+                    epochs: 10,
+                })
+                .check()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    group.bench_function("adam_10_epochs_64x64", |b| {
+        b.iter(|| {
+            adam.fit(x.view(), t.view())
+                .unwrap_or_else(|e| panic!("{e}"))
+        })
+    });
     group.finish();
+}
+
+/// `rows` records of `n` features in [-1, 1] and `q` smooth targets of
+/// them, from a fixed stream.
+fn adam_problem(rows: usize, n: usize, q: usize) -> (ndarray::Array2<f64>, ndarray::Array2<f64>) {
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut uniform = move || {
+        // xorshift64: any fixed stream serves.
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let x = ndarray::Array2::from_shape_fn((rows, n), |_| uniform());
+    let t = ndarray::Array2::from_shape_fn((rows, q), |(i, k)| {
+        (x[[i, k]] * x[[i, k + 1]] + x[[i, k + 2]]).sin()
+    });
+    (x, t)
 }
 
 criterion_group! {

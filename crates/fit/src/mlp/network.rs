@@ -174,12 +174,39 @@ pub(super) fn parameter_count(sizes: &[usize]) -> usize {
     sizes.windows(2).map(|w| w[1] * (w[0] + 1)).sum()
 }
 
+/// Every layer's weights transposed in place (column `c`, the weights from
+/// input `c` to each unit, contiguous), biases as they are: the layout in
+/// which [`forward`] adds one input's contribution to a whole layer at a
+/// time.
+pub(super) fn by_columns(sizes: &[usize], params: &[f64]) -> Vec<f64> {
+    let mut columns = params.to_vec();
+    let mut p = 0;
+    for w in sizes.windows(2) {
+        let (n_in, n_out) = (w[0], w[1]);
+        for a in 0..n_out {
+            for c in 0..n_in {
+                columns[p + c * n_out + a] = params[p + a * n_in + c];
+            }
+        }
+        p += n_out * (n_in + 1);
+    }
+    columns
+}
+
 /// Forward pass on standardized input `x`, keeping every layer's activation
 /// in `acts` (layer l starts at `offsets[l]`); returns nothing, the output
-/// is the last layer.
+/// is the last layer. `columns` are the weights [`by_columns`].
+///
+/// Each unit's sum takes the same additions in the same order as the
+/// estimate path's [`dense_layer`] (from -0.0, input by input, the bias
+/// last), so training and estimating give the same bits; the loop runs over
+/// the units, whose sums are independent, and the processor overlaps them
+/// where one dot product at a time waits on each addition. Inlined so that
+/// the callers' [`widest_vectors`] reach its loops.
+#[inline(always)]
 pub(super) fn forward(
     sizes: &[usize],
-    params: &[f64],
+    columns: &[f64],
     x: &[f64],
     acts: &mut [f64],
     offsets: &[usize],
@@ -191,9 +218,19 @@ pub(super) fn forward(
         let (n_in, n_out) = (sizes[l], sizes[l + 1]);
         let (before, after) = acts.split_at_mut(offsets[l + 1]);
         let input = &before[offsets[l]..offsets[l] + n_in];
-        let w = &params[p..p + n_out * n_in];
-        let b = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
-        dense_layer(w, b, input, activation(l, layers), &mut after[..n_out]);
+        let out = &mut after[..n_out];
+        out.fill(-0.0);
+        for (column, &x) in columns[p..p + n_out * n_in].chunks_exact(n_out).zip(input) {
+            for (o, w) in out.iter_mut().zip(column) {
+                *o += w * x;
+            }
+        }
+        let bias = &columns[p + n_out * n_in..p + n_out * (n_in + 1)];
+        let tanh = activation(l, layers) == Activation::Tanh;
+        for (o, b) in out.iter_mut().zip(bias) {
+            let z = b + *o;
+            *o = if tanh { z.tanh() } else { z };
+        }
         p += n_out * (n_in + 1);
     }
 }
@@ -211,17 +248,32 @@ pub(super) fn activation(layer: usize, layers: usize) -> Activation {
 /// .* (1 - a^2)`, with `a` the layer's input activations. `delta` holds
 /// `delta_l` in its first half and receives `delta_{l-1}` there; the second
 /// half is scratch, so the step never reads what it has overwritten.
+#[inline(always)]
 pub(super) fn backward(w: &[f64], input: &[f64], n_out: usize, delta: &mut [f64]) {
     let n_in = input.len();
     let (cur, next) = delta.split_at_mut(MAX_WIDTH);
-    for c in 0..n_in {
-        let mut acc = 0.0;
-        for a in 0..n_out {
-            acc += w[a * n_in + c] * cur[a];
+    let next = &mut next[..n_in];
+    // Each input's sum runs over the units in order, as one dot product
+    // per input would; the loop runs over the inputs, independent of one
+    // another.
+    next.fill(0.0);
+    for (row, &d) in w.chunks_exact(n_in).zip(&cur[..n_out]) {
+        for (acc, w) in next.iter_mut().zip(row) {
+            *acc += w * d;
         }
-        next[c] = acc * (1.0 - input[c] * input[c]);
     }
-    cur[..n_in].copy_from_slice(&next[..n_in]);
+    for (acc, v) in next.iter_mut().zip(input) {
+        *acc *= 1.0 - v * v;
+    }
+    cur[..n_in].copy_from_slice(next);
+}
+
+/// Run `work` compiled for the widest vectors the processor offers (pulp
+/// dispatches at run time). The training loops' arithmetic is elementwise,
+/// a multiplication then an addition each rounded (Rust never fuses them),
+/// so every width gives the same bits.
+fn widest_vectors<R>(work: impl FnOnce() -> R) -> R {
+    pulp::Arch::new().dispatch(work)
 }
 
 /// The training problem of one restart: standardized data and buffers.
@@ -254,13 +306,15 @@ impl Problem<'_> {
     /// parallel, their sums added in block order.
     pub(super) fn mse(&self, params: &[f64], rows: &[usize]) -> f64 {
         let q = *self.sizes.last().unwrap_or(&1);
+        let columns = by_columns(self.sizes, params);
+        let columns = columns.as_slice();
         let sse: f64 = if rows.len() <= BLOCK_SAMPLES {
-            self.sse(params, rows, &mut self.activations())
+            self.sse(columns, rows, &mut self.activations())
         } else {
             rows.par_chunks(BLOCK_SAMPLES)
                 .map_init(
                     || self.activations(),
-                    |acts, block| self.sse(params, block, acts),
+                    |acts, block| self.sse(columns, block, acts),
                 )
                 .collect::<Vec<f64>>()
                 .iter()
@@ -269,15 +323,24 @@ impl Problem<'_> {
         sse / (rows.len() * q).max(1) as f64
     }
 
-    /// Sum of squared errors over `rows`, in row order.
-    fn sse(&self, params: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
+    /// Sum of squared errors over `rows`, in row order, of the network
+    /// whose weights are `columns` ([`by_columns`]).
+    fn sse(&self, columns: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
+        widest_vectors(
+            #[inline(always)]
+            || self.sse_here(columns, rows, acts),
+        )
+    }
+
+    #[inline(always)]
+    fn sse_here(&self, columns: &[f64], rows: &[usize], acts: &mut [f64]) -> f64 {
         let q = *self.sizes.last().unwrap_or(&1);
         let out = self.offsets[self.sizes.len() - 1];
         let mut sse = 0.0;
         for &i in rows {
             let xi = self.x.row(i);
             let xi = xi.as_slice().unwrap_or(&[]);
-            forward(self.sizes, params, xi, acts, &self.offsets);
+            forward(self.sizes, columns, xi, acts, &self.offsets);
             for k in 0..q {
                 sse += (acts[out + k] - self.t[[i, k]]).powi(2);
             }
@@ -290,24 +353,30 @@ impl Problem<'_> {
     pub(super) fn residuals(&self, params: &[f64], r: &mut [f64]) {
         let q = *self.sizes.last().unwrap_or(&1);
         let out = self.offsets[self.sizes.len() - 1];
+        let columns = by_columns(self.sizes, params);
         r.par_chunks_mut(BLOCK_SAMPLES * q)
             .zip(self.train.par_chunks(BLOCK_SAMPLES))
             .for_each_init(
                 || self.activations(),
                 |acts, (r, rows)| {
-                    for (r, &i) in r.chunks_exact_mut(q).zip(rows) {
-                        let xi = self.x.row(i);
-                        forward(
-                            self.sizes,
-                            params,
-                            xi.as_slice().unwrap_or(&[]),
-                            acts,
-                            &self.offsets,
-                        );
-                        for (k, r) in r.iter_mut().enumerate() {
-                            *r = acts[out + k] - self.t[[i, k]];
-                        }
-                    }
+                    widest_vectors(
+                        #[inline(always)]
+                        || {
+                            for (r, &i) in r.chunks_exact_mut(q).zip(rows) {
+                                let xi = self.x.row(i);
+                                forward(
+                                    self.sizes,
+                                    &columns,
+                                    xi.as_slice().unwrap_or(&[]),
+                                    acts,
+                                    &self.offsets,
+                                );
+                                for (k, r) in r.iter_mut().enumerate() {
+                                    *r = acts[out + k] - self.t[[i, k]];
+                                }
+                            }
+                        },
+                    )
                 },
             );
     }
@@ -324,11 +393,13 @@ impl Problem<'_> {
     pub(super) fn gradient(&self, params: &[f64], rows: &[usize], grad: &mut [f64]) {
         let q = *self.sizes.last().unwrap_or(&1);
         let scale = 2.0 / (rows.len() * q).max(1) as f64;
+        let columns = by_columns(self.sizes, params);
+        let weights = (params, columns.as_slice());
         grad.fill(0.0);
         if rows.len() <= BLOCK_SAMPLES {
             let mut delta = vec![0.0; 2 * MAX_WIDTH];
             self.add_gradient(
-                params,
+                weights,
                 rows,
                 scale,
                 grad,
@@ -342,7 +413,7 @@ impl Problem<'_> {
                     || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
                     |(acts, delta), block| {
                         let mut partial = vec![0.0; params.len()];
-                        self.add_gradient(params, block, scale, &mut partial, acts, delta);
+                        self.add_gradient(weights, block, scale, &mut partial, acts, delta);
                         partial
                     },
                 )
@@ -363,7 +434,23 @@ impl Problem<'_> {
     /// `grad`, in row order.
     fn add_gradient(
         &self,
-        params: &[f64],
+        weights: (&[f64], &[f64]),
+        rows: &[usize],
+        scale: f64,
+        grad: &mut [f64],
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
+        widest_vectors(
+            #[inline(always)]
+            || self.add_gradient_here(weights, rows, scale, grad, acts, delta),
+        );
+    }
+
+    #[inline(always)]
+    fn add_gradient_here(
+        &self,
+        (params, columns): (&[f64], &[f64]),
         rows: &[usize],
         scale: f64,
         grad: &mut [f64],
@@ -377,7 +464,7 @@ impl Problem<'_> {
         for &i in rows {
             let xi = self.x.row(i);
             let xi = xi.as_slice().unwrap_or(&[]);
-            forward(sizes, params, xi, acts, &self.offsets);
+            forward(sizes, columns, xi, acts, &self.offsets);
             for k in 0..q {
                 delta[k] = scale * (acts[out + k] - self.t[[i, k]]);
             }
@@ -386,12 +473,16 @@ impl Problem<'_> {
                 let (n_in, n_out) = (sizes[l], sizes[l + 1]);
                 s -= n_out * (n_in + 1);
                 let input = &acts[self.offsets[l]..self.offsets[l] + n_in];
-                for a in 0..n_out {
-                    let d = delta[a];
-                    for (c, inp) in input.iter().enumerate() {
-                        grad[s + a * n_in + c] += d * inp;
+                let (weights, biases) = grad[s..s + n_out * (n_in + 1)].split_at_mut(n_out * n_in);
+                for ((row, bias), &d) in weights
+                    .chunks_exact_mut(n_in)
+                    .zip(biases)
+                    .zip(&delta[..n_out])
+                {
+                    for (g, inp) in row.iter_mut().zip(input) {
+                        *g += d * inp;
                     }
-                    grad[s + n_out * n_in + a] += d;
+                    *bias += d;
                 }
                 if l > 0 {
                     backward(&params[s..s + n_out * n_in], input, n_out, delta);
@@ -407,13 +498,15 @@ impl Problem<'_> {
     pub(super) fn jacobian(&self, params: &[f64], jt: &mut [f64], res: &mut [f64]) {
         let q = *self.sizes.last().unwrap_or(&1);
         let n = params.len();
+        let columns = by_columns(self.sizes, params);
+        let weights = (params, columns.as_slice());
         jt.par_chunks_mut(n * BLOCK_SAMPLES * q)
             .zip(res.par_chunks_mut(BLOCK_SAMPLES * q))
             .zip(self.train.par_chunks(BLOCK_SAMPLES))
             .for_each_init(
                 || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
                 |(acts, delta), ((jt, res), rows)| {
-                    self.jacobian_block(params, rows, jt, res, acts, delta);
+                    self.jacobian_block(weights, rows, jt, res, acts, delta);
                 },
             );
     }
@@ -421,7 +514,23 @@ impl Problem<'_> {
     /// [`Self::jacobian`] for the samples `rows`, on one thread.
     fn jacobian_block(
         &self,
-        params: &[f64],
+        weights: (&[f64], &[f64]),
+        rows: &[usize],
+        jt: &mut [f64],
+        res: &mut [f64],
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
+        widest_vectors(
+            #[inline(always)]
+            || self.jacobian_block_here(weights, rows, jt, res, acts, delta),
+        );
+    }
+
+    #[inline(always)]
+    fn jacobian_block_here(
+        &self,
+        (params, columns): (&[f64], &[f64]),
         rows: &[usize],
         jt: &mut [f64],
         res: &mut [f64],
@@ -442,7 +551,7 @@ impl Problem<'_> {
         for (sample, &i) in rows.iter().enumerate() {
             let xi = self.x.row(i);
             let xi = xi.as_slice().unwrap_or(&[]);
-            forward(sizes, params, xi, acts, &self.offsets);
+            forward(sizes, columns, xi, acts, &self.offsets);
             for k in 0..q {
                 let r = sample * q + k;
                 res[r] = acts[out + k] - self.t[[i, k]];
@@ -586,7 +695,8 @@ mod tests {
         let (mut jt, mut res) = (vec![0.0; n * 2], vec![0.0; 2]);
         p.jacobian(&params, &mut jt, &mut res);
         let output = |w: &[f64], acts: &mut [f64]| -> [f64; 2] {
-            forward(&sizes, w, &[0.3, -0.7, 0.9], acts, &p.offsets);
+            let columns = by_columns(&sizes, w);
+            forward(&sizes, &columns, &[0.3, -0.7, 0.9], acts, &p.offsets);
             [acts[width - 2], acts[width - 1]]
         };
         let h = 1e-6;
@@ -603,6 +713,59 @@ mod tests {
                     jt[k * n + j]
                 );
             }
+        }
+    }
+
+    /// The forward pass over transposed weights against the estimate
+    /// path's one dot product a unit ([`dense_layer`]), and the backward
+    /// step against one dot product an input: the same bits, zeros of
+    /// either sign included (an input of zero makes products of -0.0).
+    #[test]
+    fn a_layer_at_a_time_gives_the_bits_of_a_unit_at_a_time() {
+        let sizes = [5, 7, 6, 3];
+        let n = n_parameters(&sizes);
+        let mut params = random(n, 51);
+        params[3] = -0.0;
+        params[n - 1] = 0.0;
+        let mut offsets = vec![0];
+        for s in sizes {
+            offsets.push(offsets.last().copied().unwrap() + s);
+        }
+        let columns = by_columns(&sizes, &params);
+        for (seed, zeros) in [(52, 0), (53, 2), (54, 5)] {
+            let mut x = random(5, seed);
+            x[..zeros].fill(-0.0);
+            let mut acts = vec![0.0; offsets[4]];
+            forward(&sizes, &columns, &x, &mut acts, &offsets);
+            // A unit at a time, as the estimate path computes it.
+            let (mut input, mut p) = (x.clone(), 0);
+            for l in 0..3 {
+                let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+                let mut out = vec![0.0; n_out];
+                let (w, b) = params[p..p + n_out * (n_in + 1)].split_at(n_out * n_in);
+                dense_layer(w, b, &input, activation(l, 3), &mut out);
+                let got = &acts[offsets[l + 1]..offsets[l + 2]];
+                let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(got), bits(&out), "layer {l}, {zeros} zero inputs");
+                (input, p) = (out, p + n_out * (n_in + 1));
+            }
+            // Back from the last hidden layer (6 units) to the first (7).
+            let w = &params[7 * 6..7 * 6 + 6 * 7];
+            let hidden = &acts[offsets[1]..offsets[2]];
+            let mut delta = vec![0.0; 2 * MAX_WIDTH];
+            delta[..6].copy_from_slice(&random(6, seed + 10));
+            let expected: Vec<u64> = (0..7)
+                .map(|c| {
+                    let mut acc = 0.0;
+                    for a in 0..6 {
+                        acc += w[a * 7 + c] * delta[a];
+                    }
+                    (acc * (1.0 - hidden[c] * hidden[c])).to_bits()
+                })
+                .collect();
+            backward(w, hidden, 6, &mut delta);
+            let got: Vec<u64> = delta[..7].iter().map(|v| v.to_bits()).collect();
+            assert_eq!(got, expected);
         }
     }
 
