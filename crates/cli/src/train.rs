@@ -34,8 +34,9 @@ pub struct TrainArgs {
     /// the model's inputs and outputs.
     #[arg(long)]
     compress: Option<String>,
-    /// Stage 2: linear, mlp:H[,H...] hidden sizes, ensemble:H[,H...] (the
-    /// network's independently seeded restarts averaged), or piecewise:K,H
+    /// Stage 2: linear, mlp:H[,H...] hidden sizes, ensemble:H[,H...][xN]
+    /// (the network's independently seeded restarts averaged: 4, or N),
+    /// or piecewise:K,H
     /// (a global H-unit network routing to K experts by pieces of the first
     /// parameter's range) (default: the preset's).
     #[arg(long)]

@@ -6,6 +6,7 @@ use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{FitError as Error, Result};
+use crate::mlp::DEFAULT_RESTARTS;
 use crate::{
     FittedLinear, FittedMlp, FittedPiecewise, Mlp, MlpParams, Piecewise, Predictor, Regressor,
     Ridge,
@@ -68,14 +69,18 @@ impl std::str::FromStr for RegressorConfig {
 
     /// A stage-2 specification as the command line and model files write
     /// it: `linear`, `mlp:H[,H...]` (hidden sizes), `ensemble:H[,H...]`
-    /// (the same network's restarts, independently seeded, averaged) or
-    /// `piecewise:K,H` (a global H-unit network routing to K experts by
-    /// pieces of the first parameter's range).
+    /// (the same network's restarts, independently seeded, averaged; four
+    /// of them, or N with `ensemble:H[,H...]xN`) or `piecewise:K,H` (a
+    /// global H-unit network routing to K experts by pieces of the first
+    /// parameter's range).
     ///
     /// ```
     /// use twostage_fit::RegressorConfig;
     /// assert!(matches!("mlp:10".parse()?, RegressorConfig::Mlp(_)));
+    /// let RegressorConfig::Mlp(eight) = "ensemble:64,64x8".parse()? else { unreachable!() };
+    /// assert_eq!((eight.params().hidden(), eight.params().n_restarts()), (&[64, 64][..], 8));
     /// assert!("mlp:ten".parse::<RegressorConfig>().is_err());
+    /// assert!("ensemble:20x0".parse::<RegressorConfig>().is_err());
     /// # Ok::<(), twostage_fit::FitError>(())
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
@@ -99,28 +104,42 @@ impl std::str::FromStr for RegressorConfig {
                 return Err(Error::InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
-                    reason: "use linear, mlp:H[,H...], ensemble:H[,H...] or piecewise:PIECES,H"
+                    reason: "use linear, mlp:H[,H...], ensemble:H[,H...][xN] or piecewise:PIECES,H"
                         .into(),
                 });
             }
         };
+        let (hidden, members) = match hidden.split_once('x') {
+            Some((hidden, members)) if ensemble => (hidden, Some(members)),
+            _ => (hidden, None),
+        };
         let n = hidden.split(',').count();
         let sizes = counts(hidden, spec, n, WHAT)?;
-        Ok(Self::Mlp(
-            MlpParams::new(&sizes).and_then(|p| p.ensemble(ensemble).check())?,
-        ))
+        let mut params = MlpParams::new(&sizes)?.ensemble(ensemble);
+        if let Some(members) = members {
+            let n = members.trim().parse().map_err(|_| Error::InvalidSetting {
+                name: WHAT,
+                value: spec.to_string(),
+                reason: format!(
+                    "after 'x' comes the number of members, a whole number: not '{members}'"
+                ),
+            })?;
+            params = params.restarts(n);
+        }
+        Ok(Self::Mlp(params.check()?))
     }
 }
 
 impl RegressorConfig {
     /// The specification the command line and model files write for this
-    /// method (`linear`, `mlp:20,20`, `piecewise:4,20`), when one gives it
-    /// back exactly (not for a ridge penalty, trainer or restarts other
-    /// than the defaults, which only the library sets).
+    /// method (`linear`, `mlp:20,20`, `ensemble:64,64x8`, `piecewise:4,20`),
+    /// when one gives it back exactly (not for a ridge penalty, trainer, or
+    /// a single network's restarts other than the defaults, which only the
+    /// library sets).
     ///
     /// ```
     /// use twostage_fit::RegressorConfig;
-    /// for spec in ["linear", "mlp:20,20", "ensemble:20", "piecewise:4,20"] {
+    /// for spec in ["linear", "mlp:20,20", "ensemble:20", "ensemble:64,64x8", "piecewise:4,20"] {
     ///     let r: RegressorConfig = spec.parse()?;
     ///     assert_eq!(r.spec().as_deref(), Some(spec));
     /// }
@@ -134,7 +153,11 @@ impl RegressorConfig {
         let text = match self {
             Self::Linear(_) => "linear".to_string(),
             Self::Mlp(m) if m.params().is_ensemble() => {
-                format!("ensemble:{}", sizes(m.params().hidden()))
+                let members = match m.params().n_restarts() {
+                    DEFAULT_RESTARTS => String::new(),
+                    n => format!("x{n}"),
+                };
+                format!("ensemble:{}{members}", sizes(m.params().hidden()))
             }
             Self::Mlp(m) => format!("mlp:{}", sizes(m.params().hidden())),
             Self::Piecewise(p) => format!(

@@ -12,4 +12,5 @@ mod training;
 
 pub use network::RestartReport;
 pub use network::{FittedMlp, MAX_WIDTH, n_parameters};
+pub(crate) use params::DEFAULT_RESTARTS;
 pub use params::{Mlp, MlpParams, Trainer};

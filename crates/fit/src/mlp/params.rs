@@ -99,6 +99,9 @@ pub struct MlpParams {
     pub(super) stop_by: Option<std::time::Instant>,
 }
 
+/// Restarts of a network unless set otherwise.
+pub(crate) const DEFAULT_RESTARTS: usize = 4;
+
 impl MlpParams {
     /// A network with the given hidden layer sizes and default training.
     ///
@@ -108,7 +111,7 @@ impl MlpParams {
     pub fn new(hidden: &[usize]) -> Result<Self> {
         Ok(Self {
             hidden: hidden.to_vec(),
-            restarts: 4,
+            restarts: DEFAULT_RESTARTS,
             max_iterations: 300,
             validation_fraction: 0.15,
             patience: 25,
@@ -163,6 +166,10 @@ impl MlpParams {
         self
     }
 
+    /// The number of seeded restarts (an ensemble's members).
+    pub fn n_restarts(&self) -> usize {
+        self.restarts
+    }
     /// Whether the restarts' networks are averaged ([`MlpParams::ensemble`]).
     pub fn is_ensemble(&self) -> bool {
         self.ensemble

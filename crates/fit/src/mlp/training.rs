@@ -103,6 +103,25 @@ fn plan(trainer: Trainer, rows: usize, q: usize, n_params: usize, max_jacobian: 
     }
 }
 
+/// Where a fit begins: anew, from a fit's networks ([`Mlp::fit_from`]), or
+/// beside a fit's members with this many more ([`Mlp::fit_more`]).
+#[derive(Clone, Copy)]
+enum Begin<'a> {
+    Anew,
+    Further(&'a FittedMlp),
+    More(&'a FittedMlp, usize),
+}
+
+/// The restart of the lowest held-out loss; ties go to the lower index, so
+/// the choice does not depend on scheduling.
+fn lowest_held_out(reports: &[RestartReport]) -> usize {
+    reports
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.validation_mse.total_cmp(&b.1.validation_mse))
+        .map_or(0, |(i, _)| i)
+}
+
 /// Whether the training's time is up (`Mlp::stopped_by`).
 fn out_of_time(mlp: &MlpParams) -> bool {
     mlp.stop_by
@@ -397,7 +416,7 @@ impl Regressor for Mlp {
     type Model = FittedMlp;
 
     fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedMlp> {
-        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, None)
+        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::Anew)
     }
 }
 
@@ -438,19 +457,68 @@ impl Mlp {
         x: ArrayView2<'_, f64>,
         y: ArrayView2<'_, f64>,
     ) -> Result<FittedMlp> {
-        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Some(start))
+        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::Further(start))
+    }
+
+    /// The ensemble `fitted` (a fit of this network on `x` and `y`) with
+    /// `more` members trained anew beside its own: the restarts that follow
+    /// its last, each from its own seed stream, on the same held-out split
+    /// and with `fitted`'s scaling. With the same data and no stop time,
+    /// the result is the bits of a fit with that many more restarts at
+    /// once, so a fit that grows while time is left can be written down as
+    /// a number of members. A member that [`Mlp::stopped_by`] cut short is
+    /// left out: trained part of the way, it would pull the average.
+    ///
+    /// ```
+    /// use ndarray::Array2;
+    /// use twostage_fit::{MlpParams, Regressor};
+    ///
+    /// let x = Array2::from_shape_fn((300, 1), |(i, _)| i as f64 / 150.0 - 1.0);
+    /// let y = x.mapv(|v| (3.0 * v).sin());
+    /// let four = MlpParams::new(&[6])?.ensemble(true).seed(2).check()?;
+    /// let six = MlpParams::new(&[6])?.ensemble(true).seed(2).restarts(6).check()?;
+    /// let grown = four.fit_more(&four.fit(x.view(), y.view())?, x.view(), y.view(), 2)?;
+    /// assert_eq!(grown.n_members(), 6);
+    /// assert_eq!(grown, six.fit(x.view(), y.view())?);
+    /// # Ok::<(), twostage_fit::FitError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A network that is not an ensemble, a `fitted` of other layer sizes,
+    /// or what a fit reports.
+    pub fn fit_more(
+        &self,
+        fitted: &FittedMlp,
+        x: ArrayView2<'_, f64>,
+        y: ArrayView2<'_, f64>,
+        more: usize,
+    ) -> Result<FittedMlp> {
+        if !self.params.ensemble {
+            return Err(FitError::InvalidSetting {
+                name: "ensemble",
+                value: "false".into(),
+                reason: "only an ensemble averages members: set MlpParams::ensemble".into(),
+            });
+        }
+        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::More(fitted, more))
     }
 
     /// [`Regressor::fit`] with Levenberg-Marquardt's Jacobian limited to
-    /// `max_jacobian` entries under [`Trainer::Auto`], from scratch or
-    /// further from `start` ([`Mlp::fit_from`]).
+    /// `max_jacobian` entries under [`Trainer::Auto`], from scratch, further
+    /// from a start ([`Mlp::fit_from`]) or with more members
+    /// ([`Mlp::fit_more`]).
     fn fit_within(
         &self,
         x: ArrayView2<'_, f64>,
         y: ArrayView2<'_, f64>,
         max_jacobian: usize,
-        start: Option<&FittedMlp>,
+        begin: Begin<'_>,
     ) -> Result<FittedMlp> {
+        let (start, grown) = match begin {
+            Begin::Anew => (None, None),
+            Begin::Further(start) => (Some(start), None),
+            Begin::More(fitted, more) => (Some(fitted), Some((fitted, more))),
+        };
         check::training_data(x, y)?;
         let p = &self.params;
         let (m, n_in) = x.dim();
@@ -522,6 +590,24 @@ impl Mlp {
         };
         // Restart r < restarts as the plan says first; in `Both`, restarts
         // r >= restarts by Adam (seed streams of their own).
+        let anew = |r: usize| match plan {
+            Plan::Both { .. } if r < p.restarts => train_one(&first_rows, p, r, true),
+            _ => train_one(&problem, p, r, plan == Plan::LevenbergMarquardt),
+        };
+        if let Some((fitted, more)) = grown {
+            let first = fitted.reports.len();
+            let runs: Vec<(Vec<f64>, RestartReport)> =
+                (first..first + more).into_par_iter().map(anew).collect();
+            let mut grown = fitted.clone();
+            for (weights, report) in runs {
+                if !report.reason.is_deadline() {
+                    grown.members.push(weights);
+                    grown.reports.push(report);
+                }
+            }
+            grown.best = lowest_held_out(&grown.reports);
+            return Ok(grown);
+        }
         let runs: Vec<(Vec<f64>, RestartReport)> = match (start, plan) {
             // Further from a start: its networks, by LM (on the rows LM
             // takes) unless the plan is Adam alone.
@@ -533,27 +619,13 @@ impl Mlp {
                     train_from(&first_rows, p, r, weights.clone(), plan != Plan::Adam)
                 })
                 .collect(),
-            (None, Plan::LevenbergMarquardt | Plan::Adam) => (0..p.restarts)
-                .into_par_iter()
-                .map(|r| train_one(&problem, p, r, plan == Plan::LevenbergMarquardt))
-                .collect(),
-            (None, Plan::Both { .. }) => (0..2 * p.restarts)
-                .into_par_iter()
-                .map(|r| match r < p.restarts {
-                    true => train_one(&first_rows, p, r, true),
-                    false => train_one(&problem, p, r, false),
-                })
-                .collect(),
+            (None, Plan::LevenbergMarquardt | Plan::Adam) => {
+                (0..p.restarts).into_par_iter().map(anew).collect()
+            }
+            (None, Plan::Both { .. }) => (0..2 * p.restarts).into_par_iter().map(anew).collect(),
         };
-        // The lowest held-out loss wins; ties go to the lower index, so the
-        // choice does not depend on scheduling.
-        let best = runs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.1.validation_mse.total_cmp(&b.1.1.validation_mse))
-            .map(|(i, _)| i)
-            .unwrap_or(0);
         let (members, reports): (Vec<Vec<f64>>, Vec<RestartReport>) = runs.into_iter().unzip();
+        let best = lowest_held_out(&reports);
         let members = if p.ensemble || start.is_some() {
             // A start's networks were its members: each continued is one.
             members
@@ -595,6 +667,47 @@ mod tests {
         assert_eq!(plan(Trainer::ADAM, 10, 1, 10, limit), Plan::Adam);
     }
 
+    /// Members added while time is left: a member the stop time cuts
+    /// short is left out, and those that end by themselves are the
+    /// restarts a larger ensemble would have trained (their bits).
+    #[test]
+    fn members_cut_short_are_left_out_of_a_grown_ensemble() {
+        use ndarray::Array2;
+        let x = Array2::from_shape_fn((500, 2), |(i, j)| {
+            ((i * 31 + j * 7) % 89) as f64 / 44.0 - 1.0
+        });
+        let y = x.map_axis(ndarray::Axis(1), |r| (2.0 * r[0]).sin() * r[1]);
+        let y = y.insert_axis(ndarray::Axis(1));
+        let adam = Trainer::Adam {
+            learning_rate: 1e-2,
+            batch_size: 32,
+            epochs: 40,
+        };
+        let net = |restarts: usize| {
+            MlpParams::new(&[5])
+                .unwrap()
+                .ensemble(true)
+                .trainer(adam)
+                .restarts(restarts)
+                .seed(9)
+                .check()
+                .unwrap()
+        };
+        let two = net(2).fit(x.view(), y.view()).unwrap();
+        let cut = net(2)
+            .stopped_by(std::time::Instant::now())
+            .fit_more(&two, x.view(), y.view(), 3)
+            .unwrap();
+        assert_eq!(cut, two, "every added member was cut short");
+        let five = net(2).fit_more(&two, x.view(), y.view(), 3).unwrap();
+        assert_eq!(five.n_members(), 5);
+        let restarts: Vec<usize> = five.reports().iter().map(|r| r.restart).collect();
+        assert_eq!(restarts, [0, 1, 2, 3, 4]);
+        assert_eq!(five, net(5).fit(x.view(), y.view()).unwrap());
+        let single = MlpParams::new(&[5]).unwrap().check().unwrap();
+        assert!(single.fit_more(&two, x.view(), y.view(), 1).is_err());
+    }
+
     /// Beyond the limit both trainers run, each restart says which by its
     /// stop reason, and the kept network is the lowest held-out error of
     /// all of them; the Levenberg-Marquardt restarts are those a plain LM
@@ -615,7 +728,9 @@ mod tests {
             .check()
             .unwrap();
         // 19 weights: 2000 entries leave LM 105 of the 340 training rows.
-        let both = mlp.fit_within(x.view(), y.view(), 2000, None).unwrap();
+        let both = mlp
+            .fit_within(x.view(), y.view(), 2000, Begin::Anew)
+            .unwrap();
         assert_eq!(both.reports.len(), 4);
         let trainers: Vec<&str> = both.reports.iter().map(|r| r.reason.trainer()).collect();
         assert_eq!(
@@ -633,7 +748,7 @@ mod tests {
         );
         // Under the limit: LM alone, as before.
         let alone = mlp
-            .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES, None)
+            .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES, Begin::Anew)
             .unwrap();
         assert_eq!(alone.reports.len(), 2);
         assert!(
