@@ -25,6 +25,10 @@ pub(crate) const PLANNED_SHARE: f64 = 0.8;
 /// The winner's refit keeps at most this share of the time left when
 /// round 2 or 3 starts; the rounds get the rest.
 pub(crate) const REFIT_SHARE: f64 = 0.45;
+/// The share the final fit keeps instead, under a deadline, where a network
+/// sized for a chart's records will compete in it: its members grow while
+/// time is left (decision 049), so the time pays there.
+pub(crate) const SIZED_SHARE: f64 = 0.7;
 /// A fit anew beside the fit trained further starts only if its estimate
 /// is below this share of the time left.
 pub(crate) const ANEW_SHARE: f64 = 0.9;

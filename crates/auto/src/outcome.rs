@@ -271,9 +271,10 @@ impl AutoOutcome {
                     .candidates
                     .get(i)
                     .map_or_else(String::new, |c| format!(" as {}", c.design)),
-                RivalNetwork::SizedForRows { width } => {
+                RivalNetwork::SizedForRows { width, members } => {
                     format!(
-                        " as MLP [{width}, {width}] (its restarts averaged), sized for the records"
+                        " as MLP [{width}, {width}] (its {members} restarts averaged), sized for \
+                         the records"
                     )
                 }
             };
@@ -419,10 +420,13 @@ pub enum RivalNetwork {
     Candidate(usize),
     /// Two hidden layers of `width` units, as wide as the final fit's
     /// records afford, on the winner's stage 1, trained by Adam (decision
-    /// 045), its restarts averaged (decision 046).
+    /// 045), its restarts averaged (decision 046), as many as the time
+    /// left afforded (decision 049).
     SizedForRows {
         /// The units of each hidden layer.
         width: usize,
+        /// The networks averaged.
+        members: usize,
     },
 }
 

@@ -16,8 +16,8 @@ mod anytime;
 mod final_fit;
 
 use crate::cost::{
-    COST_EXPONENT, COST_MARGIN, REFIT_SHARE, affordable_rows, fit_seconds, measured_exponent,
-    rows_growth,
+    COST_EXPONENT, COST_MARGIN, REFIT_SHARE, SIZED_SHARE, affordable_rows, fit_seconds,
+    measured_exponent, rows_growth,
 };
 use crate::{Budget, CandidateReport, Status};
 pub(super) use final_fit::Winner;
@@ -211,6 +211,8 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             let share = REFIT_SHARE * self.plan.seconds_left();
             if self.plan.grows {
                 share
+            } else if self.sized_network_competes(i) {
+                SIZED_SHARE * self.plan.seconds_left()
             } else {
                 refit.min(share)
             }
@@ -291,8 +293,12 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let rows = winner.fit_rows;
         // Each trial, and the winner's refit on the whole chart after it,
         // must end in time.
-        let refit = fit_seconds(winner.seconds, rows, self.plan.chart.thetas.nrows())
-            .min(REFIT_SHARE * self.plan.seconds_left());
+        let refit = if self.sized_network_competes(best) {
+            SIZED_SHARE * self.plan.seconds_left()
+        } else {
+            fit_seconds(winner.seconds, rows, self.plan.chart.thetas.nrows())
+                .min(REFIT_SHARE * self.plan.seconds_left())
+        };
         let limit = self
             .plan
             .deadline

@@ -3,7 +3,7 @@
 //! further from its scored fit and anew where the time affords, the better
 //! on added records no fit saw.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use ndarray::{Array2, Axis};
 use twostage_compress::CompressorConfig;
@@ -160,13 +160,14 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             self.plan.budget_words()
         ));
         // A rival trained further shares the time left: the winner's fit
-        // stops at its middle at the latest; a network sized for the
-        // records, fitted anew, needs the most of it: the winner's fit
-        // stops at a quarter.
+        // stops at its middle at the latest; a fit anew at the deadline; a
+        // network sized for the records, fitted anew and grown while time
+        // is left, at an eighth (decision 049: each wave of members it
+        // gains pays more than the winner's further epochs).
         let now = Instant::now();
         let left = deadline.saturating_duration_since(now);
         let winner_stop = match rival {
-            Some(r) if matches!(r.of, RivalNetwork::SizedForRows { .. }) => now + left / 4,
+            Some(r) if matches!(r.of, RivalNetwork::SizedForRows { .. }) => now + left / 8,
             Some(r) if !r.anew => now + left / 2,
             _ => deadline,
         };
@@ -203,7 +204,25 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             },
             self.plan.budget_words()
         ));
+        let started = Instant::now();
         let rival_fit = rival_network.fit_from(start, (x, z.view()), seed, Some(deadline))?;
+        let (rival_network, rival_fit, rival_of) = match rival.of {
+            RivalNetwork::SizedForRows { width, .. } => {
+                let (network, fit) = self.more_members(
+                    rival_network,
+                    rival_fit,
+                    (x, z.view()),
+                    started.elapsed(),
+                    deadline,
+                )?;
+                let members = match &fit {
+                    FittedRegressor::Mlp(m) => m.n_members(),
+                    _ => 1,
+                };
+                (network, fit, RivalNetwork::SizedForRows { width, members })
+            }
+            of => (rival_network, rival_fit, of),
+        };
         let rows = ndarray::s![train_rows..refit_rows, ..];
         let (x_held, t_held) = (winner.features.slice(rows), winner.thetas.slice(rows));
         let score = |fitted: &FittedRegressor| -> Result<f64> {
@@ -213,7 +232,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             compared,
             further: score(&continued)?,
             rival: score(&rival_fit)?,
-            rival_of: rival.of,
+            rival_of,
             rival_anew: rival.anew,
         };
         let chosen = if fits.rival < fits.further {
@@ -234,6 +253,82 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         Ok(())
     }
 
+    /// The ensemble sized for the records (`network`, fitted as `fitted` in
+    /// `first`) with members added, a wave of one a thread, while the time
+    /// left affords a wave ([`WAVE_MARGIN`] times the longest measured) and
+    /// up to [`MAX_MEMBERS`]: a chart cannot grow, and more members average
+    /// away more of each network's own error (decision 049). A wave the
+    /// deadline cuts short is left out whole, so the members are restarts
+    /// 0 to N - 1 and `ensemble:..xN` trains them again.
+    fn more_members(
+        &self,
+        network: RegressorConfig,
+        fitted: FittedRegressor,
+        (x, z): (ndarray::ArrayView2<'_, f64>, ndarray::ArrayView2<'_, f64>),
+        first: Duration,
+        deadline: Instant,
+    ) -> Result<(RegressorConfig, FittedRegressor)> {
+        let (RegressorConfig::Mlp(mlp), FittedRegressor::Mlp(fit)) = (&network, &fitted) else {
+            return Ok((network, fitted));
+        };
+        if fitted.stopped_at_deadline() || !mlp.params().is_ensemble() {
+            return Ok((network, fitted));
+        }
+        let wave = rayon::current_num_threads().max(1);
+        // The first fit ran its members a wave at a time too.
+        let rounds = fit.n_members().div_ceil(wave).max(1);
+        let mut wave_time = first / rounds as u32;
+        let grower = mlp.with_seed(self.plan.base.seed()).stopped_by(deadline);
+        let mut fit = fit.clone();
+        while fit.n_members() + wave <= MAX_MEMBERS
+            && Instant::now() + wave_time.mul_f64(WAVE_MARGIN) < deadline
+        {
+            self.plan.base.progress().status(&format!(
+                "final fit: {} more members beside {}; {}",
+                wave,
+                fit.n_members(),
+                self.plan.budget_words()
+            ));
+            let began = Instant::now();
+            let grown = grower.fit_more(&fit, x, z, wave)?;
+            wave_time = wave_time.max(began.elapsed());
+            if grown.n_members() < fit.n_members() + wave {
+                break;
+            }
+            fit = grown;
+        }
+        let members = fit.n_members();
+        let network = MlpParams::clone(mlp.params())
+            .restarts(members)
+            .check()
+            .map(RegressorConfig::Mlp)?;
+        Ok((network, FittedRegressor::Mlp(fit)))
+    }
+
+    /// Whether a network sized for the records will compete in the final
+    /// fit of candidate `i`'s stage 1 on the chart: a chart that cannot
+    /// grow, with records for one ([`network_for_rows`], the compared
+    /// records left out).
+    pub(super) fn sized_network_competes(&self, i: usize) -> bool {
+        let Some((compressor, _)) = self.candidates[i].fitted.as_ref() else {
+            return false;
+        };
+        let rows = self
+            .plan
+            .chart
+            .thetas
+            .nrows()
+            .saturating_sub(MAX_COMPARED_RECORDS);
+        !self.plan.grows
+            && self.plan.deadline.is_some()
+            && network_for_rows(
+                rows,
+                compressor.n_features(),
+                self.plan.chart.thetas.ncols(),
+            )
+            .is_some()
+    }
+
     /// The fit that competes with the winner trained further on
     /// `refit_rows`, where `compared` added records can judge them: on a
     /// chart's many records, a network sized for them
@@ -248,8 +343,11 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         let train_rows = refit_rows - compared;
         if let Some((network, width)) = self.sized_for_rows(best, train_rows) {
             return Some(Rival {
+                of: RivalNetwork::SizedForRows {
+                    width,
+                    members: network_members(&network),
+                },
                 network,
-                of: RivalNetwork::SizedForRows { width },
                 anew: true,
             });
         }
@@ -391,6 +489,22 @@ pub(crate) fn network_for_rows(
     Some((RegressorConfig::Mlp(averaged), width))
 }
 
+/// The members of an ensemble configuration (1 for any other).
+fn network_members(network: &RegressorConfig) -> usize {
+    match network {
+        RegressorConfig::Mlp(m) if m.params().is_ensemble() => m.params().n_restarts(),
+        _ => 1,
+    }
+}
+
+/// Members of the network sized for the records at most: each is a
+/// network the estimate runs (sixteen [64, 64] networks are some 110,000
+/// multiply-adds an estimate).
+const MAX_MEMBERS: usize = 16;
+/// How many times a wave's measured time must be left for another wave of
+/// members to start.
+const WAVE_MARGIN: f64 = 1.1;
+
 /// Training records below which the final fit keeps the search's
 /// networks.
 const SIZED_MIN_ROWS: usize = 20_000;
@@ -503,10 +617,19 @@ mod tests {
         grows: bool,
         check: impl FnOnce(&mut Search<'_, '_, Benchmark>, CompressorConfig),
     ) {
+        with_search_of(grows, 60, check);
+    }
+
+    /// [`with_search`] on a chart of `rows` records.
+    fn with_search_of(
+        grows: bool,
+        rows: usize,
+        check: impl FnOnce(&mut Search<'_, '_, Benchmark>, CompressorConfig),
+    ) {
         let model = Benchmark::builder().n_samples(100).build().unwrap();
         let run = TwoStage::builder(&model).simulations(60).prepare().unwrap();
         let chart = StoredChart {
-            thetas: Array2::zeros((60, 1)),
+            thetas: Array2::zeros((rows, 1)),
             records: Vec::new(),
         };
         let scope = Scope::of(&run);
@@ -550,6 +673,89 @@ mod tests {
             search.seed_spread = Some(0.04);
             assert_eq!(search.larger_network(0, 16_000), Some(2));
         });
+    }
+
+    /// The sized ensemble grows a wave of one member a thread at a time
+    /// while a wave's time is left, to [`super::MAX_MEMBERS`], into the
+    /// fit of that many restarts at once; with less than a wave's time
+    /// left, it stays as fitted.
+    #[test]
+    fn the_sized_ensemble_grows_while_a_wave_of_members_fits_in_the_time_left() {
+        let x = Array2::from_shape_fn((300, 2), |(i, j)| ((i * 13 + j * 5) % 41) as f64 / 20.0);
+        let z = Array2::from_shape_fn((300, 1), |(i, _)| (x[[i, 0]] - x[[i, 1]]).sin());
+        let ensemble = |members: usize| {
+            let adam = twostage_fit::Trainer::Adam {
+                learning_rate: 1e-2,
+                batch_size: 50,
+                epochs: 5,
+            };
+            RegressorConfig::Mlp(
+                MlpParams::new(&[3])
+                    .unwrap()
+                    .ensemble(true)
+                    .trainer(adam)
+                    .restarts(members)
+                    .check()
+                    .unwrap(),
+            )
+        };
+        let two_threads = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        with_search(false, |search, _| {
+            let seed = search.plan.base.seed();
+            let four = ensemble(4).fit(x.view(), z.view(), seed).unwrap();
+            let data = (x.view(), z.view());
+            let far = Instant::now() + Duration::from_secs(3600);
+            let (network, grown) = two_threads
+                .install(|| {
+                    search.more_members(ensemble(4), four.clone(), data, Duration::ZERO, far)
+                })
+                .unwrap();
+            assert_eq!(network, ensemble(16));
+            assert_eq!(grown, ensemble(16).fit(x.view(), z.view(), seed).unwrap());
+            // A wave takes half the first fit's 20 s (two rounds of two):
+            // 11 s with the margin, more than the 10 s left.
+            let near = Instant::now() + Duration::from_secs(10);
+            let (network, kept) = two_threads
+                .install(|| {
+                    search.more_members(
+                        ensemble(4),
+                        four.clone(),
+                        data,
+                        Duration::from_secs(20),
+                        near,
+                    )
+                })
+                .unwrap();
+            assert_eq!((network, kept), (ensemble(4), four));
+        });
+    }
+
+    /// The rounds leave the final fit [`crate::cost::SIZED_SHARE`] of the
+    /// time where the sized network will compete: on a chart (not a
+    /// source that simulates) with records for it once the compared ones
+    /// are left out.
+    #[test]
+    fn the_sized_network_is_expected_on_a_chart_with_records_for_it() {
+        let net = network(&[20]).unwrap();
+        // ARX(2, 2) has 4 features: [32, 32] needs 1249 * 12 = 14,988
+        // records, and the sized network at least 20,000.
+        for (grows, rows, expected) in [
+            (false, 22_000, true),
+            (false, 21_999, false),
+            (true, 22_000, false),
+        ] {
+            with_search_of(grows, rows, |search, arx| {
+                search.candidates = vec![scored(&arx, net.clone(), 0.05, 1.0)];
+                assert_eq!(
+                    search.sized_network_competes(0),
+                    expected,
+                    "{rows} rows, grows: {grows}"
+                );
+            });
+        }
     }
 
     #[test]
@@ -610,7 +816,10 @@ mod tests {
                 hidden(search.rival(0, 32_000, 2000)),
                 Some((
                     vec![32, 32],
-                    super::RivalNetwork::SizedForRows { width: 32 }
+                    super::RivalNetwork::SizedForRows {
+                        width: 32,
+                        members: 4
+                    }
                 ))
             );
             // A scored network larger still ([40, 40], 1881 weights) keeps
