@@ -1,0 +1,276 @@
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use std::time::{Duration, Instant};
+
+use ndarray::Array2;
+use twostage_compress::{Arx, CompressorConfig};
+use twostage_fit::{MlpParams, RegressorConfig};
+use twostage_models::{Benchmark, Simulator};
+use twostage_sources::{ForModel, StoredChart};
+use twostage_train::TwoStage;
+
+use super::super::{Candidate, Scope, Search};
+use crate::candidates::{network, pieces};
+use crate::{Budget, CandidateReport, Status};
+
+/// A scored candidate of `net` on `compressor` at 4000 rows.
+fn scored(
+    compressor: &CompressorConfig,
+    net: RegressorConfig,
+    score: f64,
+    seconds: f64,
+) -> Candidate {
+    // Any fit will do: the choice reads the reports and the networks.
+    let x = Array2::from_shape_fn((40, 2), |(i, j)| ((i * 7 + j * 3) % 11) as f64);
+    let y = Array2::from_shape_fn((40, 1), |(i, _)| (i % 5) as f64);
+    let tiny = RegressorConfig::Mlp(MlpParams::new(&[2]).unwrap().check().unwrap());
+    let fitted = tiny.fit(x.view(), y.view(), 1).unwrap();
+    Candidate {
+        report: CandidateReport {
+            compressor: compressor.to_string(),
+            regressor: String::new(),
+            design: String::new(),
+            round: 2,
+            rmse: vec![score],
+            score,
+            seconds,
+            fit_rows: 4000,
+            status: Status::Scored,
+            trained_by: None,
+        },
+        network: net,
+        fitted: Some((compressor.clone(), fitted)),
+        solo_seconds: None,
+    }
+}
+
+/// ARX(NA, NA) prepared for the benchmark of [`with_search`].
+fn arx_of(order: usize) -> CompressorConfig {
+    let model = Benchmark::builder().n_samples(100).build().unwrap();
+    CompressorConfig::from(Arx::new(order, order).unwrap())
+        .for_model(model.spec())
+        .unwrap()
+}
+
+/// `check` given a search over the benchmark whose candidates it sets
+/// (nothing is fitted), with no deadline in sight, and ARX(2, 2);
+/// `grows`: whether its source simulates.
+fn with_search(grows: bool, check: impl FnOnce(&mut Search<'_, '_, Benchmark>, CompressorConfig)) {
+    with_search_of(grows, 60, check);
+}
+
+/// [`with_search`] on a chart of `rows` records.
+fn with_search_of(
+    grows: bool,
+    rows: usize,
+    check: impl FnOnce(&mut Search<'_, '_, Benchmark>, CompressorConfig),
+) {
+    let model = Benchmark::builder().n_samples(100).build().unwrap();
+    let run = TwoStage::builder(&model).simulations(60).prepare().unwrap();
+    let chart = StoredChart {
+        thetas: Array2::zeros((rows, 1)),
+        records: Vec::new(),
+    };
+    let scope = Scope::of(&run);
+    let far = Instant::now() + Duration::from_secs(1_000_000);
+    let mut search = Search::new(
+        &scope,
+        &chart,
+        (Budget::Seconds(1e6), Some(far)),
+        4000,
+        grows,
+    );
+    check(&mut search, arx_of(2));
+}
+
+#[test]
+fn the_rival_is_the_cheapest_larger_network_the_seed_could_have_ranked_first() {
+    with_search(true, |search, arx| {
+        let other = arx_of(3);
+        let net = |h: &[usize]| network(h).unwrap();
+        search.candidates = vec![
+            scored(&arx, net(&[20]), 0.0428, 3.8),
+            scored(&arx, net(&[40]), 0.0431, 13.2),
+            scored(&arx, pieces(4, &[20]).unwrap(), 0.0436, 6.0),
+            scored(&arx, net(&[20, 20]), 0.0431, 22.4),
+            // Cheaper still, but not larger, or on another stage 1.
+            scored(&arx, net(&[10]), 0.0430, 1.0),
+            scored(&other, net(&[40]), 0.0420, 2.0),
+        ];
+        // Too few final rows for a larger network to pay: none.
+        assert_eq!(search.larger_network(0, 15_999), None);
+        // Pieces tie with the best larger network (within 2%) and cost
+        // least: they compete.
+        assert_eq!(search.larger_network(0, 16_000), Some(2));
+        // A measured seed spread below 2% still ties them; outside the
+        // tie, the best-scoring larger network.
+        search.seed_spread = Some(0.005);
+        assert_eq!(search.larger_network(0, 16_000), Some(2));
+        search.candidates[2].report.score = 0.0445;
+        assert_eq!(search.larger_network(0, 16_000), Some(1));
+        // A wider seed spread ties them again.
+        search.seed_spread = Some(0.04);
+        assert_eq!(search.larger_network(0, 16_000), Some(2));
+    });
+}
+
+/// The sized ensemble grows a wave of one member a thread at a time
+/// while a wave's time is left, to [`super::MAX_MEMBERS`], into the
+/// fit of that many restarts at once; with less than a wave's time
+/// left, it stays as fitted.
+#[test]
+fn the_sized_ensemble_grows_while_a_wave_of_members_fits_in_the_time_left() {
+    let x = Array2::from_shape_fn((300, 2), |(i, j)| ((i * 13 + j * 5) % 41) as f64 / 20.0);
+    let z = Array2::from_shape_fn((300, 1), |(i, _)| (x[[i, 0]] - x[[i, 1]]).sin());
+    let ensemble = |members: usize| {
+        let adam = twostage_fit::Trainer::Adam {
+            learning_rate: 1e-2,
+            batch_size: 50,
+            epochs: 5,
+        };
+        RegressorConfig::Mlp(
+            MlpParams::new(&[3])
+                .unwrap()
+                .ensemble(true)
+                .trainer(adam)
+                .restarts(members)
+                .check()
+                .unwrap(),
+        )
+    };
+    let two_threads = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    with_search(false, |search, _| {
+        let seed = search.plan.base.seed();
+        let four = ensemble(4).fit(x.view(), z.view(), seed).unwrap();
+        let data = (x.view(), z.view());
+        let far = Instant::now() + Duration::from_secs(3600);
+        let (network, grown) = two_threads
+            .install(|| search.more_members(ensemble(4), four.clone(), data, Duration::ZERO, far))
+            .unwrap();
+        assert_eq!(network, ensemble(16));
+        assert_eq!(grown, ensemble(16).fit(x.view(), z.view(), seed).unwrap());
+        // A wave takes half the first fit's 20 s (two rounds of two):
+        // 11 s with the margin, more than the 10 s left.
+        let near = Instant::now() + Duration::from_secs(10);
+        let (network, kept) = two_threads
+            .install(|| {
+                search.more_members(
+                    ensemble(4),
+                    four.clone(),
+                    data,
+                    Duration::from_secs(20),
+                    near,
+                )
+            })
+            .unwrap();
+        assert_eq!((network, kept), (ensemble(4), four));
+    });
+}
+
+/// The rounds leave the final fit [`crate::cost::SIZED_SHARE`] of the
+/// time where the sized network will compete: on a chart (not a
+/// source that simulates) with records for it once the compared ones
+/// are left out.
+#[test]
+fn the_sized_network_is_expected_on_a_chart_with_records_for_it() {
+    let net = network(&[20]).unwrap();
+    // ARX(2, 2) has 4 features: [32, 32] needs 1249 * 12 = 14,988
+    // records, and the sized network at least 20,000.
+    for (grows, rows, expected) in [
+        (false, 22_000, true),
+        (false, 21_999, false),
+        (true, 22_000, false),
+    ] {
+        with_search_of(grows, rows, |search, arx| {
+            search.candidates = vec![scored(&arx, net.clone(), 0.05, 1.0)];
+            assert_eq!(
+                search.sized_network_competes(0),
+                expected,
+                "{rows} rows, grows: {grows}"
+            );
+        });
+    }
+}
+
+#[test]
+fn a_network_sized_for_the_records_has_at_least_twelve_records_a_weight() {
+    let widths = |rows, n, q| match super::network_for_rows(rows, n, q) {
+        Some((RegressorConfig::Mlp(mlp), width)) => {
+            assert_eq!(mlp.params().hidden(), [width, width]);
+            assert!(mlp.params().is_ensemble(), "its restarts averaged");
+            Some(mlp.params().hidden().to_vec())
+        }
+        _ => None,
+    };
+    // The predator-prey task: 40 features, 4 rates, 91,000 records.
+    // [64, 64] has 41*64 + 65*64 + 65*4 = 7044 weights (7044 * 12 =
+    // 84,528 records); [128, 128] 22,276.
+    assert_eq!(widths(91_000, 40, 4), Some(vec![64, 64]));
+    assert_eq!(widths(84_528, 40, 4), Some(vec![64, 64]));
+    assert_eq!(widths(84_527, 40, 4), Some(vec![32, 32]));
+    // The benchmark's 4 ARX coefficients: [32, 32] has 1249 weights,
+    // [64, 64] 4545 (54,540 records).
+    assert_eq!(widths(30_000, 4, 1), Some(vec![32, 32]));
+    assert_eq!(widths(54_540, 4, 1), Some(vec![64, 64]));
+    // Too few records, or too many features for even [32, 32].
+    assert_eq!(widths(19_999, 4, 1), None);
+    assert_eq!(widths(20_000, 200, 4), None);
+}
+
+#[test]
+fn the_sized_network_competes_on_a_chart_where_larger_than_every_scored_one() {
+    let net = |h: &[usize]| network(h).unwrap();
+    let candidates = |arx: &CompressorConfig| {
+        vec![
+            scored(arx, net(&[20]), 0.0428, 3.8),
+            scored(arx, net(&[40]), 0.0431, 13.2),
+        ]
+    };
+    // A source that simulates spends the time on more records: the
+    // larger candidate competes, trained further or anew.
+    with_search(true, |search, arx| {
+        search.candidates = candidates(&arx);
+        assert!(matches!(
+            search.rival(0, 32_000, 2000).map(|r| r.of),
+            Some(super::RivalNetwork::Candidate(1))
+        ));
+    });
+    // A chart cannot grow.
+    with_search(false, |search, arx| {
+        search.candidates = candidates(&arx);
+        let hidden = |rival: Option<super::Rival>| {
+            rival.map(|r| match (r.network, r.of) {
+                (RegressorConfig::Mlp(mlp), of) => (mlp.params().hidden().to_vec(), of),
+                (_, of) => (Vec::new(), of),
+            })
+        };
+        // 30,000 records: [32, 32] (1249 weights) is larger than [40]
+        // (241): it is the rival, fitted anew.
+        assert_eq!(
+            hidden(search.rival(0, 32_000, 2000)),
+            Some((
+                vec![32, 32],
+                super::RivalNetwork::SizedForRows {
+                    width: 32,
+                    members: 4
+                }
+            ))
+        );
+        // A scored network larger still ([40, 40], 1881 weights) keeps
+        // it out: a larger candidate competes instead (the cheapest of
+        // the tied, [40]).
+        search
+            .candidates
+            .push(scored(&arx, net(&[40, 40]), 0.0429, 30.0));
+        assert_eq!(
+            hidden(search.rival(0, 32_000, 2000)),
+            Some((vec![40], super::RivalNetwork::Candidate(1)))
+        );
+        // Too few records compared: no rival at all.
+        assert_eq!(hidden(search.rival(0, 32_000, 199)), None);
+    });
+}
