@@ -308,7 +308,11 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// Whether a network sized for the records will compete in the final
     /// fit of candidate `i`'s stage 1 on the chart: a chart that cannot
     /// grow, with records for one ([`network_for_rows`], the compared
-    /// records left out).
+    /// records left out). The rounds ask before every network is scored,
+    /// so this does not ask, as [`Self::sized_for_rows`] does, whether a
+    /// scored network is larger still (pieces of [20] on many features can
+    /// be larger than [32, 32]); where one is, the sized network does not
+    /// compete and the winner and its other rival have the larger share.
     pub(super) fn sized_network_competes(&self, i: usize) -> bool {
         let Some((compressor, _)) = self.candidates[i].fitted.as_ref() else {
             return false;
