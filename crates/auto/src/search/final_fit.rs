@@ -215,10 +215,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
                     started.elapsed(),
                     deadline,
                 )?;
-                let members = match &fit {
-                    FittedRegressor::Mlp(m) => m.n_members(),
-                    _ => 1,
-                };
+                let members = network_members(&network);
                 (network, fit, RivalNetwork::SizedForRows { width, members })
             }
             of => (rival_network, rival_fit, of),
@@ -502,8 +499,8 @@ fn network_members(network: &RegressorConfig) -> usize {
 }
 
 /// Members of the network sized for the records at most: each is a
-/// network the estimate runs (sixteen [64, 64] networks are some 110,000
-/// multiply-adds an estimate).
+/// network the estimate runs (sixteen [64, 64] networks on 40 features have 112,704
+/// weights and biases an estimate reads).
 const MAX_MEMBERS: usize = 16;
 /// How many times a wave's measured time must be left for another wave of
 /// members to start.
