@@ -33,6 +33,23 @@ pub(crate) const SIZED_SHARE: f64 = 0.7;
 /// is below this share of the time left.
 pub(crate) const ANEW_SHARE: f64 = 0.9;
 
+/// Relative score difference within which candidates count as tied, at
+/// least (the seed alone moves a score by 1 to 3%: docs/accuracy.md).
+pub(crate) const MIN_TIE: f64 = 0.02;
+
+/// Seconds to keep after the search for calibrating and validating on
+/// `records` held-out records at `per_record` wall seconds each (a
+/// simulation and its compression, or a read record's compression):
+/// with a margin for the intervals' own fits.
+pub(crate) fn held_out_seconds(per_record: f64, records: usize) -> f64 {
+    1.2 * per_record * records as f64 + 1.0
+}
+
+/// Share of a time budget kept after the final fit on a chart read from
+/// files, beside its held-out records' measured cost: the estimator's
+/// envelope of the training features and the file are written then.
+pub(crate) const CHART_FINISH_SHARE: f64 = 0.01;
+
 /// How much longer a fit on `rows` rows takes than on `measured` rows.
 pub(crate) fn rows_growth(measured: usize, rows: usize) -> f64 {
     (rows as f64 / measured.max(1) as f64).powf(ROWS_EXPONENT)

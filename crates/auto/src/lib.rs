@@ -32,13 +32,15 @@ use twostage_sources::simulate_records;
 
 mod candidates;
 mod cost;
+use cost::held_out_seconds;
 mod outcome;
-use outcome::more_records_pay;
+use outcome::more_records_to_try;
 mod search;
 
 use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
 pub use outcome::{
-    AutoOutcome, CandidateReport, Continuation, FinalFit, FinalFits, RivalNetwork, Status,
+    AutoOutcome, CandidateReport, CheaperTie, Continuation, FinalFit, FinalFits, RivalNetwork,
+    Status,
 };
 use search::{Scope, Search, Winner};
 
@@ -197,10 +199,19 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             networks,
             screening_rows,
         } = self;
-        let sized = open_run(base, budget, start)?;
+        let mut sized = open_run(base, budget, start)?;
+        let charted = Instant::now();
+        let (chart, rest, failures) = search_chart(&sized)?;
+        sized.timed_chart(
+            budget,
+            start,
+            (
+                chart.records.len() + failures,
+                charted.elapsed().as_secs_f64(),
+            ),
+        );
         let run = &sized.run;
         let records = run.records();
-        let (chart, rest, failures) = search_chart(&sized)?;
         let (medium, networks) = match networks {
             Some(pair) => pair,
             None => default_networks()?,
@@ -235,7 +246,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let mut search = Search::new(
             &scope,
             &chart,
-            (budget, sized.deadline),
+            (budget, start, sized.deadline),
             screening_rows,
             records.can_grow(),
         );
@@ -244,16 +255,21 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         search.round_two(&medium, &networks);
         let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
         let best = search.best(&budget)?;
-        let more_pay = half_rows
-            .zip(seed_scores.first())
-            .is_some_and(|((_, half), own)| more_records_pay(half, *own));
+        let cheaper_tie = search
+            .best_score()
+            .filter(|&top| top != best)
+            .map(|best_score| CheaperTie {
+                picked: best,
+                best_score,
+            });
+        let more_to_try = more_records_to_try(half_rows, seed_scores.first().copied());
         let (rows, more) = match rest {
             // A chart's records past the search's: all to the final fit.
             Some(rest) => (chart.records.len() + rest.records.len(), Some((rest, 0))),
             None => {
                 let rows = search.final_rows(
                     best,
-                    more_pay,
+                    more_to_try,
                     sized.per_simulation.unwrap_or(f64::INFINITY),
                     chart_memory_cap(spec),
                 );
@@ -269,7 +285,10 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         // A larger network fitted anew on the final records may ship in
         // the winner's place.
         let best = winner.candidate;
-        let (steps, step_simulations, step_failures) = if more_pay && sized.simulates {
+        // Whatever the half-rows trial said: one comparison on a few
+        // hundred rows, inside the seed's spread on the car (decision
+        // 050), where each step measures for itself on records no fit saw.
+        let (steps, step_simulations, step_failures) = if sized.simulates {
             anytime_steps(
                 &sized,
                 &search,
@@ -302,6 +321,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             added_simulations,
             rows_exponent: search.rows_exponent(),
             steps,
+            cheaper_tie,
         })
     }
 }
@@ -317,6 +337,51 @@ struct SizedRun<'a, S: ?Sized> {
     per_simulation: Option<f64>,
     /// Whether the records are simulated (else read).
     simulates: bool,
+}
+
+impl<S: Simulator + ?Sized> SizedRun<'_, S> {
+    /// The cost of a simulation measured again on the search's chart
+    /// (`simulations` in `seconds`), and the deadline moved to keep what
+    /// calibration and validation take at that cost (decision 050). The
+    /// pilot's 64 simulations include the start of the thread pool and
+    /// the simulator: on the car it measured 3.1 ms a simulation where the
+    /// chart's 3,300 took 2.2, and the search stopped 8 s before it had
+    /// to. A chart smaller than the pilot, or records read from files,
+    /// keep the pilot's.
+    fn timed_chart(&mut self, budget: Budget, start: Instant, charted: (usize, f64)) {
+        if !self.simulates || self.deadline.is_none() {
+            return;
+        }
+        let settings = self.run.settings();
+        let held_out = settings.calibration + settings.validation;
+        if let Some((per_simulation, search)) = search_seconds_measured(budget, charted, held_out) {
+            self.per_simulation = Some(per_simulation);
+            self.deadline = Some(start + Duration::from_secs_f64(search));
+        }
+    }
+}
+
+/// Under a time budget, the wall seconds a simulation takes as the chart's
+/// `simulations` in `seconds` measured it, and the seconds from the run's
+/// start the search may take so that `held_out` records at that cost fit
+/// in the budget; none for a simulation budget or a chart smaller than
+/// the pilot.
+fn search_seconds_measured(
+    budget: Budget,
+    (simulations, seconds): (usize, f64),
+    held_out: usize,
+) -> Option<(f64, f64)> {
+    let Budget::Seconds(t) = budget else {
+        return None;
+    };
+    if simulations < PILOT_SIMULATIONS {
+        return None;
+    }
+    let per_simulation = (seconds / simulations as f64).max(1e-9);
+    Some((
+        per_simulation,
+        (t - held_out_seconds(per_simulation, held_out)).max(0.0),
+    ))
 }
 
 /// Open `base`'s run for a search of `budget`. A simulated chart's size
@@ -467,7 +532,7 @@ fn more_records<S: Simulator + ?Sized>(
     simulate_more(
         sized,
         sized.m..sized.m + added,
-        &format!("more records pay: simulating {added} more for the winner's final fit"),
+        &format!("more records may pay: simulating {added} more for the winner's final fit"),
     )
 }
 
@@ -612,9 +677,7 @@ fn chart_size<S: Simulator + ?Sized>(
                 per_simulation = Some(pilot);
                 let per_simulation = pilot;
                 let held_out = settings.calibration + settings.validation;
-                // Simulating and compressing the held-out records, with
-                // a margin for the intervals' own fits.
-                let cost = |records: usize| 1.2 * per_simulation * records as f64 + 1.0;
+                let cost = |records: usize| held_out_seconds(per_simulation, records);
                 let mut reserve = cost(held_out);
                 if reserve > 0.5 * t {
                     // Fewer held-out records rather than a refused budget:
@@ -654,7 +717,9 @@ fn chart_size<S: Simulator + ?Sized>(
                 // The fits, not the records, cost the time: a chart gives
                 // the search as many records as a simulated search of this
                 // budget would chart. The held-out records are compressed
-                // once by the winner: a small share of the budget.
+                // once by the winner: a small share of the budget, which
+                // the final fit measures and uses the rest of (decision
+                // 050).
                 let records = (SIMULATIONS_PER_BUDGET_SECOND * t) as usize;
                 (
                     records.max(MIN_SEARCH_RECORDS),
@@ -718,12 +783,15 @@ const PILOT_SEED: u64 = 0x0050_494c_4f54; // "PILOT"
 /// Parallel throughput of `simulator` in wall seconds per simulation, from
 /// a small timed pilot.
 fn pilot_seconds_per_simulation<S: Simulator + ?Sized>(simulator: &S, seed: u64) -> Result<f64> {
-    let pilot = 64;
+    let pilot = PILOT_SIMULATIONS;
     let design = simulator.prior().design(pilot, seed ^ PILOT_SEED)?;
     let start = Instant::now();
     simulate_records(simulator, &design, pilot, 0.0, None)?;
     Ok((start.elapsed().as_secs_f64() / pilot as f64).max(1e-9))
 }
+
+/// Simulations the pilot times.
+const PILOT_SIMULATIONS: usize = 64;
 
 /// Training records a search needs at least: a fifth of them score the
 /// candidates.
@@ -744,6 +812,30 @@ mod tests {
             after,
             stopped,
         }
+    }
+
+    #[test]
+    fn the_search_keeps_what_the_held_out_records_cost_at_the_charts_pace() {
+        // 3300 simulations in 7.26 s: 2.2 ms each; 3000 held-out records
+        // then take 1.2 x 2.2 ms x 3000 + 1 s = 8.92 s of the 60.
+        let (per_simulation, search) =
+            search_seconds_measured(Budget::Seconds(60.0), (3300, 7.26), 3000).unwrap();
+        assert!((per_simulation - 0.0022).abs() < 1e-12, "{per_simulation}");
+        assert!((search - (60.0 - 8.92)).abs() < 1e-9, "{search}");
+        // Slower than the budget: no time for the search, not a negative one.
+        let (_, none_left) =
+            search_seconds_measured(Budget::Seconds(5.0), (3300, 7.26), 3000).unwrap();
+        assert!(none_left.abs() < f64::MIN_POSITIVE, "{none_left}");
+        // Fewer simulations than the pilot's say less than it did; a
+        // simulation budget has no deadline to move.
+        assert_eq!(
+            search_seconds_measured(Budget::Seconds(60.0), (PILOT_SIMULATIONS - 1, 0.1), 3000),
+            None
+        );
+        assert_eq!(
+            search_seconds_measured(Budget::Simulations(3300), (3300, 7.26), 3000),
+            None
+        );
     }
 
     #[test]

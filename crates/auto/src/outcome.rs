@@ -110,8 +110,22 @@ pub struct AutoOutcome {
     /// final fit's rows follow from it.
     pub rows_exponent: Option<f64>,
     /// The anytime final fit's steps after the final fit, in order (empty
-    /// where it ended at the deadline, or more records do not pay).
+    /// where it ended at the deadline, or no time was left).
     pub steps: Vec<Continuation>,
+    /// Where the search picked a candidate over a better-scoring one that
+    /// the seed alone could have ranked either way, for its lower cost
+    /// (decision 050).
+    pub cheaper_tie: Option<CheaperTie>,
+}
+
+/// A tie the search broke for the cheaper candidate: both indices in
+/// [`AutoOutcome::candidates`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CheaperTie {
+    /// The candidate the search picked.
+    pub picked: usize,
+    /// The best-scoring candidate, passed over.
+    pub best_score: usize,
 }
 
 /// Whether a score of `half` on half the rows against `own` on all of them
@@ -120,6 +134,19 @@ pub struct AutoOutcome {
 /// from the winner's fit, which cannot make it worse on held-out rows.
 pub(crate) fn more_records_pay(half: f64, own: f64) -> bool {
     half > own
+}
+
+/// Whether the winner's final fit should take more records than the
+/// chart: where round 3 measured the learning curve (`half_rows` against
+/// the winner's `own` score), as it says; where the time left no room for
+/// that trial, yes (decision 050): the final fit then compares its fits on
+/// records no fit saw, and the anytime steps after it measure for
+/// themselves.
+pub(crate) fn more_records_to_try(half_rows: Option<(usize, f64)>, own: Option<f64>) -> bool {
+    match (half_rows, own) {
+        (Some((_, half)), Some(own)) => more_records_pay(half, own),
+        _ => true,
+    }
 }
 
 impl std::fmt::Display for AutoOutcome {
@@ -132,6 +159,18 @@ impl std::fmt::Display for AutoOutcome {
         self.fmt_shortened_fit(f)?;
         self.fmt_round_three(f)?;
         self.fmt_final_fit(f)?;
+        if let Some(CheaperTie { picked, best_score }) = self.cheaper_tie
+            && let (Some(p), Some(b)) =
+                (self.candidates.get(picked), self.candidates.get(best_score))
+        {
+            writeln!(
+                f,
+                "the search picked {} (score {:.4}) over {} ({:.4}): the seed alone could rank \
+                 them either way, none beats it on every parameter, and it is the cheaper to fit \
+                 (its time goes to records)",
+                p.design, p.score, b.design, b.score
+            )?;
+        }
         for (i, c) in self.candidates.iter().enumerate() {
             let mark = if i == self.best { "*" } else { " " };
             let rmse: Vec<String> = c.rmse.iter().map(|r| format!("{r:.4e}")).collect();
@@ -177,6 +216,9 @@ impl AutoOutcome {
                 }
             )
         } else if !matches!(self.final_fit, FinalFit::Compared { .. })
+            // The steps train the shipped fit further on every record
+            // they add; their lines say how far.
+            && self.steps.is_empty()
             && fitted_rows < self.simulations - self.failures
         {
             writeln!(
@@ -218,9 +260,19 @@ impl AutoOutcome {
                     "pay"
                 } else if more_records_pay(half, *own) {
                     "pay a little"
-                } else {
+                } else if self.steps.is_empty() {
                     "not pay"
+                } else {
+                    "not pay, by this trial alone (the steps below tried them, each kept only \
+                     where it paid)"
                 }
+            )?;
+        }
+        if self.half_rows.is_none() && (self.added_simulations > 0 || !self.steps.is_empty()) {
+            writeln!(
+                f,
+                "no time was left to score the winner on half its records: more records were \
+                 tried, each fit kept only where it scored better on records it did not train on"
             )?;
         }
         if let Some(exponent) = self.rows_exponent {
@@ -379,9 +431,9 @@ impl FinalFit {
 }
 
 /// One step of the anytime final fit: where the final fit ended before
-/// the deadline and more records pay, more records are simulated and the
-/// shipped fit trained further on them, kept only where it then scores
-/// better on added records it did not train on.
+/// the deadline, more records are simulated and the shipped fit trained
+/// further on them, kept only where it then scores better on added
+/// records it did not train on.
 ///
 /// ```
 /// let step = twostage::auto::Continuation {
@@ -449,4 +501,22 @@ pub struct FinalFits {
     /// Whether the rival was fitted anew (else trained further from its
     /// candidate's scored fit).
     pub rival_anew: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn more_records_are_tried_unless_the_learning_curve_was_measured_flat() {
+        // Measured: as the half-rows trial says.
+        assert!(more_records_to_try(Some((1000, 0.040)), Some(0.038)));
+        assert!(!more_records_to_try(Some((1000, 0.038)), Some(0.038)));
+        assert!(!more_records_to_try(Some((1000, 0.037)), Some(0.038)));
+        // Not measured (round 3 had no time, or its trial was cut): tried,
+        // the anytime steps judge them.
+        assert!(more_records_to_try(None, Some(0.038)));
+        assert!(more_records_to_try(None, None));
+        assert!(more_records_to_try(Some((1000, 0.037)), None));
+    }
 }

@@ -1,8 +1,7 @@
-//! The anytime final fit (decision 042): where the winner's final fit
-//! ended before the deadline and more records pay, the time left goes to
-//! more records, the shipped fit trained further on all of them, a step at
-//! a time, each step kept only if it scores better on added records it
-//! did not train on.
+//! The anytime final fit (decisions 042, 050): where the winner's final
+//! fit ended before the deadline, the time left goes to more records, the
+//! shipped fit trained further on all of them, a step at a time, each step
+//! kept only if it scores better on added records it did not train on.
 
 use std::time::Instant;
 
@@ -203,7 +202,7 @@ mod tests {
         let search = Search::new(
             &scope,
             &chart,
-            (Budget::Seconds(1e6), Some(far)),
+            (Budget::Seconds(1e6), Instant::now(), Some(far)),
             4000,
             true,
         );

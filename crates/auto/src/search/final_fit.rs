@@ -12,8 +12,12 @@ use twostage_models::Simulator;
 use twostage_sources::StoredChart;
 
 use super::{Search, compress_all, design};
+use crate::Budget;
 use crate::candidates::network_size;
-use crate::cost::{ANEW_SHARE, COST_MARGIN, ROWS_EXPONENT, fit_seconds, rows_for_final_fit};
+use crate::cost::{
+    ANEW_SHARE, CHART_FINISH_SHARE, COST_MARGIN, ROWS_EXPONENT, fit_seconds, held_out_seconds,
+    rows_for_final_fit,
+};
 use crate::outcome::{FinalFit, FinalFits, RivalNetwork};
 use twostage_compress::Compressor;
 use twostage_estimator::space::to_learning_space;
@@ -22,7 +26,8 @@ use twostage_estimator::{Error, Result};
 impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The records the winner's final fit takes: more than the chart's
     /// where the source can simulate them, the half-rows trial says more
-    /// records pay (`more_records`), and the time left affords simulating
+    /// records pay or had no time to run (`more_records`,
+    /// [`crate::outcome::more_records_to_try`]), and the time left affords simulating
     /// them (`per_simulation` wall seconds each) and fitting on all, at
     /// most four times the chart (a learning curve says little beyond
     /// that) and `cap`; else the chart's (trained further from the scored
@@ -89,7 +94,9 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             ),
         };
         let refit_rows = final_rows.min(thetas.nrows());
+        let compressing = Instant::now();
         let features = compress_all(&compressor, records)?;
+        let per_record = compressing.elapsed().as_secs_f64() / records.len().max(1) as f64;
         let mut winner = Winner {
             compressor,
             features,
@@ -115,8 +122,30 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             return Ok(winner);
         };
         let added = more.map_or(0, |m| m.records.len());
+        let deadline = self.final_deadline(deadline, per_record);
         self.fit_by_deadline(best, &mut winner, (refit_rows, added), deadline)?;
         Ok(winner)
+    }
+
+    /// The deadline of the winner's final fit: the search's `deadline`,
+    /// or, on records read from files (they cannot grow, and their
+    /// held-out records cost only their compression), the budget's end
+    /// less what compressing those at the winner's measured pace
+    /// (`per_record` seconds) and finishing take, where that is later
+    /// (decision 050). The search's own deadline keeps 5% of the budget
+    /// for them, unmeasured: on the predator-prey chart the run finished
+    /// in under a second, and the 30 s of 600 it kept were one wave of
+    /// members short of the sized ensemble's next.
+    fn final_deadline(&self, deadline: Instant, per_record: f64) -> Instant {
+        let (Some(end), Budget::Seconds(t)) = (self.plan.budget_end, self.plan.budget) else {
+            return deadline;
+        };
+        if self.plan.grows {
+            return deadline;
+        }
+        let finish = held_out_seconds(per_record, self.plan.held_out) + CHART_FINISH_SHARE * t;
+        end.checked_sub(Duration::from_secs_f64(finish))
+            .map_or(deadline, |d| d.max(deadline))
     }
 
     /// The winner's final fit on `refit_rows` under a time budget, of which
@@ -405,7 +434,8 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// than a small network can learn (the benchmark's MLP [20] on 30,000
     /// records stays 1.27 times the Bayes RMSE); among the larger networks
     /// that the seed alone could have ranked either way (within the
-    /// measured seed spread of the best of them, at least [`MIN_TIE`]), the
+    /// measured seed spread of the best of them, at least
+    /// [`crate::cost::MIN_TIE`]), the
     /// cheapest to fit anew: on the final records it trains longest in the
     /// time there is. The comparison on added records decides whether it
     /// ships.
@@ -431,10 +461,9 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             .collect();
         let score = |i: usize| self.candidates[i].report.score;
         let top = larger.iter().map(|&i| score(i)).min_by(f64::total_cmp)?;
-        let tie = self.seed_spread.unwrap_or(0.0).max(MIN_TIE);
         larger
             .into_iter()
-            .filter(|&i| score(i) <= top * (1.0 + tie))
+            .filter(|&i| score(i) <= top * (1.0 + self.tie()))
             .min_by(|&a, &b| {
                 self.fit_estimate(a, rows)
                     .total_cmp(&self.fit_estimate(b, rows))
@@ -444,7 +473,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The seconds a fit anew of candidate `i` (the winner, or its rival)
     /// on `rows` rows takes on the whole machine, from its time alone where
     /// round 3 measured it, else from its round's shared time.
-    fn fit_estimate(&self, i: usize, rows: usize) -> f64 {
+    pub(super) fn fit_estimate(&self, i: usize, rows: usize) -> f64 {
         let report = &self.candidates[i].report;
         let scored = report.fit_rows;
         let growth = (rows as f64 / scored.max(1) as f64).powf(self.cost_exponent());
@@ -527,10 +556,6 @@ struct Rival {
 /// How many times the rows a winner was scored on its final fit must have
 /// for a fit anew to take a larger network.
 const GROWN_ROWS: usize = 4;
-/// Relative score difference within which larger networks count as tied
-/// for the final fit's rival, at least (the seed alone moves a score by 1
-/// to 3%: docs/accuracy.md).
-const MIN_TIE: f64 = 0.02;
 /// Records a fit anew and a fit trained further are compared on, at least.
 pub(super) const MIN_COMPARED_RECORDS: usize = 200;
 /// Records a fit anew and a fit trained further are compared on, at most.

@@ -77,11 +77,54 @@ fn with_search_of(
     let mut search = Search::new(
         &scope,
         &chart,
-        (Budget::Seconds(1e6), Some(far)),
+        (Budget::Seconds(1e6), Instant::now(), Some(far)),
         4000,
         grows,
     );
     check(&mut search, arx_of(2));
+}
+
+#[test]
+fn on_a_chart_the_final_fit_keeps_only_what_its_held_out_records_cost() {
+    let model = Benchmark::builder().n_samples(100).build().unwrap();
+    let run = TwoStage::builder(&model).simulations(60).prepare().unwrap();
+    let held_out = run.settings().calibration + run.settings().validation;
+    let chart = StoredChart {
+        thetas: Array2::zeros((60, 1)),
+        records: Vec::new(),
+    };
+    let scope = Scope::of(&run);
+    let start = Instant::now();
+    let search_deadline = start + Duration::from_secs(95);
+    let search_of = |grows| {
+        Search::new(
+            &scope,
+            &chart,
+            (Budget::Seconds(100.0), start, Some(search_deadline)),
+            4000,
+            grows,
+        )
+    };
+    // Read from files: 100 s less 1.2 x 10 us x the held-out records + 1 s,
+    // less 1% of the budget.
+    let read = search_of(false);
+    let expected = 100.0 - (1.2 * 1e-5 * held_out as f64 + 1.0) - 1.0;
+    let given = read
+        .final_deadline(search_deadline, 1e-5)
+        .duration_since(start)
+        .as_secs_f64();
+    assert!(
+        (given - expected).abs() < 1e-6,
+        "{given} against {expected}"
+    );
+    // Never earlier than the search's own deadline, however slow.
+    assert_eq!(read.final_deadline(search_deadline, 1.0), search_deadline);
+    // Simulated: the search's deadline already keeps their measured cost.
+    let simulated = search_of(true);
+    assert_eq!(
+        simulated.final_deadline(search_deadline, 1e-5),
+        search_deadline
+    );
 }
 
 #[test]
@@ -112,6 +155,61 @@ fn the_rival_is_the_cheapest_larger_network_the_seed_could_have_ranked_first() {
         // A wider seed spread ties them again.
         search.seed_spread = Some(0.04);
         assert_eq!(search.larger_network(0, 16_000), Some(2));
+    });
+}
+
+#[test]
+fn the_winner_is_the_cheapest_of_the_ties_that_no_candidate_beats_on_every_parameter() {
+    with_search(true, |search, arx| {
+        let net = |h: &[usize]| network(h).unwrap();
+        let with_rmse = |mut c: Candidate, rmse: &[f64]| {
+            c.report.rmse = rmse.to_vec();
+            c
+        };
+        // The car at 60 s, seed 3 (decision 050): two parameters.
+        search.candidates = vec![
+            with_rmse(
+                scored(&arx, net(&[20, 20]), 0.3637, 10.1),
+                &[0.5413, 0.04202],
+            ),
+            with_rmse(scored(&arx, net(&[20]), 0.3643, 2.2), &[0.5402, 0.04212]),
+            // Cheapest and within 2%, but worse than [20, 20] on both.
+            with_rmse(scored(&arx, net(&[10]), 0.3672, 0.8), &[0.5568, 0.04226]),
+            // Outside the tie.
+            with_rmse(scored(&arx, net(&[40]), 0.3720, 0.5), &[0.5300, 0.04500]),
+        ];
+        let budget = Budget::Seconds(60.0);
+        assert_eq!(search.best(&budget).unwrap(), 1);
+        // A seed that moves scores by less than 2% still ties them; one
+        // that moves them by 3% brings [40] in, now the cheapest.
+        search.seed_spread = Some(0.001);
+        assert_eq!(search.best(&budget).unwrap(), 1);
+        search.seed_spread = Some(0.03);
+        assert_eq!(search.best(&budget).unwrap(), 3);
+        // Costlier than the best score: the best score wins.
+        search.seed_spread = None;
+        search.candidates[1].report.seconds = 12.0;
+        assert_eq!(search.best(&budget).unwrap(), 0);
+        // A time alone, where measured, says more than the round's shared
+        // one: [20] cheap in round 2 but 20 s alone costs more than [20,
+        // 20]'s shared 10.1 s on any number of threads.
+        search.candidates[1].report.seconds = 2.2;
+        assert_eq!(search.best(&budget).unwrap(), 1);
+        search.candidates[1].solo_seconds = Some(20.0);
+        assert_eq!(search.best(&budget).unwrap(), 0);
+    });
+}
+
+#[test]
+fn with_one_parameter_the_best_score_wins_however_cheap_the_others() {
+    with_search(true, |search, arx| {
+        let net = |h: &[usize]| network(h).unwrap();
+        search.candidates = vec![
+            scored(&arx, net(&[10]), 0.0430, 1.0),
+            scored(&arx, pieces(4, &[20]).unwrap(), 0.0423, 9.4),
+            scored(&arx, net(&[20]), 0.0428, 6.9),
+        ];
+        assert_eq!(search.best(&Budget::Seconds(120.0)).unwrap(), 1);
     });
 }
 
