@@ -73,8 +73,6 @@ pub(super) struct Plan<'s, 'a, S: Simulator + ?Sized> {
     /// The end of a time budget: the search's deadline keeps what comes
     /// after it before this.
     budget_end: Option<Instant>,
-    /// Calibration and validation records the run holds out.
-    held_out: usize,
     /// Round 1's fitting rows at most.
     screening_rows: usize,
     /// Rows of the chart the candidates are fitted on; the rest score them.
@@ -164,7 +162,6 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     Budget::Seconds(t) => Some(start + Duration::from_secs_f64(t.max(0.0))),
                     Budget::Simulations(_) => None,
                 },
-                held_out: base.held_out,
                 screening_rows,
                 fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
                 prior_sd,

@@ -27,12 +27,12 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The records the winner's final fit takes: more than the chart's
     /// where the source can simulate them, the half-rows trial says more
     /// records pay or had no time to run (`more_records`,
-    /// [`crate::outcome::more_records_to_try`]), and the time left affords simulating
-    /// them (`per_simulation` wall seconds each) and fitting on all, at
-    /// most four times the chart (a learning curve says little beyond
-    /// that) and `cap`; else the chart's (trained further from the scored
-    /// fit, which the deadline may stop at any time without making it
-    /// worse, so no row need be left out for time).
+    /// [`crate::outcome::more_records_to_try`]), and the time left affords
+    /// simulating them (`per_simulation` wall seconds each) and fitting on
+    /// all, at most four times the chart (a learning curve says little
+    /// beyond that) and `cap`; else the chart's (trained further from the
+    /// scored fit, which the deadline may stop at any time without making
+    /// it worse, so no row need be left out for time).
     pub(crate) fn final_rows(
         &self,
         best: usize,
@@ -143,7 +143,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         if self.plan.grows {
             return deadline;
         }
-        let finish = held_out_seconds(per_record, self.plan.held_out) + CHART_FINISH_SHARE * t;
+        let finish = held_out_seconds(per_record, self.plan.base.held_out) + CHART_FINISH_SHARE * t;
         end.checked_sub(Duration::from_secs_f64(finish))
             .map_or(deadline, |d| d.max(deadline))
     }
@@ -433,12 +433,10 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// winner's stage 1, scored on the same rows. More records carry more
     /// than a small network can learn (the benchmark's MLP [20] on 30,000
     /// records stays 1.27 times the Bayes RMSE); among the larger networks
-    /// that the seed alone could have ranked either way (within the
-    /// measured seed spread of the best of them, at least
-    /// [`crate::cost::MIN_TIE`]), the
-    /// cheapest to fit anew: on the final records it trains longest in the
-    /// time there is. The comparison on added records decides whether it
-    /// ships.
+    /// that the seed alone could have ranked either way (within
+    /// [`Self::tie`] of the best of them), the cheapest to fit anew: on
+    /// the final records it trains longest in the time there is. The
+    /// comparison on added records decides whether it ships.
     fn larger_network(&self, best: usize, rows: usize) -> Option<usize> {
         let winner = &self.candidates[best];
         let scored = winner.report.fit_rows;
