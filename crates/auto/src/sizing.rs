@@ -39,12 +39,11 @@ pub(crate) struct SizedRun<'a, S: ?Sized> {
 impl<S: Simulator + ?Sized> SizedRun<'_, S> {
     /// The cost of a simulation measured again on the search's chart
     /// (`simulations` in `seconds`), and the deadline moved to keep what
-    /// calibration and validation take at that cost (decision 050). The
-    /// pilot's 64 simulations include the start of the thread pool and
-    /// the simulator: on the car it measured 3.1 ms a simulation where the
-    /// chart's 3,300 took 2.2, and the search stopped 8 s before it had
-    /// to. A chart smaller than the pilot, or records read from files,
-    /// keep the pilot's.
+    /// calibration and validation take at that cost (decision 050): the
+    /// chart's thousands of simulations measure it better than the
+    /// pilot's 64, on which a simulator's start weighs (on the car the two
+    /// agree: 1.9 and 2.0 ms). A chart smaller than the pilot, or records
+    /// read from files, keep the pilot's.
     pub(crate) fn timed_chart(&mut self, budget: Budget, start: Instant, charted: (usize, f64)) {
         if !self.simulates || self.deadline.is_none() {
             return;
