@@ -30,7 +30,8 @@ pub(crate) struct SizedRun<'a, S: ?Sized> {
     /// Training records the search takes.
     pub(crate) m: usize,
     pub(crate) deadline: Option<Instant>,
-    /// The pilot's wall seconds per simulation, where it ran.
+    /// Wall seconds per simulation, where measured: the pilot's, then the
+    /// search chart's ([`SizedRun::timed_chart`]).
     pub(crate) per_simulation: Option<f64>,
     /// Whether the records are simulated (else read).
     pub(crate) simulates: bool,
