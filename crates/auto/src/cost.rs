@@ -33,6 +33,57 @@ pub(crate) const SIZED_SHARE: f64 = 0.7;
 /// is below this share of the time left.
 pub(crate) const ANEW_SHARE: f64 = 0.9;
 
+/// Fitting rows round 1 uses at most: it only picks the compressors worth
+/// round 2, and the best few are close (on the benchmark at m = 20000 the
+/// ARX orders 2 to 4 score within 2% of each other, round 2's networks
+/// move the score by 10%); the time saved goes to round 2 on every row.
+pub(crate) const SCREENING_ROWS: usize = 4000;
+
+/// Where the source can simulate more under a time budget, round 1 fits
+/// half the screening rows: its ten fits only rank, and every second they
+/// save buys records for the final fit. On the car at 60 s a round 1 on
+/// its whole chart (2,779 rows) took half the search and, in one run of
+/// five, left no time for round 3 or for records (1.037 times the Bayes
+/// RMSE); at half the rows the five seeds scored 1.014 to 1.022
+/// (decision 051).
+pub(crate) const QUICK_SCREEN_SHARE: f64 = 0.5;
+
+/// Round 2 fits at least the full screening rows where round 1 on them
+/// would have taken at most this share of the time the search had when
+/// round 1 started: the benchmark's best structure (4 pieces of [20])
+/// only wins on 4000 rows (all six runs at 120 s; on 3171 rows none of
+/// three, which scored 1.20 to 1.26 times the Bayes RMSE against 1.14
+/// to 1.17). Round 1 on the full rows, estimated from the quick round's
+/// time at [`ROWS_EXPONENT`]: the benchmark's about 38% of its search,
+/// the car's about 70%.
+pub(crate) const SCREENING_TIME_SHARE: f64 = 0.5;
+
+/// Round 1's rows out of `fit_rows`: the full screening rows (the user's
+/// `asked` as set, else [`SCREENING_ROWS`], within the fitting rows), and
+/// the rows round 1 fits: [`QUICK_SCREEN_SHARE`] of those where the source
+/// `grows` and the user did not set them, else all of them.
+pub(crate) fn screening_rows(asked: Option<usize>, fit_rows: usize, grows: bool) -> (usize, usize) {
+    let full = asked.unwrap_or(SCREENING_ROWS).clamp(1, fit_rows.max(1));
+    let quick = if asked.is_none() && grows {
+        ((QUICK_SCREEN_SHARE * full as f64) as usize).max(1)
+    } else {
+        full
+    };
+    (full, quick)
+}
+
+/// The fewest rows round 2 fits: the `full` screening rows where round 1,
+/// which took `seconds` on `screened` rows, would have taken at most
+/// [`SCREENING_TIME_SHARE`] of the `left` seconds the search had when it
+/// started had it fitted them, else round 1's rows.
+pub(crate) fn round_two_floor((screened, seconds): (usize, f64), full: usize, left: f64) -> usize {
+    if screened >= full || seconds * rows_growth(screened, full) <= SCREENING_TIME_SHARE * left {
+        full.max(screened)
+    } else {
+        screened
+    }
+}
+
 /// Relative score difference within which candidates count as tied, at
 /// least (the seed alone moves a score by 1 to 3%: docs/accuracy.md).
 pub(crate) const MIN_TIE: f64 = 0.02;
@@ -132,6 +183,38 @@ pub(crate) fn rows_for_final_fit(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Round 1 screens on 4000 rows at most, within the fitting rows, on
+    /// what the user set where set, and quickly on half of them where the
+    /// source grows.
+    #[test]
+    fn round_one_screens_quickly_where_the_source_grows() {
+        assert_eq!(screening_rows(None, 2779, true), (2779, 1389));
+        assert_eq!(screening_rows(None, 2779, false), (2779, 2779));
+        assert_eq!(screening_rows(None, 6342, true), (4000, 2000));
+        assert_eq!(screening_rows(None, 6342, false), (4000, 4000));
+        assert_eq!(screening_rows(Some(100), 240, true), (100, 100));
+        assert_eq!(screening_rows(Some(5000), 240, false), (240, 240));
+        assert_eq!(screening_rows(None, 1, true), (1, 1));
+        assert_eq!(screening_rows(None, 0, true), (1, 1));
+    }
+
+    /// Round 2 goes back to the full screening rows where round 1 on them
+    /// would have kept within its share of the search, not otherwise.
+    #[test]
+    fn round_two_fits_the_full_screening_rows_where_round_one_was_cheap() {
+        // 10 s on 2000 rows: 4000 would have taken 10 * 2^ROWS_EXPONENT.
+        let full_cost = 10.0 * 2f64.powf(ROWS_EXPONENT);
+        let left = full_cost / SCREENING_TIME_SHARE;
+        assert_eq!(round_two_floor((2000, 10.0), 4000, 1.01 * left), 4000);
+        assert_eq!(round_two_floor((2000, 10.0), 4000, 0.99 * left), 2000);
+        // The benchmark's and the car's measured cases (decision 051).
+        assert_eq!(round_two_floor((2000, 11.3), 4000, 118.0), 4000);
+        assert_eq!(round_two_floor((1389, 8.0), 2779, 45.5), 1389);
+        // Nothing was screened: the floor is round 1's rows.
+        assert_eq!(round_two_floor((4000, 1e9), 4000, 1.0), 4000);
+        assert_eq!(round_two_floor((2000, 10.0), 4000, f64::NAN), 2000);
+    }
 
     /// Round 2 fits every row when it can, as many as the time affords when
     /// it cannot, and never fewer than round 1 screened.

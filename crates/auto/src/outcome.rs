@@ -24,7 +24,8 @@ pub struct CandidateReport {
     /// Seconds spent compressing and fitting it.
     pub seconds: f64,
     /// Chart rows its network was fitted on: all the fitting rows, or a
-    /// screening share of them in round 1 of a large chart.
+    /// screening share of them in round 1 (decision 051), or what round 2
+    /// or 3 could afford.
     pub fit_rows: usize,
     /// Whether it was scored, and why not if it was not.
     pub status: Status,

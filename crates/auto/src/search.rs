@@ -17,7 +17,7 @@ mod final_fit;
 
 use crate::cost::{
     COST_EXPONENT, COST_MARGIN, MIN_TIE, REFIT_SHARE, SIZED_SHARE, affordable_rows, fit_seconds,
-    measured_exponent, rows_growth,
+    measured_exponent, round_two_floor, rows_growth, screening_rows,
 };
 use crate::{Budget, CandidateReport, Status};
 pub(super) use final_fit::Winner;
@@ -73,8 +73,10 @@ pub(super) struct Plan<'s, 'a, S: Simulator + ?Sized> {
     /// The end of a time budget: the search's deadline keeps what comes
     /// after it before this.
     budget_end: Option<Instant>,
-    /// Round 1's fitting rows at most.
+    /// Round 1's fitting rows, and the full screening rows round 2 goes
+    /// back to where round 1 was cheap (see [`screening_rows`]).
     screening_rows: usize,
+    full_screening_rows: usize,
     /// Rows of the chart the candidates are fitted on; the rest score them.
     fit_rows: usize,
     /// The prior's standard deviation per parameter: RMSEs are scored in
@@ -100,6 +102,9 @@ pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
     /// (the spread of its scores at three seeds over the best), where
     /// measured.
     seed_spread: Option<f64>,
+    /// Round 1's wall seconds, and the seconds the search had left when it
+    /// started, where it ran under a deadline.
+    round_one_time: Option<(f64, f64)>,
 }
 
 /// One candidate of a search: its report, its network as configured, its
@@ -141,7 +146,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         base: &'s Scope<'a, S>,
         chart: &'s StoredChart,
         (budget, start, deadline): (Budget, Instant, Option<Instant>),
-        screening_rows: usize,
+        asked_screening_rows: Option<usize>,
         grows: bool,
     ) -> Self {
         let prior = base.simulator().spec().prior();
@@ -152,6 +157,10 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .map(|(lo, hi)| (hi - lo) / 12f64.sqrt())
             .collect();
         let rows = chart.thetas.nrows();
+        let fit_rows = ((1.0 - HELD_OUT) * rows as f64).round() as usize;
+        let grows = grows && deadline.is_some();
+        let (full_screening_rows, screening_rows) =
+            screening_rows(asked_screening_rows, fit_rows, grows);
         Self {
             plan: Plan {
                 base,
@@ -163,20 +172,23 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     Budget::Simulations(_) => None,
                 },
                 screening_rows,
-                fit_rows: ((1.0 - HELD_OUT) * rows as f64).round() as usize,
+                full_screening_rows,
+                fit_rows,
                 prior_sd,
-                grows: grows && deadline.is_some(),
+                grows,
             },
             candidates: Vec::new(),
             rows_exponent: None,
             seed_spread: None,
+            round_one_time: None,
         }
     }
 
     /// Round 1: every compressor with one medium network. Nothing is known
     /// about costs yet: each starts unless the deadline has passed.
     pub(super) fn round_one(&mut self, compressors: &[CompressorConfig], medium: &RegressorConfig) {
-        let rows = self.plan.fit_rows.min(self.plan.screening_rows);
+        let rows = self.plan.screening_rows;
+        let (started, left) = (Instant::now(), self.plan.seconds_left());
         let count = compressors.len();
         let outcomes: Vec<_> = compressors
             .par_iter()
@@ -190,11 +202,16 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         for (report, outcome) in outcomes {
             self.record(report, outcome, medium.clone());
         }
+        if self.plan.deadline.is_some() {
+            self.round_one_time = Some((started.elapsed().as_secs_f64(), left));
+        }
     }
 
     /// Round 2: the other networks on the two best compressors (and the
     /// round-1 network again when round 1 only screened a share of the
-    /// rows), on every fitting row. Cheapest first, each started only if
+    /// rows), on as many fitting rows as the time affords, never fewer than
+    /// round 1 fitted, and at least the full screening rows where round 1
+    /// proved cheap (decision 051). Cheapest first, each started only if
     /// its cost (the round-1 time scaled by the network's size and the
     /// rows) leaves time to refit the best candidate found so far.
     pub(super) fn round_two(&mut self, medium: &RegressorConfig, networks: &[RegressorConfig]) {
@@ -254,7 +271,14 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             })
             .flatten()
             .collect();
-        let rows = self.plan.round_two_rows(&pairs, screened, reserve);
+        let floor = self.round_one_time.map_or(screened, |(seconds, left)| {
+            round_two_floor((screened, seconds), self.plan.full_screening_rows, left)
+        });
+        let rows = self
+            .plan
+            .round_two_rows(&pairs, screened, reserve)
+            .max(floor)
+            .min(self.plan.fit_rows);
         if rows == screened {
             // Round 1's network on these rows is scored already.
             pairs.retain(|(_, net, _)| net != medium);

@@ -203,7 +203,7 @@ mod tests {
             &scope,
             &chart,
             (Budget::Seconds(1e6), Instant::now(), Some(far)),
-            4000,
+            Some(4000),
             true,
         );
         let compressor = CompressorConfig::from(Arx::new(2, 2).unwrap())

@@ -78,7 +78,7 @@ fn with_search_of(
         &scope,
         &chart,
         (Budget::Seconds(1e6), Instant::now(), Some(far)),
-        4000,
+        Some(4000),
         grows,
     );
     check(&mut search, arx_of(2));
@@ -101,7 +101,7 @@ fn on_a_chart_the_final_fit_keeps_only_what_its_held_out_records_cost() {
             &scope,
             &chart,
             (Budget::Seconds(100.0), start, Some(search_deadline)),
-            4000,
+            Some(4000),
             grows,
         )
     };
