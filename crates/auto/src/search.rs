@@ -461,8 +461,26 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// and to more records, which pay more than a difference the seed
     /// could have made: on the car at 60 s an MLP [20, 20] won round 2 by
     /// 0.2% over [20] at 4.6 times its cost and left no time for either.
-    /// With one parameter only the best score is beaten by none.
+    /// With one parameter only the best score is beaten by none. Without
+    /// a deadline (a budget in simulations), the best score.
     pub(super) fn best(&self, budget: &Budget) -> Result<usize> {
+        let none_fitted = || Error::InvalidSetting {
+            name: "budget",
+            value: budget.describe(),
+            reason: format!(
+                "no candidate could be fitted within it (first: {})",
+                self.candidates
+                    .first()
+                    .map(|c| c.report.status.to_string())
+                    .unwrap_or_default()
+            ),
+        };
+        if self.plan.deadline.is_none() {
+            // Without a deadline the time a fit saves buys nothing, and a
+            // choice by measured times would differ from run to run: the
+            // same seed must give the same estimator on any machine.
+            return self.best_score().ok_or_else(none_fitted);
+        }
         let compared = self.on_most_rows();
         let score = |i: usize| self.report(i).score;
         let top = self.best_score().map(score);
@@ -481,17 +499,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                     .total_cmp(&self.fit_estimate(b, rows))
                     .then(score(a).total_cmp(&score(b)))
             })
-            .ok_or_else(|| Error::InvalidSetting {
-                name: "budget",
-                value: budget.describe(),
-                reason: format!(
-                    "no candidate could be fitted within it (first: {})",
-                    self.candidates
-                        .first()
-                        .map(|c| c.report.status.to_string())
-                        .unwrap_or_default()
-                ),
-            })
+            .ok_or_else(none_fitted)
     }
 
     /// The best-scoring candidate among those fitted on the most rows.

@@ -201,6 +201,37 @@ fn the_winner_is_the_cheapest_of_the_ties_that_no_candidate_beats_on_every_param
 }
 
 #[test]
+fn without_a_deadline_the_best_score_wins_whatever_the_times() {
+    let model = Benchmark::builder().n_samples(100).build().unwrap();
+    let run = TwoStage::builder(&model).simulations(60).prepare().unwrap();
+    let chart = StoredChart {
+        thetas: Array2::zeros((60, 1)),
+        records: Vec::new(),
+    };
+    let scope = Scope::of(&run);
+    let budget = Budget::Simulations(60);
+    let mut search = Search::new(&scope, &chart, (budget, Instant::now(), None), None, true);
+    let (arx, net) = (arx_of(2), |h: &[usize]| network(h).unwrap());
+    let with_rmse = |mut c: Candidate, rmse: &[f64]| {
+        c.report.rmse = rmse.to_vec();
+        c
+    };
+    // The car's tie, where a deadline ships the cheaper [20] (above): the
+    // times are measured, and must not choose what a seed fixes.
+    search.candidates = vec![
+        with_rmse(
+            scored(&arx, net(&[20, 20]), 0.3637, 10.1),
+            &[0.5413, 0.04202],
+        ),
+        with_rmse(scored(&arx, net(&[20]), 0.3643, 2.2), &[0.5402, 0.04212]),
+    ];
+    assert_eq!(search.best(&budget).unwrap(), 0);
+    search.candidates[0].report.seconds = 0.1;
+    search.candidates[1].solo_seconds = Some(0.01);
+    assert_eq!(search.best(&budget).unwrap(), 0);
+}
+
+#[test]
 fn with_one_parameter_the_best_score_wins_however_cheap_the_others() {
     with_search(true, |search, arx| {
         let net = |h: &[usize]| network(h).unwrap();
