@@ -21,7 +21,7 @@ pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig)
 
 /// Weights and biases of a network candidate on n features and q outputs:
 /// the cost of a Levenberg-Marquardt fit grows with its power
-/// [`COST_EXPONENT`] or so (round 2).
+/// [`COST_EXPONENT`](crate::cost::COST_EXPONENT) or so (round 2).
 pub(super) fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
         RegressorConfig::Mlp(mlp) => {

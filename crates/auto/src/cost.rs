@@ -9,7 +9,7 @@ pub(crate) const COST_EXPONENT: f64 = 1.2;
 /// How a network's fit time grows with its rows: Levenberg-Marquardt's
 /// products grow linearly with them, and its iterations to the held-out
 /// minimum grow too (until its iteration limit). Measured on the benchmark
-/// (2 cores, candidates timed while sharing the machine): MLP [20] from
+/// (2 cores, candidates timed while sharing the machine): MLP `[20]` from
 /// 4000 to 6342 rows as rows^1.5, [20, 20] from 6342 to 15941 rows as
 /// rows^1.8, the average of four [20, 20] from 4242 to 21010 as rows^1.7,
 /// [20, 20] from 4164 to 13991 as rows^2.2 with the share of the machine
@@ -50,7 +50,7 @@ pub(crate) const QUICK_SCREEN_SHARE: f64 = 0.5;
 
 /// Round 2 fits at least the full screening rows where round 1 on them
 /// would have taken at most this share of the time the search had when
-/// round 1 started: the benchmark's best structure (4 pieces of [20])
+/// round 1 started: the benchmark's best structure (4 pieces of `[20]`)
 /// only wins on 4000 rows (all six runs at 120 s; on 3171 rows none of
 /// three, which scored 1.20 to 1.26 times the Bayes RMSE against 1.14
 /// to 1.17). Round 1 on the full rows, estimated from the quick round's

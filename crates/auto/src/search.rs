@@ -460,7 +460,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// cheapest to fit (decision 050). The time it leaves goes to round 3
     /// and to more records, which pay more than a difference the seed
     /// could have made: on the car at 60 s an MLP [20, 20] won round 2 by
-    /// 0.2% over [20] at 4.6 times its cost and left no time for either.
+    /// 0.2% over `[20]` at 4.6 times its cost and left no time for either.
     /// With one parameter only the best score is beaten by none. Without
     /// a deadline (a budget in simulations), the best score.
     pub(super) fn best(&self, budget: &Budget) -> Result<usize> {

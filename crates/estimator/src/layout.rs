@@ -3,7 +3,7 @@
 //! as its fields in order: each version's layout is the previous one's
 //! nested, plus what the version added, so every field is named once.
 //! A file is read with its version's layout, carried forward one version
-//! at a time, and checked as a whole into an [`Estimator`].
+//! at a time, and checked as a whole into an [`Estimator`](crate::Estimator).
 
 use serde::Deserialize;
 use twostage_models::Marginal;

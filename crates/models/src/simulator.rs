@@ -34,7 +34,7 @@ impl ModelSpec {
     /// time and record length.
     ///
     /// # Errors
-    /// [`SimError::InvalidSetting`](crate::SimError::InvalidSetting) if the
+    /// [`SimError::InvalidSetting`] if the
     /// names do not match the prior's dimension, the sampling time is not
     /// finite and positive, or the record is empty.
     pub fn new(
@@ -384,7 +384,7 @@ impl Simulator for NoiseFree {
 /// random stream, it produces one experiment's input/output record.
 ///
 /// Implementations must be deterministic given `(theta, rng)`, draw all their
-/// randomness from `rng`, and return [`SimError::Diverged`](crate::SimError::Diverged)
+/// randomness from `rng`, and return [`SimError::Diverged`]
 /// instead of non-finite samples.
 ///
 /// ```

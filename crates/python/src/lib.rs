@@ -214,7 +214,7 @@ impl PyEstimator {
             .transpose()
     }
 
-    /// Estimates of one record (`u` [N, n_u], `y` [N, n_y]: theta [q]) or
+    /// Estimates of one record (`u` `[N, n_u]`, `y` `[N, n_y]`: theta `[q]`) or
     /// of a batch (`u` [b, N, n_u], `y` [b, N, n_y]: theta [b, q]), the
     /// records in parallel without the GIL. `u` is None for a model
     /// without input.
@@ -429,7 +429,7 @@ fn non_finite(name: &str, record: ArrayView2<'_, f64>, k: usize, single: bool) -
     ))
 }
 
-/// `values` ([b, width] row-major) as a numpy array [width] for one record
+/// `values` (`[b, width]` row-major) as a numpy array `[width]` for one record
 /// or [b, width] for a batch.
 fn rows(py: Python<'_>, values: Vec<f64>, width: usize, single: bool) -> Bound<'_, PyAny> {
     if single {

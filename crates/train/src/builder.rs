@@ -26,7 +26,7 @@ use twostage_sources::{Preset, Progress, RecordSource, Records, RunShape, Silent
 /// | `seed`, `calibration`, `alpha`, `validation`, `delta`, `max_failure_fraction` | [`RunSettings::default`] | as [`RunSettings`] says |
 ///
 /// The compressor, regressor and m are the paper's benchmark preset
-/// ([`paper_benchmark`](twostage_sources::paper_benchmark)) until set.
+/// ([`paper_benchmark`]) until set.
 ///
 /// ```
 /// use twostage::{Estimator, TwoStage};

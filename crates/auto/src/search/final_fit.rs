@@ -336,7 +336,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// grow, with records for one ([`network_for_rows`], the compared
     /// records left out). The rounds ask before every network is scored,
     /// so this does not ask, as [`Self::sized_for_rows`] does, whether a
-    /// scored network is larger still (pieces of [20] on many features can
+    /// scored network is larger still (pieces of `[20]` on many features can
     /// be larger than [32, 32]); where one is, the sized network does not
     /// compete and the winner and its other rival have the larger share.
     pub(super) fn sized_network_competes(&self, i: usize) -> bool {
@@ -431,7 +431,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// Where the final fit's `rows` are at least [`GROWN_ROWS`] times those
     /// the winner was scored on: a candidate with a larger network on the
     /// winner's stage 1, scored on the same rows. More records carry more
-    /// than a small network can learn (the benchmark's MLP [20] on 30,000
+    /// than a small network can learn (the benchmark's MLP `[20]` on 30,000
     /// records stays 1.27 times the Bayes RMSE); among the larger networks
     /// that the seed alone could have ranked either way (within
     /// [`Self::tie`] of the best of them), the cheapest to fit anew: on

@@ -15,7 +15,7 @@ use crate::error::{Error, Result};
 
 impl Locator<'_> {
     /// The inputs a source needs are given: an FMU's time unit and its
-    /// inputs' design, and an `[input]` only where [signals] names
+    /// inputs' design, and an `[input]` only where `[signals]` names
     /// inputs (`measured`: the file gives a measured input).
     pub(super) fn check_inputs(
         &self,
