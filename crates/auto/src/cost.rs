@@ -43,9 +43,9 @@ pub(crate) const SCREENING_ROWS: usize = 4000;
 /// half the screening rows: its ten fits only rank, and every second they
 /// save buys records for the final fit. On the car at 60 s a round 1 on
 /// its whole chart (2,779 rows) took half the search and, in one run of
-/// five, left no time for round 3 or for records (1.037 times the Bayes
-/// RMSE); at half the rows the five seeds scored 1.014 to 1.022
-/// (decision 051).
+/// nine, left no time for round 3 or for records (1.037 times the Bayes
+/// RMSE); at half the rows fifteen runs of five seeds scored 1.010 to
+/// 1.022 (decision 051).
 pub(crate) const QUICK_SCREEN_SHARE: f64 = 0.5;
 
 /// Round 2 fits at least the full screening rows where round 1 on them
