@@ -9,7 +9,7 @@ use twostage::models::{BuiltinModel, IoData, Simulator};
 use twostage::{Estimator, ModelProfile, NamedModel, OutputError, Refinement, ResidualModel};
 
 use rayon::prelude::*;
-use twostage::refine::Descent;
+use twostage::refine::{BestFit, SearchStarts};
 
 use crate::error::{BaselineError, Result};
 use crate::suite::exact_likelihood;
@@ -42,6 +42,9 @@ pub struct EstimateRefiner {
     radius: Vec<f64>,
     /// The level of the intervals (`1 - alpha`), the estimator's.
     alpha: f64,
+    /// Where an output-error refinement's best-fit search starts besides
+    /// the estimate and its interval's corners.
+    search: SearchStarts,
 }
 
 enum How {
@@ -96,6 +99,7 @@ impl EstimateRefiner {
                 },
                 radius,
                 alpha,
+                search: default_search(estimator),
             });
         }
         let simulator = estimator_model(estimator, model_file)?;
@@ -104,7 +108,43 @@ impl EstimateRefiner {
             how: How::OutputError(Refinement::new(fit)),
             radius,
             alpha,
+            search: default_search(estimator),
         })
+    }
+
+    /// Where an output-error refinement's best-fit search starts besides
+    /// the estimate and its interval's corners (default:
+    /// [`SearchStarts::default_from_prior`] starts of seed 0).
+    pub fn search(mut self, search: SearchStarts) -> Self {
+        self.search = search;
+        self
+    }
+
+    /// Whether the refinement is an output-error fit (the best fit of a
+    /// search, [`EstimateRefiner::refine_at`]), not a posterior mean.
+    pub fn is_output_error(&self) -> bool {
+        matches!(self.how, How::OutputError(_))
+    }
+
+    /// The starts of the best-fit search around `estimate`: its interval
+    /// `half_widths` where the record has its own, else half the
+    /// neighbourhood's.
+    ///
+    /// # Errors
+    /// An estimate of another length than the model's parameters.
+    pub fn search_starts(
+        &self,
+        prior: &twostage::models::Prior,
+        estimate: &[f64],
+        half_widths: Option<&[f64]>,
+    ) -> std::result::Result<Vec<Vec<f64>>, String> {
+        let widths = half_widths.map_or_else(
+            || self.radius.iter().map(|r| r / 2.0).collect(),
+            <[f64]>::to_vec,
+        );
+        self.search
+            .starts(prior, estimate, Some(&widths))
+            .map_err(|e| e.to_string())
     }
 
     /// The simulator an output-error refinement runs (`None` for a
@@ -184,47 +224,66 @@ impl EstimateRefiner {
         }
     }
 
-    /// The output-error refinement of `items`, together.
+    /// The output-error refinement of `items`, together: each record's
+    /// best-fit search, then its best fit's own interval.
     fn output_error(
         &self,
         fit: &Refinement<OutputError<Box<dyn Simulator>>>,
         items: &[ToRefine<'_>],
     ) -> Vec<std::result::Result<RefinedEstimate, String>> {
-        let jobs = items
+        let prior = fit.model().prior();
+        let starts: Vec<std::result::Result<Vec<Vec<f64>>, String>> = items
             .iter()
-            .map(|(record, estimate, half_widths)| {
-                // The record's own interval where it has one (adaptive).
-                let widths = half_widths.map_or_else(
-                    || self.radius.iter().map(|r| r / 2.0).collect(),
-                    <[f64]>::to_vec,
-                );
-                (*record, refine_starts(estimate, &widths))
-            })
+            .map(|(_, estimate, half_widths)| self.search_starts(prior, estimate, *half_widths))
             .collect();
-        let best: Vec<std::result::Result<Descent, String>> = fit
-            .descents_of_records(jobs)
+        let searches = items
+            .iter()
+            .zip(&starts)
+            .filter_map(|((record, _, _), starts)| Some((*record, starts.as_ref().ok()?.clone())))
+            .collect();
+        let mut found = fit.best_fits(searches).into_iter();
+        let bests: Vec<std::result::Result<BestFit, String>> = starts
             .into_iter()
-            .map(|descents| {
-                descents
-                    .map_err(|e| e.to_string())?
-                    .into_iter()
-                    .reduce(|best, d| if d.loss < best.loss { d } else { best })
-                    .ok_or_else(|| "no start".to_string())
+            .map(|starts| {
+                starts?;
+                found
+                    .next()
+                    .unwrap_or_else(|| unreachable!("one search per record with starts"))
+                    .map_err(|e| e.to_string())
             })
             .collect();
-        // Their own uncertainty, from the loss's curvature there and the
-        // residuals' variance and autocorrelation, in one batch.
+        self.refine_at(items, &bests)
+    }
+
+    /// The output-error refinement of `items` at best fits already
+    /// searched (one per item, as [`twostage::search_best_fits`] gives
+    /// them from [`EstimateRefiner::search_starts`]): each refined
+    /// estimate is its record's best fit, with its own interval from the
+    /// loss's curvature there and the residuals' variance and
+    /// autocorrelation, in one batch. No descent runs: the check of a
+    /// two-stage estimate and its refinement share the search. A
+    /// posterior refinement refines as [`EstimateRefiner::refine_many`]
+    /// does and reads no search.
+    pub fn refine_at(
+        &self,
+        items: &[ToRefine<'_>],
+        bests: &[std::result::Result<BestFit, String>],
+    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+        let How::OutputError(fit) = &self.how else {
+            return self.refine_many(items);
+        };
         let refined: Vec<(&IoData, &[f64])> = items
             .iter()
-            .zip(&best)
+            .zip(bests)
             .filter_map(|((record, _, _), best)| {
-                Some((*record, best.as_ref().ok()?.theta.as_slice()))
+                Some((*record, best.as_ref().ok()?.best.theta.as_slice()))
             })
             .collect();
         let mut local = fit.uncertainties(&refined).into_iter();
-        best.into_iter()
+        bests
+            .iter()
             .map(|best| {
-                let best = best?;
+                let best = &best.as_ref().map_err(Clone::clone)?.best;
                 let local = local
                     .next()
                     .unwrap_or_else(|| unreachable!("one per refined record"))
@@ -235,7 +294,7 @@ impl EstimateRefiner {
                         .map(|u| u.half_widths(self.alpha))
                         .map_err(Clone::clone),
                     correlation: local.ok().map(|u| u.correlation),
-                    theta: best.theta,
+                    theta: best.theta.clone(),
                     stop: Some(best.stop),
                 })
             })
@@ -243,31 +302,19 @@ impl EstimateRefiner {
     }
 }
 
+/// An estimator's default best-fit search: two starts per parameter and
+/// two more from its prior, seed 0.
+fn default_search(estimator: &Estimator) -> SearchStarts {
+    SearchStarts {
+        from_prior: SearchStarts::default_from_prior(estimator.param_names().len()),
+        seed: 0,
+    }
+}
+
 /// How many records an output-error refinement runs in one lockstep: their
 /// points fill a simulator's batches; more would only hold more residuals
 /// in memory at once.
 pub const RECORDS_TOGETHER: usize = 64;
-
-/// Where an output-error refinement starts: the estimate, and two corners
-/// of half its interval on either side (alternating signs across the
-/// parameters), so that a start lies off each axis the estimate may be
-/// wrong along. The descents are bounded by the prior, not the interval:
-/// on a real record the model's best fit may lie outside an interval
-/// calibrated on the model's own records.
-pub fn refine_starts(estimate: &[f64], half_widths: &[f64]) -> Vec<Vec<f64>> {
-    let corner = |sign: f64| -> Vec<f64> {
-        estimate
-            .iter()
-            .zip(half_widths)
-            .enumerate()
-            .map(|(j, (t, w))| {
-                let alternate = if j % 2 == 0 { 1.0 } else { -1.0 };
-                t + sign * alternate * 0.5 * w
-            })
-            .collect()
-    };
-    vec![estimate.to_vec(), corner(1.0), corner(-1.0)]
-}
 
 /// The model `estimator`'s records come from, noise-free capable, to check
 /// or refine them against: `model_file`, else the estimator's built-in

@@ -264,7 +264,7 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
     assert!(
         stderr.contains(
             "--refine=auto: the check explains 0 of 1 two-stage estimates; refining experiment(s) \
-             estimation"
+             1 (not explained): estimation"
         ),
         "{stderr}"
     );
@@ -297,8 +297,8 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         let at_column = at_header.iter().position(|h| h == name).unwrap();
         assert_eq!(at_row[at_column], row[column(name)], "{name}");
     }
-    // --refine --check knows the converged refinement is the best fit (1);
-    // --at descends again from the given values and finds the same point.
+    // --refine --check reads the search whose best is the refinement (1);
+    // --at searches again from the given values and finds the same point.
     let at_ratio: f64 = at_row[at_header
         .iter()
         .position(|h| h == "loss_over_best")

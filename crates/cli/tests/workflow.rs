@@ -826,7 +826,9 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
     assert!(fit.is_finite());
     let stderr = text(&out.stderr);
     assert!(
-        stderr.contains("experiment alien: the estimate fits the record as well as the model can"),
+        stderr.contains(
+            "experiment alien: the estimate fits the record within 5% in RMS of the best fit"
+        ),
         "{stderr}"
     );
     // Records are checked in parallel: one thread gives the same table.
@@ -906,7 +908,8 @@ fn intervals_stay_inside_the_prior() {
 }
 
 /// `--refine=auto` refines exactly the records `--check` does not explain,
-/// names them, and keeps the others' two-stage estimates.
+/// or finds out of distribution, or fitted below 0%, names them, and keeps
+/// the others' two-stage estimates.
 #[test]
 fn refine_auto_refines_what_the_check_does_not_explain() {
     let dir = scratch("refine-auto");
@@ -932,11 +935,20 @@ fn refine_auto_refines_what_the_check_does_not_explain() {
         &records,
     ]));
     let at = |rows: &[Vec<String>], name: &str| rows[0].iter().position(|h| h == name).unwrap();
+    let refused = |r: &Vec<String>| {
+        r[at(&checked, "explained")] == "false"
+            || r[at(&checked, "out_of_distribution")] == "true"
+            || r[at(&checked, "y_fit_percent")].parse::<f64>().unwrap() < 0.0
+    };
     let unexplained: Vec<String> = checked[1..]
         .iter()
-        .filter(|r| r[at(&checked, "explained")] == "false")
+        .filter(|r| refused(r))
         .map(|r| r[0].clone())
         .collect();
+    let explained = checked[1..]
+        .iter()
+        .filter(|r| r[at(&checked, "explained")] == "true")
+        .count();
     let out = twostage(&[
         "estimate",
         "--estimator",
@@ -951,15 +963,28 @@ fn refine_auto_refines_what_the_check_does_not_explain() {
     let expected = if unexplained.is_empty() {
         "refining none".to_string()
     } else {
-        format!("refining experiment(s) {}", unexplained.join(", "))
+        "refining experiment(s) ".to_string()
     };
     assert!(
         stderr.contains(&format!(
-            "the check explains {} of 12 two-stage estimates; {expected}",
-            12 - unexplained.len()
+            "the check explains {explained} of 12 two-stage estimates; {expected}"
         )),
         "{stderr}"
     );
+    // Every refined record is named, under its reason, and no other.
+    let note = stderr
+        .lines()
+        .find(|l| l.contains("--refine=auto"))
+        .unwrap();
+    let mut named: Vec<String> = note
+        .split("; ")
+        .filter_map(|group| group.split_once("): ").map(|(_, ids)| ids))
+        .flat_map(|ids| ids.split(", ").map(str::to_string))
+        .collect();
+    named.sort();
+    let mut wanted = unexplained.clone();
+    wanted.sort();
+    assert_eq!(named, wanted, "{note}");
     // The explained keep their two-stage estimate, bit for bit.
     for (before, after) in checked[1..].iter().zip(&auto[1..]) {
         let same = before[1] == after[1];

@@ -309,10 +309,13 @@ impl PyEstimator {
     /// --check`): `theta`, or the estimator's own estimate when None,
     /// simulated without noise on the record's input and ranked among
     /// `sims` of the model's own records of `seed`, scored from sample
-    /// `score_from` on. The model: the
+    /// `score_from` on, and judged against the best fit searched from it
+    /// (and its interval's corners, for the estimator's own estimate) and
+    /// from `prior_starts` starts over the prior (default two per
+    /// parameter and two more). The model: the
     /// estimator's built-in one, or its model file (`model_file` or
     /// `model_toml`).
-    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=199, seed=0, score_from=0))]
+    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=199, seed=0, score_from=0, prior_starts=None))]
     #[allow(clippy::too_many_arguments)]
     fn check<'py>(
         &self,
@@ -325,23 +328,32 @@ impl PyEstimator {
         sims: usize,
         seed: u64,
         score_from: usize,
+        prior_starts: Option<usize>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         let named = named_model(None, model_file, model_toml)?;
         let sim = twostage_baselines::estimator_model(&self.inner, named.as_ref())
             .map_err(|e| PyValueError::new_err(e.to_string()))?;
         let shape = self.inner.record_shape();
         let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
-        let theta = match theta {
-            Some(theta) => theta,
+        let (theta, half_widths) = match theta {
+            Some(theta) => (theta, None),
             None => {
                 if let Some(refusal) = self.inner.length_refusal(record.n_samples()) {
                     return Err(PyValueError::new_err(refusal));
                 }
-                self.inner.assess(&record).map_err(to_python)?.theta
+                let assessed = self.inner.assess(&record).map_err(to_python)?;
+                let widths = assessed.interval_half_widths().map(<[f64]>::to_vec);
+                (assessed.theta, widths)
             }
         };
-        let checked =
-            through_model::check(py, sim.as_ref(), &record, &theta, (sims, seed, score_from))?;
+        let checked = through_model::check(
+            py,
+            sim.as_ref(),
+            &record,
+            &theta,
+            half_widths.as_deref(),
+            (sims, seed, score_from, prior_starts),
+        )?;
         check_dict(py, &checked)
     }
 

@@ -159,6 +159,8 @@ pub(crate) fn check_dict<'py>(
     dict.set_item("check_runs", check.reference_runs)?;
     dict.set_item("model_consistent", check.model_consistent())?;
     dict.set_item("loss_over_best", check.loss_ratio)?;
+    dict.set_item("optima", check.optima)?;
+    dict.set_item("runner_up_over_best", check.runner_up_ratio)?;
     dict.set_item("explained", check.explained())?;
     dict.set_item(
         "input_as_trained",
@@ -175,30 +177,43 @@ pub(crate) fn check_dict<'py>(
 }
 
 /// Checks `theta` of `sim` against `record` without the GIL, scored from
-/// sample `score_from` on.
+/// sample `score_from` on, its best-fit search from `theta`, the corners
+/// of its interval `half_widths` (where known) and `prior_starts` starts
+/// over the prior (default two per parameter and two more), as the
+/// command line's check.
 pub(crate) fn check(
     py: Python<'_>,
     sim: &dyn Simulator,
     record: &IoData,
     theta: &[f64],
-    (sims, seed, score_from): (usize, u64, usize),
+    half_widths: Option<&[f64]>,
+    (sims, seed, score_from, prior_starts): (usize, u64, usize, Option<usize>),
 ) -> PyResult<RecordCheck> {
     parameters(theta, sim)?;
     let plan = twostage::CheckPlan {
         noisy: sims,
         seed,
         score_from,
-        at_best_fit: false,
+        prior_starts: prior_starts
+            .unwrap_or_else(|| twostage::SearchStarts::default_from_prior(theta.len())),
     };
-    py.detach(|| twostage::check_with(sim, record, theta, plan))
-        .map_err(|e| PyValueError::new_err(format!("the check could not simulate: {e}")))
+    py.detach(|| {
+        let starts = plan
+            .search()
+            .starts(sim.spec().prior(), theta, half_widths)?;
+        let best = twostage::search_best_fits(sim, vec![(record, starts)])
+            .pop()
+            .unwrap_or_else(|| unreachable!("one search, one result"))?;
+        twostage::check_against(sim, record, theta, &best, plan)
+    })
+    .map_err(|e| PyValueError::new_err(format!("the check could not simulate: {e}")))
 }
 
 /// Check given values against a record (`twostage estimate --at VALUES
 /// --check`): a dict of the check's columns, the noise-free response in
 /// `simulated`.
 #[pyfunction]
-#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=199, seed=0, allow_outside_prior=false, score_from=0))]
+#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=199, seed=0, allow_outside_prior=false, score_from=0, prior_starts=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check_values<'py>(
     py: Python<'py>,
@@ -212,6 +227,7 @@ pub(crate) fn check_values<'py>(
     seed: u64,
     allow_outside_prior: bool,
     score_from: usize,
+    prior_starts: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let named = named_model(model, model_file, model_toml)?.ok_or_else(|| {
         PyValueError::new_err(
@@ -231,7 +247,14 @@ pub(crate) fn check_values<'py>(
         spec.input_names().len(),
         spec.output_names().len(),
     )?;
-    let checked = check(py, sim.as_ref(), &record, &theta, (sims, seed, score_from))?;
+    let checked = check(
+        py,
+        sim.as_ref(),
+        &record,
+        &theta,
+        None,
+        (sims, seed, score_from, prior_starts),
+    )?;
     check_dict(py, &checked)
 }
 

@@ -11,22 +11,26 @@
 //! errors, a simulation's output errors) can be refined.
 #![deny(missing_docs)]
 
+mod best_fit;
 mod check;
 mod error;
 mod lockstep;
 mod moments;
 mod output_error;
+mod policy;
 mod refinement;
 mod residual;
 mod uncertainty;
 
+pub use best_fit::{BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SearchStarts, spread_starts};
 pub use check::{
-    CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_record,
-    check_with, output_fit,
+    CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_against,
+    check_record, check_with, output_fit, search_best_fits,
 };
 pub use error::RefineError;
 pub use moments::WeightedMoments;
 pub use output_error::OutputError;
+pub use policy::{RefinePolicy, RefineReason};
 pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
 /// Why a descent stopped ([`Descent::stop`]).
 pub use twostage_fit::TerminationReason;

@@ -21,6 +21,21 @@ pub(crate) struct DescentJob<'a> {
     pub(crate) start: Vec<f64>,
     pub(crate) lo: Vec<f64>,
     pub(crate) hi: Vec<f64>,
+    /// The search the descent belongs to (one per record): descents join
+    /// only descents of their own search.
+    pub(crate) group: usize,
+}
+
+/// How descents of one search that meet are treated: see
+/// [`descend_together`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Meeting {
+    /// Every descent runs to its own end.
+    Apart,
+    /// A descent whose accepted point comes within this distance (largest
+    /// unit-box coordinate) of another's of its search standing at no
+    /// higher cost stops there ([`TerminationReason::Joined`]).
+    Join(f64),
 }
 
 /// The solver every refinement descent uses. Marquardt's scaling: the
@@ -59,20 +74,75 @@ enum Slot<'a, E> {
         run: Box<LmRun>,
         /// The Jacobian's differences while their points are out.
         differences: Option<ForwardDifferences>,
+        /// The descent it stopped beside, when it joined one.
+        joined: Option<usize>,
     },
     Failed(E),
 }
+
+/// The descent of `slots` (not `d`, not itself joined, of the same group)
+/// that descent `d`, at its accepted point, joins: within `tolerance` of
+/// it, at no higher cost (the earlier of equals). `None` when none is.
+fn meets<E>(slots: &[Slot<'_, E>], d: usize, tolerance: f64) -> Option<usize> {
+    let Slot::Running { job, run, .. } = &slots[d] else {
+        return None;
+    };
+    let here = run.iterate();
+    slots.iter().enumerate().find_map(|(e, other)| {
+        let Slot::Running {
+            job: other_job,
+            run: other_run,
+            joined: None,
+            ..
+        } = other
+        else {
+            return None;
+        };
+        if e == d || other_job.group != job.group || !other_run.started() {
+            return None;
+        }
+        let there = other_run.iterate();
+        let near = here
+            .x
+            .iter()
+            .zip(there.x)
+            .all(|(a, b)| (a - b).abs() <= tolerance);
+        let lower = there.cost.total_cmp(&here.cost).then(e.cmp(&d)).is_lt();
+        (near && lower).then_some(e)
+    })
+}
+
+/// A finished descent and, where it stopped beside another, which.
+pub(crate) type Ended<E> = (Result<Descent, E>, Option<usize>);
 
 /// Run `jobs` together, one result per job in order. A start the model
 /// cannot evaluate fails its own descent only; a trial step it cannot
 /// evaluate is refused (the descent goes on with more damping); a failed
 /// Jacobian point ends its descent at its last accepted point
 /// ([`TerminationReason::EvaluationFailed`]).
+///
+/// With [`Meeting::Join`], a descent that comes where another of its
+/// search already stands at no higher cost stops there: the rounds are the
+/// same whatever the thread count, so which descents join is too.
 pub(crate) fn descend_together<M: ResidualModel>(
     model: &M,
     max_iterations: usize,
     jobs: Vec<DescentJob<'_>>,
 ) -> Vec<Result<Descent, M::Error>> {
+    descend_meeting(model, max_iterations, jobs, Meeting::Apart)
+        .into_iter()
+        .map(|(descent, _)| descent)
+        .collect()
+}
+
+/// [`descend_together`], descents meeting as `meeting` says; each result
+/// with the descent it joined, if any.
+pub(crate) fn descend_meeting<M: ResidualModel>(
+    model: &M,
+    max_iterations: usize,
+    jobs: Vec<DescentJob<'_>>,
+    meeting: Meeting,
+) -> Vec<Ended<M::Error>> {
     let prior = model.prior();
     let q = prior.dim();
     let solver = solver(max_iterations);
@@ -105,6 +175,7 @@ pub(crate) fn descend_together<M: ResidualModel>(
                 job,
                 run,
                 differences: None,
+                joined: None,
             }
         })
         .collect();
@@ -116,16 +187,26 @@ pub(crate) fn descend_together<M: ResidualModel>(
         let mut records: Vec<&IoData> = Vec::new();
         // Each asking descent and how many of the points are its own, in order.
         let mut askers: Vec<(usize, usize)> = Vec::new();
-        for (d, slot) in slots.iter_mut().enumerate() {
+        for d in 0..slots.len() {
+            let observing =
+                matches!(&slots[d], Slot::Running { run, .. } if run.need() == Need::Observe);
+            let met = match meeting {
+                Meeting::Join(tolerance) if observing => meets(&slots, d, tolerance),
+                _ => None,
+            };
             let Slot::Running {
                 job,
                 run,
                 differences,
-            } = slot
+                joined,
+            } = &mut slots[d]
             else {
                 continue;
             };
-            if run.need() == Need::Observe {
+            if let Some(other) = met {
+                run.abandon(TerminationReason::Joined);
+                *joined = Some(other);
+            } else if observing {
                 run.proceed(false);
             }
             let before = points.len();
@@ -205,16 +286,19 @@ pub(crate) fn descend_together<M: ResidualModel>(
     slots
         .into_iter()
         .map(|slot| match slot {
-            Slot::Failed(e) => Err(e),
-            Slot::Running { job, run, .. } => {
+            Slot::Failed(e) => (Err(e), None),
+            Slot::Running {
+                job, run, joined, ..
+            } => {
                 let found = run.finish();
-                Ok(Descent {
+                let descent = Descent {
                     start: job.start,
                     theta: to_theta(prior, &found.x),
                     loss: found.cost,
                     iterations: found.iterations,
                     stop: found.reason,
-                })
+                };
+                (Ok(descent), joined)
             }
         })
         .collect()

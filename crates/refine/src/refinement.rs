@@ -91,6 +91,11 @@ impl<M: ResidualModel> Refinement<M> {
         self
     }
 
+    /// Iterations per descent.
+    pub(crate) fn iterations(&self) -> usize {
+        self.max_iterations
+    }
+
     /// The residual model.
     pub fn model(&self) -> &M {
         &self.model
@@ -149,6 +154,7 @@ impl<M: ResidualModel> Refinement<M> {
                 start,
                 lo: vec![0.0; q],
                 hi: vec![1.0; q],
+                group: 0,
             })
             .collect();
         lockstep::descend_together(&self.model, self.max_iterations, jobs)
@@ -191,12 +197,14 @@ impl<M: ResidualModel> Refinement<M> {
         let counts: Vec<usize> = records.iter().map(|(_, starts)| starts.len()).collect();
         let jobs = records
             .into_iter()
-            .flat_map(|(record, starts)| {
+            .enumerate()
+            .flat_map(|(group, (record, starts))| {
                 starts.into_iter().map(move |start| DescentJob {
                     record,
                     start,
                     lo: vec![0.0; q],
                     hi: vec![1.0; q],
+                    group,
                 })
             })
             .collect();
@@ -243,6 +251,7 @@ impl<M: ResidualModel> Refinement<M> {
             start: start.to_vec(),
             lo: lo.clone(),
             hi: hi.clone(),
+            group: 0,
         }];
         if starts == RefineStarts::CentreAndAxes {
             for j in 0..q {
@@ -262,6 +271,7 @@ impl<M: ResidualModel> Refinement<M> {
                         start: from,
                         lo: l,
                         hi: h,
+                        group: 0,
                     });
                 }
             }

@@ -292,3 +292,65 @@ fn records_refined_together_end_where_each_ends_alone_in_fewer_requests() {
         "{together_requests} requests together against {alone_requests} record by record"
     );
 }
+
+/// The check of a two-stage estimate, the refinement and the check of the
+/// refined estimate read one search: the search's points, then each
+/// check's own runs (its noise-free run, its noisy references, and the
+/// best fit's noise-free run only where the estimate is not the best
+/// fit), and nothing else. Descents that meet stop, and the search's
+/// points are fewer than the same starts' run apart.
+#[test]
+fn one_search_serves_the_check_and_the_refinement() {
+    use twostage_refine::{CheckPlan, SearchStarts, check_against, search_best_fits};
+    let record = record();
+    let model = FirstOrder::new(50, f64::INFINITY);
+    let estimate = [0.6, 1.2];
+    let search = SearchStarts {
+        from_prior: 6,
+        seed: 0,
+    };
+    let starts = search
+        .starts(model.spec().prior(), &estimate, Some(&[0.2, 0.5]))
+        .unwrap();
+    assert_eq!(starts.len(), 9);
+    let points = || model.points.load(Ordering::Relaxed);
+    let found = search_best_fits(&model, vec![(&record, starts.clone())])
+        .pop()
+        .unwrap()
+        .unwrap();
+    let searched = points();
+    assert!((found.best.theta[0] - 0.8).abs() < 0.01, "{found:?}");
+    // A convex loss: every descent ends in one optimum, most of them
+    // stopped where they met another.
+    assert_eq!(found.optima.len(), 1);
+    assert_eq!((found.optima[0].descents, found.descents), (9, 9));
+    // The same starts run apart cost more points.
+    let apart = FirstOrder::new(50, f64::INFINITY);
+    Refinement::new(OutputError::new(&apart).unwrap())
+        .descents_from(&record, starts)
+        .unwrap();
+    let apart = apart.points.load(Ordering::Relaxed);
+    assert!(
+        searched < apart,
+        "{searched} points searched, {apart} apart"
+    );
+    // A check of the estimate: its noise-free run, its noisy runs (this
+    // model has none of its own noise, so no run misses as the record
+    // does and all of them run), and the best fit's noise-free run.
+    let plan = CheckPlan {
+        noisy: 99,
+        seed: 0,
+        score_from: 0,
+        prior_starts: 6,
+    };
+    let first = check_against(&model, &record, &estimate, &found, plan).unwrap();
+    let checked = points() - searched;
+    assert_eq!(checked, 1 + first.reference_runs + 1);
+    // The refined estimate is the search's best: its check adds no best-fit
+    // run and no descent.
+    let refined = found.best.theta.clone();
+    let second = check_against(&model, &record, &refined, &found, plan).unwrap();
+    assert_eq!(points() - searched - checked, 1 + second.reference_runs);
+    assert_eq!(second.loss_ratio.to_bits(), 1.0f64.to_bits());
+    assert!(first.loss_ratio > 1.0 && !first.explained());
+}

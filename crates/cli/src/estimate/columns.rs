@@ -80,7 +80,8 @@ pub(super) fn list(values: &[f64]) -> String {
 }
 
 /// The check's columns: per output its RMS residual and fit, then the
-/// tail probability and whether the record is explained.
+/// tail probability, whether the record is explained, and the optima its
+/// best-fit search ended in.
 pub(super) fn check_header(outputs: &[String]) -> Vec<String> {
     let mut header = Vec::new();
     for y in outputs {
@@ -94,6 +95,8 @@ pub(super) fn check_header(outputs: &[String]) -> Vec<String> {
         "loss_over_best".into(),
         "explained".into(),
         "input_as_trained".into(),
+        "optima".into(),
+        "runner_up_over_best".into(),
     ]);
     header
 }
@@ -116,9 +119,11 @@ pub(super) fn check_fields(
             fields.push(format_f64(c.loss_ratio));
             fields.push(c.explained().to_string());
             fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
+            fields.push(c.optima.to_string());
+            fields.push(c.runner_up_ratio.map_or_else(String::new, format_f64));
             fields
         }
-        _ => vec![String::new(); 2 * outputs + 6],
+        _ => vec![String::new(); 2 * outputs + 8],
     }
 }
 

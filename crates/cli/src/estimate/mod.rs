@@ -6,10 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use rayon::prelude::*;
-use twostage::RecordCheck;
 use twostage::fit::TerminationReason;
 use twostage::models::IoData;
 use twostage::models::Simulator;
+use twostage::{BestFit, RecordCheck, RefineReason};
 
 use crate::csv_records;
 use crate::options::{InitialCovariance, TableFormat};
@@ -74,6 +74,25 @@ pub struct EstimateArgs {
         value_enum
     )]
     refine: Option<RefineWhich>,
+    /// With --check, or --refine through a model file: the starts of the
+    /// search for the model's best fit drawn over the prior (a Sobol
+    /// design), besides the estimate and its interval's corners; default
+    /// two per parameter and two more, 0 searches beside the estimate
+    /// only. The check judges an estimate against that best fit, and the
+    /// output-error refinement is that best fit (one search serves both).
+    #[arg(long, value_name = "K")]
+    prior_starts: Option<usize>,
+    /// With --refine=auto: also refine a record whose fit (percent, on any
+    /// output) is below this, however well the check explains it
+    /// (default 0: the model at the estimate predicts worse than the
+    /// record's mean).
+    #[arg(
+        long,
+        value_name = "PERCENT",
+        requires = "refine",
+        allow_hyphen_values = true
+    )]
+    refine_below_fit: Option<f64>,
     /// With --refine: add the refined estimate's parameter correlations,
     /// a column `corr_A_B` per pair of parameters (empty where the
     /// refined estimate has no interval).
@@ -152,6 +171,16 @@ impl EstimateArgs {
     fn checks(&self) -> bool {
         self.check || self.refine == Some(RefineWhich::Auto)
     }
+
+    /// The best-fit search's starts for a model of `q` parameters.
+    fn search(&self, q: usize) -> twostage::SearchStarts {
+        twostage::SearchStarts {
+            from_prior: self
+                .prior_starts
+                .unwrap_or_else(|| twostage::SearchStarts::default_from_prior(q)),
+            seed: self.seed.unwrap_or(0),
+        }
+    }
 }
 
 /// One record's estimate, its interval half-widths and its feature
@@ -213,7 +242,12 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             noisy: args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS),
             seed: args.seed.unwrap_or(0),
             score_from: args.score_from.unwrap_or(0),
-            at_best_fit: false,
+            prior_starts: args.search(chosen.names.len()).from_prior,
+        },
+        policy: twostage::RefinePolicy {
+            min_fit_percent: args
+                .refine_below_fit
+                .unwrap_or(twostage::RefinePolicy::default().min_fit_percent),
         },
         // Progress: a bar on a terminal, else a line every 10 s of a long
         // step.
@@ -271,8 +305,14 @@ struct Session<'a> {
     chosen: &'a Chosen,
     check_model: Option<&'a dyn Simulator>,
     plan: twostage::CheckPlan,
+    /// Which two-stage estimates `--refine=auto` refines.
+    policy: twostage::RefinePolicy,
     bars: crate::bars::Bars,
 }
+
+/// A record's best-fit search, or why it failed; `None` where no check or
+/// refinement needs one.
+type Search = Option<Result<BestFit, String>>;
 
 impl Session<'_> {
     /// Every record of the file at `path` estimated, in parallel, reported
@@ -296,22 +336,19 @@ impl Session<'_> {
         Ok(estimates)
     }
 
-    /// The file's estimates checked and refined as asked: with
-    /// `--refine=auto` the two-stage estimates are checked first and only
-    /// the records the check does not explain are refined (and checked
-    /// again).
+    /// The file's estimates checked and refined as asked. One best-fit
+    /// search per record serves its check and its output-error
+    /// refinement. With `--refine=auto` the two-stage estimates are
+    /// checked first and only the records the policy names are refined
+    /// (and checked again).
     fn check_and_refine(&self, path: &std::path::Path, estimates: &mut [(String, RecordOutcome)]) {
         let everyone = vec![true; estimates.len()];
+        let searches = self.search(estimates);
         match (&self.chosen.refiner, self.args.refine) {
             (Some(refiner), Some(RefineWhich::Auto)) => {
-                self.check_all(estimates, &everyone);
-                let unexplained = self.unexplained(estimates);
-                let ids: Vec<&str> = estimates
-                    .iter()
-                    .zip(&unexplained)
-                    .filter(|(_, u)| **u)
-                    .map(|((id, _), _)| id.as_str())
-                    .collect();
+                self.check_all(estimates, &everyone, &searches);
+                let reasons = self.reasons(estimates);
+                let chosen: Vec<bool> = reasons.iter().map(Option::is_some).collect();
                 let explained = estimates
                     .iter()
                     .filter(|(_, outcome)| {
@@ -320,46 +357,113 @@ impl Session<'_> {
                     .count();
                 eprintln!(
                     "note: {}: --refine=auto: the check explains {} of {} two-stage estimates; \
-                     refining {}{}",
+                     refining {}",
                     path.display(),
                     explained,
                     everyone.len(),
-                    if ids.is_empty() {
-                        "none"
-                    } else {
-                        "experiment(s) "
-                    },
-                    said::list_ids(&ids)
+                    said::refine_reasons(estimates, &reasons)
                 );
-                refine_together(refiner, estimates, &unexplained, &self.bars);
-                self.check_all(estimates, &unexplained);
+                refine_together(refiner, estimates, &chosen, &searches, &self.bars);
+                self.check_all(estimates, &chosen, &searches);
             }
             (Some(refiner), _) => {
-                refine_together(refiner, estimates, &everyone, &self.bars);
-                self.check_all(estimates, &everyone);
+                refine_together(refiner, estimates, &everyone, &searches, &self.bars);
+                self.check_all(estimates, &everyone, &searches);
             }
-            (None, _) => self.check_all(estimates, &everyone),
+            (None, _) => self.check_all(estimates, &everyone, &searches),
         }
     }
 
-    /// The records `--refine=auto` refines: those the check does not
-    /// explain, and any of another length than the estimator's (the
-    /// two-stage estimate keeps its length).
-    fn unexplained(&self, estimates: &[(String, RecordOutcome)]) -> Vec<bool> {
-        estimates
+    /// Each record's best-fit search (from its estimate, its interval's
+    /// corners and the prior), where a check or an output-error refinement
+    /// needs one: the records of a file together, in lockstep, a batch of
+    /// them at a time.
+    fn search(&self, estimates: &[(String, RecordOutcome)]) -> Vec<Search> {
+        let refiner = self.chosen.refiner.as_ref().filter(|r| r.is_output_error());
+        let Some(model) = refiner.and_then(|r| r.simulator()).or(self.check_model) else {
+            return vec![None; estimates.len()];
+        };
+        let prior = model.spec().prior();
+        let starts: Vec<Option<Result<Vec<Vec<f64>>, String>>> = estimates
             .iter()
-            .map(|(_, outcome)| match outcome {
-                Ok((record, e)) => {
-                    matches!(&e.check, Some(Ok(c)) if !c.explained())
-                        || self.chosen.trained.is_some_and(|n| n != record.n_samples())
-                }
-                Err(_) => false,
+            .map(|(_, outcome)| {
+                let (_, e) = outcome.as_ref().ok()?;
+                let widths = e.widths.as_deref();
+                Some(match refiner {
+                    Some(r) => r.search_starts(prior, &e.theta, widths),
+                    None => self
+                        .plan
+                        .search()
+                        .starts(prior, &e.theta, widths)
+                        .map_err(|e| e.to_string()),
+                })
+            })
+            .collect();
+        let wanted = starts.iter().filter(|s| matches!(s, Some(Ok(_)))).count();
+        self.bars.begin_step("searching", wanted, "records");
+        let mut found = Vec::with_capacity(wanted);
+        let searches: Vec<(&IoData, Vec<Vec<f64>>)> = estimates
+            .iter()
+            .zip(&starts)
+            .filter_map(|((_, outcome), starts)| {
+                let (record, _) = outcome.as_ref().ok()?;
+                Some((record, starts.as_ref()?.as_ref().ok()?.clone()))
+            })
+            .collect();
+        let mut searches = searches.into_iter();
+        loop {
+            let chunk: Vec<_> = searches
+                .by_ref()
+                .take(twostage_baselines::RECORDS_TOGETHER)
+                .collect();
+            if chunk.is_empty() {
+                break;
+            }
+            let k = chunk.len();
+            found.extend(twostage::search_best_fits(model, chunk));
+            self.bars.advance_step(k);
+        }
+        self.bars.end_step();
+        let mut found = found.into_iter();
+        starts
+            .into_iter()
+            .map(|starts| match starts? {
+                Ok(_) => Some(
+                    found
+                        .next()
+                        .unwrap_or_else(|| unreachable!("one search per record with starts"))
+                        .map_err(|e| format!("the best-fit search failed: {e}")),
+                ),
+                Err(e) => Some(Err(e)),
             })
             .collect()
     }
 
-    /// Check the estimates of the records marked in `only`, in parallel.
-    fn check_all(&self, estimates: &mut [(String, RecordOutcome)], only: &[bool]) {
+    /// Why `--refine=auto` refines each record (`None`: it keeps its
+    /// two-stage estimate): the policy's reasons, from the check, the
+    /// feature distance and the record's length.
+    fn reasons(&self, estimates: &[(String, RecordOutcome)]) -> Vec<Option<RefineReason>> {
+        estimates
+            .iter()
+            .map(|(_, outcome)| {
+                let (record, e) = outcome.as_ref().ok()?;
+                let other_length = self.chosen.trained.is_some_and(|n| n != record.n_samples());
+                match &e.check {
+                    Some(Ok(c)) => self.policy.reason(c, e.out_of_distribution(), other_length),
+                    _ => other_length.then_some(RefineReason::OtherLength),
+                }
+            })
+            .collect()
+    }
+
+    /// Check the estimates of the records marked in `only`, in parallel,
+    /// against their searches.
+    fn check_all(
+        &self,
+        estimates: &mut [(String, RecordOutcome)],
+        only: &[bool],
+        searches: &[Search],
+    ) {
         let Some(model) = self.check_model else {
             return;
         };
@@ -368,10 +472,11 @@ impl Session<'_> {
         estimates
             .par_iter_mut()
             .zip(only)
-            .filter(|(_, only)| **only)
-            .for_each(|((_, outcome), _)| {
+            .zip(searches)
+            .filter(|((_, only), _)| **only)
+            .for_each(|(((_, outcome), _), search)| {
                 if let Ok((record, estimated)) = outcome {
-                    estimated.check = Some(check(model, record, estimated, self.plan));
+                    estimated.check = Some(check(model, record, estimated, search, self.plan));
                 }
                 self.bars.advance_step(1);
             });
@@ -395,25 +500,43 @@ fn write_table(args: &EstimateArgs, chosen: &Chosen, rows: &[(String, Estimated)
     Ok(())
 }
 
-/// Refines the estimated records of a file together (their simulations in
-/// shared batches): a refinement that fails keeps the TS estimate, and says
-/// so; one that succeeds brings its own interval (NaN where the record does
-/// not determine it, said on stderr).
+/// Refines the estimated records of a file together: an output-error
+/// refinement at each record's best fit from its search, a posterior
+/// refinement by its own grid (their simulations in shared batches). A
+/// refinement that fails keeps the TS estimate, and says so; one that
+/// succeeds brings its own interval (NaN where the record does not
+/// determine it, said on stderr).
 fn refine_together(
     refiner: &twostage_baselines::EstimateRefiner,
     estimates: &mut [(String, RecordOutcome)],
     only: &[bool],
+    searches: &[Search],
     bars: &crate::bars::Bars,
 ) {
-    let items: Vec<twostage_baselines::ToRefine<'_>> = estimates
+    let (items, bests): (
+        Vec<twostage_baselines::ToRefine<'_>>,
+        Vec<Result<BestFit, String>>,
+    ) = estimates
         .iter()
         .zip(only)
-        .filter(|(_, only)| **only)
-        .filter_map(|((_, outcome), _)| outcome.as_ref().ok())
-        .map(|(record, e)| (record, e.theta.as_slice(), e.widths.as_deref()))
-        .collect();
+        .zip(searches)
+        .filter(|((_, only), _)| **only)
+        .filter_map(|(((_, outcome), _), search)| {
+            let (record, e) = outcome.as_ref().ok()?;
+            let best = search
+                .clone()
+                .unwrap_or_else(|| Err("no best-fit search".into()));
+            Some(((record, e.theta.as_slice(), e.widths.as_deref()), best))
+        })
+        .unzip();
     bars.begin_step("refining", items.len(), "records");
-    let refined = refiner.refine_many_reporting(&items, &|k| bars.advance_step(k));
+    let refined = if refiner.is_output_error() {
+        let refined = refiner.refine_at(&items, &bests);
+        bars.advance_step(items.len());
+        refined
+    } else {
+        refiner.refine_many_reporting(&items, &|k| bars.advance_step(k))
+    };
     bars.end_step();
     let estimated = estimates
         .iter_mut()
@@ -439,28 +562,20 @@ fn refine_together(
     }
 }
 
-/// Checks one record's estimate; an output-error refinement that converged
-/// is the best fit near itself, and the check need not descend again.
+/// Checks one record's estimate against the record's best-fit search.
 fn check(
     model: &dyn Simulator,
     record: &IoData,
     estimated: &Estimated,
+    search: &Search,
     plan: twostage::CheckPlan,
 ) -> Result<RecordCheck, String> {
-    let at_best_fit = matches!(
-        estimated.refined,
-        Some(Ok(Some(TerminationReason::Converged)))
-    );
-    twostage::check_with(
-        model,
-        record,
-        &estimated.theta,
-        twostage::CheckPlan {
-            at_best_fit,
-            ..plan
-        },
-    )
-    .map_err(|e| e.to_string())
+    let best = search
+        .as_ref()
+        .ok_or_else(|| "no best-fit search".to_string())?
+        .as_ref()
+        .map_err(Clone::clone)?;
+    twostage::check_against(model, record, &estimated.theta, best, plan).map_err(|e| e.to_string())
 }
 
 /// How many records were estimated, and how many could not be.

@@ -21,7 +21,10 @@ fn model_file(args: &EstimateArgs) -> Result<Option<NamedModel>> {
 /// The refinement of an estimator's estimates (see
 /// [`EstimateRefiner::new`]).
 pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<EstimateRefiner> {
-    EstimateRefiner::new(estimator, model_file(args)?.as_ref()).usage_context("--refine")
+    let q = estimator.param_names().len();
+    Ok(EstimateRefiner::new(estimator, model_file(args)?.as_ref())
+        .usage_context("--refine")?
+        .search(args.search(q)))
 }
 
 /// The model an estimator's records come from, to check them against:

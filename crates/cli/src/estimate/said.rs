@@ -141,21 +141,23 @@ impl<'a> Said<'a> {
             ),
             Some(Ok(c)) if !c.explained() => eprintln!(
                 "warning: {file}: experiment {id}: not explained by the model at its \
-                 estimate: RMS residual {}, fit {} %, where the model fits {} % near \
-                 it, and at most {:.1}% of its own records there miss by as much; do \
-                 not trust this estimate (another input than training's, or a poor \
-                 estimate: try --refine; docs/real-data.md)",
+                 estimate: RMS residual {}, fit {} %, where the model's best fit \
+                 (searched from the estimate and over the prior) fits {} %, and at \
+                 most {:.1}% of its own records there miss by as much; do not trust \
+                 this estimate (another input than training's, a poor estimate or one \
+                 in another basin: try --refine; docs/real-data.md)",
                 list(&c.rms),
                 list(&c.fit_percent),
                 list(&c.best_fit_percent),
                 100.0 * c.tail_probability
             ),
             Some(Ok(c)) if !c.model_consistent() => eprintln!(
-                "note: {file}: experiment {id}: the estimate fits the record as well as the \
-                 model can near it (fit {} %), but not to the model's own noise (at \
-                 most {:.1}% of its records miss by as much): the model is not exact \
-                 for this record; judge it by predicting a record it was not fitted \
-                 to (docs/real-data.md)",
+                "note: {file}: experiment {id}: the estimate fits the record within 5% \
+                 in RMS of the best fit the model reaches from the estimate and over \
+                 its prior (fit {} %), but not to the model's own noise (at most \
+                 {:.1}% of its records miss by as much): the model is not exact for \
+                 this record; judge it by predicting a record it was not fitted to \
+                 (docs/real-data.md)",
                 list(&c.fit_percent),
                 100.0 * c.tail_probability
             ),
@@ -167,6 +169,30 @@ impl<'a> Said<'a> {
     pub(super) fn summarize(&self) {
         self.repeated.summarize(&self.file);
     }
+}
+
+/// The records `--refine=auto` refines, for its note: "none", or their
+/// ids grouped by reason.
+pub(super) fn refine_reasons(
+    estimates: &[(String, super::RecordOutcome)],
+    reasons: &[Option<twostage::RefineReason>],
+) -> String {
+    let mut groups: Vec<(twostage::RefineReason, Vec<&str>)> = Vec::new();
+    for ((id, _), reason) in estimates.iter().zip(reasons) {
+        let Some(reason) = reason else { continue };
+        match groups.iter_mut().find(|(r, _)| r == reason) {
+            Some((_, ids)) => ids.push(id),
+            None => groups.push((*reason, vec![id])),
+        }
+    }
+    if groups.is_empty() {
+        return "none".into();
+    }
+    let parts: Vec<String> = groups
+        .iter()
+        .map(|(reason, ids)| format!("{} ({}): {}", ids.len(), reason.describe(), list_ids(ids)))
+        .collect();
+    format!("experiment(s) {}", parts.join("; "))
 }
 
 /// Experiment ids for a message: the first ten, and how many more.

@@ -168,6 +168,10 @@ pub(super) fn json(
                     if let Some(same) = input_as_trained(c) {
                         object.insert("input_as_trained".into(), same.into());
                     }
+                    object.insert("optima".into(), c.optima.into());
+                    if let Some(ratio) = c.runner_up_ratio {
+                        object.insert("runner_up_over_best".into(), ratio.into());
+                    }
                 }
                 Some(Err(e)) => {
                     object.insert("check_error".into(), e.clone().into());

@@ -49,6 +49,10 @@ pub enum TerminationReason {
     /// Adam's epochs ran until the training's time was up: the best
     /// weights so far are the answer.
     EpochsUntilDeadline,
+    /// A descent among several came where another of the same search
+    /// already stood at no higher cost: from there it would follow the
+    /// other's path, so it stops and the other goes on.
+    Joined,
 }
 
 impl TerminationReason {
@@ -66,6 +70,7 @@ impl TerminationReason {
             Self::EvaluationFailed => "EvaluationFailed",
             Self::Deadline => "Deadline",
             Self::EpochsUntilDeadline => "EpochsUntilDeadline",
+            Self::Joined => "Joined",
         }
     }
 

@@ -183,19 +183,23 @@ class Estimator:
         sims: int = 199,
         seed: int = 0,
         score_from: int = 0,
+        prior_starts: Optional[int] = None,
     ) -> dict[str, Any]:
         """Check one record's estimate against the record, as ``twostage
         estimate --check`` does: the model at ``theta`` (None: this
         estimator's own estimate) simulated without noise on the record's
         input, ranked among ``sims`` of the model's own records there,
-        scored from sample ``score_from`` on (``--score-from``).
+        scored from sample ``score_from`` on (``--score-from``), and its
+        fit judged against the best fit searched from it and from
+        ``prior_starts`` starts over the prior (``--prior-starts``; None:
+        two per parameter and two more).
         The model is the estimator's built-in one, or its model file
         (``model_file`` or ``model_toml``). Returns a dict of the
         command's check columns (``rms``, ``fit_percent`` and
         ``best_fit_percent`` per output, ``check_tail_probability``,
         ``model_consistent``, ``loss_over_best``, ``explained``,
-        ``input_as_trained``) and the noise-free response ``simulated``
-        [N, n_y]."""
+        ``input_as_trained``, ``optima``, ``runner_up_over_best``) and the
+        noise-free response ``simulated`` [N, n_y]."""
         u, y = self._columns(u, y)
         if theta is not None:
             theta = [float(t) for t in np.asarray(theta, dtype=np.float64).ravel()]
@@ -208,6 +212,7 @@ class Estimator:
             sims=sims,
             seed=seed,
             score_from=score_from,
+            prior_starts=prior_starts,
         )
 
     def refine(
@@ -423,6 +428,7 @@ def check(
     seed: int = 0,
     allow_outside_prior: bool = False,
     score_from: int = 0,
+    prior_starts: Optional[int] = None,
 ) -> dict[str, Any]:
     """Check given parameter values (a published value, another tool's
     fit) against one record, as ``twostage estimate --at VALUES --check``
@@ -442,6 +448,7 @@ def check(
         seed=seed,
         allow_outside_prior=allow_outside_prior,
         score_from=score_from,
+        prior_starts=prior_starts,
     )
 
 

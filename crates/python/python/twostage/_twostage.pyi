@@ -60,6 +60,7 @@ class Estimator:
         sims: int = 199,
         seed: int = 0,
         score_from: int = 0,
+        prior_starts: Optional[int] = None,
     ) -> dict[str, Any]: ...
     def refine(
         self,
@@ -82,6 +83,7 @@ def check_values(
     seed: int = 0,
     allow_outside_prior: bool = False,
     score_from: int = 0,
+    prior_starts: Optional[int] = None,
 ) -> dict[str, Any]: ...
 def predict(
     theta: list[float],
