@@ -13,7 +13,14 @@ use crate::refinement::{Descent, Refinement, ResidualModel};
 
 /// Descents whose accepted points come this close (in every coordinate of
 /// the prior's unit box) meet: the one standing higher stops.
-pub const JOIN_DISTANCE: f64 = 1e-3;
+pub const JOIN_DISTANCE: f64 = 1e-2;
+
+/// A start is not descended from when a lower start of its search lies
+/// within this share of the side of its cube of the unit box (a cube of
+/// side `(1/n)^(1/q)` for `n` starts): multi-level single linkage (Rinnooy
+/// Kan and Timmer, 1987, Math. Programming 39), where such a start's
+/// descent most likely ends where the lower one's does (decision 052).
+pub const SCREEN_SHARE: f64 = 0.5;
 
 /// Ends of descents this close (in every coordinate of the prior's unit
 /// box) are one optimum.
@@ -225,11 +232,16 @@ impl<M: ResidualModel> Refinement<M> {
                 })
             })
             .collect();
+        let most = counts.iter().copied().max().unwrap_or(1).max(1);
+        let screen = SCREEN_SHARE * (1.0 / most as f64).powf(1.0 / q.max(1) as f64);
         let mut ended = lockstep::descend_meeting(
             self.model(),
             self.iterations(),
             jobs,
-            Meeting::Join(JOIN_DISTANCE),
+            Meeting::Join {
+                distance: JOIN_DISTANCE,
+                screen: Some(screen),
+            },
         )
         .into_iter();
         let mut first = 0;

@@ -22,7 +22,9 @@ mod refinement;
 mod residual;
 mod uncertainty;
 
-pub use best_fit::{BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SearchStarts, spread_starts};
+pub use best_fit::{
+    BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts, spread_starts,
+};
 pub use check::{
     CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_against,
     check_record, check_with, output_fit, search_best_fits,

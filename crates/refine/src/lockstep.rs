@@ -32,10 +32,46 @@ pub(crate) struct DescentJob<'a> {
 pub(crate) enum Meeting {
     /// Every descent runs to its own end.
     Apart,
-    /// A descent whose accepted point comes within this distance (largest
+    /// A descent whose accepted point comes within `distance` (largest
     /// unit-box coordinate) of another's of its search standing at no
-    /// higher cost stops there ([`TerminationReason::Joined`]).
-    Join(f64),
+    /// higher cost stops there ([`TerminationReason::Joined`]). With
+    /// `screen`, a start that has a lower start of its search within that
+    /// distance is not descended from at all (multi-level single linkage:
+    /// its descent would most likely end where the lower one's does).
+    Join { distance: f64, screen: Option<f64> },
+}
+
+/// The descent of `slots` (of the same group, not `d`) whose start lies
+/// within `radius` of `d`'s and is lower: `d`'s start is screened out.
+fn screened_by<E>(slots: &[Slot<'_, E>], d: usize, radius: f64) -> Option<usize> {
+    let Slot::Running { job, run, .. } = &slots[d] else {
+        return None;
+    };
+    if !run.started() {
+        return None;
+    }
+    let here = run.iterate();
+    slots.iter().enumerate().find_map(|(e, other)| {
+        let Slot::Running {
+            job: other_job,
+            run: other_run,
+            ..
+        } = other
+        else {
+            return None;
+        };
+        if e == d || other_job.group != job.group || !other_run.started() {
+            return None;
+        }
+        let there = other_run.iterate();
+        let near = here
+            .x
+            .iter()
+            .zip(there.x)
+            .all(|(a, b)| (a - b).abs() <= radius);
+        let lower = there.cost.total_cmp(&here.cost).then(e.cmp(&d)).is_lt();
+        (near && lower).then_some(e)
+    })
 }
 
 /// The solver every refinement descent uses. Marquardt's scaling: the
@@ -182,6 +218,7 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
     // The differences never step outside the prior box, where the model is
     // not defined.
     let (zeros, ones) = (vec![0.0; q], vec![1.0; q]);
+    let mut screened = false;
     loop {
         let mut points: Vec<Vec<f64>> = Vec::new();
         let mut records: Vec<&IoData> = Vec::new();
@@ -191,7 +228,7 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             let observing =
                 matches!(&slots[d], Slot::Running { run, .. } if run.need() == Need::Observe);
             let met = match meeting {
-                Meeting::Join(tolerance) if observing => meets(&slots, d, tolerance),
+                Meeting::Join { distance, .. } if observing => meets(&slots, d, distance),
                 _ => None,
             };
             let Slot::Running {
@@ -280,6 +317,25 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             match start_failed {
                 Some(e) => slots[d] = Slot::Failed(e),
                 None => run.evaluated(),
+            }
+        }
+        // Every start is evaluated in the first round: screen them once,
+        // all against the same costs, before any descends.
+        if let Meeting::Join {
+            screen: Some(radius),
+            ..
+        } = meeting
+            && !screened
+        {
+            screened = true;
+            let out: Vec<(usize, usize)> = (0..slots.len())
+                .filter_map(|d| screened_by(&slots, d, radius).map(|e| (d, e)))
+                .collect();
+            for (d, e) in out {
+                if let Slot::Running { run, joined, .. } = &mut slots[d] {
+                    run.abandon(TerminationReason::Joined);
+                    *joined = Some(e);
+                }
             }
         }
     }
