@@ -8,7 +8,7 @@
 use twostage_models::{IoData, Prior, Sampling};
 
 use crate::RefineError;
-use crate::lockstep::{self, DescentJob, Meeting};
+use crate::lockstep::{self, Meeting};
 use crate::refinement::{Descent, Refinement, ResidualModel};
 
 /// Descents whose accepted points come this close (in every coordinate of
@@ -217,31 +217,12 @@ impl<M: ResidualModel> Refinement<M> {
         searches: Vec<(&IoData, Vec<Vec<f64>>)>,
     ) -> Vec<Result<BestFit, M::Error>> {
         let prior = self.model().prior();
-        let q = prior.dim();
-        let counts: Vec<usize> = searches.iter().map(|(_, starts)| starts.len()).collect();
-        let jobs = searches
-            .into_iter()
-            .enumerate()
-            .flat_map(|(group, (record, starts))| {
-                starts.into_iter().map(move |start| DescentJob {
-                    record,
-                    start,
-                    lo: vec![0.0; q],
-                    hi: vec![1.0; q],
-                    group,
-                })
-            })
-            .collect();
-        let most = counts.iter().copied().max().unwrap_or(1).max(1);
-        let screen = SCREEN_SHARE * (1.0 / most as f64).powf(1.0 / q.max(1) as f64);
+        let (jobs, counts) = lockstep::record_jobs(searches, prior.dim(), Some(SCREEN_SHARE));
         let mut ended = lockstep::descend_meeting(
             self.model(),
             self.iterations(),
             jobs,
-            Meeting::Join {
-                distance: JOIN_DISTANCE,
-                screen: Some(screen),
-            },
+            Meeting::Join(JOIN_DISTANCE),
         )
         .into_iter();
         let mut first = 0;

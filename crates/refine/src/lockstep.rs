@@ -24,6 +24,41 @@ pub(crate) struct DescentJob<'a> {
     /// The search the descent belongs to (one per record): descents join
     /// only descents of their own search.
     pub(crate) group: usize,
+    /// With [`Meeting::Join`]: a start that has a lower start of its
+    /// search within this distance (every unit-box coordinate) is not
+    /// descended from at all (multi-level single linkage: its descent
+    /// would most likely end where the lower one's does).
+    pub(crate) screen: Option<f64>,
+}
+
+/// Descents over the whole unit box, one search per record in order, and
+/// how many starts each record has. With `screen_share`, each start is
+/// screened within that share of the side of its record's share of the
+/// unit box (a cube of side `(1/n)^(1/q)` for `n` starts): a record's
+/// descents are the same whatever the records beside it.
+pub(crate) fn record_jobs<'a>(
+    records: Vec<(&'a IoData, Vec<Vec<f64>>)>,
+    q: usize,
+    screen_share: Option<f64>,
+) -> (Vec<DescentJob<'a>>, Vec<usize>) {
+    let counts: Vec<usize> = records.iter().map(|(_, starts)| starts.len()).collect();
+    let jobs = records
+        .into_iter()
+        .enumerate()
+        .flat_map(|(group, (record, starts))| {
+            let n = starts.len().max(1) as f64;
+            let screen = screen_share.map(|share| share * (1.0 / n).powf(1.0 / q.max(1) as f64));
+            starts.into_iter().map(move |start| DescentJob {
+                record,
+                start,
+                lo: vec![0.0; q],
+                hi: vec![1.0; q],
+                group,
+                screen,
+            })
+        })
+        .collect();
+    (jobs, counts)
 }
 
 /// How descents of one search that meet are treated: see
@@ -32,46 +67,11 @@ pub(crate) struct DescentJob<'a> {
 pub(crate) enum Meeting {
     /// Every descent runs to its own end.
     Apart,
-    /// A descent whose accepted point comes within `distance` (largest
+    /// A descent whose accepted point comes within this distance (largest
     /// unit-box coordinate) of another's of its search standing at no
-    /// higher cost stops there ([`TerminationReason::Joined`]). With
-    /// `screen`, a start that has a lower start of its search within that
-    /// distance is not descended from at all (multi-level single linkage:
-    /// its descent would most likely end where the lower one's does).
-    Join { distance: f64, screen: Option<f64> },
-}
-
-/// The descent of `slots` (of the same group, not `d`) whose start lies
-/// within `radius` of `d`'s and is lower: `d`'s start is screened out.
-fn screened_by<E>(slots: &[Slot<'_, E>], d: usize, radius: f64) -> Option<usize> {
-    let Slot::Running { job, run, .. } = &slots[d] else {
-        return None;
-    };
-    if !run.started() {
-        return None;
-    }
-    let here = run.iterate();
-    slots.iter().enumerate().find_map(|(e, other)| {
-        let Slot::Running {
-            job: other_job,
-            run: other_run,
-            ..
-        } = other
-        else {
-            return None;
-        };
-        if e == d || other_job.group != job.group || !other_run.started() {
-            return None;
-        }
-        let there = other_run.iterate();
-        let near = here
-            .x
-            .iter()
-            .zip(there.x)
-            .all(|(a, b)| (a - b).abs() <= radius);
-        let lower = there.cost.total_cmp(&here.cost).then(e.cmp(&d)).is_lt();
-        (near && lower).then_some(e)
-    })
+    /// higher cost stops there ([`TerminationReason::Joined`]); a start
+    /// is screened out as its job's `screen` says.
+    Join(f64),
 }
 
 /// The solver every refinement descent uses. Marquardt's scaling: the
@@ -117,12 +117,16 @@ enum Slot<'a, E> {
 }
 
 /// The descent of `slots` (not `d`, not itself joined, of the same group)
-/// that descent `d`, at its accepted point, joins: within `tolerance` of
-/// it, at no higher cost (the earlier of equals). `None` when none is.
+/// that descent `d`, at its accepted point (or its start), joins: within
+/// `tolerance` of it in every coordinate, at no higher cost (the earlier
+/// of equals). `None` when none is.
 fn meets<E>(slots: &[Slot<'_, E>], d: usize, tolerance: f64) -> Option<usize> {
     let Slot::Running { job, run, .. } = &slots[d] else {
         return None;
     };
+    if !run.started() {
+        return None;
+    }
     let here = run.iterate();
     slots.iter().enumerate().find_map(|(e, other)| {
         let Slot::Running {
@@ -228,7 +232,7 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             let observing =
                 matches!(&slots[d], Slot::Running { run, .. } if run.need() == Need::Observe);
             let met = match meeting {
-                Meeting::Join { distance, .. } if observing => meets(&slots, d, distance),
+                Meeting::Join(distance) if observing => meets(&slots, d, distance),
                 _ => None,
             };
             let Slot::Running {
@@ -321,15 +325,15 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
         }
         // Every start is evaluated in the first round: screen them once,
         // all against the same costs, before any descends.
-        if let Meeting::Join {
-            screen: Some(radius),
-            ..
-        } = meeting
-            && !screened
-        {
+        if matches!(meeting, Meeting::Join(_)) && !screened {
             screened = true;
             let out: Vec<(usize, usize)> = (0..slots.len())
-                .filter_map(|d| screened_by(&slots, d, radius).map(|e| (d, e)))
+                .filter_map(|d| {
+                    let Slot::Running { job, .. } = &slots[d] else {
+                        return None;
+                    };
+                    meets(&slots, d, job.screen?).map(|e| (d, e))
+                })
                 .collect();
             for (d, e) in out {
                 if let Slot::Running { run, joined, .. } = &mut slots[d] {

@@ -155,6 +155,7 @@ impl<M: ResidualModel> Refinement<M> {
                 lo: vec![0.0; q],
                 hi: vec![1.0; q],
                 group: 0,
+                screen: None,
             })
             .collect();
         lockstep::descend_together(&self.model, self.max_iterations, jobs)
@@ -193,21 +194,7 @@ impl<M: ResidualModel> Refinement<M> {
         &self,
         records: Vec<(&IoData, Vec<Vec<f64>>)>,
     ) -> Vec<Result<Vec<Descent>, M::Error>> {
-        let q = self.model.prior().dim();
-        let counts: Vec<usize> = records.iter().map(|(_, starts)| starts.len()).collect();
-        let jobs = records
-            .into_iter()
-            .enumerate()
-            .flat_map(|(group, (record, starts))| {
-                starts.into_iter().map(move |start| DescentJob {
-                    record,
-                    start,
-                    lo: vec![0.0; q],
-                    hi: vec![1.0; q],
-                    group,
-                })
-            })
-            .collect();
+        let (jobs, counts) = lockstep::record_jobs(records, self.model.prior().dim(), None);
         let mut results =
             lockstep::descend_together(&self.model, self.max_iterations, jobs).into_iter();
         counts
@@ -252,6 +239,7 @@ impl<M: ResidualModel> Refinement<M> {
             lo: lo.clone(),
             hi: hi.clone(),
             group: 0,
+            screen: None,
         }];
         if starts == RefineStarts::CentreAndAxes {
             for j in 0..q {
@@ -272,6 +260,7 @@ impl<M: ResidualModel> Refinement<M> {
                         lo: l,
                         hi: h,
                         group: 0,
+                        screen: None,
                     });
                 }
             }
