@@ -219,7 +219,7 @@ pub fn check_with(
     let best = search_best_fits(sim, vec![(record, starts)])
         .pop()
         .unwrap_or_else(|| unreachable!("one search, one result"))?;
-    check(sim, record, theta, &best, plan)
+    check_against(sim, record, theta, &best, plan)
 }
 
 /// [`check_with`] against a best-fit search already made on the record
@@ -236,7 +236,38 @@ pub fn check_against(
     plan: CheckPlan,
 ) -> Result<RecordCheck, RefineError> {
     within_record(record, plan)?;
-    check(sim, record, theta, best, plan)
+    let from = plan.score_from;
+    let simulated = noise_free(
+        sim,
+        theta,
+        record,
+        plan.seed,
+        "the noise-free simulation at the estimate",
+    )?;
+    let (tail_probability, reference_runs) = rank_among_own(sim, record, &simulated, theta, plan)?;
+    let shared = sim
+        .shared_input()
+        .filter(|shared| shared.n_inputs() == record.n_inputs());
+    let input_shared = shared.is_some();
+    let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
+    let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..record.n_outputs())
+        .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
+        .unzip();
+    let (loss_ratio, best_fit_percent) = against_best(sim, record, theta, &simulated, best, plan)?;
+    Ok(RecordCheck {
+        rms,
+        fit_percent,
+        tail_probability,
+        reference_runs,
+        simulated,
+        input_differs_at,
+        input_shared,
+        loss_ratio,
+        best_fit_percent,
+        best_theta: best.best.theta.clone(),
+        optima: best.optima.len(),
+        runner_up_ratio: best.runner_up_ratio(),
+    })
 }
 
 /// The best fit of each record from its starts (see
@@ -313,47 +344,6 @@ pub fn check_record(
         theta,
         CheckPlan::new(noisy, seed, sim.spec().prior().dim()),
     )
-}
-
-fn check(
-    sim: &dyn Simulator,
-    record: &IoData,
-    theta: &[f64],
-    best: &BestFit,
-    plan: CheckPlan,
-) -> Result<RecordCheck, RefineError> {
-    let from = plan.score_from;
-    let simulated = noise_free(
-        sim,
-        theta,
-        record,
-        plan.seed,
-        "the noise-free simulation at the estimate",
-    )?;
-    let (tail_probability, reference_runs) = rank_among_own(sim, record, &simulated, theta, plan)?;
-    let shared = sim
-        .shared_input()
-        .filter(|shared| shared.n_inputs() == record.n_inputs());
-    let input_shared = shared.is_some();
-    let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
-    let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..record.n_outputs())
-        .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
-        .unzip();
-    let (loss_ratio, best_fit_percent) = against_best(sim, record, theta, &simulated, best, plan)?;
-    Ok(RecordCheck {
-        rms,
-        fit_percent,
-        tail_probability,
-        reference_runs,
-        simulated,
-        input_differs_at,
-        input_shared,
-        loss_ratio,
-        best_fit_percent,
-        best_theta: best.best.theta.clone(),
-        optima: best.optima.len(),
-        runner_up_ratio: best.runner_up_ratio(),
-    })
 }
 
 /// The model's noise-free response at `theta` on `record`'s input.
