@@ -49,6 +49,7 @@ CHECK_COLUMNS = [
     "model_consistent",
     "loss_over_best",
     "explained",
+    "optima",
 ]
 
 
@@ -57,6 +58,8 @@ def same_check(from_python, row):
     assert from_python["fit_percent"].tolist() == [row["y_fit_percent"]]
     for name in CHECK_COLUMNS:
         assert from_python[name] == row[name], name
+    # The same best-fit search: the same optima, the same runner-up.
+    assert from_python["runner_up_over_best"] == row.get("runner_up_over_best")
 
 
 @pytest.fixture(scope="module")
