@@ -314,6 +314,14 @@ fn every_mistake_names_its_line_and_key() {
         ),
         (
             "samples = 300",
+            "samples = 1000000000000",
+            Some(11),
+            "signals.samples",
+            "would take 16.0 TB for one record, which is held whole in memory (by each \
+             thread at once): at most 67108864 samples fit the 1.1 GB",
+        ),
+        (
+            "samples = 300",
             "samples = 300\nsample_time = 0.5",
             Some(12),
             "signals.sample_time",

@@ -595,10 +595,28 @@ impl Locator<'_> {
                 "at least one output: an estimator learns from what is measured".into(),
             ));
         }
+        let samples = self.record_length(s.samples.as_ref(), base, whole.clone())?;
+        let signals = inputs.len() + outputs.len();
+        let most = MAX_RECORD_BYTES / (8 * signals);
+        if samples > most {
+            // In f64: samples x signals x 8 can overflow usize.
+            let bytes = samples as f64 * signals as f64 * 8.0;
+            return Err(self.error(
+                s.samples.as_ref().map(Spanned::span).or(whole),
+                "signals.samples",
+                format!(
+                    "{samples} samples of {signals} signal(s) would take {} for one record, \
+                     which is held whole in memory (by each thread at once): at most {most} \
+                     samples fit the {} a record may take; give a shorter record",
+                    readable_bytes(bytes),
+                    readable_bytes(MAX_RECORD_BYTES as f64)
+                ),
+            ));
+        }
         Ok(Signals {
             inputs,
             outputs,
-            samples: self.record_length(s.samples.as_ref(), base, whole)?,
+            samples,
             sample_time: self.sample_time(s.sample_time.as_ref(), base)?,
         })
     }
@@ -646,7 +664,8 @@ impl Locator<'_> {
         }
     }
 
-    /// `[signals] samples`, or the built-in source's record length.
+    /// `[signals] samples`, or the built-in source's record length (at
+    /// least 1; the record's size is checked by [`Self::signals`]).
     fn record_length(
         &self,
         given: Option<&Spanned<i64>>,
@@ -750,5 +769,26 @@ impl Locator<'_> {
             ));
         }
         Ok(presets)
+    }
+}
+
+/// The most one record of a model file may take in memory, its inputs and
+/// outputs as f64: every simulating thread holds at least one whole
+/// record, so a record is refused before anything allocates it.
+const MAX_RECORD_BYTES: usize = 1 << 30;
+
+/// A byte count as people read it: "8.0 TB", "1.1 GB".
+fn readable_bytes(bytes: f64) -> String {
+    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut value = bytes;
+    let mut unit = 0;
+    while value >= 1000.0 && unit + 1 < units.len() {
+        value /= 1000.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{value} bytes")
+    } else {
+        format!("{value:.1} {}", units[unit])
     }
 }
