@@ -210,6 +210,9 @@ impl<M: ResidualModel> Refinement<M> {
     /// // One optimum, the sample mean, which all three descents reach.
     /// assert_eq!((found.optima.len(), found.optima[0].descents), (1, 3));
     /// assert!((found.best.theta[0] - 0.4).abs() < 1e-6 && found.runner_up_ratio().is_none());
+    /// // A record without a start is refused, the others searched.
+    /// let both = fit.best_fits(vec![(&record, vec![]), (&record, vec![vec![0.5]])]);
+    /// assert!(both[0].is_err() && both[1].is_ok());
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn best_fits(
@@ -240,7 +243,11 @@ impl<M: ResidualModel> Refinement<M> {
 
 /// One record's descents (`first` the index of its first among all, as
 /// the joins name them) as its best fit and optima.
-fn summarize<E>(prior: &Prior, ended: Vec<lockstep::Ended<E>>, first: usize) -> Result<BestFit, E> {
+fn summarize<E: From<RefineError>>(
+    prior: &Prior,
+    ended: Vec<lockstep::Ended<E>>,
+    first: usize,
+) -> Result<BestFit, E> {
     let descents = ended.len();
     // Which descent each joined one stopped beside, followed to the one
     // that ran on (a descent joins only one that has not joined).
@@ -262,11 +269,17 @@ fn summarize<E>(prior: &Prior, ended: Vec<lockstep::Ended<E>>, first: usize) -> 
         }
     }
     if ran_on.is_empty() {
-        let d = error.unwrap_or(0);
-        let (result, _) = ended.into_iter().nth(d).unwrap_or_else(|| {
-            unreachable!("a search has a start, and every failed one is an error")
+        // Every start failed (a descent that joined another leads to one
+        // that ran on), or there was none.
+        return Err(match error.and_then(|d| ended.into_iter().nth(d)) {
+            Some((Err(e), _)) => e,
+            _ => RefineError::InvalidSetting {
+                name: "starts",
+                value: "none".into(),
+                reason: "a best-fit search needs at least one start".into(),
+            }
+            .into(),
         });
-        return result.map(|_| unreachable!("no descent ran on, so the first is an error"));
     }
     // Lowest loss first; the earlier start of equals.
     ran_on.sort_by(|a, b| a.1.loss.total_cmp(&b.1.loss).then(a.0.cmp(&b.0)));
