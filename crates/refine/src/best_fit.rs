@@ -3,7 +3,7 @@
 //! of its interval and from points spread over the prior's mass, in one
 //! lockstep, each stopping where it meets another. The check judges an
 //! estimate against it, and the output-error refinement is its best
-//! descent, so that one search serves both (decision 052).
+//! descent, so that one search serves both.
 
 use twostage_models::{IoData, Prior, Sampling};
 
@@ -19,7 +19,7 @@ pub const JOIN_DISTANCE: f64 = 1e-2;
 /// within this share of the side of its cube of the unit box (a cube of
 /// side `(1/n)^(1/q)` for `n` starts): multi-level single linkage (Rinnooy
 /// Kan and Timmer, 1987, Math. Programming 39), where such a start's
-/// descent most likely ends where the lower one's does (decision 052).
+/// descent most likely ends where the lower one's does.
 pub const SCREEN_SHARE: f64 = 0.5;
 
 /// Ends of descents this close (in every coordinate of the prior's unit
@@ -59,7 +59,7 @@ pub struct SearchStarts {
 
 impl SearchStarts {
     /// The starts from the prior a search of `q` parameters takes by
-    /// default: two per parameter and two more (decision 052).
+    /// default: two per parameter and two more.
     pub fn default_from_prior(q: usize) -> usize {
         2 * q + 2
     }

@@ -152,7 +152,7 @@ fn an_estimate_in_a_wrong_basin_is_not_explained() {
 /// from a random draw of the prior reaches (a weak estimator's worst case):
 /// the local check explains every one of them in a wrong basin; the check
 /// that searches the prior explains none. `PLANTS=N` runs N plants
-/// instead of 12 (the measurement of decision 052).
+/// instead of 12, for a larger measurement.
 #[test]
 fn no_wrong_basin_is_explained_over_many_plants() {
     let model = Duffing::new();
