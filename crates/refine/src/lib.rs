@@ -14,6 +14,7 @@
 mod best_fit;
 mod check;
 mod error;
+mod joint;
 mod lockstep;
 mod moments;
 mod output_error;
@@ -30,6 +31,7 @@ pub use check::{
     check_record, check_with, output_fit, search_best_fits,
 };
 pub use error::RefineError;
+pub use joint::{JointEstimate, JointPlan, PooledEstimate, SingleEstimate, pool_estimates};
 pub use moments::WeightedMoments;
 pub use output_error::OutputError;
 pub use policy::{RefinePolicy, RefineReason};

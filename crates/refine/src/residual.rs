@@ -57,6 +57,25 @@ pub trait ResidualModel: Send + Sync {
         record.n_samples()
     }
 
+    /// The lengths of the runs of `record`'s residuals that are each one
+    /// stationary sequence in time (one per output of a record, one per
+    /// output of each record of several), in order, summing to
+    /// [`ResidualModel::n_residuals`]. An interval models each run's
+    /// noise on its own ([`Refinement::uncertainty`]). Default: one run
+    /// per output when the residuals are a multiple of the samples, else
+    /// one.
+    ///
+    /// [`Refinement::uncertainty`]: crate::Refinement::uncertainty
+    fn residual_runs(&self, record: &IoData) -> Vec<usize> {
+        let n = self.n_residuals(record);
+        let samples = record.n_samples();
+        if samples > 0 && n.is_multiple_of(samples) {
+            vec![samples; n / samples]
+        } else {
+            vec![n]
+        }
+    }
+
     /// The residuals of many `(theta, record)` pairs, one result each,
     /// into `residuals[k]` (resized to the pair's
     /// [`ResidualModel::n_residuals`]): what one round of the descents
@@ -99,6 +118,9 @@ impl<E: From<Error> + Send> ResidualModel for Box<dyn ResidualModel<Error = E>> 
     }
     fn n_residuals(&self, record: &IoData) -> usize {
         (**self).n_residuals(record)
+    }
+    fn residual_runs(&self, record: &IoData) -> Vec<usize> {
+        (**self).residual_runs(record)
     }
     fn residuals_batch(
         &self,

@@ -23,6 +23,10 @@ use crate::error::RefineError as Error;
 use crate::lockstep::{to_theta, to_unit};
 use crate::refinement::{Refinement, ResidualModel};
 
+/// An estimate's uncertainty (or why it has none: the record does not
+/// determine some parameter) with its residuals.
+pub(crate) type WithResiduals = (Result<LocalUncertainty, Error>, Vec<f64>);
+
 /// The local uncertainty of an estimate: see [`Refinement::uncertainty`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct LocalUncertainty {
@@ -101,6 +105,18 @@ impl<M: ResidualModel> Refinement<M> {
         &self,
         estimates: &[(&IoData, &[f64])],
     ) -> Vec<Result<LocalUncertainty, M::Error>> {
+        self.uncertainties_and_residuals(estimates)
+            .into_iter()
+            .map(|found| found.and_then(|(local, _)| local.map_err(M::Error::from)))
+            .collect()
+    }
+
+    /// [`Refinement::uncertainties`], each with the residuals at its
+    /// estimate (computed on the way, and kept where the interval fails).
+    pub(crate) fn uncertainties_and_residuals(
+        &self,
+        estimates: &[(&IoData, &[f64])],
+    ) -> Vec<Result<WithResiduals, M::Error>> {
         let model = self.model();
         let prior = model.prior();
         let q = prior.dim();
@@ -144,7 +160,7 @@ impl<M: ResidualModel> Refinement<M> {
             .into_iter()
             .zip(estimates)
             .map(|(prepared, (record, _))| {
-                let (differences, first) = prepared?;
+                let (differences, first) = prepared.map_err(M::Error::from)?;
                 let count = 2 * q + 1;
                 if let Some(e) = results[first..first + count]
                     .iter_mut()
@@ -159,14 +175,15 @@ impl<M: ResidualModel> Refinement<M> {
                 let residuals = mine.remove(0);
                 let n = residuals.len();
                 let columns = differences.jacobian(&mine, n);
-                let samples = record.n_samples().max(1);
-                let length = if n.is_multiple_of(samples) {
-                    samples
-                } else {
-                    n
-                };
-                let (covariance, noise_order) = sandwich(&columns, &residuals, q, length)?;
-                Ok(local_uncertainty(&covariance, &span, noise_order))
+                let mut runs = model.residual_runs(record);
+                if runs.iter().sum::<usize>() != n {
+                    runs = vec![n];
+                }
+                let local =
+                    sandwich(&columns, &residuals, q, &runs).map(|(covariance, noise_order)| {
+                        local_uncertainty(&covariance, &span, noise_order)
+                    });
+                Ok((local, residuals))
             })
             .collect()
     }
@@ -199,21 +216,23 @@ fn local_uncertainty(covariance: &[f64], span: &[f64], noise_order: usize) -> Lo
 }
 
 /// `A^-1 B A^-1` (row-major q x q) for the Jacobian `columns` (each `n`
-/// long) and residuals `r`, whose index `k` is time `k % length` of output
-/// `k / length`; and the largest autoregressive order taken.
+/// long) and residuals `r`, made of consecutive runs of the lengths
+/// `runs`, each a sequence in time; and the largest autoregressive order
+/// taken.
 fn sandwich(
     columns: &[f64],
     r: &[f64],
     q: usize,
-    length: usize,
+    runs: &[usize],
 ) -> Result<(Vec<f64>, usize), Error> {
     let n = r.len();
     let mut meat = vec![0.0; q * q];
     let mut largest_order = 0;
-    // Each output's residuals are their own stationary process; the
-    // outputs' cross-correlation is not modelled.
-    for (block, residuals) in r.chunks(length).enumerate() {
-        let offset = block * length;
+    // Each run's residuals (an output of a record) are their own
+    // stationary process; the runs' cross-correlation is not modelled.
+    let mut offset = 0;
+    for &length in runs {
+        let residuals = &r[offset..offset + length];
         // Order by BIC up to 20: the same model a model file's coloured
         // noise is made of.
         let noise = ArNoise::fit(residuals, 20, q);
@@ -234,6 +253,7 @@ fn sandwich(
                 }
             }
         }
+        offset += length;
     }
     let mut bread = vec![0.0; q * q];
     for a in 0..q {
