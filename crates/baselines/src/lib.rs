@@ -38,6 +38,7 @@ mod car;
 mod error;
 mod filters;
 mod indirect;
+mod joint;
 mod kalman;
 mod particle;
 mod pem;
@@ -54,6 +55,7 @@ pub use filters::{FilterRun, FilterStart, KalmanEstimator, UnscentedParams, run_
 pub use indirect::{
     COMMON_NUMBERS_SEED, IndirectInference, IndirectObjective, WEIGHTING_SEED, Weighting,
 };
+pub use joint::{JointFitter, JointOfRecords};
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
 pub use pem::{BenchmarkPredictor, PredictionError};

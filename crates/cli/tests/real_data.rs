@@ -183,6 +183,70 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "validation RMS: two-stage {ts_rms}, refined {refined_rms}, output error {oe_rms}"
     );
 
+    // Both records of the plant, jointly: one estimate after the
+    // records' own, which predicts the validation record better than the
+    // estimation record's refinement alone (it saw it), and fits both.
+    let joint = dir.join("joint.csv");
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--joint",
+        "--out",
+        path(&joint),
+        path(&estimation),
+        path(&validation),
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("note: joint estimate of 2 of 2 records"),
+        "{stderr}"
+    );
+    let table_text = std::fs::read_to_string(&joint).unwrap();
+    let lines: Vec<Vec<&str>> = table_text.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(lines.len(), 4, "{table_text}");
+    assert!(
+        lines.iter().all(|l| l.len() == lines[0].len()),
+        "{table_text}"
+    );
+    assert_eq!(lines[3][0], "joint");
+    let header = lines[0].clone();
+    let joint_only = dir.join("joint-only.csv");
+    std::fs::write(
+        &joint_only,
+        format!("{}\n{}\n", header.join(","), lines[3].join(",")),
+    )
+    .unwrap();
+    let joint_rms = validation_rms(&model, &joint_only, &validation);
+    assert!(
+        joint_rms < refined_rms,
+        "validation RMS: joint {joint_rms}, refined on the estimation record {refined_rms}"
+    );
+    let fits: Vec<f64> = stderr
+        .split("fit at it: ")
+        .nth(1)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .split(", ")
+        .map(|f| {
+            f.rsplit(' ')
+                .next()
+                .unwrap()
+                .trim_end_matches('%')
+                .parse()
+                .unwrap()
+        })
+        .collect();
+    assert!(
+        fits.len() == 2 && fits.iter().all(|f| *f > 80.0),
+        "{stderr}"
+    );
+
     // The estimator learned the estimation record's input: on the
     // validation record (another input) its estimate is not explained.
     let out = twostage(&[

@@ -22,6 +22,7 @@ use twostage::{
     ChartDir, EstimateWorkspace, NamedModel, RecordsRequest, RunSettings, TrainingRequest,
 };
 
+mod joint;
 mod simulator;
 mod through_model;
 use simulator::{PythonProgress, PythonSimulator};
@@ -355,6 +356,43 @@ impl PyEstimator {
             (sims, seed, score_from, prior_starts),
         )?;
         check_dict(py, &checked)
+    }
+
+    /// One estimate of the plant behind all `records` (pairs `(u, y)`, any
+    /// lengths), as `twostage estimate --joint`: their two-stage
+    /// estimates pooled, then one output-error fit of every record on its
+    /// own input, searched from `prior_starts` starts over the prior of
+    /// `seed` besides them. See `joint::joint_dict` for the keys.
+    #[pyo3(signature = (records, *, model_file=None, model_toml=None, prior_starts=None, seed=0))]
+    fn joint<'py>(
+        &self,
+        py: Python<'py>,
+        records: Vec<(Option<Bound<'py, PyAny>>, Bound<'py, PyAny>)>,
+        model_file: Option<PathBuf>,
+        model_toml: Option<&str>,
+        prior_starts: Option<usize>,
+        seed: u64,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let named = named_model(None, model_file, model_toml)?;
+        let q = self.inner.param_names().len();
+        let search = twostage::refine::SearchStarts {
+            from_prior: prior_starts
+                .unwrap_or_else(|| twostage::refine::SearchStarts::default_from_prior(q)),
+            seed,
+        };
+        let fitter = twostage_baselines::JointFitter::new(&self.inner, named.as_ref(), search)
+            .map_err(|e| PyValueError::new_err(format!("joint: {e}")))?;
+        let shape = self.inner.record_shape();
+        let records: Vec<twostage::models::IoData> = records
+            .iter()
+            .enumerate()
+            .map(|(k, (u, y))| {
+                one_record(u.as_ref(), Some(y), shape.n_inputs, shape.n_outputs)
+                    .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))
+            })
+            .collect::<PyResult<_>>()?;
+        let joint = py.detach(|| joint::of_records(&self.inner, &fitter, &records))?;
+        joint::joint_dict(py, joint)
     }
 
     /// Refine one record's estimate through the model (`twostage estimate

@@ -111,6 +111,21 @@ def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
         assert ours["lower"].tolist() == [refined[k]["theta_lo"]]
         assert ours["upper"].tolist() == [refined[k]["theta_hi"]]
         assert ours["stop"] == refined[k]["refine_stop"]
+    # Both records jointly: the command line's joint row, bit for bit.
+    joint = json.loads(cli("estimate", "--estimator", str(path), "--model-file", str(model),
+                           "--joint", "--format", "json",
+                           str(tmp_path / "records" / "data.csv")))[-1]
+    ours = estimator.joint([(u[0], y[0]), (u[1], y[1])], model_file=model)
+    assert joint["experiment"] == "joint"
+    assert ours["theta"].tolist() == [joint["theta"]]
+    assert ours["lower"].tolist() == [joint["theta_lo"]]
+    assert ours["upper"].tolist() == [joint["theta_hi"]]
+    assert ours["stop"] == joint["refine_stop"]
+    assert ours["fitted"] == [0, 1] and ours["left_out"] == []
+    assert ours["fit_percent"].shape == (2,)
+    # A record the model cannot run (the wrong number of outputs) is refused, named.
+    with pytest.raises(ValueError, match=r"records\[1\]"):
+        estimator.joint([(u[0], y[0]), (u[1], np.hstack([y[1], y[1]]))], model_file=model)
     # The file's text does as well as the file.
     assert estimator.refine(u[0], y[0], model_toml=SHORT)["theta"].tolist() == [refined[0]["theta"]]
     # Without the model file the estimator's model is unknown: said.

@@ -7,7 +7,7 @@ use twostage::models::Simulator;
 use twostage::models::{BuiltinModel, IoData};
 use twostage::{Estimator, ModelProfile, OutputError, SignalNames};
 
-use super::refine::{model_of, refinement};
+use super::refine::{joint_fitter, model_of, refinement};
 use super::{EstimateArgs, Estimated, Method, OUTPUT_ERROR, PriorBox};
 use crate::OrUsage;
 use crate::options::InitialCovariance;
@@ -57,6 +57,9 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
             "--method and --at (an estimator knows its model)",
         );
     }
+    if args.correlation && args.refine.is_none() && !args.joint {
+        return refuse("--correlation", "--refine and --joint");
+    }
     if args.p0.is_some() && !is(&["ekf", "ukf"]) {
         return refuse("--p0", "--method ekf and ukf");
     }
@@ -66,8 +69,12 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
     if args.starts.is_some() && !is(&["pem", "ii", OUTPUT_ERROR]) {
         return refuse("--starts", "--method pem, ii and oe");
     }
-    if args.seed.is_some() && !args.checks() && !is(&["pf", "pem", "ii", OUTPUT_ERROR]) {
-        return refuse("--seed", "--method pf, pem, ii and oe, and --check");
+    if args.seed.is_some()
+        && !args.checks()
+        && !args.joint
+        && !is(&["pf", "pem", "ii", OUTPUT_ERROR])
+    {
+        return refuse("--seed", "--method pf, pem, ii and oe, --check and --joint");
     }
     Ok(())
 }
@@ -84,7 +91,7 @@ fn record_format(spec: &twostage::models::ModelSpec) -> csv_records::RecordForma
 }
 
 /// An estimate that is nothing but its parameters.
-fn bare(theta: Vec<f64>) -> Estimated {
+pub(super) fn bare(theta: Vec<f64>) -> Estimated {
     Estimated {
         theta,
         widths: None,
@@ -116,6 +123,7 @@ fn output_error_method(args: &EstimateArgs) -> Result<Chosen> {
         checker,
         refiner: None,
         prior_box: None,
+        joint: None,
         method: Box::new(move |_, record: &IoData| {
             let best = oe
                 .descents(record)
@@ -168,6 +176,7 @@ fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<Chosen> {
         checker: Some(simulator),
         refiner: None,
         prior_box: None,
+        joint: None,
         method: Box::new(move |id, _| values(id).map(bare)),
     })
 }
@@ -203,6 +212,8 @@ pub(super) struct Chosen {
     pub(super) refiner: Option<twostage_baselines::EstimateRefiner>,
     /// The prior's box, which the intervals stay inside.
     pub(super) prior_box: Option<PriorBox>,
+    /// With --joint: the joint fit of every record.
+    pub(super) joint: Option<twostage_baselines::JointFitter>,
 }
 
 /// The method chosen on the command line, ready to estimate records.
@@ -229,6 +240,13 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         } else {
             None
         };
+        let joint = if args.joint {
+            Some(joint_fitter(&estimator, args)?)
+        } else {
+            None
+        };
+        // The joint fit, as a refinement, fits records of any length.
+        let refines = refines || args.joint;
         let prior_box = Some((estimator.lower().to_vec(), estimator.upper().to_vec()));
         return Ok(Chosen {
             names,
@@ -237,6 +255,7 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
             checker,
             refiner,
             prior_box,
+            joint,
             method: Box::new(move |_, record: &IoData| {
                 // The two-stage estimate keeps the estimator's length; a
                 // refinement fits a record of any length, from it.
@@ -299,6 +318,7 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         checker: check_model(args)?,
         refiner: None,
         prior_box: None,
+        joint: None,
         method: Box::new(move |_, record: &IoData| {
             estimator
                 .estimate(record)

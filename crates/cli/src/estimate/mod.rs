@@ -93,7 +93,19 @@ pub struct EstimateArgs {
         allow_hyphen_values = true
     )]
     refine_below_fit: Option<f64>,
-    /// With --refine: add the refined estimate's parameter correlations,
+    /// With --estimator: one estimate of the plant behind every record of
+    /// the files, written after the records' own as experiment `joint`:
+    /// their two-stage estimates pooled by their intervals, then one
+    /// output-error fit of all of them, each simulated on its own input
+    /// (any length), searched from the pooled estimate, each record's
+    /// estimate and the prior (--prior-starts), with its own interval in
+    /// _lo/_hi. Stderr names the records fitted (with their fit there),
+    /// left out (the model cannot run them) and disagreeing (their
+    /// estimates lie beyond their intervals from the others'). Needs the
+    /// model: an estimator's built-in one, or --model-file.
+    #[arg(long, requires = "estimator", conflicts_with_all = ["refine", "check"])]
+    joint: bool,
+    /// With --refine or --joint: add the estimate's parameter correlations,
     /// a column `corr_A_B` per pair of parameters (empty where the
     /// refined estimate has no interval).
     #[arg(long, requires = "refine")]
@@ -255,6 +267,8 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     };
     let mut rows: Vec<(String, Estimated)> = Vec::new();
     let mut failed = 0;
+    // With --joint: every estimated record, by file and experiment.
+    let mut plant: Vec<(String, IoData, usize)> = Vec::new();
     for path in &args.data {
         let mut estimates = session.estimate_file(path)?;
         session.check_and_refine(path, &mut estimates);
@@ -276,6 +290,10 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         )?;
                     }
                     said.check(&id, &estimated);
+                    if chosen.joint.is_some() {
+                        let name = format!("{}: experiment {id}", path.display());
+                        plant.push((name, record, rows.len()));
+                    }
                     rows.push((id, estimated));
                 }
                 Err(problem) => {
@@ -285,6 +303,12 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             }
         }
         said.summarize();
+    }
+    if let Some(fitter) = &chosen.joint
+        && !plant.is_empty()
+    {
+        let joint = joint_of_plant(fitter, &plant, &rows, &session.bars);
+        rows.push(("joint".into(), joint));
     }
     let outcome = Outcome {
         estimated: rows.len(),
@@ -559,6 +583,57 @@ fn refine_together(
             }
             Err(why) => e.refined = Some(Err(why)),
         }
+    }
+}
+
+/// The joint estimate of every record of `plant` (its name, the record
+/// and its row among `rows`), said on stderr record by record; a joint
+/// fit that fails keeps the pooled two-stage estimate, and says why.
+fn joint_of_plant(
+    fitter: &twostage_baselines::JointFitter,
+    plant: &[(String, IoData, usize)],
+    rows: &[(String, Estimated)],
+    bars: &crate::bars::Bars,
+) -> Estimated {
+    let items: Vec<twostage_baselines::ToRefine<'_>> = plant
+        .iter()
+        .map(|(_, record, row)| {
+            let e = &rows[*row].1;
+            // An estimate out of the estimator's distribution has no
+            // interval to weigh it by: it only starts the search.
+            let widths = e.widths.as_deref().filter(|_| !e.out_of_distribution());
+            (record, e.theta.as_slice(), widths)
+        })
+        .collect();
+    bars.begin_step("fitting jointly", 1, "plants");
+    let found = fitter.fit(&items);
+    bars.advance_step(1);
+    bars.end_step();
+    let joint = match found {
+        Ok(joint) => joint,
+        Err(why) => {
+            eprintln!(
+                "error: the joint fit of {} records failed: {why}",
+                plant.len()
+            );
+            return Estimated {
+                refined: Some(Err(why)),
+                ..methods::bare(Vec::new())
+            };
+        }
+    };
+    said::joint(plant, &joint);
+    let q = joint.theta.len();
+    let (widths, why) = match joint.half_widths {
+        Ok(w) => (w, None),
+        Err(why) => (vec![f64::NAN; q], Some(why)),
+    };
+    Estimated {
+        widths: Some(widths),
+        refined: Some(Ok(Some(joint.stop))),
+        interval_failure: why,
+        correlation: joint.correlation,
+        ..methods::bare(joint.theta)
     }
 }
 

@@ -33,3 +33,14 @@ pub(super) fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box
     twostage_baselines::estimator_model(estimator, model_file(args)?.as_ref())
         .usage_context("--check simulates the model")
 }
+
+/// The joint fit of an estimator's records (see
+/// [`twostage_baselines::JointFitter::new`]).
+pub(super) fn joint_fitter(
+    estimator: &Estimator,
+    args: &EstimateArgs,
+) -> Result<twostage_baselines::JointFitter> {
+    let q = estimator.param_names().len();
+    twostage_baselines::JointFitter::new(estimator, model_file(args)?.as_ref(), args.search(q))
+        .usage_context("--joint")
+}

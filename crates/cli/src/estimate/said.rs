@@ -6,6 +6,8 @@ use std::path::Path;
 
 use twostage::RecordCheck;
 use twostage::fit::TerminationReason;
+use twostage::models::IoData;
+use twostage_baselines::JointOfRecords;
 
 use super::columns::list;
 use super::{Estimated, RecordOutcome};
@@ -245,4 +247,44 @@ impl RepeatedFailures {
             );
         }
     }
+}
+
+/// What the joint fit of `plant`'s records (by name) did with each: the
+/// records left out and why, those whose estimates disagree, and each
+/// fitted record's fit at the joint estimate.
+pub(super) fn joint(plant: &[(String, IoData, usize)], joint: &JointOfRecords) {
+    let name = |i: usize| plant[i].0.as_str();
+    for (i, why) in &joint.left_out {
+        eprintln!(
+            "warning: {}: left out of the joint fit: the model does not run on it: {why}",
+            name(*i)
+        );
+    }
+    if !joint.disagreeing.is_empty() {
+        let names: Vec<&str> = joint.disagreeing.iter().map(|&i| name(i)).collect();
+        eprintln!(
+            "warning: the two-stage estimates of {} lie beyond their intervals from the \
+             others': the records may not be of one plant (or one condition); they are \
+             fitted with the rest, and the joint estimate is a compromise between them",
+            names.join("; ")
+        );
+    }
+    let fits: Vec<String> = joint
+        .fitted
+        .iter()
+        .map(|(i, fit)| format!("{} {fit:.1}%", name(*i)))
+        .collect();
+    eprintln!(
+        "note: joint estimate of {} of {} records ({} found{}); fit at it: {}",
+        joint.fitted.len(),
+        plant.len(),
+        match joint.optima {
+            1 => "1 optimum".to_string(),
+            n => format!("{n} optima"),
+        },
+        joint.runner_up_ratio.map_or_else(String::new, |r| format!(
+            ", the runner-up's loss {r:.3} times"
+        )),
+        fits.join(", ")
+    );
 }

@@ -83,15 +83,25 @@ pub(super) fn csv(
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
         fields.extend(e.theta.iter().map(|t| format_f64(*t)));
-        if let Some((lo, hi)) = interval(e, prior_box) {
-            for (lo, hi) in lo.iter().zip(&hi) {
-                fields.push(format_f64(*lo));
-                fields.push(format_f64(*hi));
+        // A row without a column's value (the joint row has no feature
+        // distance) leaves it empty, so that every row has every column.
+        match interval(e, prior_box) {
+            Some((lo, hi)) => {
+                for (lo, hi) in lo.iter().zip(&hi) {
+                    fields.push(format_f64(*lo));
+                    fields.push(format_f64(*hi));
+                }
             }
+            None if with_intervals => fields.extend(vec![String::new(); 2 * names.len()]),
+            None => {}
         }
-        if let Some((d, _)) = e.distance {
-            fields.push(format_f64(d));
-            fields.push(e.out_of_distribution().to_string());
+        match e.distance {
+            Some((d, _)) => {
+                fields.push(format_f64(d));
+                fields.push(e.out_of_distribution().to_string());
+            }
+            None if with_distance => fields.extend([String::new(), String::new()]),
+            None => {}
         }
         if with_floored {
             fields.push(e.floored.as_ref().map_or(0, Vec::len).to_string());

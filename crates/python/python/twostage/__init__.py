@@ -244,6 +244,42 @@ class Estimator:
         refined["lower"], refined["upper"] = self._interval(refined["theta"], widths)
         return refined
 
+    def joint(
+        self,
+        records: list,
+        *,
+        model_file: _Path = None,
+        model_toml: Optional[str] = None,
+        prior_starts: Optional[int] = None,
+        seed: int = 0,
+    ) -> dict[str, Any]:
+        """One estimate of the plant behind all ``records`` (a list of
+        ``(u, y)`` pairs, each of any length on its own input), as
+        ``twostage estimate --joint`` gives it: the records' two-stage
+        estimates pooled by their intervals, then one output-error fit of
+        every record, searched from the pooled estimate, each record's
+        estimate and ``prior_starts`` starts over the prior (default two
+        per parameter and two more, of ``seed``). Returns a dict:
+        ``theta``; ``lower`` and ``upper``, its interval at the estimator's
+        level (None, with ``interval_error`` saying why); ``correlation``;
+        ``stop``; ``optima`` and ``runner_up_over_best`` of the search;
+        ``pooled``; ``fitted``, the indices of the records fitted, with
+        ``fit_percent`` at the joint estimate; ``left_out``, pairs of an
+        index and why the model could not run it; ``disagreeing``, the
+        indices of records whose estimates lie beyond their intervals from
+        the others'. Raises ValueError when no record can be fitted."""
+        pairs = [self._columns(u, y) for u, y in records]
+        joint = self._native.joint(
+            pairs,
+            model_file=_path(model_file),
+            model_toml=model_toml,
+            prior_starts=prior_starts,
+            seed=seed,
+        )
+        widths = joint.pop("half_widths")
+        joint["lower"], joint["upper"] = self._interval(joint["theta"], widths)
+        return joint
+
     def _interval(self, theta, widths):
         """``theta +- widths`` inside the prior's box, as the command line
         writes it (``twostage::interval_in_box``): a parameter's interval

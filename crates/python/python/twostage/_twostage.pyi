@@ -70,6 +70,15 @@ class Estimator:
         model_file: Optional[str] = None,
         model_toml: Optional[str] = None,
     ) -> dict[str, Any]: ...
+    def joint(
+        self,
+        records: list[tuple[Optional[_Array], _Array]],
+        *,
+        model_file: Optional[str] = None,
+        model_toml: Optional[str] = None,
+        prior_starts: Optional[int] = None,
+        seed: int = 0,
+    ) -> dict[str, Any]: ...
 
 def check_values(
     theta: list[float],

@@ -1,0 +1,168 @@
+//! One estimate of a plant from several of its records through an
+//! estimator and its model, as the command line's `estimate --joint` and
+//! the Python package's `Estimator.joint` both give it: the records'
+//! two-stage estimates pooled, then one output-error fit of every record
+//! on its own input ([`twostage::refine::JointEstimate`]).
+
+use twostage::fit::TerminationReason;
+use twostage::models::{IoData, Simulator};
+use twostage::refine::{JointPlan, SearchStarts, SingleEstimate};
+use twostage::{Estimator, NamedModel, OutputError, Refinement};
+
+use crate::error::{BaselineError, Result};
+use crate::refiner::{ToRefine, estimator_model};
+
+/// The joint estimate of the records handed to [`JointFitter::fit`], each
+/// record named by its place among them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointOfRecords {
+    /// The joint estimate.
+    pub theta: Vec<f64>,
+    /// Its interval half-widths at the estimator's level, or why it has
+    /// none (the records do not determine some parameter).
+    pub half_widths: std::result::Result<Vec<f64>, String>,
+    /// Its correlation matrix (row-major q x q), where it has an interval.
+    pub correlation: Option<Vec<f64>>,
+    /// Why the best descent stopped.
+    pub stop: TerminationReason,
+    /// The distinct optima of the summed loss the search ended in.
+    pub optima: usize,
+    /// The second-best optimum's loss over the best's, with two or more.
+    pub runner_up_ratio: Option<f64>,
+    /// The two-stage estimates pooled by their intervals: the search's
+    /// first start.
+    pub pooled: Vec<f64>,
+    /// The records fitted, by place, each with its fit (percent, its
+    /// outputs' normalized fit averaged in squares) at the joint estimate.
+    pub fitted: Vec<(usize, f64)>,
+    /// The records left out, by place, with why.
+    pub left_out: Vec<(usize, String)>,
+    /// The records whose two-stage estimate disagrees with the others'
+    /// beyond its interval ([`twostage::refine::PooledEstimate`]), by
+    /// place.
+    pub disagreeing: Vec<usize>,
+}
+
+/// Joint estimates of an estimator's plant: see [`JointFitter::new`].
+pub struct JointFitter {
+    fit: Refinement<OutputError<Box<dyn Simulator>>>,
+    plan: JointPlan,
+}
+
+impl JointFitter {
+    /// Joint estimates through `estimator`'s model (`model_file`, else its
+    /// built-in model) by output error, starting from `search`'s starts
+    /// over the prior besides the records' own estimates, the interval at
+    /// the estimator's level (90% without intervals).
+    ///
+    /// ```
+    /// use twostage::TwoStage;
+    /// use twostage::models::{Benchmark, Simulator, experiment_rng};
+    /// use twostage::refine::SearchStarts;
+    /// use twostage_baselines::JointFitter;
+    /// let model = Benchmark::new();
+    /// let estimator = TwoStage::builder(&model)
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
+    /// let records: Vec<_> = (0..3).map(|i| {
+    ///     let mut record = model.spec().new_record();
+    ///     model.simulate(&[0.3], &mut experiment_rng(8, i), &mut record).map(|_| record)
+    /// }).collect::<Result<_, _>>()?;
+    /// let singles: Vec<_> = records.iter()
+    ///     .map(|r| estimator.assess(r).map(|a| (a.theta.clone(), a.interval_half_widths().map(<[f64]>::to_vec))))
+    ///     .collect::<Result<_, _>>()?;
+    /// let items: Vec<_> = records.iter().zip(&singles)
+    ///     .map(|(r, (t, w))| (r, t.as_slice(), w.as_deref())).collect();
+    /// let fitter = JointFitter::new(&estimator, None, SearchStarts { from_prior: 4, seed: 0 })?;
+    /// let joint = fitter.fit(&items)?;
+    /// assert_eq!(joint.fitted.len(), 3);
+    /// assert!((joint.theta[0] - 0.3).abs() < 0.2);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A model file of another model than the estimator's, an estimator of
+    /// a model file without it, or a model that cannot run without noise
+    /// on a given input.
+    pub fn new(
+        estimator: &Estimator,
+        model_file: Option<&NamedModel>,
+        search: SearchStarts,
+    ) -> Result<Self> {
+        let simulator = estimator_model(estimator, model_file)?;
+        let fit =
+            OutputError::new(simulator).map_err(|e| BaselineError::TwoStage(Box::new(e.into())))?;
+        let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
+        Ok(Self {
+            fit: Refinement::new(fit),
+            plan: JointPlan { search, alpha },
+        })
+    }
+
+    /// The simulator the fit runs.
+    pub fn simulator(&self) -> &dyn Simulator {
+        self.fit.model().simulator().as_ref()
+    }
+
+    /// The joint estimate of `items` (each record with its two-stage
+    /// estimate and, where it has one, its interval).
+    ///
+    /// # Errors
+    /// No record, or a model that runs on none of them (the first
+    /// record's reason).
+    pub fn fit(&self, items: &[ToRefine<'_>]) -> std::result::Result<JointOfRecords, String> {
+        let singles: Vec<SingleEstimate<'_>> = items
+            .iter()
+            .map(|(record, theta, half_widths)| SingleEstimate {
+                record,
+                theta,
+                half_widths: *half_widths,
+            })
+            .collect();
+        let joint = self
+            .fit
+            .joint_estimate(&singles, self.plan)
+            .map_err(|e| e.to_string())?;
+        let fits: Vec<f64> = match &joint.record_losses {
+            Some(losses) => joint
+                .fitted
+                .iter()
+                .zip(losses)
+                .map(|(&i, loss)| normalized_fit(items[i].0, *loss))
+                .collect(),
+            None => vec![f64::NAN; joint.fitted.len()],
+        };
+        Ok(JointOfRecords {
+            half_widths: joint
+                .uncertainty
+                .as_ref()
+                .map(|u| u.half_widths(self.plan.alpha))
+                .map_err(ToString::to_string),
+            correlation: joint
+                .uncertainty
+                .as_ref()
+                .ok()
+                .map(|u| u.correlation.clone()),
+            stop: joint.search.best.stop,
+            optima: joint.search.optima.len(),
+            runner_up_ratio: joint.search.runner_up_ratio(),
+            theta: joint.theta,
+            pooled: joint.pooled.theta,
+            fitted: joint.fitted.into_iter().zip(fits).collect(),
+            left_out: joint
+                .left_out
+                .into_iter()
+                .map(|(i, e)| (i, e.to_string()))
+                .collect(),
+            disagreeing: joint.pooled.disagreeing,
+        })
+    }
+}
+
+/// The normalized fit (percent) of a record whose output errors, each
+/// output scaled by its own spread, sum in squares to `loss`: the
+/// outputs' `100 (1 - rms)` averaged in squares.
+fn normalized_fit(record: &IoData, loss: f64) -> f64 {
+    let n = (record.n_samples() * record.n_outputs()).max(1) as f64;
+    100.0 * (1.0 - (loss / n).sqrt())
+}

@@ -1,0 +1,91 @@
+//! `Estimator.joint`: one estimate of a plant from several records, as the
+//! command line's `estimate --joint` gives it.
+
+use numpy::IntoPyArray;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use rayon::prelude::*;
+use twostage::models::IoData;
+use twostage_baselines::{JointFitter, JointOfRecords};
+
+/// The two-stage estimate of each record (an estimate out of the
+/// estimator's distribution without its interval, as the command line
+/// pools it), then the joint fit of all of them.
+pub(crate) fn of_records(
+    estimator: &twostage::Estimator,
+    fitter: &JointFitter,
+    records: &[IoData],
+) -> PyResult<JointOfRecords> {
+    let singles: Vec<(Vec<f64>, Option<Vec<f64>>)> = records
+        .par_iter()
+        .enumerate()
+        .map(|(k, record)| {
+            let a = estimator
+                .assess(record)
+                .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))?;
+            let out = a
+                .feature_distance
+                .zip(a.distance_threshold)
+                .is_some_and(|(d, t)| d > t);
+            let widths = a
+                .interval_half_widths()
+                .filter(|_| !out)
+                .map(<[f64]>::to_vec);
+            Ok((a.theta, widths))
+        })
+        .collect::<PyResult<_>>()?;
+    let items: Vec<twostage_baselines::ToRefine<'_>> = records
+        .iter()
+        .zip(&singles)
+        .map(|(record, (theta, widths))| (record, theta.as_slice(), widths.as_deref()))
+        .collect();
+    fitter
+        .fit(&items)
+        .map_err(|e| PyValueError::new_err(format!("the joint fit failed: {e}")))
+}
+
+/// The dict `Estimator.joint` returns: `theta`; `half_widths` (None, with
+/// `interval_error` saying why, where the records do not determine a
+/// parameter); `correlation` [q, q] or None; `stop`; `optima`;
+/// `runner_up_over_best` (None with one optimum); `pooled`, the two-stage
+/// estimates pooled; `fitted`, the indices of the records fitted, and
+/// `fit_percent`, each one's fit at the joint estimate; `left_out`, pairs
+/// of an index and why; `disagreeing`, the indices of records whose
+/// two-stage estimates lie beyond their intervals from the others'.
+pub(crate) fn joint_dict(
+    py: Python<'_>,
+    joint: JointOfRecords,
+) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
+    let q = joint.theta.len();
+    let dict = pyo3::types::PyDict::new(py);
+    dict.set_item("theta", joint.theta.into_pyarray(py))?;
+    match joint.half_widths {
+        Ok(w) => {
+            dict.set_item("half_widths", w.into_pyarray(py))?;
+            dict.set_item("interval_error", py.None())?;
+        }
+        Err(e) => {
+            dict.set_item("half_widths", py.None())?;
+            dict.set_item("interval_error", e)?;
+        }
+    }
+    match joint.correlation {
+        Some(r) => dict.set_item(
+            "correlation",
+            ndarray::Array2::from_shape_vec((q, q), r)
+                .map_err(|e| PyValueError::new_err(e.to_string()))?
+                .into_pyarray(py),
+        )?,
+        None => dict.set_item("correlation", py.None())?,
+    }
+    dict.set_item("stop", joint.stop.name())?;
+    dict.set_item("optima", joint.optima)?;
+    dict.set_item("runner_up_over_best", joint.runner_up_ratio)?;
+    dict.set_item("pooled", joint.pooled.into_pyarray(py))?;
+    let (fitted, fits): (Vec<usize>, Vec<f64>) = joint.fitted.into_iter().unzip();
+    dict.set_item("fitted", fitted)?;
+    dict.set_item("fit_percent", fits.into_pyarray(py))?;
+    dict.set_item("left_out", joint.left_out)?;
+    dict.set_item("disagreeing", joint.disagreeing)?;
+    Ok(dict)
+}
