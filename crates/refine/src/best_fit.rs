@@ -1,7 +1,8 @@
 //! The best fit a model reaches on a record anywhere in its prior, not
 //! only beside an estimate: descents from the estimate, from the corners
 //! of its interval and from points spread over the prior's mass, in one
-//! lockstep, each stopping where it meets another. The check judges an
+//! lockstep, each stopping where it meets another or once it stands far
+//! above the best and makes little progress. The check judges an
 //! estimate against it, and the output-error refinement is its best
 //! descent, so that one search serves both.
 
@@ -10,6 +11,7 @@ use twostage_models::{IoData, Prior, Sampling};
 use crate::RefineError;
 use crate::lockstep::{self, Meeting};
 use crate::refinement::{Descent, Refinement, ResidualModel};
+use twostage_fit::TerminationReason;
 
 /// Descents whose accepted points come this close (in every coordinate of
 /// the prior's unit box) meet: the one standing higher stops.
@@ -164,7 +166,8 @@ pub struct Optimum {
 pub struct BestFit {
     /// The lowest descent: its end is the best fit.
     pub best: Descent,
-    /// The distinct optima the descents ended in, lowest loss first.
+    /// The distinct optima the descents ended in, lowest loss first (a
+    /// descent outpaced on its way is not counted: it ended on a slope).
     pub optima: Vec<Optimum>,
     /// The descents run.
     pub descents: usize,
@@ -187,7 +190,10 @@ impl<M: ResidualModel> Refinement<M> {
     /// The best fit of each record from its `starts` (see
     /// [`SearchStarts::starts`]): every record's descents in one lockstep,
     /// a descent stopping where it meets another of its record standing
-    /// no higher ([`JOIN_DISTANCE`]); the ends grouped into optima
+    /// no higher ([`JOIN_DISTANCE`]), or where it stands above ten times
+    /// the search's lowest loss without halving its own in five steps
+    /// ([`TerminationReason::Outpaced`]; never the descent from the first
+    /// start); the ends grouped into optima
     /// ([`SAME_OPTIMUM`]). A start the model cannot evaluate leaves the
     /// others; a record whose every start fails gives the first failure.
     ///
@@ -262,7 +268,10 @@ fn summarize<E: From<RefineError>>(
     let mut ran_on: Vec<(usize, &Descent)> = Vec::new();
     for (d, (result, joined)) in ended.iter().enumerate() {
         match result {
-            Ok(descent) if joined.is_none() => ran_on.push((d, descent)),
+            // An outpaced descent stopped on a slope, not at an optimum.
+            Ok(descent) if joined.is_none() && descent.stop != TerminationReason::Outpaced => {
+                ran_on.push((d, descent));
+            }
             Ok(_) => {}
             Err(_) if error.is_none() => error = Some(d),
             Err(_) => {}

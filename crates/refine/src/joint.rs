@@ -43,19 +43,20 @@ pub struct JointPlan {
 /// The single estimates pooled: see [`pool_estimates`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PooledEstimate {
-    /// Per parameter, the single estimates' mean weighted by the inverse
-    /// square of their half-widths (their plain mean where some estimate
-    /// has no interval).
+    /// Per parameter, the mean of the single estimates that have an
+    /// interval, weighted by the inverse square of their half-widths (the
+    /// plain mean of all where none has one).
     pub theta: Vec<f64>,
     /// The pooled half-widths, `(sum 1 / w_i^2)^(-1/2)`, as if the single
     /// estimates' errors were independent (`None` without intervals): the
     /// spread of the search's first starts, not a stated interval.
     pub half_widths: Option<Vec<f64>>,
     /// The records whose single estimate lies beyond its interval from
-    /// the single estimates' weighted median (a centre that a minority of
-    /// disagreeing records does not move), the interval widened to hold
-    /// for every parameter of every record at once (Bonferroni: the level
-    /// `1 - alpha / (q n)`).
+    /// the weighted median of the estimates with intervals (a centre that
+    /// a minority of disagreeing records does not move), the interval
+    /// widened to hold for every parameter of every record at once
+    /// (Bonferroni: the level `1 - alpha / (q n)`); of two, both when
+    /// they lie beyond their intervals combined from each other.
     pub disagreeing: Vec<usize>,
 }
 
@@ -113,13 +114,19 @@ pub fn pool_estimates(
             }
         }
     }
-    let n = singles.len() as f64;
-    // Weights from the intervals only where every estimate has a usable one.
-    let widths: Option<Vec<&[f64]>> = singles
+    // Only estimates with a usable interval weigh in, and only they can
+    // disagree: an estimate without one (out of the estimator's
+    // distribution, say) is a start of the search, nothing more.
+    let sure: Vec<(usize, &[f64], &[f64])> = singles
         .iter()
-        .map(|(_, w)| w.filter(|w| w.iter().all(|v| v.is_finite() && *v > 0.0)))
+        .enumerate()
+        .filter_map(|(i, (t, w))| {
+            let w = w.filter(|w| w.iter().all(|v| v.is_finite() && *v > 0.0))?;
+            Some((i, *t, w))
+        })
         .collect();
-    let Some(widths) = widths else {
+    if sure.is_empty() {
+        let n = singles.len() as f64;
         let theta = (0..q)
             .map(|j| singles.iter().map(|(t, _)| t[j]).sum::<f64>() / n)
             .collect();
@@ -128,38 +135,37 @@ pub fn pool_estimates(
             half_widths: None,
             disagreeing: Vec::new(),
         });
-    };
+    }
     let mut theta = vec![0.0; q];
     let mut pooled_widths = vec![0.0; q];
     for j in 0..q {
-        let precision: f64 = widths.iter().map(|w| 1.0 / (w[j] * w[j])).sum();
-        let weighted: f64 = singles
-            .iter()
-            .zip(&widths)
-            .map(|((t, _), w)| t[j] / (w[j] * w[j]))
-            .sum();
+        let precision: f64 = sure.iter().map(|(_, _, w)| 1.0 / (w[j] * w[j])).sum();
+        let weighted: f64 = sure.iter().map(|(_, t, w)| t[j] / (w[j] * w[j])).sum();
         theta[j] = weighted / precision;
         pooled_widths[j] = 1.0 / precision.sqrt();
     }
+    let n = sure.len() as f64;
     let widen = standard_normal_quantile(1.0 - alpha / (2.0 * q as f64 * n))
         / standard_normal_quantile(1.0 - alpha / 2.0);
-    let centre: Vec<f64> = (0..q)
-        .map(|j| {
-            let values: Vec<(f64, f64)> = singles
-                .iter()
-                .zip(&widths)
-                .map(|((t, _), w)| (t[j], 1.0 / (w[j] * w[j])))
-                .collect();
-            weighted_median(values)
-        })
-        .collect();
-    let disagreeing = singles
-        .iter()
-        .zip(&widths)
-        .enumerate()
-        .filter(|(_, ((t, _), w))| (0..q).any(|j| (t[j] - centre[j]).abs() > widen * w[j]))
-        .map(|(i, _)| i)
-        .collect();
+    let disagreeing = if let [(a, ta, wa), (b, tb, wb)] = sure[..] {
+        // Two cannot say which of them is off: both are named.
+        let apart = (0..q).any(|j| (ta[j] - tb[j]).abs() > widen * wa[j].hypot(wb[j]));
+        if apart { vec![a, b] } else { Vec::new() }
+    } else {
+        let centre: Vec<f64> = (0..q)
+            .map(|j| {
+                weighted_median(
+                    sure.iter()
+                        .map(|(_, t, w)| (t[j], 1.0 / (w[j] * w[j])))
+                        .collect(),
+                )
+            })
+            .collect();
+        sure.iter()
+            .filter(|(_, t, w)| (0..q).any(|j| (t[j] - centre[j]).abs() > widen * w[j]))
+            .map(|(i, _, _)| *i)
+            .collect()
+    };
     Ok(PooledEstimate {
         theta,
         half_widths: Some(pooled_widths),

@@ -70,8 +70,36 @@ pub(crate) enum Meeting {
     /// A descent whose accepted point comes within this distance (largest
     /// unit-box coordinate) of another's of its search standing at no
     /// higher cost stops there ([`TerminationReason::Joined`]); a start
-    /// is screened out as its job's `screen` says.
+    /// is screened out as its job's `screen` says; a descent that is
+    /// outpaced ([`Outpacing`]) stops too.
     Join(f64),
+}
+
+/// When a descent of a search stops because it will not catch up with
+/// the search's best ([`TerminationReason::Outpaced`]): after `iterations`
+/// accepted steps its loss stands above `loss_over_best` times the lowest
+/// loss any descent of its search stands at, and it did not fall by a
+/// factor `progress` over its last `iterations` steps. A search's first
+/// descent (from the estimate) is never outpaced: the search is never
+/// worse than a refinement from the estimate alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Outpacing {
+    pub(crate) loss_over_best: f64,
+    pub(crate) iterations: usize,
+    pub(crate) progress: f64,
+}
+
+impl Outpacing {
+    /// Whether a descent whose accepted losses so far are `losses` (oldest
+    /// first) is outpaced by a search whose best stands at `best`.
+    fn outpaced(&self, losses: &[f64], best: f64) -> bool {
+        let Some(&now) = losses.last() else {
+            return false;
+        };
+        losses.len() > self.iterations
+            && now > self.loss_over_best * best
+            && losses[losses.len() - 1 - self.iterations] < self.progress * now
+    }
 }
 
 /// The solver every refinement descent uses. Marquardt's scaling: the
@@ -112,6 +140,8 @@ enum Slot<'a, E> {
         differences: Option<ForwardDifferences>,
         /// The descent it stopped beside, when it joined one.
         joined: Option<usize>,
+        /// Its accepted losses, oldest first, its start's the first.
+        losses: Vec<f64>,
     },
     Failed(E),
 }
@@ -150,6 +180,31 @@ fn meets<E>(slots: &[Slot<'_, E>], d: usize, tolerance: f64) -> Option<usize> {
         let lower = there.cost.total_cmp(&here.cost).then(e.cmp(&d)).is_lt();
         (near && lower).then_some(e)
     })
+}
+
+/// The outpacing of every search: ten times the best's loss (a fit three
+/// times worse in RMS), and not halving it in five steps.
+pub(crate) const OUTPACING: Outpacing = Outpacing {
+    loss_over_best: 10.0,
+    iterations: 5,
+    progress: 2.0,
+};
+
+/// The lowest loss a started descent of each group stands at (infinite
+/// for a group none of whose descents has started).
+fn lowest_by_group<E>(slots: &[Slot<'_, E>]) -> Vec<f64> {
+    let mut best: Vec<f64> = Vec::new();
+    for slot in slots {
+        if let Slot::Running { job, run, .. } = slot
+            && run.started()
+        {
+            if best.len() <= job.group {
+                best.resize(job.group + 1, f64::INFINITY);
+            }
+            best[job.group] = best[job.group].min(run.iterate().cost);
+        }
+    }
+    best
 }
 
 /// A finished descent and, where it stopped beside another, which.
@@ -216,7 +271,18 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
                 run,
                 differences: None,
                 joined: None,
+                losses: Vec::new(),
             }
+        })
+        .collect();
+    // Each search's first descent, which is never outpaced.
+    let firsts: Vec<usize> = (0..slots.len())
+        .filter(|&d| {
+            let group = |d: usize| match &slots[d] {
+                Slot::Running { job, .. } => Some(job.group),
+                Slot::Failed(_) => None,
+            };
+            d == 0 || group(d) != group(d - 1)
         })
         .collect();
     // The differences never step outside the prior box, where the model is
@@ -224,6 +290,9 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
     let (zeros, ones) = (vec![0.0; q], vec![1.0; q]);
     let mut screened = false;
     loop {
+        // Each search's lowest loss as the round begins: every descent
+        // of the round is judged against the same.
+        let best = lowest_by_group(&slots);
         let mut points: Vec<Vec<f64>> = Vec::new();
         let mut records: Vec<&IoData> = Vec::new();
         // Each asking descent and how many of the points are its own, in order.
@@ -240,13 +309,25 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
                 run,
                 differences,
                 joined,
+                losses,
             } = &mut slots[d]
             else {
                 continue;
             };
+            if observing {
+                losses.push(run.iterate().cost);
+            }
+            let outpaced = match meeting {
+                Meeting::Join(_) if observing && !firsts.contains(&d) => best
+                    .get(job.group)
+                    .is_some_and(|&b| OUTPACING.outpaced(losses, b)),
+                _ => false,
+            };
             if let Some(other) = met {
                 run.abandon(TerminationReason::Joined);
                 *joined = Some(other);
+            } else if outpaced {
+                run.abandon(TerminationReason::Outpaced);
             } else if observing {
                 run.proceed(false);
             }
@@ -362,4 +443,26 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The rule on hand-made loss paths against a best of 1.
+    #[test]
+    fn a_slow_descent_far_above_the_best_is_outpaced() {
+        let rule = OUTPACING;
+        // Six accepted losses, from 30 to 20: not halved in five steps,
+        // above ten times the best.
+        assert!(rule.outpaced(&[30.0, 28.0, 26.0, 24.0, 22.0, 20.0], 1.0));
+        // The same path five steps long: too soon to tell.
+        assert!(!rule.outpaced(&[28.0, 26.0, 24.0, 22.0, 20.0], 1.0));
+        // Halved in five steps: still descending fast enough.
+        assert!(!rule.outpaced(&[41.0, 35.0, 30.0, 26.0, 23.0, 20.0], 1.0));
+        // Slow, but within ten times the best: it may be a near rival.
+        assert!(!rule.outpaced(&[9.9, 9.8, 9.7, 9.6, 9.5, 9.5], 1.0));
+        // Only the last five steps count: a fast start does not save it.
+        assert!(rule.outpaced(&[1e6, 30.0, 28.0, 26.0, 24.0, 22.0, 20.0], 1.0));
+    }
 }

@@ -204,7 +204,21 @@ fn pooling_refuses_mismatched_estimates() {
     assert!(pool_estimates(&[], 0.1).is_err());
     assert!(pool_estimates(&[(&[1.0][..], None)], 1.5).is_err());
     // Without intervals: the plain mean, and no disagreement named.
-    let plain = pool_estimates(&[(&[1.0][..], None), (&[3.0][..], Some(&[1.0][..]))], 0.1).unwrap();
+    let plain = pool_estimates(&[(&[1.0][..], None), (&[3.0][..], None)], 0.1).unwrap();
     assert_eq!(plain.theta, [2.0]);
     assert!(plain.half_widths.is_none() && plain.disagreeing.is_empty());
+    // An estimate without an interval neither weighs nor disagrees.
+    let some = pool_estimates(&[(&[9.0][..], None), (&[3.0][..], Some(&[1.0][..]))], 0.1).unwrap();
+    assert_eq!(some.theta, [3.0]);
+    assert!(some.disagreeing.is_empty());
+    // Two that lie apart beyond their intervals are both named.
+    let two = pool_estimates(
+        &[
+            (&[1.0][..], Some(&[1.0][..])),
+            (&[9.0][..], Some(&[1.0][..])),
+        ],
+        0.1,
+    )
+    .unwrap();
+    assert_eq!(two.disagreeing, [0, 1]);
 }

@@ -53,6 +53,10 @@ pub enum TerminationReason {
     /// already stood at no higher cost: from there it would follow the
     /// other's path, so it stops and the other goes on.
     Joined,
+    /// A descent among several stood far above the best of its search and
+    /// was making little progress: it would not come near the best fit
+    /// within its budget, so it stopped where it stood.
+    Outpaced,
 }
 
 impl TerminationReason {
@@ -71,6 +75,7 @@ impl TerminationReason {
             Self::Deadline => "Deadline",
             Self::EpochsUntilDeadline => "EpochsUntilDeadline",
             Self::Joined => "Joined",
+            Self::Outpaced => "Outpaced",
         }
     }
 
