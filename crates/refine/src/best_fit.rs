@@ -161,6 +161,15 @@ pub struct Optimum {
     pub descents: usize,
 }
 
+/// A point of a search with its residuals there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluated {
+    /// The point.
+    pub theta: Vec<f64>,
+    /// The residuals there.
+    pub residuals: Vec<f64>,
+}
+
 /// What a best-fit search found on one record.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BestFit {
@@ -171,6 +180,12 @@ pub struct BestFit {
     pub optima: Vec<Optimum>,
     /// The descents run.
     pub descents: usize,
+    /// The first start (the estimate) with its residuals, where it was
+    /// evaluated: a check of the estimate reads them instead of simulating
+    /// it again.
+    pub first_start: Option<Evaluated>,
+    /// The residuals at the best fit, as its loss sums them.
+    pub best_residuals: Vec<f64>,
 }
 
 impl BestFit {
@@ -258,7 +273,7 @@ fn summarize<E: From<RefineError>>(
     // Which descent each joined one stopped beside, followed to the one
     // that ran on (a descent joins only one that has not joined).
     let root = |mut d: usize| {
-        while let Some(Some(other)) = ended.get(d).map(|(_, joined)| *joined) {
+        while let Some(Some(other)) = ended.get(d).map(|e| e.joined) {
             d = other - first;
         }
         d
@@ -266,10 +281,10 @@ fn summarize<E: From<RefineError>>(
     let roots: Vec<usize> = (0..descents).map(root).collect();
     let mut error = None;
     let mut ran_on: Vec<(usize, &Descent)> = Vec::new();
-    for (d, (result, joined)) in ended.iter().enumerate() {
-        match result {
+    for (d, e) in ended.iter().enumerate() {
+        match &e.descent {
             // An outpaced descent stopped on a slope, not at an optimum.
-            Ok(descent) if joined.is_none() && descent.stop != TerminationReason::Outpaced => {
+            Ok(descent) if e.joined.is_none() && descent.stop != TerminationReason::Outpaced => {
                 ran_on.push((d, descent));
             }
             Ok(_) => {}
@@ -281,7 +296,9 @@ fn summarize<E: From<RefineError>>(
         // Every start failed (a descent that joined another leads to one
         // that ran on), or there was none.
         return Err(match error.and_then(|d| ended.into_iter().nth(d)) {
-            Some((Err(e), _)) => e,
+            Some(lockstep::Ended {
+                descent: Err(e), ..
+            }) => e,
             _ => RefineError::InvalidSetting {
                 name: "starts",
                 value: "none".into(),
@@ -316,10 +333,15 @@ fn summarize<E: From<RefineError>>(
             )),
         }
     }
-    let best = ran_on[0].1.clone();
+    let (best_at, best) = (ran_on[0].0, ran_on[0].1.clone());
+    let mut ended = ended;
+    let first_start = ended.first_mut().and_then(|e| e.first_start.take());
+    let best_residuals = std::mem::take(&mut ended[best_at].end_residuals);
     Ok(BestFit {
         best,
         optima: optima.into_iter().map(|(_, optimum)| optimum).collect(),
         descents,
+        first_start,
+        best_residuals,
     })
 }

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
 
 use crate::best_fit::{BestFit, SearchStarts};
-use crate::output_error::write_output_errors;
+use crate::output_error::{response_from_output_errors, write_output_errors};
 use crate::refinement::Refinement;
 use crate::{OutputError, RefineError};
 
@@ -223,8 +223,12 @@ pub fn check_with(
 }
 
 /// [`check_with`] against a best-fit search already made on the record
-/// ([`search_best_fits`]): the check of a two-stage estimate and of its
-/// refinement share one search, and no descent runs here.
+/// through `sim` ([`search_best_fits`]): the check of a two-stage
+/// estimate and of its refinement share one search, and no descent runs
+/// here. The noise-free responses at the search's first start and at its
+/// best are read back from the search's residuals (its output errors on
+/// `record`), not simulated again: only the check's noisy runs, and a
+/// `theta` the search did not start from, are simulated.
 ///
 /// # Errors
 /// As [`check_with`].
@@ -237,13 +241,27 @@ pub fn check_against(
 ) -> Result<RecordCheck, RefineError> {
     within_record(record, plan)?;
     let from = plan.score_from;
-    let simulated = noise_free(
-        sim,
-        theta,
-        record,
-        plan.seed,
-        "the noise-free simulation at the estimate",
-    )?;
+    // The search evaluated its first start and its best: at either, the
+    // response is read back from there, not simulated again.
+    let searched = if same_bits(theta, &best.best.theta) {
+        Some(best.best_residuals.as_slice())
+    } else {
+        best.first_start
+            .as_ref()
+            .filter(|start| same_bits(&start.theta, theta))
+            .map(|start| start.residuals.as_slice())
+    }
+    .and_then(|residuals| response_from_output_errors(record, residuals));
+    let simulated = match searched {
+        Some(response) => response,
+        None => noise_free(
+            sim,
+            theta,
+            record,
+            plan.seed,
+            "the noise-free simulation at the estimate",
+        )?,
+    };
     let (tail_probability, reference_runs) = rank_among_own(sim, record, &simulated, theta, plan)?;
     let shared = sim
         .shared_input()
@@ -493,26 +511,32 @@ fn against_best(
     } else {
         1.0
     };
-    let same = |a: &[f64], b: &[f64]| {
-        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
-    };
     let own;
-    let best_response = if same(theta, &best.best.theta) {
+    let best_response = if same_bits(theta, &best.best.theta) {
         simulated
     } else {
-        own = noise_free(
-            sim,
-            &best.best.theta,
-            record,
-            plan.seed,
-            "the noise-free simulation at the best fit",
-        )?;
+        // The search's own residuals at its best, else a run there.
+        own = match response_from_output_errors(record, &best.best_residuals) {
+            Some(response) => response,
+            None => noise_free(
+                sim,
+                &best.best.theta,
+                record,
+                plan.seed,
+                "the noise-free simulation at the best fit",
+            )?,
+        };
         &own
     };
     let best_fit_percent = (0..record.n_outputs())
         .map(|j| output_fit(&record.output(j)[from..], &best_response.output(j)[from..]).1)
         .collect();
     Ok((loss_ratio, best_fit_percent))
+}
+
+/// Whether two points are the same, bit for bit.
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 #[cfg(test)]

@@ -24,7 +24,8 @@ mod residual;
 mod uncertainty;
 
 pub use best_fit::{
-    BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts, spread_starts,
+    BestFit, Evaluated, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts,
+    spread_starts,
 };
 pub use check::{
     CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_against,

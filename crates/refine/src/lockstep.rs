@@ -11,6 +11,7 @@ use twostage_fit::{
 };
 use twostage_models::{IoData, Prior};
 
+use crate::best_fit::Evaluated;
 use crate::error::RefineError as Error;
 use crate::residual::{Descent, ResidualModel};
 
@@ -142,6 +143,9 @@ enum Slot<'a, E> {
         joined: Option<usize>,
         /// Its accepted losses, oldest first, its start's the first.
         losses: Vec<f64>,
+        /// Its start and the residuals there, kept for a search's first
+        /// descent.
+        first_start: Option<Box<Evaluated>>,
     },
     Failed(E),
 }
@@ -207,8 +211,16 @@ fn lowest_by_group<E>(slots: &[Slot<'_, E>]) -> Vec<f64> {
     best
 }
 
-/// A finished descent and, where it stopped beside another, which.
-pub(crate) type Ended<E> = (Result<Descent, E>, Option<usize>);
+/// A finished descent, where it stopped beside another which, and (for a
+/// search, [`Meeting::Join`]) the residuals at its end and, for a
+/// search's first descent, at its start: what a check of those points
+/// reads instead of simulating them again.
+pub(crate) struct Ended<E> {
+    pub(crate) descent: Result<Descent, E>,
+    pub(crate) joined: Option<usize>,
+    pub(crate) first_start: Option<Evaluated>,
+    pub(crate) end_residuals: Vec<f64>,
+}
 
 /// Run `jobs` together, one result per job in order. A start the model
 /// cannot evaluate fails its own descent only; a trial step it cannot
@@ -226,7 +238,7 @@ pub(crate) fn descend_together<M: ResidualModel>(
 ) -> Vec<Result<Descent, M::Error>> {
     descend_meeting(model, max_iterations, jobs, Meeting::Apart)
         .into_iter()
-        .map(|(descent, _)| descent)
+        .map(|ended| ended.descent)
         .collect()
 }
 
@@ -272,9 +284,11 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
                 differences: None,
                 joined: None,
                 losses: Vec::new(),
+                first_start: None,
             }
         })
         .collect();
+    let search = matches!(meeting, Meeting::Join(_));
     // Each search's first descent, which is never outpaced.
     let firsts: Vec<usize> = (0..slots.len())
         .filter(|&d| {
@@ -310,6 +324,7 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
                 differences,
                 joined,
                 losses,
+                ..
             } = &mut slots[d]
             else {
                 continue;
@@ -334,11 +349,21 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             let before = points.len();
             match run.need() {
                 Need::Evaluations => {
+                    let starting = !run.started();
                     for point in run.evaluations_mut() {
+                        let mut clamped = false;
                         for ((v, lo), hi) in point.x.iter_mut().zip(&job.lo).zip(&job.hi) {
+                            clamped |= *v < *lo || *v > *hi;
                             *v = v.clamp(*lo, *hi);
                         }
-                        points.push(to_theta(prior, &point.x));
+                        // A start inside the box is evaluated at its own
+                        // values, not their round trip through the unit
+                        // box: its residuals then are those at the start.
+                        points.push(if starting && !clamped {
+                            job.start.clone()
+                        } else {
+                            to_theta(prior, &point.x)
+                        });
                     }
                 }
                 Need::Model => {
@@ -401,7 +426,30 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             }
             match start_failed {
                 Some(e) => slots[d] = Slot::Failed(e),
-                None => run.evaluated(),
+                None => {
+                    run.evaluated();
+                    let keep = starting && run.started() && search && firsts.contains(&d);
+                    if keep
+                        && let Slot::Running {
+                            job,
+                            run,
+                            first_start,
+                            ..
+                        } = &mut slots[d]
+                    {
+                        // The point evaluated: the start itself inside the box.
+                        let x = run.iterate().x;
+                        let inside = to_unit(prior, &job.start) == x;
+                        *first_start = Some(Box::new(Evaluated {
+                            theta: if inside {
+                                job.start.clone()
+                            } else {
+                                to_theta(prior, x)
+                            },
+                            residuals: run.model_mut().residuals.to_vec(),
+                        }));
+                    }
+                }
             }
         }
         // Every start is evaluated in the first round: screen them once,
@@ -427,10 +475,24 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
     slots
         .into_iter()
         .map(|slot| match slot {
-            Slot::Failed(e) => (Err(e), None),
+            Slot::Failed(e) => Ended {
+                descent: Err(e),
+                joined: None,
+                first_start: None,
+                end_residuals: Vec::new(),
+            },
             Slot::Running {
-                job, run, joined, ..
+                job,
+                mut run,
+                joined,
+                first_start,
+                ..
             } => {
+                let end_residuals = if search {
+                    run.model_mut().residuals.to_vec()
+                } else {
+                    Vec::new()
+                };
                 let found = run.finish();
                 let descent = Descent {
                     start: job.start,
@@ -439,7 +501,12 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
                     iterations: found.iterations,
                     stop: found.reason,
                 };
-                (Ok(descent), joined)
+                Ended {
+                    descent: Ok(descent),
+                    joined,
+                    first_start: first_start.map(|b| *b),
+                    end_residuals,
+                }
             }
         })
         .collect()

@@ -261,10 +261,7 @@ pub(crate) fn write_output_errors(
     }
     for j in 0..record.n_outputs() {
         let y = record.output(j);
-        let mean = y.iter().sum::<f64>() / n.max(1) as f64;
-        let spread =
-            (y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n.max(1) as f64).sqrt();
-        let scale = if spread > 0.0 { 1.0 / spread } else { 1.0 };
+        let scale = output_scale(y);
         for ((r, y), s) in residuals[j * n..(j + 1) * n]
             .iter_mut()
             .zip(y)
@@ -274,4 +271,42 @@ pub(crate) fn write_output_errors(
         }
     }
     Ok(())
+}
+
+/// The weight of an output's errors: one over the record's own spread of
+/// it (one for a constant output).
+fn output_scale(y: &[f64]) -> f64 {
+    let n = y.len().max(1) as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let spread = (y.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt();
+    if spread > 0.0 { 1.0 / spread } else { 1.0 }
+}
+
+/// The noise-free response whose output errors on `record` are
+/// `residuals` (as [`write_output_errors`] wrote them), on the record's
+/// input: what a search already simulated, read back instead of run
+/// again. `None` for residuals of another shape.
+pub(crate) fn response_from_output_errors(record: &IoData, residuals: &[f64]) -> Option<IoData> {
+    let n = record.n_samples();
+    if residuals.len() != n * record.n_outputs() {
+        return None;
+    }
+    let mut response = IoData::default();
+    response.resize(n, record.n_inputs(), record.n_outputs());
+    for j in 0..record.n_inputs() {
+        response.input_mut(j).copy_from_slice(record.input(j));
+    }
+    for j in 0..record.n_outputs() {
+        let y = record.output(j);
+        let scale = output_scale(y);
+        for ((s, y), r) in response
+            .output_mut(j)
+            .iter_mut()
+            .zip(y)
+            .zip(&residuals[j * n..(j + 1) * n])
+        {
+            *s = y - r / scale;
+        }
+    }
+    Some(response)
 }

@@ -295,9 +295,9 @@ fn records_refined_together_end_where_each_ends_alone_in_fewer_requests() {
 
 /// The check of a two-stage estimate, the refinement and the check of the
 /// refined estimate read one search: the search's points, then each
-/// check's own runs (its noise-free run, its noisy references, and the
-/// best fit's noise-free run only where the estimate is not the best
-/// fit), and nothing else. Descents that meet stop, and the search's
+/// check's noisy references, and nothing else (the noise-free responses
+/// at the estimate and at the best fit are read back from the search's
+/// residuals). Descents that meet stop, and the search's
 /// points are fewer than the same starts' run apart.
 #[test]
 fn one_search_serves_the_check_and_the_refinement() {
@@ -334,9 +334,9 @@ fn one_search_serves_the_check_and_the_refinement() {
         searched < apart,
         "{searched} points searched, {apart} apart"
     );
-    // A check of the estimate: its noise-free run, its noisy runs (this
-    // model has none of its own noise, so no run misses as the record
-    // does and all of them run), and the best fit's noise-free run.
+    // A check of the estimate: its noisy runs only (this model has none
+    // of its own noise, so no run misses as the record does and all of
+    // them run).
     let plan = CheckPlan {
         noisy: 99,
         seed: 0,
@@ -345,12 +345,26 @@ fn one_search_serves_the_check_and_the_refinement() {
     };
     let first = check_against(&model, &record, &estimate, &found, plan).unwrap();
     let checked = points() - searched;
-    assert_eq!(checked, 1 + first.reference_runs + 1);
-    // The refined estimate is the search's best: its check adds no best-fit
-    // run and no descent.
+    assert_eq!(checked, first.reference_runs);
+    // The refined estimate is the search's best: its check adds its noisy
+    // runs, no noise-free run and no descent.
     let refined = found.best.theta.clone();
     let second = check_against(&model, &record, &refined, &found, plan).unwrap();
-    assert_eq!(points() - searched - checked, 1 + second.reference_runs);
+    assert_eq!(points() - searched - checked, second.reference_runs);
+    // The responses read back are the simulated ones, to rounding.
+    for (theta, check) in [(&estimate[..], &first), (&refined[..], &second)] {
+        let mut direct = IoData::default();
+        let quiet = twostage_models::Conditions {
+            noiseless: true,
+            input: Some(&record),
+        };
+        model
+            .simulate_under(theta, &mut experiment_rng(0, 0), quiet, &mut direct)
+            .unwrap();
+        for (a, b) in check.simulated.output(0).iter().zip(direct.output(0)) {
+            assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} vs {b}");
+        }
+    }
     assert_eq!(second.loss_ratio.to_bits(), 1.0f64.to_bits());
     assert!(first.loss_ratio > 1.0 && !first.explained());
 }
