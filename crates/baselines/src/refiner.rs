@@ -28,6 +28,10 @@ pub struct RefinedEstimate {
     /// The parameters' correlation matrix (row-major q x q), where the
     /// interval has one.
     pub correlation: Option<Vec<f64>>,
+    /// Of an output-error refinement, the distinct optima its search
+    /// ended in and the runner-up's loss over the best's (`None` for a
+    /// posterior mean).
+    pub optima: Option<(usize, Option<f64>)>,
 }
 
 /// A record to refine: the record, its two-stage estimate, and that
@@ -210,6 +214,7 @@ impl EstimateRefiner {
                         correlation: Some(posterior.correlation),
                         theta: posterior.mean,
                         stop: None,
+                        optima: None,
                     })
                 })
                 .collect(),
@@ -282,8 +287,9 @@ impl EstimateRefiner {
         let mut local = fit.uncertainties(&refined).into_iter();
         bests
             .iter()
-            .map(|best| {
-                let best = &best.as_ref().map_err(Clone::clone)?.best;
+            .map(|found| {
+                let found = found.as_ref().map_err(Clone::clone)?;
+                let best = &found.best;
                 let local = local
                     .next()
                     .unwrap_or_else(|| unreachable!("one per refined record"))
@@ -296,6 +302,7 @@ impl EstimateRefiner {
                     correlation: local.ok().map(|u| u.correlation),
                     theta: best.theta.clone(),
                     stop: Some(best.stop),
+                    optima: Some((found.optima.len(), found.runner_up_ratio())),
                 })
             })
             .collect()

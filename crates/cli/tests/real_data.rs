@@ -146,8 +146,13 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stop = std::fs::read_to_string(&refined).unwrap();
+    // Why the best descent stopped, and what the search over the prior
+    // found (its optima, the runner-up's loss over the best's).
     assert!(
-        stop.lines().next().unwrap().ends_with("refine_stop"),
+        stop.lines()
+            .next()
+            .unwrap()
+            .ends_with("refine_stop,optima,runner_up_over_best"),
         "{stop}"
     );
     // The refined row's interval is its own (from the loss's curvature

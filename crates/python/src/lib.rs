@@ -448,6 +448,9 @@ impl PyEstimator {
             None => dict.set_item("correlation", py.None())?,
         }
         dict.set_item("stop", refined.stop.map(|s| s.name()))?;
+        let (optima, runner_up) = refined.optima.unzip();
+        dict.set_item("optima", optima)?;
+        dict.set_item("runner_up_over_best", runner_up.flatten())?;
         Ok(dict)
     }
 }

@@ -111,6 +111,8 @@ def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
         assert ours["lower"].tolist() == [refined[k]["theta_lo"]]
         assert ours["upper"].tolist() == [refined[k]["theta_hi"]]
         assert ours["stop"] == refined[k]["refine_stop"]
+        assert ours["optima"] == refined[k]["optima"]
+        assert ours["runner_up_over_best"] == refined[k].get("runner_up_over_best")
     # Both records jointly: the command line's joint row, bit for bit.
     joint = json.loads(cli("estimate", "--estimator", str(path), "--model-file", str(model),
                            "--joint", "--format", "json",
@@ -122,6 +124,7 @@ def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
     assert ours["upper"].tolist() == [joint["theta_hi"]]
     assert ours["stop"] == joint["refine_stop"]
     assert ours["fitted"] == [0, 1] and ours["left_out"] == []
+    assert ours["optima"] == joint["optima"]
     assert ours["fit_percent"].shape == (2,)
     # A record the model cannot run (the wrong number of outputs) is refused, named.
     with pytest.raises(ValueError, match=r"records\[1\]"):

@@ -101,6 +101,7 @@ pub(super) fn bare(theta: Vec<f64>) -> Estimated {
         refined: None,
         interval_failure: None,
         correlation: None,
+        optima: None,
     }
 }
 

@@ -61,7 +61,8 @@ pub struct EstimateArgs {
     /// noise-free simulation, in the prior's box, from the estimate and
     /// two starts inside its interval (their simulations batched together);
     /// its own interval in _lo/_hi (decision 035); `refine_stop` says
-    /// why the best descent stopped. `--refine=auto`: check every
+    /// why the best descent stopped, `optima` and `runner_up_over_best`
+    /// what its search over the prior found. `--refine=auto`: check every
     /// two-stage estimate (as --check) and refine only the records it
     /// does not explain, named on stderr; the others keep their
     /// two-stage estimate, and every row carries the check's columns.
@@ -215,6 +216,9 @@ struct Estimated {
     interval_failure: Option<String>,
     /// With --refine: the refined estimate's correlation matrix.
     correlation: Option<Vec<f64>>,
+    /// With an output-error refinement or --joint: the optima its search
+    /// ended in, and the runner-up's loss over the best's.
+    optima: Option<(usize, Option<f64>)>,
 }
 
 impl Estimated {
@@ -580,6 +584,7 @@ fn refine_together(
                 e.refined = Some(Ok(r.stop));
                 e.interval_failure = why;
                 e.correlation = r.correlation;
+                e.optima = r.optima;
             }
             Err(why) => e.refined = Some(Err(why)),
         }
@@ -633,6 +638,7 @@ fn joint_of_plant(
         refined: Some(Ok(Some(joint.stop))),
         interval_failure: why,
         correlation: joint.correlation,
+        optima: Some((joint.optima, joint.runner_up_ratio)),
         ..methods::bare(joint.theta)
     }
 }

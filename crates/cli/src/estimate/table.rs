@@ -73,6 +73,12 @@ pub(super) fn csv(
     if with_stop {
         header.push("refine_stop".into());
     }
+    // The search's optima, where a refinement searched and no check
+    // already wrote them.
+    let with_optima = !with_check && rows.iter().any(|(_, e)| e.optima.is_some());
+    if with_optima {
+        header.extend(["optima".into(), "runner_up_over_best".into()]);
+    }
     let pairs = if with_correlation {
         correlation_pairs(names)
     } else {
@@ -111,6 +117,11 @@ pub(super) fn csv(
         }
         if with_stop {
             fields.push(refine_stop(e.refined.as_ref()));
+        }
+        if with_optima {
+            let (optima, runner_up) = e.optima.unzip();
+            fields.push(optima.map_or_else(String::new, |n| n.to_string()));
+            fields.push(runner_up.flatten().map_or_else(String::new, format_f64));
         }
         for (_, at) in &pairs {
             fields.push(
@@ -158,6 +169,12 @@ pub(super) fn json(
             }
             if matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))) {
                 object.insert("refine_stop".into(), refine_stop(e.refined.as_ref()).into());
+            }
+            if let (Some((optima, runner_up)), None) = (e.optima, &e.check) {
+                object.insert("optima".into(), optima.into());
+                if let Some(ratio) = runner_up {
+                    object.insert("runner_up_over_best".into(), ratio.into());
+                }
             }
             if let Some(r) = &e.correlation {
                 for (name, at) in &pairs {

@@ -231,7 +231,9 @@ class Estimator:
         refined estimate's own interval at the estimator's level (None,
         with ``interval_error`` saying why, where the record does not
         determine a parameter); ``correlation`` [q, q]; ``stop``, why the
-        descent stopped (None for a posterior mean). The interval covers
+        descent stopped (None for a posterior mean); ``optima`` and
+        ``runner_up_over_best``, what the output-error fit's search found
+        (None for a posterior mean). The interval covers
         the record's noise about the model's best fit: where ``check``
         finds the record not ``model_consistent``, the plant's values may
         lie outside it. Raises ValueError when the model cannot be
