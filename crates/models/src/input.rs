@@ -7,6 +7,7 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Result, SimError};
+use crate::input_design::{Design, Drawn, Grid, Level, Phases};
 
 /// The input applied in every experiment of a model.
 ///
@@ -33,9 +34,18 @@ pub struct InputSignal {
 
 #[derive(Debug, Clone, PartialEq)]
 enum Kind {
-    WhiteGaussian { std_dev: f64 },
-    Chicane { amplitude: f64 },
+    WhiteGaussian {
+        std_dev: f64,
+    },
+    Chicane {
+        amplitude: f64,
+    },
     Fixed(Arc<[f64]>),
+    /// A design drawn per experiment, about `offset`.
+    Designed {
+        design: Box<Design>,
+        offset: f64,
+    },
 }
 
 impl InputSignal {
@@ -92,6 +102,124 @@ impl InputSignal {
         })
     }
 
+    /// A multisine: equal lines on the record's frequency grid `k / (N T)`
+    /// from `low` Hz to `high` Hz (its top may be drawn per experiment),
+    /// every line or the odd ones, random or Schroeder phases, scaled to
+    /// `level` about `offset`.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, Grid, InputSignal, Level, Phases, experiment_rng};
+    /// let u = InputSignal::multisine(0.0, Drawn::fixed(5.0), Grid::Odd, Phases::Random,
+    ///     Level::Rms(Drawn::fixed(0.5)), 2.0)?;
+    /// let mut x = vec![0.0; 1000];
+    /// u.fill(0.01, &mut experiment_rng(1, 0), &mut x)?;
+    /// let mean = x.iter().sum::<f64>() / 1000.0;
+    /// let rms = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 1000.0).sqrt();
+    /// assert!((mean - 2.0).abs() < 1e-12 && (rms - 0.5).abs() < 1e-12);
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a band whose bottom is not below
+    /// its top, or a non-finite offset.
+    pub fn multisine(
+        low: f64,
+        high: Drawn,
+        grid: Grid,
+        phases: Phases,
+        level: Level,
+        offset: f64,
+    ) -> Result<Self> {
+        Self::designed(
+            Design::Multisine {
+                band: (low, high),
+                grid,
+                phases,
+                level,
+            },
+            offset,
+        )
+    }
+
+    /// A random binary signal: `offset +- amplitude`, a fair coin per
+    /// value, each held `hold` samples.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a hold of 0 samples.
+    pub fn random_binary(amplitude: Drawn, hold: usize, offset: f64) -> Result<Self> {
+        Self::designed(Design::RandomBinary { amplitude, hold }, offset)
+    }
+
+    /// A pseudo-random binary sequence of a maximal shift register of
+    /// `order` bits (period `2^order - 1` bits, each held `hold` samples),
+    /// `offset +- amplitude`, from a register state drawn per experiment.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for an order outside 2 to
+    /// [`crate::MAX_PRBS_ORDER`] or a hold of 0.
+    pub fn prbs(order: u32, amplitude: Drawn, hold: usize, offset: f64) -> Result<Self> {
+        Self::designed(
+            Design::Prbs {
+                order,
+                amplitude,
+                hold,
+            },
+            offset,
+        )
+    }
+
+    /// A linear swept sine from `from` Hz at the first sample to `to` Hz
+    /// at the record's end, of `amplitude`, about `offset`.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a negative start.
+    pub fn sweep(from: f64, to: Drawn, amplitude: Drawn, offset: f64) -> Result<Self> {
+        Self::designed(
+            Design::Sweep {
+                from,
+                to,
+                amplitude,
+            },
+            offset,
+        )
+    }
+
+    /// Random steps: levels uniform in `[level.0, level.1]`, each held a
+    /// time uniform in `[hold.0, hold.1]` seconds (rounded to samples).
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for an empty level range or hold range.
+    pub fn steps(level: (f64, f64), hold: (f64, f64)) -> Result<Self> {
+        Self::designed(Design::Steps { level, hold }, 0.0)
+    }
+
+    fn designed(design: Design, offset: f64) -> Result<Self> {
+        if !offset.is_finite() {
+            return Err(invalid("input offset", offset, "must be finite"));
+        }
+        // The settings that need no sample time are checked now; the band
+        // against the Nyquist frequency with [`InputSignal::check_sampling`].
+        design.check(0.0)?;
+        Ok(Self {
+            kind: Kind::Designed {
+                design: Box::new(design),
+                offset,
+            },
+        })
+    }
+
+    /// Refuses a design whose frequencies lie above the Nyquist frequency
+    /// of `sample_time`, naming it and what would work.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] as said.
+    pub fn check_sampling(&self, sample_time: f64) -> Result<()> {
+        match &self.kind {
+            Kind::Designed { design, .. } => design.check(sample_time),
+            _ => Ok(()),
+        }
+    }
+
     /// Whether it is a fixed sampled signal (the same samples in every
     /// experiment, whatever the sample time).
     pub fn is_fixed(&self) -> bool {
@@ -117,7 +245,11 @@ impl InputSignal {
 
     /// Whether every experiment sees the same input.
     pub fn is_deterministic(&self) -> bool {
-        !matches!(self.kind, Kind::WhiteGaussian { .. })
+        match &self.kind {
+            Kind::WhiteGaussian { .. } => false,
+            Kind::Designed { design, .. } => design.is_deterministic(),
+            Kind::Chicane { .. } | Kind::Fixed(_) => true,
+        }
     }
 
     /// A one-line description for people.
@@ -133,6 +265,10 @@ impl InputSignal {
             Kind::Fixed(samples) => {
                 format!("a fixed user-given signal of {} samples", samples.len())
             }
+            Kind::Designed { design, offset } if *offset != 0.0 => {
+                format!("{}, about {offset}", design.describe())
+            }
+            Kind::Designed { design, .. } => design.describe(),
         }
     }
 
@@ -169,6 +305,12 @@ impl InputSignal {
                 }
                 u.copy_from_slice(&samples[..u.len()]);
             }
+            Kind::Designed { design, offset } => {
+                design.fill(sample_time, rng, u)?;
+                for v in u.iter_mut() {
+                    *v += offset;
+                }
+            }
         }
         Ok(())
     }
@@ -181,7 +323,7 @@ impl InputSignal {
     pub fn value_at(&self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
         match &self.kind {
             Kind::Chicane { amplitude } => chicane(*amplitude, t),
-            Kind::WhiteGaussian { .. } | Kind::Fixed(_) => {
+            Kind::WhiteGaussian { .. } | Kind::Fixed(_) | Kind::Designed { .. } => {
                 Self::sampled_value_at(t, sample_time, samples)
             }
         }

@@ -47,6 +47,7 @@ mod data;
 mod error;
 mod external;
 mod input;
+mod input_design;
 mod marginal;
 mod ode;
 mod pacejka;
@@ -66,6 +67,7 @@ pub use data::{IoData, RecordShape};
 pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;
+pub use input_design::{Drawn, Grid, Level, MAX_PRBS_ORDER, Phases};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
 };

@@ -1,0 +1,656 @@
+//! Experiment designs that draw each record's input from its own stream:
+//! random-phase multisines, random binary and pseudo-random binary
+//! sequences, swept sines and random steps, each with settings that may
+//! themselves be drawn per experiment (a level range, a band whose top is
+//! a range), so that a training chart covers a family of operating
+//! conditions rather than one input.
+
+use std::f64::consts::PI;
+
+use rand::{Rng, RngExt};
+use rustfft::FftPlannerScalar;
+use rustfft::num_complex::Complex;
+
+use crate::error::{Result, SimError};
+
+/// A value fixed, or drawn uniformly per experiment from `[low, high]`.
+///
+/// ```
+/// use twostage_models::Drawn;
+/// assert_eq!(Drawn::fixed(2.0).range(), (2.0, 2.0));
+/// assert!(Drawn::between(1.0, 0.5).is_err());
+/// # Ok::<(), twostage_models::SimError>(())
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drawn {
+    low: f64,
+    high: f64,
+}
+
+impl Drawn {
+    /// The same value in every experiment.
+    pub fn fixed(value: f64) -> Self {
+        Self {
+            low: value,
+            high: value,
+        }
+    }
+
+    /// A value drawn uniformly from `[low, high]` per experiment.
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for an empty or non-finite range.
+    pub fn between(low: f64, high: f64) -> Result<Self> {
+        if !(low.is_finite() && high.is_finite() && low <= high) {
+            return Err(SimError::InvalidSetting {
+                name: "input range",
+                value: format!("[{low}, {high}]"),
+                reason: "give finite ends, the first no larger than the second".into(),
+            });
+        }
+        Ok(Self { low, high })
+    }
+
+    /// Its ends.
+    pub fn range(&self) -> (f64, f64) {
+        (self.low, self.high)
+    }
+
+    /// Whether it is one value, not a range.
+    fn is_fixed(&self) -> bool {
+        self.low.to_bits() == self.high.to_bits()
+    }
+
+    fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+        if self.is_fixed() {
+            self.low
+        } else {
+            self.low + (self.high - self.low) * rng.random::<f64>()
+        }
+    }
+
+    fn describe(&self, unit: &str) -> String {
+        if self.is_fixed() {
+            format!("{}{unit}", self.low)
+        } else {
+            format!("{} to {}{unit} (drawn per experiment)", self.low, self.high)
+        }
+    }
+}
+
+/// The frequency lines of a multisine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Grid {
+    /// Every line of the record's grid `k / (N T)` in the band.
+    Full,
+    /// The odd lines only: even-order nonlinear distortions then fall on
+    /// lines the input leaves empty.
+    Odd,
+}
+
+/// The phases of a multisine's lines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phases {
+    /// Independent, uniform on `[0, 2 pi)`, drawn per experiment.
+    Random,
+    /// Schroeder's `-pi k (k - 1) / K` (IEEE Trans. Inf. Theory 16, 1970):
+    /// the same every experiment, a low crest factor.
+    Schroeder,
+}
+
+/// How large a design's signal is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Level {
+    /// Its root mean square over the record (about its offset).
+    Rms(Drawn),
+    /// Its largest absolute value over the record (about its offset).
+    Peak(Drawn),
+}
+
+/// An input design: see the constructors of [`crate::InputSignal`]
+/// (`multisine`, `random_binary`, `prbs`, `sweep`, `steps`).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Design {
+    Multisine {
+        band: (f64, Drawn),
+        grid: Grid,
+        phases: Phases,
+        level: Level,
+    },
+    RandomBinary {
+        amplitude: Drawn,
+        hold: usize,
+    },
+    Prbs {
+        order: u32,
+        amplitude: Drawn,
+        hold: usize,
+    },
+    Sweep {
+        from: f64,
+        to: Drawn,
+        amplitude: Drawn,
+    },
+    Steps {
+        level: (f64, f64),
+        hold: (f64, f64),
+    },
+}
+
+/// Feedback taps of maximal-length linear feedback shift registers,
+/// orders 2 to 20 (Xilinx application note XAPP 052, table 3: each a
+/// primitive polynomial).
+const PRBS_TAPS: [(u32, u32); 19] = [
+    (2, 1),
+    (3, 2),
+    (4, 3),
+    (5, 3),
+    (6, 5),
+    (7, 6),
+    (8, 6),
+    (9, 5),
+    (10, 7),
+    (11, 9),
+    (12, 6),
+    (13, 4),
+    (14, 5),
+    (15, 14),
+    (16, 15),
+    (17, 14),
+    (18, 11),
+    (19, 6),
+    (20, 17),
+];
+
+/// The extra taps of the orders whose maximal register needs four
+/// (XAPP 052): order, and its two further taps.
+const PRBS_FOUR_TAPS: [(u32, u32, u32); 6] = [
+    (8, 5, 4),
+    (12, 4, 1),
+    (13, 3, 1),
+    (14, 3, 1),
+    (16, 13, 4),
+    (19, 2, 1),
+];
+
+/// The largest PRBS register order.
+pub const MAX_PRBS_ORDER: u32 = 20;
+
+impl Design {
+    /// Refuses settings no record could use: a band above the Nyquist
+    /// frequency of `sample_time`, a hold of zero samples, a register order
+    /// without taps.
+    pub(crate) fn check(&self, sample_time: f64) -> Result<()> {
+        let nyquist = 0.5 / sample_time;
+        let above = |name: &'static str, f: f64| -> Result<()> {
+            if f > nyquist {
+                return Err(SimError::InvalidSetting {
+                    name,
+                    value: format!("{f} Hz"),
+                    reason: format!(
+                        "above the Nyquist frequency {nyquist} Hz of the sample time \
+                         {sample_time} s: lower it, or sample faster"
+                    ),
+                });
+            }
+            Ok(())
+        };
+        match self {
+            Self::Multisine { band, .. } => {
+                if !(band.0 >= 0.0 && band.0 < band.1.range().0) {
+                    return Err(SimError::InvalidSetting {
+                        name: "multisine band",
+                        value: format!("[{}, {:?}]", band.0, band.1.range()),
+                        reason: "give a lowest frequency >= 0 below the band's top".into(),
+                    });
+                }
+                above("multisine band top", band.1.range().1)
+            }
+            Self::RandomBinary { hold, .. } | Self::Prbs { hold, .. } if *hold == 0 => {
+                Err(SimError::InvalidSetting {
+                    name: "hold",
+                    value: "0".into(),
+                    reason: "hold each value at least 1 sample".into(),
+                })
+            }
+            Self::Prbs { order, .. } if !(2..=MAX_PRBS_ORDER).contains(order) => {
+                Err(SimError::InvalidSetting {
+                    name: "PRBS order",
+                    value: order.to_string(),
+                    reason: format!("give a register of 2 to {MAX_PRBS_ORDER} bits"),
+                })
+            }
+            Self::Sweep { from, to, .. } => {
+                if !from.is_finite() || *from < 0.0 {
+                    return Err(SimError::InvalidSetting {
+                        name: "sweep start",
+                        value: format!("{from} Hz"),
+                        reason: "give a frequency >= 0".into(),
+                    });
+                }
+                above("sweep end", to.range().1)
+            }
+            Self::Steps { level, hold } => {
+                Drawn::between(level.0, level.1)?;
+                if !(hold.0 > 0.0 && hold.0 <= hold.1 && hold.1.is_finite()) {
+                    return Err(SimError::InvalidSetting {
+                        name: "step hold",
+                        value: format!("[{}, {}] s", hold.0, hold.1),
+                        reason: "give a shortest and longest hold, 0 < shortest <= longest".into(),
+                    });
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether every experiment sees the same input.
+    pub(crate) fn is_deterministic(&self) -> bool {
+        match self {
+            Self::Multisine {
+                band,
+                phases,
+                level,
+                ..
+            } => {
+                let (Level::Rms(l) | Level::Peak(l)) = level;
+                *phases == Phases::Schroeder && fixed(band.1) && fixed(*l)
+            }
+            Self::Sweep { to, amplitude, .. } => fixed(*to) && fixed(*amplitude),
+            _ => false,
+        }
+    }
+
+    pub(crate) fn describe(&self) -> String {
+        match self {
+            Self::Multisine {
+                band,
+                grid,
+                phases,
+                level,
+            } => format!(
+                "{} multisine on the {} grid from {} Hz to {}, {}",
+                match phases {
+                    Phases::Random => "random-phase",
+                    Phases::Schroeder => "Schroeder-phase",
+                },
+                match grid {
+                    Grid::Full => "full",
+                    Grid::Odd => "odd",
+                },
+                band.0,
+                band.1.describe(" Hz"),
+                describe_level(level)
+            ),
+            Self::RandomBinary { amplitude, hold } => format!(
+                "random binary +-{}, each value held {hold} sample(s)",
+                amplitude.describe("")
+            ),
+            Self::Prbs {
+                order,
+                amplitude,
+                hold,
+            } => format!(
+                "PRBS of a {order}-bit register (period {}) +-{}, each bit held {hold} \
+                 sample(s), from a random state per experiment",
+                (1u64 << order) - 1,
+                amplitude.describe("")
+            ),
+            Self::Sweep {
+                from,
+                to,
+                amplitude,
+            } => format!(
+                "linear sweep from {from} Hz to {} over the record, amplitude {}",
+                to.describe(" Hz"),
+                amplitude.describe("")
+            ),
+            Self::Steps { level, hold } => format!(
+                "random steps, levels uniform in [{}, {}], each held {} to {} s",
+                level.0, level.1, hold.0, hold.1
+            ),
+        }
+    }
+
+    /// Write the design's samples (about zero) into `u`.
+    pub(crate) fn fill<R: Rng + ?Sized>(
+        &self,
+        sample_time: f64,
+        rng: &mut R,
+        u: &mut [f64],
+    ) -> Result<()> {
+        self.check(sample_time)?;
+        let n = u.len();
+        match self {
+            Self::Multisine {
+                band,
+                grid,
+                phases,
+                level,
+            } => {
+                let top = band.1.draw(rng);
+                let df = 1.0 / (n as f64 * sample_time);
+                // Lines strictly inside (0, Nyquist): each a full cosine
+                // whose samples' squares sum to n / 2.
+                let lines: Vec<usize> = (1..n.div_ceil(2))
+                    .filter(|&k| {
+                        let f = k as f64 * df;
+                        f >= band.0 && f <= top && (*grid == Grid::Full || k % 2 == 1)
+                    })
+                    .collect();
+                if lines.is_empty() {
+                    return Err(SimError::InvalidSetting {
+                        name: "multisine band",
+                        value: format!("[{}, {top}] Hz", band.0),
+                        reason: format!(
+                            "holds no line of the record's grid (spacing 1/(N T) = {df} Hz for \
+                             N = {n}): widen the band or lengthen the record"
+                        ),
+                    });
+                }
+                let count = lines.len() as f64;
+                let angles: Vec<f64> = lines
+                    .iter()
+                    .enumerate()
+                    .map(|(i, _)| match phases {
+                        Phases::Random => 2.0 * PI * rng.random::<f64>(),
+                        Phases::Schroeder => -PI * (i as f64) * (i as f64 + 1.0) / count,
+                    })
+                    .collect();
+                // The inverse DFT of the lines, in O(N log N): sample t is
+                // the sum over lines of cos(2 pi k t / N + phase).
+                let mut spectrum = vec![Complex::new(0.0, 0.0); n];
+                for (&k, phase) in lines.iter().zip(&angles) {
+                    spectrum[k] = Complex::from_polar(1.0, *phase);
+                }
+                FftPlannerScalar::new()
+                    .plan_fft_inverse(n)
+                    .process(&mut spectrum);
+                for (v, c) in u.iter_mut().zip(&spectrum) {
+                    *v = c.re;
+                }
+                scale_to(u, level, rng);
+            }
+            Self::RandomBinary { amplitude, hold } => {
+                let a = amplitude.draw(rng);
+                for chunk in u.chunks_mut(*hold) {
+                    let value = if rng.random::<bool>() { a } else { -a };
+                    chunk.fill(value);
+                }
+            }
+            Self::Prbs {
+                order,
+                amplitude,
+                hold,
+            } => {
+                let a = amplitude.draw(rng);
+                let mask = (1u32 << order) - 1;
+                // Any state but all zeros, per experiment.
+                let mut state = rng.random_range(1..=mask);
+                let taps = prbs_taps(*order);
+                for chunk in u.chunks_mut(*hold) {
+                    let bit = state & 1;
+                    chunk.fill(if bit == 1 { a } else { -a });
+                    let feedback = taps
+                        .iter()
+                        .fold(0u32, |acc, tap| acc ^ (state >> (order - tap)) & 1);
+                    state = ((state >> 1) | (feedback << (order - 1))) & mask;
+                }
+            }
+            Self::Sweep {
+                from,
+                to,
+                amplitude,
+            } => {
+                let end = to.draw(rng);
+                let a = amplitude.draw(rng);
+                let duration = n as f64 * sample_time;
+                for (k, v) in u.iter_mut().enumerate() {
+                    let t = k as f64 * sample_time;
+                    let cycles = from * t + (end - from) * t * t / (2.0 * duration);
+                    *v = a * (2.0 * PI * cycles.fract()).sin();
+                }
+            }
+            Self::Steps { level, hold } => {
+                let mut k = 0;
+                while k < n {
+                    let value = Drawn::between(level.0, level.1)?.draw(rng);
+                    let seconds = Drawn::between(hold.0, hold.1)?.draw(rng);
+                    let samples = ((seconds / sample_time).round() as usize).max(1);
+                    let end = (k + samples).min(n);
+                    u[k..end].fill(value);
+                    k = end;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The taps (counted from 1, the register's first bit) of the maximal
+/// register of `order` bits.
+fn prbs_taps(order: u32) -> Vec<u32> {
+    let second = PRBS_TAPS
+        .iter()
+        .find(|(o, _)| *o == order)
+        .map_or(1, |(_, t)| *t);
+    let mut taps = vec![order, second];
+    if let Some((_, a, b)) = PRBS_FOUR_TAPS.iter().find(|(o, _, _)| *o == order) {
+        taps.extend([*a, *b]);
+    }
+    taps
+}
+
+fn fixed(d: Drawn) -> bool {
+    d.is_fixed()
+}
+
+fn describe_level(level: &Level) -> String {
+    match level {
+        Level::Rms(l) => format!("RMS {}", l.describe("")),
+        Level::Peak(l) => format!("peak {}", l.describe("")),
+    }
+}
+
+/// Scale `u` (about zero) to the drawn level.
+fn scale_to<R: Rng + ?Sized>(u: &mut [f64], level: &Level, rng: &mut R) {
+    let (target, now) = match level {
+        Level::Rms(l) => (
+            l.draw(rng),
+            (u.iter().map(|v| v * v).sum::<f64>() / u.len().max(1) as f64).sqrt(),
+        ),
+        Level::Peak(l) => (l.draw(rng), u.iter().fold(0.0f64, |m, v| m.max(v.abs()))),
+    };
+    if now > 0.0 {
+        for v in u.iter_mut() {
+            *v *= target / now;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::experiment_rng;
+
+    fn filled(design: &Design, sample_time: f64, n: usize, experiment: u64) -> Vec<f64> {
+        let mut u = vec![0.0; n];
+        design
+            .fill(sample_time, &mut experiment_rng(5, experiment), &mut u)
+            .unwrap();
+        u
+    }
+
+    /// The power of `u` at grid line `k`, by a direct DFT (the second
+    /// algorithm beside the FFT that made it).
+    fn line_power(u: &[f64], k: usize) -> f64 {
+        let n = u.len() as f64;
+        let (mut re, mut im) = (0.0, 0.0);
+        for (t, v) in u.iter().enumerate() {
+            let angle = 2.0 * PI * (k * t % u.len()) as f64 / n;
+            re += v * angle.cos();
+            im -= v * angle.sin();
+        }
+        (re * re + im * im) / (n * n)
+    }
+
+    #[test]
+    fn a_multisine_has_its_lines_in_its_band_and_its_level() {
+        let (n, dt) = (512, 0.01);
+        let odd = Design::Multisine {
+            band: (2.0, Drawn::fixed(20.0)),
+            grid: Grid::Odd,
+            phases: Phases::Random,
+            level: Level::Rms(Drawn::fixed(0.7)),
+        };
+        let u = filled(&odd, dt, n, 0);
+        let rms = (u.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+        assert!((rms - 0.7).abs() < 1e-12, "{rms}");
+        // Grid spacing 1 / (512 * 0.01) = 0.1953 Hz: lines 11..=102 in band.
+        let band = |k: usize| (11..=102).contains(&k);
+        let powers: Vec<f64> = (1..n / 2).map(|k| line_power(&u, k)).collect();
+        let total: f64 = powers.iter().sum();
+        for (i, p) in powers.iter().enumerate() {
+            let k = i + 1;
+            if band(k) && k % 2 == 1 {
+                // Equal lines: each a 1/46 share of the power.
+                assert!((p / total - 1.0 / 46.0).abs() < 1e-9, "line {k}: {p}");
+            } else {
+                assert!(*p < 1e-20 * total, "line {k} outside: {p}");
+            }
+        }
+        // Another experiment, other phases; the same one, the same bits.
+        assert_ne!(u, filled(&odd, dt, n, 1));
+        assert_eq!(u, filled(&odd, dt, n, 0));
+    }
+
+    #[test]
+    fn schroeder_phases_lower_the_crest_factor_and_a_peak_level_holds() {
+        let (n, dt) = (1024, 1.0);
+        let crest = |phases| {
+            let d = Design::Multisine {
+                band: (0.0, Drawn::fixed(0.2)),
+                grid: Grid::Full,
+                phases,
+                level: Level::Peak(Drawn::fixed(1.0)),
+            };
+            let u = filled(&d, dt, n, 3);
+            let peak = u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!((peak - 1.0).abs() < 1e-12);
+            peak / (u.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt()
+        };
+        let (schroeder, random) = (crest(Phases::Schroeder), crest(Phases::Random));
+        assert!(
+            schroeder < 2.0 && schroeder < random,
+            "{schroeder} vs {random}"
+        );
+    }
+
+    #[test]
+    fn prbs_registers_are_maximal() {
+        for order in 2..=MAX_PRBS_ORDER {
+            let period = (1usize << order) - 1;
+            let d = Design::Prbs {
+                order,
+                amplitude: Drawn::fixed(1.0),
+                hold: 1,
+            };
+            let u = filled(&d, 1.0, 2 * period, u64::from(order));
+            // Periodic with 2^n - 1 bits, and no shorter period that
+            // divides it; one more +1 than -1 per period.
+            assert_eq!(u[..period], u[period..], "order {order}");
+            let ones = u[..period].iter().filter(|v| **v > 0.0).count();
+            assert_eq!(2 * ones, period + 1, "order {order}");
+            for p in (1..period).filter(|p| period.is_multiple_of(*p)) {
+                assert_ne!(u[..period], u[p..p + period], "order {order}: period {p}");
+            }
+        }
+    }
+
+    #[test]
+    fn binary_steps_and_sweeps_keep_their_settings() {
+        let binary = Design::RandomBinary {
+            amplitude: Drawn::between(0.5, 2.0).unwrap(),
+            hold: 4,
+        };
+        let u = filled(&binary, 1.0, 400, 0);
+        let a = u[0].abs();
+        assert!((0.5..=2.0).contains(&a));
+        assert!(u.iter().all(|v| v.abs().to_bits() == a.to_bits()));
+        assert!(
+            u.chunks(4)
+                .all(|c| c.iter().all(|v| v.to_bits() == c[0].to_bits()))
+        );
+        let steps = Design::Steps {
+            level: (1.0, 3.5),
+            hold: (2.0, 5.0),
+        };
+        let s = filled(&steps, 0.5, 1000, 2);
+        let mut runs: Vec<usize> = vec![1];
+        for w in s.windows(2) {
+            if w[0].to_bits() == w[1].to_bits() {
+                *runs.last_mut().unwrap() += 1;
+            } else {
+                runs.push(1);
+            }
+        }
+        // Holds of 4 to 10 samples (the last may be cut by the record).
+        assert!(
+            runs[..runs.len() - 1].iter().all(|r| (4..=10).contains(r)),
+            "{runs:?}"
+        );
+        assert!(s.iter().all(|v| (1.0..=3.5).contains(v)));
+        // A sweep from 0 to 5 Hz over 10 s crosses zero about 2 * 25 times
+        // (its mean frequency 2.5 Hz).
+        let sweep = Design::Sweep {
+            from: 0.0,
+            to: Drawn::fixed(5.0),
+            amplitude: Drawn::fixed(1.0),
+        };
+        let w = filled(&sweep, 0.001, 10_000, 0);
+        let crossings = w.windows(2).filter(|p| p[0] < 0.0 && p[1] >= 0.0).count();
+        assert!((24..=26).contains(&crossings), "{crossings}");
+    }
+
+    #[test]
+    fn impossible_designs_are_refused_with_what_would_work() {
+        let high = Design::Multisine {
+            band: (0.0, Drawn::fixed(60.0)),
+            grid: Grid::Full,
+            phases: Phases::Random,
+            level: Level::Rms(Drawn::fixed(1.0)),
+        };
+        let e = high.check(0.01).unwrap_err().to_string();
+        assert!(e.contains("above the Nyquist frequency 50 Hz"), "{e}");
+        let narrow = Design::Multisine {
+            band: (1.2, Drawn::fixed(1.5)),
+            grid: Grid::Full,
+            phases: Phases::Random,
+            level: Level::Rms(Drawn::fixed(1.0)),
+        };
+        let mut u = vec![0.0; 100];
+        let e = narrow
+            .fill(0.01, &mut experiment_rng(0, 0), &mut u)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("holds no line of the record's grid"), "{e}");
+        assert!(Drawn::between(2.0, 1.0).is_err());
+        let held = Design::RandomBinary {
+            amplitude: Drawn::fixed(1.0),
+            hold: 0,
+        };
+        assert!(
+            held.check(1.0)
+                .unwrap_err()
+                .to_string()
+                .contains("at least 1 sample")
+        );
+        let order = Design::Prbs {
+            order: 40,
+            amplitude: Drawn::fixed(1.0),
+            hold: 1,
+        };
+        assert!(order.check(1.0).is_err());
+    }
+}
