@@ -4,12 +4,12 @@
 use std::path::{Path, PathBuf};
 
 use toml::Spanned;
-use twostage_models::InputSignal;
+use twostage_models::{Drawn, Grid, InputSignal, Level, Phases};
 
 use super::locator::Locator;
 use super::locator::Signals;
 use super::raw::RawFile;
-use super::raw::RawInput;
+use super::raw::{OneOrMany, RawInput};
 use super::{CommandInput, ModelFile, ModelSource};
 use crate::error::{Error, Result};
 
@@ -62,6 +62,21 @@ impl Locator<'_> {
                     "[input] drives the measured inputs, but [signals] names none".into(),
                 ));
             }
+        }
+        // A design's frequencies against the records' sample time.
+        let designed = match source {
+            ModelSource::Builtin { overrides, .. } => overrides.input.as_ref(),
+            ModelSource::Fmu { input, .. } | ModelSource::Equations { input, .. } => input.as_ref(),
+            _ => None,
+        };
+        if let Some(signal) = designed {
+            signal.check_sampling(signals.sample_time).map_err(|e| {
+                self.error(
+                    raw.input.as_ref().map(Spanned::span),
+                    "input",
+                    e.to_string(),
+                )
+            })?;
         }
         let fixes_input = matches!(source, ModelSource::Command { input: Some(_), .. }) || measured;
         if fixes_input && signals.inputs.is_empty() {
@@ -166,40 +181,162 @@ impl Locator<'_> {
         self.window_needs_a_file(raw)?;
         let kind = raw.signal.get_ref().as_str();
         let here = || Some(input.span());
-        let (needed, signal) = match kind {
-            "white" => ("sd", raw.sd.map(InputSignal::white_gaussian)),
-            "chicane" => ("amplitude", raw.amplitude.map(InputSignal::chicane)),
-            "fixed" => ("values", raw.values.clone().map(InputSignal::fixed)),
+        let (takes, needs): (&[&str], &[&str]) = match kind {
+            "white" => (&["sd"], &["sd"]),
+            "chicane" => (&["amplitude"], &["amplitude"]),
+            "fixed" => (&["values"], &["values"]),
+            "multisine" => (
+                &["band", "grid", "phases", "rms", "peak", "offset"],
+                &["band"],
+            ),
+            "binary" => (&["amplitude", "hold", "offset"], &["amplitude", "hold"]),
+            "prbs" => (
+                &["order", "amplitude", "hold", "offset"],
+                &["order", "amplitude", "hold"],
+            ),
+            "sweep" => (&["band", "amplitude", "offset"], &["band", "amplitude"]),
+            "steps" => (&["levels", "hold_seconds"], &["levels", "hold_seconds"]),
             other => {
                 return Err(self.error(
                     Some(raw.signal.span()),
                     "input.signal",
-                    format!("unknown signal '{other}': use \"white\", \"chicane\" or \"fixed\""),
+                    format!(
+                        "unknown signal '{other}': use \"white\", \"chicane\", \"fixed\", \
+                         \"multisine\", \"binary\", \"prbs\", \"sweep\" or \"steps\""
+                    ),
                 ));
             }
         };
-        let extra = [
+        let given = [
             ("sd", raw.sd.is_some()),
             ("amplitude", raw.amplitude.is_some()),
             ("values", raw.values.is_some()),
-        ]
-        .into_iter()
-        .find(|(key, given)| *given && *key != needed);
-        if let Some((key, _)) = extra {
+            ("band", raw.band.is_some()),
+            ("grid", raw.grid.is_some()),
+            ("phases", raw.phases.is_some()),
+            ("rms", raw.rms.is_some()),
+            ("peak", raw.peak.is_some()),
+            ("offset", raw.offset.is_some()),
+            ("hold", raw.hold.is_some()),
+            ("order", raw.order.is_some()),
+            ("levels", raw.levels.is_some()),
+            ("hold_seconds", raw.hold_seconds.is_some()),
+        ];
+        if let Some((key, _)) = given.iter().find(|(k, g)| *g && !takes.contains(k)) {
             return Err(self.error(
                 here(),
                 &format!("input.{key}"),
-                format!("a \"{kind}\" input takes {needed} only"),
+                format!("a \"{kind}\" input takes {} only", takes.join(", ")),
             ));
         }
+        if let Some(key) = needs
+            .iter()
+            .find(|k| !given.iter().any(|(g, is)| g == *k && *is))
+        {
+            return Err(self.error(
+                here(),
+                &format!("input.{key}"),
+                format!("a \"{kind}\" input needs {}", needs.join(", ")),
+            ));
+        }
+        let wrong =
+            |key: &str, message: String| self.error(here(), &format!("input.{key}"), message);
+        let drawn = |key: &str, value: &OneOrMany| -> Result<Drawn> {
+            match value {
+                OneOrMany::One(v) => Ok(Drawn::fixed(*v)),
+                OneOrMany::Many(ends) if ends.len() == 2 => {
+                    Drawn::between(ends[0], ends[1]).map_err(|e| wrong(key, e.to_string()))
+                }
+                OneOrMany::Many(ends) => Err(wrong(
+                    key,
+                    format!(
+                        "{} values: give one value, or [low, high] to draw one per experiment",
+                        ends.len()
+                    ),
+                )),
+            }
+        };
+        let amplitude = raw
+            .amplitude
+            .as_ref()
+            .map(|a| drawn("amplitude", a))
+            .transpose()?;
+        let offset = raw.offset.unwrap_or(0.0);
+        let signal = match kind {
+            "white" => raw.sd.map(InputSignal::white_gaussian),
+            "chicane" => match &raw.amplitude {
+                Some(OneOrMany::One(a)) => Some(InputSignal::chicane(*a)),
+                _ => {
+                    return Err(wrong(
+                        "amplitude",
+                        "a chicane takes one amplitude, the same in every experiment".into(),
+                    ));
+                }
+            },
+            "fixed" => raw.values.clone().map(InputSignal::fixed),
+            "multisine" => {
+                let (low, top) = raw
+                    .band
+                    .as_ref()
+                    .map(|(l, t)| (*l, t))
+                    .unwrap_or_else(|| unreachable!("needed"));
+                let grid = match raw.grid.as_deref() {
+                    None | Some("full") => Grid::Full,
+                    Some("odd") => Grid::Odd,
+                    Some(other) => {
+                        return Err(wrong("grid", format!("'{other}': use \"full\" or \"odd\"")));
+                    }
+                };
+                let phases = match raw.phases.as_deref() {
+                    None | Some("random") => Phases::Random,
+                    Some("schroeder") => Phases::Schroeder,
+                    Some(other) => {
+                        return Err(wrong(
+                            "phases",
+                            format!("'{other}': use \"random\" or \"schroeder\""),
+                        ));
+                    }
+                };
+                let level = match (&raw.rms, &raw.peak) {
+                    (Some(r), None) => Level::Rms(drawn("rms", r)?),
+                    (None, Some(p)) => Level::Peak(drawn("peak", p)?),
+                    (None, None) => Level::Rms(Drawn::fixed(1.0)),
+                    (Some(_), Some(_)) => {
+                        return Err(wrong("peak", "give rms or peak, not both".into()));
+                    }
+                };
+                Some(InputSignal::multisine(
+                    low,
+                    drawn("band", top)?,
+                    grid,
+                    phases,
+                    level,
+                    offset,
+                ))
+            }
+            "binary" => amplitude
+                .zip(raw.hold)
+                .map(|(a, hold)| InputSignal::random_binary(a, hold, offset)),
+            "prbs" => match (raw.order, amplitude, raw.hold) {
+                (Some(order), Some(a), Some(hold)) => {
+                    Some(InputSignal::prbs(order, a, hold, offset))
+                }
+                _ => None,
+            },
+            "sweep" => match (&raw.band, amplitude) {
+                (Some((from, to)), Some(a)) => {
+                    Some(InputSignal::sweep(*from, drawn("band", to)?, a, offset))
+                }
+                _ => None,
+            },
+            "steps" => raw
+                .levels
+                .zip(raw.hold_seconds)
+                .map(|(l, h)| InputSignal::steps((l[0], l[1]), (h[0], h[1]))),
+            _ => unreachable!("the kinds are matched above"),
+        };
         signal
-            .ok_or_else(|| {
-                self.error(
-                    here(),
-                    &format!("input.{needed}"),
-                    format!("a \"{kind}\" input needs {needed}"),
-                )
-            })?
+            .unwrap_or_else(|| unreachable!("every needed key is given"))
             .map_err(|e| self.error(here(), "input", e.to_string()))
     }
 }

@@ -147,8 +147,26 @@ pub(super) struct RawSignals {
 pub(super) struct RawInput {
     pub(super) signal: Spanned<String>,
     pub(super) sd: Option<f64>,
-    pub(super) amplitude: Option<f64>,
+    /// One value, or `[low, high]` drawn per experiment.
+    pub(super) amplitude: Option<OneOrMany>,
     pub(super) values: Option<Vec<f64>>,
+    /// A design's band in Hz: its bottom, and its top or `[low, high]`.
+    pub(super) band: Option<(f64, OneOrMany)>,
+    /// A multisine's lines: "full" or "odd".
+    pub(super) grid: Option<String>,
+    /// A multisine's phases: "random" or "schroeder".
+    pub(super) phases: Option<String>,
+    pub(super) rms: Option<OneOrMany>,
+    pub(super) peak: Option<OneOrMany>,
+    /// A constant added to a design.
+    pub(super) offset: Option<f64>,
+    /// Samples each value of a binary sequence is held.
+    pub(super) hold: Option<usize>,
+    /// A PRBS register's bits.
+    pub(super) order: Option<u32>,
+    /// Random steps' levels and holds (seconds), each `[low, high]`.
+    pub(super) levels: Option<[f64; 2]>,
+    pub(super) hold_seconds: Option<[f64; 2]>,
     pub(super) file: Option<Spanned<String>>,
     /// The file's columns to read, in the order of the model's inputs.
     pub(super) columns: Option<Spanned<Vec<String>>>,

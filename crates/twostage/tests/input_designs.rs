@@ -1,0 +1,166 @@
+//! Input designs in model files (issue 50): each experiment's input drawn
+//! from its own stream, its settings drawn per experiment where a range
+//! is given, and every impossible design named by line and key.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+use twostage::ModelFile;
+use twostage::models::{Simulator, experiment_rng};
+
+/// Two tanks as equations, driven by `input` (an `[input]` table's body).
+fn tanks(input: &str) -> String {
+    format!(
+        r#"[model]
+name = "tanks"
+[[parameter]]
+name = "k"
+prior = {{ dist = "uniform", low = 0.5, high = 1.5 }}
+[signals]
+inputs = ["pump"]
+outputs = ["level"]
+samples = 400
+sample_time = 2.0
+[input]
+{input}
+[equations]
+substeps = 4
+inputs = "hold"
+states = [
+  {{ name = "h1", initial = 2, derivative = "k * pump - sqrt(max(h1, 0))" }},
+  {{ name = "h2", initial = 2, derivative = "sqrt(max(h1, 0)) - sqrt(max(h2, 0))" }},
+]
+outputs = {{ level = "h2" }}
+"#
+    )
+}
+
+/// The input of experiment `i` of seed 7.
+fn input_of(file: &ModelFile, i: u64) -> Vec<f64> {
+    let sim = file.simulator().unwrap();
+    let mut record = sim.spec().new_record();
+    sim.simulate(&[1.0], &mut experiment_rng(7, i), &mut record)
+        .unwrap();
+    record.input(0).to_vec()
+}
+
+#[test]
+fn each_experiment_draws_its_own_multisine_in_the_family() {
+    let file = ModelFile::parse(
+        &tanks(
+            "signal = \"multisine\"\nband = [0.0, [0.02, 0.1]]\ngrid = \"odd\"\n\
+             rms = [0.3, 0.8]\noffset = 2.5",
+        ),
+        "tanks.toml",
+    )
+    .unwrap();
+    let inputs: Vec<Vec<f64>> = (0..4).map(|i| input_of(&file, i)).collect();
+    let mut levels = Vec::new();
+    for u in &inputs {
+        let n = u.len() as f64;
+        let mean = u.iter().sum::<f64>() / n;
+        let rms = (u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+        assert!((mean - 2.5).abs() < 1e-9, "{mean}");
+        assert!((0.3..=0.8).contains(&rms), "{rms}");
+        levels.push(rms);
+    }
+    // Each experiment its own input and its own level; the same stream,
+    // the same bits.
+    assert!(inputs.windows(2).all(|w| w[0] != w[1]));
+    assert!(levels.windows(2).all(|w| (w[0] - w[1]).abs() > 1e-6));
+    assert_eq!(inputs[2], input_of(&file, 2));
+    let described = file.simulator().unwrap().spec().input_note().to_string();
+    assert!(
+        described.contains("random-phase multisine on the odd grid")
+            && described.contains("0.02 to 0.1 Hz (drawn per experiment)"),
+        "{described}"
+    );
+    // The other designs parse and draw too.
+    for design in [
+        "signal = \"binary\"\namplitude = 0.5\nhold = 5\noffset = 2",
+        "signal = \"prbs\"\norder = 7\namplitude = [0.2, 0.6]\nhold = 3\noffset = 2",
+        "signal = \"sweep\"\nband = [0.001, 0.1]\namplitude = 0.5\noffset = 2",
+        "signal = \"steps\"\nlevels = [1.0, 3.5]\nhold_seconds = [20, 60]",
+    ] {
+        let file = ModelFile::parse(&tanks(design), "tanks.toml").unwrap();
+        let (a, b) = (input_of(&file, 0), input_of(&file, 1));
+        assert!(a.iter().all(|v| v.is_finite() && *v > 0.9), "{design}");
+        if !design.contains("sweep") {
+            assert_ne!(a, b, "{design}");
+        }
+    }
+}
+
+#[test]
+fn an_impossible_design_is_named_by_its_key() {
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "signal = \"multisine\"\nband = [0.0, 0.5]",
+            "input",
+            "above the Nyquist frequency 0.25 Hz",
+        ),
+        (
+            "signal = \"multisine\"\nband = [0.0, 0.1]\nrms = [0.8, 0.3]",
+            "input.rms",
+            "the first no larger than the second",
+        ),
+        (
+            "signal = \"multisine\"\nband = [0.0, 0.1]\nhold = 3",
+            "input.hold",
+            "takes band, grid, phases, rms, peak, offset only",
+        ),
+        (
+            "signal = \"multisine\"\nband = [0.0, 0.1]\nrms = 1\npeak = 2",
+            "input.peak",
+            "rms or peak, not both",
+        ),
+        (
+            "signal = \"multisine\"\nband = [0.0, 0.1]\ngrid = \"even\"",
+            "input.grid",
+            "use \"full\" or \"odd\"",
+        ),
+        (
+            "signal = \"prbs\"\namplitude = 1\nhold = 1",
+            "input.order",
+            "needs order",
+        ),
+        (
+            "signal = \"prbs\"\norder = 40\namplitude = 1\nhold = 1",
+            "input",
+            "2 to 20",
+        ),
+        (
+            "signal = \"binary\"\namplitude = 1\nhold = 0",
+            "input",
+            "at least 1 sample",
+        ),
+        (
+            "signal = \"chicane\"\namplitude = [0.1, 0.2]",
+            "input.amplitude",
+            "one amplitude",
+        ),
+        (
+            "signal = \"steps\"\nlevels = [1, 2]\nhold_seconds = [5, 1]",
+            "input",
+            "0 < shortest <= longest",
+        ),
+    ];
+    for (design, key, text) in cases {
+        let e = ModelFile::parse(&tanks(design), "tanks.toml")
+            .map(|_| ())
+            .unwrap_err();
+        match &e {
+            twostage::sources::Error::ModelFile {
+                key: k,
+                line,
+                message,
+                ..
+            } => {
+                assert_eq!(k, key, "{design}: {e}");
+                assert!(line.is_some(), "{e}");
+                assert!(message.contains(text), "{design}: {e}");
+            }
+            other => panic!("{other}"),
+        }
+    }
+}
