@@ -56,28 +56,14 @@ pub(crate) fn joint_dict(
     py: Python<'_>,
     joint: JointOfRecords,
 ) -> PyResult<Bound<'_, pyo3::types::PyDict>> {
-    let q = joint.theta.len();
     let dict = pyo3::types::PyDict::new(py);
-    dict.set_item("theta", joint.theta.into_pyarray(py))?;
-    match joint.half_widths {
-        Ok(w) => {
-            dict.set_item("half_widths", w.into_pyarray(py))?;
-            dict.set_item("interval_error", py.None())?;
-        }
-        Err(e) => {
-            dict.set_item("half_widths", py.None())?;
-            dict.set_item("interval_error", e)?;
-        }
-    }
-    match joint.correlation {
-        Some(r) => dict.set_item(
-            "correlation",
-            ndarray::Array2::from_shape_vec((q, q), r)
-                .map_err(|e| PyValueError::new_err(e.to_string()))?
-                .into_pyarray(py),
-        )?,
-        None => dict.set_item("correlation", py.None())?,
-    }
+    crate::through_model::set_estimate(
+        py,
+        &dict,
+        joint.theta,
+        joint.half_widths,
+        joint.correlation,
+    )?;
     dict.set_item("stop", joint.stop.name())?;
     dict.set_item("optima", joint.optima)?;
     dict.set_item("runner_up_over_best", joint.runner_up_ratio)?;

@@ -425,28 +425,14 @@ impl PyEstimator {
                     "the refinement failed ({e}); the two-stage estimate stands"
                 ))
             })?;
-        let q = refined.theta.len();
         let dict = pyo3::types::PyDict::new(py);
-        dict.set_item("theta", refined.theta.into_pyarray(py))?;
-        match refined.half_widths {
-            Ok(w) => {
-                dict.set_item("half_widths", w.into_pyarray(py))?;
-                dict.set_item("interval_error", py.None())?;
-            }
-            Err(e) => {
-                dict.set_item("half_widths", py.None())?;
-                dict.set_item("interval_error", e)?;
-            }
-        }
-        match refined.correlation {
-            Some(r) => dict.set_item(
-                "correlation",
-                ndarray::Array2::from_shape_vec((q, q), r)
-                    .map_err(shape_error)?
-                    .into_pyarray(py),
-            )?,
-            None => dict.set_item("correlation", py.None())?,
-        }
+        through_model::set_estimate(
+            py,
+            &dict,
+            refined.theta,
+            refined.half_widths,
+            refined.correlation,
+        )?;
         dict.set_item("stop", refined.stop.map(|s| s.name()))?;
         let (optima, runner_up) = refined.optima.unzip();
         dict.set_item("optima", optima)?;

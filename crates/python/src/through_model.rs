@@ -148,6 +148,39 @@ fn inputs<'py>(py: Python<'py>, record: &IoData) -> Bound<'py, PyAny> {
 
 /// A check as the dict the Python layer returns: the command line's check
 /// columns, per output as arrays, and the noise-free response.
+/// An estimate with its own interval into `dict`: `theta`, `half_widths`
+/// (None, with `interval_error` saying why, where it has none) and
+/// `correlation` [q, q] or None, as `refine` and `joint` return them.
+pub(crate) fn set_estimate(
+    py: Python<'_>,
+    dict: &Bound<'_, PyDict>,
+    theta: Vec<f64>,
+    half_widths: Result<Vec<f64>, String>,
+    correlation: Option<Vec<f64>>,
+) -> PyResult<()> {
+    let q = theta.len();
+    dict.set_item("theta", theta.into_pyarray(py))?;
+    match half_widths {
+        Ok(w) => {
+            dict.set_item("half_widths", w.into_pyarray(py))?;
+            dict.set_item("interval_error", py.None())?;
+        }
+        Err(e) => {
+            dict.set_item("half_widths", py.None())?;
+            dict.set_item("interval_error", e)?;
+        }
+    }
+    match correlation {
+        Some(r) => dict.set_item(
+            "correlation",
+            ndarray::Array2::from_shape_vec((q, q), r)
+                .map_err(|e| PyValueError::new_err(format!("array shape: {e}")))?
+                .into_pyarray(py),
+        ),
+        None => dict.set_item("correlation", py.None()),
+    }
+}
+
 pub(crate) fn check_dict<'py>(
     py: Python<'py>,
     check: &RecordCheck,

@@ -11,6 +11,7 @@ use twostage_models::{IoData, Prior, Sampling};
 use crate::RefineError;
 use crate::lockstep::{self, Meeting};
 use crate::refinement::{Descent, Refinement, ResidualModel};
+use crate::residual::Evaluated;
 use twostage_fit::TerminationReason;
 
 /// Descents whose accepted points come this close (in every coordinate of
@@ -159,15 +160,6 @@ pub struct Optimum {
     pub loss: f64,
     /// How many descents ended there, or stopped on the way there.
     pub descents: usize,
-}
-
-/// A point of a search with its residuals there.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Evaluated {
-    /// The point.
-    pub theta: Vec<f64>,
-    /// The residuals there.
-    pub residuals: Vec<f64>,
 }
 
 /// What a best-fit search found on one record.

@@ -24,8 +24,7 @@ mod residual;
 mod uncertainty;
 
 pub use best_fit::{
-    BestFit, Evaluated, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts,
-    spread_starts,
+    BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts, spread_starts,
 };
 pub use check::{
     CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_against,
@@ -37,6 +36,7 @@ pub use moments::WeightedMoments;
 pub use output_error::OutputError;
 pub use policy::{RefinePolicy, RefineReason};
 pub use refinement::{Descent, LocalPosterior, RefineStarts, Refinement, ResidualModel};
+pub use residual::Evaluated;
 /// Why a descent stopped ([`Descent::stop`]).
 pub use twostage_fit::TerminationReason;
 pub use uncertainty::LocalUncertainty;

@@ -11,9 +11,8 @@ use twostage_fit::{
 };
 use twostage_models::{IoData, Prior};
 
-use crate::best_fit::Evaluated;
 use crate::error::RefineError as Error;
-use crate::residual::{Descent, ResidualModel};
+use crate::residual::{Descent, Evaluated, ResidualModel};
 
 /// One descent to run: a record, a start (parameter values) and the box of
 /// unit-box coordinates `[lo, hi]` its iterates stay in.

@@ -148,3 +148,12 @@ pub struct Descent {
     /// Why it stopped.
     pub stop: TerminationReason,
 }
+
+/// A point of a search with its residuals there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluated {
+    /// The point.
+    pub theta: Vec<f64>,
+    /// The residuals there.
+    pub residuals: Vec<f64>,
+}
