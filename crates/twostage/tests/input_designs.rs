@@ -35,11 +35,12 @@ outputs = {{ level = "h2" }}
     )
 }
 
-/// The input of experiment `i` of seed 7.
+/// The input of experiment `i` of seed 7 (at the prior's lower corner).
 fn input_of(file: &ModelFile, i: u64) -> Vec<f64> {
     let sim = file.simulator().unwrap();
     let mut record = sim.spec().new_record();
-    sim.simulate(&[1.0], &mut experiment_rng(7, i), &mut record)
+    let theta = sim.spec().prior().lower().to_vec();
+    sim.simulate(&theta, &mut experiment_rng(7, i), &mut record)
         .unwrap();
     record.input(0).to_vec()
 }
@@ -163,4 +164,23 @@ fn an_impossible_design_is_named_by_its_key() {
             other => panic!("{other}"),
         }
     }
+}
+
+/// The family of docs/accuracy.md's measurement loads and draws as said.
+#[test]
+fn the_documented_family_loads_and_draws_its_own_inputs() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../docs/examples/tanks/tanks_multisine.toml");
+    let file = ModelFile::load(&path).unwrap();
+    let (a, b) = (input_of(&file, 0), input_of(&file, 1));
+    assert_ne!(a, b);
+    let mean = a.iter().sum::<f64>() / a.len() as f64;
+    assert!((mean - 2.2).abs() < 1e-9, "{mean}");
+    assert!(
+        file.simulator()
+            .unwrap()
+            .spec()
+            .input_note()
+            .contains("odd grid")
+    );
 }
