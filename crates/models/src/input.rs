@@ -46,6 +46,8 @@ enum Kind {
         design: Box<Design>,
         offset: f64,
     },
+    /// The sum of signals, each drawn in turn from the experiment's stream.
+    Sum(Vec<InputSignal>),
 }
 
 impl InputSignal {
@@ -193,6 +195,46 @@ impl InputSignal {
         Self::designed(Design::Steps { level, hold }, 0.0)
     }
 
+    /// The sum of `parts` (a multisine on a step sequence, say), each
+    /// drawn in turn from the experiment's stream.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal, experiment_rng};
+    /// let steps = InputSignal::steps((1.0, 3.0), (10.0, 20.0))?;
+    /// let dither = InputSignal::random_binary(Drawn::fixed(0.1), 1, 0.0)?;
+    /// let sum = InputSignal::sum(vec![steps.clone(), dither.clone()])?;
+    /// let (mut a, mut b, mut both) = (vec![0.0; 100], vec![0.0; 100], vec![0.0; 100]);
+    /// let mut rng = experiment_rng(2, 0);
+    /// steps.fill(1.0, &mut rng, &mut a)?;
+    /// dither.fill(1.0, &mut rng, &mut b)?;
+    /// sum.fill(1.0, &mut experiment_rng(2, 0), &mut both)?;
+    /// assert!(both.iter().zip(a.iter().zip(&b)).all(|(s, (x, y))| (s - (x + y)).abs() < 1e-15));
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for fewer than two parts, or a part
+    /// that is itself a sum.
+    pub fn sum(parts: Vec<InputSignal>) -> Result<Self> {
+        if parts.len() < 2 {
+            return Err(SimError::InvalidSetting {
+                name: "input sum",
+                value: format!("{} part(s)", parts.len()),
+                reason: "a sum takes two or more signals".into(),
+            });
+        }
+        if parts.iter().any(|p| matches!(p.kind, Kind::Sum(_))) {
+            return Err(SimError::InvalidSetting {
+                name: "input sum",
+                value: "a sum among its parts".into(),
+                reason: "give the inner sum's parts to the outer sum instead".into(),
+            });
+        }
+        Ok(Self {
+            kind: Kind::Sum(parts),
+        })
+    }
+
     fn designed(design: Design, offset: f64) -> Result<Self> {
         if !offset.is_finite() {
             return Err(invalid("input offset", offset, "must be finite"));
@@ -216,6 +258,7 @@ impl InputSignal {
     pub fn check_sampling(&self, sample_time: f64) -> Result<()> {
         match &self.kind {
             Kind::Designed { design, .. } => design.check(sample_time),
+            Kind::Sum(parts) => parts.iter().try_for_each(|p| p.check_sampling(sample_time)),
             _ => Ok(()),
         }
     }
@@ -248,6 +291,7 @@ impl InputSignal {
         match &self.kind {
             Kind::WhiteGaussian { .. } => false,
             Kind::Designed { design, .. } => design.is_deterministic(),
+            Kind::Sum(parts) => parts.iter().all(InputSignal::is_deterministic),
             Kind::Chicane { .. } | Kind::Fixed(_) => true,
         }
     }
@@ -269,6 +313,10 @@ impl InputSignal {
                 format!("{}, about {offset}", design.describe())
             }
             Kind::Designed { design, .. } => design.describe(),
+            Kind::Sum(parts) => {
+                let each: Vec<String> = parts.iter().map(InputSignal::describe).collect();
+                format!("the sum of: {}", each.join("; "))
+            }
         }
     }
 
@@ -311,6 +359,16 @@ impl InputSignal {
                     *v += offset;
                 }
             }
+            Kind::Sum(parts) => {
+                u.fill(0.0);
+                let mut part = vec![0.0; u.len()];
+                for p in parts {
+                    p.fill(sample_time, rng, &mut part)?;
+                    for (v, x) in u.iter_mut().zip(&part) {
+                        *v += x;
+                    }
+                }
+            }
         }
         Ok(())
     }
@@ -323,7 +381,7 @@ impl InputSignal {
     pub fn value_at(&self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
         match &self.kind {
             Kind::Chicane { amplitude } => chicane(*amplitude, t),
-            Kind::WhiteGaussian { .. } | Kind::Fixed(_) | Kind::Designed { .. } => {
+            Kind::WhiteGaussian { .. } | Kind::Fixed(_) | Kind::Designed { .. } | Kind::Sum(_) => {
                 Self::sampled_value_at(t, sample_time, samples)
             }
         }

@@ -82,6 +82,8 @@ fn each_experiment_draws_its_own_multisine_in_the_family() {
         "signal = \"prbs\"\norder = 7\namplitude = [0.2, 0.6]\nhold = 3\noffset = 2",
         "signal = \"sweep\"\nband = [0.001, 0.1]\namplitude = 0.5\noffset = 2",
         "signal = \"steps\"\nlevels = [1.0, 3.5]\nhold_seconds = [20, 60]",
+        "signal = \"sum\"\nparts = [\n  { signal = \"steps\", levels = [1.5, 3], hold_seconds = [40, 80] },\n  \
+         { signal = \"multisine\", band = [0.0, 0.05], rms = 0.2 },\n]",
     ] {
         let file = ModelFile::parse(&tanks(design), "tanks.toml").unwrap();
         let (a, b) = (input_of(&file, 0), input_of(&file, 1));
@@ -144,6 +146,22 @@ fn an_impossible_design_is_named_by_its_key() {
             "signal = \"steps\"\nlevels = [1, 2]\nhold_seconds = [5, 1]",
             "input",
             "0 < shortest <= longest",
+        ),
+        (
+            "signal = \"sum\"\nparts = [{ signal = \"white\", sd = 1 }]",
+            "input",
+            "two or more",
+        ),
+        (
+            "signal = \"sum\"\nparts = [{ signal = \"white\", sd = 1 }, { signal = \"sum\", \
+             parts = [] }]",
+            "input.parts",
+            "a part of a sum is one design",
+        ),
+        (
+            "signal = \"sum\"\nparts = [{ signal = \"white\", sd = 1 }, { signal = \"prbs\" }]",
+            "input.order",
+            "needs order",
         ),
     ];
     for (design, key, text) in cases {

@@ -196,13 +196,14 @@ impl Locator<'_> {
             ),
             "sweep" => (&["band", "amplitude", "offset"], &["band", "amplitude"]),
             "steps" => (&["levels", "hold_seconds"], &["levels", "hold_seconds"]),
+            "sum" => (&["parts"], &["parts"]),
             other => {
                 return Err(self.error(
                     Some(raw.signal.span()),
                     "input.signal",
                     format!(
                         "unknown signal '{other}': use \"white\", \"chicane\", \"fixed\", \
-                         \"multisine\", \"binary\", \"prbs\", \"sweep\" or \"steps\""
+                         \"multisine\", \"binary\", \"prbs\", \"sweep\", \"steps\" or \"sum\""
                     ),
                 ));
             }
@@ -221,6 +222,7 @@ impl Locator<'_> {
             ("order", raw.order.is_some()),
             ("levels", raw.levels.is_some()),
             ("hold_seconds", raw.hold_seconds.is_some()),
+            ("parts", raw.parts.is_some()),
         ];
         if let Some((key, _)) = given.iter().find(|(k, g)| *g && !takes.contains(k)) {
             return Err(self.error(
@@ -329,6 +331,28 @@ impl Locator<'_> {
                 }
                 _ => None,
             },
+            "sum" => {
+                let parts = raw.parts.as_deref().unwrap_or_default();
+                // A part is one design: a sum of sums is refused, so the
+                // parts' depth stays one whatever the file says.
+                if let Some(inner) = parts
+                    .iter()
+                    .find(|p| p.get_ref().parts.is_some() || p.get_ref().signal.get_ref() == "sum")
+                {
+                    return Err(self.error(
+                        Some(inner.span()),
+                        "input.parts",
+                        "a part of a sum is one design: give the inner sum's parts to the \
+                         outer sum"
+                            .into(),
+                    ));
+                }
+                let parts = parts
+                    .iter()
+                    .map(|p| self.input(p))
+                    .collect::<Result<Vec<_>>>()?;
+                Some(InputSignal::sum(parts))
+            }
             "steps" => raw
                 .levels
                 .zip(raw.hold_seconds)

@@ -167,6 +167,8 @@ pub(super) struct RawInput {
     /// Random steps' levels and holds (seconds), each `[low, high]`.
     pub(super) levels: Option<[f64; 2]>,
     pub(super) hold_seconds: Option<[f64; 2]>,
+    /// A sum's parts, each an input table of its own.
+    pub(super) parts: Option<Vec<Spanned<RawInput>>>,
     pub(super) file: Option<Spanned<String>>,
     /// The file's columns to read, in the order of the model's inputs.
     pub(super) columns: Option<Spanned<Vec<String>>>,
