@@ -3,6 +3,8 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use twostage::models::{Benchmark, Marginal, Simulator, experiment_rng};
 use twostage::{MODEL_FILE_TEMPLATE, ModelFile, ModelSource};
 
@@ -431,19 +433,8 @@ fn presets_and_inputs_are_checked_too() {
         let e = ModelFile::parse(&with(extra), "m.toml")
             .map(|_| ())
             .unwrap_err();
-        match &e {
-            twostage::sources::Error::ModelFile {
-                key: k,
-                line,
-                message,
-                ..
-            } => {
-                assert_eq!(k, key, "{e}");
-                assert!(line.is_some_and(|l| l >= 15), "{e}");
-                assert!(message.contains(text), "{e}");
-            }
-            other => panic!("{other}"),
-        }
+        let line = common::named_line(&e, key, text);
+        assert!(line.is_some_and(|l| l >= 15), "{e}");
     }
     let two = with(
         "[[preset]]\nname = \"p\"\ncompress = \"arx:2,2\"\nfit = \"linear\"\n[[preset]]\nname = \"p\"\ncompress = \"arx:3,3\"\nfit = \"linear\"\n",

@@ -19,3 +19,21 @@ pub fn paper_rmse(sim: &dyn Simulator, m: usize, r: usize, seed: u64) -> f64 {
         .parameters[0]
         .rmse
 }
+
+/// The line of a model-file error, after asserting that it names `key`
+/// and says `text`.
+pub fn named_line(e: &twostage::sources::Error, key: &str, text: &str) -> Option<usize> {
+    match e {
+        twostage::sources::Error::ModelFile {
+            key: k,
+            line,
+            message,
+            ..
+        } => {
+            assert_eq!(k, key, "{e}");
+            assert!(message.contains(text), "{e}");
+            *line
+        }
+        other => panic!("{other}"),
+    }
+}
