@@ -8,8 +8,8 @@ through the protocol, vectorized over each batch:
 with u, v11, v12 ~ N(0, 1) and v2 ~ N(0, 0.1), x(0) = 0. Each experiment
 draws from numpy's generator seeded by [seed, index], so experiment i of a
 chart is the same whatever the batch it comes in. Served with protocol 2
-(`protocol = 2` under [source]) it also runs without noise and on a given
-input.
+(`protocol = 2` under [source]) it also runs without noise and on given
+inputs, one for the batch or one per experiment.
 """
 
 import os
@@ -27,8 +27,10 @@ def batch(thetas, seeds, indices, noiseless=False, input=None):
     theta = np.asarray(thetas, dtype=float)[:, 0]
     b = theta.size
     # A given input sets the record's length (a longer validation record,
-    # say); the model's own input is N_SAMPLES long.
-    n = N_SAMPLES if input is None else len(input)
+    # say); the model's own input is N_SAMPLES long. One input serves the
+    # whole batch ([N][1]) or each experiment has its own ([b][N][1]).
+    given = None if input is None else np.asarray(input, dtype=float)[..., 0]
+    n = N_SAMPLES if given is None else given.shape[-1]
     u = np.empty((b, n))
     noise = np.empty((b, 3, n))
     for j, (seed, index) in enumerate(zip(seeds, indices)):
@@ -37,8 +39,8 @@ def batch(thetas, seeds, indices, noiseless=False, input=None):
         if input is None:
             u[j] = own
         noise[j] = rng.standard_normal((3, n))
-    if input is not None:
-        u[:] = np.asarray(input, dtype=float)[:, 0]
+    if given is not None:
+        u[:] = given
     if noiseless:
         noise[:] = 0.0
     a = (1 - theta**2) * np.sin(50 * theta**2)

@@ -18,7 +18,10 @@ Version 2 (the model file says `protocol = 2` under [source]) calls the
 function with two more keywords: `noiseless` (True: leave every noise out,
 return the model's own response) and `input` (None, or the N rows of n_u
 values to apply instead of the simulator's own input; return them as the
-inputs). A version 1 simulator never sees them.
+inputs). A version 1 simulator never sees them. A batch function's
+`input` is N rows shared by every experiment of the batch (`given`), or,
+when each experiment has its own (`each`: an input design twostage draws
+per experiment), a list of them, [b][N][n_u]: `np.ndim(input) == 3`.
 """
 
 import inspect
@@ -109,36 +112,53 @@ def serve(simulate=None, batch=None, stdin=None, stdout=None):
         if words[0] != "batch" or len(words) not in ((2,) if version == 1 else (4, 5)):
             sys.stderr.write("unknown request %r\n" % line)
             sys.exit(2)
+        # Version 2: `noise`/`noiseless`, then `own`, `given` (one input
+        # after the experiments' lines) or `each` (every experiment's input
+        # after its line); a fifth word is the records' length when it is
+        # not the greeting's.
+        asked = shape
+        mode = "own"
+        if version >= 2:
+            if len(words) == 5:
+                asked = shape.samples(int(words[4]))
+            mode = words[3]
+            if mode not in ("own", "given", "each"):
+                sys.stderr.write("unknown input mode %r in request %r\n" % (mode, line))
+                sys.exit(2)
+
+        def read_input():
+            return [[float(v) for v in stdin.readline().split()] for _ in range(asked.n)]
+
         jobs = []
         for _ in range(int(words[1])):
             values = stdin.readline().split()
             index, seed = int(values[0]), int(values[1])
-            jobs.append((index, seed, [float(v) for v in values[2:]]))
-        # Version 2: `noise`/`noiseless`, then `own`/`given` and the input;
-        # a fifth word is the records' length when it is not the greeting's.
-        conditions = {}
-        asked = shape
-        if version >= 2:
-            if len(words) == 5:
-                asked = shape.samples(int(words[4]))
-            given = None
-            if words[3] == "given":
-                given = [[float(v) for v in stdin.readline().split()] for _ in range(asked.n)]
-            conditions = {"noiseless": words[2] == "noiseless", "input": given}
+            own_input = read_input() if mode == "each" else None
+            jobs.append((index, seed, [float(v) for v in values[2:]], own_input))
+        given = read_input() if mode == "given" else None
+        noiseless = version >= 2 and words[2] == "noiseless"
+
+        def conditions(job_input):
+            if version < 2:
+                return {}
+            return {"noiseless": noiseless, "input": given if mode == "given" else job_input}
+
         out = []
         if batch is not None:
             try:
+                every = [j[3] for j in jobs] if mode == "each" else None
                 inputs, outputs = batch(
-                    [j[2] for j in jobs], [j[1] for j in jobs], [j[0] for j in jobs], **conditions
+                    [j[2] for j in jobs], [j[1] for j in jobs], [j[0] for j in jobs],
+                    **conditions(every)
                 )
-                for b, (index, _, _) in enumerate(jobs):
+                for b, (index, _, _, _) in enumerate(jobs):
                     out += _record(index, inputs[b] if shape.n_u else None, outputs[b], asked)
             except Exception as e:  # every experiment of the batch fails
                 out = ["error %d %s" % (j[0], _one_line(e)) for j in jobs]
         else:
-            for index, seed, theta in jobs:
+            for index, seed, theta, own_input in jobs:
                 try:
-                    inputs, outputs = simulate(theta, seed, index, **conditions)
+                    inputs, outputs = simulate(theta, seed, index, **conditions(own_input))
                     out += _record(index, inputs, outputs, asked)
                 except Exception as e:  # this experiment fails, the others go on
                     out.append("error %d %s" % (index, _one_line(e)))

@@ -13,7 +13,8 @@ function twostage_serve(simulate)
   % simulate fails that experiment only. Under version 2 (protocol = 2 in
   % the model file) it is called simulate(theta, seed, index, n, noiseless,
   % u): noiseless true leaves every noise out, u is the n x n_u input to
-  % apply (return it as the inputs) or [] for the simulator's own.
+  % apply (return it as the inputs; the same for every experiment of a
+  % request, or each its own) or [] for the simulator's own.
   greeting = strsplit(strtrim(next_line()), " ");
   if numel(greeting) != 6 || !strcmp(greeting{1}, "twostage") || !any(strcmp(greeting{2}, {"1", "2"}))
     fprintf(stderr, "not a twostage greeting of version 1 or 2: %s\n", strjoin(greeting, " "));
@@ -31,25 +32,30 @@ function twostage_serve(simulate)
     end
     words = strsplit(strtrim(line), " ");
     count = str2double(words{2});
-    jobs = cell(count, 1);
-    for k = 1:count
-      jobs{k} = strsplit(strtrim(next_line()), " ");
-    end
     noiseless = false;
-    given = [];
+    mode = "own";
     asked = n;
     if version >= 2
       noiseless = strcmp(words{3}, "noiseless");
+      mode = words{4};
       % A fifth word: the records' length, when not the greeting's.
       if numel(words) >= 5
         asked = str2double(words{5});
       end
-      if strcmp(words{4}, "given")
-        given = zeros(asked, nu);
-        for t = 1:asked
-          given(t, :) = str2double(strsplit(strtrim(next_line()), " "));
-        end
+    end
+    % `given`: one input after the experiments' lines; `each`: every
+    % experiment's own input after its line.
+    jobs = cell(count, 1);
+    inputs = cell(count, 1);
+    for k = 1:count
+      jobs{k} = strsplit(strtrim(next_line()), " ");
+      if strcmp(mode, "each")
+        inputs{k} = read_input(asked, nu);
       end
+    end
+    if strcmp(mode, "given")
+      given = read_input(asked, nu);
+      inputs(:) = {given};
     end
     for k = 1:count
       job = jobs{k};
@@ -58,7 +64,7 @@ function twostage_serve(simulate)
       theta = str2double(job(3:end));
       try
         if version >= 2
-          [u, y] = simulate(theta, seed, str2double(index), asked, noiseless, given);
+          [u, y] = simulate(theta, seed, str2double(index), asked, noiseless, inputs{k});
         else
           [u, y] = simulate(theta, seed, str2double(index), n);
         end
@@ -74,6 +80,14 @@ function twostage_serve(simulate)
       end
     end
     fflush(stdout);
+  end
+end
+
+function u = read_input(samples, nu)
+  % A given input: one line of nu values per sample.
+  u = zeros(samples, nu);
+  for t = 1:samples
+    u(t, :) = str2double(strsplit(strtrim(next_line()), " "));
   end
 end
 

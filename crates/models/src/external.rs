@@ -169,13 +169,75 @@ impl ExternalSimulator {
         if let Err(e) = refused {
             return jobs.iter().map(|_| Err(e.clone())).collect();
         }
+        let inputs = match self.given_input(conditions) {
+            Some(given) => Inputs::Shared(given),
+            None => Inputs::Own,
+        };
+        self.send_jobs(jobs, conditions.noiseless, inputs, outs)
+    }
+
+    /// As [`ExternalSimulator::simulate_jobs`], each job on its own given
+    /// input (`inputs[k]` for `jobs[k]`, all of one length): one request
+    /// whose input mode is `each` (protocol 2).
+    pub fn simulate_jobs_on_inputs(
+        &self,
+        jobs: &[ExternalJob<'_>],
+        inputs: &[IoData],
+        noiseless: bool,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        let refused = (|| {
+            if inputs.len() != jobs.len() {
+                return Err(SimError::InvalidData(format!(
+                    "{} inputs for {} experiments: give one input per experiment",
+                    inputs.len(),
+                    jobs.len()
+                )));
+            }
+            let mut length = None;
+            for input in inputs {
+                let conditions = Conditions {
+                    noiseless,
+                    input: Some(input),
+                };
+                self.capabilities().check(&conditions, self.spec.name())?;
+                let n = conditions.check_input(&self.spec)?;
+                if length.is_some_and(|first| first != n) {
+                    return Err(SimError::InvalidData(format!(
+                        "the inputs of one request have {} and {n} samples: a request's \
+                         records share one length",
+                        length.unwrap_or_default()
+                    )));
+                }
+                length = Some(n);
+            }
+            Ok(())
+        })();
+        if let Err(e) = refused {
+            return jobs.iter().map(|_| Err(e.clone())).collect();
+        }
+        let inputs = if self.spec.input_names().is_empty() {
+            Inputs::Own
+        } else {
+            Inputs::Each(inputs)
+        };
+        self.send_jobs(jobs, noiseless, inputs, outs)
+    }
+
+    /// Send the jobs whose parameters the model takes, in one request;
+    /// a refused parameter vector is its own job's error.
+    fn send_jobs(
+        &self,
+        jobs: &[ExternalJob<'_>],
+        noiseless: bool,
+        inputs: Inputs<'_>,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
         if jobs.len() != outs.len() {
             let e =
                 SimError::InvalidData(format!("{} jobs for {} records", jobs.len(), outs.len()));
             return jobs.iter().map(|_| Err(e.clone())).collect();
         }
-        // A parameter vector the model refuses is that job's error; the
-        // others are sent.
         let mut results: Vec<Option<Result<()>>> = jobs
             .iter()
             .map(|job| check_theta(&self.spec, job.theta).err().map(Err))
@@ -183,9 +245,20 @@ impl ExternalSimulator {
         let sent: Vec<usize> = (0..jobs.len()).filter(|&i| results[i].is_none()).collect();
         if !sent.is_empty() {
             let batch: Vec<ExternalJob<'_>> = sent.iter().map(|&i| jobs[i]).collect();
+            let batch_inputs: Vec<&IoData>;
+            let request = Request {
+                noiseless,
+                inputs: match inputs {
+                    Inputs::Each(all) => {
+                        batch_inputs = sent.iter().map(|&i| &all[i]).collect();
+                        Inputs::EachOf(&batch_inputs)
+                    }
+                    other => other,
+                },
+            };
             let mut records: Vec<IoData> =
                 sent.iter().map(|&i| std::mem::take(&mut outs[i])).collect();
-            let answers = self.request(&batch, conditions, &mut records);
+            let answers = self.request(&batch, request, &mut records);
             for ((&i, record), answer) in sent.iter().zip(records).zip(answers) {
                 outs[i] = record;
                 results[i] = Some(answer);
@@ -201,7 +274,7 @@ impl ExternalSimulator {
     fn request(
         &self,
         jobs: &[ExternalJob<'_>],
-        conditions: Conditions<'_>,
+        request: Request<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
         let mut process = match self.checkout() {
@@ -209,7 +282,7 @@ impl ExternalSimulator {
             Err(e) => return jobs.iter().map(|_| Err(e.clone())).collect(),
         };
         let mut results = Vec::with_capacity(jobs.len());
-        match self.exchange(&mut process, jobs, conditions, outs, &mut results) {
+        match self.exchange(&mut process, jobs, request, outs, &mut results) {
             Ok(()) => self.checkin(process),
             Err(e) => {
                 let e = self.with_stderr(e, &process);
@@ -228,19 +301,19 @@ impl ExternalSimulator {
         &self,
         process: &mut Process,
         jobs: &[ExternalJob<'_>],
-        conditions: Conditions<'_>,
+        request: Request<'_>,
         outs: &mut [IoData],
         results: &mut Vec<Result<()>>,
     ) -> Result<()> {
         process
-            .send(&self.request_text(jobs, conditions))
+            .send(&self.request_text(jobs, request))
             .map_err(|e| self.failure(&e))?;
         let (n, n_u, n_y) = (
-            self.samples(conditions),
+            self.samples(request),
             self.spec.input_names().len(),
             self.spec.output_names().len(),
         );
-        for (job, out) in jobs.iter().zip(outs.iter_mut()) {
+        for (k_job, (job, out)) in jobs.iter().zip(outs.iter_mut()).enumerate() {
             let head = process.line(self.timeout).map_err(|e| self.failure(&e))?;
             let mut words = head.split_whitespace();
             match (words.next(), words.next().map(str::parse::<u64>)) {
@@ -288,60 +361,61 @@ impl ExternalSimulator {
                     )));
                 }
             }
-            results.push(self.given_input_kept(job.index, conditions, out));
+            results.push(self.given_input_kept(job.index, request.inputs.of(k_job), out));
         }
         Ok(())
     }
 
     /// The samples of each record of a request: a given record's length,
     /// else the model's.
-    fn samples(&self, conditions: Conditions<'_>) -> usize {
-        conditions
-            .input
+    fn samples(&self, request: Request<'_>) -> usize {
+        request
+            .inputs
+            .of(0)
             .map_or(self.spec.n_samples(), IoData::n_samples)
     }
 
     /// The request's text: `batch B` (version 1), or `batch B NOISE
-    /// INPUT` then, for a given input, its N lines (version 2); a record
-    /// of another length than the greeting's N adds it, `batch B NOISE
-    /// INPUT N2`, and the records answer with N2 samples.
-    fn request_text(&self, jobs: &[ExternalJob<'_>], conditions: Conditions<'_>) -> String {
-        let mut request = format!("batch {}", jobs.len());
+    /// INPUT` (version 2) then, for a `given` input, its N lines after
+    /// the experiments' lines, or, for `each`, every experiment's line
+    /// followed by its own input's N lines; a record of another length
+    /// than the greeting's N adds it, `batch B NOISE INPUT N2`, and the
+    /// records answer with N2 samples.
+    fn request_text(&self, jobs: &[ExternalJob<'_>], request: Request<'_>) -> String {
+        let mut text = format!("batch {}", jobs.len());
         if self.protocol >= 2 {
-            let noise = if conditions.noiseless {
+            let noise = if request.noiseless {
                 "noiseless"
             } else {
                 "noise"
             };
-            let input = if self.given_input(conditions).is_some() {
-                "given"
-            } else {
-                "own"
+            let input = match request.inputs {
+                Inputs::Own => "own",
+                Inputs::Shared(_) => "given",
+                Inputs::Each(_) | Inputs::EachOf(_) => "each",
             };
-            let _ = write!(request, " {noise} {input}");
-            let samples = self.samples(conditions);
+            let _ = write!(text, " {noise} {input}");
+            let samples = self.samples(request);
             if samples != self.spec.n_samples() {
-                let _ = write!(request, " {samples}");
+                let _ = write!(text, " {samples}");
             }
         }
-        request.push('\n');
-        for job in jobs {
-            let _ = write!(request, "{} {}", job.index, job.seed);
+        text.push('\n');
+        let each = matches!(request.inputs, Inputs::Each(_) | Inputs::EachOf(_));
+        for (k, job) in jobs.iter().enumerate() {
+            let _ = write!(text, "{} {}", job.index, job.seed);
             for t in job.theta {
-                let _ = write!(request, " {t:?}");
+                let _ = write!(text, " {t:?}");
             }
-            request.push('\n');
-        }
-        if let Some(given) = self.given_input(conditions) {
-            for k in 0..given.n_samples() {
-                let row: Vec<String> = (0..given.n_inputs())
-                    .map(|j| format!("{:?}", given.input(j)[k]))
-                    .collect();
-                request.push_str(&row.join(" "));
-                request.push('\n');
+            text.push('\n');
+            if let (true, Some(input)) = (each, request.inputs.of(k)) {
+                input_lines(&mut text, input);
             }
         }
-        request
+        if let Inputs::Shared(given) = request.inputs {
+            input_lines(&mut text, given);
+        }
+        text
     }
 
     /// The input to send: none for a model without inputs.
@@ -353,8 +427,8 @@ impl ExternalSimulator {
 
     /// A record must carry the input it was given: a simulator that
     /// ignored it would pass off a response to another input.
-    fn given_input_kept(&self, index: u64, conditions: Conditions<'_>, out: &IoData) -> Result<()> {
-        let Some(given) = conditions.input else {
+    fn given_input_kept(&self, index: u64, given: Option<&IoData>, out: &IoData) -> Result<()> {
+        let Some(given) = given else {
             return Ok(());
         };
         for j in 0..given.n_inputs() {
@@ -362,7 +436,7 @@ impl ExternalSimulator {
             if let Some(k) = (0..sent.len()).find(|&k| sent[k].to_bits() != back[k].to_bits()) {
                 return Err(self.failure(&format!(
                     "experiment {index} returned input {} = {:?} at sample {k} where it was \
-                     given {:?}: a request with `given` input must simulate (and return) that \
+                     given {:?}: a request with a given input must simulate (and return) that \
                      input",
                     self.spec.input_names()[j],
                     back[k],
@@ -549,6 +623,20 @@ impl Simulator for ExternalSimulator {
         self.simulate_jobs(&jobs, conditions, outs)
     }
 
+    /// One request for the block, each experiment's input after its line
+    /// (`each`, protocol 2).
+    fn simulate_batch_on_inputs(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        inputs: &[IoData],
+        noiseless: bool,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        let jobs = jobs_of(thetas, rngs);
+        self.simulate_jobs_on_inputs(&jobs, inputs, noiseless, outs)
+    }
+
     /// One request for the block; each experiment's index and seed come
     /// from its stream ([`ExternalJob::stream_of`]).
     fn simulate_batch(
@@ -569,6 +657,52 @@ impl Simulator for ExternalSimulator {
         self.simulate_batch(&[job], std::slice::from_mut(out))
             .pop()
             .unwrap_or_else(|| Err(self.failure("no answer")))
+    }
+}
+
+/// What a request asks of its records beside the parameters.
+#[derive(Clone, Copy)]
+struct Request<'a> {
+    noiseless: bool,
+    inputs: Inputs<'a>,
+}
+
+/// The inputs of a request's experiments.
+#[derive(Clone, Copy)]
+enum Inputs<'a> {
+    /// The simulator's own design.
+    Own,
+    /// One given input for every experiment (`given`).
+    Shared(&'a IoData),
+    /// Each experiment's own (`each`), as the caller handed them.
+    Each(&'a [IoData]),
+    /// Each experiment's own, of the experiments sent.
+    EachOf(&'a [&'a IoData]),
+}
+
+impl<'a> Inputs<'a> {
+    /// The input the request's `k`-th experiment is given, if any.
+    fn of(self, k: usize) -> Option<&'a IoData> {
+        match self {
+            Inputs::Own => None,
+            Inputs::Shared(input) => Some(input),
+            Inputs::Each(all) => all.get(k),
+            Inputs::EachOf(all) => all.get(k).copied(),
+        }
+    }
+}
+
+/// Append an input's samples, one line of its signals per sample, each
+/// value written to read back to the same bits.
+fn input_lines(text: &mut String, input: &IoData) {
+    for k in 0..input.n_samples() {
+        for j in 0..input.n_inputs() {
+            if j > 0 {
+                text.push(' ');
+            }
+            let _ = write!(text, "{:?}", input.input(j)[k]);
+        }
+        text.push('\n');
     }
 }
 

@@ -378,6 +378,18 @@ impl Simulator for NoiseFree {
         self.inner
             .simulate_batch_under(thetas, rngs, conditions, outs)
     }
+
+    fn simulate_batch_on_inputs(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        inputs: &[IoData],
+        _noiseless: bool,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        self.inner
+            .simulate_batch_on_inputs(thetas, rngs, inputs, true, outs)
+    }
 }
 
 /// A simulator of the system `P(theta)`: given a parameter vector and a
@@ -480,6 +492,55 @@ pub trait Simulator: Send + Sync {
             .collect()
     }
 
+    /// A block of experiments, each on its own given input: `thetas[k]`
+    /// on `inputs[k]` with the stream `rngs[k]` into `outs[k]`, without
+    /// any noise when `noiseless` (an input design drawn per experiment
+    /// by the caller, for a source that cannot draw it itself). Default:
+    /// one by one through [`Simulator::simulate_under`]; a command source
+    /// sends the block in one request.
+    ///
+    /// ```
+    /// use twostage_models::{experiment_rng, Benchmark, IoData, Simulator};
+    /// let model = Benchmark::new();
+    /// let inputs = [IoData::siso(&[0.5; 1000], &[0.0; 1000])?, IoData::siso(&[-1.0; 1000], &[0.0; 1000])?];
+    /// let mut rngs = [experiment_rng(1, 0), experiment_rng(1, 1)];
+    /// let mut outs = [model.spec().new_record(), model.spec().new_record()];
+    /// let results = model.simulate_batch_on_inputs(&[&[0.3], &[0.3]], &mut rngs, &inputs, true, &mut outs);
+    /// assert!(results.iter().all(Result::is_ok));
+    /// assert_eq!(outs[1].input(0), inputs[1].input(0));
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    fn simulate_batch_on_inputs(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        inputs: &[IoData],
+        noiseless: bool,
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        if inputs.len() != thetas.len() {
+            let e = SimError::InvalidData(format!(
+                "{} inputs for {} experiments: give one input per experiment",
+                inputs.len(),
+                thetas.len()
+            ));
+            return thetas.iter().map(|_| Err(e.clone())).collect();
+        }
+        thetas
+            .iter()
+            .zip(rngs.iter_mut())
+            .zip(inputs)
+            .zip(outs.iter_mut())
+            .map(|(((theta, rng), input), out)| {
+                let conditions = Conditions {
+                    noiseless,
+                    input: Some(input),
+                };
+                self.simulate_under(theta, rng, conditions, out)
+            })
+            .collect()
+    }
+
     /// The input every experiment gets, when the simulator's design gives
     /// all of them the same one (a fixed or deterministic signal): an
     /// estimator trained on its records learned that input, and a record
@@ -528,6 +589,16 @@ macro_rules! forward_simulator {
             }
             fn shared_input(&self) -> Option<IoData> {
                 (**self).shared_input()
+            }
+            fn simulate_batch_on_inputs(
+                &self,
+                thetas: &[&[f64]],
+                rngs: &mut [ExperimentRng],
+                inputs: &[IoData],
+                noiseless: bool,
+                outs: &mut [IoData],
+            ) -> Vec<Result<()>> {
+                (**self).simulate_batch_on_inputs(thetas, rngs, inputs, noiseless, outs)
             }
             fn simulate_under(
                 &self,

@@ -449,7 +449,7 @@ fn the_octave_benchmark_speaks_the_protocol() {
     let sim = ExternalSimulator::new(
         spec,
         vec![
-            octave,
+            octave.clone(),
             "--no-gui".into(),
             "--quiet".into(),
             "--norc".into(),
@@ -471,18 +471,63 @@ fn the_octave_benchmark_speaks_the_protocol() {
         (1.0 / 1.5..1.5).contains(&ratio),
         "Octave {octave_rmse} vs built-in {built_in}"
     );
+
+    // Version 2 with a design drawn per experiment: each experiment of a
+    // request of three simulates its own input.
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("octave-each");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("gain.m"),
+        format!(
+            "1;\naddpath({:?});\nfunction [u, y] = simulate(theta, seed, index, n, noiseless, u)\n  \
+             y = theta(1) * u;\nend\ntwostage_serve(@simulate);\n",
+            protocol_dir().to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("gain.toml"),
+        format!(
+            "[model]\nname = \"gain\"\n[source]\ncommand = [{octave:?}, \"--no-gui\", \"--quiet\", \
+             \"--norc\", \"gain.m\"]\nbatch = 3\nprotocol = 2\n[[parameter]]\nname = \"k\"\n\
+             prior = {{ dist = \"uniform\", low = 0.5, high = 2 }}\n[signals]\ninputs = [\"u\"]\n\
+             outputs = [\"y\"]\nsamples = 40\n[input]\nsignal = \"multisine\"\nband = [0.0, 0.3]\nrms = [0.5, 2]\n"
+        ),
+    )
+    .unwrap();
+    let gain = twostage::ModelFile::load(dir.join("gain.toml"))
+        .unwrap()
+        .simulator()
+        .unwrap();
+    let thetas = [[0.5], [1.0], [2.0]];
+    let theta_refs: Vec<&[f64]> = thetas.iter().map(|t| t.as_slice()).collect();
+    let mut rngs: Vec<_> = (0..3).map(|i| experiment_rng(4, i)).collect();
+    let mut records = vec![IoData::default(); 3];
+    for result in gain.simulate_batch(&theta_refs, &mut rngs, &mut records) {
+        result.unwrap();
+    }
+    for (theta, record) in thetas.iter().zip(&records) {
+        for (y, u) in record.output(0).iter().zip(record.input(0)) {
+            assert_eq!(y.to_bits(), (theta[0] * u).to_bits());
+        }
+    }
+    assert_ne!(records[0].input(0), records[1].input(0));
 }
 
 /// The numpy benchmark's model file speaking `protocol`, with `extra`
 /// lines under [source] and after it.
 fn numpy_benchmark_file(protocol: u32, extra: &str) -> twostage::ModelFile {
-    twostage::ModelFile::parse(
-        &format!(
-            r#"[model]
+    twostage::ModelFile::parse(&numpy_benchmark_text(protocol, 4, extra), "numpy.toml").unwrap()
+}
+
+/// The text of [`numpy_benchmark_file`], `batch` experiments per request.
+fn numpy_benchmark_text(protocol: u32, batch: usize, extra: &str) -> String {
+    format!(
+        r#"[model]
 name = "numpy-benchmark"
 [source]
 command = [{:?}, {:?}]
-batch = 4
+batch = {batch}
 protocol = {protocol}
 {extra}
 [[parameter]]
@@ -493,12 +538,139 @@ inputs = ["u"]
 outputs = ["y"]
 samples = 1000
 "#,
-            python(),
-            protocol_dir().join("benchmark_numpy.py").to_str().unwrap()
-        ),
-        "numpy.toml",
+        python(),
+        protocol_dir().join("benchmark_numpy.py").to_str().unwrap()
     )
-    .unwrap()
+}
+
+/// A multisine family drawn per experiment (its band top and level drawn
+/// too), as the `[input]` of the benchmark's model files.
+const DRAWN_MULTISINE: &str =
+    "[input]\nsignal = \"multisine\"\nband = [0.0, [0.2, 0.4]]\nrms = [0.5, 1.5]\n";
+
+/// Protocol 2 with an input design: twostage draws each experiment's input
+/// from the experiment's stream and hands it over (`each`), so the numpy
+/// simulator's noise-free records are the built-in benchmark's, drawing
+/// the same design itself, for every experiment of a batch; the records
+/// are the same bits whatever the batch size; a version 1 simulator is
+/// told to serve version 2.
+#[test]
+fn a_design_drawn_per_experiment_reaches_a_command_simulator() {
+    use twostage::models::NoiseFree;
+    let built_in = twostage::ModelFile::parse(
+        &format!("[model]\nname = \"b\"\n[source]\nbuiltin = \"benchmark\"\n{DRAWN_MULTISINE}"),
+        "builtin.toml",
+    )
+    .unwrap();
+    let numpy = |batch| {
+        twostage::ModelFile::parse(
+            &numpy_benchmark_text(2, batch, DRAWN_MULTISINE),
+            "numpy.toml",
+        )
+        .unwrap()
+    };
+    assert!(
+        numpy(4)
+            .spec()
+            .input_note()
+            .contains("drawn by twostage per experiment")
+            && numpy(4).spec().input_note().contains("multisine"),
+        "{}",
+        numpy(4).spec().input_note()
+    );
+    let thetas: Vec<Vec<f64>> = [-0.7, -0.1, 0.3, 0.8, 0.55]
+        .iter()
+        .map(|t| vec![*t])
+        .collect();
+    let theta_refs: Vec<&[f64]> = thetas.iter().map(Vec::as_slice).collect();
+    let chart = |sim: &dyn Simulator| {
+        let mut rngs: Vec<_> = (0..5).map(|i| experiment_rng(9, i)).collect();
+        let mut records = vec![IoData::default(); 5];
+        for result in sim.simulate_batch(&theta_refs, &mut rngs, &mut records) {
+            result.unwrap();
+        }
+        records
+    };
+    let quiet_numpy = chart(&NoiseFree::new(numpy(4).simulator().unwrap()).unwrap());
+    let quiet_built_in = chart(&NoiseFree::new(built_in.simulator().unwrap()).unwrap());
+    for (k, (a, b)) in quiet_numpy.iter().zip(&quiet_built_in).enumerate() {
+        assert_eq!(a.input(0), b.input(0), "experiment {k}: another input");
+        let worst = a
+            .output(0)
+            .iter()
+            .zip(b.output(0))
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst <= 1e-9,
+            "experiment {k}: numpy and built-in differ by {worst}"
+        );
+    }
+    assert_ne!(quiet_numpy[0].input(0), quiet_numpy[1].input(0));
+    // With noise, in batches of 4 (4 + 1) or one by one: the same bits.
+    let (four, one) = (
+        chart(numpy(4).simulator().unwrap().as_ref()),
+        chart(numpy(1).simulator().unwrap().as_ref()),
+    );
+    assert!(four == one, "the records depend on the batch size");
+    assert_eq!(four[3].input(0), quiet_numpy[3].input(0));
+    assert_ne!(four[3].output(0), quiet_numpy[3].output(0));
+
+    let refused =
+        twostage::ModelFile::parse(&numpy_benchmark_text(1, 1, DRAWN_MULTISINE), "numpy.toml")
+            .unwrap_err()
+            .to_string();
+    assert!(
+        refused.contains("protocol = 2") && refused.contains("drawn by twostage"),
+        "{refused}"
+    );
+}
+
+/// A one-experiment Python function is called with its own experiment's
+/// input, for every experiment of a request of three.
+#[test]
+fn a_function_serving_one_experiment_gets_each_its_own_input() {
+    let dir = script(
+        "external-each",
+        r#"
+def simulate(theta, seed, index, noiseless=False, input=None):
+    return input, [[theta[0] * row[0]] for row in input]
+
+serve(simulate)
+"#,
+    );
+    let text = format!(
+        "[model]\nname = \"gain\"\n[source]\ncommand = [{:?}, \"sim.py\"]\nbatch = 3\nprotocol = 2\n\
+         [[parameter]]\nname = \"k\"\nprior = {{ dist = \"uniform\", low = 0.5, high = 2 }}\n\
+         [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 64\n\
+         [input]\nsignal = \"binary\"\namplitude = [0.5, 2.0]\nhold = 4\n",
+        python()
+    );
+    let path = dir.join("gain.toml");
+    std::fs::write(&path, text).unwrap();
+    let sim = twostage::ModelFile::load(&path)
+        .unwrap()
+        .simulator()
+        .unwrap();
+    let thetas = [[0.5], [1.0], [2.0]];
+    let theta_refs: Vec<&[f64]> = thetas.iter().map(|t| t.as_slice()).collect();
+    let mut rngs: Vec<_> = (0..3).map(|i| experiment_rng(4, i)).collect();
+    let mut records = vec![IoData::default(); 3];
+    for result in sim.simulate_batch(&theta_refs, &mut rngs, &mut records) {
+        result.unwrap();
+    }
+    for (theta, record) in thetas.iter().zip(&records) {
+        let u = record.input(0);
+        assert!(
+            u.iter().all(|v| v.abs() > 0.4),
+            "not the binary design: {u:?}"
+        );
+        for (y, u) in record.output(0).iter().zip(u) {
+            assert_eq!(y.to_bits(), (theta[0] * u).to_bits());
+        }
+    }
+    assert_ne!(records[0].input(0), records[1].input(0));
+    assert_ne!(records[1].input(0), records[2].input(0));
 }
 
 /// Protocol 2: a noise-free run on a given input through the numpy client

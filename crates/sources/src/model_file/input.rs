@@ -67,6 +67,10 @@ impl Locator<'_> {
         let designed = match source {
             ModelSource::Builtin { overrides, .. } => overrides.input.as_ref(),
             ModelSource::Fmu { input, .. } | ModelSource::Equations { input, .. } => input.as_ref(),
+            ModelSource::Command {
+                input: Some(CommandInput::Drawn(design)),
+                ..
+            } => Some(design),
             _ => None,
         };
         if let Some(signal) = designed {
@@ -102,21 +106,20 @@ impl Locator<'_> {
         }
     }
 
-    /// A command's fixed input: `values` for every input signal, or a
-    /// CSV `file` whose columns are named as the model's inputs.
+    /// A command's input: a design drawn per experiment, or a fixed one
+    /// (`values` for every input signal, or a CSV `file` whose columns are
+    /// named as the model's inputs).
     pub(super) fn command_input(&self, input: &Spanned<RawInput>) -> Result<CommandInput> {
         let raw = input.get_ref();
         let fixed_only = || {
             self.error(
                 Some(raw.signal.span()),
                 "input.signal",
-                "a command is handed one input for every experiment: give signal = \"fixed\" \
-                 with its values, or with file = \"record.csv\" (a measured input)"
-                    .into(),
+                "a fixed input takes values or file = \"record.csv\" (a measured input)".into(),
             )
         };
         if raw.signal.get_ref() != "fixed" {
-            return Err(fixed_only());
+            return self.input(input).map(CommandInput::Drawn);
         }
         self.window_needs_a_file(raw)?;
         match (&raw.file, &raw.values) {
@@ -384,6 +387,19 @@ impl ModelFile {
     ) -> Result<twostage_models::IoData> {
         let mut record = self.spec.new_record();
         match input {
+            CommandInput::Drawn(design) => {
+                return design
+                    .shared_record(&self.spec)
+                    .ok_or_else(|| Error::ModelFile {
+                        file: self.origin.clone(),
+                        line: None,
+                        key: "input.signal".into(),
+                        message: format!(
+                            "{} is drawn anew per experiment: it is no one record",
+                            design.describe()
+                        ),
+                    });
+            }
             CommandInput::Values(signal) => {
                 // A fixed signal draws nothing: any stream serves.
                 let mut rng = twostage_models::experiment_rng(0, 0);

@@ -379,7 +379,8 @@ impl Locator<'_> {
                     "input",
                     "a command speaking protocol 1 makes its own input and returns it with the \
                      outputs: leave [input] out, or say `protocol = 2` under [source] and serve \
-                     version 2, which hands the simulator the input with every request"
+                     version 2, which hands the simulator each experiment's input (fixed, or \
+                     drawn by twostage from the design)"
                         .into(),
                 ));
             }

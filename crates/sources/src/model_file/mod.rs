@@ -85,9 +85,14 @@ pub enum ModelSource {
     ChartsOnly,
 }
 
-/// The input a model file fixes for a command source (protocol 2).
+/// The input a model file hands a command source (protocol 2): fixed for
+/// every experiment, or a design drawn per experiment.
 #[derive(Debug, Clone, PartialEq)]
 pub enum CommandInput {
+    /// A design (a multisine, a random binary sequence, ...) that twostage
+    /// draws from each experiment's stream and hands to the simulator with
+    /// the experiment (`each`, docs/protocol.md).
+    Drawn(InputSignal),
     /// The same values for every input signal.
     Values(InputSignal),
     /// A CSV file (a measured record, say) whose columns named as the
@@ -109,6 +114,12 @@ pub enum CommandInput {
 /// How `models` describes an input the file fixes.
 fn fixed_input_note(fixed: &CommandInput, inputs: &[&str]) -> String {
     match fixed {
+        CommandInput::Drawn(signal) => {
+            format!(
+                "drawn by twostage per experiment and handed to the simulator: {}",
+                signal.describe()
+            )
+        }
         CommandInput::Values(signal) => {
             format!("fixed for every experiment: {}", signal.describe())
         }
@@ -423,6 +434,7 @@ impl ModelFile {
                 spec: self.spec.clone(),
                 output_noise: self.output_noise()?,
                 fixed_input: self.measured_record()?,
+                design: None,
             })),
             ModelSource::Command {
                 command,
@@ -439,15 +451,17 @@ impl ModelFile {
                 if let Some(dir) = dir {
                     external = external.current_dir(dir);
                 }
-                let fixed_input = input
-                    .as_ref()
-                    .map(|input| self.fixed_record(input, dir.as_deref()))
-                    .transpose()?;
+                let (fixed_input, design) = match input {
+                    Some(CommandInput::Drawn(design)) => (None, Some(design.clone())),
+                    Some(fixed) => (Some(self.fixed_record(fixed, dir.as_deref())?), None),
+                    None => (None, None),
+                };
                 Ok(Box::new(FileSimulator {
                     inner: Box::new(external),
                     spec: self.spec.clone(),
                     output_noise: self.output_noise()?,
                     fixed_input,
+                    design,
                 }))
             }
             ModelSource::Fmu {
@@ -480,6 +494,7 @@ impl ModelFile {
                     spec: self.spec.clone(),
                     output_noise: self.output_noise()?,
                     fixed_input: self.measured_record()?,
+                    design: None,
                 }))
             }
             ModelSource::Equations { input, .. } => {
@@ -498,6 +513,7 @@ impl ModelFile {
                     spec: self.spec.clone(),
                     output_noise: self.output_noise()?,
                     fixed_input: self.measured_record()?,
+                    design: None,
                 }))
             }
             ModelSource::ChartsOnly => Err(Error::ModelFile {
@@ -562,6 +578,7 @@ impl ModelFile {
             spec: self.spec.clone(),
             output_noise: self.output_noise()?,
             fixed_input: None,
+            design: None,
         }))
     }
 

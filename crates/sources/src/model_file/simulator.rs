@@ -1,7 +1,9 @@
 //! The simulators a model file makes: its source under the file's names and
 //! noise, or none for a file that describes charts.
 
-use twostage_models::{Capabilities, Conditions, ExperimentRng, IoData, ModelSpec, Simulator};
+use twostage_models::{
+    Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec, Simulator,
+};
 
 /// A model file's simulator: the source's, under the file's name, prior
 /// and signal names, with the file's measurement noise added.
@@ -14,6 +16,10 @@ pub(super) struct FileSimulator {
     /// speaking protocol 2): every experiment gets it unless the caller
     /// gives another.
     pub(super) fixed_input: Option<IoData>,
+    /// The design twostage draws each experiment's input from, for a
+    /// source that is handed its input (a command speaking protocol 2):
+    /// drawn from the experiment's stream before anything else.
+    pub(super) design: Option<InputSignal>,
 }
 
 impl Simulator for FileSimulator {
@@ -35,6 +41,9 @@ impl Simulator for FileSimulator {
     }
 
     fn shared_input(&self) -> Option<IoData> {
+        if let Some(design) = &self.design {
+            return design.shared_record(&self.spec);
+        }
         self.fixed_input
             .clone()
             .or_else(|| self.inner.shared_input())
@@ -47,9 +56,18 @@ impl Simulator for FileSimulator {
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> twostage_models::Result<()> {
-        let conditions = self.with_fixed_input(conditions);
-        self.inner.simulate_under(theta, rng, conditions, out)?;
-        self.measured(rng, conditions, out)
+        self.simulate_batch_under(
+            &[theta],
+            std::slice::from_mut(rng),
+            conditions,
+            std::slice::from_mut(out),
+        )
+        .pop()
+        .unwrap_or_else(|| {
+            Err(twostage_models::SimError::InvalidData(
+                "the source answered no record".into(),
+            ))
+        })
     }
 
     fn simulate_batch_under(
@@ -59,6 +77,19 @@ impl Simulator for FileSimulator {
         conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<twostage_models::Result<()>> {
+        if let (Some(design), None) = (&self.design, conditions.input) {
+            let inputs = match self.drawn_inputs(design, rngs) {
+                Ok(inputs) => inputs,
+                Err(e) => return thetas.iter().map(|_| Err(e.clone())).collect(),
+            };
+            return self.simulate_batch_on_inputs(
+                thetas,
+                rngs,
+                &inputs,
+                conditions.noiseless,
+                outs,
+            );
+        }
         let conditions = self.with_fixed_input(conditions);
         let mut results = self
             .inner
@@ -73,6 +104,34 @@ impl Simulator for FileSimulator {
 
     fn batch_size(&self) -> usize {
         self.inner.batch_size()
+    }
+
+    fn simulate_batch_on_inputs(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        inputs: &[IoData],
+        noiseless: bool,
+        outs: &mut [IoData],
+    ) -> Vec<twostage_models::Result<()>> {
+        let mut results = self
+            .inner
+            .simulate_batch_on_inputs(thetas, rngs, inputs, noiseless, outs);
+        for (k, ((result, rng), out)) in results
+            .iter_mut()
+            .zip(rngs.iter_mut())
+            .zip(outs.iter_mut())
+            .enumerate()
+        {
+            if result.is_ok() {
+                let conditions = Conditions {
+                    noiseless,
+                    input: inputs.get(k),
+                };
+                *result = self.measured(rng, conditions, out);
+            }
+        }
+        results
     }
 
     fn simulate_batch(
@@ -96,6 +155,24 @@ impl FileSimulator {
             },
             _ => conditions,
         }
+    }
+
+    /// Each experiment's input drawn from `design`, from its own stream:
+    /// the same bits as a source that draws the design itself.
+    fn drawn_inputs(
+        &self,
+        design: &InputSignal,
+        rngs: &mut [ExperimentRng],
+    ) -> twostage_models::Result<Vec<IoData>> {
+        rngs.iter_mut()
+            .map(|rng| {
+                let mut record = self.spec.new_record();
+                for j in 0..record.n_inputs() {
+                    design.fill(self.spec.sample_time(), rng, record.input_mut(j))?;
+                }
+                Ok(record)
+            })
+            .collect()
     }
 
     /// Check the source's record against the file and add the file's
