@@ -186,6 +186,45 @@ impl InputSignal {
         )
     }
 
+    /// Band-limited Gaussian noise: white Gaussian noise through
+    /// Butterworth filters of `order` (a high-pass at `low` Hz unless it
+    /// is 0, a low-pass at the band's top unless it is the Nyquist
+    /// frequency; the top may be drawn per experiment), scaled so that its
+    /// stationary standard deviation is `rms` (drawn per experiment where
+    /// a range), about `offset`. Each record is a stretch of the
+    /// stationary process: the filters run through their start-up first.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal, experiment_rng};
+    /// let u = InputSignal::filtered_noise(0.0, Drawn::fixed(2.0), 4, Drawn::fixed(0.5), 0.0)?;
+    /// let mut x = vec![0.0; 100_000];
+    /// u.fill(0.01, &mut experiment_rng(1, 0), &mut x)?;
+    /// let rms = (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
+    /// assert!((rms - 0.5).abs() < 0.05);
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a band whose bottom is not below
+    /// its top, an order outside 1 to [`crate::MAX_FILTER_ORDER`], or a
+    /// non-finite offset.
+    pub fn filtered_noise(
+        low: f64,
+        high: Drawn,
+        order: u32,
+        rms: Drawn,
+        offset: f64,
+    ) -> Result<Self> {
+        Self::designed(
+            Design::FilteredNoise {
+                band: (low, high),
+                order,
+                rms,
+            },
+            offset,
+        )
+    }
+
     /// Random steps: levels uniform in `[level.0, level.1]`, each held a
     /// time uniform in `[hold.0, hold.1]` seconds (rounded to samples).
     ///

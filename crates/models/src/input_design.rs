@@ -1,6 +1,6 @@
 //! Experiment designs that draw each record's input from its own stream:
 //! random-phase multisines, random binary and pseudo-random binary
-//! sequences, swept sines and random steps, each with settings that may
+//! sequences, band-limited Gaussian noise, swept sines and random steps, each with settings that may
 //! themselves be drawn per experiment (a level range, a band whose top is
 //! a range), so that a training chart covers a family of operating
 //! conditions rather than one input.
@@ -8,9 +8,11 @@
 use std::f64::consts::PI;
 
 use rand::{Rng, RngExt};
+use rand_distr::{Distribution, StandardNormal};
 use rustfft::FftPlannerScalar;
 use rustfft::num_complex::Complex;
 
+use crate::butterworth::{Cascade, MAX_FILTER_ORDER, Pass};
 use crate::error::{Result, SimError};
 
 /// A value fixed, or drawn uniformly per experiment from `[low, high]`.
@@ -135,6 +137,11 @@ pub(crate) enum Design {
         level: (f64, f64),
         hold: (f64, f64),
     },
+    FilteredNoise {
+        band: (f64, Drawn),
+        order: u32,
+        rms: Drawn,
+    },
 }
 
 /// Feedback taps of maximal-length linear feedback shift registers,
@@ -230,6 +237,23 @@ impl Design {
                 }
                 above("sweep end", to.range().1)
             }
+            Self::FilteredNoise { band, order, .. } => {
+                if !(band.0 >= 0.0 && band.0 < band.1.range().0) {
+                    return Err(SimError::InvalidSetting {
+                        name: "noise band",
+                        value: format!("[{}, {:?}]", band.0, band.1.range()),
+                        reason: "give a lowest frequency >= 0 below the band's top".into(),
+                    });
+                }
+                if !(1..=MAX_FILTER_ORDER).contains(order) {
+                    return Err(SimError::InvalidSetting {
+                        name: "filter order",
+                        value: order.to_string(),
+                        reason: format!("give an order of 1 to {MAX_FILTER_ORDER}"),
+                    });
+                }
+                above("noise band top", band.1.range().1)
+            }
             Self::Steps { level, hold } => {
                 Drawn::between(level.0, level.1)?;
                 if !(hold.0 > 0.0 && hold.0 <= hold.1 && hold.1.is_finite()) {
@@ -309,6 +333,13 @@ impl Design {
             Self::Steps { level, hold } => format!(
                 "random steps, levels uniform in [{}, {}], each held {} to {} s",
                 level.0, level.1, hold.0, hold.1
+            ),
+            Self::FilteredNoise { band, order, rms } => format!(
+                "Gaussian noise through Butterworth filters of order {order} from {} Hz to {}, \
+                 RMS {} (stationary)",
+                band.0,
+                band.1.describe(" Hz"),
+                rms.describe("")
             ),
         }
     }
@@ -410,6 +441,51 @@ impl Design {
                     let t = k as f64 * sample_time;
                     let cycles = from * t + (end - from) * t * t / (2.0 * duration);
                     *v = a * (2.0 * PI * cycles.fract()).sin();
+                }
+            }
+            Self::FilteredNoise { band, order, rms } => {
+                let top = band.1.draw(rng);
+                let level = rms.draw(rng);
+                let resolution = 1.0 / (n as f64 * sample_time);
+                let edges_resolved = top >= resolution && (band.0 == 0.0 || band.0 >= resolution);
+                if !edges_resolved {
+                    return Err(SimError::InvalidSetting {
+                        name: "noise band",
+                        value: format!("[{}, {top}] Hz", band.0),
+                        reason: format!(
+                            "an edge lies below the record's resolution 1/(N T) = {resolution} Hz \
+                             (N = {n}): raise it, or lengthen the record"
+                        ),
+                    });
+                }
+                let mut filter = Cascade::new();
+                if band.0 > 0.0 {
+                    filter = filter.butterworth(Pass::High, *order, band.0, sample_time)?;
+                }
+                if top < 0.5 / sample_time {
+                    filter = filter.butterworth(Pass::Low, *order, top, sample_time)?;
+                }
+                // Edges above the resolution settle within some tens of
+                // records' lengths even at the highest order.
+                let (energy, settling) =
+                    filter.energy_and_settling(64 * n + 10_000).ok_or_else(|| {
+                        SimError::InvalidSetting {
+                            name: "noise band",
+                            value: format!("[{}, {top}] Hz", band.0),
+                            reason: "the filters do not settle: widen the band".into(),
+                        }
+                    })?;
+                // The filter starts at rest and runs through its start-up
+                // first, so the record is a stretch of stationary noise of
+                // the drawn RMS.
+                let scale = level / energy.sqrt();
+                for _ in 0..settling {
+                    let z: f64 = StandardNormal.sample(rng);
+                    filter.step(z);
+                }
+                for v in u.iter_mut() {
+                    let z: f64 = StandardNormal.sample(rng);
+                    *v = scale * filter.step(z);
                 }
             }
             Self::Steps { level, hold } => {
@@ -611,6 +687,75 @@ mod tests {
         let w = filled(&sweep, 0.001, 10_000, 0);
         let crossings = w.windows(2).filter(|p| p[0] < 0.0 && p[1] >= 0.0).count();
         assert!((24..=26).contains(&crossings), "{crossings}");
+    }
+
+    /// Filtered noise has its level and its band: the sample variance of
+    /// a long record is the drawn RMS squared, and the power outside the
+    /// band is what the filters' closed-form response lets through.
+    #[test]
+    fn filtered_noise_keeps_its_level_and_its_band() {
+        let (n, dt) = (1 << 15, 0.01);
+        let design = Design::FilteredNoise {
+            band: (5.0, Drawn::fixed(10.0)),
+            order: 6,
+            rms: Drawn::fixed(2.0),
+        };
+        let records: Vec<Vec<f64>> = (0..4).map(|i| filled(&design, dt, n, i)).collect();
+        let variance = records.iter().flatten().map(|v| v * v).sum::<f64>() / (4 * n) as f64;
+        // A 5 Hz band over 4 records of 328 s: about 13,000 independent
+        // samples, a relative standard error of 0.0125 on the variance.
+        assert!((variance / 4.0 - 1.0).abs() < 0.05, "variance {variance}");
+        // The lines of the record's grid well outside [5, 10] Hz hold a
+        // small share of the power, as 1 / (1 + ratio^12) says.
+        let mut spectrum: Vec<Complex<f64>> =
+            records[0].iter().map(|v| Complex::new(*v, 0.0)).collect();
+        FftPlannerScalar::new()
+            .plan_fft_forward(n)
+            .process(&mut spectrum);
+        let df = 1.0 / (n as f64 * dt);
+        let (mut inside, mut outside) = (0.0, 0.0);
+        for (k, line) in spectrum.iter().enumerate().take(n / 2).skip(1) {
+            let f = k as f64 * df;
+            let p = line.norm_sqr();
+            if (5.0..=10.0).contains(&f) {
+                inside += p;
+            } else if !(3.5..=14.0).contains(&f) {
+                outside += p;
+            }
+        }
+        assert!(
+            outside < 0.01 * inside,
+            "{outside} outside, {inside} inside"
+        );
+        // The start is already stationary: over 400 experiments the first
+        // sample's mean square is the level's (a filter started at rest
+        // would begin near 0). Its relative standard error is 0.07.
+        let first = (0..400)
+            .map(|i| filled(&design, dt, 256, i)[0].powi(2))
+            .sum::<f64>()
+            / 400.0;
+        assert!(
+            (first / 4.0 - 1.0).abs() < 0.25,
+            "first samples' mean square {first}"
+        );
+        // An edge below the record's resolution, and an order out of range.
+        let coarse = Design::FilteredNoise {
+            band: (0.0, Drawn::fixed(0.5)),
+            order: 4,
+            rms: Drawn::fixed(1.0),
+        };
+        let mut short = vec![0.0; 100];
+        let e = coarse
+            .fill(dt, &mut experiment_rng(5, 0), &mut short)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("resolution") && e.contains("1 Hz"), "{e}");
+        let steep = Design::FilteredNoise {
+            band: (0.0, Drawn::fixed(5.0)),
+            order: 11,
+            rms: Drawn::fixed(1.0),
+        };
+        assert!(steep.check(dt).unwrap_err().to_string().contains("1 to 10"));
     }
 
     #[test]

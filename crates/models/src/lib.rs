@@ -43,6 +43,7 @@
 mod ar_noise;
 mod benchmark;
 mod builtin;
+mod butterworth;
 mod data;
 mod error;
 mod external;
@@ -63,6 +64,7 @@ pub use benchmark::{
     PROCESS_NOISE_VARIANCE,
 };
 pub use builtin::{BuiltinModel, BuiltinOverrides};
+pub use butterworth::MAX_FILTER_ORDER;
 pub use data::{IoData, RecordShape};
 pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};

@@ -83,6 +83,7 @@ fn each_experiment_draws_its_own_multisine_in_the_family() {
         "signal = \"binary\"\namplitude = 0.5\nhold = 5\noffset = 2",
         "signal = \"prbs\"\norder = 7\namplitude = [0.2, 0.6]\nhold = 3\noffset = 2",
         "signal = \"sweep\"\nband = [0.001, 0.1]\namplitude = 0.5\noffset = 2",
+        "signal = \"gaussian\"\nband = [0.005, [0.05, 0.1]]\norder = 3\nrms = [0.1, 0.3]\noffset = 2",
         "signal = \"steps\"\nlevels = [1.0, 3.5]\nhold_seconds = [20, 60]",
         "signal = \"sum\"\nparts = [\n  { signal = \"steps\", levels = [1.5, 3], hold_seconds = [40, 80] },\n  \
          { signal = \"multisine\", band = [0.0, 0.05], rms = 0.2 },\n]",
@@ -123,6 +124,21 @@ fn an_impossible_design_is_named_by_its_key() {
             "signal = \"multisine\"\nband = [0.0, 0.1]\ngrid = \"even\"",
             "input.grid",
             "use \"full\" or \"odd\"",
+        ),
+        (
+            "signal = \"gaussian\"\nband = [0.0, 0.3]\nrms = 1",
+            "input",
+            "above the Nyquist frequency 0.25 Hz",
+        ),
+        (
+            "signal = \"gaussian\"\nband = [0.0, 0.1]\nrms = 1\norder = 12",
+            "input",
+            "1 to 10",
+        ),
+        (
+            "signal = \"gaussian\"\nband = [0.0, 0.1]\namplitude = 1",
+            "input.amplitude",
+            "takes band, order, rms, offset only",
         ),
         (
             "signal = \"prbs\"\namplitude = 1\nhold = 1",

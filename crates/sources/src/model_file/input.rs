@@ -198,6 +198,7 @@ impl Locator<'_> {
                 &["order", "amplitude", "hold"],
             ),
             "sweep" => (&["band", "amplitude", "offset"], &["band", "amplitude"]),
+            "gaussian" => (&["band", "order", "rms", "offset"], &["band", "rms"]),
             "steps" => (&["levels", "hold_seconds"], &["levels", "hold_seconds"]),
             "sum" => (&["parts"], &["parts"]),
             other => {
@@ -206,7 +207,8 @@ impl Locator<'_> {
                     "input.signal",
                     format!(
                         "unknown signal '{other}': use \"white\", \"chicane\", \"fixed\", \
-                         \"multisine\", \"binary\", \"prbs\", \"sweep\", \"steps\" or \"sum\""
+                         \"multisine\", \"binary\", \"prbs\", \"gaussian\", \"sweep\", \"steps\" \
+                         or \"sum\""
                     ),
                 ));
             }
@@ -334,6 +336,16 @@ impl Locator<'_> {
                 }
                 _ => None,
             },
+            "gaussian" => match (&raw.band, &raw.rms) {
+                (Some((low, top)), Some(rms)) => Some(InputSignal::filtered_noise(
+                    *low,
+                    drawn("band", top)?,
+                    raw.order.unwrap_or(DEFAULT_FILTER_ORDER),
+                    drawn("rms", rms)?,
+                    offset,
+                )),
+                _ => None,
+            },
             "sum" => {
                 let parts = raw.parts.as_deref().unwrap_or_default();
                 // A part is one design: a sum of sums is refused, so the
@@ -367,6 +379,11 @@ impl Locator<'_> {
             .map_err(|e| self.error(here(), "input", e.to_string()))
     }
 }
+
+/// The Butterworth order of a `gaussian` input whose file gives none: a
+/// 24 dB-per-octave edge, sharp enough to keep the band without a long
+/// start-up.
+const DEFAULT_FILTER_ORDER: u32 = 4;
 
 impl ModelFile {
     /// The measured input a built-in or FMU source is handed, if the file
