@@ -770,7 +770,7 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
         "--model",
         "pacejka",
         "--count",
-        "20",
+        "10",
         "--seed",
         "9",
         "--out-dir",
@@ -809,20 +809,21 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
     let same_input = column("input_as_trained");
     assert!(header.contains(&"a_y_rms") && header.contains(&"check_tail_probability"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 21);
+    assert_eq!(rows.len(), 11);
     assert!(rows.iter().all(|r| r[same_input] == "true"), "{table}");
-    let passed = rows[..20].iter().filter(|r| r[explained] == "true").count();
-    // A 1% test: one in a hundred of the model's records fails it.
+    let passed = rows[..10].iter().filter(|r| r[explained] == "true").count();
+    // A 1% test: one in a hundred of the model's records fails it (three
+    // failures of ten happen once in 8,000 runs).
     assert!(
-        passed >= 18,
-        "{passed} of 20 of the model's own records explained\n{table}"
+        passed >= 8,
+        "{passed} of 10 of the model's own records explained\n{table}"
     );
-    assert_eq!(rows[20][0], "alien");
+    assert_eq!(rows[10][0], "alien");
     // The model makes no such record, at the estimate or anywhere near
     // it: the estimate is the best the model can do (at the prior's edge),
     // and the check says the model is not exact for it.
-    assert_eq!(rows[20][column("model_consistent")], "false", "{table}");
-    let fit: f64 = rows[20][fit].parse().unwrap();
+    assert_eq!(rows[10][column("model_consistent")], "false", "{table}");
+    let fit: f64 = rows[10][fit].parse().unwrap();
     assert!(fit.is_finite());
     let stderr = text(&out.stderr);
     assert!(
