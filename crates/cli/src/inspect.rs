@@ -28,6 +28,7 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
             "upper": e.upper(),
             "priors": e.marginals(),
             "validation": e.validation(),
+            "input_family": e.input_family().map(|f| f.describe(&e.signal_names().inputs)),
         });
         writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
         return Ok(());
@@ -135,6 +136,18 @@ pub(crate) fn trust_summary(e: &Estimator) -> String {
              (99.9% of them lie within)",
             envelope.threshold()
         );
+    }
+    if let Some(family) = e.input_family() {
+        let _ = writeln!(
+            text,
+            "  input family of its {} held-out records (a record's input outside is out of \
+             distribution, {:.0}% of each range's width of slack):",
+            family.records(),
+            100.0 * twostage::models::FAMILY_MARGIN
+        );
+        for line in family.describe(&e.signal_names().inputs) {
+            let _ = writeln!(text, "    {line}");
+        }
     }
     text
 }

@@ -365,3 +365,81 @@ fn an_equations_model_goes_through_shards_and_the_automatic_design() {
     assert!(report.contains("automatic design on m = "), "{report}");
     assert!(searched.exists());
 }
+
+/// An estimator trained on the multisine family of the tanks: `inspect`
+/// names the family, `estimate` finds the family's records inside it and
+/// flags a record of a level the training never had, saying which number
+/// of which input lies outside.
+#[test]
+fn estimate_judges_each_record_s_input_against_the_family() {
+    let dir = scratch("equations-family");
+    let family = examples().join("tanks/tanks_multisine.toml");
+    let text_of = std::fs::read_to_string(&family).unwrap();
+    let loud = dir.join("loud.toml");
+    let louder = text_of.replace("rms = [0.4, 0.8]", "rms = 2.0");
+    assert_ne!(louder, text_of, "the example's level moved");
+    std::fs::write(&loud, louder).unwrap();
+    let estimator = dir.join("e.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&family),
+        "--compress",
+        "arx:2,2",
+        "--fit",
+        "linear",
+        "--sims",
+        "200",
+        "--calibrate",
+        "200",
+        "--validate",
+        "100",
+        "--quiet",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let shown = text(&twostage(&["inspect", path(&estimator)]).stdout);
+    assert!(
+        shown.contains("input family of its 300 held-out records")
+            && shown.contains("pump: mean 2.2"),
+        "{shown}"
+    );
+    let records = |model: &Path, name: &str| {
+        let out_dir = dir.join(name);
+        let out = twostage(&[
+            "simulate",
+            "--model-file",
+            path(model),
+            "--count",
+            "3",
+            "--seed",
+            "5",
+            "--out-dir",
+            path(&out_dir),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        out_dir.join("data.csv")
+    };
+    let column = |file: &Path| {
+        let out = twostage(&["estimate", "--estimator", path(&estimator), path(file)]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let table = text(&out.stdout);
+        let mut lines = table.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let at = header.iter().position(|h| *h == "input_in_family").unwrap();
+        let flags: Vec<String> = lines
+            .map(|l| l.split(',').nth(at).unwrap().to_string())
+            .collect();
+        (flags, text(&out.stderr))
+    };
+    let (own, said) = column(&records(&family, "own"));
+    assert_eq!(own, ["true", "true", "true"], "{said}");
+    let (loud_flags, said) = column(&records(&loud, "loud"));
+    assert_eq!(loud_flags, ["false", "false", "false"]);
+    assert!(
+        said.contains("its input lies outside the family the estimator was trained on")
+            && said.contains("input pump: RMS 2.000 above the training records' 0.4"),
+        "{said}"
+    );
+}

@@ -118,7 +118,9 @@ fn train_inspect_and_estimate_recorded_experiments() {
         "ARX(5, 5)",
         "m = 500 records",
         "seed 3",
-        "format version 4",
+        "format version 5",
+        "input family of its 400 held-out records",
+        "u: mean ",
         "RMSE <= ",
     ] {
         assert!(report.contains(needle), "missing {needle:?} in\n{report}");
@@ -151,7 +153,7 @@ fn train_inspect_and_estimate_recorded_experiments() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "experiment,theta,theta_lo,theta_hi,feature_distance,out_of_distribution"
+        "experiment,theta,theta_lo,theta_hi,feature_distance,out_of_distribution,input_in_family"
     );
     let truth = std::fs::read_to_string(data.join("truth.csv")).unwrap();
     let mut sq = 0.0;
@@ -161,6 +163,8 @@ fn train_inspect_and_estimate_recorded_experiments() {
         let fields: Vec<&str> = estimate.split(',').collect();
         flagged += usize::from(fields[5] == "true");
         assert!(fields[5] == "true" || fields[5] == "false", "{estimate}");
+        // The benchmark's own records: its white inputs are the family's.
+        assert_eq!(fields[6], "true", "{estimate}");
         let e: Vec<f64> = fields[..5].iter().map(|v| v.parse().unwrap()).collect();
         assert!(e[4] > 0.0, "a Mahalanobis distance");
         let t: Vec<f64> = truth.split(',').map(|v| v.parse().unwrap()).collect();

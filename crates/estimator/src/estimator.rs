@@ -5,13 +5,15 @@ use rayon::prelude::*;
 use serde::Serialize;
 use twostage_compress::{Compressor, FlooredSample, Workspace};
 use twostage_fit::Predictor;
-use twostage_models::{IoData, Marginal, ModelSpec, generic_signal_names};
+use twostage_models::{
+    InputDeviation, InputFamily, IoData, Marginal, ModelSpec, generic_signal_names,
+};
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
-use crate::layout::{EstimatorFields, Stages, V1, V2, V3};
+use crate::layout::{EstimatorFields, Stages, V1, V2, V3, V5};
 use crate::space::{rows_to_estimates, to_estimate};
 pub use crate::stored::{SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
@@ -62,6 +64,9 @@ pub struct Estimator {
     /// The names of the input and output signals, the columns `estimate`
     /// reads (format version 3 on; earlier files are `u`, `y`).
     pub(crate) signal_names: Option<SignalNames>,
+    /// The family of inputs the held-out records spanned (format version
+    /// 5 on): a record whose input lies outside is flagged.
+    pub(crate) input_family: Option<InputFamily>,
 }
 
 impl TryFrom<EstimatorFields> for Estimator {
@@ -70,6 +75,7 @@ impl TryFrom<EstimatorFields> for Estimator {
     /// this adds the ones between components, so that a decoded estimator
     /// estimates (or errs) and never indexes out of range.
     fn try_from(f: EstimatorFields) -> std::result::Result<Self, FileError> {
+        let V5 { v4, input_family } = f;
         let V3 {
             v2:
                 V2 {
@@ -93,7 +99,7 @@ impl TryFrom<EstimatorFields> for Estimator {
                 },
             marginals,
             signal_names,
-        } = f;
+        } = v4;
         let estimator = Self {
             param_names,
             lower,
@@ -108,6 +114,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             adaptive,
             marginals,
             signal_names,
+            input_family,
         };
         estimator
             .check_parameters()
@@ -203,6 +210,15 @@ impl Estimator {
                 shape.n_outputs
             ));
         }
+        if let Some(family) = &self.input_family
+            && !family.is_consistent(shape.n_inputs)
+        {
+            return Err(format!(
+                "an input family of {} signals for records of {} inputs",
+                family.n_inputs(),
+                shape.n_inputs
+            ));
+        }
         if let Some(intervals) = &self.intervals {
             let widths = intervals.half_widths();
             if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
@@ -236,13 +252,23 @@ pub struct Assessment {
     /// smallest value the training records had instead. Empty when the
     /// estimator does not transform its outputs or every sample could be.
     pub floored_samples: Vec<FlooredSample>,
+    /// Each way the record's input lies outside the family of inputs the
+    /// estimator's held-out records spanned (a level, a peak or a mean
+    /// frequency they never had). Empty inside the family, and when the
+    /// estimator knows no family.
+    pub input_deviations: Vec<InputDeviation>,
 }
 
 impl Assessment {
-    /// Whether the record's features lie outside what training saw: the
-    /// estimate is then an extrapolation, and the validation report and
-    /// the intervals do not speak for it.
+    /// Whether the record lies outside what training saw, by its features
+    /// or by its input: the estimate is then an extrapolation, and the
+    /// validation report and the intervals do not speak for it.
     pub fn out_of_distribution(&self) -> bool {
+        self.features_outside() || !self.input_deviations.is_empty()
+    }
+
+    /// Whether the record's features lie beyond the envelope's threshold.
+    pub fn features_outside(&self) -> bool {
         matches!((self.feature_distance, self.distance_threshold), (Some(d), Some(t)) if d > t)
     }
 
@@ -317,6 +343,18 @@ impl Estimator {
     /// The record shape it was trained on.
     pub fn record_shape(&self) -> &RecordShape {
         &self.shape
+    }
+    /// The family of inputs its held-out records spanned, when it knows
+    /// one (trained on simulations, from format version 5 on).
+    pub fn input_family(&self) -> Option<&InputFamily> {
+        self.input_family.as_ref()
+    }
+    /// The estimator judging records' inputs against `family` (the
+    /// calibration and validation records' inputs, as training sets it).
+    pub fn with_input_family(mut self, family: Option<InputFamily>) -> Self {
+        self.input_family =
+            family.filter(|f| f.records() > 0 && f.is_consistent(self.shape.n_inputs));
+        self
     }
     /// Why a record of `n_samples` gets no two-stage estimate from this
     /// estimator, and what to do instead; `None` for its own length. The
@@ -573,7 +611,18 @@ impl Estimator {
             feature_distance: self.envelope.as_ref().map(|e| e.distance(&work.features)),
             distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),
             floored_samples: work.compress.floored_samples().to_vec(),
+            input_deviations: self.input_deviations_of(inputs),
         })
+    }
+
+    /// How the inputs (N x n_u) lie outside the estimator's input family.
+    fn input_deviations_of(&self, inputs: ArrayView2<'_, f64>) -> Vec<InputDeviation> {
+        let Some(family) = &self.input_family else {
+            return Vec::new();
+        };
+        let columns: Vec<Vec<f64>> = inputs.columns().into_iter().map(|c| c.to_vec()).collect();
+        let signals: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+        family.signal_deviations(&signals, &self.signal_names().inputs)
     }
 
     /// Estimate theta for many records in parallel; each record gets its
@@ -669,6 +718,7 @@ impl Estimator {
                 inputs: spec.input_names().to_vec(),
                 outputs: spec.output_names().to_vec(),
             }),
+            input_family: None,
         }
     }
 

@@ -16,6 +16,7 @@ use std::path::Path;
 use crate::error::{Error, FileError, Result};
 use crate::estimator::Estimator;
 use crate::layout::{EstimatorFields, V1, V2, V3, ValidationReportV3};
+use twostage_validate::ValidationReport;
 
 /// The first eight bytes of every estimator file.
 pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
@@ -23,9 +24,11 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 ///
 /// Version 2 added the feature envelope and the adaptive intervals, version
 /// 3 the parameters' priors, version 4 the betting certificate of the
-/// validation report; older files load without them (uniform priors, no
-/// certificate). Every version's layout lives in `layout.rs`.
-pub const FORMAT_VERSION: u32 = 4;
+/// validation report, version 5 the family of inputs the held-out records
+/// spanned; older files load without them (uniform priors, no
+/// certificate, no input family). Every version's layout lives in
+/// `layout.rs`.
+pub const FORMAT_VERSION: u32 = 5;
 const HEADER: usize = 24;
 
 impl Estimator {
@@ -117,15 +120,31 @@ impl Estimator {
             .into());
         }
         // Each version's layout, carried forward to today's.
+        // A layout must take the whole payload: bytes left over are another
+        // version's fields, not this one's.
         fn read<'a, F: serde::Deserialize<'a>>(
             payload: &'a [u8],
         ) -> std::result::Result<F, String> {
-            postcard::from_bytes::<F>(payload).map_err(|e| e.to_string())
+            let (fields, rest) =
+                postcard::take_from_bytes::<F>(payload).map_err(|e| e.to_string())?;
+            if rest.is_empty() {
+                Ok(fields)
+            } else {
+                Err(format!(
+                    "{} bytes follow the fields of this format version (a file of another \
+                     version under this header?)",
+                    rest.len()
+                ))
+            }
         }
         let fields: std::result::Result<EstimatorFields, String> = match version {
-            1 => read::<V1<ValidationReportV3>>(payload).map(|v1| V3::from(V2::from(v1)).into()),
-            2 => read::<V2<ValidationReportV3>>(payload).map(|v2| V3::from(v2).into()),
-            3 => read::<V3<ValidationReportV3>>(payload).map(Into::into),
+            1 => read::<V1<ValidationReportV3>>(payload)
+                .map(|v1| V3::<ValidationReport>::from(V3::from(V2::from(v1))).into()),
+            2 => read::<V2<ValidationReportV3>>(payload)
+                .map(|v2| V3::<ValidationReport>::from(V3::from(v2)).into()),
+            3 => read::<V3<ValidationReportV3>>(payload)
+                .map(|v3| V3::<ValidationReport>::from(v3).into()),
+            4 => read::<V3<ValidationReport>>(payload).map(Into::into),
             _ => read::<EstimatorFields>(payload),
         };
         fields

@@ -6,7 +6,7 @@
 //! at a time, and checked as a whole into an [`Estimator`](crate::Estimator).
 
 use serde::Deserialize;
-use twostage_models::Marginal;
+use twostage_models::{InputFamily, Marginal};
 use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
@@ -105,8 +105,26 @@ pub(crate) struct V3<R> {
     pub(crate) signal_names: Option<SignalNames>,
 }
 
-/// Today's layout (format version 4).
-pub(crate) type EstimatorFields = V3<ValidationReport>;
+/// Format version 5 adds the family of inputs the held-out records
+/// spanned; today's layout.
+#[derive(Deserialize)]
+pub(crate) struct V5 {
+    pub(crate) v4: V3<ValidationReport>,
+    pub(crate) input_family: Option<InputFamily>,
+}
+
+/// Today's layout (format version 5).
+pub(crate) type EstimatorFields = V5;
+
+impl From<V3<ValidationReport>> for V5 {
+    /// No input family.
+    fn from(v4: V3<ValidationReport>) -> Self {
+        Self {
+            v4,
+            input_family: None,
+        }
+    }
+}
 
 impl From<V1<ValidationReportV3>> for V2<ValidationReportV3> {
     /// No envelope, no adaptive intervals.
@@ -137,7 +155,7 @@ impl From<V2<ValidationReportV3>> for V3<ValidationReportV3> {
     }
 }
 
-impl From<V3<ValidationReportV3>> for EstimatorFields {
+impl From<V3<ValidationReportV3>> for V3<ValidationReport> {
     /// The report without certificates.
     fn from(v3: V3<ValidationReportV3>) -> Self {
         let V3 {

@@ -36,6 +36,7 @@
 extern crate std;
 
 pub mod cholesky;
+pub mod input_summary;
 pub mod lagged;
 pub mod layer;
 pub mod vector;

@@ -49,6 +49,7 @@ mod error;
 mod external;
 mod input;
 mod input_design;
+mod input_family;
 mod marginal;
 mod ode;
 mod pacejka;
@@ -70,6 +71,7 @@ pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;
 pub use input_design::{Drawn, Grid, Level, MAX_PRBS_ORDER, Phases};
+pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
 };

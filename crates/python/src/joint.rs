@@ -23,10 +23,7 @@ pub(crate) fn of_records(
             let a = estimator
                 .assess(record)
                 .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))?;
-            let out = a
-                .feature_distance
-                .zip(a.distance_threshold)
-                .is_some_and(|(d, t)| d > t);
+            let out = a.out_of_distribution();
             let widths = a
                 .interval_half_widths()
                 .filter(|_| !out)

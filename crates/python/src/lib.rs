@@ -236,9 +236,11 @@ impl PyEstimator {
 
     /// Estimates with their intervals and the out-of-distribution flag, for
     /// one record or a batch: `(theta, half_widths, feature_distance,
-    /// distance_threshold)`, the half-widths those of the adaptive
-    /// intervals where calibrated, else of the conformal ones (None when
-    /// neither is), the distance None without a feature envelope.
+    /// distance_threshold, untransformed, input_outside)`, the half-widths
+    /// those of the adaptive intervals where calibrated, else of the
+    /// conformal ones (None when neither is), the distance None without a
+    /// feature envelope, `input_outside` the count of ways the record's
+    /// input lies outside the estimator's input family (None without one).
     #[pyo3(signature = (u, y))]
     #[allow(clippy::type_complexity)]
     fn assess<'py>(
@@ -252,12 +254,14 @@ impl PyEstimator {
         Option<Bound<'py, PyAny>>,
         Option<f64>,
         Option<Bound<'py, PyAny>>,
+        Option<Bound<'py, PyAny>>,
     )> {
         let q = self.inner.param_names().len();
         let estimator = &self.inner;
         // Per record: theta, half-widths (NaN when none), distance (NaN
-        // when none), samples outside the output transform.
-        let width = 2 * q + 2;
+        // when none), samples outside the output transform, ways its
+        // input lies outside the family.
+        let width = 2 * q + 3;
         let (values, single) = self.each_record(py, u, y, width, |u, y, work, out| {
             let assessment = estimator.assess_with(u, y, work)?;
             let (theta, rest) = out.split_at_mut(q);
@@ -269,6 +273,7 @@ impl PyEstimator {
             }
             rest[0] = assessment.feature_distance.unwrap_or(f64::NAN);
             rest[1] = assessment.floored_samples.len() as f64;
+            rest[2] = assessment.input_deviations.len() as f64;
             Ok(())
         })?;
         let column = |from: usize, to: usize| -> Vec<f64> {
@@ -302,8 +307,52 @@ impl PyEstimator {
         let floored = self
             .inner
             .transforms_outputs()
-            .then(|| per_record(column(2 * q + 1, width)));
-        Ok((theta, widths, distance, threshold, floored))
+            .then(|| per_record(column(2 * q + 1, 2 * q + 2)));
+        let input_outside = self
+            .inner
+            .input_family()
+            .map(|_| per_record(column(2 * q + 2, width)));
+        Ok((theta, widths, distance, threshold, floored, input_outside))
+    }
+
+    /// How each record's input lies outside the estimator's input family,
+    /// in words: a list of sentences per record (one record: one list);
+    /// empty lists inside the family, and for an estimator without one.
+    #[pyo3(signature = (u, y))]
+    fn input_deviations<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+    ) -> PyResult<Vec<Vec<String>>> {
+        let family = self.inner.input_family();
+        let names = self.inner.signal_names().inputs;
+        let said = std::sync::Mutex::new(Vec::new());
+        let (indices, _) = self.each_record(py, u, y, 1, |u, _, _, out| {
+            let columns: Vec<Vec<f64>> = u.columns().into_iter().map(|c| c.to_vec()).collect();
+            let signals: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+            let sentences: Vec<String> = family
+                .map(|f| f.signal_deviations(&signals, &names))
+                .unwrap_or_default()
+                .iter()
+                .map(ToString::to_string)
+                .collect();
+            let mut all = said
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            out[0] = all.len() as f64;
+            all.push(sentences);
+            Ok(())
+        })?;
+        // Records may be judged in any order: put each list back in its
+        // record's place.
+        let mut all = said
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        Ok(indices
+            .iter()
+            .map(|&slot| std::mem::take(&mut all[slot as usize]))
+            .collect())
     }
 
     /// Check one record's estimate against the record (`twostage estimate

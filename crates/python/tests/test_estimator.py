@@ -124,6 +124,7 @@ def test_estimates_are_the_cli_s_bit_for_bit(small, tmp_path):
         assert assessed["upper"][k].tolist() == [row["theta_hi"]]
         assert assessed["feature_distance"][k] == row["feature_distance"]
         assert bool(assessed["out_of_distribution"][k]) == row["out_of_distribution"]
+        assert bool(assessed["input_in_family"][k]) == row["input_in_family"]
     one = estimator.assess(u[0], y[0])
     assert one["theta"].shape == (1,) and isinstance(one["feature_distance"], float)
     # A record of one input and one output may give them as 1-D arrays.
@@ -140,6 +141,26 @@ def test_a_record_from_elsewhere_is_flagged(small):
     # A tenfold output: no benchmark system does that.
     y = 10.0 * rng.standard_normal((n, 1))
     assert estimator.assess(u, y)["out_of_distribution"]
+
+
+def test_an_input_outside_the_family_is_flagged_with_its_number(small):
+    """The benchmark's inputs are white of variance 1: five times louder is
+    an input no training record had, whatever the outputs."""
+    estimator, _ = small
+    n, _, _ = estimator.record_shape
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal((2, n, 1))
+    u[1] *= 5.0
+    y = rng.standard_normal((2, n, 1))
+    assessed = estimator.assess(u, y)
+    assert assessed["input_in_family"].tolist() == [True, False]
+    assert bool(assessed["out_of_distribution"][1])
+    assert assessed["input_outside_family"][0] == []
+    said = assessed["input_outside_family"][1]
+    assert any(s.startswith("input u: RMS") and "above" in s for s in said), said
+    one = estimator.assess(u[1], y[1])
+    assert one["input_in_family"] is False and one["out_of_distribution"] is True
+    assert one["input_outside_family"] == said
 
 
 def test_a_file_round_trips_and_the_cli_reads_it(small):

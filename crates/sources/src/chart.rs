@@ -3,7 +3,7 @@
 use ndarray::Array2;
 use rayon::prelude::*;
 use twostage_compress::{Compressor, CompressorConfig, Workspace};
-use twostage_models::{Design, IoData, ModelSpec, Simulator, run_experiments};
+use twostage_models::{Design, InputFamily, IoData, ModelSpec, Simulator, run_experiments};
 
 use crate::error::{Error, Result};
 use crate::progress::{Progress, Stage};
@@ -34,6 +34,9 @@ pub struct CompressedChart {
     pub indices: Vec<usize>,
     /// Experiments that failed, in index order.
     pub failures: Vec<ExperimentFailure>,
+    /// The family the kept records' inputs span (simulated, read from
+    /// files or from shards alike; `None` for a chart made by hand).
+    pub inputs: Option<InputFamily>,
 }
 
 /// Simulate and compress every experiment of `design` in parallel.
@@ -124,7 +127,9 @@ where
     // Blocks of the simulator's batch size (1 unless it vectorizes): the
     // bits of experiment i do not depend on the block it is in.
     let block = simulator.batch_size().max(1);
-    let failures: Vec<ExperimentFailure> = thetas
+    let spec = simulator.spec();
+    let (n_u, dt) = (spec.input_names().len(), spec.sample_time());
+    let outcomes: Vec<(Vec<ExperimentFailure>, InputFamily)> = thetas
         .par_chunks_mut(q * block)
         .zip(features.par_chunks_mut(n * block))
         .enumerate()
@@ -137,6 +142,7 @@ where
                 let simulated =
                     run_experiments(simulator, design, start, theta_block, &mut records[..len]);
                 let mut failed = Vec::new();
+                let mut inputs = InputFamily::new(n_u, dt);
                 for (k, outcome) in simulated.into_iter().enumerate() {
                     let record = &records[k];
                     let alpha = &mut alpha_block[k * n..(k + 1) * n];
@@ -146,21 +152,27 @@ where
                             .map_err(|e| e.to_string())
                     });
                     finished(start + k);
-                    if let Err(error) = outcome {
-                        failed.push(ExperimentFailure {
+                    match outcome {
+                        Ok(()) => inputs.include(record),
+                        Err(error) => failed.push(ExperimentFailure {
                             index: start + k,
                             theta: theta_block[k * q..(k + 1) * q].to_vec(),
                             error,
-                        });
+                        }),
                     }
                 }
-                failed
+                (failed, inputs)
             },
         )
-        .collect::<Vec<_>>()
-        .into_iter()
-        .flatten()
         .collect();
+    // Ranges merge in any order to the same bits: the family does not
+    // depend on the thread count.
+    let mut inputs = InputFamily::new(n_u, dt);
+    let mut failures = Vec::new();
+    for (failed, block_inputs) in outcomes {
+        failures.extend(failed);
+        inputs.merge(&block_inputs);
+    }
     within_allowance(stage, &failures, m, max_failure_fraction)?;
     let failed: Vec<usize> = failures.iter().map(|f| f.index).collect();
     let indices: Vec<usize> = (0..m)
@@ -180,6 +192,7 @@ where
         features: keep(features, n),
         indices,
         failures,
+        inputs: Some(inputs),
     })
 }
 

@@ -6,7 +6,7 @@
 use std::cell::RefCell;
 
 use twostage_compress::Workspace;
-use twostage_models::{IoData, ModelSpec, Prior, Sampling, Simulator};
+use twostage_models::{InputFamily, IoData, ModelSpec, Prior, Sampling, Simulator};
 
 use crate::chart::{
     CompressedChart, ExperimentFailure, ForModel, StoredChart, compress_chart_observed,
@@ -431,6 +431,9 @@ fn chart_parts(
     let mut features = vec![f64::NAN; chart.len() * n];
     let mut errors: Vec<Option<String>> = vec![None; chart.len()];
     let mut work = Workspace::new();
+    // Each row's inputs' summary numbers, for its role's input family.
+    let family = InputFamily::new(spec.input_names().len(), spec.sample_time());
+    let mut summaries = vec![Vec::new(); chart.len()];
     chart.for_each_record(spec, |row, record| {
         let alpha = &mut features[row * n..(row + 1) * n];
         if let Err(e) =
@@ -438,6 +441,7 @@ fn chart_parts(
         {
             errors[row] = Some(e.to_string());
         }
+        summaries[row] = family.summaries(record);
         Ok(())
     })?;
     let role_of = |row: usize| roles.map_or(ChartRole::Training, |r| r[row]);
@@ -470,11 +474,16 @@ fn chart_parts(
             ndarray::Array2::from_shape_vec((rows, w), v)
                 .unwrap_or_else(|_| unreachable!("rows * width values were kept"))
         };
+        let mut inputs = family.clone();
+        for &r in &kept {
+            inputs.include_summaries(&summaries[r]);
+        }
         out.push(CompressedChart {
             thetas: shape(thetas, q),
             features: shape(kept_features, n),
             indices: kept,
             failures,
+            inputs: Some(inputs),
         });
     }
     Ok(out)

@@ -6,7 +6,7 @@
 use twostage_estimator::space::to_learning_space;
 use twostage_estimator::{Estimator, Result, TrainingInfo};
 use twostage_fit::{FittedRegressor, RegressorConfig};
-use twostage_models::Simulator;
+use twostage_models::{InputFamily, Simulator};
 use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};
 
 use crate::settings::RunSettings;
@@ -162,10 +162,23 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
         };
         let mut estimator =
             Estimator::from_stages(spec, compressor, regressor, training, trained.features);
+        // The held-out records are fresh draws of the training's
+        // experiments: their inputs span the family the estimator speaks
+        // for.
+        let mut inputs: Option<InputFamily> = None;
+        let mut include = |chart: &twostage_sources::CompressedChart| {
+            if let Some(family) = &chart.inputs {
+                match inputs.as_mut() {
+                    Some(all) => all.merge(family),
+                    None => inputs = Some(family.clone()),
+                }
+            }
+        };
         if let Some(chart) = self
             .records
             .compressed(ChartRole::Calibration, estimator.compressor())?
         {
+            include(&chart);
             estimator.calibrate(
                 chart.thetas.view(),
                 chart.features.view(),
@@ -177,12 +190,13 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             .records
             .compressed(ChartRole::Validation, estimator.compressor())?
         {
+            include(&chart);
             estimator.validate(
                 chart.thetas.view(),
                 chart.features.view(),
                 self.settings.delta,
             )?;
         }
-        Ok(estimator)
+        Ok(estimator.with_input_family(inputs))
     }
 }

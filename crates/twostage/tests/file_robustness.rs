@@ -161,8 +161,13 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
         estimator.envelope().is_none(),
         "10 rows cannot fit an envelope of 10 features"
     );
-    // Without a validation report, version 4 writes what version 3 did.
-    let v3 = estimator.to_bytes().unwrap();
+    // Without a validation report, version 4 writes what version 3 did,
+    // and without held-out records version 5 adds one None (no input
+    // family) to it.
+    let v5 = estimator.to_bytes().unwrap();
+    assert!(estimator.input_family().is_none());
+    assert_eq!(v5.last(), Some(&0));
+    let v3 = &v5[..v5.len() - 1];
     // Then the signal names: Some, ["u"], ["y"] (lengths and bytes).
     let names = [1, 1, 1, b'u', 1, 1, b'y'];
     assert_eq!(&v3[v3.len() - names.len()..], &names);
@@ -173,9 +178,10 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
     // columns u and y, which is what this one stores.
     let same = |old: &Estimator| {
         assert_eq!(old.signal_names(), estimator.signal_names());
-        // Re-encoded with the names a version-3 file would hold.
+        // Re-encoded with the names a version-3 file would hold (and no
+        // input family).
         let mut bytes = old.to_bytes().unwrap();
-        bytes.truncate(bytes.len() - 1);
+        bytes.truncate(bytes.len() - 2);
         bytes.extend_from_slice(&names);
         assert_eq!(bytes.len(), v3.len());
         assert_eq!(bytes[HEADER..], v3[HEADER..]);
@@ -206,8 +212,11 @@ fn version_3_files_load_their_report_without_a_certificate() {
         .unwrap()
         .train()
         .unwrap();
+    // Version 5 appends the input family: without one, a single 0 byte.
+    let estimator = estimator.with_input_family(None);
     let report = estimator.validation().unwrap();
-    let v4 = estimator.to_bytes().unwrap();
+    let v5 = estimator.to_bytes().unwrap();
+    let v4 = seal_version(&v5[HEADER..v5.len() - 1], 4);
     // Version 3 has no such field; version 4 without certificates has a
     // None, a single 0 byte, in its place.
     let (mut payload, mut without) = (v4[HEADER..].to_vec(), v4[HEADER..].to_vec());
@@ -240,9 +249,40 @@ fn version_3_files_load_their_report_without_a_certificate() {
         report.parameters[0].hoeffding
     );
     // Everything else is the same estimator: written again, it is the
-    // version-4 file of a report without certificates.
-    assert_eq!(old.to_bytes().unwrap(), seal_version(&without, 4));
+    // version-5 file of a report without certificates and no family.
+    let mut again = without.clone();
+    again.push(0);
+    assert_eq!(old.to_bytes().unwrap(), seal_version(&again, 5));
     assert!(Estimator::from_bytes(&seal_version(&v4[HEADER..], 3)).is_err());
+}
+
+#[test]
+fn version_4_files_load_without_an_input_family() {
+    // Version 5 appended the family of inputs the held-out records
+    // spanned: the last field, postcard's Some and the family. Cutting it
+    // gives what version 4 wrote.
+    let model = model();
+    let estimator = TwoStage::builder(&model)
+        .compressor(Arx::new(3, 3).unwrap())
+        .simulations(40)
+        .calibration(30)
+        .validation(30)
+        .linear(1e-6)
+        .unwrap()
+        .train()
+        .unwrap();
+    let family = estimator.input_family().unwrap();
+    assert_eq!(family.records(), 60);
+    let v5 = estimator.to_bytes().unwrap();
+    let encoded = postcard::to_allocvec(&Some(family)).unwrap();
+    assert!(v5.ends_with(&encoded));
+    let v4_payload = &v5[HEADER..v5.len() - encoded.len()];
+    let old = Estimator::from_bytes(&seal_version(v4_payload, 4)).unwrap();
+    assert!(old.input_family().is_none());
+    assert_eq!(old, estimator.clone().with_input_family(None));
+    // The version-4 reader refuses a version-5 payload, and back.
+    assert!(Estimator::from_bytes(&seal_version(&v5[HEADER..], 4)).is_err());
+    assert!(Estimator::from_bytes(&seal_version(v4_payload, 5)).is_err());
 }
 
 proptest! {

@@ -209,3 +209,91 @@ fn the_documented_family_loads_and_draws_its_own_inputs() {
             .contains("odd grid")
     );
 }
+
+/// An estimator trained on a family judges each record's input against
+/// it: the family's own records pass (all but a few in a thousand), and
+/// an input of a level or a band the training never had is flagged, with
+/// the number that lies outside; the file keeps the family and `describe`
+/// names it.
+#[test]
+fn an_estimator_of_a_family_flags_an_input_outside_it() {
+    let file = ModelFile::parse(
+        &tanks(
+            "signal = \"multisine\"\nband = [0.0, [0.02, 0.05]]\ngrid = \"odd\"\n\
+             rms = [0.3, 0.6]\noffset = 2.5",
+        ),
+        "tanks.toml",
+    )
+    .unwrap();
+    let sim = file.simulator().unwrap();
+    let estimator = twostage::TwoStage::builder(sim.as_ref())
+        .compressor(twostage::compress::Arx::new(2, 2).unwrap())
+        .linear(1e-6)
+        .unwrap()
+        .simulations(200)
+        .calibration(300)
+        .validation(200)
+        .seed(3)
+        .train()
+        .unwrap();
+    let family = estimator
+        .input_family()
+        .expect("trained on simulations: a family");
+    assert_eq!(family.records(), 500);
+    let bytes = estimator.to_bytes().unwrap();
+    assert_eq!(twostage::Estimator::from_bytes(&bytes).unwrap(), estimator);
+    let described = family.describe(&["pump"]).join("\n");
+    assert!(
+        described.starts_with("pump: mean 2.5") && described.contains("RMS 0.3"),
+        "{described}"
+    );
+
+    // The family's own fresh records: at most a few flagged.
+    let theta = [1.0];
+    let flagged = (0..1000)
+        .filter(|&i| {
+            let mut record = sim.spec().new_record();
+            sim.simulate(&theta, &mut experiment_rng(77, i), &mut record)
+                .unwrap();
+            !estimator
+                .assess(&record)
+                .unwrap()
+                .input_deviations
+                .is_empty()
+        })
+        .count();
+    assert!(flagged <= 5, "{flagged} of 1000 family records flagged");
+
+    // Another level, another band: each flagged by what lies outside.
+    let outside = |design: &str| {
+        let other = ModelFile::parse(&tanks(design), "other.toml").unwrap();
+        let sim = other.simulator().unwrap();
+        let mut record = sim.spec().new_record();
+        sim.simulate(&theta, &mut experiment_rng(78, 0), &mut record)
+            .unwrap();
+        let assessment = estimator.assess(&record).unwrap();
+        assert!(assessment.out_of_distribution(), "{design}");
+        assessment
+            .input_deviations
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+    };
+    let loud = outside(
+        "signal = \"multisine\"\nband = [0.0, 0.03]\ngrid = \"odd\"\nrms = 1.5\noffset = 2.5",
+    );
+    assert!(
+        loud.iter()
+            .any(|s| s.starts_with("input pump: RMS 1.5") && s.contains("above")),
+        "{loud:?}"
+    );
+    let fast = outside(
+        "signal = \"multisine\"\nband = [0.1, 0.2]\ngrid = \"odd\"\nrms = 0.45\noffset = 2.5",
+    );
+    assert!(
+        fast.iter()
+            .any(|s| s.contains("mean frequency") && s.contains("above")),
+        "{fast:?}"
+    );
+    assert!(!fast.iter().any(|s| s.contains("RMS")), "{fast:?}");
+}

@@ -61,12 +61,15 @@ pub(super) fn plot_check(
     Ok(())
 }
 
-/// Whether the record's input is the one every training record had
-/// (`None` when the model's inputs vary from experiment to experiment).
-pub(super) fn input_as_trained(check: &RecordCheck) -> Option<bool> {
-    check
-        .input_shared
-        .then_some(check.input_differs_at.is_none())
+/// Whether the record's input is the one every training record had, or,
+/// where inputs vary from experiment to experiment, whether it lies in
+/// the estimator's input family (`in_family`; `None` when there is none).
+pub(super) fn input_as_trained(check: &RecordCheck, in_family: Option<bool>) -> Option<bool> {
+    if check.input_shared {
+        Some(check.input_differs_at.is_none())
+    } else {
+        in_family
+    }
 }
 
 /// Numbers for a message, comma separated, to four significant digits
@@ -105,6 +108,7 @@ pub(super) fn check_header(outputs: &[String]) -> Vec<String> {
 pub(super) fn check_fields(
     outputs: usize,
     check: Option<&Result<RecordCheck, String>>,
+    in_family: Option<bool>,
 ) -> Vec<String> {
     match check {
         Some(Ok(c)) => {
@@ -118,7 +122,7 @@ pub(super) fn check_fields(
             fields.push(c.model_consistent().to_string());
             fields.push(format_f64(c.loss_ratio));
             fields.push(c.explained().to_string());
-            fields.push(input_as_trained(c).map_or_else(String::new, |b| b.to_string()));
+            fields.push(input_as_trained(c, in_family).map_or_else(String::new, |b| b.to_string()));
             fields.push(c.optima.to_string());
             fields.push(c.runner_up_ratio.map_or_else(String::new, format_f64));
             fields

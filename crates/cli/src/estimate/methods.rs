@@ -96,6 +96,7 @@ pub(super) fn bare(theta: Vec<f64>) -> Estimated {
         theta,
         widths: None,
         distance: None,
+        input: None,
         floored: None,
         check: None,
         refined: None,
@@ -230,6 +231,7 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
             sample_time: estimator.record_shape().sample_time,
         };
         let transforms = estimator.transforms_outputs();
+        let family = estimator.input_family().is_some();
         let checker = if args.checks() {
             Some(model_of(&estimator, args)?)
         } else {
@@ -272,6 +274,7 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
                 Ok(Estimated {
                     distance: a.feature_distance.zip(a.distance_threshold),
                     widths: a.interval_half_widths().map(<[f64]>::to_vec),
+                    input: family.then_some(a.input_deviations),
                     theta: a.theta,
                     floored: transforms.then_some(a.floored_samples),
                     ..bare(Vec::new())

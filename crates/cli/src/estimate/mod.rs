@@ -202,6 +202,9 @@ struct Estimated {
     theta: Vec<f64>,
     widths: Option<Vec<f64>>,
     distance: Option<(f64, f64)>,
+    /// How the record's input lies outside the estimator's input family
+    /// (empty inside it), when the estimator knows one.
+    input: Option<Vec<twostage::models::InputDeviation>>,
     /// Samples outside their output's transform, when the estimator
     /// transforms its outputs.
     floored: Option<Vec<twostage::compress::FlooredSample>>,
@@ -222,8 +225,16 @@ struct Estimated {
 }
 
 impl Estimated {
+    /// Whether the record's input lies in the estimator's input family
+    /// (`None` when it knows none).
+    fn in_family(&self) -> Option<bool> {
+        self.input.as_ref().map(Vec::is_empty)
+    }
+
+    /// Outside what training saw, by the features or by the input.
     fn out_of_distribution(&self) -> bool {
         self.distance.is_some_and(|(d, t)| d > t)
+            || self.input.as_ref().is_some_and(|d| !d.is_empty())
     }
 }
 

@@ -61,6 +61,16 @@ impl<'a> Said<'a> {
                  and the intervals do not cover it (is it the same model and input?)"
             );
         }
+        if let Some(deviations) = estimated.input.as_ref().filter(|d| !d.is_empty()) {
+            let said: Vec<String> = deviations.iter().map(ToString::to_string).collect();
+            eprintln!(
+                "warning: {file}: experiment {id}: out of distribution: its input lies outside \
+                 the family the estimator was trained on ({}); the estimate extrapolates and \
+                 the intervals do not cover it (train on a design that covers this input: \
+                 docs/your-own-model.md)",
+                said.join("; ")
+            );
+        }
         if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
             let outputs = &self.format.signals.outputs;
             let listed: Vec<String> = floored

@@ -59,6 +59,10 @@ pub(super) fn csv(
     if with_distance {
         header.extend(["feature_distance".into(), "out_of_distribution".into()]);
     }
+    let with_family = rows.iter().any(|(_, e)| e.input.is_some());
+    if with_family {
+        header.push("input_in_family".into());
+    }
     let with_floored = rows.iter().any(|(_, e)| e.floored.is_some());
     if with_floored {
         header.push("untransformed_samples".into());
@@ -109,11 +113,18 @@ pub(super) fn csv(
             None if with_distance => fields.extend([String::new(), String::new()]),
             None => {}
         }
+        if with_family {
+            fields.push(
+                e.input
+                    .as_ref()
+                    .map_or_else(String::new, |d| d.is_empty().to_string()),
+            );
+        }
         if with_floored {
             fields.push(e.floored.as_ref().map_or(0, Vec::len).to_string());
         }
         if with_check {
-            fields.extend(check_fields(outputs.len(), e.check.as_ref()));
+            fields.extend(check_fields(outputs.len(), e.check.as_ref(), e.in_family()));
         }
         if with_stop {
             fields.push(refine_stop(e.refined.as_ref()));
@@ -164,6 +175,14 @@ pub(super) fn json(
                 object.insert("feature_distance".into(), d.into());
                 object.insert("out_of_distribution".into(), e.out_of_distribution().into());
             }
+            if let Some(deviations) = &e.input {
+                object.insert("input_in_family".into(), deviations.is_empty().into());
+                if !deviations.is_empty() {
+                    let said: Vec<serde_json::Value> =
+                        deviations.iter().map(|d| d.to_string().into()).collect();
+                    object.insert("input_outside_family".into(), said.into());
+                }
+            }
             if let Some(floored) = &e.floored {
                 object.insert("untransformed_samples".into(), floored.len().into());
             }
@@ -192,7 +211,7 @@ pub(super) fn json(
                     object.insert("model_consistent".into(), c.model_consistent().into());
                     object.insert("loss_over_best".into(), c.loss_ratio.into());
                     object.insert("explained".into(), c.explained().into());
-                    if let Some(same) = input_as_trained(c) {
+                    if let Some(same) = input_as_trained(c, e.in_family()) {
                         object.insert("input_as_trained".into(), same.into());
                     }
                     object.insert("optima".into(), c.optima.into());

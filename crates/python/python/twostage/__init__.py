@@ -157,18 +157,38 @@ class Estimator:
           the transform's domain (a zero under a logarithm) and were taken
           at the smallest training value instead; the estimate does not
           speak for them. None for an estimator without transforms.
+        - ``input_in_family``: whether the record's input lies inside the
+          family of inputs the estimator's held-out records spanned (its
+          mean, RMS, peak and mean frequency), None for an estimator
+          without one; ``input_outside_family`` says how it lies outside
+          (a list of sentences per record). A record outside the family is
+          out of distribution too.
         """
         u, y = self._columns(u, y)
-        theta, widths, distance, threshold, floored = self._native.assess(u, y)
+        theta, widths, distance, threshold, floored, outside = self._native.assess(u, y)
         lower, upper = self._interval(theta, widths)
+        features_out = None if distance is None else np.asarray(distance > threshold)
+        input_in = None if outside is None else np.asarray(outside) == 0
+        flags = [f for f in (features_out, None if input_in is None else ~input_in) if f is not None]
+        out = None
+        if flags:
+            out = flags[0] if len(flags) == 1 else flags[0] | flags[1]
+            out = bool(out) if np.ndim(out) == 0 else out
+        said = None
+        if input_in is not None:
+            said = self._native.input_deviations(u, y)
+            said = said[0] if np.ndim(input_in) == 0 else said
+            input_in = bool(input_in) if np.ndim(input_in) == 0 else input_in
         result = {
             "theta": theta,
             "lower": lower,
             "upper": upper,
             "feature_distance": distance,
             "distance_threshold": threshold,
-            "out_of_distribution": None if distance is None else distance > threshold,
+            "out_of_distribution": out,
             "untransformed_samples": floored,
+            "input_in_family": input_in,
+            "input_outside_family": said,
         }
         return result
 

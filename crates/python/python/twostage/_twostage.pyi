@@ -44,11 +44,14 @@ class Estimator:
         Optional[Union[float, _Array]],
         Optional[float],
         Optional[Union[float, _Array]],
+        Optional[Union[float, _Array]],
     ]:
         """(theta, interval half-widths, feature distance, distance
-        threshold, samples outside the output transform):
-        ``twostage.Estimator.assess`` makes the dict of these."""
+        threshold, samples outside the output transform, ways the input
+        lies outside the input family): ``twostage.Estimator.assess``
+        makes the dict of these."""
         ...
+    def input_deviations(self, u: Optional[_Array], y: _Array) -> list[list[str]]: ...
     def check(
         self,
         u: Optional[_Array],

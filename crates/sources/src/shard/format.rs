@@ -15,8 +15,10 @@ use crate::error::{Error, Result};
 pub(super) const MAGIC: &[u8; 8] = b"TSSHARD\0";
 /// The layout of the header and the records; bumped on any change.
 /// Format 2 stores the sampling design, the record shape and the
-/// compressor as typed values (format 1: as text and a bare triple).
-pub(super) const SHARD_FORMAT: u32 = 2;
+/// compressor as typed values (format 1: as text and a bare triple);
+/// format 3 follows a compressed record's features with its inputs'
+/// summary numbers (the estimator's input family, decision 056).
+pub(super) const SHARD_FORMAT: u32 = 3;
 /// The header of a shard file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(super) struct Header {
@@ -33,8 +35,9 @@ pub(super) struct Header {
 /// One experiment of a shard.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub(super) enum Stored {
-    /// Its parameter vector, and its features (compressed shards) or its
-    /// record's signals, inputs then outputs, each whole.
+    /// Its parameter vector, and its features then its inputs' summary
+    /// numbers (compressed shards) or its record's signals, inputs then
+    /// outputs, each whole.
     Kept { theta: Vec<f64>, values: Vec<f64> },
     /// Its parameter vector and why it failed.
     Failed { theta: Vec<f64>, error: String },

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use twostage_compress::{Compressor, Workspace};
-use twostage_models::{IoData, RecordShape, Sampling, Simulator};
+use twostage_models::{InputFamily, IoData, RecordShape, Sampling, Simulator};
 
 use crate::chart::ForModel;
 use crate::chart::{CompressedChart, ExperimentFailure, StoredChart, simulate_range};
@@ -155,10 +155,11 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
         }
         let design = role.design(spec.prior(), m, plan.seed)?;
         let mut work = Workspace::new();
+        let inputs = InputFamily::new(spec.input_names().len(), spec.sample_time());
         for start in range.clone().step_by(BLOCK) {
             let block = start..(start + BLOCK).min(range.end);
             for outcome in simulate_range(simulator, &design, block, None) {
-                let stored = stored(outcome, compressor.as_ref(), &mut work);
+                let stored = stored(outcome, compressor.as_ref(), &inputs, &mut work);
                 write_part(&mut out, &stored).map_err(io)?;
             }
         }
@@ -175,10 +176,12 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
 }
 
 /// One simulated experiment as a shard stores it: its record, or its
-/// features under `compressor`, or why it failed.
+/// features under `compressor` followed by its inputs' summary numbers
+/// (`inputs` says how many, shard format 3), or why it failed.
 fn stored(
     outcome: std::result::Result<(Vec<f64>, IoData), ExperimentFailure>,
     compressor: Option<&CompressorConfig>,
+    inputs: &InputFamily,
     work: &mut Workspace,
 ) -> Stored {
     let (theta, record) = match outcome {
@@ -198,10 +201,13 @@ fn stored(
     };
     let mut alpha = vec![0.0; c.n_features()];
     match c.compress_into(record.inputs(), record.outputs(), work, &mut alpha) {
-        Ok(()) => Stored::Kept {
-            theta,
-            values: alpha,
-        },
+        Ok(()) => {
+            alpha.extend(inputs.summaries(&record));
+            Stored::Kept {
+                theta,
+                values: alpha,
+            }
+        }
         Err(e) => Stored::Failed {
             theta,
             error: e.to_string(),
@@ -333,6 +339,8 @@ impl ShardedChart {
             ..
         } = self.header.shape;
         let mut record = IoData::zeros(samples, n_u, n_y);
+        let mut inputs = InputFamily::new(n_u, self.header.shape.sample_time);
+        let summaries = inputs.summary_len();
         self.for_each(role, |index, stored| {
             let (theta, values) = match stored {
                 Stored::Failed { theta, error } => {
@@ -346,14 +354,16 @@ impl ShardedChart {
                 Stored::Kept { theta, values } => (theta, values),
             };
             if stored_features {
-                if values.len() != n {
+                if values.len() != n + summaries {
                     return Err(format!(
-                        "{} features, the compressor gives {n}",
+                        "{} values, the compressor gives {n} features and the {n_u} input(s) \
+                         {summaries} summary numbers",
                         values.len()
                     ));
                 }
                 thetas.extend_from_slice(&theta);
-                features.extend_from_slice(&values);
+                features.extend_from_slice(&values[..n]);
+                inputs.include_summaries(&values[n..]);
                 indices.push(index);
                 return Ok(());
             }
@@ -364,6 +374,7 @@ impl ShardedChart {
                 Ok(()) => {
                     thetas.extend_from_slice(&theta);
                     features.extend_from_slice(&alpha);
+                    inputs.include(&record);
                     indices.push(index);
                 }
                 Err(e) => failures.push(ExperimentFailure {
@@ -382,6 +393,7 @@ impl ShardedChart {
                 .unwrap_or_else(|_| unreachable!("n values per kept record")),
             indices,
             failures,
+            inputs: Some(inputs),
         })
     }
 
