@@ -299,19 +299,23 @@ pub fn interval_in_box(
     lower: &[f64],
     upper: &[f64],
 ) -> (Vec<f64>, Vec<f64>) {
-    theta
-        .iter()
-        .zip(half_widths)
-        .zip(lower.iter().zip(upper))
-        .map(|((t, w), (lo, hi))| {
-            // A missing interval (NaN) stays missing: `max` would take the box.
-            if w.is_nan() {
-                (f64::NAN, f64::NAN)
-            } else {
-                ((t - w).max(*lo), (t + w).min(*hi))
-            }
-        })
-        .unzip()
+    // The runtime on a microcontroller keeps its intervals in the box by
+    // the same routine.
+    let n = theta
+        .len()
+        .min(half_widths.len())
+        .min(lower.len())
+        .min(upper.len());
+    let (mut low, mut high) = (vec![0.0; n], vec![0.0; n]);
+    twostage_kernels::vector::interval_in_box(
+        theta,
+        half_widths,
+        lower,
+        upper,
+        &mut low,
+        &mut high,
+    );
+    (low, high)
 }
 
 impl Estimator {

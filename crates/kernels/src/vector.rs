@@ -66,3 +66,44 @@ where
         };
     }
 }
+
+/// The interval `theta +- half_widths` kept inside the prior's box, into
+/// `low` and `high`: a parameter cannot leave its prior's support, and
+/// neither does its interval (what is cut off held no probability). A
+/// NaN half-width (no interval) gives NaN bounds. Over the shortest of
+/// the slices and the box.
+///
+/// ```
+/// let (mut low, mut high) = ([0.0; 2], [0.0; 2]);
+/// twostage_kernels::vector::interval_in_box(
+///     &[0.1, 2.0], &[0.3, 0.5], &[0.0, 1.0][..], &[5.0, 2.2][..], &mut low, &mut high,
+/// );
+/// assert_eq!((low, high), ([0.0, 1.5], [0.4, 2.2]));
+/// ```
+#[inline]
+pub fn interval_in_box<L, U>(
+    theta: &[f64],
+    half_widths: &[f64],
+    lower: &L,
+    upper: &U,
+    low: &mut [f64],
+    high: &mut [f64],
+) where
+    L: Values + ?Sized,
+    U: Values + ?Sized,
+{
+    let n = lower.len().min(upper.len());
+    let bounds = low.iter_mut().zip(high.iter_mut());
+    for (i, ((l, h), (t, w))) in bounds
+        .zip(theta.iter().zip(half_widths))
+        .enumerate()
+        .take(n)
+    {
+        if w.is_nan() {
+            // `max` would take the box's bound for a missing interval.
+            (*l, *h) = (f64::NAN, f64::NAN);
+        } else {
+            (*l, *h) = ((t - w).max(lower.at(i)), (t + w).min(upper.at(i)));
+        }
+    }
+}

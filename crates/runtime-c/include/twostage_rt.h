@@ -128,6 +128,21 @@ int32_t ts_stream_finish(const ts_stream *s,
                          size_t half_widths_len,
                          ts_assessment *assessment);
 
+// The intervals `theta +- half_widths` kept inside the prior's box into
+// `lower` and `upper`, each of `len` >= q doubles, exactly as the host
+// writes them (a parameter's interval never leaves its prior's support;
+// a NaN half-width, no interval, gives NaN bounds).
+//
+// # Safety
+// `e` is null or points to a `ts_estimator`; each pointer is null or
+// points to `len` doubles (`lower` and `upper` writable).
+int32_t ts_interval(const ts_estimator *e,
+                    const double *theta,
+                    const double *half_widths,
+                    double *lower,
+                    double *upper,
+                    size_t len);
+
 // Forget the stream's samples: ready for the next record.
 //
 // # Safety

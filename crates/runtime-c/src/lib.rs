@@ -360,6 +360,50 @@ pub unsafe extern "C" fn ts_stream_finish(
     }
 }
 
+/// The intervals `theta +- half_widths` kept inside the prior's box into
+/// `lower` and `upper`, each of `len` >= q doubles, exactly as the host
+/// writes them (a parameter's interval never leaves its prior's support;
+/// a NaN half-width, no interval, gives NaN bounds).
+///
+/// # Safety
+/// `e` is null or points to a `ts_estimator`; each pointer is null or
+/// points to `len` doubles (`lower` and `upper` writable).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ts_interval(
+    e: *const TsEstimator,
+    theta: *const f64,
+    half_widths: *const f64,
+    lower: *mut f64,
+    upper: *mut f64,
+    len: usize,
+) -> i32 {
+    // SAFETY: as documented.
+    let Some(estimator) = (unsafe { loaded(e) }) else {
+        return if e.is_null() {
+            TS_ERROR_NULL
+        } else {
+            TS_ERROR_NOT_LOADED
+        };
+    };
+    if theta.is_null() || half_widths.is_null() || lower.is_null() || upper.is_null() {
+        return TS_ERROR_NULL;
+    }
+    // SAFETY: the caller promises len doubles behind each pointer, the
+    // bounds writable.
+    let (theta, widths, lower, upper) = unsafe {
+        (
+            core::slice::from_raw_parts(theta, len),
+            core::slice::from_raw_parts(half_widths, len),
+            core::slice::from_raw_parts_mut(lower, len),
+            core::slice::from_raw_parts_mut(upper, len),
+        )
+    };
+    match estimator.interval(theta, widths, lower, upper) {
+        Ok(()) => TS_OK,
+        Err(e) => e.code(),
+    }
+}
+
 /// Forget the stream's samples: ready for the next record.
 ///
 /// # Safety

@@ -85,7 +85,12 @@ fn a_c_program_prints_the_rust_estimates() {
     let mut records: Vec<IoData> = (0..8u32)
         .map(|i| {
             let mut record = model.spec().new_record();
-            let theta = -0.8 + 0.2 * f64::from(i);
+            // The first at the prior box's edge, where intervals are cut.
+            let theta = if i == 0 {
+                -0.895
+            } else {
+                -0.8 + 0.2 * f64::from(i)
+            };
             model
                 .simulate(&[theta], &mut experiment_rng(31, u64::from(i)), &mut record)
                 .unwrap();
@@ -124,6 +129,7 @@ fn a_c_program_prints_the_rust_estimates() {
         lines.next().unwrap(),
         "damaged -4 the blob's checksum does not match: it was damaged; export it again"
     );
+    let mut clipped = 0;
     for record in &records {
         let fields: Vec<&str> = lines.next().unwrap().split(' ').collect();
         assert_eq!(fields[0], "0", "{fields:?}");
@@ -146,7 +152,21 @@ fn a_c_program_prints_the_rust_estimates() {
             host.distance_threshold.unwrap().to_bits()
         );
         assert_eq!(fields[7], host.floored_samples.len().to_string());
+        // The interval, kept inside the prior's box as the host keeps it.
+        assert_eq!(fields[8], "0", "ts_interval");
+        let (low, high) = twostage::interval_in_box(
+            &host.theta,
+            host.interval_half_widths().unwrap(),
+            estimator.lower(),
+            estimator.upper(),
+        );
+        for (c, host) in [(number(9), low[0]), (number(10), high[0])] {
+            assert!((c - host).abs() <= 1e-9, "C bound {c} vs host {host}");
+        }
+        clipped += usize::from(number(9).to_bits() == estimator.lower()[0].to_bits());
     }
+    // The record at -0.895 has an interval reaching past the box's -0.9.
+    assert!(clipped >= 1, "no interval met the prior's box");
     assert!(estimator.assess(&records[7]).unwrap().out_of_distribution());
     assert_eq!(
         lines.next().unwrap(),

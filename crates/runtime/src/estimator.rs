@@ -356,6 +356,37 @@ impl<'a> Estimator<'a> {
     pub fn upper(&self, j: usize) -> f64 {
         self.upper.at(j)
     }
+    /// The interval `theta +- half_widths` kept inside the prior's box,
+    /// into `low` and `high`, exactly as the host's `interval_in_box`
+    /// (one routine, in the kernels): a parameter's interval never leaves
+    /// its prior's support; a NaN half-width gives NaN bounds.
+    ///
+    /// # Errors
+    /// [`Error::OutputTooShort`] when a slice holds fewer than q numbers.
+    pub fn interval(
+        &self,
+        theta: &[f64],
+        half_widths: &[f64],
+        low: &mut [f64],
+        high: &mut [f64],
+    ) -> Result<(), Error> {
+        let q = self.n_parameters();
+        if [theta.len(), half_widths.len(), low.len(), high.len()]
+            .iter()
+            .any(|&len| len < q)
+        {
+            return Err(Error::OutputTooShort { needed: q });
+        }
+        twostage_kernels::vector::interval_in_box(
+            theta,
+            half_widths,
+            &self.lower,
+            &self.upper,
+            low,
+            high,
+        );
+        Ok(())
+    }
     /// Whether the estimator has intervals (adaptive or conformal).
     pub fn has_intervals(&self) -> bool {
         self.adaptive.is_some() || self.conformal.is_some()

@@ -56,6 +56,8 @@ int main(int argc, char **argv) {
     double *work = malloc(work_len * sizeof(double));
     double *theta = malloc(q * sizeof(double));
     double *widths = malloc(q * sizeof(double));
+    double *lower = malloc(q * sizeof(double));
+    double *upper = malloc(q * sizeof(double));
     double u[16], y[16];
 
     FILE *records = fopen(argv[2], "r");
@@ -87,6 +89,10 @@ int main(int argc, char **argv) {
             for (size_t j = 0; j < q; j++) printf(" %.17g", widths[j]);
             printf(" %d %d %.17g %.17g %u", a.intervals, a.out_of_distribution, a.feature_distance,
                    a.distance_threshold, (unsigned)a.untransformed_samples);
+            /* The interval as the host writes it: inside the prior's box. */
+            int bounds = ts_interval(&est, theta, widths, lower, upper, q);
+            printf(" %d", bounds);
+            for (size_t j = 0; j < q; j++) printf(" %.17g %.17g", lower[j], upper[j]);
         } else {
             printf(" %s", ts_error_message(rc));
         }
@@ -101,6 +107,8 @@ int main(int argc, char **argv) {
     free(work);
     free(theta);
     free(widths);
+    free(lower);
+    free(upper);
     free(blob);
     return 0;
 }
