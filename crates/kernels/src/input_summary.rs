@@ -20,7 +20,8 @@ pub const SUMMARY_NAMES: [&str; 4] = ["mean", "RMS", "peak", "mean frequency"];
 /// Summarize one input signal sampled every `sample_time` seconds:
 /// `[mean, RMS about the mean, largest absolute deviation from the mean,
 /// mean frequency in Hz]`. An empty signal is all zeros; a constant one
-/// has frequency 0.
+/// has frequency 0. The same numbers as an [`InputAccumulator`] fed the
+/// samples one by one (it is what this does).
 ///
 /// ```
 /// use twostage_kernels::input_summary::summarize;
@@ -35,30 +36,81 @@ pub const SUMMARY_NAMES: [&str; 4] = ["mean", "RMS", "peak", "mean frequency"];
 /// assert!((frequency - 3.0).abs() < 1e-2);
 /// ```
 pub fn summarize(u: &[f64], sample_time: f64) -> [f64; 4] {
-    let n = u.len();
-    if n == 0 {
-        return [0.0; 4];
+    let mut accumulator = InputAccumulator::new();
+    for &v in u {
+        accumulator.push(v);
     }
-    let mean = u.iter().sum::<f64>() / n as f64;
-    let (mut square, mut peak) = (0.0, 0.0f64);
-    for v in u {
-        let d = v - mean;
-        square += d * d;
-        peak = peak.max(d.abs());
+    accumulator.summary(sample_time)
+}
+
+/// The summary of a signal whose samples arrive one at a time, in seven
+/// numbers and no allocation (a stream on a microcontroller keeps one per
+/// input): the mean and the sum of squared deviations by Welford's
+/// update, which stays accurate for a small variation about a large
+/// level, the extremes, and the sum of squared first differences.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InputAccumulator {
+    count: u64,
+    mean: f64,
+    squares: f64,
+    low: f64,
+    high: f64,
+    last: f64,
+    differences: f64,
+}
+
+impl Default for InputAccumulator {
+    fn default() -> Self {
+        Self::new()
     }
-    let variance = square / n as f64;
-    let frequency = if n < 2 || variance <= 0.0 {
-        0.0
-    } else {
-        let differences = u
-            .windows(2)
-            .map(|w| (w[1] - w[0]) * (w[1] - w[0]))
-            .sum::<f64>()
-            / (n - 1) as f64;
-        let ratio = (differences / (4.0 * variance)).min(1.0);
-        libm::asin(crate::sqrt(ratio)) / (core::f64::consts::PI * sample_time)
-    };
-    [mean, crate::sqrt(variance), peak, frequency]
+}
+
+impl InputAccumulator {
+    /// No samples yet.
+    pub const fn new() -> Self {
+        Self {
+            count: 0,
+            mean: 0.0,
+            squares: 0.0,
+            low: f64::INFINITY,
+            high: f64::NEG_INFINITY,
+            last: 0.0,
+            differences: 0.0,
+        }
+    }
+
+    /// One more sample.
+    pub fn push(&mut self, v: f64) {
+        if self.count > 0 {
+            let d = v - self.last;
+            self.differences += d * d;
+        }
+        self.count += 1;
+        let delta = v - self.mean;
+        self.mean += delta / self.count as f64;
+        self.squares += delta * (v - self.mean);
+        self.low = self.low.min(v);
+        self.high = self.high.max(v);
+        self.last = v;
+    }
+
+    /// `[mean, RMS, peak, mean frequency]` of the samples so far, as
+    /// [`summarize`] says.
+    pub fn summary(&self, sample_time: f64) -> [f64; 4] {
+        if self.count == 0 {
+            return [0.0; 4];
+        }
+        let n = self.count as f64;
+        let variance = (self.squares / n).max(0.0);
+        let peak = (self.high - self.mean).max(self.mean - self.low).max(0.0);
+        let frequency = if self.count < 2 || variance <= 0.0 {
+            0.0
+        } else {
+            let ratio = (self.differences / (n - 1.0) / (4.0 * variance)).min(1.0);
+            libm::asin(crate::sqrt(ratio)) / (core::f64::consts::PI * sample_time)
+        };
+        [self.mean, crate::sqrt(variance), peak, frequency]
+    }
 }
 
 #[cfg(test)]
@@ -103,6 +155,33 @@ mod tests {
             .collect();
         let [_, _, _, frequency] = summarize(&u, 0.5);
         assert!((frequency - 0.5).abs() < 0.005, "{frequency}");
+    }
+
+    #[test]
+    fn the_running_summary_is_the_two_pass_one() {
+        // A small variation about a large level: the two-pass formulas,
+        // computed here directly, against the running ones.
+        let u: std::vec::Vec<f64> = (0..5000)
+            .map(|k| {
+                1.0e3 + 1.0e-3 * libm::sin(0.37 * k as f64) + 1.0e-4 * libm::cos(2.1 * k as f64)
+            })
+            .collect();
+        let n = u.len() as f64;
+        let mean = u.iter().sum::<f64>() / n;
+        let variance = u.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+        let peak = u.iter().fold(0.0f64, |m, v| m.max((v - mean).abs()));
+        let differences = u
+            .windows(2)
+            .map(|w| (w[1] - w[0]) * (w[1] - w[0]))
+            .sum::<f64>()
+            / (n - 1.0);
+        let frequency =
+            libm::asin(libm::sqrt(differences / (4.0 * variance))) / core::f64::consts::PI;
+        let [m, rms, p, f] = summarize(&u, 1.0);
+        assert!((m - mean).abs() < 1e-12 * mean, "{m} {mean}");
+        assert!((rms / libm::sqrt(variance) - 1.0).abs() < 1e-6, "{rms}");
+        assert!((p / peak - 1.0).abs() < 1e-6, "{p} {peak}");
+        assert!((f / frequency - 1.0).abs() < 1e-6, "{f} {frequency}");
     }
 
     #[test]
