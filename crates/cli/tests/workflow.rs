@@ -1000,3 +1000,76 @@ fn refine_auto_refines_what_the_check_does_not_explain() {
         );
     }
 }
+
+/// `estimate --window N --every K` on a long record: one row per window,
+/// its last sample beside it, each the estimate of that window alone to
+/// the bit; a record shorter than the window is refused by name.
+#[test]
+fn a_window_slides_over_a_long_record() {
+    let dir = scratch("window");
+    let file = dir.join("e.tsest");
+    let out = train_linear(&file, "300", "100");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // Three benchmark records end to end: 3000 samples of one plant's
+    // input and output (each piece of its own theta, as a drifting plant).
+    let data = simulate_records(&dir, 3, 5);
+    let csv = std::fs::read_to_string(data.join("data.csv")).unwrap();
+    let mut long = String::from("u,y\n");
+    for line in csv.lines().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        long.push_str(&format!("{},{}\n", fields[1], fields[2]));
+    }
+    let long_path = dir.join("long.csv");
+    std::fs::write(&long_path, &long).unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--window",
+        "1000",
+        "--every",
+        "500",
+        path(&long_path),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let table = text(&out.stdout);
+    let mut lines = table.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(&header[..3], ["experiment", "window_end", "theta"]);
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    let ends: Vec<&str> = rows.iter().map(|r| r[1].as_str()).collect();
+    assert_eq!(ends, ["1000", "1500", "2000", "2500", "3000"]);
+    // Each window alone, written as its own file, gives the same row.
+    let samples: Vec<&str> = long.lines().skip(1).collect();
+    for row in &rows {
+        let end: usize = row[1].parse().unwrap();
+        let alone = dir.join(format!("window-{end}.csv"));
+        let mut text_of = String::from("u,y\n");
+        for line in &samples[end - 1000..end] {
+            text_of.push_str(line);
+            text_of.push('\n');
+        }
+        std::fs::write(&alone, text_of).unwrap();
+        let out = twostage(&["estimate", "--estimator", path(&file), path(&alone)]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let single = text(&out.stdout);
+        let fields: Vec<&str> = single.lines().nth(1).unwrap().split(',').collect();
+        assert_eq!(&fields[1..], &row[2..], "the window ending at {end}");
+    }
+    // A window longer than the record: named, not estimated.
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--window",
+        "5000",
+        path(&long_path),
+    ]);
+    assert!(
+        text(&out.stderr).contains("3000 samples, shorter than the window of 5000"),
+        "{}",
+        text(&out.stderr)
+    );
+}

@@ -60,6 +60,32 @@ impl IoData {
         Ok(data)
     }
 
+    /// Samples `start..end` of every signal, as a record of their own (a
+    /// window of a long record); `end` is cut to the record's length.
+    ///
+    /// ```
+    /// use twostage_models::IoData;
+    /// let data = IoData::siso(&[1.0, 2.0, 3.0, 4.0], &[0.1, 0.2, 0.3, 0.4])?;
+    /// let last = data.window(2, 4);
+    /// assert_eq!((last.input(0), last.output(0)), (&[3.0, 4.0][..], &[0.3, 0.4][..]));
+    /// assert_eq!(data.window(3, 9).n_samples(), 1);
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    pub fn window(&self, start: usize, end: usize) -> Self {
+        let end = end.min(self.n_samples);
+        let start = start.min(end);
+        let mut part = Self::zeros(end - start, self.n_inputs, self.n_outputs);
+        for j in 0..self.n_inputs {
+            part.input_mut(j)
+                .copy_from_slice(&self.input(j)[start..end]);
+        }
+        for j in 0..self.n_outputs {
+            part.output_mut(j)
+                .copy_from_slice(&self.output(j)[start..end]);
+        }
+        part
+    }
+
     /// Reshape the record, keeping its allocation; the contents are zeroed.
     pub fn resize(&mut self, n_samples: usize, n_inputs: usize, n_outputs: usize) {
         self.n_samples = n_samples;

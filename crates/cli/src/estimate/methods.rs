@@ -103,6 +103,7 @@ pub(super) fn bare(theta: Vec<f64>) -> Estimated {
         interval_failure: None,
         correlation: None,
         optima: None,
+        window_end: None,
     }
 }
 

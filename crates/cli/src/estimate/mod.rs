@@ -11,8 +11,8 @@ use twostage::models::IoData;
 use twostage::models::Simulator;
 use twostage::{BestFit, RecordCheck, RefineReason};
 
-use crate::csv_records;
 use crate::options::{InitialCovariance, TableFormat};
+use crate::{csv_records, usage};
 
 mod columns;
 mod methods;
@@ -158,6 +158,16 @@ pub struct EstimateArgs {
     /// records of the model (default 0).
     #[arg(long)]
     seed: Option<u64>,
+    /// Estimate each window of N samples of every record instead of the
+    /// record whole: one row per window, its last sample in a
+    /// `window_end` column (counted from 1), as a control unit would
+    /// re-estimate while the plant runs.
+    #[arg(long, value_name = "N")]
+    window: Option<usize>,
+    /// With --window: a window every K samples (default N, windows side
+    /// by side; the last window ends at the record's last full step).
+    #[arg(long, value_name = "K", requires = "window")]
+    every: Option<usize>,
     /// CSV files: header u,y (one record) or experiment,u,y (many).
     #[arg(required = true)]
     data: Vec<PathBuf>,
@@ -222,6 +232,8 @@ struct Estimated {
     /// With an output-error refinement or --joint: the optima its search
     /// ended in, and the runner-up's loss over the best's.
     optima: Option<(usize, Option<f64>)>,
+    /// With --window: the window's last sample in its record, from 1.
+    window_end: Option<usize>,
 }
 
 impl Estimated {
@@ -358,21 +370,79 @@ impl Session<'_> {
     /// in their order: each estimate depends on its record alone.
     fn estimate_file(&self, path: &std::path::Path) -> Result<Vec<(String, RecordOutcome)>> {
         let reads = csv_records::read(path, &self.chosen.format).map_err(anyhow::Error::msg)?;
-        self.bars.begin_step("estimating", reads.len(), "records");
-        let estimates = reads
+        let pieces = self.windows(path, reads)?;
+        self.bars.begin_step("estimating", pieces.len(), "records");
+        let estimates = pieces
             .into_par_iter()
-            .map(|read| {
-                let estimated = read.record.and_then(|record| {
-                    let estimated = (self.chosen.method)(&read.id, &record)
-                        .map_err(|e| format!("{}: experiment {}: {e}", path.display(), read.id))?;
-                    Ok((record, estimated))
+            .map(|(id, record, window_end)| {
+                let estimated = record.and_then(|record| {
+                    let estimated = (self.chosen.method)(&id, &record)
+                        .map_err(|e| format!("{}: experiment {id}: {e}", path.display()))?;
+                    Ok((
+                        record,
+                        Estimated {
+                            window_end,
+                            ..estimated
+                        },
+                    ))
                 });
                 self.bars.advance_step(1);
-                (read.id, estimated)
+                (id, estimated)
             })
             .collect();
         self.bars.end_step();
         Ok(estimates)
+    }
+
+    /// The records to estimate: each whole, or with --window each of its
+    /// windows (its last sample, from 1, beside it). A record shorter than
+    /// one window is refused by name.
+    #[allow(clippy::type_complexity)]
+    fn windows(
+        &self,
+        path: &std::path::Path,
+        reads: Vec<csv_records::ReadRecord>,
+    ) -> Result<Vec<(String, Result<IoData, String>, Option<usize>)>> {
+        let Some(window) = self.args.window else {
+            return Ok(reads.into_iter().map(|r| (r.id, r.record, None)).collect());
+        };
+        let every = self.args.every.unwrap_or(window);
+        if window == 0 || every == 0 {
+            return Err(usage(format!(
+                "--window {window} --every {every}: give a window and a step of at least 1 sample"
+            )));
+        }
+        let mut pieces = Vec::new();
+        for read in reads {
+            let record = match read.record {
+                Ok(record) => record,
+                Err(e) => {
+                    pieces.push((read.id, Err(e), None));
+                    continue;
+                }
+            };
+            let n = record.n_samples();
+            if n < window {
+                pieces.push((
+                    read.id.clone(),
+                    Err(format!(
+                        "{}: experiment {}: {n} samples, shorter than the window of {window}",
+                        path.display(),
+                        read.id
+                    )),
+                    None,
+                ));
+                continue;
+            }
+            for end in (window..=n).step_by(every) {
+                pieces.push((
+                    read.id.clone(),
+                    Ok(record.window(end - window, end)),
+                    Some(end),
+                ));
+            }
+        }
+        Ok(pieces)
     }
 
     /// The file's estimates checked and refined as asked. One best-fit

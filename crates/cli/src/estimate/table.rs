@@ -49,6 +49,10 @@ pub(super) fn csv(
     let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
     let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
     let mut header = vec!["experiment".to_string()];
+    let windowed = rows.iter().any(|(_, e)| e.window_end.is_some());
+    if windowed {
+        header.push("window_end".into());
+    }
     header.extend(names.iter().cloned());
     if with_intervals {
         for n in names {
@@ -92,6 +96,9 @@ pub(super) fn csv(
     let mut text = row(&header);
     for (id, e) in rows {
         let mut fields = vec![id.clone()];
+        if windowed {
+            fields.push(e.window_end.map_or_else(String::new, |end| end.to_string()));
+        }
         fields.extend(e.theta.iter().map(|t| format_f64(*t)));
         // A row without a column's value (the joint row has no feature
         // distance) leaves it empty, so that every row has every column.
@@ -163,6 +170,9 @@ pub(super) fn json(
         .map(|(id, e)| {
             let mut object = serde_json::Map::new();
             object.insert("experiment".into(), id.clone().into());
+            if let Some(end) = e.window_end {
+                object.insert("window_end".into(), end.into());
+            }
             let bounds = interval(e, prior_box);
             for (j, n) in names.iter().enumerate() {
                 object.insert(n.clone(), e.theta[j].into());
