@@ -163,6 +163,29 @@ def test_an_input_outside_the_family_is_flagged_with_its_number(small):
     assert one["input_outside_family"] == said
 
 
+def test_windows_of_a_long_record_are_the_cli_s(small, tmp_path):
+    """``assess_windows`` gives ``estimate --window --every``'s rows."""
+    estimator, path = small
+    n, _, _ = estimator.record_shape
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal((3 * n, 1))
+    y = rng.standard_normal((3 * n, 1))
+    record = tmp_path / "long.csv"
+    np.savetxt(record, np.hstack([u, y]), delimiter=",", header="u,y", comments="",
+               fmt="%.17g")
+    out = cli("estimate", "--estimator", str(path), "--window", str(n), "--every",
+              str(n // 2), "--format", "json", str(record))
+    from_cli = json.loads(out)
+    windows = estimator.assess_windows(u, y, n, n // 2)
+    assert windows["window_end"].tolist() == [row["window_end"] for row in from_cli]
+    assert windows["window_end"].tolist() == [n, 3 * n // 2, 2 * n, 5 * n // 2, 3 * n]
+    for k, row in enumerate(from_cli):
+        assert windows["theta"][k].tolist() == [row["theta"]]
+        assert windows["lower"][k].tolist() == [row["theta_lo"]]
+    with pytest.raises(ValueError, match="shorter than the window"):
+        estimator.assess_windows(u, y, 4 * n)
+
+
 def test_a_file_round_trips_and_the_cli_reads_it(small):
     estimator, path = small
     again = twostage.Estimator.load(path)

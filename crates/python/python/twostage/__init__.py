@@ -192,6 +192,41 @@ class Estimator:
         }
         return result
 
+    def assess_windows(
+        self,
+        u: Optional[npt.NDArray[np.float64]],
+        y: npt.NDArray[np.float64],
+        window: int,
+        every: Optional[int] = None,
+    ) -> dict[str, Any]:
+        """``assess`` of every window of ``window`` samples of one long
+        record ([N, n_u], [N, n_y]), one every ``every`` samples (default
+        ``window``: side by side), as ``twostage estimate --window --every``
+        writes them: the dict of ``assess`` for the batch of windows, with
+        ``window_end`` the last sample of each (from 1). Each window's
+        numbers are those of the window assessed alone.
+        """
+        u, y = self._columns(u, y)
+        y = np.asarray(y, dtype=np.float64)
+        n = y.shape[0]
+        every = window if every is None else every
+        if window < 1 or every < 1:
+            raise ValueError(
+                "window %d, every %d: give a window and a step of at least 1 sample"
+                % (window, every)
+            )
+        if n < window:
+            raise ValueError("the record has %d samples, shorter than the window of %d" % (n, window))
+        ends = np.arange(window, n + 1, every)
+        ys = np.stack([y[end - window:end] for end in ends])
+        us = None
+        if u is not None:
+            u = np.asarray(u, dtype=np.float64)
+            us = np.stack([u[end - window:end] for end in ends])
+        result = self.assess(us, ys)
+        result["window_end"] = ends
+        return result
+
     def check(
         self,
         u: Optional[npt.NDArray[np.float64]],
