@@ -112,8 +112,8 @@ fn the_presets_write_the_files_they_always_wrote() {
     let bench_recommended = with(&["train", "--model", "benchmark", "--preset", "recommended"]);
     let car_paper = with(&["train", "--model", "pacejka"]);
     let car_recommended = with(&["train", "--model", "pacejka", "--preset", "recommended"]);
-    // Every file below changed on purpose with decision 056 (format 5
-    // appends the input family; the payloads before are prefixes of these).
+    // Every file below changed on purpose when estimator files gained the
+    // input family (format 5): the payloads before are prefixes of these.
     check(
         &[
             // Every default of the command line: m, seed, validation, calibration, alpha.
@@ -223,7 +223,7 @@ fn every_source_writes_the_file_it_always_wrote() {
         "--calibrate",
         "50",
     ];
-    // Changed on purpose with decision 056, as the presets' files above.
+    // Changed on purpose with the input family, as the presets' files above.
     check(
         &[
             ("chart-csv", &chart, 0xe5be0343007b8fea),

@@ -53,6 +53,7 @@ mod input_family;
 mod marginal;
 mod ode;
 mod pacejka;
+mod prbs;
 mod prior;
 mod rng;
 mod signals;
@@ -70,7 +71,7 @@ pub use data::{IoData, RecordShape};
 pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;
-pub use input_design::{Drawn, Grid, Level, MAX_PRBS_ORDER, Phases};
+pub use input_design::{Drawn, Grid, Level, Phases};
 pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
@@ -80,6 +81,7 @@ pub use pacejka::{
     CHICANE_AMPLITUDE, PACEJKA_NOISE_VARIANCE, PACEJKA_SAMPLE_TIME, PACEJKA_SAMPLES,
     PACEJKA_STEPS_PER_SAMPLE, PacejkaCar, PacejkaCarBuilder, Tire, Vehicle,
 };
+pub use prbs::MAX_PRBS_ORDER;
 pub use prior::{Design, Prior, Sampling, random_permutation};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
 pub use signals::{SignalColumn, generic_signal_names, signal_columns};
