@@ -615,12 +615,14 @@ impl Estimator {
             feature_distance: self.envelope.as_ref().map(|e| e.distance(&work.features)),
             distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),
             floored_samples: work.compress.floored_samples().to_vec(),
-            input_deviations: self.input_deviations_of(inputs),
+            input_deviations: self.input_deviations(inputs),
         })
     }
 
-    /// How the inputs (N x n_u) lie outside the estimator's input family.
-    fn input_deviations_of(&self, inputs: ArrayView2<'_, f64>) -> Vec<InputDeviation> {
+    /// How a record's inputs (N x n_u) lie outside the estimator's input
+    /// family, each named by the input's name (empty inside it, and for an
+    /// estimator without a family): what [`Estimator::assess`] reports.
+    pub fn input_deviations(&self, inputs: ArrayView2<'_, f64>) -> Vec<InputDeviation> {
         let Some(family) = &self.input_family else {
             return Vec::new();
         };

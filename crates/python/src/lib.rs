@@ -325,15 +325,11 @@ impl PyEstimator {
         u: Option<&Bound<'py, PyAny>>,
         y: &Bound<'py, PyAny>,
     ) -> PyResult<Vec<Vec<String>>> {
-        let family = self.inner.input_family();
-        let names = self.inner.signal_names().inputs;
+        let estimator = &self.inner;
         let said = std::sync::Mutex::new(Vec::new());
         let (indices, _) = self.each_record(py, u, y, 1, |u, _, _, out| {
-            let columns: Vec<Vec<f64>> = u.columns().into_iter().map(|c| c.to_vec()).collect();
-            let signals: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
-            let sentences: Vec<String> = family
-                .map(|f| f.signal_deviations(&signals, &names))
-                .unwrap_or_default()
+            let sentences: Vec<String> = estimator
+                .input_deviations(u)
                 .iter()
                 .map(ToString::to_string)
                 .collect();
