@@ -1,8 +1,10 @@
 //! The microcontroller runtime on this machine: the cost of one pushed
 //! sample (`runtime_push`, per sample) and of the final solve, network,
 //! intervals and envelope (`runtime_finish`), for both presets of both
-//! models (docs/embedded.md puts them beside the Cortex-M4's instruction
-//! counts). The estimators are trained on fewer simulations than the
+//! models, and the same of a window that slides over the record's last
+//! quarter (`runtime_window_push`, per sample of a full window, and
+//! `runtime_window_finish`) (docs/embedded.md puts them beside the
+//! Cortex-M4's instruction counts). The estimators are trained on fewer simulations than the
 //! presets say: the cost depends on the structure, not on m.
 
 use std::hint::black_box;
@@ -104,7 +106,58 @@ fn runtime(c: &mut Criterion) {
                     BatchSize::SmallInput,
                 )
             });
+        window(c, case, &estimator);
     }
+}
+
+/// A window of 3/4 of the record, full after its first samples: each
+/// later push gains one sample and loses one.
+fn window(c: &mut Criterion, case: &Case, estimator: &Estimator<'_>) {
+    let (nu, ny) = (estimator.n_inputs(), estimator.n_outputs());
+    let samples = case.outputs.len() / ny;
+    let length = 3 * samples / 4;
+    let q = estimator.n_parameters();
+    let push = |work: &mut [f64], from: usize, to: usize| {
+        let mut stream = Stream::resume(estimator, work).unwrap_or_else(|e| panic!("{e}"));
+        for t in from..to {
+            stream
+                .push(
+                    black_box(&case.inputs[t * nu..(t + 1) * nu]),
+                    black_box(&case.outputs[t * ny..(t + 1) * ny]),
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+    };
+    let mut filled = vec![0.0; estimator.window_workspace_len(length)];
+    Stream::window(estimator, length, &mut filled).unwrap_or_else(|e| panic!("{e}"));
+    push(&mut filled, 0, length);
+    let mut group = c.benchmark_group("runtime_window_push");
+    group.throughput(Throughput::Elements((samples - length) as u64));
+    group.bench_function(case.name, |b| {
+        b.iter_batched_ref(
+            || filled.clone(),
+            |work| push(work, length, samples),
+            BatchSize::SmallInput,
+        )
+    });
+    group.finish();
+    push(&mut filled, length, samples);
+    let (mut theta, mut widths) = (vec![0.0; q], vec![0.0; q]);
+    c.benchmark_group("runtime_window_finish")
+        .bench_function(case.name, |b| {
+            b.iter_batched_ref(
+                || filled.clone(),
+                |work| {
+                    let mut stream =
+                        Stream::resume(estimator, work).unwrap_or_else(|e| panic!("{e}"));
+                    let a = stream
+                        .finish(&mut theta, &mut widths)
+                        .unwrap_or_else(|e| panic!("{e}"));
+                    black_box((theta[0], a.feature_distance))
+                },
+                BatchSize::SmallInput,
+            )
+        });
 }
 
 criterion_group! {

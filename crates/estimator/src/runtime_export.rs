@@ -3,12 +3,13 @@
 
 use twostage_compress::Compressor;
 use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
-use twostage_models::Transform;
+use twostage_models::{InputFamily, Transform};
 use twostage_runtime::format::{
-    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_OUTPUT_TRANSFORMS,
-    HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS,
-    MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG,
-    SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
+    FLAG_OUTPUT_TRANSFORMS, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_MEMBERS, MAX_ORDER,
+    MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
+    SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    VERSION_WITHOUT_FAMILY,
 };
 
 use crate::error::{Error, Result};
@@ -157,7 +158,12 @@ impl Estimator {
             bytes: Vec::with_capacity(4096),
         };
         w.bytes.extend_from_slice(&MAGIC);
-        w.u32(VERSION as usize)?;
+        let version = if self.runtime_family().is_some() {
+            VERSION
+        } else {
+            VERSION_WITHOUT_FAMILY
+        };
+        w.u32(version as usize)?;
         w.u32(0)?; // length, set below
         w.u32(0)?; // checksum, set below
         w.header(self, arx, transformed.is_some())?;
@@ -170,6 +176,14 @@ impl Estimator {
         let crc = twostage_runtime::format::checksum(&w.bytes[CHECKSUM_FROM..]);
         w.bytes[12..16].copy_from_slice(&crc.to_le_bytes());
         Ok(w.bytes)
+    }
+
+    /// The input family the runtime judges records by: one of some
+    /// records, of at least one input.
+    fn runtime_family(&self) -> Option<&InputFamily> {
+        self.input_family
+            .as_ref()
+            .filter(|f| f.records() > 0 && f.n_inputs() > 0)
     }
 
     /// The ARX stage 1 the runtime streams, and the output transform in
@@ -221,6 +235,9 @@ impl Writer {
         }
         if transforms_outputs {
             flags |= FLAG_OUTPUT_TRANSFORMS;
+        }
+        if e.runtime_family().is_some() {
+            flags |= FLAG_INPUT_FAMILY;
         }
         let (kind, experts) = match &e.regressor {
             FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),
@@ -295,6 +312,14 @@ impl Writer {
         }
         if let Some(transformed) = transformed {
             self.output_transforms(transformed, e.shape.n_outputs)?;
+        }
+        if let Some(family) = e.runtime_family() {
+            self.f64s(&[family.sample_time()]);
+            for j in 0..family.n_inputs() {
+                if let Some(ranges) = family.ranges(j) {
+                    self.f64s(ranges.as_flattened());
+                }
+            }
         }
         Ok(())
     }

@@ -17,6 +17,34 @@
 /// The numbers of an input summary, in the order of [`summarize`]'s array.
 pub const SUMMARY_NAMES: [&str; 4] = ["mean", "RMS", "peak", "mean frequency"];
 
+/// How far beyond a family's own range a summary number may lie and still
+/// be of the family, as a share of the range's width: the range of a few
+/// hundred records falls short of the family's by a fraction of its
+/// width, and a record just past it is no extrapolation.
+pub const FAMILY_MARGIN: f64 = 0.1;
+
+/// The least tolerance, relative to a number's size: a record of the one
+/// input every training record had, read back from text, is that input.
+pub const FAMILY_RELATIVE_TOLERANCE: f64 = 1e-9;
+
+/// Whether a summary number `value` lies outside the range `[low, high]`
+/// a family's records spanned, widened by [`FAMILY_MARGIN`] of its width
+/// and [`FAMILY_RELATIVE_TOLERANCE`] of its size: the one judgement of
+/// the host and the runtime (a NaN is outside).
+///
+/// ```
+/// use twostage_kernels::input_summary::outside_family;
+/// assert!(!outside_family(1.05, [0.0, 1.0])); // within a tenth of the width
+/// assert!(outside_family(1.2, [0.0, 1.0]));
+/// assert!(!outside_family(2.0, [2.0, 2.0])); // the one value every record had
+/// assert!(outside_family(f64::NAN, [0.0, 1.0]));
+/// ```
+pub fn outside_family(value: f64, [low, high]: [f64; 2]) -> bool {
+    let slack = FAMILY_MARGIN * (high - low)
+        + FAMILY_RELATIVE_TOLERANCE * low.abs().max(high.abs()).max(f64::MIN_POSITIVE);
+    !(value >= low - slack && value <= high + slack)
+}
+
 /// Summarize one input signal sampled every `sample_time` seconds:
 /// `[mean, RMS about the mean, largest absolute deviation from the mean,
 /// mean frequency in Hz]`. An empty signal is all zeros; a constant one
@@ -43,6 +71,9 @@ pub fn summarize(u: &[f64], sample_time: f64) -> [f64; 4] {
     accumulator.summary(sample_time)
 }
 
+/// The `f64` words of [`InputAccumulator::to_words`].
+pub const ACCUMULATOR_WORDS: usize = 7;
+
 /// The summary of a signal whose samples arrive one at a time, in seven
 /// numbers and no allocation (a stream on a microcontroller keeps one per
 /// input): the mean and the sum of squared deviations by Welford's
@@ -50,7 +81,9 @@ pub fn summarize(u: &[f64], sample_time: f64) -> [f64; 4] {
 /// level, the extremes, and the sum of squared first differences.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InputAccumulator {
-    count: u64,
+    /// Samples so far, as a float: exact to 2^53, and the runtime keeps
+    /// it among its words without an integer conversion.
+    count: f64,
     mean: f64,
     squares: f64,
     low: f64,
@@ -69,7 +102,7 @@ impl InputAccumulator {
     /// No samples yet.
     pub const fn new() -> Self {
         Self {
-            count: 0,
+            count: 0.0,
             mean: 0.0,
             squares: 0.0,
             low: f64::INFINITY,
@@ -81,29 +114,57 @@ impl InputAccumulator {
 
     /// One more sample.
     pub fn push(&mut self, v: f64) {
-        if self.count > 0 {
+        if self.count > 0.0 {
             let d = v - self.last;
             self.differences += d * d;
         }
-        self.count += 1;
+        self.count += 1.0;
         let delta = v - self.mean;
-        self.mean += delta / self.count as f64;
+        self.mean += delta / self.count;
         self.squares += delta * (v - self.mean);
         self.low = self.low.min(v);
         self.high = self.high.max(v);
         self.last = v;
     }
 
+    /// Its state as seven numbers (the count first), for a stream that
+    /// keeps its state in a caller's workspace of `f64`.
+    pub fn to_words(&self) -> [f64; ACCUMULATOR_WORDS] {
+        [
+            self.count,
+            self.mean,
+            self.squares,
+            self.low,
+            self.high,
+            self.last,
+            self.differences,
+        ]
+    }
+
+    /// The accumulator [`InputAccumulator::to_words`] wrote.
+    pub fn from_words(words: [f64; ACCUMULATOR_WORDS]) -> Self {
+        let [count, mean, squares, low, high, last, differences] = words;
+        Self {
+            count,
+            mean,
+            squares,
+            low,
+            high,
+            last,
+            differences,
+        }
+    }
+
     /// `[mean, RMS, peak, mean frequency]` of the samples so far, as
     /// [`summarize`] says.
     pub fn summary(&self, sample_time: f64) -> [f64; 4] {
-        if self.count == 0 {
+        if self.count < 1.0 {
             return [0.0; 4];
         }
-        let n = self.count as f64;
+        let n = self.count;
         let variance = (self.squares / n).max(0.0);
         let peak = (self.high - self.mean).max(self.mean - self.low).max(0.0);
-        let frequency = if self.count < 2 || variance <= 0.0 {
+        let frequency = if self.count < 2.0 || variance <= 0.0 {
             0.0
         } else {
             let ratio = (self.differences / (n - 1.0) / (4.0 * variance)).min(1.0);
@@ -182,6 +243,39 @@ mod tests {
         assert!((rms / libm::sqrt(variance) - 1.0).abs() < 1e-6, "{rms}");
         assert!((p / peak - 1.0).abs() < 1e-6, "{p} {peak}");
         assert!((f / frequency - 1.0).abs() < 1e-6, "{f} {frequency}");
+    }
+
+    #[test]
+    fn an_accumulator_kept_as_words_goes_on_to_the_same_bits() {
+        let u: std::vec::Vec<f64> = (0..300).map(|k| libm::sin(0.1 * k as f64) + 4.0).collect();
+        let mut whole = InputAccumulator::new();
+        let mut words = InputAccumulator::new().to_words();
+        for &v in &u {
+            whole.push(v);
+            let mut again = InputAccumulator::from_words(words);
+            again.push(v);
+            words = again.to_words();
+        }
+        assert_eq!(InputAccumulator::from_words(words), whole);
+        assert_eq!(
+            summarize(&u, 0.1).map(f64::to_bits),
+            InputAccumulator::from_words(words)
+                .summary(0.1)
+                .map(f64::to_bits)
+        );
+    }
+
+    #[test]
+    fn the_family_range_is_widened_by_its_margin_on_both_sides() {
+        // The margin's edge, computed independently: a tenth of the width.
+        let range = [2.0, 6.0];
+        assert!(!outside_family(6.0 + 0.39, range));
+        assert!(outside_family(6.0 + 0.41, range));
+        assert!(!outside_family(2.0 - 0.39, range));
+        assert!(outside_family(2.0 - 0.41, range));
+        // A degenerate range allows a relative 1e-9 only.
+        assert!(!outside_family(1.0 + 5e-10, [1.0, 1.0]));
+        assert!(outside_family(1.0 + 2e-9, [1.0, 1.0]));
     }
 
     #[test]

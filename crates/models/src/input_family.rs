@@ -4,22 +4,13 @@
 //! frequency). An estimator keeps its held-out records' family and says
 //! which number of which input puts a record outside it.
 
-use twostage_kernels::input_summary::{SUMMARY_NAMES, summarize};
+pub use twostage_kernels::input_summary::{FAMILY_MARGIN, SUMMARY_NAMES};
+use twostage_kernels::input_summary::{outside_family, summarize};
 
 use crate::data::IoData;
 
 /// How many numbers summarize one input signal.
 const SUMMARY_LEN: usize = SUMMARY_NAMES.len();
-
-/// How far beyond the records' own range a summary may lie and still be
-/// of the family, as a share of the range's width: the range of a few
-/// hundred records falls short of the family's by a fraction of its
-/// width, and a record just past it is no extrapolation.
-pub const FAMILY_MARGIN: f64 = 0.1;
-
-/// The least tolerance, relative to a number's size: a record of the one
-/// input every training record had, read back from text, is that input.
-const RELATIVE_TOLERANCE: f64 = 1e-9;
 
 /// The range each summary number of each input signal spans over a set of
 /// records.
@@ -217,10 +208,7 @@ impl InputFamily {
         for (j, ranges) in self.ranges.iter().enumerate() {
             let summary = summarize(signals[j], self.sample_time);
             for ((range, value), quantity) in ranges.iter().zip(summary).zip(SUMMARY_NAMES) {
-                let [low, high] = *range;
-                let slack = FAMILY_MARGIN * (high - low)
-                    + RELATIVE_TOLERANCE * low.abs().max(high.abs()).max(f64::MIN_POSITIVE);
-                if !(value >= low - slack && value <= high + slack) {
+                if outside_family(value, *range) {
                     found.push(InputDeviation {
                         signal: names
                             .get(j)

@@ -72,7 +72,7 @@ pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;
 pub use input_design::{Drawn, Grid, Level, Phases};
-pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily};
+pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
 };

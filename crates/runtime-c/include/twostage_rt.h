@@ -44,7 +44,8 @@ typedef struct {
   // 0: no intervals; 1: conformal half-widths (the same for every
   // record); 2: adaptive ones (following this record).
   int32_t intervals;
-  // 1 when the record's features lie outside what training saw.
+  // 1 when the record lies outside what training saw: its features,
+  // or its input (then `input_outside_family` says which numbers).
   int32_t out_of_distribution;
   // Mahalanobis distance of the features from training's (NaN without
   // an envelope).
@@ -56,6 +57,11 @@ typedef struct {
   // non-positive value), taken at the smallest value training showed
   // (0 when the estimator does not transform its outputs).
   uint32_t untransformed_samples;
+  // Which numbers of the record's input summaries lie outside the
+  // family the training records spanned: bit `4 j + k` for input j's
+  // number k (0 mean, 1 RMS, 2 peak, 3 mean frequency); 0 for an input
+  // of the family and for an estimator without one.
+  uint64_t input_outside_family;
 } ts_assessment;
 
 #ifdef __cplusplus
@@ -95,6 +101,13 @@ size_t ts_outputs(const ts_estimator *e);
 // `e` is null or points to a `ts_estimator`.
 size_t ts_workspace_len(const ts_estimator *e);
 
+// How many doubles the workspace of a window of `window` samples must
+// hold (0 if `e` is not loaded).
+//
+// # Safety
+// `e` is null or points to a `ts_estimator`.
+size_t ts_window_workspace_len(const ts_estimator *e, size_t window);
+
 // Start a stream of estimator `e` over `work` (`work_len` doubles, at
 // least `ts_workspace_len(e)`), which it owns until the stream ends.
 //
@@ -102,6 +115,20 @@ size_t ts_workspace_len(const ts_estimator *e);
 // `s` points to a `ts_stream`, `e` to a loaded `ts_estimator`, `work` to
 // `work_len` writable doubles; all outlive the stream.
 int32_t ts_stream_start(ts_stream *s, const ts_estimator *e, double *work, size_t work_len);
+
+// Start a stream over a window that slides: `ts_stream_finish` then
+// estimates the last `window` samples pushed (all of them while fewer
+// were), as each window alone would be estimated. `work` holds
+// `work_len` doubles, at least `ts_window_workspace_len(e, window)`;
+// push, finish and reset as for any stream (a reset keeps the window).
+//
+// # Safety
+// As `ts_stream_start`.
+int32_t ts_window_start(ts_stream *s,
+                        const ts_estimator *e,
+                        size_t window,
+                        double *work,
+                        size_t work_len);
 
 // Push one sample: `inputs` holds `ts_inputs(e)` doubles (may be null
 // when there are none), `outputs` `ts_outputs(e)`.

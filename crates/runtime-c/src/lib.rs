@@ -81,7 +81,8 @@ pub struct TsAssessment {
     /// 0: no intervals; 1: conformal half-widths (the same for every
     /// record); 2: adaptive ones (following this record).
     pub intervals: i32,
-    /// 1 when the record's features lie outside what training saw.
+    /// 1 when the record lies outside what training saw: its features,
+    /// or its input (then `input_outside_family` says which numbers).
     pub out_of_distribution: i32,
     /// Mahalanobis distance of the features from training's (NaN without
     /// an envelope).
@@ -93,6 +94,11 @@ pub struct TsAssessment {
     /// non-positive value), taken at the smallest value training showed
     /// (0 when the estimator does not transform its outputs).
     pub untransformed_samples: u32,
+    /// Which numbers of the record's input summaries lie outside the
+    /// family the training records spanned: bit `4 j + k` for input j's
+    /// number k (0 mean, 1 RMS, 2 peak, 3 mean frequency); 0 for an input
+    /// of the family and for an estimator without one.
+    pub input_outside_family: u64,
 }
 
 fn code(result: Result<(), Error>) -> i32 {
@@ -214,6 +220,17 @@ unsafe fn attached<'x>(s: *const TsStream) -> Result<(&'x Estimator<'static>, &'
     Ok((estimator, work))
 }
 
+/// How many doubles the workspace of a window of `window` samples must
+/// hold (0 if `e` is not loaded).
+///
+/// # Safety
+/// `e` is null or points to a `ts_estimator`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ts_window_workspace_len(e: *const TsEstimator, window: usize) -> usize {
+    // SAFETY: as documented.
+    unsafe { loaded(e) }.map_or(0, |e| e.window_workspace_len(window))
+}
+
 /// Start a stream of estimator `e` over `work` (`work_len` doubles, at
 /// least `ts_workspace_len(e)`), which it owns until the stream ends.
 ///
@@ -224,6 +241,41 @@ unsafe fn attached<'x>(s: *const TsStream) -> Result<(&'x Estimator<'static>, &'
 pub unsafe extern "C" fn ts_stream_start(
     s: *mut TsStream,
     e: *const TsEstimator,
+    work: *mut f64,
+    work_len: usize,
+) -> i32 {
+    // SAFETY: as documented.
+    unsafe { start(s, e, 0, work, work_len) }
+}
+
+/// Start a stream over a window that slides: `ts_stream_finish` then
+/// estimates the last `window` samples pushed (all of them while fewer
+/// were), as each window alone would be estimated. `work` holds
+/// `work_len` doubles, at least `ts_window_workspace_len(e, window)`;
+/// push, finish and reset as for any stream (a reset keeps the window).
+///
+/// # Safety
+/// As `ts_stream_start`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ts_window_start(
+    s: *mut TsStream,
+    e: *const TsEstimator,
+    window: usize,
+    work: *mut f64,
+    work_len: usize,
+) -> i32 {
+    // SAFETY: as documented.
+    unsafe { start(s, e, window, work, work_len) }
+}
+
+/// A stream of whole records (`window` 0) or over a window.
+///
+/// # Safety
+/// As `ts_stream_start`.
+unsafe fn start(
+    s: *mut TsStream,
+    e: *const TsEstimator,
+    window: usize,
     work: *mut f64,
     work_len: usize,
 ) -> i32 {
@@ -242,8 +294,13 @@ pub unsafe extern "C" fn ts_stream_start(
     }
     // SAFETY: the caller promises work_len writable doubles.
     let slice = unsafe { core::slice::from_raw_parts_mut(work, work_len) };
-    match Stream::new(estimator, slice) {
-        Ok(_) => {
+    let started = if window == 0 {
+        Stream::new(estimator, slice).map(drop)
+    } else {
+        Stream::window(estimator, window, slice).map(drop)
+    };
+    match started {
+        Ok(()) => {
             // SAFETY: `s` is not null and points to storage for a TsStream
             // (as documented); `write` neither reads nor drops what was there.
             unsafe {
@@ -352,6 +409,7 @@ pub unsafe extern "C" fn ts_stream_finish(
                     distance_threshold: a.distance_threshold.unwrap_or(f64::NAN),
                     untransformed_samples: u32::try_from(a.untransformed_samples)
                         .unwrap_or(u32::MAX),
+                    input_outside_family: a.input_outside_family,
                 };
             }
             TS_OK

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use twostage::TwoStage;
-use twostage::models::{Benchmark, IoData, Simulator, experiment_rng};
+use twostage::models::{Benchmark, IoData, SUMMARY_NAMES, Simulator, experiment_rng};
 
 /// Build `libtwostage_rt.a` (release, in its own target directory, so that
 /// this test's cargo does not wait on the one running it).
@@ -63,6 +63,15 @@ fn compile(dir: &Path) -> PathBuf {
     program
 }
 
+/// The host's input deviations of a one-input record as the runtime's
+/// mask (bit k for summary number k).
+fn input_mask(host: &twostage::Assessment) -> u64 {
+    host.input_deviations
+        .iter()
+        .map(|d| 1u64 << SUMMARY_NAMES.iter().position(|n| *n == d.quantity).unwrap())
+        .fold(0, |m, b| m | b)
+}
+
 #[test]
 fn a_c_program_prints_the_rust_estimates() {
     let dir = tempfile::tempdir().unwrap();
@@ -99,6 +108,10 @@ fn a_c_program_prints_the_rust_estimates() {
         .collect();
     let alien: Vec<f64> = records[7].output(0).iter().map(|v| 10.0 * v).collect();
     records[7] = IoData::siso(records[7].input(0), &alien).unwrap();
+    // One record's input is three times the family's (its RMS and peak
+    // beyond any training record's); the flag must say so, by number.
+    let loud: Vec<f64> = records[6].input(0).iter().map(|v| 3.0 * v).collect();
+    records[6] = IoData::siso(&loud, records[6].output(0)).unwrap();
     let mut text = format!("{} {n} 1 1\n", records.len() + 1);
     for record in &records {
         for (u, y) in record.input(0).iter().zip(record.output(0)) {
@@ -113,9 +126,11 @@ fn a_c_program_prints_the_rust_estimates() {
     let records_path = dir.path().join("records.txt");
     std::fs::write(&records_path, text).unwrap();
 
+    let (window, every) = (300, 250);
     let output = Command::new(compile(dir.path()))
         .arg(&blob_path)
         .arg(&records_path)
+        .args([window.to_string(), every.to_string()])
         .output()
         .unwrap();
     assert!(
@@ -152,26 +167,68 @@ fn a_c_program_prints_the_rust_estimates() {
             host.distance_threshold.unwrap().to_bits()
         );
         assert_eq!(fields[7], host.floored_samples.len().to_string());
+        // The input's numbers outside the family, bit 4 j + k.
+        assert_eq!(
+            fields[8],
+            input_mask(&host).to_string(),
+            "{:?}",
+            host.input_deviations
+        );
         // The interval, kept inside the prior's box as the host keeps it.
-        assert_eq!(fields[8], "0", "ts_interval");
+        assert_eq!(fields[9], "0", "ts_interval");
         let (low, high) = twostage::interval_in_box(
             &host.theta,
             host.interval_half_widths().unwrap(),
             estimator.lower(),
             estimator.upper(),
         );
-        for (c, host) in [(number(9), low[0]), (number(10), high[0])] {
+        for (c, host) in [(number(10), low[0]), (number(11), high[0])] {
             assert!((c - host).abs() <= 1e-9, "C bound {c} vs host {host}");
         }
-        clipped += usize::from(number(9).to_bits() == estimator.lower()[0].to_bits());
+        clipped += usize::from(number(10).to_bits() == estimator.lower()[0].to_bits());
     }
     // The record at -0.895 has an interval reaching past the box's -0.9.
     assert!(clipped >= 1, "no interval met the prior's box");
     assert!(estimator.assess(&records[7]).unwrap().out_of_distribution());
+    let loud = estimator.assess(&records[6]).unwrap();
+    let quantities: Vec<&str> = loud.input_deviations.iter().map(|d| d.quantity).collect();
+    assert!(
+        quantities.contains(&"RMS") && quantities.contains(&"peak"),
+        "{quantities:?}"
+    );
     assert_eq!(
         lines.next().unwrap(),
         "-10 a sample is not finite: the record cannot be estimated; reset the stream"
     );
     assert_eq!(lines.next().unwrap(), "after-finish 0");
     assert_eq!(lines.next().unwrap(), "empty -11");
+    assert_eq!(lines.next().unwrap(), "short window -16");
+    // The window slid over the eight records one after another: each row
+    // is the host's estimate of that window alone, flags included.
+    let mut long = IoData::zeros(records.len() * n, 1, 1);
+    for (i, record) in records.iter().enumerate() {
+        long.input_mut(0)[i * n..(i + 1) * n].copy_from_slice(record.input(0));
+        long.output_mut(0)[i * n..(i + 1) * n].copy_from_slice(record.output(0));
+    }
+    let mut rows = 0;
+    for line in lines {
+        let fields: Vec<&str> = line.split(' ').collect();
+        assert_eq!(fields[0], "window", "{line}");
+        let end: usize = fields[1].parse().unwrap();
+        assert_eq!(end % every, 0);
+        let host = estimator
+            .assess(&long.window(end.saturating_sub(window), end))
+            .unwrap();
+        assert_eq!(fields[2], "0", "{line}");
+        let theta: f64 = fields[3].parse().unwrap();
+        assert!(
+            (theta - host.theta[0]).abs() <= 1e-9 * host.theta[0].abs().max(1e-3),
+            "window ending at {end}: C {theta} vs Rust {}",
+            host.theta[0]
+        );
+        assert_eq!(fields[4] == "1", host.out_of_distribution(), "{line}");
+        assert_eq!(fields[5], input_mask(&host).to_string(), "{line}");
+        rows += 1;
+    }
+    assert_eq!(rows, records.len() * n / every);
 }

@@ -8,7 +8,7 @@ use crate::error::Error;
 /// alignment): the [`Values`] the kernels compute with.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct LeF64s<'a> {
-    bytes: &'a [u8],
+    pub(crate) bytes: &'a [u8],
 }
 
 impl<'a> LeF64s<'a> {

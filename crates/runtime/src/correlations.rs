@@ -21,14 +21,100 @@ pub(crate) struct Shape {
     pub(crate) lags: usize,
 }
 
+/// Where a stream keeps the samples it still needs.
+pub(crate) enum Past<'w> {
+    /// A whole record: per signal its first L samples, and its last L in
+    /// a ring (sample i at slot i mod L, so that a push moves nothing) as
+    /// (value, its two halves).
+    Record {
+        first: &'w mut [f64],
+        last: &'w mut [f64],
+    },
+    /// A window of the last `length` samples: per signal a ring of them
+    /// (sample i at slot i mod length), which the sums forget a sample
+    /// from as it leaves.
+    Window { ring: &'w mut [f64], length: usize },
+}
+
 /// Where the stream keeps what it has seen, as slices of the workspace.
 pub(crate) struct Memory<'w> {
-    /// Per signal, lags 1..=L, most recent first: (value, its two halves).
-    pub(crate) history: &'w mut [f64],
-    /// Per signal, its first L samples.
-    pub(crate) first: &'w mut [f64],
+    pub(crate) past: Past<'w>,
     /// Per (x, z, d): R_xz(d) as (hi, lo).
     pub(crate) sums: &'w mut [f64],
+}
+
+impl Memory<'_> {
+    /// The ring's length: L for a record, the window's for a window
+    /// (at least 1).
+    fn ring_len(&self, shape: &Shape) -> usize {
+        match self.past {
+            Past::Record { .. } => shape.lags,
+            Past::Window { length, .. } => length,
+        }
+        .max(1)
+    }
+
+    /// Signal s at absolute sample `i` (one the memory still holds), with
+    /// its two halves.
+    pub(crate) fn sample(&self, shape: &Shape, s: usize, i: usize) -> (f64, (f64, f64)) {
+        self.at_slot(shape, s, i % self.ring_len(shape))
+    }
+
+    /// Signal s in ring slot `slot`, with its two halves.
+    fn at_slot(&self, shape: &Shape, s: usize, slot: usize) -> (f64, (f64, f64)) {
+        match &self.past {
+            Past::Record { last, .. } => {
+                let at = 3 * (s * shape.lags + slot);
+                let v = |k: usize| last.get(at + k).copied().unwrap_or(f64::NAN);
+                (v(0), (v(1), v(2)))
+            }
+            Past::Window { ring, length } => {
+                let v = ring.get(s * length + slot).copied().unwrap_or(f64::NAN);
+                (v, split(v))
+            }
+        }
+    }
+
+    /// Keep signal s's value `now` at absolute sample `t`, whose ring slot
+    /// is `slot`.
+    fn keep(&mut self, shape: &Shape, s: usize, t: usize, slot: usize, now: f64) {
+        let lags = shape.lags;
+        match &mut self.past {
+            Past::Record { first, last } => {
+                if lags == 0 {
+                    return;
+                }
+                if t < lags
+                    && let Some(slot) = first.get_mut(s * lags + t)
+                {
+                    *slot = now;
+                }
+                let at = 3 * (s * lags + slot);
+                if let Some(kept) = last.get_mut(at..at + 3) {
+                    let (hi, lo) = split(now);
+                    kept.copy_from_slice(&[now, hi, lo]);
+                }
+            }
+            Past::Window { ring, length } => {
+                if let Some(kept) = ring.get_mut(s * *length + slot) {
+                    *kept = now;
+                }
+            }
+        }
+    }
+
+    /// Signal s at sample `index` of the `n` samples the sums hold (of a
+    /// window, counted from its start): every index a finish asks for is
+    /// among the first or the last L, which the memory holds.
+    fn value(&self, shape: &Shape, s: usize, index: usize, n: usize, pushed: usize) -> f64 {
+        match &self.past {
+            Past::Record { first, .. } if index < shape.lags => first
+                .get(s * shape.lags + index)
+                .copied()
+                .unwrap_or(f64::NAN),
+            _ => self.sample(shape, s, pushed - n + index).0,
+        }
+    }
 }
 
 impl Shape {
@@ -51,81 +137,124 @@ impl Shape {
         (x * self.signals + z) * (self.lags + 1) + d
     }
 
-    /// Take sample `t`: `current(s)` is signal s's value now.
+    /// Take sample `t`: `current(s)` is signal s's value now. A window
+    /// that is full first forgets its oldest sample.
     pub(crate) fn push(&self, t: usize, current: impl Fn(usize) -> f64, m: &mut Memory<'_>) {
-        let lags = self.lags;
-        let past = |history: &[f64], s: usize, k: usize| -> (f64, (f64, f64)) {
-            let at = 3 * (s * lags + k - 1);
-            let v = |i: usize| history.get(at + i).copied().unwrap_or(f64::NAN);
-            (v(0), (v(1), v(2)))
+        let window = match m.past {
+            Past::Window { length, .. } => Some(length),
+            Past::Record { .. } => None,
         };
+        if let Some(length) = window
+            && t >= length
+        {
+            self.forget(t - length, m);
+        }
+        // Ring slots step back from sample t's without a division each.
+        let ring = m.ring_len(self);
+        let now = t % ring;
+        let back = |d: usize| if now >= d { now - d } else { now + ring - d };
+        // One loop per kind of memory, each with its reads inlined.
+        let Memory { past, sums } = m;
+        match past {
+            Past::Record { last, .. } => {
+                let lags = self.lags;
+                let past = |z: usize, d: usize| {
+                    let at = 3 * (z * lags + back(d));
+                    let v = |k: usize| last.get(at + k).copied().unwrap_or(f64::NAN);
+                    (v(0), (v(1), v(2)))
+                };
+                self.gain(t, &current, past, false, sums);
+            }
+            Past::Window { ring, length } => {
+                let length = *length;
+                let past = |z: usize, d: usize| {
+                    let v = ring.get(z * length + back(d)).copied().unwrap_or(f64::NAN);
+                    (v, split(v))
+                };
+                // Sums that also lose products are kept normalized, so
+                // that their error stays a double-double's however long
+                // the window slides.
+                self.gain(t, &current, past, true, sums);
+            }
+        }
+        for s in 0..self.signals {
+            m.keep(self, s, t, now, current(s));
+        }
+    }
+
+    /// Add sample t's products with itself and the L samples before it,
+    /// `past(z, d)` being signal z at sample `t - d` with its halves.
+    fn gain(
+        &self,
+        t: usize,
+        current: &impl Fn(usize) -> f64,
+        past: impl Fn(usize, usize) -> (f64, (f64, f64)),
+        normalize: bool,
+        sums: &mut [f64],
+    ) {
         for x in 0..self.signals {
             let cx = current(x);
             let sx = split(cx);
             for z in (0..self.signals).filter(|z| self.needed(x, *z)) {
-                for d in 0..=lags.min(t) {
+                for d in 0..=self.lags.min(t) {
                     let (zv, sz) = if d == 0 {
                         let cz = current(z);
                         (cz, split(cz))
                     } else {
-                        past(m.history, z, d)
+                        past(z, d)
                     };
                     let k = self.slot(x, z, d);
-                    store(m.sums, k, dd::accumulate(load(m.sums, k), cx, sx, sz, zv));
-                }
-            }
-        }
-        if lags == 0 {
-            return;
-        }
-        for s in 0..self.signals {
-            let now = current(s);
-            if t < lags
-                && let Some(slot) = m.first.get_mut(s * lags + t)
-            {
-                *slot = now;
-            }
-            if let Some(block) = m.history.get_mut(3 * s * lags..3 * (s + 1) * lags) {
-                block.copy_within(..3 * (lags - 1), 3);
-                let (hi, lo) = split(now);
-                if let Some(head) = block.get_mut(..3) {
-                    head.copy_from_slice(&[now, hi, lo]);
+                    let sum = dd::accumulate(load(sums, k), cx, sx, sz, zv);
+                    store(sums, k, if normalize { sum.normalized() } else { sum });
                 }
             }
         }
     }
 
-    /// Signal s at sample `index` of a record of `n` samples, from the
-    /// first samples or the recent ones (every index a finish asks for is
-    /// in one of them).
-    fn value(&self, m: &Memory<'_>, s: usize, index: usize, n: usize) -> f64 {
-        let lags = self.lags;
-        if index < lags {
-            m.first.get(s * lags + index).copied()
-        } else {
-            let k = n - index;
-            m.history.get(3 * (s * lags + k - 1)).copied()
+    /// Subtract every product of sample `o`, the oldest of a full window,
+    /// with the samples after it: `x(o + d) z(o)` for each lag difference.
+    fn forget(&self, o: usize, m: &mut Memory<'_>) {
+        let ring = m.ring_len(self);
+        let oldest = o % ring;
+        let ahead = |d: usize| {
+            let slot = oldest + d;
+            if slot >= ring { slot - ring } else { slot }
+        };
+        for z in 0..self.signals {
+            let (zv, sz) = m.at_slot(self, z, oldest);
+            for x in (0..self.signals).filter(|x| self.needed(*x, z)) {
+                for d in 0..=self.lags {
+                    let (xv, (hi, lo)) = m.at_slot(self, x, ahead(d));
+                    let k = self.slot(x, z, d);
+                    let sum = dd::accumulate(load(m.sums, k), -xv, (-hi, -lo), sz, zv);
+                    store(m.sums, k, sum.normalized());
+                }
+            }
         }
-        .unwrap_or(f64::NAN)
     }
 
-    /// `sum_{t = L}^{n-1} x(t - la) z(t - lb)` for a record of `n > L`
-    /// samples.
+    /// `sum_{t = L}^{n-1} x(t - la) z(t - lb)` over the last `n > L` of
+    /// `pushed` samples (all of them for a record, the window's for a
+    /// window).
     pub(crate) fn entry(
         &self,
         m: &Memory<'_>,
         n: usize,
+        pushed: usize,
         a: (usize, usize),
         b: (usize, usize),
     ) -> Dd {
         let ((x, la), (z, lb)) = if a.1 <= b.1 { (a, b) } else { (b, a) };
         let d = lb - la;
         let mut sum = load(m.sums, self.slot(x, z, d)).normalized();
-        // The full correlation runs over tau = 0..n-d; the window over
+        // The full correlation runs over tau = 0..n-d; the regression over
         // tau = L-lb..n-lb.
         let ends = (0..self.lags - lb).chain(n - lb..n - d);
         for tau in ends {
-            let p = two_prod(self.value(m, x, tau + d, n), self.value(m, z, tau, n));
+            let p = two_prod(
+                m.value(self, x, tau + d, n, pushed),
+                m.value(self, z, tau, n, pushed),
+            );
             sum = sum.sub(p);
         }
         sum

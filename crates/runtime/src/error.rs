@@ -89,6 +89,13 @@ pub enum Error {
     },
     /// The workspace holds no stream: start one with `Stream::new`.
     NotStarted,
+    /// A window shorter than one regression needs.
+    WindowTooShort {
+        /// The window asked for, in samples.
+        window: usize,
+        /// The fewest samples a window may hold.
+        needed: usize,
+    },
 }
 
 impl Error {
@@ -110,6 +117,7 @@ impl Error {
             Error::Overflow => -13,
             Error::OutputTooShort { .. } => -14,
             Error::NotStarted => -15,
+            Error::WindowTooShort { .. } => -16,
         }
     }
 }
@@ -135,6 +143,7 @@ impl Error {
             -13 => c"the sums overflowed: samples are far too large",
             -14 => c"the output array is shorter than the parameters",
             -15 => c"the workspace holds no stream: start one with ts_stream_start",
+            -16 => c"the window is shorter than one regression needs",
             _ => return None,
         })
     }
@@ -149,8 +158,9 @@ impl core::fmt::Display for Error {
             ),
             Error::UnsupportedVersion { found } => write!(
                 f,
-                "blob format version {found}, this runtime reads version {}: export \
+                "blob format version {found}, this runtime reads versions {} to {}: export \
                  the estimator again with the matching twostage",
+                crate::format::VERSION_WITHOUT_FAMILY,
                 crate::format::VERSION
             ),
             Error::Length { declared, actual } => write!(
@@ -198,6 +208,11 @@ impl core::fmt::Display for Error {
             Error::NotStarted => {
                 f.write_str("the workspace holds no stream: start one (Stream::new)")
             }
+            Error::WindowTooShort { window, needed } => write!(
+                f,
+                "a window of {window} samples, the regression needs at least {needed}: \
+                 take a longer window"
+            ),
         }
     }
 }

@@ -5,10 +5,10 @@ use twostage_kernels::Values;
 use crate::bytes::{Cursor, LeF64s, u32_at};
 use crate::error::Error;
 use crate::format::{
-    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_OUTPUT_TRANSFORMS,
-    HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK,
-    REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY,
-    TRANSFORM_LOG, VERSION,
+    CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
+    FLAG_OUTPUT_TRANSFORMS, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS,
+    MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P,
+    TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY,
 };
 use crate::network::Network;
 
@@ -90,6 +90,8 @@ pub struct Estimator<'a> {
     /// an offset rather than two slices keeps the view within the C
     /// API's opaque storage.
     output_transforms_at: usize,
+    /// Where the input family starts in the blob (0: none).
+    input_family_at: usize,
     blob: &'a [u8],
     max_width: usize,
 }
@@ -106,7 +108,7 @@ impl<'a> Estimator<'a> {
             return Err(Error::BadMagic);
         }
         let version = u32_at(blob, 4).ok_or(Error::Truncated { at: 4 })?;
-        if version != VERSION {
+        if !(VERSION_WITHOUT_FAMILY..=VERSION).contains(&version) {
             return Err(Error::UnsupportedVersion { found: version });
         }
         let declared = u32_at(blob, 8).ok_or(Error::Truncated { at: 8 })? as usize;
@@ -121,10 +123,10 @@ impl<'a> Estimator<'a> {
         if stored != actual {
             return Err(Error::Checksum { stored, actual });
         }
-        Self::read(blob)
+        Self::read(blob, version)
     }
 
-    fn read(blob: &'a [u8]) -> Result<Self, Error> {
+    fn read(blob: &'a [u8], version: u32) -> Result<Self, Error> {
         let mut c = Cursor::new(blob, CHECKSUM_FROM);
         let q = c.count("parameter count", MAX_PARAMETERS)?;
         let n_inputs = c.count("input count", MAX_SIGNALS)?;
@@ -145,7 +147,10 @@ impl<'a> Estimator<'a> {
                 at: CHECKSUM_FROM,
             });
         }
-        let known = FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE | FLAG_OUTPUT_TRANSFORMS;
+        let mut known = FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE | FLAG_OUTPUT_TRANSFORMS;
+        if version >= VERSION {
+            known |= FLAG_INPUT_FAMILY;
+        }
         if flags & !known != 0 || r1 != 0 || r2 != 0 {
             return Err(Error::Invalid {
                 field: "flags",
@@ -275,6 +280,11 @@ impl<'a> Estimator<'a> {
         } else {
             0
         };
+        let input_family_at = if flags & FLAG_INPUT_FAMILY != 0 {
+            read_input_family(&mut c, n_inputs)?
+        } else {
+            0
+        };
         if c.at != blob.len() {
             return Err(Error::TrailingBytes { at: c.at });
         }
@@ -294,6 +304,7 @@ impl<'a> Estimator<'a> {
             adaptive,
             envelope,
             output_transforms_at,
+            input_family_at,
             blob,
             max_width: 0,
         };
@@ -412,6 +423,40 @@ impl<'a> Estimator<'a> {
         u32_at(self.transforms, 4 * j) == Some(TRANSFORM_LOG)
     }
 
+    /// Whether it judges each record's input against the family of inputs
+    /// its training records spanned ([`crate::Assessment::input_outside_family`]).
+    pub fn has_input_family(&self) -> bool {
+        self.input_family_at != 0
+    }
+
+    /// The range `[low, high]` the training records spanned of input
+    /// `j`'s summary number `k` (0 mean, 1 RMS, 2 peak, 3 mean frequency
+    /// in Hz, as `twostage_kernels::input_summary::SUMMARY_NAMES`), before
+    /// the margin a record may lie beyond it; `None` without a family or
+    /// past the ends.
+    pub fn input_family_range(&self, j: usize, k: usize) -> Option<[f64; 2]> {
+        if !self.has_input_family() || j >= self.n_inputs || k >= SUMMARY_LEN {
+            return None;
+        }
+        let at = 1 + 2 * (SUMMARY_LEN * j + k);
+        Some([self.family().at(at), self.family().at(at + 1)])
+    }
+
+    /// The sample time the family's frequencies are in (NaN without a
+    /// family).
+    pub(crate) fn input_sample_time(&self) -> f64 {
+        self.family().at(0)
+    }
+
+    /// The input family's numbers, checked at load (empty without one).
+    fn family(&self) -> LeF64s<'a> {
+        let bytes = match self.input_family_at {
+            0 => &[],
+            at => self.blob.get(at..).unwrap_or_default(),
+        };
+        LeF64s { bytes }
+    }
+
     /// Whether an estimate transforms the output samples (logarithms)
     /// before stage 1: a sample outside a transform's domain is then
     /// replaced by the smallest value training showed, and counted in
@@ -439,6 +484,25 @@ impl<'a> Estimator<'a> {
             _ => Ok(value),
         }
     }
+}
+
+/// Numbers in one input's summary.
+pub(crate) const SUMMARY_LEN: usize = twostage_kernels::input_summary::SUMMARY_NAMES.len();
+
+/// The input family: a positive sample time, then per input each summary
+/// number's finite `[low, high]` with `low <= high`; its offset.
+fn read_input_family(c: &mut Cursor<'_>, n_inputs: usize) -> Result<usize, Error> {
+    let at = c.at;
+    let sample_time = c.f64("input family sample time")?;
+    let ranges = c.finite("input family range", 2 * SUMMARY_LEN * n_inputs)?;
+    let ordered = (0..SUMMARY_LEN * n_inputs).all(|k| ranges.at(2 * k) <= ranges.at(2 * k + 1));
+    if sample_time <= 0.0 || n_inputs == 0 || !ordered {
+        return Err(Error::Invalid {
+            field: "input family",
+            at,
+        });
+    }
+    Ok(at)
 }
 
 /// Where the floors follow `n_outputs` codes starting at `codes_at` (the

@@ -1,4 +1,4 @@
-//! The exported estimator's byte layout, version 1: what
+//! The exported estimator's byte layout, version 2: what
 //! `twostage export --to runtime` writes and [`crate::Estimator`] reads.
 //!
 //! Every number is little-endian; counts are `u32`, trained values `f64`.
@@ -10,7 +10,7 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0..4 | magic `TSRT` |
-//! | 4..8 | format version (1) |
+//! | 4..8 | format version (2; 1 for a blob without an input family) |
 //! | 8..12 | the blob's length in bytes |
 //! | 12..16 | CRC-32 (IEEE) of bytes 16..length |
 //! | 16..64 | twelve `u32`: q, inputs, outputs, trained record length, na, nb, delay, flags, regressor kind, experts, 0, 0 |
@@ -22,7 +22,10 @@
 //! envelope's threshold, mean and row-major lower Cholesky factor (flag
 //! 4); the output signals' transform codes (`u32`, one per output) and
 //! their floors (`f64`, one per output: what a sample outside the
-//! transform's domain is replaced by) (flag 8). A network is: the count of its layer sizes and of its ensemble
+//! transform's domain is replaced by) (flag 8); the input family (flag
+//! 16, version 2): the sample time, then per input signal the low and
+//! high end of each summary number's range (mean, RMS, peak, mean
+//! frequency: eight `f64`). A network is: the count of its layer sizes and of its ensemble
 //! members (`u32`), the sizes (`u32`), the feature means and scales, the
 //! target means and scales, then each member's weights and biases, layer
 //! by layer (row-major weights, then biases). A linear map is a network
@@ -30,8 +33,13 @@
 
 /// The first four bytes.
 pub const MAGIC: [u8; 4] = *b"TSRT";
-/// The version this crate reads and the exporter writes.
-pub const VERSION: u32 = 1;
+/// The newest version this crate reads, which the exporter writes for an
+/// estimator that knows its input family. Version 1 (no family) is read
+/// too, and written for an estimator without one, so that a runtime of
+/// before the family reads it.
+pub const VERSION: u32 = 2;
+/// The version of a blob without an input family.
+pub const VERSION_WITHOUT_FAMILY: u32 = 1;
 /// Bytes before the first section.
 pub const HEADER_BYTES: usize = 64;
 /// The checksum covers the blob from here to its end.
@@ -46,6 +54,10 @@ pub const FLAG_ENVELOPE: u32 = 4;
 
 /// Flag: the output signals are transformed before stage 1.
 pub const FLAG_OUTPUT_TRANSFORMS: u32 = 8;
+
+/// Flag (version 2): the input family follows, and a stream judges each
+/// record's input against it.
+pub const FLAG_INPUT_FAMILY: u32 = 16;
 
 /// Regressor kind: one network (an MLP ensemble, or a linear map).
 pub const REGRESSOR_NETWORK: u32 = 1;

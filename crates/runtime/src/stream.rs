@@ -2,18 +2,20 @@
 
 use twostage_kernels::Values;
 use twostage_kernels::cholesky::{RANK_TOLERANCE, solve_lower_in_place};
+use twostage_kernels::input_summary::{ACCUMULATOR_WORDS, InputAccumulator, outside_family};
 use twostage_kernels::vector::clip_to_box;
 
-use crate::correlations::{Memory, Shape, load, store};
+use crate::correlations::{Memory, Past, Shape, load, store};
 use crate::dd::Dd;
 use crate::error::Error;
-use crate::estimator::{Estimator, Regressor};
+use crate::estimator::{Estimator, Regressor, SUMMARY_LEN};
 use crate::format::MAX_SIGNALS;
 
 /// Words at the start of the workspace: samples pushed, the state, the
-/// sample that was not finite (for a failed stream), and the output
-/// samples an output transform could not take.
-const STATUS_WORDS: usize = 4;
+/// sample that was not finite (for a failed stream), the output samples
+/// an output transform could not take (of the window, for a window), and
+/// the window's length (0: the whole record).
+const STATUS_WORDS: usize = 5;
 const OPEN: f64 = 0.0;
 const FAILED: f64 = 2.0;
 
@@ -21,16 +23,28 @@ const FAILED: f64 = 2.0;
 /// status words.
 pub(crate) struct Layout {
     pub(crate) shape: Shape,
+    /// The window's length, 0 for a whole record.
+    window: usize,
+    /// A record's last L samples (three words each) and first L, or a
+    /// window's ring of samples.
     history: usize,
     first: usize,
+    /// A window's count of untransformed outputs per sample (of an
+    /// estimator that transforms its outputs).
+    marks: usize,
     sums: usize,
+    /// One input accumulator per input, for a record's stream of an
+    /// estimator with a family (a window summarizes its ring at finish).
+    family: usize,
     features: usize,
     scratch: usize,
     pub(crate) total: usize,
 }
 
 impl Layout {
-    pub(crate) fn of(e: &Estimator<'_>) -> Self {
+    /// The workspace of a stream over whole records (`window` 0) or over
+    /// a sliding window of `window` samples.
+    pub(crate) fn of(e: &Estimator<'_>, window: usize) -> Self {
         let n = e.per_output();
         let shape = Shape {
             outputs: e.n_outputs,
@@ -42,39 +56,102 @@ impl Layout {
         // is solved, or the network's input and layers, or the envelope's
         // whitened features.
         let scratch = (n * (n + 1) + 2 * n).max(features + 2 * e.max_width());
-        let (history, first, sums) = (
-            shape.history_words(),
-            shape.first_words(),
-            shape.sum_words(),
-        );
+        let sums = shape.sum_words();
+        let (history, first, marks, family) = if window == 0 {
+            let family = if e.has_input_family() {
+                ACCUMULATOR_WORDS * e.n_inputs
+            } else {
+                0
+            };
+            (shape.history_words(), shape.first_words(), 0, family)
+        } else {
+            let marks = if e.transforms_outputs() { window } else { 0 };
+            (shape.signals.saturating_mul(window), 0, marks, 0)
+        };
+        let total = [history, first, marks, sums, family, features, scratch]
+            .iter()
+            .fold(STATUS_WORDS, |total, words| total.saturating_add(*words));
         Self {
             shape,
+            window,
             history,
             first,
+            marks,
             sums,
+            family,
             features,
             scratch,
-            total: STATUS_WORDS + history + first + sums + features + scratch,
+            total,
         }
     }
 
-    /// The stream's memory, the features and the scratch.
-    fn split<'w>(&self, work: &'w mut [f64]) -> (Memory<'w>, &'w mut [f64], &'w mut [f64]) {
+    /// The stream's memory, the window's marks, the input accumulators,
+    /// the features and the scratch.
+    fn split<'w>(&self, work: &'w mut [f64]) -> Parts<'w> {
         let (history, rest) = work.split_at_mut(self.history.min(work.len()));
         let (first, rest) = rest.split_at_mut(self.first.min(rest.len()));
+        let (marks, rest) = rest.split_at_mut(self.marks.min(rest.len()));
         let (sums, rest) = rest.split_at_mut(self.sums.min(rest.len()));
+        let (family, rest) = rest.split_at_mut(self.family.min(rest.len()));
         let (features, rest) = rest.split_at_mut(self.features.min(rest.len()));
         let scratch = rest.get_mut(..self.scratch).unwrap_or_default();
-        (
-            Memory {
-                history,
+        let past = if self.window == 0 {
+            Past::Record {
                 first,
-                sums,
-            },
+                last: history,
+            }
+        } else {
+            Past::Window {
+                ring: history,
+                length: self.window,
+            }
+        };
+        Parts {
+            memory: Memory { past, sums },
+            marks,
+            family,
             features,
             scratch,
-        )
+        }
     }
+}
+
+/// A workspace cut into its parts.
+struct Parts<'w> {
+    memory: Memory<'w>,
+    marks: &'w mut [f64],
+    family: &'w mut [f64],
+    features: &'w mut [f64],
+    scratch: &'w mut [f64],
+}
+
+/// An accumulator kept in a workspace's words.
+fn accumulator(words: &[f64]) -> InputAccumulator {
+    let mut kept = [0.0; ACCUMULATOR_WORDS];
+    for (k, w) in kept.iter_mut().zip(words) {
+        *k = *w;
+    }
+    InputAccumulator::from_words(kept)
+}
+
+/// Each input's summary judged against the estimator's family: bit
+/// `4 j + k` set when input j's summary number k lies outside.
+fn input_outside_family(e: &Estimator<'_>, summary_of: impl Fn(usize) -> InputAccumulator) -> u64 {
+    let mut outside = 0u64;
+    if !e.has_input_family() {
+        return outside;
+    }
+    let sample_time = e.input_sample_time();
+    for j in 0..e.n_inputs {
+        let summary = summary_of(j).summary(sample_time);
+        for (k, value) in summary.iter().enumerate() {
+            let range = e.input_family_range(j, k).unwrap_or([f64::NAN; 2]);
+            if outside_family(*value, range) {
+                outside |= 1 << (SUMMARY_LEN * j + k);
+            }
+        }
+    }
+    outside
 }
 
 /// What an estimate says of itself besides theta.
@@ -91,12 +168,24 @@ pub struct Assessment {
     /// non-positive value), replaced by the smallest value training
     /// showed: 0 unless the estimator transforms its outputs.
     pub untransformed_samples: usize,
+    /// Which numbers of the record's input summaries lie outside the
+    /// family the training records spanned (the host's
+    /// `Assessment::input_deviations`): bit `4 j + k` for input j's number
+    /// k (0 mean, 1 RMS, 2 peak, 3 mean frequency); 0 for an input of
+    /// the family and for an estimator without one.
+    pub input_outside_family: u64,
 }
 
 impl Assessment {
-    /// Whether the record lies outside what training saw: the estimate is
-    /// an extrapolation and the intervals do not speak for it.
+    /// Whether the record lies outside what training saw, by its features
+    /// or by its input: the estimate is an extrapolation and the
+    /// intervals do not speak for it.
     pub fn out_of_distribution(&self) -> bool {
+        self.features_outside() || self.input_outside_family != 0
+    }
+
+    /// Whether the record's features lie beyond the envelope's threshold.
+    pub fn features_outside(&self) -> bool {
         matches!((self.feature_distance, self.distance_threshold), (Some(d), Some(t)) if d > t)
     }
 }
@@ -117,46 +206,109 @@ pub enum Intervals {
 /// the last few samples, never the record, in the caller's workspace,
 /// which holds all of its state: a stream can be dropped and
 /// [`Stream::resume`]d over the same workspace (the C API does so on
-/// every call).
+/// every call). A [`Stream::window`] estimates the last N samples
+/// instead, as a control unit re-estimates while the plant runs.
 #[derive(Debug)]
 pub struct Stream<'e, 'a, 'w> {
     estimator: &'e Estimator<'a>,
+    window: usize,
     status: &'w mut [f64],
     work: &'w mut [f64],
 }
 
 impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
-    /// A stream over `work`, which must hold
+    /// A stream of whole records over `work`, which must hold
     /// [`Estimator::workspace_len`] numbers (a longer one is fine).
     ///
     /// # Errors
     /// [`Error::WorkspaceTooSmall`].
     pub fn new(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
-        let mut stream = Self::attach(estimator, work)?;
+        let mut stream = Self::attach(estimator, 0, work)?;
         stream.reset();
         Ok(stream)
     }
 
-    /// The stream whose state `work` holds (from [`Stream::new`] over the
-    /// same estimator), to go on pushing or to finish it.
+    /// A stream over a window that slides: [`Stream::finish`] estimates
+    /// the last `window` samples (all of them while fewer were pushed),
+    /// the same numbers as a stream of those samples alone, to rounding.
+    /// The stage-1 sums gain each sample as it is pushed and lose the one
+    /// leaving the window, so a push costs about twice a record stream's
+    /// and a finish as much as a record's (plus a pass over the window's
+    /// inputs, for an estimator with an input family). `work` holds
+    /// [`Estimator::window_workspace_len`] numbers: the window's samples
+    /// and the sums.
+    ///
+    /// ```
+    /// # use twostage::{TwoStage, models::{Benchmark, Simulator, experiment_rng}};
+    /// # let model = Benchmark::builder().n_samples(200).build()?;
+    /// # let trained = TwoStage::builder(&model).simulations(300).validation(0)
+    /// #     .calibration(100).linear(1e-6)?.train()?;
+    /// # let blob = trained.to_runtime()?;
+    /// # let mut record = model.spec().new_record();
+    /// # model.simulate(&[0.4], &mut experiment_rng(1, 0), &mut record)?;
+    /// # let (u, y) = (record.input(0).to_vec(), record.output(0).to_vec());
+    /// use twostage_runtime::{Estimator, Stream};
+    /// let estimator = Estimator::from_bytes(&blob)?;
+    /// let mut work = vec![0.0; estimator.window_workspace_len(100)];
+    /// let mut window = Stream::window(&estimator, 100, &mut work)?;
+    /// let mut theta = [0.0];
+    /// for t in 0..u.len() {
+    ///     window.push(&[u[t]], &[y[t]])?;
+    ///     if t + 1 >= 100 && (t + 1) % 50 == 0 {
+    ///         window.finish(&mut theta, &mut [])?; // the last 100 samples
+    ///     }
+    /// }
+    /// // The last window, estimated alone.
+    /// let mut alone = [0.0];
+    /// let mut work = vec![0.0; estimator.workspace_len()];
+    /// estimator.estimate_record(&u[100..], &y[100..], &mut work, &mut alone, &mut [])?;
+    /// assert!((theta[0] - alone[0]).abs() <= 1e-9 * alone[0].abs().max(1e-3));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::WindowTooShort`] for a window shorter than one regression
+    /// (the ARX's first sample plus its regressors), and
+    /// [`Error::WorkspaceTooSmall`].
+    pub fn window(
+        estimator: &'e Estimator<'a>,
+        window: usize,
+        work: &'w mut [f64],
+    ) -> Result<Self, Error> {
+        let needed = estimator.first_sample() + estimator.per_output();
+        if window < needed.max(1) {
+            return Err(Error::WindowTooShort { window, needed });
+        }
+        let mut stream = Self::attach(estimator, window, work)?;
+        stream.reset();
+        Ok(stream)
+    }
+
+    /// The stream whose state `work` holds (from [`Stream::new`] or
+    /// [`Stream::window`] over the same estimator), to go on pushing or
+    /// to finish it.
     ///
     /// # Errors
     /// [`Error::WorkspaceTooSmall`], and [`Error::NotStarted`] for a
     /// workspace no stream was started in.
     pub fn resume(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
-        let stream = Self::attach(estimator, work)?;
-        let samples = stream.status.first().copied().unwrap_or(f64::NAN);
-        let state = stream.status.get(1).copied().unwrap_or(f64::NAN);
-        let whole =
-            (0.0..4.0e15).contains(&samples) && libm::trunc(samples).to_bits() == samples.to_bits();
-        if !(whole && [OPEN, FAILED].contains(&state)) {
+        let whole = |v: f64| (0.0..4.0e15).contains(&v) && libm::trunc(v).to_bits() == v.to_bits();
+        let word = |k: usize| work.get(k).copied().unwrap_or(f64::NAN);
+        let (samples, state, window) = (word(0), word(1), word(4));
+        let needed = estimator.first_sample() + estimator.per_output();
+        let window_ok = whole(window) && (window == 0.0 || window >= needed as f64);
+        if !(whole(samples) && window_ok && [OPEN, FAILED].contains(&state)) {
             return Err(Error::NotStarted);
         }
-        Ok(stream)
+        Self::attach(estimator, window as usize, work)
     }
 
-    fn attach(estimator: &'e Estimator<'a>, work: &'w mut [f64]) -> Result<Self, Error> {
-        let needed = estimator.workspace_len();
+    fn attach(
+        estimator: &'e Estimator<'a>,
+        window: usize,
+        work: &'w mut [f64],
+    ) -> Result<Self, Error> {
+        let needed = Layout::of(estimator, window).total;
         if work.len() < needed {
             return Err(Error::WorkspaceTooSmall {
                 needed,
@@ -166,15 +318,25 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let (status, work) = work.split_at_mut(STATUS_WORDS);
         Ok(Self {
             estimator,
+            window,
             status,
             work,
         })
     }
 
-    /// Forget every sample: ready for the next record.
+    /// Forget every sample: ready for the next record (a window stays as
+    /// long).
     pub fn reset(&mut self) {
         self.status.fill(0.0);
+        if let Some(word) = self.status.get_mut(4) {
+            *word = self.window as f64;
+        }
         self.work.fill(0.0);
+    }
+
+    /// The window's length, or `None` for a stream of whole records.
+    pub fn window_len(&self) -> Option<usize> {
+        (self.window > 0).then_some(self.window)
     }
 
     /// Samples pushed so far.
@@ -235,11 +397,34 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
                 floor
             });
         }
-        if let Some(count) = self.status.get_mut(3) {
-            *count += f64::from(untransformed);
+        let layout = Layout::of(e, self.window);
+        let Parts {
+            mut memory,
+            marks,
+            family,
+            ..
+        } = layout.split(self.work);
+        let mut count = self.status.get(3).copied().unwrap_or(0.0) + f64::from(untransformed);
+        if self.window > 0 && !marks.is_empty() {
+            // The window's count: the sample leaving it takes its own away.
+            let slot = samples % self.window;
+            if samples >= self.window {
+                count -= marks.get(slot).copied().unwrap_or(0.0);
+            }
+            if let Some(mark) = marks.get_mut(slot) {
+                *mark = f64::from(untransformed);
+            }
         }
-        let layout = Layout::of(e);
-        let (mut memory, _, _) = layout.split(self.work);
+        if let Some(kept) = self.status.get_mut(3) {
+            *kept = count;
+        }
+        for (words, u) in family.chunks_exact_mut(ACCUMULATOR_WORDS).zip(inputs) {
+            let mut kept = accumulator(words);
+            kept.push(*u);
+            for (w, k) in words.iter_mut().zip(kept.to_words()) {
+                *w = k;
+            }
+        }
         let current = |signal: usize| -> f64 {
             if signal < e.n_outputs {
                 taken.get(signal)
@@ -280,12 +465,23 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             .ok_or(Error::OutputTooShort { needed: q })?;
         let n = e.per_output();
         let needed = e.first_sample() + n;
-        let samples = self.samples();
+        let pushed = self.samples();
+        // The samples the sums hold: the record's, or the window's.
+        let samples = match self.window {
+            0 => pushed,
+            window => pushed.min(window),
+        };
         if samples < needed {
             return Err(Error::TooShort { samples, needed });
         }
-        let layout = Layout::of(e);
-        let (memory, features, scratch) = layout.split(self.work);
+        let layout = Layout::of(e, self.window);
+        let Parts {
+            memory,
+            family,
+            features,
+            scratch,
+            ..
+        } = layout.split(self.work);
         let rhs = packed(n, 0);
         for (i, alpha) in features.chunks_exact_mut(n).enumerate() {
             // Column c of output i's regression: its own lags, then each
@@ -300,13 +496,17 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             };
             for r in 0..n {
                 for c in 0..=r {
-                    let g = layout.shape.entry(&memory, samples, column(r), column(c));
+                    let g = layout
+                        .shape
+                        .entry(&memory, samples, pushed, column(r), column(c));
                     store(scratch, packed(r, c), g);
                 }
                 store(
                     scratch,
                     rhs + r,
-                    layout.shape.entry(&memory, samples, column(r), (i, 0)),
+                    layout
+                        .shape
+                        .entry(&memory, samples, pushed, column(r), (i, 0)),
                 );
             }
             solve(scratch, n, alpha).map_err(|column| match column {
@@ -352,6 +552,18 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             feature_distance,
             distance_threshold: e.envelope.map(|envelope| envelope.threshold),
             untransformed_samples: self.status.get(3).map_or(0, |c| *c as usize),
+            input_outside_family: input_outside_family(e, |j| {
+                if self.window == 0 {
+                    return accumulator(family.get(j * ACCUMULATOR_WORDS..).unwrap_or_default());
+                }
+                // The window's inputs, oldest first, as the host summarizes
+                // the window alone.
+                let mut window = InputAccumulator::new();
+                for i in pushed - samples..pushed {
+                    window.push(memory.sample(&layout.shape, e.n_outputs + j, i).0);
+                }
+                window
+            }),
         })
     }
 }
@@ -452,9 +664,18 @@ fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usi
 impl Estimator<'_> {
     /// How many `f64` a [`crate::Stream`] of this estimator needs as its
     /// workspace: the past samples of each signal, the normal equations
-    /// of each output in double-double, and the scratch of the final
+    /// of each output in double-double, each input's summary (for an
+    /// estimator with an input family), and the scratch of the final
     /// solve and networks.
     pub fn workspace_len(&self) -> usize {
-        Layout::of(self).total
+        Layout::of(self, 0).total
+    }
+
+    /// How many `f64` a [`Stream::window`] of `window` samples needs: each
+    /// signal's samples in the window, the normal equations, the scratch
+    /// (and a count per sample, for an estimator that transforms its
+    /// outputs).
+    pub fn window_workspace_len(&self, window: usize) -> usize {
+        Layout::of(self, window).total
     }
 }

@@ -12,8 +12,8 @@ mod common;
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::Arx;
 use twostage::models::{
-    Benchmark, ExperimentRng, IoData, Marginal, ModelSpec, PacejkaCar, Prior, SimError, Simulator,
-    experiment_rng,
+    Benchmark, ExperimentRng, IoData, Marginal, ModelSpec, PacejkaCar, Prior, SUMMARY_NAMES,
+    SimError, Simulator, experiment_rng,
 };
 use twostage::{Preset, TwoStage};
 use twostage_runtime::{Estimator, Intervals, Stream};
@@ -70,6 +70,13 @@ fn disagreement_on(
         }
         let got = stream.finish(&mut theta, &mut widths).unwrap();
         assert_eq!(got.untransformed_samples, expected.floored_samples.len());
+        // The input family judges the very numbers the host's does.
+        assert_eq!(
+            got.input_outside_family,
+            input_mask(&expected),
+            "record {i}: {:?}",
+            expected.input_deviations
+        );
         let exact = through_qr(host, &record);
         for j in 0..q {
             let width = host.upper()[j] - host.lower()[j];
@@ -101,6 +108,20 @@ fn disagreement_on(
         }
     }
     worst
+}
+
+/// The host's input deviations as the runtime's bits: `4 j + k` for input
+/// j's summary number k.
+fn input_mask(assessment: &twostage::Assessment) -> u64 {
+    assessment
+        .input_deviations
+        .iter()
+        .map(|d| {
+            let j: usize = d.signal.trim_start_matches('u').parse().unwrap_or(1) - 1;
+            let k = SUMMARY_NAMES.iter().position(|n| *n == d.quantity).unwrap();
+            1u64 << (4 * j + k)
+        })
+        .fold(0, |mask, bit| mask | bit)
 }
 
 /// The estimate from stage-1 coefficients solved by QR, the reference
@@ -396,10 +417,16 @@ fn output_transforms_agree_and_floor_the_same_samples() {
             .unwrap()
             .transforms_outputs()
     );
-    // The section is last: two codes padded to 8 bytes, then two floors.
+    // The section is last but the input family (the sample time and eight
+    // numbers per input): two codes padded to 8 bytes, then two floors.
     // A floor outside its transform's domain, or an unknown code, is
     // refused where the section starts.
-    let section = runtime_blob.len() - 24;
+    assert!(
+        Estimator::from_bytes(&runtime_blob)
+            .unwrap()
+            .has_input_family()
+    );
+    let section = runtime_blob.len() - 24 - (8 + 64);
     let refused = |change: &dyn Fn(&mut Vec<u8>)| {
         let mut blob = runtime_blob.clone();
         change(&mut blob);
@@ -419,4 +446,409 @@ fn output_transforms_agree_and_floor_the_same_samples() {
         refused(&|b| b[section..section + 4].copy_from_slice(&7u32.to_le_bytes())),
         named
     );
+}
+
+#[test]
+fn an_input_outside_the_family_is_flagged_as_the_host_flags_it() {
+    let model = Benchmark::new();
+    let host = trained(&model, twostage::paper_benchmark(), 400);
+    let blob = host.to_runtime().unwrap();
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    assert!(runtime.has_input_family());
+    let family = host.input_family().unwrap();
+    for k in 0..4 {
+        let range = runtime.input_family_range(0, k).unwrap();
+        assert_eq!(
+            range.map(f64::to_bits),
+            family.ranges(0).unwrap()[k].map(f64::to_bits)
+        );
+    }
+    assert_eq!(runtime.input_family_range(1, 0), None);
+    // Only the input changes (the output stays the model's): louder,
+    // quieter, offset, slower (each sample held twice) and faster (the
+    // white input's first differences, at its RMS).
+    type Spoiler = fn(&[f64]) -> Vec<f64>;
+    let spoilers: [(&str, Spoiler); 5] = [
+        ("louder", |u| u.iter().map(|v| 3.0 * v).collect()),
+        ("quieter", |u| u.iter().map(|v| 0.3 * v).collect()),
+        ("offset", |u| u.iter().map(|v| v + 1.0).collect()),
+        ("slower", |u| (0..u.len()).map(|k| u[k - k % 2]).collect()),
+        ("faster", |u| {
+            (0..u.len())
+                .map(|k| (u[k] - u[k.saturating_sub(1)]) / 2f64.sqrt())
+                .collect()
+        }),
+    ];
+    let mut work = vec![0.0; runtime.workspace_len()];
+    let mut record = IoData::default();
+    for (name, spoil) in spoilers {
+        let mut by_input_alone = 0;
+        for i in 0..10 {
+            model
+                .simulate(
+                    &[-0.5 + 0.1 * i as f64],
+                    &mut experiment_rng(79, i),
+                    &mut record,
+                )
+                .unwrap();
+            let spoiled = IoData::siso(&spoil(record.input(0)), record.output(0)).unwrap();
+            let (mut theta, mut widths) = ([0.0], [0.0]);
+            let got = runtime
+                .estimate_record(
+                    spoiled.input(0),
+                    spoiled.output(0),
+                    &mut work,
+                    &mut theta,
+                    &mut widths,
+                )
+                .unwrap();
+            let expected = host.assess(&spoiled).unwrap();
+            assert_eq!(
+                got.input_outside_family,
+                input_mask(&expected),
+                "{name} {i}"
+            );
+            assert!(got.out_of_distribution(), "{name} {i}: not flagged");
+            by_input_alone += usize::from(!got.features_outside());
+        }
+        println!("{name}: {by_input_alone} of 10 flagged by the input alone");
+    }
+    // Records of the family are not flagged by their input.
+    for i in 0..20 {
+        model
+            .simulate(&[0.1], &mut experiment_rng(80, i), &mut record)
+            .unwrap();
+        let (mut theta, mut widths) = ([0.0], [0.0]);
+        let got = runtime
+            .estimate_record(
+                record.input(0),
+                record.output(0),
+                &mut work,
+                &mut theta,
+                &mut widths,
+            )
+            .unwrap();
+        assert_eq!(got.input_outside_family, 0, "family record {i}");
+    }
+    // An estimator without a family writes version 1, which reads as
+    // before: no input judgement and no accumulators in the workspace.
+    let without = host.clone().with_input_family(None);
+    let old = without.to_runtime().unwrap();
+    assert_eq!(u32::from_le_bytes(old[4..8].try_into().unwrap()), 1);
+    assert_eq!(u32::from_le_bytes(blob[4..8].try_into().unwrap()), 2);
+    let old = Estimator::from_bytes(&old).unwrap();
+    assert!(!old.has_input_family());
+    assert_eq!(old.workspace_len() + 7, runtime.workspace_len());
+    // A version-1 blob may not carry the family's flag.
+    let mut forged = blob.clone();
+    forged[4..8].copy_from_slice(&1u32.to_le_bytes());
+    common::seal(&mut forged);
+    assert!(matches!(
+        Estimator::from_bytes(&forged),
+        Err(twostage_runtime::Error::Invalid { field: "flags", .. })
+    ));
+}
+
+/// Records of `model` one after another (fresh truths, as
+/// [`disagreement_on`] draws them): a long record whose windows cross
+/// from one plant to the next, as a drifting plant's would.
+fn long_record(host: &twostage::Estimator, model: &dyn Simulator, records: u64) -> IoData {
+    let q = host.param_names().len();
+    let mut record = model.spec().new_record();
+    let (n, nu, ny) = (record.n_samples(), record.n_inputs(), record.n_outputs());
+    let mut long = IoData::zeros(n * records as usize, nu, ny);
+    for i in 0..records {
+        let mut rng = experiment_rng(91, i);
+        let truth: Vec<f64> = (0..q)
+            .map(|j| {
+                let u: f64 = rand::RngExt::random(&mut rng);
+                host.lower()[j] + u * (host.upper()[j] - host.lower()[j])
+            })
+            .collect();
+        model
+            .simulate(&truth, &mut experiment_rng(92, i), &mut record)
+            .unwrap();
+        let at = i as usize * n;
+        for j in 0..nu {
+            long.input_mut(j)[at..at + n].copy_from_slice(record.input(j));
+        }
+        for j in 0..ny {
+            long.output_mut(j)[at..at + n].copy_from_slice(record.output(j));
+        }
+    }
+    long
+}
+
+/// A window of `window` samples slid over `long`, finished every `every`
+/// samples once it holds `window / 2`, against the host's estimate of
+/// each window alone: the largest relative differences of theta,
+/// half-widths and distance, and how many windows were estimated. Flags,
+/// input masks and untransformed counts must be equal, and a window one
+/// side cannot estimate the other cannot either.
+fn window_disagreement(
+    host: &twostage::Estimator,
+    long: &IoData,
+    window: usize,
+    every: usize,
+) -> ([f64; 3], usize) {
+    let blob = host.to_runtime().unwrap();
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    let mut work = vec![0.0; runtime.window_workspace_len(window)];
+    let mut stream = Stream::window(&runtime, window, &mut work).unwrap();
+    let q = host.param_names().len();
+    let (mut theta, mut widths) = (vec![0.0; q], vec![0.0; q]);
+    let relative = |a: f64, b: f64, scale: f64| (a - b).abs() / b.abs().max(scale);
+    let mut worst = [0.0f64; 3];
+    let mut windows = 0;
+    for (t, (u, y)) in long
+        .inputs()
+        .rows()
+        .into_iter()
+        .zip(long.outputs().rows())
+        .enumerate()
+    {
+        stream.push(&u.to_vec(), &y.to_vec()).unwrap();
+        let end = t + 1;
+        if end < window / 2 || end % every != 0 {
+            continue;
+        }
+        let alone = long.window(end.saturating_sub(window), end);
+        let got = stream.finish(&mut theta, &mut widths);
+        let expected = host.assess(&alone);
+        let (got, expected) = match (got, expected) {
+            (Ok(g), Ok(e)) => (g, e),
+            (Err(_), Err(_)) => continue,
+            other => panic!("window ending at {end}: {other:?}"),
+        };
+        windows += 1;
+        for (j, t) in theta.iter().enumerate() {
+            let width = host.upper()[j] - host.lower()[j];
+            worst[0] = worst[0].max(relative(*t, expected.theta[j], 1e-3 * width));
+        }
+        if let Some(w) = expected.interval_half_widths() {
+            for j in 0..q {
+                worst[1] = worst[1].max(relative(widths[j], w[j], 1e-300));
+            }
+        }
+        if let (Some(a), Some(b)) = (got.feature_distance, expected.feature_distance) {
+            worst[2] = worst[2].max(relative(a, b, 1e-300));
+            let threshold = expected.distance_threshold.unwrap();
+            if (b - threshold).abs() > 1e-9 * threshold {
+                assert_eq!(
+                    got.features_outside(),
+                    b > threshold,
+                    "window ending at {end}"
+                );
+            }
+        }
+        assert_eq!(
+            got.input_outside_family,
+            input_mask(&expected),
+            "window ending at {end}"
+        );
+        assert_eq!(got.untransformed_samples, expected.floored_samples.len());
+    }
+    (worst, windows)
+}
+
+fn check_window(
+    name: &str,
+    host: &twostage::Estimator,
+    long: &IoData,
+    window: usize,
+    every: usize,
+) {
+    let (worst, windows) = window_disagreement(host, long, window, every);
+    println!(
+        "{name}: {windows} windows of {window}; largest relative difference theta {:.1e}, \
+         half-widths {:.1e}, distance {:.1e}",
+        worst[0], worst[1], worst[2]
+    );
+    assert!(windows >= 10, "{name}: only {windows} windows estimated");
+    assert!(worst[0] <= 1e-9 && worst[2] <= 1e-9, "{name}: {worst:?}");
+    assert!(worst[1] <= 1e-8, "{name}: {worst:?}");
+}
+
+#[test]
+fn a_sliding_window_estimates_what_each_window_alone_does() {
+    let model = Benchmark::new();
+    let paper = trained(&model, twostage::paper_benchmark(), 400);
+    check_window(
+        "benchmark paper",
+        &paper,
+        &long_record(&paper, &model, 4),
+        400,
+        97,
+    );
+    let car = PacejkaCar::new();
+    let car_paper = trained(&car, twostage::paper_pacejka(), 300);
+    check_window(
+        "car paper",
+        &car_paper,
+        &long_record(&car_paper, &car, 3),
+        300,
+        41,
+    );
+    let two = TwoByTwo {
+        spec: ModelSpec::new(
+            "two-by-two",
+            &["K", "a", "c"],
+            Prior::uniform_box(&[0.5, -0.8, -0.5], &[2.0, 0.8, 0.5]).unwrap(),
+            1.0,
+            150,
+        )
+        .unwrap()
+        .with_signals(&["u1", "u2"], &["y1", "y2"]),
+    };
+    let arx = Arx::new(2, 2).unwrap().with_delay(3).unwrap();
+    let delayed = structured(&two, arx, "mlp:5", 4);
+    check_window(
+        "two-by-two, delay 3",
+        &delayed,
+        &long_record(&delayed, &two, 4),
+        100,
+        13,
+    );
+    let output_only = OutputOnly {
+        spec: ModelSpec::new(
+            "ar",
+            &["a"],
+            Prior::uniform_box(&[-0.7], &[0.7]).unwrap(),
+            1.0,
+            300,
+        )
+        .unwrap()
+        .with_signals(&[], &["y"]),
+    };
+    let ar = Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap();
+    let ar_estimator = structured(&output_only, ar, "mlp:4", 6);
+    check_window(
+        "output only",
+        &ar_estimator,
+        &long_record(&ar_estimator, &output_only, 3),
+        150,
+        29,
+    );
+}
+
+#[test]
+fn a_window_counts_the_untransformed_samples_inside_it() {
+    let model = Positive {
+        spec: ModelSpec::new(
+            "positive",
+            &["a", "b"],
+            Prior::uniform_box(&[0.2, 0.5], &[0.8, 1.5]).unwrap(),
+            1.0,
+            200,
+        )
+        .unwrap()
+        .with_signals(&["u"], &["level", "count"]),
+    };
+    let compressor: twostage::compress::CompressorConfig = "log,log1p+arx:2,2".parse().unwrap();
+    let host = TwoStage::builder(&model)
+        .compressor(compressor)
+        .regressor("mlp:6".parse().unwrap())
+        .simulations(400)
+        .validation(0)
+        .calibration(200)
+        .seed(5)
+        .train()
+        .unwrap();
+    let mut long = long_record(&host, &model, 3);
+    // Samples no logarithm takes, here and there: each window counts the
+    // ones inside it, as the host counts them in the window alone.
+    for t in [5, 60, 61, 250, 420, 555] {
+        long.output_mut(0)[t] = -0.5;
+    }
+    long.output_mut(1)[300] = -2.0;
+    check_window("log and log1p outputs", &host, &long, 120, 17);
+}
+
+#[test]
+fn a_window_slid_a_long_way_still_estimates_its_last_samples_alone() {
+    // 100 records of 1000 samples through a window of 300: the sums have
+    // gained and lost every product of 100,000 samples.
+    let model = Benchmark::new();
+    let host = trained(&model, twostage::recommended_benchmark(), 600);
+    let long = long_record(&host, &model, 100);
+    let blob = host.to_runtime().unwrap();
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    let mut work = vec![0.0; runtime.window_workspace_len(300)];
+    let mut stream = Stream::window(&runtime, 300, &mut work).unwrap();
+    let u = long.input(0);
+    let y = long.output(0);
+    for t in 0..long.n_samples() {
+        stream.push(&u[t..=t], &y[t..=t]).unwrap();
+    }
+    let mut theta = [0.0];
+    stream.finish(&mut theta, &mut []).unwrap();
+    let n = long.n_samples();
+    let mut alone = [0.0];
+    let mut fresh = vec![0.0; runtime.workspace_len()];
+    runtime
+        .estimate_record(
+            &u[n - 300..],
+            &y[n - 300..],
+            &mut fresh,
+            &mut alone,
+            &mut [],
+        )
+        .unwrap();
+    let host_theta = host.assess(&long.window(n - 300, n)).unwrap().theta[0];
+    println!(
+        "after 100,000 samples: window {} alone {} host {host_theta}",
+        theta[0], alone[0]
+    );
+    assert!((theta[0] - alone[0]).abs() <= 1e-12 * alone[0].abs().max(1e-3));
+    assert!((theta[0] - host_theta).abs() <= 1e-9 * host_theta.abs().max(1e-3));
+}
+
+#[test]
+fn a_window_is_refused_shorter_than_a_regression_and_resumes_as_a_window() {
+    let model = Benchmark::new();
+    let host = trained(&model, twostage::paper_benchmark(), 400);
+    let blob = host.to_runtime().unwrap();
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    // ARX(5, 5): the first sample 5, ten regressors.
+    let mut work = vec![0.0; runtime.window_workspace_len(100)];
+    assert_eq!(
+        Stream::window(&runtime, 14, &mut work).unwrap_err(),
+        twostage_runtime::Error::WindowTooShort {
+            window: 14,
+            needed: 15
+        }
+    );
+    let mut small = vec![0.0; runtime.window_workspace_len(100) - 1];
+    assert!(matches!(
+        Stream::window(&runtime, 100, &mut small),
+        Err(twostage_runtime::Error::WorkspaceTooSmall { .. })
+    ));
+    // A window's state is its workspace's: dropped and resumed between
+    // samples, as the C API does, it gives the same bits.
+    let long = long_record(&host, &model, 1);
+    let (u, y) = (long.input(0), long.output(0));
+    let mut kept = vec![0.0; runtime.window_workspace_len(100)];
+    let mut stream = Stream::window(&runtime, 100, &mut kept).unwrap();
+    for t in 0..500 {
+        stream.push(&u[t..=t], &y[t..=t]).unwrap();
+    }
+    let mut once = [0.0];
+    stream.finish(&mut once, &mut []).unwrap();
+    Stream::window(&runtime, 100, &mut work).unwrap();
+    for t in 0..500 {
+        let mut resumed = Stream::resume(&runtime, &mut work).unwrap();
+        assert_eq!(resumed.window_len(), Some(100));
+        resumed.push(&u[t..=t], &y[t..=t]).unwrap();
+    }
+    let mut again = [0.0];
+    Stream::resume(&runtime, &mut work)
+        .unwrap()
+        .finish(&mut again, &mut [])
+        .unwrap();
+    assert_eq!(once[0].to_bits(), again[0].to_bits());
+    // A reset keeps the window's length.
+    let mut stream = Stream::resume(&runtime, &mut work).unwrap();
+    stream.reset();
+    assert_eq!(stream.window_len(), Some(100));
+    assert_eq!(stream.samples(), 0);
 }

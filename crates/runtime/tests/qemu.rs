@@ -112,16 +112,31 @@ fn write_case(dir: &Path, k: usize, case: &Case) {
     std::fs::write(dir.join(format!("case-{k}.bin")), bytes).unwrap();
 }
 
-/// Build the firmware (or its baseline without the runtime) and return
-/// the ELF and its (text, rodata) sizes.
-fn firmware(data: &Path, baseline: bool) -> (PathBuf, usize) {
+/// What a firmware build holds.
+#[derive(Clone, Copy, PartialEq)]
+enum Build {
+    /// The harness alone, without the runtime.
+    Baseline,
+    /// The runtime estimating whole records.
+    Records,
+    /// The runtime estimating records and sliding a window.
+    Window,
+}
+
+/// Build the firmware and return the ELF and its flash bytes.
+fn firmware(data: &Path, build: Build) -> (PathBuf, usize) {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware");
+    let (name, features) = match build {
+        Build::Baseline => ("baseline", "baseline"),
+        Build::Records => ("full", ""),
+        Build::Window => ("window", "window"),
+    };
     let target_dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../target/firmware")
-        .join(if baseline { "baseline" } else { "full" });
+        .join(name);
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut build = Command::new(cargo);
-    build
+    let mut command = Command::new(cargo);
+    command
         .current_dir(&manifest)
         .args(["build", "--release", "--target-dir"])
         .arg(&target_dir)
@@ -129,10 +144,10 @@ fn firmware(data: &Path, baseline: bool) -> (PathBuf, usize) {
         // The workspace's settings are not the firmware's.
         .env_remove("RUSTFLAGS")
         .env_remove("CARGO_BUILD_TARGET");
-    if baseline {
-        build.args(["--features", "baseline"]);
+    if !features.is_empty() {
+        command.args(["--features", features]);
     }
-    let output = build.output().unwrap();
+    let output = command.output().unwrap();
     assert!(
         output.status.success(),
         "building the firmware failed:\n{}",
@@ -232,11 +247,16 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
         "case | blob B | flash B (runtime code + blob) | workspace B | peak stack B | \
          instructions per sample | instructions per finish\n",
     );
+    let mut window_report = String::from(
+        "case | window (samples) | flash B (runtime code + blob) | RAM B (workspace + peak \
+         stack) | instructions per sample | instructions per finish\n",
+    );
     for (k, case) in cases.iter().enumerate() {
         let data = tempfile::tempdir().unwrap();
         write_case(data.path(), 0, case);
-        let (elf, flash) = firmware(data.path(), false);
-        let (_, baseline_flash) = firmware(data.path(), true);
+        let (elf, flash) = firmware(data.path(), Build::Records);
+        let (_, baseline_flash) = firmware(data.path(), Build::Baseline);
+        let (window_elf, window_flash) = firmware(data.path(), Build::Window);
         let stdout = run(&elf);
         let mut lines = stdout.lines();
         let ticks: f64 = lines
@@ -285,6 +305,62 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             .unwrap()
             .parse()
             .unwrap();
+        // The window slid over the records one after another: at each
+        // record's end it holds that record's last quarter. (Its firmware
+        // estimates the records first, as the other does.)
+        let window_stdout = run(&window_elf);
+        let mut lines = window_stdout
+            .lines()
+            .skip_while(|line| !line.starts_with("window "));
+        let header: Vec<&str> = lines.next().unwrap().split(' ').collect();
+        assert_eq!(header[0], "window", "{header:?}");
+        let (length, window_workspace): (usize, usize) =
+            (header[3].parse().unwrap(), header[5].parse().unwrap());
+        let (mut slide_push, mut slide_finish) = (0.0f64, 0.0f64);
+        for (r, record) in case.records.iter().enumerate() {
+            let fields: Vec<&str> = lines.next().unwrap().split(' ').collect();
+            assert_eq!(fields[3], "ok", "{}: {fields:?}", case.name);
+            let n = record.n_samples();
+            let host = case
+                .estimator
+                .assess(&record.window(n - length, n))
+                .unwrap();
+            for j in 0..q {
+                let m4 = f64::from_bits(u64::from_str_radix(fields[4 + j], 16).unwrap());
+                let h = host.theta[j];
+                let scale = 1e-3 * (case.estimator.upper()[j] - case.estimator.lower()[j]);
+                assert!(
+                    (m4 - h).abs() <= 1e-9 * h.abs().max(scale),
+                    "{} window {r}: Cortex-M4 {m4} vs host {h}",
+                    case.name
+                );
+            }
+            assert_eq!(fields[4 + q] == "1", host.out_of_distribution());
+            let mask: u64 = fields[5 + q].parse().unwrap();
+            assert_eq!(mask == 0, host.input_deviations.is_empty(), "{fields:?}");
+            if r > 0 {
+                // A full window: every push gains a sample and loses one.
+                let ticks: f64 = fields[7 + q].parse().unwrap();
+                slide_push = slide_push.max(ticks * per_tick / n as f64);
+            }
+            slide_finish = slide_finish.max(fields[9 + q].parse::<f64>().unwrap() * per_tick);
+        }
+        let slide_stack: usize = lines
+            .next()
+            .unwrap()
+            .rsplit(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(lines.next().unwrap().starts_with("stack "));
+        window_report.push_str(&format!(
+            "{} | {length} | {} | {} + {slide_stack} = {} | {slide_push:.0} | {slide_finish:.0}\n",
+            case.name,
+            window_flash - baseline_flash + blob,
+            8 * window_workspace,
+            8 * window_workspace + slide_stack
+        ));
         // Both firmwares hold the case table, blob included: the difference
         // is the runtime's code, to which the blob adds itself.
         let runtime_flash = flash - baseline_flash + blob;
@@ -309,5 +385,5 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             );
         }
     }
-    println!("{report}");
+    println!("{report}\n{window_report}");
 }

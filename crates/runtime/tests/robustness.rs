@@ -144,10 +144,15 @@ fn damage_is_named() {
         Err(Error::Length { declared, actual }) if declared == blob.len() && actual == blob.len() - 8
     ));
     let mut newer = blob.clone();
-    newer[4] = 2;
+    newer[4] = 3;
     assert_eq!(
         Estimator::from_bytes(&newer).unwrap_err(),
-        Error::UnsupportedVersion { found: 2 }
+        Error::UnsupportedVersion { found: 3 }
+    );
+    assert_eq!(
+        Error::UnsupportedVersion { found: 3 }.to_string(),
+        "blob format version 3, this runtime reads versions 1 to 2: export the estimator \
+         again with the matching twostage"
     );
     // One more byte, sealed: read to the end, the byte is left over.
     let mut longer = blob.clone();

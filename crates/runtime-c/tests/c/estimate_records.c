@@ -1,7 +1,11 @@
 /* Estimates records with the runtime's C API, as a C firmware or tool
- * would: usage `estimate_records BLOB RECORDS`. RECORDS is text: a line
+ * would: usage `estimate_records BLOB RECORDS WINDOW EVERY`. RECORDS is text: a line
  * "R N NU NY", then R*N lines of NU inputs and NY outputs. For each record
- * it prints "rc theta... widths... intervals ood distance threshold". */
+ * it prints "rc theta... widths... intervals ood distance threshold
+ * untransformed input-mask interval-rc (lower upper)...". Then it slides
+ * a window of WINDOW samples over the records before the last, one after
+ * another, and prints "window END rc theta... ood input-mask" every EVERY
+ * samples. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,10 +29,11 @@ static unsigned char *read_file(const char *path, size_t *len) {
 }
 
 int main(int argc, char **argv) {
-    if (argc != 3) {
-        fprintf(stderr, "usage: %s BLOB RECORDS\n", argv[0]);
+    if (argc != 5) {
+        fprintf(stderr, "usage: %s BLOB RECORDS WINDOW EVERY\n", argv[0]);
         return 2;
     }
+    size_t window = (size_t)strtoul(argv[3], NULL, 10), every = (size_t)strtoul(argv[4], NULL, 10);
     size_t len = 0;
     unsigned char *blob = read_file(argv[1], &len);
     if (!blob) {
@@ -67,6 +72,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "bad records file\n");
         return 2;
     }
+    double *kept = malloc(r_count * n * (nu + ny) * sizeof(double));
     int after_finish = 1;
     ts_stream stream;
     rc = ts_stream_start(&stream, &est, work, work_len);
@@ -78,6 +84,8 @@ int main(int argc, char **argv) {
         for (size_t t = 0; t < n; t++) {
             for (size_t j = 0; j < nu; j++) if (fscanf(records, "%lf", &u[j]) != 1) return 2;
             for (size_t j = 0; j < ny; j++) if (fscanf(records, "%lf", &y[j]) != 1) return 2;
+            memcpy(kept + (r * n + t) * (nu + ny), u, nu * sizeof(double));
+            memcpy(kept + (r * n + t) * (nu + ny) + nu, y, ny * sizeof(double));
             rc = ts_stream_push(&stream, u, y);
             if (rc != TS_OK) break;
         }
@@ -87,8 +95,9 @@ int main(int argc, char **argv) {
         if (rc == TS_OK) {
             for (size_t j = 0; j < q; j++) printf(" %.17g", theta[j]);
             for (size_t j = 0; j < q; j++) printf(" %.17g", widths[j]);
-            printf(" %d %d %.17g %.17g %u", a.intervals, a.out_of_distribution, a.feature_distance,
-                   a.distance_threshold, (unsigned)a.untransformed_samples);
+            printf(" %d %d %.17g %.17g %u %llu", a.intervals, a.out_of_distribution,
+                   a.feature_distance, a.distance_threshold, (unsigned)a.untransformed_samples,
+                   (unsigned long long)a.input_outside_family);
             /* The interval as the host writes it: inside the prior's box. */
             int bounds = ts_interval(&est, theta, widths, lower, upper, q);
             printf(" %d", bounds);
@@ -104,6 +113,31 @@ int main(int argc, char **argv) {
     printf("after-finish %d\n", after_finish);
     /* An empty stream is too short to finish. */
     printf("empty %d\n", ts_stream_finish(&stream, theta, q, NULL, 0, NULL));
+
+    /* A window too short for one regression is refused. */
+    printf("short window %d\n", ts_window_start(&stream, &est, 3, work, work_len));
+    size_t window_len = ts_window_workspace_len(&est, window);
+    double *window_work = malloc(window_len * sizeof(double));
+    rc = ts_window_start(&stream, &est, window, window_work, window_len);
+    if (rc != TS_OK) {
+        fprintf(stderr, "window: %s\n", ts_error_message(rc));
+        return 1;
+    }
+    for (size_t t = 0; t < (r_count - 1) * n; t++) {
+        rc = ts_stream_push(&stream, kept + t * (nu + ny), kept + t * (nu + ny) + nu);
+        if (rc != TS_OK) break;
+        if ((t + 1) % every != 0) continue;
+        ts_assessment a;
+        rc = ts_stream_finish(&stream, theta, q, NULL, 0, &a);
+        printf("window %zu %d", t + 1, rc);
+        if (rc == TS_OK) {
+            for (size_t j = 0; j < q; j++) printf(" %.17g", theta[j]);
+            printf(" %d %llu", a.out_of_distribution, (unsigned long long)a.input_outside_family);
+        }
+        printf("\n");
+    }
+    free(window_work);
+    free(kept);
     free(work);
     free(theta);
     free(widths);
