@@ -57,9 +57,20 @@ enum Command {
     /// An estimator of a built-in model against the Bayes posterior mean on
     /// the same fresh records: both RMSEs and their ratio, per parameter.
     BayesGap {
-        /// The estimator file (trained on the built-in benchmark or car).
+        /// The estimator file (trained on the built-in benchmark or car, or
+        /// on a model file of one: then name it with --model).
         #[arg(long)]
         estimator: PathBuf,
+        /// A second estimator, set beside the first on the same records.
+        #[arg(long)]
+        against: Option<PathBuf>,
+        /// The built-in model the test records are of (default: the one
+        /// the estimator was trained on).
+        #[arg(long)]
+        model: Option<twostage::models::BuiltinModel>,
+        /// What steers the car in the test records.
+        #[arg(long, value_enum, default_value = "chicane")]
+        steering: bayes_gap::Steering,
         /// Fresh test records.
         #[arg(long, default_value_t = 2000)]
         records: usize,
@@ -95,9 +106,19 @@ fn main() -> ExitCode {
         Command::Crates { check } => crates::run(check),
         Command::BayesGap {
             estimator,
+            against,
+            model,
+            steering,
             records,
             seed,
-        } => bayes_gap::run(&estimator, records, seed),
+        } => bayes_gap::run(
+            &estimator,
+            against.as_deref(),
+            model,
+            steering,
+            records,
+            seed,
+        ),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -176,6 +176,11 @@ pub struct BayesCar {
     step: [f64; 2],
     n_samples: usize,
     trajectories: Vec<f64>,
+    /// The noise-free car the grid was simulated with.
+    car: PacejkaCar,
+    /// Its steering samples, when they are a given input every record
+    /// shares (a manoeuvre); `None` for the car's own chicane.
+    steering: Option<Vec<f64>>,
 }
 
 impl BayesCar {
@@ -184,6 +189,30 @@ impl BayesCar {
     /// # Errors
     /// A grid smaller than 3 x 3, or a simulation that fails.
     pub fn new(n1: usize, n2: usize, n_samples: usize) -> Result<Self> {
+        let car = PacejkaCar::builder()
+            .noiseless(true)
+            .n_samples(n_samples)
+            .build()?;
+        Self::simulate(n1, n2, car, None)
+    }
+
+    /// The reference for records of the car driven by one given steering
+    /// (a manoeuvre every record shares, sampled as the records are): the
+    /// grid is simulated on it, and a record of another steering is
+    /// refused.
+    ///
+    /// # Errors
+    /// As [`BayesCar::new`], and a steering the car refuses.
+    pub fn on_steering(n1: usize, n2: usize, steering: Vec<f64>) -> Result<Self> {
+        let car = PacejkaCar::builder()
+            .noiseless(true)
+            .n_samples(steering.len())
+            .input(twostage_models::InputSignal::fixed(steering.clone())?)
+            .build()?;
+        Self::simulate(n1, n2, car, Some(steering))
+    }
+
+    fn simulate(n1: usize, n2: usize, car: PacejkaCar, steering: Option<Vec<f64>>) -> Result<Self> {
         if n1 < 3 || n2 < 3 {
             return Err(BaselineError::InvalidSetting {
                 name: "grid",
@@ -191,17 +220,16 @@ impl BayesCar {
                 expected: "at least 3 x 3 points".into(),
             });
         }
-        let car = PacejkaCar::builder()
-            .noiseless(true)
-            .n_samples(n_samples)
-            .build()?;
+        let n_samples = car.spec().n_samples();
         let (lo, hi) = (car.prior().lower(), car.prior().upper());
         let lower = [lo[0], lo[1]];
         let step = [
             (hi[0] - lo[0]) / (n1 - 1) as f64,
             (hi[1] - lo[1]) / (n2 - 1) as f64,
         ];
-        let chicane = vec![0.0; n_samples];
+        // The chicane is the car's own; a given steering is read from its
+        // samples.
+        let inputs = steering.clone().unwrap_or_else(|| vec![0.0; n_samples]);
         let trajectories: Vec<Vec<f64>> = (0..n1 * n2)
             .into_par_iter()
             .map(|g| {
@@ -210,7 +238,7 @@ impl BayesCar {
                     lower[1] + step[1] * (g % n2) as f64,
                 ];
                 let mut y = vec![0.0; n_samples];
-                noise_free(&car, &theta, &chicane, &mut y).map(|()| y)
+                noise_free(&car, &theta, &inputs, &mut y).map(|()| y)
             })
             .collect::<Result<_>>()?;
         Ok(Self {
@@ -220,6 +248,8 @@ impl BayesCar {
             step,
             n_samples,
             trajectories: trajectories.concat(),
+            car,
+            steering,
         })
     }
 
@@ -238,10 +268,33 @@ impl BayesCar {
         ]
     }
 
+    /// A record driven by another steering than the grid's is refused.
+    fn check_steering(&self, record: &IoData) -> Result<()> {
+        let Some(steering) = &self.steering else {
+            return Ok(());
+        };
+        let same = record.n_inputs() == 1
+            && record
+                .input(0)
+                .iter()
+                .zip(steering)
+                .all(|(a, b)| (a - b).abs() <= 1e-9 * b.abs().max(1e-6));
+        if same {
+            Ok(())
+        } else {
+            Err(BaselineError::Shape {
+                what: "the record's steering",
+                found: "another steering".into(),
+                expected: "the steering the grid was simulated on".into(),
+            })
+        }
+    }
+
     /// The posterior given one record.
     ///
     /// # Errors
-    /// A record of another length, or not SISO.
+    /// A record of another length, or not SISO, or (for a grid on a given
+    /// steering) of another steering.
     pub fn posterior(&self, record: &IoData) -> Result<CarPosterior> {
         if record.n_outputs() != 1 || record.n_samples() != self.n_samples {
             return Err(BaselineError::Shape {
@@ -258,6 +311,7 @@ impl BayesCar {
             });
         }
         record.check_finite()?;
+        self.check_steering(record)?;
         let y = record.output(0);
         let log_post: Vec<f64> = self
             .trajectories
@@ -291,10 +345,8 @@ impl BayesCar {
         tolerance: f64,
         max_levels: usize,
     ) -> Result<(CarPosterior, usize)> {
-        let car = PacejkaCar::builder()
-            .noiseless(true)
-            .n_samples(self.n_samples)
-            .build()?;
+        self.check_steering(record)?;
+        let car = &self.car;
         let (box_lo, box_hi) = (car.prior().lower().to_vec(), car.prior().upper().to_vec());
         let y = record.output(0);
         let mut previous: Option<CarPosterior> = None;
@@ -308,7 +360,10 @@ impl BayesCar {
                 let hi = (grid.mean[d] + spread).min(box_hi[d]);
                 step[d] = (hi - lo[d]) / (points - 1) as f64;
             }
-            let chicane = vec![0.0; self.n_samples];
+            let inputs = self
+                .steering
+                .clone()
+                .unwrap_or_else(|| vec![0.0; self.n_samples]);
             let log_post: Vec<f64> = (0..points * points)
                 .into_par_iter()
                 .map(|g| {
@@ -317,7 +372,7 @@ impl BayesCar {
                         lo[1] + step[1] * (g % points) as f64,
                     ];
                     let mut prediction = vec![0.0; self.n_samples];
-                    noise_free(&car, &theta, &chicane, &mut prediction)?;
+                    noise_free(car, &theta, &inputs, &mut prediction)?;
                     let sse: f64 = prediction
                         .iter()
                         .zip(y)
@@ -333,6 +388,8 @@ impl BayesCar {
                 step,
                 n_samples: self.n_samples,
                 trajectories: Vec::new(),
+                car: car.clone(),
+                steering: None,
             };
             let (mean, sd, map) = local.moments(&log_post, 1);
             let current = CarPosterior {

@@ -102,3 +102,29 @@ fn local_refinement_no_longer_moves_the_car_posterior_mean() {
         );
     }
 }
+
+#[test]
+fn a_grid_on_a_given_steering_is_the_chicane_s_when_given_the_chicane() {
+    // The chicane's own samples as a given steering: the car then follows
+    // them linearly between samples instead of the chicane's formula, so
+    // the two posteriors of one record differ by a small share of their
+    // spread, and each sits where the other does.
+    let chicane = BayesCar::new(33, 17, 250).unwrap();
+    let record = car_record([-34.0, -1.08], false, 250, 7);
+    let given = BayesCar::on_steering(33, 17, record.input(0).to_vec()).unwrap();
+    let (a, b) = (
+        chicane.posterior(&record).unwrap(),
+        given.posterior(&record).unwrap(),
+    );
+    for d in 0..2 {
+        assert!(
+            (a.mean[d] - b.mean[d]).abs() < 0.1 * a.sd[d],
+            "{a:?}\n{b:?}"
+        );
+    }
+    // A record of another steering is not the grid's.
+    let mut other = record.clone();
+    other.input_mut(0)[100] += 0.01;
+    let e = given.posterior(&other).unwrap_err().to_string();
+    assert!(e.contains("steering"), "{e}");
+}

@@ -290,14 +290,31 @@ impl InputSignal {
     }
 
     /// Refuses a design whose frequencies lie above the Nyquist frequency
-    /// of `sample_time`, naming it and what would work.
+    /// of `sample_time`, or whose band a record of `n_samples` cannot
+    /// resolve, naming it and what would work: before any experiment is
+    /// drawn.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal};
+    /// let noise = InputSignal::filtered_noise(0.05, Drawn::fixed(1.0), 4, Drawn::fixed(0.1), 0.0)?;
+    /// // 500 samples every 0.02 s resolve 0.1 Hz, not 0.05.
+    /// let e = noise.check_sampling(0.02, 500).unwrap_err().to_string();
+    /// assert!(e.contains("below the record's resolution"), "{e}");
+    /// assert!(noise.check_sampling(0.02, 1000).is_ok());
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
     ///
     /// # Errors
     /// [`SimError::InvalidSetting`] as said.
-    pub fn check_sampling(&self, sample_time: f64) -> Result<()> {
+    pub fn check_sampling(&self, sample_time: f64, n_samples: usize) -> Result<()> {
         match &self.kind {
-            Kind::Designed { design, .. } => design.check(sample_time),
-            Kind::Sum(parts) => parts.iter().try_for_each(|p| p.check_sampling(sample_time)),
+            Kind::Designed { design, .. } => {
+                design.check(sample_time)?;
+                design.check_record(sample_time, n_samples)
+            }
+            Kind::Sum(parts) => parts
+                .iter()
+                .try_for_each(|p| p.check_sampling(sample_time, n_samples)),
             _ => Ok(()),
         }
     }

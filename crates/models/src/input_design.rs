@@ -231,6 +231,16 @@ impl Design {
         }
     }
 
+    /// Refuses a band noise whose edges a record of `n` samples cannot
+    /// resolve (below 1 / (N T)): said before any experiment is drawn,
+    /// for every top the design may draw.
+    pub(crate) fn check_record(&self, sample_time: f64, n: usize) -> Result<()> {
+        if let Self::FilteredNoise { band, .. } = self {
+            resolved_band(band.0, band.1.range().0, sample_time, n)?;
+        }
+        Ok(())
+    }
+
     /// Whether every experiment sees the same input.
     pub(crate) fn is_deterministic(&self) -> bool {
         match self {
@@ -408,18 +418,7 @@ impl Design {
             Self::FilteredNoise { band, order, rms } => {
                 let top = band.1.draw(rng);
                 let level = rms.draw(rng);
-                let resolution = 1.0 / (n as f64 * sample_time);
-                let edges_resolved = top >= resolution && (band.0 == 0.0 || band.0 >= resolution);
-                if !edges_resolved {
-                    return Err(SimError::InvalidSetting {
-                        name: "noise band",
-                        value: format!("[{}, {top}] Hz", band.0),
-                        reason: format!(
-                            "an edge lies below the record's resolution 1/(N T) = {resolution} Hz \
-                             (N = {n}): raise it, or lengthen the record"
-                        ),
-                    });
-                }
+                resolved_band(band.0, top, sample_time, n)?;
                 let mut filter = Cascade::new();
                 if band.0 > 0.0 {
                     filter = filter.butterworth(Pass::High, *order, band.0, sample_time)?;
@@ -491,6 +490,23 @@ fn scale_to<R: Rng + ?Sized>(u: &mut [f64], level: &Level, rng: &mut R) {
             *v *= target / now;
         }
     }
+}
+
+/// A band noise's edges against the resolution 1 / (N T) of a record of
+/// `n` samples every `sample_time` s (a bottom edge of 0 is no edge).
+fn resolved_band(bottom: f64, top: f64, sample_time: f64, n: usize) -> Result<()> {
+    let resolution = 1.0 / (n as f64 * sample_time);
+    if top >= resolution && (bottom == 0.0 || bottom >= resolution) {
+        return Ok(());
+    }
+    Err(SimError::InvalidSetting {
+        name: "noise band",
+        value: format!("[{bottom}, {top}] Hz"),
+        reason: format!(
+            "an edge lies below the record's resolution 1/(N T) = {resolution} Hz (N = {n}): \
+             raise it, or lengthen the record"
+        ),
+    })
 }
 
 #[cfg(test)]

@@ -131,6 +131,18 @@ fn an_impossible_design_is_named_by_its_key() {
             "above the Nyquist frequency 0.25 Hz",
         ),
         (
+            // 400 samples every 2 s resolve 1/800 Hz: said when the file is
+            // read, not by every experiment of a training run.
+            "signal = \"gaussian\"\nband = [0.001, 0.1]\nrms = 1",
+            "input",
+            "below the record's resolution 1/(N T) = 0.00125 Hz",
+        ),
+        (
+            "signal = \"gaussian\"\nband = [0.0, [0.0005, 0.1]]\nrms = 1",
+            "input",
+            "below the record's resolution",
+        ),
+        (
             "signal = \"gaussian\"\nband = [0.0, 0.1]\nrms = 1\norder = 12",
             "input",
             "1 to 10",

@@ -74,13 +74,15 @@ impl Locator<'_> {
             _ => None,
         };
         if let Some(signal) = designed {
-            signal.check_sampling(signals.sample_time).map_err(|e| {
-                self.error(
-                    raw.input.as_ref().map(Spanned::span),
-                    "input",
-                    e.to_string(),
-                )
-            })?;
+            signal
+                .check_sampling(signals.sample_time, signals.samples)
+                .map_err(|e| {
+                    self.error(
+                        raw.input.as_ref().map(Spanned::span),
+                        "input",
+                        e.to_string(),
+                    )
+                })?;
         }
         let fixes_input = matches!(source, ModelSource::Command { input: Some(_), .. }) || measured;
         if fixes_input && signals.inputs.is_empty() {
