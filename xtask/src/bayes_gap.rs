@@ -261,7 +261,10 @@ mod tests {
         // zero, so the car leaves it heading straight.
         let first: f64 = u[75..225].iter().sum();
         let second: f64 = u[350..475].iter().sum();
-        assert!(first.abs() < 1e-9 && second.abs() < 1e-9, "{first} {second}");
+        assert!(
+            first.abs() < 1e-9 && second.abs() < 1e-9,
+            "{first} {second}"
+        );
         // The first change steers left first (positive), 0.07 at most.
         assert!(u[75..225].iter().all(|v| v.abs() <= 0.07 + 1e-12));
         assert!(u[80] > 0.0 && u[355] < 0.0);

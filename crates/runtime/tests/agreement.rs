@@ -374,8 +374,9 @@ impl Simulator for Positive {
     }
 }
 
-#[test]
-fn output_transforms_agree_and_floor_the_same_samples() {
+/// The positive model and an estimator taking the logarithm of one
+/// output and `ln(1 + y)` of the other before ARX(2, 2).
+fn positive_with_log_outputs() -> (Positive, twostage::Estimator) {
     let prior = Prior::uniform_box(&[0.2, 0.5], &[0.8, 1.5]).unwrap();
     let model = Positive {
         spec: ModelSpec::new("positive", &["a", "b"], prior, 1.0, 200)
@@ -392,6 +393,12 @@ fn output_transforms_agree_and_floor_the_same_samples() {
         .seed(5)
         .train()
         .unwrap();
+    (model, host)
+}
+
+#[test]
+fn output_transforms_agree_and_floor_the_same_samples() {
+    let (model, host) = positive_with_log_outputs();
     check("log and log1p of the outputs", &host, &model);
     // Samples a logarithm cannot take: the runtime floors and counts the
     // very samples the host does, and the estimates still agree.
@@ -733,27 +740,7 @@ fn a_sliding_window_estimates_what_each_window_alone_does() {
 
 #[test]
 fn a_window_counts_the_untransformed_samples_inside_it() {
-    let model = Positive {
-        spec: ModelSpec::new(
-            "positive",
-            &["a", "b"],
-            Prior::uniform_box(&[0.2, 0.5], &[0.8, 1.5]).unwrap(),
-            1.0,
-            200,
-        )
-        .unwrap()
-        .with_signals(&["u"], &["level", "count"]),
-    };
-    let compressor: twostage::compress::CompressorConfig = "log,log1p+arx:2,2".parse().unwrap();
-    let host = TwoStage::builder(&model)
-        .compressor(compressor)
-        .regressor("mlp:6".parse().unwrap())
-        .simulations(400)
-        .validation(0)
-        .calibration(200)
-        .seed(5)
-        .train()
-        .unwrap();
+    let (model, host) = positive_with_log_outputs();
     let mut long = long_record(&host, &model, 3);
     // Samples no logarithm takes, here and there: each window counts the
     // ones inside it, as the host counts them in the window alone.

@@ -147,31 +147,14 @@ fn estimate_case(k: usize, blob: &[u8], records: &[u8], work: &mut [f64], peak_s
         blob.len(),
         estimator.workspace_len()
     );
-    let (count, n, nu, ny) = (
-        u32_at(records, 0),
-        u32_at(records, 4),
-        u32_at(records, 8),
-        u32_at(records, 12),
-    );
+    let count = u32_at(records, 0);
     let q = estimator.n_parameters();
     for r in 0..count {
         let sp = paint();
         let mut theta = [0.0; 8];
         let mut widths = [0.0; 8];
-        let (mut u, mut y) = ([0.0; 4], [0.0; 4]);
         let result = Stream::new(&estimator, work).and_then(|mut stream| {
-            let start = SYST::get_current();
-            for t in 0..n {
-                let row = (r * n + t) * (nu + ny);
-                for j in 0..nu {
-                    u[j] = f64_at(records, row + j);
-                }
-                for j in 0..ny {
-                    y[j] = f64_at(records, row + nu + j);
-                }
-                stream.push(&u[..nu], &y[..ny])?;
-            }
-            let push = since(start);
+            let push = push_record(&mut stream, records, r)?;
             let start = SYST::get_current();
             let assessment = stream.finish(&mut theta[..q], &mut widths[..q])?;
             Ok((assessment, push, since(start)))
@@ -200,16 +183,35 @@ fn estimate_case(k: usize, blob: &[u8], records: &[u8], work: &mut [f64], peak_s
     slide(k, &estimator, records, work);
 }
 
+/// Push record `r` of `records` into `stream`, sample by sample; the
+/// SysTick ticks it took.
+#[cfg(not(feature = "baseline"))]
+fn push_record(
+    stream: &mut Stream<'_, '_, '_>,
+    records: &[u8],
+    r: usize,
+) -> Result<u32, twostage_runtime::Error> {
+    let (n, nu, ny) = (u32_at(records, 4), u32_at(records, 8), u32_at(records, 12));
+    let (mut u, mut y) = ([0.0; 4], [0.0; 4]);
+    let start = SYST::get_current();
+    for t in 0..n {
+        let row = (r * n + t) * (nu + ny);
+        for j in 0..nu {
+            u[j] = f64_at(records, row + j);
+        }
+        for j in 0..ny {
+            y[j] = f64_at(records, row + nu + j);
+        }
+        stream.push(&u[..nu], &y[..ny])?;
+    }
+    Ok(since(start))
+}
+
 /// A window of a quarter of a record slid over all of the case's records,
 /// finished at the end of each.
 #[cfg(all(feature = "window", not(feature = "baseline")))]
 fn slide(k: usize, estimator: &Estimator<'_>, records: &[u8], work: &mut [f64]) {
-    let (count, n, nu, ny) = (
-        u32_at(records, 0),
-        u32_at(records, 4),
-        u32_at(records, 8),
-        u32_at(records, 12),
-    );
+    let (count, n) = (u32_at(records, 0), u32_at(records, 4));
     let length = n / 4;
     hprintln!(
         "window {} length {} workspace {}",
@@ -222,24 +224,12 @@ fn slide(k: usize, estimator: &Estimator<'_>, records: &[u8], work: &mut [f64]) 
         return;
     }
     let q = estimator.n_parameters();
-    let (mut u, mut y) = ([0.0; 4], [0.0; 4]);
     let mut peak_stack = 0;
     for r in 0..count {
         let sp = paint();
         let mut theta = [0.0; 8];
         let result = Stream::resume(estimator, work).and_then(|mut stream| {
-            let start = SYST::get_current();
-            for t in 0..n {
-                let row = (r * n + t) * (nu + ny);
-                for j in 0..nu {
-                    u[j] = f64_at(records, row + j);
-                }
-                for j in 0..ny {
-                    y[j] = f64_at(records, row + nu + j);
-                }
-                stream.push(&u[..nu], &y[..ny])?;
-            }
-            let push = since(start);
+            let push = push_record(&mut stream, records, r)?;
             let start = SYST::get_current();
             let assessment = stream.finish(&mut theta[..q], &mut [])?;
             Ok((assessment, push, since(start)))
