@@ -1,0 +1,199 @@
+//! docs/any-experiment.md, step by step: one estimator of the two tanks'
+//! multisine family estimates ten realizations of one plant (checked and
+//! refined), flags an input outside the family with the reason, follows a
+//! long record window by window, and exports its family to the runtime.
+
+// A panic is how a test fails.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::{path, scratch, text, twostage};
+
+fn family_file() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../docs/examples/tanks/tanks_multisine.toml")
+}
+
+/// The rows of an estimate CSV as (header, rows of fields).
+fn table(csv: &str) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+fn column(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+}
+
+#[test]
+fn one_estimator_reads_every_experiment_of_its_family() {
+    let dir = scratch("any-experiment");
+    let model = family_file();
+    let estimator = dir.join("family.tsest");
+    // 1. The family, and an estimator of it (smaller than the guide's).
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--compress",
+        "arx:4,4",
+        "--fit",
+        "mlp:16",
+        "--sims",
+        "1000",
+        "--calibrate",
+        "500",
+        "--validate",
+        "500",
+        "--seed",
+        "1",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let shown = text(&twostage(&["inspect", path(&estimator)]).stdout);
+    assert!(
+        shown.contains("input family of its 1000 held-out records"),
+        "{shown}"
+    );
+    assert!(shown.contains("pump: mean 2.2 to 2.2, RMS 0.4"), "{shown}");
+
+    // 2. Ten realizations of one plant, checked and refined.
+    let truth = [("k", 1.2), ("a1", 0.9), ("a2", 0.8), ("h0", 4.0)];
+    let runs: Vec<PathBuf> = (0..10)
+        .map(|i| {
+            let run = dir.join(format!("run-{i}.csv"));
+            let out = twostage(&[
+                "simulate",
+                "--model-file",
+                path(&model),
+                "--theta",
+                "1.2,0.9,0.8,4",
+                "--experiment",
+                &i.to_string(),
+                "--out",
+                path(&run),
+            ]);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+            run
+        })
+        .collect();
+    let mut args = vec![
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--model-file",
+        path(&model),
+        "--check",
+        "--refine=auto",
+    ];
+    args.extend(runs.iter().map(|r| path(r)));
+    let out = twostage(&args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (header, rows) = table(&text(&out.stdout));
+    assert_eq!(rows.len(), 10);
+    let in_family = column(&header, "input_in_family");
+    let explained = column(&header, "explained");
+    assert!(rows.iter().all(|r| r[in_family] == "true"), "{rows:?}");
+    let explained = rows.iter().filter(|r| r[explained] == "true").count();
+    assert!(explained >= 8, "{explained} of 10 explained");
+    let mut covered = 0;
+    for (name, value) in truth {
+        let (lo, hi) = (
+            column(&header, &format!("{name}_lo")),
+            column(&header, &format!("{name}_hi")),
+        );
+        for r in &rows {
+            let (l, h): (f64, f64) = (r[lo].parse().unwrap(), r[hi].parse().unwrap());
+            covered += usize::from(l <= value && value <= h);
+        }
+    }
+    // The guide's estimator covers 37 of 40; a smaller one a few less.
+    assert!(covered >= 28, "{covered} of 40 intervals cover the truth");
+
+    // 3. An input outside the family: estimated, flagged with the reason.
+    let source = std::fs::read_to_string(&model).unwrap();
+    let loud_model = dir.join("loud.toml");
+    std::fs::write(&loud_model, source.replace("rms = [0.4, 0.8]", "rms = 1.2")).unwrap();
+    let loud = dir.join("loud.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&loud_model),
+        "--theta",
+        "1.2,0.9,0.8,4",
+        "--out",
+        path(&loud),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&["estimate", "--estimator", path(&estimator), path(&loud)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let warning = text(&out.stderr);
+    assert!(
+        warning.contains("input pump: RMS 1.200 above the training records' 0.4"),
+        "{warning}"
+    );
+    let (header, rows) = table(&text(&out.stdout));
+    assert_eq!(rows[0][column(&header, "input_in_family")], "false");
+
+    // 4. A long record, window by window.
+    let long_model = dir.join("long.toml");
+    std::fs::write(
+        &long_model,
+        source.replace("samples = 400", "samples = 1600"),
+    )
+    .unwrap();
+    let long = dir.join("long.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&long_model),
+        "--theta",
+        "1.2,0.9,0.8,4",
+        "--out",
+        path(&long),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--window",
+        "400",
+        "--every",
+        "200",
+        path(&long),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (header, rows) = table(&text(&out.stdout));
+    let ends: Vec<&str> = rows
+        .iter()
+        .map(|r| r[column(&header, "window_end")].as_str())
+        .collect();
+    assert_eq!(ends, ["400", "600", "800", "1000", "1200", "1400", "1600"]);
+
+    // 5. The runtime's blob carries the family.
+    let blob = dir.join("family.tsrt");
+    let out = twostage(&[
+        "export",
+        "--estimator",
+        path(&estimator),
+        "--to",
+        "runtime",
+        "--out",
+        path(&blob),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let bytes = std::fs::read(&blob).unwrap();
+    let runtime = twostage::runtime::Estimator::from_bytes(&bytes).unwrap();
+    assert!(runtime.has_input_family());
+    assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
+}
