@@ -54,6 +54,13 @@ fn script(name: &str, body: &str) -> PathBuf {
 const GAIN: &str = r#"
 def simulate(theta, seed, index):
     t = theta[0]
+    if t < -1.1:
+        print("record %d" % index); sys.stdout.flush()
+        while True:
+            sys.stdout.write("1" * 65536)
+    if -1.1 <= t < -1.0:
+        sys.stderr.write("x" * 20000000 + "\n"); sys.stderr.flush()
+        t = 0.5
     if t < -0.8:
         raise ValueError("theta %r is too small for this plant" % t)
     if -0.8 <= t < -0.7:
@@ -166,6 +173,12 @@ fn every_failure_is_one_experiment_quoting_the_answer_and_the_next_starts_afresh
         ),
         (-0.55, "segmentation fault, say"),
         (-0.45, "no answer within 2 s"),
+        // A line without end is cut at the longest answer the protocol
+        // has, and the process ended: it does not fill the memory.
+        (
+            -1.15,
+            "it wrote a line longer than 65664 bytes (no answer of the protocol is that long)",
+        ),
     ];
     for (theta, quoted) in cases {
         let e = run(&sim, *theta, 0).unwrap_err();
@@ -176,6 +189,10 @@ fn every_failure_is_one_experiment_quoting_the_answer_and_the_next_starts_afresh
         // The next experiment works, on the same or a fresh process.
         assert_eq!(run(&sim, 0.3, 1).unwrap().n_samples(), 50, "after {theta}");
     }
+    // Twenty megabytes on standard error in one line are read and
+    // dropped but for their start; the answer that follows is taken.
+    let flooded = run(&sim, -1.05, 2).unwrap();
+    assert_eq!(flooded.n_samples(), 50);
     // A chart counts such failures, within the allowance.
     let wide = ExternalSimulator::new(
         ModelSpec::new(
