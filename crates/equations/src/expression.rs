@@ -214,6 +214,18 @@ impl Expression {
                 ),
             ));
         }
+        let operators = operator_count(text);
+        if operators > MAX_OPERATORS {
+            return Err(error(
+                None,
+                format!(
+                    "{operators} operators in one equation, at most {MAX_OPERATORS}: exmex's \
+                     parse takes time that grows with their square and its tree is walked \
+                     recursively; split it into named parts with `define` (each part its own \
+                     equation, the sum of the parts in this one)"
+                ),
+            ));
+        }
         if let Some(at) = negated_power(text) {
             return Err(error(
                 Some(at),
@@ -358,6 +370,20 @@ pub(crate) fn slot_index(slot: usize) -> u32 {
 /// `(-x)^2`: unary operators bind tighter than binary ones there
 /// (exmex's documentation). A unary minus is one at the start, or after
 /// an opening parenthesis, a comma or another operator.
+/// The most operators one equation may hold: the parse's time grows with
+/// their square (10,000 take about 3 s) and the expression tree is
+/// walked recursively, so a generated equation of any length is refused
+/// by its size rather than left to exhaust the time or the stack.
+pub(crate) const MAX_OPERATORS: usize = 10_000;
+
+/// The operators and function arguments of `text`: each of `+ - * / ^ ,`
+/// and each opening parenthesis (a call or a group).
+fn operator_count(text: &str) -> usize {
+    text.bytes()
+        .filter(|b| matches!(b, b'+' | b'-' | b'*' | b'/' | b'^' | b',' | b'('))
+        .count()
+}
+
 fn negated_power(text: &str) -> Option<usize> {
     let chars: Vec<(usize, char)> = text
         .char_indices()

@@ -212,6 +212,32 @@ fn mistakes_are_refused_at_load_named() {
         e.message.contains("unknown name `b`") && e.message.contains("t, a, u, x, y"),
         "{e}"
     );
+    // An equation too large to parse in reasonable time and stack: its
+    // size named, and what to do; one of the largest size compiles.
+    let sum = |terms: usize| vec!["x"; terms].join(" + ");
+    let e = error_of(&with_output(&sum(200_001)), &spec);
+    assert_eq!(e.equation, "y");
+    assert!(
+        e.message
+            .contains("200000 operators in one equation, at most 10000")
+            && e.message.contains("`define`"),
+        "{e}"
+    );
+    let (small, large) = (
+        compile(&with_output("x"), &spec).unwrap(),
+        compile(&with_output(&sum(2_001)), &spec).unwrap(),
+    );
+    let (mut x, mut y) = (IoData::zeros(10, 1, 1), IoData::zeros(10, 1, 1));
+    for record in [&mut x, &mut y] {
+        record.input_mut(0).fill(1.0);
+    }
+    small.respond(&[0.5], &mut x, None).unwrap();
+    large.respond(&[0.5], &mut y, None).unwrap();
+    // y = 2001 x: the whole sum evaluated.
+    for (a, b) in x.output(0).iter().zip(y.output(0)) {
+        assert!((b - 2001.0 * a).abs() <= 1e-9 * b.abs().max(1.0), "{a} {b}");
+    }
+    assert!(x.output(0)[9] > 0.0);
     // A minus before a power, which exmex would read as (-x)^2.
     for (text, at) in [
         ("-x^2", 0),
