@@ -389,7 +389,12 @@ impl ExternalSimulator {
             self.spec.output_names().len(),
         );
         for (k_job, (job, out)) in jobs.iter().zip(outs.iter_mut()).enumerate() {
-            let head = process.line(self.timeout).map_err(|e| self.failure(&e))?;
+            // The timeout is the whole record's, not each line's: a
+            // simulator that trickles its lines is ended all the same.
+            let deadline = Instant::now() + self.timeout;
+            let head = process
+                .line_by(deadline, self.timeout)
+                .map_err(|e| self.failure(&e))?;
             let mut words = head.split_whitespace();
             match (words.next(), words.next().map(str::parse::<u64>)) {
                 (Some("record"), Some(Ok(index))) if index == job.index => {}
@@ -410,7 +415,7 @@ impl ExternalSimulator {
             }
             out.resize(n, n_u, n_y);
             for k in 0..n {
-                let line = process.line(self.timeout).map_err(|e| {
+                let line = process.line_by(deadline, self.timeout).map_err(|e| {
                     self.failure(&format!("{e} (at sample {k} of experiment {})", job.index))
                 })?;
                 let mut count = 0;
@@ -853,7 +858,18 @@ impl Process {
     }
 
     fn line(&mut self, timeout: Duration) -> std::result::Result<String, String> {
-        match self.lines.recv_timeout(timeout) {
+        self.line_by(Instant::now() + timeout, timeout)
+    }
+
+    /// The next line, if it comes before `deadline`, the end of a
+    /// `timeout` that started earlier.
+    fn line_by(
+        &mut self,
+        deadline: Instant,
+        timeout: Duration,
+    ) -> std::result::Result<String, String> {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match self.lines.recv_timeout(left) {
             Ok(line) => line,
             Err(RecvTimeoutError::Timeout) => Err(format!(
                 "no answer within {} s (the timeout)",

@@ -54,10 +54,15 @@ fn script(name: &str, body: &str) -> PathBuf {
 const GAIN: &str = r#"
 def simulate(theta, seed, index):
     t = theta[0]
-    if t < -1.1:
+    if t < -1.4:
         print("record %d" % index); sys.stdout.flush()
         while True:
             sys.stdout.write("1" * 65536)
+    if -1.3 <= t < -1.2:
+        print("record %d" % index); sys.stdout.flush()
+        for k in range(50):
+            time.sleep(0.1); print("0.0 0.0"); sys.stdout.flush()
+        return None
     if -1.1 <= t < -1.0:
         sys.stderr.write("x" * 20000000 + "\n"); sys.stderr.flush()
         t = 0.5
@@ -176,9 +181,12 @@ fn every_failure_is_one_experiment_quoting_the_answer_and_the_next_starts_afresh
         // A line without end is cut at the longest answer the protocol
         // has, and the process ended: it does not fill the memory.
         (
-            -1.15,
+            -1.45,
             "it wrote a line longer than 65664 bytes (no answer of the protocol is that long)",
         ),
+        // A line every 0.1 s, each well within the timeout, the record's
+        // 50 lines past it: the timeout is the record's.
+        (-1.25, "no answer within 2 s (the timeout) (at sample"),
     ];
     for (theta, quoted) in cases {
         let e = run(&sim, *theta, 0).unwrap_err();
