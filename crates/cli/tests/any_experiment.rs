@@ -197,3 +197,90 @@ fn one_estimator_reads_every_experiment_of_its_family() {
     assert!(runtime.has_input_family());
     assert_eq!(u32::from_le_bytes(bytes[4..8].try_into().unwrap()), 2);
 }
+
+/// A simulated CSV's numbers, column by column after the header.
+fn numbers(csv: &str) -> Vec<Vec<f64>> {
+    csv.lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect()
+}
+
+#[test]
+fn the_car_written_as_equations_is_the_built_in_car() {
+    let dir = scratch("car-equations");
+    let examples = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../docs/examples/car");
+    // The same sampled steering for both (the chicane's samples, which
+    // both follow linearly between samples).
+    let mut steering = String::from("delta\n");
+    for k in 0..500 {
+        let t = f64::from(k) * 0.02;
+        let v = if (1.0..=9.0).contains(&t) {
+            0.2 * (std::f64::consts::TAU * (t - 1.0) / 4.0).sin()
+                * (std::f64::consts::PI * (t - 1.0) / 8.0).sin().powi(2)
+        } else {
+            0.0
+        };
+        steering.push_str(&format!("{v:e}\n"));
+    }
+    std::fs::write(dir.join("steering.csv"), steering).unwrap();
+    let given = "[input]\nsignal = \"fixed\"\nfile = \"steering.csv\"";
+    let equations = std::fs::read_to_string(examples.join("car_equations.toml"))
+        .unwrap()
+        .replace("[input]\nsignal = \"chicane\"\namplitude = 0.2", given);
+    assert!(equations.contains("steering.csv"));
+    std::fs::write(dir.join("equations.toml"), equations).unwrap();
+    std::fs::write(
+        dir.join("builtin.toml"),
+        format!("[model]\nname = \"car\"\n[source]\nbuiltin = \"pacejka\"\n{given}\n"),
+    )
+    .unwrap();
+    let run = |file: &str, theta: &str| {
+        let out = twostage(&[
+            "simulate",
+            "--model-file",
+            path(&dir.join(file)),
+            "--theta",
+            theta,
+            "--noiseless",
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        numbers(&text(&out.stdout))
+    };
+    for theta in ["-42,-1.2", "-35,-1.1", "-28,-0.99"] {
+        let (a, b) = (run("equations.toml", theta), run("builtin.toml", theta));
+        assert_eq!(a.len(), 500);
+        let peak = a.iter().fold(0.0f64, |m, row| m.max(row[1].abs()));
+        assert!(
+            peak > 5.0,
+            "{theta}: a chicane's lateral acceleration, {peak}"
+        );
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(
+                (x[1] - y[1]).abs() <= 1e-9 * y[1].abs().max(1.0),
+                "{theta}, sample {k}: equations {} against built-in {}",
+                x[1],
+                y[1]
+            );
+        }
+    }
+    // The drifting tire: the same car, pK1 growing by 10 over the drive;
+    // at its start it is the constant car, at its end it is not.
+    let drifting = std::fs::read_to_string(examples.join("car_drifting_tire.toml"))
+        .unwrap()
+        .replace("samples = 30000", "samples = 3000");
+    std::fs::write(dir.join("drifting.toml"), &drifting).unwrap();
+    std::fs::write(
+        dir.join("constant.toml"),
+        drifting.replace("k1 = \"pK1 + (10 / 600) * t\"", "k1 = \"pK1\""),
+    )
+    .unwrap();
+    let (drift, constant) = (
+        run("drifting.toml", "-40,-1.1"),
+        run("constant.toml", "-40,-1.1"),
+    );
+    let gap = |k: usize| (drift[k][1] - constant[k][1]).abs();
+    assert!(gap(5) < 1e-3 * constant[5][1].abs().max(0.1), "{}", gap(5));
+    let late = (2500..3000).map(gap).fold(0.0f64, f64::max);
+    assert!(late > 0.01, "{late}");
+}
