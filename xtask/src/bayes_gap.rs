@@ -244,7 +244,10 @@ mod tests {
         // The first peak a quarter period in, then the dwell at the
         // second, 0.5 s (25 samples) long.
         assert!((at(1.0 + 0.25 / 0.7) - 0.2).abs() < 2e-3);
-        let dwelling = u.iter().filter(|v| **v == -0.2).count();
+        let dwelling = u
+            .iter()
+            .filter(|v| v.to_bits() == (-0.2f64).to_bits())
+            .count();
         assert!((25..=26).contains(&dwelling), "{dwelling}");
         // Continuous: no step larger than a sine's over one sample.
         let slope = 0.2 * std::f64::consts::TAU * 0.7 * CAR_SAMPLE_TIME;
