@@ -26,6 +26,23 @@ fn table(csv: &str) -> (Vec<String>, Vec<Vec<String>>) {
     (header, rows)
 }
 
+/// Simulate the plant of the guide (k 1.2, a1 0.9, a2 0.8, h0 4) from
+/// `model` into `out`, experiment `experiment`'s streams.
+fn simulate_plant(model: &std::path::Path, experiment: u64, out: &std::path::Path) {
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(model),
+        "--theta",
+        "1.2,0.9,0.8,4",
+        "--experiment",
+        &experiment.to_string(),
+        "--out",
+        path(out),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+}
+
 fn column(header: &[String], name: &str) -> usize {
     header
         .iter()
@@ -71,18 +88,7 @@ fn one_estimator_reads_every_experiment_of_its_family() {
     let runs: Vec<PathBuf> = (0..10)
         .map(|i| {
             let run = dir.join(format!("run-{i}.csv"));
-            let out = twostage(&[
-                "simulate",
-                "--model-file",
-                path(&model),
-                "--theta",
-                "1.2,0.9,0.8,4",
-                "--experiment",
-                &i.to_string(),
-                "--out",
-                path(&run),
-            ]);
-            assert!(out.status.success(), "{}", text(&out.stderr));
+            simulate_plant(&model, i, &run);
             run
         })
         .collect();
@@ -124,16 +130,7 @@ fn one_estimator_reads_every_experiment_of_its_family() {
     let loud_model = dir.join("loud.toml");
     std::fs::write(&loud_model, source.replace("rms = [0.4, 0.8]", "rms = 1.2")).unwrap();
     let loud = dir.join("loud.csv");
-    let out = twostage(&[
-        "simulate",
-        "--model-file",
-        path(&loud_model),
-        "--theta",
-        "1.2,0.9,0.8,4",
-        "--out",
-        path(&loud),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
+    simulate_plant(&loud_model, 0, &loud);
     let out = twostage(&["estimate", "--estimator", path(&estimator), path(&loud)]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let warning = text(&out.stderr);
@@ -152,16 +149,7 @@ fn one_estimator_reads_every_experiment_of_its_family() {
     )
     .unwrap();
     let long = dir.join("long.csv");
-    let out = twostage(&[
-        "simulate",
-        "--model-file",
-        path(&long_model),
-        "--theta",
-        "1.2,0.9,0.8,4",
-        "--out",
-        path(&long),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
+    simulate_plant(&long_model, 0, &long);
     let out = twostage(&[
         "estimate",
         "--estimator",

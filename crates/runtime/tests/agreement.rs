@@ -45,13 +45,7 @@ fn disagreement_on(
     let relative = |a: f64, b: f64, scale: f64| (a - b).abs() / b.abs().max(scale);
     let mut record = IoData::default();
     for i in 0..count {
-        let mut rng = experiment_rng(77, i);
-        let truth: Vec<f64> = (0..q)
-            .map(|j| {
-                let u: f64 = rand::RngExt::random(&mut rng);
-                host.lower()[j] + u * (host.upper()[j] - host.lower()[j])
-            })
-            .collect();
+        let truth = truth_in_box(host, 77, i);
         model
             .simulate(&truth, &mut experiment_rng(78, i), &mut record)
             .unwrap();
@@ -108,6 +102,18 @@ fn disagreement_on(
         }
     }
     worst
+}
+
+/// Parameters drawn uniformly in the estimator's prior box from
+/// experiment `i`'s stream of `seed`.
+fn truth_in_box(host: &twostage::Estimator, seed: u64, i: u64) -> Vec<f64> {
+    let mut rng = experiment_rng(seed, i);
+    (0..host.param_names().len())
+        .map(|j| {
+            let u: f64 = rand::RngExt::random(&mut rng);
+            host.lower()[j] + u * (host.upper()[j] - host.lower()[j])
+        })
+        .collect()
 }
 
 /// The host's input deviations as the runtime's bits: `4 j + k` for input
@@ -560,18 +566,11 @@ fn an_input_outside_the_family_is_flagged_as_the_host_flags_it() {
 /// [`disagreement_on`] draws them): a long record whose windows cross
 /// from one plant to the next, as a drifting plant's would.
 fn long_record(host: &twostage::Estimator, model: &dyn Simulator, records: u64) -> IoData {
-    let q = host.param_names().len();
     let mut record = model.spec().new_record();
     let (n, nu, ny) = (record.n_samples(), record.n_inputs(), record.n_outputs());
     let mut long = IoData::zeros(n * records as usize, nu, ny);
     for i in 0..records {
-        let mut rng = experiment_rng(91, i);
-        let truth: Vec<f64> = (0..q)
-            .map(|j| {
-                let u: f64 = rand::RngExt::random(&mut rng);
-                host.lower()[j] + u * (host.upper()[j] - host.lower()[j])
-            })
-            .collect();
+        let truth = truth_in_box(host, 91, i);
         model
             .simulate(&truth, &mut experiment_rng(92, i), &mut record)
             .unwrap();
