@@ -47,6 +47,7 @@ mod butterworth;
 mod data;
 mod error;
 mod external;
+mod external_process;
 mod input;
 mod input_design;
 mod input_family;
