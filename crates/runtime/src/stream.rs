@@ -232,9 +232,9 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     /// the last `window` samples (all of them while fewer were pushed),
     /// the same numbers as a stream of those samples alone, to rounding.
     /// The stage-1 sums gain each sample as it is pushed and lose the one
-    /// leaving the window, so a push costs about twice a record stream's
-    /// and a finish as much as a record's (plus a pass over the window's
-    /// inputs, for an estimator with an input family). `work` holds
+    /// leaving the window, so a push costs about two and a half times a
+    /// record stream's and a finish as much as a record's (plus a pass
+    /// over the window's inputs, for an estimator with an input family). `work` holds
     /// [`Estimator::window_workspace_len`] numbers: the window's samples
     /// and the sums.
     ///
