@@ -271,8 +271,8 @@ impl Simulator for TwoByTwo {
     }
 }
 
-#[test]
-fn a_two_by_two_model_with_a_log_normal_gain_and_a_linear_map_agrees() {
+/// The two-by-two model with a log-normal gain K and uniform a and c.
+fn two_by_two() -> TwoByTwo {
     let prior = Prior::new(vec![
         Marginal::LogNormal {
             mu: 0.0,
@@ -288,11 +288,16 @@ fn a_two_by_two_model_with_a_log_normal_gain_and_a_linear_map_agrees() {
         },
     ])
     .unwrap();
-    let model = TwoByTwo {
+    TwoByTwo {
         spec: ModelSpec::new("two-by-two", &["K", "a", "c"], prior, 1.0, 150)
             .unwrap()
             .with_signals(&["u1", "u2"], &["y1", "y2"]),
-    };
+    }
+}
+
+#[test]
+fn a_two_by_two_model_with_a_log_normal_gain_and_a_linear_map_agrees() {
+    let model = two_by_two();
     let arx = |na, nb, delay| Arx::new(na, nb).unwrap().with_delay(delay).unwrap();
     let linear = structured(&model, arx(2, 3, 1), "linear", 3);
     check("two-by-two linear", &linear, &model);
@@ -330,14 +335,24 @@ impl Simulator for OutputOnly {
     }
 }
 
+/// The autoregression with a in [-0.7, 0.7], 300 samples.
+fn output_only() -> OutputOnly {
+    OutputOnly {
+        spec: ModelSpec::new(
+            "ar",
+            &["a"],
+            Prior::uniform_box(&[-0.7], &[0.7]).unwrap(),
+            1.0,
+            300,
+        )
+        .unwrap()
+        .with_signals(&[], &["y"]),
+    }
+}
+
 #[test]
 fn an_output_only_model_agrees() {
-    let prior = Prior::uniform_box(&[-0.7], &[0.7]).unwrap();
-    let model = OutputOnly {
-        spec: ModelSpec::new("ar", &["a"], prior, 1.0, 300)
-            .unwrap()
-            .with_signals(&[], &["y"]),
-    };
+    let model = output_only();
     let ar = Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap();
     let estimator = structured(&model, ar, "mlp:4", 6);
     check("output only, ar:3", &estimator, &model);
@@ -695,17 +710,7 @@ fn a_sliding_window_estimates_what_each_window_alone_does() {
         300,
         41,
     );
-    let two = TwoByTwo {
-        spec: ModelSpec::new(
-            "two-by-two",
-            &["K", "a", "c"],
-            Prior::uniform_box(&[0.5, -0.8, -0.5], &[2.0, 0.8, 0.5]).unwrap(),
-            1.0,
-            150,
-        )
-        .unwrap()
-        .with_signals(&["u1", "u2"], &["y1", "y2"]),
-    };
+    let two = two_by_two();
     let arx = Arx::new(2, 2).unwrap().with_delay(3).unwrap();
     let delayed = structured(&two, arx, "mlp:5", 4);
     check_window(
@@ -715,17 +720,7 @@ fn a_sliding_window_estimates_what_each_window_alone_does() {
         100,
         13,
     );
-    let output_only = OutputOnly {
-        spec: ModelSpec::new(
-            "ar",
-            &["a"],
-            Prior::uniform_box(&[-0.7], &[0.7]).unwrap(),
-            1.0,
-            300,
-        )
-        .unwrap()
-        .with_signals(&[], &["y"]),
-    };
+    let output_only = output_only();
     let ar = Arx::new(3, 0).unwrap().with_signals(0, 1).unwrap();
     let ar_estimator = structured(&output_only, ar, "mlp:4", 6);
     check_window(
