@@ -23,6 +23,7 @@ use twostage::models::{Benchmark, Simulator};
 
 mod bayes_gap;
 mod crates;
+mod fit_speed;
 mod paper;
 mod test;
 
@@ -85,6 +86,35 @@ enum Command {
         #[arg(long)]
         check: bool,
     },
+    /// The stage-2 fit alone: a model's charts compressed once, the fit
+    /// timed and scored on the validation chart (optionally written as CSV
+    /// for another tool to fit the same features).
+    FitSpeed {
+        /// A built-in model's name or a model file.
+        #[arg(long)]
+        model: String,
+        /// Stage 1, as `train --compress` takes it.
+        #[arg(long, default_value = "arx:4,4")]
+        compress: String,
+        /// Stage 2, as `train --fit` takes it.
+        #[arg(long, default_value = "mlp:32")]
+        fit: String,
+        /// Training records.
+        #[arg(long, default_value_t = 4000)]
+        sims: usize,
+        /// Validation records.
+        #[arg(long, default_value_t = 10_000)]
+        validate: usize,
+        /// Seed of the charts and the fit.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Fits timed (the median is reported).
+        #[arg(long, default_value_t = 1)]
+        repeats: usize,
+        /// Write the charts as CSV into this folder.
+        #[arg(long)]
+        export: Option<PathBuf>,
+    },
     /// Simulate and compress a large benchmark chart; report throughput and
     /// peak memory (the bounded-memory claim of DESIGN.md).
     ChartScale {
@@ -103,6 +133,25 @@ fn main() -> ExitCode {
         Command::ReproducePaper { quick, out, seed } => paper::reproduce(quick, &out, seed),
         Command::ChartScale { sims, threads } => chart_scale(sims, threads),
         Command::Test { args } => test::run(&args),
+        Command::FitSpeed {
+            model,
+            compress,
+            fit,
+            sims,
+            validate,
+            seed,
+            repeats,
+            export,
+        } => fit_speed::run(&fit_speed::FitSpeed {
+            model: &model,
+            compress: &compress,
+            fit: &fit,
+            sims,
+            validate,
+            seed,
+            repeats,
+            export: export.as_deref(),
+        }),
         Command::Crates { check } => crates::run(check),
         Command::BayesGap {
             estimator,

@@ -6,6 +6,7 @@
 //! - `network`: the forward pass, back-propagation and the fitted network;
 //! - `training`: restarts, the Levenberg-Marquardt and Adam trainers.
 
+mod gauss_newton;
 mod network;
 mod params;
 mod training;

@@ -511,6 +511,62 @@ impl Problem<'_> {
             );
     }
 
+    /// What a network of one hidden layer's Gauss-Newton products are made
+    /// of, per training sample `n` (docs/decisions/059): the columns
+    /// `ut[.., n] = s_n (x) [x_n; 1]` (hidden unit by hidden unit, `s` the
+    /// slopes `1 - z^2` of the tanh units), `zt[.., n] = [z_n; 1]` and the
+    /// residuals `output - target` (samples x targets, row-major); blocks
+    /// of samples in parallel.
+    pub(super) fn hidden_layer_terms(
+        &self,
+        params: &[f64],
+        ut: &mut [f64],
+        zt: &mut [f64],
+        res: &mut [f64],
+    ) {
+        let (d, h, q) = (self.sizes[0], self.sizes[1], self.sizes[2]);
+        let columns = by_columns(self.sizes, params);
+        let (unit_rows, hidden_rows) = (h * (d + 1), h + 1);
+        ut.par_chunks_mut(unit_rows * BLOCK_SAMPLES)
+            .zip(zt.par_chunks_mut(hidden_rows * BLOCK_SAMPLES))
+            .zip(res.par_chunks_mut(q * BLOCK_SAMPLES))
+            .zip(self.train.par_chunks(BLOCK_SAMPLES))
+            .for_each_init(
+                || self.activations(),
+                |acts, (((ut, zt), res), rows)| {
+                    widest_vectors(
+                        #[inline(always)]
+                        || {
+                            for (((u, z), r), &i) in ut
+                                .chunks_exact_mut(unit_rows)
+                                .zip(zt.chunks_exact_mut(hidden_rows))
+                                .zip(res.chunks_exact_mut(q))
+                                .zip(rows)
+                            {
+                                let xi = self.x.row(i);
+                                let xi = xi.as_slice().unwrap_or(&[]);
+                                forward(self.sizes, &columns, xi, acts, &self.offsets);
+                                let hidden = &acts[d..d + h];
+                                for (unit, &a) in u.chunks_exact_mut(d + 1).zip(hidden) {
+                                    let slope = 1.0 - a * a;
+                                    let (weights, bias) = unit.split_at_mut(d);
+                                    for (slot, &x) in weights.iter_mut().zip(xi) {
+                                        *slot = slope * x;
+                                    }
+                                    bias[0] = slope;
+                                }
+                                z[..h].copy_from_slice(hidden);
+                                z[h] = 1.0;
+                                for (k, r) in r.iter_mut().enumerate() {
+                                    *r = acts[d + h + k] - self.t[[i, k]];
+                                }
+                            }
+                        },
+                    )
+                },
+            );
+    }
+
     /// [`Self::jacobian`] for the samples `rows`, on one thread.
     fn jacobian_block(
         &self,

@@ -5,8 +5,7 @@
 
 use std::ops::ControlFlow;
 
-use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par};
+use faer::Mat;
 use ndarray::ArrayView2;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -21,6 +20,7 @@ use crate::levenberg_marquardt::{
 };
 use crate::standardize::Standardizer;
 
+use super::gauss_newton::{HiddenLayerProducts, by_structure, gram_products};
 use super::network::{
     FittedMlp, MAX_WIDTH, Problem, RestartReport, initial_parameters, parameter_count,
 };
@@ -306,68 +306,47 @@ fn train_levenberg_marquardt(
 /// The training rows' residuals as a least-squares problem: the cost is
 /// the mean squared error per target value plus the weight decay over the
 /// same count, and the Gauss-Newton products come from the back-propagated
-/// Jacobian (kept here between iterations, transposed: parameters x rows).
+/// Jacobian (kept here between iterations, transposed: parameters x rows)
+/// or, for a network of one hidden layer and several targets, from its
+/// structure.
 struct NetworkLeastSquares<'p, 'a> {
     problem: &'p Problem<'a>,
     rows: usize,
-    jt: Vec<f64>,
-    res: Vec<f64>,
-    jtj: Mat<f64>,
-    jtr: Mat<f64>,
+    products: Products,
 }
 
-/// Columns of `J'J` per parallel task: each task owns its columns' lower
-/// part and sums over every row in one fixed order, so the products do
-/// not depend on the number of threads.
-const GRAM_TILE: usize = 16;
+/// How a restart computes its Gauss-Newton products, with its scratch.
+enum Products {
+    ByJacobian {
+        jt: Vec<f64>,
+        res: Vec<f64>,
+        jtj: Mat<f64>,
+        jtr: Mat<f64>,
+    },
+    ByStructure(Box<HiddenLayerProducts>),
+}
 
 impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
     fn new(problem: &'p Problem<'a>) -> Self {
         let n = problem.n_params();
         let q = *problem.sizes.last().unwrap_or(&1);
         let rows = problem.train.len() * q;
+        let products = if by_structure(problem.sizes) {
+            Products::ByStructure(Box::new(HiddenLayerProducts::new(problem)))
+        } else {
+            Products::ByJacobian {
+                jt: vec![0.0; n * rows],
+                res: vec![0.0; rows],
+                jtj: Mat::zeros(n, n),
+                jtr: Mat::zeros(n, 1),
+            }
+        };
         Self {
             problem,
             rows,
-            jt: vec![0.0; n * rows],
-            res: vec![0.0; rows],
-            jtj: Mat::zeros(n, n),
-            jtr: Mat::zeros(n, 1),
+            products,
         }
     }
-}
-
-/// The lower triangle of `scale J'J` and `scale J'r` from `J'` (n x rows,
-/// column-major) and `r`, by tiles of [`GRAM_TILE`] columns in parallel.
-fn gram_products(jt: &[f64], res: &[f64], scale: f64, jtj: &mut Mat<f64>, jtr: &mut Mat<f64>) {
-    let n = jtj.nrows();
-    let rows = res.len();
-    let jt = MatRef::from_column_major_slice(jt, n, rows);
-    let res = MatRef::from_column_major_slice(res, rows, 1);
-    jtj.as_mut()
-        .par_col_chunks_mut(GRAM_TILE)
-        .zip(jtr.as_mut().par_row_chunks_mut(GRAM_TILE))
-        .enumerate()
-        .for_each(|(tile, (columns, gradient))| {
-            let first = tile * GRAM_TILE;
-            let width = columns.ncols();
-            matmul(
-                columns.subrows_mut(first, n - first),
-                Accum::Replace,
-                jt.subrows(first, n - first),
-                jt.subrows(first, width).transpose(),
-                scale,
-                Par::Seq,
-            );
-            matmul(
-                gradient,
-                Accum::Replace,
-                jt.subrows(first, width),
-                res,
-                scale,
-                Par::Seq,
-            );
-        });
 }
 
 impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
@@ -397,16 +376,31 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
     ) -> std::result::Result<(), Self::Error> {
         let n = jtr.len();
         let scale = 1.0 / self.rows as f64;
-        self.problem.jacobian(params, &mut self.jt, &mut self.res);
-        gram_products(&self.jt, &self.res, scale, &mut self.jtj, &mut self.jtr);
+        match &mut self.products {
+            Products::ByJacobian {
+                jt,
+                res,
+                jtj: gram,
+                jtr: gradient,
+            } => {
+                self.problem.jacobian(params, jt, res);
+                gram_products(jt, res, scale, gram, gradient);
+                for i in 0..n {
+                    for j in 0..=i {
+                        jtj[i * n + j] = gram[(i, j)];
+                    }
+                    jtr[i] = gradient[(i, 0)];
+                }
+            }
+            Products::ByStructure(products) => {
+                products.products(self.problem, params, scale, jtj, jtr);
+            }
+        }
         // The weight decay term decay * ||p||^2 / rows: its Hessian and gradient.
         let d = self.problem.decay * scale;
         for i in 0..n {
-            for j in 0..=i {
-                jtj[i * n + j] = self.jtj[(i, j)];
-            }
             jtj[i * n + i] += d;
-            jtr[i] = self.jtr[(i, 0)] + d * params[i];
+            jtr[i] += d * params[i];
         }
         Ok(())
     }
@@ -757,31 +751,5 @@ mod tests {
                 .iter()
                 .all(|r| r.reason.trainer() == "Levenberg-Marquardt")
         );
-    }
-
-    /// The tiled products against a plain triple loop, with a width that
-    /// is not a multiple of the tile.
-    #[test]
-    fn gram_products_match_the_plain_sums() {
-        let (n, rows) = (2 * GRAM_TILE + 5, 53);
-        let value = |i: usize| ((i * 7919 + 13) % 101) as f64 / 50.0 - 1.0;
-        let jt: Vec<f64> = (0..n * rows).map(value).collect();
-        let res: Vec<f64> = (0..rows).map(|i| value(i + 5000)).collect();
-        let (mut jtj, mut jtr) = (Mat::zeros(n, n), Mat::zeros(n, 1));
-        gram_products(&jt, &res, 0.5, &mut jtj, &mut jtr);
-        for i in 0..n {
-            let mut gradient = 0.0;
-            for r in 0..rows {
-                gradient += jt[r * n + i] * res[r];
-            }
-            assert!((jtr[(i, 0)] - 0.5 * gradient).abs() < 1e-12, "J'r[{i}]");
-            for j in 0..=i {
-                let mut product = 0.0;
-                for r in 0..rows {
-                    product += jt[r * n + i] * jt[r * n + j];
-                }
-                assert!((jtj[(i, j)] - 0.5 * product).abs() < 1e-12, "J'J[{i}, {j}]");
-            }
-        }
     }
 }

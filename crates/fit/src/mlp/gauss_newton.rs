@@ -1,0 +1,354 @@
+//! The Gauss-Newton products `J'J` and `J'r` of the training's least
+//! squares, by either of two computations of the same numbers
+//! (docs/decisions/026, 059):
+//!
+//! - from the Jacobian itself, one row per sample and target, for any
+//!   network;
+//! - from the structure of a network with one hidden layer, whose `q`
+//!   outputs share it: every first-layer block of `J'J` is one Gram matrix
+//!   of a row per sample, weighted by the output weights' own Gram matrix,
+//!   and the output layer's blocks are the hidden activations' Gram matrix.
+//!   Its cost does not grow with the number of targets, so it is chosen
+//!   from two targets on.
+//!
+//! Every product is summed over the samples in one fixed order by tiles
+//! that run in parallel, so the result does not depend on the number of
+//! threads.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+use rayon::prelude::*;
+
+use super::network::Problem;
+
+/// Columns of a Gram matrix per parallel task: each task owns its columns'
+/// lower part and sums over every sample in one fixed order.
+pub(super) const GRAM_TILE: usize = 16;
+
+/// The lower triangle of `scale A A'` for `a` (features x samples), by
+/// tiles of [`GRAM_TILE`] columns in parallel.
+fn lower_gram(a: MatRef<'_, f64>, scale: f64, out: MatMut<'_, f64>) {
+    let n = a.nrows();
+    out.par_col_chunks_mut(GRAM_TILE)
+        .enumerate()
+        .for_each(|(tile, columns)| {
+            let first = tile * GRAM_TILE;
+            let width = columns.ncols();
+            matmul(
+                columns.subrows_mut(first, n - first),
+                Accum::Replace,
+                a.subrows(first, n - first),
+                a.subrows(first, width).transpose(),
+                scale,
+                Par::Seq,
+            );
+        });
+}
+
+/// The lower triangle of `scale J'J` and `scale J'r` from `J'` (n x rows,
+/// column-major) and `r`, by tiles of [`GRAM_TILE`] columns in parallel.
+pub(super) fn gram_products(
+    jt: &[f64],
+    res: &[f64],
+    scale: f64,
+    jtj: &mut Mat<f64>,
+    jtr: &mut Mat<f64>,
+) {
+    let n = jtj.nrows();
+    let rows = res.len();
+    let jt = MatRef::from_column_major_slice(jt, n, rows);
+    let res = MatRef::from_column_major_slice(res, rows, 1);
+    lower_gram(jt, scale, jtj.as_mut());
+    jtr.as_mut()
+        .par_row_chunks_mut(GRAM_TILE)
+        .enumerate()
+        .for_each(|(tile, gradient)| {
+            let first = tile * GRAM_TILE;
+            let width = gradient.nrows();
+            matmul(
+                gradient,
+                Accum::Replace,
+                jt.subrows(first, width),
+                res,
+                scale,
+                Par::Seq,
+            );
+        });
+}
+
+/// Whether the products are cheaper from the structure of a network with
+/// these layer sizes: one hidden layer and at least two targets (with
+/// one, both computations cost the same, and the Jacobian's is kept).
+pub(super) fn by_structure(sizes: &[usize]) -> bool {
+    sizes.len() == 3 && sizes[2] >= 2
+}
+
+/// Scratch and results of the structured products of one restart.
+pub(super) struct HiddenLayerProducts {
+    inputs: usize,
+    hidden: usize,
+    targets: usize,
+    samples: usize,
+    /// `s_n (x) [x_n; 1]` per sample (unit-major rows).
+    ut: Vec<f64>,
+    /// `[z_n; 1]` per sample.
+    zt: Vec<f64>,
+    /// Residuals, samples x targets row-major (targets x samples
+    /// column-major).
+    res: Vec<f64>,
+    unit_gram: Mat<f64>,
+    cross: Mat<f64>,
+    hidden_gram: Mat<f64>,
+    back: Mat<f64>,
+    unit_gradient: Mat<f64>,
+    output_gradient: Mat<f64>,
+}
+
+impl HiddenLayerProducts {
+    /// Scratch for `problem`, whose network has one hidden layer.
+    pub(super) fn new(problem: &Problem<'_>) -> Self {
+        let (d, h, q) = (problem.sizes[0], problem.sizes[1], problem.sizes[2]);
+        let samples = problem.train.len();
+        let units = h * (d + 1);
+        Self {
+            inputs: d,
+            hidden: h,
+            targets: q,
+            samples,
+            ut: vec![0.0; units * samples],
+            zt: vec![0.0; (h + 1) * samples],
+            res: vec![0.0; q * samples],
+            unit_gram: Mat::zeros(units, units),
+            cross: Mat::zeros(units, h + 1),
+            hidden_gram: Mat::zeros(h + 1, h + 1),
+            back: Mat::zeros(h, samples),
+            unit_gradient: Mat::zeros(units, 1),
+            output_gradient: Mat::zeros(h + 1, q),
+        }
+    }
+
+    /// The lower triangle of `scale J'J` (row-major, `n x n` for the
+    /// network's `n` weights) and `scale J'r` at `params`.
+    pub(super) fn products(
+        &mut self,
+        problem: &Problem<'_>,
+        params: &[f64],
+        scale: f64,
+        jtj: &mut [f64],
+        jtr: &mut [f64],
+    ) {
+        let (d, h, q, samples) = (self.inputs, self.hidden, self.targets, self.samples);
+        let units = h * (d + 1);
+        problem.hidden_layer_terms(params, &mut self.ut, &mut self.zt, &mut self.res);
+        let ut = MatRef::from_column_major_slice(&self.ut, units, samples);
+        let zt = MatRef::from_column_major_slice(&self.zt, h + 1, samples);
+        let rt = MatRef::from_column_major_slice(&self.res, q, samples);
+        // The output weights V (targets x hidden units, row-major).
+        let v = MatRef::from_row_major_slice(&params[units..units + q * h], q, h);
+        lower_gram(ut, scale, self.unit_gram.as_mut());
+        self.cross
+            .as_mut()
+            .par_row_chunks_mut(GRAM_TILE)
+            .enumerate()
+            .for_each(|(tile, rows)| {
+                let first = tile * GRAM_TILE;
+                let width = rows.nrows();
+                matmul(
+                    rows,
+                    Accum::Replace,
+                    ut.subrows(first, width),
+                    zt.transpose(),
+                    scale,
+                    Par::Seq,
+                );
+            });
+        matmul(
+            self.hidden_gram.as_mut(),
+            Accum::Replace,
+            zt,
+            zt.transpose(),
+            scale,
+            Par::Seq,
+        );
+        // Each sample's residuals sent back to the hidden units: V' r_n.
+        matmul(
+            self.back.as_mut(),
+            Accum::Replace,
+            v.transpose(),
+            rt,
+            1.0,
+            Par::Seq,
+        );
+        for unit in 0..h {
+            matmul(
+                self.unit_gradient.as_mut().subrows_mut(unit * (d + 1), d + 1),
+                Accum::Replace,
+                ut.subrows(unit * (d + 1), d + 1),
+                self.back.as_ref().row(unit).transpose().as_mat(),
+                scale,
+                Par::Seq,
+            );
+        }
+        matmul(
+            self.output_gradient.as_mut(),
+            Accum::Replace,
+            zt,
+            rt.transpose(),
+            scale,
+            Par::Seq,
+        );
+        self.assemble(v, params.len(), jtj, jtr);
+    }
+
+    /// Where the structured blocks go in the network's weight order: the
+    /// first layer's weights unit by unit, then its biases; the output
+    /// layer's likewise.
+    fn assemble(&self, v: MatRef<'_, f64>, n: usize, jtj: &mut [f64], jtr: &mut [f64]) {
+        let (d, h, q) = (self.inputs, self.hidden, self.targets);
+        let units = h * (d + 1);
+        let first = |a: usize| {
+            let (unit, input) = (a / (d + 1), a % (d + 1));
+            if input < d {
+                unit * d + input
+            } else {
+                h * d + unit
+            }
+        };
+        let output = |p: usize, k: usize| {
+            if k < h {
+                units + p * h + k
+            } else {
+                units + q * h + p
+            }
+        };
+        let mut set = |i: usize, j: usize, value: f64| {
+            let (row, column) = if i >= j { (i, j) } else { (j, i) };
+            jtj[row * n + column] = value;
+        };
+        // The output weights' Gram matrix V'V weights the first layer's.
+        let mut weights = Mat::<f64>::zeros(h, h);
+        matmul(
+            weights.as_mut(),
+            Accum::Replace,
+            v.transpose(),
+            v,
+            1.0,
+            Par::Seq,
+        );
+        for a in 0..units {
+            for b in 0..=a {
+                let value = weights[(a / (d + 1), b / (d + 1))] * self.unit_gram[(a, b)];
+                set(first(a), first(b), value);
+            }
+        }
+        for p in 0..q {
+            for k in 0..=h {
+                for a in 0..units {
+                    set(output(p, k), first(a), v[(p, a / (d + 1))] * self.cross[(a, k)]);
+                }
+                for other in 0..q {
+                    for l in 0..=h {
+                        let value = if other == p {
+                            let (row, column) = if k >= l { (k, l) } else { (l, k) };
+                            self.hidden_gram[(row, column)]
+                        } else {
+                            0.0
+                        };
+                        set(output(p, k), output(other, l), value);
+                    }
+                }
+            }
+        }
+        for a in 0..units {
+            jtr[first(a)] = self.unit_gradient[(a, 0)];
+        }
+        for p in 0..q {
+            for k in 0..=h {
+                jtr[output(p, k)] = self.output_gradient[(k, p)];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use ndarray::Array2;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+    use crate::mlp::network::initial_parameters;
+
+    /// The tiled products against a plain triple loop, with a width that
+    /// is not a multiple of the tile.
+    #[test]
+    fn gram_products_match_the_plain_sums() {
+        let (n, rows) = (2 * GRAM_TILE + 5, 53);
+        let value = |i: usize| ((i * 7919 + 13) % 101) as f64 / 50.0 - 1.0;
+        let jt: Vec<f64> = (0..n * rows).map(value).collect();
+        let res: Vec<f64> = (0..rows).map(|i| value(i + 5000)).collect();
+        let (mut jtj, mut jtr) = (Mat::zeros(n, n), Mat::zeros(n, 1));
+        gram_products(&jt, &res, 0.5, &mut jtj, &mut jtr);
+        for i in 0..n {
+            let mut gradient = 0.0;
+            for r in 0..rows {
+                gradient += jt[r * n + i] * res[r];
+            }
+            assert!((jtr[(i, 0)] - 0.5 * gradient).abs() < 1e-12, "J'r[{i}]");
+            for j in 0..=i {
+                let mut product = 0.0;
+                for r in 0..rows {
+                    product += jt[r * n + i] * jt[r * n + j];
+                }
+                assert!((jtj[(i, j)] - 0.5 * product).abs() < 1e-12, "J'J[{i}, {j}]");
+            }
+        }
+    }
+
+    /// The structured products against the Jacobian's, on a network whose
+    /// rows span several blocks: the same numbers in another order.
+    #[test]
+    fn structured_products_match_the_jacobians() {
+        let sizes = [3, 5, 4];
+        let samples = 700;
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let x = Array2::from_shape_fn((samples, 3), |_| rng.random_range(-2.0..2.0));
+        let t = Array2::from_shape_fn((samples, 4), |_| rng.random_range(-1.0..1.0));
+        let order: Vec<usize> = (0..samples).rev().collect();
+        let (held_out, train) = order.split_at(100);
+        let problem = Problem {
+            sizes: &sizes,
+            offsets: vec![0, 3, 8, 12],
+            x: &x,
+            t: &t,
+            train,
+            held_out,
+            decay: 0.0,
+        };
+        let params = initial_parameters(&sizes, &mut rng);
+        let n = params.len();
+        let rows = train.len() * 4;
+        let (mut jt, mut res) = (vec![0.0; n * rows], vec![0.0; rows]);
+        problem.jacobian(&params, &mut jt, &mut res);
+        let (mut jtj, mut jtr) = (Mat::zeros(n, n), Mat::zeros(n, 1));
+        gram_products(&jt, &res, 0.25, &mut jtj, &mut jtr);
+        let mut structured = HiddenLayerProducts::new(&problem);
+        let (mut sjtj, mut sjtr) = (vec![f64::NAN; n * n], vec![f64::NAN; n]);
+        structured.products(&problem, &params, 0.25, &mut sjtj, &mut sjtr);
+        let largest = (0..n)
+            .flat_map(|i| (0..=i).map(move |j| (i, j)))
+            .map(|(i, j)| jtj[(i, j)].abs())
+            .fold(0.0, f64::max);
+        for i in 0..n {
+            let gradient = jtr[(i, 0)];
+            assert!((sjtr[i] - gradient).abs() <= 1e-12 * largest, "J'r[{i}]");
+            for j in 0..=i {
+                let (a, b) = (sjtj[i * n + j], jtj[(i, j)]);
+                assert!((a - b).abs() <= 1e-12 * largest, "J'J[{i}, {j}]: {a} against {b}");
+            }
+        }
+        assert!(by_structure(&sizes));
+        assert!(!by_structure(&[3, 5, 1]));
+        assert!(!by_structure(&[3, 5, 5, 4]));
+    }
+}
