@@ -128,8 +128,11 @@ fn the_presets_write_the_files_they_always_wrote() {
                 &bench_recommended,
                 0xa0738bd59e117549,
             ),
-            ("pacejka-paper", &car_paper, 0xb0e3848ca7190641),
-            ("pacejka-recommended", &car_recommended, 0xc6b37ded6e57d0fe),
+            // The car's two targets share one hidden layer: its
+            // Gauss-Newton products come from the structure since
+            // decision 059 (the same numbers summed in another order).
+            ("pacejka-paper", &car_paper, 0x2db888edf61cd85d),
+            ("pacejka-recommended", &car_recommended, 0xca7977637ba72d52),
         ],
         &dir,
     );

@@ -134,18 +134,30 @@ fn the_network_fits_what_a_linear_map_cannot() {
 
 /// Enough rows for several of the parallel loops' blocks (256 samples),
 /// so the Jacobian, the Gauss-Newton products and Adam's gradients are
-/// divided over the threads: the file must not notice.
+/// divided over the threads: the file must not notice. Two hidden layers
+/// take the Jacobian's products, one (of two targets) the structured ones
+/// over several tiles.
 #[test]
 fn training_is_identical_whatever_the_thread_count() {
     let x = uniform(900, 3, 7);
     let y = nonlinear(&x.slice(ndarray::s![.., 0..2]).to_owned());
+    for hidden in [&[6, 4][..], &[12]] {
+        training_is_identical_whatever_the_thread_count_for(hidden, &x, &y);
+    }
+}
+
+fn training_is_identical_whatever_the_thread_count_for(
+    hidden: &[usize],
+    x: &Array2<f64>,
+    y: &Array2<f64>,
+) {
     let fit = |threads: usize, trainer: Trainer, seed: u64| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         pool.install(|| {
-            MlpParams::new(&[6, 4])
+            MlpParams::new(hidden)
                 .unwrap()
                 .restarts(3)
                 .max_iterations(25)

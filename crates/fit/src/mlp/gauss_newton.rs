@@ -19,7 +19,7 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use super::network::Problem;
+use super::network::{Problem, parameter_count};
 
 /// Columns of a Gram matrix per parallel task: each task owns its columns'
 /// lower part and sums over every sample in one fixed order.
@@ -83,6 +83,18 @@ pub(super) fn by_structure(sizes: &[usize]) -> bool {
     sizes.len() == 3 && sizes[2] >= 2
 }
 
+/// The entries a restart's products keep per training sample: the
+/// Jacobian's row per target, or the structure's `s (x) [x; 1]`, `[z; 1]`
+/// and residuals.
+pub(super) fn entries_per_sample(sizes: &[usize]) -> usize {
+    if by_structure(sizes) {
+        let (d, h, q) = (sizes[0], sizes[1], sizes[2]);
+        h * (d + 1) + h + 1 + q
+    } else {
+        sizes.last().copied().unwrap_or(1) * parameter_count(sizes)
+    }
+}
+
 /// Scratch and results of the structured products of one restart.
 pub(super) struct HiddenLayerProducts {
     inputs: usize,
@@ -96,6 +108,8 @@ pub(super) struct HiddenLayerProducts {
     /// Residuals, samples x targets row-major (targets x samples
     /// column-major).
     res: Vec<f64>,
+    /// The weights `ut`, `zt` and `res` were computed at, if any.
+    evaluated_at: Option<Vec<f64>>,
     unit_gram: Mat<f64>,
     cross: Mat<f64>,
     hidden_gram: Mat<f64>,
@@ -118,6 +132,7 @@ impl HiddenLayerProducts {
             ut: vec![0.0; units * samples],
             zt: vec![0.0; (h + 1) * samples],
             res: vec![0.0; q * samples],
+            evaluated_at: None,
             unit_gram: Mat::zeros(units, units),
             cross: Mat::zeros(units, h + 1),
             hidden_gram: Mat::zeros(h + 1, h + 1),
@@ -125,6 +140,22 @@ impl HiddenLayerProducts {
             unit_gradient: Mat::zeros(units, 1),
             output_gradient: Mat::zeros(h + 1, q),
         }
+    }
+
+    /// The residuals at `params` into `r` (samples x targets, row-major),
+    /// the products' terms there kept for [`Self::products`] at the same
+    /// weights: Levenberg-Marquardt asks for the products where it last
+    /// evaluated the residuals, the step it accepted.
+    pub(super) fn evaluate(&mut self, problem: &Problem<'_>, params: &[f64], r: &mut [f64]) {
+        self.compute_terms(problem, params);
+        r.copy_from_slice(&self.res);
+    }
+
+    fn compute_terms(&mut self, problem: &Problem<'_>, params: &[f64]) {
+        problem.hidden_layer_terms(params, &mut self.ut, &mut self.zt, &mut self.res);
+        let at = self.evaluated_at.get_or_insert_with(Vec::new);
+        at.clear();
+        at.extend_from_slice(params);
     }
 
     /// The lower triangle of `scale J'J` (row-major, `n x n` for the
@@ -139,7 +170,12 @@ impl HiddenLayerProducts {
     ) {
         let (d, h, q, samples) = (self.inputs, self.hidden, self.targets, self.samples);
         let units = h * (d + 1);
-        problem.hidden_layer_terms(params, &mut self.ut, &mut self.zt, &mut self.res);
+        let same = |at: &Vec<f64>| {
+            at.len() == params.len() && at.iter().zip(params).all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        if !self.evaluated_at.as_ref().is_some_and(same) {
+            self.compute_terms(problem, params);
+        }
         let ut = MatRef::from_column_major_slice(&self.ut, units, samples);
         let zt = MatRef::from_column_major_slice(&self.zt, h + 1, samples);
         let rt = MatRef::from_column_major_slice(&self.res, q, samples);
@@ -347,6 +383,22 @@ mod tests {
                 assert!((a - b).abs() <= 1e-12 * largest, "J'J[{i}, {j}]: {a} against {b}");
             }
         }
+        // Residuals evaluated elsewhere in between, or at these weights:
+        // the same products to the bit, and the Jacobian's residuals.
+        let elsewhere: Vec<f64> = params.iter().map(|p| p * 0.9).collect();
+        let mut r = vec![0.0; rows];
+        for at in [&elsewhere, &params] {
+            structured.evaluate(&problem, at, &mut r);
+            let (mut again, mut again_r) = (vec![f64::NAN; n * n], vec![f64::NAN; n]);
+            structured.products(&problem, &params, 0.25, &mut again, &mut again_r);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+            assert_eq!(bits(&again), bits(&sjtj));
+            assert_eq!(bits(&again_r), bits(&sjtr));
+        }
+        assert_eq!(
+            r.iter().map(|x| x.to_bits()).collect::<Vec<u64>>(),
+            res.iter().map(|x| x.to_bits()).collect::<Vec<u64>>()
+        );
         assert!(by_structure(&sizes));
         assert!(!by_structure(&[3, 5, 1]));
         assert!(!by_structure(&[3, 5, 5, 4]));

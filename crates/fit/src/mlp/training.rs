@@ -20,7 +20,7 @@ use crate::levenberg_marquardt::{
 };
 use crate::standardize::Standardizer;
 
-use super::gauss_newton::{HiddenLayerProducts, by_structure, gram_products};
+use super::gauss_newton::{HiddenLayerProducts, by_structure, entries_per_sample, gram_products};
 use super::network::{
     FittedMlp, MAX_WIDTH, Problem, RestartReport, initial_parameters, parameter_count,
 };
@@ -85,15 +85,16 @@ enum Plan {
     },
 }
 
-/// The plan for `trainer` on `rows` training samples of `q` targets and a
-/// network of `n_params` weights.
-fn plan(trainer: Trainer, rows: usize, q: usize, n_params: usize, max_jacobian: usize) -> Plan {
+/// The plan for `trainer` on `rows` training samples for a network of
+/// layer sizes `sizes`, Levenberg-Marquardt's products keeping at most
+/// `max_jacobian` entries.
+fn plan(trainer: Trainer, rows: usize, sizes: &[usize], max_jacobian: usize) -> Plan {
     match trainer {
         Trainer::LevenbergMarquardt => Plan::LevenbergMarquardt,
         Trainer::Adam { .. } => Plan::Adam,
-        Trainer::Auto if n_params > MAX_LM_WEIGHTS => Plan::Adam,
+        Trainer::Auto if parameter_count(sizes) > MAX_LM_WEIGHTS => Plan::Adam,
         Trainer::Auto => {
-            let lm_rows = max_jacobian / (q.max(1) * n_params.max(1));
+            let lm_rows = max_jacobian / entries_per_sample(sizes).max(1);
             if rows <= lm_rows {
                 Plan::LevenbergMarquardt
             } else {
@@ -358,7 +359,12 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
         r: &mut Vec<f64>,
     ) -> std::result::Result<(), Self::Error> {
         r.resize(self.rows, 0.0);
-        self.problem.residuals(params, r);
+        match &mut self.products {
+            // The structure's terms come with the residuals: kept, they
+            // spare the accepted point's products a second forward pass.
+            Products::ByStructure(products) => products.evaluate(self.problem, params, r),
+            Products::ByJacobian { .. } => self.problem.residuals(params, r),
+        }
         Ok(())
     }
 
@@ -527,7 +533,6 @@ impl Mlp {
         let mut sizes = vec![n_in];
         sizes.extend(&p.hidden);
         sizes.push(q);
-        let n_params = parameter_count(&sizes);
         let n_held = (p.validation_fraction * m as f64).round() as usize;
         let n_train = m - n_held;
         if n_train < 2 || (p.validation_fraction > 0.0 && n_held == 0) {
@@ -570,7 +575,7 @@ impl Mlp {
             held_out,
             decay: p.weight_decay,
         };
-        let plan = plan(p.trainer, train.len(), q, n_params, max_jacobian);
+        let plan = plan(p.trainer, train.len(), &sizes, max_jacobian);
         let first_rows = match plan {
             Plan::Both { lm_rows } => Problem {
                 train: &train[..lm_rows.clamp(2, train.len())],
@@ -644,21 +649,34 @@ mod tests {
     #[test]
     fn auto_runs_both_trainers_where_levenberg_marquardt_alone_would_not_fit() {
         let limit = MAX_JACOBIAN_ENTRIES;
+        // 222 weights, one target: the Jacobian's 222 entries a sample.
         assert_eq!(
-            plan(Trainer::Auto, 3000, 1, 222, limit),
+            plan(Trainer::Auto, 3000, &[15, 13, 1], limit),
             Plan::LevenbergMarquardt
         );
-        // 20e6 / (7 * 487) = 5866 rows for LM, Adam on all 6800.
+        // Two hidden layers, 467 weights, 7 targets: 20e6 / (7 * 467) =
+        // 6118 rows for LM, Adam on all 6800.
         assert_eq!(
-            plan(Trainer::Auto, 6800, 7, 487, limit),
-            Plan::Both { lm_rows: 5866 }
+            plan(Trainer::Auto, 6800, &[8, 20, 10, 7], limit),
+            Plan::Both { lm_rows: 6118 }
         );
-        assert_eq!(plan(Trainer::Auto, 100, 1, 5000, limit), Plan::Adam);
+        // One hidden layer of 30 units shared by 7 targets (487 weights):
+        // the structured products keep 30 * 9 + 31 + 7 = 308 entries a
+        // sample, so LM takes 20e6 / 308 = 64935 rows.
         assert_eq!(
-            plan(Trainer::LevenbergMarquardt, 200_000, 1, 5000, limit),
+            plan(Trainer::Auto, 6800, &[8, 30, 7], limit),
             Plan::LevenbergMarquardt
         );
-        assert_eq!(plan(Trainer::ADAM, 10, 1, 10, limit), Plan::Adam);
+        assert_eq!(
+            plan(Trainer::Auto, 100_000, &[8, 30, 7], limit),
+            Plan::Both { lm_rows: 64935 }
+        );
+        assert_eq!(plan(Trainer::Auto, 100, &[100, 49, 1], limit), Plan::Adam);
+        assert_eq!(
+            plan(Trainer::LevenbergMarquardt, 200_000, &[100, 49, 1], limit),
+            Plan::LevenbergMarquardt
+        );
+        assert_eq!(plan(Trainer::ADAM, 10, &[2, 3, 1], limit), Plan::Adam);
     }
 
     /// Members added while time is left: a member the stop time cuts
