@@ -660,3 +660,29 @@ fn the_output_noise_can_take_a_measured_residuals_spectrum() {
         );
     }
 }
+
+/// Every model file the documentation shows loads: its keys, priors,
+/// input design and equations are read as a user would read them (the
+/// command sources are not started).
+#[test]
+fn every_example_model_file_loads() {
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/examples");
+    let mut loaded = Vec::new();
+    for folder in std::fs::read_dir(&examples).unwrap() {
+        let folder = folder.unwrap().path();
+        if !folder.is_dir() {
+            continue;
+        }
+        for file in std::fs::read_dir(&folder).unwrap() {
+            let file = file.unwrap().path();
+            if file.extension().is_some_and(|e| e == "toml") {
+                ModelFile::load(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+                loaded.push(file);
+            }
+        }
+    }
+    assert!(
+        loaded.iter().any(|f| f.ends_with("tanks/tanks7_equations.toml")),
+        "{loaded:?}"
+    );
+}
