@@ -112,8 +112,14 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         fs::create_dir_all(dir)?;
         write_csv(&dir.join("train_features.csv"), charts.train.0.view())?;
         write_csv(&dir.join("train_targets.csv"), charts.train.1.view())?;
-        write_csv(&dir.join("validation_features.csv"), charts.validation.0.view())?;
-        write_csv(&dir.join("validation_targets.csv"), charts.validation.1.view())?;
+        write_csv(
+            &dir.join("validation_features.csv"),
+            charts.validation.0.view(),
+        )?;
+        write_csv(
+            &dir.join("validation_targets.csv"),
+            charts.validation.1.view(),
+        )?;
         println!("charts written to {}", dir.display());
     }
     let regressor: RegressorConfig = options

@@ -19,9 +19,33 @@ pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig)
     )
 }
 
-/// Weights and biases of a network candidate on n features and q outputs:
-/// the cost of a Levenberg-Marquardt fit grows with its power
-/// [`COST_EXPONENT`](crate::cost::COST_EXPONENT) or so (round 2).
+/// What one Levenberg-Marquardt iteration of a candidate's fit costs a
+/// training row on n features and q outputs: a fit's time grows with its
+/// power [`PRODUCTS_EXPONENT`](crate::cost::PRODUCTS_EXPONENT) or so
+/// (round 2). A network of one hidden layer shared by several outputs
+/// costs far less than its weights say (decision 059).
+pub(super) fn fit_cost(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
+    match regressor {
+        RegressorConfig::Mlp(mlp) => {
+            let mut sizes = vec![n];
+            sizes.extend_from_slice(mlp.params().hidden());
+            sizes.push(q);
+            twostage_fit::products_per_sample(&sizes)
+        }
+        // The global network on every row, then experts that together see
+        // the rows about 1.5 times: counted as a network of 2.5 times the
+        // weights, whose products are the square of that.
+        RegressorConfig::Piecewise(p) => {
+            2.5 * 2.5 * fit_cost(&RegressorConfig::Mlp(p.global().clone()), n, q)
+        }
+        _ => {
+            let weights = (n * q + q) as f64;
+            weights * weights / 2.0
+        }
+    }
+}
+
+/// Weights and biases of a network candidate on n features and q outputs.
 pub(super) fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
         RegressorConfig::Mlp(mlp) => {
@@ -243,5 +267,33 @@ mod tests {
             _ => true,
         }));
         assert!(held.iter().any(|c| matches!(c, CompressorConfig::Arx(_))));
+    }
+
+    /// With one target every cost estimate is the weights' power 1.2 it
+    /// always was; with several, a network of one hidden layer is
+    /// estimated at what its structured products cost, far below a
+    /// network of two layers of as many weights a unit.
+    #[test]
+    fn fit_costs_follow_the_products_a_fit_takes() {
+        let net = |hidden: &[usize]| {
+            RegressorConfig::Mlp(MlpParams::new(hidden).unwrap().check().unwrap())
+        };
+        let (small, wide, deep) = (net(&[20]), net(&[40]), net(&[20, 20]));
+        let pieces = pieces(4, &[20]).unwrap();
+        let ratio = |a: &RegressorConfig, b: &RegressorConfig, q: usize| {
+            (fit_cost(a, 4, q) / fit_cost(b, 4, q)).powf(crate::cost::PRODUCTS_EXPONENT)
+        };
+        let weights = |a: &RegressorConfig, b: &RegressorConfig| {
+            (network_size(a, 4, 1) / network_size(b, 4, 1)).powf(1.2)
+        };
+        for (a, b) in [(&wide, &small), (&deep, &small), (&pieces, &small)] {
+            let (new, old) = (ratio(a, b, 1), weights(a, b));
+            assert!((new - old).abs() <= 1e-12 * old, "{new} against {old}");
+        }
+        // Seven targets: [20, 20] by its Jacobian's 7 x 667 weights a row,
+        // [20] by the structure's 100 + 21 columns.
+        let seven = ratio(&deep, &small, 7);
+        assert!(seven > 20.0, "{seven}");
+        assert!(ratio(&wide, &small, 7) < 3.0);
     }
 }

@@ -3,9 +3,11 @@
 //! shares of the time left that its plans may spend. Every number here was
 //! measured on the benchmark on 2 cores (docs/accuracy.md, decision 034).
 
-/// How a network's fit time grows with its weights, for round 2's cost
-/// estimates (see `round_two`).
-pub(crate) const COST_EXPONENT: f64 = 1.2;
+/// How a network's fit time grows with the cost of its Levenberg-Marquardt
+/// products a row (`candidates::fit_cost`), for round 2's cost estimates
+/// (see `round_two`): measured as the weights' power 1.2 when every
+/// network's products grew as its weights squared, so 0.6 of the products.
+pub(crate) const PRODUCTS_EXPONENT: f64 = 0.6;
 /// How a network's fit time grows with its rows: Levenberg-Marquardt's
 /// products grow linearly with them, and its iterations to the held-out
 /// minimum grow too (until its iteration limit). Measured on the benchmark

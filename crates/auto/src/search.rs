@@ -10,14 +10,14 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::{IoData, Simulator};
 use twostage_sources::{ForModel, StoredChart};
 
-use crate::candidates::{design, network_size};
+use crate::candidates::{design, fit_cost};
 
 mod anytime;
 mod final_fit;
 
 use crate::cost::{
-    COST_EXPONENT, COST_MARGIN, MIN_TIE, REFIT_SHARE, SIZED_SHARE, affordable_rows, fit_seconds,
-    measured_exponent, round_two_floor, rows_growth, screening_rows,
+    COST_MARGIN, MIN_TIE, PRODUCTS_EXPONENT, REFIT_SHARE, SIZED_SHARE, affordable_rows,
+    fit_seconds, measured_exponent, round_two_floor, rows_growth, screening_rows,
 };
 use crate::{Budget, CandidateReport, Status};
 pub(super) use final_fit::Winner;
@@ -256,16 +256,16 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .filter_map(|&i| {
                 let (c, _) = self.candidates[i].fitted.as_ref()?;
                 let n = c.n_features();
-                let base_size = network_size(medium, n, q);
+                let base_cost = fit_cost(medium, n, q);
                 let seconds = self.candidates[i].report.seconds;
                 Some(trials.iter().map(move |net| {
-                    // Levenberg-Marquardt's products grow with the square
-                    // of the weights, its iterations less: on 16000 rows
-                    // the benchmark's fits grew as size^1.4 to size^1.5, on
-                    // the 4000 of a screened round as size^0.6 to size^1.1
+                    // Levenberg-Marquardt's products dominate its time, its
+                    // iterations grow less: on 16000 rows the benchmark's
+                    // fits grew as weights^1.4 to weights^1.5, on the 4000
+                    // of a screened round as weights^0.6 to weights^1.1
                     // (other costs weigh more there). Round 2 sizes its rows
                     // by these estimates, so they aim at the middle.
-                    let scale = (network_size(net, n, q) / base_size).powf(COST_EXPONENT);
+                    let scale = (fit_cost(net, n, q) / base_cost).powf(PRODUCTS_EXPONENT);
                     (c.clone(), (*net).clone(), seconds * scale)
                 }))
             })

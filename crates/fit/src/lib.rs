@@ -45,7 +45,9 @@ pub use levenberg_marquardt::{
     LevenbergMarquardt, LmRun, Minimum, ModelAt, Need, TerminationReason, normal_products,
 };
 pub use linear::{FittedLinear, Ridge};
-pub use mlp::{FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, n_parameters};
+pub use mlp::{
+    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, n_parameters, products_per_sample,
+};
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;
 

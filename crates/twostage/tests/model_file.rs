@@ -682,7 +682,9 @@ fn every_example_model_file_loads() {
         }
     }
     assert!(
-        loaded.iter().any(|f| f.ends_with("tanks/tanks7_equations.toml")),
+        loaded
+            .iter()
+            .any(|f| f.ends_with("tanks/tanks7_equations.toml")),
         "{loaded:?}"
     );
 }

@@ -95,6 +95,31 @@ pub(super) fn entries_per_sample(sizes: &[usize]) -> usize {
     }
 }
 
+/// Multiply-adds per training sample of one Levenberg-Marquardt
+/// iteration's Gauss-Newton products for a network of layer sizes `sizes`
+/// (the lower triangles of the Gram matrices), by whichever computation
+/// its fit takes: what a fit's time grows with from one network to
+/// another.
+///
+/// ```
+/// use twostage_fit::products_per_sample;
+/// // One target: the Jacobian's row of 121 weights, 121^2 / 2.
+/// assert_eq!(products_per_sample(&[4, 20, 1]), 7320.5);
+/// // Seven targets share the hidden layer: 100^2 / 2 + 100 * 21 + 21^2 / 2,
+/// // where the Jacobian's rows would take 7 * 247^2 / 2.
+/// assert_eq!(products_per_sample(&[4, 20, 7]), 7320.5);
+/// ```
+pub fn products_per_sample(sizes: &[usize]) -> f64 {
+    if by_structure(sizes) {
+        let (d, h) = (sizes[0] as f64, sizes[1] as f64);
+        let units = h * (d + 1.0);
+        units * units / 2.0 + units * (h + 1.0) + (h + 1.0) * (h + 1.0) / 2.0
+    } else {
+        let weights = parameter_count(sizes) as f64;
+        sizes.last().copied().unwrap_or(1) as f64 * weights * weights / 2.0
+    }
+}
+
 /// Scratch and results of the structured products of one restart.
 pub(super) struct HiddenLayerProducts {
     inputs: usize,
@@ -171,7 +196,11 @@ impl HiddenLayerProducts {
         let (d, h, q, samples) = (self.inputs, self.hidden, self.targets, self.samples);
         let units = h * (d + 1);
         let same = |at: &Vec<f64>| {
-            at.len() == params.len() && at.iter().zip(params).all(|(a, b)| a.to_bits() == b.to_bits())
+            at.len() == params.len()
+                && at
+                    .iter()
+                    .zip(params)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
         };
         if !self.evaluated_at.as_ref().is_some_and(same) {
             self.compute_terms(problem, params);
@@ -217,7 +246,9 @@ impl HiddenLayerProducts {
         );
         for unit in 0..h {
             matmul(
-                self.unit_gradient.as_mut().subrows_mut(unit * (d + 1), d + 1),
+                self.unit_gradient
+                    .as_mut()
+                    .subrows_mut(unit * (d + 1), d + 1),
                 Accum::Replace,
                 ut.subrows(unit * (d + 1), d + 1),
                 self.back.as_ref().row(unit).transpose().as_mat(),
@@ -280,7 +311,11 @@ impl HiddenLayerProducts {
         for p in 0..q {
             for k in 0..=h {
                 for a in 0..units {
-                    set(output(p, k), first(a), v[(p, a / (d + 1))] * self.cross[(a, k)]);
+                    set(
+                        output(p, k),
+                        first(a),
+                        v[(p, a / (d + 1))] * self.cross[(a, k)],
+                    );
                 }
                 for other in 0..q {
                     for l in 0..=h {
@@ -380,7 +415,10 @@ mod tests {
             assert!((sjtr[i] - gradient).abs() <= 1e-12 * largest, "J'r[{i}]");
             for j in 0..=i {
                 let (a, b) = (sjtj[i * n + j], jtj[(i, j)]);
-                assert!((a - b).abs() <= 1e-12 * largest, "J'J[{i}, {j}]: {a} against {b}");
+                assert!(
+                    (a - b).abs() <= 1e-12 * largest,
+                    "J'J[{i}, {j}]: {a} against {b}"
+                );
             }
         }
         // Residuals evaluated elsewhere in between, or at these weights:

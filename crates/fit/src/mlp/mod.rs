@@ -11,6 +11,7 @@ mod network;
 mod params;
 mod training;
 
+pub use gauss_newton::products_per_sample;
 pub use network::RestartReport;
 pub use network::{FittedMlp, MAX_WIDTH, n_parameters};
 pub(crate) use params::DEFAULT_RESTARTS;
