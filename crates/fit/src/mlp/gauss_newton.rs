@@ -20,6 +20,7 @@ use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use super::network::{Problem, parameter_count};
+use super::training::same_bits;
 
 /// Columns of a Gram matrix per parallel task: each task owns its columns'
 /// lower part and sums over every sample in one fixed order.
@@ -195,14 +196,11 @@ impl HiddenLayerProducts {
     ) {
         let (d, h, q, samples) = (self.inputs, self.hidden, self.targets, self.samples);
         let units = h * (d + 1);
-        let same = |at: &Vec<f64>| {
-            at.len() == params.len()
-                && at
-                    .iter()
-                    .zip(params)
-                    .all(|(a, b)| a.to_bits() == b.to_bits())
-        };
-        if !self.evaluated_at.as_ref().is_some_and(same) {
+        if !self
+            .evaluated_at
+            .as_deref()
+            .is_some_and(|at| same_bits(at, params))
+        {
             self.compute_terms(problem, params);
         }
         let ut = MatRef::from_column_major_slice(&self.ut, units, samples);
@@ -400,7 +398,18 @@ mod tests {
         let n = params.len();
         let rows = train.len() * 4;
         let (mut jt, mut res) = (vec![0.0; n * rows], vec![0.0; rows]);
-        problem.jacobian(&params, &mut jt, &mut res);
+        problem.jacobian(&params, &mut jt, &mut res, None);
+        // The Jacobian from the activations its residuals kept: the same
+        // bits as with its own forward passes.
+        let mut kept = vec![0.0; train.len() * problem.activations_per_sample()];
+        let mut kept_r = vec![0.0; rows];
+        problem.residuals_keeping(&params, &mut kept_r, Some(&mut kept));
+        let (mut jt_kept, mut res_kept) = (vec![0.0; n * rows], vec![0.0; rows]);
+        problem.jacobian(&params, &mut jt_kept, &mut res_kept, Some(&kept));
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        assert_eq!(bits(&jt_kept), bits(&jt));
+        assert_eq!(bits(&res_kept), bits(&res));
+        assert_eq!(bits(&kept_r), bits(&res));
         let (mut jtj, mut jtr) = (Mat::zeros(n, n), Mat::zeros(n, 1));
         gram_products(&jt, &res, 0.25, &mut jtj, &mut jtr);
         let mut structured = HiddenLayerProducts::new(&problem);
@@ -429,14 +438,10 @@ mod tests {
             structured.evaluate(&problem, at, &mut r);
             let (mut again, mut again_r) = (vec![f64::NAN; n * n], vec![f64::NAN; n]);
             structured.products(&problem, &params, 0.25, &mut again, &mut again_r);
-            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
             assert_eq!(bits(&again), bits(&sjtj));
             assert_eq!(bits(&again_r), bits(&sjtr));
         }
-        assert_eq!(
-            r.iter().map(|x| x.to_bits()).collect::<Vec<u64>>(),
-            res.iter().map(|x| x.to_bits()).collect::<Vec<u64>>()
-        );
+        assert_eq!(bits(&r), bits(&res));
         assert!(by_structure(&sizes));
         assert!(!by_structure(&[3, 5, 1]));
         assert!(!by_structure(&[3, 5, 5, 4]));

@@ -348,37 +348,68 @@ impl Problem<'_> {
         sse
     }
 
+    /// Every layer's activations a training sample takes (its input
+    /// among them): what [`Self::residuals_keeping`] keeps a sample.
+    pub(super) fn activations_per_sample(&self) -> usize {
+        self.offsets.last().copied().unwrap_or(0)
+    }
+
     /// Residuals `output - target` of the training rows, row-major (rows x
-    /// targets), into `r`: blocks of rows in parallel.
-    pub(super) fn residuals(&self, params: &[f64], r: &mut [f64]) {
+    /// targets), into `r`, blocks of rows in parallel; each training
+    /// sample's activations kept in `kept` where given
+    /// ([`Self::activations_per_sample`] a sample, in training order), for
+    /// [`Self::jacobian`] at the same weights.
+    pub(super) fn residuals_keeping(
+        &self,
+        params: &[f64],
+        r: &mut [f64],
+        kept: Option<&mut [f64]>,
+    ) {
         let q = *self.sizes.last().unwrap_or(&1);
         let out = self.offsets[self.sizes.len() - 1];
+        let width = self.activations_per_sample();
         let columns = by_columns(self.sizes, params);
-        r.par_chunks_mut(BLOCK_SAMPLES * q)
-            .zip(self.train.par_chunks(BLOCK_SAMPLES))
-            .for_each_init(
-                || self.activations(),
-                |acts, (r, rows)| {
-                    widest_vectors(
-                        #[inline(always)]
-                        || {
-                            for (r, &i) in r.chunks_exact_mut(q).zip(rows) {
-                                let xi = self.x.row(i);
-                                forward(
-                                    self.sizes,
-                                    &columns,
-                                    xi.as_slice().unwrap_or(&[]),
-                                    acts,
-                                    &self.offsets,
-                                );
-                                for (k, r) in r.iter_mut().enumerate() {
-                                    *r = acts[out + k] - self.t[[i, k]];
-                                }
+        let block =
+            |acts: &mut Vec<f64>, r: &mut [f64], rows: &[usize], mut kept: Option<&mut [f64]>| {
+                widest_vectors(
+                    #[inline(always)]
+                    || {
+                        for (sample, (r, &i)) in r.chunks_exact_mut(q).zip(rows).enumerate() {
+                            let xi = self.x.row(i);
+                            forward(
+                                self.sizes,
+                                &columns,
+                                xi.as_slice().unwrap_or(&[]),
+                                acts,
+                                &self.offsets,
+                            );
+                            for (k, r) in r.iter_mut().enumerate() {
+                                *r = acts[out + k] - self.t[[i, k]];
                             }
-                        },
-                    )
-                },
-            );
+                            if let Some(kept) = kept.as_deref_mut() {
+                                kept[sample * width..(sample + 1) * width].copy_from_slice(acts);
+                            }
+                        }
+                    },
+                );
+            };
+        match kept {
+            Some(kept) => r
+                .par_chunks_mut(BLOCK_SAMPLES * q)
+                .zip(kept.par_chunks_mut(BLOCK_SAMPLES * width))
+                .zip(self.train.par_chunks(BLOCK_SAMPLES))
+                .for_each_init(
+                    || self.activations(),
+                    |acts, ((r, kept), rows)| block(acts, r, rows, Some(kept)),
+                ),
+            None => r
+                .par_chunks_mut(BLOCK_SAMPLES * q)
+                .zip(self.train.par_chunks(BLOCK_SAMPLES))
+                .for_each_init(
+                    || self.activations(),
+                    |acts, (r, rows)| block(acts, r, rows, None),
+                ),
+        }
     }
 
     pub(super) fn penalty(&self, params: &[f64]) -> f64 {
@@ -495,18 +526,34 @@ impl Problem<'_> {
     /// transposed Jacobian `J'` (parameters x residuals, column-major: each
     /// residual's derivatives are one contiguous column), blocks of rows in
     /// parallel.
-    pub(super) fn jacobian(&self, params: &[f64], jt: &mut [f64], res: &mut [f64]) {
+    ///
+    /// `kept`, where given, holds every training sample's activations at
+    /// these weights ([`Self::residuals_keeping`]), which spares the
+    /// forward passes.
+    pub(super) fn jacobian(
+        &self,
+        params: &[f64],
+        jt: &mut [f64],
+        res: &mut [f64],
+        kept: Option<&[f64]>,
+    ) {
         let q = *self.sizes.last().unwrap_or(&1);
         let n = params.len();
+        let width = self.activations_per_sample();
         let columns = by_columns(self.sizes, params);
         let weights = (params, columns.as_slice());
         jt.par_chunks_mut(n * BLOCK_SAMPLES * q)
             .zip(res.par_chunks_mut(BLOCK_SAMPLES * q))
             .zip(self.train.par_chunks(BLOCK_SAMPLES))
+            .enumerate()
             .for_each_init(
                 || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
-                |(acts, delta), ((jt, res), rows)| {
-                    self.jacobian_block(weights, rows, jt, res, acts, delta);
+                |(acts, delta), (block, ((jt, res), rows))| {
+                    let kept = kept.map(|k| {
+                        let first = block * BLOCK_SAMPLES * width;
+                        &k[first..first + rows.len() * width]
+                    });
+                    self.jacobian_block(weights, rows, (jt, res), kept, acts, delta);
                 },
             );
     }
@@ -572,14 +619,14 @@ impl Problem<'_> {
         &self,
         weights: (&[f64], &[f64]),
         rows: &[usize],
-        jt: &mut [f64],
-        res: &mut [f64],
+        out: (&mut [f64], &mut [f64]),
+        kept: Option<&[f64]>,
         acts: &mut [f64],
         delta: &mut [f64],
     ) {
         widest_vectors(
             #[inline(always)]
-            || self.jacobian_block_here(weights, rows, jt, res, acts, delta),
+            || self.jacobian_block_here(weights, rows, out, kept, acts, delta),
         );
     }
 
@@ -588,11 +635,12 @@ impl Problem<'_> {
         &self,
         (params, columns): (&[f64], &[f64]),
         rows: &[usize],
-        jt: &mut [f64],
-        res: &mut [f64],
+        (jt, res): (&mut [f64], &mut [f64]),
+        kept: Option<&[f64]>,
         acts: &mut [f64],
         delta: &mut [f64],
     ) {
+        let width = self.activations_per_sample();
         let sizes = self.sizes;
         let layers = sizes.len() - 1;
         let q = sizes[layers];
@@ -605,9 +653,19 @@ impl Problem<'_> {
             p += sizes[l + 1] * (sizes[l] + 1);
         }
         for (sample, &i) in rows.iter().enumerate() {
-            let xi = self.x.row(i);
-            let xi = xi.as_slice().unwrap_or(&[]);
-            forward(sizes, columns, xi, acts, &self.offsets);
+            match kept {
+                Some(kept) => acts.copy_from_slice(&kept[sample * width..(sample + 1) * width]),
+                None => {
+                    let xi = self.x.row(i);
+                    forward(
+                        sizes,
+                        columns,
+                        xi.as_slice().unwrap_or(&[]),
+                        acts,
+                        &self.offsets,
+                    );
+                }
+            }
             for k in 0..q {
                 let r = sample * q + k;
                 res[r] = acts[out + k] - self.t[[i, k]];

@@ -323,6 +323,11 @@ enum Products {
         res: Vec<f64>,
         jtj: Mat<f64>,
         jtr: Mat<f64>,
+        /// Every training sample's activations where the residuals were
+        /// last evaluated, and the weights there: the accepted step's, so
+        /// its Jacobian needs no forward pass.
+        kept: Vec<f64>,
+        kept_at: Option<Vec<f64>>,
     },
     ByStructure(Box<HiddenLayerProducts>),
 }
@@ -340,6 +345,8 @@ impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
                 res: vec![0.0; rows],
                 jtj: Mat::zeros(n, n),
                 jtr: Mat::zeros(n, 1),
+                kept: vec![0.0; problem.train.len() * problem.activations_per_sample()],
+                kept_at: None,
             }
         };
         Self {
@@ -348,6 +355,11 @@ impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
             products,
         }
     }
+}
+
+/// Whether two weight vectors are the same bits.
+pub(super) fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
@@ -363,7 +375,12 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
             // The structure's terms come with the residuals: kept, they
             // spare the accepted point's products a second forward pass.
             Products::ByStructure(products) => products.evaluate(self.problem, params, r),
-            Products::ByJacobian { .. } => self.problem.residuals(params, r),
+            Products::ByJacobian { kept, kept_at, .. } => {
+                self.problem.residuals_keeping(params, r, Some(kept));
+                let at = kept_at.get_or_insert_with(Vec::new);
+                at.clear();
+                at.extend_from_slice(params);
+            }
         }
         Ok(())
     }
@@ -388,8 +405,12 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
                 res,
                 jtj: gram,
                 jtr: gradient,
+                kept,
+                kept_at,
             } => {
-                self.problem.jacobian(params, jt, res);
+                let here = kept_at.as_deref().is_some_and(|at| same_bits(at, params));
+                self.problem
+                    .jacobian(params, jt, res, here.then_some(kept.as_slice()));
                 gram_products(jt, res, scale, gram, gradient);
                 for i in 0..n {
                     for j in 0..=i {

@@ -43,7 +43,7 @@ fn backpropagation_matches_finite_differences() {
     let width = p.offsets.last().copied().unwrap();
     let mut acts = vec![0.0; width];
     let (mut jt, mut res) = (vec![0.0; n * 2], vec![0.0; 2]);
-    p.jacobian(&params, &mut jt, &mut res);
+    p.jacobian(&params, &mut jt, &mut res, None);
     let output = |w: &[f64], acts: &mut [f64]| -> [f64; 2] {
         let columns = by_columns(&sizes, w);
         forward(&sizes, &columns, &[0.3, -0.7, 0.9], acts, &p.offsets);
@@ -174,8 +174,8 @@ fn blocks_of_rows_add_up_to_the_row_by_row_quantities() {
                 vec![0.0; samples * 2],
                 vec![0.0; samples * 2],
             );
-            p.jacobian(&params, &mut jt, &mut res);
-            p.residuals(&params, &mut r);
+            p.jacobian(&params, &mut jt, &mut res, None);
+            p.residuals_keeping(&params, &mut r, None);
             let mut grad = vec![0.0; n];
             p.gradient(&params, &rows, &mut grad);
             (jt, res, r, grad, p.mse(&params, &rows))
@@ -190,7 +190,7 @@ fn blocks_of_rows_add_up_to_the_row_by_row_quantities() {
     for (sample, &i) in rows.iter().enumerate() {
         let one = problem(&sizes, &x, &t, std::slice::from_ref(&i), 0.0);
         let (mut jt1, mut res1) = (vec![0.0; n * 2], vec![0.0; 2]);
-        one.jacobian(&params, &mut jt1, &mut res1);
+        one.jacobian(&params, &mut jt1, &mut res1, None);
         assert_eq!(&jt[sample * 2 * n..(sample + 1) * 2 * n], &jt1[..]);
         assert_eq!(&res[sample * 2..sample * 2 + 2], &res1[..]);
         sse += res1.iter().map(|v| v * v).sum::<f64>();
