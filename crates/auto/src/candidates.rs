@@ -5,7 +5,7 @@
 use twostage_compress::{
     Arx, Compressor, CompressorConfig, Narx, OutputPca, RawRecord, SignalTransform, Transformed,
 };
-use twostage_fit::{MlpParams, Piecewise, RegressorConfig};
+use twostage_fit::{Mlp, MlpParams, Piecewise, RegressorConfig};
 use twostage_models::IoData;
 
 use twostage_estimator::Result;
@@ -19,6 +19,14 @@ pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig)
     )
 }
 
+/// A network's layer sizes on n features and q outputs.
+fn layer_sizes(mlp: &Mlp, n: usize, q: usize) -> Vec<usize> {
+    let mut sizes = vec![n];
+    sizes.extend_from_slice(mlp.params().hidden());
+    sizes.push(q);
+    sizes
+}
+
 /// What one Levenberg-Marquardt iteration of a candidate's fit costs a
 /// training row on n features and q outputs: a fit's time grows with its
 /// power [`PRODUCTS_EXPONENT`](crate::cost::PRODUCTS_EXPONENT) or so
@@ -26,12 +34,7 @@ pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig)
 /// costs far less than its weights say (decision 059).
 pub(super) fn fit_cost(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
-        RegressorConfig::Mlp(mlp) => {
-            let mut sizes = vec![n];
-            sizes.extend_from_slice(mlp.params().hidden());
-            sizes.push(q);
-            twostage_fit::products_per_sample(&sizes)
-        }
+        RegressorConfig::Mlp(mlp) => twostage_fit::products_per_sample(&layer_sizes(mlp, n, q)),
         // The global network on every row, then experts that together see
         // the rows about 1.5 times: counted as a network of 2.5 times the
         // weights, whose products are the square of that.
@@ -48,12 +51,7 @@ pub(super) fn fit_cost(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
 /// Weights and biases of a network candidate on n features and q outputs.
 pub(super) fn network_size(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
-        RegressorConfig::Mlp(mlp) => {
-            let mut sizes = vec![n];
-            sizes.extend_from_slice(mlp.params().hidden());
-            sizes.push(q);
-            twostage_fit::n_parameters(&sizes) as f64
-        }
+        RegressorConfig::Mlp(mlp) => twostage_fit::n_parameters(&layer_sizes(mlp, n, q)) as f64,
         // The global network on every row, then experts that together see
         // the rows about 1.5 times (their margins overlap).
         RegressorConfig::Piecewise(p) => {

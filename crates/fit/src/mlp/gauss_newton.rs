@@ -60,17 +60,22 @@ pub(super) fn gram_products(
     let jt = MatRef::from_column_major_slice(jt, n, rows);
     let res = MatRef::from_column_major_slice(res, rows, 1);
     lower_gram(jt, scale, jtj.as_mut());
-    jtr.as_mut()
-        .par_row_chunks_mut(GRAM_TILE)
+    tiled_product(jt, res, scale, jtr.as_mut());
+}
+
+/// `out = scale A B` by tiles of [`GRAM_TILE`] rows in parallel, each one
+/// product over every column of `a` in one order.
+fn tiled_product(a: MatRef<'_, f64>, b: MatRef<'_, f64>, scale: f64, out: MatMut<'_, f64>) {
+    out.par_row_chunks_mut(GRAM_TILE)
         .enumerate()
-        .for_each(|(tile, gradient)| {
+        .for_each(|(tile, rows)| {
             let first = tile * GRAM_TILE;
-            let width = gradient.nrows();
+            let width = rows.nrows();
             matmul(
-                gradient,
+                rows,
                 Accum::Replace,
-                jt.subrows(first, width),
-                res,
+                a.subrows(first, width),
+                b,
                 scale,
                 Par::Seq,
             );
@@ -209,22 +214,7 @@ impl HiddenLayerProducts {
         // The output weights V (targets x hidden units, row-major).
         let v = MatRef::from_row_major_slice(&params[units..units + q * h], q, h);
         lower_gram(ut, scale, self.unit_gram.as_mut());
-        self.cross
-            .as_mut()
-            .par_row_chunks_mut(GRAM_TILE)
-            .enumerate()
-            .for_each(|(tile, rows)| {
-                let first = tile * GRAM_TILE;
-                let width = rows.nrows();
-                matmul(
-                    rows,
-                    Accum::Replace,
-                    ut.subrows(first, width),
-                    zt.transpose(),
-                    scale,
-                    Par::Seq,
-                );
-            });
+        tiled_product(ut, zt.transpose(), scale, self.cross.as_mut());
         matmul(
             self.hidden_gram.as_mut(),
             Accum::Replace,
