@@ -16,14 +16,16 @@ mod predict;
 mod simulate;
 mod slurm;
 mod specs;
+mod standard_output;
 mod train;
 mod validate;
 
 use std::fmt;
-use std::io;
+use std::io::{self, Write};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use standard_output::StandardOutput;
 
 /// Turn a simulator into a microsecond-fast parameter estimator (Garatti and
 /// Bittanti's two-stage method), and simulate the paper's models.
@@ -142,24 +144,26 @@ fn main() -> ExitCode {
         Err(e) => e.exit(),
     };
     let result = match &cli.command {
-        Command::Demo(args) => demo::demo(args, &mut io::stdout().lock()),
-        Command::Models(args) => models::models(args, &mut io::stdout().lock()),
+        Command::Demo(args) => demo::demo(args, &mut StandardOutput::lock()),
+        Command::Models(args) => models::models(args, &mut StandardOutput::lock()),
         Command::Simulate(args) => simulate::simulate(args),
-        Command::Train(args) => train::train(args, &mut io::stdout().lock()),
+        Command::Train(args) => train::train(args, &mut StandardOutput::lock()),
         Command::Inspect { file, format } => {
-            inspect::inspect(file, format.json(), &mut io::stdout().lock())
+            inspect::inspect(file, format.json(), &mut StandardOutput::lock())
         }
-        Command::Validate(args) => validate::validate(args, &mut io::stdout().lock()),
-        Command::LearningCurve(args) => curve::learning_curve(args, &mut io::stdout().lock()),
-        Command::Slurm(args) => slurm::slurm(args, &mut io::stdout().lock()),
-        Command::Export(args) => export::export(args, &mut io::stdout().lock()),
-        Command::Fmu { command } => fmu::run(command, &mut io::stdout().lock()),
+        Command::Validate(args) => validate::validate(args, &mut StandardOutput::lock()),
+        Command::LearningCurve(args) => curve::learning_curve(args, &mut StandardOutput::lock()),
+        Command::Slurm(args) => slurm::slurm(args, &mut StandardOutput::lock()),
+        Command::Export(args) => export::export(args, &mut StandardOutput::lock()),
+        Command::Fmu { command } => fmu::run(command, &mut StandardOutput::lock()),
         Command::Estimate(args) => estimate::estimate(args).and_then(|outcome| {
             outcome
                 .failure()
                 .map_or(Ok(()), |message| Err(anyhow::anyhow!(message)))
         }),
     };
+    // What the command printed last may still sit in the buffer.
+    let result = result.and_then(|()| Ok(StandardOutput::lock().flush()?));
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,

@@ -1,7 +1,7 @@
 //! `twostage models` and `twostage simulate`.
 
 use std::fs::{self, File};
-use std::io::{self, BufWriter, Write};
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -151,7 +151,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
     push_rows(&mut text, None, &record);
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
-        None => io::stdout().lock().write_all(text.as_bytes())?,
+        None => crate::standard_output::StandardOutput::write_text(&text)?,
     }
     Ok(())
 }
@@ -226,7 +226,7 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
     }
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
-        None => io::stdout().lock().write_all(text.as_bytes())?,
+        None => crate::standard_output::StandardOutput::write_text(&text)?,
     }
     eprintln!(
         "simulated {} at {} estimate(s) of {}{}{} in {:.1} s",

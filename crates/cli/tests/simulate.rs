@@ -332,3 +332,38 @@ fn simulate_at_estimates_predicts_on_a_measured_input() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(stdout(&out).lines().count(), 1 + 2, "{}", stdout(&out));
 }
+
+/// A full standard output is named as the place that failed, with what to
+/// do (Linux's /dev/full refuses every write); a closed one (`| head`) is
+/// not an error.
+#[test]
+fn a_full_standard_output_is_named() {
+    let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") else {
+        return;
+    };
+    for args in [
+        &["simulate", "--model", "benchmark", "--theta", "0.3"][..],
+        &["models"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_twostage"))
+            .args(args)
+            .stdout(full.try_clone().unwrap())
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        let said = stderr(&out);
+        assert!(
+            said.contains("writing to standard output") && said.contains("--out"),
+            "{args:?}: {said}"
+        );
+    }
+    let mut child = Command::new(env!("CARGO_BIN_EXE_twostage"))
+        .args(["simulate", "--model", "benchmark", "--theta", "0.3"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+}

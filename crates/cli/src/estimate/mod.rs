@@ -1,7 +1,6 @@
 //! `twostage estimate`: estimates of recorded experiments by an estimator
 //! file or a classic method.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
@@ -604,7 +603,7 @@ fn write_table(args: &EstimateArgs, chosen: &Chosen, rows: &[(String, Estimated)
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
-        None => std::io::stdout().lock().write_all(text.as_bytes())?,
+        None => crate::standard_output::StandardOutput::write_text(&text)?,
     }
     Ok(())
 }
