@@ -304,11 +304,70 @@ fn one_shard(
 /// that memory stays bounded and the files do not depend on the thread count.
 const BLOCK: usize = 256;
 
+/// Characters a number takes in the files at most, as `format_f64`
+/// writes it (a sign, 17 significant digits, a point and an exponent), and
+/// the comma after it.
+const NUMBER_WIDTH: u64 = 25;
+
+/// What `count` records of `spec`'s model take in `dir`, said up front,
+/// and refused where the disk has less room, with the `--count` that fits.
+fn room_for(spec: &twostage_models::ModelSpec, count: usize, dir: &Path) -> Result<()> {
+    let index = count.to_string().len() as u64 + 1;
+    let signals = (spec.input_names().len() + spec.output_names().len()) as u64;
+    let record = spec.n_samples() as u64 * (index + signals * NUMBER_WIDTH)
+        + index
+        + spec.n_params() as u64 * NUMBER_WIDTH;
+    let total = record.saturating_mul(count as u64);
+    let existing = dir
+        .ancestors()
+        .find(|d| d.exists())
+        .unwrap_or(Path::new("."));
+    if let Ok(disk) = rustix::fs::statvfs(existing) {
+        let free = disk.f_bavail.saturating_mul(disk.f_frsize);
+        if total > free {
+            return Err(anyhow::anyhow!(
+                "--count {count} would write up to {} to {} ({} a record of {} samples), \
+                 where its disk has {} free: at most --count {} fits, or write elsewhere",
+                human_bytes(total),
+                dir.display(),
+                human_bytes(record),
+                spec.n_samples(),
+                human_bytes(free),
+                free / record.max(1)
+            ));
+        }
+    }
+    eprintln!(
+        "writing {count} records to {}: up to {} ({} a record)",
+        dir.display(),
+        human_bytes(total),
+        human_bytes(record)
+    );
+    Ok(())
+}
+
+/// A size in bytes as people read it (decimal units).
+fn human_bytes(bytes: u64) -> String {
+    const UNITS: [&str; 6] = ["B", "kB", "MB", "GB", "TB", "PB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1000.0 && unit + 1 < UNITS.len() {
+        value /= 1000.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{value:.1} {}", UNITS[unit])
+    }
+}
+
 fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) -> Result<()> {
     if count == 0 {
         return Err(usage("--count must be at least 1".into()));
     }
     let spec = sim.spec();
+    room_for(spec, count, dir)?;
     let design = spec.prior().design(count, seed)?;
     fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let data_path = dir.join("data.csv");

@@ -367,3 +367,51 @@ fn a_full_standard_output_is_named() {
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
 }
+
+/// A count no disk holds is refused before anything is drawn or written,
+/// with the size it would take and the count that fits; a small one says
+/// up front what it will take.
+#[test]
+fn a_count_the_disk_cannot_hold_is_refused_up_front() {
+    let dir = scratch("simulate-huge");
+    let target = dir.join("chart");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        "1000000000000000",
+        "--out-dir",
+        target.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let said = stderr(&out);
+    assert!(
+        said.contains("--count 1000000000000000 would write up to")
+            && said.contains("free: at most --count"),
+        "{said}"
+    );
+    assert!(!target.exists(), "nothing is written");
+    let small = twostage(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        "3",
+        "--out-dir",
+        target.to_str().unwrap(),
+    ]);
+    assert!(small.status.success(), "{}", stderr(&small));
+    let written = std::fs::metadata(target.join("data.csv")).unwrap().len();
+    let said = stderr(&small);
+    let bound: f64 = said
+        .split("up to ")
+        .nth(1)
+        .and_then(|s| s.split(" kB").next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!(
+        written as f64 <= bound * 1000.0,
+        "{written} bytes against {said}"
+    );
+}
