@@ -62,6 +62,8 @@ fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<SignalColumn>> 
 
 /// What a header lacks and has too many of, against the model's signals
 /// (the order of the columns does not matter).
+use twostage::sources::csv_rows::excerpt;
+
 fn header_difference(fields: &[&str], signals: &[&str]) -> String {
     let missing: Vec<&str> = signals
         .iter()
@@ -85,7 +87,7 @@ fn header_difference(fields: &[&str], signals: &[&str]) -> String {
     if !extra.is_empty() {
         parts.push(format!(
             "extra {} (not a signal of the model: remove the column)",
-            extra.join(", ")
+            excerpt(&extra.join(", "))
         ));
     }
     if !twice.is_empty() {
@@ -158,7 +160,8 @@ pub fn parse(
     let signal_fields: Vec<&str> = signal_at.iter().map(|&c| fields[c]).collect();
     let placed = columns(&signal_fields, signals).ok_or_else(|| {
         format!(
-            "{name}: row 1: header '{header}' is not {expected}: {}",
+            "{name}: row 1: header '{}' is not {expected}: {}",
+            excerpt(&header),
             header_difference(&signal_fields, &all)
         )
     })?;

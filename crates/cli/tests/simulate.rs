@@ -415,3 +415,50 @@ fn a_count_the_disk_cannot_hold_is_refused_up_front() {
         "{written} bytes against {said}"
     );
 }
+
+/// A header of a hundred thousand columns (a hostile or broken file) is
+/// named by its row and its beginning, not echoed whole: the message stays
+/// a line, whichever reader meets it.
+#[test]
+fn a_header_of_many_columns_makes_a_short_message() {
+    let dir = scratch("wide-header");
+    let header: Vec<String> = ["u".to_string(), "y".to_string()]
+        .into_iter()
+        .chain((0..100_000).map(|i| format!("z{i}")))
+        .collect();
+    let record = dir.join("wide.csv");
+    std::fs::write(&record, format!("{}\n1,2\n", header.join(","))).unwrap();
+    let estimator = dir.join("b.tse");
+    let trained = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "100",
+        "--compress",
+        "arx:2,2",
+        "--fit",
+        "linear",
+        "--validate",
+        "0",
+        "--calibrate",
+        "0",
+        "--quiet",
+        "--out",
+        estimator.to_str().unwrap(),
+    ]);
+    assert!(trained.status.success(), "{}", stderr(&trained));
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        estimator.to_str().unwrap(),
+        record.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let said = stderr(&out);
+    assert!(said.len() < 2000, "{} bytes: {}", said.len(), &said[..300]);
+    assert!(
+        said.contains("row 1: header 'u,y,z0,") && said.contains("characters)"),
+        "{said}"
+    );
+}

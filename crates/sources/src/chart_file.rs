@@ -86,7 +86,7 @@ impl ChartFiles {
                         Some(number),
                         format!(
                             "header '{}': expected '{}' (the model's parameters, in order)",
-                            fields.iter().collect::<Vec<_>>().join(","),
+                            crate::csv_rows::excerpt(&fields.iter().collect::<Vec<_>>().join(",")),
                             expected.join(",")
                         ),
                     ));
@@ -286,8 +286,9 @@ impl ChartFiles {
                     file.error(
                         Some(number),
                         format!(
-                            "header '{header}': expected experiment, then the inputs and outputs \
+                            "header '{}': expected experiment, then the inputs and outputs \
                              ({}), or u,y as `twostage simulate` writes them",
+                            crate::csv_rows::excerpt(&header),
                             spec.input_names()
                                 .iter()
                                 .chain(spec.output_names())

@@ -198,6 +198,31 @@ pub fn read_columns(path: &std::path::Path, names: &[String]) -> Result<Vec<Vec<
     Ok(columns)
 }
 
+/// Characters of a user's text an error message quotes.
+pub const EXCERPT_CHARACTERS: usize = 200;
+
+/// `text` as an error message quotes it: whole up to
+/// [`EXCERPT_CHARACTERS`], else its beginning and how long it was, so that
+/// a hostile line (a header of a million columns) cannot make a message of
+/// megabytes.
+///
+/// ```
+/// use twostage_sources::csv_rows::excerpt;
+/// assert_eq!(excerpt("u,y"), "u,y");
+/// let wide = vec!["z"; 1000].join(",");
+/// assert!(excerpt(&wide).ends_with("... (1999 characters)"));
+/// ```
+pub fn excerpt(text: &str) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(EXCERPT_CHARACTERS) {
+        None => std::borrow::Cow::Borrowed(text),
+        Some((cut, _)) => std::borrow::Cow::Owned(format!(
+            "{}... ({} characters)",
+            &text[..cut],
+            text.chars().count()
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
