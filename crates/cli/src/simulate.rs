@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::RunSettings;
 use twostage::sources::csv_rows::row;
+use twostage::sources::readable_bytes;
 use twostage_models::{IoData, Simulator, experiment_rng, run_experiments};
 
 use crate::OrUsage;
@@ -317,22 +318,23 @@ fn room_for(spec: &twostage_models::ModelSpec, count: usize, dir: &Path) -> Resu
     let record = spec.n_samples() as u64 * (index + signals * NUMBER_WIDTH)
         + index
         + spec.n_params() as u64 * NUMBER_WIDTH;
-    let total = record.saturating_mul(count as u64);
+    // In f64: a hostile count overflows u64 bytes.
+    let total = record as f64 * count as f64;
     let existing = dir
         .ancestors()
         .find(|d| d.exists())
         .unwrap_or(Path::new("."));
     if let Ok(disk) = rustix::fs::statvfs(existing) {
         let free = disk.f_bavail.saturating_mul(disk.f_frsize);
-        if total > free {
+        if total > free as f64 {
             return Err(anyhow::anyhow!(
                 "--count {count} would write up to {} to {} ({} a record of {} samples), \
                  where its disk has {} free: at most --count {} fits, or write elsewhere",
-                human_bytes(total),
+                readable_bytes(total),
                 dir.display(),
-                human_bytes(record),
+                readable_bytes(record as f64),
                 spec.n_samples(),
-                human_bytes(free),
+                readable_bytes(free as f64),
                 free / record.max(1)
             ));
         }
@@ -340,26 +342,10 @@ fn room_for(spec: &twostage_models::ModelSpec, count: usize, dir: &Path) -> Resu
     eprintln!(
         "writing {count} records to {}: up to {} ({} a record)",
         dir.display(),
-        human_bytes(total),
-        human_bytes(record)
+        readable_bytes(total),
+        readable_bytes(record as f64)
     );
     Ok(())
-}
-
-/// A size in bytes as people read it (decimal units).
-fn human_bytes(bytes: u64) -> String {
-    const UNITS: [&str; 6] = ["B", "kB", "MB", "GB", "TB", "PB"];
-    let mut value = bytes as f64;
-    let mut unit = 0;
-    while value >= 1000.0 && unit + 1 < UNITS.len() {
-        value /= 1000.0;
-        unit += 1;
-    }
-    if unit == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{value:.1} {}", UNITS[unit])
-    }
 }
 
 fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) -> Result<()> {

@@ -46,6 +46,7 @@ pub use chart_file::ChartFiles;
 pub use error::{Error, Result};
 pub use model_file::{
     CommandInput, DEFAULT_PRESET_SIMULATIONS, ModelFile, ModelSource, TEMPLATE, fmu_model_file,
+    readable_bytes,
 };
 pub use named_model::NamedModel;
 pub use preset::Preset;

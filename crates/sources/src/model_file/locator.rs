@@ -778,8 +778,14 @@ impl Locator<'_> {
 /// record, so a record is refused before anything allocates it.
 const MAX_RECORD_BYTES: usize = 1 << 30;
 
-/// A byte count as people read it: "8.0 TB", "1.1 GB".
-fn readable_bytes(bytes: f64) -> String {
+/// A byte count as people read it, in decimal units: "8.0 TB", "1.1 GB".
+///
+/// ```
+/// use twostage_sources::readable_bytes;
+/// assert_eq!(readable_bytes(512.0), "512 bytes");
+/// assert_eq!(readable_bytes(6.3e19), "63.0 EB");
+/// ```
+pub fn readable_bytes(bytes: f64) -> String {
     let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
     let mut value = bytes;
     let mut unit = 0;
