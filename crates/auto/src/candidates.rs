@@ -31,7 +31,8 @@ fn layer_sizes(mlp: &Mlp, n: usize, q: usize) -> Vec<usize> {
 /// training row on n features and q outputs: a fit's time grows with its
 /// power [`PRODUCTS_EXPONENT`](crate::cost::PRODUCTS_EXPONENT) or so
 /// (round 2). A network of one hidden layer shared by several outputs
-/// costs far less than its weights say (decision 059).
+/// costs far less than its weights say: its products come from its
+/// structure.
 pub(super) fn fit_cost(regressor: &RegressorConfig, n: usize, q: usize) -> f64 {
     match regressor {
         RegressorConfig::Mlp(mlp) => twostage_fit::products_per_sample(&layer_sizes(mlp, n, q)),

@@ -128,9 +128,9 @@ fn the_presets_write_the_files_they_always_wrote() {
                 &bench_recommended,
                 0xa0738bd59e117549,
             ),
-            // The car's two targets share one hidden layer: its
-            // Gauss-Newton products come from the structure since
-            // decision 059 (the same numbers summed in another order).
+            // The car's two targets share one hidden layer, whose
+            // Gauss-Newton products come from its structure: the same
+            // numbers summed in another order than the Jacobian's.
             ("pacejka-paper", &car_paper, 0x2db888edf61cd85d),
             ("pacejka-recommended", &car_recommended, 0xca7977637ba72d52),
         ],

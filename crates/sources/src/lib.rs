@@ -34,6 +34,7 @@ mod named_model;
 mod preset;
 mod profile;
 mod progress;
+mod readable;
 mod records;
 mod roles;
 mod shard;
@@ -46,7 +47,6 @@ pub use chart_file::ChartFiles;
 pub use error::{Error, Result};
 pub use model_file::{
     CommandInput, DEFAULT_PRESET_SIMULATIONS, ModelFile, ModelSource, TEMPLATE, fmu_model_file,
-    readable_bytes,
 };
 pub use named_model::NamedModel;
 pub use preset::Preset;
@@ -55,6 +55,7 @@ pub use profile::{
     recommended_pacejka,
 };
 pub use progress::{Progress, Silent, Stage};
+pub use readable::readable_bytes;
 pub use records::{CHART_WORDS, RecordSource, Records, RunShape};
 pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};

@@ -1,6 +1,5 @@
 //! The Gauss-Newton products `J'J` and `J'r` of the training's least
-//! squares, by either of two computations of the same numbers
-//! (docs/decisions/026, 059):
+//! squares, by either of two computations of the same numbers:
 //!
 //! - from the Jacobian itself, one row per sample and target, for any
 //!   network;

@@ -559,7 +559,7 @@ impl Problem<'_> {
     }
 
     /// What a network of one hidden layer's Gauss-Newton products are made
-    /// of, per training sample `n` (docs/decisions/059): the columns
+    /// of, per training sample `n`: the columns
     /// `ut[.., n] = s_n (x) [x_n; 1]` (hidden unit by hidden unit, `s` the
     /// slopes `1 - z^2` of the tanh units), `zt[.., n] = [z_n; 1]` and the
     /// residuals `output - target` (samples x targets, row-major); blocks

@@ -13,6 +13,7 @@ use super::raw::*;
 use super::{DEFAULT_PRESET_SIMULATIONS, ModelSource};
 use crate::error::{Error, Result};
 use crate::preset::Preset;
+use crate::readable_bytes;
 
 /// The checked signals.
 pub(super) struct Signals {
@@ -777,25 +778,3 @@ impl Locator<'_> {
 /// outputs as f64: every simulating thread holds at least one whole
 /// record, so a record is refused before anything allocates it.
 const MAX_RECORD_BYTES: usize = 1 << 30;
-
-/// A byte count as people read it, in decimal units: "8.0 TB", "1.1 GB".
-///
-/// ```
-/// use twostage_sources::readable_bytes;
-/// assert_eq!(readable_bytes(512.0), "512 bytes");
-/// assert_eq!(readable_bytes(6.3e19), "63.0 EB");
-/// ```
-pub fn readable_bytes(bytes: f64) -> String {
-    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut value = bytes;
-    let mut unit = 0;
-    while value >= 1000.0 && unit + 1 < units.len() {
-        value /= 1000.0;
-        unit += 1;
-    }
-    if unit == 0 {
-        format!("{value} bytes")
-    } else {
-        format!("{value:.1} {}", units[unit])
-    }
-}

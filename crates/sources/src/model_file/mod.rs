@@ -691,7 +691,6 @@ mod simulator;
 
 pub use fmu_template::fmu_model_file;
 use locator::Locator;
-pub use locator::readable_bytes;
 use raw::RawFile;
 use simulator::{ChartsOnly, FileSimulator};
 
