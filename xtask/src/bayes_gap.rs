@@ -19,6 +19,19 @@ use twostage_baselines::{
 };
 
 use crate::paper::test_records;
+use crate::posterior_cache;
+
+/// Where posterior means are kept between runs: the workspace's target
+/// directory, which `cargo clean` empties.
+fn cache_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map_or_else(
+            || Path::new("target").to_path_buf(),
+            |root| root.join("target"),
+        )
+        .join("bayes-gap")
+}
 
 /// What drives the car in the test records.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -193,14 +206,25 @@ pub(crate) fn run(
         .map(|path| load(path).and_then(|e| estimates(&e, &records)))
         .transpose()?;
     let start = Instant::now();
-    let posterior: Vec<Vec<f64>> = records
-        .par_iter()
-        .map(|record| bayes.estimate(record).map(|e| e.theta))
-        .collect::<Result<_, _>>()?;
-    let bayes_seconds = start.elapsed().as_secs_f64();
+    let kept = posterior_cache::path(&cache_dir(), posterior_cache::key(&truth, &records));
+    let (posterior, bayes_words) =
+        match posterior_cache::load(&kept, records.len(), simulator.prior().dim()) {
+            Some(posterior) => (posterior, format!("as kept in {}", kept.display())),
+            None => {
+                let posterior: Vec<Vec<f64>> = records
+                    .par_iter()
+                    .map(|record| bayes.estimate(record).map(|e| e.theta))
+                    .collect::<Result<_, _>>()?;
+                posterior_cache::store(&kept, &posterior).with_context(|| {
+                    format!("keeping the posterior means in {}", kept.display())
+                })?;
+                let seconds = start.elapsed().as_secs_f64();
+                (posterior, format!("in {seconds:.1} s"))
+            }
+        };
     println!(
         "{count} fresh {} records ({steering:?} steering, seed {seed}): {} in {ts_seconds:.2} s, \
-         the Bayes posterior mean in {bayes_seconds:.1} s",
+         the Bayes posterior mean {bayes_words}",
         simulator.spec().name(),
         path.display()
     );

@@ -25,6 +25,7 @@ mod bayes_gap;
 mod crates;
 mod fit_speed;
 mod paper;
+mod posterior_cache;
 mod test;
 
 #[derive(Debug, Parser)]
