@@ -9,13 +9,14 @@
 //! - [`lagged`]: the least-squares normal equations of an ARX-type
 //!   regression assembled from lagged products of the signals (eq. (2) of
 //!   the paper without forming the regressor matrix);
-//! - [`layer`]: one dense layer of the network (affine map and activation);
+//! - [`layer`]: one dense layer of the network (affine map and activation),
+//!   and [`tanh`], its activation, the same bits on every platform;
 //! - [`vector`]: standardization and clipping to the prior box.
 //!
 //! The summation orders are part of the contract: sums run in index order
-//! and pivots are formed by subtracting one product at a time, so a
-//! re-implementation elsewhere is not needed and a caller that changes
-//! platforms changes only what the platform's `tanh` does.
+//! and pivots are formed by subtracting one product at a time, and the
+//! activation is the crate's own [`tanh`], so a caller that changes
+//! platforms changes no bit.
 //!
 //! ```
 //! use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
@@ -39,7 +40,10 @@ pub mod cholesky;
 pub mod input_summary;
 pub mod lagged;
 pub mod layer;
+mod tanh;
 pub mod vector;
+
+pub use tanh::tanh;
 
 /// Square root, correctly rounded on every platform (IEEE 754).
 #[inline]
@@ -51,20 +55,6 @@ pub(crate) fn sqrt(x: f64) -> f64 {
     #[cfg(not(feature = "std"))]
     {
         libm::sqrt(x)
-    }
-}
-
-/// Hyperbolic tangent: the platform's with std (what every estimator
-/// trained so far used), libm's without.
-#[inline]
-pub(crate) fn tanh(x: f64) -> f64 {
-    #[cfg(feature = "std")]
-    {
-        x.tanh()
-    }
-    #[cfg(not(feature = "std"))]
-    {
-        libm::tanh(x)
     }
 }
 

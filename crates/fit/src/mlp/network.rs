@@ -229,7 +229,7 @@ pub(super) fn forward(
         let tanh = activation(l, layers) == Activation::Tanh;
         for (o, b) in out.iter_mut().zip(bias) {
             let z = b + *o;
-            *o = if tanh { z.tanh() } else { z };
+            *o = if tanh { twostage_kernels::tanh(z) } else { z };
         }
         p += n_out * (n_in + 1);
     }
