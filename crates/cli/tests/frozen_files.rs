@@ -112,27 +112,28 @@ fn the_presets_write_the_files_they_always_wrote() {
     let bench_recommended = with(&["train", "--model", "benchmark", "--preset", "recommended"]);
     let car_paper = with(&["train", "--model", "pacejka"]);
     let car_recommended = with(&["train", "--model", "pacejka", "--preset", "recommended"]);
-    // Every file below changed on purpose when estimator files gained the
-    // input family (format 5): the payloads before are prefixes of these.
+    // Every file below changed on purpose when the networks' tanh became
+    // the project's own (within 3 ulps of glibc's, so every weight moved in
+    // its last bits; the accuracy is unchanged).
     check(
         &[
             // Every default of the command line: m, seed, validation, calibration, alpha.
             (
                 "benchmark-defaults",
                 &["train", "--model", "benchmark"],
-                0xc679f4d46aafc690,
+                0x571ee750706cc850,
             ),
-            ("benchmark-paper", &bench_paper, 0x7d4b86eaf6fb5b7b),
+            ("benchmark-paper", &bench_paper, 0x7ac697cdc2c2b7f4),
             (
                 "benchmark-recommended",
                 &bench_recommended,
-                0xa0738bd59e117549,
+                0xfc04d2c591a3b95c,
             ),
             // The car's two targets share one hidden layer, whose
             // Gauss-Newton products come from its structure: the same
             // numbers summed in another order than the Jacobian's.
-            ("pacejka-paper", &car_paper, 0x2db888edf61cd85d),
-            ("pacejka-recommended", &car_recommended, 0xca7977637ba72d52),
+            ("pacejka-paper", &car_paper, 0xbdef92c304576f4b),
+            ("pacejka-recommended", &car_recommended, 0xe142a757f110af86),
         ],
         &dir,
     );
@@ -229,12 +230,12 @@ fn every_source_writes_the_file_it_always_wrote() {
     // Changed on purpose with the input family, as the presets' files above.
     check(
         &[
-            ("chart-csv", &chart, 0xe5be0343007b8fea),
-            ("model-file-preset", &model_file, 0x2964daa6d4fc87ff),
-            ("shards", &shards, 0x472e12d902fe836e),
+            ("chart-csv", &chart, 0xfe733323fc3b6439),
+            ("model-file-preset", &model_file, 0xfd65a3b9f056d470),
+            ("shards", &shards, 0x6ada6392680807b9),
             // Changed on purpose by issue 27: round 3 averages the winner's
             // restarts, and here the average wins (was 0xcd51098186e891d5).
-            ("auto-sims", &auto, 0x8d7fb6b4536efab2),
+            ("auto-sims", &auto, 0xd4bd4d368341dcba),
         ],
         &dir,
     );
