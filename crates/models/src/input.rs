@@ -474,11 +474,15 @@ fn interpolate(samples: &[f64], x: f64) -> f64 {
     if x <= 0.0 {
         return samples[0];
     }
-    let k = x.floor();
-    let i = k as usize;
-    if i + 1 >= samples.len() {
+    if x.is_nan() {
+        return f64::NAN;
+    }
+    // At or past the last sample (an infinite index included) it holds.
+    if x >= (samples.len() - 1) as f64 {
         return last;
     }
+    let k = x.floor();
+    let i = k as usize;
     let frac = x - k;
     samples[i] + frac * (samples[i + 1] - samples[i])
 }
@@ -495,6 +499,21 @@ fn invalid(name: &'static str, value: f64, reason: &str) -> SimError {
 mod tests {
     use super::*;
     use crate::rng::experiment_rng;
+
+    #[test]
+    fn interpolation_holds_the_ends_for_any_index() {
+        let samples = [1.0, 3.0, 7.0];
+        assert_eq!(interpolate(&samples, 0.5), 2.0);
+        assert_eq!(interpolate(&samples, 1.25), 4.0);
+        for past in [2.0, 2.5, 1e300, f64::INFINITY] {
+            assert_eq!(interpolate(&samples, past), 7.0, "{past}");
+        }
+        assert_eq!(interpolate(&samples, f64::NEG_INFINITY), 1.0);
+        assert!(interpolate(&samples, f64::NAN).is_nan());
+        assert!(interpolate(&[4.0], f64::NAN).is_nan());
+        assert_eq!(interpolate(&[4.0], 0.3), 4.0);
+        assert_eq!(interpolate(&[], 0.3), 0.0);
+    }
 
     #[test]
     fn chicane_is_zero_outside_its_window_and_matches_the_formula() {

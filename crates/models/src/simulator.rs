@@ -14,6 +14,10 @@ use crate::rng::ExperimentRng;
 ///     .with_notes("a step of 1 N at t = 0", "position noise of variance 1e-4");
 /// assert_eq!(spec.param_names(), ["k", "c"]);
 /// assert_eq!(spec.n_samples(), 800);
+/// // 800 samples 1e306 apart would end past the largest f64.
+/// let prior = Prior::uniform_box(&[1.0], &[5.0])?;
+/// assert!(ModelSpec::new("far", &["k"], prior.clone(), 1e306, 800).is_err());
+/// assert!(ModelSpec::new("far", &["k"], prior, 1e300, 800).is_ok());
 /// # Ok::<(), twostage_models::SimError>(())
 /// ```
 #[derive(Debug, Clone, PartialEq)]
@@ -36,7 +40,8 @@ impl ModelSpec {
     /// # Errors
     /// [`SimError::InvalidSetting`] if the
     /// names do not match the prior's dimension, the sampling time is not
-    /// finite and positive, or the record is empty.
+    /// finite and positive, the record is empty, or its last sample's time
+    /// is beyond the largest `f64`.
     pub fn new(
         name: &str,
         param_names: &[&str],
@@ -64,6 +69,17 @@ impl ModelSpec {
                 name: "number of samples",
                 value: "0".into(),
                 reason: "a record needs at least one sample".into(),
+            });
+        }
+        if !(n_samples as f64 * sample_time).is_finite() {
+            return Err(InvalidSetting {
+                name: "sample time",
+                value: sample_time.to_string(),
+                reason: format!(
+                    "{n_samples} samples this far apart end beyond the largest time a \
+                     number holds; give at most {:e}",
+                    f64::MAX / n_samples as f64
+                ),
             });
         }
         Ok(Self {

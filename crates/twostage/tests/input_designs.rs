@@ -98,6 +98,36 @@ fn each_experiment_draws_its_own_multisine_in_the_family() {
 }
 
 #[test]
+fn a_sample_time_whose_record_ends_past_the_largest_time_is_refused_by_its_key() {
+    let text = tanks("signal = \"chicane\"\namplitude = 0.2")
+        .replace("sample_time = 2.0", "sample_time = 0.1e308");
+    let message = ModelFile::parse(&text, "far.toml").unwrap_err().to_string();
+    for part in [
+        "far.toml",
+        "line 10",
+        "signals.sample_time",
+        "400 samples 1e307 apart",
+        "give at most 4.49",
+    ] {
+        assert!(message.contains(part), "{part} not in: {message}");
+    }
+    // Just inside, the file reads, and a step of 8e305 makes the
+    // record fail with the state named, not the process.
+    let text = tanks("signal = \"chicane\"\namplitude = 0.2")
+        .replace("sample_time = 2.0", "sample_time = 4e305");
+    let sim = ModelFile::parse(&text, "far.toml")
+        .unwrap()
+        .simulator()
+        .unwrap();
+    let mut record = sim.spec().new_record();
+    let theta = sim.spec().prior().lower().to_vec();
+    let failed = sim
+        .simulate(&theta, &mut experiment_rng(7, 0), &mut record)
+        .unwrap_err();
+    assert!(failed.to_string().contains("h2"), "{failed}");
+}
+
+#[test]
 fn an_impossible_design_is_named_by_its_key() {
     let cases: &[(&str, &str, &str)] = &[
         (

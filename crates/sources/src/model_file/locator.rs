@@ -615,11 +615,23 @@ impl Locator<'_> {
                 ),
             ));
         }
+        let sample_time = self.sample_time(s.sample_time.as_ref(), base)?;
+        if !(samples as f64 * sample_time).is_finite() {
+            return Err(self.error(
+                s.sample_time.as_ref().map(Spanned::span).or(whole),
+                "signals.sample_time",
+                format!(
+                    "{samples} samples {sample_time:e} apart end beyond the largest time a number \
+                     holds: give at most {:e}",
+                    f64::MAX / samples as f64
+                ),
+            ));
+        }
         Ok(Signals {
             inputs,
             outputs,
             samples,
-            sample_time: self.sample_time(s.sample_time.as_ref(), base)?,
+            sample_time,
         })
     }
 
