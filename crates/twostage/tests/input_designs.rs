@@ -128,6 +128,26 @@ fn a_sample_time_whose_record_ends_past_the_largest_time_is_refused_by_its_key()
 }
 
 #[test]
+fn substeps_beyond_the_limit_are_refused_by_their_key() {
+    let text = tanks("signal = \"chicane\"\namplitude = 0.2")
+        .replace("substeps = 4", "substeps = 1000000000000");
+    let message = ModelFile::parse(&text, "steps.toml")
+        .unwrap_err()
+        .to_string();
+    for part in [
+        "steps.toml",
+        "line 15",
+        "equations.substeps",
+        "from 1 to 100000, not 1000000000000",
+    ] {
+        assert!(message.contains(part), "{part} not in: {message}");
+    }
+    let text =
+        tanks("signal = \"chicane\"\namplitude = 0.2").replace("substeps = 4", "substeps = 100000");
+    assert!(ModelFile::parse(&text, "steps.toml").is_ok());
+}
+
+#[test]
 fn an_impossible_design_is_named_by_its_key() {
     let cases: &[(&str, &str, &str)] = &[
         (

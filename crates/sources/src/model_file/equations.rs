@@ -53,12 +53,17 @@ impl Locator<'_> {
                     None => DEFAULT_SUBSTEPS,
                     Some(s) => usize::try_from(*s.get_ref())
                         .ok()
-                        .filter(|&n| n >= 1)
+                        .filter(|n| (1..=MAX_SUBSTEPS).contains(n))
                         .ok_or_else(|| {
                             self.error(
                                 Some(s.span()),
                                 "equations.substeps",
-                                format!("must be a whole number >= 1, not {}", s.get_ref()),
+                                format!(
+                                    "must be a whole number from 1 to {MAX_SUBSTEPS}, not {} \
+                                     (for dynamics faster than that, sample faster: a \
+                                     shorter sample_time)",
+                                    s.get_ref()
+                                ),
                             )
                         })?,
                 };
@@ -218,6 +223,11 @@ impl Locator<'_> {
 
 /// RK4 steps per sample where the file does not say.
 pub const DEFAULT_SUBSTEPS: usize = 10;
+
+/// The most integrator steps a sample: a record's work grows with them, and
+/// a step of a hundred-thousandth of the sample time is finer than RK4
+/// needs in f64 (a typo of a few zeros would otherwise run for days).
+pub const MAX_SUBSTEPS: usize = 100_000;
 
 /// `text` compiled for `spec`, the file's `lognormal` (output name, sd,
 /// line) placed in the outputs' order; an error names the file, the line
