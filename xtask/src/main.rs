@@ -24,6 +24,7 @@ use twostage::models::{Benchmark, Simulator};
 mod bayes_gap;
 mod crates;
 mod fit_speed;
+mod fuzz;
 mod paper;
 mod posterior_cache;
 mod test;
@@ -116,6 +117,43 @@ enum Command {
         #[arg(long)]
         export: Option<PathBuf>,
     },
+    /// Fuzz the readers of outside data (estimator files, runtime blobs,
+    /// model files, CSV rows) with inputs mutated from their corpus in
+    /// xtask/fuzz/; a panic, an abort or endless work fails the run, and
+    /// the input is kept under target/fuzz/.
+    Fuzz {
+        /// The readers (default: every one).
+        #[arg(long = "reader", value_enum)]
+        readers: Vec<fuzz::Reader>,
+        /// Inputs per reader (a reproducible run; the default).
+        #[arg(long, default_value_t = 100_000, conflicts_with = "seconds")]
+        execs: u64,
+        /// Fuzz each reader for this many seconds instead.
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Seed of the inputs' random streams.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Child processes at a time.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+        /// First write each reader's corpus again from the repository's
+        /// files and small estimators trained here.
+        #[arg(long)]
+        write_corpus: bool,
+    },
+    /// One fuzzing child's chunk of inputs (started by `fuzz`).
+    #[command(hide = true)]
+    FuzzChunk {
+        #[arg(long, value_enum)]
+        reader: fuzz::Reader,
+        #[arg(long)]
+        seed: u64,
+        #[arg(long)]
+        from: u64,
+        #[arg(long)]
+        count: u64,
+    },
     /// Simulate and compress a large benchmark chart; report throughput and
     /// peak memory (the bounded-memory claim of DESIGN.md).
     ChartScale {
@@ -154,6 +192,23 @@ fn main() -> ExitCode {
             export: export.as_deref(),
         }),
         Command::Crates { check } => crates::run(check),
+        Command::Fuzz {
+            readers,
+            execs,
+            seconds,
+            seed,
+            jobs,
+            write_corpus,
+        } => {
+            let length = seconds.map_or(fuzz::Length::Executions(execs), fuzz::Length::Seconds);
+            fuzz::run(&readers, length, seed, jobs, write_corpus)
+        }
+        Command::FuzzChunk {
+            reader,
+            seed,
+            from,
+            count,
+        } => fuzz::chunk(reader, seed, from, count),
         Command::BayesGap {
             estimator,
             against,

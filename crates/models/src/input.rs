@@ -503,16 +503,23 @@ mod tests {
     #[test]
     fn interpolation_holds_the_ends_for_any_index() {
         let samples = [1.0, 3.0, 7.0];
-        assert_eq!(interpolate(&samples, 0.5), 2.0);
-        assert_eq!(interpolate(&samples, 1.25), 4.0);
+        assert_eq!(interpolate(&samples, 0.5).to_bits(), 2.0f64.to_bits());
+        assert_eq!(interpolate(&samples, 1.25).to_bits(), 4.0f64.to_bits());
         for past in [2.0, 2.5, 1e300, f64::INFINITY] {
-            assert_eq!(interpolate(&samples, past), 7.0, "{past}");
+            assert_eq!(
+                interpolate(&samples, past).to_bits(),
+                7.0f64.to_bits(),
+                "{past}"
+            );
         }
-        assert_eq!(interpolate(&samples, f64::NEG_INFINITY), 1.0);
+        assert_eq!(
+            interpolate(&samples, f64::NEG_INFINITY).to_bits(),
+            1.0f64.to_bits()
+        );
         assert!(interpolate(&samples, f64::NAN).is_nan());
         assert!(interpolate(&[4.0], f64::NAN).is_nan());
-        assert_eq!(interpolate(&[4.0], 0.3), 4.0);
-        assert_eq!(interpolate(&[], 0.3), 0.0);
+        assert_eq!(interpolate(&[4.0], 0.3).to_bits(), 4.0f64.to_bits());
+        assert_eq!(interpolate(&[], 0.3).to_bits(), 0.0f64.to_bits());
     }
 
     #[test]
