@@ -21,18 +21,6 @@ use twostage_baselines::{
 use crate::paper::test_records;
 use crate::posterior_cache;
 
-/// Where posterior means are kept between runs: the workspace's target
-/// directory, which `cargo clean` empties.
-fn cache_dir() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map_or_else(
-            || Path::new("target").to_path_buf(),
-            |root| root.join("target"),
-        )
-        .join("bayes-gap")
-}
-
 /// What drives the car in the test records.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum Steering {
@@ -206,7 +194,10 @@ pub(crate) fn run(
         .map(|path| load(path).and_then(|e| estimates(&e, &records)))
         .transpose()?;
     let start = Instant::now();
-    let kept = posterior_cache::path(&cache_dir(), posterior_cache::key(&truth, &records));
+    let kept = posterior_cache::path(
+        &crate::target_dir().join("bayes-gap"),
+        posterior_cache::key(&truth, &records),
+    );
     let (posterior, bayes_words) =
         match posterior_cache::load(&kept, records.len(), simulator.prior().dim()) {
             Some(posterior) => (posterior, format!("as kept in {}", kept.display())),

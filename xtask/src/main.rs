@@ -234,6 +234,15 @@ fn main() -> ExitCode {
     }
 }
 
+/// The workspace's target directory: what the tasks keep between runs
+/// (posterior means, fuzzing findings) goes there, and `cargo clean`
+/// empties it.
+fn target_dir() -> PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map_or_else(|| PathBuf::from("target"), |root| root.join("target"))
+}
+
 /// Peak resident memory of this process (VmHWM), in MiB, where /proc has it.
 fn peak_memory_mib() -> Option<f64> {
     let status = fs::read_to_string("/proc/self/status").ok()?;

@@ -25,8 +25,6 @@ pub(crate) use targets::Reader;
 mod corpus;
 mod run;
 
-use std::path::Path;
-
 use anyhow::{Result, bail};
 
 pub(crate) use run::{Length, chunk};
@@ -50,7 +48,7 @@ pub(crate) fn run(
     } else {
         readers
     };
-    let kept = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/fuzz");
+    let kept = crate::target_dir().join("fuzz");
     let mut found = 0;
     for &reader in readers {
         let summary = run::fuzz(reader, seed, length, jobs)?;
