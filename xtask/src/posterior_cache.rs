@@ -11,10 +11,13 @@ use twostage::models::IoData;
 use twostage::sources::fingerprint;
 
 /// The fingerprint of a test set: every number of its truth and records,
-/// bit for bit, in order.
+/// bit for bit, in order (each record's fingerprint, then theirs, so that
+/// no copy of the whole set is made).
 pub(crate) fn key(truth: &[Vec<f64>], records: &[IoData]) -> u64 {
+    let mut hashes = Vec::with_capacity(8 * records.len());
     let mut bytes = Vec::new();
     for (theta, record) in truth.iter().zip(records) {
+        bytes.clear();
         let inputs = (0..record.n_inputs()).flat_map(|j| record.input(j).iter());
         let outputs = (0..record.n_outputs()).flat_map(|j| record.output(j).iter());
         for x in theta.iter().chain(inputs).chain(outputs) {
@@ -22,8 +25,9 @@ pub(crate) fn key(truth: &[Vec<f64>], records: &[IoData]) -> u64 {
         }
         // Record boundaries count: the same numbers split differently differ.
         bytes.extend_from_slice(&(record.n_samples() as u64).to_le_bytes());
+        hashes.extend_from_slice(&fingerprint(&bytes).to_le_bytes());
     }
-    fingerprint(&bytes)
+    fingerprint(&hashes)
 }
 
 /// Where the posterior means of the test set `key` are kept.
