@@ -10,7 +10,7 @@ use twostage::refine::{JointPlan, SearchStarts, SingleEstimate};
 use twostage::{Estimator, NamedModel, OutputError, Refinement};
 
 use crate::error::{BaselineError, Result};
-use crate::refiner::{ToRefine, estimator_model};
+use crate::refiner::ToRefine;
 
 /// The joint estimate of the records handed to [`JointFitter::fit`], each
 /// record named by its place among them.
@@ -89,9 +89,11 @@ impl JointFitter {
         model_file: Option<&NamedModel>,
         search: SearchStarts,
     ) -> Result<Self> {
-        let simulator = estimator_model(estimator, model_file)?;
-        let fit =
-            OutputError::new(simulator).map_err(|e| BaselineError::TwoStage(Box::new(e.into())))?;
+        let boxed = |e: twostage::Error| BaselineError::TwoStage(Box::new(e));
+        let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
+            .and_then(|model| model.simulator(false))
+            .map_err(|e| boxed(e.into()))?;
+        let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         Ok(Self {
             fit: Refinement::new(fit),

@@ -59,7 +59,7 @@ pub use joint::{JointFitter, JointOfRecords};
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
 pub use pem::{BenchmarkPredictor, PredictionError};
-pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine, estimator_model};
+pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
 pub use suite::{MethodSettings, classic_estimator, exact_likelihood};
 pub use twostage_fit::TerminationReason;
 

@@ -106,7 +106,9 @@ impl EstimateRefiner {
                 search: default_search(estimator),
             });
         }
-        let simulator = estimator_model(estimator, model_file)?;
+        let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
+            .and_then(|model| model.simulator(false))
+            .map_err(|e| boxed(e.into()))?;
         let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
         Ok(Self {
             how: How::OutputError(Refinement::new(fit)),
@@ -322,47 +324,6 @@ fn default_search(estimator: &Estimator) -> SearchStarts {
 /// points fill a simulator's batches; more would only hold more residuals
 /// in memory at once.
 pub const RECORDS_TOGETHER: usize = 64;
-
-/// The model `estimator`'s records come from, noise-free capable, to check
-/// or refine them against: `model_file`, else the estimator's built-in
-/// model.
-///
-/// # Errors
-/// An estimator of a model file without `model_file`, or a model file of
-/// another model.
-pub fn estimator_model(
-    estimator: &Estimator,
-    model_file: Option<&NamedModel>,
-) -> Result<Box<dyn Simulator>> {
-    let trained_on = &estimator.training().model;
-    let builtin;
-    let named = match model_file {
-        Some(named) => named,
-        None => {
-            builtin =
-                NamedModel::builtin(trained_on).map_err(|_| BaselineError::InvalidSetting {
-                    name: "model file",
-                    value: "none".into(),
-                    expected: format!(
-                        "this estimator is of '{trained_on}', not a built-in model: give the model \
-                     file it was trained from"
-                    ),
-                })?;
-            &builtin
-        }
-    };
-    if named.name() != trained_on {
-        return Err(BaselineError::InvalidSetting {
-            name: "model file",
-            value: format!("'{}'", named.name()),
-            expected: format!(
-                "the estimator was trained on '{trained_on}': give the model file it was \
-                 trained from"
-            ),
-        });
-    }
-    named.simulator(false).map_err(|e| boxed(e.into()))
-}
 
 fn boxed(e: twostage::Error) -> BaselineError {
     BaselineError::TwoStage(Box::new(e))

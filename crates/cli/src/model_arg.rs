@@ -1,7 +1,7 @@
 //! `--model NAME` or `--model-file PATH`: the model a command works on, and
 //! its presets, whichever way it was named.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use twostage::models::Simulator;
@@ -32,13 +32,22 @@ pub struct Model(NamedModel);
 impl ModelArgs {
     /// The model, read and checked.
     pub fn resolve(&self) -> Result<Model> {
-        match (&self.model, &self.model_file) {
-            (Some(name), None) => NamedModel::builtin(name)
-                .map(Model)
-                .map_err(|e| usage(format!("{e} (see `twostage models`)"))),
-            (None, Some(path)) => NamedModel::file(path).map(Model).or_usage(),
-            _ => Err(usage("give --model NAME or --model-file PATH".into())),
-        }
+        named(self.model.as_deref(), self.model_file.as_deref())?
+            .map(Model)
+            .ok_or_else(|| usage("give --model NAME or --model-file PATH".into()))
+    }
+}
+
+/// The model named by `--model` (`model`) or `--model-file` (`file`), read
+/// and checked; `None` when neither is given. Every command that takes
+/// them reads them here (clap refuses both at once).
+pub fn named(model: Option<&str>, file: Option<&Path>) -> Result<Option<NamedModel>> {
+    match (model, file) {
+        (None, None) => Ok(None),
+        (_, Some(path)) => NamedModel::file(path).map(Some).or_usage(),
+        (Some(name), None) => NamedModel::builtin(name)
+            .map(Some)
+            .map_err(|e| usage(format!("{e} (see `twostage models`)"))),
     }
 }
 

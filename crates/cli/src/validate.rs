@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 use ndarray::Array2;
 use rayon::prelude::*;
-use twostage::models::{BuiltinModel, IoData, Sampling, run_experiment};
+use twostage::models::{IoData, Sampling, run_experiment};
 use twostage::validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
-use twostage::{EstimateWorkspace, Estimator, ModelFile};
+use twostage::{EstimateWorkspace, Estimator, NamedModel};
 
 use crate::OrUsage;
 use crate::usage;
@@ -59,29 +59,10 @@ pub struct ValidateArgs {
 pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let estimator = Estimator::load(&args.estimator)?;
     let trained_on = &estimator.training().model;
-    let sim = match &args.model_file {
-        Some(path) => {
-            let file = ModelFile::load(path).or_usage()?;
-            if file.name() != trained_on {
-                return Err(usage(format!(
-                    "{} describes '{}', the estimator was trained on '{trained_on}'",
-                    path.display(),
-                    file.name()
-                )));
-            }
-            file.simulator().or_usage()?
-        }
-        None => {
-            let model: BuiltinModel = trained_on.parse().map_err(|_| {
-                usage(format!(
-                    "{} was trained on '{trained_on}', not a built-in model: give its \
-                     --model-file",
-                    args.estimator.display()
-                ))
-            })?;
-            model.build(false)?
-        }
-    };
+    let given = crate::model_arg::named(None, args.model_file.as_deref())?;
+    let sim = NamedModel::trained_on(trained_on, given.as_ref())
+        .and_then(|model| model.simulator(false))
+        .or_usage()?;
     let sigma = squared_error_bound(estimator.lower(), estimator.upper());
     let mut r = match (args.sims, args.gamma) {
         (Some(r), _) => r,

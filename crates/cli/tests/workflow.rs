@@ -867,11 +867,19 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
         path(&alien_path),
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
-    assert!(
-        text(&out.stderr).contains("trained on 'pacejka'"),
-        "{}",
-        text(&out.stderr)
-    );
+    let refusal = "describes 'other', the estimator was trained on 'pacejka': give the model \
+                   file it was trained from";
+    assert!(text(&out.stderr).contains(refusal), "{}", text(&out.stderr));
+    // Validating refuses it in the same words: one function finds the model.
+    let out = twostage(&[
+        "validate",
+        "--estimator",
+        path(&file),
+        "--model-file",
+        path(&benchmark),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains(refusal), "{}", text(&out.stderr));
 }
 
 /// An interval never leaves the prior's box: a record near its edge gets

@@ -377,8 +377,9 @@ impl PyEstimator {
         prior_starts: Option<usize>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         let named = named_model(None, model_file, model_toml)?;
-        let sim = twostage_baselines::estimator_model(&self.inner, named.as_ref())
-            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let sim = NamedModel::trained_on(&self.inner.training().model, named.as_ref())
+            .and_then(|model| model.simulator(false))
+            .map_err(to_python)?;
         let shape = self.inner.record_shape();
         let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
         let (theta, half_widths) = match theta {
@@ -655,23 +656,20 @@ fn train(
         (true, Some(t), None) => Some(twostage::Budget::Seconds(t)),
         (true, None, None) => Some(twostage::Budget::default()),
     };
-    let named = match (model, model_file, model_toml) {
-        (Some(name), None, None) if simulator.is_none() => NamedModel::builtin(name),
-        (None, Some(path), None) => NamedModel::file(path),
-        (None, None, Some(text)) => twostage::ModelFile::parse(text, "model_toml")
-            .map(|file| NamedModel::File(Box::new(file))),
-        (Some(_), None, None) => {
+    let named = match (model, simulator.is_some()) {
+        (Some(_), true) => {
             return Err(PyValueError::new_err(
-                "a simulator needs a model file without [source] (model_file= or model_toml=)                  for its parameter names, priors and signals, not a built-in model",
+                "a simulator needs a model file without [source] (model_file= or model_toml=) \
+                 for its parameter names, priors and signals, not a built-in model",
             ));
         }
-        _ => {
-            return Err(PyValueError::new_err(
-                "give one of model='benchmark' (a built-in model), model_file='path.toml' or                  model_toml='...' (a model file's text)",
-            ));
-        }
-    }
-    .map_err(to_python)?;
+        _ => named_model(model, model_file, model_toml)?.ok_or_else(|| {
+            PyValueError::new_err(
+                "give one of model='benchmark' (a built-in model), model_file='path.toml' or \
+                 model_toml='...' (a model file's text)",
+            )
+        })?,
+    };
     let defaults = RunSettings::default();
     let chart_dir = |given: Option<(PathBuf, Option<String>)>| {
         given.map(|(dir, label)| ChartDir { dir, label })

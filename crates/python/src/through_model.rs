@@ -27,8 +27,7 @@ pub(crate) fn named_model(
         (None, None, None) => return Ok(None),
         (Some(name), None, None) => NamedModel::builtin(name),
         (None, Some(path), None) => NamedModel::file(path),
-        (None, None, Some(text)) => twostage::ModelFile::parse(text, "model_toml")
-            .map(|file| NamedModel::File(Box::new(file))),
+        (None, None, Some(text)) => NamedModel::text(text, "model_toml"),
         _ => {
             return Err(PyValueError::new_err(
                 "give one of model= (a built-in model), model_file= or model_toml=, not several",

@@ -101,6 +101,23 @@ pub enum Error {
         /// What the model has instead.
         available: String,
     },
+    /// The model given for an estimator's records is not the model it
+    /// was trained on, or none was given for a model that is not built in.
+    #[error(
+        "{}: give the model file it was trained from",
+        match given {
+            Some((origin, name)) => format!(
+                "{origin} describes '{name}', the estimator was trained on '{trained_on}'"
+            ),
+            None => format!("the estimator was trained on '{trained_on}', not a built-in model"),
+        }
+    )]
+    OtherModel {
+        /// The model the estimator was trained on.
+        trained_on: String,
+        /// Where the model given came from and the model it describes.
+        given: Option<(String, String)>,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {cause}")]
     Io {

@@ -2,6 +2,7 @@
 //! path, with its simulator, its charts-only form and its presets, so the
 //! command line and the Python package resolve names the same way.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use twostage_models::{BuiltinModel, NoiseFree, Simulator};
@@ -34,7 +35,7 @@ use crate::profile::ModelProfile;
 /// assert_eq!(short.preset(Some("paper"))?.simulations, 1500);
 /// # Ok::<(), twostage_sources::Error>(())
 /// ```
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub enum NamedModel {
     /// A built-in model with the paper's settings.
     Builtin(BuiltinModel),
@@ -57,6 +58,65 @@ impl NamedModel {
     /// As [`ModelFile::load`].
     pub fn file(path: impl AsRef<Path>) -> Result<Self> {
         Ok(Self::File(Box::new(ModelFile::load(path)?)))
+    }
+
+    /// The model file whose text is `text`; `origin` names it in messages
+    /// (as a path would).
+    ///
+    /// # Errors
+    /// As [`ModelFile::parse`].
+    pub fn text(text: &str, origin: &str) -> Result<Self> {
+        Ok(Self::File(Box::new(ModelFile::parse(text, origin)?)))
+    }
+
+    /// The model whose records an estimator trained on the model called
+    /// `trained_on` reads, to check, refine or validate them against:
+    /// `given` where it describes that model, else the built-in model of
+    /// that name. Every door (the command line's commands, the Python
+    /// package) finds it here, so that they accept and refuse alike.
+    ///
+    /// ```
+    /// use twostage_sources::NamedModel;
+    /// let model = NamedModel::trained_on("benchmark", None)?;
+    /// assert_eq!(model.name(), "benchmark");
+    /// let short = NamedModel::text(
+    ///     "[model]\nname = \"short\"\n[source]\nbuiltin = \"benchmark\"\n",
+    ///     "short.toml",
+    /// )?;
+    /// assert_eq!(NamedModel::trained_on("short", Some(&short))?.name(), "short");
+    /// // A model file of another model, or none for a model that is not built in.
+    /// let other = NamedModel::trained_on("benchmark", Some(&short)).unwrap_err();
+    /// assert!(other.to_string().starts_with("short.toml describes 'short'"));
+    /// assert!(NamedModel::trained_on("short", None).is_err());
+    /// # Ok::<(), twostage_sources::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::OtherModel`]: `given` describes another model, or none is
+    /// given and `trained_on` is not a built-in model.
+    pub fn trained_on<'a>(trained_on: &str, given: Option<&'a Self>) -> Result<Cow<'a, Self>> {
+        match given {
+            Some(given) if given.name() == trained_on => Ok(Cow::Borrowed(given)),
+            Some(given) => Err(Error::OtherModel {
+                trained_on: trained_on.to_string(),
+                given: Some((given.origin().to_string(), given.name().to_string())),
+            }),
+            None => Self::builtin(trained_on)
+                .map(Cow::Owned)
+                .map_err(|_| Error::OtherModel {
+                    trained_on: trained_on.to_string(),
+                    given: None,
+                }),
+        }
+    }
+
+    /// Where the model was named: a model file's path (or the name its
+    /// text was given), or "built-in model 'NAME'".
+    pub fn origin(&self) -> Cow<'_, str> {
+        match self {
+            Self::Builtin(model) => Cow::Owned(format!("built-in model '{}'", model.name())),
+            Self::File(file) => Cow::Borrowed(file.origin()),
+        }
     }
 
     /// Identifies the model's description in shard files: the model

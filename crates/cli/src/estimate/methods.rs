@@ -7,7 +7,7 @@ use twostage::models::Simulator;
 use twostage::models::{BuiltinModel, IoData};
 use twostage::{Estimator, ModelProfile, OutputError, SignalNames};
 
-use super::refine::{joint_fitter, model_of, refinement};
+use super::refine::{joint_fitter, model_file, model_of, refinement};
 use super::{EstimateArgs, Estimated, Method, OUTPUT_ERROR, PriorBox};
 use crate::OrUsage;
 use crate::options::InitialCovariance;
@@ -15,16 +15,11 @@ use crate::{csv_records, usage};
 
 /// The model named by --model or --model-file, which `what` needs.
 fn named_model(args: &EstimateArgs, what: &str) -> Result<twostage::NamedModel> {
-    match (&args.model_file, &args.model) {
-        (Some(path), _) => twostage::NamedModel::file(path),
-        (None, Some(model)) => twostage::NamedModel::builtin(model),
-        (None, None) => {
-            return Err(usage(format!(
-                "{what} simulates the model: give --model M or --model-file F"
-            )));
-        }
-    }
-    .or_usage()
+    crate::model_arg::named(args.model.as_deref(), args.model_file.as_deref())?.ok_or_else(|| {
+        usage(format!(
+            "{what} simulates the model: give --model M or --model-file F"
+        ))
+    })
 }
 
 /// Refuses an option that the chosen way of estimating would not read:
@@ -233,19 +228,21 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         };
         let transforms = estimator.transforms_outputs();
         let family = estimator.input_family().is_some();
+        let given = model_file(args)?;
+        let given = given.as_ref();
         let checker = if args.checks() {
-            Some(model_of(&estimator, args)?)
+            Some(model_of(&estimator, given)?)
         } else {
             None
         };
         let refines = args.refine.is_some();
         let refiner = if refines {
-            Some(refinement(&estimator, args)?)
+            Some(refinement(&estimator, given, args)?)
         } else {
             None
         };
         let joint = if args.joint {
-            Some(joint_fitter(&estimator, args)?)
+            Some(joint_fitter(&estimator, given, args)?)
         } else {
             None
         };

@@ -10,8 +10,9 @@ use twostage_baselines::EstimateRefiner;
 use super::EstimateArgs;
 use crate::OrUsage;
 
-/// The --model-file given, loaded.
-fn model_file(args: &EstimateArgs) -> Result<Option<NamedModel>> {
+/// The --model-file given, loaded: once for every use of it (check,
+/// refinement, joint fit), so they read the same file.
+pub(super) fn model_file(args: &EstimateArgs) -> Result<Option<NamedModel>> {
     args.model_file
         .as_ref()
         .map(|path| NamedModel::file(path).or_usage())
@@ -19,18 +20,26 @@ fn model_file(args: &EstimateArgs) -> Result<Option<NamedModel>> {
 }
 
 /// The refinement of an estimator's estimates (see
-/// [`EstimateRefiner::new`]).
-pub(super) fn refinement(estimator: &Estimator, args: &EstimateArgs) -> Result<EstimateRefiner> {
+/// [`EstimateRefiner::new`]) through `given`, the --model-file.
+pub(super) fn refinement(
+    estimator: &Estimator,
+    given: Option<&NamedModel>,
+    args: &EstimateArgs,
+) -> Result<EstimateRefiner> {
     let q = estimator.param_names().len();
-    Ok(EstimateRefiner::new(estimator, model_file(args)?.as_ref())
+    Ok(EstimateRefiner::new(estimator, given)
         .usage_context("--refine")?
         .search(args.search(q)))
 }
 
 /// The model an estimator's records come from, to check them against:
-/// `--model-file`, else the estimator's built-in model.
-pub(super) fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box<dyn Simulator>> {
-    twostage_baselines::estimator_model(estimator, model_file(args)?.as_ref())
+/// `given` (the --model-file), else the estimator's built-in model.
+pub(super) fn model_of(
+    estimator: &Estimator,
+    given: Option<&NamedModel>,
+) -> Result<Box<dyn Simulator>> {
+    NamedModel::trained_on(&estimator.training().model, given)
+        .and_then(|model| model.simulator(false))
         .usage_context("--check simulates the model")
 }
 
@@ -38,9 +47,9 @@ pub(super) fn model_of(estimator: &Estimator, args: &EstimateArgs) -> Result<Box
 /// [`twostage_baselines::JointFitter::new`]).
 pub(super) fn joint_fitter(
     estimator: &Estimator,
+    given: Option<&NamedModel>,
     args: &EstimateArgs,
 ) -> Result<twostage_baselines::JointFitter> {
     let q = estimator.param_names().len();
-    twostage_baselines::JointFitter::new(estimator, model_file(args)?.as_ref(), args.search(q))
-        .usage_context("--joint")
+    twostage_baselines::JointFitter::new(estimator, given, args.search(q)).usage_context("--joint")
 }

@@ -422,6 +422,12 @@ impl ModelFile {
         &self.source
     }
 
+    /// The file as it was named when read (its path, or what the caller
+    /// called its text).
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
     /// The simulator the file describes.
     ///
     /// # Errors
