@@ -361,7 +361,7 @@ impl PyEstimator {
     /// parameter and two more). The model: the
     /// estimator's built-in one, or its model file (`model_file` or
     /// `model_toml`).
-    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=199, seed=0, score_from=0, prior_starts=None))]
+    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=None, seed=0, score_from=0, prior_starts=None))]
     #[allow(clippy::too_many_arguments)]
     fn check<'py>(
         &self,
@@ -371,7 +371,7 @@ impl PyEstimator {
         theta: Option<Vec<f64>>,
         model_file: Option<PathBuf>,
         model_toml: Option<&str>,
-        sims: usize,
+        sims: Option<usize>,
         seed: u64,
         score_from: usize,
         prior_starts: Option<usize>,

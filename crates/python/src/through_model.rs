@@ -219,11 +219,11 @@ pub(crate) fn check(
     record: &IoData,
     theta: &[f64],
     half_widths: Option<&[f64]>,
-    (sims, seed, score_from, prior_starts): (usize, u64, usize, Option<usize>),
+    (sims, seed, score_from, prior_starts): (Option<usize>, u64, usize, Option<usize>),
 ) -> PyResult<RecordCheck> {
     parameters(theta, sim)?;
     let plan = twostage::CheckPlan {
-        noisy: sims,
+        noisy: sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
         seed,
         score_from,
         prior_starts: prior_starts
@@ -245,7 +245,7 @@ pub(crate) fn check(
 /// --check`): a dict of the check's columns, the noise-free response in
 /// `simulated`.
 #[pyfunction]
-#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=199, seed=0, allow_outside_prior=false, score_from=0, prior_starts=None))]
+#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=None, seed=0, allow_outside_prior=false, score_from=0, prior_starts=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check_values<'py>(
     py: Python<'py>,
@@ -255,7 +255,7 @@ pub(crate) fn check_values<'py>(
     model: Option<&str>,
     model_file: Option<PathBuf>,
     model_toml: Option<&str>,
-    sims: usize,
+    sims: Option<usize>,
     seed: u64,
     allow_outside_prior: bool,
     score_from: usize,

@@ -27,8 +27,8 @@ pub use best_fit::{
     BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts, spread_starts,
 };
 pub use check::{
-    CheckPlan, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES, check_against,
-    check_record, check_with, output_fit, search_best_fits,
+    CheckPlan, DEFAULT_CHECK_RUNS, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES,
+    check_against, check_record, check_with, output_fit, search_best_fits,
 };
 pub use error::RefineError;
 pub use joint::{JointEstimate, JointPlan, PooledEstimate, SingleEstimate, pool_estimates};

@@ -225,14 +225,23 @@ impl<M: ResidualModel> Refinement<M> {
         let prior = self.model.prior();
         let q = prior.dim();
         check_neighbourhood(q, start, radius)?;
-        // The box in unit coordinates, and a start confined to a sub-box.
-        let unit = |j: usize, t: f64| {
-            ((t - prior.lower()[j]) / (prior.upper()[j] - prior.lower()[j])).clamp(0.0, 1.0)
+        // The box in unit coordinates (within the prior's), and a start
+        // confined to a sub-box.
+        let unit = |theta: Vec<f64>| -> Vec<f64> {
+            lockstep::to_unit(prior, &theta)
+                .into_iter()
+                .map(|s| s.clamp(0.0, 1.0))
+                .collect()
         };
-        let outer: Vec<(f64, f64)> = (0..q)
-            .map(|j| (unit(j, start[j] - radius[j]), unit(j, start[j] + radius[j])))
-            .collect();
-        let (lo, hi): (Vec<f64>, Vec<f64>) = outer.iter().copied().unzip();
+        let shifted = |side: f64| {
+            start
+                .iter()
+                .zip(radius)
+                .map(|(s, r)| s + side * r)
+                .collect()
+        };
+        let (lo, hi) = (unit(shifted(-1.0)), unit(shifted(1.0)));
+        let centre = unit(start.to_vec());
         let mut jobs = vec![DescentJob {
             record,
             start: start.to_vec(),
@@ -248,7 +257,7 @@ impl<M: ResidualModel> Refinement<M> {
                     from[j] += side * 0.5 * radius[j];
                     // Its own half of the box along axis j.
                     let (mut l, mut h) = (lo.clone(), hi.clone());
-                    let middle = unit(j, start[j]);
+                    let middle = centre[j];
                     if side < 0.0 {
                         h[j] = middle;
                     } else {

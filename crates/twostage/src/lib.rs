@@ -60,10 +60,10 @@ pub use twostage_estimator::{
 };
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
-    BestFit, CheckPlan, Descent, EXPLAINED_LEVEL, LocalPosterior, LocalUncertainty, OutputError,
-    RecordCheck, RefineError, RefinePolicy, RefineReason, RefineStarts, Refinement, ResidualModel,
-    SearchStarts, WeightedMoments, check_against, check_record, check_with, output_fit,
-    search_best_fits,
+    BestFit, CheckPlan, DEFAULT_CHECK_RUNS, Descent, EXPLAINED_LEVEL, LocalPosterior,
+    LocalUncertainty, OutputError, RecordCheck, RefineError, RefinePolicy, RefineReason,
+    RefineStarts, Refinement, ResidualModel, SearchStarts, WeightedMoments, check_against,
+    check_record, check_with, output_fit, search_best_fits,
 };
 pub use twostage_train::{DEFAULT_SEED, Run, RunSettings, TrainedOn, TwoStage};
 

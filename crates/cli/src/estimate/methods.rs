@@ -189,10 +189,6 @@ fn check_model(args: &EstimateArgs) -> Result<Option<Box<dyn Simulator>>> {
     Ok(Some(named.simulator(false).or_usage()?))
 }
 
-/// The most runs of the model's own records a check ranks a record among
-/// when --check-sims is not given.
-pub(super) const DEFAULT_CHECK_SIMS: usize = 199;
-
 /// Starts of the multi-start methods when --starts is not given.
 const DEFAULT_STARTS: usize = 5;
 

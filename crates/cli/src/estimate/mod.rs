@@ -20,7 +20,7 @@ mod said;
 mod table;
 
 use columns::plot_check;
-use methods::{Chosen, DEFAULT_CHECK_SIMS, method};
+use methods::{Chosen, method};
 use table::{PriorBox, csv, json};
 
 /// Options of `twostage estimate`.
@@ -277,7 +277,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         chosen: &chosen,
         check_model,
         plan: twostage::CheckPlan {
-            noisy: args.check_sims.unwrap_or(DEFAULT_CHECK_SIMS),
+            noisy: args.check_sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
             seed: args.seed.unwrap_or(0),
             score_from: args.score_from.unwrap_or(0),
             prior_starts: args.search(chosen.names.len()).from_prior,

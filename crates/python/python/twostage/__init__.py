@@ -235,7 +235,7 @@ class Estimator:
         *,
         model_file: _Path = None,
         model_toml: Optional[str] = None,
-        sims: int = 199,
+        sims: Optional[int] = None,
         seed: int = 0,
         score_from: int = 0,
         prior_starts: Optional[int] = None,
@@ -243,7 +243,8 @@ class Estimator:
         """Check one record's estimate against the record, as ``twostage
         estimate --check`` does: the model at ``theta`` (None: this
         estimator's own estimate) simulated without noise on the record's
-        input, ranked among ``sims`` of the model's own records there,
+        input, ranked among ``sims`` of the model's own records there
+        (None: as many as the command's ``--check-sims`` default),
         scored from sample ``score_from`` on (``--score-from``), and its
         fit judged against the best fit searched from it and from
         ``prior_starts`` starts over the prior (``--prior-starts``; None:
@@ -517,7 +518,7 @@ def check(
     model: Optional[str] = None,
     model_file: _Path = None,
     model_toml: Optional[str] = None,
-    sims: int = 199,
+    sims: Optional[int] = None,
     seed: int = 0,
     allow_outside_prior: bool = False,
     score_from: int = 0,
