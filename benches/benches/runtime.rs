@@ -29,7 +29,7 @@ fn case(name: &'static str, model: &dyn Simulator, preset: Preset, theta: &[f64]
         .validation(0)
         .calibration(300)
         .train()
-        .and_then(|e| e.to_runtime())
+        .and_then(|e| Ok(e.to_runtime()?))
         .unwrap_or_else(|e| panic!("{name}: {e}"));
     let data: IoData = record(model, theta);
     Case {

@@ -8,7 +8,7 @@ use twostage_compress::{
 use twostage_fit::{Mlp, MlpParams, Piecewise, RegressorConfig};
 use twostage_models::IoData;
 
-use twostage_estimator::Result;
+use twostage_train::Result;
 
 /// Both stages as the command line writes them, for reports and progress.
 pub(super) fn design(compressor: &CompressorConfig, regressor: &RegressorConfig) -> String {

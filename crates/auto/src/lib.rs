@@ -19,8 +19,9 @@
 
 use std::time::Instant;
 
-use twostage_estimator::{Error, Estimator, Result};
+use twostage_estimator::Estimator;
 use twostage_models::Simulator;
+use twostage_train::{Error, Result};
 use twostage_train::{TrainedOn, TwoStage};
 
 use twostage_compress::CompressorConfig;
@@ -348,14 +349,14 @@ fn search_chart<S: Simulator + ?Sized>(
         rest = kept.then_some(tail);
     }
     if chart.records.len() < MIN_SEARCH_RECORDS {
-        return Err(Error::InvalidSetting {
-            name: "training records",
-            value: chart.records.len().to_string(),
-            reason: format!(
+        return Err(Error::setting(
+            "training records",
+            chart.records.len().to_string(),
+            format!(
                 "the automatic design needs at least {MIN_SEARCH_RECORDS} to fit on and \
                  score its candidates: give a larger chart, or hold out fewer records"
             ),
-        });
+        ));
     }
     Ok((chart, rest, failures))
 }

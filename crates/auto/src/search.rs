@@ -22,8 +22,8 @@ use crate::cost::{
 use crate::{Budget, CandidateReport, Status};
 pub(super) use final_fit::Winner;
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
-use twostage_estimator::{Error, Result};
 use twostage_sources::Progress;
+use twostage_train::{Error, Result};
 
 /// Share of the chart held out to score candidates.
 const HELD_OUT: f64 = 0.2;
@@ -464,16 +464,18 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// With one parameter only the best score is beaten by none. Without
     /// a deadline (a budget in simulations), the best score.
     pub(super) fn best(&self, budget: &Budget) -> Result<usize> {
-        let none_fitted = || Error::InvalidSetting {
-            name: "budget",
-            value: budget.describe(),
-            reason: format!(
-                "no candidate could be fitted within it (first: {})",
-                self.candidates
-                    .first()
-                    .map(|c| c.report.status.to_string())
-                    .unwrap_or_default()
-            ),
+        let none_fitted = || {
+            Error::setting(
+                "budget",
+                budget.describe(),
+                format!(
+                    "no candidate could be fitted within it (first: {})",
+                    self.candidates
+                        .first()
+                        .map(|c| c.report.status.to_string())
+                        .unwrap_or_default()
+                ),
+            )
         };
         if self.plan.deadline.is_none() {
             // Without a deadline the time a fit saves buys nothing, and a

@@ -4,9 +4,9 @@
 
 use std::time::{Duration, Instant};
 
-use twostage_estimator::{Error, Result};
 use twostage_models::Simulator;
 use twostage_sources::simulate_records;
+use twostage_train::{Error, Result};
 use twostage_train::{RunSettings, TwoStage};
 
 use crate::Budget;
@@ -168,11 +168,11 @@ fn chart_size<S: Simulator + ?Sized>(
         Budget::Simulations(m) => (m, None),
         Budget::Seconds(t) => {
             if !(t.is_finite() && t > 0.0) {
-                return Err(Error::InvalidSetting {
-                    name: "budget seconds",
-                    value: t.to_string(),
-                    reason: "must be finite and > 0".into(),
-                });
+                return Err(Error::setting(
+                    "budget seconds",
+                    t.to_string(),
+                    "must be finite and > 0",
+                ));
             }
             if simulates {
                 let pilot = pilot_seconds_per_simulation(simulator, settings.seed_or_default())?;
@@ -194,17 +194,17 @@ fn chart_size<S: Simulator + ?Sized>(
                         (shrink(settings.calibration), shrink(settings.validation));
                     reserve = cost(calibration + validation);
                     if reserve > 0.5 * t {
-                        return Err(Error::InvalidSetting {
-                            name: "budget seconds",
-                            value: format!("{t}"),
-                            reason: format!(
+                        return Err(Error::setting(
+                            "budget seconds",
+                            format!("{t}"),
+                            format!(
                                 "even {calibration} calibration and {validation} validation \
                                  records take about {reserve:.0} s here ({:.2} ms a simulation, \
                                  measured): give at least {:.0} s",
                                 1e3 * per_simulation,
                                 (2.0 * reserve).ceil()
                             ),
-                        });
+                        ));
                     }
                     held_out_sizes = Some((calibration, validation));
                 }
@@ -239,11 +239,11 @@ fn chart_size<S: Simulator + ?Sized>(
         });
     }
     if m < 50 || m > memory_cap {
-        return Err(Error::InvalidSetting {
-            name: "budget simulations",
-            value: m.to_string(),
-            reason: format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
-        });
+        return Err(Error::setting(
+            "budget simulations",
+            m.to_string(),
+            format!("must lie in 50..={memory_cap} (the records are kept in memory)"),
+        ));
     }
     Ok(ChartSize {
         m,

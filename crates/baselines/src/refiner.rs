@@ -90,7 +90,7 @@ impl EstimateRefiner {
     /// model file of another model than the estimator's, or a model that
     /// cannot run without noise on a given input.
     pub fn new(estimator: &Estimator, model_file: Option<&NamedModel>) -> Result<Self> {
-        let radius = estimator.neighbourhood(2.0).map_err(boxed)?;
+        let radius = estimator.neighbourhood(2.0).map_err(|e| boxed(e.into()))?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         if model_file.is_none()

@@ -84,7 +84,7 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
         t.simulations,
         t.failures,
         t.seed,
-        match t.chart() {
+        match twostage::sources::chart_of(&t.sampling) {
             Some(chart) => format!("from {chart}"),
             None => format!("simulated, {} design", t.sampling),
         }

@@ -1,13 +1,15 @@
-//! The one error type of the facade.
+//! What can go wrong with an estimator: its file, a record that does not
+//! fit it, a stage that fails on a record. The training side's error
+//! (`twostage_train::Error`, the facade's) wraps it.
 
 use thiserror::Error;
 use twostage_compress::CompressError;
 use twostage_fit::FitError;
 use twostage_models::SimError;
-use twostage_sources::Error as SourceError;
 use twostage_validate::ValidateError;
 
-/// Everything that can go wrong while training, using or storing an estimator.
+/// Everything that can go wrong while using or storing an estimator, and
+/// in the stages a training run shares with it.
 ///
 /// [`Error::is_setting`] tells the mistakes a user fixes by changing what
 /// they asked for (a setting, a structure, a file they named) from what
@@ -27,13 +29,6 @@ pub enum Error {
     /// Validation failed.
     #[error(transparent)]
     Validation(#[from] ValidateError),
-    /// A source of records failed: a model file, a chart on disk, shards,
-    /// or too many failed simulations.
-    #[error(transparent)]
-    Source(#[from] SourceError),
-    /// A refinement refused its settings or failed numerically.
-    #[error(transparent)]
-    Refine(#[from] twostage_refine::RefineError),
     /// A builder setting is out of range.
     #[error("invalid {name} = {value}: {reason}")]
     InvalidSetting {
@@ -75,13 +70,6 @@ pub enum Error {
         path: Option<std::path::PathBuf>,
         /// What is wrong with it.
         error: FileError,
-    },
-    /// The automatic design went wrong inside, not in what was asked of
-    /// it (the command line exits with 1, not 2).
-    #[error("the automatic design failed: {what}")]
-    Search {
-        /// What went wrong.
-        what: String,
     },
     /// Reading or writing a file failed.
     #[error("{path}: {cause}")]
@@ -176,13 +164,13 @@ pub type Result<T> = std::result::Result<T, Error>;
 
 impl Error {
     /// Whether the error is in what was asked for: a setting out of range,
-    /// a structure that does not parse or fit the model, a preset the model
-    /// lacks, a model file, chart or shard that is not what it should be.
-    /// The command line exits with 2 on these.
+    /// a structure that does not parse or fit the model. The command line
+    /// exits with 2 on these.
     ///
     /// ```
     /// use twostage::CompressorConfig;
-    /// let e: twostage::Error = "arx:x".parse::<CompressorConfig>().unwrap_err().into();
+    /// use twostage::estimator::Error;
+    /// let e: Error = "arx:x".parse::<CompressorConfig>().unwrap_err().into();
     /// assert!(e.is_setting());
     /// ```
     pub fn is_setting(&self) -> bool {
@@ -191,6 +179,6 @@ impl Error {
             Self::InvalidSetting { .. }
                 | Self::Compression(CompressError::InvalidSetting { .. })
                 | Self::Fit(FitError::InvalidSetting { .. })
-        ) || matches!(self, Self::Source(e) if e.is_setting())
+        )
     }
 }

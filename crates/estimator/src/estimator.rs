@@ -439,8 +439,8 @@ impl Estimator {
         ))
     }
 
-    /// The neighbourhood a [`Refinement`](twostage_refine::Refinement) of this
-    /// estimator's estimates searches: `scale` times the calibrated
+    /// The neighbourhood a refinement of this estimator's estimates
+    /// searches (`twostage::Refinement`): `scale` times the calibrated
     /// intervals' half-widths, one radius per parameter. TS has already
     /// found the right region; the radius says how far its error goes.
     ///

@@ -19,22 +19,12 @@ pub struct TrainingInfo {
     pub seed: u64,
     /// The design that placed the training parameters (its name, as
     /// [`twostage_models::Sampling::name`] writes it), or the chart the
-    /// records were read from ([`Self::chart`]).
+    /// records were read from (`twostage::sources::chart_of` tells them apart).
     pub sampling: String,
     /// The stage-2 method as configured.
     pub regressor: RegressorConfig,
     /// The twostage version that trained it.
     pub version: String,
-}
-
-impl TrainingInfo {
-    /// The chart the training records were read from, described, where
-    /// they were not simulated.
-    pub fn chart(&self) -> Option<&str> {
-        self.sampling
-            .starts_with(twostage_sources::CHART_WORDS)
-            .then_some(self.sampling.as_str())
-    }
 }
 
 /// The names of a model's input and output signals.

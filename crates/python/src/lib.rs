@@ -32,7 +32,7 @@ use through_model::{check_dict, named_model, one_record};
 /// that cannot be read is an `OSError`, everything else a `ValueError`.
 fn to_python(error: impl Into<twostage::Error>) -> PyErr {
     match error.into() {
-        error @ (twostage::Error::Io { .. }
+        error @ (twostage::Error::Estimator(twostage::estimator::Error::Io { .. })
         | twostage::Error::Source(twostage::sources::Error::Io { .. })) => {
             PyOSError::new_err(error.to_string())
         }
@@ -229,7 +229,7 @@ impl PyEstimator {
         let q = self.inner.param_names().len();
         let estimator = &self.inner;
         let (theta, single) = self.each_record(py, u, y, q, |u, y, work, out| {
-            estimator.estimate_into(u, y, work, out)
+            Ok(estimator.estimate_into(u, y, work, out)?)
         })?;
         Ok(rows(py, theta, q, single))
     }

@@ -56,6 +56,6 @@ pub use profile::{
 };
 pub use progress::{Progress, Silent, Stage};
 pub use readable::readable_bytes;
-pub use records::{CHART_WORDS, RecordSource, Records, RunShape};
+pub use records::{CHART_WORDS, RecordSource, Records, RunShape, chart_of};
 pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};

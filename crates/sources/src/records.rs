@@ -67,6 +67,20 @@ fn stage(role: ChartRole) -> Stage {
 /// were read from a chart, not simulated ([`Records::sampling`]).
 pub const CHART_WORDS: &str = "the chart";
 
+/// The chart an estimator's training records were read from, described,
+/// where they were not simulated: `sampling` is how its training record
+/// says they were drawn ([`Records::sampling`] wrote it).
+///
+/// ```
+/// use twostage_sources::chart_of;
+/// assert_eq!(chart_of("the chart runs/ (calibration: none; validation: none)"),
+///            Some("the chart runs/ (calibration: none; validation: none)"));
+/// assert_eq!(chart_of("uniform"), None);
+/// ```
+pub fn chart_of(sampling: &str) -> Option<&str> {
+    sampling.starts_with(CHART_WORDS).then_some(sampling)
+}
+
 /// A source opened for one run: it knows the run's sizes, seed and
 /// failure allowance, and hands out each role's records compressed.
 pub struct Records<'a, S: ?Sized> {

@@ -3,7 +3,8 @@
 //! their defaults in `settings.rs`). [`TwoStage::prepare`] turns it into a
 //! [`Run`], which trains it.
 
-use twostage_estimator::{Error, Estimator, Result};
+use crate::{Error, Result};
+use twostage_estimator::Estimator;
 use twostage_fit::Ridge;
 use twostage_models::{Sampling, Simulator};
 
@@ -228,11 +229,11 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         let builder = self.adopting_source()?;
         builder.settings.check()?;
         if builder.records.simulates() && builder.simulations < 10 {
-            return Err(Error::InvalidSetting {
-                name: "simulations",
-                value: builder.simulations.to_string(),
-                reason: "at least 10".into(),
-            });
+            return Err(Error::setting(
+                "simulations",
+                builder.simulations.to_string(),
+                "at least 10",
+            ));
         }
         let records = builder.open_records()?;
         let mut settings = builder.settings;

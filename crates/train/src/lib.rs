@@ -8,9 +8,11 @@
 #![deny(missing_docs)]
 
 mod builder;
+mod error;
 mod run;
 mod settings;
 
 pub use builder::TwoStage;
+pub use error::{Error, Result};
 pub use run::{Run, TrainedOn};
 pub use settings::{DEFAULT_SEED, RunSettings};

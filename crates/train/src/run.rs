@@ -3,8 +3,9 @@
 //! the builder's one structure; a search (the automatic design) fits many
 //! on [`Run::records`] and ships its winner through [`Run::finish`].
 
+use crate::Result;
 use twostage_estimator::space::to_learning_space;
-use twostage_estimator::{Estimator, Result, TrainingInfo};
+use twostage_estimator::{Estimator, TrainingInfo};
 use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::{InputFamily, Simulator};
 use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use twostage_estimator::{Error, Result};
+use crate::{Error, Result};
 
 /// The seed of a run that names none (and trains on no shards, which
 /// bring their own).
@@ -75,14 +75,10 @@ impl RunSettings {
     /// Check every value against its range.
     ///
     /// # Errors
-    /// [`Error::InvalidSetting`] naming the first value out of range.
+    /// A setting ([`Error::setting`]) naming the first value out of range.
     pub fn check(&self) -> Result<()> {
         let invalid = |name: &'static str, value: f64, reason: &str| {
-            Err(Error::InvalidSetting {
-                name,
-                value: value.to_string(),
-                reason: reason.into(),
-            })
+            Err(Error::setting(name, value.to_string(), reason))
         };
         if !(self.alpha > 0.0 && self.alpha < 1.0) {
             return invalid("alpha", self.alpha, "must lie in (0, 1)");

@@ -54,9 +54,9 @@ pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_estimator::{
-    AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, Error, EstimateWorkspace, Estimator,
-    FORMAT_VERSION, FeatureEnvelope, FileError, MAGIC, RecordShape, Result, SignalNames,
-    TrainingInfo, interval_in_box, write_whole,
+    AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,
+    FeatureEnvelope, FileError, MAGIC, RecordShape, SignalNames, TrainingInfo, interval_in_box,
+    write_whole,
 };
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{
@@ -65,7 +65,7 @@ pub use twostage_refine::{
     RefineStarts, Refinement, ResidualModel, SearchStarts, WeightedMoments, check_against,
     check_record, check_with, output_fit, search_best_fits,
 };
-pub use twostage_train::{DEFAULT_SEED, Run, RunSettings, TrainedOn, TwoStage};
+pub use twostage_train::{DEFAULT_SEED, Error, Result, Run, RunSettings, TrainedOn, TwoStage};
 
 pub use twostage_sources::{
     ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,

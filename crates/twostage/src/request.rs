@@ -11,13 +11,14 @@ use twostage_models::Simulator;
 
 use twostage_auto::{AutoDesign, AutoOutcome, Budget};
 use twostage_compress::CompressorConfig;
-use twostage_estimator::{Error, Estimator, Result};
+use twostage_estimator::Estimator;
 use twostage_fit::RegressorConfig;
 use twostage_sources::NamedModel;
 use twostage_sources::Progress;
 use twostage_sources::RecordSource;
 use twostage_sources::{ChartFiles, DEFAULT_PRESET_SIMULATIONS, Preset};
 use twostage_sources::{ShardPlan, ShardedChart};
+use twostage_train::{Error, Result};
 use twostage_train::{RunSettings, TwoStage};
 
 /// A chart folder (CSV or NumPy files), and how the estimator file names
@@ -249,13 +250,12 @@ impl TrainingRequest {
         ];
         let named = design_given.iter().find(|(_, given)| *given);
         match (self.search, named) {
-            (Some(budget), Some((name, _))) => Err(Error::InvalidSetting {
-                name: "search",
-                value: format!("{budget:?} with a {name}"),
-                reason: "the automatic design chooses the structure and the chart size itself: \
-                         leave out the preset, simulations, compress and fit"
-                    .into(),
-            }),
+            (Some(budget), Some((name, _))) => Err(Error::setting(
+                "search",
+                format!("{budget:?} with a {name}"),
+                "the automatic design chooses the structure and the chart size itself: \
+                         leave out the preset, simulations, compress and fit",
+            )),
             (Some(budget), None) => Ok(Some(budget)),
             // No preset to train: search, on the simulations asked for
             // (every candidate) or within the default time.

@@ -343,7 +343,7 @@ fn a_save_that_fails_leaves_the_file_it_would_replace_and_no_debris() {
     std::fs::create_dir(&blocked).unwrap();
     let err = estimator.save(&blocked).unwrap_err();
     assert!(
-        matches!(&err, twostage::Error::Io { path, .. } if path.ends_with("blocked.tsest")),
+        matches!(&err, twostage::estimator::Error::Io { path, .. } if path.ends_with("blocked.tsest")),
         "{err}"
     );
     let mut names: Vec<String> = std::fs::read_dir(&dir)

@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 use twostage::compress::Arx;
+use twostage::estimator::Error as EstimatorError;
 use twostage::fit::MlpParams;
 use twostage::models::{
     Benchmark, ExperimentRng, IoData, ModelSpec, SimError, Simulator, experiment_rng,
@@ -61,7 +62,7 @@ fn damaged_files_get_a_clear_error_each() {
     let model = small_benchmark();
     let bytes = small_estimator(&model, 4).to_bytes().unwrap();
     let kind = |bytes: &[u8]| match Estimator::from_bytes(bytes) {
-        Err(Error::File { path: None, error }) => error,
+        Err(EstimatorError::File { path: None, error }) => error,
         other => panic!("expected a file error, got {other:?}"),
     };
     let header = bytes.len() as u64 - 24;
@@ -196,7 +197,7 @@ fn bad_records_fail_alone_in_a_batch() {
     assert!(e2.contains("too short"), "{e2}");
     let e = estimator.estimate(&[1.0, 2.0], &[1.0]).unwrap_err();
     assert!(
-        matches!(&e, Error::Simulation(twostage::models::SimError::InvalidData(m))
+        matches!(&e, EstimatorError::Simulation(twostage::models::SimError::InvalidData(m))
             if m.contains("u has 2 samples but y has 1")),
         "u and y of different lengths: {e}"
     );
@@ -276,7 +277,9 @@ fn invalid_builder_settings_are_refused() {
     let model = small_benchmark();
     let refused = |builder: TwoStage<'_, _>| -> (&'static str, String) {
         match builder.train() {
-            Err(Error::InvalidSetting { name, value, .. }) => (name, value),
+            Err(Error::Estimator(EstimatorError::InvalidSetting { name, value, .. })) => {
+                (name, value)
+            }
             other => panic!("expected an invalid setting, got {other:?}"),
         }
     };

@@ -7,9 +7,9 @@ use std::time::Instant;
 
 use ndarray::{Axis, s};
 use twostage_estimator::space::to_learning_space;
-use twostage_estimator::{Error, Result};
 use twostage_models::Simulator;
 use twostage_sources::StoredChart;
+use twostage_train::{Error, Result};
 
 use super::final_fit::{MAX_COMPARED_RECORDS, MIN_COMPARED_RECORDS};
 use super::{Search, Winner, compress_all, design};

@@ -21,7 +21,7 @@ use crate::cost::{
 use crate::outcome::{FinalFit, FinalFits, RivalNetwork};
 use twostage_compress::Compressor;
 use twostage_estimator::space::to_learning_space;
-use twostage_estimator::{Error, Result};
+use twostage_train::{Error, Result};
 
 impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// The records the winner's final fit takes: more than the chart's
