@@ -62,7 +62,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let given = crate::model_arg::named(None, args.model_file.as_deref())?;
     let sim = NamedModel::trained_on(trained_on, given.as_ref())
         .and_then(|model| model.simulator(false))
-        .or_usage()?;
+        .usage_context("--model-file")?;
     let sigma = squared_error_bound(estimator.lower(), estimator.upper());
     let mut r = match (args.sims, args.gamma) {
         (Some(r), _) => r,

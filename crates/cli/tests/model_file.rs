@@ -62,7 +62,14 @@ fn the_template_trains_validates_and_simulates_an_estimator() {
     // Validation simulates the model again: from the file, which it needs.
     let out = twostage(&["validate", "--estimator", path(&estimator), "--sims", "100"]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(text(&out.stderr).contains("give its --model-file"));
+    assert!(
+        text(&out.stderr).contains(
+            "--model-file: the estimator was trained on 'benchmark-normal', not a built-in \
+             model: give the model file it was trained from"
+        ),
+        "{}",
+        text(&out.stderr)
+    );
     let out = twostage(&[
         "validate",
         "--estimator",
