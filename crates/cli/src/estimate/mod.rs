@@ -520,10 +520,7 @@ impl Session<'_> {
             .collect();
         let mut searches = searches.into_iter();
         loop {
-            let chunk: Vec<_> = searches
-                .by_ref()
-                .take(twostage_baselines::RECORDS_TOGETHER)
-                .collect();
+            let chunk: Vec<_> = searches.by_ref().take(twostage::RECORDS_TOGETHER).collect();
             if chunk.is_empty() {
                 break;
             }
@@ -615,16 +612,13 @@ fn write_table(args: &EstimateArgs, chosen: &Chosen, rows: &[(String, Estimated)
 /// succeeds brings its own interval (NaN where the record does not
 /// determine it, said on stderr).
 fn refine_together(
-    refiner: &twostage_baselines::EstimateRefiner,
+    refiner: &twostage::EstimateRefiner,
     estimates: &mut [(String, RecordOutcome)],
     only: &[bool],
     searches: &[Search],
     bars: &crate::bars::Bars,
 ) {
-    let (items, bests): (
-        Vec<twostage_baselines::ToRefine<'_>>,
-        Vec<Result<BestFit, String>>,
-    ) = estimates
+    let (items, bests): (Vec<twostage::ToRefine<'_>>, Vec<Result<BestFit, String>>) = estimates
         .iter()
         .zip(only)
         .zip(searches)
@@ -675,12 +669,12 @@ fn refine_together(
 /// and its row among `rows`), said on stderr record by record; a joint
 /// fit that fails keeps the pooled two-stage estimate, and says why.
 fn joint_of_plant(
-    fitter: &twostage_baselines::JointFitter,
+    fitter: &twostage::JointFitter,
     plant: &[(String, IoData, usize)],
     rows: &[(String, Estimated)],
     bars: &crate::bars::Bars,
 ) -> Estimated {
-    let items: Vec<twostage_baselines::ToRefine<'_>> = plant
+    let items: Vec<twostage::ToRefine<'_>> = plant
         .iter()
         .map(|(_, record, row)| {
             let e = &rows[*row].1;
