@@ -2,7 +2,7 @@
 //! command line's `estimate --refine` and the Python package's
 //! `Estimator.refine` both do: a built-in model's local posterior under its
 //! exact likelihood, or for any other model an output-error fit through its
-//! simulator, each with the refined estimate's own interval (decision 035).
+//! simulator, each with the refined estimate's own interval.
 
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;

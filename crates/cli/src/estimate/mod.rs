@@ -54,13 +54,13 @@ pub struct EstimateArgs {
     score_from: Option<usize>,
     /// With --estimator: refine each estimate through the model. A
     /// built-in model: the posterior mean of its prediction-error
-    /// likelihood over twice the interval (about 1 ms per benchmark
-    /// record, 0.4 s per car record). Any other model (--model-file): an
-    /// output-error fit, Levenberg-Marquardt on the record minus the
-    /// noise-free simulation, in the prior's box, from the estimate and
-    /// two starts inside its interval (their simulations batched together);
-    /// its own interval in _lo/_hi (decision 035); `refine_stop` says
-    /// why the best descent stopped, `optima` and `runner_up_over_best`
+    /// likelihood over twice the interval (a grid of the likelihood;
+    /// docs/accuracy.md, "Refinement", says what it costs). Any other
+    /// model (--model-file): an output-error fit, Levenberg-Marquardt on
+    /// the record minus the noise-free simulation, in the prior's box,
+    /// from the estimate and two starts inside its interval (their
+    /// simulations batched together); its own interval in _lo/_hi;
+    /// `refine_stop` says why the best descent stopped, `optima` and `runner_up_over_best`
     /// what its search over the prior found. `--refine=auto`: check every
     /// two-stage estimate (as --check) and refine only the records it
     /// does not explain, named on stderr; the others keep their
