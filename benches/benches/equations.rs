@@ -1,5 +1,5 @@
-//! The cost of a record of a model written as equations (decisions 043
-//! and 044: compiled by Cranelift)
+//! The cost of a record of a model written as equations (compiled by
+//! Cranelift)
 //! against the same model in Rust: the paper's benchmark, eq. (5), 1000
 //! samples, built in (`equations/builtin`) and as
 //! `benches/models/benchmark_equations.toml` (`equations/equations`),

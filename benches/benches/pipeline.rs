@@ -125,7 +125,7 @@ fn train(c: &mut Criterion) {
                 .unwrap_or_else(|e| panic!("{e}"))
         })
     });
-    // The network sized for a large chart (decision 045) trains by Adam:
+    // The network sized for a large chart trains by Adam:
     // its epochs are what the search's final fit spends its time on.
     let (x, t) = adam_problem(5000, 40, 4);
     let adam = twostage::fit::MlpParams::new(&[64, 64])

@@ -1,7 +1,7 @@
 //! What the search's fits cost, in one place: how a fit's time grows with
 //! its network and its rows, the margins its estimates carry, and the
 //! shares of the time left that its plans may spend. Every number here was
-//! measured on the benchmark on 2 cores (docs/accuracy.md, decision 034).
+//! measured on the benchmark on 2 cores (docs/accuracy.md).
 
 /// How a network's fit time grows with the cost of its Levenberg-Marquardt
 /// products a row (`candidates::fit_cost`), for round 2's cost estimates
@@ -29,7 +29,7 @@ pub(crate) const PLANNED_SHARE: f64 = 0.8;
 pub(crate) const REFIT_SHARE: f64 = 0.45;
 /// The share the final fit keeps instead, under a deadline, where a network
 /// sized for a chart's records will compete in it: its members grow while
-/// time is left (decision 049), so the time pays there.
+/// time is left, so the time pays there.
 pub(crate) const SIZED_SHARE: f64 = 0.7;
 /// A fit anew beside the fit trained further starts only if its estimate
 /// is below this share of the time left.
@@ -43,21 +43,16 @@ pub(crate) const SCREENING_ROWS: usize = 4000;
 
 /// Where the source can simulate more under a time budget, round 1 fits
 /// half the screening rows: its ten fits only rank, and every second they
-/// save buys records for the final fit. On the car at 60 s a round 1 on
-/// its whole chart (2,779 rows) took half the search and, in one run of
-/// nine, left no time for round 3 or for records (1.037 times the Bayes
-/// RMSE); at half the rows fifteen runs of five seeds scored 1.010 to
-/// 1.022 (decision 051).
+/// save buys records for the final fit (docs/accuracy.md measures both
+/// ways on the car).
 pub(crate) const QUICK_SCREEN_SHARE: f64 = 0.5;
 
 /// Round 2 fits at least the full screening rows where round 1 on them
 /// would have taken at most this share of the time the search had when
-/// round 1 started: the benchmark's best structure (4 pieces of `[20]`)
-/// only wins on 4000 rows (all six runs at 120 s; on 3171 rows none of
-/// three, which scored 1.20 to 1.26 times the Bayes RMSE against 1.14
-/// to 1.17). Round 1 on the full rows, estimated from the quick round's
-/// time at [`ROWS_EXPONENT`]: the benchmark's 34 to 38% of its search,
-/// the car's 70 to 85%.
+/// round 1 started: a structure that wins on many rows can lose on fewer
+/// (the benchmark's 4 pieces of `[20]`, docs/accuracy.md). Round 1 on the
+/// full rows is estimated from the quick round's time at
+/// [`ROWS_EXPONENT`].
 pub(crate) const SCREENING_TIME_SHARE: f64 = 0.5;
 
 /// Round 1's rows out of `fit_rows`: the full screening rows (the user's
@@ -210,7 +205,7 @@ mod tests {
         let left = full_cost / SCREENING_TIME_SHARE;
         assert_eq!(round_two_floor((2000, 10.0), 4000, 1.01 * left), 4000);
         assert_eq!(round_two_floor((2000, 10.0), 4000, 0.99 * left), 2000);
-        // The benchmark's and the car's measured cases (decision 051).
+        // The benchmark's and the car's measured cases.
         assert_eq!(round_two_floor((2000, 11.2), 4000, 118.0), 4000);
         assert_eq!(round_two_floor((1389, 8.0), 2779, 45.5), 1389);
         // Nothing was screened: the floor is round 1's rows.

@@ -155,7 +155,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
     /// least as many; only the fits on the most rows compete for the win.
     /// By default, where the source simulates more under a time budget,
     /// round 1 fits half of them and round 2 goes back to all of them where
-    /// round 1 proved cheap against the budget (decision 051); a number set
+    /// round 1 proved cheap against the budget; a number set
     /// here is fitted as it is.
     pub fn screening_rows(mut self, rows: usize) -> Self {
         self.screening_rows = Some(rows.max(1));
@@ -277,8 +277,8 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         // the winner's place.
         let best = winner.candidate;
         // Whatever the half-rows trial said: one comparison on a few
-        // hundred rows, inside the seed's spread on the car (decision
-        // 050), where each step measures for itself on records no fit saw.
+        // hundred rows can sit inside the seed's spread, where each step
+        // measures for itself on records no fit saw.
         let (steps, step_simulations, step_failures) = if sized.simulates {
             anytime_steps(
                 &sized,
@@ -427,7 +427,7 @@ fn simulate_more<S: Simulator + ?Sized>(
     Ok(more)
 }
 
-/// The anytime final fit's steps (decision 042) after the winner's final
+/// The anytime final fit's steps after the winner's final
 /// fit, which took `last_seconds`: while the search's time lasts, more
 /// records of the run's design from `next` on, the shipped fit trained
 /// further on them; until [`UNPAID_STEPS_TO_END`] steps in a row do not
@@ -469,13 +469,11 @@ fn anytime_steps<S: Simulator + ?Sized>(
     Ok((steps, simulations, failures))
 }
 
-/// Anytime steps in a row that do not pay and end the steps (decision
-/// 048): one step's comparison on a few hundred records is too noisy to
-/// say alone that more records no longer pay (the benchmark at 120 s,
-/// seed 1: a tie, 0.0384 against 0.0384 on 1287 records, ended a run at
-/// 32,000 records that had reached 64,000 on another day, 1.176 against
-/// 1.150 times the Bayes error). The records of a step that did not pay
-/// stay: the next trains the fit kept on them and more.
+/// Anytime steps in a row that do not pay and end the steps: one step's
+/// comparison on a few hundred records is too noisy to say alone that
+/// more records no longer pay (a tie there ended runs at half the records
+/// they reached otherwise). The records of a step that did not pay stay:
+/// the next trains the fit kept on them and more.
 const UNPAID_STEPS_TO_END: usize = 2;
 
 /// Whether the anytime steps end after `step`, which followed `unpaid`

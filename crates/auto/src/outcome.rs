@@ -24,7 +24,7 @@ pub struct CandidateReport {
     /// Seconds spent compressing and fitting it.
     pub seconds: f64,
     /// Chart rows its network was fitted on: all the fitting rows, or a
-    /// screening share of them in round 1 (decision 051), or what round 2
+    /// screening share of them in round 1, or what round 2
     /// or 3 could afford.
     pub fit_rows: usize,
     /// Whether it was scored, and why not if it was not.
@@ -114,8 +114,7 @@ pub struct AutoOutcome {
     /// where it ended at the deadline, or no time was left).
     pub steps: Vec<Continuation>,
     /// Where the search picked a candidate over a better-scoring one that
-    /// the seed alone could have ranked either way, for its lower cost
-    /// (decision 050).
+    /// the seed alone could have ranked either way, for its lower cost.
     pub cheaper_tie: Option<CheaperTie>,
 }
 
@@ -140,7 +139,7 @@ pub(crate) fn more_records_pay(half: f64, own: f64) -> bool {
 /// Whether the winner's final fit should take more records than the
 /// chart: where round 3 measured the learning curve (`half_rows` against
 /// the winner's `own` score), as it says; where the time left no room for
-/// that trial, yes (decision 050): the final fit then compares its fits on
+/// that trial, yes: the final fit then compares its fits on
 /// records no fit saw, and the anytime steps after it measure for
 /// themselves.
 pub(crate) fn more_records_to_try(half_rows: Option<(usize, f64)>, own: Option<f64>) -> bool {
@@ -472,9 +471,8 @@ pub enum RivalNetwork {
     /// A candidate's (by index): a larger one, or the winner's own.
     Candidate(usize),
     /// Two hidden layers of `width` units, as wide as the final fit's
-    /// records afford, on the winner's stage 1, trained by Adam (decision
-    /// 045), its restarts averaged (decision 046), as many as the time
-    /// left afforded (decision 049).
+    /// records afford, on the winner's stage 1, trained by Adam, its
+    /// restarts averaged, as many as the time left afforded.
     SizedForRows {
         /// The units of each hidden layer.
         width: usize,

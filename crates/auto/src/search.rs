@@ -211,7 +211,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// round-1 network again when round 1 only screened a share of the
     /// rows), on as many fitting rows as the time affords, never fewer than
     /// round 1 fitted, and at least the full screening rows where round 1
-    /// proved cheap (decision 051). Cheapest first, each started only if
+    /// proved cheap. Cheapest first, each started only if
     /// its cost (the round-1 time scaled by the network's size and the
     /// rows) leaves time to refit the best candidate found so far.
     pub(super) fn round_two(&mut self, medium: &RegressorConfig, networks: &[RegressorConfig]) {
@@ -226,8 +226,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         // refit takes as many rows as its time affords. A source that can
         // simulate more keeps the 45% for a final fit on more records:
         // where its learning curve still falls, rows pay more than a
-        // finer comparison of networks (the benchmark's 4 pieces of [20]
-        // reach 1.09 times the Bayes RMSE on 16000 records, 1.21 on 8000).
+        // finer comparison of networks.
         let all_rows = self.plan.chart.thetas.nrows() as f64;
         let reserve = ranked.first().map_or(0.0, |&i| {
             let refit = fit_seconds(
@@ -457,7 +456,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// them), or, if round 1 alone was fitted, among all: of those the
     /// seed alone could have ranked first (within [`Self::tie`] of the
     /// best score) and that no other beats on every parameter, the
-    /// cheapest to fit (decision 050). The time it leaves goes to round 3
+    /// cheapest to fit. The time it leaves goes to round 3
     /// and to more records, which pay more than a difference the seed
     /// could have made: on the car at 60 s an MLP [20, 20] won round 2 by
     /// 0.2% over `[20]` at 4.6 times its cost and left no time for either.

@@ -1,6 +1,6 @@
 //! How large a search's chart is and when its search ends: from the
-//! budget, a timing pilot and the chart's own pace (decisions 011, 025,
-//! 041, 050), and the run opened on them.
+//! budget, a timing pilot and the chart's own pace, and the run opened on
+//! them.
 
 use std::time::{Duration, Instant};
 
@@ -40,7 +40,7 @@ pub(crate) struct SizedRun<'a, S: ?Sized> {
 impl<S: Simulator + ?Sized> SizedRun<'_, S> {
     /// The cost of a simulation measured again on the search's chart
     /// (`simulations` in `seconds`), and the deadline moved to keep what
-    /// calibration and validation take at that cost (decision 050): the
+    /// calibration and validation take at that cost: the
     /// chart's thousands of simulations measure it better than the
     /// pilot's 64, on which a simulator's start weighs (on the car the two
     /// agree: 1.9 and 2.0 ms). A chart smaller than the pilot, or records
@@ -220,8 +220,7 @@ fn chart_size<S: Simulator + ?Sized>(
                 // the search as many records as a simulated search of this
                 // budget would chart. The held-out records are compressed
                 // once by the winner: a small share of the budget, which
-                // the final fit measures and uses the rest of (decision
-                // 050).
+                // the final fit measures and uses the rest of.
                 let records = (SIMULATIONS_PER_BUDGET_SECOND * t) as usize;
                 (
                     records.max(MIN_SEARCH_RECORDS),

@@ -1,4 +1,4 @@
-//! Round 1's rows under a time budget (decision 051): where the source
+//! Round 1's rows under a time budget: where the source
 //! simulates, round 1 screens quickly on half the screening rows and
 //! round 2 goes back to all of them where round 1 proved cheap; rows the
 //! user sets are fitted as set.

@@ -9,8 +9,8 @@
 
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use twostage::{ResidualModel, WeightedMoments};
 use twostage_models::{IoData, PACEJKA_NOISE_VARIANCE, PacejkaCar, Prior, Rk4, Simulator};
+use twostage_refine::{ResidualModel, WeightedMoments};
 
 use crate::error::{BaselineError, Result};
 use crate::particle::ParticleModel;

@@ -16,7 +16,7 @@ pub enum BaselineError {
     /// The facade's refinement search (on which PE and indirect inference
     /// descend) refused a setting.
     #[error(transparent)]
-    TwoStage(Box<twostage::Error>),
+    TwoStage(Box<twostage_train::Error>),
     /// The model's table entry does not list the method.
     #[error("method '{method}' is not available for {model}: it has {available}")]
     NotAvailable {
@@ -57,18 +57,18 @@ pub enum BaselineError {
     },
 }
 
-impl From<twostage::Error> for BaselineError {
-    fn from(error: twostage::Error) -> Self {
+impl From<twostage_train::Error> for BaselineError {
+    fn from(error: twostage_train::Error) -> Self {
         BaselineError::TwoStage(Box::new(error))
     }
 }
 
 /// A refinement's own errors (a start of the wrong length, say), as the
-/// facade wraps them: what a [`twostage::ResidualModel`] of this crate
+/// facade wraps them: what a [`ResidualModel`](twostage_refine::ResidualModel) of this crate
 /// returns.
-impl From<twostage::RefineError> for BaselineError {
-    fn from(error: twostage::RefineError) -> Self {
-        twostage::Error::from(error).into()
+impl From<twostage_refine::RefineError> for BaselineError {
+    fn from(error: twostage_refine::RefineError) -> Self {
+        twostage_train::Error::from(error).into()
     }
 }
 

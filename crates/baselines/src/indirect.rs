@@ -17,11 +17,11 @@
 //! beta_bar(theta))||^2`, a sum of squared residuals.
 
 use rayon::prelude::*;
-use twostage::ResidualModel;
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::CovarianceFactor;
 use twostage_kernels::cholesky::solve_lower_in_place;
 use twostage_models::{IoData, Prior, Simulator, experiment_rng};
+use twostage_refine::ResidualModel;
 
 use crate::error::{BaselineError, Result};
 use crate::pem::PredictionError;

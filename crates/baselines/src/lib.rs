@@ -38,11 +38,9 @@ mod car;
 mod error;
 mod filters;
 mod indirect;
-mod joint;
 mod kalman;
 mod particle;
 mod pem;
-mod refiner;
 mod suite;
 
 pub use augmented::{
@@ -55,11 +53,9 @@ pub use filters::{FilterRun, FilterStart, KalmanEstimator, UnscentedParams, run_
 pub use indirect::{
     COMMON_NUMBERS_SEED, IndirectInference, IndirectObjective, WEIGHTING_SEED, Weighting,
 };
-pub use joint::{JointFitter, JointOfRecords};
 pub use kalman::{BenchmarkStateSpace, KalmanRun, benchmark_kalman, benchmark_kalman_innovations};
 pub use particle::{BenchmarkParticles, ParticleFilter, ParticleModel};
 pub use pem::{BenchmarkPredictor, PredictionError};
-pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
 pub use suite::{MethodSettings, classic_estimator, exact_likelihood};
 pub use twostage_fit::TerminationReason;
 

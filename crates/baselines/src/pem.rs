@@ -4,8 +4,8 @@
 //! seeded random starts, keeping the lowest loss. The descent itself is the
 //! facade's [`Refinement::descend`], the one that refines TS estimates.
 
-use twostage::{Descent, Refinement, ResidualModel};
 use twostage_models::{IoData, Prior};
+use twostage_refine::{Descent, Refinement, ResidualModel};
 
 use crate::error::{BaselineError, Result};
 use crate::kalman::benchmark_kalman_innovations;

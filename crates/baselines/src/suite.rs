@@ -3,8 +3,9 @@
 //! methods exist for a model and with which settings, this module binds each
 //! (model, method) pair to its implementation.
 
-use twostage::models::{Benchmark, BuiltinModel, PacejkaCar};
-use twostage::{ClassicMethod, ModelProfile, ResidualModel};
+use twostage_models::{Benchmark, BuiltinModel, PacejkaCar};
+use twostage_refine::ResidualModel;
+use twostage_sources::{ClassicMethod, ModelProfile};
 
 use crate::error::{BaselineError, Result};
 use crate::{

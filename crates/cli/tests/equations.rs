@@ -1,4 +1,4 @@
-//! Models written as equations in their model file (decision 043): the
+//! Models written as equations in their model file: the
 //! examples' equations give their Python simulators' noise-free records,
 //! they train through every door, and their mistakes are named at load.
 

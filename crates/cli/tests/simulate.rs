@@ -327,7 +327,7 @@ fn simulate_at_estimates_predicts_on_a_measured_input() {
     let short = dir.join("short.csv");
     std::fs::write(&short, "u,y\n1,0\n2,0\n").unwrap();
     std::fs::write(&estimates, "experiment,theta\nA,0.3\n").unwrap();
-    // A record of another length is simulated at its own (decision 037).
+    // A record of another length is simulated at its own.
     let out = twostage(&[&at[..], &["--input", short.to_str().unwrap()]].concat());
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(stdout(&out).lines().count(), 1 + 2, "{}", stdout(&out));

@@ -170,7 +170,7 @@ fn train_inspect_and_estimate_recorded_experiments() {
         let t: Vec<f64> = truth.split(',').map(|v| v.parse().unwrap()).collect();
         assert_eq!(e[0].to_bits(), t[0].to_bits(), "experiment ids in order");
         // An estimate clipped to the prior's edge sits at its interval's
-        // end: the interval stays inside the prior (decision 036).
+        // end: the interval stays inside the prior.
         assert!(
             e[2] <= e[1] && e[1] <= e[3] && e[2] < e[3] && (-0.9..=0.9).contains(&e[3]),
             "the interval surrounds the estimate"

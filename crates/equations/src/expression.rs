@@ -1,6 +1,6 @@
 //! One equation's right side: parsed once by exmex, its names resolved
 //! to slots of the model's value table, and compiled to instructions
-//! that read and write that table (decision 044).
+//! that read and write that table.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -62,8 +62,8 @@ impl Program {
     /// `stride` slots long, its vectors holding the lanes one after the
     /// other. Each instruction is followed by its copies for the other
     /// lanes: their chains are independent, so the processor works on them
-    /// at once where one record's chain would keep it waiting (decision
-    /// 047). Not yet compiled.
+    /// at once where one record's chain would keep it waiting. Not yet
+    /// compiled.
     pub(crate) fn lanes(&self, lanes: usize, stride: usize) -> Self {
         let by = |lane: usize| slot_index(lane * stride);
         let code = self

@@ -1,5 +1,5 @@
 //! The instructions equations compile to: a function of slots of the
-//! model's value table written into another (decision 044), and the
+//! model's value table written into another, and the
 //! interpreter that runs them.
 
 use crate::ops::{Binary, Unary};

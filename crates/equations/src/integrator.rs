@@ -1,6 +1,6 @@
-//! Integrator steps of a continuous-time model as one program (decision
-//! 047): the stages of RK4 (or Euler's one) and the states' update wrapped
-//! around the derivatives' program, one or several steps in a row, so
+//! Integrator steps of a continuous-time model as one program: the
+//! stages of RK4 (or Euler's one) and the states' update wrapped around
+//! the derivatives' program, one or several steps in a row, so
 //! that they are one call of compiled code rather than one call a stage
 //! through the models crate's integrator. The arithmetic is that of the
 //! models crate's `Rk4::step` (and of `x += h f`), operation for operation

@@ -1,4 +1,4 @@
-//! A program compiled to machine code by Cranelift (decision 044): the
+//! A program compiled to machine code by Cranelift: the
 //! same instructions as the interpreter, in the same order, on the same
 //! value table, so that both give the same bits. `+ - * /`, negation,
 //! `abs` and `sqrt` are the processor's own (IEEE 754 rounds them exactly
@@ -80,11 +80,11 @@ impl Native {
             .unwrap_or(0);
         let mut flags = settings::builder();
         // Cranelift's optimizer would move each value next to its first
-        // use: a program of two records side by side (decision 047) then
-        // runs one record's chain, then the other's, and the processor
-        // has nothing to overlap. Our instructions are already reduced
-        // (common parts once, per-record parts hoisted): kept in their
-        // order, a tanks step costs 34 ns a record against 54.
+        // use: a program of two records side by side then runs one
+        // record's chain, then the other's, and the processor has nothing
+        // to overlap. Our instructions are already reduced (common parts
+        // once, per-record parts hoisted), and kept in their order the
+        // records' chains interleave.
         flags.set("opt_level", "none").ok()?;
         let isa = cranelift_native::builder()
             .ok()?

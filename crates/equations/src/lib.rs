@@ -1,12 +1,12 @@
 //! Models written as equations: states with initial values, their
 //! derivatives (continuous time, integrated by the fixed-step RK4 of the
-//! models crate, its arithmetic compiled with the equations: decision 047)
+//! models crate, its arithmetic compiled with the equations)
 //! or next values (discrete time), named intermediate
 //! quantities and outputs, over the model's parameters, inputs and the
 //! time `t`. Each right side is parsed once by
-//! [exmex](https://docs.rs/exmex) (decision 043) and the equations of a
+//! [exmex](https://docs.rs/exmex) and the equations of a
 //! step compiled to machine code by
-//! [Cranelift](https://docs.rs/cranelift-jit) (decision 044); a record
+//! [Cranelift](https://docs.rs/cranelift-jit); a record
 //! then costs only the model's own arithmetic.
 //!
 //! ```
@@ -91,7 +91,7 @@ pub enum Integrator {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum InputPath {
     /// The straight line through the samples, held after the last
-    /// (decision 005, as the built-in models and FMUs see them).
+    /// (as the built-in models and FMUs see them).
     #[default]
     Linear,
     /// Each sample held until the next (a zero-order hold: a digital

@@ -5,7 +5,7 @@
 //! comparisons (1 where true, else 0) and a piecewise
 //! `if CONDITION then VALUE else OTHER`.
 //!
-//! exmex parses; it does not evaluate a record (decision 044). Its
+//! exmex parses; it does not evaluate a record. Its
 //! operators here act on [`Traced`] values: evaluating a parsed equation
 //! once on them gives the equation's tree in exmex's own reading
 //! (priorities, unary minus), which the expression module compiles to
@@ -215,7 +215,7 @@ impl Binary {
             Self::Atan2 => a.atan2(b),
             // Spelled out, not f64::min and max, whose choice between
             // equal operands (0 and -0) is left to the compiler: compiled
-            // code does the same one comparison (decisions 044 and 047). A
+            // code does the same one comparison. A
             // NaN first operand passes on, as arithmetic passes NaN on.
             Self::Min => {
                 if b < a {

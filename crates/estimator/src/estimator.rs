@@ -363,7 +363,7 @@ impl Estimator {
     /// Why a record of `n_samples` gets no two-stage estimate from this
     /// estimator, and what to do instead; `None` for its own length. The
     /// estimate keeps the length the estimator was trained and validated
-    /// on (decision 037): its accuracy and intervals hold for no other.
+    /// on: its accuracy and intervals hold for no other.
     ///
     /// ```
     /// use twostage::{TwoStage, models::Benchmark};

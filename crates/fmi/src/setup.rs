@@ -94,7 +94,7 @@ impl Loaded {
         let roles = Roles::check(md, &origin, setup)?;
         // FMI 2.0 co-simulation FMUs that say they interpolate inputs get
         // the straight line to the next sample (the project's convention
-        // for continuous-time models, decision 005); FMI 3.0 has no input
+        // for continuous-time models); FMI 3.0 has no input
         // derivatives, and others hold inputs between samples.
         let interpolate_inputs = md.version == crate::FmiVersion::V2
             && kind == InterfaceKind::CoSimulation

@@ -1,7 +1,7 @@
 //! Stationary autoregressive noise: fitted to a series (the residuals of a
 //! fit, a measured residual) by Yule-Walker with the order chosen by BIC,
 //! its autocovariances, and sample paths from an experiment's stream. One
-//! model for the refined interval's noise (decision 035) and a model
+//! model for the refined interval's noise and a model
 //! file's coloured output noise.
 
 use rand_distr::{Distribution, StandardNormal};

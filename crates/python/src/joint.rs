@@ -6,7 +6,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use twostage::models::IoData;
-use twostage_baselines::{JointFitter, JointOfRecords};
+use twostage::{JointFitter, JointOfRecords};
 
 /// The two-stage estimate of each record (an estimate out of the
 /// estimator's distribution without its interval, as the command line
@@ -31,7 +31,7 @@ pub(crate) fn of_records(
             Ok((a.theta, widths))
         })
         .collect::<PyResult<_>>()?;
-    let items: Vec<twostage_baselines::ToRefine<'_>> = records
+    let items: Vec<twostage::ToRefine<'_>> = records
         .iter()
         .zip(&singles)
         .map(|(record, (theta, widths))| (record, theta.as_slice(), widths.as_deref()))

@@ -426,7 +426,7 @@ impl PyEstimator {
                 .unwrap_or_else(|| twostage::refine::SearchStarts::default_from_prior(q)),
             seed,
         };
-        let fitter = twostage_baselines::JointFitter::new(&self.inner, named.as_ref(), search)
+        let fitter = twostage::JointFitter::new(&self.inner, named.as_ref(), search)
             .map_err(|e| PyValueError::new_err(format!("joint: {e}")))?;
         let shape = self.inner.record_shape();
         let records: Vec<twostage::models::IoData> = records
@@ -459,7 +459,7 @@ impl PyEstimator {
         model_toml: Option<&str>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         let named = named_model(None, model_file, model_toml)?;
-        let refiner = twostage_baselines::EstimateRefiner::new(&self.inner, named.as_ref())
+        let refiner = twostage::EstimateRefiner::new(&self.inner, named.as_ref())
             .map_err(|e| PyValueError::new_err(format!("refine: {e}")))?;
         let shape = self.inner.record_shape();
         let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;

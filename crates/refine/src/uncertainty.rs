@@ -12,7 +12,7 @@
 //! parameter that only a few samples determine (an initial state, seen in
 //! the first samples' transient) has scores on those samples alone, whose
 //! fitted residuals are near zero; the kernel estimate was then many times
-//! too narrow (decision 035). The noise model is estimated from all the
+//! too narrow. The noise model is estimated from all the
 //! samples, whatever the parameter.
 
 use twostage_fit::CentralDifferences;

@@ -19,8 +19,11 @@
 //! (simulators), [`compress`] (stage 1), [`fit`] (stage 2), [`validate`],
 //! [`sources`] (where records come from), [`estimator`] (the trained
 //! estimator and its file), [`train`] (the builder and its run), [`auto`]
-//! (the automatic design). This crate holds only the training request
-//! that every door (command line, Python, shards) builds.
+//! (the automatic design), [`refine`] (refinements and checks through a
+//! model), [`baselines`] (the paper's competitors and the exact Bayes
+//! references). This crate holds what every door (command line, Python,
+//! shards) shares: the training request, and the policy that refines an
+//! estimator's estimates ([`EstimateRefiner`], [`JointFitter`]).
 //!
 //! # Example
 //!
@@ -48,8 +51,12 @@
 //! ```
 #![deny(missing_docs)]
 
+mod joint;
+mod refiner;
 mod request;
 
+pub use joint::{JointFitter, JointOfRecords};
+pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
 pub use twostage_compress::CompressorConfig;
@@ -78,6 +85,7 @@ pub use twostage_sources::{
 };
 
 pub use twostage_auto as auto;
+pub use twostage_baselines as baselines;
 pub use twostage_compress as compress;
 pub use twostage_estimator as estimator;
 pub use twostage_fit as fit;

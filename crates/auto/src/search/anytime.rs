@@ -1,4 +1,4 @@
-//! The anytime final fit (decisions 042, 050): where the winner's final
+//! The anytime final fit: where the winner's final
 //! fit ended before the deadline, the time left goes to more records, the
 //! shipped fit trained further on all of them, a step at a time, each step
 //! kept only if it scores better on added records it did not train on.

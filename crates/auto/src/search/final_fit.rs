@@ -1,5 +1,5 @@
 //! The winner's final fit: on the chart, or on more records simulated for
-//! it where the learning curve says they pay (decision 034), trained
+//! it where the learning curve says they pay, trained
 //! further from its scored fit and anew where the time affords, the better
 //! on added records no fit saw.
 
@@ -131,11 +131,10 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// or, on records read from files (they cannot grow, and their
     /// held-out records cost only their compression), the budget's end
     /// less what compressing those at the winner's measured pace
-    /// (`per_record` seconds) and finishing take, where that is later
-    /// (decision 050). The search's own deadline keeps 5% of the budget
-    /// for them, unmeasured: on the predator-prey chart the run finished
-    /// in under a second, and the 30 s of 600 it kept were one wave of
-    /// members short of the sized ensemble's next.
+    /// (`per_record` seconds) and finishing take, where that is later.
+    /// The search's own deadline keeps 5% of the budget for them,
+    /// unmeasured, which on a chart whose held-out records compress in
+    /// moments is time the sized ensemble could have grown in.
     fn final_deadline(&self, deadline: Instant, per_record: f64) -> Instant {
         let (Some(end), Budget::Seconds(t)) = (self.plan.budget_end, self.plan.budget) else {
             return deadline;
@@ -191,7 +190,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         // A rival trained further shares the time left: the winner's fit
         // stops at its middle at the latest; a fit anew at the deadline; a
         // network sized for the records, fitted anew and grown while time
-        // is left, at an eighth (decision 049: each wave of members it
+        // is left, at an eighth (each wave of members it
         // gains pays more than the winner's further epochs).
         let now = Instant::now();
         let left = deadline.saturating_duration_since(now);
@@ -283,7 +282,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// `first`) with members added, a wave of one a thread, while the time
     /// left affords a wave ([`WAVE_MARGIN`] times the longest measured) and
     /// up to [`MAX_MEMBERS`]: a chart cannot grow, and more members average
-    /// away more of each network's own error (decision 049). A wave the
+    /// away more of each network's own error. A wave the
     /// deadline cuts short is left out whole, so the members are restarts
     /// 0 to N - 1 and `ensemble:..xN` trains them again.
     fn more_members(
@@ -398,15 +397,12 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// stage 1 ([`network_for_rows`]), where the records cannot grow (a
     /// chart) and it is larger than every network the search scored
     /// there: the search's networks are sized for the rows it scores on,
-    /// and a chart of many records carries more than they can learn (decision 045: predator-prey from raw
-    /// populations, [20, 20] trained further on 93,000 records against
-    /// [64, 64] by Adam).
+    /// and a chart of many records carries more than they can learn.
     fn sized_for_rows(&self, best: usize, rows: usize) -> Option<(RegressorConfig, usize)> {
         // Where the source simulates, more records (the anytime steps)
-        // are the better use of the time: on the benchmark at 120 s, the
-        // wide rival's fit took the time of a larger candidate's and of
-        // the steps, and the run shipped 1.30 times the Bayes error
-        // against 1.155 (decision 045). A chart cannot grow.
+        // are the better use of the time: a wide rival's fit takes the
+        // time of a larger candidate's and of the steps. A chart cannot
+        // grow.
         if self.plan.grows {
             return None;
         }
@@ -431,8 +427,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// Where the final fit's `rows` are at least [`GROWN_ROWS`] times those
     /// the winner was scored on: a candidate with a larger network on the
     /// winner's stage 1, scored on the same rows. More records carry more
-    /// than a small network can learn (the benchmark's MLP `[20]` on 30,000
-    /// records stays 1.27 times the Bayes RMSE); among the larger networks
+    /// than a small network can learn; among the larger networks
     /// that the seed alone could have ranked either way (within
     /// [`Self::tie`] of the best of them), the cheapest to fit anew: on
     /// the final records it trains longest in the time there is. The
@@ -508,9 +503,8 @@ pub(crate) fn network_for_rows(
         .filter(|&w| twostage_fit::n_parameters(&[n, w, w, q]) * ROWS_PER_WEIGHT <= rows)
         .max()?;
     // Its restarts averaged rather than the best kept: the same training,
-    // and on the predator-prey task the average of the four [64, 64]
-    // scored mean |z| 0.165 against 0.239 for the best alone (decision
-    // 046).
+    // and a wide network's restarts err in different directions, which
+    // their average cancels and the best alone keeps.
     let averaged = MlpParams::new(&[width, width])
         .and_then(|p| p.ensemble(true).check())
         .ok()?;

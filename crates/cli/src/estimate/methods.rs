@@ -203,11 +203,11 @@ pub(super) struct Chosen {
     pub(super) checker: Option<Box<dyn Simulator>>,
     /// With --refine: the refinement of an estimator's estimates, run over
     /// a file's records together.
-    pub(super) refiner: Option<twostage_baselines::EstimateRefiner>,
+    pub(super) refiner: Option<twostage::EstimateRefiner>,
     /// The prior's box, which the intervals stay inside.
     pub(super) prior_box: Option<PriorBox>,
     /// With --joint: the joint fit of every record.
-    pub(super) joint: Option<twostage_baselines::JointFitter>,
+    pub(super) joint: Option<twostage::JointFitter>,
 }
 
 /// The method chosen on the command line, ready to estimate records.

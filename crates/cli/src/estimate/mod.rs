@@ -54,13 +54,13 @@ pub struct EstimateArgs {
     score_from: Option<usize>,
     /// With --estimator: refine each estimate through the model. A
     /// built-in model: the posterior mean of its prediction-error
-    /// likelihood over twice the interval (about 1 ms per benchmark
-    /// record, 0.4 s per car record). Any other model (--model-file): an
-    /// output-error fit, Levenberg-Marquardt on the record minus the
-    /// noise-free simulation, in the prior's box, from the estimate and
-    /// two starts inside its interval (their simulations batched together);
-    /// its own interval in _lo/_hi (decision 035); `refine_stop` says
-    /// why the best descent stopped, `optima` and `runner_up_over_best`
+    /// likelihood over twice the interval (a grid of the likelihood;
+    /// docs/accuracy.md, "Refinement", says what it costs). Any other
+    /// model (--model-file): an output-error fit, Levenberg-Marquardt on
+    /// the record minus the noise-free simulation, in the prior's box,
+    /// from the estimate and two starts inside its interval (their
+    /// simulations batched together); its own interval in _lo/_hi;
+    /// `refine_stop` says why the best descent stopped, `optima` and `runner_up_over_best`
     /// what its search over the prior found. `--refine=auto`: check every
     /// two-stage estimate (as --check) and refine only the records it
     /// does not explain, named on stderr; the others keep their
@@ -520,10 +520,7 @@ impl Session<'_> {
             .collect();
         let mut searches = searches.into_iter();
         loop {
-            let chunk: Vec<_> = searches
-                .by_ref()
-                .take(twostage_baselines::RECORDS_TOGETHER)
-                .collect();
+            let chunk: Vec<_> = searches.by_ref().take(twostage::RECORDS_TOGETHER).collect();
             if chunk.is_empty() {
                 break;
             }
@@ -615,16 +612,13 @@ fn write_table(args: &EstimateArgs, chosen: &Chosen, rows: &[(String, Estimated)
 /// succeeds brings its own interval (NaN where the record does not
 /// determine it, said on stderr).
 fn refine_together(
-    refiner: &twostage_baselines::EstimateRefiner,
+    refiner: &twostage::EstimateRefiner,
     estimates: &mut [(String, RecordOutcome)],
     only: &[bool],
     searches: &[Search],
     bars: &crate::bars::Bars,
 ) {
-    let (items, bests): (
-        Vec<twostage_baselines::ToRefine<'_>>,
-        Vec<Result<BestFit, String>>,
-    ) = estimates
+    let (items, bests): (Vec<twostage::ToRefine<'_>>, Vec<Result<BestFit, String>>) = estimates
         .iter()
         .zip(only)
         .zip(searches)
@@ -675,12 +669,12 @@ fn refine_together(
 /// and its row among `rows`), said on stderr record by record; a joint
 /// fit that fails keeps the pooled two-stage estimate, and says why.
 fn joint_of_plant(
-    fitter: &twostage_baselines::JointFitter,
+    fitter: &twostage::JointFitter,
     plant: &[(String, IoData, usize)],
     rows: &[(String, Estimated)],
     bars: &crate::bars::Bars,
 ) -> Estimated {
-    let items: Vec<twostage_baselines::ToRefine<'_>> = plant
+    let items: Vec<twostage::ToRefine<'_>> = plant
         .iter()
         .map(|(_, record, row)| {
             let e = &rows[*row].1;

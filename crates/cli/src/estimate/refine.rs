@@ -1,11 +1,11 @@
 //! The command line's side of refining and checking an estimator's
 //! estimates: the model named on it (the refinement itself is
-//! `twostage_baselines::EstimateRefiner`, shared with the Python package).
+//! `twostage::EstimateRefiner`, shared with the Python package).
 
 use anyhow::Result;
+use twostage::EstimateRefiner;
 use twostage::models::Simulator;
 use twostage::{Estimator, NamedModel};
-use twostage_baselines::EstimateRefiner;
 
 use super::EstimateArgs;
 use crate::OrUsage;
@@ -44,12 +44,12 @@ pub(super) fn model_of(
 }
 
 /// The joint fit of an estimator's records (see
-/// [`twostage_baselines::JointFitter::new`]).
+/// [`twostage::JointFitter::new`]).
 pub(super) fn joint_fitter(
     estimator: &Estimator,
     given: Option<&NamedModel>,
     args: &EstimateArgs,
-) -> Result<twostage_baselines::JointFitter> {
+) -> Result<twostage::JointFitter> {
     let q = estimator.param_names().len();
-    twostage_baselines::JointFitter::new(estimator, given, args.search(q)).usage_context("--joint")
+    twostage::JointFitter::new(estimator, given, args.search(q)).usage_context("--joint")
 }

@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
+use twostage::JointOfRecords;
 use twostage::RecordCheck;
 use twostage::fit::TerminationReason;
 use twostage::models::IoData;
-use twostage_baselines::JointOfRecords;
 
 use super::columns::list;
 use super::{Estimated, RecordOutcome};

@@ -1,6 +1,6 @@
 //! A record's response: the states stepped from sample to sample by
 //! the compiled programs, the outputs measured, the noise drawn; records
-//! of a batch side by side (decision 047).
+//! of a batch side by side.
 
 use rand_distr::{Distribution, StandardNormal};
 use twostage_models::{ExperimentRng, InputSignal, IoData, SimError};
@@ -319,7 +319,7 @@ impl EquationModel {
     }
 
     /// `t` and the inputs there into the value table: linear between
-    /// samples and held after the last (decision 005), or, held, those of
+    /// samples and held after the last, or, held, those of
     /// the sample interval `k` being simulated.
     fn set_time_and_inputs(&self, values: &mut [f64], (t, k): (f64, usize), inputs: &[Vec<f64>]) {
         values[TIME_SLOT] = t;
@@ -347,7 +347,7 @@ impl EquationModel {
     }
 }
 
-/// Records of a batch that respond side by side (decision 047): one
+/// Records of a batch that respond side by side: one
 /// record's step is a chain of dependent operations, and a second chain
 /// beside it fills the processor's idle time.
 pub(crate) const LANES: usize = 2;

@@ -14,7 +14,7 @@ pub enum Trainer {
     /// Levenberg-Marquardt while its Jacobian (samples x outputs x weights)
     /// stays under 2e7 entries and the network under 1000 weights. On more
     /// samples, Levenberg-Marquardt on as many as it takes and Adam on all
-    /// of them, the lowest held-out error kept (decision 032); Adam alone
+    /// of them, the lowest held-out error kept; Adam alone
     /// for larger networks.
     Auto,
     /// Levenberg-Marquardt on the full training set.

@@ -1,5 +1,5 @@
-//! `[equations]`: a model written as equations in its model file
-//! (decision 043), read into the equations crate's text and compiled
+//! `[equations]`: a model written as equations in its model file, read
+//! into the equations crate's text and compiled
 //! against the file's parameters and signals at load.
 
 use toml::Spanned;

@@ -69,8 +69,8 @@ pub enum ModelSource {
         /// The design of the measured inputs.
         input: Option<InputSignal>,
     },
-    /// The model written as equations in the file (`[equations]`,
-    /// decision 043), simulated natively.
+    /// The model written as equations in the file (`[equations]`),
+    /// simulated natively.
     Equations {
         /// The equations as written.
         text: EquationsText,

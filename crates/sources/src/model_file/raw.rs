@@ -23,7 +23,7 @@ pub(super) struct RawFile {
     pub(super) preset: Vec<Spanned<RawPreset>>,
 }
 
-/// `[equations]`: the model written as equations (decision 043).
+/// `[equations]`: the model written as equations.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RawEquations {

@@ -94,7 +94,7 @@ fn with_search_under(
     check(&mut search, arx_of(2));
 }
 
-/// The car at 60 s, seed 3 (decision 050), two parameters: [20, 20] best
+/// The car at 60 s, seed 3, two parameters: [20, 20] best
 /// by 0.2% over [20] at 4.6 times its cost; [10] cheapest and within 2%
 /// but worse than [20, 20] on both; [40] outside the tie.
 fn car_tie(arx: &CompressorConfig) -> Vec<Candidate> {

@@ -2,17 +2,18 @@
 //! command line's `estimate --refine` and the Python package's
 //! `Estimator.refine` both do: a built-in model's local posterior under its
 //! exact likelihood, or for any other model an output-error fit through its
-//! simulator, each with the refined estimate's own interval (decision 035).
+//! simulator, each with the refined estimate's own interval.
 
-use twostage::fit::TerminationReason;
-use twostage::models::{BuiltinModel, IoData, Simulator};
-use twostage::{Estimator, ModelProfile, NamedModel, OutputError, Refinement, ResidualModel};
+use twostage_estimator::Estimator;
+use twostage_fit::TerminationReason;
+use twostage_models::{BuiltinModel, IoData, Simulator};
+use twostage_refine::{OutputError, Refinement, ResidualModel};
+use twostage_sources::{ModelProfile, NamedModel};
 
 use rayon::prelude::*;
-use twostage::refine::{BestFit, SearchStarts};
+use twostage_refine::{BestFit, SearchStarts};
 
-use crate::error::{BaselineError, Result};
-use crate::suite::exact_likelihood;
+use twostage_baselines::{BaselineError, Result, exact_likelihood};
 
 /// A refined estimate of one record.
 #[derive(Debug, Clone, PartialEq)]
@@ -72,7 +73,7 @@ impl EstimateRefiner {
     /// ```
     /// use twostage::TwoStage;
     /// use twostage::models::{Benchmark, Simulator, experiment_rng};
-    /// use twostage_baselines::EstimateRefiner;
+    /// use twostage::EstimateRefiner;
     /// let estimator = TwoStage::builder(&Benchmark::new())
     ///     .preset(twostage::paper_benchmark())
     ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
@@ -140,7 +141,7 @@ impl EstimateRefiner {
     /// An estimate of another length than the model's parameters.
     pub fn search_starts(
         &self,
-        prior: &twostage::models::Prior,
+        prior: &twostage_models::Prior,
         estimate: &[f64],
         half_widths: Option<&[f64]>,
     ) -> std::result::Result<Vec<Vec<f64>>, String> {
@@ -202,7 +203,7 @@ impl EstimateRefiner {
         items: &[ToRefine<'_>],
         done: &(dyn Fn(usize) + Sync),
     ) -> Vec<std::result::Result<RefinedEstimate, String>> {
-        let z = twostage::models::standard_normal_quantile(1.0 - self.alpha / 2.0);
+        let z = twostage_models::standard_normal_quantile(1.0 - self.alpha / 2.0);
         match &self.how {
             How::Posterior { local, points } => items
                 .par_iter()
@@ -263,7 +264,7 @@ impl EstimateRefiner {
     }
 
     /// The output-error refinement of `items` at best fits already
-    /// searched (one per item, as [`twostage::search_best_fits`] gives
+    /// searched (one per item, as [`crate::search_best_fits`] gives
     /// them from [`EstimateRefiner::search_starts`]): each refined
     /// estimate is its record's best fit, with its own interval from the
     /// loss's curvature there and the residuals' variance and
@@ -325,6 +326,6 @@ fn default_search(estimator: &Estimator) -> SearchStarts {
 /// in memory at once.
 pub const RECORDS_TOGETHER: usize = 64;
 
-fn boxed(e: twostage::Error) -> BaselineError {
+fn boxed(e: crate::Error) -> BaselineError {
     BaselineError::TwoStage(Box::new(e))
 }

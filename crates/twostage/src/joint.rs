@@ -2,15 +2,17 @@
 //! estimator and its model, as the command line's `estimate --joint` and
 //! the Python package's `Estimator.joint` both give it: the records'
 //! two-stage estimates pooled, then one output-error fit of every record
-//! on its own input ([`twostage::refine::JointEstimate`]).
+//! on its own input ([`crate::refine::JointEstimate`]).
 
-use twostage::fit::TerminationReason;
-use twostage::models::{IoData, Simulator};
-use twostage::refine::{JointPlan, SearchStarts, SingleEstimate};
-use twostage::{Estimator, NamedModel, OutputError, Refinement};
+use twostage_estimator::Estimator;
+use twostage_fit::TerminationReason;
+use twostage_models::{IoData, Simulator};
+use twostage_refine::{JointPlan, SearchStarts, SingleEstimate};
+use twostage_refine::{OutputError, Refinement};
+use twostage_sources::NamedModel;
 
-use crate::error::{BaselineError, Result};
 use crate::refiner::ToRefine;
+use twostage_baselines::{BaselineError, Result};
 
 /// The joint estimate of the records handed to [`JointFitter::fit`], each
 /// record named by its place among them.
@@ -38,7 +40,7 @@ pub struct JointOfRecords {
     /// The records left out, by place, with why.
     pub left_out: Vec<(usize, String)>,
     /// The records whose two-stage estimate disagrees with the others'
-    /// beyond its interval ([`twostage::refine::PooledEstimate`]), by
+    /// beyond its interval ([`crate::refine::PooledEstimate`]), by
     /// place.
     pub disagreeing: Vec<usize>,
 }
@@ -59,7 +61,7 @@ impl JointFitter {
     /// use twostage::TwoStage;
     /// use twostage::models::{Benchmark, Simulator, experiment_rng};
     /// use twostage::refine::SearchStarts;
-    /// use twostage_baselines::JointFitter;
+    /// use twostage::JointFitter;
     /// let model = Benchmark::new();
     /// let estimator = TwoStage::builder(&model)
     ///     .preset(twostage::paper_benchmark())
@@ -89,7 +91,7 @@ impl JointFitter {
         model_file: Option<&NamedModel>,
         search: SearchStarts,
     ) -> Result<Self> {
-        let boxed = |e: twostage::Error| BaselineError::TwoStage(Box::new(e));
+        let boxed = |e: crate::Error| BaselineError::TwoStage(Box::new(e));
         let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
             .and_then(|model| model.simulator(false))
             .map_err(|e| boxed(e.into()))?;
