@@ -7,6 +7,7 @@ use anyhow::Result;
 use ndarray::Array2;
 use rayon::prelude::*;
 use twostage::models::{IoData, Sampling, run_experiment};
+use twostage::sources::refuse_beyond_memory;
 use twostage::validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
 use twostage::{EstimateWorkspace, Estimator, NamedModel};
 
@@ -96,6 +97,19 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     // prior, whatever design the model trains with. Record i depends only
     // on (seed, i), so each round extends the one before.
     let prior = sim.prior().clone().with_sampling(Sampling::Uniform);
+    // Each record's parameters in the design, and its truth and estimate.
+    let flag = if args.target_rmse.is_some() {
+        "--max-sims"
+    } else {
+        "--sims"
+    };
+    refuse_beyond_memory(
+        flag,
+        most,
+        8 * 3 * q as u64,
+        "records' parameters and estimates",
+    )
+    .or_usage()?;
     let design = prior.design(most, args.seed)?;
     let (mut truth, mut estimates) = (Vec::new(), Vec::new());
     let report = loop {

@@ -322,6 +322,42 @@ fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     );
 }
 
+/// A run whose records the memory cannot hold (a typo of a few zeros) is
+/// refused before anything is allocated, with the most that fit, instead
+/// of ending the process when the allocation fails.
+#[test]
+fn a_count_the_memory_cannot_hold_is_refused_up_front() {
+    let dir = scratch("memory");
+    let huge = "1000000000000";
+    let refused = |out: &Output, start: &str| {
+        let said = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{said}");
+        assert!(said.contains(start) && said.contains("at most"), "{said}");
+        assert!(!said.contains("memory allocation"), "{said}");
+    };
+    let out = train_linear(&dir.join("huge.tsest"), huge, "0");
+    refused(
+        &out,
+        "invalid simulations = 1000000000000: its training records' parameters and features take \
+         96.0 TB (96 bytes each)",
+    );
+    assert!(!dir.join("huge.tsest").exists());
+    // Held-out records too, by their own setting.
+    let out = train_linear(&dir.join("huge.tsest"), "300", huge);
+    refused(
+        &out,
+        "invalid calibration = 1000000000000: its calibration records'",
+    );
+    // Validation's fresh records, by its flag.
+    let file = dir.join("small.tsest");
+    assert!(train_linear(&file, "300", "0").status.success());
+    let out = twostage(&["validate", "--estimator", path(&file), "--sims", huge]);
+    refused(
+        &out,
+        "invalid --sims = 1000000000000: its records' parameters and estimates take 24.0 TB",
+    );
+}
+
 #[test]
 fn usage_mistakes_and_missing_files_get_one_clear_line() {
     let dir = scratch("mistakes");

@@ -5,7 +5,7 @@
 
 use std::cell::RefCell;
 
-use twostage_compress::Workspace;
+use twostage_compress::{Compressor, Workspace};
 use twostage_models::{InputFamily, IoData, ModelSpec, Prior, Sampling, Simulator};
 
 use crate::chart::{
@@ -15,6 +15,7 @@ use crate::chart::{
 use crate::chart_file::ChartFiles;
 use crate::error::{Error, Result};
 use crate::progress::{Progress, Stage};
+use crate::readable::refuse_beyond_memory;
 use crate::roles::{ChartRole, RoleCounts, held_out_roles};
 use crate::shard::ShardedChart;
 use twostage_compress::CompressorConfig;
@@ -271,6 +272,20 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
             }
             _ if count == 0 => return Ok(None),
             Kind::Simulated => {
+                // The design, the parameters and the features, each a row
+                // of f64 per record, before the fit copies them.
+                let q = self.training_prior.dim() as u64;
+                let each = 8 * (2 * q + compressor.n_features() as u64);
+                let name = match role {
+                    ChartRole::Training => "simulations",
+                    other => other.label(),
+                };
+                refuse_beyond_memory(
+                    name,
+                    count,
+                    each,
+                    &format!("{} records' parameters and features", role.label()),
+                )?;
                 let design = role.design(&self.training_prior, count, self.seed)?;
                 return compress_chart_observed(
                     self.simulator,
