@@ -58,11 +58,14 @@ pub fn available_memory() -> Option<u64> {
 /// too large would otherwise end the process when the allocation fails.
 ///
 /// ```
-/// use twostage_sources::refuse_beyond_memory;
+/// use twostage_sources::{available_memory, refuse_beyond_memory};
 /// assert!(refuse_beyond_memory("simulations", 1000, 80, "records").is_ok());
-/// let refused = refuse_beyond_memory("simulations", usize::MAX, 80, "records").unwrap_err();
-/// assert!(refused.to_string().starts_with("invalid simulations = 18446744073709551615: \
-///     its records take 1475.7 EB"), "{refused}");
+/// // Where the system says what it has (Linux).
+/// if available_memory().is_some() {
+///     let refused = refuse_beyond_memory("simulations", usize::MAX, 80, "records").unwrap_err();
+///     assert!(refused.to_string().starts_with("invalid simulations = 18446744073709551615: \
+///         its records take 1475.7 EB"), "{refused}");
+/// }
 /// ```
 ///
 /// # Errors
@@ -89,4 +92,24 @@ pub fn refuse_beyond_memory(name: &'static str, count: usize, each: u64, what: &
             available / each.max(1)
         ),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On Linux the memory a run may take is known, and no more than the
+    /// machine's whole memory (read here from its own line).
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn the_available_memory_lies_within_the_machines() {
+        let meminfo = std::fs::read_to_string("/proc/meminfo").unwrap();
+        let total_kb: u64 = meminfo
+            .lines()
+            .find_map(|l| l.strip_prefix("MemTotal:"))
+            .and_then(|rest| rest.trim().trim_end_matches("kB").trim().parse().ok())
+            .unwrap();
+        let available = available_memory().unwrap();
+        assert!(available > 0 && available <= total_kb * 1024, "{available}");
+    }
 }
