@@ -4,15 +4,14 @@
 //! two-stage estimates pooled, then one output-error fit of every record
 //! on its own input ([`crate::refine::JointEstimate`]).
 
+use twostage_baselines::{BaselineError, Result};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{IoData, Simulator};
-use twostage_refine::{JointPlan, SearchStarts, SingleEstimate};
-use twostage_refine::{OutputError, Refinement};
+use twostage_refine::{JointPlan, OutputError, Refinement, SearchStarts, SingleEstimate};
 use twostage_sources::NamedModel;
 
 use crate::refiner::ToRefine;
-use twostage_baselines::{BaselineError, Result};
 
 /// The joint estimate of the records handed to [`JointFitter::fit`], each
 /// record named by its place among them.

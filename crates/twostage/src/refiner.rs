@@ -4,16 +4,13 @@
 //! exact likelihood, or for any other model an output-error fit through its
 //! simulator, each with the refined estimate's own interval.
 
+use rayon::prelude::*;
+use twostage_baselines::{BaselineError, Result, exact_likelihood};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{BuiltinModel, IoData, Simulator};
-use twostage_refine::{OutputError, Refinement, ResidualModel};
+use twostage_refine::{BestFit, OutputError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel};
-
-use rayon::prelude::*;
-use twostage_refine::{BestFit, SearchStarts};
-
-use twostage_baselines::{BaselineError, Result, exact_likelihood};
 
 /// A refined estimate of one record.
 #[derive(Debug, Clone, PartialEq)]

@@ -224,7 +224,13 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         };
         let transforms = estimator.transforms_outputs();
         let family = estimator.input_family().is_some();
-        let given = model_file(args)?;
+        // Read once for the check, the refinement and the joint fit, and
+        // only where one of them runs.
+        let given = if args.checks() || args.refine.is_some() || args.joint {
+            model_file(args)?
+        } else {
+            None
+        };
         let given = given.as_ref();
         let checker = if args.checks() {
             Some(model_of(&estimator, given)?)
