@@ -906,6 +906,22 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
     let refusal = "describes 'other', the estimator was trained on 'pacejka': give the model \
                    file it was trained from";
     assert!(text(&out.stderr).contains(refusal), "{}", text(&out.stderr));
+    // Without a check, a refinement or a joint fit the model file would be
+    // ignored: refused, not read.
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--model-file",
+        path(&benchmark),
+        path(&alien_path),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("--model-file is read by --check, --refine and --joint"),
+        "{}",
+        text(&out.stderr)
+    );
     // Validating refuses it in the same words: one function finds the model.
     let out = twostage(&[
         "validate",

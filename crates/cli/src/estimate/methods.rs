@@ -46,6 +46,15 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
             "--check and --refine=auto",
         );
     }
+    if args.model_file.is_some()
+        && args.estimator.is_some()
+        && !(args.checks() || args.refine.is_some() || args.joint)
+    {
+        return refuse(
+            "--model-file",
+            "--check, --refine and --joint with an estimator (it knows its model's records)",
+        );
+    }
     if args.model.is_some() && method.is_none() && args.at.is_none() {
         return refuse(
             "--model",
@@ -224,13 +233,9 @@ pub(super) fn method(args: &EstimateArgs) -> Result<Chosen> {
         };
         let transforms = estimator.transforms_outputs();
         let family = estimator.input_family().is_some();
-        // Read once for the check, the refinement and the joint fit, and
-        // only where one of them runs.
-        let given = if args.checks() || args.refine.is_some() || args.joint {
-            model_file(args)?
-        } else {
-            None
-        };
+        // Read once for the check, the refinement and the joint fit (it
+        // is refused above without one of them).
+        let given = model_file(args)?;
         let given = given.as_ref();
         let checker = if args.checks() {
             Some(model_of(&estimator, given)?)
