@@ -25,7 +25,7 @@ pub const NEAR_BEST_LOSS: f64 = 1.1;
 /// The most runs of the model's own records a check ranks a record among
 /// when its caller does not say (the command line's `--check-sims`, the
 /// Python package's `sims`): the tail probability then resolves to 1/200,
-/// a fifth of [`EXPLAINED_LEVEL`].
+/// half of [`EXPLAINED_LEVEL`].
 pub const DEFAULT_CHECK_RUNS: usize = 199;
 
 /// The check's noisy runs may stop once this many miss by at least as much
