@@ -30,8 +30,10 @@ pub struct TrainArgs {
     /// for models whose experiments share one input) or raw (the record
     /// itself, for records of tens of samples), each after output
     /// transforms when written log+SPEC or log1p+SPEC (log,id+SPEC: one
-    /// per output) (default: the preset's). ARX orders apply to each of
-    /// the model's inputs and outputs.
+    /// per output), and followed by +level (each output's first sample
+    /// and mean) or +summary (each signal's mean, RMS, peak and mean
+    /// frequency: for a family of inputs) (default: the preset's). ARX
+    /// orders apply to each of the model's inputs and outputs.
     #[arg(long)]
     compress: Option<String>,
     /// Stage 2: linear, mlp:H[,H...] hidden sizes, ensemble:H[,H...][xN]

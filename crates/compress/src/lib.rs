@@ -53,7 +53,7 @@ use ndarray::ArrayView2;
 pub use arx::Arx;
 pub use config::{
     CompressorConfig, NARX_SCALE_RECORDS, PCA_RECORDS, SignalTransform, TRANSFORM_RECORDS,
-    Transformed, WithLevel,
+    Transformed, WithLevel, WithSummary,
 };
 pub use error::{CompressError, Result};
 pub use narx::{Narx, signal_rms};

@@ -6,9 +6,11 @@
 //! `CompressorConfig` hold each other.
 
 mod level;
+mod summary;
 mod transform;
 
 pub use level::WithLevel;
+pub use summary::WithSummary;
 pub use transform::{SignalTransform, TRANSFORM_RECORDS, Transformed};
 
 use ndarray::ArrayView2;
@@ -34,6 +36,9 @@ pub enum CompressorConfig {
     /// One of the above, then each output's first sample and mean
     /// (`SPEC+level`).
     Leveled(WithLevel),
+    /// One of the above, then each input's and output's mean, RMS, peak
+    /// and mean frequency (`SPEC+summary`).
+    Summarized(WithSummary),
 }
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
@@ -93,6 +98,11 @@ impl CompressorConfig {
                 n_outputs,
                 l.inner().for_shape(n_inputs, n_outputs, n_samples)?,
             )?),
+            Self::Summarized(s) => Self::Summarized(WithSummary::new(
+                s.inner().for_shape(n_inputs, n_outputs, n_samples)?,
+                n_inputs,
+                n_outputs,
+            )?),
             other => other.clone(),
         })
     }
@@ -103,7 +113,10 @@ impl CompressorConfig {
     ///
     /// ```
     /// use twostage_compress::CompressorConfig;
-    /// for spec in ["arx:5,5", "ar:3", "narx:2,2,2", "pca:8", "raw", "log+ar:2", "log+arx:2,2+level"] {
+    /// for spec in [
+    ///     "arx:5,5", "ar:3", "narx:2,2,2", "pca:8", "raw", "log+ar:2", "log+arx:2,2+level",
+    ///     "arx:2,2+summary", "arx:2,2+level+summary",
+    /// ] {
     ///     let c: CompressorConfig = spec.parse()?;
     ///     assert_eq!(c.spec().as_deref(), Some(spec));
     /// }
@@ -117,6 +130,7 @@ impl CompressorConfig {
             Self::Raw(_) => Some("raw".into()),
             Self::Transformed(t) => t.spec(),
             Self::Leveled(l) => l.spec(),
+            Self::Summarized(s) => s.spec(),
         }
     }
 
@@ -130,6 +144,7 @@ impl CompressorConfig {
                 TRANSFORM_RECORDS.max(t.inner().records_to_prepare())
             }
             CompressorConfig::Leveled(l) => l.inner().records_to_prepare(),
+            CompressorConfig::Summarized(s) => s.inner().records_to_prepare(),
             _ => 0,
         }
     }
@@ -180,6 +195,16 @@ impl CompressorConfig {
                 let n_outputs = records.first().map_or(1, |(_, y)| y.ncols());
                 CompressorConfig::Leveled(WithLevel::new(l.inner().prepared(records)?, n_outputs)?)
             }
+            CompressorConfig::Summarized(s) if s.inner().records_to_prepare() > 0 => {
+                let (n_inputs, n_outputs) = records
+                    .first()
+                    .map_or((0, 1), |(u, y)| (u.ncols(), y.ncols()));
+                CompressorConfig::Summarized(WithSummary::new(
+                    s.inner().prepared(records)?,
+                    n_inputs,
+                    n_outputs,
+                )?)
+            }
             other => other.clone(),
         })
     }
@@ -194,6 +219,7 @@ impl std::fmt::Display for CompressorConfig {
             Self::Raw(raw) => raw.fmt(f),
             Self::Transformed(t) => t.fmt(f),
             Self::Leveled(l) => l.fmt(f),
+            Self::Summarized(s) => s.fmt(f),
         }
     }
 }
@@ -231,6 +257,10 @@ impl std::str::FromStr for CompressorConfig {
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
         const WHAT: &str = "compressor";
+        if let Some(inner) = spec.trim().strip_suffix("+summary") {
+            // Shaped by the model (`for_shape`): one input and output until then.
+            return Ok(Self::Summarized(WithSummary::new(inner.parse()?, 1, 1)?));
+        }
         if let Some(inner) = spec.trim().strip_suffix("+level") {
             // Shaped by the model (`for_shape`): one output until then.
             return Ok(Self::Leveled(WithLevel::new(inner.parse()?, 1)?));
@@ -302,6 +332,7 @@ impl Compressor for CompressorConfig {
             Self::Raw(c) => c.n_features(),
             Self::Transformed(c) => c.n_features(),
             Self::Leveled(c) => c.n_features(),
+            Self::Summarized(c) => c.n_features(),
         }
     }
 
@@ -319,6 +350,7 @@ impl Compressor for CompressorConfig {
             Self::Raw(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Transformed(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Leveled(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Summarized(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -338,6 +370,7 @@ impl Compressor for CompressorConfig {
             Self::Raw(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Transformed(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Leveled(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Summarized(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -349,6 +382,7 @@ impl Compressor for CompressorConfig {
             Self::Raw(c) => c.feature_names(),
             Self::Transformed(c) => c.feature_names(),
             Self::Leveled(c) => c.feature_names(),
+            Self::Summarized(c) => c.feature_names(),
         }
     }
 }
