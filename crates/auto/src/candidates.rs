@@ -199,6 +199,47 @@ pub(super) fn constant_inputs(records: &[IoData]) -> Vec<usize> {
         .collect()
 }
 
+/// How many times the smallest input RMS among the records the largest
+/// must be for the records to be a family of operating levels: white
+/// noise of a few hundred samples varies by a few per cent, a family of
+/// drawn levels or of manoeuvres by several times.
+const FAMILY_LEVEL_RATIO: f64 = 2.0;
+
+/// The winner's stage 1 with each signal's mean, RMS, peak and mean
+/// frequency appended, where the `records`' inputs differ in level from
+/// one experiment to another (an input family): the coefficients of a
+/// nonlinear system then depend on how hard each record drove it, which
+/// they do not say. The held-out risk decides whether it pays.
+pub(super) fn with_summary(
+    compressor: &CompressorConfig,
+    records: &[IoData],
+) -> Option<CompressorConfig> {
+    let first = records.first()?;
+    if matches!(compressor, CompressorConfig::Summarized(_)) {
+        return None;
+    }
+    let differ = (0..first.n_inputs()).any(|j| {
+        let (low, high) = records
+            .iter()
+            .map(|record| {
+                let u = record.input(j);
+                let n = u.len().max(1) as f64;
+                let mean = u.iter().sum::<f64>() / n;
+                (u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
+            })
+            .fold((f64::INFINITY, 0.0f64), |(l, h), rms| {
+                (l.min(rms), h.max(rms))
+            });
+        high > FAMILY_LEVEL_RATIO * low
+    });
+    if !differ {
+        return None;
+    }
+    twostage_compress::WithSummary::new(compressor.clone(), first.n_inputs(), first.n_outputs())
+        .ok()
+        .map(CompressorConfig::Summarized)
+}
+
 /// The longest record (in values) whose raw samples the search tries as
 /// features.
 const RAW_CANDIDATE_VALUES: usize = 256;
@@ -241,6 +282,28 @@ mod tests {
             mimo.iter()
                 .all(|c| !matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Narx(_)))
         );
+    }
+
+    /// A family of input levels earns the summary rival; one level with
+    /// the small spread of noise, or a stage 1 already summarized, not.
+    #[test]
+    fn the_summary_rival_is_for_inputs_of_different_levels() {
+        let record = |level: f64| {
+            let mut r = IoData::zeros(200, 1, 1);
+            for (t, v) in r.input_mut(0).iter_mut().enumerate() {
+                *v = level * if t % 2 == 0 { 1.0 } else { -1.0 };
+            }
+            r
+        };
+        let arx: CompressorConfig = "arx:2,2".parse().unwrap();
+        let arx = arx.for_shape(1, 1, 200).unwrap();
+        let one_level: Vec<IoData> = [1.0, 1.1, 0.95].map(record).into();
+        assert!(with_summary(&arx, &one_level).is_none());
+        let family: Vec<IoData> = [1.0, 0.4, 0.9].map(record).into();
+        let summarized = with_summary(&arx, &family).unwrap();
+        assert_eq!(summarized.n_features(), 4 + 8);
+        assert!(with_summary(&summarized, &family).is_none());
+        assert!(with_summary(&arx, &[]).is_none());
     }
 
     /// An input that never varies within a record is found whatever its

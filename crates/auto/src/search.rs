@@ -10,7 +10,7 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::{IoData, Simulator};
 use twostage_sources::{ForModel, StoredChart};
 
-use crate::candidates::{design, fit_cost};
+use crate::candidates::{design, fit_cost, with_summary};
 
 mod anytime;
 mod final_fit;
@@ -349,6 +349,9 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         let n_outputs = self.plan.base.simulator().spec().output_names().len();
         if let Some(leveled) = with_level(&compressor, n_outputs) {
             trials.push(trial(&leveled, &network, TrialRole::Rival, rows));
+        }
+        if let Some(summarized) = with_summary(&compressor, &self.plan.chart.records[..rows]) {
+            trials.push(trial(&summarized, &network, TrialRole::Rival, rows));
         }
         if let RegressorConfig::Mlp(mlp) = &network
             && !mlp.params().is_ensemble()

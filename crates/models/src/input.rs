@@ -234,6 +234,51 @@ impl InputSignal {
         Self::designed(Design::Steps { level, hold }, 0.0)
     }
 
+    /// Random manoeuvres: `count` bursts per experiment (drawn from the
+    /// whole numbers between its ends), each a sine of a whole number of
+    /// half `cycles` over `seconds`, of `amplitude` with a random sign,
+    /// under a Hann `taper` or none, at a random time that keeps it
+    /// wholly in the record; zero (`offset`) between them.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal, Taper, experiment_rng};
+    /// let one = InputSignal::bursts(
+    ///     (1, 1), Drawn::fixed(2.0), Drawn::fixed(0.5), Drawn::fixed(1.0), Taper::None, 0.0,
+    /// )?;
+    /// let mut u = vec![0.0; 1000];
+    /// one.fill(0.01, &mut experiment_rng(1, 0), &mut u)?;
+    /// // Half a sine of 2 s: 200 samples of one sign, rest elsewhere.
+    /// let nonzero = u.iter().filter(|v| **v != 0.0).count();
+    /// assert!((199..=200).contains(&nonzero));
+    /// assert!(u.iter().all(|v| v.abs() <= 1.0));
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a count range outside 1 to
+    /// [`crate::MAX_BURSTS`], a length that is not positive, a cycles
+    /// range without a whole number of half cycles, or a non-finite
+    /// offset.
+    pub fn bursts(
+        count: (usize, usize),
+        seconds: Drawn,
+        cycles: Drawn,
+        amplitude: Drawn,
+        taper: crate::Taper,
+        offset: f64,
+    ) -> Result<Self> {
+        Self::designed(
+            Design::Bursts(crate::bursts::Bursts {
+                count,
+                seconds,
+                cycles,
+                amplitude,
+                taper,
+            }),
+            offset,
+        )
+    }
+
     /// The sum of `parts` (a multisine on a step sequence, say), each
     /// drawn in turn from the experiment's stream.
     ///

@@ -12,6 +12,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rustfft::FftPlannerScalar;
 use rustfft::num_complex::Complex;
 
+use crate::bursts::Bursts;
 use crate::butterworth::{Cascade, MAX_FILTER_ORDER, Pass};
 use crate::error::{Result, SimError};
 use crate::prbs::{MAX_PRBS_ORDER, prbs_taps};
@@ -64,7 +65,7 @@ impl Drawn {
         self.low.to_bits() == self.high.to_bits()
     }
 
-    fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
+    pub(crate) fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         if self.is_fixed() {
             self.low
         } else {
@@ -72,7 +73,7 @@ impl Drawn {
         }
     }
 
-    fn describe(&self, unit: &str) -> String {
+    pub(crate) fn describe(&self, unit: &str) -> String {
         if self.is_fixed() {
             format!("{}{unit}", self.low)
         } else {
@@ -143,6 +144,7 @@ pub(crate) enum Design {
         order: u32,
         rms: Drawn,
     },
+    Bursts(Bursts),
 }
 
 impl Design {
@@ -227,6 +229,7 @@ impl Design {
                 }
                 Ok(())
             }
+            Self::Bursts(bursts) => bursts.check(sample_time),
             _ => Ok(()),
         }
     }
@@ -313,6 +316,7 @@ impl Design {
                 band.1.describe(" Hz"),
                 rms.describe("")
             ),
+            Self::Bursts(bursts) => bursts.describe(),
         }
     }
 
@@ -460,6 +464,7 @@ impl Design {
                     k = end;
                 }
             }
+            Self::Bursts(bursts) => bursts.fill(sample_time, rng, u)?,
         }
         Ok(())
     }

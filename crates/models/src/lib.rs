@@ -43,6 +43,7 @@
 mod ar_noise;
 mod benchmark;
 mod builtin;
+mod bursts;
 mod butterworth;
 mod data;
 mod error;
@@ -67,6 +68,7 @@ pub use benchmark::{
     PROCESS_NOISE_VARIANCE,
 };
 pub use builtin::{BuiltinModel, BuiltinOverrides};
+pub use bursts::{MAX_BURSTS, Taper};
 pub use butterworth::MAX_FILTER_ORDER;
 pub use data::{IoData, RecordShape};
 pub use error::{Result, SimError};

@@ -85,6 +85,8 @@ fn each_experiment_draws_its_own_multisine_in_the_family() {
         "signal = \"sweep\"\nband = [0.001, 0.1]\namplitude = 0.5\noffset = 2",
         "signal = \"gaussian\"\nband = [0.005, [0.05, 0.1]]\norder = 3\nrms = [0.1, 0.3]\noffset = 2",
         "signal = \"steps\"\nlevels = [1.0, 3.5]\nhold_seconds = [20, 60]",
+        "signal = \"bursts\"\ncount = [1, 3]\nseconds = [40, 200]\ncycles = [0.5, 2.5]\n\
+         amplitude = [0.2, 0.5]\ntaper = \"mixed\"\noffset = 2",
         "signal = \"sum\"\nparts = [\n  { signal = \"steps\", levels = [1.5, 3], hold_seconds = [40, 80] },\n  \
          { signal = \"multisine\", band = [0.0, 0.05], rms = 0.2 },\n]",
     ] {
@@ -226,6 +228,36 @@ fn an_impossible_design_is_named_by_its_key() {
             "signal = \"steps\"\nlevels = [1, 2]\nhold_seconds = [5, 1]",
             "input",
             "0 < shortest <= longest",
+        ),
+        (
+            "signal = \"bursts\"\ncount = [0, 2]\nseconds = 50\ncycles = 1\namplitude = 1",
+            "input",
+            "1 <= low <= high",
+        ),
+        (
+            "signal = \"bursts\"\ncount = [1.5, 2]\nseconds = 50\ncycles = 1\namplitude = 1",
+            "input.count",
+            "whole numbers",
+        ),
+        (
+            "signal = \"bursts\"\nseconds = 50\ncycles = [0.6, 0.9]\namplitude = 1",
+            "input",
+            "no whole number of half cycles",
+        ),
+        (
+            "signal = \"bursts\"\nseconds = 50\ncycles = 1\namplitude = 1\ntaper = \"cosine\"",
+            "input.taper",
+            "use \"hann\", \"none\" or \"mixed\"",
+        ),
+        (
+            "signal = \"bursts\"\nseconds = [4, 8]\ncycles = 2\namplitude = 1",
+            "input",
+            "above the Nyquist frequency 0.25 Hz",
+        ),
+        (
+            "signal = \"bursts\"\nseconds = 50\namplitude = 1",
+            "input.cycles",
+            "needs seconds, cycles, amplitude",
         ),
         (
             "signal = \"sum\"\nparts = [{ signal = \"white\", sd = 1 }]",

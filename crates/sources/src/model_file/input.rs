@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use toml::Spanned;
-use twostage_models::{Drawn, Grid, InputSignal, Level, Phases};
+use twostage_models::{Drawn, Grid, InputSignal, Level, Phases, Taper};
 
 use super::locator::Locator;
 use super::locator::Signals;
@@ -202,6 +202,10 @@ impl Locator<'_> {
             "sweep" => (&["band", "amplitude", "offset"], &["band", "amplitude"]),
             "gaussian" => (&["band", "order", "rms", "offset"], &["band", "rms"]),
             "steps" => (&["levels", "hold_seconds"], &["levels", "hold_seconds"]),
+            "bursts" => (
+                &["count", "seconds", "cycles", "amplitude", "taper", "offset"],
+                &["seconds", "cycles", "amplitude"],
+            ),
             "sum" => (&["parts"], &["parts"]),
             other => {
                 return Err(self.error(
@@ -209,8 +213,8 @@ impl Locator<'_> {
                     "input.signal",
                     format!(
                         "unknown signal '{other}': use \"white\", \"chicane\", \"fixed\", \
-                         \"multisine\", \"binary\", \"prbs\", \"gaussian\", \"sweep\", \"steps\" \
-                         or \"sum\""
+                         \"multisine\", \"binary\", \"prbs\", \"gaussian\", \"sweep\", \"steps\", \
+                         \"bursts\" or \"sum\""
                     ),
                 ));
             }
@@ -229,6 +233,10 @@ impl Locator<'_> {
             ("order", raw.order.is_some()),
             ("levels", raw.levels.is_some()),
             ("hold_seconds", raw.hold_seconds.is_some()),
+            ("count", raw.count.is_some()),
+            ("seconds", raw.seconds.is_some()),
+            ("cycles", raw.cycles.is_some()),
+            ("taper", raw.taper.is_some()),
             ("parts", raw.parts.is_some()),
         ];
         if let Some((key, _)) = given.iter().find(|(k, g)| *g && !takes.contains(k)) {
@@ -369,6 +377,44 @@ impl Locator<'_> {
                     .map(|p| self.input(p))
                     .collect::<Result<Vec<_>>>()?;
                 Some(InputSignal::sum(parts))
+            }
+            "bursts" => {
+                let count = match &raw.count {
+                    None => (1, 1),
+                    Some(count) => {
+                        let (low, high) = drawn("count", count)?.range();
+                        let whole = |v: f64| v.fract() == 0.0 && v >= 0.0 && v <= 1e9;
+                        if !(whole(low) && whole(high)) {
+                            return Err(wrong(
+                                "count",
+                                format!("[{low}, {high}]: give whole numbers of bursts per record"),
+                            ));
+                        }
+                        (low as usize, high as usize)
+                    }
+                };
+                let taper = match raw.taper.as_deref() {
+                    None | Some("hann") => Taper::Hann,
+                    Some("none") => Taper::None,
+                    Some("mixed") => Taper::Mixed,
+                    Some(other) => {
+                        return Err(wrong(
+                            "taper",
+                            format!("'{other}': use \"hann\", \"none\" or \"mixed\""),
+                        ));
+                    }
+                };
+                match (&raw.seconds, &raw.cycles, amplitude) {
+                    (Some(seconds), Some(cycles), Some(a)) => Some(InputSignal::bursts(
+                        count,
+                        drawn("seconds", seconds)?,
+                        drawn("cycles", cycles)?,
+                        a,
+                        taper,
+                        offset,
+                    )),
+                    _ => None,
+                }
             }
             "steps" => raw
                 .levels

@@ -167,6 +167,13 @@ pub(super) struct RawInput {
     /// Random steps' levels and holds (seconds), each `[low, high]`.
     pub(super) levels: Option<[f64; 2]>,
     pub(super) hold_seconds: Option<[f64; 2]>,
+    /// Bursts per record: one number, or `[low, high]` drawn per record.
+    pub(super) count: Option<OneOrMany>,
+    /// Each burst's length in seconds and its sine's cycles.
+    pub(super) seconds: Option<OneOrMany>,
+    pub(super) cycles: Option<OneOrMany>,
+    /// A burst's window: "hann", "none" or "mixed".
+    pub(super) taper: Option<String>,
     /// A sum's parts, each an input table of its own.
     pub(super) parts: Option<Vec<Spanned<RawInput>>>,
     pub(super) file: Option<Spanned<String>>,
