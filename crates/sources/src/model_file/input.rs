@@ -383,7 +383,8 @@ impl Locator<'_> {
                     None => (1, 1),
                     Some(count) => {
                         let (low, high) = drawn("count", count)?.range();
-                        let whole = |v: f64| v.fract() == 0.0 && v >= 0.0 && v <= 1e9;
+                        let whole =
+                            |v: f64| v.fract().abs() < f64::EPSILON && (0.0..=1e9).contains(&v);
                         if !(whole(low) && whole(high)) {
                             return Err(wrong(
                                 "count",
