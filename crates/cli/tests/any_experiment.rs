@@ -272,3 +272,77 @@ fn the_car_written_as_equations_is_the_built_in_car() {
     let late = (2500..3000).map(gap).fold(0.0f64, f64::max);
     assert!(late > 0.01, "{late}");
 }
+
+/// Section 7: the car's manoeuvre family trains with `+summary` (smaller
+/// than the guide's), `inspect` names the stage 1, a chicane record is
+/// estimated inside the prior and not flagged by its input, and the
+/// runtime export refuses the stage 1 it cannot stream, naming it.
+#[test]
+fn the_car_on_manoeuvres_trains_with_each_records_summary() {
+    let dir = scratch("car-manoeuvres");
+    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../docs/examples/car/car_manoeuvres.toml");
+    let estimator = dir.join("car-manoeuvres.tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(&model),
+        "--preset",
+        "recommended",
+        "--compress",
+        "arx:2,2+summary",
+        "--fit",
+        "mlp:5",
+        "--sims",
+        "400",
+        "--calibrate",
+        "200",
+        "--validate",
+        "100",
+        "--seed",
+        "1",
+        "--quiet",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let inspected = twostage(&["inspect", path(&estimator)]);
+    let inspected = text(&inspected.stdout);
+    assert!(
+        inspected.contains("mean, RMS, peak and mean frequency"),
+        "{inspected}"
+    );
+    let chicane = dir.join("chicane.csv");
+    let out = twostage(&[
+        "simulate",
+        "--model",
+        "pacejka",
+        "--theta",
+        "-35,-1.1",
+        "--out",
+        path(&chicane),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = twostage(&["estimate", "--estimator", path(&estimator), path(&chicane)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let (header, rows) = table(&text(&out.stdout));
+    let pk1: f64 = rows[0][column(&header, "pK1")].parse().unwrap();
+    assert!((-42.83..=-27.32).contains(&pk1), "{pk1}");
+    let flag = &rows[0][column(&header, "out_of_distribution")];
+    assert_eq!(flag, "false", "{header:?} {rows:?}");
+    let out = twostage(&[
+        "export",
+        "--estimator",
+        path(&estimator),
+        "--to",
+        "runtime",
+        "--out",
+        path(&dir.join("car.tsrt")),
+    ]);
+    assert!(!out.status.success());
+    let said = text(&out.stderr);
+    assert!(
+        said.contains("ARX and AR compressors only") && said.contains("mean frequency"),
+        "{said}"
+    );
+}

@@ -391,3 +391,39 @@ fn an_estimator_of_a_family_flags_an_input_outside_it() {
     );
     assert!(!fast.iter().any(|s| s.contains("RMS")), "{fast:?}");
 }
+
+/// The car's family of manoeuvres (docs/examples/car/car_manoeuvres.toml)
+/// draws records that rest and steer, and holds the paper's chicane as
+/// one of its kind: the chicane's input summary lies inside the range of
+/// the family's records, though no record is the chicane.
+#[test]
+fn the_car_family_of_manoeuvres_holds_the_chicane_among_its_kind() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../docs/examples/car/car_manoeuvres.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let sim = ModelFile::parse(&text, &path.display().to_string())
+        .unwrap()
+        .simulator()
+        .unwrap();
+    let spec = sim.spec();
+    let mut family = twostage::models::InputFamily::new(1, spec.sample_time());
+    let theta = spec.prior().lower().to_vec();
+    let mut resting = 0;
+    for i in 0..500 {
+        let mut record = spec.new_record();
+        sim.simulate(&theta, &mut experiment_rng(7, i), &mut record)
+            .unwrap();
+        let u = record.input(0);
+        assert!(u.iter().all(|v| v.abs() <= 0.5), "{i}: two bursts at most");
+        resting += usize::from(u.iter().filter(|v| **v == 0.0).count() >= 50);
+        family.include(&record);
+    }
+    // At least a second of rest in most records.
+    assert!(resting >= 400, "{resting} of 500 records rest a second");
+    let car = twostage::models::PacejkaCar::new();
+    let mut chicane = car.spec().new_record();
+    car.simulate(&[-35.0, -1.1], &mut experiment_rng(7, 0), &mut chicane)
+        .unwrap();
+    let outside = family.deviations(&chicane, &["delta"]);
+    assert!(outside.is_empty(), "{outside:?}");
+}
