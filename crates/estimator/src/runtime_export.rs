@@ -6,10 +6,10 @@ use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
 use twostage_models::{InputFamily, Transform};
 use twostage_runtime::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_OUTPUT_TRANSFORMS, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_MEMBERS, MAX_ORDER,
-    MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
-    SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
-    VERSION_WITHOUT_FAMILY,
+    FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_MEMBERS,
+    MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK,
+    REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY,
+    TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_SUMMARY,
 };
 
 use crate::error::{Error, Result};
@@ -135,7 +135,9 @@ impl Estimator {
     /// ([`twostage_runtime`]): versioned, checksummed, read in place. The
     /// runtime streams ARX and AR compressors; stage 2 may be any of the
     /// project's (linear, MLP, piecewise), with the intervals and the
-    /// envelope; output transforms (`log+arx:...`) go with the ARX.
+    /// envelope; output transforms (`log+arx:...`) go with the ARX, and
+    /// so does each signal's summary after it (`arx:...+summary`), but
+    /// not both.
     ///
     /// ```
     /// use twostage::TwoStage;
@@ -150,23 +152,26 @@ impl Estimator {
     /// ```
     ///
     /// # Errors
-    /// [`Error::NotExportable`] for a NARX, PCA or raw compressor, or sizes
-    /// beyond the runtime's limits ([`twostage_runtime::format`]).
+    /// [`Error::NotExportable`] for a NARX, PCA or raw compressor, a
+    /// summary after output transforms, or sizes beyond the runtime's
+    /// limits ([`twostage_runtime::format`]).
     pub fn to_runtime(&self) -> Result<Vec<u8>> {
-        let (transformed, arx) = self.runtime_stage1()?;
+        let (transformed, arx, summary) = self.runtime_stage1()?;
         let mut w = Writer {
             bytes: Vec::with_capacity(4096),
         };
         w.bytes.extend_from_slice(&MAGIC);
-        let version = if self.runtime_family().is_some() {
+        let version = if summary {
             VERSION
+        } else if self.runtime_family().is_some() {
+            VERSION_WITHOUT_SUMMARY
         } else {
             VERSION_WITHOUT_FAMILY
         };
         w.u32(version as usize)?;
         w.u32(0)?; // length, set below
         w.u32(0)?; // checksum, set below
-        w.header(self, arx, transformed.is_some())?;
+        w.header(self, arx, transformed.is_some(), summary)?;
         w.parts(self, transformed)?;
         debug_assert_eq!(self.compressor.n_features(), self.regressor.n_inputs());
         let length = w.bytes.len();
@@ -186,17 +191,23 @@ impl Estimator {
             .filter(|f| f.records() > 0 && f.n_inputs() > 0)
     }
 
-    /// The ARX stage 1 the runtime streams, and the output transform in
-    /// front of it where there is one; refused beyond the runtime's sizes.
-    fn runtime_stage1(&self) -> Result<(Option<&Transformed>, &Arx)> {
-        let (transformed, stage1) = match &self.compressor {
-            CompressorConfig::Transformed(t) => (Some(t), t.inner()),
+    /// The ARX stage 1 the runtime streams, the output transform in front
+    /// of it where there is one, and whether each signal's summary
+    /// follows it; refused beyond the runtime's sizes.
+    fn runtime_stage1(&self) -> Result<(Option<&Transformed>, &Arx, bool)> {
+        let (summary, stage1) = match &self.compressor {
+            CompressorConfig::Summarized(s) => (true, s.inner()),
+            other => (false, other),
+        };
+        let (transformed, stage1) = match stage1 {
+            CompressorConfig::Transformed(t) if !summary => (Some(t), t.inner()),
             other => (None, other),
         };
         let CompressorConfig::Arx(arx) = stage1 else {
             return Err(refuse(format!(
-                "the runtime streams ARX and AR compressors only, this estimator uses {}; \
-                 train with --compress arx:NA,NB (or ar:NA)",
+                "the runtime streams ARX and AR compressors only, with each signal's summary \
+                 after them or output transforms before them, this estimator uses {}; \
+                 train with --compress arx:NA,NB (or ar:NA, log+arx:NA,NB, arx:NA,NB+summary)",
                 self.compressor
             )));
         };
@@ -214,7 +225,7 @@ impl Estimator {
                 shape.n_inputs, shape.n_outputs
             )));
         }
-        Ok((transformed, arx))
+        Ok((transformed, arx, summary))
     }
 }
 
@@ -222,7 +233,13 @@ impl Writer {
     /// The header's fields after the magic, version, length and checksum:
     /// sizes, the ARX orders, the flags of the optional parts, the kind of
     /// stage 2.
-    fn header(&mut self, e: &Estimator, arx: &Arx, transforms_outputs: bool) -> Result<()> {
+    fn header(
+        &mut self,
+        e: &Estimator,
+        arx: &Arx,
+        transforms_outputs: bool,
+        summary: bool,
+    ) -> Result<()> {
         let mut flags = 0;
         if e.intervals.is_some() {
             flags |= FLAG_CONFORMAL;
@@ -238,6 +255,9 @@ impl Writer {
         }
         if e.runtime_family().is_some() {
             flags |= FLAG_INPUT_FAMILY;
+        }
+        if summary {
+            flags |= FLAG_SIGNAL_SUMMARY;
         }
         let (kind, experts) = match &e.regressor {
             FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),

@@ -6,9 +6,10 @@ use crate::bytes::{Cursor, LeF64s, u32_at};
 use crate::error::Error;
 use crate::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_OUTPUT_TRANSFORMS, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS,
-    MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P,
-    TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY,
+    FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER,
+    MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY,
+    SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY,
+    VERSION_WITHOUT_SUMMARY,
 };
 use crate::network::Network;
 
@@ -92,6 +93,8 @@ pub struct Estimator<'a> {
     output_transforms_at: usize,
     /// Where the input family starts in the blob (0: none).
     input_family_at: usize,
+    /// Whether stage 1 appends each signal's summary.
+    pub(crate) signal_summary: bool,
     blob: &'a [u8],
     max_width: usize,
 }
@@ -148,8 +151,11 @@ impl<'a> Estimator<'a> {
             });
         }
         let mut known = FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE | FLAG_OUTPUT_TRANSFORMS;
-        if version >= VERSION {
+        if version >= VERSION_WITHOUT_SUMMARY {
             known |= FLAG_INPUT_FAMILY;
+        }
+        if version >= VERSION {
+            known |= FLAG_SIGNAL_SUMMARY;
         }
         if flags & !known != 0 || r1 != 0 || r2 != 0 {
             return Err(Error::Invalid {
@@ -157,7 +163,13 @@ impl<'a> Estimator<'a> {
                 at: flags_at,
             });
         }
-        let n_features = n_outputs * (na + n_inputs * nb);
+        let signal_summary = flags & FLAG_SIGNAL_SUMMARY != 0;
+        let n_features = n_outputs * (na + n_inputs * nb)
+            + if signal_summary {
+                SUMMARY_LEN * (n_inputs + n_outputs)
+            } else {
+                0
+            };
         let transforms_at = c.at;
         let transforms = c.u32s(q)?;
         if (0..q).any(|j| {
@@ -305,6 +317,7 @@ impl<'a> Estimator<'a> {
             envelope,
             output_transforms_at,
             input_family_at,
+            signal_summary,
             blob,
             max_width: 0,
         };
@@ -355,8 +368,24 @@ impl<'a> Estimator<'a> {
     pub fn trained_samples(&self) -> usize {
         self.trained_samples
     }
-    /// Stage 1's features: `n_outputs * (na + n_inputs * nb)`.
+    /// Stage 1's features: `n_outputs * (na + n_inputs * nb)` ARX
+    /// coefficients, then four summary numbers per signal where stage 1
+    /// appends them.
     pub fn n_features(&self) -> usize {
+        self.arx_features()
+            + if self.signal_summary {
+                SUMMARY_LEN * (self.n_inputs + self.n_outputs)
+            } else {
+                0
+            }
+    }
+    /// Whether stage 1 appends each input's and output's mean, RMS, peak
+    /// and mean frequency to the ARX coefficients.
+    pub fn has_signal_summary(&self) -> bool {
+        self.signal_summary
+    }
+    /// The ARX coefficients among the features.
+    pub(crate) fn arx_features(&self) -> usize {
         self.n_outputs * self.per_output()
     }
     /// Lower bound of parameter `j`'s prior box (NaN past the end).

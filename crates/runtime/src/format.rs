@@ -1,4 +1,4 @@
-//! The exported estimator's byte layout, version 2: what
+//! The exported estimator's byte layout, version 3: what
 //! `twostage export --to runtime` writes and [`crate::Estimator`] reads.
 //!
 //! Every number is little-endian; counts are `u32`, trained values `f64`.
@@ -10,7 +10,7 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0..4 | magic `TSRT` |
-//! | 4..8 | format version (2; 1 for a blob without an input family) |
+//! | 4..8 | format version (3; 2 for a blob without the signals' summary, 1 without an input family either) |
 //! | 8..12 | the blob's length in bytes |
 //! | 12..16 | CRC-32 (IEEE) of bytes 16..length |
 //! | 16..64 | twelve `u32`: q, inputs, outputs, trained record length, na, nb, delay, flags, regressor kind, experts, 0, 0 |
@@ -25,7 +25,10 @@
 //! transform's domain is replaced by) (flag 8); the input family (flag
 //! 16, version 2): the sample time, then per input signal the low and
 //! high end of each summary number's range (mean, RMS, peak, mean
-//! frequency: eight `f64`). A network is: the count of its layer sizes and of its ensemble
+//! frequency: eight `f64`). Flag 32 (version 3) has no section: stage 1
+//! appends each input's, then each output's mean, RMS, peak and mean
+//! frequency in cycles per sample to the ARX coefficients (the host's
+//! `arx:NA,NB+summary`). A network is: the count of its layer sizes and of its ensemble
 //! members (`u32`), the sizes (`u32`), the feature means and scales, the
 //! target means and scales, then each member's weights and biases, layer
 //! by layer (row-major weights, then biases). A linear map is a network
@@ -34,10 +37,12 @@
 /// The first four bytes.
 pub const MAGIC: [u8; 4] = *b"TSRT";
 /// The newest version this crate reads, which the exporter writes for an
-/// estimator that knows its input family. Version 1 (no family) is read
-/// too, and written for an estimator without one, so that a runtime of
-/// before the family reads it.
-pub const VERSION: u32 = 2;
+/// estimator whose stage 1 appends the signals' summary. Versions 2 (an
+/// input family, no summary) and 1 (no family) are read too, and written
+/// for estimators without them, so that a runtime of before reads them.
+pub const VERSION: u32 = 3;
+/// The version of a blob with an input family and no signals' summary.
+pub const VERSION_WITHOUT_SUMMARY: u32 = 2;
 /// The version of a blob without an input family.
 pub const VERSION_WITHOUT_FAMILY: u32 = 1;
 /// Bytes before the first section.
@@ -58,6 +63,10 @@ pub const FLAG_OUTPUT_TRANSFORMS: u32 = 8;
 /// Flag (version 2): the input family follows, and a stream judges each
 /// record's input against it.
 pub const FLAG_INPUT_FAMILY: u32 = 16;
+
+/// Flag (version 3): stage 1 appends each signal's summary (mean, RMS,
+/// peak, mean frequency in cycles per sample) to the ARX coefficients.
+pub const FLAG_SIGNAL_SUMMARY: u32 = 32;
 
 /// Regressor kind: one network (an MLP ensemble, or a linear map).
 pub const REGRESSOR_NETWORK: u32 = 1;

@@ -33,8 +33,9 @@ pub(crate) struct Layout {
     /// estimator that transforms its outputs).
     marks: usize,
     sums: usize,
-    /// One input accumulator per input, for a record's stream of an
-    /// estimator with a family (a window summarizes its ring at finish).
+    /// One accumulator per input, for a record's stream of an estimator
+    /// with a family, and one per output after them where stage 1 appends
+    /// the signals' summary (a window summarizes its ring at finish).
     family: usize,
     features: usize,
     scratch: usize,
@@ -58,7 +59,9 @@ impl Layout {
         let scratch = (n * (n + 1) + 2 * n).max(features + 2 * e.max_width());
         let sums = shape.sum_words();
         let (history, first, marks, family) = if window == 0 {
-            let family = if e.has_input_family() {
+            let family = if e.has_signal_summary() {
+                ACCUMULATOR_WORDS * (e.n_inputs + e.n_outputs)
+            } else if e.has_input_family() {
                 ACCUMULATOR_WORDS * e.n_inputs
             } else {
                 0
@@ -418,7 +421,10 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         if let Some(kept) = self.status.get_mut(3) {
             *kept = count;
         }
-        for (words, u) in family.chunks_exact_mut(ACCUMULATOR_WORDS).zip(inputs) {
+        // The signals as measured: the host summarizes the outputs before
+        // any transform.
+        let signals = inputs.iter().chain(outputs);
+        for (words, u) in family.chunks_exact_mut(ACCUMULATOR_WORDS).zip(signals) {
             let mut kept = accumulator(words);
             kept.push(*u);
             for (w, k) in words.iter_mut().zip(kept.to_words()) {
@@ -483,7 +489,8 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             ..
         } = layout.split(self.work);
         let rhs = packed(n, 0);
-        for (i, alpha) in features.chunks_exact_mut(n).enumerate() {
+        let (arx, summary) = features.split_at_mut(e.arx_features().min(features.len()));
+        for (i, alpha) in arx.chunks_exact_mut(n).enumerate() {
             // Column c of output i's regression: its own lags, then each
             // input's; the target is the output at lag 0.
             let column = |c: usize| -> (usize, usize) {
@@ -513,6 +520,26 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
                 Some(column) => Error::RankDeficient { output: i, column },
                 None => Error::Overflow,
             })?;
+        }
+        // Each signal's summary, inputs first, in cycles per sample: a
+        // record's from its accumulators, a window's from its samples.
+        let signal_summary = |signal: usize| -> InputAccumulator {
+            if self.window == 0 {
+                return accumulator(family.get(signal * ACCUMULATOR_WORDS..).unwrap_or_default());
+            }
+            let column = if signal < e.n_inputs {
+                e.n_outputs + signal
+            } else {
+                signal - e.n_inputs
+            };
+            let mut window = InputAccumulator::new();
+            for i in pushed - samples..pushed {
+                window.push(memory.sample(&layout.shape, column, i).0);
+            }
+            window
+        };
+        for (signal, numbers) in summary.chunks_exact_mut(SUMMARY_LEN).enumerate() {
+            numbers.copy_from_slice(&signal_summary(signal).summary(1.0));
         }
         predict(e, features, scratch, theta)?;
         for (j, t) in theta.iter_mut().enumerate() {
@@ -552,18 +579,9 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             feature_distance,
             distance_threshold: e.envelope.map(|envelope| envelope.threshold),
             untransformed_samples: self.status.get(3).map_or(0, |c| *c as usize),
-            input_outside_family: input_outside_family(e, |j| {
-                if self.window == 0 {
-                    return accumulator(family.get(j * ACCUMULATOR_WORDS..).unwrap_or_default());
-                }
-                // The window's inputs, oldest first, as the host summarizes
-                // the window alone.
-                let mut window = InputAccumulator::new();
-                for i in pushed - samples..pushed {
-                    window.push(memory.sample(&layout.shape, e.n_outputs + j, i).0);
-                }
-                window
-            }),
+            // The window's inputs, oldest first, as the host summarizes the
+            // window alone.
+            input_outside_family: input_outside_family(e, signal_summary),
         })
     }
 }

@@ -833,3 +833,50 @@ fn a_window_is_refused_shorter_than_a_regression_and_resumes_as_a_window() {
     assert_eq!(stream.window_len(), Some(100));
     assert_eq!(stream.samples(), 0);
 }
+
+/// Stage 1 with each signal's summary after the ARX coefficients (the
+/// host's `arx:NA,NB+summary`, decision 064): record by record and window
+/// by window, the runtime's estimates, intervals, distances and flags are
+/// the host's, for one signal each way and for two; a summary over
+/// transformed outputs is refused with the compressor named.
+#[test]
+fn the_signals_summary_after_the_coefficients_agrees_record_and_window() {
+    use twostage::compress::CompressorConfig;
+    let summarized = |model: &dyn Simulator, spec: &str, seed: u64| {
+        let compressor: CompressorConfig = spec.parse().unwrap();
+        TwoStage::builder(model)
+            .compressor(compressor)
+            .regressor("mlp:5".parse().unwrap())
+            .simulations(400)
+            .validation(0)
+            .calibration(200)
+            .seed(seed)
+            .train()
+            .unwrap()
+    };
+    let car = PacejkaCar::new();
+    let host = summarized(&car, "arx:2,2+summary", 5);
+    let blob = host.to_runtime().unwrap();
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    assert!(runtime.has_signal_summary());
+    assert_eq!(runtime.n_features(), 4 + 2 * SUMMARY_NAMES.len());
+    check("car, summary", &host, &car);
+    check_window("car, summary", &host, &long_record(&host, &car, 3), 300, 41);
+    let two = two_by_two();
+    let host = summarized(&two, "arx:2,2+summary", 6);
+    check("two-by-two, summary", &host, &two);
+    check_window(
+        "two-by-two, summary",
+        &host,
+        &long_record(&host, &two, 4),
+        100,
+        13,
+    );
+    let (positive, _) = positive_with_log_outputs();
+    let transformed = summarized(&positive, "log,log1p+arx:2,2+summary", 7);
+    let refused = transformed.to_runtime().unwrap_err().to_string();
+    assert!(
+        refused.contains("mean frequency") && refused.contains("arx:NA,NB+summary"),
+        "{refused}"
+    );
+}

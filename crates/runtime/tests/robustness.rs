@@ -144,15 +144,30 @@ fn damage_is_named() {
         Err(Error::Length { declared, actual }) if declared == blob.len() && actual == blob.len() - 8
     ));
     let mut newer = blob.clone();
-    newer[4] = 3;
+    newer[4] = 4;
     assert_eq!(
         Estimator::from_bytes(&newer).unwrap_err(),
-        Error::UnsupportedVersion { found: 3 }
+        Error::UnsupportedVersion { found: 4 }
     );
     assert_eq!(
-        Error::UnsupportedVersion { found: 3 }.to_string(),
-        "blob format version 3, this runtime reads versions 1 to 2: export the estimator \
+        Error::UnsupportedVersion { found: 4 }.to_string(),
+        "blob format version 4, this runtime reads versions 1 to 3: export the estimator \
          again with the matching twostage"
+    );
+    // The summary's flag belongs to version 3: a version-2 blob that
+    // sets it is damaged, not a summary the reader would skip.
+    let mut flagged = blob.clone();
+    assert_eq!(flagged[4], 2, "a blob with an input family");
+    flagged[44] |= twostage_runtime::format::FLAG_SIGNAL_SUMMARY as u8;
+    seal(&mut flagged);
+    assert!(matches!(
+        Estimator::from_bytes(&flagged),
+        Err(Error::Invalid { field: "flags", .. })
+    ));
+    flagged[4] = 3;
+    assert!(
+        Estimator::from_bytes(&flagged).is_err(),
+        "its features outnumber the network's inputs"
     );
     // One more byte, sealed: read to the end, the byte is left over.
     let mut longer = blob.clone();
