@@ -488,6 +488,24 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             scratch,
             ..
         } = layout.split(self.work);
+        if self.window > 0 {
+            // A signal at zero through the whole window leaves in its sums
+            // the rounding of the products that left it, not zero: refused
+            // as the host refuses a record with nothing to fit.
+            let silent = |signal: usize| {
+                (pushed - samples..pushed).all(|i| {
+                    let v = memory.sample(&layout.shape, signal, i).0;
+                    !(v.abs() > 0.0)
+                })
+            };
+            let outputs = (0..e.n_outputs).filter(|_| e.na > 0).map(|i| (i, 0));
+            let inputs = (0..e.n_inputs)
+                .filter(|_| e.nb > 0)
+                .map(|j| (e.n_outputs + j, e.na + j * e.nb));
+            if let Some((_, column)) = outputs.chain(inputs).find(|(signal, _)| silent(*signal)) {
+                return Err(Error::RankDeficient { output: 0, column });
+            }
+        }
         let rhs = packed(n, 0);
         let (arx, summary) = features.split_at_mut(e.arx_features().min(features.len()));
         for (i, alpha) in arx.chunks_exact_mut(n).enumerate() {
