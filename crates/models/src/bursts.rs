@@ -101,23 +101,26 @@ impl Bursts {
     }
 
     pub(crate) fn describe(&self) -> String {
+        let between = |(low, high): (f64, f64)| {
+            if low.to_bits() == high.to_bits() {
+                low.to_string()
+            } else {
+                format!("{low} to {high}")
+            }
+        };
         let (fewest, most) = self.count;
         format!(
-            "random bursts, {} per record, each a sine of {} cycles (whole half cycles) over {}, \
-             amplitude {} of a random sign, {}, each at a random time wholly in the record \
-             (one longer than the record from its start)",
-            if fewest == most {
-                fewest.to_string()
-            } else {
-                format!("{fewest} to {most}")
-            },
-            self.cycles.describe(""),
-            self.seconds.describe(" s"),
-            self.amplitude.describe(""),
+            "random bursts, {} per record, each a sine of {} cycles (in whole half cycles) \
+             over {} s, amplitude {} of a random sign, {}, at a random time wholly in the \
+             record (one longer than the record from its start), each drawn per burst",
+            between((fewest as f64, most as f64)),
+            between(self.cycles.range()),
+            between(self.seconds.range()),
+            between(self.amplitude.range()),
             match self.taper {
                 Taper::Hann => "Hann-tapered",
                 Taper::None => "untapered",
-                Taper::Mixed => "Hann-tapered or not (drawn per burst)",
+                Taper::Mixed => "Hann-tapered or not",
             }
         )
     }

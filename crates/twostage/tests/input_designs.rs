@@ -406,6 +406,13 @@ fn the_car_family_of_manoeuvres_holds_the_chicane_among_its_kind() {
         .simulator()
         .unwrap();
     let spec = sim.spec();
+    let described = spec.input_note().to_string();
+    assert!(
+        described.contains("random bursts, 1 to 2 per record")
+            && described.contains("0.5 to 2.5 cycles")
+            && described.contains("over 2 to 8 s"),
+        "{described}"
+    );
     let mut family = twostage::models::InputFamily::new(1, spec.sample_time());
     let theta = spec.prior().lower().to_vec();
     let mut resting = 0;
