@@ -268,7 +268,7 @@ impl InputSignal {
         offset: f64,
     ) -> Result<Self> {
         Self::designed(
-            Design::Bursts(crate::bursts::Bursts {
+            Design::Bursts(crate::input_design::Bursts {
                 count,
                 seconds,
                 cycles,

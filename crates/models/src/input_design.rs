@@ -12,10 +12,14 @@ use rand_distr::{Distribution, StandardNormal};
 use rustfft::FftPlannerScalar;
 use rustfft::num_complex::Complex;
 
-use crate::bursts::Bursts;
 use crate::butterworth::{Cascade, MAX_FILTER_ORDER, Pass};
 use crate::error::{Result, SimError};
 use crate::prbs::{MAX_PRBS_ORDER, prbs_taps};
+
+mod bursts;
+
+pub(crate) use bursts::Bursts;
+pub use bursts::{MAX_BURSTS, Taper};
 
 /// A value fixed, or drawn uniformly per experiment from `[low, high]`.
 ///

@@ -43,7 +43,6 @@
 mod ar_noise;
 mod benchmark;
 mod builtin;
-mod bursts;
 mod butterworth;
 mod data;
 mod error;
@@ -68,13 +67,12 @@ pub use benchmark::{
     PROCESS_NOISE_VARIANCE,
 };
 pub use builtin::{BuiltinModel, BuiltinOverrides};
-pub use bursts::{MAX_BURSTS, Taper};
 pub use butterworth::MAX_FILTER_ORDER;
 pub use data::{IoData, RecordShape};
 pub use error::{Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION};
 pub use input::InputSignal;
-pub use input_design::{Drawn, Grid, Level, Phases};
+pub use input_design::{Drawn, Grid, Level, MAX_BURSTS, Phases, Taper};
 pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,

@@ -835,7 +835,7 @@ fn a_window_is_refused_shorter_than_a_regression_and_resumes_as_a_window() {
 }
 
 /// Stage 1 with each signal's summary after the ARX coefficients (the
-/// host's `arx:NA,NB+summary`, decision 064): record by record and window
+/// host's `arx:NA,NB+summary`): record by record and window
 /// by window, the runtime's estimates, intervals, distances and flags are
 /// the host's, for one signal each way and for two; a summary over
 /// transformed outputs is refused with the compressor named.

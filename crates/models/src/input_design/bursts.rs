@@ -14,8 +14,8 @@ use std::f64::consts::PI;
 
 use rand::{Rng, RngExt};
 
+use super::Drawn;
 use crate::error::{Result, SimError};
-use crate::input_design::Drawn;
 
 /// The most bursts a record may draw: beyond it the bursts overlap into
 /// noise, which the `gaussian` design draws directly.
