@@ -493,10 +493,8 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             // the rounding of the products that left it, not zero: refused
             // as the host refuses a record with nothing to fit.
             let silent = |signal: usize| {
-                (pushed - samples..pushed).all(|i| {
-                    let v = memory.sample(&layout.shape, signal, i).0;
-                    !(v.abs() > 0.0)
-                })
+                (pushed - samples..pushed)
+                    .all(|i| memory.sample(&layout.shape, signal, i).0.abs() <= 0.0)
             };
             let outputs = (0..e.n_outputs).filter(|_| e.na > 0).map(|i| (i, 0));
             let inputs = (0..e.n_inputs)
