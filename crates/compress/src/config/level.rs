@@ -106,15 +106,7 @@ impl WithLevel {
     }
 
     fn split<'a>(&self, alpha: &'a mut [f64]) -> Result<(&'a mut [f64], &'a mut [f64])> {
-        let k = self.inner.n_features();
-        if alpha.len() != k + 2 * self.n_outputs {
-            return Err(CompressError::InvalidSetting {
-                name: "feature buffer",
-                value: alpha.len().to_string(),
-                reason: format!("{} features", k + 2 * self.n_outputs),
-            });
-        }
-        Ok(alpha.split_at_mut(k))
+        super::split_appended(alpha, self.inner.n_features(), 2 * self.n_outputs)
     }
 }
 

@@ -224,6 +224,23 @@ impl std::fmt::Display for CompressorConfig {
     }
 }
 
+/// A wrapper's feature buffer cut into its inner compressor's `inner`
+/// features and the `appended` ones after them (`+level`, `+summary`).
+fn split_appended(
+    alpha: &mut [f64],
+    inner: usize,
+    appended: usize,
+) -> Result<(&mut [f64], &mut [f64])> {
+    if alpha.len() != inner + appended {
+        return Err(Error::InvalidSetting {
+            name: "feature buffer",
+            value: alpha.len().to_string(),
+            reason: format!("{} features", inner + appended),
+        });
+    }
+    Ok(alpha.split_at_mut(inner))
+}
+
 /// Whole numbers separated by commas, exactly `count` of them.
 fn counts(spec: &str, whole: &str, count: usize, what: &'static str) -> Result<Vec<usize>> {
     let values: Option<Vec<usize>> = spec.split(',').map(|v| v.trim().parse().ok()).collect();

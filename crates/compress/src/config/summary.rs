@@ -111,15 +111,7 @@ impl WithSummary {
     }
 
     fn split<'a>(&self, alpha: &'a mut [f64]) -> Result<(&'a mut [f64], &'a mut [f64])> {
-        let k = self.inner.n_features();
-        if alpha.len() != k + self.appended() {
-            return Err(CompressError::InvalidSetting {
-                name: "feature buffer",
-                value: alpha.len().to_string(),
-                reason: format!("{} features", k + self.appended()),
-            });
-        }
-        Ok(alpha.split_at_mut(k))
+        super::split_appended(alpha, self.inner.n_features(), self.appended())
     }
 }
 
@@ -248,5 +240,18 @@ mod tests {
             .compress(one_input.view(), two_outputs.view())
             .unwrap_err();
         assert!(err.to_string().contains('2'), "{err}");
+        // A buffer of another length than the inner features and the
+        // summary's eight: refused, naming the count it needs.
+        let one_output = Array2::<f64>::from_elem((10, 1), 1.0);
+        let mut short = [0.0; 9];
+        let err = once
+            .compress_into(
+                one_input.view(),
+                one_output.view(),
+                &mut Workspace::new(),
+                &mut short,
+            )
+            .unwrap_err();
+        assert!(err.to_string().contains("10 features"), "{err}");
     }
 }
