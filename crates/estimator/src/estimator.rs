@@ -543,10 +543,7 @@ impl Estimator {
     /// [`Assessment::floored_samples`] says which samples it could not
     /// take as they were).
     pub fn transforms_outputs(&self) -> bool {
-        match &self.compressor {
-            CompressorConfig::Leveled(l) => matches!(l.inner(), CompressorConfig::Transformed(_)),
-            c => matches!(c, CompressorConfig::Transformed(_)),
-        }
+        self.compressor.transforms_outputs()
     }
 
     /// The adaptive intervals, when calibrated.

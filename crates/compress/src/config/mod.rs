@@ -134,6 +134,32 @@ impl CompressorConfig {
         }
     }
 
+    /// Whether the outputs pass through transforms before stage 1, also
+    /// inside the wrappers that append the level or the summary.
+    ///
+    /// ```
+    /// use twostage_compress::CompressorConfig;
+    /// for (spec, transforms) in [
+    ///     ("arx:2,2", false),
+    ///     ("log+arx:2,2", true),
+    ///     ("log+arx:2,2+level", true),
+    ///     ("log+arx:2,2+level+summary", true),
+    ///     ("arx:2,2+summary", false),
+    /// ] {
+    ///     let c: CompressorConfig = spec.parse()?;
+    ///     assert_eq!(c.transforms_outputs(), transforms, "{spec}");
+    /// }
+    /// # Ok::<(), twostage_compress::CompressError>(())
+    /// ```
+    pub fn transforms_outputs(&self) -> bool {
+        match self {
+            Self::Transformed(_) => true,
+            Self::Leveled(l) => l.inner().transforms_outputs(),
+            Self::Summarized(s) => s.inner().transforms_outputs(),
+            _ => false,
+        }
+    }
+
     /// How many training records [`CompressorConfig::prepared`] uses: 0
     /// when the compressor has nothing to fit.
     pub fn records_to_prepare(&self) -> usize {
