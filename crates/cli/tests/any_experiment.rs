@@ -273,8 +273,9 @@ fn the_car_written_as_equations_is_the_built_in_car() {
     assert!(late > 0.01, "{late}");
 }
 
-/// Section 7: the car's manoeuvre family trains with `+summary` (smaller
-/// than the guide's), `inspect` names the stage 1, a chicane record is
+/// Section 7: the car's manoeuvre family trains from its file's first
+/// preset, whose stage 1 is `+summary` (smaller than the guide's),
+/// `inspect` names the stage 1, a chicane record is
 /// estimated inside the prior and not flagged by its input, and the
 /// estimator exports to the runtime.
 #[test]
@@ -287,10 +288,6 @@ fn the_car_on_manoeuvres_trains_with_each_records_summary() {
         "train",
         "--model-file",
         path(&model),
-        "--preset",
-        "recommended",
-        "--compress",
-        "arx:2,2+summary",
         "--fit",
         "mlp:5",
         "--sims",
