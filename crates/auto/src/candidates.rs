@@ -218,19 +218,14 @@ pub(super) fn with_summary(
     if matches!(compressor, CompressorConfig::Summarized(_)) {
         return None;
     }
+    // The input family's own RMS range (the sample time does not enter
+    // the RMS).
+    let mut family = twostage_models::InputFamily::new(first.n_inputs(), 1.0);
+    records.iter().for_each(|record| family.include(record));
     let differ = (0..first.n_inputs()).any(|j| {
-        let (low, high) = records
-            .iter()
-            .map(|record| {
-                let u = record.input(j);
-                let n = u.len().max(1) as f64;
-                let mean = u.iter().sum::<f64>() / n;
-                (u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt()
-            })
-            .fold((f64::INFINITY, 0.0f64), |(l, h), rms| {
-                (l.min(rms), h.max(rms))
-            });
-        high > FAMILY_LEVEL_RATIO * low
+        family
+            .ranges(j)
+            .is_some_and(|[_, [low, high], ..]| *high > FAMILY_LEVEL_RATIO * *low)
     });
     if !differ {
         return None;
