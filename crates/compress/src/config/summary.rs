@@ -15,7 +15,7 @@ use twostage_kernels::input_summary::{InputAccumulator, SUMMARY_NAMES};
 
 use super::CompressorConfig;
 use crate::error::{CompressError, Result};
-use crate::signals::{check, name};
+use crate::signals::name;
 use crate::{Compressor, Workspace};
 
 /// The numbers appended per signal: [`SUMMARY_NAMES`].
@@ -93,8 +93,17 @@ impl WithSummary {
         outputs: ArrayView2<'_, f64>,
         summary: &mut [f64],
     ) -> Result<()> {
-        let n = check(inputs, outputs, self.n_inputs, self.n_outputs)?;
-        if n == 0 {
+        // The inner compressor has checked the samples; only the shape
+        // the summary's slots follow is checked again.
+        if inputs.ncols() != self.n_inputs || outputs.ncols() != self.n_outputs {
+            return Err(CompressError::ShapeMismatch {
+                inputs: self.n_inputs,
+                outputs: self.n_outputs,
+                got_inputs: inputs.ncols(),
+                got_outputs: outputs.ncols(),
+            });
+        }
+        if outputs.nrows() == 0 {
             return Err(CompressError::InvalidSetting {
                 name: "record",
                 value: "0 samples".into(),
