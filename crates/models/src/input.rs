@@ -237,13 +237,15 @@ impl InputSignal {
     /// Random manoeuvres: `count` bursts per experiment (drawn from the
     /// whole numbers between its ends), each a sine of a whole number of
     /// half `cycles` over `seconds`, of `amplitude` with a random sign,
-    /// under a Hann `taper` or none, at a random time that keeps it
-    /// wholly in the record; zero (`offset`) between them.
+    /// under a Hann `taper` or none, holding one of its crests (drawn)
+    /// `dwell` seconds (`Drawn::fixed(0.0)`: none), at a random time that
+    /// keeps it wholly in the record; zero (`offset`) between them.
     ///
     /// ```
     /// use twostage_models::{Drawn, InputSignal, Taper, experiment_rng};
     /// let one = InputSignal::bursts(
-    ///     (1, 1), Drawn::fixed(2.0), Drawn::fixed(0.5), Drawn::fixed(1.0), Taper::None, 0.0,
+    ///     (1, 1), Drawn::fixed(2.0), Drawn::fixed(0.5), Drawn::fixed(1.0), Taper::None,
+    ///     Drawn::fixed(0.0), 0.0,
     /// )?;
     /// let mut u = vec![0.0; 1000];
     /// one.fill(0.01, &mut experiment_rng(1, 0), &mut u)?;
@@ -257,14 +259,15 @@ impl InputSignal {
     /// # Errors
     /// [`SimError::InvalidSetting`] for a count range outside 1 to
     /// [`crate::MAX_BURSTS`], a length that is not positive, a cycles
-    /// range without a whole number of half cycles, or a non-finite
-    /// offset.
+    /// range without a whole number of half cycles, a dwell below zero,
+    /// or a non-finite offset.
     pub fn bursts(
         count: (usize, usize),
         seconds: Drawn,
         cycles: Drawn,
         amplitude: Drawn,
         taper: crate::Taper,
+        dwell: Drawn,
         offset: f64,
     ) -> Result<Self> {
         Self::designed(
@@ -274,6 +277,7 @@ impl InputSignal {
                 cycles,
                 amplitude,
                 taper,
+                dwell,
             }),
             offset,
         )

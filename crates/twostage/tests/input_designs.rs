@@ -87,6 +87,8 @@ fn each_experiment_draws_its_own_multisine_in_the_family() {
         "signal = \"steps\"\nlevels = [1.0, 3.5]\nhold_seconds = [20, 60]",
         "signal = \"bursts\"\ncount = [1, 3]\nseconds = [40, 200]\ncycles = [0.5, 2.5]\n\
          amplitude = [0.2, 0.5]\ntaper = \"mixed\"\noffset = 2",
+        "signal = \"bursts\"\ncount = [1, 2]\nseconds = [40, 200]\ncycles = [0.5, 2.5]\n\
+         amplitude = [0.2, 0.5]\ndwell = [0, 30]\noffset = 2",
         "signal = \"sum\"\nparts = [\n  { signal = \"steps\", levels = [1.5, 3], hold_seconds = [40, 80] },\n  \
          { signal = \"multisine\", band = [0.0, 0.05], rms = 0.2 },\n]",
     ] {
@@ -248,6 +250,16 @@ fn an_impossible_design_is_named_by_its_key() {
             "signal = \"bursts\"\nseconds = 50\ncycles = 1\namplitude = 1\ntaper = \"cosine\"",
             "input.taper",
             "use \"hann\", \"none\" or \"mixed\"",
+        ),
+        (
+            "signal = \"bursts\"\nseconds = 50\ncycles = 1\namplitude = 1\ndwell = [-1, 2]",
+            "input",
+            "a crest is held zero seconds or more",
+        ),
+        (
+            "signal = \"bursts\"\nseconds = 50\ncycles = 1\namplitude = 1\ndwell = [2, 1]",
+            "input.dwell",
+            "the first no larger than the second",
         ),
         (
             "signal = \"bursts\"\nseconds = [4, 8]\ncycles = 2\namplitude = 1",

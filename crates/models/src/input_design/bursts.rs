@@ -9,6 +9,13 @@
 //! `[0, 1)`, with `c` a whole number of half cycles so that an untapered
 //! burst ends at zero too, and `w` a Hann taper `sin(pi x)^2` or none.
 //! The paper's chicane is one such burst (2 cycles over 8 s, tapered).
+//!
+//! A burst may dwell: its sine stops at one of its crests (drawn) for a
+//! drawn time and then goes on, as the sine with dwell of FMVSS 126 holds
+//! its second crest, and a turn held at its crest is a steady corner.
+//! Stationary bursts never hold a system at its crest long enough to
+//! settle there, and where the system saturates that is where its
+//! parameters show.
 
 use std::f64::consts::PI;
 
@@ -44,6 +51,9 @@ pub(crate) struct Bursts {
     /// Each burst's sine amplitude; its sign is drawn.
     pub(crate) amplitude: Drawn,
     pub(crate) taper: Taper,
+    /// Seconds each burst holds one of its crests; exactly zero draws
+    /// nothing (the records of a design without dwells stay as they were).
+    pub(crate) dwell: Drawn,
 }
 
 impl Bursts {
@@ -84,6 +94,14 @@ impl Bursts {
                 reason: "a burst lasts a positive time".into(),
             });
         }
+        let (least_dwell, _) = self.dwell.range();
+        if least_dwell < 0.0 {
+            return Err(SimError::InvalidSetting {
+                name: "bursts dwell",
+                value: least_dwell.to_string(),
+                reason: "a crest is held zero seconds or more (e.g. [0, 1.5])".into(),
+            });
+        }
         let (_, most_half_cycles) = self.half_cycles()?;
         let fastest = most_half_cycles as f64 / 2.0 / shortest;
         if sample_time > 0.0 && fastest > 0.5 / sample_time {
@@ -109,10 +127,15 @@ impl Bursts {
             }
         };
         let (fewest, most) = self.count;
+        let dwell = if self.dwells() {
+            format!(", holding a random crest {} s", between(self.dwell.range()))
+        } else {
+            String::new()
+        };
         format!(
             "random bursts, {} per record, each a sine of {} cycles (in whole half cycles) \
-             over {} s, amplitude {} of a random sign, {}, at a random time wholly in the \
-             record (one longer than the record from its start), each drawn per burst",
+             over {} s, amplitude {} of a random sign, {}{dwell}, at a random time wholly \
+             in the record (one longer than the record from its start), each drawn per burst",
             between((fewest as f64, most as f64)),
             between(self.cycles.range()),
             between(self.seconds.range()),
@@ -123,6 +146,10 @@ impl Bursts {
                 Taper::Mixed => "Hann-tapered or not",
             }
         )
+    }
+
+    fn dwells(&self) -> bool {
+        self.dwell.range().1 > 0.0
     }
 
     /// Add the record's bursts (about zero) into `u`, zeroed first.
@@ -146,9 +173,28 @@ impl Bursts {
                 Taper::None => false,
                 Taper::Mixed => rng.random::<bool>(),
             };
-            let start = rng.random::<f64>() * (record - length).max(0.0);
+            // The crest held and for how long, as a fraction of the burst:
+            // crest j of the sine lies at x = (2 j + 1) / (4 c).
+            let (crest, hold) = if self.dwells() {
+                let half_cycles = (2.0 * cycles) as u64;
+                let j = rng.random_range(0..half_cycles) as f64;
+                (
+                    (2.0 * j + 1.0) / (4.0 * cycles),
+                    self.dwell.draw(rng) / length,
+                )
+            } else {
+                (1.0, 0.0)
+            };
+            let start = rng.random::<f64>() * (record - length * (1.0 + hold)).max(0.0);
             for (k, v) in u.iter_mut().enumerate() {
-                let x = (k as f64 * sample_time - start) / length;
+                let held = (k as f64 * sample_time - start) / length;
+                let x = if held < crest {
+                    held
+                } else if held < crest + hold {
+                    crest
+                } else {
+                    held - hold
+                };
                 if (0.0..1.0).contains(&x) {
                     let taper = if tapered { (PI * x).sin().powi(2) } else { 1.0 };
                     *v += amplitude * (2.0 * PI * cycles * x).sin() * taper;
@@ -171,6 +217,7 @@ mod tests {
             cycles,
             amplitude: Drawn::between(0.05, 0.2).unwrap(),
             taper,
+            dwell: Drawn::fixed(0.0),
         }
     }
 
@@ -233,6 +280,7 @@ mod tests {
             cycles: Drawn::fixed(2.0),
             amplitude: Drawn::fixed(0.2),
             taper: Taper::Hann,
+            dwell: Drawn::fixed(0.0),
         };
         let dt = 0.02;
         let mut u = vec![0.0; 500];
@@ -263,6 +311,94 @@ mod tests {
     }
 
     #[test]
+    fn a_dwelling_burst_holds_a_crest_and_goes_on_as_the_sine_with_dwell() {
+        // FMVSS 126's shape: one cycle of 0.7 Hz, a crest held 0.5 s.
+        let period = 1.0 / 0.7;
+        let design = Bursts {
+            count: (1, 1),
+            seconds: Drawn::fixed(period),
+            cycles: Drawn::fixed(1.0),
+            amplitude: Drawn::fixed(0.2),
+            taper: Taper::None,
+            dwell: Drawn::fixed(0.5),
+        };
+        let dt = 0.02;
+        let mut crests_held = [0; 2];
+        for experiment in 0..40 {
+            let mut u = vec![0.0; 500];
+            design
+                .fill(dt, &mut experiment_rng(5, experiment), &mut u)
+                .unwrap();
+            let first = u.iter().position(|v| *v != 0.0).unwrap();
+            let last = u.iter().rposition(|v| *v != 0.0).unwrap();
+            let seconds = (last + 1 - first) as f64 * dt;
+            assert!(
+                (period + 0.5 - dt..=period + 0.5 + dt).contains(&seconds),
+                "{experiment}: {seconds}"
+            );
+            // The held samples sit at the crest; the sine's own samples
+            // reach it at most once per crest.
+            let held: Vec<usize> = (first..=last)
+                .filter(|&k| (u[k].abs() - 0.2).abs() < 1e-12)
+                .collect();
+            assert!((25..=27).contains(&held.len()), "{experiment}: {held:?}");
+            assert!(held.windows(2).all(|w| w[1] == w[0] + 1), "{held:?}");
+            // Before the hold: the sine from the burst's start; the first
+            // crest held is a quarter period in, the second three.
+            let quarter = ((held[0] - first) as f64 * dt / (period / 4.0)).round() as i64;
+            assert!(quarter == 1 || quarter == 3, "{experiment}: {quarter}");
+            crests_held[usize::from(quarter == 3)] += 1;
+            let sign = u[held[0]].signum() * if quarter == 3 { -1.0 } else { 1.0 };
+            let start = (first as f64 - 1.0) * dt;
+            let shape = |s: f64| -> f64 {
+                (first..held[0])
+                    .chain(held[held.len() - 1] + 1..=last)
+                    .map(|k| {
+                        let mut t = k as f64 * dt - s;
+                        if k > held[0] {
+                            t -= 0.5;
+                        }
+                        (u[k] - sign * 0.2 * (std::f64::consts::TAU * t / period).sin()).abs()
+                    })
+                    .fold(0.0, f64::max)
+            };
+            let best = (0..=100)
+                .map(|i| shape(start + i as f64 * dt / 100.0))
+                .fold(f64::INFINITY, f64::min);
+            assert!(best < 3e-3, "{experiment}: {best}");
+        }
+        assert!(crests_held.iter().all(|&n| n > 5), "{crests_held:?}");
+    }
+
+    #[test]
+    fn a_design_without_dwells_draws_what_it_drew_before_dwells_existed() {
+        // The stream a dwell-free burst consumes is its length, cycles,
+        // amplitude, sign, taper and start: draw them by hand.
+        let design = bursts((1, 1), Drawn::between(0.5, 2.5).unwrap(), Taper::Mixed);
+        let dt = 0.02;
+        let mut u = vec![0.0; 500];
+        design.fill(dt, &mut experiment_rng(9, 3), &mut u).unwrap();
+        let mut rng = experiment_rng(9, 3);
+        let _count: usize = rng.random_range(1..=1);
+        let length = design.seconds.draw(&mut rng);
+        let cycles = rng.random_range(1..=5u64) as f64 / 2.0;
+        let amplitude =
+            design.amplitude.draw(&mut rng) * if rng.random::<bool>() { 1.0 } else { -1.0 };
+        let tapered = rng.random::<bool>();
+        let start = rng.random::<f64>() * (10.0 - length);
+        for (k, v) in u.iter().enumerate() {
+            let x = (k as f64 * dt - start) / length;
+            let want = if (0.0..1.0).contains(&x) {
+                let taper = if tapered { (PI * x).sin().powi(2) } else { 1.0 };
+                amplitude * (2.0 * PI * cycles * x).sin() * taper
+            } else {
+                0.0
+            };
+            assert!((v - want).abs() < 1e-12, "{k}: {v} against {want}");
+        }
+    }
+
+    #[test]
     fn settings_no_record_could_use_are_refused() {
         let ok = Drawn::between(0.5, 2.5).unwrap();
         assert!(bursts((0, 2), ok, Taper::Mixed).check(0.02).is_err());
@@ -276,6 +412,10 @@ mod tests {
         let err = bursts((1, 2), ok, Taper::Mixed).check(1.0).unwrap_err();
         assert!(err.to_string().contains("Nyquist"), "{err}");
         assert!(bursts((1, 2), ok, Taper::Mixed).check(0.02).is_ok());
+        let mut backwards = bursts((1, 2), ok, Taper::Mixed);
+        backwards.dwell = Drawn::between(-1.0, 1.0).unwrap();
+        let err = backwards.check(0.02).unwrap_err();
+        assert!(err.to_string().contains("dwell"), "{err}");
     }
 
     #[test]

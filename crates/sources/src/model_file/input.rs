@@ -203,7 +203,15 @@ impl Locator<'_> {
             "gaussian" => (&["band", "order", "rms", "offset"], &["band", "rms"]),
             "steps" => (&["levels", "hold_seconds"], &["levels", "hold_seconds"]),
             "bursts" => (
-                &["count", "seconds", "cycles", "amplitude", "taper", "offset"],
+                &[
+                    "count",
+                    "seconds",
+                    "cycles",
+                    "amplitude",
+                    "taper",
+                    "dwell",
+                    "offset",
+                ],
                 &["seconds", "cycles", "amplitude"],
             ),
             "sum" => (&["parts"], &["parts"]),
@@ -237,6 +245,7 @@ impl Locator<'_> {
             ("seconds", raw.seconds.is_some()),
             ("cycles", raw.cycles.is_some()),
             ("taper", raw.taper.is_some()),
+            ("dwell", raw.dwell.is_some()),
             ("parts", raw.parts.is_some()),
         ];
         if let Some((key, _)) = given.iter().find(|(k, g)| *g && !takes.contains(k)) {
@@ -412,6 +421,10 @@ impl Locator<'_> {
                         drawn("cycles", cycles)?,
                         a,
                         taper,
+                        match &raw.dwell {
+                            None => Drawn::fixed(0.0),
+                            Some(dwell) => drawn("dwell", dwell)?,
+                        },
                         offset,
                     )),
                     _ => None,

@@ -174,6 +174,8 @@ pub(super) struct RawInput {
     pub(super) cycles: Option<OneOrMany>,
     /// A burst's window: "hann", "none" or "mixed".
     pub(super) taper: Option<String>,
+    /// Seconds a burst holds one of its crests: one number or `[low, high]`.
+    pub(super) dwell: Option<OneOrMany>,
     /// A sum's parts, each an input table of its own.
     pub(super) parts: Option<Vec<Spanned<RawInput>>>,
     pub(super) file: Option<Spanned<String>>,
