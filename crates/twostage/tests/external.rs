@@ -42,7 +42,7 @@ fn script(name: &str, body: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let text = format!(
-        "import sys, random, time\nsys.path.insert(0, {:?})\nfrom twostage_protocol import serve\n{body}",
+        "import os, sys, random, time\nsys.path.insert(0, {:?})\nfrom twostage_protocol import serve\n{body}",
         protocol_dir().to_str().unwrap()
     );
     std::fs::write(dir.join("sim.py"), text).unwrap();
@@ -54,7 +54,14 @@ fn script(name: &str, body: &str) -> PathBuf {
 const GAIN: &str = r#"
 def simulate(theta, seed, index):
     t = theta[0]
-    if t < -1.4:
+    if -1.7 <= t < -1.6:
+        print("record %d" % (index + 7)); sys.stdout.flush(); return None
+    if -1.9 <= t < -1.8:
+        print("record %d" % index)
+        for k in range(10):
+            print("0.0 0.0")
+        sys.stdout.flush(); os._exit(0)
+    if -1.5 < t < -1.4:
         print("record %d" % index); sys.stdout.flush()
         while True:
             sys.stdout.write("1" * 65536)
@@ -187,6 +194,16 @@ fn every_failure_is_one_experiment_quoting_the_answer_and_the_next_starts_afresh
         // A line every 0.1 s, each well within the timeout, the record's
         // 50 lines past it: the timeout is the record's.
         (-1.25, "no answer within 2 s (the timeout) (at sample"),
+        // An answer for another experiment is not taken for this one.
+        (
+            -1.65,
+            "expected `record 0` or `error 0 MESSAGE`, it answered \"record 7\"",
+        ),
+        // Output closed mid-record: the sample it stopped at is named.
+        (
+            -1.85,
+            "it ended (exit status: 0) (at sample 10 of experiment 0)",
+        ),
     ];
     for (theta, quoted) in cases {
         let e = run(&sim, *theta, 0).unwrap_err();
