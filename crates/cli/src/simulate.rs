@@ -320,24 +320,19 @@ fn room_for(spec: &twostage_models::ModelSpec, count: usize, dir: &Path) -> Resu
         + spec.n_params() as u64 * NUMBER_WIDTH;
     // In f64: a hostile count overflows u64 bytes.
     let total = record as f64 * count as f64;
-    let existing = dir
-        .ancestors()
-        .find(|d| d.exists())
-        .unwrap_or(Path::new("."));
-    if let Ok(disk) = rustix::fs::statvfs(existing) {
-        let free = disk.f_bavail.saturating_mul(disk.f_frsize);
-        if total > free as f64 {
-            return Err(anyhow::anyhow!(
-                "--count {count} would write up to {} to {} ({} a record of {} samples), \
-                 where its disk has {} free: at most --count {} fits, or write elsewhere",
-                readable_bytes(total),
-                dir.display(),
-                readable_bytes(record as f64),
-                spec.n_samples(),
-                readable_bytes(free as f64),
-                free / record.max(1)
-            ));
-        }
+    if let Some(free) = twostage::models::free_disk(dir)
+        && total > free as f64
+    {
+        return Err(anyhow::anyhow!(
+            "--count {count} would write up to {} to {} ({} a record of {} samples), \
+             where its disk has {} free: at most --count {} fits, or write elsewhere",
+            readable_bytes(total),
+            dir.display(),
+            readable_bytes(record as f64),
+            spec.n_samples(),
+            readable_bytes(free as f64),
+            free / record.max(1)
+        ));
     }
     eprintln!(
         "writing {count} records to {}: up to {} ({} a record)",

@@ -56,6 +56,7 @@ mod ode;
 mod pacejka;
 mod prbs;
 mod prior;
+mod resources;
 mod rng;
 mod signals;
 mod simulator;
@@ -84,6 +85,7 @@ pub use pacejka::{
 };
 pub use prbs::MAX_PRBS_ORDER;
 pub use prior::{Design, Prior, Sampling, random_permutation};
+pub use resources::{available_memory, free_disk, readable_bytes};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
 pub use signals::{SignalColumn, generic_signal_names, signal_columns};
 pub use simulator::{Capabilities, Conditions, ModelSpec, NoiseFree, Simulator};

@@ -55,7 +55,8 @@ pub use profile::{
     recommended_pacejka,
 };
 pub use progress::{Progress, Silent, Stage};
-pub use readable::{available_memory, readable_bytes, refuse_beyond_memory};
+pub use readable::refuse_beyond_memory;
 pub use records::{CHART_WORDS, RecordSource, Records, RunShape, chart_of};
 pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
+pub use twostage_models::{available_memory, readable_bytes};

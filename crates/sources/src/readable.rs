@@ -1,56 +1,9 @@
-//! Sizes as a person reads them in a message, and the memory a run may
-//! still take, checked before it is taken.
+//! A count a setting makes too large for the memory, refused before it is
+//! taken.
+
+use twostage_models::{available_memory, readable_bytes};
 
 use crate::error::{Error, Result};
-
-/// A byte count as people read it, in decimal units: "8.0 TB", "1.1 GB".
-///
-/// ```
-/// use twostage_sources::readable_bytes;
-/// assert_eq!(readable_bytes(512.0), "512 bytes");
-/// assert_eq!(readable_bytes(6.3e19), "63.0 EB");
-/// ```
-pub fn readable_bytes(bytes: f64) -> String {
-    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut value = bytes;
-    let mut unit = 0;
-    while value >= 1000.0 && unit + 1 < units.len() {
-        value /= 1000.0;
-        unit += 1;
-    }
-    if unit == 0 {
-        format!("{value} bytes")
-    } else {
-        format!("{value:.1} {}", units[unit])
-    }
-}
-
-/// The memory this process may still take, in bytes: the machine's
-/// available memory (Linux's `MemAvailable`), or less where the process's
-/// address space is limited (`ulimit -v`, less what it has mapped);
-/// `None` where neither is known (another system).
-pub fn available_memory() -> Option<u64> {
-    let field = |text: &str, key: &str| -> Option<u64> {
-        let line = text.lines().find(|l| l.starts_with(key))?;
-        line[key.len()..].split_whitespace().next()?.parse().ok()
-    };
-    let machine = std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|text| field(&text, "MemAvailable:"))
-        .map(|kb| kb.saturating_mul(1024));
-    let limited = std::fs::read_to_string("/proc/self/limits")
-        .ok()
-        .and_then(|text| field(&text, "Max address space"))
-        .and_then(|limit| {
-            let status = std::fs::read_to_string("/proc/self/status").ok()?;
-            let mapped = field(&status, "VmSize:")?.saturating_mul(1024);
-            Some(limit.saturating_sub(mapped))
-        });
-    match (machine, limited) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        (a, b) => a.or(b),
-    }
-}
 
 /// Refuses `count` items of `each` bytes (`what` they are, for the
 /// message) where they would not fit in [`available_memory`], before any
@@ -92,24 +45,4 @@ pub fn refuse_beyond_memory(name: &'static str, count: usize, each: u64, what: &
             available / each.max(1)
         ),
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// On Linux the memory a run may take is known, and no more than the
-    /// machine's whole memory (read here from its own line).
-    #[test]
-    #[cfg(target_os = "linux")]
-    fn the_available_memory_lies_within_the_machines() {
-        let meminfo = std::fs::read_to_string("/proc/meminfo").unwrap();
-        let total_kb: u64 = meminfo
-            .lines()
-            .find_map(|l| l.strip_prefix("MemTotal:"))
-            .and_then(|rest| rest.trim().trim_end_matches("kB").trim().parse().ok())
-            .unwrap();
-        let available = available_memory().unwrap();
-        assert!(available > 0 && available <= total_kb * 1024, "{available}");
-    }
 }
