@@ -48,17 +48,17 @@ impl Unpacked {
                 .prefix("twostage-fmu-")
                 .tempdir()
                 .map_err(io)?;
-            // `extract` refuses entries that would land outside the folder.
-            archive
-                .extract(temporary.path())
-                .map_err(|e| FmiError::NotAnArchive {
+            let room = twostage_models::free_disk(temporary.path()).unwrap_or(u64::MAX);
+            unpack(&mut archive, temporary.path(), room).map_err(|message| {
+                FmiError::NotAnArchive {
                     path: origin.clone(),
-                    message: format!("it cannot be unpacked ({e})"),
-                })?;
+                    message,
+                }
+            })?;
             (temporary.path().to_path_buf(), Some(temporary))
         };
         let description_path = root.join("modelDescription.xml");
-        let text = std::fs::read_to_string(&description_path).map_err(|e| {
+        let text = read_description(&description_path).map_err(|e| {
             if e.kind() == std::io::ErrorKind::NotFound {
                 FmiError::Description {
                     path: origin.clone(),
@@ -120,6 +120,93 @@ impl Unpacked {
     }
 }
 
+/// The largest `modelDescription.xml` read: a description of a hundred
+/// thousand variables takes tens of megabytes; beyond this a file is not
+/// a description but an attack on the memory.
+const MAX_DESCRIPTION_BYTES: u64 = 256 << 20;
+
+/// `modelDescription.xml`'s text, refused beyond [`MAX_DESCRIPTION_BYTES`]
+/// before it is read.
+fn read_description(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    let size = file.metadata()?.len();
+    if size > MAX_DESCRIPTION_BYTES {
+        return Err(std::io::Error::other(format!(
+            "modelDescription.xml takes {} where a description takes at most {}: \
+             the FMU is damaged or not an FMU",
+            twostage_models::readable_bytes(size as f64),
+            twostage_models::readable_bytes(MAX_DESCRIPTION_BYTES as f64)
+        )));
+    }
+    let mut text = String::new();
+    file.take(MAX_DESCRIPTION_BYTES).read_to_string(&mut text)?;
+    Ok(text)
+}
+
+/// Unpack every entry of `archive` into `folder`, with no more than
+/// `room` bytes written: the entries' declared sizes are summed before
+/// anything is written (a zip bomb declares what it unpacks to), and an
+/// entry that unpacks to more than it declares is stopped there. Entries
+/// that would land outside the folder are refused; links are written as
+/// the files they hold.
+fn unpack(
+    archive: &mut zip::ZipArchive<std::fs::File>,
+    folder: &Path,
+    room: u64,
+) -> std::result::Result<(), String> {
+    use std::io::Read;
+    let mut declared = 0u64;
+    for i in 0..archive.len() {
+        let entry = archive
+            .by_index_raw(i)
+            .map_err(|e| format!("entry {i} cannot be read ({e})"))?;
+        declared = declared.saturating_add(entry.size());
+    }
+    if declared > room {
+        return Err(format!(
+            "it unpacks to {} (its entries' sizes), where the disk of {} has {} free: \
+             free room there or set TMPDIR to a disk with more",
+            twostage_models::readable_bytes(declared as f64),
+            folder.display(),
+            twostage_models::readable_bytes(room as f64)
+        ));
+    }
+    for i in 0..archive.len() {
+        let mut entry = archive
+            .by_index(i)
+            .map_err(|e| format!("entry {i} cannot be unpacked ({e})"))?;
+        let name = entry
+            .name()
+            .map_or_else(|_| format!("number {i}"), |name| format!("{name:?}"));
+        let Some(relative) = entry.enclosed_name() else {
+            return Err(format!(
+                "entry {name} would land outside the folder it is unpacked into"
+            ));
+        };
+        let path = folder.join(relative);
+        let made = |e: std::io::Error| format!("{}: {e}", path.display());
+        if entry.is_dir() {
+            std::fs::create_dir_all(&path).map_err(made)?;
+            continue;
+        }
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(made)?;
+        }
+        let size = entry.size();
+        let mut out = std::fs::File::create(&path).map_err(made)?;
+        let written = std::io::copy(&mut (&mut entry).take(size.saturating_add(1)), &mut out)
+            .map_err(|e| format!("entry {name} cannot be unpacked ({e})"))?;
+        if written > size {
+            return Err(format!(
+                "entry {name} unpacks to more than the {size} bytes it declares: the archive \
+                 is damaged or forged"
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The folder under `binaries/` that holds this platform's shared library:
 /// FMI 2.0 names (`linux64`, `win64`, `darwin64`; FMI 2.0.4 section 2.3)
 /// and FMI 3.0 platform tuples (`x86_64-linux`; FMI 3.0.1 section 2.5.1.4).
@@ -165,6 +252,88 @@ fn percent_encode(path: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A zip archive of `entries` (name, bytes), deflated, as a file.
+    fn archive_of(
+        entries: &[(&str, &[u8])],
+    ) -> (tempfile::TempDir, zip::ZipArchive<std::fs::File>) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.fmu");
+        write_zip(&path, entries);
+        let archive = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
+        (dir, archive)
+    }
+
+    fn write_zip(path: &Path, entries: &[(&str, &[u8])]) {
+        use std::io::Write;
+        let mut writer = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+        let options = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated);
+        for (name, bytes) in entries {
+            writer.start_file(*name, options).unwrap();
+            writer.write_all(bytes).unwrap();
+        }
+        writer.finish().unwrap();
+    }
+
+    fn files_in(folder: &Path) -> usize {
+        std::fs::read_dir(folder).unwrap().count()
+    }
+
+    #[test]
+    fn a_zip_bomb_is_refused_by_its_declared_size_before_anything_is_written() {
+        // 20 MB of zeros deflate to about 20 kB.
+        let zeros = vec![0u8; 20_000_000];
+        let (dir, mut archive) = archive_of(&[("a.txt", b"a"), ("zeros.bin", &zeros)]);
+        assert!(std::fs::metadata(dir.path().join("a.fmu")).unwrap().len() < 100_000);
+        let into = tempfile::tempdir().unwrap();
+        let refused = unpack(&mut archive, into.path(), 1_000_000).unwrap_err();
+        assert!(
+            refused.starts_with("it unpacks to 20.0 MB (its entries' sizes), where the disk of")
+                && refused.contains("has 1.0 MB free"),
+            "{refused}"
+        );
+        assert_eq!(files_in(into.path()), 0);
+        // With room, the same archive unpacks whole.
+        unpack(&mut archive, into.path(), 100_000_000).unwrap();
+        assert_eq!(std::fs::read(into.path().join("zeros.bin")).unwrap(), zeros);
+    }
+
+    #[test]
+    fn an_entry_larger_than_it_declares_is_stopped_at_its_declared_size() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("forged.fmu");
+        let text = vec![b'a'; 100_000];
+        write_zip(&path, &[("big.txt", &text)]);
+        // Forge the uncompressed size in the local header (offset 22 from
+        // its signature) and the central directory (offset 24) to 1000.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let forge = |bytes: &mut Vec<u8>, signature: &[u8; 4], offset: usize| {
+            let at = bytes.windows(4).position(|w| w == signature).unwrap();
+            bytes[at + offset..at + offset + 4].copy_from_slice(&1000u32.to_le_bytes());
+        };
+        forge(&mut bytes, b"PK\x03\x04", 22);
+        forge(&mut bytes, b"PK\x01\x02", 24);
+        std::fs::write(&path, &bytes).unwrap();
+        let mut archive = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
+        let into = tempfile::tempdir().unwrap();
+        let refused = unpack(&mut archive, into.path(), u64::MAX).unwrap_err();
+        assert!(
+            refused.starts_with("entry \"big.txt\" ") && refused.contains("declared"),
+            "{refused}"
+        );
+        let written = std::fs::metadata(into.path().join("big.txt")).map_or(0, |m| m.len());
+        assert!(written <= 1001, "{written}");
+    }
+
+    #[test]
+    fn an_entry_that_would_land_outside_the_folder_is_refused() {
+        let (_dir, mut archive) = archive_of(&[("../outside.txt", b"x")]);
+        let into = tempfile::tempdir().unwrap();
+        let refused = unpack(&mut archive, &into.path().join("fmu"), u64::MAX).unwrap_err();
+        assert!(refused.contains("would land outside"), "{refused}");
+        assert!(!into.path().join("outside.txt").exists());
+    }
 
     #[test]
     fn uri_paths_escape_spaces_and_keep_slashes() {

@@ -386,6 +386,17 @@ fn broken_fmus_are_answered_clearly() {
         matches!(err, FmiError::NotAnArchive { .. }) && err.to_string().contains("zip"),
         "{err}"
     );
+    // An FMU cut short (a download that stopped half way).
+    let fmu = build(Model::Benchmark, FmiVersion::V2);
+    let whole = std::fs::read(&fmu.path).unwrap();
+    let cut = dir.path().join("cut.fmu");
+    std::fs::write(&cut, &whole[..whole.len() / 2]).unwrap();
+    let err = build_error(&cut, spec());
+    assert!(
+        matches!(err, FmiError::NotAnArchive { .. })
+            && err.to_string().contains("the zip archive is damaged"),
+        "{err}"
+    );
     // A zip without a description.
     let fmu = build_with(Model::Benchmark, FmiVersion::V2, |root| {
         std::fs::remove_file(root.join("modelDescription.xml")).unwrap();
