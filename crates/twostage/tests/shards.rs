@@ -184,6 +184,18 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
         "{err}"
     );
 
+    // A length word that claims a gigabyte in a file of a few hundred
+    // bytes: found at the file's end, nothing of that size taken.
+    let mut claiming = original.clone();
+    claiming[8..16].copy_from_slice(&((1u64 << 30) - 1).to_le_bytes());
+    std::fs::write(&files[0], &claiming).unwrap();
+    let err = open_error(&pattern(&dir));
+    assert!(
+        err.contains("the file ends inside the header")
+            && err.contains("of its 1073741823 bytes are there"),
+        "{err}"
+    );
+
     // Not a shard at all.
     std::fs::write(&files[0], "experiment,u,y\n").unwrap();
     let err = open_error(&pattern(&dir));

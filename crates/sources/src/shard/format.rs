@@ -114,11 +114,19 @@ pub(super) fn read_part_bytes<R: Read>(
     if n > MAX_PART {
         return Err(format!("{what} claims {n} bytes: the file is damaged"));
     }
-    let mut bytes = vec![0u8; n as usize];
-    input
-        .inner
-        .read_exact(&mut bytes)
+    // Grown as the bytes arrive, not taken whole at the length's word: a
+    // damaged length is found at the file's end, not by the allocator.
+    let mut bytes = Vec::new();
+    (&mut input.inner)
+        .take(n)
+        .read_to_end(&mut bytes)
         .map_err(|e| format!("the file ends inside {what} ({e})"))?;
+    if (bytes.len() as u64) < n {
+        return Err(format!(
+            "the file ends inside {what} ({} of its {n} bytes are there)",
+            bytes.len()
+        ));
+    }
     input.hasher.update(&length);
     input.hasher.update(&bytes);
     Ok(bytes)
