@@ -22,6 +22,15 @@ use crate::simulator::{Capabilities, Conditions, ModelSpec, Simulator, check_the
 /// is still served for the simulators written for it.
 pub const PROTOCOL_VERSION: u32 = 2;
 
+/// What a simulator answered for one experiment, in protocol.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ProtocolAnswer {
+    /// Its record, read whole.
+    Record,
+    /// `error INDEX MESSAGE`: the experiment failed, with the message.
+    Failed(String),
+}
+
 /// One experiment of a batch request.
 #[derive(Debug, Clone, Copy)]
 pub struct ExternalJob<'a> {
@@ -312,58 +321,87 @@ impl ExternalSimulator {
             // The timeout is the whole record's, not each line's: a
             // simulator that trickles its lines is ended all the same.
             let deadline = Instant::now() + self.timeout;
-            let head = process
-                .line_by(deadline, self.timeout)
-                .map_err(|e| self.failure(&e))?;
-            let mut words = head.split_whitespace();
-            match (words.next(), words.next().map(str::parse::<u64>)) {
-                (Some("record"), Some(Ok(index))) if index == job.index => {}
-                (Some("error"), Some(Ok(index))) if index == job.index => {
-                    let message = head.splitn(3, ' ').nth(2).unwrap_or("").trim();
-                    results.push(Err(SimError::External {
-                        command: self.command_line(),
-                        message: format!("experiment {index} failed: {message}"),
-                    }));
-                    continue;
-                }
-                _ => {
-                    return Err(self.failure(&format!(
-                        "expected `record {0}` or `error {0} MESSAGE`, it answered {head:?}",
-                        job.index
-                    )));
-                }
-            }
             out.resize(n, n_u, n_y);
-            for k in 0..n {
-                let line = process.line_by(deadline, self.timeout).map_err(|e| {
-                    self.failure(&format!("{e} (at sample {k} of experiment {})", job.index))
-                })?;
-                let mut count = 0;
-                for (c, word) in line.split_whitespace().enumerate() {
-                    let value: f64 = word.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
-                        self.failure(&format!(
-                            "sample {k} of experiment {}: {word:?} is not a finite number (line {line:?})",
-                            job.index
-                        ))
-                    })?;
-                    if c < n_u {
-                        out.input_mut(c)[k] = value;
-                    } else if c < n_u + n_y {
-                        out.output_mut(c - n_u)[k] = value;
-                    }
-                    count += 1;
+            let mut next_line = || process.line_by(deadline, self.timeout);
+            match Self::read_answer(&mut next_line, job.index, out) {
+                Ok(ProtocolAnswer::Record) => {
+                    results.push(self.given_input_kept(job.index, request.inputs.of(k_job), out));
                 }
-                if count != n_u + n_y {
-                    return Err(self.failure(&format!(
-                        "sample {k} of experiment {} has {count} values, the model has {n_u} \
-                         input(s) and {n_y} output(s) (line {line:?})",
-                        job.index
-                    )));
-                }
+                Ok(ProtocolAnswer::Failed(message)) => results.push(Err(SimError::External {
+                    command: self.command_line(),
+                    message: format!("experiment {} failed: {message}", job.index),
+                })),
+                Err(message) => return Err(self.failure(&message)),
             }
-            results.push(self.given_input_kept(job.index, request.inputs.of(k_job), out));
         }
         Ok(())
+    }
+
+    /// Read one experiment's answer (docs/protocol.md): `record INDEX` and
+    /// one line per sample of `out`'s length, its inputs' then its
+    /// outputs' values, into `out`; or `error INDEX MESSAGE`. Each line
+    /// comes from `next_line`, whose error (a timeout, an ended process)
+    /// is passed on with the sample it stopped at.
+    ///
+    /// ```
+    /// use twostage_models::{ExternalSimulator, IoData, ProtocolAnswer};
+    /// let mut lines = ["record 4", "0.5 1.0", "-0.5 2.0"].map(String::from).into_iter();
+    /// let mut next = || lines.next().ok_or_else(|| "it ended".to_string());
+    /// let mut out = IoData::zeros(2, 1, 1);
+    /// let answer = ExternalSimulator::read_answer(&mut next, 4, &mut out);
+    /// assert_eq!(answer, Ok(ProtocolAnswer::Record));
+    /// assert_eq!(out.output(0), &[1.0, 2.0]);
+    /// ```
+    ///
+    /// # Errors
+    /// Out of protocol, each message quoting the line: another index, a
+    /// value that is not a finite number, a line of another width, or
+    /// what `next_line` said.
+    pub fn read_answer(
+        next_line: &mut dyn FnMut() -> std::result::Result<String, String>,
+        index: u64,
+        out: &mut IoData,
+    ) -> std::result::Result<ProtocolAnswer, String> {
+        let (n, n_u, n_y) = (out.n_samples(), out.n_inputs(), out.n_outputs());
+        let head = next_line()?;
+        let mut words = head.split_whitespace();
+        match (words.next(), words.next().map(str::parse::<u64>)) {
+            (Some("record"), Some(Ok(i))) if i == index => {}
+            (Some("error"), Some(Ok(i))) if i == index => {
+                let message = head.splitn(3, ' ').nth(2).unwrap_or("").trim();
+                return Ok(ProtocolAnswer::Failed(message.to_string()));
+            }
+            _ => {
+                return Err(format!(
+                    "expected `record {index}` or `error {index} MESSAGE`, it answered {head:?}"
+                ));
+            }
+        }
+        for k in 0..n {
+            let line =
+                next_line().map_err(|e| format!("{e} (at sample {k} of experiment {index})"))?;
+            let mut count = 0;
+            for (c, word) in line.split_whitespace().enumerate() {
+                let value: f64 = word.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+                    format!(
+                        "sample {k} of experiment {index}: {word:?} is not a finite number (line {line:?})"
+                    )
+                })?;
+                if c < n_u {
+                    out.input_mut(c)[k] = value;
+                } else if c < n_u + n_y {
+                    out.output_mut(c - n_u)[k] = value;
+                }
+                count += 1;
+            }
+            if count != n_u + n_y {
+                return Err(format!(
+                    "sample {k} of experiment {index} has {count} values, the model has {n_u} \
+                     input(s) and {n_y} output(s) (line {line:?})"
+                ));
+            }
+        }
+        Ok(ProtocolAnswer::Record)
     }
 
     /// The samples of each record of a request: a given record's length,
