@@ -489,6 +489,7 @@ impl ShardedChart {
         role: ChartRole,
         mut visit: impl FnMut(usize, Stored) -> std::result::Result<(), String>,
     ) -> Result<()> {
+        let q = self.header.param_names.len();
         for (i, file) in self.files.iter().enumerate() {
             let fail = |message: String| Error::Shards {
                 what: file.display().to_string(),
@@ -522,6 +523,15 @@ impl ShardedChart {
                 }
                 for index in range {
                     let stored: Stored = read_part(&mut input, "a record").map_err(fail)?;
+                    let (Stored::Kept { theta, .. } | Stored::Failed { theta, .. }) = &stored;
+                    if theta.len() != q {
+                        return Err(fail(format!(
+                            "{} record {index} has {} parameter values, the chart's model has \
+                             {q}: the file is damaged",
+                            r.label(),
+                            theta.len()
+                        )));
+                    }
                     if wanted {
                         visit(index, stored)
                             .map_err(|e| fail(format!("{} record {index}: {e}", r.label())))?;
@@ -655,6 +665,67 @@ fn describe(header: &Header) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A shard whose first training record carries one parameter value
+    /// more than the model has, its checksum made to match (as a tool
+    /// writing shards wrongly would): refused with the record named, not
+    /// a panic.
+    #[test]
+    fn a_record_with_another_number_of_parameters_is_named() {
+        let model = twostage_models::Benchmark::builder()
+            .n_samples(30)
+            .build()
+            .unwrap();
+        let plan = ShardPlan {
+            model: "benchmark".into(),
+            model_fingerprint: 1,
+            seed: 2,
+            counts: RoleCounts::new(6, 0, 2),
+            compressor: None,
+        };
+        let dir = std::env::temp_dir().join(format!("shard-theta-{}", std::process::id()));
+        let path = simulate_shard(&model, &plan, ShardIndex { index: 0, count: 1 }, &dir).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        // The parts after the magic: the header, then per role its range
+        // and its records.
+        let mut input = Checksummed::new(&bytes[8..bytes.len() - 4]);
+        let mut parts = Vec::new();
+        while let Ok(part) = format::read_part_bytes(&mut input, "a part") {
+            parts.push(part);
+        }
+        assert_eq!(
+            parts.len(),
+            1 + 3 + 8,
+            "the header, three ranges, eight records"
+        );
+        let mut first: Stored = postcard::from_bytes(&parts[2]).unwrap();
+        let Stored::Kept { theta, .. } = &mut first else {
+            panic!("the first record was simulated");
+        };
+        theta.push(0.5);
+        parts[2] = postcard::to_stdvec(&first).unwrap();
+        let mut forged = MAGIC.to_vec();
+        let mut hasher = crc32fast::Hasher::new();
+        for part in &parts {
+            let length = (part.len() as u64).to_le_bytes();
+            hasher.update(&length);
+            hasher.update(part);
+            forged.extend_from_slice(&length);
+            forged.extend_from_slice(part);
+        }
+        forged.extend_from_slice(&hasher.finalize().to_le_bytes());
+        std::fs::write(&path, &forged).unwrap();
+        let chart = ShardedChart::open(&path.display().to_string()).unwrap();
+        let Err(err) = chart.training_records() else {
+            panic!("a record of two parameter values was read as the model's one");
+        };
+        let err = err.to_string();
+        assert!(
+            err.contains("training record 0 has 2 parameter values, the chart's model has 1"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn fingerprints_are_fnv1a() {
