@@ -351,6 +351,29 @@ fn a_count_the_memory_cannot_hold_is_refused_up_front() {
     // Validation's fresh records, by its flag.
     let file = dir.join("small.tsest");
     assert!(train_linear(&file, "300", "0").status.success());
+    let trained = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "300",
+        "--fit",
+        "linear",
+        "--validate",
+        "0",
+        "--calibrate",
+        "0",
+        "--out",
+        path(&dir.join("said.tsest")),
+    ]);
+    assert!(trained.status.success());
+    // A run that fits says up front what its records take, and of what.
+    let said = text(&trained.stderr);
+    assert!(
+        said.contains("300 training records' parameters and features take 28.8 kB (96 bytes each)")
+            && said.contains("this process may take"),
+        "{said}"
+    );
     let out = twostage(&["validate", "--estimator", path(&file), "--sims", huge]);
     refused(
         &out,

@@ -280,12 +280,13 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                     ChartRole::Training => "simulations",
                     other => other.label(),
                 };
-                refuse_beyond_memory(
+                let taken = refuse_beyond_memory(
                     name,
                     count,
                     each,
                     &format!("{} records' parameters and features", role.label()),
                 )?;
+                self.progress.note(&taken);
                 let design = role.design(&self.training_prior, count, self.seed)?;
                 return compress_chart_observed(
                     self.simulator,
