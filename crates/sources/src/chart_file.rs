@@ -426,12 +426,70 @@ impl ChartFiles {
     }
 }
 
+/// The longest .npy header read: NumPy's own `np.load` refuses longer
+/// ones by default (`max_header_size`, NumPy 1.24 on).
+const MAX_NPY_HEADER: usize = 10_000;
+
+/// Refuses an .npy header that the NumPy reader would take apart badly:
+/// a length word beyond [`MAX_NPY_HEADER`] (it allocates what the word
+/// says) or a shape nested in itself (it parses nesting slowly). A header
+/// NumPy writes is a flat dictionary with one tuple.
+fn check_npy_preamble(bytes: &[u8]) -> std::result::Result<(), String> {
+    const MAGIC: &[u8] = b"\x93NUMPY";
+    if bytes.len() < 10 || !bytes.starts_with(MAGIC) {
+        return Ok(()); // The reader itself says what is wrong.
+    }
+    let (length, start) = match bytes[6] {
+        1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
+        2 | 3 if bytes.len() >= 12 => {
+            let word = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+            (usize::try_from(word).unwrap_or(usize::MAX), 12)
+        }
+        _ => return Ok(()),
+    };
+    if length > MAX_NPY_HEADER {
+        return Err(format!(
+            "its header claims {length} bytes, where NumPy writes and reads at most \
+             {MAX_NPY_HEADER}: the file is damaged or not written by NumPy"
+        ));
+    }
+    let mut depth = 0usize;
+    for &byte in bytes.iter().skip(start).take(length) {
+        match byte {
+            b'(' | b'[' => {
+                depth += 1;
+                if depth > 1 {
+                    return Err("its header nests a shape in a shape: the file is damaged \
+                                or not written by NumPy"
+                        .into());
+                }
+            }
+            b')' | b']' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// An .npy file opened, its header read: the reader and the shape.
 fn npy(path: &Path) -> Result<(npyz::NpyFile<BufReader<std::fs::File>>, Vec<usize>)> {
-    let file = std::fs::File::open(path).map_err(|cause| Error::Io {
+    use std::io::{Read, Seek};
+    let io = |cause| Error::Io {
         path: path.display().to_string(),
         cause,
+    };
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut preamble = Vec::with_capacity(12 + MAX_NPY_HEADER);
+    (&mut file)
+        .take((12 + MAX_NPY_HEADER) as u64)
+        .read_to_end(&mut preamble)
+        .map_err(io)?;
+    check_npy_preamble(&preamble).map_err(|message| Error::ChartFile {
+        file: path.display().to_string(),
+        line: None,
+        message: format!("not a NumPy .npy file: {message}"),
     })?;
+    file.rewind().map_err(io)?;
     let npy = npyz::NpyFile::new(BufReader::new(file)).map_err(|e| Error::ChartFile {
         file: path.display().to_string(),
         line: None,
@@ -444,7 +502,23 @@ fn npy(path: &Path) -> Result<(npyz::NpyFile<BufReader<std::fs::File>>, Vec<usiz
             message: "stored in Fortran order: save np.ascontiguousarray(a)".into(),
         });
     }
-    let shape = npy.shape().iter().map(|&d| d as usize).collect();
+    let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
+    // The values the shape declares must be in the file, before a reader
+    // sizes anything by the shape. In f64: a forged shape overflows usize.
+    let declared = shape.iter().fold(8.0, |bytes, &d| bytes * d as f64);
+    let size = std::fs::metadata(path).map_err(io)?.len();
+    if declared > size as f64 {
+        return Err(Error::ChartFile {
+            file: path.display().to_string(),
+            line: None,
+            message: format!(
+                "its shape {shape:?} declares {} of float64 values, the file holds {}: \
+                 it was cut short, or its header is damaged",
+                twostage_models::readable_bytes(declared),
+                twostage_models::readable_bytes(size as f64)
+            ),
+        });
+    }
     Ok((npy, shape))
 }
 

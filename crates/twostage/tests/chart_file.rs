@@ -340,4 +340,57 @@ fn a_numpy_chart_trains_the_same_networks_as_the_csv_one() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("not a NumPy .npy file"), "{e}");
+    write_npy(&npy.join("theta.npy"), &[240, 1], vec![0.1; 240]);
+    ChartFiles::open(&npy, model.spec()).unwrap();
+}
+
+/// Headers the fuzzer made (`cargo xtask fuzz --reader npy-chart`): a
+/// length word of 4 GB, which the NumPy reader allocated until the
+/// process aborted; a shape nested in itself hundreds deep, which it
+/// parsed for minutes; a shape whose values the file does not hold.
+#[test]
+fn forged_numpy_headers_are_refused_before_they_are_believed() {
+    let model = model();
+    let dir = scratch("chart-npy-forged");
+    write_numpy_chart(&dir, 3, 2);
+    let valid = std::fs::read(dir.join("theta.npy")).unwrap();
+    let header = |version: u8, text: &str| -> Vec<u8> {
+        let mut bytes = b"\x93NUMPY".to_vec();
+        bytes.extend_from_slice(&[version, 0]);
+        match version {
+            1 => bytes.extend_from_slice(&(text.len() as u16).to_le_bytes()),
+            _ => bytes.extend_from_slice(&(text.len() as u32).to_le_bytes()),
+        }
+        bytes.extend_from_slice(text.as_bytes());
+        bytes
+    };
+    let refused = |bytes: &[u8], said: &str| {
+        std::fs::write(dir.join("theta.npy"), bytes).unwrap();
+        let e = ChartFiles::open(&dir, model.spec())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("theta.npy") && e.contains(said), "{e}");
+    };
+    // A version-3 length word of 4,286,251,126 bytes, as found.
+    let mut claiming = b"\x93NUMPY\x03\x00\x76\x00\x7b\xff".to_vec();
+    claiming.extend_from_slice(&valid[10..]);
+    refused(
+        &claiming,
+        "its header claims 4286251126 bytes, where NumPy writes and reads at most 10000",
+    );
+    let nested = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': {}3{}, }}\n",
+        "(3,".repeat(300),
+        ")".repeat(300)
+    );
+    refused(&header(1, &nested), "nests a shape in a shape");
+    let mut short = header(
+        1,
+        "{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 1), }\n",
+    );
+    short.extend_from_slice(&0.5f64.to_le_bytes());
+    refused(
+        &short,
+        "its shape [1000000000000, 1] declares 8.0 TB of float64 values, the file holds",
+    );
 }
