@@ -9,6 +9,100 @@ use twostage::models::{Benchmark, PacejkaCar, Simulator, experiment_rng};
 use twostage::sources::TEMPLATE;
 
 use super::Reader;
+use super::targets::{ANSWER_SAMPLES, NPY_FILES, npy_chart, shard_sets};
+
+/// A file of a set, after the byte that says which of the set it is.
+fn selected(which: usize, bytes: &[u8]) -> Vec<u8> {
+    let mut input = vec![which as u8];
+    input.extend_from_slice(bytes);
+    input
+}
+
+/// Answers of a simulator to experiment 0 of a one-input, one-output
+/// model: a record as Python prints it, one with exponents and CRLF line
+/// ends, and a failure.
+fn protocol_answers() -> Result<Vec<(String, Vec<u8>)>> {
+    let model = Benchmark::builder().n_samples(ANSWER_SAMPLES).build()?;
+    let mut record = model.spec().new_record();
+    model.simulate(&[0.4], &mut experiment_rng(2, 0), &mut record)?;
+    let (mut plain, mut exponents) = (String::from("record 0\n"), String::from("record 0\r\n"));
+    for (u, y) in record.input(0).iter().zip(record.output(0)) {
+        plain.push_str(&format!("{u} {y}\n"));
+        exponents.push_str(&format!("{u:e}\t{y:E}\r\n"));
+    }
+    Ok(vec![
+        (
+            "error.txt".to_string(),
+            b"error 0 the plant refused theta 0.4\n".to_vec(),
+        ),
+        ("exponents.txt".to_string(), exponents.into_bytes()),
+        ("plain.txt".to_string(), plain.into_bytes()),
+    ])
+}
+
+/// An FMI 2.0 co-simulation description: parameters, an input, an
+/// output, a default experiment.
+const FMI2_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="gain" guid="{twostage-fuzz-1}" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="gain" canHandleVariableCommunicationStepSize="true"/>
+  <DefaultExperiment startTime="0" stopTime="300" stepSize="1"/>
+  <ModelVariables>
+    <ScalarVariable name="k" valueReference="0" causality="parameter" variability="fixed"><Real start="1.5" unit="1/s"/></ScalarVariable>
+    <ScalarVariable name="u" valueReference="1" causality="input" variability="continuous"><Real start="0"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="2" causality="output" variability="continuous"><Real/></ScalarVariable>
+    <ScalarVariable name="x" valueReference="3" causality="local" variability="continuous"><Real start="0.5"/></ScalarVariable>
+    <ScalarVariable name="der(x)" valueReference="4" causality="local" variability="continuous"><Real derivative="4"/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs><Unknown index="3"/></Outputs>
+    <Derivatives><Unknown index="5"/></Derivatives>
+  </ModelStructure>
+</fmiModelDescription>
+"#;
+
+/// An FMI 3.0 model-exchange description: types, arrays, states and an
+/// event indicator.
+const FMI3_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="osc" instantiationToken="{abc}">
+  <ModelExchange modelIdentifier="osc" canBeInstantiatedOnlyOncePerProcess="true"/>
+  <TypeDefinitions><Float64Type name="Angle" unit="rad"/></TypeDefinitions>
+  <DefaultExperiment stopTime="10" stepSize="0.01"/>
+  <ModelVariables>
+    <Float64 name="time" valueReference="0" causality="independent" variability="continuous"/>
+    <Float64 name="phi" valueReference="1" declaredType="Angle" start="0.1"/>
+    <Float64 name="der(phi)" valueReference="2" derivative="1"/>
+    <Float64 name="k" valueReference="3" causality="parameter" variability="fixed" start="2"/>
+    <Float64 name="y" valueReference="4" causality="output" variability="continuous"/>
+    <Float64 name="table" valueReference="5" causality="parameter" variability="fixed" start="1 2">
+      <Dimension start="2"/>
+    </Float64>
+  </ModelVariables>
+  <ModelStructure>
+    <Output valueReference="4"/>
+    <ContinuousStateDerivative valueReference="2"/>
+    <EventIndicator valueReference="1"/>
+  </ModelStructure>
+</fmiModelDescription>
+"#;
+
+/// An FMU archive of `description`, a stand-in binary at `binary` (never
+/// loaded: the fuzzer reads archives, it does not run them) and a
+/// resource.
+fn fmu(description: &str, binary: &str) -> Result<Vec<u8>> {
+    use std::io::Write;
+    let mut writer = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let options = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    for (name, bytes) in [
+        ("modelDescription.xml", description.as_bytes()),
+        (binary, b"\x7fELF not a library".as_slice()),
+        ("resources/table.txt", b"0 1\n1 2\n".as_slice()),
+    ] {
+        writer.start_file(name, options)?;
+        writer.write_all(bytes)?;
+    }
+    Ok(writer.finish()?.into_inner())
+}
 
 /// Fill every reader's corpus folder from the repository's files and a few
 /// small estimators trained here (deterministic: the same files each time).
@@ -27,6 +121,40 @@ pub(crate) fn write() -> Result<()> {
                 .collect::<Result<Vec<_>>>()?,
             Reader::ModelFile => model_files()?,
             Reader::CsvRows => csv_files()?,
+            Reader::NpyChart => NPY_FILES
+                .iter()
+                .zip(npy_chart())
+                .enumerate()
+                .map(|(k, (name, bytes))| (format!("{k}-{name}"), selected(k, bytes)))
+                .collect(),
+            Reader::ShardFile => shard_sets()
+                .iter()
+                .zip(["raw", "compressed"])
+                .enumerate()
+                .flat_map(|(set, (files, kind))| {
+                    files.iter().enumerate().map(move |(slot, bytes)| {
+                        (
+                            format!("{kind}-{slot}.tsshard"),
+                            selected(slot | (set << 1), bytes),
+                        )
+                    })
+                })
+                .collect(),
+            Reader::ProtocolAnswer => protocol_answers()?,
+            Reader::FmuDescription => vec![
+                ("fmi2.xml".to_string(), FMI2_DESCRIPTION.as_bytes().to_vec()),
+                ("fmi3.xml".to_string(), FMI3_DESCRIPTION.as_bytes().to_vec()),
+            ],
+            Reader::FmuArchive => vec![
+                (
+                    "fmi2.fmu".to_string(),
+                    fmu(FMI2_DESCRIPTION, "binaries/linux64/gain.so")?,
+                ),
+                (
+                    "fmi3.fmu".to_string(),
+                    fmu(FMI3_DESCRIPTION, "binaries/x86_64-linux/osc.so")?,
+                ),
+            ],
         };
         for (name, bytes) in files {
             fs::write(dir.join(&name), bytes).with_context(|| format!("writing {name}"))?;

@@ -344,5 +344,6 @@ mod tests {
                 assert!(reader.exercise(entry), "{} entry {k}", reader.name());
             }
         }
+        let _ = fs::remove_dir_all(super::super::targets::scratch_root());
     }
 }

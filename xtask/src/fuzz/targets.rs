@@ -3,8 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
-use twostage::models::{IoData, Simulator, run_experiment};
+use twostage::models::{ExternalSimulator, IoData, Simulator, run_experiment};
 use twostage::sources::{ModelFile, ModelSource, csv_rows};
+
+mod on_disk;
+
+pub(crate) use on_disk::{NPY_FILES, npy_chart, scratch_root, shard_sets};
 
 /// A reader of outside data.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -18,15 +22,33 @@ pub(crate) enum Reader {
     ModelFile,
     /// CSV rows (`csv_rows::for_each_row`, under records and charts).
     CsvRows,
+    /// NumPy charts (`ChartFiles::open`, every record read): one of
+    /// theta.npy, inputs.npy and outputs.npy, the others valid.
+    NpyChart,
+    /// Shard files (`ShardedChart::open`, then training on them): one of
+    /// two shards, the other valid.
+    ShardFile,
+    /// A simulator's answer to one experiment, line by line
+    /// (`ExternalSimulator::read_answer`).
+    ProtocolAnswer,
+    /// An FMU's `modelDescription.xml` (`ModelDescription::parse`).
+    FmuDescription,
+    /// FMU archives (`Fmu::open`: unpacked, described, never loaded).
+    FmuArchive,
 }
 
 impl Reader {
     /// Every reader, in the order a run of all of them takes.
-    pub(crate) const ALL: [Self; 4] = [
+    pub(crate) const ALL: [Self; 9] = [
         Self::EstimatorFile,
         Self::RuntimeBlob,
         Self::ModelFile,
         Self::CsvRows,
+        Self::NpyChart,
+        Self::ShardFile,
+        Self::ProtocolAnswer,
+        Self::FmuDescription,
+        Self::FmuArchive,
     ];
 
     /// The name on the command line and of the corpus folder.
@@ -36,6 +58,11 @@ impl Reader {
             Self::RuntimeBlob => "runtime-blob",
             Self::ModelFile => "model-file",
             Self::CsvRows => "csv-rows",
+            Self::NpyChart => "npy-chart",
+            Self::ShardFile => "shard-file",
+            Self::ProtocolAnswer => "protocol-answer",
+            Self::FmuDescription => "fmu-description",
+            Self::FmuArchive => "fmu-archive",
         }
     }
 
@@ -48,7 +75,10 @@ impl Reader {
 
     /// Whether it reads text (tokens are swapped whole).
     pub(crate) fn reads_text(self) -> bool {
-        matches!(self, Self::ModelFile | Self::CsvRows)
+        matches!(
+            self,
+            Self::ModelFile | Self::CsvRows | Self::ProtocolAnswer | Self::FmuDescription
+        )
     }
 
     /// Set a binary input's length and checksum to its bytes, so that a
@@ -57,7 +87,13 @@ impl Reader {
         match self {
             Self::EstimatorFile => seal_estimator_file(input),
             Self::RuntimeBlob => seal_runtime_blob(input),
-            Self::ModelFile | Self::CsvRows => {}
+            Self::ShardFile => on_disk::seal_shard(input),
+            Self::ModelFile
+            | Self::CsvRows
+            | Self::NpyChart
+            | Self::ProtocolAnswer
+            | Self::FmuDescription
+            | Self::FmuArchive => {}
         }
     }
 
@@ -70,6 +106,11 @@ impl Reader {
             Self::RuntimeBlob => runtime_blob(input),
             Self::ModelFile => model_file(input),
             Self::CsvRows => csv(input),
+            Self::NpyChart => on_disk::npy(input),
+            Self::ShardFile => on_disk::shards(input),
+            Self::ProtocolAnswer => protocol_answer(input),
+            Self::FmuDescription => fmu_description(input),
+            Self::FmuArchive => on_disk::fmu_archive(input),
         }
     }
 }
@@ -203,6 +244,34 @@ fn csv(input: &[u8]) -> bool {
         |line, message| format!("{line:?}: {message}"),
     )
     .is_ok()
+}
+
+/// Samples of the record a protocol answer is read into (one input, one
+/// output): the corpus's answers have this many.
+pub(crate) const ANSWER_SAMPLES: usize = 50;
+
+fn protocol_answer(input: &[u8]) -> bool {
+    let text = String::from_utf8_lossy(input);
+    let mut lines = text
+        .split('\n')
+        .map(|line| line.trim_end_matches('\r').to_string());
+    let mut next_line = || lines.next().ok_or_else(|| "it ended".to_string());
+    let mut out = IoData::zeros(ANSWER_SAMPLES, 1, 1);
+    // A failure said in protocol is an answer read, as a record is.
+    ExternalSimulator::read_answer(&mut next_line, 0, &mut out).is_ok()
+}
+
+fn fmu_description(input: &[u8]) -> bool {
+    use twostage::fmi::{InterfaceKind, ModelDescription};
+    let Ok(text) = std::str::from_utf8(input) else {
+        return false;
+    };
+    let Ok(description) = ModelDescription::parse(text, "fuzz.fmu") else {
+        return false;
+    };
+    let _ = description.similar_names("u");
+    let _ = description.interface(InterfaceKind::CoSimulation);
+    true
 }
 
 #[cfg(test)]
