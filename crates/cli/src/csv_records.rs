@@ -34,12 +34,39 @@ pub struct RecordFormat {
 /// # Errors
 /// A file that cannot be read or has no usable header: one line naming it.
 pub fn read(path: &Path, format: &RecordFormat) -> Result<Vec<ReadRecord>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let name = path.display().to_string();
+    let text = read_text(path)?;
     let stem = path
         .file_stem()
         .map_or_else(|| name.clone(), |s| s.to_string_lossy().into_owned());
     parse(&text, &name, &stem, format)
+}
+
+/// A record file's text, held whole: refused before it is read where it
+/// and its records would not fit in the memory this process may take, and
+/// named by its line where it is not UTF-8 text.
+fn read_text(path: &Path) -> Result<String, String> {
+    let name = path.display();
+    let size = std::fs::metadata(path)
+        .map_err(|e| format!("{name}: {e}"))?
+        .len();
+    // The text, and the records parsed from it (fewer bytes than text).
+    if let Some(available) = twostage::models::available_memory()
+        && size.saturating_mul(2) > available
+    {
+        return Err(format!(
+            "{name}: a file of {} is read whole with its records, where this process has {} \
+             available: split it into files of fewer experiments",
+            twostage::models::readable_bytes(size as f64),
+            twostage::models::readable_bytes(available as f64)
+        ));
+    }
+    let bytes = std::fs::read(path).map_err(|e| format!("{name}: {e}"))?;
+    String::from_utf8(bytes).map_err(|e| {
+        let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+        let line = valid.iter().filter(|&&b| b == b'\n').count() + 1;
+        format!("{name}, line {line}: bytes that are not UTF-8 text: give a CSV file")
+    })
 }
 
 /// The SISO signals `u`, `y`, sampled every second.
@@ -400,6 +427,35 @@ mod tests {
 
     /// A time column is checked against the sample time, not read as a
     /// signal; a step that is not the model's names its row.
+    #[test]
+    fn bytes_that_are_not_text_are_named_by_their_line() {
+        let path = std::env::temp_dir().join(format!("not-text-{}.csv", std::process::id()));
+        std::fs::write(&path, b"u,y\n1,2\n3,\xff\xfe\n").unwrap();
+        let problem = read(&path, &siso()).err().unwrap();
+        std::fs::remove_file(&path).ok();
+        assert!(
+            problem.ends_with(", line 3: bytes that are not UTF-8 text: give a CSV file"),
+            "{problem}"
+        );
+    }
+
+    /// A sparse file of 100 GB: refused by its size, nothing read.
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn a_file_beyond_the_memory_is_refused_before_it_is_read() {
+        let path = std::env::temp_dir().join(format!("huge-{}.csv", std::process::id()));
+        let file = std::fs::File::create(&path).unwrap();
+        file.set_len(100_000_000_000).unwrap();
+        let problem = read(&path, &siso()).err().unwrap();
+        std::fs::remove_file(&path).ok();
+        if twostage::models::available_memory().is_some_and(|bytes| bytes < 50_000_000_000) {
+            assert!(
+                problem.contains(": a file of 100.0 GB is read whole with its records, where"),
+                "{problem}"
+            );
+        }
+    }
+
     #[test]
     fn a_time_column_steps_by_the_sample_time() {
         let format = RecordFormat {
