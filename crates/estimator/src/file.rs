@@ -169,10 +169,22 @@ impl Estimator {
     /// [`Estimator::from_bytes`] (the message names the file).
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|cause| Error::Io {
+        let io = |cause| Error::Io {
             path: path.display().to_string(),
             cause,
-        })?;
+        };
+        let size = std::fs::metadata(path).map_err(io)?.len();
+        if let Some(available) = twostage_models::available_memory()
+            && size > available
+        {
+            return Err(io(std::io::Error::other(format!(
+                "a file of {}, where this process has {} available: not an estimator file \
+                 (those take kilobytes to a few megabytes)",
+                twostage_models::readable_bytes(size as f64),
+                twostage_models::readable_bytes(available as f64)
+            ))));
+        }
+        let bytes = std::fs::read(path).map_err(io)?;
         Self::from_bytes(&bytes).map_err(|e| match e {
             Error::File { error, .. } => Error::File {
                 path: Some(path.to_path_buf()),

@@ -359,3 +359,32 @@ fn a_save_that_fails_leaves_the_file_it_would_replace_and_no_debris() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Files far larger than any estimator or model file (sparse: nothing is
+/// written) are refused by their size before they are read.
+#[test]
+#[cfg(target_os = "linux")]
+fn files_larger_than_their_kind_are_refused_before_they_are_read() {
+    let dir = std::env::temp_dir().join(format!("huge-files-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let sparse = |name: &str, size: u64| {
+        let path = dir.join(name);
+        std::fs::File::create(&path).unwrap().set_len(size).unwrap();
+        path
+    };
+    let model = sparse("model.toml", 100_000_000);
+    let e = twostage::ModelFile::load(&model).unwrap_err().to_string();
+    assert!(
+        e.contains("a file of 100.0 MB, where a model file takes at most 67.1 MB"),
+        "{e}"
+    );
+    let estimator = sparse("huge.tsest", 100_000_000_000);
+    let e = Estimator::load(&estimator).unwrap_err().to_string();
+    if twostage::models::available_memory().is_some_and(|bytes| bytes < 100_000_000_000) {
+        assert!(
+            e.contains("a file of 100.0 GB, where this process has") && e.contains("huge.tsest"),
+            "{e}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -196,6 +196,10 @@ pub struct ModelFile {
     fingerprint: u64,
 }
 
+/// The largest model file read: it is read and parsed whole, and thousands
+/// of equations of the largest size each accepts fit in far less.
+const MAX_MODEL_FILE_BYTES: u64 = 64 << 20;
+
 impl ModelFile {
     /// Read and check a model file.
     ///
@@ -204,10 +208,20 @@ impl ModelFile {
     /// mistake in it.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|cause| Error::Io {
+        let io = |cause| Error::Io {
             path: path.display().to_string(),
             cause,
-        })?;
+        };
+        let size = std::fs::metadata(path).map_err(io)?.len();
+        if size > MAX_MODEL_FILE_BYTES {
+            return Err(io(std::io::Error::other(format!(
+                "a file of {}, where a model file takes at most {}: not a model file, or \
+                 equations that belong in a compiled simulator",
+                crate::readable_bytes(size as f64),
+                crate::readable_bytes(MAX_MODEL_FILE_BYTES as f64)
+            ))));
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
         let mut file = Self::parse(&text, &path.display().to_string())?;
         // A command runs beside its model file, so that `python3 sim.py` works
         // from any folder; an FMU is found beside it.
