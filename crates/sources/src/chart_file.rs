@@ -432,8 +432,9 @@ const MAX_NPY_HEADER: usize = 10_000;
 
 /// Refuses an .npy header that the NumPy reader would take apart badly:
 /// a length word beyond [`MAX_NPY_HEADER`] (it allocates what the word
-/// says) or a shape nested in itself (it parses nesting slowly). A header
-/// NumPy writes is a flat dictionary with one tuple.
+/// says) or brackets nested deeper than a dictionary holding a tuple (it
+/// parses nesting in time exponential in its depth), which is all a
+/// header NumPy writes for an array of plain numbers holds.
 fn check_npy_preamble(bytes: &[u8]) -> std::result::Result<(), String> {
     const MAGIC: &[u8] = b"\x93NUMPY";
     if bytes.len() < 10 || !bytes.starts_with(MAGIC) {
@@ -453,18 +454,21 @@ fn check_npy_preamble(bytes: &[u8]) -> std::result::Result<(), String> {
              {MAX_NPY_HEADER}: the file is damaged or not written by NumPy"
         ));
     }
+    // A dictionary holding one tuple: two levels of brackets.
     let mut depth = 0usize;
     for &byte in bytes.iter().skip(start).take(length) {
         match byte {
-            b'(' | b'[' => {
+            b'(' | b'[' | b'{' => {
                 depth += 1;
-                if depth > 1 {
-                    return Err("its header nests a shape in a shape: the file is damaged \
-                                or not written by NumPy"
-                        .into());
+                if depth > 2 {
+                    return Err(
+                        "its header nests brackets deeper than a dictionary holding \
+                                a shape: the file is damaged or not written by NumPy"
+                            .into(),
+                    );
                 }
             }
-            b')' | b']' => depth = depth.saturating_sub(1),
+            b')' | b']' | b'}' => depth = depth.saturating_sub(1),
             _ => {}
         }
     }

@@ -346,8 +346,9 @@ fn a_numpy_chart_trains_the_same_networks_as_the_csv_one() {
 
 /// Headers the fuzzer made (`cargo xtask fuzz --reader npy-chart`): a
 /// length word of 4 GB, which the NumPy reader allocated until the
-/// process aborted; a shape nested in itself hundreds deep, which it
-/// parsed for minutes; a shape whose values the file does not hold.
+/// process aborted; a shape nested in itself hundreds deep and
+/// dictionaries nested in the header, which it parsed for minutes; a
+/// shape whose values the file does not hold.
 #[test]
 fn forged_numpy_headers_are_refused_before_they_are_believed() {
     let model = model();
@@ -383,7 +384,20 @@ fn forged_numpy_headers_are_refused_before_they_are_believed() {
         "(3,".repeat(300),
         ")".repeat(300)
     );
-    refused(&header(1, &nested), "nests a shape in a shape");
+    refused(
+        &header(1, &nested),
+        "nests brackets deeper than a dictionary",
+    );
+    // Dictionaries nested in the header, as the fuzzer found next.
+    let dictionaries = format!(
+        "{{'descr': '<f8', 'x': {}1{}, 'shape': (3, 1), }}\n",
+        "{'a': ".repeat(40),
+        "}".repeat(40)
+    );
+    refused(
+        &header(1, &dictionaries),
+        "nests brackets deeper than a dictionary",
+    );
     let mut short = header(
         1,
         "{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 1), }\n",
