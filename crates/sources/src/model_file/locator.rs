@@ -35,14 +35,32 @@ struct FmuRun {
 pub(super) struct Locator<'t> {
     pub(super) text: &'t str,
     pub(super) origin: &'t str,
+    /// Where each line break is, found once: a file names a line per
+    /// parameter and signal, and counting from the start for each made
+    /// reading a file of many names take time in their square.
+    breaks: std::cell::OnceCell<Vec<usize>>,
 }
 
-impl Locator<'_> {
+impl<'t> Locator<'t> {
+    pub(super) fn new(text: &'t str, origin: &'t str) -> Self {
+        Self {
+            text,
+            origin,
+            breaks: std::cell::OnceCell::new(),
+        }
+    }
+
+    /// The line (from 1) of byte `offset`.
     pub(super) fn line(&self, offset: usize) -> usize {
-        1 + self.text.as_bytes()[..offset.min(self.text.len())]
-            .iter()
-            .filter(|b| **b == b'\n')
-            .count()
+        let breaks = self.breaks.get_or_init(|| {
+            self.text
+                .bytes()
+                .enumerate()
+                .filter(|(_, b)| *b == b'\n')
+                .map(|(k, _)| k)
+                .collect()
+        });
+        1 + breaks.partition_point(|&k| k < offset.min(self.text.len()))
     }
 
     pub(super) fn error(&self, span: Option<Range<usize>>, key: &str, message: String) -> Error {
@@ -790,3 +808,22 @@ impl Locator<'_> {
 /// outputs as f64: every simulating thread holds at least one whole
 /// record, so a record is refused before anything allocates it.
 const MAX_RECORD_BYTES: usize = 1 << 30;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_offset_is_on_the_line_a_count_of_breaks_before_it_says() {
+        let text = "a = 1\n\n[b]\nc = \"x\"\r\nd\n";
+        let at = Locator::new(text, "t.toml");
+        for offset in 0..=text.len() + 3 {
+            let counted = 1 + text.as_bytes()[..offset.min(text.len())]
+                .iter()
+                .filter(|b| **b == b'\n')
+                .count();
+            assert_eq!(at.line(offset), counted, "offset {offset}");
+        }
+        assert_eq!(Locator::new("", "e.toml").line(0), 1);
+    }
+}

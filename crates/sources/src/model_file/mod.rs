@@ -262,7 +262,7 @@ impl ModelFile {
     /// # Errors
     /// [`Error::ModelFile`] naming the line, the key and what is accepted.
     pub fn parse(text: &str, origin: &str) -> Result<Self> {
-        let at = Locator { text, origin };
+        let at = Locator::new(text, origin);
         let raw: RawFile = toml::from_str(text).map_err(|e| Error::ModelFile {
             file: origin.to_string(),
             line: e.span().map(|s| at.line(s.start)),
