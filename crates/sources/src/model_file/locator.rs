@@ -483,11 +483,12 @@ impl<'t> Locator<'t> {
             ));
         }
         let mut names = Vec::with_capacity(raw.len());
+        let mut seen = std::collections::HashSet::with_capacity(raw.len());
         let mut marginals = Vec::with_capacity(raw.len());
         for (j, p) in raw.iter().enumerate() {
             let p_ref = p.get_ref();
             let name = p_ref.name.get_ref().trim().to_string();
-            if name.is_empty() || names.contains(&name) {
+            if name.is_empty() || !seen.insert(name.clone()) {
                 return Err(self.error(
                     Some(p_ref.name.span()),
                     "parameter.name",
