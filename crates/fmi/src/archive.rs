@@ -49,11 +49,15 @@ impl Unpacked {
                 .tempdir()
                 .map_err(io)?;
             let room = twostage_models::free_disk(temporary.path()).unwrap_or(u64::MAX);
-            unpack(&mut archive, temporary.path(), room).map_err(|message| {
-                FmiError::NotAnArchive {
+            unpack(&mut archive, temporary.path(), room).map_err(|failed| match failed {
+                Unpacking::NoRoom(message) => FmiError::NoRoom {
                     path: origin.clone(),
                     message,
-                }
+                },
+                Unpacking::Damaged(message) => FmiError::NotAnArchive {
+                    path: origin.clone(),
+                    message,
+                },
             })?;
             (temporary.path().to_path_buf(), Some(temporary))
         };
@@ -144,6 +148,15 @@ fn read_description(path: &Path) -> std::io::Result<String> {
     Ok(text)
 }
 
+/// Why an archive was not unpacked.
+#[derive(Debug)]
+enum Unpacking {
+    /// Its entries would take more than the room there is.
+    NoRoom(String),
+    /// It is damaged or forged.
+    Damaged(String),
+}
+
 /// Unpack every entry of `archive` into `folder`, with no more than
 /// `room` bytes written: the entries' declared sizes are summed before
 /// anything is written (a zip bomb declares what it unpacks to), and an
@@ -154,38 +167,38 @@ fn unpack(
     archive: &mut zip::ZipArchive<std::fs::File>,
     folder: &Path,
     room: u64,
-) -> std::result::Result<(), String> {
+) -> std::result::Result<(), Unpacking> {
     use std::io::Read;
     let mut declared = 0u64;
     for i in 0..archive.len() {
         let entry = archive
             .by_index_raw(i)
-            .map_err(|e| format!("entry {i} cannot be read ({e})"))?;
+            .map_err(|e| Unpacking::Damaged(format!("entry {i} cannot be read ({e})")))?;
         declared = declared.saturating_add(entry.size());
     }
     if declared > room {
-        return Err(format!(
+        return Err(Unpacking::NoRoom(format!(
             "it unpacks to {} (its entries' sizes), where the disk of {} has {} free: \
              free room there or set TMPDIR to a disk with more",
             twostage_models::readable_bytes(declared as f64),
             folder.display(),
             twostage_models::readable_bytes(room as f64)
-        ));
+        )));
     }
     for i in 0..archive.len() {
         let mut entry = archive
             .by_index(i)
-            .map_err(|e| format!("entry {i} cannot be unpacked ({e})"))?;
+            .map_err(|e| Unpacking::Damaged(format!("entry {i} cannot be unpacked ({e})")))?;
         let name = entry
             .name()
             .map_or_else(|_| format!("number {i}"), |name| format!("{name:?}"));
         let Some(relative) = entry.enclosed_name() else {
-            return Err(format!(
+            return Err(Unpacking::Damaged(format!(
                 "entry {name} would land outside the folder it is unpacked into"
-            ));
+            )));
         };
         let path = folder.join(relative);
-        let made = |e: std::io::Error| format!("{}: {e}", path.display());
+        let made = |e: std::io::Error| Unpacking::Damaged(format!("{}: {e}", path.display()));
         if entry.is_dir() {
             std::fs::create_dir_all(&path).map_err(made)?;
             continue;
@@ -196,12 +209,12 @@ fn unpack(
         let size = entry.size();
         let mut out = std::fs::File::create(&path).map_err(made)?;
         let written = std::io::copy(&mut (&mut entry).take(size.saturating_add(1)), &mut out)
-            .map_err(|e| format!("entry {name} cannot be unpacked ({e})"))?;
+            .map_err(|e| Unpacking::Damaged(format!("entry {name} cannot be unpacked ({e})")))?;
         if written > size {
-            return Err(format!(
+            return Err(Unpacking::Damaged(format!(
                 "entry {name} unpacks to more than the {size} bytes it declares: the archive \
                  is damaged or forged"
-            ));
+            )));
         }
     }
     Ok(())
@@ -287,7 +300,9 @@ mod tests {
         let (dir, mut archive) = archive_of(&[("a.txt", b"a"), ("zeros.bin", &zeros)]);
         assert!(std::fs::metadata(dir.path().join("a.fmu")).unwrap().len() < 100_000);
         let into = tempfile::tempdir().unwrap();
-        let refused = unpack(&mut archive, into.path(), 1_000_000).unwrap_err();
+        let Err(Unpacking::NoRoom(refused)) = unpack(&mut archive, into.path(), 1_000_000) else {
+            panic!("a bomb was unpacked");
+        };
         assert!(
             refused.starts_with("it unpacks to 20.0 MB (its entries' sizes), where the disk of")
                 && refused.contains("has 1.0 MB free"),
@@ -317,7 +332,9 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
         let mut archive = zip::ZipArchive::new(std::fs::File::open(&path).unwrap()).unwrap();
         let into = tempfile::tempdir().unwrap();
-        let refused = unpack(&mut archive, into.path(), u64::MAX).unwrap_err();
+        let Err(Unpacking::Damaged(refused)) = unpack(&mut archive, into.path(), u64::MAX) else {
+            panic!("a forged entry was unpacked");
+        };
         assert!(
             refused.starts_with("entry \"big.txt\" ") && refused.contains("declared"),
             "{refused}"
@@ -330,7 +347,11 @@ mod tests {
     fn an_entry_that_would_land_outside_the_folder_is_refused() {
         let (_dir, mut archive) = archive_of(&[("../outside.txt", b"x")]);
         let into = tempfile::tempdir().unwrap();
-        let refused = unpack(&mut archive, &into.path().join("fmu"), u64::MAX).unwrap_err();
+        let Err(Unpacking::Damaged(refused)) =
+            unpack(&mut archive, &into.path().join("fmu"), u64::MAX)
+        else {
+            panic!("an entry outside the folder was unpacked");
+        };
         assert!(refused.contains("would land outside"), "{refused}");
         assert!(!into.path().join("outside.txt").exists());
     }

@@ -26,6 +26,14 @@ pub enum FmiError {
         /// What is wrong with it.
         message: String,
     },
+    /// Unpacking the archive would take more room than its disk has.
+    #[error("{path} cannot be unpacked here: {message}")]
+    NoRoom {
+        /// The FMU.
+        path: String,
+        /// What it would take and what there is.
+        message: String,
+    },
     /// `modelDescription.xml` is missing or malformed.
     #[error("{path}, modelDescription.xml{}: {message}", line.map(|l| format!(" line {l}")).unwrap_or_default())]
     Description {
