@@ -375,7 +375,7 @@ fn files_larger_than_their_kind_are_refused_before_they_are_read() {
     let model = sparse("model.toml", 100_000_000);
     let e = twostage::ModelFile::load(&model).unwrap_err().to_string();
     assert!(
-        e.contains("a file of 100.0 MB, where a model file takes at most 67.1 MB"),
+        e.contains("a file of 100.0 MB, where a model file takes at most 16.8 MB"),
         "{e}"
     );
     let estimator = sparse("huge.tsest", 100_000_000_000);

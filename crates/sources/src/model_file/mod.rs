@@ -196,9 +196,10 @@ pub struct ModelFile {
     fingerprint: u64,
 }
 
-/// The largest model file read: it is read and parsed whole, and thousands
-/// of equations of the largest size each accepts fit in far less.
-const MAX_MODEL_FILE_BYTES: u64 = 64 << 20;
+/// The largest model file read: it is read and parsed whole, the parser
+/// holding many times its size, and a model that needs more words than
+/// this is better a compiled simulator (docs/reliability.md).
+const MAX_MODEL_FILE_BYTES: u64 = 16 << 20;
 
 impl ModelFile {
     /// Read and check a model file.
