@@ -104,7 +104,12 @@ impl ShardIndex {
 
     /// The records of a chart of `m` that this shard simulates.
     pub fn range(&self, m: usize) -> Range<usize> {
-        self.index * m / self.count..(self.index + 1) * m / self.count
+        // In u128: an index and a chart of a few billion each overflow usize.
+        let at = |i: usize| {
+            let bound = i as u128 * m as u128 / self.count.max(1) as u128;
+            usize::try_from(bound).unwrap_or(m)
+        };
+        at(self.index)..at(self.index + 1)
     }
 }
 
@@ -125,6 +130,17 @@ mod tests {
                 assert_eq!(next, m);
             }
         }
+        // Counts whose products overflow 64 bits: the exact bounds.
+        let huge = ShardIndex {
+            index: (1 << 40) - 1,
+            count: 1 << 40,
+        };
+        assert_eq!(huge.range(1 << 40), (1 << 40) - 1..1 << 40);
+        let last = ShardIndex {
+            index: usize::MAX - 1,
+            count: usize::MAX,
+        };
+        assert_eq!(last.range(1_000_000), 999_999..1_000_000);
     }
 
     #[test]
