@@ -707,6 +707,7 @@ mod fmu_template;
 mod input;
 mod locator;
 mod noise;
+mod priors;
 mod raw;
 mod simulator;
 
