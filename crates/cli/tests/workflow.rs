@@ -32,7 +32,12 @@ fn simulate_records(dir: &std::path::Path, count: usize, seed: u64) -> PathBuf {
 
 /// A quick, quiet benchmark estimator with a linear stage 2, written to `file`.
 fn train_linear(file: &std::path::Path, sims: &str, calibrate: &str) -> Output {
-    twostage(&[
+    train_linear_saying(file, sims, calibrate, false)
+}
+
+/// [`train_linear`], with what it says on standard error where `says`.
+fn train_linear_saying(file: &std::path::Path, sims: &str, calibrate: &str, says: bool) -> Output {
+    let mut args = vec![
         "train",
         "--model",
         "benchmark",
@@ -44,10 +49,13 @@ fn train_linear(file: &std::path::Path, sims: &str, calibrate: &str) -> Output {
         "0",
         "--calibrate",
         calibrate,
-        "--quiet",
         "--out",
         path(file),
-    ])
+    ];
+    if !says {
+        args.push("--quiet");
+    }
+    twostage(&args)
 }
 
 #[test]
@@ -351,21 +359,7 @@ fn a_count_the_memory_cannot_hold_is_refused_up_front() {
     // Validation's fresh records, by its flag.
     let file = dir.join("small.tsest");
     assert!(train_linear(&file, "300", "0").status.success());
-    let trained = twostage(&[
-        "train",
-        "--model",
-        "benchmark",
-        "--sims",
-        "300",
-        "--fit",
-        "linear",
-        "--validate",
-        "0",
-        "--calibrate",
-        "0",
-        "--out",
-        path(&dir.join("said.tsest")),
-    ]);
+    let trained = train_linear_saying(&dir.join("said.tsest"), "300", "0", true);
     assert!(trained.status.success());
     // A run that fits says up front what its records take, and of what.
     let said = text(&trained.stderr);

@@ -379,25 +379,22 @@ fn forged_numpy_headers_are_refused_before_they_are_believed() {
         &claiming,
         "its header claims 4286251126 bytes, where NumPy writes and reads at most 10000",
     );
-    let nested = format!(
-        "{{'descr': '<f8', 'fortran_order': False, 'shape': {}3{}, }}\n",
-        "(3,".repeat(300),
-        ")".repeat(300)
-    );
-    refused(
-        &header(1, &nested),
-        "nests brackets deeper than a dictionary",
-    );
-    // Dictionaries nested in the header, as the fuzzer found next.
-    let dictionaries = format!(
-        "{{'descr': '<f8', 'x': {}1{}, 'shape': (3, 1), }}\n",
-        "{'a': ".repeat(40),
-        "}".repeat(40)
-    );
-    refused(
-        &header(1, &dictionaries),
-        "nests brackets deeper than a dictionary",
-    );
+    // A shape nested in itself, then dictionaries nested in the header,
+    // as the fuzzer found them.
+    let nested = [
+        ("(3,".repeat(300), "3", ")".repeat(300), "'shape': "),
+        (
+            "{'a': ".repeat(40),
+            "1",
+            "}".repeat(40),
+            "'shape': (3, 1), 'x': ",
+        ),
+    ];
+    for (open, inside, close, key) in nested {
+        let text =
+            format!("{{'descr': '<f8', 'fortran_order': False, {key}{open}{inside}{close}, }}\n");
+        refused(&header(1, &text), "nests brackets deeper than a dictionary");
+    }
     let mut short = header(
         1,
         "{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 1), }\n",

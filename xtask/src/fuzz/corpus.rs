@@ -60,27 +60,35 @@ const FMI2_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
 </fmiModelDescription>
 "#;
 
-/// An FMI 3.0 model-exchange description: types, arrays, states and an
-/// event indicator.
+/// An FMI 3.0 description of both interfaces: units, types, arrays,
+/// states, an input and an output.
 const FMI3_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="3.0" modelName="osc" instantiationToken="{abc}">
-  <ModelExchange modelIdentifier="osc" canBeInstantiatedOnlyOncePerProcess="true"/>
-  <TypeDefinitions><Float64Type name="Angle" unit="rad"/></TypeDefinitions>
-  <DefaultExperiment stopTime="10" stepSize="0.01"/>
+<fmiModelDescription fmiVersion="3.0" modelName="mass" instantiationToken="{twostage-fuzz-3}">
+  <CoSimulation modelIdentifier="mass" canHandleVariableCommunicationStepSize="true"/>
+  <ModelExchange modelIdentifier="mass"/>
+  <UnitDefinitions><Unit name="m"/></UnitDefinitions>
+  <TypeDefinitions><Float64Type name="Position" unit="m"/></TypeDefinitions>
+  <DefaultExperiment startTime="0" stopTime="20" stepSize="0.05"/>
   <ModelVariables>
     <Float64 name="time" valueReference="0" causality="independent" variability="continuous"/>
-    <Float64 name="phi" valueReference="1" declaredType="Angle" start="0.1"/>
-    <Float64 name="der(phi)" valueReference="2" derivative="1"/>
-    <Float64 name="k" valueReference="3" causality="parameter" variability="fixed" start="2"/>
-    <Float64 name="y" valueReference="4" causality="output" variability="continuous"/>
-    <Float64 name="table" valueReference="5" causality="parameter" variability="fixed" start="1 2">
-      <Dimension start="2"/>
+    <Float64 name="c" valueReference="1" causality="parameter" variability="fixed" start="0.4"/>
+    <Float64 name="k" valueReference="2" causality="parameter" variability="tunable" start="2"/>
+    <Float64 name="force" valueReference="3" causality="input" variability="continuous" start="0"/>
+    <Float64 name="x" valueReference="4" declaredType="Position" start="0.1"/>
+    <Float64 name="v" valueReference="5" start="0"/>
+    <Float64 name="der(x)" valueReference="6" derivative="4"/>
+    <Float64 name="der(v)" valueReference="7" derivative="5"/>
+    <Float64 name="position" valueReference="8" causality="output" variability="continuous"/>
+    <Int32 name="mode" valueReference="9" causality="parameter" variability="fixed" start="1"/>
+    <Float64 name="gains" valueReference="10" causality="parameter" variability="fixed" start="1 2 3">
+      <Dimension start="3"/>
     </Float64>
   </ModelVariables>
   <ModelStructure>
-    <Output valueReference="4"/>
-    <ContinuousStateDerivative valueReference="2"/>
-    <EventIndicator valueReference="1"/>
+    <Output valueReference="8"/>
+    <ContinuousStateDerivative valueReference="6"/>
+    <ContinuousStateDerivative valueReference="7"/>
+    <InitialUnknown valueReference="8"/>
   </ModelStructure>
 </fmiModelDescription>
 "#;
