@@ -159,6 +159,7 @@ impl FmuSimulatorBuilder {
                 command,
                 &self.setup,
                 &loaded.unpacked.origin,
+                &loaded.unpacked.root,
             )?)),
             _ => Engine::InProcess(loaded.in_process(single)?),
         };

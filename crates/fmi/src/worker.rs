@@ -230,15 +230,14 @@ struct WorkerProcess {
     stdout: BufReader<ChildStdout>,
 }
 
-/// How long a worker let go may take to clean up (remove the FMU it
-/// unpacked) before it is killed.
+/// How long a worker let go may take to end (unload its FMU) before it is
+/// killed.
 const WORKER_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
 
 impl Drop for WorkerProcess {
     fn drop(&mut self) {
-        // Its input closed, a worker ends its loop and removes the FMU it
-        // unpacked; killed, it would leave the directory behind. One that
-        // hangs (a crashed FMU) is killed after the grace period.
+        // Its input closed, a worker ends its loop and unloads its FMU.
+        // One that hangs (a crashed FMU) is killed after the grace period.
         drop(self.stdin.take());
         let start = std::time::Instant::now();
         while start.elapsed() < WORKER_GRACE {
@@ -255,14 +254,25 @@ impl Drop for WorkerProcess {
 /// The worker processes of one simulator: one per concurrent caller.
 pub(crate) struct WorkerPool {
     command: Vec<String>,
+    /// The set-up each worker gets: the FMU the parent unpacked, so that a
+    /// worker unpacks nothing and a crashed one leaves nothing behind.
     setup: Setup,
+    /// The FMU as the user named it, and where the parent unpacked it (the
+    /// workers' name for it, replaced by the user's in their messages).
     origin: String,
+    unpacked_at: String,
     idle: Mutex<Vec<WorkerProcess>>,
 }
 
 impl WorkerPool {
-    /// Start one worker, so that a failing set-up is reported now.
-    pub fn start(command: Vec<String>, setup: &Setup, origin: &str) -> Result<Self> {
+    /// Start one worker on the FMU the parent unpacked at `unpacked_at`,
+    /// so that a failing set-up is reported now.
+    pub fn start(
+        command: Vec<String>,
+        setup: &Setup,
+        origin: &str,
+        unpacked_at: &std::path::Path,
+    ) -> Result<Self> {
         if command.first().is_none_or(|c| c.trim().is_empty()) {
             return Err(FmiError::Setting {
                 name: "worker command",
@@ -272,8 +282,12 @@ impl WorkerPool {
         }
         let pool = Self {
             command,
-            setup: setup.clone(),
+            setup: Setup {
+                path: unpacked_at.to_path_buf(),
+                ..setup.clone()
+            },
             origin: origin.into(),
+            unpacked_at: unpacked_at.display().to_string(),
             idle: Mutex::new(Vec::new()),
         };
         let first = pool.spawn()?;
@@ -340,6 +354,7 @@ impl WorkerPool {
 
     /// The worker's message without the FMU path it starts with.
     fn unprefixed(&self, message: String) -> String {
+        let message = message.replace(&self.unpacked_at, &self.origin);
         message
             .strip_prefix(&format!("{}: ", self.origin))
             .map(str::to_string)
