@@ -180,57 +180,6 @@ impl Bars {
     fn with_bar(&self, f: impl FnOnce(&mut Option<ProgressBar>)) {
         f(&mut lock(&self.current));
     }
-
-    /// A step of a command other than training (`what`, over `total`
-    /// `unit`s: "refining", 12 "records"): a bar on a terminal; without
-    /// one, a line every 10 s while it runs and none before, so that a
-    /// quick command stays quiet and a long one is never silent.
-    pub fn begin_step(&self, what: &'static str, total: usize, unit: &'static str) {
-        let bar = if self.quiet || self.log.is_some() {
-            ProgressBar::hidden()
-        } else {
-            ProgressBar::new(total as u64).with_style(
-                ProgressStyle::with_template(&format!(
-                    "  {{msg:<24}} {{bar:20}} {{pos}}/{{len}} {unit}, {{elapsed}} (eta {{eta}})"
-                ))
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-            )
-        };
-        bar.set_message(what);
-        self.with_bar(|current| *current = Some(bar));
-        if let Some(log) = &self.log {
-            let state = &log.state;
-            *lock(&state.stage) = Some(what);
-            *lock(&state.unit) = unit;
-            *lock(&state.status) = None;
-            state.done.store(0, Ordering::Relaxed);
-            state.total.store(total, Ordering::Relaxed);
-        }
-    }
-
-    /// `done` more steps of the running one.
-    pub fn advance_step(&self, done: usize) {
-        self.with_bar(|current| {
-            if let Some(bar) = current {
-                bar.inc(done as u64);
-            }
-        });
-        if let Some(log) = &self.log {
-            log.state.done.fetch_add(done, Ordering::Relaxed);
-        }
-    }
-
-    /// The running step has ended.
-    pub fn end_step(&self) {
-        self.with_bar(|current| {
-            if let Some(bar) = current.take() {
-                bar.finish_and_clear();
-            }
-        });
-        if let Some(log) = &self.log {
-            *lock(&log.state.stage) = None;
-        }
-    }
 }
 
 const STAGES: [Stage; 4] = [
@@ -337,6 +286,57 @@ impl Progress for Bars {
         });
         if let Some(log) = &self.log {
             *lock(&log.state.status) = Some(message.to_string());
+        }
+    }
+
+    /// A step of a command other than training (`what`, over `total`
+    /// `unit`s: "refining", 12 "records"): a bar on a terminal; without
+    /// one, a line every 10 s while it runs and none before, so that a
+    /// quick command stays quiet and a long one is never silent.
+    fn begin_step(&self, what: &'static str, total: usize, unit: &'static str) {
+        let bar = if self.quiet || self.log.is_some() {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::new(total as u64).with_style(
+                ProgressStyle::with_template(&format!(
+                    "  {{msg:<24}} {{bar:20}} {{pos}}/{{len}} {unit}, {{elapsed}} (eta {{eta}})"
+                ))
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            )
+        };
+        bar.set_message(what);
+        self.with_bar(|current| *current = Some(bar));
+        if let Some(log) = &self.log {
+            let state = &log.state;
+            *lock(&state.stage) = Some(what);
+            *lock(&state.unit) = unit;
+            *lock(&state.status) = None;
+            state.done.store(0, Ordering::Relaxed);
+            state.total.store(total, Ordering::Relaxed);
+        }
+    }
+
+    /// `done` more steps of the running one.
+    fn advance_step(&self, done: usize) {
+        self.with_bar(|current| {
+            if let Some(bar) = current {
+                bar.inc(done as u64);
+            }
+        });
+        if let Some(log) = &self.log {
+            log.state.done.fetch_add(done, Ordering::Relaxed);
+        }
+    }
+
+    /// The running step has ended.
+    fn end_step(&self) {
+        self.with_bar(|current| {
+            if let Some(bar) = current.take() {
+                bar.finish_and_clear();
+            }
+        });
+        if let Some(log) = &self.log {
+            *lock(&log.state.stage) = None;
         }
     }
 }

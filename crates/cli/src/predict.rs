@@ -199,7 +199,7 @@ pub fn simulate_rows(
     inputs: &Inputs,
     noiseless: bool,
     seed: u64,
-    done: &(dyn Fn(usize) + Sync),
+    progress: &dyn twostage::Progress,
 ) -> Result<Vec<IoData>> {
     let batch = match inputs {
         Inputs::PerRow(_) => 1,
@@ -220,7 +220,7 @@ pub fn simulate_rows(
                 input: inputs.of(start),
             };
             let results = sim.simulate_batch_under(&thetas, &mut rngs, conditions, &mut records);
-            done(block.len());
+            progress.advance_step(block.len());
             for (row, result) in block.iter().zip(results) {
                 if let Err(e) = result {
                     bail!("simulating experiment {} at {:?}: {e}", row.id, row.theta);

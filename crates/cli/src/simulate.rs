@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
+use twostage::Progress;
 use twostage::RunSettings;
 use twostage::sources::csv_rows::row;
 use twostage::sources::readable_bytes;
@@ -184,7 +185,7 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
         &inputs,
         args.noiseless,
         args.seed.unwrap_or(0),
-        &|k| bars.advance_step(k),
+        &bars,
     )?;
     bars.end_step();
     let text = predict::records_csv(sim, &rows, &records);

@@ -75,6 +75,18 @@ pub trait Progress: Sync {
     fn status(&self, message: &str) {
         let _ = message;
     }
+    /// A step of a run other than training starts: `what` over `total`
+    /// `unit`s ("refining", 12, "records"), each finished one reported by
+    /// [`Progress::advance_step`], from any thread.
+    fn begin_step(&self, what: &'static str, total: usize, unit: &'static str) {
+        let _ = (what, total, unit);
+    }
+    /// `done` more units of the running step finished.
+    fn advance_step(&self, done: usize) {
+        let _ = done;
+    }
+    /// The running step ended (successfully or not).
+    fn end_step(&self) {}
 }
 
 /// The observer that shows nothing.

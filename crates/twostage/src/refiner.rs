@@ -10,7 +10,7 @@ use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{BuiltinModel, IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, Refinement, ResidualModel, SearchStarts};
-use twostage_sources::{ModelProfile, NamedModel};
+use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
 
 /// A refined estimate of one record.
 #[derive(Debug, Clone, PartialEq)]
@@ -190,15 +190,50 @@ impl EstimateRefiner {
         &self,
         items: &[ToRefine<'_>],
     ) -> Vec<std::result::Result<RefinedEstimate, String>> {
-        self.refine_many_reporting(items, &|_| {})
+        self.refine_many_reporting(items, &Silent)
     }
 
-    /// [`EstimateRefiner::refine_many`], calling `done(k)` as each `k`
-    /// more records are refined (for a progress display).
+    /// [`EstimateRefiner::refine_many`], reporting each `k` more records
+    /// refined to `progress` ([`Progress::advance_step`] of the step the
+    /// caller began).
+    ///
+    /// ```
+    /// use std::sync::atomic::{AtomicUsize, Ordering};
+    /// use twostage::models::{Benchmark, Simulator, experiment_rng};
+    /// use twostage::{EstimateRefiner, Progress, TwoStage};
+    /// #[derive(Default)]
+    /// struct Count(AtomicUsize);
+    /// impl Progress for Count {
+    ///     fn advance_step(&self, done: usize) {
+    ///         self.0.fetch_add(done, Ordering::Relaxed);
+    ///     }
+    /// }
+    /// let estimator = TwoStage::builder(&Benchmark::new())
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
+    /// let refiner = EstimateRefiner::new(&estimator, None)?;
+    /// let records: Vec<_> = (0..3u64)
+    ///     .map(|i| {
+    ///         let mut record = Benchmark::new().spec().new_record();
+    ///         Benchmark::new().simulate(&[0.3], &mut experiment_rng(8, i), &mut record)?;
+    ///         Ok(record)
+    ///     })
+    ///     .collect::<Result<_, twostage::models::SimError>>()?;
+    /// let firsts: Vec<_> = records.iter().map(|r| estimator.assess(r)).collect::<Result<_, _>>()?;
+    /// let items: Vec<_> = records
+    ///     .iter()
+    ///     .zip(&firsts)
+    ///     .map(|(r, e)| (r, e.theta.as_slice(), e.interval_half_widths()))
+    ///     .collect();
+    /// let count = Count::default();
+    /// let refined = refiner.refine_many_reporting(&items, &count);
+    /// assert_eq!((refined.len(), count.0.load(Ordering::Relaxed)), (3, 3));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn refine_many_reporting(
         &self,
         items: &[ToRefine<'_>],
-        done: &(dyn Fn(usize) + Sync),
+        progress: &dyn Progress,
     ) -> Vec<std::result::Result<RefinedEstimate, String>> {
         let z = twostage_models::standard_normal_quantile(1.0 - self.alpha / 2.0);
         match &self.how {
@@ -208,7 +243,7 @@ impl EstimateRefiner {
                     let posterior = local
                         .local_posterior(record, estimate, &self.radius, *points)
                         .map_err(|e| e.to_string())?;
-                    done(1);
+                    progress.advance_step(1);
                     Ok(RefinedEstimate {
                         half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
                         correlation: Some(posterior.correlation),
@@ -222,7 +257,7 @@ impl EstimateRefiner {
                 .chunks(RECORDS_TOGETHER)
                 .flat_map(|chunk| {
                     let refined = self.output_error(fit, chunk);
-                    done(chunk.len());
+                    progress.advance_step(chunk.len());
                     refined
                 })
                 .collect(),

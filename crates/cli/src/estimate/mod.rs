@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use rayon::prelude::*;
+use twostage::Progress;
 use twostage::fit::TerminationReason;
 use twostage::models::IoData;
 use twostage::models::Simulator;
@@ -637,7 +638,7 @@ fn refine_together(
         bars.advance_step(items.len());
         refined
     } else {
-        refiner.refine_many_reporting(&items, &|k| bars.advance_step(k))
+        refiner.refine_many_reporting(&items, bars)
     };
     bars.end_step();
     let estimated = estimates
