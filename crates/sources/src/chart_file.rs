@@ -509,14 +509,15 @@ fn npy(path: &Path) -> Result<(npyz::NpyFile<BufReader<std::fs::File>>, Vec<usiz
     let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
     // The values the shape declares must be in the file, before a reader
     // sizes anything by the shape. In f64: a forged shape overflows usize.
-    let declared = shape.iter().fold(8.0, |bytes, &d| bytes * d as f64);
+    let item = npy.dtype().num_bytes().unwrap_or(1) as f64;
+    let declared = shape.iter().fold(item, |bytes, &d| bytes * d as f64);
     let size = std::fs::metadata(path).map_err(io)?.len();
     if declared > size as f64 {
         return Err(Error::ChartFile {
             file: path.display().to_string(),
             line: None,
             message: format!(
-                "its shape {shape:?} declares {} of float64 values, the file holds {}: \
+                "its shape {shape:?} declares {} of values, the file holds {}: \
                  it was cut short, or its header is damaged",
                 twostage_models::readable_bytes(declared),
                 twostage_models::readable_bytes(size as f64)

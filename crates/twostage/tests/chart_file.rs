@@ -340,6 +340,25 @@ fn a_numpy_chart_trains_the_same_networks_as_the_csv_one() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("not a NumPy .npy file"), "{e}");
+    // A float32 array of the right size is told what to save, not that it
+    // was cut short.
+    let float32 = {
+        use npyz::WriterBuilder;
+        let path = npy.join("theta.npy");
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut writer = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&[240, 1])
+            .writer(file)
+            .begin_nd()
+            .unwrap();
+        writer.extend(vec![0.1f32; 240]).unwrap();
+        writer.finish().unwrap();
+        ChartFiles::open(&npy, model.spec())
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(float32.contains("save float64 arrays"), "{float32}");
     write_npy(&npy.join("theta.npy"), &[240, 1], vec![0.1; 240]);
     ChartFiles::open(&npy, model.spec()).unwrap();
 }
@@ -402,6 +421,6 @@ fn forged_numpy_headers_are_refused_before_they_are_believed() {
     short.extend_from_slice(&0.5f64.to_le_bytes());
     refused(
         &short,
-        "its shape [1000000000000, 1] declares 8.0 TB of float64 values, the file holds",
+        "its shape [1000000000000, 1] declares 8.0 TB of values, the file holds",
     );
 }
