@@ -407,6 +407,19 @@ fn broken_fmus_are_answered_clearly() {
             && err.to_string().contains("the zip archive is damaged"),
         "{err}"
     );
+    // A description far larger than any (sparse: nothing is written),
+    // refused by its size before it is read.
+    let huge = dir.path().join("huge");
+    std::fs::create_dir_all(&huge).unwrap();
+    std::fs::File::create(huge.join("modelDescription.xml"))
+        .unwrap()
+        .set_len(300_000_000)
+        .unwrap();
+    let err = build_error(&huge, spec()).to_string();
+    assert!(
+        err.contains("modelDescription.xml takes 300.0 MB where a description takes at most 268.4 MB"),
+        "{err}"
+    );
     // A zip without a description.
     let fmu = build_with(Model::Benchmark, FmiVersion::V2, |root| {
         std::fs::remove_file(root.join("modelDescription.xml")).unwrap();
