@@ -417,7 +417,9 @@ fn broken_fmus_are_answered_clearly() {
         .unwrap();
     let err = build_error(&huge, spec()).to_string();
     assert!(
-        err.contains("modelDescription.xml takes 300.0 MB where a description takes at most 268.4 MB"),
+        err.contains(
+            "modelDescription.xml takes 300.0 MB where a description takes at most 268.4 MB"
+        ),
         "{err}"
     );
     // A zip without a description.
