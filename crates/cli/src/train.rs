@@ -162,6 +162,8 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     if let Some(spec) = &args.fit {
         regressor(spec)?;
     }
+    // Before the work: a training that ends unable to save is lost.
+    twostage::check_writable(&args.out)?;
     let request = args.request();
     if matches!(request.records, RecordsRequest::Shards { .. })
         && (args.validate_chart.is_some() || args.calibrate_chart.is_some())

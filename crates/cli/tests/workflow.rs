@@ -1150,3 +1150,18 @@ fn a_window_slides_over_a_long_record() {
         text(&out.stderr)
     );
 }
+
+#[test]
+fn a_training_that_could_not_be_saved_is_refused_before_it_starts() {
+    let dir = scratch("unwritable");
+    let out = train_linear_saying(&dir.join("no/such/folder/x.tsest"), "300", "0", true);
+    let said = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains("no/such/folder/x.tsest: No such file or directory")
+            && !said.contains(".tmp"),
+        "{said}"
+    );
+    // Nothing was simulated: the refusal came first.
+    assert!(!said.contains("training records"), "{said}");
+}

@@ -238,18 +238,78 @@ pub fn write_whole(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
         path: path.display().to_string(),
         cause,
     };
-    let target = match std::fs::metadata(path) {
-        Ok(existing) if !existing.is_file() => return std::fs::write(path, bytes).map_err(io),
-        Ok(_) => std::fs::canonicalize(path).map_err(io)?,
-        Err(_) => path.to_path_buf(),
+    let (target, dir) = match destination(path).map_err(io)? {
+        Destination::Through => return std::fs::write(path, bytes).map_err(io),
+        Destination::Replace { target, dir } => (target, dir),
     };
-    let dir = match target.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    let mut file = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
+    let mut file = temporary_in(&dir).map_err(io)?;
     file.write_all(bytes).map_err(io)?;
     file.as_file().sync_all().map_err(io)?;
     file.persist(&target).map_err(|e| io(e.error))?;
     Ok(())
+}
+
+/// Whether [`write_whole`] could write `path`, tried before the work that
+/// makes its bytes (a training of minutes that ends unable to save is
+/// lost): a temporary file is made beside it and removed.
+///
+/// ```
+/// assert!(twostage::check_writable(std::env::temp_dir().join("x.tsest")).is_ok());
+/// let refused = twostage::check_writable("/no/such/folder/x.tsest").unwrap_err();
+/// assert!(refused.to_string().contains("/no/such/folder/x.tsest"), "{refused}");
+/// ```
+///
+/// # Errors
+/// [`Error::Io`] naming `path` and what the system said.
+pub fn check_writable(path: impl AsRef<Path>) -> Result<()> {
+    let path = path.as_ref();
+    let io = |cause: std::io::Error| Error::Io {
+        path: path.display().to_string(),
+        cause,
+    };
+    match destination(path).map_err(io)? {
+        Destination::Through => std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map(drop)
+            .map_err(io),
+        Destination::Replace { dir, .. } => temporary_in(&dir).map(drop).map_err(io),
+    }
+}
+
+/// Where [`write_whole`] puts a file.
+enum Destination {
+    /// Not a regular file (a device, a FIFO): written through.
+    Through,
+    /// Written beside `target` in `dir`, then renamed over it.
+    Replace {
+        target: std::path::PathBuf,
+        dir: std::path::PathBuf,
+    },
+}
+
+fn destination(path: &Path) -> std::io::Result<Destination> {
+    let target = match std::fs::metadata(path) {
+        Ok(existing) if !existing.is_file() => return Ok(Destination::Through),
+        Ok(_) => std::fs::canonicalize(path)?,
+        Err(_) => path.to_path_buf(),
+    };
+    let dir = match target.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
+        _ => Path::new(".").to_path_buf(),
+    };
+    Ok(Destination::Replace { target, dir })
+}
+
+/// A temporary file in `dir`; the system's words for a failure, without
+/// the temporary name that the user never gave.
+fn temporary_in(dir: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    tempfile::NamedTempFile::new_in(dir).map_err(|e| {
+        // tempfile appends ` at path "<dir>/.tmpXXXX"` to the system's words.
+        let said = e.to_string();
+        match said.split_once(" at path \"") {
+            Some((system, _)) => std::io::Error::new(e.kind(), system.to_string()),
+            None => e,
+        }
+    })
 }

@@ -27,4 +27,4 @@ pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
     interval_in_box,
 };
-pub use file::{FORMAT_VERSION, MAGIC, write_whole};
+pub use file::{FORMAT_VERSION, MAGIC, check_writable, write_whole};

@@ -62,8 +62,8 @@ pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalF
 pub use twostage_compress::CompressorConfig;
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,
-    FeatureEnvelope, FileError, MAGIC, RecordShape, SignalNames, TrainingInfo, interval_in_box,
-    write_whole,
+    FeatureEnvelope, FileError, MAGIC, RecordShape, SignalNames, TrainingInfo, check_writable,
+    interval_in_box, write_whole,
 };
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
 pub use twostage_refine::{

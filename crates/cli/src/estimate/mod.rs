@@ -263,6 +263,10 @@ const OUTPUT_ERROR: &str = "oe";
 /// Run `twostage estimate`; returns how many records were estimated and
 /// how many failed.
 pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
+    // Before the work: refined or checked records take minutes.
+    if let Some(path) = &args.out {
+        twostage::check_writable(path)?;
+    }
     let chosen = method(args)?;
     // A check simulates the model many times per record; after an
     // output-error refinement, through the refinement's simulator (its
