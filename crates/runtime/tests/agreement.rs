@@ -10,7 +10,7 @@
 mod common;
 
 use rand_distr::{Distribution, StandardNormal};
-use twostage::compress::Arx;
+use twostage::compress::{Arx, CompressorConfig};
 use twostage::models::{
     Benchmark, ExperimentRng, IoData, Marginal, ModelSpec, PacejkaCar, Prior, SUMMARY_NAMES,
     SimError, Simulator, experiment_rng,
@@ -138,7 +138,7 @@ fn through_qr(host: &twostage::Estimator, record: &IoData) -> Vec<f64> {
     // A sample an output transform cannot take counts at its floor, as
     // on the estimate path.
     let mut outputs = record.outputs().to_owned();
-    if let twostage::compress::CompressorConfig::Transformed(t) = host.compressor() {
+    if let CompressorConfig::Transformed(t) = host.compressor() {
         for (j, mut column) in outputs.columns_mut().into_iter().enumerate() {
             for v in column.iter_mut() {
                 if !t.transforms()[j].accepts(*v) {
@@ -191,9 +191,14 @@ fn trained(model: &dyn Simulator, preset: Preset, simulations: usize) -> twostag
 }
 
 /// An estimator of the given structure (400 simulations, 200 to calibrate).
-fn structured(model: &dyn Simulator, arx: Arx, regressor: &str, seed: u64) -> twostage::Estimator {
+fn structured(
+    model: &dyn Simulator,
+    compressor: impl Into<CompressorConfig>,
+    regressor: &str,
+    seed: u64,
+) -> twostage::Estimator {
     TwoStage::builder(model)
-        .compressor(arx)
+        .compressor(compressor.into())
         .regressor(regressor.parse().unwrap())
         .simulations(400)
         .validation(0)
@@ -404,7 +409,7 @@ fn positive_with_log_outputs() -> (Positive, twostage::Estimator) {
             .unwrap()
             .with_signals(&["u"], &["level", "count"]),
     };
-    let compressor: twostage::compress::CompressorConfig = "log,log1p+arx:2,2".parse().unwrap();
+    let compressor: CompressorConfig = "log,log1p+arx:2,2".parse().unwrap();
     let host = TwoStage::builder(&model)
         .compressor(compressor)
         .regressor("mlp:6".parse().unwrap())
@@ -841,18 +846,13 @@ fn a_window_is_refused_shorter_than_a_regression_and_resumes_as_a_window() {
 /// transformed outputs is refused with the compressor named.
 #[test]
 fn the_signals_summary_after_the_coefficients_agrees_record_and_window() {
-    use twostage::compress::CompressorConfig;
     let summarized = |model: &dyn Simulator, spec: &str, seed: u64| {
-        let compressor: CompressorConfig = spec.parse().unwrap();
-        TwoStage::builder(model)
-            .compressor(compressor)
-            .regressor("mlp:5".parse().unwrap())
-            .simulations(400)
-            .validation(0)
-            .calibration(200)
-            .seed(seed)
-            .train()
-            .unwrap()
+        structured(
+            model,
+            spec.parse::<CompressorConfig>().unwrap(),
+            "mlp:5",
+            seed,
+        )
     };
     let car = PacejkaCar::new();
     let host = summarized(&car, "arx:2,2+summary", 5);
