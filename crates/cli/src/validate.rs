@@ -5,11 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use ndarray::Array2;
-use rayon::prelude::*;
-use twostage::models::{IoData, Sampling, run_experiment};
-use twostage::sources::refuse_beyond_memory;
-use twostage::validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
-use twostage::{EstimateWorkspace, Estimator, NamedModel};
+use twostage::{Estimator, NamedModel, TargetRmse, Validated, ValidationPlan, validate_estimator};
 
 use crate::OrUsage;
 use crate::usage;
@@ -33,17 +29,17 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "K", conflicts_with = "gamma")]
     target_rmse: Option<f64>,
     /// The most fresh simulations --target-rmse may run.
-    #[arg(long, default_value_t = 1_000_000, requires = "target_rmse")]
+    #[arg(long, default_value_t = ValidationPlan::default().max_sims, requires = "target_rmse")]
     max_sims: usize,
     /// Accuracy gamma of Theorem 1: r is then the smallest size that
     /// guarantees it with confidence 1 - delta.
     #[arg(long, requires = "delta")]
     gamma: Option<f64>,
     /// Confidence parameter delta of Theorem 1.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = ValidationPlan::default().delta)]
     delta: f64,
     /// Seed of the fresh simulations (disjoint from training by default).
-    #[arg(long, default_value_t = 0x5641_4c49)]
+    #[arg(long, default_value_t = ValidationPlan::DEFAULT_SEED)]
     seed: u64,
     /// Also draw estimates against truth into this SVG file.
     #[arg(long)]
@@ -64,118 +60,51 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let sim = NamedModel::trained_on(trained_on, given.as_ref())
         .and_then(|model| model.simulator(false))
         .usage_context("--model-file")?;
-    let sigma = squared_error_bound(estimator.lower(), estimator.upper());
-    let mut r = match (args.sims, args.gamma) {
-        (Some(r), _) => r,
-        (None, Some(gamma)) => usize::try_from(
-            hoeffding_sample_size(sigma, gamma, args.delta).usage_context("--gamma/--delta")?,
-        )
-        .map_err(|_| usage("--gamma is too small: the sample size overflows".into()))?,
-        (None, None) => 1000,
+    let plan = ValidationPlan {
+        sims: args.sims,
+        gamma: args.gamma,
+        delta: args.delta,
+        seed: args.seed,
+        target_rmse: args.target_rmse,
+        max_sims: args.max_sims,
     };
-    if r == 0 {
-        return Err(usage("--sims must be at least 1".into()));
+    // Progress: a bar on a terminal, else a line every 10 s of a long run.
+    let bars = crate::bars::Bars::new(false);
+    let run = validate_estimator(&estimator, sim.as_ref(), &plan, &bars).map_err(|e| {
+        // What was asked for is the user's to fix, like a bad flag.
+        if e.is_setting() {
+            usage(e.to_string())
+        } else {
+            anyhow::Error::new(e).context("validating")
+        }
+    })?;
+    let Validated {
+        report,
+        truth,
+        estimates,
+        records: r,
+        target,
+    } = run;
+    if let (Some(k), Some(target), false) = (args.target_rmse, target, args.format.json()) {
+        match target {
+            TargetRmse::Met { ratio } => writeln!(
+                out,
+                "--target-rmse {k}: met with r = {r} (every certified RMSE within {ratio:.3} \
+                 times the observed)"
+            )?,
+            TargetRmse::NotMet { ratio } => writeln!(
+                out,
+                "--target-rmse {k}: not met with r = {r} = --max-sims (a certified RMSE is \
+                 {ratio:.3} times the observed): raise --max-sims"
+            )?,
+        }
     }
-    let most = match args.target_rmse {
-        Some(k) if !(k.is_finite() && k > 1.0) => {
-            return Err(usage(format!(
-                "--target-rmse {k}: a certified RMSE is never below the observed one; \
-                 give a multiple above 1, such as 1.5"
-            )));
-        }
-        Some(_) if args.max_sims < r => {
-            return Err(usage(format!(
-                "--max-sims {} is below the first round of {r} simulations",
-                args.max_sims
-            )));
-        }
-        Some(_) => args.max_sims,
-        None => r,
-    };
-    let q = estimator.param_names().len();
-    // Theorem 1 and the certificate assume independent draws from the
-    // prior, whatever design the model trains with. Record i depends only
-    // on (seed, i), so each round extends the one before.
-    let prior = sim.prior().clone().with_sampling(Sampling::Uniform);
-    // Each record's parameters in the design, and its truth and estimate.
-    let flag = if args.target_rmse.is_some() {
-        "--max-sims"
-    } else {
-        "--sims"
-    };
-    refuse_beyond_memory(
-        flag,
-        most,
-        8 * 3 * q as u64,
-        "records' parameters and estimates",
-    )
-    .or_usage()?;
-    let design = prior.design(most, args.seed)?;
-    let (mut truth, mut estimates) = (Vec::new(), Vec::new());
-    let report = loop {
-        let done = truth.len() / q;
-        let pairs: Vec<(Vec<f64>, Vec<f64>)> = (done..r)
-            .into_par_iter()
-            .map_init(
-                || (IoData::default(), EstimateWorkspace::new()),
-                |(record, work), i| -> Result<(Vec<f64>, Vec<f64>)> {
-                    let mut theta = vec![0.0; q];
-                    run_experiment(sim.as_ref(), &design, i, &mut theta, record)?;
-                    let mut estimate = vec![0.0; q];
-                    estimator.estimate_into(
-                        record.inputs(),
-                        record.outputs(),
-                        work,
-                        &mut estimate,
-                    )?;
-                    Ok((theta, estimate))
-                },
-            )
-            .collect::<Result<_>>()?;
-        for (theta, estimate) in pairs {
-            truth.extend(theta);
-            estimates.extend(estimate);
-        }
-        let report = ValidationReport::new(
-            estimator.param_names(),
-            ndarray::ArrayView2::from_shape((r, q), &truth)?,
-            ndarray::ArrayView2::from_shape((r, q), &estimates)?,
-            estimator.lower(),
-            estimator.upper(),
-            args.delta,
-            estimator.intervals().cloned(),
-        )?;
-        let Some(k) = args.target_rmse else {
-            break report;
-        };
-        let ratio = certified_ratio(&report);
-        if ratio <= k {
-            if !args.format.json() {
-                writeln!(
-                    out,
-                    "--target-rmse {k}: met with r = {r} (every certified RMSE within {ratio:.3} \
-                     times the observed)"
-                )?;
-            }
-            break report;
-        }
-        if r == most {
-            if !args.format.json() {
-                writeln!(
-                    out,
-                    "--target-rmse {k}: not met with r = {r} = --max-sims (a certified RMSE is \
-                     {ratio:.3} times the observed): raise --max-sims"
-                )?;
-            }
-            break report;
-        }
-        r = r.saturating_mul(2).min(most);
-    };
     if args.format.json() {
         writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
     } else {
         writeln!(out, "{report}")?;
     }
+    let q = estimator.param_names().len();
     let truth = Array2::from_shape_vec((r, q), truth)?;
     let estimates = Array2::from_shape_vec((r, q), estimates)?;
     if let Some(path) = &args.plot {
@@ -219,23 +148,4 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// The largest ratio of a certified RMSE to the observed one, over the
-/// parameters and the whole vector (infinite when an observed error is 0,
-/// since no finite r certifies a perfect estimator).
-fn certified_ratio(report: &ValidationReport) -> f64 {
-    let ratio = |bound: Option<f64>, observed_mse: f64| match bound {
-        Some(mse_bound) if observed_mse > 0.0 => (mse_bound / observed_mse).sqrt(),
-        _ => f64::INFINITY,
-    };
-    report
-        .parameters
-        .iter()
-        .map(|p| ratio(p.certified.map(|c| c.upper()), p.mse))
-        .chain([ratio(
-            report.certified_total.map(|c| c.upper()),
-            report.total.empirical_mse,
-        )])
-        .fold(0.0, f64::max)
 }

@@ -179,6 +179,7 @@ impl Error {
             Self::InvalidSetting { .. }
                 | Self::Compression(CompressError::InvalidSetting { .. })
                 | Self::Fit(FitError::InvalidSetting { .. })
+                | Self::Validation(ValidateError::InvalidSetting { .. })
         )
     }
 }

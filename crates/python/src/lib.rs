@@ -404,6 +404,72 @@ impl PyEstimator {
         check_dict(py, &checked)
     }
 
+    /// The estimator validated on fresh simulations of its model, as
+    /// `twostage validate` does (the same plan gives the same report, bit
+    /// for bit): `(report_json, truth [r, q], estimates [r, q], target)`,
+    /// `target` None without `target_rmse`, else `(met, ratio)`. The
+    /// records run without the GIL, reported to `progress` as `train`'s
+    /// are. The model: the estimator's built-in one, or its model file
+    /// (`model_file` or `model_toml`).
+    #[pyo3(signature = (*, model_file=None, model_toml=None, sims=None, gamma=None, delta=None, seed=None, target_rmse=None, max_sims=None, progress=None))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn validate<'py>(
+        &self,
+        py: Python<'py>,
+        model_file: Option<PathBuf>,
+        model_toml: Option<&str>,
+        sims: Option<usize>,
+        gamma: Option<f64>,
+        delta: Option<f64>,
+        seed: Option<u64>,
+        target_rmse: Option<f64>,
+        max_sims: Option<usize>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<(
+        String,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Option<(bool, f64)>,
+    )> {
+        let named = named_model(None, model_file, model_toml)?;
+        let sim = NamedModel::trained_on(&self.inner.training().model, named.as_ref())
+            .and_then(|model| model.simulator(false))
+            .map_err(to_python)?;
+        let defaults = twostage::ValidationPlan::default();
+        let plan = twostage::ValidationPlan {
+            sims,
+            gamma,
+            delta: delta.unwrap_or(defaults.delta),
+            seed: seed.unwrap_or(defaults.seed),
+            target_rmse,
+            max_sims: max_sims.unwrap_or(defaults.max_sims),
+        };
+        let reporter = progress.map(PythonProgress::new);
+        let run = py
+            .detach(|| {
+                let progress: &dyn twostage::Progress = match &reporter {
+                    Some(reporter) => reporter,
+                    None => &twostage::Silent,
+                };
+                twostage::validate_estimator(&self.inner, sim.as_ref(), &plan, progress)
+            })
+            .map_err(to_python)?;
+        let report = serde_json::to_string(&run.report)
+            .map_err(|e| PyValueError::new_err(format!("validation report: {e}")))?;
+        let q = self.inner.param_names().len();
+        let table = |values: Vec<f64>| -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+            Ok(ndarray::Array2::from_shape_vec((run.records, q), values)
+                .map_err(shape_error)?
+                .into_dyn()
+                .into_pyarray(py))
+        };
+        let target = run.target.map(|t| match t {
+            twostage::TargetRmse::Met { ratio } => (true, ratio),
+            twostage::TargetRmse::NotMet { ratio } => (false, ratio),
+        });
+        Ok((report, table(run.truth)?, table(run.estimates)?, target))
+    }
+
     /// One estimate of the plant behind all `records` (pairs `(u, y)`, any
     /// lengths), as `twostage estimate --joint`: their two-stage
     /// estimates pooled, then one output-error fit of every record on its

@@ -232,13 +232,16 @@ impl Simulator for PythonSimulator {
 
 /// Progress reported to a Python callable `f(event, stage, count)`:
 /// `("begin", "training", total)`, `("advance", "training", done)`,
-/// `("end", "training", 0)`. Advances are gathered and passed on at most
+/// `("end", "training", 0)`; the steps of other work (`"validating"`)
+/// alike, by the step's name. Advances are gathered and passed on at most
 /// ten times a second, so a chart of microsecond simulations does not wait
 /// for the interpreter.
 pub(crate) struct PythonProgress {
     callback: Py<PyAny>,
     pending: std::sync::atomic::AtomicUsize,
     last: std::sync::Mutex<std::time::Instant>,
+    /// The step begun last (`begin_step`), which its advances report.
+    step: std::sync::Mutex<&'static str>,
 }
 
 impl PythonProgress {
@@ -247,14 +250,15 @@ impl PythonProgress {
             callback,
             pending: std::sync::atomic::AtomicUsize::new(0),
             last: std::sync::Mutex::new(std::time::Instant::now()),
+            step: std::sync::Mutex::new(""),
         }
     }
 
     /// Call the function; a failing progress callback must not stop
     /// training, so its exception is printed by Python and dropped.
-    fn tell(&self, event: &str, stage: twostage::Stage, count: usize) {
+    fn tell(&self, event: &str, stage: &str, count: usize) {
         Python::attach(|py| {
-            if let Err(e) = self.callback.bind(py).call1((event, stage.label(), count)) {
+            if let Err(e) = self.callback.bind(py).call1((event, stage, count)) {
                 e.print(py);
             }
         });
@@ -269,36 +273,63 @@ impl PythonProgress {
         });
     }
 
-    fn flush(&self, stage: twostage::Stage) {
+    fn flush(&self, stage: &str) {
         let done = self.pending.swap(0, std::sync::atomic::Ordering::Relaxed);
         if done > 0 {
             self.tell("advance", stage, done);
         }
+    }
+
+    /// `done` more, passed on when a tenth of a second has gone since the
+    /// last report: whoever finds the clock free and the time gone reports.
+    fn gather(&self, done: usize, stage: impl FnOnce() -> &'static str) {
+        self.pending
+            .fetch_add(done, std::sync::atomic::Ordering::Relaxed);
+        if let Ok(mut last) = self.last.try_lock()
+            && last.elapsed() >= std::time::Duration::from_millis(100)
+        {
+            *last = std::time::Instant::now();
+            drop(last);
+            self.flush(stage());
+        }
+    }
+
+    fn current_step(&self) -> &'static str {
+        self.step.lock().map_or("", |step| *step)
     }
 }
 
 impl twostage::Progress for PythonProgress {
     fn begin(&self, stage: twostage::Stage, total: usize) {
         self.pending.store(0, std::sync::atomic::Ordering::Relaxed);
-        self.tell("begin", stage, total);
+        self.tell("begin", stage.label(), total);
     }
 
     fn advance(&self, stage: twostage::Stage, done: usize) {
-        self.pending
-            .fetch_add(done, std::sync::atomic::Ordering::Relaxed);
-        // Whoever finds the clock free and a tenth of a second gone reports.
-        if let Ok(mut last) = self.last.try_lock()
-            && last.elapsed() >= std::time::Duration::from_millis(100)
-        {
-            *last = std::time::Instant::now();
-            drop(last);
-            self.flush(stage);
-        }
+        self.gather(done, || stage.label());
     }
 
     fn end(&self, stage: twostage::Stage) {
-        self.flush(stage);
-        self.tell("end", stage, 0);
+        self.flush(stage.label());
+        self.tell("end", stage.label(), 0);
+    }
+
+    fn begin_step(&self, what: &'static str, total: usize, _unit: &'static str) {
+        if let Ok(mut step) = self.step.lock() {
+            *step = what;
+        }
+        self.pending.store(0, std::sync::atomic::Ordering::Relaxed);
+        self.tell("begin", what, total);
+    }
+
+    fn advance_step(&self, done: usize) {
+        self.gather(done, || self.current_step());
+    }
+
+    fn end_step(&self) {
+        let what = self.current_step();
+        self.flush(what);
+        self.tell("end", what, 0);
     }
 
     fn note(&self, message: &str) {

@@ -208,6 +208,35 @@ def test_the_validation_report_is_plain_data(small):
     json.dumps(report)  # nothing but JSON's types
 
 
+def test_validate_is_the_cli_s_to_the_last_bit(small):
+    estimator, path = small
+    run = estimator.validate(sims=150, seed=11)
+    assert run["records"] == 150 and run["truth"].shape == (150, 1)
+    printed = json.loads(cli("validate", "--estimator", str(path), "--sims", "150",
+                             "--seed", "11", "--json"))
+    assert run["report"] == printed
+    # The report is the rows' own.
+    mse = float(np.mean((run["truth"] - run["estimates"]) ** 2))
+    assert abs(run["report"]["parameters"][0]["mse"] - mse) <= 1e-12 * mse
+    assert run["target_met"] is None
+
+    grown = estimator.validate(sims=100, seed=11, target_rmse=1.5)
+    r = grown["records"]
+    assert grown["target_met"] and grown["certified_over_observed"] <= 1.5
+    said = cli("validate", "--estimator", str(path), "--sims", "100", "--seed", "11",
+               "--target-rmse", "1.5")
+    assert f"met with r = {r} " in said
+    events = []
+    estimator.validate(sims=120, seed=11, progress=lambda *e: events.append(e))
+    assert events[0] == ("begin", "validating", 120) and events[-1] == ("end", "validating", 0)
+    assert sum(n for event, _, n in events if event == "advance") == 120
+
+    with pytest.raises(ValueError, match=r"target_rmse = 0.9: .*multiple above 1"):
+        estimator.validate(sims=100, target_rmse=0.9)
+    with pytest.raises(ValueError, match=r"sims and gamma both size the run"):
+        estimator.validate(sims=100, gamma=0.1)
+
+
 def test_bad_arrays_name_the_argument_and_the_index(small):
     estimator, _ = small
     n, _, _ = estimator.record_shape

@@ -22,7 +22,8 @@
 //! (the automatic design), [`refine`] (refinements and checks through a
 //! model), [`baselines`] (the paper's competitors and the exact Bayes
 //! references). This crate holds what every door (command line, Python,
-//! shards) shares: the training request, and the policy that refines an
+//! shards) shares: the training request, the validation run
+//! ([`validate_estimator`]), and the policy that refines an
 //! estimator's estimates ([`EstimateRefiner`], [`JointFitter`]).
 //!
 //! # Example
@@ -54,6 +55,7 @@
 mod joint;
 mod refiner;
 mod request;
+mod validation_run;
 
 pub use joint::{JointFitter, JointOfRecords};
 pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
@@ -73,6 +75,9 @@ pub use twostage_refine::{
     check_record, check_with, output_fit, search_best_fits,
 };
 pub use twostage_train::{DEFAULT_SEED, Error, Result, Run, RunSettings, TrainedOn, TwoStage};
+pub use validation_run::{
+    TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator,
+};
 
 pub use twostage_sources::{
     ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,

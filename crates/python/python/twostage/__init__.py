@@ -338,6 +338,55 @@ class Estimator:
         joint["lower"], joint["upper"] = self._interval(joint["theta"], widths)
         return joint
 
+    def validate(
+        self,
+        *,
+        model_file: _Path = None,
+        model_toml: Optional[str] = None,
+        sims: Optional[int] = None,
+        gamma: Optional[float] = None,
+        delta: Optional[float] = None,
+        seed: Optional[int] = None,
+        target_rmse: Optional[float] = None,
+        max_sims: Optional[int] = None,
+        progress: Any = None,
+    ) -> dict[str, Any]:
+        """Validate this estimator on fresh simulations of its model, as
+        ``twostage validate`` does (the same settings give the same report,
+        bit for bit): ``sims`` records (default 1000), or as many as
+        Theorem 1 needs for accuracy ``gamma`` with confidence
+        ``1 - delta`` (``delta`` default 1e-3); with ``target_rmse`` K,
+        doubling the records from ``sims`` until every certified RMSE is
+        at most K times the observed one, at most ``max_sims`` (default
+        1,000,000). ``seed`` defaults to the command's, apart from every
+        training seed. The model is the estimator's built-in one, or its
+        model file (``model_file`` or ``model_toml``). ``progress`` as in
+        ``train``. Returns a dict: ``report`` (as ``validation`` holds
+        it), ``truth`` and ``estimates`` [r, q], ``records`` r, and
+        ``target_met`` and ``certified_over_observed`` (None without
+        ``target_rmse``). A setting out of range raises ValueError naming
+        it."""
+        report, truth, estimates, target = self._native.validate(
+            model_file=_path(model_file),
+            model_toml=model_toml,
+            sims=sims,
+            gamma=gamma,
+            delta=delta,
+            seed=seed,
+            target_rmse=target_rmse,
+            max_sims=max_sims,
+            progress=_progress(progress),
+        )
+        met, ratio = target if target is not None else (None, None)
+        return {
+            "report": json.loads(report),
+            "truth": truth,
+            "estimates": estimates,
+            "records": truth.shape[0],
+            "target_met": met,
+            "certified_over_observed": ratio,
+        }
+
     def _interval(self, theta, widths):
         """``theta +- widths`` inside the prior's box, as the command line
         writes it (``twostage::interval_in_box``): a parameter's interval

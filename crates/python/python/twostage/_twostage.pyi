@@ -82,6 +82,22 @@ class Estimator:
         prior_starts: Optional[int] = None,
         seed: int = 0,
     ) -> dict[str, Any]: ...
+    def validate(
+        self,
+        *,
+        model_file: Optional[str] = None,
+        model_toml: Optional[str] = None,
+        sims: Optional[int] = None,
+        gamma: Optional[float] = None,
+        delta: Optional[float] = None,
+        seed: Optional[int] = None,
+        target_rmse: Optional[float] = None,
+        max_sims: Optional[int] = None,
+        progress: Optional[Any] = None,
+    ) -> Tuple[str, _Array, _Array, Optional[Tuple[bool, float]]]:
+        """(report JSON, truth [r, q], estimates [r, q], (met, ratio) or
+        None): ``twostage.Estimator.validate`` makes the dict of these."""
+        ...
 
 def check_values(
     theta: list[float],
