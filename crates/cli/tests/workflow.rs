@@ -371,7 +371,7 @@ fn a_count_the_memory_cannot_hold_is_refused_up_front() {
     let out = twostage(&["validate", "--estimator", path(&file), "--sims", huge]);
     refused(
         &out,
-        "invalid --sims = 1000000000000: its records' parameters and estimates take 24.0 TB",
+        "invalid sims = 1000000000000: its records' parameters and estimates take 24.0 TB",
     );
 }
 

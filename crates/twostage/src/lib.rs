@@ -52,11 +52,17 @@
 //! ```
 #![deny(missing_docs)]
 
+mod estimating;
 mod joint;
 mod refiner;
 mod request;
 mod validation_run;
 
+pub use estimating::{
+    AutoRefined, CheckSettings, EstimateRequest, EstimateWith, Estimates, Estimating, GivenValues,
+    OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordOutcome, RefineWhich, RequestError,
+    RequestProblem, Windows,
+};
 pub use joint::{JointFitter, JointOfRecords};
 pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};

@@ -4,25 +4,19 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use rayon::prelude::*;
-use twostage::Progress;
-use twostage::fit::TerminationReason;
 use twostage::models::IoData;
-use twostage::models::Simulator;
-use twostage::{BestFit, RecordCheck, RefineReason};
+use twostage::{Estimating, RecordEstimate};
 
+use crate::csv_records;
 use crate::options::{InitialCovariance, TableFormat};
-use crate::{csv_records, usage};
 
 mod columns;
 mod methods;
-mod refine;
 mod said;
 mod table;
 
 use columns::plot_check;
-use methods::{Chosen, method};
-use table::{PriorBox, csv, json};
+use table::{csv, json};
 
 /// Options of `twostage estimate`.
 #[derive(Debug, clap::Args)]
@@ -141,7 +135,7 @@ pub struct EstimateArgs {
     /// from the prior, Levenberg-Marquardt on the record minus the
     /// noise-free simulation) for any model, --model or --model-file.
     #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(
-        twostage::ClassicMethod::ALL.map(|m| m.name()).into_iter().chain([OUTPUT_ERROR])
+        twostage::ClassicMethod::ALL.map(|m| m.name()).into_iter().chain([twostage::OUTPUT_ERROR_METHOD])
     ))]
     method: Option<String>,
     /// EKF/UKF initial covariance: the paper's eq. (6) or (7) (default eq6).
@@ -194,71 +188,7 @@ impl EstimateArgs {
     fn checks(&self) -> bool {
         self.check || self.refine == Some(RefineWhich::Auto)
     }
-
-    /// The best-fit search's starts for a model of `q` parameters.
-    fn search(&self, q: usize) -> twostage::SearchStarts {
-        twostage::SearchStarts {
-            from_prior: self
-                .prior_starts
-                .unwrap_or_else(|| twostage::SearchStarts::default_from_prior(q)),
-            seed: self.seed.unwrap_or(0),
-        }
-    }
 }
-
-/// One record's estimate, its interval half-widths and its feature
-/// distance with the out-of-distribution threshold, where known.
-struct Estimated {
-    theta: Vec<f64>,
-    widths: Option<Vec<f64>>,
-    distance: Option<(f64, f64)>,
-    /// How the record's input lies outside the estimator's input family
-    /// (empty inside it), when the estimator knows one.
-    input: Option<Vec<twostage::models::InputDeviation>>,
-    /// Samples outside their output's transform, when the estimator
-    /// transforms its outputs.
-    floored: Option<Vec<twostage::compress::FlooredSample>>,
-    /// With --check: how the model at the estimate explains the record, or
-    /// why it could not be simulated.
-    check: Option<Result<RecordCheck, String>>,
-    /// With --refine: why an output-error descent stopped (`Ok(None)` for
-    /// a posterior mean), or why the refinement failed (the TS estimate
-    /// is kept).
-    refined: Option<Result<Option<TerminationReason>, String>>,
-    /// With --refine: why the refined estimate has no interval of its own.
-    interval_failure: Option<String>,
-    /// With --refine: the refined estimate's correlation matrix.
-    correlation: Option<Vec<f64>>,
-    /// With an output-error refinement or --joint: the optima its search
-    /// ended in, and the runner-up's loss over the best's.
-    optima: Option<(usize, Option<f64>)>,
-    /// With --window: the window's last sample in its record, from 1.
-    window_end: Option<usize>,
-}
-
-impl Estimated {
-    /// Whether the record's input lies in the estimator's input family
-    /// (`None` when it knows none).
-    fn in_family(&self) -> Option<bool> {
-        self.input.as_ref().map(Vec::is_empty)
-    }
-
-    /// Outside what training saw, by the features or by the input.
-    fn out_of_distribution(&self) -> bool {
-        self.distance.is_some_and(|(d, t)| d > t)
-            || self.input.as_ref().is_some_and(|d| !d.is_empty())
-    }
-}
-
-/// A record with its estimate, or why it has none.
-type RecordOutcome = Result<(IoData, Estimated), String>;
-
-/// Estimates one record (its experiment id and data), or says why it
-/// cannot.
-type Method = Box<dyn Fn(&str, &IoData) -> Result<Estimated, String> + Send + Sync>;
-
-/// The name of the multi-start output-error fit among the methods.
-const OUTPUT_ERROR: &str = "oe";
 
 /// Run `twostage estimate`; returns how many records were estimated and
 /// how many failed.
@@ -267,50 +197,40 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     if let Some(path) = &args.out {
         twostage::check_writable(path)?;
     }
-    let chosen = method(args)?;
-    // A check simulates the model many times per record; after an
-    // output-error refinement, through the refinement's simulator (its
-    // processes are already running).
-    let check_model: Option<&dyn Simulator> = chosen
-        .refiner
-        .as_ref()
-        .and_then(|r| r.simulator())
-        .filter(|_| chosen.checker.is_some())
-        .or(chosen.checker.as_deref());
-    let session = Session {
-        args,
-        chosen: &chosen,
-        check_model,
-        plan: twostage::CheckPlan {
-            noisy: args.check_sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
-            seed: args.seed.unwrap_or(0),
-            score_from: args.score_from.unwrap_or(0),
-            prior_starts: args.search(chosen.names.len()).from_prior,
-        },
-        policy: twostage::RefinePolicy {
-            min_fit_percent: args
-                .refine_below_fit
-                .unwrap_or(twostage::RefinePolicy::default().min_fit_percent),
-        },
-        // Progress: a bar on a terminal, else a line every 10 s of a long
-        // step.
-        bars: crate::bars::Bars::new(false),
+    let estimating = methods::prepared(args)?;
+    let format = csv_records::RecordFormat {
+        signals: estimating.signals().clone(),
+        sample_time: estimating.sample_time(),
     };
-    let mut rows: Vec<(String, Estimated)> = Vec::new();
+    let trained = estimating.trained_length();
+    // Progress: a bar on a terminal, else a line every 10 s of a long step.
+    let bars = crate::bars::Bars::new(false);
+    let mut rows: Vec<(String, RecordEstimate)> = Vec::new();
     let mut failed = 0;
-    // With --joint: every estimated record, by file and experiment.
+    // With --joint: every estimated record, by file and experiment, and
+    // its row.
     let mut plant: Vec<(String, IoData, usize)> = Vec::new();
     for path in &args.data {
-        let mut estimates = session.estimate_file(path)?;
-        session.check_and_refine(path, &mut estimates);
-        let mut said = said::Said::new(path, &chosen.format, chosen.trained);
-        for (id, outcome) in estimates {
+        let reads = csv_records::read(path, &format).map_err(anyhow::Error::msg)?;
+        let records = reads.into_iter().map(|r| (r.id, r.record)).collect();
+        let file = path.display().to_string();
+        let estimates = estimating.estimate(&file, records, &bars);
+        if let Some(auto) = &estimates.auto {
+            eprintln!(
+                "note: {file}: --refine=auto: the check explains {} of {} two-stage estimates; \
+                 refining {}",
+                auto.explained,
+                auto.checked,
+                said::refine_reasons(auto, &estimates.rows)
+            );
+        }
+        let mut said = said::Said::new(path, &format, trained);
+        for (id, outcome) in estimates.rows {
             said.note_length(&id, &outcome);
             match outcome {
                 Ok((record, estimated)) => {
                     said.warnings(&id, &estimated);
                     if let (Some(dir), Some(Ok(check))) = (&args.plot, &estimated.check) {
-                        let format = &chosen.format;
                         plot_check(
                             dir,
                             &id,
@@ -321,8 +241,8 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         )?;
                     }
                     said.check(&id, &estimated);
-                    if chosen.joint.is_some() {
-                        let name = format!("{}: experiment {id}", path.display());
+                    if estimating.joins() {
+                        let name = format!("{file}: experiment {id}");
                         plant.push((name, record, rows.len()));
                     }
                     rows.push((id, estimated));
@@ -335,10 +255,28 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         }
         said.summarize();
     }
-    if let Some(fitter) = &chosen.joint
-        && !plant.is_empty()
-    {
-        let joint = joint_of_plant(fitter, &plant, &rows, &session.bars);
+    if !plant.is_empty() {
+        let records: Vec<(&IoData, &RecordEstimate)> = plant
+            .iter()
+            .map(|(_, record, row)| (record, &rows[*row].1))
+            .collect();
+        let joint = match estimating.joint(&records, &bars) {
+            Some(Ok((joint, row))) => {
+                said::joint(&plant, &joint);
+                row
+            }
+            Some(Err(why)) => {
+                eprintln!(
+                    "error: the joint fit of {} records failed: {why}",
+                    plant.len()
+                );
+                RecordEstimate {
+                    refined: Some(Err(why)),
+                    ..RecordEstimate::bare(Vec::new())
+                }
+            }
+            None => unreachable!("records are gathered for a joint fit only"),
+        };
         rows.push(("joint".into(), joint));
     }
     let outcome = Outcome {
@@ -349,393 +287,29 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         // Nothing to write: an empty table would read as a result.
         return Ok(outcome);
     }
-    write_table(args, &chosen, &rows)?;
+    write_table(args, &estimating, &rows)?;
     Ok(outcome)
 }
 
-/// What every file of one `estimate` run shares: the method, the check's
-/// model and plan, the progress bars.
-struct Session<'a> {
-    args: &'a EstimateArgs,
-    chosen: &'a Chosen,
-    check_model: Option<&'a dyn Simulator>,
-    plan: twostage::CheckPlan,
-    /// Which two-stage estimates `--refine=auto` refines.
-    policy: twostage::RefinePolicy,
-    bars: crate::bars::Bars,
-}
-
-/// A record's best-fit search, or why it failed; `None` where no check or
-/// refinement needs one.
-type Search = Option<Result<BestFit, String>>;
-
-impl Session<'_> {
-    /// Every record of the file at `path` estimated, in parallel, reported
-    /// in their order: each estimate depends on its record alone.
-    fn estimate_file(&self, path: &std::path::Path) -> Result<Vec<(String, RecordOutcome)>> {
-        let reads = csv_records::read(path, &self.chosen.format).map_err(anyhow::Error::msg)?;
-        let pieces = self.windows(path, reads)?;
-        self.bars.begin_step("estimating", pieces.len(), "records");
-        let estimates = pieces
-            .into_par_iter()
-            .map(|(id, record, window_end)| {
-                let estimated = record.and_then(|record| {
-                    let estimated = (self.chosen.method)(&id, &record)
-                        .map_err(|e| format!("{}: experiment {id}: {e}", path.display()))?;
-                    Ok((
-                        record,
-                        Estimated {
-                            window_end,
-                            ..estimated
-                        },
-                    ))
-                });
-                self.bars.advance_step(1);
-                (id, estimated)
-            })
-            .collect();
-        self.bars.end_step();
-        Ok(estimates)
-    }
-
-    /// The records to estimate: each whole, or with --window each of its
-    /// windows (its last sample, from 1, beside it). A record shorter than
-    /// one window is refused by name.
-    #[allow(clippy::type_complexity)]
-    fn windows(
-        &self,
-        path: &std::path::Path,
-        reads: Vec<csv_records::ReadRecord>,
-    ) -> Result<Vec<(String, Result<IoData, String>, Option<usize>)>> {
-        let Some(window) = self.args.window else {
-            return Ok(reads.into_iter().map(|r| (r.id, r.record, None)).collect());
-        };
-        let every = self.args.every.unwrap_or(window);
-        if window == 0 || every == 0 {
-            return Err(usage(format!(
-                "--window {window} --every {every}: give a window and a step of at least 1 sample"
-            )));
-        }
-        let mut pieces = Vec::new();
-        for read in reads {
-            let record = match read.record {
-                Ok(record) => record,
-                Err(e) => {
-                    pieces.push((read.id, Err(e), None));
-                    continue;
-                }
-            };
-            let n = record.n_samples();
-            if n < window {
-                pieces.push((
-                    read.id.clone(),
-                    Err(format!(
-                        "{}: experiment {}: {n} samples, shorter than the window of {window}",
-                        path.display(),
-                        read.id
-                    )),
-                    None,
-                ));
-                continue;
-            }
-            for end in (window..=n).step_by(every) {
-                pieces.push((
-                    read.id.clone(),
-                    Ok(record.window(end - window, end)),
-                    Some(end),
-                ));
-            }
-        }
-        Ok(pieces)
-    }
-
-    /// The file's estimates checked and refined as asked. One best-fit
-    /// search per record serves its check and its output-error
-    /// refinement. With `--refine=auto` the two-stage estimates are
-    /// checked first and only the records the policy names are refined
-    /// (and checked again).
-    fn check_and_refine(&self, path: &std::path::Path, estimates: &mut [(String, RecordOutcome)]) {
-        let everyone = vec![true; estimates.len()];
-        let searches = self.search(estimates);
-        match (&self.chosen.refiner, self.args.refine) {
-            (Some(refiner), Some(RefineWhich::Auto)) => {
-                self.check_all(estimates, &everyone, &searches);
-                let reasons = self.reasons(estimates);
-                let chosen: Vec<bool> = reasons.iter().map(Option::is_some).collect();
-                let explained = estimates
-                    .iter()
-                    .filter(|(_, outcome)| {
-                        matches!(outcome, Ok((_, e)) if matches!(&e.check, Some(Ok(c)) if c.explained()))
-                    })
-                    .count();
-                eprintln!(
-                    "note: {}: --refine=auto: the check explains {} of {} two-stage estimates; \
-                     refining {}",
-                    path.display(),
-                    explained,
-                    everyone.len(),
-                    said::refine_reasons(estimates, &reasons)
-                );
-                refine_together(refiner, estimates, &chosen, &searches, &self.bars);
-                self.check_all(estimates, &chosen, &searches);
-            }
-            (Some(refiner), _) => {
-                refine_together(refiner, estimates, &everyone, &searches, &self.bars);
-                self.check_all(estimates, &everyone, &searches);
-            }
-            (None, _) => self.check_all(estimates, &everyone, &searches),
-        }
-    }
-
-    /// Each record's best-fit search (from its estimate, its interval's
-    /// corners and the prior), where a check or an output-error refinement
-    /// needs one: the records of a file together, in lockstep, a batch of
-    /// them at a time.
-    fn search(&self, estimates: &[(String, RecordOutcome)]) -> Vec<Search> {
-        let refiner = self.chosen.refiner.as_ref().filter(|r| r.is_output_error());
-        let Some(model) = refiner.and_then(|r| r.simulator()).or(self.check_model) else {
-            return vec![None; estimates.len()];
-        };
-        let prior = model.spec().prior();
-        let starts: Vec<Option<Result<Vec<Vec<f64>>, String>>> = estimates
-            .iter()
-            .map(|(_, outcome)| {
-                let (_, e) = outcome.as_ref().ok()?;
-                let widths = e.widths.as_deref();
-                Some(match refiner {
-                    Some(r) => r.search_starts(prior, &e.theta, widths),
-                    None => self
-                        .plan
-                        .search()
-                        .starts(prior, &e.theta, widths)
-                        .map_err(|e| e.to_string()),
-                })
-            })
-            .collect();
-        let wanted = starts.iter().filter(|s| matches!(s, Some(Ok(_)))).count();
-        self.bars.begin_step("searching", wanted, "records");
-        let mut found = Vec::with_capacity(wanted);
-        let searches: Vec<(&IoData, Vec<Vec<f64>>)> = estimates
-            .iter()
-            .zip(&starts)
-            .filter_map(|((_, outcome), starts)| {
-                let (record, _) = outcome.as_ref().ok()?;
-                Some((record, starts.as_ref()?.as_ref().ok()?.clone()))
-            })
-            .collect();
-        let mut searches = searches.into_iter();
-        loop {
-            let chunk: Vec<_> = searches.by_ref().take(twostage::RECORDS_TOGETHER).collect();
-            if chunk.is_empty() {
-                break;
-            }
-            let k = chunk.len();
-            found.extend(twostage::search_best_fits(model, chunk));
-            self.bars.advance_step(k);
-        }
-        self.bars.end_step();
-        let mut found = found.into_iter();
-        starts
-            .into_iter()
-            .map(|starts| match starts? {
-                Ok(_) => Some(
-                    found
-                        .next()
-                        .unwrap_or_else(|| unreachable!("one search per record with starts"))
-                        .map_err(|e| format!("the best-fit search failed: {e}")),
-                ),
-                Err(e) => Some(Err(e)),
-            })
-            .collect()
-    }
-
-    /// Why `--refine=auto` refines each record (`None`: it keeps its
-    /// two-stage estimate): the policy's reasons, from the check, the
-    /// feature distance and the record's length.
-    fn reasons(&self, estimates: &[(String, RecordOutcome)]) -> Vec<Option<RefineReason>> {
-        estimates
-            .iter()
-            .map(|(_, outcome)| {
-                let (record, e) = outcome.as_ref().ok()?;
-                let other_length = self.chosen.trained.is_some_and(|n| n != record.n_samples());
-                match &e.check {
-                    Some(Ok(c)) => self.policy.reason(c, e.out_of_distribution(), other_length),
-                    _ => other_length.then_some(RefineReason::OtherLength),
-                }
-            })
-            .collect()
-    }
-
-    /// Check the estimates of the records marked in `only`, in parallel,
-    /// against their searches.
-    fn check_all(
-        &self,
-        estimates: &mut [(String, RecordOutcome)],
-        only: &[bool],
-        searches: &[Search],
-    ) {
-        let Some(model) = self.check_model else {
-            return;
-        };
-        self.bars
-            .begin_step("checking", only.iter().filter(|o| **o).count(), "records");
-        estimates
-            .par_iter_mut()
-            .zip(only)
-            .zip(searches)
-            .filter(|((_, only), _)| **only)
-            .for_each(|(((_, outcome), _), search)| {
-                if let Ok((record, estimated)) = outcome {
-                    estimated.check = Some(check(model, record, estimated, search, self.plan));
-                }
-                self.bars.advance_step(1);
-            });
-        self.bars.end_step();
-    }
-}
-
 /// The table of every estimated record, to `--out` or stdout.
-fn write_table(args: &EstimateArgs, chosen: &Chosen, rows: &[(String, Estimated)]) -> Result<()> {
-    let outputs = &chosen.format.signals.outputs;
-    let prior_box = chosen.prior_box.as_ref();
+fn write_table(
+    args: &EstimateArgs,
+    estimating: &Estimating,
+    rows: &[(String, RecordEstimate)],
+) -> Result<()> {
+    let outputs = &estimating.signals().outputs;
+    let names = estimating.param_names();
+    let prior_box = estimating.prior_box();
     let text = if args.format == TableFormat::Json {
-        json(&chosen.names, rows, outputs, args.correlation, prior_box)?
+        json(names, rows, outputs, args.correlation, prior_box)?
     } else {
-        csv(&chosen.names, rows, outputs, args.correlation, prior_box)?
+        csv(names, rows, outputs, args.correlation, prior_box)?
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => crate::standard_output::StandardOutput::write_text(&text)?,
     }
     Ok(())
-}
-
-/// Refines the estimated records of a file together: an output-error
-/// refinement at each record's best fit from its search, a posterior
-/// refinement by its own grid (their simulations in shared batches). A
-/// refinement that fails keeps the TS estimate, and says so; one that
-/// succeeds brings its own interval (NaN where the record does not
-/// determine it, said on stderr).
-fn refine_together(
-    refiner: &twostage::EstimateRefiner,
-    estimates: &mut [(String, RecordOutcome)],
-    only: &[bool],
-    searches: &[Search],
-    bars: &crate::bars::Bars,
-) {
-    let (items, bests): (Vec<twostage::ToRefine<'_>>, Vec<Result<BestFit, String>>) = estimates
-        .iter()
-        .zip(only)
-        .zip(searches)
-        .filter(|((_, only), _)| **only)
-        .filter_map(|(((_, outcome), _), search)| {
-            let (record, e) = outcome.as_ref().ok()?;
-            let best = search
-                .clone()
-                .unwrap_or_else(|| Err("no best-fit search".into()));
-            Some(((record, e.theta.as_slice(), e.widths.as_deref()), best))
-        })
-        .unzip();
-    bars.begin_step("refining", items.len(), "records");
-    let refined = if refiner.is_output_error() {
-        let refined = refiner.refine_at(&items, &bests);
-        bars.advance_step(items.len());
-        refined
-    } else {
-        refiner.refine_many_reporting(&items, bars)
-    };
-    bars.end_step();
-    let estimated = estimates
-        .iter_mut()
-        .zip(only)
-        .filter(|(_, only)| **only)
-        .filter_map(|((_, outcome), _)| outcome.as_mut().ok());
-    for ((_, e), result) in estimated.zip(refined) {
-        match result {
-            Ok(r) => {
-                let q = r.theta.len();
-                let (own, why) = match r.half_widths {
-                    Ok(w) => (w, None),
-                    Err(why) => (vec![f64::NAN; q], Some(why)),
-                };
-                e.theta = r.theta;
-                e.widths = Some(own);
-                e.refined = Some(Ok(r.stop));
-                e.interval_failure = why;
-                e.correlation = r.correlation;
-                e.optima = r.optima;
-            }
-            Err(why) => e.refined = Some(Err(why)),
-        }
-    }
-}
-
-/// The joint estimate of every record of `plant` (its name, the record
-/// and its row among `rows`), said on stderr record by record; a joint
-/// fit that fails keeps the pooled two-stage estimate, and says why.
-fn joint_of_plant(
-    fitter: &twostage::JointFitter,
-    plant: &[(String, IoData, usize)],
-    rows: &[(String, Estimated)],
-    bars: &crate::bars::Bars,
-) -> Estimated {
-    let items: Vec<twostage::ToRefine<'_>> = plant
-        .iter()
-        .map(|(_, record, row)| {
-            let e = &rows[*row].1;
-            // An estimate out of the estimator's distribution has no
-            // interval to weigh it by: it only starts the search.
-            let widths = e.widths.as_deref().filter(|_| !e.out_of_distribution());
-            (record, e.theta.as_slice(), widths)
-        })
-        .collect();
-    bars.begin_step("fitting jointly", 1, "plants");
-    let found = fitter.fit(&items);
-    bars.advance_step(1);
-    bars.end_step();
-    let joint = match found {
-        Ok(joint) => joint,
-        Err(why) => {
-            eprintln!(
-                "error: the joint fit of {} records failed: {why}",
-                plant.len()
-            );
-            return Estimated {
-                refined: Some(Err(why)),
-                ..methods::bare(Vec::new())
-            };
-        }
-    };
-    said::joint(plant, &joint);
-    let q = joint.theta.len();
-    let (widths, why) = match joint.half_widths {
-        Ok(w) => (w, None),
-        Err(why) => (vec![f64::NAN; q], Some(why)),
-    };
-    Estimated {
-        widths: Some(widths),
-        refined: Some(Ok(Some(joint.stop))),
-        interval_failure: why,
-        correlation: joint.correlation,
-        optima: Some((joint.optima, joint.runner_up_ratio)),
-        ..methods::bare(joint.theta)
-    }
-}
-
-/// Checks one record's estimate against the record's best-fit search.
-fn check(
-    model: &dyn Simulator,
-    record: &IoData,
-    estimated: &Estimated,
-    search: &Search,
-    plan: twostage::CheckPlan,
-) -> Result<RecordCheck, String> {
-    let best = search
-        .as_ref()
-        .ok_or_else(|| "no best-fit search".to_string())?
-        .as_ref()
-        .map_err(Clone::clone)?;
-    twostage::check_against(model, record, &estimated.theta, best, plan).map_err(|e| e.to_string())
 }
 
 /// How many records were estimated, and how many could not be.

@@ -10,8 +10,8 @@ use twostage::fit::TerminationReason;
 use twostage::models::IoData;
 
 use super::columns::list;
-use super::{Estimated, RecordOutcome};
 use crate::csv_records::RecordFormat;
+use twostage::{AutoRefined, RecordEstimate, RecordOutcome};
 
 /// The messages about one file's records.
 pub(super) struct Said<'a> {
@@ -51,7 +51,7 @@ impl<'a> Said<'a> {
     }
 
     /// Warnings about the estimate itself and its refinement.
-    pub(super) fn warnings(&mut self, id: &str, estimated: &Estimated) {
+    pub(super) fn warnings(&mut self, id: &str, estimated: &RecordEstimate) {
         let file = &self.file;
         if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
             eprintln!(
@@ -121,7 +121,7 @@ impl<'a> Said<'a> {
     }
 
     /// What the check found, where it ran.
-    pub(super) fn check(&mut self, id: &str, estimated: &Estimated) {
+    pub(super) fn check(&mut self, id: &str, estimated: &RecordEstimate) {
         let file = &self.file;
         // Only an estimator learned one input; a check simulates on the
         // record's own.
@@ -185,18 +185,8 @@ impl<'a> Said<'a> {
 
 /// The records `--refine=auto` refines, for its note: "none", or their
 /// ids grouped by reason.
-pub(super) fn refine_reasons(
-    estimates: &[(String, super::RecordOutcome)],
-    reasons: &[Option<twostage::RefineReason>],
-) -> String {
-    let mut groups: Vec<(twostage::RefineReason, Vec<&str>)> = Vec::new();
-    for ((id, _), reason) in estimates.iter().zip(reasons) {
-        let Some(reason) = reason else { continue };
-        match groups.iter_mut().find(|(r, _)| r == reason) {
-            Some((_, ids)) => ids.push(id),
-            None => groups.push((*reason, vec![id])),
-        }
-    }
+pub(super) fn refine_reasons(auto: &AutoRefined, rows: &[(String, RecordOutcome)]) -> String {
+    let groups = auto.groups(rows);
     if groups.is_empty() {
         return "none".into();
     }

@@ -4,29 +4,12 @@
 
 use anyhow::Result;
 
-use super::Estimated;
 use super::columns::{check_fields, check_header, input_as_trained, refine_stop};
 use crate::number::format_f64;
+use twostage::RecordEstimate;
 
 /// The lower and upper corners of a prior's box.
-pub(super) type PriorBox = (Vec<f64>, Vec<f64>);
-
-/// A row's interval as written: `theta +- widths` inside the prior's box.
-pub(super) fn interval(
-    e: &Estimated,
-    prior_box: Option<&PriorBox>,
-) -> Option<(Vec<f64>, Vec<f64>)> {
-    let widths = e.widths.as_ref()?;
-    Some(match prior_box {
-        Some((lower, upper)) => twostage::interval_in_box(&e.theta, widths, lower, upper),
-        None => e
-            .theta
-            .iter()
-            .zip(widths)
-            .map(|(t, w)| (t - w, t + w))
-            .unzip(),
-    })
-}
+pub(super) type PriorBox<'a> = Option<(&'a [f64], &'a [f64])>;
 
 /// The pairs of parameters a correlation column names, `corr_A_B` with A
 /// before B, with their place in the row-major matrix.
@@ -40,13 +23,13 @@ pub(super) fn correlation_pairs(names: &[String]) -> Vec<(String, usize)> {
 
 pub(super) fn csv(
     names: &[String],
-    rows: &[(String, Estimated)],
+    rows: &[(String, RecordEstimate)],
     outputs: &[String],
     with_correlation: bool,
-    prior_box: Option<&PriorBox>,
+    prior_box: PriorBox<'_>,
 ) -> Result<String> {
     use twostage::sources::csv_rows::row;
-    let with_intervals = rows.iter().any(|(_, e)| e.widths.is_some());
+    let with_intervals = rows.iter().any(|(_, e)| e.half_widths.is_some());
     let with_distance = rows.iter().any(|(_, e)| e.distance.is_some());
     let mut header = vec!["experiment".to_string()];
     let windowed = rows.iter().any(|(_, e)| e.window_end.is_some());
@@ -102,7 +85,7 @@ pub(super) fn csv(
         fields.extend(e.theta.iter().map(|t| format_f64(*t)));
         // A row without a column's value (the joint row has no feature
         // distance) leaves it empty, so that every row has every column.
-        match interval(e, prior_box) {
+        match e.interval(prior_box) {
             Some((lo, hi)) => {
                 for (lo, hi) in lo.iter().zip(&hi) {
                     fields.push(format_f64(*lo));
@@ -155,10 +138,10 @@ pub(super) fn csv(
 
 pub(super) fn json(
     names: &[String],
-    rows: &[(String, Estimated)],
+    rows: &[(String, RecordEstimate)],
     outputs: &[String],
     with_correlation: bool,
-    prior_box: Option<&PriorBox>,
+    prior_box: PriorBox<'_>,
 ) -> Result<String> {
     let pairs = if with_correlation {
         correlation_pairs(names)
@@ -173,7 +156,7 @@ pub(super) fn json(
             if let Some(end) = e.window_end {
                 object.insert("window_end".into(), end.into());
             }
-            let bounds = interval(e, prior_box);
+            let bounds = e.interval(prior_box);
             for (j, n) in names.iter().enumerate() {
                 object.insert(n.clone(), e.theta[j].into());
                 if let Some((lo, hi)) = &bounds {

@@ -1,0 +1,599 @@
+//! One estimate request: what estimates each record (a trained estimator,
+//! a classic method, the multi-start output-error fit, or given values),
+//! the model its records come from, found once, and what to do with the
+//! estimates (check them against their records, refine them, fit one
+//! estimate of every record, estimate windows of each record). The
+//! command line's `estimate` and the Python package build an
+//! [`EstimateRequest`] and only print or convert the typed rows it gives.
+
+use std::collections::HashMap;
+
+use twostage_baselines::MethodSettings;
+use twostage_estimator::{Estimator, SignalNames};
+use twostage_models::{BuiltinModel, IoData, Simulator};
+use twostage_refine::{CheckPlan, DEFAULT_CHECK_RUNS, RefinePolicy, RefineReason, SearchStarts};
+use twostage_sources::{ClassicMethod, NamedModel};
+
+use crate::{EstimateRefiner, JointFitter};
+
+mod methods;
+mod records;
+mod through_model;
+
+pub use methods::OUTPUT_ERROR_METHOD;
+pub use records::{AutoRefined, Estimates, RecordEstimate, RecordOutcome};
+
+use methods::Method;
+
+/// What estimates each record.
+pub enum EstimateWith {
+    /// A trained two-stage estimator (its model is the one it was trained
+    /// on; a model file of it is the request's `model`).
+    Estimator(Box<Estimator>),
+    /// A classic method of a built-in model (the request's `model`).
+    Classic {
+        /// The method.
+        method: ClassicMethod,
+        /// Its settings; the request's `seed` seeds it.
+        settings: MethodSettings,
+    },
+    /// The multi-start output-error fit of any model that runs without
+    /// noise on a given input: `starts` draws from the prior, each
+    /// descended by Levenberg-Marquardt, seeded by the request's `seed`.
+    OutputError {
+        /// Random starts.
+        starts: usize,
+    },
+    /// Given values, checked against their records (a published value,
+    /// another tool's estimate).
+    Given(GivenValues),
+}
+
+/// Values given for the records: one row for every record, or a row per
+/// experiment.
+#[derive(Debug, Clone)]
+pub struct GivenValues {
+    one: Option<Vec<f64>>,
+    by_id: HashMap<String, Vec<f64>>,
+    /// Where they came from, for the message of a record without a row.
+    from: String,
+}
+
+impl GivenValues {
+    /// The `rows` (experiment, values) read from `from`: a single row
+    /// stands for every record.
+    ///
+    /// ```
+    /// let given = twostage::GivenValues::new(
+    ///     vec![("1".into(), vec![0.2]), ("2".into(), vec![0.4])],
+    ///     "values.csv",
+    /// )?;
+    /// assert_eq!(given.of("2")?, vec![0.4]);
+    /// assert!(given.of("3").unwrap_err().contains("values.csv has no row for experiment 3"));
+    /// # Ok::<(), String>(())
+    /// ```
+    ///
+    /// # Errors
+    /// Two rows of one experiment, said with the experiment.
+    pub fn new(rows: Vec<(String, Vec<f64>)>, from: &str) -> Result<Self, String> {
+        let mut given = Self {
+            one: None,
+            by_id: HashMap::new(),
+            from: from.to_string(),
+        };
+        if let [(_, theta)] = rows.as_slice() {
+            given.one = Some(theta.clone());
+            return Ok(given);
+        }
+        for (id, theta) in rows {
+            if given.by_id.insert(id.clone(), theta).is_some() {
+                return Err(format!(
+                    "{from}: experiment {id} has two rows of values: give one per experiment"
+                ));
+            }
+        }
+        Ok(given)
+    }
+
+    /// The values of experiment `id`.
+    ///
+    /// # Errors
+    /// No row for it (and more than one row in all).
+    pub fn of(&self, id: &str) -> Result<Vec<f64>, String> {
+        match &self.one {
+            Some(theta) => Ok(theta.clone()),
+            None => self.by_id.get(id).cloned().ok_or_else(|| {
+                format!(
+                    "{} has no row for experiment {id}: give a row per experiment, or a single \
+                     row for every record",
+                    self.from
+                )
+            }),
+        }
+    }
+}
+
+/// Which estimates a request refines.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RefineWhich {
+    /// Every record's.
+    All,
+    /// Those the check does not explain, or that the policy names
+    /// otherwise (a poor fit, out of distribution, another length); every
+    /// record is checked to choose.
+    Auto(RefinePolicy),
+}
+
+/// Windows of each record estimated instead of the record whole.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Windows {
+    /// Samples in a window.
+    pub length: usize,
+    /// Samples from one window's end to the next's.
+    pub every: usize,
+}
+
+/// How a check ranks a record among the model's own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CheckSettings {
+    /// The most noisy runs of the model each record is ranked among.
+    pub runs: usize,
+    /// Score from this sample on, leaving out a transient.
+    pub score_from: usize,
+}
+
+impl Default for CheckSettings {
+    fn default() -> Self {
+        Self {
+            runs: DEFAULT_CHECK_RUNS,
+            score_from: 0,
+        }
+    }
+}
+
+/// Everything an estimate of records needs: see the module's doc.
+pub struct EstimateRequest {
+    /// What estimates each record.
+    pub with: EstimateWith,
+    /// The model the records come from: a built-in one or a model file.
+    /// An estimator knows its own (a model file of it is needed to check,
+    /// refine or jointly fit an estimator of a model file); a classic
+    /// method, the output-error fit and given values need it.
+    pub model: Option<NamedModel>,
+    /// Check each estimate against its record.
+    pub check: Option<CheckSettings>,
+    /// Refine an estimator's estimates through the model.
+    pub refine: Option<RefineWhich>,
+    /// One estimate of the plant behind every record, after theirs
+    /// ([`Estimating::joint`]).
+    pub joint: bool,
+    /// Estimate windows of each record.
+    pub windows: Option<Windows>,
+    /// Seeds the random methods, the check's own records and the best-fit
+    /// search's starts over the prior.
+    pub seed: u64,
+    /// The best-fit search's starts over the prior besides the estimate
+    /// and its interval's corners (default
+    /// [`SearchStarts::default_from_prior`]).
+    pub prior_starts: Option<usize>,
+}
+
+impl EstimateRequest {
+    /// A request that estimates with `with` and nothing else.
+    pub fn new(with: EstimateWith) -> Self {
+        Self {
+            with,
+            model: None,
+            check: None,
+            refine: None,
+            joint: false,
+            windows: None,
+            seed: 0,
+            prior_starts: None,
+        }
+    }
+
+    /// Whether the records are checked: asked, or to choose which to
+    /// refine.
+    pub fn checks(&self) -> bool {
+        self.check.is_some() || matches!(self.refine, Some(RefineWhich::Auto(_)))
+    }
+
+    /// The request ready to estimate records: the model found and loaded
+    /// once for every use (check, refinement, joint fit), the method
+    /// built.
+    ///
+    /// ```
+    /// use twostage::models::{Benchmark, Simulator, experiment_rng};
+    /// use twostage::{CheckSettings, EstimateRequest, EstimateWith, Silent, TwoStage};
+    /// let model = Benchmark::new();
+    /// let estimator = TwoStage::builder(&model)
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
+    /// let mut record = model.spec().new_record();
+    /// model.simulate(&[0.3], &mut experiment_rng(8, 0), &mut record)?;
+    /// let request = EstimateRequest {
+    ///     check: Some(CheckSettings { runs: 39, score_from: 0 }),
+    ///     ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+    /// };
+    /// let estimating = request.prepare()?;
+    /// let estimates = estimating.estimate("records", vec![("7".into(), Ok(record.clone()))], &Silent);
+    /// let (_, row) = estimates.rows[0].1.as_ref()?;
+    /// assert_eq!(row.theta, estimator.estimate(record.input(0), record.output(0))?);
+    /// assert!(row.check.as_ref().unwrap().as_ref()?.explained());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`RequestError`]: what it was for (the method, the check, the
+    /// refinement, the joint fit) and what went wrong (a model file of
+    /// another model, a model that cannot run without noise, a method the
+    /// model lacks, no model where one is needed).
+    pub fn prepare(self) -> Result<Estimating, RequestError> {
+        if let Some(w) = self.windows
+            && (w.length == 0 || w.every == 0)
+        {
+            return Err(RequestError {
+                purpose: Purpose::Windows,
+                error: RequestProblem::EmptyWindow {
+                    length: w.length,
+                    every: w.every,
+                },
+            });
+        }
+        let settings = Settings {
+            checks: self.checks(),
+            check: self.check.unwrap_or_default(),
+            refine: self.refine,
+            joint: self.joint,
+            windows: self.windows,
+            seed: self.seed,
+            prior_starts: self.prior_starts,
+        };
+        match self.with {
+            EstimateWith::Estimator(estimator) => {
+                settings.two_stage(estimator, self.model.as_ref())
+            }
+            other => settings.through_model(other, self.model.as_ref()),
+        }
+    }
+}
+
+/// The settings of a request that its preparation reads.
+#[derive(Clone, Copy)]
+struct Settings {
+    checks: bool,
+    check: CheckSettings,
+    refine: Option<RefineWhich>,
+    joint: bool,
+    windows: Option<Windows>,
+    seed: u64,
+    prior_starts: Option<usize>,
+}
+
+impl Settings {
+    /// The best-fit search of a model of `q` parameters.
+    fn search(self, q: usize) -> SearchStarts {
+        SearchStarts {
+            from_prior: self
+                .prior_starts
+                .unwrap_or_else(|| SearchStarts::default_from_prior(q)),
+            seed: self.seed,
+        }
+    }
+
+    /// The check's plan for a model of `q` parameters.
+    fn plan(self, q: usize) -> CheckPlan {
+        CheckPlan {
+            noisy: self.check.runs,
+            seed: self.seed,
+            score_from: self.check.score_from,
+            prior_starts: self.search(q).from_prior,
+        }
+    }
+
+    /// A trained estimator's request: its model (the model file `given`,
+    /// else its built-in one) for each use asked.
+    fn two_stage(
+        self,
+        estimator: Box<Estimator>,
+        given: Option<&NamedModel>,
+    ) -> Result<Estimating, RequestError> {
+        let q = estimator.param_names().len();
+        let checker = if self.checks {
+            let found = NamedModel::trained_on(&estimator.training().model, given)
+                .and_then(|named| named.simulator(false))
+                .map_err(|e| RequestError::new(Purpose::Check, e.into()))?;
+            Some(found)
+        } else {
+            None
+        };
+        let refiner = match self.refine {
+            Some(_) => Some(
+                EstimateRefiner::new(&estimator, given)
+                    .map_err(|e| RequestError::new(Purpose::Refine, e.into()))?
+                    .search(self.search(q)),
+            ),
+            None => None,
+        };
+        let joint = if self.joint {
+            Some(
+                JointFitter::new(&estimator, given, self.search(q))
+                    .map_err(|e| RequestError::new(Purpose::Joint, e.into()))?,
+            )
+        } else {
+            None
+        };
+        let shape = estimator.record_shape();
+        Ok(Estimating {
+            names: estimator.param_names().to_vec(),
+            signals: estimator.signal_names(),
+            sample_time: shape.sample_time,
+            trained: Some(shape.n_samples),
+            prior_box: Some((estimator.lower().to_vec(), estimator.upper().to_vec())),
+            checker,
+            refiner,
+            joint,
+            refine: self.refine,
+            windows: self.windows,
+            plan: self.plan(q),
+            // The joint fit, as a refinement, fits records of any length.
+            method: Method::two_stage(estimator, self.refine.is_some() || self.joint),
+        })
+    }
+
+    /// A classic method's, the output-error fit's or given values'
+    /// request: each needs the model `given`.
+    fn through_model(
+        self,
+        with: EstimateWith,
+        given: Option<&NamedModel>,
+    ) -> Result<Estimating, RequestError> {
+        let purpose = match &with {
+            EstimateWith::Classic { .. } => Purpose::Method,
+            EstimateWith::OutputError { .. } => Purpose::OutputError,
+            EstimateWith::Given(_) | EstimateWith::Estimator(_) => Purpose::Given,
+        };
+        let without = |purpose| RequestError {
+            purpose,
+            error: RequestProblem::NeedsEstimator,
+        };
+        if self.refine.is_some() {
+            return Err(without(Purpose::Refine));
+        }
+        if self.joint {
+            return Err(without(Purpose::Joint));
+        }
+        let named = given.ok_or(RequestError {
+            purpose,
+            error: RequestProblem::NoModel,
+        })?;
+        let simulator = |purpose: Purpose| {
+            named
+                .simulator(false)
+                .map_err(|e| RequestError::new(purpose, e.into()))
+        };
+        let (method, spec) = match with {
+            EstimateWith::Classic { method, settings } => {
+                let builtin = named
+                    .name()
+                    .parse::<BuiltinModel>()
+                    .map_err(|_| RequestError {
+                        purpose,
+                        error: RequestProblem::NotBuiltIn {
+                            method: method.name(),
+                            model: named.name().to_string(),
+                        },
+                    })?;
+                let settings = MethodSettings {
+                    seed: self.seed,
+                    ..settings
+                };
+                let classic = twostage_baselines::classic_estimator(builtin, method, &settings)
+                    .map_err(|e| RequestError::new(purpose, Box::new(e)))?;
+                (Method::Classic(classic), simulator(purpose)?.spec().clone())
+            }
+            EstimateWith::OutputError { starts } => {
+                let model = simulator(purpose)?;
+                let spec = model.spec().clone();
+                let method = Method::output_error(model, starts, self.seed)
+                    .map_err(|e| RequestError::new(purpose, e.into()))?;
+                (method, spec)
+            }
+            EstimateWith::Given(values) => {
+                (Method::Given(values), simulator(purpose)?.spec().clone())
+            }
+            EstimateWith::Estimator(_) => unreachable!("an estimator is prepared by two_stage"),
+        };
+        let checker = if self.checks {
+            Some(simulator(Purpose::Check)?)
+        } else {
+            None
+        };
+        Ok(Estimating {
+            names: spec.param_names().to_vec(),
+            signals: SignalNames {
+                inputs: spec.input_names().to_vec(),
+                outputs: spec.output_names().to_vec(),
+            },
+            sample_time: spec.sample_time(),
+            trained: None,
+            prior_box: None,
+            checker,
+            refiner: None,
+            joint: None,
+            refine: self.refine,
+            windows: self.windows,
+            plan: self.plan(spec.param_names().len()),
+            method,
+        })
+    }
+}
+
+/// What part of a request a [`RequestError`] is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Purpose {
+    /// The classic method.
+    Method,
+    /// The multi-start output-error fit.
+    OutputError,
+    /// Given values.
+    Given,
+    /// The check of each estimate.
+    Check,
+    /// The refinement of each estimate.
+    Refine,
+    /// The joint fit of every record.
+    Joint,
+    /// The windows of each record.
+    Windows,
+}
+
+impl Purpose {
+    /// The purpose in a few words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Method => "the classic method",
+            Self::OutputError => "the output-error fit",
+            Self::Given => "checking given values",
+            Self::Check => "the check",
+            Self::Refine => "the refinement",
+            Self::Joint => "the joint fit",
+            Self::Windows => "the windows",
+        }
+    }
+}
+
+/// What went wrong preparing a request.
+#[derive(Debug, thiserror::Error)]
+pub enum RequestProblem {
+    /// A method or check that simulates the model, and no model given.
+    #[error("it simulates the model: give a built-in model or a model file")]
+    NoModel,
+    /// A refinement or a joint fit asked of another way of estimating
+    /// than a trained estimator.
+    #[error("it starts from a two-stage estimate and its interval: give a trained estimator")]
+    NeedsEstimator,
+    /// A window or a step of no samples.
+    #[error(
+        "a window of {length} samples every {every}: give a window and a step of at least 1 sample"
+    )]
+    EmptyWindow {
+        /// Samples in a window.
+        length: usize,
+        /// Samples between windows.
+        every: usize,
+    },
+    /// A classic method asked of a model file.
+    #[error(
+        "method '{method}' is not available for {model}: the classic methods exist for the \
+         built-in models only; train an estimator of the model file"
+    )]
+    NotBuiltIn {
+        /// The method.
+        method: &'static str,
+        /// The model.
+        model: String,
+    },
+    /// The model, the method or the estimator said no.
+    #[error(transparent)]
+    Failed(Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// A request that cannot be prepared: what it was for, and why.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {error}", purpose.describe())]
+pub struct RequestError {
+    /// The part of the request.
+    pub purpose: Purpose,
+    /// Why.
+    #[source]
+    pub error: RequestProblem,
+}
+
+impl RequestError {
+    fn new(purpose: Purpose, error: Box<dyn std::error::Error + Send + Sync>) -> Self {
+        Self {
+            purpose,
+            error: RequestProblem::Failed(error),
+        }
+    }
+}
+
+/// A prepared [`EstimateRequest`]: estimates records, file by file or
+/// batch by batch, and the joint estimate of them all.
+pub struct Estimating {
+    method: Method,
+    names: Vec<String>,
+    signals: SignalNames,
+    sample_time: f64,
+    trained: Option<usize>,
+    prior_box: Option<(Vec<f64>, Vec<f64>)>,
+    checker: Option<Box<dyn Simulator>>,
+    refiner: Option<EstimateRefiner>,
+    joint: Option<JointFitter>,
+    refine: Option<RefineWhich>,
+    windows: Option<Windows>,
+    plan: CheckPlan,
+}
+
+impl Estimating {
+    /// The parameters estimated, in the rows' order.
+    pub fn param_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The signals a record holds (the record files' columns).
+    pub fn signals(&self) -> &SignalNames {
+        &self.signals
+    }
+
+    /// The records' sample time.
+    pub fn sample_time(&self) -> f64 {
+        self.sample_time
+    }
+
+    /// The record length an estimator was trained and validated on
+    /// (`None` for the other ways of estimating).
+    pub fn trained_length(&self) -> Option<usize> {
+        self.trained
+    }
+
+    /// The prior's box (lower, upper), which an estimator's intervals
+    /// stay inside.
+    pub fn prior_box(&self) -> Option<(&[f64], &[f64])> {
+        self.prior_box
+            .as_ref()
+            .map(|(lo, hi)| (lo.as_slice(), hi.as_slice()))
+    }
+
+    /// Whether the request asked for the joint estimate.
+    pub fn joins(&self) -> bool {
+        self.joint.is_some()
+    }
+
+    /// The model a check simulates: after an output-error refinement, the
+    /// refinement's (its processes are running already).
+    fn check_model(&self) -> Option<&dyn Simulator> {
+        let checker = self.checker.as_deref()?;
+        Some(
+            self.refiner
+                .as_ref()
+                .and_then(EstimateRefiner::simulator)
+                .unwrap_or(checker),
+        )
+    }
+
+    /// Why `RefineWhich::Auto` refines a record (`None`: it keeps its
+    /// estimate).
+    fn reason(&self, record: &IoData, e: &RecordEstimate) -> Option<RefineReason> {
+        let Some(RefineWhich::Auto(policy)) = self.refine else {
+            return None;
+        };
+        let other_length = self.trained.is_some_and(|n| n != record.n_samples());
+        match &e.check {
+            Some(Ok(c)) => policy.reason(c, e.out_of_distribution(), other_length),
+            _ => other_length.then_some(RefineReason::OtherLength),
+        }
+    }
+}

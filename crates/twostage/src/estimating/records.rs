@@ -1,0 +1,283 @@
+//! What an estimate request gives back: a typed row per record (or
+//! window), and which records `refine = auto` chose.
+
+use rayon::prelude::*;
+use twostage_compress::FlooredSample;
+use twostage_estimator::interval_in_box;
+use twostage_fit::TerminationReason;
+use twostage_models::{InputDeviation, IoData};
+use twostage_refine::{RecordCheck, RefineReason};
+use twostage_sources::Progress;
+
+use super::{Estimating, RefineWhich};
+
+/// One record's (or window's) estimate and what was found about it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordEstimate {
+    /// The estimate (refined, where a refinement succeeded).
+    pub theta: Vec<f64>,
+    /// Its interval's half-widths, where known: an estimator's adaptive
+    /// ones where calibrated, else its conformal ones; a refined
+    /// estimate's own (NaN where the record does not determine it).
+    pub half_widths: Option<Vec<f64>>,
+    /// The record's feature distance and the out-of-distribution
+    /// threshold, where the estimator has a feature envelope.
+    pub distance: Option<(f64, f64)>,
+    /// How the record's input lies outside the estimator's input family
+    /// (empty inside it), when the estimator knows one.
+    pub input: Option<Vec<InputDeviation>>,
+    /// Samples outside their output's transform, when the estimator
+    /// transforms its outputs.
+    pub floored: Option<Vec<FlooredSample>>,
+    /// With a check: how the model at the estimate explains the record, or
+    /// why it could not be simulated.
+    pub check: Option<Result<RecordCheck, String>>,
+    /// With a refinement (or the output-error method, or the joint fit):
+    /// why the output-error descent stopped (`Ok(None)` for a posterior
+    /// mean), or why the refinement failed (the two-stage estimate is
+    /// kept).
+    pub refined: Option<Result<Option<TerminationReason>, String>>,
+    /// Why a refined estimate has no interval of its own.
+    pub interval_failure: Option<String>,
+    /// A refined estimate's correlation matrix (row-major q x q).
+    pub correlation: Option<Vec<f64>>,
+    /// Of an output-error refinement or the joint fit: the optima its
+    /// search ended in, and the runner-up's loss over the best's.
+    pub optima: Option<(usize, Option<f64>)>,
+    /// With windows: the window's last sample in its record, from 1.
+    pub window_end: Option<usize>,
+}
+
+impl RecordEstimate {
+    /// An estimate that is nothing but its parameters.
+    ///
+    /// ```
+    /// let row = twostage::RecordEstimate::bare(vec![0.3]);
+    /// assert!(!row.out_of_distribution() && row.in_family().is_none());
+    /// ```
+    pub fn bare(theta: Vec<f64>) -> Self {
+        Self {
+            theta,
+            half_widths: None,
+            distance: None,
+            input: None,
+            floored: None,
+            check: None,
+            refined: None,
+            interval_failure: None,
+            correlation: None,
+            optima: None,
+            window_end: None,
+        }
+    }
+
+    /// Whether the record's input lies in the estimator's input family
+    /// (`None` when it knows none).
+    pub fn in_family(&self) -> Option<bool> {
+        self.input.as_ref().map(Vec::is_empty)
+    }
+
+    /// The interval as written: `theta +- half_widths`, inside the
+    /// prior's box where known (a parameter's interval never leaves its
+    /// prior's support); `None` without half-widths.
+    ///
+    /// ```
+    /// let row = twostage::RecordEstimate {
+    ///     half_widths: Some(vec![0.2]),
+    ///     ..twostage::RecordEstimate::bare(vec![0.8])
+    /// };
+    /// let (lower, upper) = row.interval(Some((&[-0.9], &[0.9]))).unwrap();
+    /// assert!((lower[0] - 0.6).abs() < 1e-12 && upper[0] == 0.9);
+    /// ```
+    pub fn interval(&self, prior_box: Option<(&[f64], &[f64])>) -> Option<(Vec<f64>, Vec<f64>)> {
+        let widths = self.half_widths.as_ref()?;
+        Some(match prior_box {
+            Some((lower, upper)) => interval_in_box(&self.theta, widths, lower, upper),
+            None => self
+                .theta
+                .iter()
+                .zip(widths)
+                .map(|(t, w)| (t - w, t + w))
+                .unzip(),
+        })
+    }
+
+    /// Outside what training saw, by the features or by the input.
+    pub fn out_of_distribution(&self) -> bool {
+        self.distance.is_some_and(|(d, t)| d > t)
+            || self.input.as_ref().is_some_and(|d| !d.is_empty())
+    }
+}
+
+/// A record (or window) with its estimate, or why it has none.
+pub type RecordOutcome = Result<(IoData, RecordEstimate), String>;
+
+/// The estimates of one batch of records, in their order.
+#[derive(Debug)]
+pub struct Estimates {
+    /// Each record's (or window's) experiment id and outcome.
+    pub rows: Vec<(String, RecordOutcome)>,
+    /// With `RefineWhich::Auto`: what the check chose.
+    pub auto: Option<AutoRefined>,
+}
+
+/// Which records `RefineWhich::Auto` refined, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AutoRefined {
+    /// Two-stage estimates the check explained.
+    pub explained: usize,
+    /// Records (or windows) checked.
+    pub checked: usize,
+    /// Why each row was refined (`None`: it kept its estimate), in the
+    /// rows' order.
+    pub reasons: Vec<Option<RefineReason>>,
+}
+
+impl AutoRefined {
+    /// The refined rows' ids grouped by reason, in the order the reasons
+    /// first occur.
+    pub fn groups<'a>(
+        &self,
+        rows: &'a [(String, RecordOutcome)],
+    ) -> Vec<(RefineReason, Vec<&'a str>)> {
+        let mut groups: Vec<(RefineReason, Vec<&str>)> = Vec::new();
+        for ((id, _), reason) in rows.iter().zip(&self.reasons) {
+            let Some(reason) = reason else { continue };
+            match groups.iter_mut().find(|(r, _)| r == reason) {
+                Some((_, ids)) => ids.push(id),
+                None => groups.push((*reason, vec![id])),
+            }
+        }
+        groups
+    }
+}
+
+impl Estimating {
+    /// Estimates `records` (each an experiment id and its record, or why
+    /// it could not be read, kept as it is), in parallel, in their order;
+    /// with windows, each window of a record as a row of its own. Then
+    /// checks and refines them as the request asked: one best-fit search
+    /// per record serves its check and its output-error refinement; with
+    /// `RefineWhich::Auto` the estimates are checked first and only those
+    /// the policy names are refined (and checked again). A record's error
+    /// names `source` (its file, say) and its experiment. Reports its
+    /// steps to `progress`.
+    pub fn estimate(
+        &self,
+        source: &str,
+        records: Vec<(String, Result<IoData, String>)>,
+        progress: &dyn Progress,
+    ) -> Estimates {
+        let pieces = self.pieces(source, records);
+        progress.begin_step("estimating", pieces.len(), "records");
+        let mut rows: Vec<(String, RecordOutcome)> = pieces
+            .into_par_iter()
+            .map(|(id, record, window_end)| {
+                let estimated = record.and_then(|record| {
+                    let estimated = self
+                        .method
+                        .estimate(&id, &record)
+                        .map_err(|e| format!("{source}: experiment {id}: {e}"))?;
+                    Ok((
+                        record,
+                        RecordEstimate {
+                            window_end,
+                            ..estimated
+                        },
+                    ))
+                });
+                progress.advance_step(1);
+                (id, estimated)
+            })
+            .collect();
+        progress.end_step();
+        let auto = self.check_and_refine(&mut rows, progress);
+        Estimates { rows, auto }
+    }
+
+    /// The records to estimate: each whole, or with windows each of its
+    /// windows (its last sample, from 1, beside it). A record shorter than
+    /// one window is refused by name.
+    #[allow(clippy::type_complexity)]
+    fn pieces(
+        &self,
+        source: &str,
+        records: Vec<(String, Result<IoData, String>)>,
+    ) -> Vec<(String, Result<IoData, String>, Option<usize>)> {
+        let Some(windows) = self.windows else {
+            return records.into_iter().map(|(id, r)| (id, r, None)).collect();
+        };
+        let (length, every) = (windows.length, windows.every);
+        let mut pieces = Vec::new();
+        for (id, record) in records {
+            let record = match record {
+                Ok(record) => record,
+                Err(e) => {
+                    pieces.push((id, Err(e), None));
+                    continue;
+                }
+            };
+            let n = record.n_samples();
+            if n < length {
+                let why = format!(
+                    "{source}: experiment {id}: {n} samples, shorter than the window of {length}"
+                );
+                pieces.push((id, Err(why), None));
+                continue;
+            }
+            // A step of 0 is refused when the request is built.
+            for end in (length..=n).step_by(every.max(1)) {
+                pieces.push((id.clone(), Ok(record.window(end - length, end)), Some(end)));
+            }
+        }
+        pieces
+    }
+
+    /// The rows checked and refined as the request asked; what
+    /// `RefineWhich::Auto` chose.
+    fn check_and_refine(
+        &self,
+        rows: &mut [(String, RecordOutcome)],
+        progress: &dyn Progress,
+    ) -> Option<AutoRefined> {
+        let everyone = vec![true; rows.len()];
+        let searches = self.search(rows, progress);
+        match (&self.refiner, self.refine) {
+            (Some(refiner), Some(RefineWhich::Auto(_))) => {
+                self.check_all(rows, &everyone, &searches, progress);
+                let reasons: Vec<Option<RefineReason>> = rows
+                    .iter()
+                    .map(|(_, outcome)| {
+                        let (record, e) = outcome.as_ref().ok()?;
+                        self.reason(record, e)
+                    })
+                    .collect();
+                let chosen: Vec<bool> = reasons.iter().map(Option::is_some).collect();
+                let explained = rows
+                    .iter()
+                    .filter(|(_, outcome)| {
+                        matches!(outcome, Ok((_, e)) if matches!(&e.check, Some(Ok(c)) if c.explained()))
+                    })
+                    .count();
+                super::through_model::refine_together(refiner, rows, &chosen, &searches, progress);
+                self.check_all(rows, &chosen, &searches, progress);
+                Some(AutoRefined {
+                    explained,
+                    checked: everyone.len(),
+                    reasons,
+                })
+            }
+            (Some(refiner), _) => {
+                super::through_model::refine_together(
+                    refiner, rows, &everyone, &searches, progress,
+                );
+                self.check_all(rows, &everyone, &searches, progress);
+                None
+            }
+            (None, _) => {
+                self.check_all(rows, &everyone, &searches, progress);
+                None
+            }
+        }
+    }
+}

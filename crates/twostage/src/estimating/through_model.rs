@@ -1,0 +1,236 @@
+//! An estimate request's work through the model: each record's best-fit
+//! search, its check, its refinement, and the joint fit of every record.
+
+use rayon::prelude::*;
+use twostage_models::IoData;
+use twostage_refine::{BestFit, RecordCheck, check_against, search_best_fits};
+use twostage_sources::Progress;
+
+use super::Estimating;
+use super::records::{RecordEstimate, RecordOutcome};
+use crate::{EstimateRefiner, JointOfRecords, RECORDS_TOGETHER, ToRefine};
+
+/// A record's best-fit search, or why it failed; `None` where no check or
+/// refinement needs one.
+pub(super) type Search = Option<Result<BestFit, String>>;
+
+impl Estimating {
+    /// Each record's best-fit search (from its estimate, its interval's
+    /// corners and the prior), where a check or an output-error refinement
+    /// needs one: the records together, in lockstep, a batch of them at a
+    /// time.
+    pub(super) fn search(
+        &self,
+        rows: &[(String, RecordOutcome)],
+        progress: &dyn Progress,
+    ) -> Vec<Search> {
+        let refiner = self.refiner.as_ref().filter(|r| r.is_output_error());
+        let Some(model) = refiner
+            .and_then(EstimateRefiner::simulator)
+            .or(self.check_model())
+        else {
+            return vec![None; rows.len()];
+        };
+        let prior = model.spec().prior();
+        let starts: Vec<Option<Result<Vec<Vec<f64>>, String>>> = rows
+            .iter()
+            .map(|(_, outcome)| {
+                let (_, e) = outcome.as_ref().ok()?;
+                let widths = e.half_widths.as_deref();
+                Some(match refiner {
+                    Some(r) => r.search_starts(prior, &e.theta, widths),
+                    None => self
+                        .plan
+                        .search()
+                        .starts(prior, &e.theta, widths)
+                        .map_err(|e| e.to_string()),
+                })
+            })
+            .collect();
+        let wanted = starts.iter().filter(|s| matches!(s, Some(Ok(_)))).count();
+        progress.begin_step("searching", wanted, "records");
+        let mut found = Vec::with_capacity(wanted);
+        let searches: Vec<(&IoData, Vec<Vec<f64>>)> = rows
+            .iter()
+            .zip(&starts)
+            .filter_map(|((_, outcome), starts)| {
+                let (record, _) = outcome.as_ref().ok()?;
+                Some((record, starts.as_ref()?.as_ref().ok()?.clone()))
+            })
+            .collect();
+        let mut searches = searches.into_iter();
+        loop {
+            let chunk: Vec<_> = searches.by_ref().take(RECORDS_TOGETHER).collect();
+            if chunk.is_empty() {
+                break;
+            }
+            let k = chunk.len();
+            found.extend(search_best_fits(model, chunk));
+            progress.advance_step(k);
+        }
+        progress.end_step();
+        let mut found = found.into_iter();
+        starts
+            .into_iter()
+            .map(|starts| match starts? {
+                Ok(_) => Some(
+                    found
+                        .next()
+                        .unwrap_or_else(|| unreachable!("one search per record with starts"))
+                        .map_err(|e| format!("the best-fit search failed: {e}")),
+                ),
+                Err(e) => Some(Err(e)),
+            })
+            .collect()
+    }
+
+    /// Checks the estimates of the rows marked in `only`, in parallel,
+    /// against their searches.
+    pub(super) fn check_all(
+        &self,
+        rows: &mut [(String, RecordOutcome)],
+        only: &[bool],
+        searches: &[Search],
+        progress: &dyn Progress,
+    ) {
+        let Some(model) = self.check_model() else {
+            return;
+        };
+        progress.begin_step("checking", only.iter().filter(|o| **o).count(), "records");
+        rows.par_iter_mut()
+            .zip(only)
+            .zip(searches)
+            .filter(|((_, only), _)| **only)
+            .for_each(|(((_, outcome), _), search)| {
+                if let Ok((record, estimated)) = outcome {
+                    estimated.check = Some(check(model, record, estimated, search, self));
+                }
+                progress.advance_step(1);
+            });
+        progress.end_step();
+    }
+
+    /// The joint estimate of every record of `plant` (a record and its
+    /// row's estimate), the request's joint fit: their two-stage
+    /// estimates pooled by their intervals (an estimate out of the
+    /// estimator's distribution only starts the search), then one
+    /// output-error fit of them all. `None` when the request asked for no
+    /// joint fit.
+    ///
+    /// # Errors
+    /// Why the joint fit failed: the caller keeps the records' own
+    /// estimates.
+    pub fn joint(
+        &self,
+        plant: &[(&IoData, &RecordEstimate)],
+        progress: &dyn Progress,
+    ) -> Option<Result<(JointOfRecords, RecordEstimate), String>> {
+        let fitter = self.joint.as_ref()?;
+        let items: Vec<ToRefine<'_>> = plant
+            .iter()
+            .map(|(record, e)| {
+                let widths = e
+                    .half_widths
+                    .as_deref()
+                    .filter(|_| !e.out_of_distribution());
+                (*record, e.theta.as_slice(), widths)
+            })
+            .collect();
+        progress.begin_step("fitting jointly", 1, "plants");
+        let found = fitter.fit(&items);
+        progress.advance_step(1);
+        progress.end_step();
+        Some(found.map(|joint| {
+            let q = joint.theta.len();
+            let (widths, why) = match &joint.half_widths {
+                Ok(w) => (w.clone(), None),
+                Err(why) => (vec![f64::NAN; q], Some(why.clone())),
+            };
+            let row = RecordEstimate {
+                half_widths: Some(widths),
+                refined: Some(Ok(Some(joint.stop))),
+                interval_failure: why,
+                correlation: joint.correlation.clone(),
+                optima: Some((joint.optima, joint.runner_up_ratio)),
+                ..RecordEstimate::bare(joint.theta.clone())
+            };
+            (joint, row)
+        }))
+    }
+}
+
+/// Refines the rows marked in `only` together: an output-error
+/// refinement at each record's best fit from its search, a posterior
+/// refinement by its own grid (their simulations in shared batches). A
+/// refinement that fails keeps the two-stage estimate, and says why in
+/// `refined`; one that succeeds brings its own interval (NaN where the
+/// record does not determine it, said in `interval_failure`).
+pub(super) fn refine_together(
+    refiner: &EstimateRefiner,
+    rows: &mut [(String, RecordOutcome)],
+    only: &[bool],
+    searches: &[Search],
+    progress: &dyn Progress,
+) {
+    let (items, bests): (Vec<ToRefine<'_>>, Vec<Result<BestFit, String>>) = rows
+        .iter()
+        .zip(only)
+        .zip(searches)
+        .filter(|((_, only), _)| **only)
+        .filter_map(|(((_, outcome), _), search)| {
+            let (record, e) = outcome.as_ref().ok()?;
+            let best = search
+                .clone()
+                .unwrap_or_else(|| Err("no best-fit search".into()));
+            Some(((record, e.theta.as_slice(), e.half_widths.as_deref()), best))
+        })
+        .unzip();
+    progress.begin_step("refining", items.len(), "records");
+    let refined = if refiner.is_output_error() {
+        let refined = refiner.refine_at(&items, &bests);
+        progress.advance_step(items.len());
+        refined
+    } else {
+        refiner.refine_many_reporting(&items, progress)
+    };
+    progress.end_step();
+    let estimated = rows
+        .iter_mut()
+        .zip(only)
+        .filter(|(_, only)| **only)
+        .filter_map(|((_, outcome), _)| outcome.as_mut().ok());
+    for ((_, e), result) in estimated.zip(refined) {
+        match result {
+            Ok(r) => {
+                let q = r.theta.len();
+                let (own, why) = match r.half_widths {
+                    Ok(w) => (w, None),
+                    Err(why) => (vec![f64::NAN; q], Some(why)),
+                };
+                e.theta = r.theta;
+                e.half_widths = Some(own);
+                e.refined = Some(Ok(r.stop));
+                e.interval_failure = why;
+                e.correlation = r.correlation;
+                e.optima = r.optima;
+            }
+            Err(why) => e.refined = Some(Err(why)),
+        }
+    }
+}
+
+/// Checks one record's estimate against the record's best-fit search.
+fn check(
+    model: &dyn twostage_models::Simulator,
+    record: &IoData,
+    estimated: &RecordEstimate,
+    search: &Search,
+    estimating: &Estimating,
+) -> Result<RecordCheck, String> {
+    let best = search
+        .as_ref()
+        .ok_or_else(|| "no best-fit search".to_string())?
+        .as_ref()
+        .map_err(Clone::clone)?;
+    check_against(model, record, &estimated.theta, best, estimating.plan).map_err(|e| e.to_string())
+}
