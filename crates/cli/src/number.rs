@@ -1,18 +1,7 @@
 //! Numbers as text: printed so they read back to the same f64, parsed with
 //! messages that say which value was wrong.
 
-/// The shortest text that parses back to exactly `v`: plain decimals for
-/// everyday magnitudes, scientific notation for very small or large ones.
-pub fn format_f64(v: f64) -> String {
-    let magnitude = v.abs();
-    if v == 0.0 || (1e-5..1e16).contains(&magnitude) || !v.is_finite() {
-        // Display prints the shortest round-trip digits, never an exponent.
-        format!("{v}")
-    } else {
-        // LowerExp also prints the shortest round-trip digits.
-        format!("{v:e}")
-    }
-}
+pub use twostage::sources::csv_rows::format_f64;
 
 /// `v` to four significant digits, for people: plain decimals from 1e-3
 /// to 1e5, scientific notation outside (a residual of 1.8e-6 m must not
@@ -46,7 +35,6 @@ pub fn parse_list(text: &str, what: &str) -> Result<Vec<f64>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use twostage_models::{StreamPurpose, stream_rng};
 
     #[test]
     fn four_digits_keep_small_values_readable() {
@@ -56,42 +44,6 @@ mod tests {
         assert_eq!(four_digits(0.0012345), "0.001234");
         assert_eq!(four_digits(123456.0), "1.235e5");
         assert_eq!(four_digits(0.0), "0");
-    }
-
-    #[test]
-    fn every_value_reads_back_to_the_same_bits() {
-        let mut special = vec![
-            0.0,
-            -0.0,
-            1.0,
-            -1.1,
-            0.1,
-            1e-5,
-            9.99e-6,
-            1e16,
-            1e15,
-            f64::MIN_POSITIVE,
-            f64::MAX,
-            5e-324,
-            -4.66933843093e-20,
-            1.22464679915e-17,
-        ];
-        // Random bit patterns cover every exponent.
-        let mut rng = stream_rng(1, 0, StreamPurpose::Simulation);
-        for _ in 0..20_000 {
-            let bits = rand::Rng::next_u64(&mut rng);
-            let v = f64::from_bits(bits);
-            if v.is_finite() {
-                special.push(v);
-            }
-        }
-        for v in special {
-            let text = format_f64(v);
-            let back: f64 = text.parse().unwrap();
-            assert_eq!(back.to_bits(), v.to_bits(), "{v:e} printed as {text}");
-        }
-        assert_eq!(format_f64(0.5), "0.5");
-        assert_eq!(format_f64(-4.66933843093e-20), "-4.66933843093e-20");
     }
 
     #[test]

@@ -1,45 +1,10 @@
-//! `Estimator.joint`: one estimate of a plant from several records, as the
-//! command line's `estimate --joint` gives it.
+//! `Estimator.joint`'s dict: one estimate of a plant from several
+//! records, as the command line's `estimate --joint` gives it (both make
+//! the same estimate request).
 
 use numpy::IntoPyArray;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use rayon::prelude::*;
-use twostage::models::IoData;
-use twostage::{JointFitter, JointOfRecords};
-
-/// The two-stage estimate of each record (an estimate out of the
-/// estimator's distribution without its interval, as the command line
-/// pools it), then the joint fit of all of them.
-pub(crate) fn of_records(
-    estimator: &twostage::Estimator,
-    fitter: &JointFitter,
-    records: &[IoData],
-) -> PyResult<JointOfRecords> {
-    let singles: Vec<(Vec<f64>, Option<Vec<f64>>)> = records
-        .par_iter()
-        .enumerate()
-        .map(|(k, record)| {
-            let a = estimator
-                .assess(record)
-                .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))?;
-            let out = a.out_of_distribution();
-            let widths = a
-                .interval_half_widths()
-                .filter(|_| !out)
-                .map(<[f64]>::to_vec);
-            Ok((a.theta, widths))
-        })
-        .collect::<PyResult<_>>()?;
-    let items: Vec<twostage::ToRefine<'_>> = records
-        .iter()
-        .zip(&singles)
-        .map(|(record, (theta, widths))| (record, theta.as_slice(), widths.as_deref()))
-        .collect();
-    fitter
-        .fit(&items)
-        .map_err(|e| PyValueError::new_err(format!("the joint fit failed: {e}")))
-}
+use twostage::JointOfRecords;
 
 /// The dict `Estimator.joint` returns: `theta`; `half_widths` (None, with
 /// `interval_error` saying why, where the records do not determine a

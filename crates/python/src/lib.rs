@@ -18,15 +18,13 @@ use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use rayon::prelude::*;
-use twostage::{
-    ChartDir, EstimateWorkspace, NamedModel, RecordsRequest, RunSettings, TrainingRequest,
-};
+use twostage::EstimateWorkspace;
 
 mod joint;
+mod requests;
 mod simulator;
 mod through_model;
-use simulator::{PythonProgress, PythonSimulator};
-use through_model::{check_dict, named_model, one_record};
+mod training;
 
 /// A twostage error as the Python exception a caller would expect: a file
 /// that cannot be read is an `OSError`, everything else a `ValueError`.
@@ -376,32 +374,19 @@ impl PyEstimator {
         score_from: usize,
         prior_starts: Option<usize>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        let named = named_model(None, model_file, model_toml)?;
-        let sim = NamedModel::trained_on(&self.inner.training().model, named.as_ref())
-            .and_then(|model| model.simulator(false))
-            .map_err(to_python)?;
-        let shape = self.inner.record_shape();
-        let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
-        let (theta, half_widths) = match theta {
-            Some(theta) => (theta, None),
-            None => {
-                if let Some(refusal) = self.inner.length_refusal(record.n_samples()) {
-                    return Err(PyValueError::new_err(refusal));
-                }
-                let assessed = self.inner.assess(&record).map_err(to_python)?;
-                let widths = assessed.interval_half_widths().map(<[f64]>::to_vec);
-                (assessed.theta, widths)
-            }
-        };
-        let checked = through_model::check(
+        requests::check(
+            &self.inner,
             py,
-            sim.as_ref(),
-            &record,
-            &theta,
-            half_widths.as_deref(),
-            (sims, seed, score_from, prior_starts),
-        )?;
-        check_dict(py, &checked)
+            u,
+            y,
+            theta,
+            model_file,
+            model_toml,
+            sims,
+            seed,
+            score_from,
+            prior_starts,
+        )
     }
 
     /// The estimator validated on fresh simulations of its model, as
@@ -431,43 +416,76 @@ impl PyEstimator {
         Bound<'py, PyArrayDyn<f64>>,
         Option<(bool, f64)>,
     )> {
-        let named = named_model(None, model_file, model_toml)?;
-        let sim = NamedModel::trained_on(&self.inner.training().model, named.as_ref())
-            .and_then(|model| model.simulator(false))
-            .map_err(to_python)?;
-        let defaults = twostage::ValidationPlan::default();
-        let plan = twostage::ValidationPlan {
+        requests::validate(
+            &self.inner,
+            py,
+            model_file,
+            model_toml,
             sims,
             gamma,
-            delta: delta.unwrap_or(defaults.delta),
-            seed: seed.unwrap_or(defaults.seed),
+            delta,
+            seed,
             target_rmse,
-            max_sims: max_sims.unwrap_or(defaults.max_sims),
-        };
-        let reporter = progress.map(PythonProgress::new);
-        let run = py
-            .detach(|| {
-                let progress: &dyn twostage::Progress = match &reporter {
-                    Some(reporter) => reporter,
-                    None => &twostage::Silent,
-                };
-                twostage::validate_estimator(&self.inner, sim.as_ref(), &plan, progress)
-            })
-            .map_err(to_python)?;
-        let report = serde_json::to_string(&run.report)
-            .map_err(|e| PyValueError::new_err(format!("validation report: {e}")))?;
-        let q = self.inner.param_names().len();
-        let table = |values: Vec<f64>| -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-            Ok(ndarray::Array2::from_shape_vec((run.records, q), values)
-                .map_err(shape_error)?
-                .into_dyn()
-                .into_pyarray(py))
-        };
-        let target = run.target.map(|t| match t {
-            twostage::TargetRmse::Met { ratio } => (true, ratio),
-            twostage::TargetRmse::NotMet { ratio } => (false, ratio),
-        });
-        Ok((report, table(run.truth)?, table(run.estimates)?, target))
+            max_sims,
+            progress,
+        )
+    }
+
+    /// Every record of `records` (pairs `(u, y)`, named `experiments` or
+    /// by index) as `twostage estimate --estimator` estimates a file of
+    /// them with the same flags (`check`, `refine` "all" or "auto",
+    /// `refine_below_fit`, `joint`, `window`/`every`, `correlation`,
+    /// `sims` as `--check-sims`, `score_from`, `prior_starts`, `seed`):
+    /// `(rows_json, failed, auto)`, the rows as its `--format json`
+    /// writes them, the records that could not be estimated (experiment,
+    /// why), and with `refine="auto"` `(explained, checked, [(experiment,
+    /// reason)])`.
+    #[pyo3(signature = (records, *, experiments=None, check=false, refine=None, refine_below_fit=None, joint=false, window=None, every=None, correlation=false, model_file=None, model_toml=None, sims=None, score_from=0, prior_starts=None, seed=0, progress=None))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn estimate_records<'py>(
+        &self,
+        py: Python<'py>,
+        records: Vec<(Option<Bound<'py, PyAny>>, Bound<'py, PyAny>)>,
+        experiments: Option<Vec<String>>,
+        check: bool,
+        refine: Option<&str>,
+        refine_below_fit: Option<f64>,
+        joint: bool,
+        window: Option<usize>,
+        every: Option<usize>,
+        correlation: bool,
+        model_file: Option<PathBuf>,
+        model_toml: Option<&str>,
+        sims: Option<usize>,
+        score_from: usize,
+        prior_starts: Option<usize>,
+        seed: u64,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<(
+        String,
+        Vec<(String, String)>,
+        Option<(usize, usize, Vec<(String, String)>)>,
+    )> {
+        requests::estimate_records(
+            &self.inner,
+            py,
+            records,
+            experiments,
+            check,
+            refine,
+            refine_below_fit,
+            joint,
+            window,
+            every,
+            correlation,
+            model_file,
+            model_toml,
+            sims,
+            score_from,
+            prior_starts,
+            seed,
+            progress,
+        )
     }
 
     /// One estimate of the plant behind all `records` (pairs `(u, y)`, any
@@ -485,26 +503,15 @@ impl PyEstimator {
         prior_starts: Option<usize>,
         seed: u64,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        let named = named_model(None, model_file, model_toml)?;
-        let q = self.inner.param_names().len();
-        let search = twostage::refine::SearchStarts {
-            from_prior: prior_starts
-                .unwrap_or_else(|| twostage::refine::SearchStarts::default_from_prior(q)),
+        requests::joint(
+            &self.inner,
+            py,
+            records,
+            model_file,
+            model_toml,
+            prior_starts,
             seed,
-        };
-        let fitter = twostage::JointFitter::new(&self.inner, named.as_ref(), search)
-            .map_err(|e| PyValueError::new_err(format!("joint: {e}")))?;
-        let shape = self.inner.record_shape();
-        let records: Vec<twostage::models::IoData> = records
-            .iter()
-            .enumerate()
-            .map(|(k, (u, y))| {
-                one_record(u.as_ref(), Some(y), shape.n_inputs, shape.n_outputs)
-                    .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))
-            })
-            .collect::<PyResult<_>>()?;
-        let joint = py.detach(|| joint::of_records(&self.inner, &fitter, &records))?;
-        joint::joint_dict(py, joint)
+        )
     }
 
     /// Refine one record's estimate through the model (`twostage estimate
@@ -524,32 +531,7 @@ impl PyEstimator {
         model_file: Option<PathBuf>,
         model_toml: Option<&str>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        let named = named_model(None, model_file, model_toml)?;
-        let refiner = twostage::EstimateRefiner::new(&self.inner, named.as_ref())
-            .map_err(|e| PyValueError::new_err(format!("refine: {e}")))?;
-        let shape = self.inner.record_shape();
-        let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
-        let first = self.inner.assess(&record).map_err(to_python)?;
-        let refined = py
-            .detach(|| refiner.refine(&record, &first.theta, first.interval_half_widths()))
-            .map_err(|e| {
-                PyValueError::new_err(format!(
-                    "the refinement failed ({e}); the two-stage estimate stands"
-                ))
-            })?;
-        let dict = pyo3::types::PyDict::new(py);
-        through_model::set_estimate(
-            py,
-            &dict,
-            refined.theta,
-            refined.half_widths,
-            refined.correlation,
-        )?;
-        dict.set_item("stop", refined.stop.map(|s| s.name()))?;
-        let (optima, runner_up) = refined.optima.unzip();
-        dict.set_item("optima", optima)?;
-        dict.set_item("runner_up_over_best", runner_up.flatten())?;
-        Ok(dict)
+        requests::refine(&self.inner, py, u, y, model_file, model_toml)
     }
 }
 
@@ -670,148 +652,11 @@ impl PyEstimator {
     }
 }
 
-/// Train an estimator. The model is a built-in one (`model`), a model
-/// file (`model_file`, or its text as `model_toml`), or, with `simulator`,
-/// a Python function simulating the model a source-less model file
-/// describes, in batches of `batch_size`. The command line's defaults: the
-/// same arguments and seed give the same file as `twostage train`.
-/// `auto` searches the design (within `budget_seconds`, or on
-/// `budget_sims` simulations with every candidate), as `--auto` does; a
-/// model without presets searches anyway. `progress` is called as
-/// `progress(event, stage, count)`, and as `progress("note" or "status",
-/// message, 0)` for the run's messages.
-#[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None))]
-#[allow(clippy::too_many_arguments)]
-fn train(
-    py: Python<'_>,
-    model: Option<&str>,
-    model_file: Option<PathBuf>,
-    model_toml: Option<&str>,
-    simulator: Option<Py<PyAny>>,
-    batch_size: usize,
-    preset: Option<&str>,
-    sims: Option<usize>,
-    compress: Option<&str>,
-    fit: Option<&str>,
-    seed: Option<u64>,
-    validate: Option<usize>,
-    calibrate: Option<usize>,
-    alpha: Option<f64>,
-    progress: Option<Py<PyAny>>,
-    chart: Option<(PathBuf, Option<String>)>,
-    validate_chart: Option<(PathBuf, Option<String>)>,
-    calibrate_chart: Option<(PathBuf, Option<String>)>,
-    auto: bool,
-    budget_seconds: Option<f64>,
-    budget_sims: Option<usize>,
-) -> PyResult<PyEstimator> {
-    let search = match (auto, budget_seconds, budget_sims) {
-        (false, None, None) => None,
-        (false, _, _) => {
-            return Err(PyValueError::new_err(
-                "budget_seconds and budget_sims go with auto=True (the automatic design)",
-            ));
-        }
-        (true, Some(_), Some(_)) => {
-            return Err(PyValueError::new_err(
-                "give budget_seconds or budget_sims, not both",
-            ));
-        }
-        (true, None, Some(m)) => Some(twostage::Budget::Simulations(m)),
-        (true, Some(t), None) => Some(twostage::Budget::Seconds(t)),
-        (true, None, None) => Some(twostage::Budget::default()),
-    };
-    let named = match (model, simulator.is_some()) {
-        (Some(_), true) => {
-            return Err(PyValueError::new_err(
-                "a simulator needs a model file without [source] (model_file= or model_toml=) \
-                 for its parameter names, priors and signals, not a built-in model",
-            ));
-        }
-        _ => named_model(model, model_file, model_toml)?.ok_or_else(|| {
-            PyValueError::new_err(
-                "give one of model='benchmark' (a built-in model), model_file='path.toml' or \
-                 model_toml='...' (a model file's text)",
-            )
-        })?,
-    };
-    let defaults = RunSettings::default();
-    let chart_dir = |given: Option<(PathBuf, Option<String>)>| {
-        given.map(|(dir, label)| ChartDir { dir, label })
-    };
-    let records = match (chart, validate_chart, calibrate_chart) {
-        (None, None, None) => RecordsRequest::Simulated,
-        (Some((dir, label)), validation, calibration) => match RecordsRequest::chart(&dir) {
-            RecordsRequest::Chart { .. } => RecordsRequest::Chart {
-                training: ChartDir { dir, label },
-                calibration: chart_dir(calibration),
-                validation: chart_dir(validation),
-            },
-            shards if validation.is_none() && calibration.is_none() => shards,
-            _ => {
-                return Err(PyValueError::new_err(
-                    "shards hold their own calibration and validation records: leave out \
-                     validate_chart and calibrate_chart",
-                ));
-            }
-        },
-        (None, _, _) => {
-            return Err(PyValueError::new_err(
-                "validate_chart and calibrate_chart go with chart (a training chart)",
-            ));
-        }
-    };
-    let request = TrainingRequest {
-        preset: preset.map(str::to_string),
-        simulations: sims,
-        compress: compress.map(str::to_string),
-        fit: fit.map(str::to_string),
-        search,
-        settings: RunSettings {
-            seed,
-            validation: validate.unwrap_or(defaults.validation),
-            calibration: calibrate.unwrap_or(defaults.calibration),
-            alpha: alpha.unwrap_or(defaults.alpha),
-            ..defaults
-        },
-        records,
-    };
-    let python = match (&named, simulator) {
-        (NamedModel::File(file), Some(function)) => {
-            let python = PythonSimulator::new(function, file.spec().clone(), batch_size);
-            Some(file.simulator_with(Box::new(python)).map_err(to_python)?)
-        }
-        (_, Some(_)) => {
-            return Err(PyValueError::new_err(
-                "a simulator needs a model file without [source] (model_file= or model_toml=)",
-            ));
-        }
-        (_, None) => None,
-    };
-    let reporter = progress.map(PythonProgress::new);
-    let trained = py.detach(|| -> twostage::Result<twostage::Trained> {
-        let progress: &dyn twostage::Progress = match &reporter {
-            Some(reporter) => reporter,
-            None => &twostage::Silent,
-        };
-        match &python {
-            Some(simulator) => request.train_with(&named, simulator.as_ref(), progress),
-            None => request.train(&named, progress),
-        }
-    });
-    trained
-        .map(|trained| PyEstimator {
-            inner: trained.into_estimator(),
-        })
-        .map_err(to_python)
-}
-
 /// The native module.
 #[pymodule]
 fn _twostage(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<PyEstimator>()?;
-    module.add_function(wrap_pyfunction!(train, module)?)?;
+    module.add_function(wrap_pyfunction!(training::train, module)?)?;
     module.add_function(wrap_pyfunction!(through_model::check_values, module)?)?;
     module.add_function(wrap_pyfunction!(through_model::predict, module)?)?;
     module.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -12,7 +12,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use twostage::models::{Conditions, IoData, Simulator, experiment_rng};
-use twostage::{NamedModel, RecordCheck};
+use twostage::{
+    EstimateRequest, EstimateWith, Estimating, GivenValues, NamedModel, RecordCheck, RecordEstimate,
+};
 
 use crate::{as_batch, non_finite, records, to_python};
 
@@ -208,37 +210,56 @@ pub(crate) fn check_dict<'py>(
     Ok(dict)
 }
 
-/// Checks `theta` of `sim` against `record` without the GIL, scored from
-/// sample `score_from` on, its best-fit search from `theta`, the corners
-/// of its interval `half_widths` (where known) and `prior_starts` starts
-/// over the prior (default two per parameter and two more), as the
-/// command line's check.
-pub(crate) fn check(
+/// A request prepared, its error as Python's: what it was for and why.
+pub(crate) fn prepared(request: EstimateRequest) -> PyResult<Estimating> {
+    request
+        .prepare()
+        .map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// One record through a prepared request, without the GIL: its row, or
+/// why it has none.
+pub(crate) fn one_row(
     py: Python<'_>,
-    sim: &dyn Simulator,
-    record: &IoData,
-    theta: &[f64],
-    half_widths: Option<&[f64]>,
-    (sims, seed, score_from, prior_starts): (Option<usize>, u64, usize, Option<usize>),
-) -> PyResult<RecordCheck> {
-    parameters(theta, sim)?;
-    let plan = twostage::CheckPlan {
-        noisy: sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
-        seed,
+    estimating: &Estimating,
+    record: IoData,
+) -> PyResult<RecordEstimate> {
+    let estimates = py.detach(|| {
+        estimating.estimate_each(
+            vec![("0".into(), Ok(record))],
+            &|_| "the record".into(),
+            &twostage::Silent,
+        )
+    });
+    let (_, outcome) = estimates
+        .rows
+        .into_iter()
+        .next()
+        .unwrap_or_else(|| unreachable!("one record, one row"));
+    outcome.map(|(_, row)| row).map_err(PyValueError::new_err)
+}
+
+/// The check a row carries, as its dict; why it could not simulate, as
+/// Python's error.
+pub(crate) fn checked_dict<'py>(
+    py: Python<'py>,
+    row: &RecordEstimate,
+) -> PyResult<Bound<'py, PyDict>> {
+    match &row.check {
+        Some(Ok(check)) => check_dict(py, check),
+        Some(Err(e)) => Err(PyValueError::new_err(format!(
+            "the check could not simulate: {e}"
+        ))),
+        None => unreachable!("a request that checks gives every row a check"),
+    }
+}
+
+/// The check's settings as the keyword arguments give them.
+pub(crate) fn check_settings(sims: Option<usize>, score_from: usize) -> twostage::CheckSettings {
+    twostage::CheckSettings {
+        runs: sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
         score_from,
-        prior_starts: prior_starts
-            .unwrap_or_else(|| twostage::SearchStarts::default_from_prior(theta.len())),
-    };
-    py.detach(|| {
-        let starts = plan
-            .search()
-            .starts(sim.spec().prior(), theta, half_widths)?;
-        let best = twostage::search_best_fits(sim, vec![(record, starts)])
-            .pop()
-            .unwrap_or_else(|| unreachable!("one search, one result"))?;
-        twostage::check_against(sim, record, theta, &best, plan)
-    })
-    .map_err(|e| PyValueError::new_err(format!("the check could not simulate: {e}")))
+    }
 }
 
 /// Check given values against a record (`twostage estimate --at VALUES
@@ -279,15 +300,17 @@ pub(crate) fn check_values<'py>(
         spec.input_names().len(),
         spec.output_names().len(),
     )?;
-    let checked = check(
-        py,
-        sim.as_ref(),
-        &record,
-        &theta,
-        None,
-        (sims, seed, score_from, prior_starts),
-    )?;
-    check_dict(py, &checked)
+    parameters(&theta, sim.as_ref())?;
+    let given =
+        GivenValues::new(vec![("0".into(), theta)], "theta").map_err(PyValueError::new_err)?;
+    let estimating = prepared(EstimateRequest {
+        model: Some(named),
+        check: Some(check_settings(sims, score_from)),
+        seed,
+        prior_starts,
+        ..EstimateRequest::new(EstimateWith::Given(given))
+    })?;
+    checked_dict(py, &one_row(py, &estimating, record)?)
 }
 
 /// The model's record at `theta` on the input `u` (`twostage simulate --at

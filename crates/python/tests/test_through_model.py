@@ -93,6 +93,41 @@ def test_check_and_refine_are_the_cli_s(benchmark):
         assert again["simulated"].shape == (1000, 1)
 
 
+def test_a_file_of_records_is_estimated_as_the_cli_estimates_it(benchmark):
+    estimator, path, folder = benchmark
+    u, y, _ = records(folder)
+    pairs = [(u[k], y[k]) for k in range(3)]
+    data = str(folder / "data.csv")
+    # Checked, refined where the check does not explain (or the fit is
+    # below 99.9%, so that some are), with the correlations.
+    from_cli = json.loads(cli("estimate", "--estimator", str(path), "--refine=auto",
+                              "--refine-below-fit", "99.9", "--check-sims", "99",
+                              "--format", "json", data))
+    ours = estimator.estimate_records(pairs, refine="auto", refine_below_fit=99.9, sims=99)
+    assert ours["rows"] == from_cli and ours["failed"] == []
+    assert ours["auto"]["checked"] == 3
+    # Refined rows left their two-stage estimate; the others kept it.
+    moved = {row["experiment"] for row in from_cli
+             if row["theta"] != estimator.estimate(*pairs[int(row["experiment"])])[0]}
+    assert set(ours["auto"]["refined"]) == moved and moved
+    # Windows, then one estimate of every window together, by name.
+    from_cli = json.loads(cli("estimate", "--estimator", str(path), "--window", "500",
+                              "--every", "250", "--joint", "--format", "json", data))
+    ours = estimator.estimate_records(pairs, window=500, every=250, joint=True,
+                                      experiments=["0", "1", "2"])
+    assert ours["rows"] == from_cli
+    assert [row.get("window_end") for row in ours["rows"]][:3] == [500, 750, 1000]
+    assert ours["rows"][-1]["experiment"] == "joint"
+    # Windows the estimator cannot read alone are named, the others kept.
+    ours = estimator.estimate_records(pairs[:1], window=500)
+    assert ours["rows"] == [] and len(ours["failed"]) == 2
+    assert "records: experiment 0: " in ours["failed"][0][1]
+    with pytest.raises(ValueError, match="refine_below_fit is read with refine=\"auto\""):
+        estimator.estimate_records(pairs, refine_below_fit=50.0)
+    with pytest.raises(ValueError, match="experiments has 1 names for 3 records"):
+        estimator.estimate_records(pairs, experiments=["a"])
+
+
 def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
     model = tmp_path / "short.toml"
     model.write_text(SHORT)

@@ -13,10 +13,8 @@ use crate::options::{InitialCovariance, TableFormat};
 mod columns;
 mod methods;
 mod said;
-mod table;
 
 use columns::plot_check;
-use table::{csv, json};
 
 /// Options of `twostage estimate`.
 #[derive(Debug, clap::Args)]
@@ -260,24 +258,21 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             .iter()
             .map(|(_, record, row)| (record, &rows[*row].1))
             .collect();
-        let joint = match estimating.joint(&records, &bars) {
+        match estimating.joint(&records, &bars) {
             Some(Ok((joint, row))) => {
                 said::joint(&plant, &joint);
-                row
+                rows.push(("joint".into(), row));
             }
+            // No row: a joint row without an estimate would read as one.
             Some(Err(why)) => {
+                failed += 1;
                 eprintln!(
                     "error: the joint fit of {} records failed: {why}",
                     plant.len()
                 );
-                RecordEstimate {
-                    refined: Some(Err(why)),
-                    ..RecordEstimate::bare(Vec::new())
-                }
             }
             None => unreachable!("records are gathered for a joint fit only"),
-        };
-        rows.push(("joint".into(), joint));
+        }
     }
     let outcome = Outcome {
         estimated: rows.len(),
@@ -297,13 +292,10 @@ fn write_table(
     estimating: &Estimating,
     rows: &[(String, RecordEstimate)],
 ) -> Result<()> {
-    let outputs = &estimating.signals().outputs;
-    let names = estimating.param_names();
-    let prior_box = estimating.prior_box();
     let text = if args.format == TableFormat::Json {
-        json(names, rows, outputs, args.correlation, prior_box)?
+        serde_json::to_string_pretty(&estimating.json(rows, args.correlation))? + "\n"
     } else {
-        csv(names, rows, outputs, args.correlation, prior_box)?
+        estimating.csv(rows, args.correlation)
     };
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,

@@ -338,6 +338,67 @@ class Estimator:
         joint["lower"], joint["upper"] = self._interval(joint["theta"], widths)
         return joint
 
+    def estimate_records(
+        self,
+        records: list,
+        *,
+        experiments: Optional[list[str]] = None,
+        check: bool = False,
+        refine: Optional[str] = None,
+        refine_below_fit: Optional[float] = None,
+        joint: bool = False,
+        window: Optional[int] = None,
+        every: Optional[int] = None,
+        correlation: bool = False,
+        model_file: _Path = None,
+        model_toml: Optional[str] = None,
+        sims: Optional[int] = None,
+        score_from: int = 0,
+        prior_starts: Optional[int] = None,
+        seed: int = 0,
+        progress: Any = None,
+    ) -> dict[str, Any]:
+        """Estimate ``records`` (a list of ``(u, y)`` pairs, any lengths),
+        named ``experiments`` (default their indices), as ``twostage
+        estimate --estimator`` estimates a file of them with the same
+        flags: ``check`` (``--check``, ranked among ``sims`` runs, scored
+        from ``score_from``), ``refine`` ``"all"`` or ``"auto"``
+        (``--refine``, ``--refine=auto``: check every record and refine
+        those the check does not explain, or whose fit is below
+        ``refine_below_fit`` percent), ``joint`` (a last row
+        ``"joint"``), ``window`` and ``every`` (a row per window),
+        ``correlation``, ``prior_starts`` and ``seed``. The model is the
+        estimator's built-in one, or its model file (``model_file`` or
+        ``model_toml``). Returns a dict: ``rows``, a dict per row with the
+        keys of the command's ``--format json`` (the same numbers, bit
+        for bit); ``failed``, pairs of an experiment and why it has no
+        row; ``auto``, with ``refine="auto"``, a dict of ``explained``
+        and ``checked`` counts and ``refined``, each refined experiment
+        and why."""
+        pairs = [self._columns(u, y) for u, y in records]
+        rows, failed, auto = self._native.estimate_records(
+            pairs,
+            experiments=experiments,
+            check=check,
+            refine=refine,
+            refine_below_fit=refine_below_fit,
+            joint=joint,
+            window=window,
+            every=every,
+            correlation=correlation,
+            model_file=_path(model_file),
+            model_toml=model_toml,
+            sims=sims,
+            score_from=score_from,
+            prior_starts=prior_starts,
+            seed=seed,
+            progress=_progress(progress),
+        )
+        if auto is not None:
+            explained, checked, refined = auto
+            auto = {"explained": explained, "checked": checked, "refined": dict(refined)}
+        return {"rows": json.loads(rows), "failed": failed, "auto": auto}
+
     def validate(
         self,
         *,

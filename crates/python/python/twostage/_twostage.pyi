@@ -82,6 +82,31 @@ class Estimator:
         prior_starts: Optional[int] = None,
         seed: int = 0,
     ) -> dict[str, Any]: ...
+    def estimate_records(
+        self,
+        records: list[tuple[Optional[_Array], _Array]],
+        *,
+        experiments: Optional[list[str]] = None,
+        check: bool = False,
+        refine: Optional[str] = None,
+        refine_below_fit: Optional[float] = None,
+        joint: bool = False,
+        window: Optional[int] = None,
+        every: Optional[int] = None,
+        correlation: bool = False,
+        model_file: Optional[str] = None,
+        model_toml: Optional[str] = None,
+        sims: Optional[int] = None,
+        score_from: int = 0,
+        prior_starts: Optional[int] = None,
+        seed: int = 0,
+        progress: Optional[Any] = None,
+    ) -> Tuple[
+        str, list[Tuple[str, str]], Optional[Tuple[int, int, list[Tuple[str, str]]]]
+    ]:
+        """(rows as JSON, failed records, what refine="auto" chose):
+        ``twostage.Estimator.estimate_records`` reads these."""
+        ...
     def validate(
         self,
         *,

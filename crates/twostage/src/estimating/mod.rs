@@ -18,6 +18,7 @@ use crate::{EstimateRefiner, JointFitter};
 
 mod methods;
 mod records;
+mod table;
 mod through_model;
 
 pub use methods::OUTPUT_ERROR_METHOD;

@@ -168,7 +168,22 @@ impl Estimating {
         records: Vec<(String, Result<IoData, String>)>,
         progress: &dyn Progress,
     ) -> Estimates {
-        let pieces = self.pieces(source, records);
+        self.estimate_each(
+            records,
+            &|id| format!("{source}: experiment {id}"),
+            progress,
+        )
+    }
+
+    /// [`Estimating::estimate`], a record's error named by `place` of its
+    /// id (`records[3]`, say) instead of a source and an experiment.
+    pub fn estimate_each(
+        &self,
+        records: Vec<(String, Result<IoData, String>)>,
+        place: &(dyn Fn(&str) -> String + Sync),
+        progress: &dyn Progress,
+    ) -> Estimates {
+        let pieces = self.pieces(records, place);
         progress.begin_step("estimating", pieces.len(), "records");
         let mut rows: Vec<(String, RecordOutcome)> = pieces
             .into_par_iter()
@@ -177,7 +192,7 @@ impl Estimating {
                     let estimated = self
                         .method
                         .estimate(&id, &record)
-                        .map_err(|e| format!("{source}: experiment {id}: {e}"))?;
+                        .map_err(|e| format!("{}: {e}", place(&id)))?;
                     Ok((
                         record,
                         RecordEstimate {
@@ -201,8 +216,8 @@ impl Estimating {
     #[allow(clippy::type_complexity)]
     fn pieces(
         &self,
-        source: &str,
         records: Vec<(String, Result<IoData, String>)>,
+        place: &(dyn Fn(&str) -> String + Sync),
     ) -> Vec<(String, Result<IoData, String>, Option<usize>)> {
         let Some(windows) = self.windows else {
             return records.into_iter().map(|(id, r)| (id, r, None)).collect();
@@ -220,12 +235,13 @@ impl Estimating {
             let n = record.n_samples();
             if n < length {
                 let why = format!(
-                    "{source}: experiment {id}: {n} samples, shorter than the window of {length}"
+                    "{}: {n} samples, shorter than the window of {length}",
+                    place(&id)
                 );
                 pieces.push((id, Err(why), None));
                 continue;
             }
-            // A step of 0 is refused when the request is built.
+            // A step of 0 is refused when the request is prepared.
             for end in (length..=n).step_by(every.max(1)) {
                 pieces.push((id.clone(), Ok(record.window(end - length, end)), Some(end)));
             }

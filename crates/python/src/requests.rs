@@ -1,0 +1,355 @@
+//! What the estimator does through its model, each one estimate request
+//! (`twostage::EstimateRequest`) as the command line's `estimate` makes
+//! it, or the validation run `twostage validate` makes: so the numbers
+//! are the command line's, bit for bit.
+
+use std::path::PathBuf;
+
+use numpy::{IntoPyArray, PyArrayDyn};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use twostage::models::IoData;
+use twostage::{EstimateRequest, EstimateWith, NamedModel};
+
+use crate::simulator::PythonProgress;
+use crate::through_model::{
+    check_settings, checked_dict, named_model, one_record, one_row, prepared,
+};
+use crate::{joint, shape_error, through_model, to_python};
+
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn check<'py>(
+    estimator: &twostage::Estimator,
+    py: Python<'py>,
+    u: Option<&Bound<'py, PyAny>>,
+    y: &Bound<'py, PyAny>,
+    theta: Option<Vec<f64>>,
+    model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+    sims: Option<usize>,
+    seed: u64,
+    score_from: usize,
+    prior_starts: Option<usize>,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let named = named_model(None, model_file, model_toml)?;
+    let shape = estimator.record_shape();
+    let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
+    let with = match theta {
+        // The estimator's own estimate, its interval's corners among
+        // the search's starts.
+        None => EstimateWith::Estimator(Box::new(estimator.clone())),
+        Some(theta) => {
+            let q = estimator.param_names().len();
+            if theta.len() != q {
+                return Err(PyValueError::new_err(format!(
+                    "theta has {} values, the model has {q} parameters ({})",
+                    theta.len(),
+                    estimator.param_names().join(", ")
+                )));
+            }
+            let given = twostage::GivenValues::new(vec![("0".into(), theta)], "theta")
+                .map_err(PyValueError::new_err)?;
+            EstimateWith::Given(given)
+        }
+    };
+    // Given values need the model by name; the estimator finds its own.
+    let model = match &with {
+        EstimateWith::Given(_) => Some(
+            NamedModel::trained_on(&estimator.training().model, named.as_ref())
+                .map_err(to_python)?
+                .into_owned(),
+        ),
+        _ => named,
+    };
+    let estimating = prepared(EstimateRequest {
+        model,
+        check: Some(check_settings(sims, score_from)),
+        seed,
+        prior_starts,
+        ..EstimateRequest::new(with)
+    })?;
+    checked_dict(py, &one_row(py, &estimating, record)?)
+}
+
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub(crate) fn validate<'py>(
+    estimator: &twostage::Estimator,
+    py: Python<'py>,
+    model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+    sims: Option<usize>,
+    gamma: Option<f64>,
+    delta: Option<f64>,
+    seed: Option<u64>,
+    target_rmse: Option<f64>,
+    max_sims: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<(
+    String,
+    Bound<'py, PyArrayDyn<f64>>,
+    Bound<'py, PyArrayDyn<f64>>,
+    Option<(bool, f64)>,
+)> {
+    let named = named_model(None, model_file, model_toml)?;
+    let sim = NamedModel::trained_on(&estimator.training().model, named.as_ref())
+        .and_then(|model| model.simulator(false))
+        .map_err(to_python)?;
+    let defaults = twostage::ValidationPlan::default();
+    let plan = twostage::ValidationPlan {
+        sims,
+        gamma,
+        delta: delta.unwrap_or(defaults.delta),
+        seed: seed.unwrap_or(defaults.seed),
+        target_rmse,
+        max_sims: max_sims.unwrap_or(defaults.max_sims),
+    };
+    let reporter = progress.map(PythonProgress::new);
+    let run = py
+        .detach(|| {
+            let progress: &dyn twostage::Progress = match &reporter {
+                Some(reporter) => reporter,
+                None => &twostage::Silent,
+            };
+            twostage::validate_estimator(estimator, sim.as_ref(), &plan, progress)
+        })
+        .map_err(to_python)?;
+    let report = serde_json::to_string(&run.report)
+        .map_err(|e| PyValueError::new_err(format!("validation report: {e}")))?;
+    let q = estimator.param_names().len();
+    let table = |values: Vec<f64>| -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        Ok(ndarray::Array2::from_shape_vec((run.records, q), values)
+            .map_err(shape_error)?
+            .into_dyn()
+            .into_pyarray(py))
+    };
+    let target = run.target.map(|t| match t {
+        twostage::TargetRmse::Met { ratio } => (true, ratio),
+        twostage::TargetRmse::NotMet { ratio } => (false, ratio),
+    });
+    Ok((report, table(run.truth)?, table(run.estimates)?, target))
+}
+
+pub(crate) fn joint<'py>(
+    estimator: &twostage::Estimator,
+    py: Python<'py>,
+    records: Vec<(Option<Bound<'py, PyAny>>, Bound<'py, PyAny>)>,
+    model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+    prior_starts: Option<usize>,
+    seed: u64,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let named = named_model(None, model_file, model_toml)?;
+    let estimating = prepared(EstimateRequest {
+        model: named,
+        joint: true,
+        seed,
+        prior_starts,
+        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+    })?;
+    let shape = estimator.record_shape();
+    let records: Vec<(String, Result<twostage::models::IoData, String>)> = records
+        .iter()
+        .enumerate()
+        .map(|(k, (u, y))| {
+            one_record(u.as_ref(), Some(y), shape.n_inputs, shape.n_outputs)
+                .map(|record| (k.to_string(), Ok(record)))
+                .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))
+        })
+        .collect::<PyResult<_>>()?;
+    let joint = py.detach(|| {
+        let estimates =
+            estimating.estimate_each(records, &|id| format!("records[{id}]"), &twostage::Silent);
+        let rows: Vec<(twostage::models::IoData, twostage::RecordEstimate)> = estimates
+            .rows
+            .into_iter()
+            .map(|(_, outcome)| outcome)
+            .collect::<Result<_, String>>()?;
+        let plant: Vec<_> = rows.iter().map(|(record, row)| (record, row)).collect();
+        match estimating.joint(&plant, &twostage::Silent) {
+            Some(Ok((joint, _))) => Ok(joint),
+            Some(Err(e)) => Err(format!("the joint fit failed: {e}")),
+            None => unreachable!("the request asks for the joint fit"),
+        }
+    });
+    joint::joint_dict(py, joint.map_err(PyValueError::new_err)?)
+}
+
+pub(crate) fn refine<'py>(
+    estimator: &twostage::Estimator,
+    py: Python<'py>,
+    u: Option<&Bound<'py, PyAny>>,
+    y: &Bound<'py, PyAny>,
+    model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let named = named_model(None, model_file, model_toml)?;
+    let estimating = prepared(EstimateRequest {
+        model: named,
+        refine: Some(twostage::RefineWhich::All),
+        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+    })?;
+    let shape = estimator.record_shape();
+    let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
+    let row = one_row(py, &estimating, record)?;
+    let stop = match &row.refined {
+        Some(Ok(stop)) => *stop,
+        Some(Err(e)) => {
+            return Err(PyValueError::new_err(format!(
+                "the refinement failed ({e}); the two-stage estimate stands"
+            )));
+        }
+        None => unreachable!("a request that refines gives every row a refinement"),
+    };
+    let half_widths = match (row.interval_failure, row.half_widths) {
+        (Some(why), _) => Err(why),
+        (None, Some(widths)) => Ok(widths),
+        (None, None) => Err("the refinement gave no interval".into()),
+    };
+    let dict = pyo3::types::PyDict::new(py);
+    through_model::set_estimate(py, &dict, row.theta, half_widths, row.correlation)?;
+    dict.set_item("stop", stop.map(|s| s.name()))?;
+    let (optima, runner_up) = row.optima.unzip();
+    dict.set_item("optima", optima)?;
+    dict.set_item("runner_up_over_best", runner_up.flatten())?;
+    Ok(dict)
+}
+
+/// What `Estimator.estimate_records` returns before the Python layer
+/// reads it: the rows as JSON, the records that failed (experiment and
+/// why), and what `refine="auto"` chose (explained, checked, and each
+/// refined experiment with its reason).
+type Table = (
+    String,
+    Vec<(String, String)>,
+    Option<(usize, usize, Vec<(String, String)>)>,
+);
+
+/// Every record of `records` (pairs `(u, y)`, named `experiments` or by
+/// their index) through one estimate request, as `twostage estimate`
+/// makes it from the same flags: the rows as its `--format json` writes
+/// them.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn estimate_records<'py>(
+    estimator: &twostage::Estimator,
+    py: Python<'py>,
+    records: Vec<(Option<Bound<'py, PyAny>>, Bound<'py, PyAny>)>,
+    experiments: Option<Vec<String>>,
+    check: bool,
+    refine: Option<&str>,
+    refine_below_fit: Option<f64>,
+    joint: bool,
+    window: Option<usize>,
+    every: Option<usize>,
+    correlation: bool,
+    model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+    sims: Option<usize>,
+    score_from: usize,
+    prior_starts: Option<usize>,
+    seed: u64,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Table> {
+    let ids = match experiments {
+        Some(ids) if ids.len() != records.len() => {
+            return Err(PyValueError::new_err(format!(
+                "experiments has {} names for {} records: give one per record",
+                ids.len(),
+                records.len()
+            )));
+        }
+        Some(ids) => ids,
+        None => (0..records.len()).map(|k| k.to_string()).collect(),
+    };
+    let refine = match refine {
+        None => None,
+        Some("all") => Some(twostage::RefineWhich::All),
+        Some("auto") => Some(twostage::RefineWhich::Auto(twostage::RefinePolicy {
+            min_fit_percent: refine_below_fit
+                .unwrap_or(twostage::RefinePolicy::default().min_fit_percent),
+        })),
+        Some(other) => {
+            return Err(PyValueError::new_err(format!(
+                "refine = {other:?}: give \"all\", \"auto\" or None"
+            )));
+        }
+    };
+    if refine_below_fit.is_some() && !matches!(refine, Some(twostage::RefineWhich::Auto(_))) {
+        return Err(PyValueError::new_err(
+            "refine_below_fit is read with refine=\"auto\" only: leave it out",
+        ));
+    }
+    if every.is_some() && window.is_none() {
+        return Err(PyValueError::new_err("every needs window=N: give both"));
+    }
+    let estimating = prepared(EstimateRequest {
+        model: named_model(None, model_file, model_toml)?,
+        // refine="auto" checks to choose, with the same settings.
+        check: (check || matches!(refine, Some(twostage::RefineWhich::Auto(_))))
+            .then(|| check_settings(sims, score_from)),
+        refine,
+        joint,
+        windows: window.map(|length| twostage::Windows {
+            length,
+            every: every.unwrap_or(length),
+        }),
+        seed,
+        prior_starts,
+        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+    })?;
+    let shape = estimator.record_shape();
+    let records: Vec<(String, Result<IoData, String>)> = records
+        .iter()
+        .zip(ids)
+        .enumerate()
+        .map(|(k, ((u, y), id))| {
+            one_record(u.as_ref(), Some(y), shape.n_inputs, shape.n_outputs)
+                .map(|record| (id, Ok(record)))
+                .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))
+        })
+        .collect::<PyResult<_>>()?;
+    let reporter = progress.map(PythonProgress::new);
+    let (rows, failed, auto) = py.detach(|| {
+        let progress: &dyn twostage::Progress = match &reporter {
+            Some(reporter) => reporter,
+            None => &twostage::Silent,
+        };
+        let estimates = estimating.estimate("records", records, progress);
+        let auto = estimates.auto.as_ref().map(|auto| {
+            let refined = auto
+                .groups(&estimates.rows)
+                .into_iter()
+                .flat_map(|(reason, ids)| {
+                    ids.into_iter()
+                        .map(move |id| (id.to_string(), reason.describe().to_string()))
+                })
+                .collect();
+            (auto.explained, auto.checked, refined)
+        });
+        let mut rows = Vec::new();
+        let mut failed = Vec::new();
+        for (id, outcome) in estimates.rows {
+            match outcome {
+                Ok((record, row)) => rows.push((id, record, row)),
+                Err(why) => failed.push((id, why)),
+            }
+        }
+        let plant: Vec<(&IoData, &twostage::RecordEstimate)> =
+            rows.iter().map(|(_, record, row)| (record, row)).collect();
+        let joint = if plant.is_empty() {
+            None
+        } else {
+            estimating.joint(&plant, progress)
+        };
+        let mut rows: Vec<(String, twostage::RecordEstimate)> =
+            rows.into_iter().map(|(id, _, row)| (id, row)).collect();
+        match joint {
+            Some(Ok((_, row))) => rows.push(("joint".into(), row)),
+            Some(Err(why)) => failed.push(("joint".into(), format!("the joint fit failed: {why}"))),
+            None => {}
+        }
+        (rows, failed, auto)
+    });
+    let json = serde_json::to_string(&estimating.json(&rows, correlation))
+        .map_err(|e| PyValueError::new_err(format!("the rows as JSON: {e}")))?;
+    Ok((json, failed, auto))
+}

@@ -1,0 +1,150 @@
+//! `twostage.train`: one training request (`twostage::TrainingRequest`)
+//! built from keyword arguments, as the command line's `train` builds it
+//! from flags, so the same arguments give the same estimator file.
+
+use std::path::PathBuf;
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use twostage::{ChartDir, NamedModel, RecordsRequest, RunSettings, TrainingRequest};
+
+use crate::simulator::{PythonProgress, PythonSimulator};
+use crate::through_model::named_model;
+use crate::{PyEstimator, to_python};
+
+/// Train an estimator. The model is a built-in one (`model`), a model
+/// file (`model_file`, or its text as `model_toml`), or, with `simulator`,
+/// a Python function simulating the model a source-less model file
+/// describes, in batches of `batch_size`. The command line's defaults: the
+/// same arguments and seed give the same file as `twostage train`.
+/// `auto` searches the design (within `budget_seconds`, or on
+/// `budget_sims` simulations with every candidate), as `--auto` does; a
+/// model without presets searches anyway. `progress` is called as
+/// `progress(event, stage, count)`, and as `progress("note" or "status",
+/// message, 0)` for the run's messages.
+#[pyfunction]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn train(
+    py: Python<'_>,
+    model: Option<&str>,
+    model_file: Option<PathBuf>,
+    model_toml: Option<&str>,
+    simulator: Option<Py<PyAny>>,
+    batch_size: usize,
+    preset: Option<&str>,
+    sims: Option<usize>,
+    compress: Option<&str>,
+    fit: Option<&str>,
+    seed: Option<u64>,
+    validate: Option<usize>,
+    calibrate: Option<usize>,
+    alpha: Option<f64>,
+    progress: Option<Py<PyAny>>,
+    chart: Option<(PathBuf, Option<String>)>,
+    validate_chart: Option<(PathBuf, Option<String>)>,
+    calibrate_chart: Option<(PathBuf, Option<String>)>,
+    auto: bool,
+    budget_seconds: Option<f64>,
+    budget_sims: Option<usize>,
+) -> PyResult<PyEstimator> {
+    let search = match (auto, budget_seconds, budget_sims) {
+        (false, None, None) => None,
+        (false, _, _) => {
+            return Err(PyValueError::new_err(
+                "budget_seconds and budget_sims go with auto=True (the automatic design)",
+            ));
+        }
+        (true, Some(_), Some(_)) => {
+            return Err(PyValueError::new_err(
+                "give budget_seconds or budget_sims, not both",
+            ));
+        }
+        (true, None, Some(m)) => Some(twostage::Budget::Simulations(m)),
+        (true, Some(t), None) => Some(twostage::Budget::Seconds(t)),
+        (true, None, None) => Some(twostage::Budget::default()),
+    };
+    let named = match (model, simulator.is_some()) {
+        (Some(_), true) => {
+            return Err(PyValueError::new_err(
+                "a simulator needs a model file without [source] (model_file= or model_toml=) \
+                 for its parameter names, priors and signals, not a built-in model",
+            ));
+        }
+        _ => named_model(model, model_file, model_toml)?.ok_or_else(|| {
+            PyValueError::new_err(
+                "give one of model='benchmark' (a built-in model), model_file='path.toml' or \
+                 model_toml='...' (a model file's text)",
+            )
+        })?,
+    };
+    let defaults = RunSettings::default();
+    let chart_dir = |given: Option<(PathBuf, Option<String>)>| {
+        given.map(|(dir, label)| ChartDir { dir, label })
+    };
+    let records = match (chart, validate_chart, calibrate_chart) {
+        (None, None, None) => RecordsRequest::Simulated,
+        (Some((dir, label)), validation, calibration) => match RecordsRequest::chart(&dir) {
+            RecordsRequest::Chart { .. } => RecordsRequest::Chart {
+                training: ChartDir { dir, label },
+                calibration: chart_dir(calibration),
+                validation: chart_dir(validation),
+            },
+            shards if validation.is_none() && calibration.is_none() => shards,
+            _ => {
+                return Err(PyValueError::new_err(
+                    "shards hold their own calibration and validation records: leave out \
+                     validate_chart and calibrate_chart",
+                ));
+            }
+        },
+        (None, _, _) => {
+            return Err(PyValueError::new_err(
+                "validate_chart and calibrate_chart go with chart (a training chart)",
+            ));
+        }
+    };
+    let request = TrainingRequest {
+        preset: preset.map(str::to_string),
+        simulations: sims,
+        compress: compress.map(str::to_string),
+        fit: fit.map(str::to_string),
+        search,
+        settings: RunSettings {
+            seed,
+            validation: validate.unwrap_or(defaults.validation),
+            calibration: calibrate.unwrap_or(defaults.calibration),
+            alpha: alpha.unwrap_or(defaults.alpha),
+            ..defaults
+        },
+        records,
+    };
+    let python = match (&named, simulator) {
+        (NamedModel::File(file), Some(function)) => {
+            let python = PythonSimulator::new(function, file.spec().clone(), batch_size);
+            Some(file.simulator_with(Box::new(python)).map_err(to_python)?)
+        }
+        (_, Some(_)) => {
+            return Err(PyValueError::new_err(
+                "a simulator needs a model file without [source] (model_file= or model_toml=)",
+            ));
+        }
+        (_, None) => None,
+    };
+    let reporter = progress.map(PythonProgress::new);
+    let trained = py.detach(|| -> twostage::Result<twostage::Trained> {
+        let progress: &dyn twostage::Progress = match &reporter {
+            Some(reporter) => reporter,
+            None => &twostage::Silent,
+        };
+        match &python {
+            Some(simulator) => request.train_with(&named, simulator.as_ref(), progress),
+            None => request.train(&named, progress),
+        }
+    });
+    trained
+        .map(|trained| PyEstimator {
+            inner: trained.into_estimator(),
+        })
+        .map_err(to_python)
+}
