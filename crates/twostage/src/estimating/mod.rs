@@ -219,9 +219,10 @@ impl EstimateRequest {
     /// };
     /// let estimating = request.prepare()?;
     /// let estimates = estimating.estimate("records", vec![("7".into(), Ok(record.clone()))], &Silent);
-    /// let (_, row) = estimates.rows[0].1.as_ref()?;
+    /// let (_, row) = estimates.rows[0].1.as_ref().map_err(String::as_str)?;
     /// assert_eq!(row.theta, estimator.estimate(record.input(0), record.output(0))?);
-    /// assert!(row.check.as_ref().unwrap().as_ref()?.explained());
+    /// let check = row.check.as_ref().expect("checked").as_ref().map_err(String::as_str)?;
+    /// assert!(check.explained());
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     ///
