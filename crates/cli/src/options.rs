@@ -51,7 +51,7 @@ pub enum InitialCovariance {
     Eq7,
 }
 
-impl From<InitialCovariance> for twostage_baselines::InitialCovariance {
+impl From<InitialCovariance> for twostage::baselines::InitialCovariance {
     fn from(p0: InitialCovariance) -> Self {
         match p0 {
             InitialCovariance::Eq6 => Self::Eq6,

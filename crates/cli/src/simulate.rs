@@ -8,9 +8,9 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use twostage::Progress;
 use twostage::RunSettings;
+use twostage::models::{IoData, Simulator, experiment_rng, run_experiments};
 use twostage::sources::csv_rows::row;
 use twostage::sources::readable_bytes;
-use twostage_models::{IoData, Simulator, experiment_rng, run_experiments};
 
 use crate::OrUsage;
 use crate::model_arg::ModelArgs;
@@ -133,7 +133,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
             usage(format!(
                 "--theta for {}: {e}{}",
                 spec.name(),
-                if matches!(e, twostage_models::SimError::OutsidePrior { .. }) {
+                if matches!(e, twostage::models::SimError::OutsidePrior { .. }) {
                     " (--allow-outside-prior)"
                 } else {
                     ""
@@ -313,7 +313,7 @@ const NUMBER_WIDTH: u64 = 25;
 
 /// What `count` records of `spec`'s model take in `dir`, said up front,
 /// and refused where the disk has less room, with the `--count` that fits.
-fn room_for(spec: &twostage_models::ModelSpec, count: usize, dir: &Path) -> Result<()> {
+fn room_for(spec: &twostage::models::ModelSpec, count: usize, dir: &Path) -> Result<()> {
     let index = count.to_string().len() as u64 + 1;
     let signals = (spec.input_names().len() + spec.output_names().len()) as u64;
     let record = spec.n_samples() as u64 * (index + signals * NUMBER_WIDTH)
@@ -425,7 +425,7 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
 
 /// The model's signal names (`estimate` reads them, and the generic
 /// `u,y` names, back).
-fn signal_header(spec: &twostage_models::ModelSpec) -> String {
+fn signal_header(spec: &twostage::models::ModelSpec) -> String {
     row(spec.input_names().iter().chain(spec.output_names()))
         .trim_end()
         .to_string()

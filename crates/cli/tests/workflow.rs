@@ -631,7 +631,7 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
         .unwrap();
     let (mut theta, mut record) = (vec![0.0], twostage::models::IoData::default());
     twostage::models::run_experiment(&model, &design, 2, &mut theta, &mut record).unwrap();
-    let ii = twostage_baselines::IndirectInference::new(
+    let ii = twostage::baselines::IndirectInference::new(
         model,
         twostage::compress::Arx::new(5, 5).unwrap(),
         2,
@@ -639,7 +639,7 @@ fn validate_sizes_its_run_by_hoeffding_and_classic_methods_estimate_the_same_fil
     .seed(5)
     .build()
     .unwrap();
-    let expected = twostage_baselines::RecordEstimator::estimate(&ii, &record)
+    let expected = twostage::baselines::RecordEstimator::estimate(&ii, &record)
         .unwrap()
         .theta[0];
     let got: f64 = lines[3].split(',').nth(1).unwrap().parse().unwrap();

@@ -22,9 +22,10 @@
 //! (the automatic design), [`refine`] (refinements and checks through a
 //! model), [`baselines`] (the paper's competitors and the exact Bayes
 //! references). This crate holds what every door (command line, Python,
-//! shards) shares: the training request, the validation run
-//! ([`validate_estimator`]), and the policy that refines an
-//! estimator's estimates ([`EstimateRefiner`], [`JointFitter`]).
+//! shards) shares: the training request, the estimate request
+//! ([`EstimateRequest`]), the validation run ([`validate_estimator`]), and
+//! the policy that refines an estimator's estimates ([`EstimateRefiner`],
+//! [`JointFitter`]).
 //!
 //! # Example
 //!
