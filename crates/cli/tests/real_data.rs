@@ -338,6 +338,21 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "{stderr}"
     );
     let (auto_header, auto_row) = table(&out);
+    // With a space, clap hands `auto` to the record files: said so.
+    let spaced = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&estimator),
+        "--refine",
+        "auto",
+        path(&estimation),
+    ]);
+    assert_eq!(spaced.status.code(), Some(2));
+    assert!(
+        text(&spaced.stderr).contains("write --refine=auto"),
+        "{}",
+        text(&spaced.stderr)
+    );
     for name in ["k", "a1", "a2", "h0", "explained", "refine_stop"] {
         let at = auto_header.iter().position(|h| h == name).unwrap();
         assert_eq!(auto_row[at], row[column(name)], "{name}");

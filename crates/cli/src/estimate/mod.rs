@@ -7,8 +7,8 @@ use anyhow::Result;
 use twostage::models::IoData;
 use twostage::{Estimating, RecordEstimate};
 
-use crate::csv_records;
 use crate::options::{InitialCovariance, TableFormat};
+use crate::{csv_records, usage};
 
 mod columns;
 mod methods;
@@ -191,6 +191,18 @@ impl EstimateArgs {
 /// Run `twostage estimate`; returns how many records were estimated and
 /// how many failed.
 pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
+    // `--refine auto` (a space) gives `auto` to the record files: clap
+    // takes --refine's value only after `=`.
+    if args.refine.is_some()
+        && let Some(value) = args.data.first().and_then(|path| path.to_str())
+        && ["auto", "all"].contains(&value)
+        && !std::path::Path::new(value).exists()
+    {
+        return Err(usage(format!(
+            "`--refine {value}` reads `{value}` as a record file: --refine takes its value \
+             after `=`, write --refine={value}"
+        )));
+    }
     // Before the work: refined or checked records take minutes.
     if let Some(path) = &args.out {
         twostage::check_writable(path)?;
