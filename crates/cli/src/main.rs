@@ -1,7 +1,6 @@
 //! `twostage`: the command line of the two-stage estimator toolkit.
 
 mod bars;
-mod csv_records;
 mod curve;
 mod demo;
 mod estimate;

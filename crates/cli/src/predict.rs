@@ -6,13 +6,12 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 use rayon::prelude::*;
-use twostage::SignalNames;
 use twostage::models::{Conditions, IoData, Simulator, experiment_rng};
 use twostage::sources::csv_rows::{for_each_row, row};
 
-use crate::csv_records;
 use crate::number::format_f64;
 use crate::usage;
+use twostage::sources::record_file::{self, RecordFormat};
 
 /// One row of an estimate CSV: the experiment's id and its parameters.
 pub struct Row {
@@ -144,13 +143,9 @@ impl Inputs {
     /// # Errors
     /// A file that cannot be read, a record that cannot be (file, row,
     /// column), or a row without its record.
-    pub fn read(path: &Path, signals: SignalNames, sample_time: f64, rows: &[Row]) -> Result<Self> {
-        let format = csv_records::RecordFormat {
-            signals,
-            sample_time,
-        };
-        let mut records = csv_records::read(path, &format).map_err(usage)?;
-        let checked = |r: csv_records::ReadRecord| -> Result<(String, IoData)> {
+    pub fn read(path: &Path, format: &RecordFormat, rows: &[Row]) -> Result<Self> {
+        let mut records = record_file::read(path, format).map_err(usage)?;
+        let checked = |r: record_file::ReadRecord| -> Result<(String, IoData)> {
             r.record
                 .map(|record| (r.id.clone(), record))
                 .map_err(|e| usage(format!("--input: {e}")))

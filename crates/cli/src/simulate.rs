@@ -11,6 +11,7 @@ use twostage::RunSettings;
 use twostage::models::{IoData, Simulator, experiment_rng, run_experiments};
 use twostage::sources::csv_rows::row;
 use twostage::sources::readable_bytes;
+use twostage::sources::record_file::RecordFormat;
 
 use crate::OrUsage;
 use crate::model_arg::ModelArgs;
@@ -165,15 +166,7 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
     predict::refuse_outside_prior(&rows, spec, at, args.allow_outside_prior)?;
     let inputs = match &args.input {
         None => predict::Inputs::Own,
-        Some(path) => predict::Inputs::read(
-            path,
-            twostage::SignalNames {
-                inputs: spec.input_names().to_vec(),
-                outputs: spec.output_names().to_vec(),
-            },
-            spec.sample_time(),
-            &rows,
-        )?,
+        Some(path) => predict::Inputs::read(path, &RecordFormat::of(spec), &rows)?,
     };
     let start = std::time::Instant::now();
     // Progress: a bar on a terminal, else a line every 10 s of a long run.

@@ -431,6 +431,21 @@ impl PyEstimator {
         )
     }
 
+    /// The records of the CSV file at `path`, read as `twostage estimate`
+    /// reads them: `(records, failed)`, each record `(experiment, u, y)`,
+    /// each failure `(experiment, why)` (file, row, column).
+    #[allow(clippy::type_complexity)]
+    fn read_records<'py>(
+        &self,
+        py: Python<'py>,
+        path: PathBuf,
+    ) -> PyResult<(
+        Vec<(String, Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+        Vec<(String, String)>,
+    )> {
+        requests::read_records(&self.inner, py, path)
+    }
+
     /// Every record of `records` (pairs `(u, y)`, named `experiments` or
     /// by index) as `twostage estimate --estimator` estimates a file of
     /// them with the same flags (`check`, `refine` "all" or "auto",

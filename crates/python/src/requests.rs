@@ -353,3 +353,41 @@ pub(crate) fn estimate_records<'py>(
         .map_err(|e| PyValueError::new_err(format!("the rows as JSON: {e}")))?;
     Ok((json, failed, auto))
 }
+
+/// A file's records read as `twostage estimate` reads them for
+/// `estimator` (the long format, its signals' columns in any order, a
+/// `time` column checked): `(experiment, u [N, n_u], y [N, n_y])` for each
+/// record read, and `(experiment, why)` for each that could not be.
+#[allow(clippy::type_complexity)]
+pub(crate) fn read_records<'py>(
+    estimator: &twostage::Estimator,
+    py: Python<'py>,
+    path: PathBuf,
+) -> PyResult<(
+    Vec<(String, Bound<'py, PyAny>, Bound<'py, PyAny>)>,
+    Vec<(String, String)>,
+)> {
+    let shape = estimator.record_shape();
+    let signals = estimator.signal_names();
+    let format = twostage::sources::record_file::RecordFormat {
+        inputs: signals.inputs,
+        outputs: signals.outputs,
+        sample_time: shape.sample_time,
+    };
+    let read = py
+        .detach(|| twostage::sources::record_file::read(&path, &format))
+        .map_err(pyo3::exceptions::PyOSError::new_err)?;
+    let mut records = Vec::new();
+    let mut failed = Vec::new();
+    for r in read {
+        match r.record {
+            Ok(record) => records.push((
+                r.id,
+                through_model::inputs(py, &record),
+                through_model::outputs(py, &record),
+            )),
+            Err(why) => failed.push((r.id, why)),
+        }
+    }
+    Ok((records, failed))
+}

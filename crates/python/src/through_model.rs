@@ -128,7 +128,7 @@ pub(crate) fn parameters(theta: &[f64], sim: &dyn Simulator) -> PyResult<()> {
 }
 
 /// A record's outputs [N, n_y] as numpy.
-fn outputs<'py>(py: Python<'py>, record: &IoData) -> Bound<'py, PyAny> {
+pub(crate) fn outputs<'py>(py: Python<'py>, record: &IoData) -> Bound<'py, PyAny> {
     record
         .outputs()
         .as_standard_layout()
@@ -138,7 +138,7 @@ fn outputs<'py>(py: Python<'py>, record: &IoData) -> Bound<'py, PyAny> {
 }
 
 /// A record's inputs [N, n_u] as numpy.
-fn inputs<'py>(py: Python<'py>, record: &IoData) -> Bound<'py, PyAny> {
+pub(crate) fn inputs<'py>(py: Python<'py>, record: &IoData) -> Bound<'py, PyAny> {
     record
         .inputs()
         .as_standard_layout()

@@ -103,7 +103,12 @@ def test_a_file_of_records_is_estimated_as_the_cli_estimates_it(benchmark):
     from_cli = json.loads(cli("estimate", "--estimator", str(path), "--refine=auto",
                               "--refine-below-fit", "99.9", "--check-sims", "99",
                               "--format", "json", data))
-    ours = estimator.estimate_records(pairs, refine="auto", refine_below_fit=99.9, sims=99)
+    read = estimator.read_records(data)
+    assert read["failed"] == [] and [r[0] for r in read["records"]] == ["0", "1", "2"]
+    assert all(np.array_equal(r[2], y[k]) for k, r in enumerate(read["records"]))
+    ours = estimator.estimate_records([(u_, y_) for _, u_, y_ in read["records"]],
+                                      experiments=[r[0] for r in read["records"]],
+                                      refine="auto", refine_below_fit=99.9, sims=99)
     assert ours["rows"] == from_cli and ours["failed"] == []
     assert ours["auto"]["checked"] == 3
     # Refined rows left their two-stage estimate; the others kept it.

@@ -283,18 +283,27 @@ impl ChartFiles {
             let Some(columns) = &columns else {
                 let header = fields.iter().collect::<Vec<_>>().join(",");
                 columns = Some(signal_columns(spec, &header).ok_or_else(|| {
+                    let signals: Vec<&str> = spec
+                        .input_names()
+                        .iter()
+                        .chain(spec.output_names())
+                        .map(String::as_str)
+                        .collect();
+                    let given: Vec<&str> = fields.iter().collect();
+                    let difference = match given.split_first() {
+                        Some((&"experiment", rest)) => {
+                            crate::record_file::header_difference(rest, &signals)
+                        }
+                        _ => "the first column must be experiment".to_string(),
+                    };
                     file.error(
                         Some(number),
                         format!(
                             "header '{}': expected experiment, then the inputs and outputs \
-                             ({}), or u,y as `twostage simulate` writes them",
+                             ({}), or u,y as `twostage simulate` writes them: {}",
                             crate::csv_rows::excerpt(&header),
-                            spec.input_names()
-                                .iter()
-                                .chain(spec.output_names())
-                                .cloned()
-                                .collect::<Vec<_>>()
-                                .join(",")
+                            signals.join(","),
+                            difference
                         ),
                     )
                 })?);

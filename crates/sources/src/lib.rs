@@ -35,6 +35,7 @@ mod preset;
 mod profile;
 mod progress;
 mod readable;
+pub mod record_file;
 mod records;
 mod roles;
 mod shard;

@@ -155,6 +155,22 @@ fn every_file_problem_names_its_file_and_line() {
             Some(1),
             "or u,y",
         ),
+        // What the header lacks and has too many of, as a record file's
+        // reader says it.
+        (
+            "data.csv",
+            "experiment,u,y",
+            "experiment,u,z",
+            Some(1),
+            "missing y; extra z (not a signal of the model: remove the column)",
+        ),
+        (
+            "data.csv",
+            "experiment,u,y",
+            "u,y,experiment",
+            Some(1),
+            "the first column must be experiment",
+        ),
         (
             "data.csv",
             "\n2,",

@@ -8,7 +8,7 @@ use twostage::models::IoData;
 use twostage::{Estimating, RecordEstimate};
 
 use crate::options::{InitialCovariance, TableFormat};
-use crate::{csv_records, usage};
+use crate::usage;
 
 mod columns;
 mod methods;
@@ -208,10 +208,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         twostage::check_writable(path)?;
     }
     let estimating = methods::prepared(args)?;
-    let format = csv_records::RecordFormat {
-        signals: estimating.signals().clone(),
-        sample_time: estimating.sample_time(),
-    };
+    let format = estimating.record_format();
     let trained = estimating.trained_length();
     // Progress: a bar on a terminal, else a line every 10 s of a long step.
     let bars = crate::bars::Bars::new(false);
@@ -221,7 +218,8 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     // its row.
     let mut plant: Vec<(String, IoData, usize)> = Vec::new();
     for path in &args.data {
-        let reads = csv_records::read(path, &format).map_err(anyhow::Error::msg)?;
+        let reads =
+            twostage::sources::record_file::read(path, &format).map_err(anyhow::Error::msg)?;
         let records = reads.into_iter().map(|r| (r.id, r.record)).collect();
         let file = path.display().to_string();
         let estimates = estimating.estimate(&file, records, &bars);
@@ -246,7 +244,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                             &id,
                             &record,
                             check,
-                            &format.signals.outputs,
+                            &format.outputs,
                             format.sample_time,
                         )?;
                     }

@@ -10,7 +10,7 @@ use twostage::fit::TerminationReason;
 use twostage::models::IoData;
 
 use super::columns::list;
-use crate::csv_records::RecordFormat;
+use twostage::sources::record_file::RecordFormat;
 use twostage::{AutoRefined, RecordEstimate, RecordOutcome};
 
 /// The messages about one file's records.
@@ -72,7 +72,7 @@ impl<'a> Said<'a> {
             );
         }
         if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
-            let outputs = &self.format.signals.outputs;
+            let outputs = &self.format.outputs;
             let listed: Vec<String> = floored
                 .iter()
                 .take(5)
@@ -138,11 +138,7 @@ impl<'a> Said<'a> {
                  training record had (from sample {}): the estimator learned that \
                  input and does not read this one, so its estimate is not for this \
                  record; train on this experiment's input, or on an input design",
-                self.format
-                    .signals
-                    .inputs
-                    .get(*j)
-                    .map_or("?", String::as_str),
+                self.format.inputs.get(*j).map_or("?", String::as_str),
                 k + 1
             );
         }

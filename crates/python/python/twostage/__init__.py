@@ -338,6 +338,18 @@ class Estimator:
         joint["lower"], joint["upper"] = self._interval(joint["theta"], widths)
         return joint
 
+    def read_records(self, path: Union[str, PathLike[str]]) -> dict[str, Any]:
+        """The records of the CSV file at ``path`` as ``twostage estimate``
+        reads them for this estimator (one record ``u,y`` or many
+        ``experiment,u,y``, its signals' columns in any order, a ``time``
+        column checked against the sample time): a dict of ``records``, a
+        list of ``(experiment, u, y)`` ready for ``estimate_records``, and
+        ``failed``, pairs of an experiment and why it could not be read
+        (file, row, column). Raises OSError when the file cannot be read
+        at all."""
+        records, failed = self._native.read_records(str(path))
+        return {"records": records, "failed": failed}
+
     def estimate_records(
         self,
         records: list,

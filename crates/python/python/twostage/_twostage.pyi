@@ -82,6 +82,9 @@ class Estimator:
         prior_starts: Optional[int] = None,
         seed: int = 0,
     ) -> dict[str, Any]: ...
+    def read_records(
+        self, path: str
+    ) -> Tuple[list[Tuple[str, _Array, _Array]], list[Tuple[str, str]]]: ...
     def estimate_records(
         self,
         records: list[tuple[Optional[_Array], _Array]],

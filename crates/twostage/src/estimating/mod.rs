@@ -550,6 +550,16 @@ impl Estimating {
         &self.signals
     }
 
+    /// How the records are laid out in a file: their signals' columns and
+    /// the sample time a `time` column steps by.
+    pub fn record_format(&self) -> twostage_sources::record_file::RecordFormat {
+        twostage_sources::record_file::RecordFormat {
+            inputs: self.signals.inputs.clone(),
+            outputs: self.signals.outputs.clone(),
+            sample_time: self.sample_time,
+        }
+    }
+
     /// The records' sample time.
     pub fn sample_time(&self) -> f64 {
         self.sample_time

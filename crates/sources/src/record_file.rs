@@ -1,4 +1,6 @@
-//! Reading records from CSV: one record (`u,y`, the signal columns only) or
+//! Reading a user's records from CSV (one file holds any number, of any
+//! lengths; the chart files of `simulate` have their own streaming reader,
+//! `ChartFiles`, bound to their truth.csv and fixed length): one record (`u,y`, the signal columns only) or
 //! many (`experiment,u,y`, long format), with the columns named as the
 //! estimator's signals (`u`, `y` for the built-in models; a model file's
 //! names otherwise, or `u1,..,y1,..` as `simulate` writes them), in any
@@ -9,8 +11,9 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use twostage::SignalNames;
-use twostage::models::{IoData, SignalColumn};
+use twostage_models::{IoData, SignalColumn};
+
+use crate::csv_rows::excerpt;
 
 /// One record read from a file, or why it could not be.
 pub struct ReadRecord {
@@ -22,14 +25,44 @@ pub struct ReadRecord {
 
 /// How a model's records are laid out in a file: the names of its signals,
 /// and the time between samples that a `time` column must step by.
+#[derive(Debug, Clone, PartialEq)]
 pub struct RecordFormat {
-    /// The columns' names.
-    pub signals: SignalNames,
+    /// The inputs' column names.
+    pub inputs: Vec<String>,
+    /// The outputs' column names.
+    pub outputs: Vec<String>,
     /// Seconds between samples.
     pub sample_time: f64,
 }
 
-/// Read every record of one CSV file laid out as `format`.
+impl RecordFormat {
+    /// The records of the model `spec` describes.
+    pub fn of(spec: &twostage_models::ModelSpec) -> Self {
+        Self {
+            inputs: spec.input_names().to_vec(),
+            outputs: spec.output_names().to_vec(),
+            sample_time: spec.sample_time(),
+        }
+    }
+}
+
+/// Read every record of one CSV file laid out as `format`: each record
+/// whole, or why it could not be read (its file, row and column); the
+/// records of an experiment in order of first appearance.
+///
+/// ```
+/// use twostage_sources::record_file::{RecordFormat, read};
+/// let dir = std::env::temp_dir().join("twostage-record-file-doc");
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let path = dir.join("runs.csv");
+/// std::fs::write(&path, "experiment,time,y,u\na,0,1.5,1\na,0.1,2,0\nb,0,x,1\n").unwrap();
+/// let format = RecordFormat { inputs: vec!["u".into()], outputs: vec!["y".into()], sample_time: 0.1 };
+/// let records = read(&path, &format)?;
+/// assert_eq!(records[0].id, "a");
+/// assert_eq!(records[0].record.as_ref().unwrap().output(0), &[1.5, 2.0]);
+/// assert!(records[1].record.as_ref().unwrap_err().contains("runs.csv: row 4, column y"));
+/// # Ok::<(), String>(())
+/// ```
 ///
 /// # Errors
 /// A file that cannot be read or has no usable header: one line naming it.
@@ -51,14 +84,14 @@ fn read_text(path: &Path) -> Result<String, String> {
         .map_err(|e| format!("{name}: {e}"))?
         .len();
     // The text, and the records parsed from it (fewer bytes than text).
-    if let Some(available) = twostage::models::available_memory()
+    if let Some(available) = twostage_models::available_memory()
         && size.saturating_mul(2) > available
     {
         return Err(format!(
             "{name}: a file of {} is read whole with its records, where this process has {} \
              available: split it into files of fewer experiments",
-            twostage::models::readable_bytes(size as f64),
-            twostage::models::readable_bytes(available as f64)
+            twostage_models::readable_bytes(size as f64),
+            twostage_models::readable_bytes(available as f64)
         ));
     }
     let bytes = std::fs::read(path).map_err(|e| format!("{name}: {e}"))?;
@@ -73,25 +106,15 @@ fn read_text(path: &Path) -> Result<String, String> {
 #[cfg(test)]
 fn siso() -> RecordFormat {
     RecordFormat {
-        signals: SignalNames {
-            inputs: vec!["u".into()],
-            outputs: vec!["y".into()],
-        },
+        inputs: vec!["u".into()],
+        outputs: vec!["y".into()],
         sample_time: 1.0,
     }
 }
 
-/// Where each column after `experiment` goes; `None` if the header names
-/// other signals.
-fn columns(header: &[&str], signals: &SignalNames) -> Option<Vec<SignalColumn>> {
-    twostage::models::signal_columns(header, &signals.inputs, &signals.outputs)
-}
-
 /// What a header lacks and has too many of, against the model's signals
 /// (the order of the columns does not matter).
-use twostage::sources::csv_rows::excerpt;
-
-fn header_difference(fields: &[&str], signals: &[&str]) -> String {
+pub(crate) fn header_difference(fields: &[&str], signals: &[&str]) -> String {
     let missing: Vec<&str> = signals
         .iter()
         .filter(|s| !fields.contains(s))
@@ -143,11 +166,10 @@ pub fn parse(
     stem: &str,
     format: &RecordFormat,
 ) -> Result<Vec<ReadRecord>, String> {
-    let signals = &format.signals;
-    let all: Vec<&str> = signals
+    let all: Vec<&str> = format
         .inputs
         .iter()
-        .chain(&signals.outputs)
+        .chain(&format.outputs)
         .map(String::as_str)
         .collect();
     let expected = format!(
@@ -157,7 +179,7 @@ pub fn parse(
     );
     // Every row, header first, as the shared CSV reader gives it.
     let mut rows: Vec<(usize, Vec<String>)> = Vec::new();
-    twostage::sources::csv_rows::for_each_row(
+    crate::csv_rows::for_each_row(
         text.as_bytes(),
         |line, fields| {
             rows.push((line, fields.iter().map(str::to_string).collect()));
@@ -185,7 +207,8 @@ pub fn parse(
         .map(|c| first + c);
     let signal_at: Vec<usize> = (first..fields.len()).filter(|c| Some(*c) != time).collect();
     let signal_fields: Vec<&str> = signal_at.iter().map(|&c| fields[c]).collect();
-    let placed = columns(&signal_fields, signals).ok_or_else(|| {
+    let placed = twostage_models::signal_columns(&signal_fields, &format.inputs, &format.outputs)
+        .ok_or_else(|| {
         format!(
             "{name}: row 1: header '{}' is not {expected}: {}",
             excerpt(&header),
@@ -193,7 +216,7 @@ pub fn parse(
         )
     })?;
     let width = fields.len();
-    let (n_u, n_y) = (signals.inputs.len(), signals.outputs.len());
+    let (n_u, n_y) = (format.inputs.len(), format.outputs.len());
     // Records in the order their experiment first appears.
     let mut order: Vec<String> = Vec::new();
     let mut slots: HashMap<String, usize> = HashMap::new();
@@ -448,7 +471,7 @@ mod tests {
         file.set_len(100_000_000_000).unwrap();
         let problem = read(&path, &siso()).err().unwrap();
         std::fs::remove_file(&path).ok();
-        if twostage::models::available_memory().is_some_and(|bytes| bytes < 50_000_000_000) {
+        if twostage_models::available_memory().is_some_and(|bytes| bytes < 50_000_000_000) {
             assert!(
                 problem.contains(": a file of 100.0 GB is read whole with its records, where"),
                 "{problem}"
@@ -494,10 +517,8 @@ mod tests {
     #[test]
     fn named_signals_in_any_order() {
         let signals = RecordFormat {
-            signals: SignalNames {
-                inputs: vec!["force".into()],
-                outputs: vec!["x".into(), "v".into()],
-            },
+            inputs: vec!["force".into()],
+            outputs: vec!["x".into(), "v".into()],
             sample_time: 1.0,
         };
         let text = "experiment,v,force,x\na,1,2,3\na,4,5,6\n";
@@ -546,10 +567,8 @@ mod tests {
         assert!(parse("t,v,force,x\n0,1,2,3\n", "f.csv", "f", &signals).is_ok());
         // No input at all: outputs only.
         let autonomous = RecordFormat {
-            signals: SignalNames {
-                inputs: vec![],
-                outputs: vec!["I".into()],
-            },
+            inputs: vec![],
+            outputs: vec!["I".into()],
             sample_time: 3.0,
         };
         let records = parse("I\n0.1\n0.2\n", "f.csv", "f", &autonomous).expect("valid");
