@@ -38,7 +38,7 @@ fn run(args: &[String]) -> Result<(), String> {
     let repetitions: usize = repetitions
         .parse()
         .map_err(|e| format!("repetitions: {e}"))?;
-    let simulator = model.build(false).map_err(|e| e.to_string())?;
+    let simulator = model.build().map_err(|e| e.to_string())?;
     let theta: &[f64] = match model {
         BuiltinModel::Benchmark => &[0.5],
         BuiltinModel::Pacejka => &[-35.0, -1.1],

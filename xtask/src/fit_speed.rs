@@ -31,7 +31,7 @@ fn charts(
     validate: usize,
     seed: u64,
 ) -> Result<Charts> {
-    let simulator = model.simulator(false)?;
+    let simulator = model.simulator()?;
     let spec = simulator.spec();
     let compressor: CompressorConfig = compress
         .parse()
@@ -140,7 +140,7 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
     };
     let predicted = fitted.predict(charts.validation.0.view())?;
     let errors = rmse(predicted.view(), charts.validation.1.view());
-    let names = model.simulator(false)?.spec().param_names().to_vec();
+    let names = model.simulator()?.spec().param_names().to_vec();
     println!(
         "fit {}: median {:.2} s of {} (from {:.2} to {:.2} s)",
         options.fit,

@@ -189,10 +189,7 @@ impl BayesCar {
     /// # Errors
     /// A grid smaller than 3 x 3, or a simulation that fails.
     pub fn new(n1: usize, n2: usize, n_samples: usize) -> Result<Self> {
-        let car = PacejkaCar::builder()
-            .noiseless(true)
-            .n_samples(n_samples)
-            .build()?;
+        let car = PacejkaCar::builder().n_samples(n_samples).build()?;
         Self::simulate(n1, n2, car, None)
     }
 
@@ -205,7 +202,6 @@ impl BayesCar {
     /// As [`BayesCar::new`], and a steering the car refuses.
     pub fn on_steering(n1: usize, n2: usize, steering: Vec<f64>) -> Result<Self> {
         let car = PacejkaCar::builder()
-            .noiseless(true)
             .n_samples(steering.len())
             .input(twostage_models::InputSignal::fixed(steering.clone())?)
             .build()?;

@@ -7,17 +7,22 @@ use twostage::ResidualModel;
 use twostage_baselines::{
     BayesCar, CarParticles, CarPredictor, ParticleFilter, PredictionError, RecordEstimator,
 };
-use twostage_models::{IoData, PacejkaCar, Simulator, experiment_rng};
+use twostage_models::{Conditions, IoData, PacejkaCar, Simulator, experiment_rng};
 
 fn car_record(theta: [f64; 2], noiseless: bool, n: usize, seed: u64) -> IoData {
-    let car = PacejkaCar::builder()
-        .noiseless(noiseless)
-        .n_samples(n)
-        .build()
-        .unwrap();
+    let car = PacejkaCar::builder().n_samples(n).build().unwrap();
     let mut record = car.spec().new_record();
-    car.simulate(&theta, &mut experiment_rng(seed, 0), &mut record)
-        .unwrap();
+    let conditions = Conditions {
+        noiseless,
+        input: None,
+    };
+    car.simulate_under(
+        &theta,
+        &mut experiment_rng(seed, 0),
+        conditions,
+        &mut record,
+    )
+    .unwrap();
     record
 }
 

@@ -62,9 +62,17 @@ impl Model {
         self.0.name()
     }
 
-    /// The simulator, with or without the built-in model's own noise.
+    /// The simulator, with its noise, or without it where `noiseless`
+    /// (refused by a source that cannot run without it).
     pub fn simulator(&self, noiseless: bool) -> Result<Box<dyn Simulator>> {
-        self.0.simulator(noiseless).or_usage()
+        let simulator = self.0.simulator().or_usage()?;
+        if noiseless {
+            Ok(Box::new(
+                twostage::models::NoiseFree::new(simulator).or_usage()?,
+            ))
+        } else {
+            Ok(simulator)
+        }
     }
 
     /// A preset by name; `None` is the model's default.

@@ -82,7 +82,7 @@ fn describe(named: &NamedModel, out: &mut dyn Write) -> Result<()> {
     };
     // The output-error fit needs only a noise-free run on a given input.
     if named
-        .simulator(false)
+        .simulator()
         .is_ok_and(|s| twostage::OutputError::new(s).is_ok())
     {
         methods.push("oe");

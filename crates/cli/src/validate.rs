@@ -58,7 +58,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let trained_on = &estimator.training().model;
     let given = crate::model_arg::named(None, args.model_file.as_deref())?;
     let sim = NamedModel::trained_on(trained_on, given.as_ref())
-        .and_then(|model| model.simulator(false))
+        .and_then(|model| model.simulator())
         .usage_context("--model-file")?;
     let plan = ValidationPlan {
         sims: args.sims,

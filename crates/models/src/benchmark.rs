@@ -32,8 +32,8 @@ pub const MEASUREMENT_NOISE_VARIANCE: f64 = 0.1;
 /// then `v2(k)`, `v11(k)`, `v12(k)` for k = 0, 1, ...
 ///
 /// ```
-/// use twostage_models::{experiment_rng, Benchmark, Simulator};
-/// let model = Benchmark::builder().n_samples(200).noiseless(true).build()?;
+/// use twostage_models::{experiment_rng, Benchmark, NoiseFree, Simulator};
+/// let model = NoiseFree::new(Box::new(Benchmark::builder().n_samples(200).build()?))?;
 /// let mut record = model.spec().new_record();
 /// model.simulate(&[0.5], &mut experiment_rng(0, 0), &mut record)?;
 /// // Noise-free, x2(0) = 0 and x2(1) = theta / (1 + theta^2) u(0).
@@ -46,7 +46,6 @@ pub const MEASUREMENT_NOISE_VARIANCE: f64 = 0.1;
 pub struct Benchmark {
     spec: ModelSpec,
     input: InputSignal,
-    noisy: bool,
 }
 
 /// Builder for [`Benchmark`].
@@ -54,12 +53,13 @@ pub struct Benchmark {
 /// | setting | default | valid |
 /// |---|---|---|
 /// | `n_samples` | 1000 | >= 1 |
-/// | `noiseless` | false (v11, v12, v2 as in eq. 5) | true sets every noise to 0 |
 /// | `input` | white Gaussian N(0, 1) per experiment | any [`InputSignal`] |
+///
+/// A run without noise is the run's condition, as for every simulator
+/// (`Conditions::noiseless`, or the model wrapped in [`crate::NoiseFree`]).
 #[derive(Debug, Clone)]
 pub struct BenchmarkBuilder {
     n_samples: usize,
-    noiseless: bool,
     input: Option<InputSignal>,
 }
 
@@ -67,11 +67,6 @@ impl BenchmarkBuilder {
     /// Record length N.
     pub fn n_samples(mut self, n: usize) -> Self {
         self.n_samples = n;
-        self
-    }
-    /// Set every noise (v11, v12, v2) to zero; the input is still drawn.
-    pub fn noiseless(mut self, noiseless: bool) -> Self {
-        self.noiseless = noiseless;
         self
     }
     /// Replace the white-noise input.
@@ -88,13 +83,9 @@ impl BenchmarkBuilder {
             Some(input) => input,
             None => InputSignal::white_gaussian(1.0)?,
         };
-        let noise = if self.noiseless {
-            "none (noiseless: v11 = v12 = v2 = 0)".to_string()
-        } else {
-            format!(
-                "process v11, v12 ~ WGN(0, {PROCESS_NOISE_VARIANCE}); measurement v2 ~ WGN(0, {MEASUREMENT_NOISE_VARIANCE})"
-            )
-        };
+        let noise = format!(
+            "process v11, v12 ~ WGN(0, {PROCESS_NOISE_VARIANCE}); measurement v2 ~ WGN(0, {MEASUREMENT_NOISE_VARIANCE})"
+        );
         let spec = ModelSpec::new(
             "benchmark",
             &["theta"],
@@ -103,11 +94,7 @@ impl BenchmarkBuilder {
             self.n_samples,
         )?
         .with_notes(&input.describe(), &noise);
-        Ok(Benchmark {
-            spec,
-            input,
-            noisy: !self.noiseless,
-        })
+        Ok(Benchmark { spec, input })
     }
 }
 
@@ -123,7 +110,6 @@ impl Benchmark {
     pub fn builder() -> BenchmarkBuilder {
         BenchmarkBuilder {
             n_samples: BENCHMARK_SAMPLES,
-            noiseless: false,
             input: None,
         }
     }
@@ -180,7 +166,7 @@ impl Simulator for Benchmark {
             Some(given) => u.copy_from_slice(given.input(0)),
             None => self.input.fill(1.0, rng, u)?,
         }
-        let noisy = self.noisy && !conditions.noiseless;
+        let noisy = !conditions.noiseless;
         let measurement_sd = MEASUREMENT_NOISE_VARIANCE.sqrt();
         let process_sd = PROCESS_NOISE_VARIANCE.sqrt();
         let (mut x1, mut x2) = (0.0f64, 0.0f64);

@@ -14,7 +14,7 @@ use crate::simulator::Simulator;
 /// ```
 /// use twostage_models::BuiltinModel;
 /// let model: BuiltinModel = "pacejka".parse()?;
-/// let car = model.build(false)?;
+/// let car = model.build()?;
 /// assert_eq!(car.param_names(), ["pK1", "pK2"]);
 /// assert!("tractor".parse::<BuiltinModel>().is_err());
 /// # Ok::<(), twostage_models::SimError>(())
@@ -56,16 +56,14 @@ impl BuiltinModel {
         }
     }
 
-    /// Build the model with the paper's settings, with or without noise.
+    /// Build the model with the paper's settings (its noise; a run
+    /// without it is the run's condition, [`crate::NoiseFree`]).
     ///
     /// # Errors
     /// Never for the built-in settings; the `Result` keeps the door open for
     /// models whose construction can fail.
-    pub fn build(self, noiseless: bool) -> Result<Box<dyn Simulator>> {
-        self.build_with(&BuiltinOverrides {
-            noiseless,
-            ..BuiltinOverrides::default()
-        })
+    pub fn build(self) -> Result<Box<dyn Simulator>> {
+        self.build_with(&BuiltinOverrides::default())
     }
 
     /// Build the model with some of the paper's settings replaced (what a
@@ -85,9 +83,9 @@ impl BuiltinModel {
     /// # Errors
     /// A record length or input the model's builder refuses.
     pub fn build_with(self, overrides: &BuiltinOverrides) -> Result<Box<dyn Simulator>> {
-        Ok(match self {
+        let model: Box<dyn Simulator> = match self {
             Self::Benchmark => {
-                let mut b = Benchmark::builder().noiseless(overrides.noiseless);
+                let mut b = Benchmark::builder();
                 if let Some(n) = overrides.n_samples {
                     b = b.n_samples(n);
                 }
@@ -97,7 +95,7 @@ impl BuiltinModel {
                 Box::new(b.build()?)
             }
             Self::Pacejka => {
-                let mut b = PacejkaCar::builder().noiseless(overrides.noiseless);
+                let mut b = PacejkaCar::builder();
                 if let Some(n) = overrides.n_samples {
                     b = b.n_samples(n);
                 }
@@ -106,7 +104,11 @@ impl BuiltinModel {
                 }
                 Box::new(b.build()?)
             }
-        })
+        };
+        if overrides.noiseless {
+            return Ok(Box::new(crate::NoiseFree::new(model)?));
+        }
+        Ok(model)
     }
 }
 
@@ -114,7 +116,9 @@ impl BuiltinModel {
 /// paper's.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BuiltinOverrides {
-    /// Drop the model's own process and measurement noise.
+    /// Drop the model's own process and measurement noise (a model file's
+    /// `[noise] model = false`): the model runs as [`crate::NoiseFree`]
+    /// runs it.
     pub noiseless: bool,
     /// Samples per record.
     pub n_samples: Option<usize>,

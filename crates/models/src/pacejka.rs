@@ -173,8 +173,8 @@ pub const CHICANE_AMPLITUDE: f64 = 0.2;
 /// zero at t = 0.
 ///
 /// ```
-/// use twostage_models::{experiment_rng, PacejkaCar, Simulator};
-/// let car = PacejkaCar::builder().noiseless(true).build()?;
+/// use twostage_models::{experiment_rng, NoiseFree, PacejkaCar, Simulator};
+/// let car = NoiseFree::new(Box::new(PacejkaCar::new()))?;
 /// let mut record = car.spec().new_record();
 /// car.simulate(&[-35.0, -1.1], &mut experiment_rng(0, 0), &mut record)?;
 /// // pacejka-golden.csv: t = 6 s gives a_y = 5.98522057067 m/s^2.
@@ -187,7 +187,6 @@ pub struct PacejkaCar {
     vehicle: Vehicle,
     tire: Tire,
     input: InputSignal,
-    noise_variance: f64,
 }
 
 /// Builder for [`PacejkaCar`].
@@ -195,13 +194,15 @@ pub struct PacejkaCar {
 /// | setting | default | valid |
 /// |---|---|---|
 /// | `n_samples` | 500 (0 to 9.98 s) | >= 1 |
-/// | `noiseless` | false (noise variance 0.01) | true removes the measurement noise |
 /// | `input` | the chicane, A = 0.2 rad | any [`InputSignal`] |
 /// | `vehicle`, `tire` | [`Vehicle::PAPER`], [`Tire::PAPER`] | physical values |
+///
+/// A run without the measurement noise is the run's condition, as for
+/// every simulator (`Conditions::noiseless`, or the car wrapped in
+/// [`crate::NoiseFree`]).
 #[derive(Debug, Clone)]
 pub struct PacejkaCarBuilder {
     n_samples: usize,
-    noiseless: bool,
     input: Option<InputSignal>,
     vehicle: Vehicle,
     tire: Tire,
@@ -211,11 +212,6 @@ impl PacejkaCarBuilder {
     /// Record length N (samples every 0.02 s from t = 0).
     pub fn n_samples(mut self, n: usize) -> Self {
         self.n_samples = n;
-        self
-    }
-    /// Remove the accelerometer noise.
-    pub fn noiseless(mut self, noiseless: bool) -> Self {
-        self.noiseless = noiseless;
         self
     }
     /// Replace the chicane by another steering input.
@@ -263,18 +259,9 @@ impl PacejkaCarBuilder {
             Some(input) => input,
             None => InputSignal::chicane(CHICANE_AMPLITUDE)?,
         };
-        let noise_variance = if self.noiseless {
-            0.0
-        } else {
-            PACEJKA_NOISE_VARIANCE
-        };
-        let noise = if self.noiseless {
-            "none (noiseless)".to_string()
-        } else {
-            format!(
-                "white Gaussian on y, variance {PACEJKA_NOISE_VARIANCE} (m/s^2)^2; input noise-free"
-            )
-        };
+        let noise = format!(
+            "white Gaussian on y, variance {PACEJKA_NOISE_VARIANCE} (m/s^2)^2; input noise-free"
+        );
         let spec = ModelSpec::new(
             "pacejka",
             &["pK1", "pK2"],
@@ -289,7 +276,6 @@ impl PacejkaCarBuilder {
             vehicle: self.vehicle,
             tire: self.tire,
             input,
-            noise_variance,
         })
     }
 }
@@ -352,7 +338,6 @@ impl PacejkaCar {
     pub fn builder() -> PacejkaCarBuilder {
         PacejkaCarBuilder {
             n_samples: PACEJKA_SAMPLES,
-            noiseless: false,
             input: None,
             vehicle: Vehicle::PAPER,
             tire: Tire::PAPER,
@@ -484,7 +469,7 @@ impl Simulator for PacejkaCar {
         let noise_sd = if conditions.noiseless {
             0.0
         } else {
-            self.noise_variance.sqrt()
+            PACEJKA_NOISE_VARIANCE.sqrt()
         };
         for (k, y_k) in y.iter_mut().enumerate() {
             if k > 0 {

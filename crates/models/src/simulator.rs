@@ -316,6 +316,8 @@ impl Capabilities {
 /// ```
 pub struct NoiseFree {
     inner: Box<dyn Simulator>,
+    /// The inner model's spec, its noise said to be off.
+    spec: ModelSpec,
 }
 
 impl NoiseFree {
@@ -332,13 +334,16 @@ impl NoiseFree {
         inner
             .capabilities()
             .check(&conditions, inner.spec().name())?;
-        Ok(Self { inner })
+        let spec = inner.spec().clone();
+        let input_note = spec.input_note().to_string();
+        let spec = spec.with_notes(&input_note, "none (run without the model's noise)");
+        Ok(Self { inner, spec })
     }
 }
 
 impl Simulator for NoiseFree {
     fn spec(&self) -> &ModelSpec {
-        self.inner.spec()
+        &self.spec
     }
 
     fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {

@@ -57,11 +57,10 @@ fn stationary_output_variance_matches_the_lyapunov_equation() {
 
 #[test]
 fn noise_free_records_follow_the_recursion_of_eq_5() {
-    let model = Benchmark::builder()
-        .n_samples(50)
-        .noiseless(true)
-        .build()
-        .unwrap();
+    let model = twostage_models::NoiseFree::new(Box::new(
+        Benchmark::builder().n_samples(50).build().unwrap(),
+    ))
+    .unwrap();
     let mut record = model.spec().new_record();
     let theta = -0.45;
     model

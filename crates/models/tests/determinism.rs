@@ -82,7 +82,7 @@ fn every_design_gives_thread_independent_charts() {
 #[test]
 fn builtin_models_describe_themselves() {
     for model in BuiltinModel::ALL {
-        let sim = model.build(false).unwrap();
+        let sim = model.build().unwrap();
         let spec = sim.spec();
         assert_eq!(spec.name(), model.name());
         assert_eq!(spec.param_names().len(), spec.prior().dim());

@@ -5,7 +5,9 @@
 
 use std::path::PathBuf;
 
-use twostage_models::{InputSignal, PacejkaCar, Simulator, Tire, Vehicle, experiment_rng};
+use twostage_models::{
+    InputSignal, NoiseFree, PacejkaCar, Simulator, Tire, Vehicle, experiment_rng,
+};
 
 /// `tests/data/pacejka-golden.csv`: the reference values of
 /// `spec/pacejka-car.md`, copied into the repository so that a fresh clone
@@ -18,7 +20,7 @@ fn golden_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/pacejka-golden.csv")
 }
 
-fn simulate(car: &PacejkaCar, theta: &[f64]) -> (Vec<f64>, Vec<f64>) {
+fn simulate(car: &dyn Simulator, theta: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let mut record = car.spec().new_record();
     car.simulate(theta, &mut experiment_rng(0, 0), &mut record)
         .expect("simulation inside the prior box succeeds");
@@ -39,7 +41,7 @@ fn reproduces_every_golden_row() {
             path.display()
         )
     });
-    let car = PacejkaCar::builder().noiseless(true).build().unwrap();
+    let car = NoiseFree::new(Box::new(PacejkaCar::new())).unwrap();
     let mut rows = 0;
     let mut cache: Option<([f64; 2], Vec<f64>, Vec<f64>)> = None;
     for (line_no, line) in text.lines().enumerate().skip(1) {
@@ -104,11 +106,11 @@ fn small_constant_steer_gives_the_linear_single_track_gain() {
     let delta = 1e-3;
     let n = 1500; // 30 s: every mode has settled
     let car = PacejkaCar::builder()
-        .noiseless(true)
         .n_samples(n)
         .input(InputSignal::fixed(vec![delta; n]).unwrap())
         .build()
         .unwrap();
+    let car = NoiseFree::new(Box::new(car)).unwrap();
     let v = Vehicle::PAPER;
     let tire = Tire::PAPER;
     let (n_f, n_r) = v.axle_loads();
@@ -133,7 +135,7 @@ fn small_constant_steer_gives_the_linear_single_track_gain() {
 fn the_chicane_is_stable_over_the_whole_prior_box() {
     // The spec: peaks of about 6.2 to 6.4 m/s^2 over the box, and the car
     // settles once the chicane ends at t = 9 s.
-    let car = PacejkaCar::builder().noiseless(true).build().unwrap();
+    let car = NoiseFree::new(Box::new(PacejkaCar::new())).unwrap();
     let corners = [
         [-42.83, -1.22],
         [-42.83, -0.98],
@@ -155,7 +157,7 @@ fn the_chicane_is_stable_over_the_whole_prior_box() {
 
 #[test]
 fn measurement_noise_has_the_spec_variance() {
-    let clean = PacejkaCar::builder().noiseless(true).build().unwrap();
+    let clean = NoiseFree::new(Box::new(PacejkaCar::new())).unwrap();
     let noisy = PacejkaCar::new();
     let theta = [-30.0, -1.0];
     let (_, y0) = simulate(&clean, &theta);
@@ -185,7 +187,7 @@ fn measurement_noise_has_the_spec_variance() {
 }
 
 fn clean_input() -> Vec<f64> {
-    let car = PacejkaCar::builder().noiseless(true).build().unwrap();
+    let car = NoiseFree::new(Box::new(PacejkaCar::new())).unwrap();
     simulate(&car, &[-35.0, -1.1]).0
 }
 

@@ -92,7 +92,7 @@ pub(crate) fn validate<'py>(
 )> {
     let named = named_model(None, model_file, model_toml)?;
     let sim = NamedModel::trained_on(&estimator.training().model, named.as_ref())
-        .and_then(|model| model.simulator(false))
+        .and_then(|model| model.simulator())
         .map_err(to_python)?;
     let defaults = twostage::ValidationPlan::default();
     let plan = twostage::ValidationPlan {

@@ -287,7 +287,7 @@ pub(crate) fn check_values<'py>(
             "the check simulates the model: give model=, model_file= or model_toml=",
         )
     })?;
-    let sim = named.simulator(false).map_err(to_python)?;
+    let sim = named.simulator().map_err(to_python)?;
     let spec = sim.spec();
     spec.prior()
         .check(&theta, spec.param_names(), allow_outside_prior)
@@ -337,7 +337,7 @@ pub(crate) fn predict<'py>(
             "predict simulates the model: give model=, model_file= or model_toml=",
         )
     })?;
-    let sim = named.simulator(false).map_err(to_python)?;
+    let sim = named.simulator().map_err(to_python)?;
     let spec = sim.spec();
     parameters(&theta, sim.as_ref())?;
     let given = match u {

@@ -5,7 +5,7 @@
 use std::borrow::Cow;
 use std::path::Path;
 
-use twostage_models::{BuiltinModel, NoiseFree, Simulator};
+use twostage_models::{BuiltinModel, Simulator};
 
 use crate::error::{Error, Result};
 use crate::fingerprint;
@@ -136,19 +136,15 @@ impl NamedModel {
         }
     }
 
-    /// The simulator, with or without its noise: `noiseless` turns off
-    /// every noise, the model's and the model file's measurement noise,
-    /// for any source that can run without it (built-in models, FMUs,
-    /// commands speaking protocol 2).
+    /// The simulator, with its noise (a run without it is the run's
+    /// condition: `Conditions::noiseless`, or the simulator wrapped in
+    /// `NoiseFree`, for any source that can run without it).
     ///
     /// # Errors
-    /// `noiseless` for a source that cannot (a command speaking protocol
-    /// 1: the message says how to upgrade it), or what starting the model
-    /// file's source reports.
-    pub fn simulator(&self, noiseless: bool) -> Result<Box<dyn Simulator>> {
+    /// What starting the model file's source reports.
+    pub fn simulator(&self) -> Result<Box<dyn Simulator>> {
         match self {
-            Self::Builtin(model) => Ok(model.build(noiseless)?),
-            Self::File(file) if noiseless => Ok(Box::new(NoiseFree::new(file.simulator()?)?)),
+            Self::Builtin(model) => Ok(model.build()?),
             Self::File(file) => file.simulator(),
         }
     }
@@ -160,7 +156,7 @@ impl NamedModel {
     /// As [`ModelFile::chart_model`].
     pub fn chart_model(&self) -> Result<Box<dyn Simulator>> {
         match self {
-            Self::Builtin(model) => Ok(model.build(false)?),
+            Self::Builtin(model) => Ok(model.build()?),
             Self::File(file) => file.chart_model(),
         }
     }

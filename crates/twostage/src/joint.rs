@@ -92,7 +92,7 @@ impl JointFitter {
     ) -> Result<Self> {
         let boxed = |e: crate::Error| BaselineError::TwoStage(Box::new(e));
         let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
-            .and_then(|model| model.simulator(false))
+            .and_then(|model| model.simulator())
             .map_err(|e| boxed(e.into()))?;
         let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());

@@ -105,7 +105,7 @@ impl EstimateRefiner {
             });
         }
         let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
-            .and_then(|model| model.simulator(false))
+            .and_then(|model| model.simulator())
             .map_err(|e| boxed(e.into()))?;
         let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
         Ok(Self {

@@ -328,7 +328,7 @@ impl TrainingRequest {
     /// reports.
     pub fn train(&self, model: &NamedModel, progress: &dyn Progress) -> Result<Trained> {
         let simulator = match self.records {
-            RecordsRequest::Simulated => model.simulator(false)?,
+            RecordsRequest::Simulated => model.simulator()?,
             _ => model.chart_model()?,
         };
         self.train_with(model, simulator.as_ref(), progress)

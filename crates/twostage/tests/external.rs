@@ -800,7 +800,10 @@ fn protocol_two_runs_noise_free_on_a_given_input() {
         "{refused}"
     );
     let named = twostage::NamedModel::File(Box::new(numpy_benchmark_file(1, "")));
-    let refused = named.simulator(true).err().unwrap().to_string();
+    let refused = twostage::models::NoiseFree::new(named.simulator().unwrap())
+        .err()
+        .unwrap()
+        .to_string();
     assert!(refused.contains("protocol = 2"), "{refused}");
 }
 

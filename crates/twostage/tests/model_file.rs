@@ -5,7 +5,7 @@
 
 mod common;
 
-use twostage::models::{Benchmark, Marginal, Simulator, experiment_rng};
+use twostage::models::{Benchmark, Marginal, NoiseFree, Simulator, experiment_rng};
 use twostage::{MODEL_FILE_TEMPLATE, ModelFile, ModelSource};
 
 const GOOD: &str = r#"[model]
@@ -29,11 +29,10 @@ output_sd = 0.5
 /// `seed`), one after another.
 fn added_noise(file: &ModelFile, runs: u64, seed: u64) -> Vec<f64> {
     let simulator = file.simulator().unwrap();
-    let noiseless = Benchmark::builder()
-        .n_samples(300)
-        .noiseless(true)
-        .build()
-        .unwrap();
+    let noiseless = NoiseFree::new(Box::new(
+        Benchmark::builder().n_samples(300).build().unwrap(),
+    ))
+    .unwrap();
     let spec = file.spec();
     let (mut noisy, mut clean) = (spec.new_record(), spec.new_record());
     let mut added = Vec::new();
@@ -84,11 +83,10 @@ fn the_files_output_noise_can_be_coloured() {
     assert!((rho - 0.9).abs() < 0.02, "lag-one correlation {rho}");
     // Noise-free runs leave it out: the model's own response.
     let simulator = file.simulator().unwrap();
-    let noiseless = Benchmark::builder()
-        .n_samples(300)
-        .noiseless(true)
-        .build()
-        .unwrap();
+    let noiseless = NoiseFree::new(Box::new(
+        Benchmark::builder().n_samples(300).build().unwrap(),
+    ))
+    .unwrap();
     let mut given = file.spec().new_record();
     noiseless
         .simulate(&[0.3], &mut experiment_rng(6, 0), &mut given)

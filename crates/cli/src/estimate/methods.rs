@@ -79,7 +79,7 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
 /// experiment, read with the model's parameters.
 fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<GivenValues> {
     let named = named_model(args, "--at")?;
-    let spec = named.simulator(false).or_usage()?.spec().clone();
+    let spec = named.simulator().or_usage()?.spec().clone();
     let rows = crate::predict::read_rows(path, spec.param_names())?;
     crate::predict::refuse_outside_prior(&rows, &spec, path, args.allow_outside_prior)?;
     let rows = rows.into_iter().map(|row| (row.id, row.theta)).collect();

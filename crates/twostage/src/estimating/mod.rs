@@ -304,7 +304,7 @@ impl Settings {
         let q = estimator.param_names().len();
         let checker = if self.checks {
             let found = NamedModel::trained_on(&estimator.training().model, given)
-                .and_then(|named| named.simulator(false))
+                .and_then(|named| named.simulator())
                 .map_err(|e| RequestError::new(Purpose::Check, e.into()))?;
             Some(found)
         } else {
@@ -372,7 +372,7 @@ impl Settings {
         })?;
         let simulator = |purpose: Purpose| {
             named
-                .simulator(false)
+                .simulator()
                 .map_err(|e| RequestError::new(purpose, e.into()))
         };
         let (method, spec) = match with {
