@@ -83,6 +83,22 @@ pub(crate) struct FitSpeed<'a> {
     pub(crate) seed: u64,
     pub(crate) repeats: usize,
     pub(crate) export: Option<&'a Path>,
+    /// A network's trainer instead of the structure's own: `lm`, `adam`
+    /// or `lbfgs:N` (at most N iterations).
+    pub(crate) trainer: Option<&'a str>,
+}
+
+/// The trainer `--trainer` names.
+fn trainer(name: &str) -> Result<twostage::fit::Trainer> {
+    use twostage::fit::Trainer;
+    Ok(match name.split_once(':') {
+        None if name == "lm" => Trainer::LevenbergMarquardt,
+        None if name == "adam" => Trainer::ADAM,
+        Some(("lbfgs", n)) => Trainer::Lbfgs {
+            iterations: n.parse().with_context(|| format!("--trainer {name}"))?,
+        },
+        _ => anyhow::bail!("--trainer {name}: give lm, adam or lbfgs:N"),
+    })
 }
 
 pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
@@ -122,10 +138,16 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         )?;
         println!("charts written to {}", dir.display());
     }
-    let regressor: RegressorConfig = options
+    let mut regressor: RegressorConfig = options
         .fit
         .parse()
         .with_context(|| format!("--fit {}", options.fit))?;
+    if let Some(name) = options.trainer {
+        let RegressorConfig::Mlp(mlp) = &regressor else {
+            anyhow::bail!("--trainer {name}: --fit {} is not a network", options.fit);
+        };
+        regressor = RegressorConfig::Mlp(mlp.params().clone().trainer(trainer(name)?).check()?);
+    }
     let mut times = Vec::new();
     let mut fitted = None;
     for _ in 0..options.repeats.max(1) {

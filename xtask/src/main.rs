@@ -116,6 +116,9 @@ enum Command {
         /// Write the charts as CSV into this folder.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// A network's trainer instead of its own: lm, adam or lbfgs:N.
+        #[arg(long)]
+        trainer: Option<String>,
     },
     /// Fuzz the readers of outside data (estimator files, runtime blobs,
     /// model files, CSV rows) with inputs mutated from their corpus in
@@ -181,6 +184,7 @@ fn main() -> ExitCode {
             seed,
             repeats,
             export,
+            trainer,
         } => fit_speed::run(&fit_speed::FitSpeed {
             model: &model,
             compress: &compress,
@@ -190,6 +194,7 @@ fn main() -> ExitCode {
             seed,
             repeats,
             export: export.as_deref(),
+            trainer: trainer.as_deref(),
         }),
         Command::Crates { check } => crates::run(check),
         Command::Fuzz {

@@ -175,7 +175,8 @@ fn training_is_identical_whatever_the_thread_count_for(
         batch_size: 600,
         epochs: 15,
     };
-    for trainer in [Trainer::LevenbergMarquardt, adam] {
+    let lbfgs = Trainer::Lbfgs { iterations: 30 };
+    for trainer in [Trainer::LevenbergMarquardt, adam, lbfgs] {
         let one = fit(1, trainer, 9);
         assert_eq!(one, fit(2, trainer, 9), "{trainer:?}");
         assert_eq!(one, fit(3, trainer, 9), "{trainer:?}");
@@ -269,6 +270,54 @@ fn an_ensemble_of_one_is_the_network_and_of_three_is_not_the_best_one() {
         .mapv(f64::abs)
         .fold(0.0f64, |m, v| m.max(*v));
     assert!(diff > 1e-9 && diff < 0.5, "largest difference {diff}");
+}
+
+#[test]
+fn lbfgs_fits_a_smooth_function_as_closely_as_levenberg_marquardt() {
+    let x = Array2::from_shape_fn((400, 1), |(i, _)| -1.5 + 3.0 * i as f64 / 399.0);
+    let t = x.mapv(|v| (2.0 * v).sin());
+    let fit = |trainer: Trainer| {
+        let net = MlpParams::new(&[16])
+            .unwrap()
+            .trainer(trainer)
+            .restarts(2)
+            .max_iterations(500)
+            .patience(50)
+            .seed(2)
+            .check()
+            .unwrap()
+            .fit(x.view(), t.view())
+            .unwrap();
+        let p = net.predict(x.view()).unwrap();
+        let rmse = ((&p - &t).mapv(|v| v * v).sum() / 400.0).sqrt();
+        (rmse, net)
+    };
+    let (lm, _) = fit(Trainer::LevenbergMarquardt);
+    let (lbfgs, net) = fit(Trainer::Lbfgs { iterations: 3000 });
+    assert!(
+        lbfgs < 0.01 && lbfgs < 3.0 * lm.max(1e-3),
+        "L-BFGS {lbfgs}, LM {lm}"
+    );
+    assert_eq!(net.best_restart().reason.trainer(), "L-BFGS");
+    assert!(
+        net.training_summary().contains("2 restarts by L-BFGS"),
+        "{}",
+        net.training_summary()
+    );
+    let refused = MlpParams::new(&[4])
+        .unwrap()
+        .trainer(Trainer::Lbfgs { iterations: 0 })
+        .check();
+    assert!(
+        matches!(
+            refused,
+            Err(FitError::InvalidSetting {
+                name: "iterations",
+                ..
+            })
+        ),
+        "{refused:?}"
+    );
 }
 
 #[test]

@@ -57,6 +57,16 @@ pub enum TerminationReason {
     /// was making little progress: it would not come near the best fit
     /// within its budget, so it stopped where it stood.
     Outpaced,
+    /// L-BFGS's iteration budget ran out.
+    LbfgsMaxIterations,
+    /// L-BFGS's held-out loss did not improve for `patience` iterations.
+    LbfgsWithoutImprovement,
+    /// L-BFGS found no step that decreases the loss enough, or its
+    /// decrease fell below the tolerance.
+    LbfgsConverged,
+    /// L-BFGS's iterations ran until the training's time was up: the best
+    /// weights so far are the answer.
+    LbfgsUntilDeadline,
 }
 
 impl TerminationReason {
@@ -76,18 +86,30 @@ impl TerminationReason {
             Self::EpochsUntilDeadline => "EpochsUntilDeadline",
             Self::Joined => "Joined",
             Self::Outpaced => "Outpaced",
+            Self::LbfgsMaxIterations => "LbfgsMaxIterations",
+            Self::LbfgsWithoutImprovement => "LbfgsWithoutImprovement",
+            Self::LbfgsConverged => "LbfgsConverged",
+            Self::LbfgsUntilDeadline => "LbfgsUntilDeadline",
         }
     }
 
     /// Whether the training's time ran out before the trainer's own end.
     pub fn is_deadline(self) -> bool {
-        matches!(self, Self::Deadline | Self::EpochsUntilDeadline)
+        matches!(
+            self,
+            Self::Deadline | Self::EpochsUntilDeadline | Self::LbfgsUntilDeadline
+        )
     }
 
-    /// The trainer that stops for this reason: Adam's reasons are its own.
+    /// The trainer that stops for this reason: Adam's and L-BFGS's reasons
+    /// are their own.
     pub fn trainer(self) -> &'static str {
         match self {
             Self::MaxEpochs | Self::EpochsWithoutImprovement | Self::EpochsUntilDeadline => "Adam",
+            Self::LbfgsMaxIterations
+            | Self::LbfgsWithoutImprovement
+            | Self::LbfgsConverged
+            | Self::LbfgsUntilDeadline => "L-BFGS",
             _ => "Levenberg-Marquardt",
         }
     }

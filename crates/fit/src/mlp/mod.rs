@@ -4,9 +4,11 @@
 //!
 //! - `params`: the hyperparameters, unchecked and checked;
 //! - `network`: the forward pass, back-propagation and the fitted network;
-//! - `training`: restarts, the Levenberg-Marquardt and Adam trainers.
+//! - `training`: restarts, the Levenberg-Marquardt and Adam trainers;
+//! - `lbfgs`: the L-BFGS trainer, for many rows and weights.
 
 mod gauss_newton;
+mod lbfgs;
 mod network;
 mod params;
 mod training;

@@ -116,19 +116,32 @@ impl FittedMlp {
     }
     /// How the kept network was trained, in words: "Levenberg-Marquardt,
     /// stopped by Converged (best of 4 restarts by Levenberg-Marquardt)",
-    /// naming both trainers when [`crate::Trainer::Auto`] ran both, and
+    /// naming every trainer that ran (both when [`crate::Trainer::Auto`]
+    /// ran Levenberg-Marquardt and Adam), and
     /// "average of" for an ensemble.
     pub fn training_summary(&self) -> String {
         let best = self.best_restart();
-        let lm = self
-            .reports
+        let counts: Vec<String> = ["Levenberg-Marquardt", "Adam", "L-BFGS"]
             .iter()
-            .filter(|r| r.reason.trainer() == "Levenberg-Marquardt")
-            .count();
-        let restarts = match (lm, self.reports.len() - lm) {
-            (0, adam) => format!("{adam} restarts by Adam"),
-            (lm, 0) => format!("{lm} restarts by Levenberg-Marquardt"),
-            (lm, adam) => format!("{lm} restarts by Levenberg-Marquardt, {adam} by Adam"),
+            .filter_map(|&trainer| {
+                let n = self
+                    .reports
+                    .iter()
+                    .filter(|r| r.reason.trainer() == trainer)
+                    .count();
+                (n > 0).then(|| format!("{n} by {trainer}"))
+            })
+            .collect();
+        let restarts = match counts.split_first() {
+            Some((first, rest)) => {
+                let mut said = first.replacen(" by ", " restarts by ", 1);
+                for more in rest {
+                    said.push_str(", ");
+                    said.push_str(more);
+                }
+                said
+            }
+            None => "no restarts".to_string(),
         };
         let kept = match self.members.len() {
             1 => format!("best of {restarts}"),

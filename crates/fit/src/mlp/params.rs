@@ -28,6 +28,13 @@ pub enum Trainer {
         /// Passes over the training set at most.
         epochs: usize,
     },
+    /// L-BFGS (Nocedal and Wright, 2006) on the full training set: an
+    /// iteration costs a gradient of every row, not Levenberg-Marquardt's
+    /// products of a Jacobian of rows x weights.
+    Lbfgs {
+        /// Iterations at most.
+        iterations: usize,
+    },
 }
 
 impl std::fmt::Display for Trainer {
@@ -43,6 +50,7 @@ impl std::fmt::Display for Trainer {
                 f,
                 "Adam (step {learning_rate:e}, batches of {batch_size}, {epochs} epochs)"
             ),
+            Self::Lbfgs { iterations } => write!(f, "L-BFGS (at most {iterations} iterations)"),
         }
     }
 }
@@ -67,7 +75,7 @@ impl Trainer {
 /// | `patience` | 25 | iterations without held-out improvement before stopping |
 /// | `weight_decay` | 1e-6 | >= 0, L2 penalty on the weights (standardized units) |
 /// | `seed` | 0 | any |
-/// | `trainer` | [`Trainer::Auto`] | LM, Adam, or chosen by size |
+/// | `trainer` | [`Trainer::Auto`] | LM, Adam, L-BFGS, or chosen by size |
 /// | `ensemble` | false (keep the best held-out network) | true: average the restarts' networks |
 ///
 /// ```
@@ -248,6 +256,9 @@ impl MlpParams {
                     "both at least 1",
                 ));
             }
+        }
+        if let Trainer::Lbfgs { iterations: 0 } = self.trainer {
+            return Err(invalid("iterations", "0".into(), "at least 1"));
         }
         if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
             return Err(invalid(

@@ -1,5 +1,5 @@
 //! Training: seeded restarts in parallel, each by Levenberg-Marquardt (the
-//! crate's one solver) or Adam, with early stopping on a held-out split;
+//! crate's one least-squares solver), Adam or L-BFGS, with early stopping on a held-out split;
 //! within a restart the rows are divided over the threads in fixed blocks
 //! (docs/decisions/026), so the weights do not depend on the thread count.
 
@@ -28,16 +28,16 @@ use super::params::{Mlp, MlpParams, Trainer};
 
 /// Keeps the weights with the lowest held-out loss and says when `patience`
 /// checks have passed without improvement (never, when nothing is held out).
-struct BestHeldOut {
-    loss: f64,
-    params: Vec<f64>,
+pub(super) struct BestHeldOut {
+    pub(super) loss: f64,
+    pub(super) params: Vec<f64>,
     since: usize,
     patience: usize,
     active: bool,
 }
 
 impl BestHeldOut {
-    fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
+    pub(super) fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
         Self {
             loss,
             params: params.to_vec(),
@@ -48,7 +48,7 @@ impl BestHeldOut {
     }
 
     /// Record the held-out loss of `params`; true when training should stop.
-    fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
+    pub(super) fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
         if loss < self.loss {
             self.loss = loss;
             self.params.copy_from_slice(params);
@@ -73,7 +73,7 @@ const MAX_LM_WEIGHTS: usize = 1000;
 enum Plan {
     /// Every restart by Levenberg-Marquardt on every training row.
     LevenbergMarquardt,
-    /// Every restart by Adam.
+    /// Every restart by Adam, or by L-BFGS where the trainer says so.
     Adam,
     /// [`Trainer::Auto`] on more rows than Levenberg-Marquardt takes: its
     /// restarts on the first `lm_rows` training rows, as many by Adam on
@@ -91,7 +91,7 @@ enum Plan {
 fn plan(trainer: Trainer, rows: usize, sizes: &[usize], max_jacobian: usize) -> Plan {
     match trainer {
         Trainer::LevenbergMarquardt => Plan::LevenbergMarquardt,
-        Trainer::Adam { .. } => Plan::Adam,
+        Trainer::Adam { .. } | Trainer::Lbfgs { .. } => Plan::Adam,
         Trainer::Auto if parameter_count(sizes) > MAX_LM_WEIGHTS => Plan::Adam,
         Trainer::Auto => {
             let lm_rows = max_jacobian / entries_per_sample(sizes).max(1);
@@ -124,7 +124,7 @@ fn lowest_held_out(reports: &[RestartReport]) -> usize {
 }
 
 /// Whether the training's time is up (`Mlp::stopped_by`).
-fn out_of_time(mlp: &MlpParams) -> bool {
+pub(super) fn out_of_time(mlp: &MlpParams) -> bool {
     mlp.stop_by
         .is_some_and(|stop_by| std::time::Instant::now() >= stop_by)
 }
@@ -178,6 +178,8 @@ fn train_with(
 ) -> (Vec<f64>, RestartReport) {
     if levenberg_marquardt {
         train_levenberg_marquardt(problem, mlp, restart, params)
+    } else if let Trainer::Lbfgs { iterations } = mlp.trainer {
+        super::lbfgs::train_lbfgs(problem, mlp, restart, params, iterations)
     } else {
         let (learning_rate, batch_size, epochs) = match mlp.trainer {
             Trainer::Adam {

@@ -1,0 +1,216 @@
+//! L-BFGS on the whole training set (Nocedal and Wright, Numerical
+//! Optimization, 2nd ed., 2006: the two-loop recursion, Algorithm 7.4, and
+//! Algorithm 7.5 with a backtracking line search under the Armijo
+//! condition): each iteration one gradient of every training row and a
+//! few of their losses, against Levenberg-Marquardt's products of a
+//! Jacobian of rows x weights. Where the rows and the weights are many,
+//! an iteration costs a small fraction of one of Levenberg-Marquardt's.
+
+use std::collections::VecDeque;
+
+use crate::levenberg_marquardt::TerminationReason;
+
+use super::network::{Problem, RestartReport};
+use super::params::MlpParams;
+
+/// Curvature pairs kept (the memory m of Nocedal and Wright; 3 to 20
+/// work in practice, their section 7.2).
+const MEMORY: usize = 10;
+/// The Armijo condition's sufficient-decrease constant.
+const ARMIJO: f64 = 1e-4;
+/// Halvings of the step before an iteration gives up.
+const HALVINGS: usize = 40;
+/// The cost's relative decrease below which an iteration counts as none.
+const TOLERANCE: f64 = 1e-12;
+/// Iterations per unit of `patience`: an L-BFGS iteration moves the
+/// weights far less than a Levenberg-Marquardt one, whose count the
+/// patience was set for.
+const PATIENCE_SCALE: usize = 20;
+
+/// The training loss L-BFGS minimizes: the mean squared error per target
+/// value over the training rows plus the weight decay, the cost whose
+/// gradient [`Problem::gradient`] gives.
+fn loss(problem: &Problem<'_>, params: &[f64]) -> f64 {
+    let q = *problem.sizes.last().unwrap_or(&1);
+    let values = (problem.train.len() * q).max(1) as f64;
+    problem.mse(params, problem.train) + problem.penalty(params) / values
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// The direction `-H g` of the two-loop recursion over the kept pairs
+/// `(s, y, 1 / y's)`, oldest first, the initial matrix scaled by the
+/// newest pair (Nocedal and Wright, eq. 7.20).
+fn direction(grad: &[f64], pairs: &VecDeque<(Vec<f64>, Vec<f64>, f64)>) -> Vec<f64> {
+    let mut d: Vec<f64> = grad.iter().map(|g| -g).collect();
+    let mut alphas = Vec::with_capacity(pairs.len());
+    for (s, y, rho) in pairs.iter().rev() {
+        let alpha = rho * dot(s, &d);
+        for (d, y) in d.iter_mut().zip(y) {
+            *d -= alpha * y;
+        }
+        alphas.push(alpha);
+    }
+    if let Some((s, y, _)) = pairs.back() {
+        let gamma = dot(s, y) / dot(y, y);
+        for d in &mut d {
+            *d *= gamma;
+        }
+    }
+    for ((s, y, rho), alpha) in pairs.iter().zip(alphas.iter().rev()) {
+        let beta = rho * dot(y, &d);
+        for (d, s) in d.iter_mut().zip(s) {
+            *d += (alpha - beta) * s;
+        }
+    }
+    d
+}
+
+/// One restart from `params` by L-BFGS, at most `iterations` iterations,
+/// keeping the weights of the lowest held-out loss (checked every
+/// iteration, `patience` counting [`PATIENCE_SCALE`] iterations) and
+/// stopping at the
+/// training's deadline.
+pub(super) fn train_lbfgs(
+    problem: &Problem<'_>,
+    mlp: &MlpParams,
+    restart: usize,
+    mut params: Vec<f64>,
+    iterations: usize,
+) -> (Vec<f64>, RestartReport) {
+    let held_out = if problem.held_out.is_empty() {
+        problem.train
+    } else {
+        problem.held_out
+    };
+    let initial = problem.mse(&params, held_out);
+    let mut best = super::training::BestHeldOut::new(
+        initial,
+        &params,
+        mlp.patience.saturating_mul(PATIENCE_SCALE),
+        !problem.held_out.is_empty(),
+    );
+    let n = params.len();
+    let mut grad = vec![0.0; n];
+    problem.gradient(&params, problem.train, &mut grad);
+    let mut cost = loss(problem, &params);
+    let mut pairs: VecDeque<(Vec<f64>, Vec<f64>, f64)> = VecDeque::with_capacity(MEMORY);
+    let mut reason = TerminationReason::LbfgsMaxIterations;
+    let mut done = 0;
+    let mut trial = vec![0.0; n];
+    let mut trial_grad = vec![0.0; n];
+    while done < iterations {
+        done += 1;
+        let mut d = direction(&grad, &pairs);
+        let mut slope = dot(&grad, &d);
+        if slope >= 0.0 || slope.is_nan() {
+            // Not a descent direction (curvature pairs gone stale): start
+            // the memory again from the steepest descent.
+            pairs.clear();
+            d = grad.iter().map(|g| -g).collect();
+            slope = dot(&grad, &d);
+        }
+        // The first step, without curvature, moves the weights by at most
+        // one unit; later ones try the quasi-Newton step itself.
+        let mut step = if pairs.is_empty() {
+            1.0 / d.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1.0)
+        } else {
+            1.0
+        };
+        let mut accepted = None;
+        for _ in 0..HALVINGS {
+            for ((t, p), d) in trial.iter_mut().zip(&params).zip(&d) {
+                *t = p + step * d;
+            }
+            let trial_cost = loss(problem, &trial);
+            if trial_cost.is_finite() && trial_cost <= cost + ARMIJO * step * slope {
+                accepted = Some(trial_cost);
+                break;
+            }
+            step *= 0.5;
+        }
+        let Some(new_cost) = accepted else {
+            reason = TerminationReason::LbfgsConverged;
+            break;
+        };
+        problem.gradient(&trial, problem.train, &mut trial_grad);
+        let s: Vec<f64> = trial.iter().zip(&params).map(|(a, b)| a - b).collect();
+        let y: Vec<f64> = trial_grad.iter().zip(&grad).map(|(a, b)| a - b).collect();
+        let sy = dot(&s, &y);
+        // A pair of no positive curvature would spoil the recursion.
+        if sy > f64::EPSILON * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
+            if pairs.len() == MEMORY {
+                pairs.pop_front();
+            }
+            pairs.push_back((s, y, 1.0 / sy));
+        }
+        std::mem::swap(&mut params, &mut trial);
+        std::mem::swap(&mut grad, &mut trial_grad);
+        let decrease = (cost - new_cost) / cost.abs().max(f64::MIN_POSITIVE);
+        cost = new_cost;
+        if best.observe(problem.mse(&params, held_out), &params) {
+            reason = TerminationReason::LbfgsWithoutImprovement;
+            break;
+        }
+        if decrease < TOLERANCE && pairs.len() == MEMORY {
+            reason = TerminationReason::LbfgsConverged;
+            break;
+        }
+        if super::training::out_of_time(mlp) {
+            reason = TerminationReason::LbfgsUntilDeadline;
+            break;
+        }
+    }
+    let (validation_mse, kept) = (best.loss, best.params);
+    let report = RestartReport {
+        restart,
+        iterations: done,
+        reason,
+        train_mse: problem.mse(&kept, problem.train),
+        validation_mse,
+    };
+    (kept, report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On a convex quadratic 1/2 x'Ax - b'x, curvature pairs of
+    /// A-conjugate steps make the recursion's matrix A^-1 (the hereditary
+    /// property of BFGS on quadratics, Nocedal and Wright, Theorem 6.4), so
+    /// its step from any point lands on the minimizer A^-1 b.
+    #[test]
+    fn the_two_loop_recursion_inverts_a_quadratic_s_curvature() {
+        // A = [[4, 1], [1, 3]], b = (1, 2): x* = A^-1 b = (1/11, 7/11).
+        let a = [[4.0, 1.0], [1.0, 3.0]];
+        let grad_at = |x: &[f64]| -> Vec<f64> {
+            vec![
+                a[0][0] * x[0] + a[0][1] * x[1] - 1.0,
+                a[1][0] * x[0] + a[1][1] * x[1] - 2.0,
+            ]
+        };
+        let mut pairs = VecDeque::new();
+        // (1, 0) and (1, -4) are A-conjugate: 4 - 4 = 0.
+        for s in [vec![1.0, 0.0], vec![1.0, -4.0]] {
+            let y = vec![
+                a[0][0] * s[0] + a[0][1] * s[1],
+                a[1][0] * s[0] + a[1][1] * s[1],
+            ];
+            let rho = 1.0 / dot(&s, &y);
+            pairs.push_back((s, y, rho));
+        }
+        let x0 = [0.0, 0.0];
+        let d = direction(&grad_at(&x0), &pairs);
+        assert!((d[0] - 1.0 / 11.0).abs() < 1e-14, "{d:?}");
+        assert!((d[1] - 7.0 / 11.0).abs() < 1e-14, "{d:?}");
+    }
+
+    /// Without pairs the direction is the steepest descent.
+    #[test]
+    fn without_memory_the_direction_is_minus_the_gradient() {
+        assert_eq!(direction(&[0.5, -2.0], &VecDeque::new()), vec![-0.5, 2.0]);
+    }
+}
