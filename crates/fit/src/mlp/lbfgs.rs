@@ -163,15 +163,7 @@ pub(super) fn train_lbfgs(
             break;
         }
     }
-    let (validation_mse, kept) = (best.loss, best.params);
-    let report = RestartReport {
-        restart,
-        iterations: done,
-        reason,
-        train_mse: problem.mse(&kept, problem.train),
-        validation_mse,
-    };
-    (kept, report)
+    best.into_restart(problem, restart, done, reason)
 }
 
 #[cfg(test)]

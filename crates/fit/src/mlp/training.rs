@@ -47,6 +47,25 @@ impl BestHeldOut {
         }
     }
 
+    /// The restart's kept weights and its report, `iterations` run and
+    /// stopped for `reason`.
+    pub(super) fn into_restart(
+        self,
+        problem: &Problem<'_>,
+        restart: usize,
+        iterations: usize,
+        reason: TerminationReason,
+    ) -> (Vec<f64>, RestartReport) {
+        let report = RestartReport {
+            restart,
+            iterations,
+            reason,
+            train_mse: problem.mse(&self.params, problem.train),
+            validation_mse: self.loss,
+        };
+        (self.params, report)
+    }
+
     /// Record the held-out loss of `params`; true when training should stop.
     pub(super) fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
         if loss < self.loss {
@@ -248,15 +267,7 @@ fn train_adam(
             break;
         }
     }
-    let (validation_mse, kept) = (best.loss, best.params);
-    let report = RestartReport {
-        restart,
-        iterations: done,
-        reason,
-        train_mse: problem.mse(&kept, problem.train),
-        validation_mse,
-    };
-    (kept, report)
+    best.into_restart(problem, restart, done, reason)
 }
 
 fn train_levenberg_marquardt(
@@ -291,19 +302,12 @@ fn train_levenberg_marquardt(
             ControlFlow::Continue(())
         }
     });
-    let (validation_mse, kept) = (best.loss, best.params);
-    let report = RestartReport {
-        restart,
-        iterations: minimum.iterations,
-        reason: if timed_out {
-            TerminationReason::Deadline
-        } else {
-            minimum.reason
-        },
-        train_mse: problem.mse(&kept, problem.train),
-        validation_mse,
+    let reason = if timed_out {
+        TerminationReason::Deadline
+    } else {
+        minimum.reason
     };
-    (kept, report)
+    best.into_restart(problem, restart, minimum.iterations, reason)
 }
 
 /// The training rows' residuals as a least-squares problem: the cost is
