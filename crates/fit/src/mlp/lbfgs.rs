@@ -80,17 +80,10 @@ pub(super) fn train_lbfgs(
     mut params: Vec<f64>,
     iterations: usize,
 ) -> (Vec<f64>, RestartReport) {
-    let held_out = if problem.held_out.is_empty() {
-        problem.train
-    } else {
-        problem.held_out
-    };
-    let initial = problem.mse(&params, held_out);
-    let mut best = super::training::BestHeldOut::new(
-        initial,
+    let (mut best, held_out) = super::training::BestHeldOut::start(
+        problem,
         &params,
         mlp.patience.saturating_mul(PATIENCE_SCALE),
-        !problem.held_out.is_empty(),
     );
     let n = params.len();
     let mut grad = vec![0.0; n];

@@ -37,7 +37,25 @@ pub(super) struct BestHeldOut {
 }
 
 impl BestHeldOut {
-    pub(super) fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
+    /// The watch of a restart from `params` on `problem`'s held-out rows
+    /// (its training rows when none are held out, where it never stops
+    /// the training), and those rows.
+    pub(super) fn start<'p>(
+        problem: &Problem<'p>,
+        params: &[f64],
+        patience: usize,
+    ) -> (Self, &'p [usize]) {
+        let active = !problem.held_out.is_empty();
+        let held_out = if active {
+            problem.held_out
+        } else {
+            problem.train
+        };
+        let initial = problem.mse(params, held_out);
+        (Self::new(initial, params, patience, active), held_out)
+    }
+
+    fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
         Self {
             loss,
             params: params.to_vec(),
@@ -234,14 +252,8 @@ fn train_adam(
     const EPSILON: f64 = 1e-8;
     let n = problem.n_params();
     let (mut grad, mut m, mut v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let held_out = if problem.held_out.is_empty() {
-        problem.train
-    } else {
-        problem.held_out
-    };
+    let (mut best, held_out) = BestHeldOut::start(problem, &params, mlp.patience);
     let mut order = problem.train.to_vec();
-    let initial = problem.mse(&params, held_out);
-    let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
     let (mut step, mut done) = (0i32, 0);
     let mut reason = TerminationReason::MaxEpochs;
     for _ in 0..epochs {
@@ -276,13 +288,7 @@ fn train_levenberg_marquardt(
     restart: usize,
     params: Vec<f64>,
 ) -> (Vec<f64>, RestartReport) {
-    let held_out = if problem.held_out.is_empty() {
-        problem.train
-    } else {
-        problem.held_out
-    };
-    let initial = problem.mse(&params, held_out);
-    let mut best = BestHeldOut::new(initial, &params, mlp.patience, !problem.held_out.is_empty());
+    let (mut best, held_out) = BestHeldOut::start(problem, &params, mlp.patience);
     let mut least_squares = NetworkLeastSquares::new(problem);
     let solver = LevenbergMarquardt::new()
         .max_iterations(mlp.max_iterations)
