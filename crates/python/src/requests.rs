@@ -39,14 +39,7 @@ pub(crate) fn check<'py>(
         // the search's starts.
         None => EstimateWith::Estimator(Box::new(estimator.clone())),
         Some(theta) => {
-            let q = estimator.param_names().len();
-            if theta.len() != q {
-                return Err(PyValueError::new_err(format!(
-                    "theta has {} values, the model has {q} parameters ({})",
-                    theta.len(),
-                    estimator.param_names().join(", ")
-                )));
-            }
+            through_model::parameters(&theta, estimator.param_names())?;
             let given = twostage::GivenValues::new(vec![("0".into(), theta)], "theta")
                 .map_err(PyValueError::new_err)?;
             EstimateWith::Given(given)

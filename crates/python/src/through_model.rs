@@ -108,9 +108,9 @@ pub(crate) fn one_record(
     Ok(record)
 }
 
-/// A parameter vector of the model's length, finite.
-pub(crate) fn parameters(theta: &[f64], sim: &dyn Simulator) -> PyResult<()> {
-    let names = sim.spec().param_names();
+/// A parameter vector of as many values as the model has parameters
+/// (`names`), finite.
+pub(crate) fn parameters(theta: &[f64], names: &[String]) -> PyResult<()> {
     if theta.len() != names.len() {
         return Err(PyValueError::new_err(format!(
             "theta has {} values, the model has {} parameters ({})",
@@ -300,7 +300,7 @@ pub(crate) fn check_values<'py>(
         spec.input_names().len(),
         spec.output_names().len(),
     )?;
-    parameters(&theta, sim.as_ref())?;
+    parameters(&theta, sim.spec().param_names())?;
     let given =
         GivenValues::new(vec![("0".into(), theta)], "theta").map_err(PyValueError::new_err)?;
     let estimating = prepared(EstimateRequest {
@@ -339,7 +339,7 @@ pub(crate) fn predict<'py>(
     })?;
     let sim = named.simulator().map_err(to_python)?;
     let spec = sim.spec();
-    parameters(&theta, sim.as_ref())?;
+    parameters(&theta, sim.spec().param_names())?;
     let given = match u {
         Some(_) => Some(one_record(
             u,

@@ -218,6 +218,10 @@ def test_bad_values_and_arrays_are_named(benchmark):
     assert outside["explained"] in (True, False)
     with pytest.raises(ValueError, match="theta has 2 values, the model has 1"):
         twostage.predict([0.1, 0.2], u[0], model="benchmark")
+    with pytest.raises(ValueError, match="theta's theta is NaN: give finite values"):
+        estimator.check(u[0], y[0], [float("nan")])
+    with pytest.raises(ValueError, match="theta has 2 values, the model has 1"):
+        estimator.check(u[0], y[0], [0.1, 0.2])
     with pytest.raises(ValueError, match="u is a batch"):
         estimator.refine(u, y)
     bad = y[0].copy()
