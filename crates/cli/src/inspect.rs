@@ -84,9 +84,9 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
         t.simulations,
         t.failures,
         t.seed,
-        match twostage::sources::chart_of(&t.sampling) {
-            Some(chart) => format!("from {chart}"),
-            None => format!("simulated, {} design", t.sampling),
+        match t.records() {
+            chart @ twostage::models::RecordsOrigin::Chart(_) => format!("from {chart}"),
+            drawn => drawn.to_string(),
         }
     )?;
     match e.validation() {

@@ -224,7 +224,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
         if let Some(trained_by) = estimator.regressor().training_summary() {
             writeln!(out, "stage 2: {trained_by}")?;
         }
-        if let Some(chart) = twostage::sources::chart_of(&estimator.training().sampling) {
+        if let chart @ twostage::models::RecordsOrigin::Chart(_) = estimator.training().records() {
             // The certificate covers records drawn as the chart's were.
             writeln!(out, "trained on {chart}")?;
         }

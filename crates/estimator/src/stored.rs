@@ -17,14 +17,37 @@ pub struct TrainingInfo {
     pub failures: usize,
     /// The training seed.
     pub seed: u64,
-    /// The design that placed the training parameters (its name, as
-    /// [`twostage_models::Sampling::name`] writes it), or the chart the
-    /// records were read from (`twostage::sources::chart_of` tells them apart).
+    /// Where the training records came from, as
+    /// [`twostage_models::RecordsOrigin::line`] writes it (the design that
+    /// drew their parameters, or the chart they were read from):
+    /// [`TrainingInfo::records`] reads it.
     pub sampling: String,
     /// The stage-2 method as configured.
     pub regressor: RegressorConfig,
     /// The twostage version that trained it.
     pub version: String,
+}
+
+impl TrainingInfo {
+    /// Where the training records came from.
+    ///
+    /// ```
+    /// use twostage_estimator::TrainingInfo;
+    /// use twostage_models::{RecordsOrigin, Sampling};
+    /// let info = TrainingInfo {
+    ///     model: "benchmark".into(),
+    ///     simulations: 300,
+    ///     failures: 0,
+    ///     seed: 1,
+    ///     sampling: RecordsOrigin::Drawn(Sampling::LatinHypercube).line(),
+    ///     regressor: "linear".parse().unwrap(),
+    ///     version: "0.1.0".into(),
+    /// };
+    /// assert_eq!(info.records(), RecordsOrigin::Drawn(Sampling::LatinHypercube));
+    /// ```
+    pub fn records(&self) -> twostage_models::RecordsOrigin<'_> {
+        twostage_models::RecordsOrigin::read(&self.sampling)
+    }
 }
 
 /// The names of a model's input and output signals.

@@ -53,6 +53,7 @@ mod input_design;
 mod input_family;
 mod marginal;
 mod ode;
+mod origin;
 mod pacejka;
 mod prbs;
 mod prior;
@@ -79,6 +80,7 @@ pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
 };
 pub use ode::{OdeSystem, Rk4};
+pub use origin::RecordsOrigin;
 pub use pacejka::{
     CHICANE_AMPLITUDE, PACEJKA_NOISE_VARIANCE, PACEJKA_SAMPLE_TIME, PACEJKA_SAMPLES,
     PACEJKA_STEPS_PER_SAMPLE, PacejkaCar, PacejkaCarBuilder, Tire, Vehicle,

@@ -57,7 +57,7 @@ pub use profile::{
 };
 pub use progress::{Progress, Silent, Stage};
 pub use readable::refuse_beyond_memory;
-pub use records::{CHART_WORDS, RecordSource, Records, RunShape, chart_of};
+pub use records::{RecordSource, Records, RunShape};
 pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
 pub use twostage_models::{available_memory, readable_bytes};

@@ -6,7 +6,7 @@
 use std::cell::RefCell;
 
 use twostage_compress::{Compressor, Workspace};
-use twostage_models::{InputFamily, IoData, ModelSpec, Prior, Sampling, Simulator};
+use twostage_models::{InputFamily, IoData, ModelSpec, Prior, RecordsOrigin, Sampling, Simulator};
 
 use crate::chart::{
     CompressedChart, ExperimentFailure, ForModel, StoredChart, compress_chart_observed,
@@ -62,24 +62,6 @@ fn stage(role: ChartRole) -> Stage {
         ChartRole::Calibration => Stage::Calibration,
         ChartRole::Validation => Stage::Validation,
     }
-}
-
-/// How an estimator's record of its training begins where the records
-/// were read from a chart, not simulated ([`Records::sampling`]).
-pub const CHART_WORDS: &str = "the chart";
-
-/// The chart an estimator's training records were read from, described,
-/// where they were not simulated: `sampling` is how its training record
-/// says they were drawn ([`Records::sampling`] wrote it).
-///
-/// ```
-/// use twostage_sources::chart_of;
-/// assert_eq!(chart_of("the chart runs/ (calibration: none; validation: none)"),
-///            Some("the chart runs/ (calibration: none; validation: none)"));
-/// assert_eq!(chart_of("uniform"), None);
-/// ```
-pub fn chart_of(sampling: &str) -> Option<&str> {
-    sampling.starts_with(CHART_WORDS).then_some(sampling)
 }
 
 /// A source opened for one run: it knows the run's sizes, seed and
@@ -420,26 +402,27 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
         self.counts.training
     }
 
-    /// How the training records were drawn, for the estimator's record:
-    /// the sampling design's name, or [`CHART_WORDS`] and the chart.
+    /// How the training records were drawn, for the estimator's record
+    /// ([`RecordsOrigin`]'s line): the sampling design, or the chart.
     pub fn sampling(&self) -> String {
         match &self.kind {
-            Kind::Simulated => self.training_prior.sampling().name().to_string(),
-            Kind::Shards(chart) => chart.sampling().name().to_string(),
+            Kind::Simulated => RecordsOrigin::Drawn(self.training_prior.sampling()).line(),
+            Kind::Shards(chart) => RecordsOrigin::Drawn(chart.sampling()).line(),
             Kind::Files { chart, own, .. } => {
                 let source = |role: ChartRole| match own[role.slot()] {
-                    Some(c) => format!("{CHART_WORDS} {}", c.describe()),
+                    Some(c) => format!("the chart {}", c.describe()),
                     None if self.counts[role] > 0 => {
                         format!("{} records held out of it at random", self.counts[role])
                     }
                     None => "none".into(),
                 };
-                format!(
-                    "{CHART_WORDS} {} (calibration: {}; validation: {})",
+                let described = format!(
+                    "{} (calibration: {}; validation: {})",
                     chart.describe(),
                     source(ChartRole::Calibration),
                     source(ChartRole::Validation)
-                )
+                );
+                RecordsOrigin::Chart(&described).line()
             }
         }
     }
