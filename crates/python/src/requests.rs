@@ -41,7 +41,7 @@ pub(crate) fn check<'py>(
         Some(theta) => {
             through_model::parameters(&theta, estimator.param_names())?;
             let given = twostage::GivenValues::new(vec![("0".into(), theta)], "theta")
-                .map_err(PyValueError::new_err)?;
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
             EstimateWith::Given(given)
         }
     };

@@ -301,8 +301,8 @@ pub(crate) fn check_values<'py>(
         spec.output_names().len(),
     )?;
     parameters(&theta, sim.spec().param_names())?;
-    let given =
-        GivenValues::new(vec![("0".into(), theta)], "theta").map_err(PyValueError::new_err)?;
+    let given = GivenValues::new(vec![("0".into(), theta)], "theta")
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let estimating = prepared(EstimateRequest {
         model: Some(named),
         check: Some(check_settings(sims, score_from)),

@@ -61,8 +61,8 @@ mod validation_run;
 
 pub use estimating::{
     AutoRefined, CheckSettings, EstimateRequest, EstimateWith, Estimates, Estimating, GivenValues,
-    OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordOutcome, RefineWhich, RequestError,
-    RequestProblem, Windows,
+    GivenValuesError, OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordOutcome, RefineWhich,
+    RequestError, RequestProblem, Windows,
 };
 pub use joint::{JointFitter, JointOfRecords};
 pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};

@@ -83,7 +83,7 @@ fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<GivenValu
     let rows = crate::predict::read_rows(path, spec.param_names())?;
     crate::predict::refuse_outside_prior(&rows, &spec, path, args.allow_outside_prior)?;
     let rows = rows.into_iter().map(|row| (row.id, row.theta)).collect();
-    GivenValues::new(rows, &path.display().to_string()).map_err(usage)
+    GivenValues::new(rows, &path.display().to_string()).or_usage()
 }
 
 /// The model named by --model or --model-file, which `what` needs.

@@ -95,7 +95,10 @@ impl Method {
                     ..RecordEstimate::bare(best.theta)
                 })
             }
-            Self::Given(given) => given.of(id).map(RecordEstimate::bare),
+            Self::Given(given) => given
+                .of(id)
+                .map(RecordEstimate::bare)
+                .map_err(|e| e.to_string()),
         }
     }
 }

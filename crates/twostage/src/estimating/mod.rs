@@ -65,18 +65,21 @@ impl GivenValues {
     /// stands for every record.
     ///
     /// ```
-    /// let given = twostage::GivenValues::new(
+    /// use twostage::{GivenValues, GivenValuesError};
+    /// let given = GivenValues::new(
     ///     vec![("1".into(), vec![0.2]), ("2".into(), vec![0.4])],
     ///     "values.csv",
     /// )?;
     /// assert_eq!(given.of("2")?, vec![0.4]);
-    /// assert!(given.of("3").unwrap_err().contains("values.csv has no row for experiment 3"));
-    /// # Ok::<(), String>(())
+    /// let missing = given.of("3").unwrap_err();
+    /// assert!(matches!(&missing, GivenValuesError::NoRow { id, .. } if id == "3"));
+    /// assert!(missing.to_string().contains("values.csv has no row for experiment 3"));
+    /// # Ok::<(), GivenValuesError>(())
     /// ```
     ///
     /// # Errors
-    /// Two rows of one experiment, said with the experiment.
-    pub fn new(rows: Vec<(String, Vec<f64>)>, from: &str) -> Result<Self, String> {
+    /// Two rows of one experiment ([`GivenValuesError::TwoRows`]).
+    pub fn new(rows: Vec<(String, Vec<f64>)>, from: &str) -> Result<Self, GivenValuesError> {
         let mut given = Self {
             one: None,
             by_id: HashMap::new(),
@@ -87,11 +90,13 @@ impl GivenValues {
             return Ok(given);
         }
         for (id, theta) in rows {
-            if given.by_id.insert(id.clone(), theta).is_some() {
-                return Err(format!(
-                    "{from}: experiment {id} has two rows of values: give one per experiment"
-                ));
+            if given.by_id.contains_key(&id) {
+                return Err(GivenValuesError::TwoRows {
+                    from: from.to_string(),
+                    id,
+                });
             }
+            given.by_id.insert(id, theta);
         }
         Ok(given)
     }
@@ -99,19 +104,45 @@ impl GivenValues {
     /// The values of experiment `id`.
     ///
     /// # Errors
-    /// No row for it (and more than one row in all).
-    pub fn of(&self, id: &str) -> Result<Vec<f64>, String> {
+    /// No row for it, and more than one row in all
+    /// ([`GivenValuesError::NoRow`]).
+    pub fn of(&self, id: &str) -> Result<Vec<f64>, GivenValuesError> {
         match &self.one {
             Some(theta) => Ok(theta.clone()),
-            None => self.by_id.get(id).cloned().ok_or_else(|| {
-                format!(
-                    "{} has no row for experiment {id}: give a row per experiment, or a single \
-                     row for every record",
-                    self.from
-                )
-            }),
+            None => self
+                .by_id
+                .get(id)
+                .cloned()
+                .ok_or_else(|| GivenValuesError::NoRow {
+                    from: self.from.clone(),
+                    id: id.to_string(),
+                }),
         }
     }
+}
+
+/// Values given for records that do not fit them.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GivenValuesError {
+    /// An experiment has two rows of values.
+    #[error("{from}: experiment {id} has two rows of values: give one per experiment")]
+    TwoRows {
+        /// Where the values came from.
+        from: String,
+        /// The experiment.
+        id: String,
+    },
+    /// A record's experiment has no row, among several.
+    #[error(
+        "{from} has no row for experiment {id}: give a row per experiment, or a single row for \
+         every record"
+    )]
+    NoRow {
+        /// Where the values came from.
+        from: String,
+        /// The experiment.
+        id: String,
+    },
 }
 
 /// Which estimates a request refines.
