@@ -8,7 +8,9 @@ use twostage_baselines::{BaselineError, Result};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{IoData, Simulator};
-use twostage_refine::{JointPlan, OutputError, Refinement, SearchStarts, SingleEstimate};
+use twostage_refine::{
+    JointPlan, OutputError, RefineError, Refinement, SearchStarts, SingleEstimate,
+};
 use twostage_sources::NamedModel;
 
 use crate::refiner::ToRefine;
@@ -113,7 +115,7 @@ impl JointFitter {
     /// # Errors
     /// No record, or a model that runs on none of them (the first
     /// record's reason).
-    pub fn fit(&self, items: &[ToRefine<'_>]) -> std::result::Result<JointOfRecords, String> {
+    pub fn fit(&self, items: &[ToRefine<'_>]) -> std::result::Result<JointOfRecords, RefineError> {
         let singles: Vec<SingleEstimate<'_>> = items
             .iter()
             .map(|(record, theta, half_widths)| SingleEstimate {
@@ -122,10 +124,7 @@ impl JointFitter {
                 half_widths: *half_widths,
             })
             .collect();
-        let joint = self
-            .fit
-            .joint_estimate(&singles, self.plan)
-            .map_err(|e| e.to_string())?;
+        let joint = self.fit.joint_estimate(&singles, self.plan)?;
         let fits: Vec<f64> = match &joint.record_losses {
             Some(losses) => joint
                 .fitted

@@ -9,7 +9,7 @@ use twostage_baselines::{BaselineError, Result, exact_likelihood};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{BuiltinModel, IoData, Simulator};
-use twostage_refine::{BestFit, OutputError, Refinement, ResidualModel, SearchStarts};
+use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
 
 /// A refined estimate of one record.
@@ -141,14 +141,12 @@ impl EstimateRefiner {
         prior: &twostage_models::Prior,
         estimate: &[f64],
         half_widths: Option<&[f64]>,
-    ) -> std::result::Result<Vec<Vec<f64>>, String> {
+    ) -> std::result::Result<Vec<Vec<f64>>, RefineError> {
         let widths = half_widths.map_or_else(
             || self.radius.iter().map(|r| r / 2.0).collect(),
             <[f64]>::to_vec,
         );
-        self.search
-            .starts(prior, estimate, Some(&widths))
-            .map_err(|e| e.to_string())
+        self.search.starts(prior, estimate, Some(&widths))
     }
 
     /// The simulator an output-error refinement runs (`None` for a
@@ -274,7 +272,10 @@ impl EstimateRefiner {
         let prior = fit.model().prior();
         let starts: Vec<std::result::Result<Vec<Vec<f64>>, String>> = items
             .iter()
-            .map(|(_, estimate, half_widths)| self.search_starts(prior, estimate, *half_widths))
+            .map(|(_, estimate, half_widths)| {
+                self.search_starts(prior, estimate, *half_widths)
+                    .map_err(|e| e.to_string())
+            })
             .collect();
         let searches = items
             .iter()

@@ -3,7 +3,7 @@
 
 use rayon::prelude::*;
 use twostage_models::IoData;
-use twostage_refine::{BestFit, RecordCheck, check_against, search_best_fits};
+use twostage_refine::{BestFit, RecordCheck, RefineError, check_against, search_best_fits};
 use twostage_sources::Progress;
 
 use super::Estimating;
@@ -38,7 +38,9 @@ impl Estimating {
                 let (_, e) = outcome.as_ref().ok()?;
                 let widths = e.half_widths.as_deref();
                 Some(match refiner {
-                    Some(r) => r.search_starts(prior, &e.theta, widths),
+                    Some(r) => r
+                        .search_starts(prior, &e.theta, widths)
+                        .map_err(|e| e.to_string()),
                     None => self
                         .plan
                         .search()
@@ -124,7 +126,7 @@ impl Estimating {
         &self,
         plant: &[(&IoData, &RecordEstimate)],
         progress: &dyn Progress,
-    ) -> Option<Result<(JointOfRecords, RecordEstimate), String>> {
+    ) -> Option<Result<(JointOfRecords, RecordEstimate), RefineError>> {
         let fitter = self.joint.as_ref()?;
         let items: Vec<ToRefine<'_>> = plant
             .iter()
