@@ -80,7 +80,7 @@ pub(super) fn train_lbfgs(
     mut params: Vec<f64>,
     iterations: usize,
 ) -> (Vec<f64>, RestartReport) {
-    let (mut best, held_out) = super::training::BestHeldOut::start(
+    let (mut best, held_out) = super::held_out::BestHeldOut::start(
         problem,
         &params,
         mlp.patience.saturating_mul(PATIENCE_SCALE),
@@ -151,7 +151,7 @@ pub(super) fn train_lbfgs(
             reason = TerminationReason::LbfgsConverged;
             break;
         }
-        if super::training::out_of_time(mlp) {
+        if super::held_out::out_of_time(mlp) {
             reason = TerminationReason::LbfgsUntilDeadline;
             break;
         }

@@ -5,9 +5,11 @@
 //! - `params`: the hyperparameters, unchecked and checked;
 //! - `network`: the forward pass, back-propagation and the fitted network;
 //! - `training`: restarts, the Levenberg-Marquardt and Adam trainers;
-//! - `lbfgs`: the L-BFGS trainer, for many rows and weights.
+//! - `lbfgs`: the L-BFGS trainer, for many rows and weights;
+//! - `held_out`: a restart's held-out watch, shared by the trainers.
 
 mod gauss_newton;
+mod held_out;
 mod lbfgs;
 mod network;
 mod params;
