@@ -170,7 +170,6 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
         Purpose::Method => format!("--method {}", args.method.as_deref().unwrap_or("")),
         Purpose::OutputError => "--method oe".into(),
         Purpose::Given => "--at".into(),
-        Purpose::Check if args.estimator.is_some() => "--check simulates the model".into(),
         Purpose::Check => "--check".into(),
         Purpose::Refine => "--refine".into(),
         Purpose::Joint => "--joint".into(),
@@ -178,13 +177,18 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
     };
     match e.error {
         RequestProblem::NoModel => usage(format!(
-            "{} simulates the model: give --model M or --model-file F",
-            flag.split(" simulates").next().unwrap_or(&flag)
+            "{flag} simulates the model: give --model M or --model-file F"
         )),
         RequestProblem::NotBuiltIn { .. } => usage(e.error.to_string()),
         // The method's own error names the method and the model.
         RequestProblem::Failed(cause) if e.purpose == Purpose::Method => {
             anyhow::Error::new(UsageError::Caused(cause))
+        }
+        // An estimator's model that cannot be run is said as the check's
+        // need of it.
+        RequestProblem::Failed(cause) if e.purpose == Purpose::Check => {
+            anyhow::Error::from_boxed(cause)
+                .context(UsageError::Said("--check simulates the model".into()))
         }
         RequestProblem::Failed(cause) => {
             anyhow::Error::from_boxed(cause).context(UsageError::Said(flag))
