@@ -2,6 +2,7 @@
 //! the estimator with the least mean squared error, the limit no method can
 //! beat on the same data.
 
+use crate::InvalidSetting;
 use rayon::prelude::*;
 use twostage_models::IoData;
 
@@ -73,11 +74,11 @@ impl BayesBenchmark {
     /// A record the Kalman filter refuses, or invalid settings.
     pub fn posterior(&self, record: &IoData) -> Result<Posterior> {
         if self.initial_points < 3 || self.tolerance.is_nan() || self.tolerance <= 0.0 {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "grid points and tolerance",
                 value: format!("{} and {}", self.initial_points, self.tolerance),
-                expected: "at least 3 points and a positive tolerance".into(),
-            });
+                reason: "at least 3 points and a positive tolerance".into(),
+            }));
         }
         let (lo, hi) = (-0.9, 0.9);
         let log_likelihood = |thetas: &[f64]| -> Result<Vec<f64>> {

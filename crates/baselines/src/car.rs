@@ -7,6 +7,7 @@
 //! the record's sampled input is used only between samples by models whose
 //! input is not the chicane.
 
+use crate::InvalidSetting;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use twostage_models::{IoData, PACEJKA_NOISE_VARIANCE, PacejkaCar, Prior, Rk4, Simulator};
@@ -210,11 +211,11 @@ impl BayesCar {
 
     fn simulate(n1: usize, n2: usize, car: PacejkaCar, steering: Option<Vec<f64>>) -> Result<Self> {
         if n1 < 3 || n2 < 3 {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "grid",
                 value: format!("{n1} x {n2}"),
-                expected: "at least 3 x 3 points".into(),
-            });
+                reason: "at least 3 x 3 points".into(),
+            }));
         }
         let n_samples = car.spec().n_samples();
         let (lo, hi) = (car.prior().lower(), car.prior().upper());

@@ -2,6 +2,7 @@
 
 use thiserror::Error;
 use twostage_models::SimError;
+pub use twostage_setting::InvalidSetting;
 
 /// Why a baseline could not produce an estimate.
 #[derive(Debug, Error)]
@@ -27,16 +28,9 @@ pub enum BaselineError {
         /// The methods the model has.
         available: String,
     },
-    /// A setting of the method is out of range.
-    #[error("invalid {name} = {value}: {expected}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: String,
-        /// What is accepted, or what to do instead.
-        expected: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// A record, or a buffer or vector given with it, has the wrong shape.
     #[error("{what}: {found}, where the method needs {expected}")]
     Shape {

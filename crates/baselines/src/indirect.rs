@@ -16,6 +16,7 @@
 //! with `W = C^-1` and `C = L L'` (Cholesky) the loss is `||L^-1 (beta(D) -
 //! beta_bar(theta))||^2`, a sum of squared residuals.
 
+use crate::InvalidSetting;
 use rayon::prelude::*;
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::CovarianceFactor;
@@ -75,11 +76,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
         seed: u64,
     ) -> Result<Self> {
         if simulations == 0 {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "simulations per theta",
                 value: "0".into(),
-                expected: "at least 1".into(),
-            });
+                reason: "at least 1".into(),
+            }));
         }
         let mut objective = Self {
             simulator,
@@ -98,11 +99,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
     fn covariance_factor(&self, count: usize) -> Result<Vec<f64>> {
         let n = self.compressor.n_features();
         if count <= n {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "weighting simulations",
                 value: count.to_string(),
-                expected: format!("more than the {n} features, to estimate their covariance"),
-            });
+                reason: format!("more than the {n} features, to estimate their covariance"),
+            }));
         }
         let prior = self.simulator.prior();
         let centre: Vec<f64> = prior
@@ -122,15 +123,16 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectObjective<S, C> {
         }
         let rows = ndarray::ArrayView2::from_shape((count, n), &features)
             .unwrap_or_else(|_| unreachable!("count rows of n features"));
-        let covariance =
-            CovarianceFactor::of_rows(rows).ok_or_else(|| BaselineError::InvalidSetting {
+        let covariance = CovarianceFactor::of_rows(rows).ok_or_else(|| {
+            BaselineError::InvalidSetting(InvalidSetting {
                 name: "weighting",
                 value: "inverse covariance".into(),
-                expected: "a weighting that exists: the features' covariance at the prior's \
+                reason: "a weighting that exists: the features' covariance at the prior's \
                            centre is singular (a feature does not vary), use \
                            Weighting::Identity"
                     .into(),
-            })?;
+            })
+        })?;
         Ok(covariance.factor)
     }
 
@@ -314,11 +316,11 @@ impl<S: Simulator, C: Compressor + Send + Sync> IndirectInference<S, C> {
     /// As [`IndirectObjective::new`], and no start.
     pub fn build(self) -> Result<PredictionError<IndirectObjective<S, C>>> {
         if self.starts == 0 {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "starts",
                 value: "0".into(),
-                expected: "at least 1".into(),
-            });
+                reason: "at least 1".into(),
+            }));
         }
         let objective = IndirectObjective::new(
             self.simulator,

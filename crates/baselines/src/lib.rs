@@ -48,7 +48,7 @@ pub use augmented::{
 };
 pub use bayes::{BayesBenchmark, Posterior};
 pub use car::{BayesCar, CarParticles, CarPosterior, CarPredictor};
-pub use error::{BaselineError, Result};
+pub use error::{BaselineError, InvalidSetting, Result};
 pub use filters::{FilterRun, FilterStart, KalmanEstimator, UnscentedParams, run_ekf, run_ukf};
 pub use indirect::{
     COMMON_NUMBERS_SEED, IndirectInference, IndirectObjective, WEIGHTING_SEED, Weighting,

@@ -2,6 +2,7 @@
 //! carry a state and a parameter vector drawn from the prior; theta follows
 //! a random walk ("jitter") so that resampling does not collapse it.
 
+use crate::InvalidSetting;
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -153,11 +154,11 @@ impl<M: ParticleModel> ParticleFilter<M> {
         }
         record.check_finite()?;
         if self.particles < 2 || self.jitter.is_nan() || self.jitter < 0.0 {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "particles and jitter",
                 value: format!("{} and {}", self.particles, self.jitter),
-                expected: "at least 2 particles and a jitter >= 0".into(),
-            });
+                reason: "at least 2 particles and a jitter >= 0".into(),
+            }));
         }
         let (u, y) = (record.input(0), record.output(0));
         let prior = self.model.prior();

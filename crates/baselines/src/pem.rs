@@ -4,6 +4,7 @@
 //! seeded random starts, keeping the lowest loss. The descent itself is the
 //! facade's [`Refinement::descend`], the one that refines TS estimates.
 
+use crate::InvalidSetting;
 use twostage_models::{IoData, Prior};
 use twostage_refine::{Descent, Refinement, ResidualModel};
 
@@ -128,11 +129,11 @@ where
     /// A bad record, or no start at all.
     pub fn descents(&self, record: &IoData) -> Result<Vec<Descent>> {
         if self.starts == 0 || self.max_iterations == 0 {
-            return Err(BaselineError::InvalidSetting {
+            return Err(BaselineError::InvalidSetting(InvalidSetting {
                 name: "starts and iterations",
                 value: format!("{} and {}", self.starts, self.max_iterations),
-                expected: "at least 1 each".into(),
-            });
+                reason: "at least 1 each".into(),
+            }));
         }
         let prior = self.model().prior();
         let design = prior.design(self.starts, self.seed)?;
@@ -160,11 +161,11 @@ where
 
     fn estimate(&self, record: &IoData) -> Result<Estimate> {
         let best = self.descents(record)?.into_iter().next().ok_or_else(|| {
-            BaselineError::InvalidSetting {
+            BaselineError::InvalidSetting(InvalidSetting {
                 name: "starts",
                 value: self.starts.to_string(),
-                expected: "at least 1".into(),
-            }
+                reason: "at least 1".into(),
+            })
         })?;
         Ok(Estimate {
             theta: best.theta,

@@ -3,6 +3,7 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
+use twostage_baselines::InvalidSetting;
 use twostage_baselines::{
     BaselineError, COMMON_NUMBERS_SEED, IndirectInference, IndirectObjective, RecordEstimator,
     WEIGHTING_SEED, Weighting,
@@ -167,7 +168,7 @@ fn bad_settings_and_records_are_refused_with_the_reason() {
     let model = Benchmark::builder().n_samples(200).build().unwrap();
     let arx = Arx::new(5, 5).unwrap();
     let setting = |r: Result<_, BaselineError>| match r.map(|_| ()).unwrap_err() {
-        BaselineError::InvalidSetting { name, value, .. } => (name, value),
+        BaselineError::InvalidSetting(InvalidSetting { name, value, .. }) => (name, value),
         other => panic!("expected a setting error, got {other}"),
     };
     let e = setting(IndirectInference::new(model.clone(), arx, 0).build());
@@ -184,7 +185,7 @@ fn bad_settings_and_records_are_refused_with_the_reason() {
         .map(|_| ())
         .unwrap_err();
     assert!(
-        matches!(&e, BaselineError::InvalidSetting { name: "weighting simulations", value, .. } if value == "10"),
+        matches!(&e, BaselineError::InvalidSetting(InvalidSetting { name: "weighting simulations", value, .. }) if value == "10"),
         "{e}"
     );
     assert!(e.to_string().contains("more than the 10 features"), "{e}");

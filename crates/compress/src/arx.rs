@@ -1,5 +1,6 @@
 //! ARX models fitted by least squares: the paper's compression, eq. (2).
 
+use crate::InvalidSetting;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -74,11 +75,11 @@ impl TryFrom<ArxFields> for Arx {
 }
 
 fn order_error(name: &'static str, value: usize, reason: &str) -> CompressError {
-    CompressError::InvalidSetting {
+    CompressError::InvalidSetting(InvalidSetting {
         name,
         value: value.to_string(),
         reason: reason.to_string(),
-    }
+    })
 }
 
 impl Arx {

@@ -1,21 +1,15 @@
 //! The one error type of this crate.
 
 use thiserror::Error;
+pub use twostage_setting::InvalidSetting;
 
 /// Why a record could not be compressed.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum CompressError {
-    /// A structure parameter is out of range.
-    #[error("invalid {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: String,
-        /// The valid range.
-        reason: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// The record's signals do not have the shape the compressor was built for.
     #[error(
         "the record has {got_inputs} input and {got_outputs} output signals, \

@@ -55,7 +55,7 @@ pub use config::{
     CompressorConfig, NARX_SCALE_RECORDS, PCA_RECORDS, SignalTransform, TRANSFORM_RECORDS,
     Transformed, WithLevel, WithSummary,
 };
-pub use error::{CompressError, Result};
+pub use error::{CompressError, InvalidSetting, Result};
 pub use narx::{Narx, signal_rms};
 pub use pca::OutputPca;
 pub use raw::{MAX_RAW_FEATURES, RawRecord};

@@ -1,6 +1,7 @@
 //! Polynomial NARX models fitted by least squares: the paper's suggestion
 //! for systems too nonlinear for ARX (Section 4.3).
 
+use crate::InvalidSetting;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -93,11 +94,11 @@ const MAX_LAGS: usize = 16;
 const MAX_DEGREE: usize = 5;
 
 fn setting(name: &'static str, value: impl ToString, reason: &str) -> CompressError {
-    CompressError::InvalidSetting {
+    CompressError::InvalidSetting(InvalidSetting {
         name,
         value: value.to_string(),
         reason: reason.to_string(),
-    }
+    })
 }
 
 impl Narx {

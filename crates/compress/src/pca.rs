@@ -1,6 +1,7 @@
 //! The leading principal components of the output record: a stage-1
 //! compressor for experiments that all share one input signal.
 
+use crate::InvalidSetting;
 use faer::Par;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
@@ -93,11 +94,11 @@ impl TryFrom<PcaFields> for OutputPca {
             && d.and_then(|d| d.checked_mul(f.components)) == Some(f.basis.len())
             && f.mean.iter().chain(&f.basis).all(|v| v.is_finite());
         if !consistent {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "PCA basis",
                 value: format!("{} values", f.basis.len()),
                 reason: "does not match the stored record shape (the data is corrupted)".into(),
-            });
+            }));
         }
         Ok(Self {
             components: f.components,
@@ -117,11 +118,11 @@ impl OutputPca {
     /// [`CompressError::InvalidSetting`] outside 1..=64.
     pub fn new(components: usize) -> Result<Self> {
         if !(1..=MAX_COMPONENTS).contains(&components) {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "components",
                 value: components.to_string(),
                 reason: "must lie in 1..=64".into(),
-            });
+            }));
         }
         Ok(Self {
             components,
@@ -240,18 +241,18 @@ impl OutputPca {
     /// More than 64 inputs.
     pub fn with_inputs(mut self, n_inputs: usize) -> Result<Self> {
         if n_inputs > MAX_SIGNALS {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "inputs",
                 value: n_inputs.to_string(),
                 reason: "at most 64".into(),
-            });
+            }));
         }
         self.n_inputs = n_inputs;
         Ok(self)
     }
 
     fn too_few(&self, m: usize) -> CompressError {
-        CompressError::InvalidSetting {
+        CompressError::InvalidSetting(InvalidSetting {
             name: "PCA records",
             value: m.to_string(),
             reason: format!(
@@ -259,7 +260,7 @@ impl OutputPca {
                 self.components,
                 self.components + 1
             ),
-        }
+        })
     }
 }
 
@@ -337,11 +338,11 @@ impl Compressor for OutputPca {
         alpha: &mut [f64],
     ) -> Result<()> {
         if !self.is_fitted() {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "PCA",
                 value: "unfitted".into(),
                 reason: "fit it on training outputs first (OutputPca::fit)".into(),
-            });
+            }));
         }
         check_fixed_record(
             inputs,

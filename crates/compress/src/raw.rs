@@ -3,6 +3,7 @@
 //! whole record is the best compression there is (the paper's Section 4.2
 //! allows any g; stage 2 then learns from every sample).
 
+use crate::InvalidSetting;
 use std::fmt;
 
 use ndarray::ArrayView2;
@@ -46,14 +47,14 @@ impl RawRecord {
     pub fn new(n_samples: usize, n_inputs: usize, n_outputs: usize) -> Result<Self> {
         let features = n_samples.saturating_mul(n_inputs + n_outputs);
         if n_samples == 0 || n_outputs == 0 || features > MAX_RAW_FEATURES {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "raw record",
                 value: format!("{n_samples} samples of {n_inputs} input(s), {n_outputs} output(s)"),
                 reason: format!(
                     "at least one sample and one output, at most {MAX_RAW_FEATURES} values in \
                      all: for longer records use arx, ar or pca"
                 ),
-            });
+            }));
         }
         Ok(Self {
             n_samples,

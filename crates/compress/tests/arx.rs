@@ -7,6 +7,7 @@ use ndarray::{Array2, ArrayView2, ShapeBuilder};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
+use twostage_compress::InvalidSetting;
 use twostage_compress::{Arx, CompressError, Compressor, Workspace};
 
 fn noise(n: usize, seed: u64) -> Vec<f64> {
@@ -230,7 +231,7 @@ fn degenerate_records_are_refused_with_their_cause() {
 #[test]
 fn invalid_orders_are_refused() {
     let setting = |result: Result<Arx, CompressError>| match result {
-        Err(CompressError::InvalidSetting { name, value, .. }) => (name, value),
+        Err(CompressError::InvalidSetting(InvalidSetting { name, value, .. })) => (name, value),
         other => panic!("expected an invalid setting, got {other:?}"),
     };
     assert_eq!(setting(Arx::new(0, 0)), ("na + nb", "0".into()));

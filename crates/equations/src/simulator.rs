@@ -1,6 +1,7 @@
 //! A model written as equations, as a [`Simulator`]: the input design
 //! draws each experiment's inputs, the equations respond.
 
+use twostage_models::InvalidSetting;
 use twostage_models::{
     Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec, SimError, Simulator,
 };
@@ -158,13 +159,13 @@ impl EquationSimulator {
                 }
             }
             (None, None) if n_u > 0 => {
-                return Err(SimError::InvalidSetting {
+                return Err(SimError::InvalidSetting(InvalidSetting {
                     name: "input",
                     value: self.spec.input_names().join(", "),
                     reason: "the equations' inputs need an input design ([input]: white, \
                              chicane or fixed) or a measured input"
                         .into(),
-                });
+                }));
             }
             (None, None) => {}
         }

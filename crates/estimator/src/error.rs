@@ -6,6 +6,7 @@ use thiserror::Error;
 use twostage_compress::CompressError;
 use twostage_fit::FitError;
 use twostage_models::SimError;
+pub use twostage_setting::InvalidSetting;
 use twostage_validate::ValidateError;
 
 /// Everything that can go wrong while using or storing an estimator, and
@@ -29,16 +30,9 @@ pub enum Error {
     /// Validation failed.
     #[error(transparent)]
     Validation(#[from] ValidateError),
-    /// A builder setting is out of range.
-    #[error("invalid {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: String,
-        /// The valid range.
-        reason: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// The estimator uses a structure the microcontroller runtime does not
     /// evaluate.
     #[error("this estimator cannot be exported to the runtime: {reason}")]
@@ -176,10 +170,10 @@ impl Error {
     pub fn is_setting(&self) -> bool {
         matches!(
             self,
-            Self::InvalidSetting { .. }
-                | Self::Compression(CompressError::InvalidSetting { .. })
-                | Self::Fit(FitError::InvalidSetting { .. })
-                | Self::Validation(ValidateError::InvalidSetting { .. })
+            Self::InvalidSetting(_)
+                | Self::Compression(CompressError::InvalidSetting(_))
+                | Self::Fit(FitError::InvalidSetting(_))
+                | Self::Validation(ValidateError::InvalidSetting(_))
         )
     }
 }

@@ -1,5 +1,6 @@
 //! The trained estimator f = clip(h(g(u, y))).
 
+use crate::InvalidSetting;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -464,18 +465,20 @@ impl Estimator {
     /// positive and finite.
     pub fn neighbourhood(&self, scale: f64) -> Result<Vec<f64>> {
         if !(scale.is_finite() && scale > 0.0) {
-            return Err(Error::InvalidSetting {
+            return Err(Error::InvalidSetting(InvalidSetting {
                 name: "neighbourhood scale",
                 value: scale.to_string(),
                 reason: "a positive, finite multiple of the interval half-widths".into(),
-            });
+            }));
         }
-        let intervals = self.intervals().ok_or_else(|| Error::InvalidSetting {
-            name: "calibration",
-            value: "0".into(),
-            reason: "a refinement sizes its neighbourhood by the calibrated intervals: train \
+        let intervals = self.intervals().ok_or_else(|| {
+            Error::InvalidSetting(InvalidSetting {
+                name: "calibration",
+                value: "0".into(),
+                reason: "a refinement sizes its neighbourhood by the calibrated intervals: train \
                      with calibration > 0 (the command line's --calibrate)"
-                .into(),
+                    .into(),
+            })
         })?;
         Ok(intervals.half_widths().iter().map(|w| scale * w).collect())
     }

@@ -22,7 +22,7 @@ mod stored;
 
 pub use adaptive::AdaptiveIntervals;
 pub use envelope::{ENVELOPE_LEVEL, FeatureEnvelope};
-pub use error::{Error, FileError, Result};
+pub use error::{Error, FileError, InvalidSetting, Result};
 pub use estimator::{
     Assessment, EstimateWorkspace, Estimator, RecordShape, SignalNames, TrainingInfo,
     interval_in_box,

@@ -2,6 +2,7 @@
 //! command line and model files write it (`linear`, `mlp:10`,
 //! `piecewise:4,20`), and the fitted map it gives.
 
+use crate::InvalidSetting;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -15,15 +16,15 @@ use crate::{
 /// Whole numbers separated by commas, exactly `count` of them.
 fn counts(spec: &str, whole: &str, count: usize, what: &'static str) -> Result<Vec<usize>> {
     let values: Option<Vec<usize>> = spec.split(',').map(|v| v.trim().parse().ok()).collect();
-    values
-        .filter(|v| v.len() == count)
-        .ok_or_else(|| Error::InvalidSetting {
+    values.filter(|v| v.len() == count).ok_or_else(|| {
+        Error::InvalidSetting(InvalidSetting {
             name: what,
             value: whole.to_string(),
             reason: format!(
                 "the part after ':' must be {count} whole number(s) separated by commas"
             ),
         })
+    })
 }
 
 /// The fitting method of stage 2.
@@ -101,12 +102,12 @@ impl std::str::FromStr for RegressorConfig {
             (Some(hidden), _) => (hidden, false),
             (None, Some(hidden)) => (hidden, true),
             (None, None) => {
-                return Err(Error::InvalidSetting {
+                return Err(Error::InvalidSetting(InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
                     reason: "use linear, mlp:H[,H...], ensemble:H[,H...][xN] or piecewise:PIECES,H"
                         .into(),
-                });
+                }));
             }
         };
         let (hidden, members) = match hidden.split_once('x') {
@@ -117,12 +118,14 @@ impl std::str::FromStr for RegressorConfig {
         let sizes = counts(hidden, spec, n, WHAT)?;
         let mut params = MlpParams::new(&sizes)?.ensemble(ensemble);
         if let Some(members) = members {
-            let n = members.trim().parse().map_err(|_| Error::InvalidSetting {
-                name: WHAT,
-                value: spec.to_string(),
-                reason: format!(
-                    "after 'x' comes the number of members, a whole number: not '{members}'"
-                ),
+            let n = members.trim().parse().map_err(|_| {
+                Error::InvalidSetting(InvalidSetting {
+                    name: WHAT,
+                    value: spec.to_string(),
+                    reason: format!(
+                        "after 'x' comes the number of members, a whole number: not '{members}'"
+                    ),
+                })
             })?;
             params = params.restarts(n);
         }
@@ -252,11 +255,11 @@ impl RegressorConfig {
                 FittedRegressor::Piecewise(pieces(p).fit_from(s, x, y)?)
             }
             _ => {
-                return Err(crate::FitError::InvalidSetting {
+                return Err(crate::FitError::InvalidSetting(InvalidSetting {
                     name: "start",
                     value: format!("{self}"),
                     reason: "the start was fitted by another kind of regressor".into(),
-                });
+                }));
             }
         })
     }

@@ -1,21 +1,15 @@
 //! The one error type of this crate.
 
 use thiserror::Error;
+pub use twostage_setting::InvalidSetting;
 
 /// Why a regressor could not be fitted or evaluated.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum FitError {
-    /// A hyperparameter is out of range.
-    #[error("invalid {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: String,
-        /// The valid range.
-        reason: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// Features and targets disagree in shape, or a row has the wrong length.
     #[error("shape mismatch: {0}")]
     ShapeMismatch(String),

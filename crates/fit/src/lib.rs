@@ -39,7 +39,7 @@ use ndarray::{Array2, ArrayView2};
 
 pub use config::{FittedRegressor, RegressorConfig};
 pub use covariance::CovarianceFactor;
-pub use error::{FitError, Result};
+pub use error::{FitError, InvalidSetting, Result};
 pub use levenberg_marquardt::{
     CentralDifferences, Damping, Evaluation, ForwardDifferences, Iterate, LeastSquaresProblem,
     LevenbergMarquardt, LmRun, Minimum, ModelAt, Need, TerminationReason, normal_products,

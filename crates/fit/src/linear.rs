@@ -2,6 +2,7 @@
 //! `h(alpha) = c_1 alpha_1 + ... + c_n alpha_n` (Section 3.2), with an
 //! intercept and standardized features.
 
+use crate::InvalidSetting;
 use faer::Mat;
 use faer::linalg::solvers::SolveLstsqCore;
 use ndarray::ArrayView2;
@@ -50,11 +51,11 @@ impl Ridge {
     /// [`FitError::InvalidSetting`] unless `lambda` is finite and >= 0.
     pub fn new(lambda: f64) -> Result<Self> {
         if !(lambda.is_finite() && lambda >= 0.0) {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "lambda",
                 value: lambda.to_string(),
                 reason: "must be finite and >= 0".into(),
-            });
+            }));
         }
         Ok(Self { lambda })
     }

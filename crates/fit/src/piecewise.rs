@@ -1,6 +1,7 @@
 //! Piecewise networks: a global network routes each record to a specialist
 //! trained only on its part of the parameter range.
 
+use crate::InvalidSetting;
 use ndarray::{ArrayView2, Axis};
 use serde::{Deserialize, Serialize};
 
@@ -60,11 +61,11 @@ impl Piecewise {
     /// [`FitError::InvalidSetting`] for pieces outside 2..=16.
     pub fn new(global: Mlp, expert: Mlp, pieces: usize) -> Result<Self> {
         if !(2..=16).contains(&pieces) {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "pieces",
                 value: pieces.to_string(),
                 reason: "must lie in 2..=16".into(),
-            });
+            }));
         }
         Ok(Self {
             global,
@@ -80,11 +81,11 @@ impl Piecewise {
     /// [`FitError::InvalidSetting`] outside [0, 1].
     pub fn margin(mut self, margin: f64) -> Result<Self> {
         if !(0.0..=1.0).contains(&margin) {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "margin",
                 value: margin.to_string(),
                 reason: "must lie in [0, 1]".into(),
-            });
+            }));
         }
         self.margin = margin;
         Ok(self)
@@ -123,11 +124,11 @@ impl Piecewise {
         y: ArrayView2<'_, f64>,
     ) -> Result<FittedPiecewise> {
         if start.experts.len() != self.pieces {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "start",
                 value: format!("{} pieces", start.experts.len()),
                 reason: format!("this regressor has {} pieces", self.pieces),
-            });
+            }));
         }
         let global = self.global.fit_from(&start.global, x, y)?;
         let margin = self.margin * start.width;
@@ -251,11 +252,11 @@ impl Regressor for Piecewise {
             });
         let width = (hi - lo) / self.pieces as f64;
         if !(width.is_finite() && width > 0.0) {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "pieces",
                 value: self.pieces.to_string(),
                 reason: "the first target does not vary: there is nothing to split".into(),
-            });
+            }));
         }
         let margin = self.margin * width;
         let mut experts = Vec::with_capacity(self.pieces);

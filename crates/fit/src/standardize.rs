@@ -1,6 +1,7 @@
 //! Standardization of features and targets, learned on training data and
 //! stored with the model.
 
+use crate::InvalidSetting;
 use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
@@ -46,18 +47,18 @@ impl TryFrom<StandardizerFields> for Standardizer {
             )));
         }
         if let Some(s) = f.scale.iter().find(|s| !(s.is_finite() && **s > 0.0)) {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "standardizer scale",
                 value: s.to_string(),
                 reason: "must be finite and > 0".into(),
-            });
+            }));
         }
         if let Some(m) = f.mean.iter().find(|m| !m.is_finite()) {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "standardizer mean",
                 value: m.to_string(),
                 reason: "must be finite".into(),
-            });
+            }));
         }
         Ok(Self {
             mean: f.mean,

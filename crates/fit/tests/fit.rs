@@ -6,6 +6,7 @@
 use ndarray::Array2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use twostage_fit::InvalidSetting;
 use twostage_fit::{
     FitError, MlpParams, Predictor, Regressor, Ridge, Standardizer, TerminationReason, Trainer,
 };
@@ -73,7 +74,10 @@ fn ridge_refuses_collinear_features_without_a_penalty() {
     assert!(Ridge::new(1e-3).unwrap().fit(x.view(), y.view()).is_ok());
     assert!(matches!(
         Ridge::new(-1.0),
-        Err(FitError::InvalidSetting { name: "lambda", .. })
+        Err(FitError::InvalidSetting(InvalidSetting {
+            name: "lambda",
+            ..
+        }))
     ));
     let mut bad = y.clone();
     bad[[4, 0]] = f64::NAN;
@@ -212,7 +216,7 @@ fn invalid_settings_name_themselves() {
     let err = MlpParams::new(&[]).unwrap().check().unwrap_err();
     assert!(err.to_string().contains("hidden layers"), "{err}");
     let setting = |params: MlpParams| match params.check() {
-        Err(FitError::InvalidSetting { name, value, .. }) => (name, value),
+        Err(FitError::InvalidSetting(InvalidSetting { name, value, .. })) => (name, value),
         other => panic!("expected an invalid setting, got {other:?}"),
     };
     assert_eq!(
@@ -311,10 +315,10 @@ fn lbfgs_fits_a_smooth_function_as_closely_as_levenberg_marquardt() {
     assert!(
         matches!(
             refused,
-            Err(FitError::InvalidSetting {
+            Err(FitError::InvalidSetting(InvalidSetting {
                 name: "iterations",
                 ..
-            })
+            }))
         ),
         "{refused:?}"
     );
@@ -352,10 +356,10 @@ fn adam_fits_a_smooth_function() {
     assert!(
         matches!(
             refused,
-            Err(FitError::InvalidSetting {
+            Err(FitError::InvalidSetting(InvalidSetting {
                 name: "learning_rate",
                 ..
-            })
+            }))
         ),
         "{refused:?}"
     );

@@ -8,6 +8,7 @@
 //! ratio inverted. Those closed forms are what the tests hold the
 //! sections to.
 
+use crate::InvalidSetting;
 use std::f64::consts::PI;
 
 use crate::error::{Result, SimError};
@@ -62,21 +63,21 @@ impl Cascade {
         sample_time: f64,
     ) -> Result<Self> {
         if !(1..=MAX_FILTER_ORDER).contains(&order) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "filter order",
                 value: order.to_string(),
                 reason: format!("give an order of 1 to {MAX_FILTER_ORDER}"),
-            });
+            }));
         }
         let nyquist = 0.5 / sample_time;
         if !(edge > 0.0 && edge < nyquist) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "filter edge",
                 value: format!("{edge} Hz"),
                 reason: format!(
                     "give an edge above 0 and below the Nyquist frequency {nyquist} Hz"
                 ),
-            });
+            }));
         }
         // The analog edge prewarped so that the digital edge lands on
         // `edge`: s = (1 - z^-1) / (K (1 + z^-1)) for a low-pass, its

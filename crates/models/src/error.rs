@@ -1,6 +1,7 @@
 //! The one error type of this crate.
 
 use thiserror::Error;
+pub use twostage_setting::InvalidSetting;
 
 /// Everything that can go wrong when describing or running a simulator.
 ///
@@ -102,16 +103,9 @@ pub enum SimError {
     /// and what the FMU logged).
     #[error("{0}")]
     Fmu(String),
-    /// A design or model setting is out of its valid range.
-    #[error("invalid setting {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting's name.
-        name: &'static str,
-        /// Its value, as text.
-        value: String,
-        /// The valid range, or what to do.
-        reason: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// No built-in model has this name.
     #[error("unknown model '{name}': the built-in models are {known}")]
     UnknownModel {

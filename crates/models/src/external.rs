@@ -5,6 +5,7 @@
 //! experiment fails with an error quoting the answer, and the next
 //! experiment starts a fresh process.
 
+use crate::InvalidSetting;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -93,11 +94,11 @@ impl ExternalSimulator {
     /// [`SimError::InvalidSetting`] for an empty command.
     pub fn new(spec: ModelSpec, command: Vec<String>) -> Result<Self> {
         if command.first().is_none_or(|c| c.trim().is_empty()) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "command",
                 value: format!("{command:?}"),
                 reason: "give the program and its arguments, e.g. [\"python3\", \"sim.py\"]".into(),
-            });
+            }));
         }
         Ok(Self {
             spec,
@@ -136,11 +137,11 @@ impl ExternalSimulator {
     /// [`SimError::InvalidSetting`] for another version.
     pub fn protocol(mut self, version: u32) -> Result<Self> {
         if !(1..=PROTOCOL_VERSION).contains(&version) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "protocol",
                 value: version.to_string(),
                 reason: format!("this build speaks versions 1 to {PROTOCOL_VERSION}"),
-            });
+            }));
         }
         self.protocol = version;
         Ok(self)

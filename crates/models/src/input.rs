@@ -1,5 +1,6 @@
 //! Input signals: what excites the system during an experiment.
 
+use crate::InvalidSetting;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
@@ -305,18 +306,18 @@ impl InputSignal {
     /// that is itself a sum.
     pub fn sum(parts: Vec<InputSignal>) -> Result<Self> {
         if parts.len() < 2 {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "input sum",
                 value: format!("{} part(s)", parts.len()),
                 reason: "a sum takes two or more signals".into(),
-            });
+            }));
         }
         if parts.iter().any(|p| matches!(p.kind, Kind::Sum(_))) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "input sum",
                 value: "a sum among its parts".into(),
                 reason: "give the inner sum's parts to the outer sum instead".into(),
-            });
+            }));
         }
         Ok(Self {
             kind: Kind::Sum(parts),
@@ -537,11 +538,11 @@ fn interpolate(samples: &[f64], x: f64) -> f64 {
 }
 
 fn invalid(name: &'static str, value: f64, reason: &str) -> SimError {
-    SimError::InvalidSetting {
+    SimError::InvalidSetting(InvalidSetting {
         name,
         value: value.to_string(),
         reason: reason.into(),
-    }
+    })
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 //! a range), so that a training chart covers a family of operating
 //! conditions rather than one input.
 
+use crate::InvalidSetting;
 use std::f64::consts::PI;
 
 use rand::{Rng, RngExt};
@@ -50,11 +51,11 @@ impl Drawn {
     /// [`SimError::InvalidSetting`] for an empty or non-finite range.
     pub fn between(low: f64, high: f64) -> Result<Self> {
         if !(low.is_finite() && high.is_finite() && low <= high) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "input range",
                 value: format!("[{low}, {high}]"),
                 reason: "give finite ends, the first no larger than the second".into(),
-            });
+            }));
         }
         Ok(Self { low, high })
     }
@@ -159,77 +160,77 @@ impl Design {
         let nyquist = 0.5 / sample_time;
         let above = |name: &'static str, f: f64| -> Result<()> {
             if f > nyquist {
-                return Err(SimError::InvalidSetting {
+                return Err(SimError::InvalidSetting(InvalidSetting {
                     name,
                     value: format!("{f} Hz"),
                     reason: format!(
                         "above the Nyquist frequency {nyquist} Hz of the sample time \
                          {sample_time} s: lower it, or sample faster"
                     ),
-                });
+                }));
             }
             Ok(())
         };
         match self {
             Self::Multisine { band, .. } => {
                 if !(band.0 >= 0.0 && band.0 < band.1.range().0) {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "multisine band",
                         value: format!("[{}, {:?}]", band.0, band.1.range()),
                         reason: "give a lowest frequency >= 0 below the band's top".into(),
-                    });
+                    }));
                 }
                 above("multisine band top", band.1.range().1)
             }
             Self::RandomBinary { hold, .. } | Self::Prbs { hold, .. } if *hold == 0 => {
-                Err(SimError::InvalidSetting {
+                Err(SimError::InvalidSetting(InvalidSetting {
                     name: "hold",
                     value: "0".into(),
                     reason: "hold each value at least 1 sample".into(),
-                })
+                }))
             }
             Self::Prbs { order, .. } if !(2..=MAX_PRBS_ORDER).contains(order) => {
-                Err(SimError::InvalidSetting {
+                Err(SimError::InvalidSetting(InvalidSetting {
                     name: "PRBS order",
                     value: order.to_string(),
                     reason: format!("give a register of 2 to {MAX_PRBS_ORDER} bits"),
-                })
+                }))
             }
             Self::Sweep { from, to, .. } => {
                 if !from.is_finite() || *from < 0.0 {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "sweep start",
                         value: format!("{from} Hz"),
                         reason: "give a frequency >= 0".into(),
-                    });
+                    }));
                 }
                 above("sweep end", to.range().1)
             }
             Self::FilteredNoise { band, order, .. } => {
                 if !(band.0 >= 0.0 && band.0 < band.1.range().0) {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "noise band",
                         value: format!("[{}, {:?}]", band.0, band.1.range()),
                         reason: "give a lowest frequency >= 0 below the band's top".into(),
-                    });
+                    }));
                 }
                 if !(1..=MAX_FILTER_ORDER).contains(order) {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "filter order",
                         value: order.to_string(),
                         reason: format!("give an order of 1 to {MAX_FILTER_ORDER}"),
-                    });
+                    }));
                 }
                 above("noise band top", band.1.range().1)
             }
             Self::Steps { level, hold } => {
                 Drawn::between(level.0, level.1)?;
                 if !(hold.0 > 0.0 && hold.0 <= hold.1 && hold.1.is_finite()) {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "step hold",
                         value: format!("[{}, {}] s", hold.0, hold.1),
                         reason: "give a shortest and longest hold, 0 < shortest <= longest".into(),
-                    });
+                    }));
                 }
                 Ok(())
             }
@@ -351,14 +352,14 @@ impl Design {
                     })
                     .collect();
                 if lines.is_empty() {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "multisine band",
                         value: format!("[{}, {top}] Hz", band.0),
                         reason: format!(
                             "holds no line of the record's grid (spacing 1/(N T) = {df} Hz for \
                              N = {n}): widen the band or lengthen the record"
                         ),
-                    });
+                    }));
                 }
                 let count = lines.len() as f64;
                 let angles: Vec<f64> = lines
@@ -438,11 +439,11 @@ impl Design {
                 // records' lengths even at the highest order.
                 let (energy, settling) =
                     filter.energy_and_settling(64 * n + 10_000).ok_or_else(|| {
-                        SimError::InvalidSetting {
+                        SimError::InvalidSetting(InvalidSetting {
                             name: "noise band",
                             value: format!("[{}, {top}] Hz", band.0),
                             reason: "the filters do not settle: widen the band".into(),
-                        }
+                        })
                     })?;
                 // The filter starts at rest and runs through its start-up
                 // first, so the record is a stretch of stationary noise of
@@ -508,14 +509,14 @@ fn resolved_band(bottom: f64, top: f64, sample_time: f64, n: usize) -> Result<()
     if top >= resolution && (bottom == 0.0 || bottom >= resolution) {
         return Ok(());
     }
-    Err(SimError::InvalidSetting {
+    Err(SimError::InvalidSetting(InvalidSetting {
         name: "noise band",
         value: format!("[{bottom}, {top}] Hz"),
         reason: format!(
             "an edge lies below the record's resolution 1/(N T) = {resolution} Hz (N = {n}): \
              raise it, or lengthen the record"
         ),
-    })
+    }))
 }
 
 #[cfg(test)]

@@ -71,7 +71,7 @@ pub use benchmark::{
 pub use builtin::{BuiltinModel, BuiltinOverrides};
 pub use butterworth::MAX_FILTER_ORDER;
 pub use data::{IoData, RecordShape};
-pub use error::{Result, SimError};
+pub use error::{InvalidSetting, Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION, ProtocolAnswer};
 pub use input::InputSignal;
 pub use input_design::{Drawn, Grid, Level, MAX_BURSTS, Phases, Taper};

@@ -2,6 +2,7 @@
 //! spec/pacejka-car.md: single-track lateral and yaw dynamics with four
 //! wheels, roll, load shift and Pacejka's magic formula, integrated by RK4.
 
+use crate::InvalidSetting;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::data::IoData;
@@ -248,11 +249,11 @@ impl PacejkaCarBuilder {
         ];
         for (name, value) in positive {
             if !(value.is_finite() && value > 0.0) {
-                return Err(SimError::InvalidSetting {
+                return Err(SimError::InvalidSetting(InvalidSetting {
                     name: "vehicle constant",
                     value: format!("{name} = {value}"),
                     reason: "must be finite and > 0".into(),
-                });
+                }));
             }
         }
         let input = match self.input {

@@ -1,6 +1,7 @@
 //! Priors of the parameter vector (independent marginals inside a range
 //! box) and the designs that sample them.
 
+use crate::InvalidSetting;
 use rand::{Rng, RngExt};
 
 use crate::error::{Result, SimError};
@@ -81,12 +82,12 @@ impl Prior {
     /// empty, a bound is not finite, or a lower bound is not below its upper bound.
     pub fn uniform_box(lower: &[f64], upper: &[f64]) -> Result<Self> {
         if lower.len() != upper.len() || lower.is_empty() {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "prior box",
                 value: format!("{} lower and {} upper bounds", lower.len(), upper.len()),
                 reason: "give one lower and one upper bound per parameter, at least one parameter"
                     .into(),
-            });
+            }));
         }
         for (index, (&lo, &hi)) in lower.iter().zip(upper).enumerate() {
             let reason = if !lo.is_finite() || !hi.is_finite() {
@@ -139,11 +140,11 @@ impl Prior {
     /// index; [`SimError::InvalidSetting`] for no parameter at all.
     pub fn new(marginals: Vec<Marginal>) -> Result<Self> {
         if marginals.is_empty() {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "prior",
                 value: "no parameter".into(),
                 reason: "give at least one parameter".into(),
-            });
+            }));
         }
         for (index, m) in marginals.iter().enumerate() {
             m.check(index)?;
@@ -256,11 +257,11 @@ impl Prior {
     /// [`Prior::MAX_SOBOL_DIMENSION`] for a Sobol design.
     pub fn design(&self, m: usize, seed: u64) -> Result<Design> {
         if m == 0 {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "m",
                 value: "0".into(),
                 reason: "a design needs at least one experiment".into(),
-            });
+            }));
         }
         let mut design_rng = stream_rng(seed, 0, StreamPurpose::Design);
         let kind = match self.sampling {
@@ -273,7 +274,7 @@ impl Prior {
             }
             Sampling::Sobol => {
                 if self.dim() > Self::MAX_SOBOL_DIMENSION {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "sampling",
                         value: format!("Sobol with {} parameters", self.dim()),
                         reason: format!(
@@ -281,14 +282,14 @@ impl Prior {
                              Latin hypercube or uniform design",
                             Self::MAX_SOBOL_DIMENSION
                         ),
-                    });
+                    }));
                 }
                 if u32::try_from(m).is_err() {
-                    return Err(SimError::InvalidSetting {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "m",
                         value: m.to_string(),
                         reason: "Sobol designs hold at most 2^32 - 1 points".into(),
-                    });
+                    }));
                 }
                 let shifts = (0..self.dim()).map(|_| design_rng.next_u32()).collect();
                 DesignKind::Sobol {
@@ -351,11 +352,11 @@ impl Design {
     /// one slot per parameter.
     pub fn fill_theta(&self, index: usize, theta: &mut [f64]) -> Result<()> {
         if index >= self.m {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "experiment index",
                 value: index.to_string(),
                 reason: format!("the design holds experiments 0..{}", self.m),
-            });
+            }));
         }
         if theta.len() != self.prior.dim() {
             return Err(SimError::WrongParameterCount {

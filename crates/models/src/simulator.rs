@@ -1,5 +1,6 @@
 //! The `Simulator` trait: what the two-stage method needs of a model.
 
+use crate::InvalidSetting;
 use crate::data::IoData;
 use crate::error::{Result, SimError};
 use crate::prior::Prior;
@@ -49,30 +50,29 @@ impl ModelSpec {
         sample_time: f64,
         n_samples: usize,
     ) -> Result<Self> {
-        use crate::error::SimError::InvalidSetting;
         if param_names.len() != prior.dim() {
-            return Err(InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "parameter names",
                 value: param_names.join(","),
                 reason: format!("the prior box has {} parameters", prior.dim()),
-            });
+            }));
         }
         if !(sample_time.is_finite() && sample_time > 0.0) {
-            return Err(InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "sample time",
                 value: sample_time.to_string(),
                 reason: "must be finite and > 0".into(),
-            });
+            }));
         }
         if n_samples == 0 {
-            return Err(InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "number of samples",
                 value: "0".into(),
                 reason: "a record needs at least one sample".into(),
-            });
+            }));
         }
         if !(n_samples as f64 * sample_time).is_finite() {
-            return Err(InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "sample time",
                 value: sample_time.to_string(),
                 reason: format!(
@@ -80,7 +80,7 @@ impl ModelSpec {
                      number holds; give at most {:e}",
                     f64::MAX / n_samples as f64
                 ),
-            });
+            }));
         }
         Ok(Self {
             name: name.to_string(),
@@ -269,7 +269,7 @@ impl Capabilities {
     /// [`SimError::InvalidSetting`] naming the condition.
     pub fn check(&self, conditions: &Conditions<'_>, model: &str) -> Result<()> {
         if conditions.noiseless && !self.noiseless {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "noiseless",
                 value: "true".into(),
                 reason: format!(
@@ -280,10 +280,10 @@ impl Capabilities {
                      noiseless=False, input=None)`, or `def batch(thetas, seeds, indices, \
                      noiseless=False, input=None)`; docs/protocol.md)"
                 ),
-            });
+            }));
         }
         if conditions.input.is_some() && !self.given_input {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "input",
                 value: "a given record".into(),
                 reason: format!(
@@ -293,7 +293,7 @@ impl Capabilities {
                      (with docs/protocol/twostage_protocol.py: `def simulate(theta, seed, \
                      index, noiseless=False, input=None)`; docs/protocol.md)"
                 ),
-            });
+            }));
         }
         Ok(())
     }

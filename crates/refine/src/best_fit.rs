@@ -6,6 +6,7 @@
 //! estimate against it, and the output-error refinement is its best
 //! descent, so that one search serves both.
 
+use crate::InvalidSetting;
 use twostage_models::{IoData, Prior, Sampling};
 
 use crate::RefineError;
@@ -291,11 +292,11 @@ fn summarize<E: From<RefineError>>(
             Some(lockstep::Ended {
                 descent: Err(e), ..
             }) => e,
-            _ => RefineError::InvalidSetting {
+            _ => RefineError::InvalidSetting(InvalidSetting {
                 name: "starts",
                 value: "none".into(),
                 reason: "a best-fit search needs at least one start".into(),
-            }
+            })
             .into(),
         });
     }

@@ -3,6 +3,7 @@
 //! record, and how typical that misfit is of the model's own noisy
 //! records at the estimate (`twostage estimate --check`).
 
+use crate::InvalidSetting;
 use rayon::prelude::*;
 use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
 
@@ -316,7 +317,7 @@ pub fn search_best_fits(
 /// A scoring window that starts inside the record.
 fn within_record(record: &IoData, plan: CheckPlan) -> Result<(), RefineError> {
     if plan.score_from >= record.n_samples() {
-        return Err(RefineError::InvalidSetting {
+        return Err(RefineError::InvalidSetting(InvalidSetting {
             name: "score from",
             value: plan.score_from.to_string(),
             reason: format!(
@@ -324,7 +325,7 @@ fn within_record(record: &IoData, plan: CheckPlan) -> Result<(), RefineError> {
                 record.n_samples(),
                 record.n_samples().saturating_sub(1)
             ),
-        });
+        }));
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! The one error type of this crate.
 
 use thiserror::Error;
+pub use twostage_setting::InvalidSetting;
 
 /// What a refinement refuses or cannot compute; a [`ResidualModel`]'s own
 /// error converts from it.
@@ -9,16 +10,9 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum RefineError {
-    /// A setting is out of range.
-    #[error("invalid {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: String,
-        /// The valid range.
-        reason: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// A vector given with a record (a start, a radius) has the wrong length.
     #[error("{what} has {found} values where {expected} are needed, one per parameter")]
     Length {

@@ -5,6 +5,7 @@
 //! and the prior, with the joint interval from the records' residuals
 //! together (the multi-experiment fit of system identification).
 
+use crate::InvalidSetting;
 use twostage_models::{IoData, Prior, standard_normal_quantile};
 
 use crate::RefineError;
@@ -86,18 +87,18 @@ pub fn pool_estimates(
     alpha: f64,
 ) -> Result<PooledEstimate, RefineError> {
     if !(alpha > 0.0 && alpha < 1.0) {
-        return Err(RefineError::InvalidSetting {
+        return Err(RefineError::InvalidSetting(InvalidSetting {
             name: "alpha",
             value: alpha.to_string(),
             reason: "the intervals' level 1 - alpha needs alpha in (0, 1)".into(),
-        });
+        }));
     }
     let Some((first, _)) = singles.first() else {
-        return Err(RefineError::InvalidSetting {
+        return Err(RefineError::InvalidSetting(InvalidSetting {
             name: "records",
             value: "none".into(),
             reason: "a joint estimate needs at least one record".into(),
-        });
+        }));
     };
     let q = first.len();
     for (theta, widths) in singles {

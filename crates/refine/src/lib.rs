@@ -30,7 +30,7 @@ pub use check::{
     CheckPlan, DEFAULT_CHECK_RUNS, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES,
     check_against, check_record, check_with, output_fit, search_best_fits,
 };
-pub use error::RefineError;
+pub use error::{InvalidSetting, RefineError};
 pub use joint::{JointEstimate, JointPlan, PooledEstimate, SingleEstimate, pool_estimates};
 pub use moments::WeightedMoments;
 pub use output_error::OutputError;

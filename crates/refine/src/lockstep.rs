@@ -6,6 +6,7 @@
 //! is that of a descent run alone: the batching changes the number of
 //! requests, never the result.
 
+use crate::InvalidSetting;
 use twostage_fit::{
     Damping, ForwardDifferences, LevenbergMarquardt, LmRun, Need, TerminationReason,
 };
@@ -268,11 +269,11 @@ pub(crate) fn descend_meeting<M: ResidualModel>(
             }
             if max_iterations == 0 {
                 return Slot::Failed(
-                    Error::InvalidSetting {
+                    Error::InvalidSetting(InvalidSetting {
                         name: "iterations per descent",
                         value: "0".into(),
                         reason: "at least 1".into(),
-                    }
+                    })
                     .into(),
                 );
             }

@@ -10,6 +10,7 @@
 //! prediction-error method of the paper's Section 2.2; the baselines build
 //! it (and indirect inference) on [`Refinement::descend`].
 
+use crate::InvalidSetting;
 use twostage_models::IoData;
 
 use crate::error::RefineError as Error;
@@ -346,10 +347,12 @@ impl<M: ResidualModel> Refinement<M> {
             .filter(|p| *p >= 2)
             .and_then(|p| p.checked_pow(q as u32))
             .filter(|t| *t <= 1 << 20)
-            .ok_or_else(|| Error::InvalidSetting {
-                name: "points per axis",
-                value: points.to_string(),
-                reason: format!("at least 2, and at most 2^20 grid points in all ({q} axes)"),
+            .ok_or_else(|| {
+                Error::InvalidSetting(InvalidSetting {
+                    name: "points per axis",
+                    value: points.to_string(),
+                    reason: format!("at least 2, and at most 2^20 grid points in all ({q} axes)"),
+                })
             })?;
         let axes: Vec<Vec<f64>> = (0..q)
             .map(|j| {
@@ -422,11 +425,11 @@ fn check_neighbourhood(q: usize, centre: &[f64], radius: &[f64]) -> Result<(), E
         }
     }
     if let Some(r) = radius.iter().find(|r| r.is_nan() || **r < 0.0) {
-        return Err(Error::InvalidSetting {
+        return Err(Error::InvalidSetting(InvalidSetting {
             name: "radius",
             value: r.to_string(),
             reason: "every radius >= 0".into(),
-        });
+        }));
     }
     Ok(())
 }

@@ -4,6 +4,7 @@ use thiserror::Error;
 use twostage_compress::CompressError;
 use twostage_fit::FitError;
 use twostage_models::SimError;
+pub use twostage_setting::InvalidSetting;
 
 /// What can go wrong with a source of records: a model file, a chart on
 /// disk, shards, or the simulations themselves.
@@ -41,16 +42,9 @@ pub enum Error {
         /// Its error.
         first_error: String,
     },
-    /// A setting is out of range.
-    #[error("invalid {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: String,
-        /// The valid range.
-        reason: String,
-    },
+    /// A setting is out of its valid range.
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// A model file is malformed.
     #[error(
         "{file}{}{}: {message}",
@@ -145,13 +139,13 @@ impl Error {
     pub fn is_setting(&self) -> bool {
         matches!(
             self,
-            Self::InvalidSetting { .. }
+            Self::InvalidSetting(_)
                 | Self::NotAvailable { .. }
                 | Self::ModelFile { .. }
                 | Self::ChartFile { .. }
                 | Self::Shards { .. }
-                | Self::Compression(CompressError::InvalidSetting { .. })
-                | Self::Fit(FitError::InvalidSetting { .. })
+                | Self::Compression(CompressError::InvalidSetting(_))
+                | Self::Fit(FitError::InvalidSetting(_))
         )
     }
 }

@@ -45,7 +45,7 @@ pub use chart::{
     CompressedChart, ExperimentFailure, StoredChart, compress_chart, simulate_records,
 };
 pub use chart_file::ChartFiles;
-pub use error::{Error, Result};
+pub use error::{Error, InvalidSetting, Result};
 pub use model_file::{
     CommandInput, DEFAULT_PRESET_SIMULATIONS, ModelFile, ModelSource, TEMPLATE, fmu_model_file,
 };

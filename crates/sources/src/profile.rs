@@ -5,6 +5,7 @@
 //! paper reproduction and the benchmarks read it; a model without an entry
 //! for something gets [`Error::NotAvailable`], never another model's.
 
+use crate::InvalidSetting;
 use std::fmt;
 use std::str::FromStr;
 
@@ -80,10 +81,12 @@ impl FromStr for ClassicMethod {
         Self::ALL
             .into_iter()
             .find(|m| m.name() == s)
-            .ok_or_else(|| Error::InvalidSetting {
-                name: "method",
-                value: s.to_string(),
-                reason: format!("use one of {}", names(Self::ALL.iter().map(|m| m.name()))),
+            .ok_or_else(|| {
+                Error::InvalidSetting(InvalidSetting {
+                    name: "method",
+                    value: s.to_string(),
+                    reason: format!("use one of {}", names(Self::ALL.iter().map(|m| m.name()))),
+                })
             })
     }
 }
@@ -329,7 +332,7 @@ mod tests {
         }
         assert!(matches!(
             car.classic_method("kalman"),
-            Err(Error::InvalidSetting { .. })
+            Err(Error::InvalidSetting(_))
         ));
         assert_eq!(car.indirect_inference_arx(), Arx::new(4, 4).unwrap());
         assert_eq!(

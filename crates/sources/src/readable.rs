@@ -1,6 +1,7 @@
 //! A count a setting makes too large for the memory, refused before it is
 //! taken.
 
+use crate::InvalidSetting;
 use twostage_models::{available_memory, readable_bytes};
 
 use crate::error::{Error, Result};
@@ -49,7 +50,7 @@ pub fn refuse_beyond_memory(
             readable_bytes(available as f64)
         ));
     }
-    Err(Error::InvalidSetting {
+    Err(Error::InvalidSetting(InvalidSetting {
         name,
         value: count.to_string(),
         reason: format!(
@@ -60,5 +61,5 @@ pub fn refuse_beyond_memory(
             readable_bytes(available as f64),
             available / each.max(1)
         ),
-    })
+    }))
 }

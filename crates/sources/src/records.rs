@@ -3,6 +3,7 @@
 //! asks its source for the compressed records of each role
 //! ([`ChartRole`]) and never knows which source it reads.
 
+use crate::InvalidSetting;
 use std::cell::RefCell;
 
 use twostage_compress::{Compressor, Workspace};
@@ -139,7 +140,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                 };
                 let held = held_validation + held_calibration;
                 if m < held + 10 {
-                    return Err(Error::InvalidSetting {
+                    return Err(Error::InvalidSetting(InvalidSetting {
                         name: "held-out records",
                         value: format!(
                             "{held_validation} validation + {held_calibration} calibration"
@@ -149,7 +150,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                              (hold out fewer, or give separate validation and calibration charts)",
                             training.dir().display()
                         ),
-                    });
+                    }));
                 }
                 counts = RoleCounts::new(m - held, held_calibration, held_validation);
                 Kind::Files {

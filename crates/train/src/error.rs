@@ -5,6 +5,7 @@
 use thiserror::Error;
 use twostage_compress::CompressError;
 use twostage_estimator::FileError;
+use twostage_estimator::InvalidSetting;
 use twostage_fit::FitError;
 use twostage_models::SimError;
 use twostage_refine::RefineError;
@@ -55,11 +56,11 @@ impl Error {
         value: impl Into<String>,
         reason: impl Into<String>,
     ) -> Self {
-        Self::Estimator(twostage_estimator::Error::InvalidSetting {
+        Self::Estimator(twostage_estimator::Error::InvalidSetting(InvalidSetting {
             name,
             value: value.into(),
             reason: reason.into(),
-        })
+        }))
     }
 
     /// Whether the error is in what was asked for: a setting out of range,

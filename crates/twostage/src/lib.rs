@@ -75,6 +75,7 @@ pub use twostage_estimator::{
     interval_in_box, write_whole,
 };
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
+pub use twostage_setting::InvalidSetting;
 pub use twostage_refine::{
     BestFit, CheckPlan, DEFAULT_CHECK_RUNS, Descent, EXPLAINED_LEVEL, LocalPosterior,
     LocalUncertainty, OutputError, RecordCheck, RefineError, RefinePolicy, RefineReason,

@@ -4,6 +4,7 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;
+use twostage::InvalidSetting;
 
 use twostage::compress::Arx;
 use twostage::estimator::Error as EstimatorError;
@@ -277,9 +278,11 @@ fn invalid_builder_settings_are_refused() {
     let model = small_benchmark();
     let refused = |builder: TwoStage<'_, _>| -> (&'static str, String) {
         match builder.train() {
-            Err(Error::Estimator(EstimatorError::InvalidSetting { name, value, .. })) => {
-                (name, value)
-            }
+            Err(Error::Estimator(EstimatorError::InvalidSetting(InvalidSetting {
+                name,
+                value,
+                ..
+            }))) => (name, value),
             other => panic!("expected an invalid setting, got {other:?}"),
         }
     };

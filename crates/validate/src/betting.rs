@@ -158,7 +158,7 @@ fn smallest_winning_mean(values: &[f64], stakes: &[f64], target: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::HoeffdingBound;
+    use crate::{HoeffdingBound, InvalidSetting};
 
     #[test]
     fn one_record_solves_its_single_bet_by_hand() {
@@ -286,11 +286,11 @@ mod tests {
         ));
         assert!(matches!(
             refused(&[0.1], 1.0, 0.0),
-            ValidateError::InvalidSetting { name: "delta", .. }
+            ValidateError::InvalidSetting(InvalidSetting { name: "delta", .. })
         ));
         assert!(matches!(
             refused(&[0.1], 0.0, 0.1),
-            ValidateError::InvalidSetting { name: "sigma", .. }
+            ValidateError::InvalidSetting(InvalidSetting { name: "sigma", .. })
         ));
     }
 }

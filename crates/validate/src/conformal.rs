@@ -4,6 +4,7 @@
 //! `estimate +- q` with q the ceil((n + 1)(1 - alpha))-th smallest absolute
 //! residual covers a fresh truth with probability at least 1 - alpha.
 
+use crate::InvalidSetting;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -36,11 +37,7 @@ impl ConformalIntervals {
     /// `alpha` outside (0, 1), no residuals, or a non-finite residual.
     pub fn calibrate(residuals: ArrayView2<'_, f64>, alpha: f64) -> Result<Self> {
         if !(alpha > 0.0 && alpha < 1.0) {
-            return Err(ValidateError::InvalidSetting {
-                name: "alpha",
-                value: alpha,
-                reason: "must lie in (0, 1)",
-            });
+            return Err(InvalidSetting::new("alpha", alpha, "must lie in (0, 1)").into());
         }
         let n = residuals.nrows();
         if n == 0 || residuals.ncols() == 0 {

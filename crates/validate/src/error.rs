@@ -1,21 +1,15 @@
 //! The one error type of this crate.
 
 use thiserror::Error;
+pub use twostage_setting::InvalidSetting;
 
 /// What can be wrong with a validation request.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum ValidateError {
     /// A setting is out of its valid range.
-    #[error("invalid {name} = {value}: {reason}")]
-    InvalidSetting {
-        /// The setting.
-        name: &'static str,
-        /// Its value.
-        value: f64,
-        /// The valid range.
-        reason: &'static str,
-    },
+    #[error(transparent)]
+    InvalidSetting(#[from] InvalidSetting),
     /// An observed squared error exceeds the bound sigma the theorem assumes.
     #[error(
         "validation error {index} is {value}, above the assumed bound sigma = {sigma}: \

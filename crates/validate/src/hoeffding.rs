@@ -1,6 +1,7 @@
 //! Theorem 1 of the paper (Hoeffding's inequality): how many validation
 //! simulations make the empirical mean squared error a guaranteed bound.
 
+use crate::InvalidSetting;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, ValidateError};
@@ -9,11 +10,7 @@ fn check_positive(name: &'static str, value: f64) -> Result<()> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(ValidateError::InvalidSetting {
-            name,
-            value,
-            reason: "must be finite and > 0",
-        })
+        Err(InvalidSetting::new(name, value, "must be finite and > 0").into())
     }
 }
 
@@ -21,11 +18,7 @@ pub(crate) fn check_delta(delta: f64) -> Result<()> {
     if delta > 0.0 && delta < 1.0 {
         Ok(())
     } else {
-        Err(ValidateError::InvalidSetting {
-            name: "delta",
-            value: delta,
-            reason: "must lie in (0, 1)",
-        })
+        Err(InvalidSetting::new("delta", delta, "must lie in (0, 1)").into())
     }
 }
 
@@ -93,11 +86,12 @@ pub fn hoeffding_sample_size(sigma: f64, gamma: f64, delta: f64) -> Result<u64> 
     check_delta(delta)?;
     let bound = sigma * sigma / (2.0 * gamma * gamma) * (1.0 / delta).ln();
     if bound >= u64::MAX as f64 {
-        return Err(ValidateError::InvalidSetting {
-            name: "gamma",
-            value: gamma,
-            reason: "is so small that the sample size overflows: raise gamma or delta",
-        });
+        return Err(InvalidSetting::new(
+            "gamma",
+            gamma,
+            "is so small that the sample size overflows: raise gamma or delta",
+        )
+        .into());
     }
     // The strict inequality: the next integer above the bound.
     Ok(bound.floor() as u64 + 1)
@@ -120,11 +114,9 @@ pub fn hoeffding_gamma(sigma: f64, delta: f64, r: u64) -> Result<f64> {
     check_positive("sigma", sigma)?;
     check_delta(delta)?;
     if r == 0 {
-        return Err(ValidateError::InvalidSetting {
-            name: "r",
-            value: 0.0,
-            reason: "needs at least one validation simulation",
-        });
+        return Err(
+            InvalidSetting::new("r", 0.0, "needs at least one validation simulation").into(),
+        );
     }
     Ok(sigma * ((1.0 / delta).ln() / (2.0 * r as f64)).sqrt())
 }

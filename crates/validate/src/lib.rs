@@ -40,7 +40,7 @@ mod report;
 
 pub use betting::{BettingBound, MAX_STAKE};
 pub use conformal::ConformalIntervals;
-pub use error::{Result, ValidateError};
+pub use error::{InvalidSetting, Result, ValidateError};
 pub use hoeffding::{HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound};
 pub use report::{ParameterReport, ValidationReport};
 

@@ -5,6 +5,7 @@
 //! mean keeps what an initial state or an offset leaves in the record
 //! (`SPEC+level`).
 
+use crate::InvalidSetting;
 use std::fmt;
 
 use ndarray::ArrayView2;
@@ -45,11 +46,11 @@ impl WithLevel {
     /// already adds the level, or no output.
     pub fn new(inner: CompressorConfig, n_outputs: usize) -> Result<Self> {
         if n_outputs == 0 || matches!(inner, CompressorConfig::Leveled(_)) {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "level",
                 value: format!("{inner} with {n_outputs} output(s)"),
                 reason: "one `+level` after a compressor, for a model with outputs".into(),
-            });
+            }));
         }
         Ok(Self {
             n_outputs,
@@ -87,11 +88,11 @@ impl WithLevel {
             let first = column
                 .first()
                 .copied()
-                .ok_or(CompressError::InvalidSetting {
+                .ok_or(CompressError::InvalidSetting(InvalidSetting {
                     name: "record",
                     value: "0 samples".into(),
                     reason: "a record needs samples".into(),
-                })?;
+                }))?;
             let mean = column.sum() / column.len() as f64;
             if !(first.is_finite() && mean.is_finite()) {
                 return Err(CompressError::NonFinite {

@@ -13,6 +13,7 @@ pub use level::WithLevel;
 pub use summary::WithSummary;
 pub use transform::{SignalTransform, TRANSFORM_RECORDS, Transformed};
 
+use crate::InvalidSetting;
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -72,10 +73,12 @@ impl CompressorConfig {
     /// ARX with input lags for a model without input, a NARX for more than
     /// one input or output.
     pub fn for_shape(&self, n_inputs: usize, n_outputs: usize, n_samples: usize) -> Result<Self> {
-        let refuse = |reason: &str| Error::InvalidSetting {
-            name: "compressor",
-            value: self.to_string(),
-            reason: format!("{reason} ({n_inputs} input(s), {n_outputs} output(s))"),
+        let refuse = |reason: &str| {
+            Error::InvalidSetting(InvalidSetting {
+                name: "compressor",
+                value: self.to_string(),
+                reason: format!("{reason} ({n_inputs} input(s), {n_outputs} output(s))"),
+            })
         };
         Ok(match self {
             Self::Arx(arx) if n_inputs == 0 && arx.nb() > 0 => {
@@ -258,11 +261,11 @@ fn split_appended(
     appended: usize,
 ) -> Result<(&mut [f64], &mut [f64])> {
     if alpha.len() != inner + appended {
-        return Err(Error::InvalidSetting {
+        return Err(Error::InvalidSetting(InvalidSetting {
             name: "feature buffer",
             value: alpha.len().to_string(),
             reason: format!("{} features", inner + appended),
-        });
+        }));
     }
     Ok(alpha.split_at_mut(inner))
 }
@@ -270,15 +273,15 @@ fn split_appended(
 /// Whole numbers separated by commas, exactly `count` of them.
 fn counts(spec: &str, whole: &str, count: usize, what: &'static str) -> Result<Vec<usize>> {
     let values: Option<Vec<usize>> = spec.split(',').map(|v| v.trim().parse().ok()).collect();
-    values
-        .filter(|v| v.len() == count)
-        .ok_or_else(|| Error::InvalidSetting {
+    values.filter(|v| v.len() == count).ok_or_else(|| {
+        Error::InvalidSetting(InvalidSetting {
             name: what,
             value: whole.to_string(),
             reason: format!(
                 "the part after ':' must be {count} whole number(s) separated by commas"
             ),
         })
+    })
 }
 
 impl std::str::FromStr for CompressorConfig {
@@ -319,12 +322,14 @@ impl std::str::FromStr for CompressorConfig {
             // Shaped by the model (`for_shape`): one sample of one output until then.
             return Ok(Self::Raw(RawRecord::new(1, 0, 1)?));
         }
-        let (kind, orders) = spec.split_once(':').ok_or_else(|| Error::InvalidSetting {
-            name: WHAT,
-            value: spec.to_string(),
-            reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw, after \
+        let (kind, orders) = spec.split_once(':').ok_or_else(|| {
+            Error::InvalidSetting(InvalidSetting {
+                name: WHAT,
+                value: spec.to_string(),
+                reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw, after \
                      output transforms as log+SPEC"
-                .into(),
+                    .into(),
+            })
         })?;
         Ok(match kind.trim() {
             "arx" => {
@@ -338,11 +343,11 @@ impl std::str::FromStr for CompressorConfig {
             "ar" => Arx::new(counts(orders, spec, 1, WHAT)?[0], 0)?.into(),
             "pca" => OutputPca::new(counts(orders, spec, 1, WHAT)?[0])?.into(),
             _ => {
-                return Err(Error::InvalidSetting {
+                return Err(Error::InvalidSetting(InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
                     reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw".into(),
-                });
+                }));
             }
         })
     }

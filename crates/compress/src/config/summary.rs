@@ -7,6 +7,7 @@
 //! frequency (the numbers the input-family flag already reads) lets
 //! stage 2 condition on the experiment (`SPEC+summary`).
 
+use crate::InvalidSetting;
 use std::fmt;
 
 use ndarray::ArrayView2;
@@ -58,11 +59,11 @@ impl WithSummary {
     /// already appends the summary, or a record without signals.
     pub fn new(inner: CompressorConfig, n_inputs: usize, n_outputs: usize) -> Result<Self> {
         if n_inputs + n_outputs == 0 || matches!(inner, CompressorConfig::Summarized(_)) {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "summary",
                 value: format!("{inner} with {n_inputs} input(s), {n_outputs} output(s)"),
                 reason: "one `+summary` after a compressor, for a model with signals".into(),
-            });
+            }));
         }
         Ok(Self {
             n_inputs,
@@ -104,11 +105,11 @@ impl WithSummary {
             });
         }
         if outputs.nrows() == 0 {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "record",
                 value: "0 samples".into(),
                 reason: "a record needs samples".into(),
-            });
+            }));
         }
         let signals = inputs.columns().into_iter().chain(outputs.columns());
         for (column, numbers) in signals.zip(summary.chunks_exact_mut(PER_SIGNAL)) {

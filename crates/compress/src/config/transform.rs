@@ -13,6 +13,7 @@
 //! in the workspace ([`Workspace::floored_samples`]) so that the estimate
 //! can say which samples it could not take as they were.
 
+use crate::InvalidSetting;
 use std::fmt;
 
 use ndarray::{ArrayView2, Axis};
@@ -91,10 +92,12 @@ impl std::str::FromStr for SignalTransform {
         Self::ALL
             .into_iter()
             .find(|t| t.spec() == text.trim())
-            .ok_or_else(|| CompressError::InvalidSetting {
-                name: "output transform",
-                value: text.to_string(),
-                reason: "use id, log or log1p".into(),
+            .ok_or_else(|| {
+                CompressError::InvalidSetting(InvalidSetting {
+                    name: "output transform",
+                    value: text.to_string(),
+                    reason: "use id, log or log1p".into(),
+                })
             })
     }
 }
@@ -139,13 +142,13 @@ impl Transformed {
     /// compressor that is itself transformed.
     pub fn new(outputs: Vec<SignalTransform>, inner: CompressorConfig) -> Result<Self> {
         if outputs.is_empty() || matches!(inner, CompressorConfig::Transformed(_)) {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "output transform",
                 value: format!("{outputs:?} then {inner}"),
                 reason: "one transform per output (or one for all), then one compressor that is \
                          not itself transformed"
                     .into(),
-            });
+            }));
         }
         Ok(Self {
             outputs,
@@ -183,7 +186,7 @@ impl Transformed {
             [one] => vec![*one; n_outputs],
             list if list.len() == n_outputs => list.to_vec(),
             list => {
-                return Err(CompressError::InvalidSetting {
+                return Err(CompressError::InvalidSetting(InvalidSetting {
                     name: "output transform",
                     value: self.spec_prefix(),
                     reason: format!(
@@ -191,7 +194,7 @@ impl Transformed {
                          all",
                         list.len()
                     ),
-                });
+                }));
             }
         };
         let floors = if self.floors.len() == outputs.len() {
@@ -262,14 +265,14 @@ impl Transformed {
             transformed.push(z);
         }
         if let Some(j) = floors.iter().position(|f| !f.is_finite()) {
-            return Err(CompressError::InvalidSetting {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
                 name: "output transform",
                 value: self.spec_prefix(),
                 reason: format!(
                     "no training record to take the floor of {} from",
                     name("y", j, self.outputs.len())
                 ),
-            });
+            }));
         }
         let inner = if self.inner.records_to_prepare() > 0 {
             self.inner.prepared(

@@ -1,6 +1,7 @@
 //! The network's hyperparameters: unchecked ([`MlpParams`]) and checked
 //! ([`Mlp`], the [`crate::Regressor`]).
 
+use crate::InvalidSetting;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{FitError, Result};
@@ -204,10 +205,12 @@ impl MlpParams {
     /// # Errors
     /// [`FitError::InvalidSetting`] naming the first setting out of range.
     pub fn check(self) -> Result<Mlp> {
-        let invalid = |name: &'static str, value: String, reason: &str| FitError::InvalidSetting {
-            name,
-            value,
-            reason: reason.into(),
+        let invalid = |name: &'static str, value: String, reason: &str| {
+            FitError::InvalidSetting(InvalidSetting {
+                name,
+                value,
+                reason: reason.into(),
+            })
         };
         if self.hidden.is_empty() || self.hidden.len() > 4 {
             return Err(invalid(

@@ -3,6 +3,7 @@
 //! within a restart the rows are divided over the threads in fixed blocks
 //! (docs/decisions/026), so the weights do not depend on the thread count.
 
+use crate::InvalidSetting;
 use std::ops::ControlFlow;
 
 use faer::Mat;
@@ -450,11 +451,11 @@ impl Mlp {
         more: usize,
     ) -> Result<FittedMlp> {
         if !self.params.ensemble {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "ensemble",
                 value: "false".into(),
                 reason: "only an ensemble averages members: set MlpParams::ensemble".into(),
-            });
+            }));
         }
         self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::More(fitted, more))
     }
@@ -480,11 +481,11 @@ impl Mlp {
         let (m, n_in) = x.dim();
         let q = y.ncols();
         if n_in > MAX_WIDTH || q > MAX_WIDTH {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "features or targets",
                 value: format!("{n_in} features, {q} targets"),
                 reason: "at most 256 each".into(),
-            });
+            }));
         }
         let mut sizes = vec![n_in];
         sizes.extend(&p.hidden);
@@ -501,11 +502,11 @@ impl Mlp {
         if let Some(start) = start
             && start.sizes != sizes
         {
-            return Err(FitError::InvalidSetting {
+            return Err(FitError::InvalidSetting(InvalidSetting {
                 name: "start",
                 value: format!("layer sizes {:?}", start.sizes),
                 reason: format!("this network and these data have layer sizes {sizes:?}"),
-            });
+            }));
         }
         let (features, targets) = match start {
             Some(start) => (start.features.clone(), start.targets.clone()),

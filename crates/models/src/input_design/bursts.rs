@@ -17,6 +17,7 @@
 //! settle there, and where the system saturates that is where its
 //! parameters show.
 
+use crate::InvalidSetting;
 use std::f64::consts::PI;
 
 use rand::{Rng, RngExt};
@@ -62,13 +63,13 @@ impl Bursts {
         let (low, high) = self.cycles.range();
         let (first, last) = ((2.0 * low).ceil().max(1.0), (2.0 * high).floor());
         if !(first <= last && last < 1e9) {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "bursts cycles",
                 value: format!("[{low}, {high}]"),
                 reason: "holds no whole number of half cycles from 0.5 on: widen it \
                          (e.g. [0.5, 2.5])"
                     .into(),
-            });
+            }));
         }
         Ok((first as u64, last as u64))
     }
@@ -78,34 +79,34 @@ impl Bursts {
     pub(crate) fn check(&self, sample_time: f64) -> Result<()> {
         let (fewest, most) = self.count;
         if fewest == 0 || fewest > most || most > MAX_BURSTS {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "bursts count",
                 value: format!("[{fewest}, {most}]"),
                 reason: format!(
                     "give whole numbers of bursts per record, 1 <= low <= high <= {MAX_BURSTS}"
                 ),
-            });
+            }));
         }
         let (shortest, _) = self.seconds.range();
         if shortest <= 0.0 {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "bursts seconds",
                 value: shortest.to_string(),
                 reason: "a burst lasts a positive time".into(),
-            });
+            }));
         }
         let (least_dwell, _) = self.dwell.range();
         if least_dwell < 0.0 {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "bursts dwell",
                 value: least_dwell.to_string(),
                 reason: "a crest is held zero seconds or more (e.g. [0, 1.5])".into(),
-            });
+            }));
         }
         let (_, most_half_cycles) = self.half_cycles()?;
         let fastest = most_half_cycles as f64 / 2.0 / shortest;
         if sample_time > 0.0 && fastest > 0.5 / sample_time {
-            return Err(SimError::InvalidSetting {
+            return Err(SimError::InvalidSetting(InvalidSetting {
                 name: "bursts",
                 value: format!("{} cycles in {shortest} s", most_half_cycles as f64 / 2.0),
                 reason: format!(
@@ -113,7 +114,7 @@ impl Bursts {
                      sample time {sample_time} s: fewer cycles or longer bursts",
                     0.5 / sample_time
                 ),
-            });
+            }));
         }
         Ok(())
     }

@@ -1,6 +1,7 @@
 //! Which shard of how many, from an argument or a batch system's
 //! environment (Slurm, Kubernetes).
 
+use crate::InvalidSetting;
 use std::ops::Range;
 
 use crate::error::{Error, Result};
@@ -25,13 +26,15 @@ pub struct ShardIndex {
 impl std::str::FromStr for ShardIndex {
     type Err = Error;
     fn from_str(text: &str) -> Result<Self> {
-        let bad = || Error::InvalidSetting {
-            name: "shard",
-            value: text.to_string(),
-            reason: "give I/N with 0 <= I < N (shard I of N, from 0), or auto (Slurm's \
+        let bad = || {
+            Error::InvalidSetting(InvalidSetting {
+                name: "shard",
+                value: text.to_string(),
+                reason: "give I/N with 0 <= I < N (shard I of N, from 0), or auto (Slurm's \
                      SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT) or auto/N (the index from \
                      SLURM_ARRAY_TASK_ID or Kubernetes' JOB_COMPLETION_INDEX)"
-                .into(),
+                    .into(),
+            })
         };
         let (i, n) = text.split_once('/').ok_or_else(bad)?;
         let (index, count) = (
@@ -62,13 +65,13 @@ impl ShardIndex {
         let number = |name: &str| -> Result<Option<usize>> {
             env(name)
                 .map(|v| {
-                    v.trim()
-                        .parse::<usize>()
-                        .map_err(|_| Error::InvalidSetting {
+                    v.trim().parse::<usize>().map_err(|_| {
+                        Error::InvalidSetting(InvalidSetting {
                             name: "shard",
                             value: format!("{name}={v}"),
                             reason: "is not a whole number".into(),
                         })
+                    })
                 })
                 .transpose()
         };
@@ -77,28 +80,26 @@ impl ShardIndex {
             None if rest.is_empty() => (slurm, number("SLURM_ARRAY_TASK_COUNT")?),
             Some(n) => (
                 slurm.or(number("JOB_COMPLETION_INDEX")?),
-                Some(
-                    n.trim()
-                        .parse::<usize>()
-                        .map_err(|_| Error::InvalidSetting {
-                            name: "shard",
-                            value: text.into(),
-                            reason: "auto/N takes the number of shards N".into(),
-                        })?,
-                ),
+                Some(n.trim().parse::<usize>().map_err(|_| {
+                    Error::InvalidSetting(InvalidSetting {
+                        name: "shard",
+                        value: text.into(),
+                        reason: "auto/N takes the number of shards N".into(),
+                    })
+                })?),
             ),
             None => return text.parse(),
         };
         match (index, count) {
             (Some(index), Some(count)) => format!("{index}/{count}").parse(),
-            _ => Err(Error::InvalidSetting {
+            _ => Err(Error::InvalidSetting(InvalidSetting {
                 name: "shard",
                 value: text.into(),
                 reason: "no array task in the environment (SLURM_ARRAY_TASK_ID and \
                          SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX with auto/N): run it \
                          as an array job, or give I/N"
                     .into(),
-            }),
+            })),
         }
     }
 

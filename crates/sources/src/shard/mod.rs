@@ -11,6 +11,7 @@
 //! trains the very estimator the same run trains on simulated records (docs/cluster.md,
 //! docs/decisions/023-sharded-charts.md).
 
+use crate::InvalidSetting;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
@@ -109,14 +110,14 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
             let config: CompressorConfig = text.parse()?;
             let config = config.for_model(spec)?;
             if config.records_to_prepare() > 0 {
-                return Err(Error::InvalidSetting {
+                return Err(Error::InvalidSetting(InvalidSetting {
                     name: "compress",
                     value: text.into(),
                     reason: "this compressor is fitted on the first training records of the \
                              whole chart, which one shard does not have: shard raw records \
                              (leave --compress out) and compress when training"
                         .into(),
-                });
+                }));
             }
             Ok(config)
         })
