@@ -144,7 +144,7 @@ impl Inputs {
     /// A file that cannot be read, a record that cannot be (file, row,
     /// column), or a row without its record.
     pub fn read(path: &Path, format: &RecordFormat, rows: &[Row]) -> Result<Self> {
-        let mut records = record_file::read(path, format).map_err(usage)?;
+        let mut records = record_file::read(path, format).map_err(|e| usage(e.to_string()))?;
         let checked = |r: record_file::ReadRecord| -> Result<(String, IoData)> {
             r.record
                 .map(|record| (r.id.clone(), record))

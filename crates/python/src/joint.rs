@@ -23,7 +23,7 @@ pub(crate) fn joint_dict(
         py,
         &dict,
         joint.theta,
-        joint.half_widths,
+        joint.half_widths.map_err(|e| e.to_string()),
         joint.correlation,
     )?;
     dict.set_item("stop", joint.stop.name())?;
@@ -33,7 +33,12 @@ pub(crate) fn joint_dict(
     let (fitted, fits): (Vec<usize>, Vec<f64>) = joint.fitted.into_iter().unzip();
     dict.set_item("fitted", fitted)?;
     dict.set_item("fit_percent", fits.into_pyarray(py))?;
-    dict.set_item("left_out", joint.left_out)?;
+    let left_out: Vec<(usize, String)> = joint
+        .left_out
+        .into_iter()
+        .map(|(i, why)| (i, why.to_string()))
+        .collect();
+    dict.set_item("left_out", left_out)?;
     dict.set_item("disagreeing", joint.disagreeing)?;
     Ok(dict)
 }

@@ -9,6 +9,7 @@ use numpy::{IntoPyArray, PyArrayDyn};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use twostage::models::IoData;
+use twostage::sources::csv_rows::DataFileError;
 use twostage::{EstimateRequest, EstimateWith, NamedModel};
 
 use crate::simulator::PythonProgress;
@@ -140,7 +141,7 @@ pub(crate) fn joint<'py>(
         ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
     })?;
     let shape = estimator.record_shape();
-    let records: Vec<(String, Result<twostage::models::IoData, String>)> = records
+    let records: Vec<(String, Result<twostage::models::IoData, DataFileError>)> = records
         .iter()
         .enumerate()
         .map(|(k, (u, y))| {
@@ -156,7 +157,8 @@ pub(crate) fn joint<'py>(
             .rows
             .into_iter()
             .map(|(_, outcome)| outcome)
-            .collect::<Result<_, String>>()?;
+            .collect::<Result<_, twostage::RecordFailure>>()
+            .map_err(|e| e.to_string())?;
         let plant: Vec<_> = rows.iter().map(|(record, row)| (record, row)).collect();
         match estimating.joint(&plant, &twostage::Silent) {
             Some(Ok((joint, _))) => Ok(joint),
@@ -194,7 +196,7 @@ pub(crate) fn refine<'py>(
         None => unreachable!("a request that refines gives every row a refinement"),
     };
     let half_widths = match (row.interval_failure, row.half_widths) {
-        (Some(why), _) => Err(why),
+        (Some(why), _) => Err(why.to_string()),
         (None, Some(widths)) => Ok(widths),
         (None, None) => Err("the refinement gave no interval".into()),
     };
@@ -290,7 +292,7 @@ pub(crate) fn estimate_records<'py>(
         ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
     })?;
     let shape = estimator.record_shape();
-    let records: Vec<(String, Result<IoData, String>)> = records
+    let records: Vec<(String, Result<IoData, DataFileError>)> = records
         .iter()
         .zip(ids)
         .enumerate()
@@ -323,7 +325,7 @@ pub(crate) fn estimate_records<'py>(
         for (id, outcome) in estimates.rows {
             match outcome {
                 Ok((record, row)) => rows.push((id, record, row)),
-                Err(why) => failed.push((id, why)),
+                Err(why) => failed.push((id, why.to_string())),
             }
         }
         let plant: Vec<(&IoData, &twostage::RecordEstimate)> =
@@ -369,7 +371,7 @@ pub(crate) fn read_records<'py>(
     };
     let read = py
         .detach(|| twostage::sources::record_file::read(&path, &format))
-        .map_err(pyo3::exceptions::PyOSError::new_err)?;
+        .map_err(|e| pyo3::exceptions::PyOSError::new_err(e.to_string()))?;
     let mut records = Vec::new();
     let mut failed = Vec::new();
     for r in read {
@@ -379,7 +381,7 @@ pub(crate) fn read_records<'py>(
                 through_model::inputs(py, &record),
                 through_model::outputs(py, &record),
             )),
-            Err(why) => failed.push((r.id, why)),
+            Err(why) => failed.push((r.id, why.to_string())),
         }
     }
     Ok((records, failed))

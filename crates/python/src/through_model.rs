@@ -236,7 +236,9 @@ pub(crate) fn one_row(
         .into_iter()
         .next()
         .unwrap_or_else(|| unreachable!("one record, one row"));
-    outcome.map(|(_, row)| row).map_err(PyValueError::new_err)
+    outcome
+        .map(|(_, row)| row)
+        .map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
 /// The check a row carries, as its dict; why it could not simulate, as

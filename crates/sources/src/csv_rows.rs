@@ -33,6 +33,62 @@ impl<R: Read> Read for NotingBreaks<R> {
     }
 }
 
+/// A user's CSV file that cannot be read as asked: the file, the row and
+/// column where the problem is (when it has one), and what is wrong and
+/// what to do. Rows are counted as the file's lines, the header's being 1.
+///
+/// ```
+/// use twostage_sources::csv_rows::DataFileError;
+/// let e = DataFileError::at("runs.csv", 4, "'x' is not a finite number").in_column("y");
+/// assert_eq!(e.to_string(), "runs.csv: row 4, column y: 'x' is not a finite number");
+/// assert_eq!(e.row, Some(4));
+/// ```
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{file}{}{}: {message}",
+    row.map_or_else(String::new, |r| format!(": row {r}")),
+    column.as_ref().map_or_else(String::new, |c| format!(", column {c}"))
+)]
+pub struct DataFileError {
+    /// The file, as it was named.
+    pub file: String,
+    /// The row (the file's line, from 1) the problem is on, when it is on one.
+    pub row: Option<usize>,
+    /// The column the problem is in, when it is in one.
+    pub column: Option<String>,
+    /// What is wrong, and what to do.
+    pub message: String,
+}
+
+impl DataFileError {
+    /// A problem with the file as a whole (it cannot be opened, it is empty).
+    pub fn whole(file: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            file: file.into(),
+            row: None,
+            column: None,
+            message: message.into(),
+        }
+    }
+
+    /// A problem on one row of the file.
+    pub fn at(file: impl Into<String>, row: usize, message: impl Into<String>) -> Self {
+        Self {
+            row: Some(row),
+            ..Self::whole(file, message)
+        }
+    }
+
+    /// The same problem, placed in a column of its row.
+    #[must_use]
+    pub fn in_column(self, column: impl Into<String>) -> Self {
+        Self {
+            column: Some(column.into()),
+            ..self
+        }
+    }
+}
+
 /// Visit each row of `input` (the header first) with its line number and
 /// its fields, in one reused record; stop at the first error `visit`
 /// returns. Rows may have any number of fields: the caller says what it
@@ -166,16 +222,20 @@ where
 /// let columns = twostage_sources::csv_rows::read_columns(&path, &["u".to_string()])?;
 /// assert_eq!(columns, [vec![1.5, -2.0]]);
 /// let missing = twostage_sources::csv_rows::read_columns(&path, &["v".to_string()]);
-/// assert!(missing.unwrap_err().contains("no column `v`"));
-/// # Ok::<(), String>(())
+/// assert!(missing.unwrap_err().message.starts_with("no column `v`"));
+/// # Ok::<(), twostage_sources::csv_rows::DataFileError>(())
 /// ```
 ///
 /// # Errors
 /// A file that cannot be read, a missing column, or a value that is not a
-/// finite number, named by file, line and column.
-pub fn read_columns(path: &std::path::Path, names: &[String]) -> Result<Vec<Vec<f64>>, String> {
+/// finite number, named by file, row and column.
+pub fn read_columns(
+    path: &std::path::Path,
+    names: &[String],
+) -> Result<Vec<Vec<f64>>, DataFileError> {
     let file = path.display().to_string();
-    let reader = std::fs::File::open(path).map_err(|e| format!("{file}: {e}"))?;
+    let reader =
+        std::fs::File::open(path).map_err(|e| DataFileError::whole(&file, e.to_string()))?;
     let mut at: Option<Vec<usize>> = None;
     let mut columns = vec![Vec::new(); names.len()];
     for_each_row(
@@ -188,9 +248,13 @@ pub fn read_columns(path: &std::path::Path, names: &[String]) -> Result<Vec<Vec<
                         .iter()
                         .map(|name| {
                             header.iter().position(|h| h == name).ok_or_else(|| {
-                                format!(
-                                    "{file}, line {line}: no column `{name}` (the header has {})",
-                                    header.join(", ")
+                                DataFileError::at(
+                                    &file,
+                                    line,
+                                    format!(
+                                        "no column `{name}` (the header has {})",
+                                        excerpt(&header.join(", "))
+                                    ),
                                 )
                             })
                         })
@@ -205,15 +269,21 @@ pub fn read_columns(path: &std::path::Path, names: &[String]) -> Result<Vec<Vec<
                     .ok()
                     .filter(|v| v.is_finite())
                     .ok_or_else(|| {
-                        format!(
-                            "{file}, line {line}, column {name}: {cell:?} is not a finite number"
+                        DataFileError::at(
+                            &file,
+                            line,
+                            format!("{:?} is not a finite number", excerpt(cell)),
                         )
+                        .in_column(name)
                     })?;
                 column.push(value);
             }
             Ok(())
         },
-        |line, e| format!("{file}, line {line:?}: {e}"),
+        |line, e| DataFileError {
+            row: line,
+            ..DataFileError::whole(&file, e)
+        },
     )?;
     Ok(columns)
 }

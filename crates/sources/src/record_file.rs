@@ -13,14 +13,14 @@ use std::path::Path;
 
 use twostage_models::{IoData, SignalColumn};
 
-use crate::csv_rows::excerpt;
+use crate::csv_rows::{DataFileError, excerpt};
 
 /// One record read from a file, or why it could not be.
 pub struct ReadRecord {
     /// The experiment's id: the `experiment` column, or the file's stem.
     pub id: String,
     /// The record, or the problem with it (file, row, column).
-    pub record: Result<IoData, String>,
+    pub record: Result<IoData, DataFileError>,
 }
 
 /// How a model's records are laid out in a file: the names of its signals,
@@ -60,13 +60,15 @@ impl RecordFormat {
 /// let records = read(&path, &format)?;
 /// assert_eq!(records[0].id, "a");
 /// assert_eq!(records[0].record.as_ref().unwrap().output(0), &[1.5, 2.0]);
-/// assert!(records[1].record.as_ref().unwrap_err().contains("runs.csv: row 4, column y"));
-/// # Ok::<(), String>(())
+/// let problem = records[1].record.as_ref().unwrap_err();
+/// assert_eq!((problem.row, problem.column.as_deref()), (Some(4), Some("y")));
+/// assert!(problem.to_string().contains("runs.csv: row 4, column y: 'x' is not a finite number"));
+/// # Ok::<(), twostage_sources::csv_rows::DataFileError>(())
 /// ```
 ///
 /// # Errors
 /// A file that cannot be read or has no usable header: one line naming it.
-pub fn read(path: &Path, format: &RecordFormat) -> Result<Vec<ReadRecord>, String> {
+pub fn read(path: &Path, format: &RecordFormat) -> Result<Vec<ReadRecord>, DataFileError> {
     let name = path.display().to_string();
     let text = read_text(path)?;
     let stem = path
@@ -78,27 +80,34 @@ pub fn read(path: &Path, format: &RecordFormat) -> Result<Vec<ReadRecord>, Strin
 /// A record file's text, held whole: refused before it is read where it
 /// and its records would not fit in the memory this process may take, and
 /// named by its line where it is not UTF-8 text.
-fn read_text(path: &Path) -> Result<String, String> {
-    let name = path.display();
+fn read_text(path: &Path) -> Result<String, DataFileError> {
+    let name = path.display().to_string();
     let size = std::fs::metadata(path)
-        .map_err(|e| format!("{name}: {e}"))?
+        .map_err(|e| DataFileError::whole(&name, e.to_string()))?
         .len();
     // The text, and the records parsed from it (fewer bytes than text).
     if let Some(available) = twostage_models::available_memory()
         && size.saturating_mul(2) > available
     {
-        return Err(format!(
-            "{name}: a file of {} is read whole with its records, where this process has {} \
+        return Err(DataFileError::whole(
+            &name,
+            format!(
+                "a file of {} is read whole with its records, where this process has {} \
              available: split it into files of fewer experiments",
-            twostage_models::readable_bytes(size as f64),
-            twostage_models::readable_bytes(available as f64)
+                twostage_models::readable_bytes(size as f64),
+                twostage_models::readable_bytes(available as f64)
+            ),
         ));
     }
-    let bytes = std::fs::read(path).map_err(|e| format!("{name}: {e}"))?;
+    let bytes = std::fs::read(path).map_err(|e| DataFileError::whole(&name, e.to_string()))?;
     String::from_utf8(bytes).map_err(|e| {
         let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
         let line = valid.iter().filter(|&&b| b == b'\n').count() + 1;
-        format!("{name}, line {line}: bytes that are not UTF-8 text: give a CSV file")
+        DataFileError::at(
+            &name,
+            line,
+            "bytes that are not UTF-8 text: give a CSV file",
+        )
     })
 }
 
@@ -152,7 +161,7 @@ pub(crate) fn header_difference(fields: &[&str], signals: &[&str]) -> String {
 struct Partial {
     columns: Vec<Vec<f64>>,
     last_time: Option<f64>,
-    problem: Option<String>,
+    problem: Option<DataFileError>,
 }
 
 /// Parse the text of a CSV file called `name`; records without an
@@ -165,7 +174,7 @@ pub fn parse(
     name: &str,
     stem: &str,
     format: &RecordFormat,
-) -> Result<Vec<ReadRecord>, String> {
+) -> Result<Vec<ReadRecord>, DataFileError> {
     let all: Vec<&str> = format
         .inputs
         .iter()
@@ -185,15 +194,16 @@ pub fn parse(
             rows.push((line, fields.iter().map(str::to_string).collect()));
             Ok(())
         },
-        |line, e| match line {
-            Some(line) => format!("{name}: row {line}: {e}"),
-            None => format!("{name}: {e}"),
+        |line, e| DataFileError {
+            row: line,
+            ..DataFileError::whole(name, e)
         },
     )?;
     let mut rows = rows.into_iter();
     let Some((_, fields)) = rows.next() else {
-        return Err(format!(
-            "{name}: the file is empty; expected a header {expected}"
+        return Err(DataFileError::whole(
+            name,
+            format!("the file is empty; expected a header {expected}"),
         ));
     };
     let header = fields.join(",");
@@ -209,10 +219,14 @@ pub fn parse(
     let signal_fields: Vec<&str> = signal_at.iter().map(|&c| fields[c]).collect();
     let placed = twostage_models::signal_columns(&signal_fields, &format.inputs, &format.outputs)
         .ok_or_else(|| {
-        format!(
-            "{name}: row 1: header '{}' is not {expected}: {}",
-            excerpt(&header),
-            header_difference(&signal_fields, &all)
+        DataFileError::at(
+            name,
+            1,
+            format!(
+                "header '{}' is not {expected}: {}",
+                excerpt(&header),
+                header_difference(&signal_fields, &all)
+            ),
         )
     })?;
     let width = fields.len();
@@ -224,9 +238,10 @@ pub fn parse(
     for (row, values) in rows {
         let values: Vec<&str> = values.iter().map(String::as_str).collect();
         if values.len() != width {
-            return Err(format!(
-                "{name}: row {row}: {} values, the header has {width}",
-                values.len()
+            return Err(DataFileError::at(
+                name,
+                row,
+                format!("{} values, the header has {width}", values.len()),
             ));
         }
         let id = if long { values[0] } else { stem };
@@ -257,10 +272,7 @@ pub fn parse(
                 _ => None,
             };
             if let (Some(problem), None) = (problem, &entry.problem) {
-                entry.problem = Some(format!(
-                    "{name}: row {row}, column {}: {problem}",
-                    fields[c]
-                ));
+                entry.problem = Some(DataFileError::at(name, row, problem).in_column(fields[c]));
             }
             entry.last_time = now;
         }
@@ -272,10 +284,14 @@ pub fn parse(
             };
             let value = text.parse::<f64>().ok().filter(|v| v.is_finite());
             if value.is_none() && entry.problem.is_none() {
-                entry.problem = Some(format!(
-                    "{name}: row {row}, column {}: '{text}' is not a finite number",
-                    fields[c]
-                ));
+                entry.problem = Some(
+                    DataFileError::at(
+                        name,
+                        row,
+                        format!("'{}' is not a finite number", excerpt(text)),
+                    )
+                    .in_column(fields[c]),
+                );
             }
             // Keep the lengths aligned so later rows still parse.
             entry.columns[column].push(value.unwrap_or(0.0));
@@ -346,11 +362,11 @@ mod tests {
                 Ok(records) => {
                     for r in records {
                         if let Err(problem) = r.record {
-                            prop_assert!(problem.starts_with("data.csv: "), "{problem}");
+                            prop_assert_eq!(&problem.file, "data.csv", "{}", problem);
                         }
                     }
                 }
-                Err(problem) => prop_assert!(problem.starts_with("data.csv: "), "{problem}"),
+                Err(problem) => prop_assert_eq!(&problem.file, "data.csv", "{}", problem),
             }
         }
 
@@ -414,8 +430,10 @@ mod tests {
                 if e == victim {
                     let problem = record.record.as_ref().expect_err("the bad record fails");
                     let name = ["u", "y"][column];
-                    let expected = format!("f.csv: row {expected_row}, column {name}: '{token}'");
-                    prop_assert!(problem.starts_with(&expected), "{} vs {}", problem, expected);
+                    prop_assert_eq!(problem.row, Some(expected_row), "{}", problem);
+                    prop_assert_eq!(problem.column.as_deref(), Some(name), "{}", problem);
+                    let said = format!("f.csv: row {expected_row}, column {name}: '{token}'");
+                    prop_assert!(problem.to_string().starts_with(&said), "{} vs {}", problem, said);
                 } else {
                     prop_assert!(record.record.is_ok());
                 }
@@ -425,7 +443,12 @@ mod tests {
 
     #[test]
     fn headers_and_ragged_rows_are_rejected_with_their_row() {
-        let problem = |text: &str| parse(text, "f.csv", "f", &siso()).err().unwrap_or_default();
+        let problem = |text: &str| {
+            parse(text, "f.csv", "f", &siso())
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default()
+        };
         assert_eq!(
             problem("\n \n"),
             "f.csv: the file is empty; expected a header u,y or experiment,u,y (with a time or t \
@@ -448,16 +471,17 @@ mod tests {
         );
     }
 
-    /// A time column is checked against the sample time, not read as a
-    /// signal; a step that is not the model's names its row.
     #[test]
-    fn bytes_that_are_not_text_are_named_by_their_line() {
+    fn bytes_that_are_not_text_are_named_by_their_row() {
         let path = std::env::temp_dir().join(format!("not-text-{}.csv", std::process::id()));
         std::fs::write(&path, b"u,y\n1,2\n3,\xff\xfe\n").unwrap();
         let problem = read(&path, &siso()).err().unwrap();
         std::fs::remove_file(&path).ok();
+        assert_eq!(problem.row, Some(3), "{problem}");
         assert!(
-            problem.ends_with(", line 3: bytes that are not UTF-8 text: give a CSV file"),
+            problem
+                .to_string()
+                .ends_with(": row 3: bytes that are not UTF-8 text: give a CSV file"),
             "{problem}"
         );
     }
@@ -473,7 +497,9 @@ mod tests {
         std::fs::remove_file(&path).ok();
         if twostage_models::available_memory().is_some_and(|bytes| bytes < 50_000_000_000) {
             assert!(
-                problem.contains(": a file of 100.0 GB is read whole with its records, where"),
+                problem
+                    .message
+                    .starts_with("a file of 100.0 GB is read whole with its records, where"),
                 "{problem}"
             );
         }
@@ -499,7 +525,12 @@ mod tests {
         let records = parse(text, "f.csv", "f", &format).expect("valid header");
         assert!(records[0].record.is_ok());
         assert_eq!(
-            records[1].record.as_ref().err().map(String::as_str),
+            records[1]
+                .record
+                .as_ref()
+                .err()
+                .map(ToString::to_string)
+                .as_deref(),
             Some(
                 "f.csv: row 5, column t: time steps by 0.03 from the row before; the model \
                  samples every 0.02"
@@ -507,7 +538,12 @@ mod tests {
         );
         let records = parse("t,u,y\nnow,1,2\n", "f.csv", "f", &format).expect("valid header");
         assert_eq!(
-            records[0].record.as_ref().err().map(String::as_str),
+            records[0]
+                .record
+                .as_ref()
+                .err()
+                .map(ToString::to_string)
+                .as_deref(),
             Some("f.csv: row 2, column t: 'now' is not a finite time")
         );
     }
@@ -539,6 +575,7 @@ mod tests {
         assert!(parse("u,y1,y2\n1,2,3\n", "f.csv", "f", &signals).is_ok());
         let e = parse("force,x\n1,2\n", "f.csv", "f", &signals)
             .err()
+            .map(|e| e.to_string())
             .unwrap_or_default();
         assert_eq!(
             e,
@@ -547,6 +584,7 @@ mod tests {
         );
         let e = parse("force,x,x\n1,2,3\n", "f.csv", "f", &signals)
             .err()
+            .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(
             e.ends_with("missing v; more than once x; the columns may come in any order"),
@@ -556,6 +594,7 @@ mod tests {
         // have: the message names that one, not the order.
         let e = parse("t,v,pulse,force,x\n0,1,2,3,4\n", "f.csv", "f", &signals)
             .err()
+            .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(
             e.ends_with(

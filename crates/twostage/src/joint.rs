@@ -23,7 +23,7 @@ pub struct JointOfRecords {
     pub theta: Vec<f64>,
     /// Its interval half-widths at the estimator's level, or why it has
     /// none (the records do not determine some parameter).
-    pub half_widths: std::result::Result<Vec<f64>, String>,
+    pub half_widths: std::result::Result<Vec<f64>, RefineError>,
     /// Its correlation matrix (row-major q x q), where it has an interval.
     pub correlation: Option<Vec<f64>>,
     /// Why the best descent stopped.
@@ -39,7 +39,7 @@ pub struct JointOfRecords {
     /// outputs' normalized fit averaged in squares) at the joint estimate.
     pub fitted: Vec<(usize, f64)>,
     /// The records left out, by place, with why.
-    pub left_out: Vec<(usize, String)>,
+    pub left_out: Vec<(usize, RefineError)>,
     /// The records whose two-stage estimate disagrees with the others'
     /// beyond its interval ([`crate::refine::PooledEstimate`]), by
     /// place.
@@ -139,7 +139,7 @@ impl JointFitter {
                 .uncertainty
                 .as_ref()
                 .map(|u| u.half_widths(self.plan.alpha))
-                .map_err(ToString::to_string),
+                .map_err(Clone::clone),
             correlation: joint
                 .uncertainty
                 .as_ref()
@@ -151,11 +151,7 @@ impl JointFitter {
             theta: joint.theta,
             pooled: joint.pooled.theta,
             fitted: joint.fitted.into_iter().zip(fits).collect(),
-            left_out: joint
-                .left_out
-                .into_iter()
-                .map(|(i, e)| (i, e.to_string()))
-                .collect(),
+            left_out: joint.left_out,
             disagreeing: joint.pooled.disagreeing,
         })
     }

@@ -61,11 +61,11 @@ mod validation_run;
 
 pub use estimating::{
     AutoRefined, CheckSettings, EstimateRequest, EstimateWith, Estimates, Estimating, GivenValues,
-    GivenValuesError, OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordOutcome, RefineWhich,
-    RequestError, RequestProblem, Windows,
+    GivenValuesError, MethodFailure, OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordFailure,
+    RecordOutcome, RefineWhich, RequestError, RequestProblem, Windows,
 };
 pub use joint::{JointFitter, JointOfRecords};
-pub use refiner::{EstimateRefiner, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
+pub use refiner::{EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
 pub use twostage_compress::CompressorConfig;
@@ -75,13 +75,13 @@ pub use twostage_estimator::{
     interval_in_box, write_whole,
 };
 pub use twostage_fit::{FittedRegressor, RegressorConfig};
-pub use twostage_setting::InvalidSetting;
 pub use twostage_refine::{
     BestFit, CheckPlan, DEFAULT_CHECK_RUNS, Descent, EXPLAINED_LEVEL, LocalPosterior,
     LocalUncertainty, OutputError, RecordCheck, RefineError, RefinePolicy, RefineReason,
     RefineStarts, Refinement, ResidualModel, SearchStarts, WeightedMoments, check_against,
     check_record, check_with, output_fit, search_best_fits,
 };
+pub use twostage_setting::InvalidSetting;
 pub use twostage_train::{DEFAULT_SEED, Error, Result, Run, RunSettings, TrainedOn, TwoStage};
 pub use validation_run::{
     TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator,

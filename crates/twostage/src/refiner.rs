@@ -4,6 +4,8 @@
 //! exact likelihood, or for any other model an output-error fit through its
 //! simulator, each with the refined estimate's own interval.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 use twostage_baselines::{BaselineError, Result, exact_likelihood};
 use twostage_estimator::Estimator;
@@ -12,8 +14,44 @@ use twostage_models::{BuiltinModel, IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
 
+/// Why a record's best-fit search, check or refinement through its model
+/// failed: the two-stage estimate is then the caller's to keep.
+///
+/// ```
+/// use twostage::ModelFailure;
+/// use twostage::refine::RefineError;
+/// let failed = ModelFailure::Search(RefineError::Numerical { what: "every start's loss".into() });
+/// assert_eq!(
+///     failed.to_string(),
+///     "the best-fit search failed: numerical failure: every start's loss"
+/// );
+/// ```
+#[derive(Debug, Clone, thiserror::Error)]
+#[non_exhaustive]
+pub enum ModelFailure {
+    /// The search's starts could not be placed (an interval or a radius
+    /// that does not fit the parameters).
+    #[error(transparent)]
+    Starts(RefineError),
+    /// The best-fit search from the starts failed.
+    #[error("the best-fit search failed: {0}")]
+    Search(RefineError),
+    /// A check or an output-error refinement was asked for a record
+    /// without a best-fit search.
+    #[error("no best-fit search")]
+    NoSearch,
+    /// The check could not simulate the model at the estimate or the
+    /// best fit.
+    #[error(transparent)]
+    Check(RefineError),
+    /// A built-in model's local posterior could not be computed near the
+    /// estimate.
+    #[error(transparent)]
+    Posterior(Arc<BaselineError>),
+}
+
 /// A refined estimate of one record.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RefinedEstimate {
     /// The refined parameters.
     pub theta: Vec<f64>,
@@ -22,7 +60,7 @@ pub struct RefinedEstimate {
     /// The refined estimate's own interval half-widths, at the level of the
     /// estimator's intervals, or why it has none (the record does not
     /// determine some parameter).
-    pub half_widths: std::result::Result<Vec<f64>, String>,
+    pub half_widths: std::result::Result<Vec<f64>, RefineError>,
     /// The parameters' correlation matrix (row-major q x q), where the
     /// interval has one.
     pub correlation: Option<Vec<f64>>,
@@ -171,7 +209,7 @@ impl EstimateRefiner {
         record: &IoData,
         estimate: &[f64],
         half_widths: Option<&[f64]>,
-    ) -> std::result::Result<RefinedEstimate, String> {
+    ) -> std::result::Result<RefinedEstimate, ModelFailure> {
         self.refine_many(&[(record, estimate, half_widths)])
             .pop()
             .unwrap_or_else(|| unreachable!("one result per record"))
@@ -187,7 +225,7 @@ impl EstimateRefiner {
     pub fn refine_many(
         &self,
         items: &[ToRefine<'_>],
-    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+    ) -> Vec<std::result::Result<RefinedEstimate, ModelFailure>> {
         self.refine_many_reporting(items, &Silent)
     }
 
@@ -232,7 +270,7 @@ impl EstimateRefiner {
         &self,
         items: &[ToRefine<'_>],
         progress: &dyn Progress,
-    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+    ) -> Vec<std::result::Result<RefinedEstimate, ModelFailure>> {
         let z = twostage_models::standard_normal_quantile(1.0 - self.alpha / 2.0);
         match &self.how {
             How::Posterior { local, points } => items
@@ -240,7 +278,7 @@ impl EstimateRefiner {
                 .map(|(record, estimate, _)| {
                     let posterior = local
                         .local_posterior(record, estimate, &self.radius, *points)
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| ModelFailure::Posterior(Arc::new(e)))?;
                     progress.advance_step(1);
                     Ok(RefinedEstimate {
                         half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
@@ -268,13 +306,13 @@ impl EstimateRefiner {
         &self,
         fit: &Refinement<OutputError<Box<dyn Simulator>>>,
         items: &[ToRefine<'_>],
-    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+    ) -> Vec<std::result::Result<RefinedEstimate, ModelFailure>> {
         let prior = fit.model().prior();
-        let starts: Vec<std::result::Result<Vec<Vec<f64>>, String>> = items
+        let starts: Vec<std::result::Result<Vec<Vec<f64>>, ModelFailure>> = items
             .iter()
             .map(|(_, estimate, half_widths)| {
                 self.search_starts(prior, estimate, *half_widths)
-                    .map_err(|e| e.to_string())
+                    .map_err(ModelFailure::Starts)
             })
             .collect();
         let searches = items
@@ -283,14 +321,14 @@ impl EstimateRefiner {
             .filter_map(|((record, _, _), starts)| Some((*record, starts.as_ref().ok()?.clone())))
             .collect();
         let mut found = fit.best_fits(searches).into_iter();
-        let bests: Vec<std::result::Result<BestFit, String>> = starts
+        let bests: Vec<std::result::Result<BestFit, ModelFailure>> = starts
             .into_iter()
             .map(|starts| {
                 starts?;
                 found
                     .next()
                     .unwrap_or_else(|| unreachable!("one search per record with starts"))
-                    .map_err(|e| e.to_string())
+                    .map_err(ModelFailure::Search)
             })
             .collect();
         self.refine_at(items, &bests)
@@ -308,8 +346,8 @@ impl EstimateRefiner {
     pub fn refine_at(
         &self,
         items: &[ToRefine<'_>],
-        bests: &[std::result::Result<BestFit, String>],
-    ) -> Vec<std::result::Result<RefinedEstimate, String>> {
+        bests: &[std::result::Result<BestFit, ModelFailure>],
+    ) -> Vec<std::result::Result<RefinedEstimate, ModelFailure>> {
         let How::OutputError(fit) = &self.how else {
             return self.refine_many(items);
         };
@@ -328,8 +366,7 @@ impl EstimateRefiner {
                 let best = &found.best;
                 let local = local
                     .next()
-                    .unwrap_or_else(|| unreachable!("one per refined record"))
-                    .map_err(|e| e.to_string());
+                    .unwrap_or_else(|| unreachable!("one per refined record"));
                 Ok(RefinedEstimate {
                     half_widths: local
                         .as_ref()

@@ -7,9 +7,11 @@
 
 use twostage::baselines::{MethodSettings, classic_estimator};
 use twostage::models::{Benchmark, BuiltinModel, IoData, Simulator, experiment_rng};
+use twostage::sources::csv_rows::DataFileError;
 use twostage::{
-    ClassicMethod, EstimateRequest, EstimateWith, Estimator, GivenValues, NamedModel, Purpose,
-    RefinePolicy, RefineWhich, RequestProblem, Silent, TwoStage, Windows,
+    ClassicMethod, EstimateRequest, EstimateWith, Estimator, GivenValues, MethodFailure,
+    NamedModel, Purpose, RecordFailure, RefinePolicy, RefineWhich, RequestProblem, Silent,
+    TwoStage, Windows,
 };
 
 fn estimator() -> Estimator {
@@ -23,7 +25,7 @@ fn estimator() -> Estimator {
         .unwrap()
 }
 
-fn records(thetas: &[f64], seed: u64) -> Vec<(String, Result<IoData, String>)> {
+fn records(thetas: &[f64], seed: u64) -> Vec<(String, Result<IoData, DataFileError>)> {
     let model = Benchmark::new();
     thetas
         .iter()
@@ -55,7 +57,8 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
     assert_eq!(estimating.trained_length(), Some(1000));
     let mut given = records(&[-0.5, 0.4], 5);
     let whole: Vec<IoData> = given.iter().map(|(_, r)| r.clone().unwrap()).collect();
-    given.push(("bad".into(), Err("file.csv: row 3: not a number".into())));
+    let unreadable = DataFileError::at("file.csv", 3, "not a number").in_column("y");
+    given.push(("bad".into(), Err(unreadable.clone())));
     let estimates = estimating.estimate("file.csv", given, &Silent);
     assert_eq!(estimates.rows.len(), 7);
     for (k, (id, outcome)) in estimates.rows.iter().take(6).enumerate() {
@@ -74,9 +77,14 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
     }
     // A record that could not be read is kept as it was said.
     let (id, bad) = estimates.rows.last().unwrap();
+    assert_eq!(id, "bad");
+    assert!(
+        matches!(bad, Err(RecordFailure::Unreadable(e)) if *e == unreadable),
+        "{bad:?}"
+    );
     assert_eq!(
-        (id.as_str(), bad.as_ref().unwrap_err().as_str()),
-        ("bad", "file.csv: row 3: not a number")
+        bad.as_ref().unwrap_err().to_string(),
+        "file.csv: row 3, column y: not a number"
     );
 
     // Without a fit that follows, another length is refused by name.
@@ -92,8 +100,14 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
     let estimates = estimating.estimate("file.csv", records(&[0.1], 5), &Silent);
     let refused = estimates.rows[0].1.as_ref().unwrap_err();
     assert!(
-        refused.starts_with("file.csv: experiment e0: ") && refused.contains("500 samples"),
-        "{refused}"
+        matches!(refused, RecordFailure::NotEstimated { place, why: MethodFailure::Length(_) }
+            if place == "file.csv: experiment e0"),
+        "{refused:?}"
+    );
+    let said = refused.to_string();
+    assert!(
+        said.starts_with("file.csv: experiment e0: ") && said.contains("500 samples"),
+        "{said}"
     );
     let short = estimating.estimate(
         "f.csv",
@@ -101,7 +115,7 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
         &Silent,
     );
     assert_eq!(
-        short.rows[0].1.as_ref().unwrap_err(),
+        short.rows[0].1.as_ref().unwrap_err().to_string(),
         "f.csv: experiment s: 80 samples, shorter than the window of 500"
     );
 }
@@ -154,7 +168,19 @@ fn a_classic_method_and_given_values_give_their_own_estimates_and_are_checked() 
     assert!(!check(1).explained(), "{:?}", check(1));
     let stranger = estimates.rows[2].1.as_ref().unwrap_err();
     assert!(
-        stranger.contains("values.csv has no row for experiment e9"),
+        matches!(
+            stranger,
+            RecordFailure::NotEstimated {
+                why: MethodFailure::Given(_),
+                ..
+            }
+        ),
+        "{stranger:?}"
+    );
+    assert!(
+        stranger
+            .to_string()
+            .contains("values.csv has no row for experiment e9"),
         "{stranger}"
     );
 }

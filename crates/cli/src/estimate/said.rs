@@ -92,7 +92,7 @@ impl<'a> Said<'a> {
             );
         }
         match &estimated.refined {
-            Some(Err(e)) if self.repeated.first("--refine", e, id) => eprintln!(
+            Some(Err(e)) if self.repeated.first("--refine", &e.to_string(), id) => eprintln!(
                 "warning: {file}: experiment {id}: --refine failed ({e}); the two-stage \
                  estimate is kept"
             ),
@@ -143,7 +143,7 @@ impl<'a> Said<'a> {
             );
         }
         match &estimated.check {
-            Some(Err(e)) if self.repeated.first("--check", e, id) => eprintln!(
+            Some(Err(e)) if self.repeated.first("--check", &e.to_string(), id) => eprintln!(
                 "warning: {file}: experiment {id}: --check could not simulate the model at \
                  the estimate ({e}); the estimate is kept, unchecked"
             ),

@@ -523,7 +523,7 @@ impl ModelFile {
                     ));
                 }
                 let mut columns = crate::csv_rows::read_columns(&path, names)
-                    .map_err(|message| error("input.file", message))?;
+                    .map_err(|problem| error("input.file", problem.to_string()))?;
                 if let Some([first, last]) = *rows {
                     let available = columns.first().map_or(0, Vec::len);
                     if last > available {

@@ -620,8 +620,8 @@ impl ModelFile {
             key: "noise.output_residual".into(),
             message,
         };
-        let columns =
-            crate::csv_rows::read_columns(path, self.spec.output_names()).map_err(error)?;
+        let columns = crate::csv_rows::read_columns(path, self.spec.output_names())
+            .map_err(|problem| error(problem.to_string()))?;
         columns
             .iter()
             .zip(self.spec.output_names())

@@ -7,6 +7,7 @@ use twostage_models::{IoData, Simulator};
 use twostage_refine::OutputError;
 
 use super::GivenValues;
+use super::failure::MethodFailure;
 use super::records::RecordEstimate;
 
 /// The name the multi-start output-error fit goes by among the methods.
@@ -53,7 +54,11 @@ impl Method {
     }
 
     /// The estimate of experiment `id`'s `record`, or why there is none.
-    pub(super) fn estimate(&self, id: &str, record: &IoData) -> Result<RecordEstimate, String> {
+    pub(super) fn estimate(
+        &self,
+        id: &str,
+        record: &IoData,
+    ) -> Result<RecordEstimate, MethodFailure> {
         match self {
             Self::TwoStage {
                 estimator,
@@ -62,9 +67,9 @@ impl Method {
                 if let Some(refusal) = estimator.length_refusal(record.n_samples())
                     && !any_length
                 {
-                    return Err(refusal);
+                    return Err(MethodFailure::Length(refusal));
                 }
-                let a = estimator.assess(record).map_err(|e| e.to_string())?;
+                let a = estimator.assess(record)?;
                 // The adaptive intervals have the same level and follow the
                 // record; the fixed ones are the fallback. Both were
                 // calibrated for the two-stage estimate, not a refined one.
@@ -82,14 +87,13 @@ impl Method {
             Self::Classic(method) => method
                 .estimate(record)
                 .map(|e| RecordEstimate::bare(e.theta))
-                .map_err(|e| e.to_string()),
+                .map_err(MethodFailure::from),
             Self::OutputError(fit) => {
                 let best = fit
-                    .descents(record)
-                    .map_err(|e| e.to_string())?
+                    .descents(record)?
                     .into_iter()
                     .next()
-                    .ok_or_else(|| "no start".to_string())?;
+                    .ok_or(MethodFailure::NoDescent)?;
                 Ok(RecordEstimate {
                     refined: Some(Ok(Some(best.stop))),
                     ..RecordEstimate::bare(best.theta)
@@ -98,7 +102,7 @@ impl Method {
             Self::Given(given) => given
                 .of(id)
                 .map(RecordEstimate::bare)
-                .map_err(|e| e.to_string()),
+                .map_err(MethodFailure::from),
         }
     }
 }

@@ -16,11 +16,13 @@ use twostage_sources::{ClassicMethod, NamedModel};
 
 use crate::{EstimateRefiner, JointFitter};
 
+mod failure;
 mod methods;
 mod records;
 mod table;
 mod through_model;
 
+pub use failure::{MethodFailure, RecordFailure};
 pub use methods::OUTPUT_ERROR_METHOD;
 pub use records::{AutoRefined, Estimates, RecordEstimate, RecordOutcome};
 
@@ -250,9 +252,9 @@ impl EstimateRequest {
     /// };
     /// let estimating = request.prepare()?;
     /// let estimates = estimating.estimate("records", vec![("7".into(), Ok(record.clone()))], &Silent);
-    /// let (_, row) = estimates.rows[0].1.as_ref().map_err(String::as_str)?;
+    /// let (_, row) = estimates.rows[0].1.as_ref().map_err(ToString::to_string)?;
     /// assert_eq!(row.theta, estimator.estimate(record.input(0), record.output(0))?);
-    /// let check = row.check.as_ref().expect("checked").as_ref().map_err(String::as_str)?;
+    /// let check = row.check.as_ref().expect("checked").as_ref().map_err(Clone::clone)?;
     /// assert!(check.explained());
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```

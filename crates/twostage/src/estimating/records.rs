@@ -6,13 +6,16 @@ use twostage_compress::FlooredSample;
 use twostage_estimator::interval_in_box;
 use twostage_fit::TerminationReason;
 use twostage_models::{InputDeviation, IoData};
-use twostage_refine::{RecordCheck, RefineReason};
+use twostage_refine::{RecordCheck, RefineError, RefineReason};
 use twostage_sources::Progress;
+use twostage_sources::csv_rows::DataFileError;
 
+use super::failure::RecordFailure;
 use super::{Estimating, RefineWhich};
+use crate::ModelFailure;
 
 /// One record's (or window's) estimate and what was found about it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RecordEstimate {
     /// The estimate (refined, where a refinement succeeded).
     pub theta: Vec<f64>,
@@ -31,14 +34,14 @@ pub struct RecordEstimate {
     pub floored: Option<Vec<FlooredSample>>,
     /// With a check: how the model at the estimate explains the record, or
     /// why it could not be simulated.
-    pub check: Option<Result<RecordCheck, String>>,
+    pub check: Option<Result<RecordCheck, ModelFailure>>,
     /// With a refinement (or the output-error method, or the joint fit):
     /// why the output-error descent stopped (`Ok(None)` for a posterior
     /// mean), or why the refinement failed (the two-stage estimate is
     /// kept).
-    pub refined: Option<Result<Option<TerminationReason>, String>>,
+    pub refined: Option<Result<Option<TerminationReason>, ModelFailure>>,
     /// Why a refined estimate has no interval of its own.
-    pub interval_failure: Option<String>,
+    pub interval_failure: Option<RefineError>,
     /// A refined estimate's correlation matrix (row-major q x q).
     pub correlation: Option<Vec<f64>>,
     /// Of an output-error refinement or the joint fit: the optima its
@@ -110,7 +113,7 @@ impl RecordEstimate {
 }
 
 /// A record (or window) with its estimate, or why it has none.
-pub type RecordOutcome = Result<(IoData, RecordEstimate), String>;
+pub type RecordOutcome = Result<(IoData, RecordEstimate), RecordFailure>;
 
 /// The estimates of one batch of records, in their order.
 #[derive(Debug)]
@@ -165,7 +168,7 @@ impl Estimating {
     pub fn estimate(
         &self,
         source: &str,
-        records: Vec<(String, Result<IoData, String>)>,
+        records: Vec<(String, Result<IoData, DataFileError>)>,
         progress: &dyn Progress,
     ) -> Estimates {
         self.estimate_each(
@@ -179,7 +182,7 @@ impl Estimating {
     /// id (`records[3]`, say) instead of a source and an experiment.
     pub fn estimate_each(
         &self,
-        records: Vec<(String, Result<IoData, String>)>,
+        records: Vec<(String, Result<IoData, DataFileError>)>,
         place: &(dyn Fn(&str) -> String + Sync),
         progress: &dyn Progress,
     ) -> Estimates {
@@ -189,10 +192,12 @@ impl Estimating {
             .into_par_iter()
             .map(|(id, record, window_end)| {
                 let estimated = record.and_then(|record| {
-                    let estimated = self
-                        .method
-                        .estimate(&id, &record)
-                        .map_err(|e| format!("{}: {e}", place(&id)))?;
+                    let estimated = self.method.estimate(&id, &record).map_err(|why| {
+                        RecordFailure::NotEstimated {
+                            place: place(&id),
+                            why,
+                        }
+                    })?;
                     Ok((
                         record,
                         RecordEstimate {
@@ -216,11 +221,14 @@ impl Estimating {
     #[allow(clippy::type_complexity)]
     fn pieces(
         &self,
-        records: Vec<(String, Result<IoData, String>)>,
+        records: Vec<(String, Result<IoData, DataFileError>)>,
         place: &(dyn Fn(&str) -> String + Sync),
-    ) -> Vec<(String, Result<IoData, String>, Option<usize>)> {
+    ) -> Vec<(String, Result<IoData, RecordFailure>, Option<usize>)> {
         let Some(windows) = self.windows else {
-            return records.into_iter().map(|(id, r)| (id, r, None)).collect();
+            return records
+                .into_iter()
+                .map(|(id, r)| (id, r.map_err(RecordFailure::from), None))
+                .collect();
         };
         let (length, every) = (windows.length, windows.every);
         let mut pieces = Vec::new();
@@ -228,16 +236,17 @@ impl Estimating {
             let record = match record {
                 Ok(record) => record,
                 Err(e) => {
-                    pieces.push((id, Err(e), None));
+                    pieces.push((id, Err(e.into()), None));
                     continue;
                 }
             };
             let n = record.n_samples();
             if n < length {
-                let why = format!(
-                    "{}: {n} samples, shorter than the window of {length}",
-                    place(&id)
-                );
+                let why = RecordFailure::ShorterThanWindow {
+                    place: place(&id),
+                    samples: n,
+                    window: length,
+                };
                 pieces.push((id, Err(why), None));
                 continue;
             }

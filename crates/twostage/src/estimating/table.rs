@@ -205,7 +205,7 @@ impl Estimating {
                         }
                     }
                     Some(Err(e)) => {
-                        object.insert("check_error".into(), e.clone().into());
+                        object.insert("check_error".into(), e.to_string().into());
                     }
                     None => {}
                 }

@@ -8,11 +8,11 @@ use twostage_sources::Progress;
 
 use super::Estimating;
 use super::records::{RecordEstimate, RecordOutcome};
-use crate::{EstimateRefiner, JointOfRecords, RECORDS_TOGETHER, ToRefine};
+use crate::{EstimateRefiner, JointOfRecords, ModelFailure, RECORDS_TOGETHER, ToRefine};
 
 /// A record's best-fit search, or why it failed; `None` where no check or
 /// refinement needs one.
-pub(super) type Search = Option<Result<BestFit, String>>;
+pub(super) type Search = Option<Result<BestFit, ModelFailure>>;
 
 impl Estimating {
     /// Each record's best-fit search (from its estimate, its interval's
@@ -32,21 +32,18 @@ impl Estimating {
             return vec![None; rows.len()];
         };
         let prior = model.spec().prior();
-        let starts: Vec<Option<Result<Vec<Vec<f64>>, String>>> = rows
+        let starts: Vec<Option<Result<Vec<Vec<f64>>, ModelFailure>>> = rows
             .iter()
             .map(|(_, outcome)| {
                 let (_, e) = outcome.as_ref().ok()?;
                 let widths = e.half_widths.as_deref();
-                Some(match refiner {
-                    Some(r) => r
-                        .search_starts(prior, &e.theta, widths)
-                        .map_err(|e| e.to_string()),
-                    None => self
-                        .plan
-                        .search()
-                        .starts(prior, &e.theta, widths)
-                        .map_err(|e| e.to_string()),
-                })
+                Some(
+                    match refiner {
+                        Some(r) => r.search_starts(prior, &e.theta, widths),
+                        None => self.plan.search().starts(prior, &e.theta, widths),
+                    }
+                    .map_err(ModelFailure::Starts),
+                )
             })
             .collect();
         let wanted = starts.iter().filter(|s| matches!(s, Some(Ok(_)))).count();
@@ -79,7 +76,7 @@ impl Estimating {
                     found
                         .next()
                         .unwrap_or_else(|| unreachable!("one search per record with starts"))
-                        .map_err(|e| format!("the best-fit search failed: {e}")),
+                        .map_err(ModelFailure::Search),
                 ),
                 Err(e) => Some(Err(e)),
             })
@@ -174,16 +171,14 @@ pub(super) fn refine_together(
     searches: &[Search],
     progress: &dyn Progress,
 ) {
-    let (items, bests): (Vec<ToRefine<'_>>, Vec<Result<BestFit, String>>) = rows
+    let (items, bests): (Vec<ToRefine<'_>>, Vec<Result<BestFit, ModelFailure>>) = rows
         .iter()
         .zip(only)
         .zip(searches)
         .filter(|((_, only), _)| **only)
         .filter_map(|(((_, outcome), _), search)| {
             let (record, e) = outcome.as_ref().ok()?;
-            let best = search
-                .clone()
-                .unwrap_or_else(|| Err("no best-fit search".into()));
+            let best = search.clone().unwrap_or(Err(ModelFailure::NoSearch));
             Some(((record, e.theta.as_slice(), e.half_widths.as_deref()), best))
         })
         .unzip();
@@ -228,11 +223,12 @@ fn check(
     estimated: &RecordEstimate,
     search: &Search,
     estimating: &Estimating,
-) -> Result<RecordCheck, String> {
+) -> Result<RecordCheck, ModelFailure> {
     let best = search
         .as_ref()
-        .ok_or_else(|| "no best-fit search".to_string())?
+        .ok_or(ModelFailure::NoSearch)?
         .as_ref()
         .map_err(Clone::clone)?;
-    check_against(model, record, &estimated.theta, best, estimating.plan).map_err(|e| e.to_string())
+    check_against(model, record, &estimated.theta, best, estimating.plan)
+        .map_err(ModelFailure::Check)
 }
