@@ -14,6 +14,8 @@ use anyhow::{Context, Result, bail};
 struct CrateReport {
     folder: String,
     package: String,
+    /// The manifest's description: the crate's job in one line.
+    job: String,
     lines: usize,
     depends_on: Vec<String>,
     circles: Vec<Vec<String>>,
@@ -34,14 +36,15 @@ pub fn run(check: bool) -> Result<()> {
     for folder in folders {
         reports.push(report(&folder)?);
     }
-    println!("| crate | package | lines | depends on (workspace) | module circles |");
-    println!("|---|---|---:|---|---|");
+    println!("| crate | package | job | lines | depends on (workspace) | module circles |");
+    println!("|---|---|---|---:|---|---|");
     for r in &reports {
         let circles: Vec<String> = r.circles.iter().map(|c| c.join(" / ")).collect();
         println!(
-            "| `crates/{}` | `{}` | {} | {} | {} |",
+            "| `crates/{}` | `{}` | {} | {} | {} | {} |",
             r.folder,
             r.package,
+            r.job,
             r.lines,
             if r.depends_on.is_empty() {
                 "-".to_string()
@@ -79,6 +82,17 @@ fn report(folder: &Path) -> Result<CrateReport> {
         .and_then(|p| p.get("name"))
         .and_then(|n| n.as_str())
         .with_context(|| format!("{}: no package name", manifest_path.display()))?
+        .to_string();
+    let job = manifest
+        .get("package")
+        .and_then(|p| p.get("description"))
+        .and_then(|d| d.as_str())
+        .with_context(|| {
+            format!(
+                "{}: no description: say the crate's job in one line",
+                manifest_path.display()
+            )
+        })?
         .to_string();
     let depends_on = manifest
         .get("dependencies")
@@ -139,6 +153,7 @@ fn report(folder: &Path) -> Result<CrateReport> {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default(),
         package,
+        job,
         lines,
         depends_on,
         circles: circles(&uses),
