@@ -86,6 +86,8 @@ pub(crate) struct FitSpeed<'a> {
     /// A network's trainer instead of the structure's own: `lm`, `adam`
     /// or `lbfgs:N` (at most N iterations).
     pub(crate) trainer: Option<&'a str>,
+    /// Fit on this many training records first, then further on all.
+    pub(crate) first_rows: Option<usize>,
 }
 
 /// The trainer `--trainer` names.
@@ -142,11 +144,15 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         .fit
         .parse()
         .with_context(|| format!("--fit {}", options.fit))?;
+    let own = regressor.clone();
     if let Some(name) = options.trainer {
         let RegressorConfig::Mlp(mlp) = &regressor else {
             anyhow::bail!("--trainer {name}: --fit {} is not a network", options.fit);
         };
         regressor = RegressorConfig::Mlp(mlp.params().clone().trainer(trainer(name)?).check()?);
+    }
+    if let Some(rows) = options.first_rows {
+        return two_phases(options, &charts, &own, &regressor, rows);
     }
     let mut times = Vec::new();
     let mut fitted = None;
@@ -188,5 +194,56 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         .map(|(name, e)| format!("{name} {e:.4e}"))
         .collect();
     println!("validation RMSE (learning space): {}", row.join(", "));
+    Ok(())
+}
+
+/// `--first-rows`: `first` on the first `rows` training records, then
+/// `further` from that fit on all of them, each phase timed and scored.
+fn two_phases(
+    options: &FitSpeed<'_>,
+    charts: &Charts,
+    first: &RegressorConfig,
+    further: &RegressorConfig,
+    rows: usize,
+) -> Result<()> {
+    let (x, y) = (charts.train.0.view(), charts.train.1.view());
+    let rows = rows.min(x.nrows());
+    let part = ndarray::s![..rows, ..];
+    let start = Instant::now();
+    let begun = first.fit(x.slice(part), y.slice(part), options.seed)?;
+    let first_seconds = start.elapsed().as_secs_f64();
+    let score = |fitted: &FittedRegressor| -> Result<String> {
+        let predicted = fitted.predict(charts.validation.0.view())?;
+        let errors = rmse(predicted.view(), charts.validation.1.view());
+        Ok(errors
+            .iter()
+            .map(|e| format!("{e:.4e}"))
+            .collect::<Vec<_>>()
+            .join(", "))
+    };
+    println!(
+        "phase 1: {} on {rows} records, {first_seconds:.2} s, validation RMSE {}",
+        options.fit,
+        score(&begun)?
+    );
+    let start = Instant::now();
+    let ended = further.fit_from(Some(&begun), (x, y), options.seed, None)?;
+    let further_seconds = start.elapsed().as_secs_f64();
+    if let FittedRegressor::Mlp(mlp) = &ended {
+        for report in mlp.reports() {
+            println!(
+                "  member {}: {} iterations, {}, held-out MSE {:.4e}",
+                report.restart,
+                report.iterations,
+                report.reason.name(),
+                report.validation_mse
+            );
+        }
+    }
+    println!(
+        "phase 2: further on {} records, {further_seconds:.2} s, validation RMSE {}",
+        x.nrows(),
+        score(&ended)?
+    );
     Ok(())
 }

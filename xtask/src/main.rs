@@ -117,8 +117,14 @@ enum Command {
         #[arg(long)]
         export: Option<PathBuf>,
         /// A network's trainer instead of its own: lm, adam or lbfgs:N.
+        /// With --first-rows, the trainer of the second phase only.
         #[arg(long)]
         trainer: Option<String>,
+        /// Fit on the first S training records with the network's own
+        /// trainer, then train that fit further on all of them (the
+        /// automatic design's anytime steps), timing and scoring each phase.
+        #[arg(long, value_name = "S")]
+        first_rows: Option<usize>,
     },
     /// Fuzz the readers of outside data (estimator files, runtime blobs,
     /// model files, CSV rows) with inputs mutated from their corpus in
@@ -185,6 +191,7 @@ fn main() -> ExitCode {
             repeats,
             export,
             trainer,
+            first_rows,
         } => fit_speed::run(&fit_speed::FitSpeed {
             model: &model,
             compress: &compress,
@@ -195,6 +202,7 @@ fn main() -> ExitCode {
             repeats,
             export: export.as_deref(),
             trainer: trainer.as_deref(),
+            first_rows,
         }),
         Command::Crates { check } => crates::run(check),
         Command::Fuzz {

@@ -382,6 +382,7 @@ mod tests {
             train,
             held_out,
             decay: 0.0,
+            curvature_rows: None,
         };
         let params = initial_parameters(&sizes, &mut rng);
         let n = params.len();

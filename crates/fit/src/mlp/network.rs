@@ -298,6 +298,10 @@ pub(super) struct Problem<'a> {
     pub(super) train: &'a [usize],
     pub(super) held_out: &'a [usize],
     pub(super) decay: f64,
+    /// Levenberg-Marquardt's Gauss-Newton matrix from the first this many
+    /// training rows only (`None`: from all of them); its gradient, the
+    /// cost and the steps' acceptance stay on every row.
+    pub(super) curvature_rows: Option<usize>,
 }
 
 /// Samples per block of the training loops that run in parallel. The

@@ -12,11 +12,14 @@ use super::MAX_WIDTH;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[non_exhaustive]
 pub enum Trainer {
-    /// Levenberg-Marquardt while its Jacobian (samples x outputs x weights)
-    /// stays under 2e7 entries and the network under 1000 weights. On more
-    /// samples, Levenberg-Marquardt on as many as it takes and Adam on all
-    /// of them, the lowest held-out error kept; Adam alone
-    /// for larger networks.
+    /// Levenberg-Marquardt on every sample for networks under 1000
+    /// weights, its curvature from the first samples where the Jacobian
+    /// (samples x outputs x weights) would pass 8e6 entries; beyond 2e7
+    /// entries Adam on every sample beside it, the lowest held-out error
+    /// kept (a network of one hidden layer and several outputs, whose
+    /// products come from its structure: Levenberg-Marquardt on as many
+    /// samples as 2e7 entries take, then Adam beside it). Adam alone for
+    /// larger networks.
     Auto,
     /// Levenberg-Marquardt on the full training set.
     LevenbergMarquardt,

@@ -34,6 +34,28 @@ use super::params::{Mlp, MlpParams, Trainer};
 const MAX_JACOBIAN_ENTRIES: usize = 20_000_000;
 /// The most weights Levenberg-Marquardt takes under [`Trainer::Auto`].
 const MAX_LM_WEIGHTS: usize = 1000;
+/// The Jacobian entries Levenberg-Marquardt's curvature is formed from
+/// under [`Trainer::Auto`] (the first training rows; its gradient and its
+/// steps' acceptance take every row): a sample of this size steers the
+/// steps as well as the largest Jacobian does, at a fraction of each
+/// iteration's cost.
+const MAX_CURVATURE_ENTRIES: usize = 8_000_000;
+
+/// The entries of Levenberg-Marquardt's products under [`Trainer::Auto`]:
+/// the most before Adam runs beside it, and the sample its curvature is
+/// formed from on more rows than that sample.
+#[derive(Debug, Clone, Copy)]
+struct Limits {
+    jacobian: usize,
+    curvature: usize,
+}
+
+/// The limits every fit runs under (a test may lower them to reach the
+/// large charts' paths on small data).
+const LIMITS: Limits = Limits {
+    jacobian: MAX_JACOBIAN_ENTRIES,
+    curvature: MAX_CURVATURE_ENTRIES,
+};
 
 /// How the restarts of one fit are trained.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,10 +64,11 @@ enum Plan {
     LevenbergMarquardt,
     /// Every restart by Adam, or by L-BFGS where the trainer says so.
     Adam,
-    /// [`Trainer::Auto`] on more rows than Levenberg-Marquardt takes: its
-    /// restarts on the first `lm_rows` training rows, as many by Adam on
-    /// every row, the lowest held-out error winning; so a larger chart is
-    /// never worse on held-out rows than the largest one LM could take.
+    /// [`Trainer::Auto`] on more rows than Levenberg-Marquardt's products
+    /// take: its restarts on every training row, their curvature from a
+    /// sample of the rows (on the first `lm_rows` where the products come
+    /// from the network's structure), as many by Adam on every row, the
+    /// lowest held-out error winning.
     Both {
         /// Training rows of the Levenberg-Marquardt restarts.
         lm_rows: usize,
@@ -276,9 +299,10 @@ impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
         let products = if by_structure(problem.sizes) {
             Products::ByStructure(Box::new(HiddenLayerProducts::new(problem)))
         } else {
+            let sampled = problem.curvature_rows.unwrap_or(problem.train.len()) * q;
             Products::ByJacobian {
-                jt: vec![0.0; n * rows],
-                res: vec![0.0; rows],
+                jt: vec![0.0; n * sampled],
+                res: vec![0.0; sampled],
                 jtj: Mat::zeros(n, n),
                 jtr: Mat::zeros(n, 1),
                 kept: vec![0.0; problem.train.len() * problem.activations_per_sample()],
@@ -345,14 +369,43 @@ impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {
                 kept_at,
             } => {
                 let here = kept_at.as_deref().is_some_and(|at| same_bits(at, params));
-                self.problem
-                    .jacobian(params, jt, res, here.then_some(kept.as_slice()));
-                gram_products(jt, res, scale, gram, gradient);
-                for i in 0..n {
-                    for j in 0..=i {
-                        jtj[i * n + j] = gram[(i, j)];
+                match self.problem.curvature_rows {
+                    None => {
+                        self.problem
+                            .jacobian(params, jt, res, here.then_some(kept.as_slice()));
+                        gram_products(jt, res, scale, gram, gradient);
+                        for i in 0..n {
+                            for j in 0..=i {
+                                jtj[i * n + j] = gram[(i, j)];
+                            }
+                            jtr[i] = gradient[(i, 0)];
+                        }
                     }
-                    jtr[i] = gradient[(i, 0)];
+                    Some(rows) => {
+                        // The curvature of the first rows, scaled as a mean
+                        // like the whole; the gradient of every row, whose
+                        // half is J'r / rows with the decay's term in it.
+                        let sample = Problem {
+                            train: &self.problem.train[..rows],
+                            offsets: self.problem.offsets.clone(),
+                            ..*self.problem
+                        };
+                        let width = self.problem.activations_per_sample();
+                        let kept = here.then(|| &kept[..rows * width]);
+                        sample.jacobian(params, jt, res, kept);
+                        let q = *self.problem.sizes.last().unwrap_or(&1);
+                        gram_products(jt, res, 1.0 / (rows * q) as f64, gram, gradient);
+                        for i in 0..n {
+                            for j in 0..=i {
+                                jtj[i * n + j] = gram[(i, j)];
+                            }
+                        }
+                        self.problem.gradient(params, self.problem.train, jtr);
+                        for (g, p) in jtr.iter_mut().zip(params) {
+                            // The decay's gradient is added below.
+                            *g = 0.5 * *g - self.problem.decay * scale * p;
+                        }
+                    }
                 }
             }
             Products::ByStructure(products) => {
@@ -373,7 +426,7 @@ impl Regressor for Mlp {
     type Model = FittedMlp;
 
     fn fit(&self, x: ArrayView2<'_, f64>, y: ArrayView2<'_, f64>) -> Result<FittedMlp> {
-        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::Anew)
+        self.fit_within(x, y, LIMITS, Begin::Anew)
     }
 }
 
@@ -414,7 +467,7 @@ impl Mlp {
         x: ArrayView2<'_, f64>,
         y: ArrayView2<'_, f64>,
     ) -> Result<FittedMlp> {
-        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::Further(start))
+        self.fit_within(x, y, LIMITS, Begin::Further(start))
     }
 
     /// The ensemble `fitted` (a fit of this network on `x` and `y`) with
@@ -457,18 +510,18 @@ impl Mlp {
                 reason: "only an ensemble averages members: set MlpParams::ensemble".into(),
             }));
         }
-        self.fit_within(x, y, MAX_JACOBIAN_ENTRIES, Begin::More(fitted, more))
+        self.fit_within(x, y, LIMITS, Begin::More(fitted, more))
     }
 
-    /// [`Regressor::fit`] with Levenberg-Marquardt's Jacobian limited to
-    /// `max_jacobian` entries under [`Trainer::Auto`], from scratch, further
+    /// [`Regressor::fit`] with Levenberg-Marquardt's products under
+    /// `limits` ([`Trainer::Auto`]), from scratch, further
     /// from a start ([`Mlp::fit_from`]) or with more members
     /// ([`Mlp::fit_more`]).
     fn fit_within(
         &self,
         x: ArrayView2<'_, f64>,
         y: ArrayView2<'_, f64>,
-        max_jacobian: usize,
+        limits: Limits,
         begin: Begin<'_>,
     ) -> Result<FittedMlp> {
         let (start, grown) = match begin {
@@ -531,9 +584,23 @@ impl Mlp {
             train,
             held_out,
             decay: p.weight_decay,
+            curvature_rows: None,
         };
-        let plan = plan(p.trainer, train.len(), &sizes, max_jacobian);
-        let first_rows = match plan {
+        let plan = plan(p.trainer, train.len(), &sizes, limits.jacobian);
+        // Levenberg-Marquardt's problem under `Trainer::Auto`: on more rows
+        // than its curvature's sample, every row with the curvature of the
+        // sample where the products come from the Jacobian; where they come
+        // from the structure, the rows its products take.
+        let curvature =
+            (limits.curvature / entries_per_sample(&sizes).max(1)).clamp(2, train.len());
+        let sampled =
+            p.trainer == Trainer::Auto && !by_structure(&sizes) && train.len() > curvature;
+        let lm_problem = match plan {
+            Plan::Both { .. } | Plan::LevenbergMarquardt if sampled => Problem {
+                curvature_rows: Some(curvature),
+                offsets: problem.offsets.clone(),
+                ..problem
+            },
             Plan::Both { lm_rows } => Problem {
                 train: &train[..lm_rows.clamp(2, train.len())],
                 offsets: problem.offsets.clone(),
@@ -547,8 +614,9 @@ impl Mlp {
         // Restart r < restarts as the plan says first; in `Both`, restarts
         // r >= restarts by Adam (seed streams of their own).
         let anew = |r: usize| match plan {
-            Plan::Both { .. } if r < p.restarts => train_one(&first_rows, p, r, true),
-            _ => train_one(&problem, p, r, plan == Plan::LevenbergMarquardt),
+            Plan::Both { .. } if r < p.restarts => train_one(&lm_problem, p, r, true),
+            Plan::LevenbergMarquardt => train_one(&lm_problem, p, r, true),
+            _ => train_one(&problem, p, r, false),
         };
         if let Some((fitted, more)) = grown {
             let first = fitted.reports.len();
@@ -572,7 +640,7 @@ impl Mlp {
                 .par_iter()
                 .enumerate()
                 .map(|(r, weights)| {
-                    train_from(&first_rows, p, r, weights.clone(), plan != Plan::Adam)
+                    train_from(&lm_problem, p, r, weights.clone(), plan != Plan::Adam)
                 })
                 .collect(),
             (None, Plan::LevenbergMarquardt | Plan::Adam) => {
@@ -602,6 +670,7 @@ impl Mlp {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Predictor;
 
     #[test]
     fn auto_runs_both_trainers_where_levenberg_marquardt_alone_would_not_fit() {
@@ -634,6 +703,129 @@ mod tests {
             Plan::LevenbergMarquardt
         );
         assert_eq!(plan(Trainer::ADAM, 10, &[2, 3, 1], limit), Plan::Adam);
+    }
+
+    /// Beyond the Jacobian's limit Levenberg-Marquardt's curvature is the
+    /// sample's Gram matrix (as a mean over the sample), its gradient every
+    /// row's: each compared with the products of a problem of those rows
+    /// alone, computed the plain way.
+    #[test]
+    fn sampled_curvature_is_the_sample_s_gram_beside_every_row_s_gradient() {
+        use ndarray::Array2;
+        use rand::RngExt;
+        let sizes = [3, 5, 1];
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let x = Array2::from_shape_fn((700, 3), |_| rng.random_range(-2.0..2.0));
+        let t = Array2::from_shape_fn((700, 1), |_| rng.random_range(-1.0..1.0));
+        let order: Vec<usize> = (0..700).rev().collect();
+        let (held_out, train) = order.split_at(100);
+        let problem = |train, curvature_rows| Problem {
+            sizes: &sizes,
+            offsets: vec![0, 3, 8, 9],
+            x: &x,
+            t: &t,
+            train,
+            held_out,
+            decay: 0.3,
+            curvature_rows,
+        };
+        let sampled = problem(train, Some(220));
+        let n = sampled.n_params();
+        let params: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let products = |p: &Problem<'_>| {
+            let mut least_squares = NetworkLeastSquares::new(p);
+            let mut r = Vec::new();
+            let (mut jtj, mut jtr) = (vec![0.0; n * n], vec![0.0; n]);
+            least_squares.residuals(&params, &mut r).unwrap();
+            least_squares
+                .gauss_newton(&params, &r, &mut jtj, &mut jtr)
+                .unwrap();
+            (jtj, jtr)
+        };
+        let (jtj, jtr) = products(&sampled);
+        let (sample_jtj, _) = products(&problem(&train[..220], None));
+        let (_, whole_jtr) = products(&problem(train, None));
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + b.abs());
+        // The decay's term on the diagonal is scaled by every row, not the
+        // sample's: (decay / 600) where the sample's own problem adds
+        // (decay / 220).
+        let shift = 0.3 / 220.0 - 0.3 / 600.0;
+        for i in 0..n {
+            for j in 0..=i {
+                let expected = sample_jtj[i * n + j] - if i == j { shift } else { 0.0 };
+                assert!(close(jtj[i * n + j], expected), "J'J[{i}, {j}]");
+            }
+            assert!(close(jtr[i], whole_jtr[i]), "J'r[{i}]");
+        }
+    }
+
+    /// A fit beyond the Jacobian's limit trains on every row, its
+    /// curvature from a sample: the same bits on one thread and on three.
+    #[test]
+    fn a_fit_with_sampled_curvature_is_the_same_on_any_thread_count() {
+        use ndarray::Array2;
+        // The first input sweeps its range with the rows, so the first
+        // rows alone see a tenth of it.
+        let x = Array2::from_shape_fn((900, 2), |(i, j)| match j {
+            0 => i as f64 / 450.0 - 1.0,
+            _ => ((i * 37) % 97) as f64 / 48.0 - 1.0,
+        });
+        let y = Array2::from_shape_fn((900, 1), |(i, _)| {
+            (x[[i, 0]] * 2.0).sin() + x[[i, 1]] * x[[i, 1]]
+        });
+        let mlp = MlpParams::new(&[6])
+            .unwrap()
+            .restarts(2)
+            .max_iterations(40)
+            .check()
+            .unwrap();
+        // 19 weights: LM whole on 100 rows, its curvature from 60.
+        let limits = Limits {
+            jacobian: 1900,
+            curvature: 1140,
+        };
+        let fit = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| mlp.fit_within(x.view(), y.view(), limits, Begin::Anew))
+                .unwrap()
+        };
+        let one = fit(1);
+        assert_eq!(one, fit(3));
+        let trainers: Vec<&str> = one.reports.iter().map(|r| r.reason.trainer()).collect();
+        assert_eq!(
+            trainers,
+            ["Levenberg-Marquardt", "Levenberg-Marquardt", "Adam", "Adam"]
+        );
+        // Under the Jacobian's limit LM alone runs, on every row, its
+        // curvature from the same sample.
+        let alone = mlp
+            .fit_within(
+                x.view(),
+                y.view(),
+                Limits {
+                    jacobian: LIMITS.jacobian,
+                    ..limits
+                },
+                Begin::Anew,
+            )
+            .unwrap();
+        assert_eq!(alone.reports.len(), 2);
+        assert!(
+            alone
+                .reports
+                .iter()
+                .all(|r| r.reason.trainer() == "Levenberg-Marquardt")
+        );
+        assert_eq!(alone.reports[0], one.reports[0], "the same LM restart");
+        // A curvature of 60 rows still steers the steps down the whole
+        // loss: the function is fitted over its whole range (its variance
+        // is about 0.6).
+        let p = one.predict(x.view()).unwrap();
+        let mse = (&p - &y).mapv(|e| e * e).mean().unwrap();
+        assert!(mse < 1e-3, "{mse}");
     }
 
     /// Members added while time is left: a member the stop time cuts
@@ -698,7 +890,15 @@ mod tests {
             .unwrap();
         // 19 weights: 2000 entries leave LM 105 of the 340 training rows.
         let both = mlp
-            .fit_within(x.view(), y.view(), 2000, Begin::Anew)
+            .fit_within(
+                x.view(),
+                y.view(),
+                Limits {
+                    jacobian: 2000,
+                    ..LIMITS
+                },
+                Begin::Anew,
+            )
             .unwrap();
         assert_eq!(both.reports.len(), 4);
         let trainers: Vec<&str> = both.reports.iter().map(|r| r.reason.trainer()).collect();
@@ -717,7 +917,7 @@ mod tests {
         );
         // Under the limit: LM alone, as before.
         let alone = mlp
-            .fit_within(x.view(), y.view(), MAX_JACOBIAN_ENTRIES, Begin::Anew)
+            .fit_within(x.view(), y.view(), LIMITS, Begin::Anew)
             .unwrap();
         assert_eq!(alone.reports.len(), 2);
         assert!(

@@ -21,6 +21,7 @@ fn problem<'a>(
         train: rows,
         held_out: &[],
         decay,
+        curvature_rows: None,
     }
 }
 
