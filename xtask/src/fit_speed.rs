@@ -177,17 +177,7 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         times[0],
         times[times.len() - 1]
     );
-    if let FittedRegressor::Mlp(mlp) = &fitted {
-        for report in mlp.reports() {
-            println!(
-                "  restart {}: {} iterations, {}, held-out MSE {:.4e}",
-                report.restart,
-                report.iterations,
-                report.reason.name(),
-                report.validation_mse
-            );
-        }
-    }
+    print_restarts(&fitted);
     let row: Vec<String> = names
         .iter()
         .zip(&errors)
@@ -229,10 +219,22 @@ fn two_phases(
     let start = Instant::now();
     let ended = further.fit_from(Some(&begun), (x, y), options.seed, None)?;
     let further_seconds = start.elapsed().as_secs_f64();
-    if let FittedRegressor::Mlp(mlp) = &ended {
+    print_restarts(&ended);
+    println!(
+        "phase 2: further on {} records, {further_seconds:.2} s, validation RMSE {}",
+        x.nrows(),
+        score(&ended)?
+    );
+    Ok(())
+}
+
+/// A network's restarts (or members trained further): iterations, why
+/// each stopped, held-out error.
+fn print_restarts(fitted: &FittedRegressor) {
+    if let FittedRegressor::Mlp(mlp) = fitted {
         for report in mlp.reports() {
             println!(
-                "  member {}: {} iterations, {}, held-out MSE {:.4e}",
+                "  restart {}: {} iterations, {}, held-out MSE {:.4e}",
                 report.restart,
                 report.iterations,
                 report.reason.name(),
@@ -240,10 +242,4 @@ fn two_phases(
             );
         }
     }
-    println!(
-        "phase 2: further on {} records, {further_seconds:.2} s, validation RMSE {}",
-        x.nrows(),
-        score(&ended)?
-    );
-    Ok(())
 }

@@ -672,6 +672,14 @@ mod tests {
     use super::*;
     use crate::Predictor;
 
+    /// Whether every restart of `fitted` ran by Levenberg-Marquardt.
+    fn all_by_levenberg_marquardt(fitted: &FittedMlp) -> bool {
+        fitted
+            .reports
+            .iter()
+            .all(|r| r.reason.trainer() == "Levenberg-Marquardt")
+    }
+
     #[test]
     fn auto_runs_both_trainers_where_levenberg_marquardt_alone_would_not_fit() {
         let limit = MAX_JACOBIAN_ENTRIES;
@@ -813,12 +821,7 @@ mod tests {
             )
             .unwrap();
         assert_eq!(alone.reports.len(), 2);
-        assert!(
-            alone
-                .reports
-                .iter()
-                .all(|r| r.reason.trainer() == "Levenberg-Marquardt")
-        );
+        assert!(all_by_levenberg_marquardt(&alone));
         assert_eq!(alone.reports[0], one.reports[0], "the same LM restart");
         // A curvature of 60 rows still steers the steps down the whole
         // loss: the function is fitted over its whole range (its variance
@@ -920,11 +923,6 @@ mod tests {
             .fit_within(x.view(), y.view(), LIMITS, Begin::Anew)
             .unwrap();
         assert_eq!(alone.reports.len(), 2);
-        assert!(
-            alone
-                .reports
-                .iter()
-                .all(|r| r.reason.trainer() == "Levenberg-Marquardt")
-        );
+        assert!(all_by_levenberg_marquardt(&alone));
     }
 }
