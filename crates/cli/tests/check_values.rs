@@ -387,3 +387,20 @@ fn a_prediction_is_scored_from_the_sample_asked() {
         text(&out.stderr)
     );
 }
+
+/// The help's default for `--check-sims` is the library's: clap's doc
+/// comments cannot name the constant, so the text holds its value.
+#[test]
+fn the_check_runs_help_names_the_library_default() {
+    let out = twostage(&["estimate", "--help"]);
+    assert!(out.status.success());
+    let help = text(&out.stdout)
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
+    let (_, after) = help
+        .split_once("says how many ran). Default ")
+        .unwrap_or_else(|| panic!("`estimate --help` names no default runs:\n{help}"));
+    let digits: String = after.chars().take_while(char::is_ascii_digit).collect();
+    assert_eq!(digits, twostage::DEFAULT_CHECK_RUNS.to_string(), "{help}");
+}
