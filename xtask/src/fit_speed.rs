@@ -144,6 +144,7 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         .fit
         .parse()
         .with_context(|| format!("--fit {}", options.fit))?;
+    let names = model.simulator()?.spec().param_names().to_vec();
     let own = regressor.clone();
     if let Some(name) = options.trainer {
         let RegressorConfig::Mlp(mlp) = &regressor else {
@@ -152,7 +153,7 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         regressor = RegressorConfig::Mlp(mlp.params().clone().trainer(trainer(name)?).check()?);
     }
     if let Some(rows) = options.first_rows {
-        return two_phases(options, &charts, &own, &regressor, rows);
+        return two_phases(options, (&charts, &names), &own, &regressor, rows);
     }
     let mut times = Vec::new();
     let mut fitted = None;
@@ -166,9 +167,6 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
     let Some(fitted) = fitted else {
         return Ok(());
     };
-    let predicted = fitted.predict(charts.validation.0.view())?;
-    let errors = rmse(predicted.view(), charts.validation.1.view());
-    let names = model.simulator()?.spec().param_names().to_vec();
     println!(
         "fit {}: median {:.2} s of {} (from {:.2} to {:.2} s)",
         options.fit,
@@ -178,12 +176,10 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
         times[times.len() - 1]
     );
     print_restarts(&fitted);
-    let row: Vec<String> = names
-        .iter()
-        .zip(&errors)
-        .map(|(name, e)| format!("{name} {e:.4e}"))
-        .collect();
-    println!("validation RMSE (learning space): {}", row.join(", "));
+    println!(
+        "validation RMSE (learning space): {}",
+        scored(&fitted, &charts, &names)?
+    );
     Ok(())
 }
 
@@ -191,7 +187,7 @@ pub(crate) fn run(options: &FitSpeed<'_>) -> Result<()> {
 /// `further` from that fit on all of them, each phase timed and scored.
 fn two_phases(
     options: &FitSpeed<'_>,
-    charts: &Charts,
+    (charts, names): (&Charts, &[String]),
     first: &RegressorConfig,
     further: &RegressorConfig,
     rows: usize,
@@ -202,15 +198,7 @@ fn two_phases(
     let start = Instant::now();
     let begun = first.fit(x.slice(part), y.slice(part), options.seed)?;
     let first_seconds = start.elapsed().as_secs_f64();
-    let score = |fitted: &FittedRegressor| -> Result<String> {
-        let predicted = fitted.predict(charts.validation.0.view())?;
-        let errors = rmse(predicted.view(), charts.validation.1.view());
-        Ok(errors
-            .iter()
-            .map(|e| format!("{e:.4e}"))
-            .collect::<Vec<_>>()
-            .join(", "))
-    };
+    let score = |fitted: &FittedRegressor| scored(fitted, charts, names);
     println!(
         "phase 1: {} on {rows} records, {first_seconds:.2} s, validation RMSE {}",
         options.fit,
@@ -242,4 +230,17 @@ fn print_restarts(fitted: &FittedRegressor) {
             );
         }
     }
+}
+
+/// `fitted`'s validation RMSE per parameter (`name value`, in the space
+/// the network learns in).
+fn scored(fitted: &FittedRegressor, charts: &Charts, names: &[String]) -> Result<String> {
+    let predicted = fitted.predict(charts.validation.0.view())?;
+    let errors = rmse(predicted.view(), charts.validation.1.view());
+    Ok(names
+        .iter()
+        .zip(&errors)
+        .map(|(name, e)| format!("{name} {e:.4e}"))
+        .collect::<Vec<_>>()
+        .join(", "))
 }

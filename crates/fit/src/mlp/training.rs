@@ -70,7 +70,9 @@ enum Plan {
     /// from the network's structure), as many by Adam on every row, the
     /// lowest held-out error winning.
     Both {
-        /// Training rows of the Levenberg-Marquardt restarts.
+        /// The rows Levenberg-Marquardt's products take whole: its
+        /// restarts' rows where the products come from the network's
+        /// structure.
         lm_rows: usize,
     },
 }
