@@ -190,6 +190,14 @@ pub(crate) fn check_dict<'py>(
     dict.set_item("rms", check.rms.clone().into_pyarray(py))?;
     dict.set_item("fit_percent", check.fit_percent.clone().into_pyarray(py))?;
     dict.set_item("check_tail_probability", check.tail_probability)?;
+    dict.set_item(
+        "check_improvement_tail_probability",
+        check.improvement_tail_probability,
+    )?;
+    dict.set_item(
+        "check_best_fit_tail_probability",
+        check.best_fit_tail_probability,
+    )?;
     dict.set_item("check_runs", check.reference_runs)?;
     dict.set_item("model_consistent", check.model_consistent())?;
     dict.set_item("loss_over_best", check.loss_ratio)?;

@@ -45,6 +45,8 @@ def records(folder):
 
 CHECK_COLUMNS = [
     "check_tail_probability",
+    "check_improvement_tail_probability",
+    "check_best_fit_tail_probability",
     "check_runs",
     "model_consistent",
     "loss_over_best",

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
 
 use crate::best_fit::{BestFit, SearchStarts};
+use crate::improvement::ResponseSpan;
 use crate::output_error::{response_from_output_errors, write_output_errors};
 use crate::refinement::Refinement;
 use crate::{OutputError, RefineError};
@@ -58,6 +59,21 @@ pub struct RecordCheck {
     /// from the runs made: all of them for a record near or below the 1%
     /// level, as few as 19 for one well above it.
     pub tail_probability: f64,
+    /// The share of the model's own records at the estimate (the same
+    /// runs) whose best fit would improve on the estimate at least as much
+    /// as the record's best fit does: its output-error loss below the
+    /// estimate's over the scoring window, to first order for the model's
+    /// records (the share of their noise in the span of the model's
+    /// response to small parameter changes). Small means the record's best
+    /// fit beats the estimate by more than the model's noise explains.
+    pub improvement_tail_probability: f64,
+    /// The share of the model's own records at the estimate (the same
+    /// runs) that miss the estimate's response by at least as much as the
+    /// record misses its best fit's: small means the model does not make
+    /// the record anywhere near its best fit (a model that is not exact
+    /// for it), where a small [`Self::tail_probability`] alone may be a
+    /// poor estimate's.
+    pub best_fit_tail_probability: f64,
     /// How many of the model's own records were run.
     pub reference_runs: usize,
     /// The noise-free simulation, for plots.
@@ -91,15 +107,35 @@ impl RecordCheck {
         self.tail_probability > EXPLAINED_LEVEL
     }
 
-    /// Whether the model explains the record at the estimate: the record
-    /// is one the model makes there, or (a model that is not exact) the
-    /// estimate fits it within 5% in RMS of the best fit the search
-    /// reached anywhere in the prior ([`NEAR_BEST_LOSS`]). An estimate that
-    /// is not explained misses the record where the model need not:
-    /// another input than training's, a poor estimate, an estimate in
-    /// another basin than the best fit's.
+    /// Whether the record's best fit improves on the estimate no more than
+    /// the model's own noise would ([`Self::improvement_tail_probability`]
+    /// above the 1% level).
+    pub fn as_good_as_best_fit(&self) -> bool {
+        self.improvement_tail_probability > EXPLAINED_LEVEL
+    }
+
+    /// Whether the record is one the model makes at its best fit, by the
+    /// model's own noise ([`Self::best_fit_tail_probability`] above the 1%
+    /// level): the model is exact enough for the record.
+    pub fn best_fit_consistent(&self) -> bool {
+        self.best_fit_tail_probability > EXPLAINED_LEVEL
+    }
+
+    /// Whether the model explains the record at the estimate: where the
+    /// model makes the record at its best fit, the best fit does no better
+    /// than the model's noise allows ([`Self::as_good_as_best_fit`]);
+    /// where it does not (a model that is not exact), the estimate fits
+    /// the record within 5% in RMS of the best fit the search reached
+    /// anywhere in the prior ([`NEAR_BEST_LOSS`]). An estimate that is not
+    /// explained misses the record where the model need not: another
+    /// input than training's, a poor estimate, an estimate in another
+    /// basin than the best fit's.
     pub fn explained(&self) -> bool {
-        self.model_consistent() || self.loss_ratio <= NEAR_BEST_LOSS
+        if self.best_fit_consistent() {
+            self.as_good_as_best_fit()
+        } else {
+            self.loss_ratio <= NEAR_BEST_LOSS
+        }
     }
 }
 
@@ -269,7 +305,21 @@ pub fn check_against(
             "the noise-free simulation at the estimate",
         )?,
     };
-    let (tail_probability, reference_runs) = rank_among_own(sim, record, &simulated, theta, plan)?;
+    let mut at_estimate = vec![0.0; record.n_samples() * record.n_outputs()];
+    write_output_errors(record, &simulated, &mut at_estimate)?;
+    let against = against_best(sim, record, theta, &simulated, &at_estimate, best, plan)?;
+    let span = ResponseSpan::at(sim, record, theta, from)?;
+    let own = OwnRecords {
+        simulated: &simulated,
+        at_estimate: &at_estimate,
+        span: &span,
+    };
+    let observed = Observed {
+        misfit: mean_squares(record, &simulated, from),
+        best_misfit: against.best_misfit,
+        improved: span.window_loss(&at_estimate) - span.window_loss(&against.at_best),
+    };
+    let ranked = rank_among_own(sim, record, &own, &observed, theta, plan)?;
     let shared = sim
         .shared_input()
         .filter(|shared| shared.n_inputs() == record.n_inputs());
@@ -278,17 +328,18 @@ pub fn check_against(
     let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..record.n_outputs())
         .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
         .unzip();
-    let (loss_ratio, best_fit_percent) = against_best(sim, record, theta, &simulated, best, plan)?;
     Ok(RecordCheck {
         rms,
         fit_percent,
-        tail_probability,
-        reference_runs,
+        tail_probability: ranked.misfit,
+        improvement_tail_probability: ranked.improvement,
+        best_fit_tail_probability: ranked.best_misfit,
+        reference_runs: ranked.runs,
         simulated,
         input_differs_at,
         input_shared,
-        loss_ratio,
-        best_fit_percent,
+        loss_ratio: against.loss_ratio,
+        best_fit_percent: against.best_fit_percent,
         best_theta: best.best.theta.clone(),
         optima: best.optima.len(),
         runner_up_ratio: best.runner_up_ratio(),
@@ -394,33 +445,82 @@ fn noise_free(
     Ok(simulated)
 }
 
-/// The record's misfit to the noise-free response `simulated` ranked
-/// among the misfits of the model's own noisy records at `theta`: the
-/// tail probability, and how many of them ran.
+/// The model's noise-free response at an estimate and what the model's
+/// own records there are compared by.
+struct OwnRecords<'a> {
+    /// The noise-free response.
+    simulated: &'a IoData,
+    /// The record's output errors at the estimate.
+    at_estimate: &'a [f64],
+    /// The span of the response near the estimate.
+    span: &'a ResponseSpan,
+}
+
+/// What a record is ranked by among the model's own records.
+struct Observed {
+    /// Per output, the mean square of the record less the response at
+    /// the estimate (over the scoring window).
+    misfit: Vec<f64>,
+    /// The same against the best fit's response.
+    best_misfit: Vec<f64>,
+    /// The best fit's loss below the estimate's over the window.
+    improved: f64,
+}
+
+/// How a record ranks among the model's own records at its estimate.
+struct Ranked {
+    /// The tail probability of its misfit.
+    misfit: f64,
+    /// The tail probability of its best fit's improvement.
+    improvement: f64,
+    /// The tail probability of its misfit to its best fit.
+    best_misfit: f64,
+    /// How many of the model's records ran.
+    runs: usize,
+}
+
+/// The record's misfits to the noise-free responses at the estimate and
+/// at its best fit, and its best fit's improvement on the estimate, each
+/// ranked among the model's own noisy records at `theta` (their misfits
+/// to the estimate's response; their improvements to first order, through
+/// the response's span).
 fn rank_among_own(
     sim: &dyn Simulator,
     record: &IoData,
-    simulated: &IoData,
+    own: &OwnRecords<'_>,
+    observed: &Observed,
     theta: &[f64],
     plan: CheckPlan,
-) -> Result<(f64, usize), RefineError> {
+) -> Result<Ranked, RefineError> {
     let CheckPlan {
         noisy,
         seed,
         score_from: from,
         ..
     } = plan;
-    let record_ms = mean_squares(record, simulated, from);
     let with_noise = Conditions {
         noiseless: false,
         input: Some(record),
+    };
+    // A run's misfit per output and its improvement: the run's output
+    // errors less the estimate's are its noise, in the loss's weights.
+    let compare = |run: &IoData| -> Result<(Vec<f64>, f64), RefineError> {
+        let mut noise = vec![0.0; own.at_estimate.len()];
+        write_output_errors(record, run, &mut noise)?;
+        for (n, e) in noise.iter_mut().zip(own.at_estimate) {
+            *n = e - *n;
+        }
+        Ok((
+            mean_squares(run, own.simulated, from),
+            own.span.improvement(&noise),
+        ))
     };
     // Runs first..first + count, in the source's batches (a command answers
     // a batch in one request), spread over the threads so that a simulator
     // that does not vectorize uses every core; experiment i's stream is
     // (seed, i) whatever the split.
     let threads = rayon::current_num_threads().max(1);
-    let runs = |first: usize, count: usize| -> Result<Vec<Vec<f64>>, RefineError> {
+    let runs = |first: usize, count: usize| -> Result<Vec<(Vec<f64>, f64)>, RefineError> {
         let size = sim.batch_size().max(1).min(count.div_ceil(threads)).max(1);
         let firsts: Vec<usize> = (first..first + count).step_by(size).collect();
         let done: Vec<Vec<(Result<(), _>, IoData)>> = firsts
@@ -438,29 +538,30 @@ fn rank_among_own(
             .collect();
         done.into_iter()
             .flatten()
-            .map(|(result, own)| {
+            .map(|(result, run)| {
                 result.map_err(|source| RefineError::Simulation {
                     what: "a simulation with the model's noise at the estimate",
                     source,
                 })?;
-                Ok(mean_squares(&own, simulated, from))
+                compare(&run)
             })
             .collect()
     };
     // Sequentially (Besag and Clifford, 1991, Biometrika 78(2)): the runs
     // come in blocks ending at fixed counts, whatever the thread count, and
-    // stop once STOP_EXCEEDANCES of them miss by at least as much as the
-    // record and so many that the full run's tail probability, at least
-    // (g + 1) / (noisy + 1), would be above the 1% level anyway: the
-    // verdict is the full run's; only the reported probability is the
-    // coarser (g + 1) / (L + 1) of the L runs made.
+    // stop once STOP_EXCEEDANCES of them miss (the estimate's response and
+    // the best fit's) and improve by at least as much as the record, and so
+    // many that the full run's tail
+    // probabilities, at least (g + 1) / (noisy + 1), would be above the 1%
+    // level anyway: the verdicts are the full run's; only the reported
+    // probabilities are the coarser (g + 1) / (L + 1) of the L runs made.
     let ends = block_ends(noisy);
     let mut reference = runs(0, ends[0])?;
     // Each output's misfit in units of the model's own over the first
     // block (so that outputs of different scales weigh alike), summed over
     // the outputs.
     let scale: Vec<f64> = (0..record.n_outputs())
-        .map(|j| reference.iter().map(|r| r[j]).sum::<f64>() / reference.len().max(1) as f64)
+        .map(|j| reference.iter().map(|r| r.0[j]).sum::<f64>() / reference.len().max(1) as f64)
         .collect();
     let statistic = |ms: &[f64]| -> f64 {
         ms.iter()
@@ -476,44 +577,73 @@ fn rank_among_own(
             })
             .sum()
     };
-    let observed = statistic(&record_ms);
-    let exceeding = |reference: &[Vec<f64>]| {
-        reference
+    let (misfit, best_misfit) = (
+        statistic(&observed.misfit),
+        statistic(&observed.best_misfit),
+    );
+    let exceeding = |reference: &[(Vec<f64>, f64)]| {
+        let beyond = |level: f64| {
+            reference
+                .iter()
+                .filter(|r| statistic(&r.0) >= level)
+                .count()
+        };
+        let improvements = reference
             .iter()
-            .filter(|r| statistic(r) >= observed)
-            .count()
+            .filter(|r| r.1 >= observed.improved)
+            .count();
+        [beyond(misfit), improvements, beyond(best_misfit)]
     };
+    let settled =
+        |g: usize| g >= STOP_EXCEEDANCES && (g + 1) as f64 / (noisy + 1) as f64 > EXPLAINED_LEVEL;
     for window in ends.windows(2) {
-        let g = exceeding(&reference);
-        if g >= STOP_EXCEEDANCES && (g + 1) as f64 / (noisy + 1) as f64 > EXPLAINED_LEVEL {
+        if exceeding(&reference).into_iter().all(settled) {
             break;
         }
         reference.extend(runs(window[0], window[1] - window[0])?);
     }
-    let tail_probability = (exceeding(&reference) + 1) as f64 / (reference.len() + 1) as f64;
-    Ok((tail_probability, reference.len()))
+    let [misfits, improvements, best_misfits] = exceeding(&reference);
+    let share = |g: usize| (g + 1) as f64 / (reference.len() + 1) as f64;
+    Ok(Ranked {
+        misfit: share(misfits),
+        improvement: share(improvements),
+        best_misfit: share(best_misfits),
+        runs: reference.len(),
+    })
+}
+
+/// An estimate against its record's best fit.
+struct AgainstBest {
+    /// The output-error loss at the estimate over the best fit's.
+    loss_ratio: f64,
+    /// Per output, the best fit's normalized fit.
+    best_fit_percent: Vec<f64>,
+    /// The best fit's output errors.
+    at_best: Vec<f64>,
+    /// Per output, the mean square of the record less the best fit's
+    /// response over the scoring window.
+    best_misfit: Vec<f64>,
 }
 
 /// The estimate's fit against the search's best: the output-error loss at
-/// the estimate (from its noise-free run `simulated`) over the best fit's,
-/// and the best fit's fit per output (its own run, unless it is the
-/// estimate).
+/// the estimate (its output errors `at_estimate`, from its noise-free run
+/// `simulated`) over the best fit's, and the best fit's fit, output errors
+/// and misfit (its own run, unless it is the estimate).
 fn against_best(
     sim: &dyn Simulator,
     record: &IoData,
     theta: &[f64],
     simulated: &IoData,
+    at_estimate: &[f64],
     best: &BestFit,
     plan: CheckPlan,
-) -> Result<(f64, Vec<f64>), RefineError> {
+) -> Result<AgainstBest, RefineError> {
     let from = plan.score_from;
-    let mut residuals = vec![0.0; record.n_samples() * record.n_outputs()];
-    write_output_errors(record, simulated, &mut residuals)?;
-    let at_estimate: f64 = residuals.iter().map(|r| r * r).sum();
+    let estimate_loss: f64 = at_estimate.iter().map(|r| r * r).sum();
     let best_loss = best.best.loss;
     let loss_ratio = if best_loss > 0.0 {
-        at_estimate / best_loss
-    } else if at_estimate > 0.0 {
+        estimate_loss / best_loss
+    } else if estimate_loss > 0.0 {
         f64::INFINITY
     } else {
         1.0
@@ -538,7 +668,14 @@ fn against_best(
     let best_fit_percent = (0..record.n_outputs())
         .map(|j| output_fit(&record.output(j)[from..], &best_response.output(j)[from..]).1)
         .collect();
-    Ok((loss_ratio, best_fit_percent))
+    let mut at_best = vec![0.0; at_estimate.len()];
+    write_output_errors(record, best_response, &mut at_best)?;
+    Ok(AgainstBest {
+        loss_ratio,
+        best_fit_percent,
+        at_best,
+        best_misfit: mean_squares(record, best_response, from),
+    })
 }
 
 /// Whether two points are the same, bit for bit.
@@ -547,222 +684,4 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use twostage_models::{Capabilities, ModelSpec, Prior, SimError};
-
-    /// y = theta u + 0.1 e, on the given input.
-    struct Gain(ModelSpec);
-
-    impl Simulator for Gain {
-        fn spec(&self) -> &ModelSpec {
-            &self.0
-        }
-        fn simulate(
-            &self,
-            _: &[f64],
-            _: &mut twostage_models::ExperimentRng,
-            _: &mut IoData,
-        ) -> Result<(), SimError> {
-            Err(SimError::InvalidData("given inputs only".into()))
-        }
-        fn capabilities(&self) -> Capabilities {
-            Capabilities {
-                noiseless: true,
-                given_input: true,
-            }
-        }
-        fn simulate_under(
-            &self,
-            theta: &[f64],
-            rng: &mut twostage_models::ExperimentRng,
-            conditions: Conditions<'_>,
-            out: &mut IoData,
-        ) -> Result<(), SimError> {
-            let given = conditions
-                .input
-                .ok_or(SimError::InvalidData("no input".into()))?;
-            out.resize(given.n_samples(), 1, 1);
-            out.input_mut(0).copy_from_slice(given.input(0));
-            let u = given.input(0).to_vec();
-            for (y, u) in out.output_mut(0).iter_mut().zip(u) {
-                let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, rng);
-                *y = theta[0] * u + if conditions.noiseless { 0.0 } else { 0.1 * e };
-            }
-            Ok(())
-        }
-    }
-
-    /// The gain model with records of `n` samples.
-    fn gain(n: usize) -> Gain {
-        let spec = ModelSpec::new(
-            "gain",
-            &["k"],
-            Prior::uniform_box(&[0.0], &[5.0]).unwrap(),
-            1.0,
-            n,
-        )
-        .unwrap()
-        .with_signals(&["u"], &["y"]);
-        Gain(spec)
-    }
-
-    #[test]
-    fn the_fit_and_the_misfit_are_the_hand_computed_ones() {
-        let model = gain(4);
-        // u = 1, -1, 2, 0; y = 2 u + 0.5: the misfit at k = 2 is 0.5 at
-        // every sample, y's mean is 1.5 and its squared spread sums to 20.
-        let u = [1.0, -1.0, 2.0, 0.0];
-        let y: Vec<f64> = u.iter().map(|u| 2.0 * u + 0.5).collect();
-        let record = IoData::siso(&u, &y).unwrap();
-        let check = check_record(&model, &record, &[2.0], 199, 3).unwrap();
-        assert!((check.rms[0] - 0.5).abs() < 1e-15);
-        let expected = 100.0 * (1.0 - (4.0 * 0.25f64 / 20.0).sqrt());
-        assert!((check.fit_percent[0] - expected).abs() < 1e-12);
-        // A misfit five times the noise: none of the model's own records
-        // reaches it.
-        assert_eq!(check.tail_probability.to_bits(), (1.0f64 / 200.0).to_bits());
-        assert!(!check.model_consistent());
-        // The best gain by least squares is sum(u y) / sum(u^2) = 13/6, with
-        // a loss of 5/6 against 1 at 2 (every residual scaled alike): 2 fits
-        // 9.5% worse in RMS than the best the model can (it has no offset),
-        // beyond the 5% asked, so the record is not explained at 2.
-        assert!(
-            (check.best_theta[0] - 13.0 / 6.0).abs() < 1e-6,
-            "{:?}",
-            check.best_theta
-        );
-        assert!((check.loss_ratio - 1.2).abs() < 1e-6 && !check.explained());
-        // At 2.1 the loss is 0.86 (6 d^2 + 2 d + 1 with d = 2 - k): within
-        // 5% in RMS of the best, explained. The loss is convex: one optimum.
-        let near = check_record(&model, &record, &[2.1], 199, 3).unwrap();
-        assert!((near.loss_ratio - 0.86 / (5.0 / 6.0)).abs() < 1e-6 && near.explained());
-        assert_eq!((near.optima, near.runner_up_ratio), (1, None));
-        // At the best fit itself, a check against the search already made
-        // says what the check that searches says, and runs no descent.
-        let best = [13.0 / 6.0];
-        let plan = CheckPlan::new(199, 3, 1);
-        let starts = plan
-            .search()
-            .starts(model.spec().prior(), &best, None)
-            .unwrap();
-        let search = search_best_fits(&model, vec![(&record, starts)])
-            .pop()
-            .unwrap()
-            .unwrap();
-        let at = search.best.theta.clone();
-        let (full, shared) = (
-            check_with(&model, &record, &at, plan).unwrap(),
-            check_against(&model, &record, &at, &search, plan).unwrap(),
-        );
-        assert_eq!(full, shared);
-        assert_eq!(shared.loss_ratio.to_bits(), 1.0f64.to_bits());
-        assert_eq!(shared.best_fit_percent, shared.fit_percent);
-        // Another gain is neither.
-        let off = check_record(&model, &record, &[1.5], 199, 3).unwrap();
-        assert!(!off.explained() && off.loss_ratio > 2.0);
-        // Its inputs vary from experiment to experiment: nothing to compare.
-        assert!(!check.input_shared && check.input_differs_at.is_none());
-        // The exact response is explained by every one of them.
-        let exact = IoData::siso(&u, &u.map(|u| 2.0 * u)).unwrap();
-        let check = check_record(&model, &exact, &[2.0], 199, 3).unwrap();
-        assert_eq!(
-            (check.rms[0], check.fit_percent[0], check.tail_probability),
-            (0.0, 100.0, 1.0)
-        );
-    }
-
-    /// The sequential runs stop early on records the model makes, and the
-    /// verdict is always the one all 199 runs give (computed here by hand
-    /// from the same streams), on records from the truth to far off it.
-    #[test]
-    fn stopping_early_keeps_the_full_runs_verdict() {
-        let n = 50;
-        let model = gain(n);
-        let u: Vec<f64> = (0..n).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
-        let (mut early, mut flagged) = (0, 0);
-        for k in 0..60u64 {
-            // Records at the truth, then ever further off.
-            let offset = 0.0015 * k as f64;
-            let mut rng = experiment_rng(41, k);
-            let y: Vec<f64> = u
-                .iter()
-                .map(|u| {
-                    let e: f64 =
-                        rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
-                    (2.0 + offset) * u + 0.1 * e
-                })
-                .collect();
-            let record = IoData::siso(&u, &y).unwrap();
-            let check = check_record(&model, &record, &[2.0], 199, 5).unwrap();
-            // The full run: 199 noisy records of streams (5, i), their mean
-            // square misfit to the noise-free response 2 u.
-            let misfit = |ys: &[f64]| {
-                ys.iter()
-                    .zip(&u)
-                    .map(|(y, u)| (y - 2.0 * u).powi(2))
-                    .sum::<f64>()
-                    / n as f64
-            };
-            let observed = misfit(&y);
-            let noisy = Conditions {
-                noiseless: false,
-                input: Some(&record),
-            };
-            let at_least = (0..199u64)
-                .filter(|i| {
-                    let mut own = IoData::default();
-                    model
-                        .simulate_under(&[2.0], &mut experiment_rng(5, *i), noisy, &mut own)
-                        .unwrap();
-                    misfit(own.output(0)) >= observed
-                })
-                .count();
-            let full = (at_least + 1) as f64 / 200.0;
-            assert_eq!(
-                check.model_consistent(),
-                full > EXPLAINED_LEVEL,
-                "record {k}"
-            );
-            flagged += usize::from(!check.model_consistent());
-            if check.reference_runs < 199 {
-                early += 1;
-                assert!(check.tail_probability > EXPLAINED_LEVEL);
-            } else {
-                assert_eq!(check.tail_probability.to_bits(), full.to_bits());
-            }
-        }
-        assert!(early >= 10, "{early} of 60 stopped early");
-        assert!(flagged >= 10, "{flagged} of 60 not consistent");
-    }
-
-    /// A scoring window leaves out the samples before it: a record whose
-    /// first two samples are far off and the rest exact is explained from
-    /// sample 2 on, and not as a whole.
-    #[test]
-    fn a_scoring_window_leaves_out_the_transient() {
-        let model = gain(20);
-        let u: Vec<f64> = (0..20).map(|k| (k % 4) as f64 - 1.5).collect();
-        let mut y: Vec<f64> = u.iter().map(|u| 2.0 * u).collect();
-        y[0] += 5.0;
-        y[1] -= 5.0;
-        let record = IoData::siso(&u, &y).unwrap();
-        let plan = CheckPlan::new(199, 2, 1);
-        let whole = check_with(&model, &record, &[2.0], plan).unwrap();
-        assert!(!whole.model_consistent());
-        let windowed = check_with(
-            &model,
-            &record,
-            &[2.0],
-            CheckPlan {
-                score_from: 2,
-                ..plan
-            },
-        )
-        .unwrap();
-        assert_eq!((windowed.rms[0], windowed.fit_percent[0]), (0.0, 100.0));
-        assert!(windowed.model_consistent() && windowed.explained());
-        // The whole-record RMS is the hand-computed one: sqrt(50 / 20).
-        assert!((whole.rms[0] - 2.5f64.sqrt()).abs() < 1e-12);
-    }
-}
+mod tests;

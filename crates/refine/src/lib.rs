@@ -14,6 +14,7 @@
 mod best_fit;
 mod check;
 mod error;
+mod improvement;
 mod joint;
 mod lockstep;
 mod moments;

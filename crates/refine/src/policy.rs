@@ -97,13 +97,16 @@ mod tests {
     use super::*;
     use twostage_models::IoData;
 
-    /// A check of one output with the given fit, tail probability and
-    /// loss over the best.
+    /// A check of one output with the given fit, tail probability (at the
+    /// estimate and at its best fit) and loss over the best, whose best
+    /// fit improves on the estimate as the model's noise would.
     fn judged(fit_percent: f64, tail_probability: f64, loss_ratio: f64) -> RecordCheck {
         RecordCheck {
             rms: vec![0.1],
             fit_percent: vec![fit_percent],
             tail_probability,
+            improvement_tail_probability: 0.5,
+            best_fit_tail_probability: tail_probability,
             reference_runs: 199,
             simulated: IoData::default(),
             input_differs_at: None,
@@ -122,6 +125,18 @@ mod tests {
         // Explained by the model's noise and at its best fit: kept.
         let good = judged(90.0, 0.5, 1.0);
         assert_eq!(policy.reason(&good, false, false), None);
+        // The model makes the record at its best fit, which improves on the
+        // estimate by more than the noise would: not explained, though
+        // within 1.1 of the best loss.
+        let beaten = RecordCheck {
+            improvement_tail_probability: 0.005,
+            ..judged(90.0, 0.5, 1.05)
+        };
+        assert!(!beaten.explained() && !beaten.as_good_as_best_fit());
+        assert_eq!(
+            policy.reason(&beaten, false, false),
+            Some(RefineReason::NotExplained)
+        );
         // Not model-consistent, 1.2 times the best loss: not explained,
         // which comes before every other reason.
         let far = judged(90.0, 0.005, 1.2);

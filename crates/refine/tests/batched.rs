@@ -334,9 +334,10 @@ fn one_search_serves_the_check_and_the_refinement() {
         searched < apart,
         "{searched} points searched, {apart} apart"
     );
-    // A check of the estimate: its noisy runs only (this model has none
-    // of its own noise, so no run misses as the record does and all of
-    // them run).
+    // A check of the estimate: its noisy runs (this model has none of its
+    // own noise, so no run misses as the record does and all of them run)
+    // and the 2q noise-free points of the response's span at the estimate
+    // (central differences), nothing else.
     let plan = CheckPlan {
         noisy: 99,
         seed: 0,
@@ -345,12 +346,12 @@ fn one_search_serves_the_check_and_the_refinement() {
     };
     let first = check_against(&model, &record, &estimate, &found, plan).unwrap();
     let checked = points() - searched;
-    assert_eq!(checked, first.reference_runs);
+    assert_eq!(checked, first.reference_runs + 4);
     // The refined estimate is the search's best: its check adds its noisy
-    // runs, no noise-free run and no descent.
+    // runs and its span's points, no other noise-free run and no descent.
     let refined = found.best.theta.clone();
     let second = check_against(&model, &record, &refined, &found, plan).unwrap();
-    assert_eq!(points() - searched - checked, second.reference_runs);
+    assert_eq!(points() - searched - checked, second.reference_runs + 4);
     // The responses read back are the simulated ones, to rounding.
     for (theta, check) in [(&estimate[..], &first), (&refined[..], &second)] {
         let mut direct = IoData::default();

@@ -24,15 +24,21 @@ pub struct EstimateArgs {
     estimator: Option<PathBuf>,
     /// Check each estimate (or --at's given values) against its record:
     /// the model's noise-free response there on the record's input, its
-    /// RMS residual and normalized fit per output, and the share of the
-    /// model's own records there that miss by as much (a record at or
-    /// below 1% is not explained, said on stderr). Needs the model: an
-    /// estimator's built-in one, or --model / --model-file.
+    /// RMS residual and normalized fit per output, the share of the
+    /// model's own records there that miss by as much, and the share whose
+    /// best fit would improve on the estimate as much as the record's best
+    /// fit does. Not explained (said on stderr): a record whose best fit
+    /// the model makes to its noise (above 1%) and improves on the
+    /// estimate as at most 1% of them would; or, where not even the best
+    /// fit does (a model that is not exact), one whose estimate is more
+    /// than 5% in RMS from its best fit. Needs the model: an estimator's
+    /// built-in one, or --model / --model-file.
     #[arg(long)]
     check: bool,
     /// With --check: the most of the model's own records each record is
     /// ranked among; the runs stop early (at 19, 39 or 99) once enough of
-    /// them miss by as much as the record that the verdict cannot change
+    /// them miss, and improve, by as much as the record that the verdict
+    /// cannot change
     /// (`check_runs` says how many ran). Default 199.
     #[arg(long)]
     check_sims: Option<usize>,

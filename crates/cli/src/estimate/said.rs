@@ -147,6 +147,18 @@ impl<'a> Said<'a> {
                 "warning: {file}: experiment {id}: --check could not simulate the model at \
                  the estimate ({e}); the estimate is kept, unchecked"
             ),
+            Some(Ok(c)) if !c.explained() && c.best_fit_consistent() => eprintln!(
+                "warning: {file}: experiment {id}: not explained by the model at its \
+                 estimate (fit {} %): the model's best fit (searched from the estimate \
+                 and over the prior, fit {} %) makes the record to the model's own \
+                 noise, and improves on the estimate as at most {:.1}% of the model's \
+                 own records there would; do not trust this estimate (a record unlike \
+                 the training records, a poor estimate or one in another basin: try \
+                 --refine; docs/real-data.md)",
+                list(&c.fit_percent),
+                list(&c.best_fit_percent),
+                100.0 * c.improvement_tail_probability
+            ),
             Some(Ok(c)) if !c.explained() => eprintln!(
                 "warning: {file}: experiment {id}: not explained by the model at its \
                  estimate: RMS residual {}, fit {} %, where the model's best fit \
@@ -159,15 +171,15 @@ impl<'a> Said<'a> {
                 list(&c.best_fit_percent),
                 100.0 * c.tail_probability
             ),
-            Some(Ok(c)) if !c.model_consistent() => eprintln!(
+            Some(Ok(c)) if !c.best_fit_consistent() => eprintln!(
                 "note: {file}: experiment {id}: the estimate fits the record within 5% \
                  in RMS of the best fit the model reaches from the estimate and over \
-                 its prior (fit {} %), but not to the model's own noise (at most \
-                 {:.1}% of its records miss by as much): the model is not exact for \
-                 this record; judge it by predicting a record it was not fitted to \
-                 (docs/real-data.md)",
+                 its prior (fit {} %), but not even that best fit does to the model's \
+                 own noise (at most {:.1}% of its records miss by as much): the model \
+                 is not exact for this record; judge it by predicting a record it was \
+                 not fitted to (docs/real-data.md)",
                 list(&c.fit_percent),
-                100.0 * c.tail_probability
+                100.0 * c.best_fit_tail_probability
             ),
             _ => {}
         }

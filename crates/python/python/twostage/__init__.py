@@ -253,7 +253,9 @@ class Estimator:
         (``model_file`` or ``model_toml``). Returns a dict of the
         command's check columns (``rms``, ``fit_percent`` and
         ``best_fit_percent`` per output, ``check_tail_probability``,
-        ``model_consistent``, ``loss_over_best``, ``explained``,
+        ``check_improvement_tail_probability``,
+        ``check_best_fit_tail_probability``, ``model_consistent``,
+        ``loss_over_best``, ``explained``,
         ``input_as_trained``, ``optima``, ``runner_up_over_best``) and the
         noise-free response ``simulated`` [N, n_y]."""
         u, y = self._columns(u, y)

@@ -192,6 +192,14 @@ impl Estimating {
                             object.insert(format!("{y}_fit_percent"), c.fit_percent[j].into());
                         }
                         object.insert("check_tail_probability".into(), c.tail_probability.into());
+                        object.insert(
+                            "check_improvement_tail_probability".into(),
+                            c.improvement_tail_probability.into(),
+                        );
+                        object.insert(
+                            "check_best_fit_tail_probability".into(),
+                            c.best_fit_tail_probability.into(),
+                        );
                         object.insert("check_runs".into(), c.reference_runs.into());
                         object.insert("model_consistent".into(), c.model_consistent().into());
                         object.insert("loss_over_best".into(), c.loss_ratio.into());
@@ -251,8 +259,10 @@ impl RecordEstimate {
 }
 
 /// The check's columns: per output its RMS residual and fit, then the
-/// tail probability, whether the record is explained, and the optima its
-/// best-fit search ended in.
+/// tail probabilities of its misfit, its best fit's improvement and its
+/// best fit's misfit,
+/// whether the record is explained, and the optima its best-fit search
+/// ended in.
 fn check_header(outputs: &[String]) -> Vec<String> {
     let mut header = Vec::new();
     for y in outputs {
@@ -261,6 +271,8 @@ fn check_header(outputs: &[String]) -> Vec<String> {
     }
     header.extend([
         "check_tail_probability".into(),
+        "check_improvement_tail_probability".into(),
+        "check_best_fit_tail_probability".into(),
         "check_runs".into(),
         "model_consistent".into(),
         "loss_over_best".into(),
@@ -282,6 +294,8 @@ fn check_fields(outputs: usize, e: &RecordEstimate) -> Vec<String> {
                 fields.push(format_f64(*fit));
             }
             fields.push(format_f64(c.tail_probability));
+            fields.push(format_f64(c.improvement_tail_probability));
+            fields.push(format_f64(c.best_fit_tail_probability));
             fields.push(c.reference_runs.to_string());
             fields.push(c.model_consistent().to_string());
             fields.push(format_f64(c.loss_ratio));
@@ -294,6 +308,6 @@ fn check_fields(outputs: usize, e: &RecordEstimate) -> Vec<String> {
             fields.push(c.runner_up_ratio.map_or_else(String::new, format_f64));
             fields
         }
-        _ => vec![String::new(); 2 * outputs + 8],
+        _ => vec![String::new(); 2 * outputs + 10],
     }
 }
