@@ -7,12 +7,13 @@
 //! posterior's grid is simulated), and a second estimator may be set
 //! beside the first on the same records.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, Simulator};
+use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, IoData, Simulator};
+use twostage::sources::{ChartFiles, csv_rows::read_columns};
 use twostage::{ClassicMethod, EstimateWorkspace, Estimator};
 use twostage_baselines::{
     BayesCar, InitialCovariance, MethodSettings, RecordEstimator, classic_estimator,
@@ -141,14 +142,85 @@ fn estimates(estimator: &Estimator, records: &[twostage::models::IoData]) -> Res
         .collect::<Result<_, _>>()?)
 }
 
+/// Which records an estimator is tested on.
+pub(crate) struct TestRecords {
+    /// The built-in model (default: the estimator's).
+    pub(crate) model: Option<BuiltinModel>,
+    /// What steers the car.
+    pub(crate) steering: Steering,
+    /// How many fresh records.
+    pub(crate) count: usize,
+    /// Their seed.
+    pub(crate) seed: u64,
+    /// A chart folder whose records are tested instead of fresh ones.
+    pub(crate) chart: Option<PathBuf>,
+}
+
+/// The records of a chart folder and their truth, each checked to be
+/// steered by `given` where a manoeuvre is given (the Bayes posterior of
+/// the car is computed on that steering; the model's own input is taken
+/// as the records have it).
+fn chart_records(
+    dir: &Path,
+    simulator: &dyn Simulator,
+    given: Option<&[f64]>,
+) -> Result<(Vec<Vec<f64>>, Vec<IoData>)> {
+    let spec = simulator.spec();
+    let chart = ChartFiles::open(dir, spec)?;
+    let (mut truth, mut records) = (Vec::new(), Vec::new());
+    chart.for_each_record(spec, |row, record| {
+        truth.push(chart.theta(row).to_vec());
+        records.push(record.clone());
+        Ok(())
+    })?;
+    let differs = |r: &IoData, expected: &[f64]| {
+        r.input(0)
+            .iter()
+            .zip(expected)
+            .any(|(a, b)| (a - b).abs() > 1e-9 * (1.0 + b.abs()))
+    };
+    if let Some(k) = given.and_then(|expected| records.iter().position(|r| differs(r, expected))) {
+        bail!(
+            "{}: record {k}'s input is not the steering the Bayes posterior is computed on \
+             (--steering)",
+            dir.display()
+        );
+    }
+    Ok((truth, records))
+}
+
+/// Estimates of a chart's records from `twostage estimate`'s CSV, in the
+/// chart's order (its experiment ids the truth's).
+fn read_estimates(path: &Path, chart: &Path, names: &[String]) -> Result<Vec<Vec<f64>>> {
+    let id = ["experiment".to_string()];
+    let ids = read_columns(path, &id)?;
+    let truth_ids = read_columns(&chart.join("truth.csv"), &id)?;
+    if ids != truth_ids {
+        bail!(
+            "{}: its experiments are not {}'s, in its order",
+            path.display(),
+            chart.display()
+        );
+    }
+    let columns = read_columns(path, names)?;
+    Ok((0..ids[0].len())
+        .map(|i| columns.iter().map(|c| c[i]).collect())
+        .collect())
+}
+
 pub(crate) fn run(
     path: &Path,
     against: Option<&Path>,
-    model: Option<BuiltinModel>,
-    steering: Steering,
-    count: usize,
-    seed: u64,
+    test: TestRecords,
+    scored: &[PathBuf],
 ) -> Result<()> {
+    let TestRecords {
+        model,
+        steering,
+        count,
+        seed,
+        chart,
+    } = test;
     let load = |path: &Path| {
         Estimator::load(path).with_context(|| format!("reading the estimator {}", path.display()))
     };
@@ -174,7 +246,11 @@ pub(crate) fn run(
         ..BuiltinOverrides::default()
     };
     let simulator = kind.build_with(&overrides)?;
-    let (truth, records) = test_records(simulator.as_ref(), count, seed)?;
+    let (truth, records) = match &chart {
+        Some(dir) => chart_records(dir, simulator.as_ref(), given.as_deref())?,
+        None => test_records(simulator.as_ref(), count, seed)?,
+    };
+    let count = records.len();
     let bayes: Box<dyn RecordEstimator> = match given {
         Some(steering) => Box::new(BayesCar::on_steering(129, 65, steering)?),
         None => {
@@ -190,9 +266,21 @@ pub(crate) fn run(
     let start = Instant::now();
     let ts = estimates(&estimator, &records)?;
     let ts_seconds = start.elapsed().as_secs_f64();
-    let other = against
-        .map(|path| load(path).and_then(|e| estimates(&e, &records)))
-        .transpose()?;
+    let mut others: Vec<(String, Vec<Vec<f64>>)> = Vec::new();
+    if let Some(path) = against {
+        others.push((
+            path.display().to_string(),
+            load(path).and_then(|e| estimates(&e, &records))?,
+        ));
+    }
+    if let Some(dir) = &chart {
+        for path in scored {
+            others.push((
+                path.display().to_string(),
+                read_estimates(path, dir, estimator.param_names())?,
+            ));
+        }
+    }
     let start = Instant::now();
     let kept = posterior_cache::path(
         &crate::target_dir().join("bayes-gap"),
@@ -213,8 +301,12 @@ pub(crate) fn run(
                 (posterior, format!("in {seconds:.1} s"))
             }
         };
+    let source = match &chart {
+        Some(dir) => format!("the records of {}", dir.display()),
+        None => format!("fresh records, seed {seed}"),
+    };
     println!(
-        "{count} fresh {} records ({steering:?} steering, seed {seed}): {} in {ts_seconds:.2} s, \
+        "{count} {} records ({steering:?} steering, {source}): {} in {ts_seconds:.2} s, \
          the Bayes posterior mean {bayes_words}",
         simulator.spec().name(),
         path.display()
@@ -231,13 +323,15 @@ pub(crate) fn run(
              [{low:.3}, {high:.3}]",
             ts_rmse / bayes_rmse
         );
-        if let (Some(other), Some(other_path)) = (&other, against) {
+        for (label, other) in &others {
             let other_rmse = rmse(other, &truth, j, &all);
             let [low, high] = bootstrap_ratio(&ts, other, &truth, j, seed);
+            let [bayes_low, bayes_high] = bootstrap_ratio(other, &posterior, &truth, j, seed);
             println!(
-                "  {name}: {} RMSE {other_rmse:.5}; ratio {:.3} [{low:.3}, {high:.3}]",
-                other_path.display(),
-                ts_rmse / other_rmse
+                "  {name}: {label} RMSE {other_rmse:.5}; the estimator's over it {:.3} \
+                 [{low:.3}, {high:.3}]; it over Bayes {:.3} [{bayes_low:.3}, {bayes_high:.3}]",
+                ts_rmse / other_rmse,
+                other_rmse / bayes_rmse
             );
         }
     }
@@ -286,5 +380,57 @@ mod tests {
         // The first change steers left first (positive), 0.07 at most.
         assert!(u[75..225].iter().all(|v| v.abs() <= 0.07 + 1e-12));
         assert!(u[80] > 0.0 && u[355] < 0.0);
+    }
+
+    /// A chart's records are tested only on the steering the posterior is
+    /// computed on, and estimates only of the chart's own experiments.
+    #[test]
+    fn a_chart_of_another_steering_or_estimates_of_other_records_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let dwell = manoeuvre(Steering::SineWithDwell).unwrap();
+        let mut data = String::from("experiment,delta,a_y\n");
+        for (id, steering) in [(0, &dwell[..]), (1, &[0.0; CAR_SAMPLES][..])] {
+            for delta in steering {
+                data.push_str(&format!("{id},{delta},0.1\n"));
+            }
+        }
+        std::fs::write(dir.path().join("data.csv"), data).unwrap();
+        let truth = "experiment,pK1,pK2\n0,-35,-1.1\n1,-30,-1.0\n";
+        std::fs::write(dir.path().join("truth.csv"), truth).unwrap();
+        let overrides = BuiltinOverrides {
+            input: Some(InputSignal::fixed(dwell.clone()).unwrap()),
+            ..BuiltinOverrides::default()
+        };
+        let car = BuiltinModel::Pacejka.build_with(&overrides).unwrap();
+        let refused = chart_records(dir.path(), car.as_ref(), Some(&dwell)).unwrap_err();
+        assert!(
+            refused.to_string().contains("record 1's input"),
+            "{refused}"
+        );
+        // Its first record alone is steered so: read with its truth.
+        std::fs::write(
+            dir.path().join("truth.csv"),
+            "experiment,pK1,pK2\n0,-35,-1.1\n",
+        )
+        .unwrap();
+        let data = std::fs::read_to_string(dir.path().join("data.csv")).unwrap();
+        let first: String = data
+            .lines()
+            .take(1 + CAR_SAMPLES)
+            .map(|l| format!("{l}\n"))
+            .collect();
+        std::fs::write(dir.path().join("data.csv"), first).unwrap();
+        let (truth, records) = chart_records(dir.path(), car.as_ref(), Some(&dwell)).unwrap();
+        assert_eq!((truth, records.len()), (vec![vec![-35.0, -1.1]], 1));
+        let names = ["pK1".to_string(), "pK2".to_string()];
+        let estimates = dir.path().join("estimates.csv");
+        std::fs::write(&estimates, "experiment,pK1,pK2\n0,-34.5,-1.05\n").unwrap();
+        assert_eq!(
+            read_estimates(&estimates, dir.path(), &names).unwrap(),
+            vec![vec![-34.5, -1.05]]
+        );
+        std::fs::write(&estimates, "experiment,pK1,pK2\n7,-34.5,-1.05\n").unwrap();
+        let other = read_estimates(&estimates, dir.path(), &names).unwrap_err();
+        assert!(other.to_string().contains("not"), "{other}");
     }
 }

@@ -80,6 +80,17 @@ enum Command {
         /// Seed of the test records (kept apart from training seeds).
         #[arg(long, default_value_t = 2026)]
         seed: u64,
+        /// Test on the records of this chart folder (as `twostage simulate
+        /// --count --out-dir` writes it, steered as --steering says)
+        /// instead of fresh ones: so that `twostage estimate`'s own output
+        /// on them (--refine, --check) can be scored with --estimates.
+        #[arg(long)]
+        chart: Option<PathBuf>,
+        /// Estimates of the chart's records as `twostage estimate` writes
+        /// them (an `experiment` column and one per parameter, in the
+        /// chart's order), scored beside the estimator; repeatable.
+        #[arg(long, requires = "chart")]
+        estimates: Vec<PathBuf>,
     },
     /// The workspace's crates: lines, workspace dependencies, and circles
     /// among each crate's top-level modules (Markdown, for docs/crates.md).
@@ -229,13 +240,19 @@ fn main() -> ExitCode {
             steering,
             records,
             seed,
+            chart,
+            estimates,
         } => bayes_gap::run(
             &estimator,
             against.as_deref(),
-            model,
-            steering,
-            records,
-            seed,
+            bayes_gap::TestRecords {
+                model,
+                steering,
+                count: records,
+                seed,
+                chart,
+            },
+            &estimates,
         ),
     };
     match result {
