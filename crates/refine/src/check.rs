@@ -270,8 +270,9 @@ pub fn check_with(
 /// estimate and of its refinement share one search, and no descent runs
 /// here. The noise-free responses at the search's first start and at its
 /// best are read back from the search's residuals (its output errors on
-/// `record`), not simulated again: only the check's noisy runs, and a
-/// `theta` the search did not start from, are simulated.
+/// `record`), not simulated again: only the check's noisy runs, the `2q`
+/// noise-free points of the response's span at `theta` (one batch), and
+/// a `theta` the search did not start from, are simulated.
 ///
 /// # Errors
 /// As [`check_with`].

@@ -42,7 +42,8 @@ pub(crate) struct ResponseSpan {
 impl ResponseSpan {
     /// The span at `theta` on `record`'s input through `sim`'s output
     /// errors ([`OutputError`]: each output scaled by the record's own
-    /// spread), over the samples from `from` on of every output. A
+    /// spread), over the samples from `from` on of every output, the
+    /// differences kept inside the prior's box where `theta` is. A
     /// parameter that does not move those samples (its column within
     /// `1e-6` of the others' span) is left out: no fit gains by it.
     ///
@@ -59,8 +60,12 @@ impl ResponseSpan {
         let prior = sim.spec().prior();
         let q = prior.dim();
         let (zeros, ones) = (vec![0.0; q], vec![1.0; q]);
+        let unit = to_unit(prior, theta);
+        // Inside the prior's box the points stay in it; values checked
+        // outside it (given, not estimated) are differenced where they are.
+        let inside = unit.iter().all(|u| (0.0..=1.0).contains(u));
         let (differences, points) =
-            CentralDifferences::at(&to_unit(prior, theta), Some((&zeros, &ones)));
+            CentralDifferences::at(&unit, inside.then_some((&zeros[..], &ones[..])));
         let thetas: Vec<Vec<f64>> = points.iter().map(|p| to_theta(prior, p)).collect();
         let pairs: Vec<(&[f64], &IoData)> = thetas.iter().map(|t| (t.as_slice(), record)).collect();
         let mut values = vec![Vec::new(); pairs.len()];

@@ -320,3 +320,27 @@ fn a_poor_estimate_of_an_exact_model_is_not_excused_by_the_loss_ratio() {
         "{right:?}"
     );
 }
+
+/// The span of a gain's response, inside the prior's box and at a value
+/// checked outside it: either way the improvement of any residuals is the
+/// least-squares one, `(u'r)^2 / u'u` (the output's scale cancels).
+#[test]
+fn the_span_of_a_gain_improves_residuals_by_the_least_squares_amount() {
+    let n = 40;
+    let model = gain(n);
+    let u: Vec<f64> = (0..n).map(|t| ((t * 3) % 7) as f64 - 3.0).collect();
+    let y: Vec<f64> = u.iter().map(|u| 2.0 * u + 0.3).collect();
+    let record = IoData::siso(&u, &y).unwrap();
+    let r: Vec<f64> = (0..n).map(|t| ((t * 5) % 11) as f64 / 10.0 - 0.5).collect();
+    let ur: f64 = u.iter().zip(&r).map(|(a, b)| a * b).sum();
+    let uu: f64 = u.iter().map(|a| a * a).sum();
+    for theta in [2.0, 5.0, 5.5] {
+        let span = ResponseSpan::at(&model, &record, &[theta], 0).unwrap();
+        let found = span.improvement(&r);
+        assert!(
+            (found - ur * ur / uu).abs() < 1e-9 * (ur * ur / uu),
+            "at {theta}: {found} against {}",
+            ur * ur / uu
+        );
+    }
+}
