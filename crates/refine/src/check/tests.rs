@@ -59,6 +59,35 @@ fn gain(n: usize) -> Gain {
     Gain(spec)
 }
 
+/// A record of the gain model at `k` on the input `((7 t) mod 5) - 2`
+/// (values -2 to 2, each a fifth of the time: `u'u = 2 n`) with noise
+/// 0.1 from stream (`seed`, `experiment`), and that input.
+fn noisy_gain_record(n: usize, k: f64, seed: u64, experiment: u64) -> (Vec<f64>, IoData) {
+    let u: Vec<f64> = (0..n).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
+    let mut rng = experiment_rng(seed, experiment);
+    let y: Vec<f64> = u
+        .iter()
+        .map(|u| {
+            let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
+            k * u + 0.1 * e
+        })
+        .collect();
+    let record = IoData::siso(&u, &y).unwrap();
+    (u, record)
+}
+
+/// A check's verdict numbers, for a failing assertion's message.
+fn said(c: &RecordCheck) -> String {
+    format!(
+        "tail {} improvement {} best fit {} loss ratio {} runs {}",
+        c.tail_probability,
+        c.improvement_tail_probability,
+        c.best_fit_tail_probability,
+        c.loss_ratio,
+        c.reference_runs
+    )
+}
+
 #[test]
 fn the_fit_and_the_misfit_are_the_hand_computed_ones() {
     let model = gain(4);
@@ -133,21 +162,12 @@ fn the_fit_and_the_misfit_are_the_hand_computed_ones() {
 fn stopping_early_keeps_the_full_runs_verdict() {
     let n = 50;
     let model = gain(n);
-    let u: Vec<f64> = (0..n).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
     let (mut early, mut flagged, mut beaten) = (0, 0, 0);
     for k in 0..60u64 {
         // Records at the truth, then ever further off.
         let offset = 0.0015 * k as f64;
-        let mut rng = experiment_rng(41, k);
-        let y: Vec<f64> = u
-            .iter()
-            .map(|u| {
-                let e: f64 =
-                    rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
-                (2.0 + offset) * u + 0.1 * e
-            })
-            .collect();
-        let record = IoData::siso(&u, &y).unwrap();
+        let (u, record) = noisy_gain_record(n, 2.0 + offset, 41, k);
+        let y = record.output(0).to_vec();
         let check = check_record(&model, &record, &[2.0], 199, 5).unwrap();
         // The full run: 199 noisy records of streams (5, i), their mean
         // square misfit to the noise-free response 2 u, and their
@@ -231,25 +251,21 @@ fn stopping_early_keeps_the_full_runs_verdict() {
 /// explained.
 #[test]
 fn a_best_fit_beyond_the_noise_is_not_explained_though_the_misfit_is_typical() {
-    let n = 200;
-    let model = gain(n);
-    let u: Vec<f64> = (0..n).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
-    let mut rng = experiment_rng(8, 0);
-    let noise: Vec<f64> = (0..n)
-        .map(|_| {
-            0.1 * rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut rng)
-        })
-        .collect();
-    let y: Vec<f64> = u.iter().zip(&noise).map(|(u, e)| 2.0 * u + e).collect();
-    let record = IoData::siso(&u, &y).unwrap();
+    let model = gain(200);
+    let (_, record) = noisy_gain_record(200, 2.0, 8, 0);
     let at_truth = check_record(&model, &record, &[2.0], 199, 4).unwrap();
-    assert!(at_truth.explained(), "{at_truth:?}");
+    assert!(at_truth.explained(), "{}", said(&at_truth));
     let off = check_record(&model, &record, &[1.98], 199, 4).unwrap();
     assert!(
         off.model_consistent() && off.loss_ratio < NEAR_BEST_LOSS,
-        "{off:?}"
+        "{}",
+        said(&off)
     );
-    assert!(!off.as_good_as_best_fit() && !off.explained(), "{off:?}");
+    assert!(
+        !off.as_good_as_best_fit() && !off.explained(),
+        "{}",
+        said(&off)
+    );
     assert_eq!(off.reference_runs, 199);
 }
 
@@ -291,33 +307,26 @@ fn a_scoring_window_leaves_out_the_transient() {
 /// is not exact, the loss ratio alone would have called it explained.)
 #[test]
 fn a_poor_estimate_of_an_exact_model_is_not_excused_by_the_loss_ratio() {
-    let n = 5000;
-    let model = gain(n);
-    let u: Vec<f64> = (0..n).map(|t| ((t * 7) % 5) as f64 - 2.0).collect();
-    let mut rng = experiment_rng(9, 0);
-    let y: Vec<f64> = u
-        .iter()
-        .map(|u| {
-            let e: f64 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
-            2.0 * u + 0.1 * e
-        })
-        .collect();
-    let record = IoData::siso(&u, &y).unwrap();
+    let model = gain(5000);
+    let (_, record) = noisy_gain_record(5000, 2.0, 9, 0);
     let off = check_record(&model, &record, &[1.978], 199, 6).unwrap();
     assert!(
         !off.model_consistent() && off.loss_ratio < NEAR_BEST_LOSS,
-        "{off:?}"
+        "{}",
+        said(&off)
     );
     assert!(
         off.best_fit_consistent() && !off.as_good_as_best_fit(),
-        "{off:?}"
+        "{}",
+        said(&off)
     );
     assert!(!off.explained());
     // At the truth: explained, its best fit consistent too.
     let right = check_record(&model, &record, &[2.0], 199, 6).unwrap();
     assert!(
         right.best_fit_consistent() && right.explained(),
-        "{right:?}"
+        "{}",
+        said(&right)
     );
 }
 
