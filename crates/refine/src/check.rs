@@ -551,11 +551,11 @@ fn rank_among_own(
     // Sequentially (Besag and Clifford, 1991, Biometrika 78(2)): the runs
     // come in blocks ending at fixed counts, whatever the thread count, and
     // stop once STOP_EXCEEDANCES of them miss (the estimate's response and
-    // the best fit's) and improve by at least as much as the record, and so
-    // many that the full run's tail
-    // probabilities, at least (g + 1) / (noisy + 1), would be above the 1%
-    // level anyway: the verdicts are the full run's; only the reported
-    // probabilities are the coarser (g + 1) / (L + 1) of the L runs made.
+    // the best fit's) and improve by at least as much as the record, and
+    // so many that the full run's tail probabilities, at least (g + 1) /
+    // (noisy + 1), would be above the 1% level anyway: the verdicts are the
+    // full run's; only the reported probabilities are the coarser (g + 1)
+    // / (L + 1) of the L runs made.
     let ends = block_ends(noisy);
     let mut reference = runs(0, ends[0])?;
     // Each output's misfit in units of the model's own over the first

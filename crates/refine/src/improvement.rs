@@ -5,7 +5,7 @@
 //! `|P r|^2` with `P` the projection onto the span of the residuals'
 //! Jacobian at `theta` (the likelihood-ratio statistic of nonlinear least
 //! squares: Bates and Watts, Nonlinear Regression Analysis and Its
-//! Applications, 1988, sec. 2.3 and 6.1). The check ranks a record's own
+//! Applications, 1988, ch. 2). The check ranks a record's own
 //! improvement, its best fit's loss below the estimate's, among those of
 //! the model's noisy records at the estimate: an estimate the best fit
 //! beats by more than the noise would have been beaten is not the model's
