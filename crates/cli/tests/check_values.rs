@@ -111,6 +111,42 @@ fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
     assert!(unexplained >= 3, "{rows:?}");
     assert!(text(&out.stderr).contains("not explained"));
 
+    // Values 0.02 below the truths: on records 0 and 3 the misfit is still
+    // one the model's noise makes, but the best fit beats the values by
+    // more than that noise would (decision 073): not explained, and the
+    // warning says which test failed.
+    let near = dir.join("near.csv");
+    let below: String = truths
+        .iter()
+        .enumerate()
+        .map(|(i, t)| format!("{i},{}\n", t - 0.02))
+        .collect();
+    std::fs::write(&near, format!("experiment,theta\n{below}")).unwrap();
+    let out = twostage(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&near),
+        "--check",
+        "--check-sims",
+        "99",
+        path(&records),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows = table(&text(&out.stdout));
+    for i in [0, 3] {
+        let row = &rows[i];
+        assert_eq!(
+            (row["model_consistent"].as_str(), row["explained"].as_str()),
+            ("true", "false"),
+            "{row:?}"
+        );
+        let improvement: f64 = row["check_improvement_tail_probability"].parse().unwrap();
+        assert!(improvement <= 0.01, "{row:?}");
+    }
+    assert!(text(&out.stderr).contains("improves on the estimate"));
+
     // A file of several rows must have one per record: the record without
     // its row is named, the others are checked.
     let partial = dir.join("partial.csv");
