@@ -311,6 +311,12 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         "{header:?}\n{row:?}"
     );
     assert!(text(&out.stderr).contains("the model is not exact for this record"));
+    // Not even its best fit misses the record as the model's own records
+    // do: the model, not the estimate, is what falls short.
+    let best_fit: f64 = row[column("check_best_fit_tail_probability")]
+        .parse()
+        .unwrap();
+    assert!(best_fit <= 0.01, "{header:?}\n{row:?}");
     // And the refined interval says what it covers there.
     assert!(
         text(&out.stderr).contains("the refined interval covers this record's noise"),

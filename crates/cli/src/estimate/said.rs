@@ -109,13 +109,15 @@ impl<'a> Said<'a> {
             );
         }
         if let (Some(Ok(_)), Some(Ok(check))) = (&estimated.refined, &estimated.check)
-            && !check.model_consistent()
+            && !check.best_fit_consistent()
         {
             eprintln!(
                 "note: {file}: experiment {id}: the model does not make this record \
-                 exactly (model_consistent false): the refined interval covers this \
-                 record's noise about the model's best fit, not the error of the \
-                 model itself, so the plant's true values may lie outside it"
+                 exactly (not even its best fit misses it as the model's own records \
+                 do: check_best_fit_tail_probability {}): the refined interval covers \
+                 this record's noise about the model's best fit, not the error of the \
+                 model itself, so the plant's true values may lie outside it",
+                check.best_fit_tail_probability
             );
         }
     }
