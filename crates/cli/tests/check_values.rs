@@ -113,7 +113,7 @@ fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
 
     // Values 0.02 below the truths: on records 0 and 3 the misfit is still
     // one the model's noise makes, but the best fit beats the values by
-    // more than that noise would (decision 073): not explained, and the
+    // more than that noise would: not explained, and the
     // warning says which test failed.
     let near = dir.join("near.csv");
     let below: String = truths
