@@ -55,19 +55,24 @@ fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
     let dir = scratch("check-values");
     let data = records(&dir, 4);
     let (truth, records) = (data.join("truth.csv"), data.join("data.csv"));
-    let out = twostage(&[
-        "estimate",
-        "--model",
-        "benchmark",
-        "--at",
-        path(&truth),
-        "--check",
-        "--check-sims",
-        "99",
-        path(&records),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let rows = table(&text(&out.stdout));
+    // The values of a file checked against the records, 99 of the model's
+    // own records each: the table's rows and what stderr said.
+    let checked = |values: &Path| {
+        let out = twostage(&[
+            "estimate",
+            "--model",
+            "benchmark",
+            "--at",
+            path(values),
+            "--check",
+            "--check-sims",
+            "99",
+            path(&records),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        (table(&text(&out.stdout)), text(&out.stderr))
+    };
+    let (rows, _) = checked(&truth);
     let truth_rows = table(&std::fs::read_to_string(&truth).unwrap());
     assert_eq!(rows.len(), 4);
     for (row, truth) in rows.iter().zip(&truth_rows) {
@@ -93,28 +98,16 @@ fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
         -0.85
     };
     std::fs::write(&far, format!("theta\n{value}\n")).unwrap();
-    let out = twostage(&[
-        "estimate",
-        "--model",
-        "benchmark",
-        "--at",
-        path(&far),
-        "--check",
-        "--check-sims",
-        "99",
-        path(&records),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let rows = table(&text(&out.stdout));
+    let (rows, stderr) = checked(&far);
     assert_eq!(rows.len(), 4);
     let unexplained = rows.iter().filter(|r| r["explained"] == "false").count();
     assert!(unexplained >= 3, "{rows:?}");
-    assert!(text(&out.stderr).contains("not explained"));
+    assert!(stderr.contains("not explained"));
 
     // Values 0.02 below the truths: on records 0 and 3 the misfit is still
     // one the model's noise makes, but the best fit beats the values by
-    // more than that noise would: not explained, and the
-    // warning says which test failed.
+    // more than that noise would: not explained, and the warning says
+    // which test failed.
     let near = dir.join("near.csv");
     let below: String = truths
         .iter()
@@ -122,19 +115,7 @@ fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
         .map(|(i, t)| format!("{i},{}\n", t - 0.02))
         .collect();
     std::fs::write(&near, format!("experiment,theta\n{below}")).unwrap();
-    let out = twostage(&[
-        "estimate",
-        "--model",
-        "benchmark",
-        "--at",
-        path(&near),
-        "--check",
-        "--check-sims",
-        "99",
-        path(&records),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let rows = table(&text(&out.stdout));
+    let (rows, stderr) = checked(&near);
     for i in [0, 3] {
         let row = &rows[i];
         assert_eq!(
@@ -145,7 +126,7 @@ fn the_true_values_explain_their_records_and_wrong_ones_do_not() {
         let improvement: f64 = row["check_improvement_tail_probability"].parse().unwrap();
         assert!(improvement <= 0.01, "{row:?}");
     }
-    assert!(text(&out.stderr).contains("improves on the estimate"));
+    assert!(stderr.contains("improves on the estimate"));
 
     // A file of several rows must have one per record: the record without
     // its row is named, the others are checked.

@@ -31,8 +31,6 @@ pub(crate) struct ResponseSpan {
     columns: Vec<f64>,
     /// The residuals' rows the window keeps: from `from` in each output.
     rows: Vec<std::ops::Range<usize>>,
-    /// How many rows a column has.
-    length: usize,
     /// How many columns were kept.
     rank: usize,
     /// `L`, row-major `rank x rank`.
@@ -92,7 +90,6 @@ impl ResponseSpan {
     /// The span of `columns` (each as long as `rows` keep), dropping each
     /// column within `1e-6` of the span of those kept before it.
     fn of_columns(mut columns: Vec<Vec<f64>>, rows: Vec<std::ops::Range<usize>>) -> Self {
-        let length = rows.iter().map(ExactSizeIterator::len).sum();
         loop {
             let k = columns.len();
             let mut factor = vec![0.0; k * k];
@@ -106,7 +103,6 @@ impl ResponseSpan {
                     return Self {
                         columns: columns.concat(),
                         rows,
-                        length,
                         rank: k,
                         factor,
                     };
@@ -129,7 +125,7 @@ impl ResponseSpan {
             .collect();
         let mut z: Vec<f64> = self
             .columns
-            .chunks_exact(self.length.max(1))
+            .chunks_exact(kept.len().max(1))
             .take(self.rank)
             .map(|column| dot(column, &kept))
             .collect();
