@@ -21,18 +21,30 @@ use rayon::prelude::*;
 use super::network::{Problem, parameter_count};
 use super::training::same_bits;
 
-/// Columns of a Gram matrix per parallel task: each task owns its columns'
-/// lower part and sums over every sample in one fixed order.
+/// Rows of a product per parallel task (the gradient's `J'r`, the cross
+/// terms): each task sums over every sample in one fixed order.
 pub(super) const GRAM_TILE: usize = 16;
 
+/// Columns of an `n x n` Gram matrix per parallel task: each task owns its
+/// columns' lower part and sums over every sample in one fixed order.
+/// Each task packs the rows below its first column again, so narrow tiles
+/// spend their time copying; wide ones leave the cores unevenly loaded.
+/// About `n / 6` columns, a multiple of 16 from 16 to 96, balances the
+/// two. It depends on `n` alone, never on the thread count, so neither do
+/// the products' bits.
+pub(super) fn gram_tile(n: usize) -> usize {
+    (16 * ((n + 48) / 96)).clamp(16, 96)
+}
+
 /// The lower triangle of `scale A A'` for `a` (features x samples), by
-/// tiles of [`GRAM_TILE`] columns in parallel.
+/// tiles of [`gram_tile`] columns in parallel.
 fn lower_gram(a: MatRef<'_, f64>, scale: f64, out: MatMut<'_, f64>) {
     let n = a.nrows();
-    out.par_col_chunks_mut(GRAM_TILE)
+    let width = gram_tile(n);
+    out.par_col_chunks_mut(width)
         .enumerate()
         .for_each(|(tile, columns)| {
-            let first = tile * GRAM_TILE;
+            let first = tile * width;
             let width = columns.ncols();
             matmul(
                 columns.subrows_mut(first, n - first),
@@ -46,7 +58,7 @@ fn lower_gram(a: MatRef<'_, f64>, scale: f64, out: MatMut<'_, f64>) {
 }
 
 /// The lower triangle of `scale J'J` and `scale J'r` from `J'` (n x rows,
-/// column-major) and `r`, by tiles of [`GRAM_TILE`] columns in parallel.
+/// column-major) and `r`, by tiles of columns in parallel.
 pub(super) fn gram_products(
     jt: &[f64],
     res: &[f64],
@@ -341,7 +353,19 @@ mod tests {
     /// is not a multiple of the tile.
     #[test]
     fn gram_products_match_the_plain_sums() {
-        let (n, rows) = (2 * GRAM_TILE + 5, 53);
+        // Tiles of 16, 48 and 96 columns, each size leaving a ragged last
+        // tile.
+        for n in [2 * GRAM_TILE + 5, 301, 600] {
+            gram_products_match_the_plain_sums_at(n);
+        }
+        assert_eq!(
+            (gram_tile(37), gram_tile(301), gram_tile(600)),
+            (16, 48, 96)
+        );
+    }
+
+    fn gram_products_match_the_plain_sums_at(n: usize) {
+        let rows = 53;
         let value = |i: usize| ((i * 7919 + 13) % 101) as f64 / 50.0 - 1.0;
         let jt: Vec<f64> = (0..n * rows).map(value).collect();
         let res: Vec<f64> = (0..rows).map(|i| value(i + 5000)).collect();
