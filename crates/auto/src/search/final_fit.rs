@@ -47,7 +47,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         let scored = self.candidates[best].report.fit_rows;
         rows_for_final_fit(
             self.plan.seconds_left(),
-            (per_simulation, self.fit_estimate(best, scored), scored),
+            (per_simulation, self.further_estimate(best, scored), scored),
             self.cost_exponent(),
             chart_rows,
             cap.min(4 * chart_rows),
@@ -476,6 +476,14 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         }
     }
 
+    /// The seconds candidate `i`'s scored fit takes to train further on
+    /// `rows` rows: a fit anew's ([`Self::fit_estimate`]) for the networks
+    /// that go on, the kept restart of a best-of-restarts network
+    /// ([`trained_further_share`]).
+    pub(super) fn further_estimate(&self, i: usize, rows: usize) -> f64 {
+        self.fit_estimate(i, rows) * trained_further_share(&self.candidates[i].network)
+    }
+
     /// How a fit's time grows with its rows: as round 3 measured it, or
     /// [`ROWS_EXPONENT`].
     fn cost_exponent(&self) -> f64 {
@@ -509,6 +517,24 @@ pub(crate) fn network_for_rows(
         .and_then(|p| p.ensemble(true).check())
         .ok()?;
     Some((RegressorConfig::Mlp(averaged), width))
+}
+
+/// The share of a fit anew's work that training its fit further takes:
+/// a best-of-restarts network goes on from its kept restart alone (its
+/// restarts ran side by side on the machine's threads; the one left runs
+/// its products on them all), an ensemble from every member. A piecewise
+/// regressor's networks are restarted as its global network is.
+fn trained_further_share(network: &RegressorConfig) -> f64 {
+    let mlp = match network {
+        RegressorConfig::Mlp(m) => m,
+        RegressorConfig::Piecewise(p) => p.global(),
+        _ => return 1.0,
+    };
+    if mlp.params().is_ensemble() {
+        1.0
+    } else {
+        1.0 / mlp.params().n_restarts().max(1) as f64
+    }
 }
 
 /// The members of an ensemble configuration (1 for any other).

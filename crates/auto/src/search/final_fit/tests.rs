@@ -401,3 +401,46 @@ fn the_sized_network_competes_on_a_chart_where_larger_than_every_scored_one() {
         assert_eq!(hidden(search.rival(0, 32_000, 199)), None);
     });
 }
+
+/// The final fit trains the winner's scored fit further: a best-of-four
+/// network goes on from its one kept restart, a quarter of a fit anew's
+/// work, where an ensemble of four goes on with every member. At a cost
+/// growing as rows^2 the same time affords the first twice the records.
+#[test]
+fn the_final_fit_plans_its_records_for_the_restarts_that_go_on() {
+    let deadline = Instant::now() + Duration::from_secs(100);
+    let threads = rayon::current_num_threads() as f64;
+    // Seconds on 4000 rows such that 6000 rows of an ensemble trained
+    // further take 80% of the 100 s left: 1.25 s (6000 / 4000)^2 / threads.
+    let seconds = 0.8 * 100.0 * threads / (1.25 * 1.5 * 1.5);
+    let planned = |net: RegressorConfig| {
+        let mut rows = 0;
+        with_search_under(
+            (Budget::Seconds(100.0), Some(deadline)),
+            true,
+            4000,
+            |search, arx| {
+                search.candidates = vec![scored(&arx, net, 0.04, seconds)];
+                rows = search.final_rows(0, true, 0.0, usize::MAX);
+            },
+        );
+        rows as f64
+    };
+    let best_of_four = planned(network(&[20]).unwrap());
+    let ensemble = RegressorConfig::Mlp(
+        MlpParams::new(&[20])
+            .unwrap()
+            .ensemble(true)
+            .check()
+            .unwrap(),
+    );
+    let averaged = planned(ensemble);
+    assert!((averaged / 6000.0 - 1.0).abs() < 0.01, "{averaged}");
+    assert!(
+        (best_of_four / 12_000.0 - 1.0).abs() < 0.01,
+        "{best_of_four}"
+    );
+    // Pieces go on from their networks' kept restarts too.
+    let pieces = planned(pieces(4, &[20]).unwrap());
+    assert!((pieces / 12_000.0 - 1.0).abs() < 0.01, "{pieces}");
+}
