@@ -40,8 +40,8 @@ use sizing::{MIN_SEARCH_RECORDS, SizedRun, chart_memory_cap, open_run};
 
 use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
 pub use outcome::{
-    AutoOutcome, CandidateReport, CheaperTie, Continuation, FinalFit, FinalFits, RivalNetwork,
-    Status,
+    AutoOutcome, CandidateReport, CheaperTie, Continuation, EqualTime, FinalFit, FinalFits,
+    RivalNetwork, Status,
 };
 use search::{Scope, Search, Winner};
 
@@ -246,9 +246,10 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         search.round_two(&medium, &networks);
         let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
         let best = search.best(&budget)?;
+        let equal_time = search.equal_time(search.tied_best(&budget)?);
         let cheaper_tie = search
             .best_score()
-            .filter(|&top| top != best)
+            .filter(|&top| top != best && equal_time.is_none())
             .map(|best_score| CheaperTie {
                 picked: best,
                 best_score,
@@ -313,6 +314,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             rows_exponent: search.rows_exponent(),
             steps,
             cheaper_tie,
+            equal_time,
         })
     }
 }

@@ -116,6 +116,26 @@ pub struct AutoOutcome {
     /// Where the search picked a candidate over a better-scoring one that
     /// the seed alone could have ranked either way, for its lower cost.
     pub cheaper_tie: Option<CheaperTie>,
+    /// Where the search picked a single network over its restarts
+    /// averaged, which scored better on equal rows but would train
+    /// further on fewer records in the same time.
+    pub equal_time: Option<EqualTime>,
+}
+
+/// Round 3's averaged network passed over for the network it averages, at
+/// equal final-fit time: both indices in [`AutoOutcome::candidates`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EqualTime {
+    /// The single network, picked.
+    pub single: usize,
+    /// Its restarts averaged, the better score on the rows both were
+    /// scored on.
+    pub averaged: usize,
+    /// The single network's score projected onto the records its final
+    /// fit takes in the average's time.
+    pub projected: f64,
+    /// How many times the rows that is.
+    pub records_factor: f64,
 }
 
 /// A tie the search broke for the cheaper candidate: both indices in
@@ -159,7 +179,20 @@ impl std::fmt::Display for AutoOutcome {
         self.fmt_shortened_fit(f)?;
         self.fmt_round_three(f)?;
         self.fmt_final_fit(f)?;
-        if let Some(CheaperTie { picked, best_score }) = self.cheaper_tie
+        if let Some(e) = self.equal_time
+            && let (Some(p), Some(b)) = (
+                self.candidates.get(e.single),
+                self.candidates.get(e.averaged),
+            )
+        {
+            writeln!(
+                f,
+                "the search picked {} (score {:.4}) over its restarts averaged, {} ({:.4}): \
+                 trained further, the single network takes {:.1} times the records in the \
+                 average's time, where its learning curve projects {:.4}",
+                p.design, p.score, b.design, b.score, e.records_factor, e.projected
+            )?;
+        } else if let Some(CheaperTie { picked, best_score }) = self.cheaper_tie
             && let (Some(p), Some(b)) =
                 (self.candidates.get(picked), self.candidates.get(best_score))
         {

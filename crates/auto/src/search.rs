@@ -19,7 +19,7 @@ use crate::cost::{
     COST_MARGIN, MIN_TIE, PRODUCTS_EXPONENT, REFIT_SHARE, SIZED_SHARE, affordable_rows,
     fit_seconds, measured_exponent, round_two_floor, rows_growth, screening_rows,
 };
-use crate::{Budget, CandidateReport, Status};
+use crate::{Budget, CandidateReport, EqualTime, Status};
 pub(super) use final_fit::Winner;
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
 use twostage_sources::Progress;
@@ -105,6 +105,12 @@ pub(super) struct Search<'s, 'a, S: Simulator + ?Sized> {
     /// Round 1's wall seconds, and the seconds the search had left when it
     /// started, where it ran under a deadline.
     round_one_time: Option<(f64, f64)>,
+    /// Round 3's averaged network and the round-2 winner it averages (both
+    /// indices), where it was scored.
+    averaged_twin: Option<(usize, usize)>,
+    /// The round-2 winner's rows and score on half its rows, where round 3
+    /// measured them.
+    half_rows: Option<(usize, f64)>,
 }
 
 /// One candidate of a search: its report, its network as configured, its
@@ -127,6 +133,9 @@ enum TrialRole {
     HalfRows,
     /// Another structure built from the winner, which competes.
     Rival,
+    /// The winner's restarts averaged: a rival that competes with the
+    /// winner at equal final-fit time too ([`Search::equal_time`]).
+    Averaged,
     /// The winner at another seed: how much the seed alone moves it.
     OtherSeed,
 }
@@ -181,6 +190,8 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             rows_exponent: None,
             seed_spread: None,
             round_one_time: None,
+            averaged_twin: None,
+            half_rows: None,
         }
     }
 
@@ -358,7 +369,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             && let Ok(averaged) = mlp.params().clone().ensemble(true).check()
         {
             let averaged = RegressorConfig::Mlp(averaged);
-            trials.push(trial(&compressor, &averaged, TrialRole::Rival, rows));
+            trials.push(trial(&compressor, &averaged, TrialRole::Averaged, rows));
         }
         for seed_offset in [1, 2] {
             trials.push(Trial {
@@ -385,11 +396,14 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         for ((report, outcome), trial) in outcomes.into_iter().zip(trials) {
             let scored = report.status.is_scored();
             match trial.role {
-                TrialRole::Rival => {
+                TrialRole::Rival | TrialRole::Averaged => {
                     let seconds = scored.then_some(report.seconds);
                     self.record(report, outcome, trial.network);
                     if let Some(last) = self.candidates.last_mut() {
                         last.solo_seconds = seconds;
+                    }
+                    if scored && trial.role == TrialRole::Averaged {
+                        self.averaged_twin = Some((best, self.candidates.len() - 1));
                     }
                 }
                 // Skipped for time: nothing to say.
@@ -410,6 +424,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 .fold((f64::INFINITY, 0f64), |(lo, hi), &s| (lo.min(s), hi.max(s)));
             self.seed_spread = Some((hi - lo) / lo);
         }
+        self.half_rows = half;
         if !seed_seconds.is_empty() {
             let seconds = seed_seconds.iter().sum::<f64>() / seed_seconds.len() as f64;
             self.candidates[best].solo_seconds = Some(seconds);
@@ -465,7 +480,16 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// 0.2% over `[20]` at 4.6 times its cost and left no time for either.
     /// With one parameter only the best score is beaten by none. Without
     /// a deadline (a budget in simulations), the best score.
+    /// Round 3's averaged network loses to the network it averages where
+    /// the records grow and the single network trains further on more of
+    /// them in the same time ([`Self::equal_time`]).
     pub(super) fn best(&self, budget: &Budget) -> Result<usize> {
+        let chosen = self.tied_best(budget)?;
+        Ok(self.equal_time(chosen).map_or(chosen, |e| e.single))
+    }
+
+    /// [`Self::best`] before the comparison at equal final-fit time.
+    pub(super) fn tied_best(&self, budget: &Budget) -> Result<usize> {
         let none_fitted = || {
             Error::setting(
                 "budget",
@@ -506,6 +530,35 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .ok_or_else(none_fitted)
     }
 
+    /// Where `chosen` is round 3's averaged network and the records grow
+    /// under a deadline, its comparison with the network it averages at
+    /// equal final-fit time: the final fit trains its pick further on
+    /// more records, every member of an average but only the kept restart
+    /// of the single network, so in the average's time the single network
+    /// takes `members^(1 / exponent)` times the records (its cost growing
+    /// as rows^exponent). Its score there is projected along its learning
+    /// curve's last step (half its rows to all of them) as a power of the
+    /// rows; where that beats the average's score, the single network
+    /// ships. None where no such comparison applies or the average wins
+    /// it.
+    pub(super) fn equal_time(&self, chosen: usize) -> Option<EqualTime> {
+        let (single, averaged) = self.averaged_twin?;
+        if chosen != averaged || !self.plan.grows || self.plan.deadline.is_none() {
+            return None;
+        }
+        let (_, half) = self.half_rows?;
+        let own = self.report(single).score;
+        let members = final_fit::network_members(&self.candidates[averaged].network) as f64;
+        let records_factor = members.powf(1.0 / self.cost_exponent());
+        let projected = projected_score((half, own), records_factor);
+        (projected < self.report(averaged).score).then_some(EqualTime {
+            single,
+            averaged,
+            projected,
+            records_factor,
+        })
+    }
+
     /// The best-scoring candidate among those fitted on the most rows.
     pub(super) fn best_score(&self) -> Option<usize> {
         self.on_most_rows()
@@ -536,6 +589,17 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     pub(super) fn rows_exponent(&self) -> Option<f64> {
         self.rows_exponent
     }
+}
+
+/// A score of `own` on some rows and `half` on half of them, projected
+/// onto `factor` times the rows as a power of the rows through the two
+/// (a learning curve that stopped falling stays where it is).
+pub(crate) fn projected_score((half, own): (f64, f64), factor: f64) -> f64 {
+    let per_doubling = (own / half).min(1.0);
+    if !(per_doubling.is_finite() && factor >= 1.0) {
+        return own;
+    }
+    own * per_doubling.powf(factor.log2())
 }
 
 /// Whether RMSEs `a` are lower than `b` on every parameter (of as many

@@ -486,7 +486,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
 
     /// How a fit's time grows with its rows: as round 3 measured it, or
     /// [`ROWS_EXPONENT`].
-    fn cost_exponent(&self) -> f64 {
+    pub(super) fn cost_exponent(&self) -> f64 {
         self.rows_exponent.unwrap_or(ROWS_EXPONENT)
     }
 }
@@ -538,7 +538,7 @@ fn trained_further_share(network: &RegressorConfig) -> f64 {
 }
 
 /// The members of an ensemble configuration (1 for any other).
-fn network_members(network: &RegressorConfig) -> usize {
+pub(super) fn network_members(network: &RegressorConfig) -> usize {
     match network {
         RegressorConfig::Mlp(m) if m.params().is_ensemble() => m.params().n_restarts(),
         _ => 1,

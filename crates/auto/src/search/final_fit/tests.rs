@@ -444,3 +444,75 @@ fn the_final_fit_plans_its_records_for_the_restarts_that_go_on() {
     let pieces = planned(pieces(4, &[20]).unwrap());
     assert!((pieces / 12_000.0 - 1.0).abs() < 0.01, "{pieces}");
 }
+
+/// A learning curve's last step, projected: 0.045 on half the rows and
+/// 0.0425 on all of them is a factor 0.0425 / 0.045 a doubling, so four
+/// times the rows give 0.0425 (0.0425 / 0.045)^2; a curve that stopped
+/// falling stays.
+#[test]
+fn a_score_is_projected_along_the_learning_curves_last_step() {
+    let projected = super::super::projected_score((0.045, 0.0425), 4.0);
+    let by_hand = 0.0425 * (0.0425f64 / 0.045).powi(2);
+    assert!(
+        (projected - by_hand).abs() < 1e-15,
+        "{projected} vs {by_hand}"
+    );
+    assert!((by_hand - 0.037_909).abs() < 1e-6);
+    let stays = |half, factor| super::super::projected_score((half, 0.0425), factor).to_bits();
+    assert_eq!(stays(0.040, 4.0), 0.0425f64.to_bits());
+    assert_eq!(stays(0.045, 1.0), 0.0425f64.to_bits());
+}
+
+/// An average of four [20, 20] that scores 0.0421 against the single
+/// network's 0.0425, which scored 0.0451 on half its rows. Trained further, the single network goes on from one
+/// restart, so in the average's time it takes 4^(1/2) = 2 times the
+/// records (its cost as rows^2), where its curve projects
+/// 0.0425^2 / 0.0451 = 0.0400: it ships. An average that beats that
+/// projection ships, and so does any average where the records cannot
+/// grow.
+#[test]
+fn an_average_competes_with_its_single_network_at_equal_final_fit_time() {
+    let deadline = Instant::now() + Duration::from_secs(100);
+    let budget = Budget::Seconds(100.0);
+    let averaged = |score| {
+        let mut pick = usize::MAX;
+        let mut told = None;
+        with_search_under((budget, Some(deadline)), true, 4000, |search, arx| {
+            let ensemble = MlpParams::new(&[20, 20])
+                .unwrap()
+                .ensemble(true)
+                .check()
+                .unwrap();
+            search.candidates = vec![
+                scored(&arx, network(&[20, 20]).unwrap(), 0.0425, 17.4),
+                scored(&arx, RegressorConfig::Mlp(ensemble), score, 9.3),
+            ];
+            search.averaged_twin = Some((0, 1));
+            search.half_rows = Some((2000, 0.0451));
+            pick = search.best(&budget).unwrap();
+            told = search.equal_time(1);
+        });
+        (pick, told)
+    };
+    let (pick, told) = averaged(0.0421);
+    assert_eq!(pick, 0);
+    let told = told.unwrap();
+    assert!((told.records_factor - 2.0).abs() < 1e-12);
+    assert!((told.projected - 0.0425 * 0.0425 / 0.0451).abs() < 1e-12);
+    assert_eq!(averaged(0.0395), (1, None));
+    // On a chart that cannot grow the final fit takes no more records.
+    with_search_under((budget, Some(deadline)), false, 4000, |search, arx| {
+        let ensemble = MlpParams::new(&[20, 20])
+            .unwrap()
+            .ensemble(true)
+            .check()
+            .unwrap();
+        search.candidates = vec![
+            scored(&arx, network(&[20, 20]).unwrap(), 0.0425, 17.4),
+            scored(&arx, RegressorConfig::Mlp(ensemble), 0.0421, 9.3),
+        ];
+        search.averaged_twin = Some((0, 1));
+        search.half_rows = Some((2000, 0.0451));
+        assert_eq!(search.best(&budget).unwrap(), 1);
+    });
+}
