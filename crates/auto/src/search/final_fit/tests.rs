@@ -451,14 +451,15 @@ fn the_final_fit_plans_its_records_for_the_restarts_that_go_on() {
 /// falling stays.
 #[test]
 fn a_score_is_projected_along_the_learning_curves_last_step() {
-    let projected = super::super::projected_score((0.045, 0.0425), 4.0);
+    let projected = super::super::equal_time::projected_score((0.045, 0.0425), 4.0);
     let by_hand = 0.0425 * (0.0425f64 / 0.045).powi(2);
     assert!(
         (projected - by_hand).abs() < 1e-15,
         "{projected} vs {by_hand}"
     );
     assert!((by_hand - 0.037_909).abs() < 1e-6);
-    let stays = |half, factor| super::super::projected_score((half, 0.0425), factor).to_bits();
+    let stays =
+        |half, factor| super::super::equal_time::projected_score((half, 0.0425), factor).to_bits();
     assert_eq!(stays(0.040, 4.0), 0.0425f64.to_bits());
     assert_eq!(stays(0.045, 1.0), 0.0425f64.to_bits());
 }
