@@ -371,7 +371,16 @@ pub(crate) fn read_records<'py>(
     };
     let read = py
         .detach(|| twostage::sources::record_file::read(&path, &format))
-        .map_err(|e| pyo3::exceptions::PyOSError::new_err(e.to_string()))?;
+        .map_err(|e| {
+            // A file that opens but is no record file (its header, a row)
+            // is the caller's data, not the system's: ValueError, with
+            // the row named as in every other message.
+            if e.row.is_some() {
+                pyo3::exceptions::PyValueError::new_err(e.to_string())
+            } else {
+                pyo3::exceptions::PyOSError::new_err(e.to_string())
+            }
+        })?;
     let mut records = Vec::new();
     let mut failed = Vec::new();
     for r in read {

@@ -107,6 +107,14 @@ def test_a_file_of_records_is_estimated_as_the_cli_estimates_it(benchmark):
                               "--format", "json", data))
     read = estimator.read_records(data)
     assert read["failed"] == [] and [r[0] for r in read["records"]] == ["0", "1", "2"]
+    # A file that reads but holds no records is the caller's data: its
+    # row named in a ValueError; one that cannot be read, an OSError.
+    headless = folder / "headless.csv"
+    headless.write_text("speed,angle\n1,2\n")
+    with pytest.raises(ValueError, match="headless.csv.*(line|row) 1"):
+        estimator.read_records(headless)
+    with pytest.raises(OSError):
+        estimator.read_records(folder / "missing.csv")
     assert all(np.array_equal(r[2], y[k]) for k, r in enumerate(read["records"]))
     ours = estimator.estimate_records([(u_, y_) for _, u_, y_ in read["records"]],
                                       experiments=[r[0] for r in read["records"]],

@@ -348,7 +348,8 @@ class Estimator:
         list of ``(experiment, u, y)`` ready for ``estimate_records``, and
         ``failed``, pairs of an experiment and why it could not be read
         (file, row, column). Raises OSError when the file cannot be read
-        at all."""
+        at all, ValueError (its row named) when it reads but is not a file
+        of records (a header without the signals' columns, say)."""
         records, failed = self._native.read_records(str(path))
         return {"records": records, "failed": failed}
 
