@@ -117,8 +117,8 @@ pub struct AutoOutcome {
     /// the seed alone could have ranked either way, for its lower cost.
     pub cheaper_tie: Option<CheaperTie>,
     /// Where the search picked a single network over its restarts
-    /// averaged, which scored better on equal rows but would train
-    /// further on fewer records in the same time.
+    /// averaged, which it would otherwise have picked, because in the
+    /// same time the single network trains further on more records.
     pub equal_time: Option<EqualTime>,
 }
 
@@ -128,8 +128,7 @@ pub struct AutoOutcome {
 pub struct EqualTime {
     /// The single network, picked.
     pub single: usize,
-    /// Its restarts averaged, the better score on the rows both were
-    /// scored on.
+    /// Its restarts averaged, the search's pick before this comparison.
     pub averaged: usize,
     /// The single network's score projected onto the records its final
     /// fit takes in the average's time.
