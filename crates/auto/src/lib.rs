@@ -244,7 +244,8 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         run.progress().begin(Stage::Fitting, 0);
         search.round_one(&compressors, &medium);
         search.round_two(&medium, &networks);
-        let (seed_scores, half_rows) = search.round_three(search.best(&budget)?);
+        let seed_scores = search.round_three(search.best(&budget)?);
+        let half_rows = search.half_rows();
         let best = search.best(&budget)?;
         let equal_time = search.equal_time(search.tied_best(&budget)?);
         let cheaper_tie = search

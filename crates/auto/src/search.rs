@@ -327,11 +327,11 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// which competes), and the winner at two other seeds (which does not:
     /// picking the luckiest seed would fit the held-out rows; it says how
     /// much the seed matters), and the winner on half its rows (does more
-    /// data pay?). Returns the winner's scores at its own and the other
-    /// seeds, and its rows and score on half the rows.
-    pub(super) fn round_three(&mut self, best: usize) -> (Vec<f64>, Option<(usize, f64)>) {
+    /// data pay? kept for [`Self::half_rows`]). Returns the winner's
+    /// scores at its own and the other seeds.
+    pub(super) fn round_three(&mut self, best: usize) -> Vec<f64> {
         let Some((compressor, _)) = self.candidates[best].fitted.clone() else {
-            return (Vec::new(), None);
+            return Vec::new();
         };
         let network = self.candidates[best].network.clone();
         let winner = &self.candidates[best].report;
@@ -433,7 +433,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 .zip(half)
                 .map(|(t, (r, _))| measured_exponent((r, t), (rows, seconds)));
         }
-        (scores, half)
+        scores
     }
 
     fn record(
@@ -554,6 +554,12 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// the seed's measured spread, at least [`MIN_TIE`].
     fn tie(&self) -> f64 {
         self.seed_spread.unwrap_or(0.0).max(MIN_TIE)
+    }
+
+    /// The round-2 winner's rows and score on half its rows, where round 3
+    /// measured them.
+    pub(super) fn half_rows(&self) -> Option<(usize, f64)> {
+        self.half_rows
     }
 
     /// How the round-2 winner's fit time grows with its rows, where round 3

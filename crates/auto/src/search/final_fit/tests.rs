@@ -465,9 +465,10 @@ fn a_score_is_projected_along_the_learning_curves_last_step() {
 }
 
 /// An average of four [20, 20] that scores 0.0421 against the single
-/// network's 0.0425, which scored 0.0451 on half its rows. Trained further, the single network goes on from one
-/// restart, so in the average's time it takes 4^(1/2) = 2 times the
-/// records (its cost as rows^2), where its curve projects
+/// network's 0.0425, which scored 0.0451 on half its rows. Trained
+/// further, the single network goes on from one restart, so in the
+/// average's time it takes 4^(1/2) = 2 times the records (its cost as
+/// rows^2), where its curve projects
 /// 0.0425^2 / 0.0451 = 0.0400: it ships. An average that beats that
 /// projection ships, and so does any average where the records cannot
 /// grow.
