@@ -188,15 +188,26 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             self.plan.budget_words()
         ));
         // A rival trained further shares the time left: the winner's fit
-        // stops at its middle at the latest; a fit anew at the deadline; a
-        // network sized for the records, fitted anew and grown while time
-        // is left, at an eighth (each wave of members it
-        // gains pays more than the winner's further epochs).
+        // stops at its share ([`winner_share`]: both fits go about as far);
+        // beside a fit anew at the deadline; beside a network sized for
+        // the records, fitted anew and grown while time is left, at an
+        // eighth (each wave of members it gains pays more than the
+        // winner's further epochs).
         let now = Instant::now();
         let left = deadline.saturating_duration_since(now);
         let winner_stop = match rival {
             Some(r) if matches!(r.of, RivalNetwork::SizedForRows { .. }) => now + left / 8,
-            Some(r) if !r.anew => now + left / 2,
+            Some(Rival {
+                of: RivalNetwork::Candidate(i),
+                anew: false,
+                ..
+            }) => {
+                let share = winner_share(
+                    self.further_estimate(best, train_rows),
+                    self.further_estimate(*i, train_rows),
+                );
+                now + left.mul_f64(share)
+            }
             _ => deadline,
         };
         let continued = winner.regressor_config.fit_from(
@@ -536,6 +547,25 @@ fn trained_further_share(network: &RegressorConfig) -> f64 {
         1.0 / mlp.params().n_restarts().max(1) as f64
     }
 }
+
+/// The share of the time left the winner's fit trained further takes
+/// beside a larger network trained further, from their estimated
+/// `winner` and `rival` seconds: in proportion to its cost, so that both
+/// fits go about as far, between [`MIN_WINNER_SHARE`] and a half. A fit
+/// trained further keeps its best held-out weights, so a short one is
+/// never worse than its start.
+fn winner_share(winner: f64, rival: f64) -> f64 {
+    let share = winner / (winner + rival);
+    if share.is_finite() {
+        share.clamp(MIN_WINNER_SHARE, 0.5)
+    } else {
+        0.5
+    }
+}
+
+/// The least share of the time left the winner's fit trained further
+/// takes beside a larger network's: cost estimates can be wrong.
+const MIN_WINNER_SHARE: f64 = 0.1;
 
 /// The members of an ensemble configuration (1 for any other).
 pub(super) fn network_members(network: &RegressorConfig) -> usize {

@@ -507,3 +507,15 @@ fn an_average_competes_with_its_single_network_at_equal_final_fit_time() {
     // On a chart that cannot grow the final fit takes no more records.
     assert_eq!(averaged(0.0421, false), (1, None));
 }
+
+/// Beside a larger network trained further, the winner's fit takes the
+/// time in proportion to its cost: 4 s against 20 s is a sixth, so that
+/// both go about as far; never less than a tenth nor more than a half.
+#[test]
+fn the_winner_and_a_larger_rival_share_the_time_as_their_costs_do() {
+    assert!((super::winner_share(4.0, 20.0) - 1.0 / 6.0).abs() < 1e-12);
+    assert!((super::winner_share(1.0, 99.0) - 0.1).abs() < 1e-12);
+    assert!((super::winner_share(30.0, 20.0) - 0.5).abs() < 1e-12);
+    assert!((super::winner_share(f64::NAN, 20.0) - 0.5).abs() < 1e-12);
+    assert!((super::winner_share(0.0, 0.0) - 0.5).abs() < 1e-12);
+}
