@@ -43,7 +43,7 @@ pub use outcome::{
     AutoOutcome, CandidateReport, CheaperTie, Continuation, EqualTime, FinalFit, FinalFits,
     RivalNetwork, Status,
 };
-use search::{Scope, Search, Winner};
+use search::{Scope, Search, Winner, slowest_pace};
 
 /// How much the search may spend.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -274,6 +274,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
             _ => (0, 0),
         };
         let final_start = Instant::now();
+        let scored_rows = search.scored_rows(best);
         let mut winner = search.winner(best, more.as_ref().map(|(c, _)| c), rows)?;
         // A larger network fitted anew on the final records may ship in
         // the winner's place.
@@ -282,14 +283,16 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         // hundred rows can sit inside the seed's spread, where each step
         // measures for itself on records no fit saw.
         let (steps, step_simulations, step_failures) = if sized.simulates {
+            let pace = final_pace(
+                &winner.final_fit,
+                scored_rows,
+                final_start.elapsed().as_secs_f64(),
+            );
             anytime_steps(
                 &sized,
                 &search,
                 &mut winner,
-                (
-                    sized.m + added_simulations,
-                    final_start.elapsed().as_secs_f64(),
-                ),
+                (sized.m + added_simulations, pace),
             )?
         } else {
             (Vec::new(), 0, 0)
@@ -440,7 +443,7 @@ fn anytime_steps<S: Simulator + ?Sized>(
     sized: &SizedRun<'_, S>,
     search: &Search<'_, '_, S>,
     winner: &mut Winner,
-    (mut next, mut last_seconds): (usize, f64),
+    (mut next, mut pace): (usize, f64),
 ) -> Result<(Vec<Continuation>, usize, usize)> {
     let run = &sized.run;
     let per_simulation = sized.per_simulation.unwrap_or(f64::INFINITY);
@@ -448,7 +451,7 @@ fn anytime_steps<S: Simulator + ?Sized>(
     let (mut steps, mut simulations, mut failures) = (Vec::new(), 0, 0);
     let mut unpaid = 0;
     loop {
-        let added = search.next_step_records(winner, last_seconds, per_simulation, cap);
+        let added = search.next_step_records(winner, pace, per_simulation, cap);
         if added == 0 {
             break;
         }
@@ -461,7 +464,11 @@ fn anytime_steps<S: Simulator + ?Sized>(
         failures += failed;
         let begun = Instant::now();
         let step = search.step(winner, &more, added)?;
-        last_seconds = begun.elapsed().as_secs_f64();
+        pace = slowest_pace(
+            Some(pace),
+            begun.elapsed().as_secs_f64(),
+            more.records.len(),
+        );
         steps.push(step);
         let end;
         (end, unpaid) = steps_end(&step, unpaid);
@@ -470,6 +477,20 @@ fn anytime_steps<S: Simulator + ?Sized>(
         }
     }
     Ok((steps, simulations, failures))
+}
+
+/// The seconds a record added cost the winner's final fit, which took
+/// `seconds` in all: a fit anew's time over its rows, a fit trained
+/// further's over the rows its start, fitted on `scored_rows`, had not
+/// seen; over all its rows where it added none (the fit it was scored
+/// with ships).
+fn final_pace(final_fit: &FinalFit, scored_rows: usize, seconds: f64) -> f64 {
+    let added = match *final_fit {
+        FinalFit::Anew { rows } => rows,
+        ref trained => trained.rows().saturating_sub(scored_rows),
+    };
+    let counted = if added == 0 { final_fit.rows() } else { added };
+    slowest_pace(None, seconds, counted)
 }
 
 /// Anytime steps in a row that do not pay and end the steps: one step's
@@ -528,6 +549,22 @@ mod tests {
             after,
             stopped,
         }
+    }
+
+    #[test]
+    fn the_final_fits_pace_counts_the_records_its_start_had_not_seen() {
+        let pace = |fit: FinalFit| final_pace(&fit, 1000, 12.0).to_bits();
+        // Trained further from a fit on 1000 rows to 4000: 3000 added.
+        let further = FinalFit::TrainedFurther {
+            rows: 4000,
+            stopped: false,
+        };
+        assert_eq!(pace(further), 0.004f64.to_bits());
+        // A fit anew saw none of its rows before.
+        assert_eq!(pace(FinalFit::Anew { rows: 4000 }), 0.003f64.to_bits());
+        // The fit it was scored with ships: its rows, not a division by
+        // the none it added.
+        assert_eq!(pace(FinalFit::AsScored { rows: 1000 }), 0.012f64.to_bits());
     }
 
     #[test]

@@ -21,6 +21,7 @@ use crate::cost::{
     fit_seconds, measured_exponent, round_two_floor, rows_growth, screening_rows,
 };
 use crate::{Budget, CandidateReport, Status};
+pub(crate) use anytime::slowest_pace;
 pub(super) use final_fit::Winner;
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
 use twostage_sources::Progress;
@@ -463,6 +464,11 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             .collect();
         ranked.sort_by(|&a, &b| self.report(a).score.total_cmp(&self.report(b).score));
         ranked
+    }
+
+    /// The rows candidate `i` was fitted and scored on.
+    pub(super) fn scored_rows(&self, i: usize) -> usize {
+        self.report(i).fit_rows
     }
 
     /// Candidate `i`'s report.

@@ -32,16 +32,17 @@ const MIN_LEFT_SHARE: f64 = 0.05;
 
 impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// How many records to simulate for one more step of the winner's
-    /// final fit, whose last fit took `last_seconds`: none unless the
-    /// source grows under a time budget, the last fit ended before the
-    /// deadline, at least [`MIN_LEFT_SHARE`] of the budget is left, and the
-    /// records stay below `cap`. The step's records follow from the last
-    /// fit's time (a fit trained further costs about as much per record),
-    /// `per_simulation` seconds each to simulate.
+    /// final fit: none unless the source grows under a time budget, the
+    /// last fit ended before the deadline, at least [`MIN_LEFT_SHARE`] of
+    /// the budget is left, and the records stay below `cap`. The step adds
+    /// as many as its share of the time left fits at `per_added` seconds
+    /// a record added ([`slowest_pace`]: a fit trained further spends its
+    /// iterations on what the records it goes on from did not show), each
+    /// simulated in `per_simulation` seconds.
     pub(crate) fn next_step_records(
         &self,
         winner: &Winner,
-        last_seconds: f64,
+        per_added: f64,
         per_simulation: f64,
         cap: usize,
     ) -> usize {
@@ -56,8 +57,9 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             return 0;
         }
         let rows = winner.features.nrows();
+        let affordable = STEP_SHARE * left / per_added.max(1e-9);
         let growth =
-            (STEP_SHARE * left / last_seconds.max(1e-3)).clamp(MIN_STEP_GROWTH, MAX_STEP_GROWTH);
+            (1.0 + affordable / rows.max(1) as f64).clamp(MIN_STEP_GROWTH, MAX_STEP_GROWTH);
         let mut target = ((rows as f64 * growth) as usize).min(cap);
         // The simulations must leave most of the time to the fit.
         let simulable = (0.25 * left / per_simulation.max(1e-9)) as usize;
@@ -135,6 +137,17 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     }
 }
 
+/// The seconds a record added costs the final fit's steps: the slowest
+/// pace yet, `pace` (`None` before any fit), or this fit's, which took
+/// `seconds` for `added` records it had not trained on. A step whose fit
+/// went on from a fit already near its minimum ends in a few iterations;
+/// priced from it alone, the next step can double the records and be cut
+/// by the deadline.
+pub(crate) fn slowest_pace(pace: Option<f64>, seconds: f64, added: usize) -> f64 {
+    let this = seconds / added.max(1) as f64;
+    pace.map_or(this, |p| p.max(this))
+}
+
 #[cfg(test)]
 mod tests {
     // A panic is how a test fails.
@@ -151,6 +164,7 @@ mod tests {
     use twostage_train::TwoStage;
 
     use super::super::{Scope, Search, Winner, compress_all};
+    use super::STEP_SHARE;
     use crate::{Budget, FinalFit};
 
     const CHART: usize = 1500;
@@ -236,6 +250,21 @@ mod tests {
             search.next_step_records(&winner, 1.0, 1e-6, rows + 1200),
             1200
         );
+        // A step adds what its share of the time left fits at the pace a
+        // record added: 0.8 of the records here, within a second's drift.
+        let left = search.plan.seconds_left();
+        let pace = STEP_SHARE * left / (0.8 * rows as f64);
+        let added = search.next_step_records(&winner, pace, 1e-6, usize::MAX);
+        assert!(
+            (rows * 8 / 10 - 1..=rows * 8 / 10).contains(&added),
+            "{added}"
+        );
+        // At ten times that pace a step would add a quarter (the least a
+        // step grows), too few to compare on here: none.
+        assert_eq!(
+            search.next_step_records(&winner, 10.0 * pace, 1e-6, usize::MAX),
+            0
+        );
         // Too few to compare a step on, or a fit the deadline stopped: none.
         assert_eq!(search.next_step_records(&winner, 1.0, 1e-6, rows + 999), 0);
         winner.final_fit = FinalFit::TrainedFurther {
@@ -280,6 +309,25 @@ mod tests {
             assert_eq!(now, before);
         }
         assert!(!step.stopped);
+    }
+
+    #[test]
+    fn the_pace_of_a_record_added_is_the_slowest_seen() {
+        use super::slowest_pace;
+        // The first fit's own: 12 s for 3000 records added.
+        assert_eq!(slowest_pace(None, 12.0, 3000).to_bits(), 0.004f64.to_bits());
+        // A step that ended in a few iterations leaves the pace as it was.
+        assert_eq!(
+            slowest_pace(Some(0.004), 2.0, 4000).to_bits(),
+            0.004f64.to_bits()
+        );
+        // A slower one sets it.
+        assert_eq!(
+            slowest_pace(Some(0.004), 30.0, 5000).to_bits(),
+            0.006f64.to_bits()
+        );
+        // No record added counts as one, not as a division by zero.
+        assert_eq!(slowest_pace(None, 0.5, 0).to_bits(), 0.5f64.to_bits());
     }
 
     /// The test's start fit again (the same seed gives the same bits).
