@@ -177,6 +177,17 @@ pub(crate) fn rows_for_final_fit(
     low
 }
 
+/// The seconds a record added costs the final fit's steps: the slowest
+/// pace yet, `pace` (`None` before any fit), or this fit's, which took
+/// `seconds` for `added` records it had not trained on. A step whose fit
+/// went on from a fit already near its minimum ends in a few iterations;
+/// priced from it alone, the next step can double the records and be cut
+/// by the deadline.
+pub(crate) fn slowest_pace(pace: Option<f64>, seconds: f64, added: usize) -> f64 {
+    let this = seconds / added.max(1) as f64;
+    pace.map_or(this, |p| p.max(this))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -273,5 +284,23 @@ mod tests {
             rows_for_final_fit(f64::INFINITY, (1e-3, fit, 80), ROWS_EXPONENT, 80, 320),
             80
         );
+    }
+
+    #[test]
+    fn the_pace_of_a_record_added_is_the_slowest_seen() {
+        // The first fit's own: 12 s for 3000 records added.
+        assert_eq!(slowest_pace(None, 12.0, 3000).to_bits(), 0.004f64.to_bits());
+        // A step that ended in a few iterations leaves the pace as it was.
+        assert_eq!(
+            slowest_pace(Some(0.004), 2.0, 4000).to_bits(),
+            0.004f64.to_bits()
+        );
+        // A slower one sets it.
+        assert_eq!(
+            slowest_pace(Some(0.004), 30.0, 5000).to_bits(),
+            0.006f64.to_bits()
+        );
+        // No record added counts as one, not as a division by zero.
+        assert_eq!(slowest_pace(None, 0.5, 0).to_bits(), 0.5f64.to_bits());
     }
 }

@@ -39,11 +39,12 @@ mod sizing;
 use sizing::{MIN_SEARCH_RECORDS, SizedRun, chart_memory_cap, open_run};
 
 use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
+use cost::slowest_pace;
 pub use outcome::{
     AutoOutcome, CandidateReport, CheaperTie, Continuation, EqualTime, FinalFit, FinalFits,
     RivalNetwork, Status,
 };
-use search::{Scope, Search, Winner, slowest_pace};
+use search::{Scope, Search, Winner};
 
 /// How much the search may spend.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

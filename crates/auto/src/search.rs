@@ -21,7 +21,6 @@ use crate::cost::{
     fit_seconds, measured_exponent, round_two_floor, rows_growth, screening_rows,
 };
 use crate::{Budget, CandidateReport, Status};
-pub(crate) use anytime::slowest_pace;
 pub(super) use final_fit::Winner;
 use twostage_estimator::space::{rows_to_estimates, to_learning_space};
 use twostage_sources::Progress;

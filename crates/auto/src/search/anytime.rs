@@ -36,7 +36,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
     /// last fit ended before the deadline, at least [`MIN_LEFT_SHARE`] of
     /// the budget is left, and the records stay below `cap`. The step adds
     /// as many as its share of the time left fits at `per_added` seconds
-    /// a record added ([`slowest_pace`]: a fit trained further spends its
+    /// a record added ([`crate::cost::slowest_pace`]: a fit trained further spends its
     /// iterations on what the records it goes on from did not show), each
     /// simulated in `per_simulation` seconds.
     pub(crate) fn next_step_records(
@@ -135,17 +135,6 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         }
         Ok(step)
     }
-}
-
-/// The seconds a record added costs the final fit's steps: the slowest
-/// pace yet, `pace` (`None` before any fit), or this fit's, which took
-/// `seconds` for `added` records it had not trained on. A step whose fit
-/// went on from a fit already near its minimum ends in a few iterations;
-/// priced from it alone, the next step can double the records and be cut
-/// by the deadline.
-pub(crate) fn slowest_pace(pace: Option<f64>, seconds: f64, added: usize) -> f64 {
-    let this = seconds / added.max(1) as f64;
-    pace.map_or(this, |p| p.max(this))
 }
 
 #[cfg(test)]
@@ -309,25 +298,6 @@ mod tests {
             assert_eq!(now, before);
         }
         assert!(!step.stopped);
-    }
-
-    #[test]
-    fn the_pace_of_a_record_added_is_the_slowest_seen() {
-        use super::slowest_pace;
-        // The first fit's own: 12 s for 3000 records added.
-        assert_eq!(slowest_pace(None, 12.0, 3000).to_bits(), 0.004f64.to_bits());
-        // A step that ended in a few iterations leaves the pace as it was.
-        assert_eq!(
-            slowest_pace(Some(0.004), 2.0, 4000).to_bits(),
-            0.004f64.to_bits()
-        );
-        // A slower one sets it.
-        assert_eq!(
-            slowest_pace(Some(0.004), 30.0, 5000).to_bits(),
-            0.006f64.to_bits()
-        );
-        // No record added counts as one, not as a division by zero.
-        assert_eq!(slowest_pace(None, 0.5, 0).to_bits(), 0.5f64.to_bits());
     }
 
     /// The test's start fit again (the same seed gives the same bits).
