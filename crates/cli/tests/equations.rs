@@ -443,3 +443,102 @@ fn estimate_judges_each_record_s_input_against_the_family() {
         "{said}"
     );
 }
+
+/// The first column after `experiment` of each row of an estimate CSV.
+fn first_parameter(stdout: &str) -> Vec<f64> {
+    stdout
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect()
+}
+
+/// A refined estimate is the likelihood's mean within the prior's box near
+/// the best fit: a time constant that noisy records leave loose at its
+/// prior's upper bound is pulled inside, where the best fit sits on the
+/// bound; records that pin it down keep the best fit.
+#[test]
+fn a_refined_estimate_leaves_a_bound_the_record_does_not_pin_down() {
+    let dir = scratch("equations-refined-bound");
+    let states = "states = [{ name = \"x\", initial = 0, derivative = \"(u - x) / tau\" }]\n";
+    let lag = lag_file(&dir, &format!("{states}outputs = {{ y = \"x\" }}\n"));
+    let equations = std::fs::read_to_string(&lag).unwrap();
+    let (mut refined_at_bound, mut pinned) = (0, 0);
+    // Loose records at the bound; records that pin it down inside the box.
+    for (noise, truth, loose) in [("1.0", "2.0", true), ("0.001", "1.25", false)] {
+        let model = dir.join(format!("lag-{noise}.toml"));
+        std::fs::write(
+            &model,
+            format!("{equations}\n[noise]\noutput_sd = {noise}\n"),
+        )
+        .unwrap();
+        let estimator = dir.join(format!("lag-{noise}.tsest"));
+        let out = twostage(&[
+            "train",
+            "--model-file",
+            path(&model),
+            "--compress",
+            "arx:1,1",
+            "--fit",
+            "linear",
+            "--sims",
+            "200",
+            "--validate",
+            "0",
+            "--calibrate",
+            "200",
+            "--quiet",
+            "--out",
+            path(&estimator),
+        ]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let records = dir.join(format!("records-{noise}"));
+        for i in 0..8 {
+            let out = twostage(&[
+                "simulate",
+                "--model-file",
+                path(&model),
+                "--theta",
+                truth,
+                "--experiment",
+                &i.to_string(),
+                "--seed",
+                "4",
+                "--out",
+                path(&records.with_extension(format!("{i}.csv"))),
+            ]);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+        }
+        let files: Vec<String> = (0..8)
+            .map(|i| path(&records.with_extension(format!("{i}.csv"))).to_string())
+            .collect();
+        let estimate = |extra: &[&str]| {
+            let mut args = vec!["estimate", "--model-file", path(&model)];
+            args.extend_from_slice(extra);
+            args.extend(files.iter().map(String::as_str));
+            let out = twostage(&args);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+            first_parameter(&text(&out.stdout))
+        };
+        let best = estimate(&["--method", "oe", "--starts", "4"]);
+        let refined = estimate(&["--estimator", path(&estimator), "--refine"]);
+        for (b, r) in best.iter().zip(&refined) {
+            assert!((0.5..=2.0).contains(r), "{r} outside the prior's box");
+            if loose && *b >= 2.0 - 1e-9 {
+                assert!(*r < 2.0 - 1e-3, "best fit {b} on the bound, refined {r}");
+                refined_at_bound += 1;
+            }
+            if !loose {
+                assert!(
+                    (r - b).abs() < 1e-6 * b,
+                    "pinned: best fit {b}, refined {r}"
+                );
+                pinned += 1;
+            }
+        }
+    }
+    assert!(
+        refined_at_bound >= 1 && pinned == 8,
+        "{refined_at_bound} at the bound"
+    );
+}

@@ -102,8 +102,9 @@ impl EstimateRefiner {
     /// calibrated interval (the model's own grid), its interval the
     /// posterior mean plus or minus `z` posterior sds; with one, by an
     /// output-error fit through the file's simulator from the estimate and
-    /// two starts inside its interval, its interval a sandwich from the
-    /// record's residuals.
+    /// two starts inside its interval, the estimate the likelihood's mean
+    /// within the prior's box near the best fit, its interval a sandwich
+    /// from the record's residuals.
     ///
     /// ```
     /// use twostage::TwoStage;
@@ -337,9 +338,13 @@ impl EstimateRefiner {
     /// The output-error refinement of `items` at best fits already
     /// searched (one per item, as [`crate::search_best_fits`] gives
     /// them from [`EstimateRefiner::search_starts`]): each refined
-    /// estimate is its record's best fit, with its own interval from the
-    /// loss's curvature there and the residuals' variance and
-    /// autocorrelation, in one batch. No descent runs: the check of a
+    /// estimate is the mean near its record's best fit of the likelihood
+    /// within the prior's box
+    /// ([`twostage_refine::LocalUncertainty::mean_within_box`]: the best
+    /// fit itself where the record pins a parameter down, pulled inside
+    /// where it leaves one loose by a bound of the box), with its
+    /// own interval from the loss's curvature there and the residuals'
+    /// variance and autocorrelation, in one batch. No descent runs: the check of a
     /// two-stage estimate and its refinement share the search. A
     /// posterior refinement refines as [`EstimateRefiner::refine_many`]
     /// does and reads no search.
@@ -351,6 +356,7 @@ impl EstimateRefiner {
         let How::OutputError(fit) = &self.how else {
             return self.refine_many(items);
         };
+        let prior = fit.model().prior();
         let refined: Vec<(&IoData, &[f64])> = items
             .iter()
             .zip(bests)
@@ -367,13 +373,17 @@ impl EstimateRefiner {
                 let local = local
                     .next()
                     .unwrap_or_else(|| unreachable!("one per refined record"));
+                let theta = local.as_ref().map_or_else(
+                    |_| best.theta.clone(),
+                    |u| u.mean_within_box(&best.theta, prior.lower(), prior.upper()),
+                );
                 Ok(RefinedEstimate {
                     half_widths: local
                         .as_ref()
                         .map(|u| u.half_widths(self.alpha))
                         .map_err(Clone::clone),
                     correlation: local.ok().map(|u| u.correlation),
-                    theta: best.theta.clone(),
+                    theta,
                     stop: Some(best.stop),
                     optima: Some((found.optima.len(), found.runner_up_ratio())),
                 })

@@ -58,7 +58,11 @@ pub struct EstimateArgs {
     /// model (--model-file): an output-error fit, Levenberg-Marquardt on
     /// the record minus the noise-free simulation, in the prior's box,
     /// from the estimate and two starts inside its interval (their
-    /// simulations batched together); its own interval in _lo/_hi;
+    /// simulations batched together), the estimate the mean of the
+    /// likelihood near its best fit within the prior's box (the best fit
+    /// where the record pins a parameter down, further inside where it
+    /// leaves one loose by a bound of the box); its own interval in
+    /// _lo/_hi;
     /// `refine_stop` says why the best descent stopped, `optima` and `runner_up_over_best`
     /// what its search over the prior found. `--refine=auto`: check every
     /// two-stage estimate (as --check) and refine only the records it

@@ -285,7 +285,9 @@ class Estimator:
         estimate --refine`` does: a built-in model's posterior mean under
         its exact likelihood, or with a model file an output-error fit
         through its simulator from the estimate and two starts in its
-        interval. Returns a dict: ``theta``; ``lower`` and ``upper``, the
+        interval, the estimate the mean of the likelihood near its best
+        fit within the prior's box (the best fit where the record pins a
+        parameter down). Returns a dict: ``theta``; ``lower`` and ``upper``, the
         refined estimate's own interval at the estimator's level (None,
         with ``interval_error`` saying why, where the record does not
         determine a parameter); ``correlation`` [q, q]; ``stop``, why the
