@@ -78,6 +78,7 @@ pub use input_design::{Drawn, Grid, Level, MAX_BURSTS, Phases, Taper};
 pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
+    truncated_standard_mean,
 };
 pub use ode::{OdeSystem, Rk4};
 pub use origin::RecordsOrigin;

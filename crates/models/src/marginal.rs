@@ -361,6 +361,30 @@ pub fn standard_normal_quantile(p: f64) -> f64 {
     x - u / (1.0 + 0.5 * x * u)
 }
 
+/// The mean of the standard normal conditioned on `[a, b]`, `(phi(a) -
+/// phi(b)) / (Phi(b) - Phi(a))` (Johnson, Kotz and Balakrishnan,
+/// Continuous Univariate Distributions 1, 2nd ed., 1994, sec. 13.10);
+/// `None` where the interval holds no mass the doubles can tell.
+///
+/// ```
+/// use twostage_models::truncated_standard_mean;
+/// // Above 0: the half-normal's mean, sqrt(2 / pi).
+/// let half = truncated_standard_mean(0.0, f64::INFINITY).unwrap();
+/// assert!((half - (2.0 / std::f64::consts::PI).sqrt()).abs() < 1e-15);
+/// // Symmetric bounds: 0.
+/// assert_eq!(truncated_standard_mean(-1.5, 1.5), Some(0.0));
+/// ```
+pub fn truncated_standard_mean(a: f64, b: f64) -> Option<f64> {
+    // With the interval in the upper tail, mirror it, as the quantile does.
+    if a > 0.0 {
+        return truncated_standard_mean(-b, -a).map(|m| -m);
+    }
+    let density = |z: f64| (-0.5 * z * z).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let mass = standard_normal_cdf(b) - standard_normal_cdf(a);
+    let mean = (density(a) - density(b)) / mass;
+    (mass > 0.0 && mean.is_finite()).then_some(mean.clamp(a, b))
+}
+
 /// The quantile at `p` of the standard normal conditioned on `[a, b]`.
 fn truncated_standard_quantile(a: f64, b: f64, p: f64) -> f64 {
     // With the interval in the upper tail, mirror it: the lower tail's CDF

@@ -17,7 +17,7 @@
 
 use twostage_fit::CentralDifferences;
 use twostage_kernels::cholesky::{PivotRule, cholesky_in_place, solve_cholesky_in_place};
-use twostage_models::{ArNoise, IoData, standard_normal_cdf};
+use twostage_models::{ArNoise, IoData, truncated_standard_mean};
 
 use crate::error::RefineError as Error;
 use crate::lockstep::{to_theta, to_unit};
@@ -323,27 +323,14 @@ fn sandwich(
     Ok((covariance, largest_order))
 }
 
-/// The mean of `N(at, sd^2)` truncated to `[low, high]` (Johnson, Kotz and
-/// Balakrishnan, Continuous Univariate Distributions 1, 2nd ed., 1994,
-/// sec. 13.10): `at + sd (phi(a) - phi(b)) / (Phi(b) - Phi(a))` with `a`
-/// and `b` the bounds in widths from `at`; `None` without a width or an
-/// interval the normal puts mass in.
+/// The mean of `N(at, sd^2)` truncated to `[low, high]`; `None` without a
+/// width or an interval the normal puts mass in.
 fn truncated_normal_mean(at: f64, sd: f64, low: f64, high: f64) -> Option<f64> {
     if !(sd.is_finite() && sd > 0.0 && at.is_finite() && low < high) {
         return None;
     }
-    let (a, b) = ((low - at) / sd, (high - at) / sd);
-    let density = |z: f64| (-0.5 * z * z).exp();
-    // Both bounds in the upper tail: the survival function keeps the
-    // difference's digits (a best fit lies in its box, so this is rare).
-    let mass = if a > 0.0 {
-        standard_normal_cdf(-a) - standard_normal_cdf(-b)
-    } else {
-        standard_normal_cdf(b) - standard_normal_cdf(a)
-    };
-    let shift = (density(a) - density(b)) / ((2.0 * std::f64::consts::PI).sqrt() * mass);
-    let mean = at + sd * shift;
-    (mass > 0.0 && mean.is_finite()).then(|| mean.clamp(low, high))
+    let shift = truncated_standard_mean((low - at) / sd, (high - at) / sd)?;
+    Some((at + sd * shift).clamp(low, high))
 }
 
 #[cfg(test)]
