@@ -342,10 +342,10 @@ impl EstimateRefiner {
     /// within the prior's box
     /// ([`twostage_refine::LocalUncertainty::mean_within_box`]: the best
     /// fit itself where the record pins a parameter down, pulled inside
-    /// where it leaves one loose by a bound of the box), with its
-    /// own interval from the loss's curvature there and the residuals'
-    /// variance and autocorrelation, in one batch. No descent runs: the check of a
-    /// two-stage estimate and its refinement share the search. A
+    /// where it leaves one loose by a bound of the box), with its own
+    /// interval from the loss's curvature there and the residuals'
+    /// variance and autocorrelation, in one batch. No descent runs: the
+    /// check of a two-stage estimate and its refinement share the search. A
     /// posterior refinement refines as [`EstimateRefiner::refine_many`]
     /// does and reads no search.
     pub fn refine_at(
