@@ -12,9 +12,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, IoData, Simulator};
+use twostage::models::{
+    BuiltinModel, BuiltinOverrides, Drawn, InputSignal, IoData, Simulator, experiment_rng,
+};
 use twostage::sources::{ChartFiles, csv_rows::read_columns};
-use twostage::{ClassicMethod, EstimateWorkspace, Estimator};
+use twostage::{Assessment, ClassicMethod, EstimateWorkspace, Estimator, interval_in_box};
 use twostage_baselines::{
     BayesCar, InitialCovariance, MethodSettings, RecordEstimator, classic_estimator,
 };
@@ -31,6 +33,14 @@ pub(crate) enum Steering {
     Iso3888,
     /// A sine with dwell (FMVSS 126).
     SineWithDwell,
+    /// A step steer (ISO 7401): a fast ramp to a held steer.
+    StepSteer,
+    /// A slalom: four cycles of one sine, steered on without rest.
+    Slalom,
+    /// A slow ramp to a steer held near the tires' saturation.
+    RampHold,
+    /// Band-limited random steering, one draw every record shares.
+    Random,
 }
 
 /// The car's sample time and record length (docs/../spec/pacejka-car.md).
@@ -55,10 +65,16 @@ fn sine_period(t: f64, start: f64, duration: f64, amplitude: f64) -> f64 {
 /// car's linear gain of about 35 m/s^2 per rad (0.07 and 0.10 rad). The
 /// sine with dwell of FMVSS 126 steers a 0.7 Hz sine, holds its second
 /// peak 0.5 s, and returns; at the chicane's 0.2 rad amplitude, from 1 s.
-fn manoeuvre(steering: Steering) -> Option<Vec<f64>> {
+/// The step steer of ISO 7401 ramps in 0.15 s (a steering-wheel rate
+/// within its 200 to 500 deg/s at a 15:1 ratio) to 0.1 rad, about
+/// 3.5 m/s^2, and holds it; the slalom steers 0.1 rad at 0.5 Hz for 8 s;
+/// the ramp reaches 0.25 rad (near the tires' limit of about mu g over the
+/// linear gain) in 4 s and holds it; the random steering is band-limited
+/// noise below 1 Hz of RMS 0.05 rad, drawn once.
+fn manoeuvre(steering: Steering) -> Result<Option<Vec<f64>>> {
     let at = |k: usize| k as f64 * CAR_SAMPLE_TIME;
     let values: Vec<f64> = match steering {
-        Steering::Chicane => return None,
+        Steering::Chicane => return Ok(None),
         Steering::Iso3888 => (0..CAR_SAMPLES)
             .map(|k| sine_period(at(k), 1.5, 3.0, 0.07) - sine_period(at(k), 7.0, 2.5, 0.10))
             .collect(),
@@ -83,9 +99,39 @@ fn manoeuvre(steering: Steering) -> Option<Vec<f64>> {
                 })
                 .collect()
         }
+        Steering::StepSteer => (0..CAR_SAMPLES)
+            .map(|k| 0.1 * ((at(k) - 1.0) / 0.15).clamp(0.0, 1.0))
+            .collect(),
+        Steering::Slalom => (0..CAR_SAMPLES)
+            .map(|k| {
+                let t = at(k) - 1.0;
+                if (0.0..8.0).contains(&t) {
+                    0.1 * (std::f64::consts::TAU * 0.5 * t).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+        Steering::RampHold => (0..CAR_SAMPLES)
+            .map(|k| 0.25 * ((at(k) - 1.0) / 4.0).clamp(0.0, 1.0))
+            .collect(),
+        Steering::Random => {
+            let noise =
+                InputSignal::filtered_noise(0.0, Drawn::fixed(1.0), 4, Drawn::fixed(0.05), 0.0)?;
+            let mut values = vec![0.0; CAR_SAMPLES];
+            noise.fill(
+                CAR_SAMPLE_TIME,
+                &mut experiment_rng(RANDOM_STEERING_SEED, 0),
+                &mut values,
+            )?;
+            values
+        }
     };
-    Some(values)
+    Ok(Some(values))
 }
+
+/// The seed of the random steering's one draw.
+const RANDOM_STEERING_SEED: u64 = 7401;
 
 /// Root mean squared error of parameter j over the records `rows` (an
 /// index may repeat: a bootstrap resample).
@@ -130,16 +176,70 @@ fn bootstrap_ratio(
 }
 
 fn estimates(estimator: &Estimator, records: &[twostage::models::IoData]) -> Result<Vec<Vec<f64>>> {
-    let q = estimator.param_names().len();
+    Ok(assessments(estimator, records)?
+        .into_iter()
+        .map(|a| a.theta)
+        .collect())
+}
+
+fn assessments(estimator: &Estimator, records: &[IoData]) -> Result<Vec<Assessment>> {
     Ok(records
         .par_iter()
         .map_init(EstimateWorkspace::new, |work, record| {
-            let mut theta = vec![0.0; q];
-            estimator
-                .estimate_into(record.inputs(), record.outputs(), work, &mut theta)
-                .map(|_| theta)
+            estimator.assess_with(record.inputs(), record.outputs(), work)
         })
         .collect::<Result<_, _>>()?)
+}
+
+/// What the estimator says of its own estimates on the test records: the
+/// share of records each parameter's interval covers the truth of, and
+/// the share it flags out of distribution (by the features, by the input).
+fn said_of_itself(estimator: &Estimator, assessed: &[Assessment], truth: &[Vec<f64>]) -> String {
+    let n = assessed.len().max(1) as f64;
+    let share = |count: usize| count as f64 / n;
+    let mut words = Vec::new();
+    if let Some(level) = estimator.intervals().map(|c| 1.0 - c.alpha()) {
+        let covered: Vec<String> = estimator
+            .param_names()
+            .iter()
+            .enumerate()
+            .map(|(j, name)| {
+                let inside = assessed
+                    .iter()
+                    .zip(truth)
+                    .filter(|(a, t)| {
+                        a.interval_half_widths().is_some_and(|w| {
+                            let (low, high) =
+                                interval_in_box(&a.theta, w, estimator.lower(), estimator.upper());
+                            (low[j]..=high[j]).contains(&t[j])
+                        })
+                    })
+                    .count();
+                format!("{name} {:.3}", share(inside))
+            })
+            .collect();
+        words.push(format!(
+            "{:.0}% intervals cover {}",
+            100.0 * level,
+            covered.join(", ")
+        ));
+    }
+    let flagged = assessed.iter().filter(|a| a.out_of_distribution()).count();
+    let by_features = assessed.iter().filter(|a| a.features_outside()).count();
+    let by_input = assessed
+        .iter()
+        .filter(|a| !a.input_deviations.is_empty())
+        .count();
+    let by_shape = assessed.iter().filter(|a| a.input_shape_outside()).count();
+    words.push(format!(
+        "flagged out of distribution {:.3} (features {:.3}, input's summary {:.3}, input's \
+         shape {:.3})",
+        share(flagged),
+        share(by_features),
+        share(by_input),
+        share(by_shape)
+    ));
+    words.join("; ")
 }
 
 /// Which records an estimator is tested on.
@@ -237,7 +337,7 @@ pub(crate) fn run(
             ),
         },
     };
-    let given = manoeuvre(steering);
+    let given = manoeuvre(steering)?;
     if given.is_some() && kind != BuiltinModel::Pacejka {
         bail!("--steering drives the car (--model pacejka), not the {kind}");
     }
@@ -264,8 +364,9 @@ pub(crate) fn run(
         }
     };
     let start = Instant::now();
-    let ts = estimates(&estimator, &records)?;
+    let assessed = assessments(&estimator, &records)?;
     let ts_seconds = start.elapsed().as_secs_f64();
+    let ts: Vec<Vec<f64>> = assessed.iter().map(|a| a.theta.clone()).collect();
     let mut others: Vec<(String, Vec<Vec<f64>>)> = Vec::new();
     if let Some(path) = against {
         others.push((
@@ -311,6 +412,7 @@ pub(crate) fn run(
         simulator.spec().name(),
         path.display()
     );
+    println!("  {}", said_of_itself(&estimator, &assessed, &truth));
     let all: Vec<usize> = (0..records.len()).collect();
     for (j, name) in estimator.param_names().iter().enumerate() {
         let (ts_rmse, bayes_rmse) = (
@@ -344,7 +446,7 @@ mod tests {
 
     #[test]
     fn the_sine_with_dwell_rises_falls_dwells_and_returns() {
-        let u = manoeuvre(Steering::SineWithDwell).unwrap();
+        let u = manoeuvre(Steering::SineWithDwell).unwrap().unwrap();
         let at = |t: f64| u[(t / CAR_SAMPLE_TIME).round() as usize];
         assert_eq!(u.len(), CAR_SAMPLES);
         // Still before 1 s and after the manoeuvre's 1 / 0.7 + 0.5 s.
@@ -365,7 +467,7 @@ mod tests {
 
     #[test]
     fn the_double_lane_change_steers_out_and_back() {
-        let u = manoeuvre(Steering::Iso3888).unwrap();
+        let u = manoeuvre(Steering::Iso3888).unwrap().unwrap();
         let largest = u.iter().fold(0.0f64, |m, v| m.max(*v));
         let smallest = u.iter().fold(0.0f64, |m, v| m.min(*v));
         assert!((largest - 0.10).abs() < 1e-3 && (smallest + 0.10).abs() < 1e-3);
@@ -387,7 +489,7 @@ mod tests {
     #[test]
     fn a_chart_of_another_steering_or_estimates_of_other_records_are_refused() {
         let dir = tempfile::tempdir().unwrap();
-        let dwell = manoeuvre(Steering::SineWithDwell).unwrap();
+        let dwell = manoeuvre(Steering::SineWithDwell).unwrap().unwrap();
         let mut data = String::from("experiment,delta,a_y\n");
         for (id, steering) in [(0, &dwell[..]), (1, &[0.0; CAR_SAMPLES][..])] {
             for delta in steering {
