@@ -29,6 +29,11 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
             "priors": e.marginals(),
             "validation": e.validation(),
             "input_family": e.input_family().map(|f| f.describe(&e.signal_names().inputs)),
+            "input_shapes": e.input_shapes().map(|s| serde_json::json!({
+                "records": s.len(),
+                "lags": twostage::models::SHAPE_LAGS,
+                "threshold": s.threshold(),
+            })),
         });
         writeln!(out, "{}", serde_json::to_string_pretty(&summary)?)?;
         return Ok(());
@@ -148,6 +153,18 @@ pub(crate) fn trust_summary(e: &Estimator) -> String {
         for line in family.describe(&e.signal_names().inputs) {
             let _ = writeln!(text, "    {line}");
         }
+    }
+    if let Some(shapes) = e.input_shapes() {
+        let _ = writeln!(
+            text,
+            "  input shapes of {} held-out records (autocorrelations at lags {:?} samples): a \
+             record's input beyond distance {:.3} of their nearest is out of distribution \
+             ({:.0}% of theirs lie within)",
+            shapes.len(),
+            twostage::models::SHAPE_LAGS,
+            shapes.threshold(),
+            100.0 * twostage::models::SHAPE_LEVEL
+        );
     }
     text
 }

@@ -126,7 +126,8 @@ fn train_inspect_and_estimate_recorded_experiments() {
         "ARX(5, 5)",
         "m = 500 records",
         "seed 3",
-        "format version 5",
+        "format version 6",
+        "input shapes of 200 held-out records",
         "input family of its 400 held-out records",
         "u: mean ",
         "RMSE <= ",
@@ -161,7 +162,8 @@ fn train_inspect_and_estimate_recorded_experiments() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "experiment,theta,theta_lo,theta_hi,feature_distance,out_of_distribution,input_in_family"
+        "experiment,theta,theta_lo,theta_hi,feature_distance,out_of_distribution,input_in_family,\
+         input_shape_distance"
     );
     let truth = std::fs::read_to_string(data.join("truth.csv")).unwrap();
     let mut sq = 0.0;

@@ -7,14 +7,14 @@ use serde::Serialize;
 use twostage_compress::{Compressor, FlooredSample, Workspace};
 use twostage_fit::Predictor;
 use twostage_models::{
-    InputDeviation, InputFamily, IoData, Marginal, ModelSpec, generic_signal_names,
+    InputDeviation, InputFamily, InputShapes, IoData, Marginal, ModelSpec, generic_signal_names,
 };
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
 use crate::envelope::FeatureEnvelope;
 use crate::error::{Error, FileError, Result};
-use crate::layout::{EstimatorFields, Stages, V1, V2, V3, V5};
+use crate::layout::{EstimatorFields, Stages, V1, V2, V3, V5, V6};
 use crate::space::{rows_to_estimates, to_estimate};
 pub use crate::stored::{SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
@@ -68,6 +68,9 @@ pub struct Estimator {
     /// The family of inputs the held-out records spanned (format version
     /// 5 on): a record whose input lies outside is flagged.
     pub(crate) input_family: Option<InputFamily>,
+    /// Where the held-out records' input shapes lie (format version 6
+    /// on): a record whose input is of another shape is flagged.
+    pub(crate) input_shapes: Option<InputShapes>,
 }
 
 impl TryFrom<EstimatorFields> for Estimator {
@@ -76,7 +79,10 @@ impl TryFrom<EstimatorFields> for Estimator {
     /// this adds the ones between components, so that a decoded estimator
     /// estimates (or errs) and never indexes out of range.
     fn try_from(f: EstimatorFields) -> std::result::Result<Self, FileError> {
-        let V5 { v4, input_family } = f;
+        let V6 {
+            v5: V5 { v4, input_family },
+            input_shapes,
+        } = f;
         let V3 {
             v2:
                 V2 {
@@ -116,6 +122,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             marginals,
             signal_names,
             input_family,
+            input_shapes,
         };
         estimator
             .check_parameters()
@@ -220,6 +227,15 @@ impl Estimator {
                 shape.n_inputs
             ));
         }
+        if let Some(shapes) = &self.input_shapes
+            && shapes.n_inputs() != shape.n_inputs
+        {
+            return Err(format!(
+                "input shapes of {} signals for records of {} inputs",
+                shapes.n_inputs(),
+                shape.n_inputs
+            ));
+        }
         if let Some(intervals) = &self.intervals {
             let widths = intervals.half_widths();
             if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
@@ -258,6 +274,13 @@ pub struct Assessment {
     /// frequency they never had). Empty inside the family, and when the
     /// estimator knows no family.
     pub input_deviations: Vec<InputDeviation>,
+    /// How far the shape of the record's input lies from the held-out
+    /// records' (the distance of its autocorrelations from their nearest
+    /// neighbours', [`twostage_models::InputShapes`]), when the estimator
+    /// knows their shapes.
+    pub input_shape_distance: Option<f64>,
+    /// The distance that 99% of the held-out records' shapes stay within.
+    pub input_shape_threshold: Option<f64>,
 }
 
 impl Assessment {
@@ -265,7 +288,14 @@ impl Assessment {
     /// or by its input: the estimate is then an extrapolation, and the
     /// validation report and the intervals do not speak for it.
     pub fn out_of_distribution(&self) -> bool {
-        self.features_outside() || !self.input_deviations.is_empty()
+        self.features_outside() || !self.input_deviations.is_empty() || self.input_shape_outside()
+    }
+
+    /// Whether the record's input is of a shape the held-out records'
+    /// inputs did not have (a step among bursts, a slalom, broadband
+    /// steering), though its level, size and frequency may be theirs.
+    pub fn input_shape_outside(&self) -> bool {
+        matches!((self.input_shape_distance, self.input_shape_threshold), (Some(d), Some(t)) if (d > t || d.is_nan()))
     }
 
     /// Whether the record's features lie beyond the envelope's threshold.
@@ -354,11 +384,26 @@ impl Estimator {
     pub fn input_family(&self) -> Option<&InputFamily> {
         self.input_family.as_ref()
     }
+    /// The density of the held-out records' input shapes, when it knows
+    /// one (from format version 6 on, for a family whose inputs differ).
+    pub fn input_shapes(&self) -> Option<&InputShapes> {
+        self.input_shapes.as_ref()
+    }
     /// The estimator judging records' inputs against `family` (the
-    /// calibration and validation records' inputs, as training sets it).
+    /// calibration and validation records' inputs, as training sets it):
+    /// by its ranges, and by the density of its sample of input shapes.
     pub fn with_input_family(mut self, family: Option<InputFamily>) -> Self {
-        self.input_family =
-            family.filter(|f| f.records() > 0 && f.is_consistent(self.shape.n_inputs));
+        let n_inputs = self.shape.n_inputs;
+        let Some((family, sample)) = family
+            .filter(|f| f.records() > 0 && f.is_consistent(n_inputs))
+            .map(InputFamily::without_shape_sample)
+        else {
+            self.input_family = None;
+            self.input_shapes = None;
+            return self;
+        };
+        self.input_shapes = InputShapes::from_sample(&sample, n_inputs);
+        self.input_family = Some(family);
         self
     }
     /// Why a record of `n_samples` gets no two-stage estimate from this
@@ -616,6 +661,8 @@ impl Estimator {
             distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),
             floored_samples: work.compress.floored_samples().to_vec(),
             input_deviations: self.input_deviations(inputs),
+            input_shape_distance: self.input_shape_distance(inputs),
+            input_shape_threshold: self.input_shapes.as_ref().map(InputShapes::threshold),
         })
     }
 
@@ -629,6 +676,16 @@ impl Estimator {
         let columns: Vec<Vec<f64>> = inputs.columns().into_iter().map(|c| c.to_vec()).collect();
         let signals: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
         family.signal_deviations(&signals, &self.signal_names().inputs)
+    }
+
+    /// How far the shape of a record's inputs (N x n_u) lies from the
+    /// held-out records' input shapes; `None` for an estimator that does
+    /// not know them.
+    pub fn input_shape_distance(&self, inputs: ArrayView2<'_, f64>) -> Option<f64> {
+        let shapes = self.input_shapes.as_ref()?;
+        let columns: Vec<Vec<f64>> = inputs.columns().into_iter().map(|c| c.to_vec()).collect();
+        let signals: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+        Some(shapes.distance(&signals))
     }
 
     /// Estimate theta for many records in parallel; each record gets its
@@ -725,6 +782,7 @@ impl Estimator {
                 outputs: spec.output_names().to_vec(),
             }),
             input_family: None,
+            input_shapes: None,
         }
     }
 

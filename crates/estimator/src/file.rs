@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32), currently 4 (1 to 3 are still read) |
+//! | 8..12 | format version (u32), currently 6 (1 to 5 are still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -15,7 +15,7 @@ use std::path::Path;
 
 use crate::error::{Error, FileError, Result};
 use crate::estimator::Estimator;
-use crate::layout::{EstimatorFields, V1, V2, V3, ValidationReportV3};
+use crate::layout::{EstimatorFields, V1, V2, V3, V5, ValidationReportV3};
 use twostage_validate::ValidationReport;
 
 /// The first eight bytes of every estimator file.
@@ -25,10 +25,11 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// Version 2 added the feature envelope and the adaptive intervals, version
 /// 3 the parameters' priors, version 4 the betting certificate of the
 /// validation report, version 5 the family of inputs the held-out records
-/// spanned; older files load without them (uniform priors, no
-/// certificate, no input family). Every version's layout lives in
+/// spanned, version 6 the density of their input shapes; older files load
+/// without them (uniform priors, no certificate, no input family, no
+/// shapes). Every version's layout lives in
 /// `layout.rs`.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 const HEADER: usize = 24;
 
 impl Estimator {
@@ -139,12 +140,13 @@ impl Estimator {
         }
         let fields: std::result::Result<EstimatorFields, String> = match version {
             1 => read::<V1<ValidationReportV3>>(payload)
-                .map(|v1| V3::<ValidationReport>::from(V3::from(V2::from(v1))).into()),
+                .map(|v1| V5::from(V3::<ValidationReport>::from(V3::from(V2::from(v1)))).into()),
             2 => read::<V2<ValidationReportV3>>(payload)
-                .map(|v2| V3::<ValidationReport>::from(V3::from(v2)).into()),
+                .map(|v2| V5::from(V3::<ValidationReport>::from(V3::from(v2))).into()),
             3 => read::<V3<ValidationReportV3>>(payload)
-                .map(|v3| V3::<ValidationReport>::from(v3).into()),
-            4 => read::<V3<ValidationReport>>(payload).map(Into::into),
+                .map(|v3| V5::from(V3::<ValidationReport>::from(v3)).into()),
+            4 => read::<V3<ValidationReport>>(payload).map(|v4| V5::from(v4).into()),
+            5 => read::<V5>(payload).map(Into::into),
             _ => read::<EstimatorFields>(payload),
         };
         fields

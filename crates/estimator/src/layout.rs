@@ -6,7 +6,7 @@
 //! at a time, and checked as a whole into an [`Estimator`](crate::Estimator).
 
 use serde::Deserialize;
-use twostage_models::{InputFamily, Marginal};
+use twostage_models::{InputFamily, InputShapes, Marginal};
 use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
@@ -106,15 +106,33 @@ pub(crate) struct V3<R> {
 }
 
 /// Format version 5 adds the family of inputs the held-out records
-/// spanned; today's layout.
+/// spanned.
 #[derive(Deserialize)]
 pub(crate) struct V5 {
     pub(crate) v4: V3<ValidationReport>,
     pub(crate) input_family: Option<InputFamily>,
 }
 
-/// Today's layout (format version 5).
-pub(crate) type EstimatorFields = V5;
+/// Format version 6 adds the density of the held-out records' input
+/// shapes; today's layout.
+#[derive(Deserialize)]
+pub(crate) struct V6 {
+    pub(crate) v5: V5,
+    pub(crate) input_shapes: Option<InputShapes>,
+}
+
+/// Today's layout (format version 6).
+pub(crate) type EstimatorFields = V6;
+
+impl From<V5> for V6 {
+    /// No input shapes.
+    fn from(v5: V5) -> Self {
+        Self {
+            v5,
+            input_shapes: None,
+        }
+    }
+}
 
 impl From<V3<ValidationReport>> for V5 {
     /// No input family.

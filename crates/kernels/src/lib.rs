@@ -11,7 +11,9 @@
 //!   the paper without forming the regressor matrix);
 //! - [`layer`]: one dense layer of the network (affine map and activation),
 //!   and [`tanh`], its activation, the same bits on every platform;
-//! - [`vector`]: standardization and clipping to the prior box.
+//! - [`vector`]: standardization and clipping to the prior box;
+//! - [`input_summary`] and [`input_shape`]: what an input was like, and
+//!   how far a record's input shape lies from a family's.
 //!
 //! The summation orders are part of the contract: sums run in index order
 //! and pivots are formed by subtracting one product at a time, and the
@@ -37,6 +39,7 @@
 extern crate std;
 
 pub mod cholesky;
+pub mod input_shape;
 pub mod input_summary;
 pub mod lagged;
 pub mod layer;

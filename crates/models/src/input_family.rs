@@ -7,7 +7,10 @@
 pub use twostage_kernels::input_summary::{FAMILY_MARGIN, SUMMARY_NAMES};
 use twostage_kernels::input_summary::{outside_family, summarize};
 
+use twostage_kernels::input_shape::SHAPE_LEN;
+
 use crate::data::IoData;
+use crate::input_shape::{ShapeSample, record_shape_numbers};
 
 /// How many numbers summarize one input signal.
 const SUMMARY_LEN: usize = SUMMARY_NAMES.len();
@@ -37,6 +40,10 @@ pub struct InputFamily {
     ranges: Vec<[[f64; 2]; SUMMARY_LEN]>,
     /// Records included.
     records: u64,
+    /// A sample of the records' input shapes, from which an estimator
+    /// makes its [`crate::InputShapes`] (and stores that, not this).
+    #[cfg_attr(feature = "serde", serde(skip))]
+    shapes: ShapeSample,
 }
 
 /// One way a record's input lies outside a family.
@@ -101,6 +108,7 @@ impl InputFamily {
             sample_time,
             ranges: vec![[[f64::INFINITY, f64::NEG_INFINITY]; SUMMARY_LEN]; inputs],
             records: 0,
+            shapes: ShapeSample::default(),
         }
     }
 
@@ -113,20 +121,26 @@ impl InputFamily {
     }
 
     /// The summary numbers of `record`'s inputs, input by input (four
-    /// each), as [`InputFamily::include_summaries`] takes them: what a
-    /// compressed shard stores beside a record's features.
+    /// each), then their shapes' numbers
+    /// ([`crate::record_shape_numbers`]), as
+    /// [`InputFamily::include_summaries`] takes them: what a compressed
+    /// shard stores beside a record's features.
     pub fn summaries(&self, record: &IoData) -> Vec<f64> {
-        (0..record.n_inputs())
+        let mut numbers: Vec<f64> = (0..record.n_inputs())
             .flat_map(|j| summarize(record.input(j), self.sample_time))
-            .collect()
+            .collect();
+        numbers.extend(record_shape_numbers(record));
+        numbers
     }
 
     /// Widen the family to hold one record given by its summary numbers
     /// ([`InputFamily::summaries`]); numbers of another count are left out.
     pub fn include_summaries(&mut self, summaries: &[f64]) {
-        if summaries.len() != SUMMARY_LEN * self.ranges.len() {
+        if summaries.len() != self.summary_len() {
             return;
         }
+        let (summaries, shape) = summaries.split_at(SUMMARY_LEN * self.ranges.len());
+        self.shapes.include(shape);
         for (ranges, summary) in self
             .ranges
             .iter_mut()
@@ -140,9 +154,22 @@ impl InputFamily {
         self.records += 1;
     }
 
-    /// How many summary numbers a record of this family has.
+    /// How many summary numbers a record of this family has (its
+    /// shape's included).
     pub fn summary_len(&self) -> usize {
-        SUMMARY_LEN * self.ranges.len()
+        (SUMMARY_LEN + SHAPE_LEN) * self.ranges.len()
+    }
+
+    /// The sample of the records' input shapes.
+    pub fn shape_sample(&self) -> &ShapeSample {
+        &self.shapes
+    }
+
+    /// The family without its sample of shapes, and the sample: what an
+    /// estimator stores is the family's ranges and the shapes' density.
+    pub fn without_shape_sample(mut self) -> (Self, ShapeSample) {
+        let shapes = std::mem::take(&mut self.shapes);
+        (self, shapes)
     }
 
     /// The family of both sets of records (of the same signals and
@@ -159,6 +186,7 @@ impl InputFamily {
                 m[1] = m[1].max(t[1]);
             }
         }
+        self.shapes.merge(&other.shapes);
         self.records += other.records;
     }
 

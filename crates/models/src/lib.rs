@@ -51,6 +51,7 @@ mod external_process;
 mod input;
 mod input_design;
 mod input_family;
+mod input_shape;
 mod marginal;
 mod ode;
 mod origin;
@@ -76,6 +77,10 @@ pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION, ProtocolAns
 pub use input::InputSignal;
 pub use input_design::{Drawn, Grid, Level, MAX_BURSTS, Phases, Taper};
 pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES};
+pub use input_shape::{
+    InputShapes, SHAPE_LEVEL, SHAPE_SAMPLE, ShapeSample, input_shape_words, record_shape_numbers,
+    shape_of,
+};
 pub use marginal::{
     Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
     truncated_standard_mean,
@@ -92,6 +97,7 @@ pub use resources::{available_memory, free_disk, readable_bytes};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
 pub use signals::{SignalColumn, generic_signal_names, signal_columns};
 pub use simulator::{Capabilities, Conditions, ModelSpec, NoiseFree, Simulator};
+pub use twostage_kernels::input_shape::SHAPE_LAGS;
 
 /// Simulate experiment `index` of the chart `(design, seed)`: draw its
 /// parameter vector into `theta` and its record into `out`.

@@ -271,7 +271,8 @@ impl PyEstimator {
             }
             rest[0] = assessment.feature_distance.unwrap_or(f64::NAN);
             rest[1] = assessment.floored_samples.len() as f64;
-            rest[2] = assessment.input_deviations.len() as f64;
+            rest[2] = assessment.input_deviations.len() as f64
+                + f64::from(u8::from(assessment.input_shape_outside()));
             Ok(())
         })?;
         let column = |from: usize, to: usize| -> Vec<f64> {
@@ -326,11 +327,19 @@ impl PyEstimator {
         let estimator = &self.inner;
         let said = std::sync::Mutex::new(Vec::new());
         let (indices, _) = self.each_record(py, u, y, 1, |u, _, _, out| {
-            let sentences: Vec<String> = estimator
+            let mut sentences: Vec<String> = estimator
                 .input_deviations(u)
                 .iter()
                 .map(ToString::to_string)
                 .collect();
+            let threshold = estimator
+                .input_shapes()
+                .map(twostage::models::InputShapes::threshold);
+            if let (Some(d), Some(t)) = (estimator.input_shape_distance(u), threshold)
+                && (d > t || d.is_nan())
+            {
+                sentences.push(twostage::models::input_shape_words(d, t));
+            }
             let mut all = said
                 .lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner);

@@ -322,7 +322,11 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
                     case.name
                 );
             }
-            assert_eq!(fields[4 + 2 * q] == "1", host.out_of_distribution());
+            // Not the input's shape, which the runtime does not judge yet (decision 078).
+            assert_eq!(
+                fields[4 + 2 * q] == "1",
+                (host.features_outside() || !host.input_deviations.is_empty())
+            );
             let samples = record.n_samples() as f64;
             push = push.max(fields[6 + 2 * q].parse::<f64>().unwrap() * per_tick / samples);
             finish = finish.max(fields[8 + 2 * q].parse::<f64>().unwrap() * per_tick);
@@ -367,7 +371,11 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
                     case.name
                 );
             }
-            assert_eq!(fields[4 + q] == "1", host.out_of_distribution());
+            // Not the input's shape, which the runtime does not judge yet (decision 078).
+            assert_eq!(
+                fields[4 + q] == "1",
+                (host.features_outside() || !host.input_deviations.is_empty())
+            );
             let mask: u64 = fields[5 + q].parse().unwrap();
             assert_eq!(mask == 0, host.input_deviations.is_empty(), "{fields:?}");
             if r > 0 {

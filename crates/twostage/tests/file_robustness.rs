@@ -162,12 +162,12 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
         "10 rows cannot fit an envelope of 10 features"
     );
     // Without a validation report, version 4 writes what version 3 did,
-    // and without held-out records version 5 adds one None (no input
-    // family) to it.
-    let v5 = estimator.to_bytes().unwrap();
-    assert!(estimator.input_family().is_none());
-    assert_eq!(v5.last(), Some(&0));
-    let v3 = &v5[..v5.len() - 1];
+    // and without held-out records versions 5 and 6 add one None each (no
+    // input family, no input shapes) to it.
+    let v6 = estimator.to_bytes().unwrap();
+    assert!(estimator.input_family().is_none() && estimator.input_shapes().is_none());
+    assert_eq!(&v6[v6.len() - 2..], &[0, 0]);
+    let v3 = &v6[..v6.len() - 2];
     // Then the signal names: Some, ["u"], ["y"] (lengths and bytes).
     let names = [1, 1, 1, b'u', 1, 1, b'y'];
     assert_eq!(&v3[v3.len() - names.len()..], &names);
@@ -179,9 +179,9 @@ fn version_1_and_2_files_load_with_uniform_priors_and_without_an_envelope() {
     let same = |old: &Estimator| {
         assert_eq!(old.signal_names(), estimator.signal_names());
         // Re-encoded with the names a version-3 file would hold (and no
-        // input family).
+        // input family, no input shapes).
         let mut bytes = old.to_bytes().unwrap();
-        bytes.truncate(bytes.len() - 2);
+        bytes.truncate(bytes.len() - 3);
         bytes.extend_from_slice(&names);
         assert_eq!(bytes.len(), v3.len());
         assert_eq!(bytes[HEADER..], v3[HEADER..]);
@@ -212,11 +212,12 @@ fn version_3_files_load_their_report_without_a_certificate() {
         .unwrap()
         .train()
         .unwrap();
-    // Version 5 appends the input family: without one, a single 0 byte.
+    // Versions 5 and 6 append the input family and its shapes: without
+    // them, a 0 byte each.
     let estimator = estimator.with_input_family(None);
     let report = estimator.validation().unwrap();
-    let v5 = estimator.to_bytes().unwrap();
-    let v4 = seal_version(&v5[HEADER..v5.len() - 1], 4);
+    let v6 = estimator.to_bytes().unwrap();
+    let v4 = seal_version(&v6[HEADER..v6.len() - 2], 4);
     // Version 3 has no such field; version 4 without certificates has a
     // None, a single 0 byte, in its place.
     let (mut payload, mut without) = (v4[HEADER..].to_vec(), v4[HEADER..].to_vec());
@@ -249,10 +250,11 @@ fn version_3_files_load_their_report_without_a_certificate() {
         report.parameters[0].hoeffding
     );
     // Everything else is the same estimator: written again, it is the
-    // version-5 file of a report without certificates and no family.
+    // version-6 file of a report without certificates, no family and no
+    // shapes.
     let mut again = without.clone();
-    again.push(0);
-    assert_eq!(old.to_bytes().unwrap(), seal_version(&again, 5));
+    again.extend([0, 0]);
+    assert_eq!(old.to_bytes().unwrap(), seal_version(&again, 6));
     assert!(Estimator::from_bytes(&seal_version(&v4[HEADER..], 3)).is_err());
 }
 
@@ -273,7 +275,12 @@ fn version_4_files_load_without_an_input_family() {
         .unwrap();
     let family = estimator.input_family().unwrap();
     assert_eq!(family.records(), 60);
-    let v5 = estimator.to_bytes().unwrap();
+    // Version 6 appends the shapes' density: of 60 records, none (a 0).
+    assert!(estimator.input_shapes().is_none());
+    let v6 = estimator.to_bytes().unwrap();
+    assert_eq!(v6.last(), Some(&0));
+    let v5 = seal_version(&v6[HEADER..v6.len() - 1], 5);
+    assert_eq!(Estimator::from_bytes(&v5).unwrap(), estimator);
     let encoded = postcard::to_allocvec(&Some(family)).unwrap();
     assert!(v5.ends_with(&encoded));
     let v4_payload = &v5[HEADER..v5.len() - encoded.len()];

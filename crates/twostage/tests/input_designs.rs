@@ -446,3 +446,122 @@ fn the_car_family_of_manoeuvres_holds_the_chicane_among_its_kind() {
     let outside = family.deviations(&chicane, &["delta"]);
     assert!(outside.is_empty(), "{outside:?}");
 }
+
+/// The car's family of sine bursts between rests (docs/examples/car):
+/// its estimator keeps a density of the held-out records' input shapes.
+/// Its own fresh records pass but about one in a hundred; a step steer
+/// and a slalom, whose level, size and mean frequency lie inside the
+/// family's ranges, are flagged by their shape alone; the file keeps the
+/// shapes, and a file of format 5 (the same bytes without them) still
+/// reads, without them.
+#[test]
+fn a_steer_of_another_shape_than_the_familys_is_flagged() {
+    use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../docs/examples/car/car_manoeuvres.toml");
+    let file = ModelFile::load(&path).unwrap();
+    let sim = file.simulator().unwrap();
+    let estimator = twostage::TwoStage::builder(sim.as_ref())
+        .compressor(twostage::compress::Arx::new(2, 2).unwrap())
+        .linear(1e-6)
+        .unwrap()
+        .simulations(200)
+        .calibration(1500)
+        .validation(700)
+        .seed(5)
+        .train()
+        .unwrap();
+    let shapes = estimator
+        .input_shapes()
+        .expect("inputs that differ: shapes");
+    assert_eq!(shapes.len(), twostage::models::SHAPE_SAMPLE / 2);
+    let bytes = estimator.to_bytes().unwrap();
+    assert_eq!(twostage::Estimator::from_bytes(&bytes).unwrap(), estimator);
+
+    let theta = [-35.0, -1.1];
+    let assess = |record: &twostage::models::IoData| estimator.assess(record).unwrap();
+    let flagged = (0..400)
+        .filter(|&i| {
+            let mut record = sim.spec().new_record();
+            sim.simulate(&theta, &mut experiment_rng(91, i), &mut record)
+                .unwrap();
+            assess(&record).input_shape_outside()
+        })
+        .count();
+    assert!(flagged <= 12, "{flagged} of 400 family records flagged");
+
+    let driven = |steering: Vec<f64>| {
+        let overrides = BuiltinOverrides {
+            input: Some(InputSignal::fixed(steering).unwrap()),
+            ..BuiltinOverrides::default()
+        };
+        let car = BuiltinModel::Pacejka.build_with(&overrides).unwrap();
+        let mut record = car.spec().new_record();
+        car.simulate(&theta, &mut experiment_rng(92, 0), &mut record)
+            .unwrap();
+        assess(&record)
+    };
+    let at = |k: usize| k as f64 * 0.02;
+    let step = driven(
+        (0..500)
+            .map(|k| 0.1 * ((at(k) - 1.0) / 0.15).clamp(0.0, 1.0))
+            .collect(),
+    );
+    let slalom = driven(
+        (0..500)
+            .map(|k| {
+                let t = at(k) - 1.0;
+                if (0.0..8.0).contains(&t) {
+                    0.1 * (std::f64::consts::TAU * 0.5 * t).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    );
+    for (name, a) in [("step", &step), ("slalom", &slalom)] {
+        assert!(
+            a.input_deviations.is_empty(),
+            "{name}: {:?}",
+            a.input_deviations
+        );
+        assert!(
+            a.input_shape_outside() && a.out_of_distribution(),
+            "{name}: {:?} beyond {:?}",
+            a.input_shape_distance,
+            a.input_shape_threshold
+        );
+    }
+
+    // Format 5: the header's version 5, the payload without the shapes
+    // (postcard writes `None` as one zero byte, `Some` as a one first).
+    let mut without = estimator.clone().with_input_family(None);
+    without = without.with_input_family(estimator.input_family().cloned());
+    assert!(without.input_shapes().is_none());
+    let mut old = without.to_bytes().unwrap();
+    assert_eq!(old.pop(), Some(0));
+    old[8..12].copy_from_slice(&5u32.to_le_bytes());
+    let length = (old.len() - 24) as u64;
+    old[12..20].copy_from_slice(&length.to_le_bytes());
+    let crc = crc32(&old[24..]);
+    old[20..24].copy_from_slice(&crc.to_le_bytes());
+    let read = twostage::Estimator::from_bytes(&old).unwrap();
+    assert!(read.input_shapes().is_none());
+    assert_eq!(read.input_family(), estimator.input_family());
+}
+
+/// CRC-32 (IEEE 802.3), bit by bit: the estimator file's checksum.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= u32::from(b);
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}

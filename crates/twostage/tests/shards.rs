@@ -175,12 +175,12 @@ fn missing_doubled_mixed_and_damaged_shards_are_named() {
     // magic and the header's length, is the format): named by it, with
     // what to do, not misread.
     let mut older = original.clone();
-    assert_eq!(older[16], 3, "the format this test knows");
+    assert_eq!(older[16], 4, "the format this test knows");
     older[16] = 2;
     std::fs::write(&files[0], &older).unwrap();
     let err = open_error(&pattern(&dir));
     assert!(
-        err.contains("shard format 2, this twostage reads 3") && err.contains("simulate"),
+        err.contains("shard format 2, this twostage reads 4") && err.contains("simulate"),
         "{err}"
     );
 

@@ -71,6 +71,17 @@ impl<'a> Said<'a> {
                 said.join("; ")
             );
         }
+        if let Some((d, t)) = estimated
+            .input_shape
+            .filter(|_| estimated.input_shape_outside())
+        {
+            eprintln!(
+                "warning: {file}: experiment {id}: out of distribution: {}; the estimate \
+                 extrapolates and the intervals do not cover it (train on a design that \
+                 covers this input: docs/any-experiment.md)",
+                twostage::models::input_shape_words(d, t)
+            );
+        }
         if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
             let outputs = &self.format.outputs;
             let listed: Vec<String> = floored

@@ -17,8 +17,9 @@ pub(super) const MAGIC: &[u8; 8] = b"TSSHARD\0";
 /// Format 2 stores the sampling design, the record shape and the
 /// compressor as typed values (format 1: as text and a bare triple);
 /// format 3 follows a compressed record's features with its inputs'
-/// summary numbers (the estimator's input family).
-pub(super) const SHARD_FORMAT: u32 = 3;
+/// summary numbers (the estimator's input family); format 4 adds their
+/// shape numbers after them (the estimator's input shapes).
+pub(super) const SHARD_FORMAT: u32 = 4;
 /// The header of a shard file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(super) struct Header {

@@ -178,7 +178,8 @@ pub fn simulate_shard<S: Simulator + ?Sized>(
 
 /// One simulated experiment as a shard stores it: its record, or its
 /// features under `compressor` followed by its inputs' summary numbers
-/// (`inputs` says how many, shard format 3), or why it failed.
+/// and shape numbers (`inputs` says how many, shard format 4), or why it
+/// failed.
 fn stored(
     outcome: std::result::Result<(Vec<f64>, IoData), ExperimentFailure>,
     compressor: Option<&CompressorConfig>,

@@ -80,6 +80,7 @@ impl Method {
                         .input_family()
                         .is_some()
                         .then_some(a.input_deviations),
+                    input_shape: a.input_shape_distance.zip(a.input_shape_threshold),
                     floored: estimator.transforms_outputs().then_some(a.floored_samples),
                     ..RecordEstimate::bare(a.theta)
                 })

@@ -29,6 +29,10 @@ pub struct RecordEstimate {
     /// How the record's input lies outside the estimator's input family
     /// (empty inside it), when the estimator knows one.
     pub input: Option<Vec<InputDeviation>>,
+    /// The distance of the record's input shape from the held-out
+    /// records' and the threshold 99% of theirs stay within, when the
+    /// estimator knows their shapes.
+    pub input_shape: Option<(f64, f64)>,
     /// Samples outside their output's transform, when the estimator
     /// transforms its outputs.
     pub floored: Option<Vec<FlooredSample>>,
@@ -64,6 +68,7 @@ impl RecordEstimate {
             half_widths: None,
             distance: None,
             input: None,
+            input_shape: None,
             floored: None,
             check: None,
             refined: None,
@@ -74,10 +79,19 @@ impl RecordEstimate {
         }
     }
 
-    /// Whether the record's input lies in the estimator's input family
-    /// (`None` when it knows none).
+    /// Whether the record's input lies in the estimator's input family,
+    /// by its summary's ranges and by its shape (`None` when it knows
+    /// none).
     pub fn in_family(&self) -> Option<bool> {
-        self.input.as_ref().map(Vec::is_empty)
+        self.input
+            .as_ref()
+            .map(|d| d.is_empty() && !self.input_shape_outside())
+    }
+
+    /// Whether the record's input is of a shape the held-out records'
+    /// inputs did not have.
+    pub fn input_shape_outside(&self) -> bool {
+        self.input_shape.is_some_and(|(d, t)| d > t || d.is_nan())
     }
 
     /// The interval as written: `theta +- half_widths`, inside the
@@ -105,10 +119,12 @@ impl RecordEstimate {
         })
     }
 
-    /// Outside what training saw, by the features or by the input.
+    /// Outside what training saw, by the features or by the input (its
+    /// summary or its shape).
     pub fn out_of_distribution(&self) -> bool {
         self.distance.is_some_and(|(d, t)| d > t)
             || self.input.as_ref().is_some_and(|d| !d.is_empty())
+            || self.input_shape_outside()
     }
 }
 

@@ -2,6 +2,7 @@
 //! it (CSV or JSON) and the Python package returns it (the JSON's
 //! objects): one place for every column.
 
+use twostage_models::input_shape_words;
 use twostage_refine::RecordCheck;
 use twostage_sources::csv_rows::{format_f64, row};
 
@@ -38,6 +39,10 @@ impl Estimating {
         let with_family = rows.iter().any(|(_, e)| e.input.is_some());
         if with_family {
             header.push("input_in_family".into());
+        }
+        let with_shape = rows.iter().any(|(_, e)| e.input_shape.is_some());
+        if with_shape {
+            header.push("input_shape_distance".into());
         }
         let with_floored = rows.iter().any(|(_, e)| e.floored.is_some());
         if with_floored {
@@ -94,9 +99,14 @@ impl Estimating {
             }
             if with_family {
                 fields.push(
-                    e.input
-                        .as_ref()
-                        .map_or_else(String::new, |d| d.is_empty().to_string()),
+                    e.in_family()
+                        .map_or_else(String::new, |inside| inside.to_string()),
+                );
+            }
+            if with_shape {
+                fields.push(
+                    e.input_shape
+                        .map_or_else(String::new, |(d, _)| format_f64(d)),
                 );
             }
             if with_floored {
@@ -161,12 +171,18 @@ impl Estimating {
                     object.insert("out_of_distribution".into(), e.out_of_distribution().into());
                 }
                 if let Some(deviations) = &e.input {
-                    object.insert("input_in_family".into(), deviations.is_empty().into());
-                    if !deviations.is_empty() {
-                        let said: Vec<serde_json::Value> =
-                            deviations.iter().map(|d| d.to_string().into()).collect();
+                    object.insert("input_in_family".into(), e.in_family().into());
+                    let mut said: Vec<serde_json::Value> =
+                        deviations.iter().map(|d| d.to_string().into()).collect();
+                    if let Some((d, t)) = e.input_shape.filter(|_| e.input_shape_outside()) {
+                        said.push(input_shape_words(d, t).into());
+                    }
+                    if !said.is_empty() {
                         object.insert("input_outside_family".into(), said.into());
                     }
+                }
+                if let Some((d, _)) = e.input_shape {
+                    object.insert("input_shape_distance".into(), d.into());
                 }
                 if let Some(floored) = &e.floored {
                     object.insert("untransformed_samples".into(), floored.len().into());
