@@ -159,7 +159,7 @@ fn a_c_program_prints_the_rust_estimates() {
         let width = host.interval_half_widths().unwrap()[0];
         assert!((number(2) - width).abs() <= 1e-9 * width);
         assert_eq!(fields[3], "2", "adaptive intervals");
-        // Not the input's shape, which the runtime does not judge yet (decision 078).
+        // Not the input's shape, which the runtime does not judge yet.
         assert_eq!(
             fields[4] == "1",
             (host.features_outside() || !host.input_deviations.is_empty())

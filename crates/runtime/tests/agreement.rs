@@ -93,9 +93,8 @@ fn disagreement_on(
             (Some(a), Some(b)) => {
                 worst[2] = worst[2].max(relative(a, b, 1e-300));
                 let threshold = expected.distance_threshold.unwrap();
-                // The runtime does not judge the input's shape yet
-                // (decision 078): it agrees with the host's features and
-                // summary.
+                // The runtime does not judge the input's shape yet: it
+                // agrees with the host's features and summary.
                 if (b - threshold).abs() > 1e-9 * threshold {
                     let host = expected.features_outside() || !expected.input_deviations.is_empty();
                     assert_eq!(got.out_of_distribution(), host);

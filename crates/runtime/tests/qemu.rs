@@ -322,7 +322,7 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
                     case.name
                 );
             }
-            // Not the input's shape, which the runtime does not judge yet (decision 078).
+            // Not the input's shape, which the runtime does not judge yet.
             assert_eq!(
                 fields[4 + 2 * q] == "1",
                 (host.features_outside() || !host.input_deviations.is_empty())
@@ -371,7 +371,7 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
                     case.name
                 );
             }
-            // Not the input's shape, which the runtime does not judge yet (decision 078).
+            // Not the input's shape, which the runtime does not judge yet.
             assert_eq!(
                 fields[4 + q] == "1",
                 (host.features_outside() || !host.input_deviations.is_empty())
