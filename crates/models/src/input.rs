@@ -4,7 +4,7 @@ use crate::InvalidSetting;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
-use rand::Rng;
+use rand::{Rng, RngExt};
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Result, SimError};
@@ -49,7 +49,18 @@ enum Kind {
     },
     /// The sum of signals, each drawn in turn from the experiment's stream.
     Sum(Vec<InputSignal>),
+    /// One of the signals per experiment, drawn by its weight.
+    OneOf {
+        parts: Vec<InputSignal>,
+        weights: Vec<f64>,
+    },
+    /// The signals one after another, the record cut at drawn times.
+    Sequence(Vec<InputSignal>),
 }
+
+/// How deep signals may nest in mixtures, sequences and sums: a design
+/// deeper than that is a file's mistake, not a family.
+pub const MAX_INPUT_NESTING: usize = 4;
 
 impl InputSignal {
     /// White Gaussian noise of standard deviation `std_dev`, a new
@@ -302,8 +313,8 @@ impl InputSignal {
     /// ```
     ///
     /// # Errors
-    /// [`SimError::InvalidSetting`] for fewer than two parts, or a part
-    /// that is itself a sum.
+    /// [`SimError::InvalidSetting`] for fewer than two parts, a part that
+    /// is itself a sum, or parts nested deeper than [`MAX_INPUT_NESTING`].
     pub fn sum(parts: Vec<InputSignal>) -> Result<Self> {
         if parts.len() < 2 {
             return Err(SimError::InvalidSetting(InvalidSetting {
@@ -319,9 +330,154 @@ impl InputSignal {
                 reason: "give the inner sum's parts to the outer sum instead".into(),
             }));
         }
-        Ok(Self {
-            kind: Kind::Sum(parts),
-        })
+        Self::nested(Kind::Sum(parts))
+    }
+
+    /// Ramps and holds from rest: the record rests a hold time, then moves
+    /// to a level uniform in `[level.0, level.1]` over a ramp time, holds
+    /// it, and so on; each hold uniform in `hold`, each ramp in `ramp`
+    /// seconds (a ramp of zero is a step), about `offset`.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal, experiment_rng};
+    /// let steer = InputSignal::ramps(Drawn::between(0.1, 0.2)?, Drawn::fixed(1.0),
+    ///     Drawn::fixed(0.0), 0.0)?;
+    /// let mut u = vec![0.0; 300];
+    /// steer.fill(0.01, &mut experiment_rng(1, 0), &mut u)?;
+    /// // A second's rest, then a step to a level held a second.
+    /// assert!(u[..100].iter().all(|v| *v == 0.0));
+    /// assert!((0.1..=0.2).contains(&u[100]) && u[100..200].iter().all(|v| *v == u[100]));
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a hold that is not positive, a
+    /// ramp below zero or a non-finite offset.
+    pub fn ramps(level: Drawn, hold: Drawn, ramp: Drawn, offset: f64) -> Result<Self> {
+        Self::designed(
+            Design::Ramps(crate::input_design::Ramps { level, hold, ramp }),
+            offset,
+        )
+    }
+
+    /// One of `parts` per experiment, part `i` with probability
+    /// `weights[i]` over their sum: a family of several kinds of
+    /// operation (manoeuvres, holds, noise) in one chart.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal, experiment_rng};
+    /// let low = InputSignal::steps((0.0, 0.0), (1.0, 1.0))?;
+    /// let high = InputSignal::steps((1.0, 1.0), (1.0, 1.0))?;
+    /// let either = InputSignal::one_of(vec![low, high], vec![1.0, 3.0])?;
+    /// let mut u = vec![0.0; 10];
+    /// let highs = (0..4000)
+    ///     .filter(|&e| {
+    ///         either.fill(1.0, &mut experiment_rng(3, e), &mut u).unwrap();
+    ///         u[0] == 1.0
+    ///     })
+    ///     .count();
+    /// // Three in four, within four standard errors (27).
+    /// assert!((highs as i64 - 3000).abs() < 110, "{highs}");
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for no parts, another number of
+    /// weights than parts, a weight that is not finite and positive, or
+    /// parts nested deeper than [`MAX_INPUT_NESTING`].
+    pub fn one_of(parts: Vec<InputSignal>, weights: Vec<f64>) -> Result<Self> {
+        if parts.is_empty() {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input mix",
+                value: "no parts".into(),
+                reason: "give one or more signals to draw from".into(),
+            }));
+        }
+        if weights.len() != parts.len() {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input mix weights",
+                value: format!("{} weight(s) for {} part(s)", weights.len(), parts.len()),
+                reason: "give one weight per part, or none for equal chances".into(),
+            }));
+        }
+        if let Some((i, w)) = weights
+            .iter()
+            .enumerate()
+            .find(|(_, w)| !(w.is_finite() && **w > 0.0))
+        {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input mix weights",
+                value: format!("{w} for part {}", i + 1),
+                reason: "each weight is finite and above zero: drop a part never drawn".into(),
+            }));
+        }
+        Self::nested(Kind::OneOf { parts, weights })
+    }
+
+    /// `parts` one after another: the record is cut at `parts.len() - 1`
+    /// times uniform over it (sorted), drawn per experiment, and each part,
+    /// drawn as a whole record, shows its own samples from its cut to the
+    /// next (a hold, then bursts where they fall, say): a part's band or
+    /// level is its design's whatever the cut, and a part that rests first
+    /// does not fill the later stretches with rest.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, InputSignal, experiment_rng};
+    /// let rest = InputSignal::steps((0.0, 0.0), (1.0, 1.0))?;
+    /// let held = InputSignal::steps((2.0, 2.0), (1.0, 1.0))?;
+    /// let both = InputSignal::sequence(vec![rest, held])?;
+    /// let mut u = vec![0.0; 100];
+    /// both.fill(1.0, &mut experiment_rng(8, 0), &mut u)?;
+    /// let cut = u.iter().position(|v| *v == 2.0).unwrap_or(100);
+    /// assert!(u[..cut].iter().all(|v| *v == 0.0) && u[cut..].iter().all(|v| *v == 2.0));
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for fewer than two parts or parts
+    /// nested deeper than [`MAX_INPUT_NESTING`].
+    pub fn sequence(parts: Vec<InputSignal>) -> Result<Self> {
+        if parts.len() < 2 {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input sequence",
+                value: format!("{} part(s)", parts.len()),
+                reason: "a sequence takes two or more signals".into(),
+            }));
+        }
+        Self::nested(Kind::Sequence(parts))
+    }
+
+    fn nested(kind: Kind) -> Result<Self> {
+        let signal = Self { kind };
+        if signal.depth() > MAX_INPUT_NESTING {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input parts",
+                value: format!("nested {} deep", signal.depth()),
+                reason: format!(
+                    "mixtures, sequences and sums nest at most {MAX_INPUT_NESTING} deep: \
+                     give the inner parts to the outer signal"
+                ),
+            }));
+        }
+        Ok(signal)
+    }
+
+    /// How many signals deep it nests (a design alone: 1).
+    fn depth(&self) -> usize {
+        1 + self
+            .parts()
+            .iter()
+            .map(InputSignal::depth)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The signals it is made of (none for a design alone).
+    fn parts(&self) -> &[InputSignal] {
+        match &self.kind {
+            Kind::Sum(parts) | Kind::OneOf { parts, .. } | Kind::Sequence(parts) => parts,
+            _ => &[],
+        }
     }
 
     fn designed(design: Design, offset: f64) -> Result<Self> {
@@ -362,7 +518,8 @@ impl InputSignal {
                 design.check(sample_time)?;
                 design.check_record(sample_time, n_samples)
             }
-            Kind::Sum(parts) => parts
+            Kind::Sum(_) | Kind::OneOf { .. } | Kind::Sequence(_) => self
+                .parts()
                 .iter()
                 .try_for_each(|p| p.check_sampling(sample_time, n_samples)),
             _ => Ok(()),
@@ -398,6 +555,9 @@ impl InputSignal {
             Kind::WhiteGaussian { .. } => false,
             Kind::Designed { design, .. } => design.is_deterministic(),
             Kind::Sum(parts) => parts.iter().all(InputSignal::is_deterministic),
+            // A sequence's cuts are drawn; a mixture of one part is that part.
+            Kind::OneOf { parts, .. } => parts.len() == 1 && parts[0].is_deterministic(),
+            Kind::Sequence(_) => false,
             Kind::Chicane { .. } | Kind::Fixed(_) => true,
         }
     }
@@ -422,6 +582,22 @@ impl InputSignal {
             Kind::Sum(parts) => {
                 let each: Vec<String> = parts.iter().map(InputSignal::describe).collect();
                 format!("the sum of: {}", each.join("; "))
+            }
+            Kind::OneOf { parts, weights } => {
+                let total: f64 = weights.iter().sum();
+                let each: Vec<String> = parts
+                    .iter()
+                    .zip(weights)
+                    .map(|(p, w)| format!("{:.3} of them {}", w / total, p.describe()))
+                    .collect();
+                format!("one per experiment: {}", each.join("; "))
+            }
+            Kind::Sequence(parts) => {
+                let each: Vec<String> = parts.iter().map(InputSignal::describe).collect();
+                format!(
+                    "in turn, the record cut at times drawn per experiment: {}",
+                    each.join("; then ")
+                )
             }
         }
     }
@@ -475,6 +651,34 @@ impl InputSignal {
                     }
                 }
             }
+            Kind::OneOf { parts, weights } => {
+                let total: f64 = weights.iter().sum();
+                let mut left = total * rng.random::<f64>();
+                // The last part takes what rounding leaves.
+                let chosen = weights
+                    .iter()
+                    .position(|w| {
+                        left -= w;
+                        left < 0.0
+                    })
+                    .unwrap_or(parts.len() - 1);
+                parts[chosen].fill(sample_time, rng, u)?;
+            }
+            Kind::Sequence(parts) => {
+                let n = u.len();
+                let mut cuts: Vec<usize> =
+                    (1..parts.len()).map(|_| rng.random_range(0..=n)).collect();
+                cuts.sort_unstable();
+                // Each part is drawn as a whole record, so that a band or a
+                // burst is as the part's own design says whatever the cut.
+                let mut whole = vec![0.0; n];
+                let mut start = 0;
+                for (part, end) in parts.iter().zip(cuts.into_iter().chain([n])) {
+                    part.fill(sample_time, rng, &mut whole)?;
+                    u[start..end].copy_from_slice(&whole[start..end]);
+                    start = end;
+                }
+            }
         }
         Ok(())
     }
@@ -487,9 +691,12 @@ impl InputSignal {
     pub fn value_at(&self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
         match &self.kind {
             Kind::Chicane { amplitude } => chicane(*amplitude, t),
-            Kind::WhiteGaussian { .. } | Kind::Fixed(_) | Kind::Designed { .. } | Kind::Sum(_) => {
-                Self::sampled_value_at(t, sample_time, samples)
-            }
+            Kind::WhiteGaussian { .. }
+            | Kind::Fixed(_)
+            | Kind::Designed { .. }
+            | Kind::Sum(_)
+            | Kind::OneOf { .. }
+            | Kind::Sequence(_) => Self::sampled_value_at(t, sample_time, samples),
         }
     }
 
@@ -595,6 +802,89 @@ mod tests {
         // Standard errors: 0.0063 for the mean, 0.018 for the variance.
         assert!(mean.abs() < 0.03, "{mean}");
         assert!((var - 4.0).abs() < 0.08, "{var}");
+    }
+
+    /// A sequence's cuts are the order statistics of uniform draws: with
+    /// three parts the first cut's mean is a third of the record, the
+    /// second's two thirds (each within four standard errors over 2000
+    /// experiments), and every sample belongs to its stretch's part.
+    #[test]
+    fn a_sequence_cuts_the_record_at_uniform_times() {
+        let level = |v: f64| InputSignal::steps((v, v), (1.0, 1.0)).unwrap();
+        let three = InputSignal::sequence(vec![level(1.0), level(2.0), level(3.0)]).unwrap();
+        let n = 300;
+        let mut u = vec![0.0; n];
+        let (mut first, mut second) = (0.0, 0.0);
+        for e in 0..2000 {
+            three.fill(0.1, &mut experiment_rng(6, e), &mut u).unwrap();
+            assert!(u.windows(2).all(|w| w[0] <= w[1]), "{u:?}");
+            assert!(u.iter().all(|v| [1.0, 2.0, 3.0].contains(v)));
+            first += u.iter().filter(|v| v.to_bits() == 1f64.to_bits()).count() as f64 / 2000.0;
+            second += u.iter().filter(|v| **v < 3.0).count() as f64 / 2000.0;
+        }
+        // sd of the minimum of two uniforms on [0, 300]: 300 / sqrt(18).
+        let error = 4.0 * 300.0 / 18f64.sqrt() / 2000f64.sqrt();
+        assert!((first - 100.0).abs() < error, "{first}");
+        assert!((second - 200.0).abs() < error, "{second}");
+        // Each part at its own times: a ramp of k after a hold shows k at k.
+        let ramp = InputSignal::fixed((0..n).map(|k| k as f64).collect()).unwrap();
+        let held_then_ramp = InputSignal::sequence(vec![level(-1.0), ramp]).unwrap();
+        held_then_ramp
+            .fill(0.1, &mut experiment_rng(6, 3), &mut u)
+            .unwrap();
+        let cut = u.iter().position(|v| *v >= 0.0).unwrap_or(n);
+        assert!(cut > 0 && cut < n, "{cut}");
+        assert!(u[..cut].iter().all(|v| v.to_bits() == (-1f64).to_bits()));
+        assert!(
+            u[cut..]
+                .iter()
+                .enumerate()
+                .all(|(i, v)| v.to_bits() == ((cut + i) as f64).to_bits())
+        );
+        // A band noise on a short stretch keeps its band: it is drawn as a
+        // whole record.
+        let noise =
+            InputSignal::filtered_noise(0.0, Drawn::fixed(0.5), 4, Drawn::fixed(1.0), 0.0).unwrap();
+        let rest = level(0.0);
+        let mixed = InputSignal::sequence(vec![noise.clone(), rest.clone(), noise]).unwrap();
+        mixed.check_sampling(0.1, n).unwrap();
+        for e in 0..50 {
+            mixed.fill(0.1, &mut experiment_rng(6, e), &mut u).unwrap();
+        }
+    }
+
+    #[test]
+    fn mixtures_and_sequences_refuse_what_no_family_could_be() {
+        let rest = InputSignal::steps((0.0, 0.0), (1.0, 1.0)).unwrap();
+        let e = |r: Result<InputSignal>| r.unwrap_err().to_string();
+        assert!(e(InputSignal::one_of(vec![], vec![])).contains("no parts"));
+        assert!(e(InputSignal::one_of(vec![rest.clone()], vec![1.0, 2.0])).contains("1 part"));
+        let zero = e(InputSignal::one_of(
+            vec![rest.clone(), rest.clone()],
+            vec![1.0, 0.0],
+        ));
+        assert!(zero.contains("0 for part 2"), "{zero}");
+        assert!(e(InputSignal::sequence(vec![rest.clone()])).contains("two or more"));
+        let mut deep = rest.clone();
+        for _ in 0..MAX_INPUT_NESTING - 1 {
+            deep = InputSignal::sequence(vec![deep, rest.clone()]).unwrap();
+        }
+        assert_eq!(deep.depth(), MAX_INPUT_NESTING);
+        let too_deep = e(InputSignal::one_of(vec![deep], vec![1.0]));
+        assert!(too_deep.contains("nested 5 deep"), "{too_deep}");
+        // A mixture of one deterministic part is that part; a sequence
+        // never is (its cuts are drawn).
+        let chicane = InputSignal::chicane(0.1).unwrap();
+        assert!(
+            InputSignal::one_of(vec![chicane.clone()], vec![2.0])
+                .unwrap()
+                .is_deterministic()
+        );
+        assert!(
+            !InputSignal::sequence(vec![chicane.clone(), chicane])
+                .unwrap()
+                .is_deterministic()
+        );
     }
 
     #[test]

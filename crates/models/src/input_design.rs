@@ -1,6 +1,7 @@
 //! Experiment designs that draw each record's input from its own stream:
 //! random-phase multisines, random binary and pseudo-random binary
-//! sequences, band-limited Gaussian noise, swept sines and random steps, each with settings that may
+//! sequences, band-limited Gaussian noise, swept sines, random steps,
+//! manoeuvre bursts and ramps between held levels, each with settings that may
 //! themselves be drawn per experiment (a level range, a band whose top is
 //! a range), so that a training chart covers a family of operating
 //! conditions rather than one input.
@@ -18,9 +19,11 @@ use crate::error::{Result, SimError};
 use crate::prbs::{MAX_PRBS_ORDER, prbs_taps};
 
 mod bursts;
+mod ramps;
 
 pub(crate) use bursts::Bursts;
 pub use bursts::{MAX_BURSTS, Taper};
+pub(crate) use ramps::Ramps;
 
 /// A value fixed, or drawn uniformly per experiment from `[low, high]`.
 ///
@@ -150,6 +153,7 @@ pub(crate) enum Design {
         rms: Drawn,
     },
     Bursts(Bursts),
+    Ramps(Ramps),
 }
 
 impl Design {
@@ -235,6 +239,7 @@ impl Design {
                 Ok(())
             }
             Self::Bursts(bursts) => bursts.check(sample_time),
+            Self::Ramps(ramps) => ramps.check(),
             _ => Ok(()),
         }
     }
@@ -322,6 +327,7 @@ impl Design {
                 rms.describe("")
             ),
             Self::Bursts(bursts) => bursts.describe(),
+            Self::Ramps(ramps) => ramps.describe(),
         }
     }
 
@@ -470,6 +476,7 @@ impl Design {
                 }
             }
             Self::Bursts(bursts) => bursts.fill(sample_time, rng, u)?,
+            Self::Ramps(ramps) => ramps.fill(sample_time, rng, u)?,
         }
         Ok(())
     }

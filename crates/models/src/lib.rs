@@ -74,7 +74,7 @@ pub use butterworth::MAX_FILTER_ORDER;
 pub use data::{IoData, RecordShape};
 pub use error::{InvalidSetting, Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION, ProtocolAnswer};
-pub use input::InputSignal;
+pub use input::{InputSignal, MAX_INPUT_NESTING};
 pub use input_design::{Drawn, Grid, Level, MAX_BURSTS, Phases, Taper};
 pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES};
 pub use input_shape::{

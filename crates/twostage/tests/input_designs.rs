@@ -287,6 +287,43 @@ fn an_impossible_design_is_named_by_its_key() {
             "input.order",
             "needs order",
         ),
+        (
+            "signal = \"mix\"\nparts = []",
+            "input.parts",
+            "needs one or more parts",
+        ),
+        (
+            "signal = \"mix\"\nparts = [{ signal = \"white\", sd = 1 }, \
+             { signal = \"white\", sd = 2 }]\nweights = [1]",
+            "input.weights",
+            "give one per part",
+        ),
+        (
+            "signal = \"mix\"\nparts = [{ signal = \"white\", sd = 1 }, \
+             { signal = \"white\", sd = 2 }]\nweights = [1, 0]",
+            "input",
+            "0 for part 2",
+        ),
+        (
+            "signal = \"sequence\"\nparts = [{ signal = \"white\", sd = 1 }]",
+            "input",
+            "two or more",
+        ),
+        (
+            "signal = \"ramps\"\nlevels = [-1, 1]\nhold_seconds = [0, 5]",
+            "input",
+            "ramps hold_seconds = 0: a level is held a positive time",
+        ),
+        (
+            "signal = \"ramps\"\nlevels = [-1, 1]\nhold_seconds = [2, 5]\nramp_seconds = [-1, 2]",
+            "input",
+            "ramps ramp_seconds = -1",
+        ),
+        (
+            "signal = \"ramps\"\nhold_seconds = [2, 5]",
+            "input.levels",
+            "needs levels, hold_seconds",
+        ),
     ];
     for (design, key, text) in cases {
         let e = ModelFile::parse(&tanks(design), "tanks.toml")
@@ -445,6 +482,41 @@ fn the_car_family_of_manoeuvres_holds_the_chicane_among_its_kind() {
         .unwrap();
     let outside = family.deviations(&chicane, &["delta"]);
     assert!(outside.is_empty(), "{outside:?}");
+}
+
+/// The car's family of ordinary driving (docs/examples/car/car_driving.toml)
+/// draws one kind of driving per experiment by weight: records steered
+/// by noise throughout (the random steering and the held corner with
+/// corrections, 3 of 10 weights) and records that start from rest
+/// (bursts, ramps and their sequence, 7 of 10), each in about its share.
+#[test]
+fn the_car_family_of_ordinary_driving_draws_each_kind_by_its_weight() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../docs/examples/car/car_driving.toml");
+    let file = ModelFile::load(&path).unwrap();
+    let sim = file.simulator().unwrap();
+    let described = sim.spec().input_note().to_string();
+    assert!(
+        described.contains("one per experiment: 0.300 of them random bursts")
+            && described.contains("0.100 of them the sum")
+            && described.contains("0.200 of them in turn"),
+        "{described}"
+    );
+    let (mut noisy, mut resting) = (0, 0);
+    let records = 600;
+    for i in 0..records {
+        let u = input_of(&file, i);
+        let steered_throughout = u.iter().all(|v| *v != 0.0) && u.windows(2).all(|w| w[0] != w[1]);
+        noisy += usize::from(steered_throughout);
+        resting += usize::from(u[0] == 0.0);
+        if i < 3 {
+            assert_eq!(u, input_of(&file, i), "the same stream, the same bits");
+        }
+    }
+    assert_eq!(noisy + resting, records as usize, "{noisy} + {resting}");
+    // A binomial share 0.3 of 600: sd 0.019.
+    let share = noisy as f64 / records as f64;
+    assert!((0.23..=0.37).contains(&share), "{share} steered throughout");
 }
 
 /// The car's family of sine bursts between rests (docs/examples/car):

@@ -214,7 +214,12 @@ impl Locator<'_> {
                 ],
                 &["seconds", "cycles", "amplitude"],
             ),
-            "sum" => (&["parts"], &["parts"]),
+            "ramps" => (
+                &["levels", "hold_seconds", "ramp_seconds", "offset"],
+                &["levels", "hold_seconds"],
+            ),
+            "sum" | "sequence" => (&["parts"], &["parts"]),
+            "mix" => (&["parts", "weights"], &["parts"]),
             other => {
                 return Err(self.error(
                     Some(raw.signal.span()),
@@ -222,7 +227,7 @@ impl Locator<'_> {
                     format!(
                         "unknown signal '{other}': use \"white\", \"chicane\", \"fixed\", \
                          \"multisine\", \"binary\", \"prbs\", \"gaussian\", \"sweep\", \"steps\", \
-                         \"bursts\" or \"sum\""
+                         \"ramps\", \"bursts\", \"sum\", \"mix\" or \"sequence\""
                     ),
                 ));
             }
@@ -247,6 +252,8 @@ impl Locator<'_> {
             ("taper", raw.taper.is_some()),
             ("dwell", raw.dwell.is_some()),
             ("parts", raw.parts.is_some()),
+            ("ramp_seconds", raw.ramp_seconds.is_some()),
+            ("weights", raw.weights.is_some()),
         ];
         if let Some((key, _)) = given.iter().find(|(k, g)| *g && !takes.contains(k)) {
             return Err(self.error(
@@ -387,6 +394,53 @@ impl Locator<'_> {
                     .collect::<Result<Vec<_>>>()?;
                 Some(InputSignal::sum(parts))
             }
+            "mix" | "sequence" => {
+                let parts = raw.parts.as_deref().unwrap_or_default();
+                if parts.is_empty() {
+                    return Err(wrong(
+                        "parts",
+                        format!("a \"{kind}\" input needs one or more parts to draw from"),
+                    ));
+                }
+                let parts = parts
+                    .iter()
+                    .map(|p| self.input(p))
+                    .collect::<Result<Vec<_>>>()?;
+                if kind == "sequence" {
+                    Some(InputSignal::sequence(parts))
+                } else {
+                    let weights = raw
+                        .weights
+                        .clone()
+                        .unwrap_or_else(|| vec![1.0; parts.len()]);
+                    if weights.len() != parts.len() {
+                        return Err(wrong(
+                            "weights",
+                            format!(
+                                "{} weight(s) for {} part(s): give one per part, or none for \
+                                 equal chances",
+                                weights.len(),
+                                parts.len()
+                            ),
+                        ));
+                    }
+                    Some(InputSignal::one_of(parts, weights))
+                }
+            }
+            "ramps" => match (raw.levels, raw.hold_seconds) {
+                (Some([low, high]), Some([shortest, longest])) => {
+                    let level =
+                        Drawn::between(low, high).map_err(|e| wrong("levels", e.to_string()))?;
+                    let hold = Drawn::between(shortest, longest)
+                        .map_err(|e| wrong("hold_seconds", e.to_string()))?;
+                    let ramp = match &raw.ramp_seconds {
+                        None => Drawn::fixed(0.0),
+                        Some(r) => drawn("ramp_seconds", r)?,
+                    };
+                    Some(InputSignal::ramps(level, hold, ramp, offset))
+                }
+                _ => None,
+            },
             "bursts" => {
                 let count = match &raw.count {
                     None => (1, 1),

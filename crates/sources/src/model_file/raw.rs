@@ -167,6 +167,8 @@ pub(super) struct RawInput {
     /// Random steps' levels and holds (seconds), each `[low, high]`.
     pub(super) levels: Option<[f64; 2]>,
     pub(super) hold_seconds: Option<[f64; 2]>,
+    /// Ramps' move times in seconds: one number or `[low, high]`.
+    pub(super) ramp_seconds: Option<OneOrMany>,
     /// Bursts per record: one number, or `[low, high]` drawn per record.
     pub(super) count: Option<OneOrMany>,
     /// Each burst's length in seconds and its sine's cycles.
@@ -176,8 +178,11 @@ pub(super) struct RawInput {
     pub(super) taper: Option<String>,
     /// Seconds a burst holds one of its crests: one number or `[low, high]`.
     pub(super) dwell: Option<OneOrMany>,
-    /// A sum's parts, each an input table of its own.
+    /// A sum's, a mixture's or a sequence's parts, each an input table of
+    /// its own.
     pub(super) parts: Option<Vec<Spanned<RawInput>>>,
+    /// A mixture's chance of each part (relative), one per part.
+    pub(super) weights: Option<Vec<f64>>,
     pub(super) file: Option<Spanned<String>>,
     /// The file's columns to read, in the order of the model's inputs.
     pub(super) columns: Option<Spanned<Vec<String>>>,
