@@ -71,7 +71,7 @@ fn sine_period(t: f64, start: f64, duration: f64, amplitude: f64) -> f64 {
 /// the ramp reaches 0.25 rad (near the tires' limit of about mu g over the
 /// linear gain) in 4 s and holds it; the random steering is band-limited
 /// noise below 1 Hz of RMS 0.05 rad, drawn once.
-fn manoeuvre(steering: Steering) -> Result<Option<Vec<f64>>> {
+pub(crate) fn manoeuvre(steering: Steering) -> Result<Option<Vec<f64>>> {
     let at = |k: usize| k as f64 * CAR_SAMPLE_TIME;
     let values: Vec<f64> = match steering {
         Steering::Chicane => return Ok(None),
@@ -135,7 +135,7 @@ const RANDOM_STEERING_SEED: u64 = 7401;
 
 /// Root mean squared error of parameter j over the records `rows` (an
 /// index may repeat: a bootstrap resample).
-fn rmse(estimates: &[Vec<f64>], truth: &[Vec<f64>], j: usize, rows: &[usize]) -> f64 {
+pub(crate) fn rmse(estimates: &[Vec<f64>], truth: &[Vec<f64>], j: usize, rows: &[usize]) -> f64 {
     let sse: f64 = rows
         .iter()
         .map(|&i| (estimates[i][j] - truth[i][j]).powi(2))
@@ -146,7 +146,7 @@ fn rmse(estimates: &[Vec<f64>], truth: &[Vec<f64>], j: usize, rows: &[usize]) ->
 /// The 2.5% and 97.5% quantiles of the ratio of two estimators' RMSE of
 /// parameter j over 2000 resamples of the records (the same resample for
 /// both: the ratio's own uncertainty, not the two RMSEs' separately).
-fn bootstrap_ratio(
+pub(crate) fn bootstrap_ratio(
     ours: &[Vec<f64>],
     theirs: &[Vec<f64>],
     truth: &[Vec<f64>],

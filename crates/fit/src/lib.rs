@@ -9,6 +9,9 @@
 //! - [`MlpParams`] -> [`Mlp`] -> [`FittedMlp`]: tanh networks trained by
 //!   Levenberg-Marquardt, with early stopping and parallel seeded restarts.
 //! - [`Standardizer`]: per-column affine standardization.
+//! - [`SummaryTraining`] -> [`SummaryNetwork`]: a stage 1 that learns, a
+//!   small convolutional network over a record's samples trained end to
+//!   end with a head on the parameters, whose summary stage 2 then fits.
 //!
 //! # Example
 //!
@@ -25,6 +28,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod adam;
 mod check;
 mod config;
 mod covariance;
@@ -34,6 +38,7 @@ mod linear;
 mod mlp;
 mod piecewise;
 mod standardize;
+mod summary_network;
 
 use ndarray::{Array2, ArrayView2};
 
@@ -50,6 +55,7 @@ pub use mlp::{
 };
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;
+pub use summary_network::{ConvShape, SummaryNetwork, SummaryTraining, TrainedSummary};
 
 /// A learning method for the map `h: alpha -> theta` (its hyperparameters).
 pub trait Regressor {

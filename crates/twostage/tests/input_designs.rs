@@ -506,7 +506,8 @@ fn the_car_family_of_ordinary_driving_draws_each_kind_by_its_weight() {
     let records = 600;
     for i in 0..records {
         let u = input_of(&file, i);
-        let steered_throughout = u.iter().all(|v| *v != 0.0) && u.windows(2).all(|w| w[0] != w[1]);
+        let steered_throughout =
+            u.iter().all(|v| *v != 0.0) && u.windows(2).all(|w| w[0].to_bits() != w[1].to_bits());
         noisy += usize::from(steered_throughout);
         resting += usize::from(u[0] == 0.0);
         if i < 3 {

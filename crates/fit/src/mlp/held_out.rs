@@ -8,7 +8,7 @@ use super::params::MlpParams;
 
 /// Keeps the weights with the lowest held-out loss and says when `patience`
 /// checks have passed without improvement (never, when nothing is held out).
-pub(super) struct BestHeldOut {
+pub(crate) struct BestHeldOut {
     loss: f64,
     params: Vec<f64>,
     since: usize,
@@ -35,7 +35,9 @@ impl BestHeldOut {
         (Self::new(initial, params, patience, active), held_out)
     }
 
-    fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
+    /// The watch from `params` at held-out `loss`, stopping after
+    /// `patience` checks without improvement when `active`.
+    pub(crate) fn new(loss: f64, params: &[f64], patience: usize, active: bool) -> Self {
         Self {
             loss,
             params: params.to_vec(),
@@ -65,7 +67,7 @@ impl BestHeldOut {
     }
 
     /// Record the held-out loss of `params`; true when training should stop.
-    pub(super) fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
+    pub(crate) fn observe(&mut self, loss: f64, params: &[f64]) -> bool {
         if loss < self.loss {
             self.loss = loss;
             self.params.copy_from_slice(params);
@@ -75,6 +77,13 @@ impl BestHeldOut {
             self.since += 1;
             self.active && self.since >= self.patience
         }
+    }
+}
+
+impl BestHeldOut {
+    /// The lowest held-out loss seen and its weights.
+    pub(crate) fn into_best(self) -> (f64, Vec<f64>) {
+        (self.loss, self.params)
     }
 }
 

@@ -16,6 +16,7 @@ mod params;
 mod training;
 
 pub use gauss_newton::products_per_sample;
+pub(crate) use held_out::BestHeldOut;
 pub use network::RestartReport;
 pub use network::{FittedMlp, MAX_WIDTH, n_parameters};
 pub(crate) use params::DEFAULT_RESTARTS;

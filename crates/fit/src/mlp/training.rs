@@ -196,27 +196,19 @@ fn train_adam(
     rng: &mut ChaCha8Rng,
     (learning_rate, batch_size, epochs): (f64, usize, usize),
 ) -> (Vec<f64>, RestartReport) {
-    const BETA1: f64 = 0.9;
-    const BETA2: f64 = 0.999;
-    const EPSILON: f64 = 1e-8;
     let n = problem.n_params();
-    let (mut grad, mut m, mut v) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let mut grad = vec![0.0; n];
+    let mut adam = crate::adam::Adam::new(n, learning_rate);
     let (mut best, held_out) = BestHeldOut::start(problem, &params, mlp.patience);
     let mut order = problem.train.to_vec();
-    let (mut step, mut done) = (0i32, 0);
+    let mut done = 0;
     let mut reason = TerminationReason::MaxEpochs;
     for _ in 0..epochs {
         done += 1;
         order.shuffle(rng);
         for batch in order.chunks(batch_size) {
             problem.gradient(&params, batch, &mut grad);
-            step += 1;
-            let (c1, c2) = (1.0 - BETA1.powi(step), 1.0 - BETA2.powi(step));
-            for j in 0..n {
-                m[j] = BETA1 * m[j] + (1.0 - BETA1) * grad[j];
-                v[j] = BETA2 * v[j] + (1.0 - BETA2) * grad[j] * grad[j];
-                params[j] -= learning_rate * (m[j] / c1) / ((v[j] / c2).sqrt() + EPSILON);
-            }
+            adam.step(&mut params, &grad);
         }
         let held = problem.mse(&params, held_out);
         if best.observe(held, &params) {

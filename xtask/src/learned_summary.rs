@@ -1,0 +1,240 @@
+//! Does a stage 1 that learns read the car's records better than its
+//! least-squares coefficients (issue 69)? A summary network is trained on
+//! a family's records and parameters, stage 2 is fitted on its summary
+//! alone and beside the family estimator's own features, and each is set
+//! against the exact posterior mean on the manoeuvres of `bayes-gap`,
+//! with the family estimator's features and the same stage 2 as the
+//! reference.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use ndarray::{Array2, Axis, concatenate};
+use rayon::prelude::*;
+use twostage::compress::Compressor;
+use twostage::fit::{Predictor, SummaryNetwork, SummaryTraining};
+use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, IoData, Simulator};
+use twostage::{Estimator, ModelFile, RegressorConfig};
+use twostage_baselines::{BayesCar, RecordEstimator};
+
+use crate::bayes_gap::{Steering, bootstrap_ratio, manoeuvre, rmse};
+use crate::paper::test_records;
+use crate::posterior_cache;
+
+/// What one run compares.
+pub(crate) struct Comparison<'a> {
+    /// The family's model file.
+    pub model_file: &'a Path,
+    /// An estimator of the family: its stage 1 gives the reference features.
+    pub estimator: &'a Path,
+    /// Training records.
+    pub sims: usize,
+    /// Test records per manoeuvre.
+    pub records: usize,
+    /// Stage 2, as `train --fit` takes it.
+    pub fit: &'a str,
+    /// The summary network's training.
+    pub training: SummaryTraining,
+    /// The manoeuvres.
+    pub steerings: &'a [Steering],
+}
+
+/// A record's signals side by side, inputs then outputs.
+fn signals(record: &IoData) -> Array2<f64> {
+    concatenate(Axis(1), &[record.inputs(), record.outputs()]).unwrap_or_default()
+}
+
+/// The family estimator's features of `records` (the records it cannot
+/// compress, such as one that never steers, are an error: the caller
+/// leaves them out with [`compressible`]).
+fn features(estimator: &Estimator, records: &[IoData]) -> Result<Array2<f64>> {
+    let compressor = estimator.compressor();
+    let rows: Vec<Vec<f64>> = records
+        .par_iter()
+        .map(|r| compressor.compress(r.inputs(), r.outputs()))
+        .collect::<Result<_, _>>()?;
+    let width = compressor.n_features();
+    Ok(Array2::from_shape_vec((rows.len(), width), rows.concat())?)
+}
+
+fn rows(a: &Array2<f64>) -> Vec<Vec<f64>> {
+    a.rows().into_iter().map(|r| r.to_vec()).collect()
+}
+
+fn table(truth: &[Vec<f64>]) -> Array2<f64> {
+    let width = truth.first().map_or(0, Vec::len);
+    Array2::from_shape_fn((truth.len(), width), |(i, j)| truth[i][j])
+}
+
+/// The records (and their parameters) the family estimator's stage 1 can
+/// compress, and how many it cannot.
+fn compressible(
+    estimator: &Estimator,
+    (truth, records): (Vec<Vec<f64>>, Vec<IoData>),
+) -> (Vec<Vec<f64>>, Vec<IoData>, usize) {
+    let compressor = estimator.compressor();
+    let total = records.len();
+    let (truth, records): (Vec<_>, Vec<_>) = truth
+        .into_iter()
+        .zip(records)
+        .filter(|(_, r)| compressor.compress(r.inputs(), r.outputs()).is_ok())
+        .unzip();
+    let left = total - records.len();
+    (truth, records, left)
+}
+
+/// The three stage-1 choices' features of `records`.
+fn variants(
+    estimator: &Estimator,
+    network: &SummaryNetwork,
+    records: &[IoData],
+) -> Result<[Array2<f64>; 3]> {
+    let reference = features(estimator, records)?;
+    let recs: Vec<Array2<f64>> = records.par_iter().map(signals).collect();
+    let learned = network.summarize_all(&recs)?;
+    let both = concatenate(Axis(1), &[reference.view(), learned.view()])?;
+    Ok([reference, learned, both])
+}
+
+const NAMES: [&str; 3] = ["features", "learned", "features+learned"];
+
+pub(crate) fn run(c: &Comparison<'_>) -> Result<()> {
+    let estimator = Estimator::load(c.estimator)
+        .with_context(|| format!("reading {}", c.estimator.display()))?;
+    let file = ModelFile::load(c.model_file)?;
+    let family = file.simulator()?;
+    if family.spec().name() != estimator.training().model {
+        bail!(
+            "{} was trained on {}, not on {}",
+            c.estimator.display(),
+            estimator.training().model,
+            family.spec().name()
+        );
+    }
+    let start = Instant::now();
+    let (truth, records, left) = compressible(
+        &estimator,
+        test_records(family.as_ref(), c.sims, c.training.seed)?,
+    );
+    if left > 0 {
+        println!("{left} training records left out: the reference stage 1 cannot compress them");
+    }
+    let simulated = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let recs: Vec<Array2<f64>> = records.par_iter().map(signals).collect();
+    let y = table(&truth);
+    let trained = c.training.train(&recs, y.view())?;
+    println!(
+        "{} records of {} in {simulated:.1} s; summary network {:?} (kernel {}, stride {}, head {}) \
+         trained in {:.1} s: {} epochs, stopped by {:?}, held-out MSE {:.4} (standardized)",
+        c.sims,
+        family.spec().name(),
+        c.training.channels,
+        c.training.kernel,
+        c.training.stride,
+        c.training.head,
+        start.elapsed().as_secs_f64(),
+        trained.epochs,
+        trained.reason,
+        trained.held_out_mse
+    );
+    let history: Vec<String> = trained.history.iter().map(|v| format!("{v:.4}")).collect();
+    println!("  held-out MSE by epoch: {}", history.join(" "));
+    let fit: RegressorConfig = c.fit.parse()?;
+    let training = variants(&estimator, &trained.network, &records)?;
+    let mut stage2 = Vec::new();
+    for (name, x) in NAMES.iter().zip(&training) {
+        let start = Instant::now();
+        stage2.push(fit.fit(x.view(), y.view(), c.training.seed)?);
+        println!(
+            "  stage 2 on {name} ({} numbers) in {:.1} s",
+            x.ncols(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    // The family's own fresh records: the stage-2 fits' held-out error.
+    let (family_truth, family_records, _) = compressible(
+        &estimator,
+        test_records(family.as_ref(), c.records.min(2000), 2026)?,
+    );
+    let held = variants(&estimator, &trained.network, &family_records)?;
+    let words: Vec<String> = NAMES
+        .iter()
+        .zip(&held)
+        .zip(&stage2)
+        .map(|((name, x), f)| {
+            let est = rows(&f.predict(x.view()).unwrap_or_default());
+            let all: Vec<usize> = (0..est.len()).collect();
+            format!(
+                "{name} {}",
+                (0..y.ncols())
+                    .map(|j| format!("{:.4}", rmse(&est, &family_truth, j, &all)))
+                    .collect::<Vec<_>>()
+                    .join("/")
+            )
+        })
+        .collect();
+    println!(
+        "  the family's fresh records, RMSE per parameter: {}",
+        words.join(", ")
+    );
+
+    for &steering in c.steerings {
+        let given = manoeuvre(steering)?;
+        let overrides = BuiltinOverrides {
+            input: given.clone().map(InputSignal::fixed).transpose()?,
+            ..BuiltinOverrides::default()
+        };
+        let car = BuiltinModel::Pacejka.build_with(&overrides)?;
+        let (truth, records) = test_records(car.as_ref(), c.records, 2026)?;
+        let bayes: Box<dyn RecordEstimator> = match given {
+            Some(steer) => Box::new(BayesCar::on_steering(129, 65, steer)?),
+            None => Box::new(BayesCar::new(
+                129,
+                65,
+                records.first().map_or(0, IoData::n_samples),
+            )?),
+        };
+        let kept = posterior_cache::path(
+            &crate::target_dir().join("bayes-gap"),
+            posterior_cache::key(&truth, &records),
+        );
+        let posterior = match posterior_cache::load(&kept, records.len(), 2) {
+            Some(p) => p,
+            None => {
+                let p: Vec<Vec<f64>> = records
+                    .par_iter()
+                    .map(|r| bayes.estimate(r).map(|e| e.theta))
+                    .collect::<Result<_, _>>()?;
+                posterior_cache::store(&kept, &p)?;
+                p
+            }
+        };
+        let x = variants(&estimator, &trained.network, &records)?;
+        let all: Vec<usize> = (0..records.len()).collect();
+        let mut line = format!("  {steering:?}:");
+        for ((name, x), f) in NAMES.iter().zip(&x).zip(&stage2) {
+            let est = rows(&f.predict(x.view())?);
+            // As the estimator does: an estimate outside the prior's box is
+            // brought to its edge.
+            let (lower, upper) = (car.prior().lower(), car.prior().upper());
+            let est: Vec<Vec<f64>> = est
+                .into_iter()
+                .map(|t| {
+                    t.iter()
+                        .zip(lower.iter().zip(upper.iter()))
+                        .map(|(v, (lo, hi))| v.clamp(*lo, *hi))
+                        .collect()
+                })
+                .collect();
+            for j in 0..2 {
+                let ratio = rmse(&est, &truth, j, &all) / rmse(&posterior, &truth, j, &all);
+                let [low, high] = bootstrap_ratio(&est, &posterior, &truth, j, 2026);
+                line += &format!(" {name} p{j} {ratio:.3} [{low:.3}, {high:.3}];");
+            }
+        }
+        println!("{line}");
+    }
+    Ok(())
+}
