@@ -73,6 +73,30 @@ impl Drawn {
         self.low.to_bits() == self.high.to_bits()
     }
 
+    /// Refuses a range whose low end is below `least` (or at it, when
+    /// `positive`), naming the setting and what is accepted.
+    pub(crate) fn check_low(
+        &self,
+        name: &'static str,
+        least: f64,
+        positive: bool,
+        reason: &str,
+    ) -> Result<()> {
+        let refused = if positive {
+            self.low <= least
+        } else {
+            self.low < least
+        };
+        if refused {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name,
+                value: self.low.to_string(),
+                reason: reason.into(),
+            }));
+        }
+        Ok(())
+    }
+
     pub(crate) fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> f64 {
         if self.is_fixed() {
             self.low

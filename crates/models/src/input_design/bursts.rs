@@ -87,22 +87,15 @@ impl Bursts {
                 ),
             }));
         }
+        self.seconds
+            .check_low("bursts seconds", 0.0, true, "a burst lasts a positive time")?;
         let (shortest, _) = self.seconds.range();
-        if shortest <= 0.0 {
-            return Err(SimError::InvalidSetting(InvalidSetting {
-                name: "bursts seconds",
-                value: shortest.to_string(),
-                reason: "a burst lasts a positive time".into(),
-            }));
-        }
-        let (least_dwell, _) = self.dwell.range();
-        if least_dwell < 0.0 {
-            return Err(SimError::InvalidSetting(InvalidSetting {
-                name: "bursts dwell",
-                value: least_dwell.to_string(),
-                reason: "a crest is held zero seconds or more (e.g. [0, 1.5])".into(),
-            }));
-        }
+        self.dwell.check_low(
+            "bursts dwell",
+            0.0,
+            false,
+            "a crest is held zero seconds or more (e.g. [0, 1.5])",
+        )?;
         let (_, most_half_cycles) = self.half_cycles()?;
         let fastest = most_half_cycles as f64 / 2.0 / shortest;
         if sample_time > 0.0 && fastest > 0.5 / sample_time {

@@ -6,12 +6,10 @@
 //! never ramp: a family of them never shows stage 1 a record that leaves
 //! rest, or the slope of a move.
 
-use crate::InvalidSetting;
-
 use rand::Rng;
 
 use super::Drawn;
-use crate::error::{Result, SimError};
+use crate::error::Result;
 
 /// The settings of a `ramps` input design (see the module's page).
 #[derive(Debug, Clone, PartialEq)]
@@ -27,22 +25,18 @@ pub(crate) struct Ramps {
 impl Ramps {
     /// Refuses a hold that is not positive or a ramp below zero.
     pub(crate) fn check(&self) -> Result<()> {
-        let (shortest, _) = self.hold.range();
-        if shortest <= 0.0 {
-            return Err(SimError::InvalidSetting(InvalidSetting {
-                name: "ramps hold_seconds",
-                value: shortest.to_string(),
-                reason: "a level is held a positive time (e.g. [0.5, 5])".into(),
-            }));
-        }
-        let (quickest, _) = self.ramp.range();
-        if quickest < 0.0 {
-            return Err(SimError::InvalidSetting(InvalidSetting {
-                name: "ramps ramp_seconds",
-                value: quickest.to_string(),
-                reason: "a move takes zero seconds (a step) or more (e.g. [0, 3])".into(),
-            }));
-        }
+        self.hold.check_low(
+            "ramps hold_seconds",
+            0.0,
+            true,
+            "a level is held a positive time (e.g. [0.5, 5])",
+        )?;
+        self.ramp.check_low(
+            "ramps ramp_seconds",
+            0.0,
+            false,
+            "a move takes zero seconds (a step) or more (e.g. [0, 3])",
+        )?;
         Ok(())
     }
 
