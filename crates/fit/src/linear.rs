@@ -3,8 +3,9 @@
 //! intercept and standardized features.
 
 use crate::InvalidSetting;
-use faer::Mat;
-use faer::linalg::solvers::SolveLstsqCore;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::qr::no_pivoting::{factor, solve};
+use faer::{Mat, Par};
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
@@ -149,17 +150,40 @@ impl Regressor for Ridge {
             }
         });
         let mut rhs = Mat::from_fn(m + extra, q, |i, j| if i < m { t[[i, j]] } else { 0.0 });
-        let qr = a.qr();
-        let r = qr.R();
-        let largest = (0..n).map(|j| r[(j, j)].abs()).fold(0.0f64, f64::max);
+        // Sequential, so that the bits do not depend on the thread count
+        // (faer's parallel blocked updates sum in another order).
+        let (mut a, rows) = (a, m + extra);
+        let block = factor::recommended_block_size::<f64>(rows, n);
+        let mut q_coeff = Mat::<f64>::zeros(block, rows.min(n));
+        let mut memory = MemBuffer::new(
+            factor::qr_in_place_scratch::<f64>(rows, n, block, Par::Seq, Default::default()).or(
+                solve::solve_lstsq_in_place_scratch::<f64>(rows, n, block, q, Par::Seq),
+            ),
+        );
+        factor::qr_in_place(
+            a.as_mut(),
+            q_coeff.as_mut(),
+            Par::Seq,
+            MemStack::new(&mut memory),
+            Default::default(),
+        );
+        // R is the upper triangle of `a` now.
+        let largest = (0..n).map(|j| a[(j, j)].abs()).fold(0.0f64, f64::max);
         let dependent = |j: usize| {
-            let d = r[(j, j)].abs();
+            let d = a[(j, j)].abs();
             d.is_nan() || d <= 1e-12 * largest
         };
         if let Some(j) = (0..n).find(|&j| dependent(j)) {
             return Err(FitError::RankDeficient { feature: j });
         }
-        qr.solve_lstsq_in_place_with_conj(faer::Conj::No, rhs.as_mut());
+        solve::solve_lstsq_in_place(
+            a.as_ref(),
+            q_coeff.as_ref(),
+            a.as_ref(),
+            rhs.as_mut(),
+            Par::Seq,
+            MemStack::new(&mut memory),
+        );
         let weights = (0..q)
             .flat_map(|k| (0..n).map(move |j| (k, j)))
             .map(|(k, j)| rhs[(j, k)])

@@ -59,6 +59,28 @@ fn ridge_equals_the_regularized_normal_equations() {
     }
 }
 
+/// A ridge fit large enough for faer to block its QR gives the same bits
+/// on one thread as on three.
+#[test]
+fn ridge_is_identical_whatever_the_thread_count() {
+    let x = uniform(3000, 40, 8);
+    let y = Array2::from_shape_fn((3000, 3), |(i, k)| {
+        x[[i, k]] - 0.5 * x[[i, 20 + k]] + 0.1 * x[[i, 39]] * x[[i, 1]]
+    });
+    let fit = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| Ridge::new(1e-6).unwrap().fit(x.view(), y.view()).unwrap())
+    };
+    let (one, three) = (fit(1), fit(3));
+    let bits = |m: &twostage_fit::FittedLinear| -> Vec<u64> {
+        m.weights().iter().map(|w| w.to_bits()).collect()
+    };
+    assert_eq!(bits(&one), bits(&three));
+}
+
 #[test]
 fn ridge_refuses_collinear_features_without_a_penalty() {
     let mut x = uniform(30, 3, 3);
