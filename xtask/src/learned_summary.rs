@@ -6,14 +6,14 @@
 //! with the family estimator's features and the same stage 2 as the
 //! reference.
 
-use std::path::Path;
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use ndarray::{Array2, Axis, concatenate};
 use rayon::prelude::*;
-use twostage::compress::Compressor;
-use twostage::fit::{Predictor, SummaryNetwork, SummaryTraining};
+use twostage::compress::{Compressor, LearnedShape, SummaryNetwork, Workspace};
+use twostage::fit::{Predictor, SummaryTraining};
 use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, IoData, Simulator};
 use twostage::{Estimator, ModelFile, RegressorConfig};
 use twostage_baselines::{BayesCar, RecordEstimator};
@@ -22,22 +22,79 @@ use crate::bayes_gap::{Steering, bootstrap_ratio, manoeuvre, rmse};
 use crate::paper::test_records;
 use crate::posterior_cache;
 
-/// What one run compares.
-pub(crate) struct Comparison<'a> {
-    /// The family's model file.
-    pub model_file: &'a Path,
-    /// An estimator of the family: its stage 1 gives the reference features.
-    pub estimator: &'a Path,
+/// What one run compares (the options of `xtask learned-summary`).
+#[derive(Debug, clap::Args)]
+pub(crate) struct Args {
+    /// The family's model file (of the built-in car).
+    #[arg(long)]
+    model_file: PathBuf,
+    /// An estimator of that family: its stage 1 is the reference.
+    #[arg(long)]
+    estimator: PathBuf,
     /// Training records.
-    pub sims: usize,
+    #[arg(long, default_value_t = 8000)]
+    sims: usize,
     /// Test records per manoeuvre.
-    pub records: usize,
+    #[arg(long, default_value_t = 10000)]
+    records: usize,
     /// Stage 2, as `train --fit` takes it.
-    pub fit: &'a str,
-    /// The summary network's training.
-    pub training: SummaryTraining,
-    /// The manoeuvres.
-    pub steerings: &'a [Steering],
+    #[arg(long, default_value = "ensemble:10")]
+    fit: String,
+    /// Channels of each convolution, comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "8,8,8")]
+    channels: Vec<usize>,
+    /// Kernel width of every convolution.
+    #[arg(long, default_value_t = 5)]
+    kernel: usize,
+    /// Stride of every convolution.
+    #[arg(long, default_value_t = 2)]
+    stride: usize,
+    /// Hidden units of the head trained with it.
+    #[arg(long, default_value_t = 16)]
+    head: usize,
+    /// Most epochs.
+    #[arg(long, default_value_t = 80)]
+    epochs: usize,
+    /// Adam's learning rate.
+    #[arg(long, default_value_t = 3e-3)]
+    learning_rate: f64,
+    /// Epochs without a better held-out loss before stopping.
+    #[arg(long, default_value_t = 15)]
+    patience: usize,
+    /// Records per mini-batch.
+    #[arg(long, default_value_t = 32)]
+    batch_size: usize,
+    /// Seed of the training records and the network.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The manoeuvres, comma separated.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "chicane,iso3888,sine-with-dwell,step-steer,slalom,random"
+    )]
+    steerings: Vec<Steering>,
+}
+
+impl Args {
+    /// The summary network's training these options ask for.
+    fn training(&self) -> SummaryTraining {
+        SummaryTraining {
+            shape: LearnedShape {
+                channels: self.channels.clone(),
+                kernel: self.kernel,
+                stride: self.stride,
+            },
+            head: self.head,
+            epochs: self.epochs,
+            learning_rate: self.learning_rate,
+            patience: self.patience,
+            batch_size: self.batch_size,
+            seed: self.seed,
+            ..SummaryTraining::default()
+        }
+    }
 }
 
 /// A record's signals side by side, inputs then outputs.
@@ -91,18 +148,26 @@ fn variants(
     records: &[IoData],
 ) -> Result<[Array2<f64>; 3]> {
     let reference = features(estimator, records)?;
-    let recs: Vec<Array2<f64>> = records.par_iter().map(signals).collect();
-    let learned = network.summarize_all(&recs)?;
+    let rows: Vec<Vec<f64>> = records
+        .par_iter()
+        .map(|r| {
+            let mut row = vec![0.0; network.n_features()];
+            network.summarize(r.inputs(), r.outputs(), &mut Workspace::new(), &mut row)?;
+            Ok(row)
+        })
+        .collect::<Result<_>>()?;
+    let learned = Array2::from_shape_vec((rows.len(), network.n_features()), rows.concat())?;
     let both = concatenate(Axis(1), &[reference.view(), learned.view()])?;
     Ok([reference, learned, both])
 }
 
 const NAMES: [&str; 3] = ["features", "learned", "features+learned"];
 
-pub(crate) fn run(c: &Comparison<'_>) -> Result<()> {
-    let estimator = Estimator::load(c.estimator)
+pub(crate) fn run(c: &Args) -> Result<()> {
+    let summary = c.training();
+    let estimator = Estimator::load(&c.estimator)
         .with_context(|| format!("reading {}", c.estimator.display()))?;
-    let file = ModelFile::load(c.model_file)?;
+    let file = ModelFile::load(&c.model_file)?;
     let family = file.simulator()?;
     if family.spec().name() != estimator.training().model {
         bail!(
@@ -115,7 +180,7 @@ pub(crate) fn run(c: &Comparison<'_>) -> Result<()> {
     let start = Instant::now();
     let (truth, records, left) = compressible(
         &estimator,
-        test_records(family.as_ref(), c.sims, c.training.seed)?,
+        test_records(family.as_ref(), c.sims, summary.seed)?,
     );
     if left > 0 {
         println!("{left} training records left out: the reference stage 1 cannot compress them");
@@ -124,16 +189,16 @@ pub(crate) fn run(c: &Comparison<'_>) -> Result<()> {
     let start = Instant::now();
     let recs: Vec<Array2<f64>> = records.par_iter().map(signals).collect();
     let y = table(&truth);
-    let trained = c.training.train(&recs, y.view())?;
+    let trained = summary.train(&recs, y.view())?;
     println!(
         "{} records of {} in {simulated:.1} s; summary network {:?} (kernel {}, stride {}, head {}) \
          trained in {:.1} s: {} epochs, stopped by {:?}, held-out MSE {:.4} (standardized)",
         c.sims,
         family.spec().name(),
-        c.training.channels,
-        c.training.kernel,
-        c.training.stride,
-        c.training.head,
+        summary.shape.channels,
+        summary.shape.kernel,
+        summary.shape.stride,
+        summary.head,
         start.elapsed().as_secs_f64(),
         trained.epochs,
         trained.reason,
@@ -146,7 +211,7 @@ pub(crate) fn run(c: &Comparison<'_>) -> Result<()> {
     let mut stage2 = Vec::new();
     for (name, x) in NAMES.iter().zip(&training) {
         let start = Instant::now();
-        stage2.push(fit.fit(x.view(), y.view(), c.training.seed)?);
+        stage2.push(fit.fit(x.view(), y.view(), summary.seed)?);
         println!(
             "  stage 2 on {name} ({} numbers) in {:.1} s",
             x.ncols(),
@@ -180,7 +245,7 @@ pub(crate) fn run(c: &Comparison<'_>) -> Result<()> {
         words.join(", ")
     );
 
-    for &steering in c.steerings {
+    for &steering in &c.steerings {
         let given = manoeuvre(steering)?;
         let overrides = BuiltinOverrides {
             input: given.clone().map(InputSignal::fixed).transpose()?,

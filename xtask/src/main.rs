@@ -97,58 +97,7 @@ enum Command {
     /// network trained on a model file's family, stage 2 fitted on its
     /// summary (alone and beside the estimator's features), each against
     /// the exact posterior mean on the car's manoeuvres.
-    LearnedSummary {
-        /// The family's model file (of the built-in car).
-        #[arg(long)]
-        model_file: PathBuf,
-        /// An estimator of that family: its stage 1 is the reference.
-        #[arg(long)]
-        estimator: PathBuf,
-        /// Training records.
-        #[arg(long, default_value_t = 8000)]
-        sims: usize,
-        /// Test records per manoeuvre.
-        #[arg(long, default_value_t = 10000)]
-        records: usize,
-        /// Stage 2, as `train --fit` takes it.
-        #[arg(long, default_value = "ensemble:10")]
-        fit: String,
-        /// Channels of each convolution, comma separated.
-        #[arg(long, value_delimiter = ',', default_value = "8,8,8")]
-        channels: Vec<usize>,
-        /// Kernel width of every convolution.
-        #[arg(long, default_value_t = 5)]
-        kernel: usize,
-        /// Stride of every convolution.
-        #[arg(long, default_value_t = 2)]
-        stride: usize,
-        /// Hidden units of the head trained with it.
-        #[arg(long, default_value_t = 16)]
-        head: usize,
-        /// Most epochs.
-        #[arg(long, default_value_t = 60)]
-        epochs: usize,
-        /// Adam's learning rate.
-        #[arg(long, default_value_t = 3e-3)]
-        learning_rate: f64,
-        /// Epochs without a better held-out loss before stopping.
-        #[arg(long, default_value_t = 8)]
-        patience: usize,
-        /// Records per mini-batch.
-        #[arg(long, default_value_t = 32)]
-        batch_size: usize,
-        /// Seed of the training records and the network.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// The manoeuvres, comma separated.
-        #[arg(
-            long,
-            value_enum,
-            value_delimiter = ',',
-            default_value = "chicane,iso3888,sine-with-dwell,step-steer,slalom,random"
-        )]
-        steerings: Vec<bayes_gap::Steering>,
-    },
+    LearnedSummary(learned_summary::Args),
     /// The workspace's crates: lines, workspace dependencies, and circles
     /// among each crate's top-level modules (Markdown, for docs/crates.md).
     Crates {
@@ -290,42 +239,7 @@ fn main() -> ExitCode {
             from,
             count,
         } => fuzz::chunk(reader, seed, from, count),
-        Command::LearnedSummary {
-            model_file,
-            estimator,
-            sims,
-            records,
-            fit,
-            channels,
-            kernel,
-            stride,
-            head,
-            epochs,
-            learning_rate,
-            patience,
-            batch_size,
-            seed,
-            steerings,
-        } => learned_summary::run(&learned_summary::Comparison {
-            model_file: &model_file,
-            estimator: &estimator,
-            sims,
-            records,
-            fit: &fit,
-            training: twostage::fit::SummaryTraining {
-                channels,
-                kernel,
-                stride,
-                head,
-                epochs,
-                learning_rate,
-                patience,
-                batch_size,
-                seed,
-                ..twostage::fit::SummaryTraining::default()
-            },
-            steerings: &steerings,
-        }),
+        Command::LearnedSummary(args) => learned_summary::run(&args),
         Command::BayesGap {
             estimator,
             against,

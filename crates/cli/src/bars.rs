@@ -21,7 +21,7 @@ pub struct Bars {
     quiet: bool,
     /// When the running stage began, and each stage's wall time so far
     /// (in `Stage` order; a stage may run more than once, as in --auto).
-    clock: Mutex<(Option<Instant>, [Duration; 4])>,
+    clock: Mutex<(Option<Instant>, [Duration; STAGES.len()])>,
     /// The plain-line log, when stderr is not a terminal.
     log: Option<PlainLog>,
 }
@@ -145,7 +145,7 @@ impl Bars {
         Self {
             current: Mutex::new(None),
             quiet,
-            clock: Mutex::new((None, [Duration::ZERO; 4])),
+            clock: Mutex::new((None, [Duration::ZERO; STAGES.len()])),
             log,
         }
     }
@@ -182,7 +182,8 @@ impl Bars {
     }
 }
 
-const STAGES: [Stage; 4] = [
+const STAGES: [Stage; 5] = [
+    Stage::Learning,
     Stage::Training,
     Stage::Fitting,
     Stage::Calibration,
@@ -197,6 +198,7 @@ fn slot(stage: Stage) -> usize {
 /// and compressed record by record (so memory stays bounded), one phase.
 fn phase(stage: Stage) -> &'static str {
     match stage {
+        Stage::Learning => "learn stage 1",
         Stage::Training => "simulate + compress",
         Stage::Fitting => "fit",
         Stage::Calibration => "calibrate",
@@ -206,6 +208,7 @@ fn phase(stage: Stage) -> &'static str {
 
 fn what(stage: Stage) -> &'static str {
     match stage {
+        Stage::Learning => "learning stage 1",
         Stage::Training => "simulating + compressing",
         Stage::Fitting => "fitting stage 2",
         Stage::Calibration => "calibrating intervals",

@@ -32,8 +32,11 @@ pub struct TrainArgs {
     /// transforms when written log+SPEC or log1p+SPEC (log,id+SPEC: one
     /// per output), and followed by +level (each output's first sample
     /// and mean) or +summary (each signal's mean, RMS, peak and mean
-    /// frequency: for a family of inputs) (default: the preset's). ARX
-    /// orders apply to each of the model's inputs and outputs.
+    /// frequency: for a family of inputs), and last by +learned[:C,C,..]
+    /// (a convolutional summary network over every signal, trained with
+    /// the estimator; learned alone uses it without other features)
+    /// (default: the preset's). ARX orders apply to each of the model's
+    /// inputs and outputs.
     #[arg(long)]
     compress: Option<String>,
     /// Stage 2: linear, mlp:H[,H...] hidden sizes, ensemble:H[,H...][xN]

@@ -91,6 +91,32 @@ fn a_structure_the_runtime_cannot_stream_is_refused_with_what_to_do() {
         "{err}"
     );
     assert!(!blob.exists(), "nothing is written for a refused estimator");
+    // A learned stage 1 trains and estimates on the host; the runtime
+    // refuses it, saying what it can take instead.
+    let learned = dir.join("learned.tsest");
+    train(&learned, "arx:2,2+learned:3");
+    let shown = twostage(&["inspect", path(&learned)]);
+    assert!(shown.status.success(), "{}", text(&shown.stderr));
+    assert!(
+        text(&shown.stdout)
+            .contains("a learned summary (3 channels, kernel 5, stride 2; 33 weights"),
+        "{}",
+        text(&shown.stdout)
+    );
+    let out = twostage(&[
+        "export",
+        "--estimator",
+        path(&learned),
+        "--out",
+        path(&blob),
+    ]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("does not evaluate a learned stage 1") && err.contains("+summary"),
+        "{err}"
+    );
+    assert!(!blob.exists());
     let missing = dir.join("missing.tsest");
     let out = twostage(&[
         "export",

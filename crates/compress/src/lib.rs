@@ -52,8 +52,8 @@ use ndarray::ArrayView2;
 
 pub use arx::Arx;
 pub use config::{
-    CompressorConfig, NARX_SCALE_RECORDS, PCA_RECORDS, SignalTransform, TRANSFORM_RECORDS,
-    Transformed, WithLevel, WithSummary,
+    CompressorConfig, ConvShape, LearnedShape, NARX_SCALE_RECORDS, PCA_RECORDS, SignalTransform,
+    SummaryNetwork, TRANSFORM_RECORDS, Transformed, WithLearned, WithLevel, WithSummary,
 };
 pub use error::{CompressError, InvalidSetting, Result};
 pub use narx::{Narx, signal_rms};

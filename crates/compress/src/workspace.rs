@@ -52,6 +52,8 @@ pub struct Workspace {
     pub(crate) columns: Vec<LaggedColumn>,
     /// Outputs after their transforms ([`crate::Transformed`]).
     pub(crate) transformed: Vec<f64>,
+    /// A summary network's activations, layer in and layer out.
+    pub(crate) learned: [Vec<f64>; 2],
     /// Samples the last estimate-path compression could not transform.
     pub(crate) floored: Vec<FlooredSample>,
     q_coeff: Mat<f64>,
@@ -85,6 +87,7 @@ impl Workspace {
             fast: FastScratch::default(),
             columns: Vec::new(),
             transformed: Vec::new(),
+            learned: [Vec::new(), Vec::new()],
             floored: Vec::new(),
             q_coeff: Mat::zeros(1, 0),
             mem: MemBuffer::new(StackReq::EMPTY),

@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32), currently 6 (1 to 5 are still read) |
+//! | 8..12 | format version (u32): 7 for an estimator whose stage 1 learns, else 6 (1 to 5 are still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -25,11 +25,15 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// Version 2 added the feature envelope and the adaptive intervals, version
 /// 3 the parameters' priors, version 4 the betting certificate of the
 /// validation report, version 5 the family of inputs the held-out records
-/// spanned, version 6 the density of their input shapes; older files load
-/// without them (uniform priors, no certificate, no input family, no
-/// shapes). Every version's layout lives in
-/// `layout.rs`.
-pub const FORMAT_VERSION: u32 = 6;
+/// spanned, version 6 the density of their input shapes, version 7 a stage
+/// 1 that learns (`+learned`, decision 081); older files load without them
+/// (uniform priors, no certificate, no input family, no shapes). Version 7
+/// shares version 6's layout and is written only where it is needed, so
+/// that a build that reads 6 still reads every estimator without a
+/// learned stage 1. Every version's layout lives in `layout.rs`.
+pub const FORMAT_VERSION: u32 = 7;
+/// The version of an estimator file whose stage 1 does not learn.
+const WITHOUT_LEARNED: u32 = 6;
 const HEADER: usize = 24;
 
 impl Estimator {
@@ -43,7 +47,12 @@ impl Estimator {
         })?;
         let mut bytes = Vec::with_capacity(HEADER + payload.len());
         bytes.extend_from_slice(MAGIC);
-        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        let version = if self.compressor().learns() {
+            FORMAT_VERSION
+        } else {
+            WITHOUT_LEARNED
+        };
+        bytes.extend_from_slice(&version.to_le_bytes());
         bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
         bytes.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
         bytes.extend_from_slice(&payload);

@@ -195,6 +195,14 @@ impl Estimator {
     /// of it where there is one, and whether each signal's summary
     /// follows it; refused beyond the runtime's sizes.
     fn runtime_stage1(&self) -> Result<(Option<&Transformed>, &Arx, bool)> {
+        if self.compressor.learns() {
+            return Err(refuse(format!(
+                "the runtime does not evaluate a learned stage 1 yet, this estimator uses {}; \
+                 export an estimator trained without `+learned` (e.g. --compress \
+                 arx:2,2+summary)",
+                self.compressor
+            )));
+        }
         let (summary, stage1) = match &self.compressor {
             CompressorConfig::Summarized(s) => (true, s.inner()),
             other => (false, other),

@@ -9,7 +9,7 @@
 //! - [`MlpParams`] -> [`Mlp`] -> [`FittedMlp`]: tanh networks trained by
 //!   Levenberg-Marquardt, with early stopping and parallel seeded restarts.
 //! - [`Standardizer`]: per-column affine standardization.
-//! - [`SummaryTraining`] -> [`SummaryNetwork`]: a stage 1 that learns, a
+//! - [`SummaryTraining`] -> [`twostage_compress::SummaryNetwork`]: a stage 1 that learns, a
 //!   small convolutional network over a record's samples trained end to
 //!   end with a head on the parameters, whose summary stage 2 then fits.
 //!
@@ -55,7 +55,7 @@ pub use mlp::{
 };
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;
-pub use summary_network::{ConvShape, SummaryNetwork, SummaryTraining, TrainedSummary};
+pub use summary_network::{SummaryTraining, TrainedSummary};
 
 /// A learning method for the map `h: alpha -> theta` (its hyperparameters).
 pub trait Regressor {

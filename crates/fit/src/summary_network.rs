@@ -1,15 +1,9 @@
-//! A stage 1 that learns (issue 69): a small one-dimensional convolutional
-//! network over a record's samples, every signal a channel, whose
-//! activations and their squares are averaged over time into a few
-//! summary numbers.
-//!
-//! Strided convolutions with tanh see a record a few samples at a time,
-//! as an ARX fit does, but through nonlinear filters of their own; the
-//! average over time makes the summary independent of the record's
-//! length, as least-squares coefficients are. The network is trained end
-//! to end with a one-hidden-layer head on the chart's parameters (Adam on
-//! the standardized squared error, held-out stopping); the head is then
-//! set aside and stage 2 is fitted on the summary, beside whatever other
+//! The training of a stage 1 that learns (issue 69): the summary network
+//! of `twostage_compress` (strided tanh convolutions over a record's
+//! samples, pooled by time averages) is trained end to end with a
+//! one-hidden-layer head on the chart's parameters (Adam on the
+//! standardized squared error, held-out stopping); the head is then set
+//! aside and stage 2 is fitted on the summary, beside whatever other
 //! features the run compresses, so that intervals, certificates and flags
 //! stay stage 2's.
 //!
@@ -24,6 +18,8 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use twostage_compress::{ConvShape, LearnedShape, SummaryNetwork};
+use twostage_kernels::convolution::{convolve_tanh, min_samples, pool_mean_and_square};
 use twostage_kernels::tanh;
 
 use crate::TerminationReason;
@@ -36,58 +32,12 @@ use crate::standardize::Standardizer;
 /// every sum is the same at any thread count.
 const GRADIENT_CHUNK: usize = 8;
 
-/// One strided convolution: `out[o][t] = tanh(b[o] + sum_c sum_k
-/// w[o][c][k] in[c][stride t + k])` over the positions where the kernel
-/// fits (no padding).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ConvShape {
-    /// Channels in (the signals, for the first layer).
-    pub inputs: usize,
-    /// Channels out.
-    pub outputs: usize,
-    /// Kernel width in samples.
-    pub kernel: usize,
-    /// Samples between successive positions.
-    pub stride: usize,
-}
-
-impl ConvShape {
-    fn n_weights(&self) -> usize {
-        self.outputs * (self.inputs * self.kernel + 1)
-    }
-
-    /// Positions the kernel takes over `length` samples (0 if it does not fit).
-    fn positions(&self, length: usize) -> usize {
-        if length < self.kernel {
-            0
-        } else {
-            (length - self.kernel) / self.stride + 1
-        }
-    }
-}
-
-/// The trained summary network: each signal's scale, the convolutions and
-/// their weights. [`SummaryNetwork::summarize`] maps a record to
-/// [`SummaryNetwork::n_features`] numbers.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SummaryNetwork {
-    /// Each signal is divided by its scale (its RMS over the training records).
-    scales: Vec<f64>,
-    layers: Vec<ConvShape>,
-    /// Layer after layer: weights (out x in x kernel, row-major), then biases.
-    weights: Vec<f64>,
-}
-
 /// How the summary network is shaped and trained.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SummaryTraining {
-    /// Channels of each convolution, first to last (the summary has as
-    /// many numbers as the last).
-    pub channels: Vec<usize>,
-    /// Kernel width of every convolution.
-    pub kernel: usize,
-    /// Stride of every convolution.
-    pub stride: usize,
+    /// The convolutions' channels (the summary has twice as many numbers
+    /// as the last), kernel and stride.
+    pub shape: LearnedShape,
     /// Hidden units of the head trained with it.
     pub head: usize,
     /// Adam's step.
@@ -107,14 +57,12 @@ pub struct SummaryTraining {
 impl Default for SummaryTraining {
     fn default() -> Self {
         Self {
-            channels: vec![8, 8, 8],
-            kernel: 5,
-            stride: 2,
+            shape: LearnedShape::default(),
             head: 16,
             learning_rate: 3e-3,
             batch_size: 32,
-            epochs: 60,
-            patience: 8,
+            epochs: 80,
+            patience: 15,
             held_out: 0.1,
             seed: 0,
         }
@@ -175,26 +123,17 @@ fn forward_convolutions(
     let mut lengths = vec![length];
     let mut offset = 0;
     for shape in layers {
-        let (w, b) = weights[offset..offset + shape.n_weights()]
-            .split_at(shape.outputs * shape.inputs * shape.kernel);
-        offset += shape.n_weights();
         let input = &acts[acts.len() - 1];
         let length_in = lengths[lengths.len() - 1];
-        let length_out = shape.positions(length_in);
-        let mut out = vec![0.0; shape.outputs * length_out];
-        for o in 0..shape.outputs {
-            let row = &mut out[o * length_out..(o + 1) * length_out];
-            row.fill(b[o]);
-            for c in 0..shape.inputs {
-                let taps = &w[(o * shape.inputs + c) * shape.kernel..][..shape.kernel];
-                let channel = &input[c * length_in..(c + 1) * length_in];
-                for (t, z) in row.iter_mut().enumerate() {
-                    let window = &channel[t * shape.stride..][..shape.kernel];
-                    *z += taps.iter().zip(window).map(|(a, x)| a * x).sum::<f64>();
-                }
-            }
-            row.iter_mut().for_each(|z| *z = tanh(*z));
-        }
+        let mut out = vec![0.0; shape.outputs * shape.positions(length_in)];
+        let length_out = convolve_tanh(
+            *shape,
+            &weights[offset..offset + shape.n_weights()],
+            input,
+            length_in,
+            &mut out,
+        );
+        offset += shape.n_weights();
         acts.push(out);
         lengths.push(length_out);
     }
@@ -210,14 +149,14 @@ fn channels_of(layers: &[ConvShape]) -> usize {
 /// the squares keep what a family steered as much left as right averages
 /// away in odd functions of the record (a gain is in `u y`, not `u`).
 fn pooled(pass: &Pass, channels: usize) -> Vec<f64> {
-    let (last, length) = (
+    let mut out = vec![0.0; 2 * channels];
+    pool_mean_and_square(
         &pass.acts[pass.acts.len() - 1],
+        channels,
         pass.lengths[pass.lengths.len() - 1],
+        &mut out,
     );
-    let rows = || (0..channels).map(|c| &last[c * length..(c + 1) * length]);
-    let mean = rows().map(|a| a.iter().sum::<f64>() / length as f64);
-    let square = rows().map(|a| a.iter().map(|v| v * v).sum::<f64>() / length as f64);
-    mean.chain(square).collect()
+    out
 }
 
 /// `record` (samples x signals) divided by `scales`, channel-major.
@@ -227,86 +166,6 @@ fn scaled(record: ArrayView2<'_, f64>, scales: &[f64]) -> Vec<f64> {
         out.extend(column.iter().map(|v| v / scale));
     }
     out
-}
-
-impl SummaryNetwork {
-    /// Summary numbers per record: two per channel of the last layer
-    /// (its time average, then the average of its square).
-    pub fn n_features(&self) -> usize {
-        2 * channels_of(&self.layers)
-    }
-
-    /// Signals a record must have.
-    pub fn n_signals(&self) -> usize {
-        self.scales.len()
-    }
-
-    /// The shortest record with at least one position in the last layer.
-    pub fn min_samples(&self) -> usize {
-        self.layers
-            .iter()
-            .rev()
-            .fold(1, |after, l| (after - 1) * l.stride + l.kernel)
-    }
-
-    /// The convolutions, first to last.
-    pub fn layers(&self) -> &[ConvShape] {
-        &self.layers
-    }
-
-    /// The summary of `record` (samples x signals, inputs then outputs)
-    /// into `out`.
-    ///
-    /// # Errors
-    /// [`FitError::ShapeMismatch`] for another number of signals or
-    /// features, or a record shorter than [`Self::min_samples`].
-    pub fn summarize(&self, record: ArrayView2<'_, f64>, out: &mut [f64]) -> Result<()> {
-        if record.ncols() != self.n_signals() || out.len() != self.n_features() {
-            return Err(FitError::ShapeMismatch(format!(
-                "a summary network of {} signals and {} features given a record of {} signals \
-                 and room for {}",
-                self.n_signals(),
-                self.n_features(),
-                record.ncols(),
-                out.len()
-            )));
-        }
-        if record.nrows() < self.min_samples() {
-            return Err(FitError::ShapeMismatch(format!(
-                "a record of {} samples: the summary network needs {} or more",
-                record.nrows(),
-                self.min_samples()
-            )));
-        }
-        let pass = forward_convolutions(
-            &self.layers,
-            &self.weights,
-            scaled(record, &self.scales),
-            record.nrows(),
-        );
-        out.copy_from_slice(&pooled(&pass, channels_of(&self.layers)));
-        Ok(())
-    }
-
-    /// The summaries of `records`, one row each, in parallel.
-    ///
-    /// # Errors
-    /// As [`Self::summarize`], naming the record.
-    pub fn summarize_all(&self, records: &[Array2<f64>]) -> Result<Array2<f64>> {
-        let rows: Vec<Vec<f64>> = records
-            .par_iter()
-            .enumerate()
-            .map(|(i, r)| {
-                let mut out = vec![0.0; self.n_features()];
-                self.summarize(r.view(), &mut out)
-                    .map_err(|e| FitError::ShapeMismatch(format!("record {i}: {e}")))?;
-                Ok(out)
-            })
-            .collect::<Result<_>>()?;
-        let flat: Vec<f64> = rows.into_iter().flatten().collect();
-        Array2::from_shape_vec((records.len(), self.n_features()), flat)
-            .map_err(|e| FitError::ShapeMismatch(e.to_string()))
-    }
 }
 
 /// The squared error of one record through the convolutions and the head
@@ -429,27 +288,12 @@ impl SummaryTraining {
                 reason: reason.into(),
             }))
         };
-        if self.channels.is_empty() || self.channels.iter().any(|&c| c == 0 || c > 64) {
-            return bad(
-                "summary channels",
-                format!("{:?}", self.channels),
-                "one to six layers of 1 to 64 channels",
-            );
-        }
-        if self.channels.len() > 6 {
-            return bad(
-                "summary channels",
-                format!("{:?}", self.channels),
-                "one to six layers of 1 to 64 channels",
-            );
-        }
-        if self.kernel == 0 || self.stride == 0 || self.stride > self.kernel {
-            return bad(
-                "summary kernel and stride",
-                format!("{} and {}", self.kernel, self.stride),
-                "a kernel of 1 sample or more and a stride from 1 to the kernel, so that no sample is skipped",
-            );
-        }
+        self.shape.check().map_err(|e| match e {
+            twostage_compress::CompressError::InvalidSetting(setting) => {
+                FitError::InvalidSetting(setting)
+            }
+            other => FitError::ShapeMismatch(other.to_string()),
+        })?;
         if self.head == 0
             || !(self.learning_rate.is_finite() && self.learning_rate > 0.0)
             || self.batch_size == 0
@@ -471,31 +315,14 @@ impl SummaryTraining {
                 "a share between 0 and 0.5",
             );
         }
-        let mut inputs = signals;
-        let layers: Vec<ConvShape> = self
-            .channels
-            .iter()
-            .map(|&outputs| {
-                let shape = ConvShape {
-                    inputs,
-                    outputs,
-                    kernel: self.kernel,
-                    stride: self.stride,
-                };
-                inputs = outputs;
-                shape
-            })
-            .collect();
-        let shortest = layers
-            .iter()
-            .rev()
-            .fold(1, |after, l| (after - 1) * l.stride + l.kernel);
+        let layers = self.shape.layers(signals);
+        let shortest = min_samples(&layers);
         if length < shortest {
             return Err(FitError::ShapeMismatch(format!(
                 "records of {length} samples: {} convolutions of kernel {} and stride {} need {shortest} or more",
                 layers.len(),
-                self.kernel,
-                self.stride
+                self.shape.kernel,
+                self.shape.stride
             )));
         }
         let held = (n_records as f64 * self.held_out).round() as usize;
@@ -521,6 +348,7 @@ impl SummaryTraining {
     ///
     /// ```
     /// use ndarray::Array2;
+    /// use twostage_compress::{LearnedShape, Workspace};
     /// use twostage_fit::SummaryTraining;
     ///
     /// // y = g u on a random input: the gain g in every record's samples.
@@ -536,13 +364,15 @@ impl SummaryTraining {
     ///     })
     ///     .collect();
     /// let targets = Array2::from_shape_vec((200, 1), gains)?;
-    /// let training = SummaryTraining { channels: vec![4, 4], epochs: 3, ..Default::default() };
+    /// let shape = LearnedShape { channels: vec![4, 4], ..Default::default() };
+    /// let training = SummaryTraining { shape, epochs: 3, ..Default::default() };
     /// let trained = training.train(&records, targets.view())?;
     /// // Two numbers per last channel: its mean and its mean square.
     /// assert_eq!(trained.network.n_features(), 8);
     /// assert_eq!(trained.history.len(), trained.epochs + 1);
     /// let mut summary = [0.0; 8];
-    /// trained.network.summarize(records[0].view(), &mut summary)?;
+    /// let (u, y) = (records[0].slice(ndarray::s![.., ..1]), records[0].slice(ndarray::s![.., 1..]));
+    /// trained.network.summarize(u, y, &mut Workspace::new(), &mut summary)?;
     /// assert!(summary[4..].iter().all(|v| (0.0..1.0).contains(v)));
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
@@ -708,11 +538,8 @@ impl SummaryTraining {
         let (held_out_mse, mut weights) = best.into_best();
         weights.truncate(layout.conv_weights());
         Ok(TrainedSummary {
-            network: SummaryNetwork {
-                scales,
-                layers: layout.layers,
-                weights,
-            },
+            network: SummaryNetwork::new(scales, layout.layers, weights)
+                .map_err(|e| FitError::ShapeMismatch(e.to_string()))?,
             epochs,
             reason,
             held_out_mse,

@@ -11,6 +11,8 @@
 //!   the paper without forming the regressor matrix);
 //! - [`layer`]: one dense layer of the network (affine map and activation),
 //!   and [`tanh`], its activation, the same bits on every platform;
+//! - [`convolution`]: the learned stage 1's strided convolutions and
+//!   their pooling over time;
 //! - [`vector`]: standardization and clipping to the prior box;
 //! - [`input_summary`] and [`input_shape`]: what an input was like, and
 //!   how far a record's input shape lies from a family's.
@@ -39,6 +41,7 @@
 extern crate std;
 
 pub mod cholesky;
+pub mod convolution;
 pub mod input_shape;
 pub mod input_summary;
 pub mod lagged;

@@ -7,6 +7,9 @@
 pub enum Stage {
     /// Simulating and compressing the training chart.
     Training,
+    /// Simulating the training records for a stage 1 that learns, and
+    /// training its summary network on them.
+    Learning,
     /// Fitting stage 2 (no count: it ends when the fit does).
     Fitting,
     /// Simulating the calibration records of the conformal intervals.
@@ -20,6 +23,7 @@ impl Stage {
     pub fn label(self) -> &'static str {
         match self {
             Self::Training => "training",
+            Self::Learning => "learning stage 1",
             Self::Fitting => "fitting",
             Self::Calibration => "calibration",
             Self::Validation => "validation",

@@ -19,7 +19,9 @@ use crate::progress::{Progress, Stage};
 use crate::readable::refuse_beyond_memory;
 use crate::roles::{ChartRole, RoleCounts, held_out_roles};
 use crate::shard::ShardedChart;
-use twostage_compress::CompressorConfig;
+use ndarray::Array2;
+use twostage_compress::{CompressorConfig, LearnedShape};
+use twostage_fit::SummaryTraining;
 
 /// Where the records of a training run come from (the facade's builder
 /// reads them through [`Records`]).
@@ -184,6 +186,95 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     /// # Errors
     /// Compressed shards of another compressor, a failed preparation.
     pub fn prepare(&self, compressor: CompressorConfig) -> Result<CompressorConfig> {
+        let prepared = self.prepare_fitted_parts(compressor)?;
+        match prepared.untrained_summary() {
+            Some(shape) => self.train_summary(&prepared, shape.clone()),
+            None => Ok(prepared),
+        }
+    }
+
+    /// `compressor` with its summary network trained on the training
+    /// records and their parameters (the run's seed), for a `+learned`
+    /// stage 1.
+    fn train_summary(
+        &self,
+        compressor: &CompressorConfig,
+        shape: LearnedShape,
+    ) -> Result<CompressorConfig> {
+        self.progress.begin(Stage::Learning, self.counts.training);
+        let trained = self.train_summary_within(compressor, shape);
+        self.progress.end(Stage::Learning);
+        trained
+    }
+
+    fn train_summary_within(
+        &self,
+        compressor: &CompressorConfig,
+        shape: LearnedShape,
+    ) -> Result<CompressorConfig> {
+        let (thetas, records) = match &self.kind {
+            Kind::Simulated => {
+                let design = ChartRole::Training.design(
+                    &self.training_prior,
+                    self.counts.training,
+                    self.seed,
+                )?;
+                let chart = simulate_records(
+                    self.simulator,
+                    &design,
+                    self.counts.training,
+                    self.max_failure_fraction,
+                    Some((Stage::Learning, self.progress)),
+                )?;
+                (chart.thetas, chart.records)
+            }
+            Kind::Files { chart, roles, .. } => {
+                let mut rows: Vec<(usize, IoData)> = Vec::new();
+                chart.for_each_record(self.spec(), |row, record| {
+                    if roles[row] == ChartRole::Training {
+                        rows.push((row, record.clone()));
+                    }
+                    Ok(())
+                })?;
+                rows.sort_by_key(|(row, _)| *row);
+                let q = self.training_prior.dim();
+                let thetas =
+                    Array2::from_shape_fn((rows.len(), q), |(i, j)| chart.theta(rows[i].0)[j]);
+                (thetas, rows.into_iter().map(|(_, r)| r).collect())
+            }
+            Kind::Shards(chart) => {
+                return Err(Error::Shards {
+                    what: chart.pattern().to_string(),
+                    message: format!(
+                        "{compressor} learns its summary from whole records and their \
+                         parameters: train it on simulated records or a chart file"
+                    ),
+                });
+            }
+        };
+        // Inputs, then outputs, side by side: the network's channels.
+        let signals: Vec<Array2<f64>> = records
+            .iter()
+            .map(|r| {
+                let (u, y) = (r.inputs(), r.outputs());
+                let n_u = u.ncols();
+                Array2::from_shape_fn((y.nrows(), n_u + y.ncols()), |(k, j)| {
+                    if j < n_u { u[[k, j]] } else { y[[k, j - n_u]] }
+                })
+            })
+            .collect();
+        let training = SummaryTraining {
+            shape,
+            seed: self.seed,
+            ..SummaryTraining::default()
+        };
+        let trained = training.train(&signals, thetas.view())?;
+        Ok(compressor.with_trained_summary(trained.network)?)
+    }
+
+    /// `compressor` with the parts fitted on the first training records
+    /// (a PCA's directions, a NARX's scales, a transform's floor).
+    fn prepare_fitted_parts(&self, compressor: CompressorConfig) -> Result<CompressorConfig> {
         let count = compressor.records_to_prepare();
         match &self.kind {
             Kind::Shards(chart) => match &chart.plan().compressor {

@@ -67,8 +67,9 @@ fn files() -> &'static [Vec<u8>] {
         let pieces = RegressorConfig::Piecewise(
             twostage::fit::Piecewise::new(small.clone(), small, 2).unwrap(),
         );
-        let configs: [(CompressorConfig, Option<RegressorConfig>); 5] = [
+        let configs: [(CompressorConfig, Option<RegressorConfig>); 6] = [
             (Arx::new(2, 2).unwrap().into(), None),
+            ("arx:1,1+learned:2".parse().unwrap(), None),
             (Arx::new(2, 1).unwrap().into(), Some(mlp.clone())),
             (Narx::new(1, 1, 2).unwrap().into(), Some(mlp)),
             (OutputPca::new(3).unwrap().into(), None),
@@ -136,7 +137,9 @@ fn exercise(estimator: &Estimator, record: &IoData) {
 #[test]
 fn the_bitwise_crc_agrees_with_the_files_we_write() {
     for file in files() {
-        assert_eq!(seal(&file[HEADER..]), *file);
+        // Each file carries the version it needs (7 only for a learned stage 1).
+        let version = u32::from_le_bytes([file[8], file[9], file[10], file[11]]);
+        assert_eq!(seal_version(&file[HEADER..], version), *file);
     }
 }
 
@@ -308,7 +311,7 @@ proptest! {
 
     #[test]
     fn resealed_mutations_of_real_files_never_panic(
-        which in 0usize..5,
+        which in 0usize..6,
         edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
         cut in proptest::option::of(any::<prop::sample::Index>()),
     ) {
@@ -327,7 +330,7 @@ proptest! {
     }
 
     #[test]
-    fn unsealed_corruption_is_always_caught(which in 0usize..5, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
+    fn unsealed_corruption_is_always_caught(which in 0usize..6, at in any::<prop::sample::Index>(), flip in 1u8..=255) {
         let mut file = files()[which].clone();
         let i = at.index(file.len());
         file[i] ^= flip;

@@ -102,11 +102,12 @@ fn damaged_files_get_a_clear_error_each() {
     assert!(bare.starts_with("estimator file: not a twostage"), "{bare}");
     // Newer and impossible format versions.
     let mut newer = bytes.clone();
-    newer[8..12].copy_from_slice(&7u32.to_le_bytes());
+    let next = twostage::FORMAT_VERSION + 1;
+    newer[8..12].copy_from_slice(&next.to_le_bytes());
     assert_eq!(
         kind(&newer),
         FileError::NewerVersion {
-            found: 7,
+            found: next,
             supported: twostage::FORMAT_VERSION
         }
     );

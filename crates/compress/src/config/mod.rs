@@ -5,10 +5,12 @@
 //! a record's level appended) live here too: their types and
 //! `CompressorConfig` hold each other.
 
+mod learned;
 mod level;
 mod summary;
 mod transform;
 
+pub use learned::{ConvShape, LearnedShape, SummaryNetwork, WithLearned};
 pub use level::WithLevel;
 pub use summary::WithSummary;
 pub use transform::{SignalTransform, TRANSFORM_RECORDS, Transformed};
@@ -40,6 +42,9 @@ pub enum CompressorConfig {
     /// One of the above, then each input's and output's mean, RMS, peak
     /// and mean frequency (`SPEC+summary`).
     Summarized(WithSummary),
+    /// Another compressor's features (or none), then a trained summary
+    /// network's (`SPEC+learned`, `learned`).
+    Learned(WithLearned),
 }
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
@@ -106,6 +111,13 @@ impl CompressorConfig {
                 n_inputs,
                 n_outputs,
             )?),
+            Self::Learned(l) => Self::Learned(
+                l.with_inner(
+                    l.inner()
+                        .map(|i| i.for_shape(n_inputs, n_outputs, n_samples))
+                        .transpose()?,
+                ),
+            ),
             other => other.clone(),
         })
     }
@@ -134,6 +146,7 @@ impl CompressorConfig {
             Self::Transformed(t) => t.spec(),
             Self::Leveled(l) => l.spec(),
             Self::Summarized(s) => s.spec(),
+            Self::Learned(l) => l.spec(),
         }
     }
 
@@ -159,6 +172,7 @@ impl CompressorConfig {
             Self::Transformed(_) => true,
             Self::Leveled(l) => l.inner().transforms_outputs(),
             Self::Summarized(s) => s.inner().transforms_outputs(),
+            Self::Learned(l) => l.inner().is_some_and(Self::transforms_outputs),
             _ => false,
         }
     }
@@ -174,6 +188,7 @@ impl CompressorConfig {
             }
             CompressorConfig::Leveled(l) => l.inner().records_to_prepare(),
             CompressorConfig::Summarized(s) => s.inner().records_to_prepare(),
+            CompressorConfig::Learned(l) => l.inner().map_or(0, Self::records_to_prepare),
             _ => 0,
         }
     }
@@ -234,8 +249,48 @@ impl CompressorConfig {
                     n_outputs,
                 )?)
             }
+            CompressorConfig::Learned(l)
+                if l.inner().is_some_and(|i| i.records_to_prepare() > 0) =>
+            {
+                let inner = l.inner().map(|i| i.prepared(records)).transpose()?;
+                CompressorConfig::Learned(l.with_inner(inner))
+            }
             other => other.clone(),
         })
+    }
+
+    /// The summary network still to train, when this compressor learns
+    /// one and has not yet: its architecture.
+    ///
+    /// ```
+    /// use twostage_compress::CompressorConfig;
+    /// let c: CompressorConfig = "arx:2,2+learned:4,4".parse()?;
+    /// assert_eq!(c.untrained_summary().map(|s| s.channels.clone()), Some(vec![4, 4]));
+    /// let arx: CompressorConfig = "arx:2,2".parse()?;
+    /// assert!(arx.untrained_summary().is_none());
+    /// # Ok::<(), twostage_compress::CompressError>(())
+    /// ```
+    pub fn untrained_summary(&self) -> Option<&LearnedShape> {
+        match self {
+            Self::Learned(l) if l.network().is_none() => Some(l.shape()),
+            _ => None,
+        }
+    }
+
+    /// The same compressor with its summary network `network`.
+    ///
+    /// # Errors
+    /// [`crate::CompressError::InvalidSetting`] for a compressor that
+    /// learns no summary, or a network of other channels than it asks for.
+    pub fn with_trained_summary(&self, network: SummaryNetwork) -> Result<Self> {
+        match self {
+            Self::Learned(l) => Ok(Self::Learned(l.clone().with_network(network)?)),
+            other => Err(Error::InvalidSetting(InvalidSetting {
+                name: "compressor",
+                value: other.to_string(),
+                reason: "only a `+learned` compressor takes a summary network".into(),
+            })),
+        }
     }
 }
 
@@ -249,6 +304,7 @@ impl std::fmt::Display for CompressorConfig {
             Self::Transformed(t) => t.fmt(f),
             Self::Leveled(l) => l.fmt(f),
             Self::Summarized(s) => s.fmt(f),
+            Self::Learned(l) => l.fmt(f),
         }
     }
 }
@@ -292,7 +348,10 @@ impl std::str::FromStr for CompressorConfig {
     /// `narx:NA,NB,DEG`, `pca:K`, or `raw` (the record itself, for very
     /// short records), each after output transforms when written
     /// `T+SPEC`: `T` is `id`, `log` or `log1p` for every output, or one per
-    /// output separated by commas (`log+pca:8`, `log,id+ar:2`).
+    /// output separated by commas (`log+pca:8`, `log,id+ar:2`); then
+    /// `+level`, `+summary` and, last, `+learned` (a summary network
+    /// trained with the estimator, [`WithLearned`]), or `learned:C1,C2,..`
+    /// alone.
     ///
     /// ```
     /// use twostage_compress::{Compressor, CompressorConfig};
@@ -302,7 +361,54 @@ impl std::str::FromStr for CompressorConfig {
     /// # Ok::<(), twostage_compress::CompressError>(())
     /// ```
     fn from_str(spec: &str) -> Result<Self> {
+        let parsed = Self::parse_part(spec)?;
+        if !matches!(parsed, Self::Learned(_)) && parsed.learns() {
+            return Err(Error::InvalidSetting(InvalidSetting {
+                name: "compressor",
+                value: spec.to_string(),
+                reason: "`+learned` comes last, after transforms, `+level` and `+summary` \
+                         (e.g. log+arx:2,2+summary+learned)"
+                    .into(),
+            }));
+        }
+        Ok(parsed)
+    }
+}
+
+impl CompressorConfig {
+    /// Whether a summary network is part of this stage 1 (trained or not).
+    ///
+    /// ```
+    /// use twostage_compress::CompressorConfig;
+    /// let learns = |spec: &str| spec.parse::<CompressorConfig>().map(|c| c.learns());
+    /// assert_eq!(learns("arx:2,2+summary+learned")?, true);
+    /// assert_eq!(learns("arx:2,2+summary")?, false);
+    /// # Ok::<(), twostage_compress::CompressError>(())
+    /// ```
+    pub fn learns(&self) -> bool {
+        match self {
+            Self::Learned(_) => true,
+            Self::Transformed(t) => t.inner().learns(),
+            Self::Leveled(l) => l.inner().learns(),
+            Self::Summarized(s) => s.inner().learns(),
+            _ => false,
+        }
+    }
+
+    /// One part of a specification, parsed (`from_str` checks the whole).
+    fn parse_part(spec: &str) -> Result<Self> {
         const WHAT: &str = "compressor";
+        if let Some(shape) = learned::parse_shape(spec) {
+            return Ok(Self::Learned(WithLearned::new(None, shape?)?));
+        }
+        if let Some((inner, last)) = spec.trim().rsplit_once('+')
+            && let Some(shape) = learned::parse_shape(last)
+        {
+            return Ok(Self::Learned(WithLearned::new(
+                Some(inner.parse()?),
+                shape?,
+            )?));
+        }
         if let Some(inner) = spec.trim().strip_suffix("+summary") {
             // Shaped by the model (`for_shape`): one input and output until then.
             return Ok(Self::Summarized(WithSummary::new(inner.parse()?, 1, 1)?));
@@ -326,8 +432,8 @@ impl std::str::FromStr for CompressorConfig {
             Error::InvalidSetting(InvalidSetting {
                 name: WHAT,
                 value: spec.to_string(),
-                reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw, after \
-                     output transforms as log+SPEC"
+                reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K, raw or \
+                     learned:C1,C2,.., after output transforms as log+SPEC"
                     .into(),
             })
         })?;
@@ -346,7 +452,9 @@ impl std::str::FromStr for CompressorConfig {
                 return Err(Error::InvalidSetting(InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
-                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K or raw".into(),
+                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K, raw or \
+                             learned:C1,C2,.."
+                        .into(),
                 }));
             }
         })
@@ -381,6 +489,7 @@ impl Compressor for CompressorConfig {
             Self::Transformed(c) => c.n_features(),
             Self::Leveled(c) => c.n_features(),
             Self::Summarized(c) => c.n_features(),
+            Self::Learned(c) => c.n_features(),
         }
     }
 
@@ -399,6 +508,7 @@ impl Compressor for CompressorConfig {
             Self::Transformed(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Leveled(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Summarized(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Learned(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -419,6 +529,7 @@ impl Compressor for CompressorConfig {
             Self::Transformed(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Leveled(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Summarized(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Learned(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -431,6 +542,7 @@ impl Compressor for CompressorConfig {
             Self::Transformed(c) => c.feature_names(),
             Self::Leveled(c) => c.feature_names(),
             Self::Summarized(c) => c.feature_names(),
+            Self::Learned(c) => c.feature_names(),
         }
     }
 }

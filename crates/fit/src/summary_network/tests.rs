@@ -2,6 +2,7 @@
 #![allow(clippy::unwrap_used)]
 
 use super::*;
+use twostage_compress::Workspace;
 
 fn layout() -> Layout {
     Layout {
@@ -70,30 +71,33 @@ fn the_gradient_is_the_losss_slope_in_every_weight() {
 
 /// A hand-computed convolution: one channel, kernel [1, -1], stride 2 on
 /// [0, 1, 3, 6, 10] gives tanh(-1), tanh(-3) (the kernel at 0 and 2), and
-/// the summary is their mean and the mean of their squares.
+/// the summary is their mean and the mean of their squares: the forward
+/// pass the training differentiates is the one the compressor runs.
 #[test]
 fn a_convolution_and_its_average_by_hand() {
-    let network = SummaryNetwork {
-        scales: vec![1.0],
-        layers: vec![ConvShape {
-            inputs: 1,
-            outputs: 1,
-            kernel: 2,
-            stride: 2,
-        }],
-        weights: vec![1.0, -1.0, 0.0],
-    };
-    let record = Array2::from_shape_vec((5, 1), vec![0.0, 1.0, 3.0, 6.0, 10.0]).unwrap();
-    let mut out = [0.0; 2];
-    network.summarize(record.view(), &mut out).unwrap();
+    let layers = vec![ConvShape {
+        inputs: 1,
+        outputs: 1,
+        kernel: 2,
+        stride: 2,
+    }];
+    let weights = vec![1.0, -1.0, 0.0];
+    let record = vec![0.0, 1.0, 3.0, 6.0, 10.0];
     let (a, b) = ((-1.0f64).tanh(), (-3.0f64).tanh());
     let want = [(a + b) / 2.0, (a * a + b * b) / 2.0];
-    for (got, want) in out.iter().zip(want) {
+    let pass = forward_convolutions(&layers, &weights, record.clone(), 5);
+    let trained_path = pooled(&pass, 1);
+    let network = SummaryNetwork::new(vec![1.0], layers, weights).unwrap();
+    let y = Array2::from_shape_vec((5, 1), record).unwrap();
+    let none = Array2::<f64>::zeros((5, 0));
+    let mut out = [0.0; 2];
+    network
+        .summarize(none.view(), y.view(), &mut Workspace::new(), &mut out)
+        .unwrap();
+    for ((got, train), want) in out.iter().zip(&trained_path).zip(want) {
         assert!((got - want).abs() < 1e-15, "{out:?} against {want}");
+        assert_eq!(got.to_bits(), train.to_bits());
     }
-    assert_eq!(network.min_samples(), 2);
-    let short = Array2::zeros((1, 1));
-    assert!(network.summarize(short.view(), &mut out).is_err());
 }
 
 /// Records `y = tanh(g u)` of a random input whose level varies from
@@ -123,9 +127,11 @@ fn saturating_records(n: usize) -> (Vec<Array2<f64>>, Array2<f64>) {
 fn it_learns_a_saturations_gain() {
     let (records, gains) = saturating_records(1200);
     let training = SummaryTraining {
-        channels: vec![6, 6],
-        kernel: 3,
-        stride: 2,
+        shape: LearnedShape {
+            channels: vec![6, 6],
+            kernel: 3,
+            stride: 2,
+        },
         head: 8,
         epochs: 150,
         patience: 20,
@@ -139,13 +145,7 @@ fn it_learns_a_saturations_gain() {
         trained.held_out_mse,
         trained.epochs
     );
-    let summaries = trained.network.summarize_all(&records[..3]).unwrap();
-    let mut row = vec![0.0; trained.network.n_features()];
-    trained
-        .network
-        .summarize(records[2].view(), &mut row)
-        .unwrap();
-    assert_eq!(summaries.row(2).to_vec(), row);
+    assert_eq!(trained.network.n_features(), 12);
 }
 
 /// The same seed, the same bits, on one thread as on three.
@@ -185,7 +185,10 @@ fn impossible_shapes_and_settings_are_refused_by_name() {
     let base = SummaryTraining::default();
     let e = error(
         SummaryTraining {
-            stride: 6,
+            shape: LearnedShape {
+                stride: 6,
+                ..LearnedShape::default()
+            },
             ..base.clone()
         },
         &records,
@@ -194,7 +197,10 @@ fn impossible_shapes_and_settings_are_refused_by_name() {
     assert!(e.contains("stride from 1 to the kernel"), "{e}");
     let e = error(
         SummaryTraining {
-            channels: vec![8; 5],
+            shape: LearnedShape {
+                channels: vec![8; 5],
+                ..LearnedShape::default()
+            },
             ..base.clone()
         },
         &records,
