@@ -24,6 +24,7 @@ use twostage::models::{Benchmark, Simulator};
 mod bayes_gap;
 mod crates;
 mod fit_speed;
+mod flag_study;
 mod fuzz;
 mod learned_summary;
 mod paper;
@@ -98,6 +99,11 @@ enum Command {
     /// summary (alone and beside the estimator's features), each against
     /// the exact posterior mean on the car's manoeuvres.
     LearnedSummary(learned_summary::Args),
+    /// Which flag knows when an estimate is far from what its record
+    /// allows: the features' density and the ensemble's disagreement,
+    /// each calibrated on the family, against the exact posterior mean on
+    /// the car's manoeuvres.
+    FlagStudy(flag_study::Args),
     /// The workspace's crates: lines, workspace dependencies, and circles
     /// among each crate's top-level modules (Markdown, for docs/crates.md).
     Crates {
@@ -240,6 +246,7 @@ fn main() -> ExitCode {
             count,
         } => fuzz::chunk(reader, seed, from, count),
         Command::LearnedSummary(args) => learned_summary::run(&args),
+        Command::FlagStudy(args) => flag_study::run(&args),
         Command::BayesGap {
             estimator,
             against,
