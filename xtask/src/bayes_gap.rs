@@ -24,6 +24,70 @@ use twostage_baselines::{
 use crate::paper::test_records;
 use crate::posterior_cache;
 
+/// The posterior means of `records` (of parameters `truth`, `dim` each) by
+/// `bayes`, read from where an earlier run kept them (that place is
+/// returned) or computed and kept under `target/bayes-gap`.
+pub(crate) fn posterior_means(
+    bayes: &dyn RecordEstimator,
+    truth: &[Vec<f64>],
+    records: &[IoData],
+    dim: usize,
+) -> Result<(Vec<Vec<f64>>, Option<PathBuf>)> {
+    let kept = posterior_cache::path(
+        &crate::target_dir().join("bayes-gap"),
+        posterior_cache::key(truth, records),
+    );
+    if let Some(posterior) = posterior_cache::load(&kept, records.len(), dim) {
+        return Ok((posterior, Some(kept)));
+    }
+    let posterior: Vec<Vec<f64>> = records
+        .par_iter()
+        .map(|record| bayes.estimate(record).map(|e| e.theta))
+        .collect::<Result<_, _>>()?;
+    posterior_cache::store(&kept, &posterior)
+        .with_context(|| format!("keeping the posterior means in {}", kept.display()))?;
+    Ok((posterior, None))
+}
+
+/// The car's test records of one manoeuvre and their exact posterior means.
+pub(crate) struct CarManoeuvre {
+    /// The car driven by the manoeuvre.
+    pub car: Box<dyn Simulator>,
+    /// Each record's parameters.
+    pub truth: Vec<Vec<f64>>,
+    /// The records.
+    pub records: Vec<IoData>,
+    /// Each record's exact posterior mean.
+    pub posterior: Vec<Vec<f64>>,
+}
+
+/// `count` fresh records of the car driven by `steering` (seed 2026, as
+/// `bayes-gap` draws them) and their exact posterior means.
+pub(crate) fn car_manoeuvre(steering: Steering, count: usize) -> Result<CarManoeuvre> {
+    let given = manoeuvre(steering)?;
+    let overrides = BuiltinOverrides {
+        input: given.clone().map(InputSignal::fixed).transpose()?,
+        ..BuiltinOverrides::default()
+    };
+    let car = BuiltinModel::Pacejka.build_with(&overrides)?;
+    let (truth, records) = test_records(car.as_ref(), count, 2026)?;
+    let bayes: Box<dyn RecordEstimator> = match given {
+        Some(steer) => Box::new(BayesCar::on_steering(129, 65, steer)?),
+        None => Box::new(BayesCar::new(
+            129,
+            65,
+            records.first().map_or(0, IoData::n_samples),
+        )?),
+    };
+    let (posterior, _) = posterior_means(bayes.as_ref(), &truth, &records, car.prior().dim())?;
+    Ok(CarManoeuvre {
+        car,
+        truth,
+        records,
+        posterior,
+    })
+}
+
 /// What drives the car in the test records.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum Steering {
@@ -383,25 +447,12 @@ pub(crate) fn run(
         }
     }
     let start = Instant::now();
-    let kept = posterior_cache::path(
-        &crate::target_dir().join("bayes-gap"),
-        posterior_cache::key(&truth, &records),
-    );
-    let (posterior, bayes_words) =
-        match posterior_cache::load(&kept, records.len(), simulator.prior().dim()) {
-            Some(posterior) => (posterior, format!("as kept in {}", kept.display())),
-            None => {
-                let posterior: Vec<Vec<f64>> = records
-                    .par_iter()
-                    .map(|record| bayes.estimate(record).map(|e| e.theta))
-                    .collect::<Result<_, _>>()?;
-                posterior_cache::store(&kept, &posterior).with_context(|| {
-                    format!("keeping the posterior means in {}", kept.display())
-                })?;
-                let seconds = start.elapsed().as_secs_f64();
-                (posterior, format!("in {seconds:.1} s"))
-            }
-        };
+    let (posterior, kept) =
+        posterior_means(bayes.as_ref(), &truth, &records, simulator.prior().dim())?;
+    let bayes_words = match kept {
+        Some(kept) => format!("as kept in {}", kept.display()),
+        None => format!("in {:.1} s", start.elapsed().as_secs_f64()),
+    };
     let source = match &chart {
         Some(dir) => format!("the records of {}", dir.display()),
         None => format!("fresh records, seed {seed}"),

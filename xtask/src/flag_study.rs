@@ -17,19 +17,18 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::Result;
 use rayon::prelude::*;
+use twostage::Estimator;
 use twostage::compress::Compressor;
 use twostage::fit::FittedRegressor;
-use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, IoData, Simulator};
-use twostage::{Estimator, ModelFile};
-use twostage_baselines::{BayesCar, RecordEstimator};
+use twostage::models::IoData;
 use twostage_kernels::input_shape::{NEIGHBOURS, nearest_distance};
 use twostage_kernels::layer::{Activation, dense_layer};
 
-use crate::bayes_gap::{Steering, manoeuvre, rmse};
+use crate::bayes_gap::{CarManoeuvre, Steering, car_manoeuvre, rmse};
+use crate::learned_summary::estimator_and_family;
 use crate::paper::test_records;
-use crate::posterior_cache;
 
 /// The options of `xtask flag-study`.
 #[derive(Debug, clap::Args)]
@@ -176,18 +175,7 @@ fn disagreement(regressor: &FittedRegressor, row: &[f64]) -> Option<f64> {
 }
 
 pub(crate) fn run(c: &Args) -> Result<()> {
-    let estimator = Estimator::load(&c.estimator)
-        .with_context(|| format!("reading {}", c.estimator.display()))?;
-    let file = ModelFile::load(&c.model_file)?;
-    let family = file.simulator()?;
-    if family.spec().name() != estimator.training().model {
-        bail!(
-            "{} was trained on {}, not on {}",
-            c.estimator.display(),
-            estimator.training().model,
-            family.spec().name()
-        );
-    }
+    let (estimator, family) = estimator_and_family(&c.estimator, &c.model_file)?;
     let (_, fresh) = test_records(family.as_ref(), 2 * c.family, 7)?;
     let compressor = estimator.compressor();
     let fresh: Vec<IoData> = fresh
@@ -243,36 +231,12 @@ pub(crate) fn run(c: &Args) -> Result<()> {
         share(&own_flags, |x| x.0 || x.1)
     );
     for &steering in &c.steerings {
-        let given = manoeuvre(steering)?;
-        let overrides = BuiltinOverrides {
-            input: given.clone().map(InputSignal::fixed).transpose()?,
-            ..BuiltinOverrides::default()
-        };
-        let car = BuiltinModel::Pacejka.build_with(&overrides)?;
-        let (truth, records) = test_records(car.as_ref(), c.records, 2026)?;
-        let bayes: Box<dyn RecordEstimator> = match given {
-            Some(steer) => Box::new(BayesCar::on_steering(129, 65, steer)?),
-            None => Box::new(BayesCar::new(
-                129,
-                65,
-                records.first().map_or(0, IoData::n_samples),
-            )?),
-        };
-        let kept = posterior_cache::path(
-            &crate::target_dir().join("bayes-gap"),
-            posterior_cache::key(&truth, &records),
-        );
-        let posterior = match posterior_cache::load(&kept, records.len(), 2) {
-            Some(p) => p,
-            None => {
-                let p: Vec<Vec<f64>> = records
-                    .par_iter()
-                    .map(|r| bayes.estimate(r).map(|e| e.theta))
-                    .collect::<Result<_, _>>()?;
-                posterior_cache::store(&kept, &p)?;
-                p
-            }
-        };
+        let CarManoeuvre {
+            truth,
+            records,
+            posterior,
+            ..
+        } = car_manoeuvre(steering, c.records)?;
         let estimates: Vec<Vec<f64>> = records
             .par_iter()
             .map(|r| estimator.estimate_record(r))

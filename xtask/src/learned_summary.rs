@@ -6,7 +6,7 @@
 //! with the family estimator's features and the same stage 2 as the
 //! reference.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -14,13 +14,11 @@ use ndarray::{Array2, Axis, concatenate};
 use rayon::prelude::*;
 use twostage::compress::{Compressor, LearnedShape, SummaryNetwork, Workspace};
 use twostage::fit::{Predictor, SummaryTraining};
-use twostage::models::{BuiltinModel, BuiltinOverrides, InputSignal, IoData, Simulator};
+use twostage::models::{IoData, Simulator};
 use twostage::{Estimator, ModelFile, RegressorConfig};
-use twostage_baselines::{BayesCar, RecordEstimator};
 
-use crate::bayes_gap::{Steering, bootstrap_ratio, manoeuvre, rmse};
+use crate::bayes_gap::{CarManoeuvre, Steering, bootstrap_ratio, car_manoeuvre, rmse};
 use crate::paper::test_records;
-use crate::posterior_cache;
 
 /// What one run compares (the options of `xtask learned-summary`).
 #[derive(Debug, clap::Args)]
@@ -163,20 +161,28 @@ fn variants(
 
 const NAMES: [&str; 3] = ["features", "learned", "features+learned"];
 
-pub(crate) fn run(c: &Args) -> Result<()> {
-    let summary = c.training();
-    let estimator = Estimator::load(&c.estimator)
-        .with_context(|| format!("reading {}", c.estimator.display()))?;
-    let file = ModelFile::load(&c.model_file)?;
-    let family = file.simulator()?;
+/// The estimator at `path` and the simulator of the family `model_file`
+/// describes, refused unless the estimator was trained on that model.
+pub(crate) fn estimator_and_family(
+    path: &Path,
+    model_file: &Path,
+) -> Result<(Estimator, Box<dyn Simulator>)> {
+    let estimator = Estimator::load(path).with_context(|| format!("reading {}", path.display()))?;
+    let family = ModelFile::load(model_file)?.simulator()?;
     if family.spec().name() != estimator.training().model {
         bail!(
             "{} was trained on {}, not on {}",
-            c.estimator.display(),
+            path.display(),
             estimator.training().model,
             family.spec().name()
         );
     }
+    Ok((estimator, family))
+}
+
+pub(crate) fn run(c: &Args) -> Result<()> {
+    let summary = c.training();
+    let (estimator, family) = estimator_and_family(&c.estimator, &c.model_file)?;
     let start = Instant::now();
     let (truth, records, left) = compressible(
         &estimator,
@@ -246,36 +252,12 @@ pub(crate) fn run(c: &Args) -> Result<()> {
     );
 
     for &steering in &c.steerings {
-        let given = manoeuvre(steering)?;
-        let overrides = BuiltinOverrides {
-            input: given.clone().map(InputSignal::fixed).transpose()?,
-            ..BuiltinOverrides::default()
-        };
-        let car = BuiltinModel::Pacejka.build_with(&overrides)?;
-        let (truth, records) = test_records(car.as_ref(), c.records, 2026)?;
-        let bayes: Box<dyn RecordEstimator> = match given {
-            Some(steer) => Box::new(BayesCar::on_steering(129, 65, steer)?),
-            None => Box::new(BayesCar::new(
-                129,
-                65,
-                records.first().map_or(0, IoData::n_samples),
-            )?),
-        };
-        let kept = posterior_cache::path(
-            &crate::target_dir().join("bayes-gap"),
-            posterior_cache::key(&truth, &records),
-        );
-        let posterior = match posterior_cache::load(&kept, records.len(), 2) {
-            Some(p) => p,
-            None => {
-                let p: Vec<Vec<f64>> = records
-                    .par_iter()
-                    .map(|r| bayes.estimate(r).map(|e| e.theta))
-                    .collect::<Result<_, _>>()?;
-                posterior_cache::store(&kept, &p)?;
-                p
-            }
-        };
+        let CarManoeuvre {
+            car,
+            truth,
+            records,
+            posterior,
+        } = car_manoeuvre(steering, c.records)?;
         let x = variants(&estimator, &trained.network, &records)?;
         let all: Vec<usize> = (0..records.len()).collect();
         let mut line = format!("  {steering:?}:");

@@ -201,57 +201,22 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
         compressor: &CompressorConfig,
         shape: LearnedShape,
     ) -> Result<CompressorConfig> {
-        self.progress.begin(Stage::Learning, self.counts.training);
-        let trained = self.train_summary_within(compressor, shape);
+        // The simulations are heard of as they run; the network's epochs
+        // as one step of no count.
+        let (StoredChart { thetas, records }, _) = self.stored_training_for(Stage::Learning)?;
+        self.progress.begin(Stage::Learning, 0);
+        let trained = Self::train_summary_on(compressor, shape, &thetas, &records, self.seed);
         self.progress.end(Stage::Learning);
         trained
     }
 
-    fn train_summary_within(
-        &self,
+    fn train_summary_on(
         compressor: &CompressorConfig,
         shape: LearnedShape,
+        thetas: &Array2<f64>,
+        records: &[IoData],
+        seed: u64,
     ) -> Result<CompressorConfig> {
-        let (thetas, records) = match &self.kind {
-            Kind::Simulated => {
-                let design = ChartRole::Training.design(
-                    &self.training_prior,
-                    self.counts.training,
-                    self.seed,
-                )?;
-                let chart = simulate_records(
-                    self.simulator,
-                    &design,
-                    self.counts.training,
-                    self.max_failure_fraction,
-                    Some((Stage::Learning, self.progress)),
-                )?;
-                (chart.thetas, chart.records)
-            }
-            Kind::Files { chart, roles, .. } => {
-                let mut rows: Vec<(usize, IoData)> = Vec::new();
-                chart.for_each_record(self.spec(), |row, record| {
-                    if roles[row] == ChartRole::Training {
-                        rows.push((row, record.clone()));
-                    }
-                    Ok(())
-                })?;
-                rows.sort_by_key(|(row, _)| *row);
-                let q = self.training_prior.dim();
-                let thetas =
-                    Array2::from_shape_fn((rows.len(), q), |(i, j)| chart.theta(rows[i].0)[j]);
-                (thetas, rows.into_iter().map(|(_, r)| r).collect())
-            }
-            Kind::Shards(chart) => {
-                return Err(Error::Shards {
-                    what: chart.pattern().to_string(),
-                    message: format!(
-                        "{compressor} learns its summary from whole records and their \
-                         parameters: train it on simulated records or a chart file"
-                    ),
-                });
-            }
-        };
         // Inputs, then outputs, side by side: the network's channels.
         let signals: Vec<Array2<f64>> = records
             .iter()
@@ -265,7 +230,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
             .collect();
         let training = SummaryTraining {
             shape,
-            seed: self.seed,
+            seed,
             ..SummaryTraining::default()
         };
         let trained = training.train(&signals, thetas.view())?;
@@ -407,6 +372,11 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     /// Too many failed records, shards that hold features, or a file
     /// problem of the source.
     pub fn stored_training(&self) -> Result<(StoredChart, usize)> {
+        self.stored_training_for(Stage::Training)
+    }
+
+    /// [`Self::stored_training`], its simulations heard of under `stage`.
+    fn stored_training_for(&self, stage: Stage) -> Result<(StoredChart, usize)> {
         let count = self.counts.training;
         match &self.kind {
             Kind::Simulated => {
@@ -416,7 +386,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                     &design,
                     count,
                     self.max_failure_fraction,
-                    Some((Stage::Training, self.progress)),
+                    Some((stage, self.progress)),
                 )?;
                 let failed = count - chart.records.len();
                 Ok((chart, failed))

@@ -5,7 +5,9 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
-use std::fmt::Write as _;
+mod common;
+
+use common::write_chart;
 use std::path::{Path, PathBuf};
 
 use twostage::models::{Benchmark, IoData, Simulator, run_experiment};
@@ -13,34 +15,6 @@ use twostage::{ChartFiles, RecordSource, TwoStage};
 
 fn model() -> Benchmark {
     Benchmark::builder().n_samples(200).build().unwrap()
-}
-
-/// Experiments 0..m of the design of `seed`, written as `twostage simulate
-/// --count` does (values that read back to the same bits).
-fn write_chart(dir: &Path, m: usize, seed: u64) {
-    let _ = std::fs::remove_dir_all(dir);
-    std::fs::create_dir_all(dir).unwrap();
-    let model = model();
-    let design = model.prior().design(m, seed).unwrap();
-    let (mut truth, mut data) = (
-        String::from("experiment,theta\n"),
-        String::from("experiment,u,y\n"),
-    );
-    let (mut theta, mut record) = ([0.0], IoData::default());
-    for i in 0..m {
-        run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
-        writeln!(truth, "{i},{:?}", theta[0]).unwrap();
-    }
-    // data.csv in reverse: experiments may come in any order.
-    for i in (0..m).rev() {
-        run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
-        for k in 0..record.n_samples() {
-            let (u, y) = (record.input(0)[k], record.output(0)[k]);
-            writeln!(data, "{i},{u:?},{y:?}").unwrap();
-        }
-    }
-    std::fs::write(dir.join("truth.csv"), truth).unwrap();
-    std::fs::write(dir.join("data.csv"), data).unwrap();
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -51,8 +25,8 @@ fn scratch(name: &str) -> PathBuf {
 fn a_chart_from_files_trains_the_same_stages_as_simulating_it() {
     let model = model();
     let (train, check) = (scratch("chart-same-train"), scratch("chart-same-check"));
-    write_chart(&train, 300, 7);
-    write_chart(&check, 120, 8);
+    write_chart(&model, &train, 300, 7);
+    write_chart(&model, &check, 120, 8);
     let builder = || {
         TwoStage::builder(&model)
             .preset(twostage::paper_benchmark())
@@ -89,7 +63,7 @@ fn a_chart_from_files_trains_the_same_stages_as_simulating_it() {
 fn without_other_charts_the_checks_are_held_out_at_random_and_reproducibly() {
     let model = model();
     let dir = scratch("chart-held-out");
-    write_chart(&dir, 260, 3);
+    write_chart(&model, &dir, 260, 3);
     let chart = ChartFiles::open(&dir, model.spec()).unwrap();
     let train = || {
         TwoStage::builder(&model)
@@ -187,7 +161,7 @@ fn every_file_problem_names_its_file_and_line() {
         ),
     ];
     for (file, from, to, line, text) in cases {
-        write_chart(&dir, 3, 1);
+        write_chart(&model, &dir, 3, 1);
         let path = dir.join(file);
         let body = std::fs::read_to_string(&path).unwrap();
         assert!(body.contains(from), "{from}");
@@ -210,7 +184,7 @@ fn every_file_problem_names_its_file_and_line() {
     }
     // A value that is not a number names its column; a short record and a
     // missing experiment are named too.
-    write_chart(&dir, 3, 1);
+    write_chart(&model, &dir, 3, 1);
     let data = std::fs::read_to_string(dir.join("data.csv")).unwrap();
     let mut lines: Vec<String> = data.lines().map(str::to_string).collect();
     lines[5] = "2,0.5,abc".into();
@@ -295,7 +269,7 @@ fn write_numpy_chart(dir: &Path, m: usize, seed: u64) {
 fn a_numpy_chart_trains_the_same_networks_as_the_csv_one() {
     let model = model();
     let (csv, npy) = (scratch("chart-npy-csv"), scratch("chart-npy-npy"));
-    write_chart(&csv, 240, 9);
+    write_chart(&model, &csv, 240, 9);
     write_numpy_chart(&npy, 240, 9);
     let train = |dir: &Path| {
         let chart = ChartFiles::open(dir, model.spec()).unwrap();

@@ -6,11 +6,13 @@
 // A panic is how a test fails.
 #![allow(clippy::unwrap_used)]
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::write_chart;
+use std::path::PathBuf;
 
 use twostage::compress::Compressor;
-use twostage::models::{Benchmark, IoData, Simulator, experiment_rng, run_experiment};
+use twostage::models::{Benchmark, Simulator, experiment_rng};
 use twostage::{ChartFiles, CompressorConfig, Estimator, RecordSource, TwoStage};
 
 fn model() -> Benchmark {
@@ -91,30 +93,6 @@ fn the_same_seed_gives_the_same_file_at_any_thread_count() {
     assert!(trained(&model, "learned:4", 6).compressor() != one.compressor());
 }
 
-/// Experiments 0..m of the design of `seed` as `twostage simulate --count`
-/// writes them.
-fn write_chart(dir: &Path, m: usize, seed: u64) {
-    let _ = std::fs::remove_dir_all(dir);
-    std::fs::create_dir_all(dir).unwrap();
-    let model = model();
-    let design = model.prior().design(m, seed).unwrap();
-    let (mut truth, mut data) = (
-        String::from("experiment,theta\n"),
-        String::from("experiment,u,y\n"),
-    );
-    let (mut theta, mut record) = ([0.0], IoData::default());
-    for i in 0..m {
-        run_experiment(&model, &design, i, &mut theta, &mut record).unwrap();
-        writeln!(truth, "{i},{:?}", theta[0]).unwrap();
-        for k in 0..record.n_samples() {
-            let (u, y) = (record.input(0)[k], record.output(0)[k]);
-            writeln!(data, "{i},{u:?},{y:?}").unwrap();
-        }
-    }
-    std::fs::write(dir.join("truth.csv"), truth).unwrap();
-    std::fs::write(dir.join("data.csv"), data).unwrap();
-}
-
 fn scratch(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name)
 }
@@ -123,8 +101,8 @@ fn scratch(name: &str) -> PathBuf {
 fn a_chart_file_trains_the_same_network_as_simulating_its_records() {
     let model = model();
     let (train, check) = (scratch("learned-train"), scratch("learned-check"));
-    write_chart(&train, 300, 7);
-    write_chart(&check, 60, 8);
+    write_chart(&model, &train, 300, 7);
+    write_chart(&model, &check, 60, 8);
     let spec = model.spec();
     let (chart, other) = (
         ChartFiles::open(&train, spec).unwrap(),

@@ -469,6 +469,26 @@ impl WithLearned {
         2 * self.shape.channels.last().copied().unwrap_or(0)
     }
 
+    /// The inner features (by its estimate-time path when `fast`), then
+    /// the summary; the network's pass is the same either way.
+    fn compress_by(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut Workspace,
+        alpha: &mut [f64],
+        fast: bool,
+    ) -> Result<()> {
+        let (features, summary) =
+            super::split_appended(alpha, self.inner_features(), self.appended())?;
+        match &self.inner {
+            Some(inner) if fast => inner.compress_fast_into(inputs, outputs, work, features)?,
+            Some(inner) => inner.compress_into(inputs, outputs, work, features)?,
+            None => {}
+        }
+        self.summary_into(inputs, outputs, work, summary)
+    }
+
     fn summary_into(
         &self,
         inputs: ArrayView2<'_, f64>,
@@ -525,12 +545,7 @@ impl Compressor for WithLearned {
         work: &mut Workspace,
         alpha: &mut [f64],
     ) -> Result<()> {
-        let (features, summary) =
-            super::split_appended(alpha, self.inner_features(), self.appended())?;
-        if let Some(inner) = &self.inner {
-            inner.compress_into(inputs, outputs, work, features)?;
-        }
-        self.summary_into(inputs, outputs, work, summary)
+        self.compress_by(inputs, outputs, work, alpha, false)
     }
 
     fn compress_fast_into(
@@ -540,12 +555,7 @@ impl Compressor for WithLearned {
         work: &mut Workspace,
         alpha: &mut [f64],
     ) -> Result<()> {
-        let (features, summary) =
-            super::split_appended(alpha, self.inner_features(), self.appended())?;
-        if let Some(inner) = &self.inner {
-            inner.compress_fast_into(inputs, outputs, work, features)?;
-        }
-        self.summary_into(inputs, outputs, work, summary)
+        self.compress_by(inputs, outputs, work, alpha, true)
     }
 
     fn feature_names(&self) -> Vec<String> {
