@@ -15,8 +15,6 @@
 //! For each manoeuvre: the share each flags, and the estimator's pK1 error
 //! over the Bayes posterior mean's on the records neither flags.
 
-use std::path::PathBuf;
-
 use anyhow::Result;
 use rayon::prelude::*;
 use twostage::Estimator;
@@ -27,18 +25,15 @@ use twostage_kernels::input_shape::{NEIGHBOURS, nearest_distance};
 use twostage_kernels::layer::{Activation, dense_layer};
 
 use crate::bayes_gap::{CarManoeuvre, Steering, car_manoeuvre, rmse};
-use crate::learned_summary::estimator_and_family;
+use crate::learned_summary::Family;
 use crate::paper::test_records;
 
 /// The options of `xtask flag-study`.
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
-    /// The family's model file (of the built-in car).
-    #[arg(long)]
-    model_file: PathBuf,
-    /// An estimator of that family.
-    #[arg(long)]
-    estimator: PathBuf,
+    /// The family and its estimator.
+    #[command(flatten)]
+    of: Family,
     /// Fresh family records: half the reference, half the calibration.
     #[arg(long, default_value_t = 4096)]
     family: usize,
@@ -175,7 +170,7 @@ fn disagreement(regressor: &FittedRegressor, row: &[f64]) -> Option<f64> {
 }
 
 pub(crate) fn run(c: &Args) -> Result<()> {
-    let (estimator, family) = estimator_and_family(&c.estimator, &c.model_file)?;
+    let (estimator, family) = c.of.open()?;
     let (_, fresh) = test_records(family.as_ref(), 2 * c.family, 7)?;
     let compressor = estimator.compressor();
     let fresh: Vec<IoData> = fresh
@@ -218,7 +213,7 @@ pub(crate) fn run(c: &Args) -> Result<()> {
     println!(
         "{}: {} reference and {} calibration records of the family; thresholds: features' \
          density {density_threshold:.3}, ensemble's disagreement {}",
-        c.estimator.display(),
+        c.of.estimator.display(),
         reference.len(),
         calibration.len(),
         spread_threshold.map_or("(no ensemble)".into(), |t| format!("{t:.4}"))

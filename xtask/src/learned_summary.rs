@@ -23,12 +23,9 @@ use crate::paper::test_records;
 /// What one run compares (the options of `xtask learned-summary`).
 #[derive(Debug, clap::Args)]
 pub(crate) struct Args {
-    /// The family's model file (of the built-in car).
-    #[arg(long)]
-    model_file: PathBuf,
-    /// An estimator of that family: its stage 1 is the reference.
-    #[arg(long)]
-    estimator: PathBuf,
+    /// The family and its estimator (whose stage 1 is the reference).
+    #[command(flatten)]
+    family: Family,
     /// Training records.
     #[arg(long, default_value_t = 8000)]
     sims: usize,
@@ -161,12 +158,28 @@ fn variants(
 
 const NAMES: [&str; 3] = ["features", "learned", "features+learned"];
 
+/// A family of the built-in car and an estimator of it.
+#[derive(Debug, clap::Args)]
+pub(crate) struct Family {
+    /// The family's model file (of the built-in car).
+    #[arg(long)]
+    pub model_file: PathBuf,
+    /// An estimator of that family.
+    #[arg(long)]
+    pub estimator: PathBuf,
+}
+
+impl Family {
+    /// The estimator and the family's simulator, refused unless the
+    /// estimator was trained on the family's model.
+    pub(crate) fn open(&self) -> Result<(Estimator, Box<dyn Simulator>)> {
+        estimator_and_family(&self.estimator, &self.model_file)
+    }
+}
+
 /// The estimator at `path` and the simulator of the family `model_file`
 /// describes, refused unless the estimator was trained on that model.
-pub(crate) fn estimator_and_family(
-    path: &Path,
-    model_file: &Path,
-) -> Result<(Estimator, Box<dyn Simulator>)> {
+fn estimator_and_family(path: &Path, model_file: &Path) -> Result<(Estimator, Box<dyn Simulator>)> {
     let estimator = Estimator::load(path).with_context(|| format!("reading {}", path.display()))?;
     let family = ModelFile::load(model_file)?.simulator()?;
     if family.spec().name() != estimator.training().model {
@@ -182,7 +195,7 @@ pub(crate) fn estimator_and_family(
 
 pub(crate) fn run(c: &Args) -> Result<()> {
     let summary = c.training();
-    let (estimator, family) = estimator_and_family(&c.estimator, &c.model_file)?;
+    let (estimator, family) = c.family.open()?;
     let start = Instant::now();
     let (truth, records, left) = compressible(
         &estimator,
