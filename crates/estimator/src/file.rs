@@ -254,6 +254,12 @@ pub fn write_whole(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
         Destination::Replace { target, dir } => (target, dir),
     };
     let mut file = temporary_in(&dir).map_err(io)?;
+    // The file replaced keeps its mode, as `std::fs::write` keeps it.
+    if let Ok(existing) = std::fs::metadata(&target) {
+        file.as_file()
+            .set_permissions(existing.permissions())
+            .map_err(io)?;
+    }
     file.write_all(bytes).map_err(io)?;
     file.as_file().sync_all().map_err(io)?;
     file.persist(&target).map_err(|e| io(e.error))?;
@@ -314,8 +320,18 @@ fn destination(path: &Path) -> std::io::Result<Destination> {
 
 /// A temporary file in `dir`; the system's words for a failure, without
 /// the temporary name that the user never gave.
+/// A temporary file in `dir` made with the mode a new file of
+/// `std::fs::write` gets (read and write for all, less the umask), not
+/// the owner-only mode of a temporary file: the estimator file it
+/// becomes is shared as any other output.
 fn temporary_in(dir: &Path) -> std::io::Result<tempfile::NamedTempFile> {
-    tempfile::NamedTempFile::new_in(dir).map_err(|e| {
+    let mut builder = tempfile::Builder::new();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    builder.tempfile_in(dir).map_err(|e| {
         // tempfile appends ` at path "<dir>/.tmpXXXX"` to the system's words.
         let said = e.to_string();
         match said.split_once(" at path \"") {

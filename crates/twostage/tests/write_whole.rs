@@ -55,3 +55,22 @@ fn a_folder_is_refused_by_name() {
     );
     assert!(dir.path().is_dir());
 }
+
+/// A new file gets the mode `std::fs::write` gives one beside it (not a
+/// temporary file's owner-only 0600, issue 72); a replaced file keeps its
+/// own.
+#[test]
+fn a_written_file_has_the_mode_an_ordinary_write_gives() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let plain = dir.path().join("plain.txt");
+    std::fs::write(&plain, b"x").unwrap();
+    let whole = dir.path().join("whole.tsest");
+    twostage::write_whole(&whole, b"estimator").unwrap();
+    assert_eq!(mode(&whole), mode(&plain));
+    std::fs::set_permissions(&whole, std::fs::Permissions::from_mode(0o640)).unwrap();
+    twostage::write_whole(&whole, b"estimator, again").unwrap();
+    assert_eq!(mode(&whole), 0o640);
+    assert_eq!(std::fs::read(&whole).unwrap(), b"estimator, again");
+}
