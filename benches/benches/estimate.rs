@@ -2,8 +2,10 @@
 //!
 //! Groups: `estimate_cost_benchmark` (ts, ts_recommended, ekf, ukf,
 //! pf1000, pem1, pem5, pem10, bayes, ii5) and `estimate_cost_pacejka` (ts,
-//! ts_recommended, pf500, pem5), every method on the same record of its
-//! group. `ts` is the paper preset, `ts_recommended` the recommended one.
+//! ts_recommended, ts_learned, pf500, pem5), every method on the same
+//! record of its group. `ts` is the paper preset, `ts_recommended` the
+//! recommended one, `ts_learned` ARX, the summary and a learned summary
+//! (`arx:2,2+summary+learned`, `ensemble:10`).
 
 use std::hint::black_box;
 
@@ -129,6 +131,26 @@ fn pacejka_costs(c: &mut Criterion) {
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     bench_ts(&mut group, "ts", &estimator, &data);
     bench_ts(&mut group, "ts_recommended", &recommended, &data);
+    // A learned stage 1 (decision 081): the ARX fit, the summary and the
+    // network's pass over the record, then the same kind of stage 2.
+    let learned = TwoStage::builder(&car)
+        .compressor(
+            "arx:2,2+summary+learned"
+                .parse::<twostage::CompressorConfig>()
+                .unwrap_or_else(|e| panic!("{e}")),
+        )
+        .regressor(
+            "ensemble:10"
+                .parse::<twostage::RegressorConfig>()
+                .unwrap_or_else(|e| panic!("{e}")),
+        )
+        .simulations(1000)
+        .validation(0)
+        .calibration(0)
+        .seed(1)
+        .train()
+        .unwrap_or_else(|e| panic!("training the learned stage 1: {e}"));
+    bench_ts(&mut group, "ts_learned", &learned, &data);
     group.finish();
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     group.sample_size(10);
