@@ -131,7 +131,7 @@ fn pacejka_costs(c: &mut Criterion) {
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     bench_ts(&mut group, "ts", &estimator, &data);
     bench_ts(&mut group, "ts_recommended", &recommended, &data);
-    // A learned stage 1 (decision 081): the ARX fit, the summary and the
+    // A learned stage 1: the ARX fit, the summary and the
     // network's pass over the record, then the same kind of stage 2.
     let learned = TwoStage::builder(&car)
         .compressor(

@@ -1,5 +1,5 @@
-//! Which flag knows when an estimate is far from what its record allows
-//! (issue 69, item 3)? For an estimator and its family (a model file of
+//! Which flag knows when an estimate is far from what its record allows?
+//! For an estimator and its family (a model file of
 //! the built-in car), two candidate flags are calibrated on fresh records
 //! of the family, each at 99% of them (split conformal), and set against
 //! the exact posterior mean on the car's manoeuvres:
@@ -7,7 +7,7 @@
 //! - **the features' density**: the root mean square distance of a
 //!   record's stage-1 features (standardized by the reference records'
 //!   spread) to their nearest reference records', as the input shape's
-//!   flag (decision 078) does with autocorrelations;
+//!   flag does with autocorrelations;
 //! - **the ensemble's disagreement**: the spread of stage 2's averaged
 //!   networks' outputs (standardized parameters), where an ensemble was
 //!   trained.

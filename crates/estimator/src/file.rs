@@ -26,7 +26,7 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// 3 the parameters' priors, version 4 the betting certificate of the
 /// validation report, version 5 the family of inputs the held-out records
 /// spanned, version 6 the density of their input shapes, version 7 a stage
-/// 1 that learns (`+learned`, decision 081); older files load without them
+/// 1 that learns (`+learned`); older files load without them
 /// (uniform priors, no certificate, no input family, no shapes). Version 7
 /// shares version 6's layout and is written only where it is needed, so
 /// that a build that reads 6 still reads every estimator without a

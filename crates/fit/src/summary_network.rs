@@ -1,4 +1,4 @@
-//! The training of a stage 1 that learns (issue 69): the summary network
+//! The training of a stage 1 that learns: the summary network
 //! of `twostage_compress` (strided tanh convolutions over a record's
 //! samples, pooled by time averages) is trained end to end with a
 //! one-hidden-layer head on the chart's parameters (Adam on the

@@ -1,4 +1,4 @@
-//! A stage 1 that learns (`+learned`, decision 081), as a user trains,
+//! A stage 1 that learns (`+learned`), as a user trains,
 //! saves and reads it: the network trained with the estimator on the
 //! training records, stored in the file, the same bits at any thread
 //! count and from a chart file as from simulating it.

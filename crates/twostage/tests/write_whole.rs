@@ -57,7 +57,7 @@ fn a_folder_is_refused_by_name() {
 }
 
 /// A new file gets the mode `std::fs::write` gives one beside it (not a
-/// temporary file's owner-only 0600, issue 72); a replaced file keeps its
+/// temporary file's owner-only 0600); a replaced file keeps its
 /// own.
 #[test]
 fn a_written_file_has_the_mode_an_ordinary_write_gives() {

@@ -1,4 +1,4 @@
-//! A stage 1 that learns (issue 69, decisions 080 and 081): a small
+//! A stage 1 that learns: a small
 //! one-dimensional convolutional network over a record's samples, every
 //! signal a channel, whose last layer's activations and their squares are
 //! averaged over time into a few summary numbers, beside (or instead of)

@@ -1,0 +1,146 @@
+use super::*;
+use crate::rng::experiment_rng;
+
+#[test]
+fn interpolation_holds_the_ends_for_any_index() {
+    let samples = [1.0, 3.0, 7.0];
+    assert_eq!(interpolate(&samples, 0.5).to_bits(), 2.0f64.to_bits());
+    assert_eq!(interpolate(&samples, 1.25).to_bits(), 4.0f64.to_bits());
+    for past in [2.0, 2.5, 1e300, f64::INFINITY] {
+        assert_eq!(
+            interpolate(&samples, past).to_bits(),
+            7.0f64.to_bits(),
+            "{past}"
+        );
+    }
+    assert_eq!(
+        interpolate(&samples, f64::NEG_INFINITY).to_bits(),
+        1.0f64.to_bits()
+    );
+    assert!(interpolate(&samples, f64::NAN).is_nan());
+    assert!(interpolate(&[4.0], f64::NAN).is_nan());
+    assert_eq!(interpolate(&[4.0], 0.3).to_bits(), 4.0f64.to_bits());
+    assert_eq!(interpolate(&[], 0.3).to_bits(), 0.0f64.to_bits());
+}
+
+#[test]
+fn chicane_is_zero_outside_its_window_and_matches_the_formula() {
+    let c = InputSignal::chicane(0.2).unwrap();
+    assert_eq!(c.value_at(0.5, 0.02, &[]).to_bits(), 0);
+    assert_eq!(c.value_at(9.5, 0.02, &[]).to_bits(), 0);
+    // t = 4: sin(3 pi / 2) sin(3 pi / 8)^2 = -(0.9238795...)^2
+    let want = -0.2 * 0.923_879_532_511_286_7_f64.powi(2);
+    assert!((c.value_at(4.0, 0.02, &[]) - want).abs() < 1e-15);
+    let mut u = vec![0.0; 500];
+    c.fill(0.02, &mut experiment_rng(0, 0), &mut u).unwrap();
+    assert!((u[200] - want).abs() < 1e-15);
+}
+
+#[test]
+fn white_noise_has_the_requested_variance() {
+    let w = InputSignal::white_gaussian(2.0).unwrap();
+    let mut u = vec![0.0; 100_000];
+    w.fill(1.0, &mut experiment_rng(3, 1), &mut u).unwrap();
+    let mean = u.iter().sum::<f64>() / u.len() as f64;
+    let var = u.iter().map(|v| v * v).sum::<f64>() / u.len() as f64;
+    // Standard errors: 0.0063 for the mean, 0.018 for the variance.
+    assert!(mean.abs() < 0.03, "{mean}");
+    assert!((var - 4.0).abs() < 0.08, "{var}");
+}
+
+/// A sequence's cuts are the order statistics of uniform draws: with
+/// three parts the first cut's mean is a third of the record, the
+/// second's two thirds (each within four standard errors over 2000
+/// experiments), and every sample belongs to its stretch's part.
+#[test]
+fn a_sequence_cuts_the_record_at_uniform_times() {
+    let level = |v: f64| InputSignal::steps((v, v), (1.0, 1.0)).unwrap();
+    let three = InputSignal::sequence(vec![level(1.0), level(2.0), level(3.0)]).unwrap();
+    let n = 300;
+    let mut u = vec![0.0; n];
+    let (mut first, mut second) = (0.0, 0.0);
+    for e in 0..2000 {
+        three.fill(0.1, &mut experiment_rng(6, e), &mut u).unwrap();
+        assert!(u.windows(2).all(|w| w[0] <= w[1]), "{u:?}");
+        assert!(u.iter().all(|v| [1.0, 2.0, 3.0].contains(v)));
+        first += u.iter().filter(|v| v.to_bits() == 1f64.to_bits()).count() as f64 / 2000.0;
+        second += u.iter().filter(|v| **v < 3.0).count() as f64 / 2000.0;
+    }
+    // sd of the minimum of two uniforms on [0, 300]: 300 / sqrt(18).
+    let error = 4.0 * 300.0 / 18f64.sqrt() / 2000f64.sqrt();
+    assert!((first - 100.0).abs() < error, "{first}");
+    assert!((second - 200.0).abs() < error, "{second}");
+    // Each part at its own times: a ramp of k after a hold shows k at k.
+    let ramp = InputSignal::fixed((0..n).map(|k| k as f64).collect()).unwrap();
+    let held_then_ramp = InputSignal::sequence(vec![level(-1.0), ramp]).unwrap();
+    held_then_ramp
+        .fill(0.1, &mut experiment_rng(6, 3), &mut u)
+        .unwrap();
+    let cut = u.iter().position(|v| *v >= 0.0).unwrap_or(n);
+    assert!(cut > 0 && cut < n, "{cut}");
+    assert!(u[..cut].iter().all(|v| v.to_bits() == (-1f64).to_bits()));
+    assert!(
+        u[cut..]
+            .iter()
+            .enumerate()
+            .all(|(i, v)| v.to_bits() == ((cut + i) as f64).to_bits())
+    );
+    // A band noise on a short stretch keeps its band: it is drawn as a
+    // whole record.
+    let noise =
+        InputSignal::filtered_noise(0.0, Drawn::fixed(0.5), 4, Drawn::fixed(1.0), 0.0).unwrap();
+    let rest = level(0.0);
+    let mixed = InputSignal::sequence(vec![noise.clone(), rest.clone(), noise]).unwrap();
+    mixed.check_sampling(0.1, n).unwrap();
+    for e in 0..50 {
+        mixed.fill(0.1, &mut experiment_rng(6, e), &mut u).unwrap();
+    }
+}
+
+#[test]
+fn mixtures_and_sequences_refuse_what_no_family_could_be() {
+    let rest = InputSignal::steps((0.0, 0.0), (1.0, 1.0)).unwrap();
+    let e = |r: Result<InputSignal>| r.unwrap_err().to_string();
+    assert!(e(InputSignal::one_of(vec![], vec![])).contains("no parts"));
+    assert!(e(InputSignal::one_of(vec![rest.clone()], vec![1.0, 2.0])).contains("1 part"));
+    let zero = e(InputSignal::one_of(
+        vec![rest.clone(), rest.clone()],
+        vec![1.0, 0.0],
+    ));
+    assert!(zero.contains("0 for part 2"), "{zero}");
+    assert!(e(InputSignal::sequence(vec![rest.clone()])).contains("two or more"));
+    let mut deep = rest.clone();
+    for _ in 0..MAX_INPUT_NESTING - 1 {
+        deep = InputSignal::sequence(vec![deep, rest.clone()]).unwrap();
+    }
+    assert_eq!(deep.depth(), MAX_INPUT_NESTING);
+    let too_deep = e(InputSignal::one_of(vec![deep], vec![1.0]));
+    assert!(too_deep.contains("nested 5 deep"), "{too_deep}");
+    // A mixture of one deterministic part is that part; a sequence
+    // never is (its cuts are drawn).
+    let chicane = InputSignal::chicane(0.1).unwrap();
+    assert!(
+        InputSignal::one_of(vec![chicane.clone()], vec![2.0])
+            .unwrap()
+            .is_deterministic()
+    );
+    assert!(
+        !InputSignal::sequence(vec![chicane.clone(), chicane])
+            .unwrap()
+            .is_deterministic()
+    );
+}
+
+#[test]
+fn fixed_signals_are_checked_and_interpolated() {
+    assert!(InputSignal::fixed(vec![]).is_err());
+    assert!(InputSignal::fixed(vec![1.0, f64::NAN]).is_err());
+    assert!(InputSignal::white_gaussian(0.0).is_err());
+    let f = InputSignal::fixed(vec![0.0, 2.0, 4.0]).unwrap();
+    let mut u = vec![0.0; 4];
+    assert!(f.fill(0.1, &mut experiment_rng(0, 0), &mut u).is_err());
+    let s = [0.0, 2.0, 4.0];
+    assert!((f.value_at(0.15, 0.1, &s) - 3.0).abs() < 1e-12);
+    assert!((f.value_at(5.0, 0.1, &s) - 4.0).abs() < 1e-12);
+    assert!((f.value_at(-1.0, 0.1, &s) - 0.0).abs() < 1e-12);
+}
