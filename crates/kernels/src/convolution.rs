@@ -3,7 +3,11 @@
 //! layer into its time averages and the averages of its squares.
 //!
 //! The host's summary network, its training and the runtime call these
-//! same functions, so a record's summary has the same bits everywhere.
+//! same functions, so a record's summary has the same bits everywhere:
+//! the host over whole arrays, the runtime position by position as the
+//! samples stream in.
+
+use crate::Values;
 
 /// One strided convolution: `out[o][t] = tanh(b[o] + sum_c sum_k
 /// w[o][c][k] in[c][stride t + k])` over the positions where the kernel
@@ -59,8 +63,8 @@ pub fn min_samples(layers: &[ConvShape]) -> usize {
 /// Applies `shape` with `weights` (taps out x in x kernel, row-major, then
 /// the biases) to `input` (channel-major, `length_in` samples a channel)
 /// into `output` (channel-major), and returns the output's length. Each
-/// position's sum runs bias first, then channel by channel, each
-/// channel's taps in index order.
+/// position is [`convolve_position`]'s, so a stream that sees the samples
+/// one at a time computes the same bits.
 ///
 /// ```
 /// use twostage_kernels::convolution::{ConvShape, convolve_tanh};
@@ -82,33 +86,64 @@ pub fn convolve_tanh(
     output: &mut [f64],
 ) -> usize {
     let length_out = shape.positions(length_in);
-    let taps_len = shape.outputs * shape.inputs * shape.kernel;
     if weights.len() < shape.n_weights()
         || input.len() < shape.inputs * length_in
         || output.len() < shape.outputs * length_out
     {
         return 0;
     }
-    let (taps_all, biases) = weights[..shape.n_weights()].split_at(taps_len);
-    for o in 0..shape.outputs {
-        let row = &mut output[o * length_out..(o + 1) * length_out];
-        row.fill(biases[o]);
-        for c in 0..shape.inputs {
-            let taps = &taps_all[(o * shape.inputs + c) * shape.kernel..][..shape.kernel];
-            let channel = &input[c * length_in..(c + 1) * length_in];
-            for (t, z) in row.iter_mut().enumerate() {
-                let window = &channel[t * shape.stride..][..shape.kernel];
-                *z += taps.iter().zip(window).map(|(a, x)| a * x).sum::<f64>();
-            }
-        }
-        row.iter_mut().for_each(|z| *z = crate::tanh(*z));
+    for t in 0..length_out {
+        let start = t * shape.stride;
+        convolve_position(
+            shape,
+            weights,
+            0,
+            |c| &input[c * length_in + start..][..shape.kernel],
+            |o, z| output[o * length_out + t] = z,
+        );
     }
     length_out
 }
 
+/// One position of [`convolve_tanh`]: `emit(o, tanh(b[o] + sum_c
+/// w[o][c] . window(c)))` for each output channel `o`, where `window(c)`
+/// is input channel `c`'s `kernel` samples under the kernel and the
+/// layer's weights start at `weights[offset]` (a slice on the host, a
+/// blob's bytes in the runtime). The sum runs bias first, then channel by
+/// channel, each channel's taps in index order ([`Values::dot_from`]).
+///
+/// ```
+/// use twostage_kernels::convolution::{ConvShape, convolve_position};
+/// let shape = ConvShape { inputs: 2, outputs: 1, kernel: 2, stride: 1 };
+/// // Taps (1, 1) and (0, 2), bias -1.
+/// let weights = [1.0, 1.0, 0.0, 2.0, -1.0];
+/// let windows = [[0.5, 0.25], [0.0, 0.125]];
+/// let mut z = 0.0;
+/// convolve_position(shape, &weights[..], 0, |c| &windows[c][..], |_, v| z = v);
+/// assert_eq!(z, twostage_kernels::tanh(-1.0 + 0.75 + 0.25));
+/// ```
+pub fn convolve_position<'x, W: Values + ?Sized>(
+    shape: ConvShape,
+    weights: &W,
+    offset: usize,
+    window: impl Fn(usize) -> &'x [f64],
+    mut emit: impl FnMut(usize, f64),
+) {
+    let taps = offset + shape.outputs * shape.inputs * shape.kernel;
+    for o in 0..shape.outputs {
+        let mut z = weights.at(taps + o);
+        for c in 0..shape.inputs {
+            z += weights.dot_from(offset + (o * shape.inputs + c) * shape.kernel, window(c));
+        }
+        emit(o, crate::tanh(z));
+    }
+}
+
 /// The time average of each of the `channels` channels of `last`
 /// (channel-major, `length` samples a channel) into `out[..channels]`, and
-/// the average of its square into `out[channels..2 channels]`.
+/// the average of its square into `out[channels..2 channels]`: the sums
+/// [`pool_accumulate`] keeps position by position, through
+/// [`pool_finish`].
 ///
 /// ```
 /// use twostage_kernels::convolution::pool_mean_and_square;
@@ -122,11 +157,40 @@ pub fn pool_mean_and_square(last: &[f64], channels: usize, length: usize, out: &
     if last.len() < channels * length || out.len() < 2 * channels || length == 0 {
         return;
     }
-    let (means, squares) = out[..2 * channels].split_at_mut(channels);
-    for c in 0..channels {
-        let row = &last[c * length..(c + 1) * length];
-        means[c] = row.iter().sum::<f64>() / length as f64;
-        squares[c] = row.iter().map(|v| v * v).sum::<f64>() / length as f64;
+    let sums = &mut out[..2 * channels];
+    sums.fill(0.0);
+    for t in 0..length {
+        pool_accumulate(sums, channels, |c| last[c * length + t]);
+    }
+    pool_finish(sums, length);
+}
+
+/// Adds one position of the last layer (`value(c)` for each of the
+/// `channels` channels) to `sums`: each channel's sum, then each one's sum
+/// of squares.
+///
+/// ```
+/// use twostage_kernels::convolution::{pool_accumulate, pool_finish};
+/// let mut sums = [0.0; 2];
+/// pool_accumulate(&mut sums, 1, |_| 2.0);
+/// pool_accumulate(&mut sums, 1, |_| -1.0);
+/// pool_finish(&mut sums, 2);
+/// assert_eq!(sums, [0.5, 2.5]);
+/// ```
+pub fn pool_accumulate(sums: &mut [f64], channels: usize, value: impl Fn(usize) -> f64) {
+    let (means, squares) = sums.split_at_mut(channels.min(sums.len()));
+    for (c, (m, s)) in means.iter_mut().zip(squares.iter_mut()).enumerate() {
+        let v = value(c);
+        *m += v;
+        *s += v * v;
+    }
+}
+
+/// The sums of [`pool_accumulate`] over `positions` positions, turned
+/// into averages in place.
+pub fn pool_finish(sums: &mut [f64], positions: usize) {
+    for v in sums.iter_mut() {
+        *v /= positions as f64;
     }
 }
 
