@@ -91,8 +91,8 @@ fn a_structure_the_runtime_cannot_stream_is_refused_with_what_to_do() {
         "{err}"
     );
     assert!(!blob.exists(), "nothing is written for a refused estimator");
-    // A learned stage 1 trains and estimates on the host; the runtime
-    // refuses it, saying what it can take instead.
+    // A learned stage 1 after ARX coefficients exports (format version
+    // 4); a network alone is refused, saying what the runtime takes.
     let learned = dir.join("learned.tsest");
     train(&learned, "arx:2,2+learned:3");
     let shown = twostage(&["inspect", path(&learned)]);
@@ -110,10 +110,18 @@ fn a_structure_the_runtime_cannot_stream_is_refused_with_what_to_do() {
         "--out",
         path(&blob),
     ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let bytes = std::fs::read(&blob).expect("the blob is written");
+    let runtime = twostage::runtime::Estimator::from_bytes(&bytes).expect("the runtime reads it");
+    assert!(runtime.has_learned_summary() && bytes[4] == 4);
+    std::fs::remove_file(&blob).expect("the blob is removed");
+    let alone = dir.join("alone.tsest");
+    train(&alone, "learned:3");
+    let out = twostage(&["export", "--estimator", path(&alone), "--out", path(&blob)]);
     assert!(!out.status.success());
     let err = text(&out.stderr);
     assert!(
-        err.contains("does not evaluate a learned stage 1") && err.contains("+summary"),
+        err.contains("after ARX coefficients") && err.contains("arx:NA,NB+learned"),
         "{err}"
     );
     assert!(!blob.exists());

@@ -6,15 +6,16 @@ use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
 use twostage_models::{InputFamily, Transform};
 use twostage_runtime::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_MEMBERS,
-    MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK,
-    REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY,
-    TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_SUMMARY,
+    FLAG_LEARNED_SUMMARY, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC,
+    MAX_CHANNELS, MAX_EXPERTS, MAX_KERNEL, MAX_LAYERS, MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS,
+    MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY,
+    SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY,
+    VERSION_WITHOUT_LEARNED, VERSION_WITHOUT_SUMMARY,
 };
 
 use crate::error::{Error, Result};
 use crate::estimator::Estimator;
-use twostage_compress::{Arx, CompressorConfig, SignalTransform, Transformed};
+use twostage_compress::{Arx, CompressorConfig, SignalTransform, SummaryNetwork, Transformed};
 use twostage_fit::FittedRegressor;
 
 /// Little-endian sections, each starting at a multiple of 8 bytes.
@@ -126,6 +127,48 @@ impl Writer {
     }
 }
 
+impl Writer {
+    /// The learned stage 1's shapes (channels out, kernel, stride per
+    /// layer), each signal's scale, then the weights.
+    fn learned(&mut self, network: &SummaryNetwork) -> Result<()> {
+        let layers = network.layers();
+        let beyond = layers.len() > MAX_LAYERS
+            || network.n_signals() > MAX_CHANNELS
+            || layers
+                .iter()
+                .any(|l| l.outputs > MAX_CHANNELS || l.kernel > MAX_KERNEL);
+        if beyond {
+            return Err(refuse(format!(
+                "a summary network of {} layers over {} signals ({:?}): the runtime takes at \
+                 most {MAX_LAYERS} layers of {MAX_CHANNELS} channels over {MAX_CHANNELS} \
+                 signals, kernels of at most {MAX_KERNEL} samples; train a smaller \
+                 `+learned:C,..`",
+                layers.len(),
+                network.n_signals(),
+                layers
+            )));
+        }
+        let mut shapes = vec![layers.len()];
+        for l in layers {
+            shapes.extend([l.outputs, l.kernel, l.stride]);
+        }
+        self.u32s(&shapes)?;
+        self.f64s(network.scales());
+        self.f64s(network.weights());
+        Ok(())
+    }
+}
+
+/// What the runtime streams as stage 1: the ARX, an output transform in
+/// front of it, each signal's summary after it, a summary network after
+/// them.
+struct RuntimeStage1<'e> {
+    transformed: Option<&'e Transformed>,
+    arx: &'e Arx,
+    summary: bool,
+    learned: Option<&'e SummaryNetwork>,
+}
+
 fn refuse(reason: String) -> Error {
     Error::NotExportable { reason }
 }
@@ -137,7 +180,8 @@ impl Estimator {
     /// project's (linear, MLP, piecewise), with the intervals and the
     /// envelope; output transforms (`log+arx:...`) go with the ARX, and
     /// so does each signal's summary after it (`arx:...+summary`), but
-    /// not both.
+    /// not both; a learned summary (`arx:...[+summary]+learned`) closes
+    /// the features, without output transforms.
     ///
     /// ```
     /// use twostage::TwoStage;
@@ -153,16 +197,19 @@ impl Estimator {
     ///
     /// # Errors
     /// [`Error::NotExportable`] for a NARX, PCA or raw compressor, a
-    /// summary after output transforms, or sizes beyond the runtime's
-    /// limits ([`twostage_runtime::format`]).
+    /// learned summary without ARX coefficients before it, a summary
+    /// after output transforms, or sizes beyond the runtime's limits
+    /// ([`twostage_runtime::format`]).
     pub fn to_runtime(&self) -> Result<Vec<u8>> {
-        let (transformed, arx, summary) = self.runtime_stage1()?;
+        let stage1 = self.runtime_stage1()?;
         let mut w = Writer {
             bytes: Vec::with_capacity(4096),
         };
         w.bytes.extend_from_slice(&MAGIC);
-        let version = if summary {
+        let version = if stage1.learned.is_some() {
             VERSION
+        } else if stage1.summary {
+            VERSION_WITHOUT_LEARNED
         } else if self.runtime_family().is_some() {
             VERSION_WITHOUT_SUMMARY
         } else {
@@ -171,8 +218,8 @@ impl Estimator {
         w.u32(version as usize)?;
         w.u32(0)?; // length, set below
         w.u32(0)?; // checksum, set below
-        w.header(self, arx, transformed.is_some(), summary)?;
-        w.parts(self, transformed)?;
+        w.header(self, &stage1)?;
+        w.parts(self, &stage1)?;
         debug_assert_eq!(self.compressor.n_features(), self.regressor.n_inputs());
         let length = w.bytes.len();
         let length = u32::try_from(length)
@@ -192,30 +239,45 @@ impl Estimator {
     }
 
     /// The ARX stage 1 the runtime streams, the output transform in front
-    /// of it where there is one, and whether each signal's summary
-    /// follows it; refused beyond the runtime's sizes.
-    fn runtime_stage1(&self) -> Result<(Option<&Transformed>, &Arx, bool)> {
-        if self.compressor.learns() {
-            return Err(refuse(format!(
-                "the runtime does not evaluate a learned stage 1 yet, this estimator uses {}; \
-                 export an estimator trained without `+learned` (e.g. --compress \
-                 arx:2,2+summary)",
-                self.compressor
-            )));
-        }
-        let (summary, stage1) = match &self.compressor {
+    /// of it where there is one, whether each signal's summary follows
+    /// it, and the summary network after them; refused beyond the
+    /// runtime's sizes.
+    fn runtime_stage1(&self) -> Result<RuntimeStage1<'_>> {
+        let (learned, before) = match &self.compressor {
+            CompressorConfig::Learned(l) => {
+                let network = l.network().ok_or_else(|| {
+                    refuse(format!(
+                        "the summary network of {} is untrained: train the estimator first",
+                        self.compressor
+                    ))
+                })?;
+                let inner = l.inner().ok_or_else(|| {
+                    refuse(format!(
+                        "the runtime streams a learned summary after ARX coefficients, this \
+                         estimator uses {} alone; train with --compress arx:NA,NB+learned",
+                        self.compressor
+                    ))
+                })?;
+                (Some(network), inner)
+            }
+            other => (None, other),
+        };
+        let (summary, stage1) = match before {
             CompressorConfig::Summarized(s) => (true, s.inner()),
             other => (false, other),
         };
         let (transformed, stage1) = match stage1 {
-            CompressorConfig::Transformed(t) if !summary => (Some(t), t.inner()),
+            CompressorConfig::Transformed(t) if !summary && learned.is_none() => {
+                (Some(t), t.inner())
+            }
             other => (None, other),
         };
         let CompressorConfig::Arx(arx) = stage1 else {
             return Err(refuse(format!(
                 "the runtime streams ARX and AR compressors only, with each signal's summary \
-                 after them or output transforms before them, this estimator uses {}; \
-                 train with --compress arx:NA,NB (or ar:NA, log+arx:NA,NB, arx:NA,NB+summary)",
+                 or a learned summary after them or output transforms before them, this \
+                 estimator uses {}; train with --compress arx:NA,NB (or ar:NA, log+arx:NA,NB, \
+                 arx:NA,NB+summary, arx:NA,NB+summary+learned)",
                 self.compressor
             )));
         };
@@ -233,7 +295,12 @@ impl Estimator {
                 shape.n_inputs, shape.n_outputs
             )));
         }
-        Ok((transformed, arx, summary))
+        Ok(RuntimeStage1 {
+            transformed,
+            arx,
+            summary,
+            learned,
+        })
     }
 }
 
@@ -241,13 +308,8 @@ impl Writer {
     /// The header's fields after the magic, version, length and checksum:
     /// sizes, the ARX orders, the flags of the optional parts, the kind of
     /// stage 2.
-    fn header(
-        &mut self,
-        e: &Estimator,
-        arx: &Arx,
-        transforms_outputs: bool,
-        summary: bool,
-    ) -> Result<()> {
+    fn header(&mut self, e: &Estimator, stage1: &RuntimeStage1<'_>) -> Result<()> {
+        let arx = stage1.arx;
         let mut flags = 0;
         if e.intervals.is_some() {
             flags |= FLAG_CONFORMAL;
@@ -258,14 +320,17 @@ impl Writer {
         if e.envelope.is_some() {
             flags |= FLAG_ENVELOPE;
         }
-        if transforms_outputs {
+        if stage1.transformed.is_some() {
             flags |= FLAG_OUTPUT_TRANSFORMS;
         }
         if e.runtime_family().is_some() {
             flags |= FLAG_INPUT_FAMILY;
         }
-        if summary {
+        if stage1.summary {
             flags |= FLAG_SIGNAL_SUMMARY;
+        }
+        if stage1.learned.is_some() {
+            flags |= FLAG_LEARNED_SUMMARY;
         }
         let (kind, experts) = match &e.regressor {
             FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),
@@ -299,7 +364,7 @@ impl Writer {
 
     /// The parameters' transforms and box, stage 2, then the optional
     /// parts in the header's order.
-    fn parts(&mut self, e: &Estimator, transformed: Option<&Transformed>) -> Result<()> {
+    fn parts(&mut self, e: &Estimator, stage1: &RuntimeStage1<'_>) -> Result<()> {
         let transforms: Vec<usize> = e
             .marginals
             .iter()
@@ -311,6 +376,9 @@ impl Writer {
         self.u32s(&transforms)?;
         self.f64s(&e.lower);
         self.f64s(&e.upper);
+        if let Some(network) = stage1.learned {
+            self.learned(network)?;
+        }
         match &e.regressor {
             FittedRegressor::Linear(linear) => self.linear(linear)?,
             FittedRegressor::Mlp(mlp) => self.mlp(mlp)?,
@@ -338,7 +406,7 @@ impl Writer {
             self.f64s(mean);
             self.f64s(factor);
         }
-        if let Some(transformed) = transformed {
+        if let Some(transformed) = stage1.transformed {
             self.output_transforms(transformed, e.shape.n_outputs)?;
         }
         if let Some(family) = e.runtime_family() {

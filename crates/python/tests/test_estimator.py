@@ -99,9 +99,10 @@ def test_the_runtime_blob_is_the_cli_s_export(small, tmp_path):
         narx.to_runtime()
 
 
-def test_a_learned_stage1_is_the_cli_s_file_and_stays_off_the_runtime(tmp_path):
+def test_a_learned_stage1_is_the_cli_s_file_and_exports_to_the_runtime(tmp_path):
     """A summary network trained with the estimator: the same bytes from
-    Python as from the command line, and the runtime export refused."""
+    Python as from the command line, and a runtime blob of format 4; a
+    network without coefficients before it is refused."""
     args = dict(model="benchmark", compress="arx:1,1+learned:3", fit="linear",
                 sims=200, validate=50, calibrate=50, seed=3)
     from_cli = tmp_path / "learned.tsest"
@@ -111,8 +112,11 @@ def test_a_learned_stage1_is_the_cli_s_file_and_stays_off_the_runtime(tmp_path):
     learned = twostage.train(progress=False, **args)
     assert learned.to_bytes() == from_cli.read_bytes()
     assert from_cli.read_bytes()[8] == 7
-    with pytest.raises(ValueError, match="learned stage 1"):
-        learned.to_runtime()
+    blob = learned.to_runtime()
+    assert blob[:4] == b"TSRT" and blob[4] == 4
+    alone = twostage.train(progress=False, **dict(args, compress="learned:3"))
+    with pytest.raises(ValueError, match="after ARX coefficients"):
+        alone.to_runtime()
 
 
 def test_estimates_are_the_cli_s_bit_for_bit(small, tmp_path):

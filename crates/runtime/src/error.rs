@@ -96,6 +96,12 @@ pub enum Error {
         /// The fewest samples a window may hold.
         needed: usize,
     },
+    /// The blob needs a part of the runtime that this build leaves out
+    /// (a learned summary network without the feature `learned`).
+    NotBuiltIn {
+        /// The Cargo feature of `twostage-runtime` that builds it in.
+        feature: &'static str,
+    },
 }
 
 impl Error {
@@ -118,6 +124,7 @@ impl Error {
             Error::OutputTooShort { .. } => -14,
             Error::NotStarted => -15,
             Error::WindowTooShort { .. } => -16,
+            Error::NotBuiltIn { .. } => -17,
         }
     }
 }
@@ -138,12 +145,13 @@ impl Error {
             -8 => c"the workspace is smaller than ts_workspace_len",
             -9 => c"a sample has the wrong number of inputs or outputs",
             -10 => c"a sample is not finite: the record cannot be estimated; reset the stream",
-            -11 => c"too few samples for the regression",
+            -11 => c"too few samples for the regression or the summary network",
             -12 => c"a regressor is a combination of the others: the input does not excite the system enough",
             -13 => c"the sums overflowed: samples are far too large",
             -14 => c"the output array is shorter than the parameters",
             -15 => c"the workspace holds no stream: start one with ts_stream_start",
-            -16 => c"the window is shorter than one regression needs",
+            -16 => c"the window is shorter than the regression or the summary network needs",
+            -17 => c"the blob needs a part this runtime was built without: enable the runtime's feature that builds it (a learned summary: learned)",
             _ => return None,
         })
     }
@@ -194,7 +202,7 @@ impl core::fmt::Display for Error {
             ),
             Error::TooShort { samples, needed } => write!(
                 f,
-                "{samples} samples pushed, the regression needs at least {needed}"
+                "{samples} samples pushed, the estimator needs at least {needed} (its regression and any summary network)"
             ),
             Error::RankDeficient { output, column } => write!(
                 f,
@@ -210,8 +218,13 @@ impl core::fmt::Display for Error {
             }
             Error::WindowTooShort { window, needed } => write!(
                 f,
-                "a window of {window} samples, the regression needs at least {needed}: \
-                 take a longer window"
+                "a window of {window} samples, the estimator needs at least {needed} (its \
+                 regression and any summary network): take a longer window"
+            ),
+            Error::NotBuiltIn { feature } => write!(
+                f,
+                "the blob's stage 1 needs a part of the runtime that this build leaves out: \
+                 build twostage-runtime with its feature `{feature}` (on by default)"
             ),
         }
     }

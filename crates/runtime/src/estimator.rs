@@ -6,11 +6,12 @@ use crate::bytes::{Cursor, LeF64s, u32_at};
 use crate::error::Error;
 use crate::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER,
-    MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY,
-    SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY,
-    VERSION_WITHOUT_SUMMARY,
+    FLAG_LEARNED_SUMMARY, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC,
+    MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
+    SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED, VERSION_WITHOUT_SUMMARY,
 };
+use crate::learned::Learned;
 use crate::network::Network;
 
 /// Stage 2: one network, or a global one routing to experts.
@@ -95,6 +96,8 @@ pub struct Estimator<'a> {
     input_family_at: usize,
     /// Whether stage 1 appends each signal's summary.
     pub(crate) signal_summary: bool,
+    /// Where the learned stage 1's network starts in the blob (0: none).
+    learned_at: usize,
     blob: &'a [u8],
     max_width: usize,
 }
@@ -154,17 +157,25 @@ impl<'a> Estimator<'a> {
         if version >= VERSION_WITHOUT_SUMMARY {
             known |= FLAG_INPUT_FAMILY;
         }
-        if version >= VERSION {
+        if version >= VERSION_WITHOUT_LEARNED {
             known |= FLAG_SIGNAL_SUMMARY;
         }
-        if flags & !known != 0 || r1 != 0 || r2 != 0 {
+        if version >= VERSION {
+            known |= FLAG_LEARNED_SUMMARY;
+        }
+        // The network reads the outputs as measured, as the summary does:
+        // neither goes with output transforms.
+        let learned = flags & FLAG_LEARNED_SUMMARY != 0;
+        let transformed = flags & FLAG_OUTPUT_TRANSFORMS != 0;
+        let measured = flags & (FLAG_SIGNAL_SUMMARY | FLAG_LEARNED_SUMMARY) != 0;
+        if flags & !known != 0 || r1 != 0 || r2 != 0 || (measured && transformed) {
             return Err(Error::Invalid {
                 field: "flags",
                 at: flags_at,
             });
         }
         let signal_summary = flags & FLAG_SIGNAL_SUMMARY != 0;
-        let n_features = n_outputs * (na + n_inputs * nb)
+        let mut n_features = n_outputs * (na + n_inputs * nb)
             + if signal_summary {
                 SUMMARY_LEN * (n_inputs + n_outputs)
             } else {
@@ -192,6 +203,17 @@ impl<'a> Estimator<'a> {
                 at: bounds_at,
             });
         }
+        // Before stage 2, whose networks read its features.
+        if learned && !cfg!(feature = "learned") {
+            return Err(Error::NotBuiltIn { feature: "learned" });
+        }
+        let learned_at = if learned {
+            let at = c.at;
+            n_features += Learned::read(&mut c, n_inputs + n_outputs)?.n_features();
+            at
+        } else {
+            0
+        };
         let regressor = match kind {
             REGRESSOR_NETWORK if n_experts == 0 => {
                 Regressor::Network(Network::read(&mut c, n_features, q)?)
@@ -318,6 +340,7 @@ impl<'a> Estimator<'a> {
             output_transforms_at,
             input_family_at,
             signal_summary,
+            learned_at,
             blob,
             max_width: 0,
         };
@@ -370,7 +393,8 @@ impl<'a> Estimator<'a> {
     }
     /// Stage 1's features: `n_outputs * (na + n_inputs * nb)` ARX
     /// coefficients, then four summary numbers per signal where stage 1
-    /// appends them.
+    /// appends them, then two per channel of the learned network's last
+    /// layer where it learns.
     pub fn n_features(&self) -> usize {
         self.arx_features()
             + if self.signal_summary {
@@ -378,6 +402,38 @@ impl<'a> Estimator<'a> {
             } else {
                 0
             }
+            + self.learned().map_or(0, |l| l.n_features())
+    }
+
+    /// The learned stage 1's network, checked at load.
+    pub(crate) fn learned(&self) -> Option<Learned<'a>> {
+        // Without the feature no blob with a network loads, and the
+        // constant lets the linker drop the network's code.
+        if !cfg!(feature = "learned") {
+            return None;
+        }
+        match self.learned_at {
+            0 => None,
+            at => Learned::parse(
+                &mut Cursor::new(self.blob, at),
+                self.n_inputs + self.n_outputs,
+            )
+            .ok(),
+        }
+    }
+
+    /// Whether stage 1 appends a learned summary of the record (a
+    /// convolutional network's time averages, `+learned` on the host).
+    pub fn has_learned_summary(&self) -> bool {
+        self.learned_at != 0
+    }
+
+    /// The fewest samples a record (or a window) must hold: one
+    /// regression for each output, and one position of the learned
+    /// network's last layer.
+    pub fn min_samples(&self) -> usize {
+        let regression = self.first_sample() + self.per_output();
+        regression.max(self.learned().map_or(0, |l| l.min_samples()))
     }
     /// Whether stage 1 appends each input's and output's mean, RMS, peak
     /// and mean frequency to the ARX coefficients.

@@ -1,4 +1,4 @@
-//! The exported estimator's byte layout, version 3: what
+//! The exported estimator's byte layout, version 4: what
 //! `twostage export --to runtime` writes and [`crate::Estimator`] reads.
 //!
 //! Every number is little-endian; counts are `u32`, trained values `f64`.
@@ -10,13 +10,13 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0..4 | magic `TSRT` |
-//! | 4..8 | format version (3; 2 for a blob without the signals' summary, 1 without an input family either) |
+//! | 4..8 | format version (4 for a learned stage 1; 3 without it, 2 without the signals' summary either, 1 without an input family) |
 //! | 8..12 | the blob's length in bytes |
 //! | 12..16 | CRC-32 (IEEE) of bytes 16..length |
 //! | 16..64 | twelve `u32`: q, inputs, outputs, trained record length, na, nb, delay, flags, regressor kind, experts, 0, 0 |
 //!
 //! Then, in order: q transform codes (`u32`); q lower and q upper bounds;
-//! for a piecewise regressor its start and width; the networks (one, or
+//! the learned stage 1 (flag 64); for a piecewise regressor its start and width; the networks (one, or
 //! the global one and each expert); the conformal half-widths (flag 1);
 //! the adaptive floors, quantiles and difficulty network (flag 2); the
 //! envelope's threshold, mean and row-major lower Cholesky factor (flag
@@ -28,7 +28,13 @@
 //! frequency: eight `f64`). Flag 32 (version 3) has no section: stage 1
 //! appends each input's, then each output's mean, RMS, peak and mean
 //! frequency in cycles per sample to the ARX coefficients (the host's
-//! `arx:NA,NB+summary`). A network is: the count of its layer sizes and of its ensemble
+//! `arx:NA,NB+summary`). The learned stage 1 (flag 64, version 4)
+//! is its layer count L (`u32`), then each layer's channels out,
+//! kernel and stride (`u32`; the first layer's inputs are the signals,
+//! inputs first, each next one's the channels before), each signal's
+//! scale, then each layer's taps (out x in x kernel, row-major) and
+//! biases; stage 1 appends the last layer's time averages and average
+//! squares (the host's `+learned`). A network is: the count of its layer sizes and of its ensemble
 //! members (`u32`), the sizes (`u32`), the feature means and scales, the
 //! target means and scales, then each member's weights and biases, layer
 //! by layer (row-major weights, then biases). A linear map is a network
@@ -37,10 +43,14 @@
 /// The first four bytes.
 pub const MAGIC: [u8; 4] = *b"TSRT";
 /// The newest version this crate reads, which the exporter writes for an
-/// estimator whose stage 1 appends the signals' summary. Versions 2 (an
-/// input family, no summary) and 1 (no family) are read too, and written
-/// for estimators without them, so that a runtime of before reads them.
-pub const VERSION: u32 = 3;
+/// estimator with a learned stage 1. Versions 3 (the signals' summary, no
+/// network), 2 (an input family, no summary) and 1 (no family) are read
+/// too, and written for estimators without them, so that a runtime of
+/// before reads them.
+pub const VERSION: u32 = 4;
+/// The version of a blob whose stage 1 appends the signals' summary and
+/// does not learn.
+pub const VERSION_WITHOUT_LEARNED: u32 = 3;
 /// The version of a blob with an input family and no signals' summary.
 pub const VERSION_WITHOUT_SUMMARY: u32 = 2;
 /// The version of a blob without an input family.
@@ -67,6 +77,10 @@ pub const FLAG_INPUT_FAMILY: u32 = 16;
 /// Flag (version 3): stage 1 appends each signal's summary (mean, RMS,
 /// peak, mean frequency in cycles per sample) to the ARX coefficients.
 pub const FLAG_SIGNAL_SUMMARY: u32 = 32;
+
+/// Flag (version 4): a learned stage 1's network follows, and its
+/// summary numbers close the features.
+pub const FLAG_LEARNED_SUMMARY: u32 = 64;
 
 /// Regressor kind: one network (an MLP ensemble, or a linear map).
 pub const REGRESSOR_NETWORK: u32 = 1;
@@ -100,6 +114,12 @@ pub const MAX_SIZES: usize = 10;
 pub const MAX_MEMBERS: usize = 64;
 /// Most experts of a piecewise regressor.
 pub const MAX_EXPERTS: usize = 16;
+/// Most convolutions of a learned stage 1.
+pub const MAX_LAYERS: usize = 6;
+/// Most channels of a learned stage 1's layer (and of its signals).
+pub const MAX_CHANNELS: usize = 32;
+/// Widest kernel of a learned stage 1, in samples.
+pub const MAX_KERNEL: usize = 64;
 
 /// The blob's checksum: CRC-32 (IEEE 802.3, as zip and PNG use it),
 /// computed bit by bit, without a table: it runs once per load, and a

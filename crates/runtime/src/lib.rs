@@ -35,6 +35,7 @@ mod dd;
 mod error;
 mod estimator;
 pub mod format;
+mod learned;
 mod network;
 mod stream;
 

@@ -37,6 +37,9 @@ pub(crate) struct Layout {
     /// with a family, and one per output after them where stage 1 appends
     /// the signals' summary (a window summarizes its ring at finish).
     family: usize,
+    /// The learned network's state: fed by each push of a record's
+    /// stream, by the window's samples at a window's finish.
+    learned: usize,
     features: usize,
     scratch: usize,
     pub(crate) total: usize,
@@ -71,9 +74,12 @@ impl Layout {
             let marks = if e.transforms_outputs() { window } else { 0 };
             (shape.signals.saturating_mul(window), 0, marks, 0)
         };
-        let total = [history, first, marks, sums, family, features, scratch]
-            .iter()
-            .fold(STATUS_WORDS, |total, words| total.saturating_add(*words));
+        let learned = e.learned().map_or(0, |l| l.state_words());
+        let total = [
+            history, first, marks, sums, family, learned, features, scratch,
+        ]
+        .iter()
+        .fold(STATUS_WORDS, |total, words| total.saturating_add(*words));
         Self {
             shape,
             window,
@@ -82,6 +88,7 @@ impl Layout {
             marks,
             sums,
             family,
+            learned,
             features,
             scratch,
             total,
@@ -96,6 +103,7 @@ impl Layout {
         let (marks, rest) = rest.split_at_mut(self.marks.min(rest.len()));
         let (sums, rest) = rest.split_at_mut(self.sums.min(rest.len()));
         let (family, rest) = rest.split_at_mut(self.family.min(rest.len()));
+        let (learned, rest) = rest.split_at_mut(self.learned.min(rest.len()));
         let (features, rest) = rest.split_at_mut(self.features.min(rest.len()));
         let scratch = rest.get_mut(..self.scratch).unwrap_or_default();
         let past = if self.window == 0 {
@@ -113,6 +121,7 @@ impl Layout {
             memory: Memory { past, sums },
             marks,
             family,
+            learned,
             features,
             scratch,
         }
@@ -124,6 +133,7 @@ struct Parts<'w> {
     memory: Memory<'w>,
     marks: &'w mut [f64],
     family: &'w mut [f64],
+    learned: &'w mut [f64],
     features: &'w mut [f64],
     scratch: &'w mut [f64],
 }
@@ -271,14 +281,15 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     ///
     /// # Errors
     /// [`Error::WindowTooShort`] for a window shorter than one regression
-    /// (the ARX's first sample plus its regressors), and
+    /// (the ARX's first sample plus its regressors) or than the learned
+    /// network's shortest record ([`Estimator::min_samples`]), and
     /// [`Error::WorkspaceTooSmall`].
     pub fn window(
         estimator: &'e Estimator<'a>,
         window: usize,
         work: &'w mut [f64],
     ) -> Result<Self, Error> {
-        let needed = estimator.first_sample() + estimator.per_output();
+        let needed = estimator.min_samples();
         if window < needed.max(1) {
             return Err(Error::WindowTooShort { window, needed });
         }
@@ -298,7 +309,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let whole = |v: f64| (0.0..4.0e15).contains(&v) && libm::trunc(v).to_bits() == v.to_bits();
         let word = |k: usize| work.get(k).copied().unwrap_or(f64::NAN);
         let (samples, state, window) = (word(0), word(1), word(4));
-        let needed = estimator.first_sample() + estimator.per_output();
+        let needed = estimator.min_samples();
         let window_ok = whole(window) && (window == 0.0 || window >= needed as f64);
         if !(whole(samples) && window_ok && [OPEN, FAILED].contains(&state)) {
             return Err(Error::NotStarted);
@@ -405,6 +416,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             mut memory,
             marks,
             family,
+            learned,
             ..
         } = layout.split(self.work);
         let mut count = self.status.get(3).copied().unwrap_or(0.0) + f64::from(untransformed);
@@ -430,6 +442,9 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             for (w, k) in words.iter_mut().zip(kept.to_words()) {
                 *w = k;
             }
+        }
+        if let (Some(network), 0) = (e.learned(), self.window) {
+            network.push(learned, |j| measured(inputs, outputs, j));
         }
         let current = |signal: usize| -> f64 {
             if signal < e.n_outputs {
@@ -470,7 +485,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             .get_mut(..q)
             .ok_or(Error::OutputTooShort { needed: q })?;
         let n = e.per_output();
-        let needed = e.first_sample() + n;
+        let needed = e.min_samples();
         let pushed = self.samples();
         // The samples the sums hold: the record's, or the window's.
         let samples = match self.window {
@@ -484,6 +499,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         let Parts {
             memory,
             family,
+            learned,
             features,
             scratch,
             ..
@@ -506,6 +522,12 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         }
         let rhs = packed(n, 0);
         let (arx, summary) = features.split_at_mut(e.arx_features().min(features.len()));
+        let summary_len = if e.has_signal_summary() {
+            SUMMARY_LEN * (e.n_inputs + e.n_outputs)
+        } else {
+            0
+        };
+        let (summary, learned_summary) = summary.split_at_mut(summary_len.min(summary.len()));
         for (i, alpha) in arx.chunks_exact_mut(n).enumerate() {
             // Column c of output i's regression: its own lags, then each
             // input's; the target is the output at lag 0.
@@ -557,6 +579,27 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         for (signal, numbers) in summary.chunks_exact_mut(SUMMARY_LEN).enumerate() {
             numbers.copy_from_slice(&signal_summary(signal).summary(1.0));
         }
+        if let Some(network) = e.learned() {
+            if self.window > 0 {
+                // The window's samples, oldest first, through a network
+                // that starts afresh: the window's summary as the host's
+                // of the window alone.
+                learned.fill(0.0);
+                for i in pushed - samples..pushed {
+                    network.push(learned, |j| {
+                        let column = if j < e.n_inputs {
+                            e.n_outputs + j
+                        } else {
+                            j - e.n_inputs
+                        };
+                        memory.sample(&layout.shape, column, i).0
+                    });
+                }
+            }
+            if !network.finish(learned, learned_summary) {
+                return Err(Error::TooShort { samples, needed });
+            }
+        }
         predict(e, features, scratch, theta)?;
         for (j, t) in theta.iter_mut().enumerate() {
             if e.is_log(j) {
@@ -600,6 +643,16 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             input_outside_family: input_outside_family(e, signal_summary),
         })
     }
+}
+
+/// Signal `j` of a sample as measured, inputs first.
+fn measured(inputs: &[f64], outputs: &[f64], j: usize) -> f64 {
+    match j.checked_sub(inputs.len()) {
+        None => inputs.get(j),
+        Some(k) => outputs.get(k),
+    }
+    .copied()
+    .unwrap_or(f64::NAN)
 }
 
 /// The learning-space estimate of the features.

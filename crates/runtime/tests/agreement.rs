@@ -211,6 +211,16 @@ fn structured(
         .unwrap()
 }
 
+/// A stage 1 given by its specification, then `mlp:5`.
+fn with_mlp5(model: &dyn Simulator, spec: &str, seed: u64) -> twostage::Estimator {
+    structured(
+        model,
+        spec.parse::<CompressorConfig>().unwrap(),
+        "mlp:5",
+        seed,
+    )
+}
+
 #[test]
 fn the_benchmark_presets_agree_with_the_host() {
     let model = Benchmark::new();
@@ -849,16 +859,8 @@ fn a_window_is_refused_shorter_than_a_regression_and_resumes_as_a_window() {
 /// transformed outputs is refused with the compressor named.
 #[test]
 fn the_signals_summary_after_the_coefficients_agrees_record_and_window() {
-    let summarized = |model: &dyn Simulator, spec: &str, seed: u64| {
-        structured(
-            model,
-            spec.parse::<CompressorConfig>().unwrap(),
-            "mlp:5",
-            seed,
-        )
-    };
     let car = PacejkaCar::new();
-    let host = summarized(&car, "arx:2,2+summary", 5);
+    let host = with_mlp5(&car, "arx:2,2+summary", 5);
     let blob = host.to_runtime().unwrap();
     let runtime = Estimator::from_bytes(&blob).unwrap();
     assert!(runtime.has_signal_summary());
@@ -866,7 +868,7 @@ fn the_signals_summary_after_the_coefficients_agrees_record_and_window() {
     check("car, summary", &host, &car);
     check_window("car, summary", &host, &long_record(&host, &car, 3), 300, 41);
     let two = two_by_two();
-    let host = summarized(&two, "arx:2,2+summary", 6);
+    let host = with_mlp5(&two, "arx:2,2+summary", 6);
     check("two-by-two, summary", &host, &two);
     check_window(
         "two-by-two, summary",
@@ -876,10 +878,70 @@ fn the_signals_summary_after_the_coefficients_agrees_record_and_window() {
         13,
     );
     let (positive, _) = positive_with_log_outputs();
-    let transformed = summarized(&positive, "log,log1p+arx:2,2+summary", 7);
+    let transformed = with_mlp5(&positive, "log,log1p+arx:2,2+summary", 7);
     let refused = transformed.to_runtime().unwrap_err().to_string();
     assert!(
         refused.contains("mean frequency") && refused.contains("arx:NA,NB+summary"),
+        "{refused}"
+    );
+}
+
+/// A learned stage 1 (`+learned`: a convolutional summary network after
+/// the ARX coefficients and the signals' summary): record by record, a
+/// stream that runs the network position by position as the samples come
+/// gives the host's estimates, intervals, distances and flags, and so
+/// does a window, whose finish runs the network over the window's samples
+/// alone; a record or a window shorter than the network's receptive field
+/// is refused with both lengths; a network without coefficients before it
+/// is refused at export with what to train instead.
+#[test]
+fn a_learned_stage1_agrees_record_and_window_and_refuses_what_it_cannot_read() {
+    let car = PacejkaCar::new();
+    let host = with_mlp5(&car, "arx:2,2+summary+learned:4,4", 5);
+    let blob = host.to_runtime().unwrap();
+    assert_eq!(blob[4], 4, "format version 4");
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    assert!(runtime.has_learned_summary() && runtime.has_signal_summary());
+    assert_eq!(runtime.n_features(), 4 + 2 * SUMMARY_NAMES.len() + 2 * 4);
+    // Two layers of kernel 5 and stride 2: (5 - 1) * 2 + 5 samples.
+    assert_eq!(runtime.min_samples(), 13);
+    check("car, learned", &host, &car);
+    check_window("car, learned", &host, &long_record(&host, &car, 3), 300, 41);
+    let mut work = vec![0.0; runtime.window_workspace_len(100)];
+    assert_eq!(
+        Stream::window(&runtime, 12, &mut work).unwrap_err(),
+        twostage_runtime::Error::WindowTooShort {
+            window: 12,
+            needed: 13
+        }
+    );
+    let mut stream = Stream::new(&runtime, &mut work).unwrap();
+    for t in 0..12 {
+        stream.push(&[0.01 * f64::from(t)], &[0.1]).unwrap();
+    }
+    let mut theta = [0.0; 2];
+    assert_eq!(
+        stream.finish(&mut theta, &mut []).unwrap_err(),
+        twostage_runtime::Error::TooShort {
+            samples: 12,
+            needed: 13
+        }
+    );
+    // Two signals each way, without the summary between.
+    let two = two_by_two();
+    let host = with_mlp5(&two, "arx:2,2+learned:3", 6);
+    check("two-by-two, learned", &host, &two);
+    check_window(
+        "two-by-two, learned",
+        &host,
+        &long_record(&host, &two, 4),
+        100,
+        13,
+    );
+    let alone = with_mlp5(&car, "learned:3", 7);
+    let refused = alone.to_runtime().unwrap_err().to_string();
+    assert!(
+        refused.contains("after ARX coefficients") && refused.contains("arx:NA,NB+learned"),
         "{refused}"
     );
 }

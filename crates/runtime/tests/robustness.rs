@@ -18,14 +18,19 @@ use twostage::models::{Benchmark, Simulator, experiment_rng};
 use twostage_runtime::format::CHECKSUM_FROM;
 use twostage_runtime::{Error, Estimator, Stream};
 
-/// A network estimator and a piecewise one, with intervals and envelope.
-fn blobs() -> &'static [Vec<u8>; 2] {
-    static BLOBS: OnceLock<[Vec<u8>; 2]> = OnceLock::new();
+/// A network estimator, a piecewise one and one whose stage 1 ends in a
+/// learned summary network, all with intervals and envelope.
+fn blobs() -> &'static [Vec<u8>; 3] {
+    static BLOBS: OnceLock<[Vec<u8>; 3]> = OnceLock::new();
     BLOBS.get_or_init(|| {
         let model = Benchmark::builder().n_samples(120).build().unwrap();
-        let train = |regressor: &str| {
+        let train = |compress: &str, regressor: &str| {
             TwoStage::builder(&model)
-                .compressor(twostage::compress::Arx::new(2, 2).unwrap())
+                .compressor(
+                    compress
+                        .parse::<twostage::compress::CompressorConfig>()
+                        .unwrap(),
+                )
                 .regressor(regressor.parse().unwrap())
                 .simulations(300)
                 .validation(0)
@@ -36,7 +41,11 @@ fn blobs() -> &'static [Vec<u8>; 2] {
                 .to_runtime()
                 .unwrap()
         };
-        [train("mlp:4"), train("piecewise:2,3")]
+        [
+            train("arx:2,2", "mlp:4"),
+            train("arx:2,2", "piecewise:2,3"),
+            train("arx:2,2+learned:3", "mlp:4"),
+        ]
     })
 }
 
@@ -85,7 +94,7 @@ proptest! {
 
     #[test]
     fn mutated_blobs_never_panic(
-        which in 0usize..2,
+        which in 0usize..3,
         edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
         cut in any::<prop::sample::Index>(),
         truncate in any::<bool>(),
@@ -104,8 +113,25 @@ proptest! {
     }
 
     #[test]
+    fn learned_shapes_set_to_anything_never_panic(
+        word in 0usize..4,
+        value in prop_oneof![0u32..100, any::<u32>()],
+    ) {
+        // One layer of three channels, kernel 5, stride 2.
+        let mut blob = blobs()[2].clone();
+        let shape: Vec<u8> = [1u32, 3, 5, 2].iter().flat_map(|w| w.to_le_bytes()).collect();
+        let at = blob
+            .windows(shape.len())
+            .position(|w| w == shape.as_slice())
+            .expect("the learned section's shape");
+        blob[at + 4 * word..at + 4 * word + 4].copy_from_slice(&value.to_le_bytes());
+        seal(&mut blob);
+        exercise(&blob);
+    }
+
+    #[test]
     fn counts_set_to_anything_never_panic(
-        which in 0usize..2,
+        which in 0usize..3,
         field in 0usize..12,
         value in prop_oneof![0u32..300, any::<u32>()],
     ) {
@@ -144,18 +170,19 @@ fn damage_is_named() {
         Err(Error::Length { declared, actual }) if declared == blob.len() && actual == blob.len() - 8
     ));
     let mut newer = blob.clone();
-    newer[4] = 4;
+    newer[4] = 5;
     assert_eq!(
         Estimator::from_bytes(&newer).unwrap_err(),
-        Error::UnsupportedVersion { found: 4 }
+        Error::UnsupportedVersion { found: 5 }
     );
     assert_eq!(
-        Error::UnsupportedVersion { found: 4 }.to_string(),
-        "blob format version 4, this runtime reads versions 1 to 3: export the estimator \
+        Error::UnsupportedVersion { found: 5 }.to_string(),
+        "blob format version 5, this runtime reads versions 1 to 4: export the estimator \
          again with the matching twostage"
     );
-    // The summary's flag belongs to version 3: a version-2 blob that
-    // sets it is damaged, not a summary the reader would skip.
+    // The summary's flag belongs to version 3 and the learned one to
+    // version 4: an older blob that sets one is damaged, not a section
+    // the reader would skip.
     let mut flagged = blob.clone();
     assert_eq!(flagged[4], 2, "a blob with an input family");
     flagged[44] |= twostage_runtime::format::FLAG_SIGNAL_SUMMARY as u8;
@@ -165,10 +192,19 @@ fn damage_is_named() {
         Err(Error::Invalid { field: "flags", .. })
     ));
     flagged[4] = 3;
+    seal(&mut flagged);
     assert!(
         Estimator::from_bytes(&flagged).is_err(),
         "its features outnumber the network's inputs"
     );
+    let mut learned = blobs()[2].clone();
+    assert_eq!(learned[4], 4, "a blob with a learned summary");
+    learned[4] = 3;
+    seal(&mut learned);
+    assert!(matches!(
+        Estimator::from_bytes(&learned),
+        Err(Error::Invalid { field: "flags", .. })
+    ));
     // One more byte, sealed: read to the end, the byte is left over.
     let mut longer = blob.clone();
     longer.push(0);
