@@ -66,17 +66,23 @@ fn case(name: &'static str, model: &dyn Simulator, preset: Preset, m: usize) -> 
     case_of(name, model, estimator)
 }
 
+/// The simulator of a model file in docs/examples/car.
+fn car_example(file: &str) -> Box<dyn Simulator> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../docs/examples/car")
+        .join(file);
+    let text = std::fs::read_to_string(&path).unwrap();
+    twostage::ModelFile::parse(&text, &path.display().to_string())
+        .unwrap()
+        .simulator()
+        .unwrap()
+}
+
 /// The car on its family of manoeuvres (docs/examples/car), each record's
 /// summary after its ARX(2, 2) coefficients and four averaged networks of
 /// ten units: the family estimator of docs/any-experiment.md, section 7.
 fn manoeuvres_case() -> Case {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/examples/car/car_manoeuvres.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let model = twostage::ModelFile::parse(&text, &path.display().to_string())
-        .unwrap()
-        .simulator()
-        .unwrap();
+    let model = car_example("car_manoeuvres.toml");
     let compressor: twostage::compress::CompressorConfig = "arx:2,2+summary".parse().unwrap();
     let estimator = TwoStage::builder(model.as_ref())
         .compressor(compressor)
@@ -88,6 +94,66 @@ fn manoeuvres_case() -> Case {
         .train()
         .unwrap();
     case_of("car manoeuvres, summary", model.as_ref(), estimator)
+}
+
+/// The car on a family of ordinary driving (docs/examples/car), its stage 1
+/// ending in a learned summary network (three layers of eight channels)
+/// after the ARX(2, 2) coefficients and the signals' summary, with four
+/// averaged networks of ten units. Each record is four manoeuvres of the
+/// family one after another by the same car (2000 samples, 40 s), so that
+/// the window of a quarter of a record is the issue's 10 s, 500 samples.
+fn driving_learned_case() -> Case {
+    let model = car_example("car_driving.toml");
+    let compressor: twostage::compress::CompressorConfig =
+        "arx:2,2+summary+learned".parse().unwrap();
+    let estimator = TwoStage::builder(model.as_ref())
+        .compressor(compressor)
+        .regressor("ensemble:10".parse().unwrap())
+        .simulations(300)
+        .validation(0)
+        .calibration(200)
+        .seed(41)
+        .train()
+        .unwrap();
+    let manoeuvres = case_of("car driving, learned", model.as_ref(), estimator);
+    let segments = 4;
+    let records = manoeuvres
+        .records
+        .iter()
+        .zip(0u64..)
+        .map(|(first, r)| {
+            let (n, nu, ny) = (first.n_samples(), first.n_inputs(), first.n_outputs());
+            let estimator = &manoeuvres.estimator;
+            let theta: Vec<f64> = estimator
+                .lower()
+                .iter()
+                .zip(estimator.upper())
+                .map(|(lo, hi)| lo + (0.25 + 0.25 * r as f64) * (hi - lo))
+                .collect();
+            let mut long = IoData::zeros(segments * n, nu, ny);
+            let mut segment = IoData::default();
+            for s in 0..segments {
+                model
+                    .simulate(
+                        &theta,
+                        &mut experiment_rng(47, r * 10 + s as u64),
+                        &mut segment,
+                    )
+                    .unwrap();
+                for j in 0..nu {
+                    long.input_mut(j)[s * n..(s + 1) * n].copy_from_slice(segment.input(j));
+                }
+                for j in 0..ny {
+                    long.output_mut(j)[s * n..(s + 1) * n].copy_from_slice(segment.output(j));
+                }
+            }
+            long
+        })
+        .collect();
+    Case {
+        records,
+        ..manoeuvres
+    }
 }
 
 fn case_of(name: &'static str, model: &dyn Simulator, estimator: twostage::Estimator) -> Case {
@@ -151,17 +217,22 @@ enum Build {
     Window,
 }
 
-/// Build the firmware and return the ELF and its flash bytes.
-fn firmware(data: &Path, build: Build) -> (PathBuf, usize) {
+/// Build the firmware and return the ELF and its flash bytes; `learned`
+/// builds in the learned summary network (the runtime's feature), which
+/// only the estimators with one pay for.
+fn firmware(data: &Path, build: Build, learned: bool) -> (PathBuf, usize) {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware");
-    let (name, features) = match build {
-        Build::Baseline => ("baseline", "baseline"),
-        Build::Records => ("full", ""),
-        Build::Window => ("window", "window"),
+    let (name, mut features) = match build {
+        Build::Baseline => ("baseline", vec!["baseline"]),
+        Build::Records => ("full", vec![]),
+        Build::Window => ("window", vec!["window"]),
     };
+    if learned && build != Build::Baseline {
+        features.push("learned");
+    }
     let target_dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../target/firmware")
-        .join(name);
+        .join(format!("{name}{}", if learned { "-learned" } else { "" }));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut command = Command::new(cargo);
     command
@@ -173,7 +244,7 @@ fn firmware(data: &Path, build: Build) -> (PathBuf, usize) {
         .env_remove("RUSTFLAGS")
         .env_remove("CARGO_BUILD_TARGET");
     if !features.is_empty() {
-        command.args(["--features", features]);
+        command.args(["--features", &features.join(",")]);
     }
     let output = command.output().unwrap();
     assert!(
@@ -270,6 +341,7 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             300,
         ),
         manoeuvres_case(),
+        driving_learned_case(),
     ];
     // One firmware per case, so that each one's flash is its own.
     let mut report = String::from(
@@ -283,9 +355,21 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
     for (k, case) in cases.iter().enumerate() {
         let data = tempfile::tempdir().unwrap();
         write_case(data.path(), 0, case);
-        let (elf, flash) = firmware(data.path(), Build::Records);
-        let (_, baseline_flash) = firmware(data.path(), Build::Baseline);
-        let (window_elf, window_flash) = firmware(data.path(), Build::Window);
+        let learned = case.estimator.compressor().to_string().contains("learned");
+        let (elf, flash) = firmware(data.path(), Build::Records, learned);
+        let (_, baseline_flash) = firmware(data.path(), Build::Baseline, false);
+        let (window_elf, window_flash) = firmware(data.path(), Build::Window, learned);
+        if learned {
+            // A firmware built without the network refuses the blob,
+            // saying which feature builds it in.
+            let (without, _) = firmware(data.path(), Build::Records, false);
+            let refused = run(&without);
+            assert!(
+                refused.lines().any(|l| l == "case 0 refused -17"),
+                "{}: {refused}",
+                case.name
+            );
+        }
         let stdout = run(&elf);
         let mut lines = stdout.lines();
         let ticks: f64 = lines
@@ -401,6 +485,27 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             8 * window_workspace,
             8 * window_workspace + slide_stack
         ));
+        if case.name == "car driving, learned" {
+            // The issue's control unit: a 10 s window (500 samples at
+            // 20 ms) re-estimated every second on a 168 MHz Cortex-M4F,
+            // counted in instructions (cycles are as many or more). The
+            // share is reported, not asserted: docs/embedded.md gives it
+            // and the levers left.
+            assert_eq!(length, 500);
+            let per_second = 50.0 * slide_push + slide_finish;
+            let (flash, ram) = (
+                window_flash - baseline_flash + blob,
+                8 * window_workspace + slide_stack,
+            );
+            window_report.push_str(&format!(
+                "{}: {per_second:.0} instructions a second, {:.1}% of 168 MHz; flash {flash} B, \
+                 RAM {ram} B\n",
+                case.name,
+                100.0 * per_second / 168e6
+            ));
+            assert!(flash <= 64 * 1024, "{}: flash {flash}", case.name);
+            assert!(ram <= 16 * 1024, "{}: RAM {ram}", case.name);
+        }
         // Both firmwares hold the case table, blob included: the difference
         // is the runtime's code, to which the blob adds itself.
         let runtime_flash = flash - baseline_flash + blob;

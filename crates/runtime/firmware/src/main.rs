@@ -26,8 +26,8 @@ use twostage_runtime::{Estimator, Stream};
 
 include!(concat!(env!("OUT_DIR"), "/cases.rs"));
 
-/// The largest workspace a case may need, in f64 (8 KiB).
-const WORK: usize = 1024;
+/// The largest workspace a case may need, in f64 (32 KiB).
+const WORK: usize = 4096;
 static mut WORKSPACE: [f64; WORK] = [0.0; WORK];
 
 const PAINT: u32 = 0xDEAD_BEEF;
