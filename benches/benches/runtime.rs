@@ -3,7 +3,8 @@
 //! intervals and envelope (`runtime_finish`), for both presets of both
 //! models, and the same of a window that slides over the record's last
 //! quarter (`runtime_window_push`, per sample of a full window, and
-//! `runtime_window_finish`) (docs/embedded.md puts them beside the
+//! `runtime_window_finish`), and of the car's estimator whose stage 1 ends
+//! in a learned summary network (docs/embedded.md puts them beside the
 //! Cortex-M4's instruction counts). The estimators are trained on fewer simulations than the
 //! presets say: the cost depends on the structure, not on m.
 
@@ -23,13 +24,43 @@ struct Case {
 }
 
 fn case(name: &'static str, model: &dyn Simulator, preset: Preset, theta: &[f64]) -> Case {
-    let blob = TwoStage::builder(model)
+    let estimator = TwoStage::builder(model)
         .preset(preset)
         .simulations(1000)
         .validation(0)
         .calibration(300)
         .train()
-        .and_then(|e| Ok(e.to_runtime()?))
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    case_of(name, model, &estimator, theta)
+}
+
+/// The car's estimator of a family, its stage 1 ending in a learned
+/// summary network (`arx:2,2+summary+learned`, `ensemble:10`), trained on
+/// the built-in car's records: the cost is the structure's.
+fn learned_case(theta: &[f64]) -> Case {
+    let model = PacejkaCar::new();
+    let compressor: twostage::compress::CompressorConfig = "arx:2,2+summary+learned"
+        .parse()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let estimator = TwoStage::builder(&model)
+        .compressor(compressor)
+        .regressor("ensemble:10".parse().unwrap_or_else(|e| panic!("{e}")))
+        .simulations(300)
+        .validation(0)
+        .calibration(200)
+        .train()
+        .unwrap_or_else(|e| panic!("car_learned: {e}"));
+    case_of("car_learned", &model, &estimator, theta)
+}
+
+fn case_of(
+    name: &'static str,
+    model: &dyn Simulator,
+    estimator: &twostage::Estimator,
+    theta: &[f64],
+) -> Case {
+    let blob = estimator
+        .to_runtime()
         .unwrap_or_else(|e| panic!("{name}: {e}"));
     let data: IoData = record(model, theta);
     Case {
@@ -66,6 +97,7 @@ fn runtime(c: &mut Criterion) {
             twostage::recommended_pacejka(),
             &[-25.0, -1.0],
         ),
+        learned_case(&[-25.0, -1.0]),
     ];
     for case in &cases {
         let estimator = Estimator::from_bytes(&case.blob).unwrap_or_else(|e| panic!("{e}"));
