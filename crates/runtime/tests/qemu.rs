@@ -78,13 +78,11 @@ fn car_example(file: &str) -> Box<dyn Simulator> {
         .unwrap()
 }
 
-/// The car on its family of manoeuvres (docs/examples/car), each record's
-/// summary after its ARX(2, 2) coefficients and four averaged networks of
-/// ten units: the family estimator of docs/any-experiment.md, section 7.
-fn manoeuvres_case() -> Case {
-    let model = car_example("car_manoeuvres.toml");
-    let compressor: twostage::compress::CompressorConfig = "arx:2,2+summary".parse().unwrap();
-    let estimator = TwoStage::builder(model.as_ref())
+/// A family's estimator: stage 1 as `compress` says, four averaged
+/// networks of ten units, 300 training records.
+fn family_estimator(model: &dyn Simulator, compress: &str) -> twostage::Estimator {
+    let compressor: twostage::compress::CompressorConfig = compress.parse().unwrap();
+    TwoStage::builder(model)
         .compressor(compressor)
         .regressor("ensemble:10".parse().unwrap())
         .simulations(300)
@@ -92,7 +90,15 @@ fn manoeuvres_case() -> Case {
         .calibration(200)
         .seed(41)
         .train()
-        .unwrap();
+        .unwrap()
+}
+
+/// The car on its family of manoeuvres (docs/examples/car), each record's
+/// summary after its ARX(2, 2) coefficients and four averaged networks of
+/// ten units: the family estimator of docs/any-experiment.md, section 7.
+fn manoeuvres_case() -> Case {
+    let model = car_example("car_manoeuvres.toml");
+    let estimator = family_estimator(model.as_ref(), "arx:2,2+summary");
     case_of("car manoeuvres, summary", model.as_ref(), estimator)
 }
 
@@ -104,17 +110,7 @@ fn manoeuvres_case() -> Case {
 /// the window of a quarter of a record is the 10 s, 500 samples.
 fn driving_learned_case() -> Case {
     let model = car_example("car_driving.toml");
-    let compressor: twostage::compress::CompressorConfig =
-        "arx:2,2+summary+learned".parse().unwrap();
-    let estimator = TwoStage::builder(model.as_ref())
-        .compressor(compressor)
-        .regressor("ensemble:10".parse().unwrap())
-        .simulations(300)
-        .validation(0)
-        .calibration(200)
-        .seed(41)
-        .train()
-        .unwrap();
+    let estimator = family_estimator(model.as_ref(), "arx:2,2+summary+learned");
     let manoeuvres = case_of("car driving, learned", model.as_ref(), estimator);
     let segments = 4;
     let records = manoeuvres
