@@ -794,6 +794,23 @@ fn refinement_moves_estimates_towards_the_bayes_ones() {
     );
     let out = twostage(&["estimate", "--refine", path(&records)]);
     assert_eq!(out.status.code(), Some(2), "--refine needs --estimator");
+    // A fit threshold is read by --refine=auto alone: with --refine=all
+    // it is refused as Python refuses it, not ignored.
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--refine=all",
+        "--refine-below-fit",
+        "5",
+        path(&records),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("--refine-below-fit is read with --refine=auto only"),
+        "{}",
+        text(&out.stderr)
+    );
 }
 
 /// `estimate --check` passes the model's own records and flags one the

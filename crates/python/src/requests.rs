@@ -255,24 +255,14 @@ pub(crate) fn estimate_records<'py>(
         Some(ids) => ids,
         None => (0..records.len()).map(|k| k.to_string()).collect(),
     };
-    let refine = match refine {
-        None => None,
-        Some("all") => Some(twostage::RefineWhich::All),
-        Some("auto") => Some(twostage::RefineWhich::Auto(twostage::RefinePolicy {
-            min_fit_percent: refine_below_fit
-                .unwrap_or(twostage::RefinePolicy::default().min_fit_percent),
-        })),
-        Some(other) => {
-            return Err(PyValueError::new_err(format!(
-                "refine = {other:?}: give \"all\", \"auto\" or None"
-            )));
-        }
-    };
-    if refine_below_fit.is_some() && !matches!(refine, Some(twostage::RefineWhich::Auto(_))) {
-        return Err(PyValueError::new_err(
+    let refine = twostage::RefineWhich::chosen(refine, refine_below_fit).map_err(|e| match e {
+        twostage::RefineChoiceError::Unknown(other) => PyValueError::new_err(format!(
+            "refine = {other:?}: give \"all\", \"auto\" or None"
+        )),
+        twostage::RefineChoiceError::BelowFitWithoutAuto => PyValueError::new_err(
             "refine_below_fit is read with refine=\"auto\" only: leave it out",
-        ));
-    }
+        ),
+    })?;
     if every.is_some() && window.is_none() {
         return Err(PyValueError::new_err("every needs window=N: give both"));
     }

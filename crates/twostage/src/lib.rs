@@ -62,7 +62,7 @@ mod validation_run;
 pub use estimating::{
     AutoRefined, CheckSettings, EstimateRequest, EstimateWith, Estimates, Estimating, GivenValues,
     GivenValuesError, MethodFailure, OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordFailure,
-    RecordOutcome, RefineWhich, RequestError, RequestProblem, Windows,
+    RecordOutcome, RefineChoiceError, RefineWhich, RequestError, RequestProblem, Windows,
 };
 pub use joint::{JointFitter, JointOfRecords};
 pub use refiner::{EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, ToRefine};

@@ -6,7 +6,8 @@
 use anyhow::Result;
 use twostage::{
     CheckSettings, EstimateRequest, EstimateWith, Estimating, Estimator, GivenValues,
-    OUTPUT_ERROR_METHOD, Purpose, RefinePolicy, RefineWhich, RequestError, RequestProblem, Windows,
+    OUTPUT_ERROR_METHOD, Purpose, RefineChoiceError, RefineWhich, RequestError, RequestProblem,
+    Windows,
 };
 
 use super::EstimateArgs;
@@ -146,14 +147,23 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
             runs: args.check_sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
             score_from: args.score_from.unwrap_or(0),
         }),
-        refine: args.refine.map(|which| match which {
-            super::RefineWhich::All => RefineWhich::All,
-            super::RefineWhich::Auto => RefineWhich::Auto(RefinePolicy {
-                min_fit_percent: args
-                    .refine_below_fit
-                    .unwrap_or(RefinePolicy::default().min_fit_percent),
+        refine: RefineWhich::chosen(
+            args.refine.map(|which| match which {
+                super::RefineWhich::All => "all",
+                super::RefineWhich::Auto => "auto",
             }),
-        }),
+            args.refine_below_fit,
+        )
+        .map_err(|e| match e {
+            RefineChoiceError::BelowFitWithoutAuto => usage(
+                "--refine-below-fit is read with --refine=auto only: leave it out or give \
+                 --refine=auto"
+                    .into(),
+            ),
+            RefineChoiceError::Unknown(other) => {
+                usage(format!("--refine={other}: give all or auto"))
+            }
+        })?,
         joint: args.joint,
         windows: window,
         seed: args.seed.unwrap_or(0),

@@ -158,6 +158,58 @@ pub enum RefineWhich {
     Auto(RefinePolicy),
 }
 
+impl RefineWhich {
+    /// The refinement a door names: `which` is `"all"` or `"auto"` (none:
+    /// no refinement), and `below_fit` the fit in percent below which
+    /// `"auto"` refines a record however well the check explains it
+    /// (default [`RefinePolicy::default`]). Every door reads its choice
+    /// here, so a threshold given without `"auto"` is refused the same way
+    /// through each.
+    ///
+    /// ```
+    /// use twostage::{RefineChoiceError, RefineWhich};
+    /// assert_eq!(RefineWhich::chosen(Some("all"), None), Ok(Some(RefineWhich::All)));
+    /// let Ok(Some(RefineWhich::Auto(policy))) = RefineWhich::chosen(Some("auto"), Some(5.0)) else {
+    ///     panic!("auto with a threshold");
+    /// };
+    /// assert_eq!(policy.min_fit_percent, 5.0);
+    /// assert_eq!(
+    ///     RefineWhich::chosen(Some("all"), Some(5.0)),
+    ///     Err(RefineChoiceError::BelowFitWithoutAuto)
+    /// );
+    /// assert_eq!(RefineWhich::chosen(None, None), Ok(None));
+    /// ```
+    pub fn chosen(
+        which: Option<&str>,
+        below_fit: Option<f64>,
+    ) -> Result<Option<RefineWhich>, RefineChoiceError> {
+        let chosen = match which {
+            None => None,
+            Some("all") => Some(RefineWhich::All),
+            Some("auto") => Some(RefineWhich::Auto(RefinePolicy {
+                min_fit_percent: below_fit.unwrap_or(RefinePolicy::default().min_fit_percent),
+            })),
+            Some(other) => return Err(RefineChoiceError::Unknown(other.to_string())),
+        };
+        if below_fit.is_some() && !matches!(chosen, Some(RefineWhich::Auto(_))) {
+            return Err(RefineChoiceError::BelowFitWithoutAuto);
+        }
+        Ok(chosen)
+    }
+}
+
+/// A refinement choice [`RefineWhich::chosen`] refuses; each door says it
+/// in the words of its own flags.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RefineChoiceError {
+    /// Neither `all` nor `auto`.
+    #[error("refine {0:?}: give all or auto")]
+    Unknown(String),
+    /// A fit threshold without `auto`, which alone reads it.
+    #[error("a fit below which to refine is read by refine auto only: leave it out or refine auto")]
+    BelowFitWithoutAuto,
+}
+
 /// Windows of each record estimated instead of the record whole.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Windows {
