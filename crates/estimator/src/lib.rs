@@ -11,6 +11,7 @@
 #![deny(missing_docs)]
 
 mod adaptive;
+mod assessment;
 mod envelope;
 mod error;
 mod estimator;
