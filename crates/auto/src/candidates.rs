@@ -205,6 +205,52 @@ pub(super) fn constant_inputs(records: &[IoData]) -> Vec<usize> {
 /// drawn levels or of manoeuvres by several times.
 const FAMILY_LEVEL_RATIO: f64 = 2.0;
 
+/// How far the records' input shapes must spread for their inputs to
+/// differ in kind: the standard deviation across records of one of an
+/// input's autocorrelations (decision 078), at its most spread lag. White
+/// noise of N samples spreads as 1/sqrt(N) at every lag (0.1 at 100
+/// samples); a family of holds, bursts and noise spreads over most of
+/// [-1, 1].
+const SHAPE_SPREAD: f64 = 0.2;
+
+/// Whether the `records`' inputs differ in level from one experiment to
+/// another (an input family): one input's RMS varies by more than
+/// [`FAMILY_LEVEL_RATIO`] over the records.
+fn inputs_differ_in_level(records: &[IoData]) -> bool {
+    let Some(first) = records.first() else {
+        return false;
+    };
+    // The input family's own RMS range (the sample time does not enter
+    // the RMS).
+    let mut family = twostage_models::InputFamily::new(first.n_inputs(), 1.0);
+    records.iter().for_each(|record| family.include(record));
+    (0..first.n_inputs()).any(|j| {
+        family
+            .ranges(j)
+            .is_some_and(|[_, [low, high], ..]| *high > FAMILY_LEVEL_RATIO * *low)
+    })
+}
+
+/// Whether the `records`' inputs differ in shape: one of their
+/// autocorrelations spreads over the records by more than
+/// [`SHAPE_SPREAD`] (steps, bursts and noise mixed, not realizations of
+/// one noise).
+fn inputs_differ_in_shape(records: &[IoData]) -> bool {
+    let shapes: Vec<Vec<f64>> = records
+        .iter()
+        .map(twostage_models::record_shape_numbers)
+        .collect();
+    let Some(width) = shapes.first().map(Vec::len) else {
+        return false;
+    };
+    let n = shapes.len() as f64;
+    (0..width).any(|k| {
+        let mean = shapes.iter().map(|s| s[k]).sum::<f64>() / n;
+        let variance = shapes.iter().map(|s| (s[k] - mean).powi(2)).sum::<f64>() / n;
+        variance.sqrt() > SHAPE_SPREAD
+    })
+}
+
 /// The winner's stage 1 with each signal's mean, RMS, peak and mean
 /// frequency appended, where the `records`' inputs differ in level from
 /// one experiment to another (an input family): the coefficients of a
@@ -215,24 +261,40 @@ pub(super) fn with_summary(
     records: &[IoData],
 ) -> Option<CompressorConfig> {
     let first = records.first()?;
-    if matches!(compressor, CompressorConfig::Summarized(_)) {
-        return None;
-    }
-    // The input family's own RMS range (the sample time does not enter
-    // the RMS).
-    let mut family = twostage_models::InputFamily::new(first.n_inputs(), 1.0);
-    records.iter().for_each(|record| family.include(record));
-    let differ = (0..first.n_inputs()).any(|j| {
-        family
-            .ranges(j)
-            .is_some_and(|[_, [low, high], ..]| *high > FAMILY_LEVEL_RATIO * *low)
-    });
-    if !differ {
+    // A learned summary comes last: nothing is appended after it.
+    if matches!(
+        compressor,
+        CompressorConfig::Summarized(_) | CompressorConfig::Learned(_)
+    ) || !inputs_differ_in_level(records)
+    {
         return None;
     }
     twostage_compress::WithSummary::new(compressor.clone(), first.n_inputs(), first.n_outputs())
         .ok()
         .map(CompressorConfig::Summarized)
+}
+
+/// The winner's stage 1 (with the summary, where [`with_summary`] adds
+/// it) and after it a summary network trained on the records (decision
+/// 081's default shape), where the `records`' inputs differ in level or
+/// in shape: what one stage 1 reads of a step differs from what it reads
+/// of a burst, and a network can learn to tell them apart (decision 083).
+/// The held-out risk decides whether it pays for its training.
+pub(super) fn with_learned(
+    compressor: &CompressorConfig,
+    records: &[IoData],
+) -> Option<CompressorConfig> {
+    let first = records.first()?;
+    if first.n_inputs() == 0
+        || matches!(compressor, CompressorConfig::Learned(_))
+        || !(inputs_differ_in_level(records) || inputs_differ_in_shape(records))
+    {
+        return None;
+    }
+    let inner = with_summary(compressor, records).unwrap_or_else(|| compressor.clone());
+    twostage_compress::WithLearned::new(Some(inner), twostage_compress::LearnedShape::default())
+        .ok()
+        .map(CompressorConfig::Learned)
 }
 
 /// The longest record (in values) whose raw samples the search tries as
@@ -299,6 +361,68 @@ mod tests {
         assert_eq!(summarized.n_features(), 4 + 8);
         assert!(with_summary(&summarized, &family).is_none());
         assert!(with_summary(&arx, &[]).is_none());
+    }
+
+    /// Inputs of one level and one kind (realizations of one noise) earn
+    /// no network; inputs of mixed kinds at one level (slow and fast
+    /// oscillations) or of different levels do, after the summary where the
+    /// levels differ; a stage 1 that learns already, or records without
+    /// an input, not.
+    #[test]
+    fn the_learned_rival_is_for_inputs_that_differ_in_kind() {
+        let n = 400;
+        // A linear congruential sequence: white enough at these lags.
+        let mut state: u64 = 5;
+        let mut noise = || {
+            let mut r = IoData::zeros(n, 1, 1);
+            for v in r.input_mut(0) {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                *v = (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
+            }
+            r
+        };
+        // A slow sine, or a fast square wave of about its RMS.
+        let shaped = |square: bool, level: f64| {
+            let mut r = IoData::zeros(n, 1, 1);
+            for (t, v) in r.input_mut(0).iter_mut().enumerate() {
+                *v = level
+                    * match square {
+                        true if t % 4 < 2 => 0.8,
+                        true => -0.8,
+                        false => (t as f64 * 0.05).sin(),
+                    };
+            }
+            r
+        };
+        let arx: CompressorConfig = "arx:2,2".parse().unwrap();
+        let arx = arx.for_shape(1, 1, n).unwrap();
+        let white: Vec<IoData> = (0..40).map(|_| noise()).collect();
+        assert!(with_learned(&arx, &white).is_none());
+        let kinds: Vec<IoData> = (0..40).map(|k| shaped(k % 2 == 0, 1.0)).collect();
+        let learned = with_learned(&arx, &kinds).unwrap();
+        assert_eq!(
+            learned.spec().as_deref(),
+            Some("arx:2,2+learned:8,8,8"),
+            "one level: no summary before the network"
+        );
+        let levels: Vec<IoData> = (0..40)
+            .map(|k| shaped(false, if k % 2 == 0 { 1.0 } else { 0.3 }))
+            .collect();
+        let both = with_learned(&arx, &levels).unwrap();
+        assert_eq!(
+            both.spec().as_deref(),
+            Some("arx:2,2+summary+learned:8,8,8")
+        );
+        assert!(with_learned(&learned, &kinds).is_none());
+        assert!(
+            with_summary(&both, &levels).is_none(),
+            "nothing after the network"
+        );
+        let silent: Vec<IoData> = (0..4).map(|_| IoData::zeros(n, 0, 1)).collect();
+        assert!(with_learned(&arx, &silent).is_none());
+        assert!(with_learned(&arx, &[]).is_none());
     }
 
     /// An input that never varies within a record is found whatever its

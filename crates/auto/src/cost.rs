@@ -31,6 +31,10 @@ pub(crate) const REFIT_SHARE: f64 = 0.45;
 /// sized for a chart's records will compete in it: its members grow while
 /// time is left, so the time pays there.
 pub(crate) const SIZED_SHARE: f64 = 0.7;
+/// Share of the time left before the winner's refit that round 3's
+/// learned rival may spend on its network's epochs: the rest stays for
+/// the final fit's further records, which it competes with.
+pub(crate) const LEARNED_SHARE: f64 = 0.5;
 /// A fit anew beside the fit trained further starts only if its estimate
 /// is below this share of the time left.
 pub(crate) const ANEW_SHARE: f64 = 0.9;

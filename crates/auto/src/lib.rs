@@ -5,7 +5,9 @@
 //!
 //! The chart is simulated once and its records kept; every candidate
 //! compressor compresses them, every candidate network fits the same rows,
-//! and all are scored on the same held-out rows. The winner is refitted on
+//! and all are scored on the same held-out rows; where the records'
+//! inputs differ in kind, the last rival puts a summary network after the
+//! best stage 1 (decision 083). The winner is refitted on
 //! the whole chart, then calibrated and validated on fresh simulations like
 //! any trained estimator (so the final report is not biased by the
 //! selection).
@@ -301,7 +303,7 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
         let added_simulations = added_simulations + step_simulations;
         run.progress().end(Stage::Fitting);
         let search_seconds = start.elapsed().as_secs_f64();
-        let failures = failures + added_failures + step_failures;
+        let failures = failures + added_failures + step_failures + winner.left_out;
         let simulations = winner.features.nrows() + failures;
         let final_fit = winner.final_fit;
         let estimator = ship(run, winner, failures)?;

@@ -10,15 +10,15 @@ use twostage_fit::{FittedRegressor, RegressorConfig};
 use twostage_models::{IoData, Simulator};
 use twostage_sources::{ForModel, StoredChart};
 
-use crate::candidates::{design, fit_cost, with_summary};
+use crate::candidates::{design, fit_cost, with_learned, with_summary};
 
 mod anytime;
 mod equal_time;
 mod final_fit;
 
 use crate::cost::{
-    COST_MARGIN, MIN_TIE, PRODUCTS_EXPONENT, REFIT_SHARE, SIZED_SHARE, affordable_rows,
-    fit_seconds, measured_exponent, round_two_floor, rows_growth, screening_rows,
+    COST_MARGIN, LEARNED_SHARE, MIN_TIE, PRODUCTS_EXPONENT, REFIT_SHARE, SIZED_SHARE,
+    affordable_rows, fit_seconds, measured_exponent, round_two_floor, rows_growth, screening_rows,
 };
 use crate::{Budget, CandidateReport, Status};
 pub(super) use final_fit::Winner;
@@ -36,6 +36,9 @@ pub(crate) struct Scope<'a, S: ?Sized> {
     progress: &'a dyn Progress,
     /// Calibration and validation records of the run.
     held_out: usize,
+    /// Share of records a stage 1 may fail to compress (as the run's
+    /// simulations may fail): they are left out of its fit and score.
+    max_failure_fraction: f64,
 }
 
 impl<'a, S: Simulator + ?Sized> Scope<'a, S> {
@@ -46,6 +49,7 @@ impl<'a, S: Simulator + ?Sized> Scope<'a, S> {
             seed: run.seed(),
             progress: run.progress(),
             held_out: run.settings().calibration + run.settings().validation,
+            max_failure_fraction: run.settings().max_failure_fraction,
         }
     }
 
@@ -392,6 +396,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             })
             .collect();
         let mut scores = vec![self.candidates[best].report.score];
+        let first_rival = self.candidates.len();
         let mut seed_seconds = Vec::new();
         let (mut half, mut half_seconds) = (None, None);
         for ((report, outcome), trial) in outcomes.into_iter().zip(trials) {
@@ -419,6 +424,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 }
             }
         }
+        self.learned_rival(best, first_rival, rows, limit);
         if scores.len() > 1 {
             let (lo, hi) = scores
                 .iter()
@@ -434,6 +440,45 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 .map(|(t, (r, _))| measured_exponent((r, t), (rows, seconds)));
         }
         scores
+    }
+
+    /// Round 3's last rival, where the records' inputs differ in kind:
+    /// the best of the winner and its rivals just scored (candidates from
+    /// `first_rival` on, with the winner's network), with a summary network
+    /// after its stage 1, trained on the same `rows`. Its epochs take a
+    /// share of the time the others left ([`LEARNED_SHARE`]).
+    fn learned_rival(
+        &mut self,
+        best: usize,
+        first_rival: usize,
+        rows: usize,
+        limit: Option<(Instant, f64)>,
+    ) {
+        let network = self.candidates[best].network.clone();
+        let base = std::iter::once(best)
+            .chain(first_rival..self.candidates.len())
+            .filter(|&i| {
+                self.candidates[i].network == network
+                    && self.candidates[i].report.status.is_scored()
+            })
+            .min_by(|&a, &b| {
+                self.candidates[a]
+                    .report
+                    .score
+                    .total_cmp(&self.candidates[b].report.score)
+            })
+            .and_then(|i| self.candidates[i].fitted.as_ref().map(|(c, _)| c.clone()));
+        let Some(learned) = base.and_then(|c| with_learned(&c, &self.plan.chart.records[..rows]))
+        else {
+            return;
+        };
+        self.plan.tell(3, 0, 1, &learned, &network);
+        let (report, outcome) = self.plan.evaluate(&learned, &network, rows, limit, 3, 0);
+        let seconds = report.status.is_scored().then_some(report.seconds);
+        self.record(report, outcome, network);
+        if let Some(last) = self.candidates.last_mut() {
+            last.solo_seconds = seconds;
+        }
     }
 
     fn record(
@@ -671,13 +716,33 @@ impl<S: Simulator + ?Sized> Plan<'_, '_, S> {
             return (report, None);
         }
         let start = Instant::now();
+        // A learned stage 1's network ends its epochs in time for the fit
+        // after it and the rest of the search.
+        let stop_by = limit.map(|(deadline, cost)| {
+            let free = deadline
+                .checked_sub(Duration::from_secs_f64(cost))
+                .map_or(0.0, |end| {
+                    end.saturating_duration_since(start).as_secs_f64()
+                });
+            start + Duration::from_secs_f64(LEARNED_SHARE * free)
+        });
         // A structure the records cannot take (an autoregression of a
-        // noise-free decay is rank deficient) does not apply; only a fit that
-        // went wrong failed.
+        // noise-free decay is rank deficient, a network longer than the
+        // records) does not apply; only a fit that went wrong failed.
         let compressed = compressor
             .prepared_on(&chart.records[..rows])
+            .and_then(|c| {
+                c.trained_on(
+                    chart.thetas.slice(ndarray::s![..rows, ..]),
+                    &chart.records[..rows],
+                    seed,
+                    stop_by,
+                )
+            })
             .map_err(Error::from)
-            .and_then(|c| compress_all(&c, &chart.records).map(|f| (c, f)));
+            .and_then(|c| {
+                compress_all(&c, &chart.records, self.base.max_failure_fraction).map(|f| (c, f))
+            });
         let (compressor, features) = match compressed {
             Ok(pair) => pair,
             Err(e) => {
@@ -689,14 +754,15 @@ impl<S: Simulator + ?Sized> Plan<'_, '_, S> {
         let outcome = (|| -> Result<(Vec<f64>, f64, CompressorConfig, FittedRegressor)> {
             let (x_fit, x_held) = features.view().split_at(Axis(0), held_out);
             let (t_fit, t_held) = chart.thetas.view().split_at(Axis(0), held_out);
-            let (x_fit, t_fit) = (
+            let (x_fit, t_fit) = readable_rows(
                 x_fit.slice_move(ndarray::s![..rows, ..]),
                 t_fit.slice_move(ndarray::s![..rows, ..]),
             );
+            let (x_held, t_held) = readable_rows(x_held, t_held);
             let prior = self.base.simulator().spec().prior();
-            let z_fit = to_learning_space(t_fit, prior.marginals());
-            let fitted = regressor.fit(x_fit, z_fit.view(), seed)?;
-            let (rmse, score) = self.score(&fitted, x_held, t_held)?;
+            let z_fit = to_learning_space(t_fit.view(), prior.marginals());
+            let fitted = regressor.fit(x_fit.view(), z_fit.view(), seed)?;
+            let (rmse, score) = self.score(&fitted, x_held.view(), t_held.view())?;
             Ok((rmse, score, compressor.clone(), fitted))
         })();
         report.seconds = start.elapsed().as_secs_f64();
@@ -776,17 +842,57 @@ fn with_level(compressor: &CompressorConfig, n_outputs: usize) -> Option<Compres
         .map(CompressorConfig::Leveled)
 }
 
-/// Features of every record, in parallel (row i is record i).
-fn compress_all(compressor: &CompressorConfig, records: &[IoData]) -> Result<Array2<f64>> {
+/// Features of every record, in parallel (row i is record i). A record
+/// the compressor cannot take (an ARX of a record whose input never
+/// moves) gets a row of NaN, to be left out by [`readable_rows`], as long
+/// as at most `allowed` of the records are such; beyond, the first one's
+/// error.
+fn compress_all(
+    compressor: &CompressorConfig,
+    records: &[IoData],
+    allowed: f64,
+) -> Result<Array2<f64>> {
     let n = compressor.n_features();
     let mut features = vec![0.0; records.len() * n];
-    features
+    let failures: Vec<(usize, twostage_compress::CompressError)> = features
         .par_chunks_mut(n.max(1))
         .zip(records.par_iter())
-        .map_init(Workspace::new, |work, (alpha, record)| {
-            compressor.compress_into(record.inputs(), record.outputs(), work, alpha)
+        .enumerate()
+        .map_init(Workspace::new, |work, (i, (alpha, record))| {
+            compressor
+                .compress_into(record.inputs(), record.outputs(), work, alpha)
+                .map_err(|e| {
+                    alpha.fill(f64::NAN);
+                    (i, e)
+                })
+                .err()
         })
-        .collect::<twostage_compress::Result<Vec<()>>>()?;
+        .flatten()
+        .collect();
+    if failures.len() as f64 > allowed * records.len() as f64
+        && let Some((_, first)) = failures.into_iter().min_by_key(|(i, _)| *i)
+    {
+        return Err(first.into());
+    }
     Ok(Array2::from_shape_vec((records.len(), n), features)
         .unwrap_or_else(|_| unreachable!("n features per record")))
+}
+
+/// The rows of `features` (and of `thetas`, row for row) that
+/// [`compress_all`] could compress.
+fn readable_rows(
+    features: ndarray::ArrayView2<'_, f64>,
+    thetas: ndarray::ArrayView2<'_, f64>,
+) -> (Array2<f64>, Array2<f64>) {
+    let kept: Vec<usize> = features
+        .rows()
+        .into_iter()
+        .enumerate()
+        .filter(|(_, row)| row.iter().all(|v| !v.is_nan()))
+        .map(|(i, _)| i)
+        .collect();
+    (
+        features.select(Axis(0), &kept),
+        thetas.select(Axis(0), &kept),
+    )
 }

@@ -46,8 +46,9 @@ pub struct TrainArgs {
     /// parameter's range) (default: the preset's).
     #[arg(long)]
     fit: Option<String>,
-    /// Search compressors, output transforms and networks by held-out
-    /// error instead of using the preset (with --budget-seconds or
+    /// Search compressors, output transforms and networks (and a learned
+    /// stage 1, where the records' inputs differ in level or shape) by
+    /// held-out error instead of using the preset (with --budget-seconds or
     /// --budget-sims; default 120 s). On a --chart the search fits and
     /// scores on the chart's training records, no new simulation (under a
     /// time budget on the first it affords, and the winner's final fit

@@ -52,6 +52,12 @@ pub struct SummaryTraining {
     pub held_out: f64,
     /// Seeds the initial weights, the held-out split and the batches.
     pub seed: u64,
+    /// When the training's time is up: no epoch starts after it, and the
+    /// best held-out weights so far are the answer (a search's budget;
+    /// `None` trains until `epochs` or `patience` stop it, the same bits on
+    /// any machine).
+    #[serde(skip)]
+    pub stop_by: Option<std::time::Instant>,
 }
 
 impl Default for SummaryTraining {
@@ -65,6 +71,7 @@ impl Default for SummaryTraining {
             patience: 15,
             held_out: 0.1,
             seed: 0,
+            stop_by: None,
         }
     }
 }
@@ -522,6 +529,10 @@ impl SummaryTraining {
         let mut best = BestHeldOut::new(history[0], &weights, self.patience, true);
         let (mut epochs, mut reason) = (0, TerminationReason::MaxEpochs);
         for _ in 0..self.epochs {
+            if self.stop_by.is_some_and(|t| std::time::Instant::now() >= t) {
+                reason = TerminationReason::EpochsUntilDeadline;
+                break;
+            }
             epochs += 1;
             train.shuffle(&mut rng);
             for batch in train.chunks(self.batch_size) {

@@ -354,6 +354,23 @@ pub trait ForModel: Sized {
     /// # Errors
     /// What fitting those parameters reports.
     fn prepared_on(&self, records: &[IoData]) -> Result<Self>;
+    /// The compressor with its summary network (a `+learned` stage 1)
+    /// trained end to end on `records` and their parameter vectors
+    /// `thetas` (row i is record i's, in the prior's own coordinates),
+    /// seeded by `seed`, no epoch started after `stop_by`; as it is when
+    /// it has no untrained network. Its other fitted parts must be
+    /// prepared first ([`Self::prepared_on`]).
+    ///
+    /// # Errors
+    /// Records that do not match `thetas` or cannot train the network
+    /// (too short for its receptive field, a signal that never moves).
+    fn trained_on(
+        &self,
+        thetas: ndarray::ArrayView2<'_, f64>,
+        records: &[IoData],
+        seed: u64,
+        stop_by: Option<std::time::Instant>,
+    ) -> Result<Self>;
 }
 
 impl ForModel for CompressorConfig {
@@ -367,5 +384,36 @@ impl ForModel for CompressorConfig {
 
     fn prepared_on(&self, records: &[IoData]) -> Result<Self> {
         Ok(self.prepared(records.iter().map(|r| (r.inputs(), r.outputs())))?)
+    }
+
+    fn trained_on(
+        &self,
+        thetas: ndarray::ArrayView2<'_, f64>,
+        records: &[IoData],
+        seed: u64,
+        stop_by: Option<std::time::Instant>,
+    ) -> Result<Self> {
+        let Some(shape) = self.untrained_summary() else {
+            return Ok(self.clone());
+        };
+        // Inputs, then outputs, side by side: the network's channels.
+        let signals: Vec<Array2<f64>> = records
+            .iter()
+            .map(|r| {
+                let (u, y) = (r.inputs(), r.outputs());
+                let n_u = u.ncols();
+                Array2::from_shape_fn((y.nrows(), n_u + y.ncols()), |(k, j)| {
+                    if j < n_u { u[[k, j]] } else { y[[k, j - n_u]] }
+                })
+            })
+            .collect();
+        let training = twostage_fit::SummaryTraining {
+            shape: shape.clone(),
+            seed,
+            stop_by,
+            ..twostage_fit::SummaryTraining::default()
+        };
+        let trained = training.train(&signals, thetas)?;
+        Ok(self.with_trained_summary(trained.network)?)
     }
 }

@@ -19,9 +19,7 @@ use crate::progress::{Progress, Stage};
 use crate::readable::refuse_beyond_memory;
 use crate::roles::{ChartRole, RoleCounts, held_out_roles};
 use crate::shard::ShardedChart;
-use ndarray::Array2;
-use twostage_compress::{CompressorConfig, LearnedShape};
-use twostage_fit::SummaryTraining;
+use twostage_compress::CompressorConfig;
 
 /// Where the records of a training run come from (the facade's builder
 /// reads them through [`Records`]).
@@ -188,7 +186,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     pub fn prepare(&self, compressor: CompressorConfig) -> Result<CompressorConfig> {
         let prepared = self.prepare_fitted_parts(compressor)?;
         match prepared.untrained_summary() {
-            Some(shape) => self.train_summary(&prepared, shape.clone()),
+            Some(_) => self.train_summary(&prepared),
             None => Ok(prepared),
         }
     }
@@ -196,45 +194,14 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
     /// `compressor` with its summary network trained on the training
     /// records and their parameters (the run's seed), for a `+learned`
     /// stage 1.
-    fn train_summary(
-        &self,
-        compressor: &CompressorConfig,
-        shape: LearnedShape,
-    ) -> Result<CompressorConfig> {
+    fn train_summary(&self, compressor: &CompressorConfig) -> Result<CompressorConfig> {
         // The simulations are heard of as they run; the network's epochs
         // as one step of no count.
         let (StoredChart { thetas, records }, _) = self.stored_training_for(Stage::Learning)?;
         self.progress.begin(Stage::Learning, 0);
-        let trained = Self::train_summary_on(compressor, shape, &thetas, &records, self.seed);
+        let trained = compressor.trained_on(thetas.view(), &records, self.seed, None);
         self.progress.end(Stage::Learning);
         trained
-    }
-
-    fn train_summary_on(
-        compressor: &CompressorConfig,
-        shape: LearnedShape,
-        thetas: &Array2<f64>,
-        records: &[IoData],
-        seed: u64,
-    ) -> Result<CompressorConfig> {
-        // Inputs, then outputs, side by side: the network's channels.
-        let signals: Vec<Array2<f64>> = records
-            .iter()
-            .map(|r| {
-                let (u, y) = (r.inputs(), r.outputs());
-                let n_u = u.ncols();
-                Array2::from_shape_fn((y.nrows(), n_u + y.ncols()), |(k, j)| {
-                    if j < n_u { u[[k, j]] } else { y[[k, j - n_u]] }
-                })
-            })
-            .collect();
-        let training = SummaryTraining {
-            shape,
-            seed,
-            ..SummaryTraining::default()
-        };
-        let trained = training.train(&signals, thetas.view())?;
-        Ok(compressor.with_trained_summary(trained.network)?)
     }
 
     /// `compressor` with the parts fitted on the first training records

@@ -12,7 +12,7 @@ use twostage_sources::StoredChart;
 use twostage_train::{Error, Result};
 
 use super::final_fit::{MAX_COMPARED_RECORDS, MIN_COMPARED_RECORDS};
-use super::{Search, Winner, compress_all, design};
+use super::{Search, Winner, compress_all, design, readable_rows};
 use crate::Budget;
 use crate::outcome::Continuation;
 
@@ -85,8 +85,14 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
         let deadline = self.plan.deadline.ok_or_else(|| Error::Search {
             what: "the anytime final fit needs a time budget".into(),
         })?;
-        let added = more.records.len();
-        let features = compress_all(&winner.compressor, &more.records)?;
+        let features = compress_all(
+            &winner.compressor,
+            &more.records,
+            self.plan.base.max_failure_fraction,
+        )?;
+        let (features, thetas) = readable_rows(features.view(), more.thetas.view());
+        let added = features.nrows();
+        winner.left_out += more.records.len() - added;
         let grown = |what: &str, e: ndarray::ShapeError| Error::Search {
             what: format!("the records added to the final fit do not match its {what}: {e}"),
         };
@@ -96,7 +102,7 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
             .map_err(|e| grown("features", e))?;
         winner
             .thetas
-            .append(Axis(0), more.thetas.view())
+            .append(Axis(0), thetas.view())
             .map_err(|e| grown("parameters", e))?;
         let total = winner.features.nrows();
         let compared = (added / 5).clamp(MIN_COMPARED_RECORDS.min(added), MAX_COMPARED_RECORDS);
@@ -213,7 +219,7 @@ mod tests {
             .for_model(model.spec())
             .unwrap();
         let network = RegressorConfig::Mlp(MlpParams::new(&[4]).unwrap().check().unwrap());
-        let features = compress_all(&compressor, &chart.records).unwrap();
+        let features = compress_all(&compressor, &chart.records, 0.0).unwrap();
         let marginals = model.spec().prior().marginals();
         let z = to_learning_space(chart.thetas.view(), marginals);
         let fitted = network.fit(features.view(), z.view(), 7).unwrap();
@@ -221,6 +227,7 @@ mod tests {
             compressor,
             features,
             thetas: chart.thetas.clone(),
+            left_out: 0,
             regressor_config: network,
             regressor: fitted,
             final_fit: FinalFit::TrainedFurther {
@@ -309,7 +316,7 @@ mod tests {
             .for_model(model.spec())
             .unwrap();
         let network = RegressorConfig::Mlp(MlpParams::new(&[4]).unwrap().check().unwrap());
-        let features = compress_all(&compressor, &chart.records).unwrap();
+        let features = compress_all(&compressor, &chart.records, 0.0).unwrap();
         let z = to_learning_space(chart.thetas.view(), model.spec().prior().marginals());
         network.fit(features.view(), z.view(), 7).unwrap()
     }

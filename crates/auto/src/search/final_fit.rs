@@ -11,7 +11,7 @@ use twostage_fit::{FittedRegressor, MlpParams, RegressorConfig};
 use twostage_models::Simulator;
 use twostage_sources::StoredChart;
 
-use super::{Search, compress_all, design};
+use super::{Search, compress_all, design, readable_rows};
 use crate::Budget;
 use crate::candidates::network_size;
 use crate::cost::{
@@ -93,14 +93,17 @@ impl<S: Simulator + ?Sized> Search<'_, '_, S> {
                 self.plan.chart.thetas.clone(),
             ),
         };
-        let refit_rows = final_rows.min(thetas.nrows());
         let compressing = Instant::now();
-        let features = compress_all(&compressor, records)?;
+        let features = compress_all(&compressor, records, self.plan.base.max_failure_fraction)?;
         let per_record = compressing.elapsed().as_secs_f64() / records.len().max(1) as f64;
+        let (features, kept_thetas) = readable_rows(features.view(), thetas.view());
+        let left_out = thetas.nrows() - kept_thetas.nrows();
+        let refit_rows = final_rows.min(kept_thetas.nrows());
         let mut winner = Winner {
             compressor,
             features,
-            thetas,
+            thetas: kept_thetas,
+            left_out,
             regressor_config,
             regressor: held_out_fit,
             final_fit: FinalFit::AsScored { rows: scored_rows },
@@ -617,6 +620,8 @@ pub(crate) struct Winner {
     pub(crate) features: Array2<f64>,
     /// The parameters of the same records, row for row.
     pub(crate) thetas: Array2<f64>,
+    /// Records its stage 1 could not compress, left out of both.
+    pub(crate) left_out: usize,
     pub(crate) regressor_config: RegressorConfig,
     pub(crate) regressor: FittedRegressor,
     /// How `regressor` was fitted.

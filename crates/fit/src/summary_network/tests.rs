@@ -218,3 +218,32 @@ fn impossible_shapes_and_settings_are_refused_by_name() {
     let e = error(base, &silent, gains.view());
     assert!(e.contains("signal 0 zero in every record"), "{e}");
 }
+
+/// A time that is up before the first epoch keeps the initial weights and
+/// says why; a time far off changes no bit.
+#[test]
+fn the_training_stops_when_its_time_is_up() {
+    let (records, gains) = saturating_records(120);
+    let base = SummaryTraining {
+        epochs: 2,
+        seed: 3,
+        ..SummaryTraining::default()
+    };
+    let now = std::time::Instant::now();
+    let late = SummaryTraining {
+        stop_by: Some(now),
+        ..base.clone()
+    };
+    let stopped = late.train(&records, gains.view()).unwrap();
+    assert_eq!(stopped.epochs, 0);
+    assert_eq!(stopped.reason, TerminationReason::EpochsUntilDeadline);
+    assert_eq!(stopped.history.len(), 1);
+    let free = base.train(&records, gains.view()).unwrap();
+    assert_eq!((free.epochs, free.history.len()), (2, 3));
+    assert_ne!(free.reason, TerminationReason::EpochsUntilDeadline);
+    let distant = SummaryTraining {
+        stop_by: Some(now + std::time::Duration::from_secs(3600)),
+        ..base
+    };
+    assert_eq!(distant.train(&records, gains.view()).unwrap(), free);
+}
