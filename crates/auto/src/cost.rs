@@ -1,21 +1,17 @@
 //! What the search's fits cost, in one place: how a fit's time grows with
 //! its network and its rows, the margins its estimates carry, and the
-//! shares of the time left that its plans may spend. Every number here was
-//! measured on the benchmark on 2 cores (docs/accuracy.md).
+//! shares of the time left that its plans may spend. The measurements
+//! behind every number are in docs/performance.md, "The automatic design's cost constants".
 
 /// How a network's fit time grows with the cost of its Levenberg-Marquardt
 /// products a row (`candidates::fit_cost`), for round 2's cost estimates
-/// (see `round_two`): measured as the weights' power 1.2 when every
-/// network's products grew as its weights squared, so 0.6 of the products.
+/// (see `round_two`): fit times grew as a power of the weights that was
+/// 0.6 of the power the products grew by.
 pub(crate) const PRODUCTS_EXPONENT: f64 = 0.6;
 /// How a network's fit time grows with its rows: Levenberg-Marquardt's
 /// products grow linearly with them, and its iterations to the held-out
-/// minimum grow too (until its iteration limit). Measured on the benchmark
-/// (2 cores, candidates timed while sharing the machine): MLP `[20]` from
-/// 4000 to 6342 rows as rows^1.5, [20, 20] from 6342 to 15941 rows as
-/// rows^1.8, the average of four [20, 20] from 4242 to 21010 as rows^1.7,
-/// [20, 20] from 4164 to 13991 as rows^2.2 with the share of the machine
-/// taken as half: the upper end, as fits that would not end in time cost
+/// minimum grow too (until its iteration limit). The upper end of what
+/// the benchmark's fits measured, as fits that would not end in time cost
 /// the whole final fit.
 pub(crate) const ROWS_EXPONENT: f64 = 2.0;
 /// Estimates of a fit's seconds carry a margin of a quarter: a fit that
@@ -40,9 +36,9 @@ pub(crate) const LEARNED_SHARE: f64 = 0.5;
 pub(crate) const ANEW_SHARE: f64 = 0.9;
 
 /// Fitting rows round 1 uses at most: it only picks the compressors worth
-/// round 2, and the best few are close (on the benchmark at m = 20000 the
-/// ARX orders 2 to 4 score within 2% of each other, round 2's networks
-/// move the score by 10%); the time saved goes to round 2 on every row.
+/// round 2, and the best few are close (the structures' scores differ far
+/// less than round 2's networks move them); the time saved goes to round
+/// 2 on every row.
 pub(crate) const SCREENING_ROWS: usize = 4000;
 
 /// Where the source can simulate more under a time budget, round 1 fits
@@ -86,7 +82,7 @@ pub(crate) fn round_two_floor((screened, seconds): (usize, f64), full: usize, le
 }
 
 /// Relative score difference within which candidates count as tied, at
-/// least (the seed alone moves a score by 1 to 3%: docs/accuracy.md).
+/// least (about what the seed alone moves a score by).
 pub(crate) const MIN_TIE: f64 = 0.02;
 
 /// Seconds to keep after the search for calibrating and validating on
@@ -131,8 +127,8 @@ pub(crate) fn affordable_rows(seconds: f64, left: f64, screened: usize, rows: us
 }
 
 /// The exponent of a fit's cost in its rows from two timings `(rows,
-/// seconds)`, within 1.2 and 2.2 (what the benchmark's fits measured;
-/// two timings of one fit each are noisy).
+/// seconds)`, within the range the benchmark's fits measured (two
+/// timings of one fit each are noisy).
 pub(crate) fn measured_exponent(
     (rows_a, seconds_a): (usize, f64),
     (rows_b, seconds_b): (usize, f64),

@@ -287,7 +287,7 @@ impl AutoOutcome {
                 f,
                 "on half its records ({rows}) the round-2 winner scores {half:.4} against \
                  {own:.4}: more records would {}",
-                // The seed alone moves a score by 1 to 2%.
+                // Beyond what the seed alone moves a score by.
                 if half > 1.03 * own {
                     "pay"
                 } else if more_records_pay(half, *own) {

@@ -275,11 +275,10 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
                 let seconds = self.candidates[i].report.seconds;
                 Some(trials.iter().map(move |net| {
                     // Levenberg-Marquardt's products dominate its time, its
-                    // iterations grow less: on 16000 rows the benchmark's
-                    // fits grew as weights^1.4 to weights^1.5, on the 4000
-                    // of a screened round as weights^0.6 to weights^1.1
-                    // (other costs weigh more there). Round 2 sizes its rows
-                    // by these estimates, so they aim at the middle.
+                    // iterations grow less, and other costs weigh more on a
+                    // screened round's rows. Round 2 sizes its rows by these
+                    // estimates, so they aim at the middle of what was
+                    // measured.
                     let scale = (fit_cost(net, n, q) / base_cost).powf(PRODUCTS_EXPONENT);
                     (c.clone(), (*net).clone(), seconds * scale)
                 }))
@@ -527,8 +526,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// best score) and that no other beats on every parameter, the
     /// cheapest to fit. The time it leaves goes to round 3
     /// and to more records, which pay more than a difference the seed
-    /// could have made: on the car at 60 s an MLP [20, 20] won round 2 by
-    /// 0.2% over `[20]` at 4.6 times its cost and left no time for either.
+    /// could have made (decision 050).
     /// With one parameter only the best score is beaten by none. Without
     /// a deadline (a budget in simulations), the best score.
     /// Round 3's averaged network loses to the network it averages where

@@ -14,10 +14,9 @@ use crate::cost::held_out_seconds;
 
 /// Largest chart a time budget chooses per second of budget: the default
 /// search's fits, not its simulations, dominate its cost, and they grow
-/// with m; on 2 cores they take about 100 s at m = 8000 (docs/accuracy.md),
-/// so 120 s buys 8000 simulations and 300 s 20000. (16000 per 120 s was
-/// tried: the refit then had time for only 6607 of them, 1.24 times the
-/// Bayes RMSE against 1.21 to 1.29 at 8000.)
+/// with m; the rate is the one their measured time affords, and a larger
+/// one left the refit too little time for its records
+/// (docs/performance.md, "The automatic design's cost constants").
 const SIMULATIONS_PER_BUDGET_SECOND: f64 = 8000.0 / 120.0;
 
 /// Memory allowed for the stored records.
@@ -42,8 +41,8 @@ impl<S: Simulator + ?Sized> SizedRun<'_, S> {
     /// (`simulations` in `seconds`), and the deadline moved to keep what
     /// calibration and validation take at that cost: the
     /// chart's thousands of simulations measure it better than the
-    /// pilot's 64, on which a simulator's start weighs (on the car the two
-    /// agree: 1.9 and 2.0 ms). A chart smaller than the pilot, or records
+    /// pilot's 64, on which a simulator's start weighs. A chart smaller
+    /// than the pilot, or records
     /// read from files, keep the pilot's.
     pub(crate) fn timed_chart(&mut self, budget: Budget, start: Instant, charted: (usize, f64)) {
         if !self.simulates || self.deadline.is_none() {

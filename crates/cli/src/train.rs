@@ -62,8 +62,7 @@ pub struct TrainArgs {
     /// the search and final fit get the rest. Where the reserve would take
     /// more than half the budget, both sets shrink alike to what half
     /// affords (at least 100 each, said in a note); a budget too small
-    /// even for those is refused with the smallest it accepts (about 3 s
-    /// for the benchmark and 4 s for the car on 2 cores).
+    /// even for those is refused with the smallest budget it accepts.
     #[arg(long, requires = "auto", conflicts_with = "budget_sims")]
     budget_seconds: Option<f64>,
     /// --auto: simulations in the chart (with --chart: its first records),

@@ -371,7 +371,7 @@ pub(crate) fn slot_index(slot: usize) -> u32 {
 /// (exmex's documentation). A unary minus is one at the start, or after
 /// an opening parenthesis, a comma or another operator.
 /// The most operators one equation may hold: the parse's time grows with
-/// their square (10,000 take about 3 s) and the expression tree is
+/// their square (docs/performance.md) and the expression tree is
 /// walked recursively, so a generated equation of any length is refused
 /// by its size rather than left to exhaust the time or the stack.
 pub(crate) const MAX_OPERATORS: usize = 10_000;
