@@ -19,7 +19,6 @@ use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use super::network::{Problem, parameter_count};
-use super::training::same_bits;
 
 /// Rows of a product per parallel task (the gradient's `J'r`, the cross
 /// terms): each task sums over every sample in one fixed order.
@@ -338,6 +337,12 @@ impl HiddenLayerProducts {
             }
         }
     }
+}
+
+/// Whether two weight vectors are the same bits: the products kept at
+/// one point serve only that very point.
+pub(super) fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 #[cfg(test)]

@@ -21,7 +21,9 @@ use crate::levenberg_marquardt::{
 };
 use crate::standardize::Standardizer;
 
-use super::gauss_newton::{HiddenLayerProducts, by_structure, entries_per_sample, gram_products};
+use super::gauss_newton::{
+    HiddenLayerProducts, by_structure, entries_per_sample, gram_products, same_bits,
+};
 use super::held_out::{BestHeldOut, out_of_time};
 use super::network::{
     FittedMlp, MAX_WIDTH, Problem, RestartReport, initial_parameters, parameter_count,
@@ -309,11 +311,6 @@ impl<'p, 'a> NetworkLeastSquares<'p, 'a> {
             products,
         }
     }
-}
-
-/// Whether two weight vectors are the same bits.
-pub(super) fn same_bits(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 impl LeastSquaresProblem for NetworkLeastSquares<'_, '_> {

@@ -8,7 +8,7 @@ use twostage_refine::OutputError;
 
 use super::GivenValues;
 use super::failure::MethodFailure;
-use super::records::RecordEstimate;
+use super::rows::RecordEstimate;
 
 /// The name the multi-start output-error fit goes by among the methods.
 pub const OUTPUT_ERROR_METHOD: &str = "oe";

@@ -19,12 +19,13 @@ use crate::{EstimateRefiner, JointFitter};
 mod failure;
 mod methods;
 mod records;
+mod rows;
 mod table;
 mod through_model;
 
 pub use failure::{MethodFailure, RecordFailure};
 pub use methods::OUTPUT_ERROR_METHOD;
-pub use records::{AutoRefined, Estimates, RecordEstimate, RecordOutcome};
+pub use rows::{AutoRefined, Estimates, RecordEstimate, RecordOutcome};
 
 use methods::Method;
 

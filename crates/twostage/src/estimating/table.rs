@@ -7,7 +7,7 @@ use twostage_refine::RecordCheck;
 use twostage_sources::csv_rows::{format_f64, row};
 
 use super::Estimating;
-use super::records::RecordEstimate;
+use super::rows::RecordEstimate;
 
 impl Estimating {
     /// The rows as the CSV table `twostage estimate` writes: a column

@@ -7,7 +7,7 @@ use twostage_refine::{BestFit, RecordCheck, RefineError, check_against, search_b
 use twostage_sources::Progress;
 
 use super::Estimating;
-use super::records::{RecordEstimate, RecordOutcome};
+use super::rows::{RecordEstimate, RecordOutcome};
 use crate::{EstimateRefiner, JointOfRecords, ModelFailure, RECORDS_TOGETHER, ToRefine};
 
 /// A record's best-fit search, or why it failed; `None` where no check or
