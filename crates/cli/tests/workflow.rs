@@ -811,6 +811,24 @@ fn refinement_moves_estimates_towards_the_bayes_ones() {
         "{}",
         text(&out.stderr)
     );
+    // An empty step is refused once, by the request, in its words and the
+    // flag's.
+    let out = twostage(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--window",
+        "100",
+        "--every",
+        "0",
+        path(&records),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("--window: a window of 100 samples every 0: give a window and a step of at least 1 sample"),
+        "{}",
+        text(&out.stderr)
+    );
 }
 
 /// `estimate --check` passes the model's own records and flags one the

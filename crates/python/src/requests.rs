@@ -55,13 +55,14 @@ pub(crate) fn check<'py>(
         ),
         _ => named,
     };
-    let estimating = prepared(EstimateRequest {
-        model,
-        check: Some(check_settings(sims, score_from)),
-        seed,
-        prior_starts,
-        ..EstimateRequest::new(with)
-    })?;
+    let estimating = prepared(
+        EstimateRequest::new(with)
+            .model(model)
+            .check_records(true)
+            .check_settings(check_settings(sims, score_from))
+            .seed(seed)
+            .prior_starts(prior_starts),
+    )?;
     checked_dict(py, &one_row(py, &estimating, record)?)
 }
 
@@ -133,13 +134,13 @@ pub(crate) fn joint<'py>(
     seed: u64,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let named = named_model(None, model_file, model_toml)?;
-    let estimating = prepared(EstimateRequest {
-        model: named,
-        joint: true,
-        seed,
-        prior_starts,
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
-    })?;
+    let estimating = prepared(
+        EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+            .model(named)
+            .joint(true)
+            .seed(seed)
+            .prior_starts(prior_starts),
+    )?;
     let shape = estimator.record_shape();
     let records: Vec<(String, Result<twostage::models::IoData, DataFileError>)> = records
         .iter()
@@ -178,11 +179,11 @@ pub(crate) fn refine<'py>(
     model_toml: Option<&str>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let named = named_model(None, model_file, model_toml)?;
-    let estimating = prepared(EstimateRequest {
-        model: named,
-        refine: Some(twostage::RefineWhich::All),
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
-    })?;
+    let estimating = prepared(
+        EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+            .model(named)
+            .refine(Some(twostage::RefineWhich::All)),
+    )?;
     let shape = estimator.record_shape();
     let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
     let row = one_row(py, &estimating, record)?;
@@ -266,21 +267,20 @@ pub(crate) fn estimate_records<'py>(
     if every.is_some() && window.is_none() {
         return Err(PyValueError::new_err("every needs window=N: give both"));
     }
-    let estimating = prepared(EstimateRequest {
-        model: named_model(None, model_file, model_toml)?,
-        // refine="auto" checks to choose, with the same settings.
-        check: (check || matches!(refine, Some(twostage::RefineWhich::Auto(_))))
-            .then(|| check_settings(sims, score_from)),
-        refine,
-        joint,
-        windows: window.map(|length| twostage::Windows {
-            length,
-            every: every.unwrap_or(length),
-        }),
-        seed,
-        prior_starts,
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
-    })?;
+    let estimating = prepared(
+        EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+            .model(named_model(None, model_file, model_toml)?)
+            .check_records(check)
+            .check_settings(check_settings(sims, score_from))
+            .refine(refine)
+            .joint(joint)
+            .windows(window.map(|length| twostage::Windows {
+                length,
+                every: every.unwrap_or(length),
+            }))
+            .seed(seed)
+            .prior_starts(prior_starts),
+    )?;
     let shape = estimator.record_shape();
     let records: Vec<(String, Result<IoData, DataFileError>)> = records
         .iter()

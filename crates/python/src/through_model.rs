@@ -313,13 +313,14 @@ pub(crate) fn check_values<'py>(
     parameters(&theta, sim.spec().param_names())?;
     let given = GivenValues::new(vec![("0".into(), theta)], "theta")
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
-    let estimating = prepared(EstimateRequest {
-        model: Some(named),
-        check: Some(check_settings(sims, score_from)),
-        seed,
-        prior_starts,
-        ..EstimateRequest::new(EstimateWith::Given(given))
-    })?;
+    let estimating = prepared(
+        EstimateRequest::new(EstimateWith::Given(given))
+            .model(Some(named))
+            .check_records(true)
+            .check_settings(check_settings(sims, score_from))
+            .seed(seed)
+            .prior_starts(prior_starts),
+    )?;
     checked_dict(py, &one_row(py, &estimating, record)?)
 }
 

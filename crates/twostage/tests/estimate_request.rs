@@ -45,14 +45,12 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
     let estimator = estimator();
     // Windows of another length than training's are estimated only where
     // a fit through the model follows (here the joint fit).
-    let request = EstimateRequest {
-        windows: Some(Windows {
+    let request = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+        .windows(Some(Windows {
             length: 500,
             every: 250,
-        }),
-        joint: true,
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
-    };
+        }))
+        .joint(true);
     let estimating = request.prepare().unwrap();
     assert_eq!(estimating.trained_length(), Some(1000));
     let mut given = records(&[-0.5, 0.4], 5);
@@ -88,15 +86,13 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
     );
 
     // Without a fit that follows, another length is refused by name.
-    let estimating = EstimateRequest {
-        windows: Some(Windows {
+    let estimating = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator)))
+        .windows(Some(Windows {
             length: 500,
             every: 500,
-        }),
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator)))
-    }
-    .prepare()
-    .unwrap();
+        }))
+        .prepare()
+        .unwrap();
     let estimates = estimating.estimate("file.csv", records(&[0.1], 5), &Silent);
     let refused = estimates.rows[0].1.as_ref().unwrap_err();
     assert!(
@@ -123,13 +119,11 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
 #[test]
 fn a_classic_method_and_given_values_give_their_own_estimates_and_are_checked() {
     let settings = MethodSettings::default();
-    let request = EstimateRequest {
-        model: Some(NamedModel::builtin("benchmark").unwrap()),
-        ..EstimateRequest::new(EstimateWith::Classic {
-            method: ClassicMethod::Ekf,
-            settings: settings.clone(),
-        })
-    };
+    let request = EstimateRequest::new(EstimateWith::Classic {
+        method: ClassicMethod::Ekf,
+        settings: settings.clone(),
+    })
+    .model(Some(NamedModel::builtin("benchmark").unwrap()));
     let estimating = request.prepare().unwrap();
     let given = records(&[0.3, -0.2], 9);
     let alone = classic_estimator(BuiltinModel::Benchmark, ClassicMethod::Ekf, &settings).unwrap();
@@ -148,14 +142,13 @@ fn a_classic_method_and_given_values_give_their_own_estimates_and_are_checked() 
         "values.csv",
     )
     .unwrap();
-    let request = EstimateRequest {
-        model: Some(NamedModel::builtin("benchmark").unwrap()),
-        check: Some(twostage::CheckSettings {
+    let request = EstimateRequest::new(EstimateWith::Given(values))
+        .model(Some(NamedModel::builtin("benchmark").unwrap()))
+        .check_records(true)
+        .check_settings(twostage::CheckSettings {
             runs: 99,
             score_from: 0,
-        }),
-        ..EstimateRequest::new(EstimateWith::Given(values))
-    };
+        });
     let estimating = request.prepare().unwrap();
     let mut with_stranger = given;
     with_stranger.push(("e9".into(), with_stranger[0].1.clone()));
@@ -188,10 +181,8 @@ fn a_classic_method_and_given_values_give_their_own_estimates_and_are_checked() 
 #[test]
 fn refine_auto_refines_only_what_the_check_does_not_explain() {
     let estimator = estimator();
-    let request = EstimateRequest {
-        refine: Some(RefineWhich::Auto(RefinePolicy::default())),
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
-    };
+    let request = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+        .refine(Some(RefineWhich::Auto(RefinePolicy::default())));
     let estimating = request.prepare().unwrap();
     let mut given = records(&[0.2, -0.6], 4);
     // A record of another length: estimated only to start the refinement,
@@ -220,30 +211,31 @@ fn a_request_that_cannot_run_is_refused_by_its_part() {
     }));
     assert_eq!(e.purpose, Purpose::OutputError);
     assert!(matches!(e.error, RequestProblem::NoModel));
-    let e = refused(EstimateRequest {
-        refine: Some(RefineWhich::All),
-        model: Some(NamedModel::builtin("benchmark").unwrap()),
-        ..EstimateRequest::new(EstimateWith::OutputError { starts: 3 })
-    });
+    let e = refused(
+        EstimateRequest::new(EstimateWith::OutputError { starts: 3 })
+            .refine(Some(RefineWhich::All))
+            .model(Some(NamedModel::builtin("benchmark").unwrap())),
+    );
     assert_eq!(e.purpose, Purpose::Refine);
     assert!(matches!(e.error, RequestProblem::NeedsEstimator));
-    let e = refused(EstimateRequest {
-        windows: Some(Windows {
-            length: 100,
-            every: 0,
-        }),
-        ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator())))
-    });
+    let e = refused(
+        EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator()))).windows(Some(
+            Windows {
+                length: 100,
+                every: 0,
+            },
+        )),
+    );
     assert_eq!(e.purpose, Purpose::Windows);
     assert!(e.to_string().contains("at least 1 sample"), "{e}");
     // The car has no EKF in the paper's table: the method's own words.
-    let e = refused(EstimateRequest {
-        model: Some(NamedModel::builtin("pacejka").unwrap()),
-        ..EstimateRequest::new(EstimateWith::Classic {
+    let e = refused(
+        EstimateRequest::new(EstimateWith::Classic {
             method: ClassicMethod::Ekf,
             settings: MethodSettings::default(),
         })
-    });
+        .model(Some(NamedModel::builtin("pacejka").unwrap())),
+    );
     assert_eq!(e.purpose, Purpose::Method);
     assert!(
         e.to_string().contains("'ekf' is not available for pacejka"),

@@ -132,43 +132,40 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
         length,
         every: args.every.unwrap_or(length),
     });
-    if let Some(w) = window
-        && (w.length == 0 || w.every == 0)
-    {
-        return Err(usage(format!(
-            "--window {} --every {}: give a window and a step of at least 1 sample",
-            w.length, w.every
-        )));
-    }
-    let request = EstimateRequest {
-        with,
-        model: crate::model_arg::named(args.model.as_deref(), args.model_file.as_deref())?,
-        check: args.checks().then(|| CheckSettings {
+    // An empty window or step is refused by the request, said as --window.
+    let request = EstimateRequest::new(with)
+        .model(crate::model_arg::named(
+            args.model.as_deref(),
+            args.model_file.as_deref(),
+        )?)
+        .check_records(args.check)
+        .check_settings(CheckSettings {
             runs: args.check_sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
             score_from: args.score_from.unwrap_or(0),
-        }),
-        refine: RefineWhich::chosen(
-            args.refine.map(|which| match which {
-                super::RefineWhich::All => "all",
-                super::RefineWhich::Auto => "auto",
-            }),
-            args.refine_below_fit,
+        })
+        .refine(
+            RefineWhich::chosen(
+                args.refine.map(|which| match which {
+                    super::RefineWhich::All => "all",
+                    super::RefineWhich::Auto => "auto",
+                }),
+                args.refine_below_fit,
+            )
+            .map_err(|e| match e {
+                RefineChoiceError::BelowFitWithoutAuto => usage(
+                    "--refine-below-fit is read with --refine=auto only: leave it out or give \
+                     --refine=auto"
+                        .into(),
+                ),
+                RefineChoiceError::Unknown(other) => {
+                    usage(format!("--refine={other}: give all or auto"))
+                }
+            })?,
         )
-        .map_err(|e| match e {
-            RefineChoiceError::BelowFitWithoutAuto => usage(
-                "--refine-below-fit is read with --refine=auto only: leave it out or give \
-                 --refine=auto"
-                    .into(),
-            ),
-            RefineChoiceError::Unknown(other) => {
-                usage(format!("--refine={other}: give all or auto"))
-            }
-        })?,
-        joint: args.joint,
-        windows: window,
-        seed: args.seed.unwrap_or(0),
-        prior_starts: args.prior_starts,
-    };
+        .joint(args.joint)
+        .windows(window)
+        .seed(args.seed.unwrap_or(0))
+        .prior_starts(args.prior_starts);
     request
         .prepare()
         .map_err(|e| said_as_the_flags_say_it(e, args))

@@ -238,31 +238,29 @@ impl Default for CheckSettings {
     }
 }
 
-/// Everything an estimate of records needs: see the module's doc.
+/// Everything an estimate of records needs: see the module's doc. Built
+/// by its setters from [`EstimateRequest::new`], then
+/// [`prepared`](EstimateRequest::prepare).
+///
+/// ```
+/// use twostage::{CheckSettings, EstimateRequest, EstimateWith, RefinePolicy, RefineWhich};
+/// let request = EstimateRequest::new(EstimateWith::OutputError { starts: 3 })
+///     .check_settings(CheckSettings { runs: 19, score_from: 10 })
+///     .seed(4);
+/// assert!(!request.checks(), "settings alone ask for no check");
+/// let request = request.refine(Some(RefineWhich::Auto(RefinePolicy::default())));
+/// assert!(request.checks(), "refine = auto checks to choose");
+/// ```
 pub struct EstimateRequest {
-    /// What estimates each record.
-    pub with: EstimateWith,
-    /// The model the records come from: a built-in one or a model file.
-    /// An estimator knows its own (a model file of it is needed to check,
-    /// refine or jointly fit an estimator of a model file); a classic
-    /// method, the output-error fit and given values need it.
-    pub model: Option<NamedModel>,
-    /// Check each estimate against its record.
-    pub check: Option<CheckSettings>,
-    /// Refine an estimator's estimates through the model.
-    pub refine: Option<RefineWhich>,
-    /// One estimate of the plant behind every record, after theirs
-    /// ([`Estimating::joint`]).
-    pub joint: bool,
-    /// Estimate windows of each record.
-    pub windows: Option<Windows>,
-    /// Seeds the random methods, the check's own records and the best-fit
-    /// search's starts over the prior.
-    pub seed: u64,
-    /// The best-fit search's starts over the prior besides the estimate
-    /// and its interval's corners (default
-    /// [`SearchStarts::default_from_prior`]).
-    pub prior_starts: Option<usize>,
+    with: EstimateWith,
+    model: Option<NamedModel>,
+    check: bool,
+    check_settings: CheckSettings,
+    refine: Option<RefineWhich>,
+    joint: bool,
+    windows: Option<Windows>,
+    seed: u64,
+    prior_starts: Option<usize>,
 }
 
 impl EstimateRequest {
@@ -271,7 +269,8 @@ impl EstimateRequest {
         Self {
             with,
             model: None,
-            check: None,
+            check: false,
+            check_settings: CheckSettings::default(),
             refine: None,
             joint: false,
             windows: None,
@@ -280,10 +279,67 @@ impl EstimateRequest {
         }
     }
 
+    /// The model the records come from: a built-in one or a model file.
+    /// An estimator knows its own (a model file of it is needed to check,
+    /// refine or jointly fit an estimator of a model file); a classic
+    /// method, the output-error fit and given values need it.
+    pub fn model(mut self, model: Option<NamedModel>) -> Self {
+        self.model = model;
+        self
+    }
+
+    /// Check each estimate against its record (with
+    /// [`Self::check_settings`]).
+    pub fn check_records(mut self, asked: bool) -> Self {
+        self.check = asked;
+        self
+    }
+
+    /// How a check ranks a record, whether it is asked for or implied by
+    /// `refine = auto` (default [`CheckSettings::default`]).
+    pub fn check_settings(mut self, settings: CheckSettings) -> Self {
+        self.check_settings = settings;
+        self
+    }
+
+    /// Refine an estimator's estimates through the model.
+    pub fn refine(mut self, which: Option<RefineWhich>) -> Self {
+        self.refine = which;
+        self
+    }
+
+    /// One estimate of the plant behind every record, after theirs
+    /// ([`Estimating::joint`]).
+    pub fn joint(mut self, joint: bool) -> Self {
+        self.joint = joint;
+        self
+    }
+
+    /// Estimate windows of each record.
+    pub fn windows(mut self, windows: Option<Windows>) -> Self {
+        self.windows = windows;
+        self
+    }
+
+    /// Seeds the random methods, the check's own records and the best-fit
+    /// search's starts over the prior (default 0).
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// The best-fit search's starts over the prior besides the estimate
+    /// and its interval's corners (default
+    /// [`SearchStarts::default_from_prior`]).
+    pub fn prior_starts(mut self, starts: Option<usize>) -> Self {
+        self.prior_starts = starts;
+        self
+    }
+
     /// Whether the records are checked: asked, or to choose which to
-    /// refine.
+    /// refine (the one place `refine = auto` implies the check).
     pub fn checks(&self) -> bool {
-        self.check.is_some() || matches!(self.refine, Some(RefineWhich::Auto(_)))
+        self.check || matches!(self.refine, Some(RefineWhich::Auto(_)))
     }
 
     /// The request ready to estimate records: the model found and loaded
@@ -299,10 +355,9 @@ impl EstimateRequest {
     ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
     /// let mut record = model.spec().new_record();
     /// model.simulate(&[0.3], &mut experiment_rng(8, 0), &mut record)?;
-    /// let request = EstimateRequest {
-    ///     check: Some(CheckSettings { runs: 39, score_from: 0 }),
-    ///     ..EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
-    /// };
+    /// let request = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+    ///     .check_records(true)
+    ///     .check_settings(CheckSettings { runs: 39, score_from: 0 });
     /// let estimating = request.prepare()?;
     /// let estimates = estimating.estimate("records", vec![("7".into(), Ok(record.clone()))], &Silent);
     /// let (_, row) = estimates.rows[0].1.as_ref().map_err(ToString::to_string)?;
@@ -331,7 +386,7 @@ impl EstimateRequest {
         }
         let settings = Settings {
             checks: self.checks(),
-            check: self.check.unwrap_or_default(),
+            check: self.check_settings,
             refine: self.refine,
             joint: self.joint,
             windows: self.windows,
