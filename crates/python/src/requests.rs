@@ -154,17 +154,15 @@ pub(crate) fn joint<'py>(
     let joint = py.detach(|| {
         let estimates =
             estimating.estimate_each(records, &|id| format!("records[{id}]"), &twostage::Silent);
-        let rows: Vec<(twostage::models::IoData, twostage::RecordEstimate)> = estimates
-            .rows
-            .into_iter()
-            .map(|(_, outcome)| outcome)
-            .collect::<Result<_, twostage::RecordFailure>>()
-            .map_err(|e| e.to_string())?;
-        let plant: Vec<_> = rows.iter().map(|(record, row)| (record, row)).collect();
-        match estimating.joint(&plant, &twostage::Silent) {
+        if let Some((_, Err(e))) = estimates.rows.iter().find(|(_, o)| o.is_err()) {
+            return Err(e.to_string());
+        }
+        let mut plant = estimating.plant();
+        plant.gather(&estimates, |id| format!("records[{id}]"));
+        match estimating.fit_plant(&plant, &twostage::Silent) {
             Some(Ok((joint, _))) => Ok(joint),
             Some(Err(e)) => Err(format!("the joint fit failed: {e}")),
-            None => unreachable!("the request asks for the joint fit"),
+            None => unreachable!("the request asks for the joint fit of its records"),
         }
     });
     joint::joint_dict(py, joint.map_err(PyValueError::new_err)?)
@@ -310,24 +308,17 @@ pub(crate) fn estimate_records<'py>(
                 .collect();
             (auto.explained, auto.checked, refined)
         });
+        let mut plant = estimating.plant();
+        plant.gather(&estimates, |id| format!("records[{id}]"));
         let mut rows = Vec::new();
         let mut failed = Vec::new();
         for (id, outcome) in estimates.rows {
             match outcome {
-                Ok((record, row)) => rows.push((id, record, row)),
+                Ok((_, row)) => rows.push((id, row)),
                 Err(why) => failed.push((id, why.to_string())),
             }
         }
-        let plant: Vec<(&IoData, &twostage::RecordEstimate)> =
-            rows.iter().map(|(_, record, row)| (record, row)).collect();
-        let joint = if plant.is_empty() {
-            None
-        } else {
-            estimating.joint(&plant, progress)
-        };
-        let mut rows: Vec<(String, twostage::RecordEstimate)> =
-            rows.into_iter().map(|(id, _, row)| (id, row)).collect();
-        match joint {
+        match estimating.fit_plant(&plant, progress) {
             Some(Ok((_, row))) => rows.push(("joint".into(), row)),
             Some(Err(why)) => failed.push(("joint".into(), format!("the joint fit failed: {why}"))),
             None => {}

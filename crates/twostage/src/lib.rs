@@ -61,8 +61,9 @@ mod validation_run;
 
 pub use estimating::{
     AutoRefined, CheckSettings, EstimateRequest, EstimateWith, Estimates, Estimating, GivenValues,
-    GivenValuesError, MethodFailure, OUTPUT_ERROR_METHOD, Purpose, RecordEstimate, RecordFailure,
-    RecordOutcome, RefineChoiceError, RefineWhich, RequestError, RequestProblem, Windows,
+    GivenValuesError, MethodFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RecordEstimate,
+    RecordFailure, RecordOutcome, RefineChoiceError, RefineWhich, RequestError, RequestProblem,
+    Windows,
 };
 pub use joint::{JointFitter, JointOfRecords};
 pub use refiner::{EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, ToRefine};

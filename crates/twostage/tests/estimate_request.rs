@@ -84,6 +84,30 @@ fn an_estimator_s_rows_are_its_own_estimates_and_windows_the_records_own_windows
         bad.as_ref().unwrap_err().to_string(),
         "file.csv: row 3, column y: not a number"
     );
+    // The plant gathers the estimated windows, not the unreadable record,
+    // and its fit is the joint fit of the same rows.
+    let mut plant = estimating.plant();
+    plant.gather(&estimates, |id| format!("file.csv: experiment {id}"));
+    assert_eq!(plant.len(), 6);
+    assert_eq!(plant.places()[3], "file.csv: experiment e1");
+    let pairs: Vec<(&IoData, &twostage::RecordEstimate)> = estimates.rows[..6]
+        .iter()
+        .map(|(_, o)| {
+            let (record, row) = o.as_ref().unwrap();
+            (record, row)
+        })
+        .collect();
+    let (alone, _) = estimating.joint(&pairs, &Silent).unwrap().unwrap();
+    let (gathered, row) = estimating.fit_plant(&plant, &Silent).unwrap().unwrap();
+    assert_eq!(gathered.theta, alone.theta);
+    assert_eq!(row.theta, alone.theta);
+    let unjoined = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
+        .prepare()
+        .unwrap();
+    let mut nothing = unjoined.plant();
+    nothing.gather(&estimates, |id| id.to_string());
+    assert!(nothing.is_empty(), "no joint fit asked: nothing gathered");
+    assert!(unjoined.fit_plant(&nothing, &Silent).is_none());
 
     // Without a fit that follows, another length is refused by name.
     let estimating = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator)))

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use twostage::models::IoData;
 use twostage::{Estimating, RecordEstimate};
 
 use crate::options::{InitialCovariance, TableFormat};
@@ -224,15 +223,15 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let bars = crate::bars::Bars::new(false);
     let mut rows: Vec<(String, RecordEstimate)> = Vec::new();
     let mut failed = 0;
-    // With --joint: every estimated record, by file and experiment, and
-    // its row.
-    let mut plant: Vec<(String, IoData, usize)> = Vec::new();
+    // With --joint: every estimated record, by file and experiment.
+    let mut plant = estimating.plant();
     for path in &args.data {
         let reads =
             twostage::sources::record_file::read(path, &format).map_err(anyhow::Error::msg)?;
         let records = reads.into_iter().map(|r| (r.id, r.record)).collect();
         let file = path.display().to_string();
         let estimates = estimating.estimate(&file, records, &bars);
+        plant.gather(&estimates, |id| format!("{file}: experiment {id}"));
         if let Some(auto) = &estimates.auto {
             eprintln!(
                 "note: {file}: --refine=auto: the check explains {} of {} two-stage estimates; \
@@ -259,10 +258,6 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                         )?;
                     }
                     said.check(&id, &estimated);
-                    if estimating.joins() {
-                        let name = format!("{file}: experiment {id}");
-                        plant.push((name, record, rows.len()));
-                    }
                     rows.push((id, estimated));
                 }
                 Err(problem) => {
@@ -273,26 +268,20 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         }
         said.summarize();
     }
-    if !plant.is_empty() {
-        let records: Vec<(&IoData, &RecordEstimate)> = plant
-            .iter()
-            .map(|(_, record, row)| (record, &rows[*row].1))
-            .collect();
-        match estimating.joint(&records, &bars) {
-            Some(Ok((joint, row))) => {
-                said::joint(&plant, &joint);
-                rows.push(("joint".into(), row));
-            }
-            // No row: a joint row without an estimate would read as one.
-            Some(Err(why)) => {
-                failed += 1;
-                eprintln!(
-                    "error: the joint fit of {} records failed: {why}",
-                    plant.len()
-                );
-            }
-            None => unreachable!("records are gathered for a joint fit only"),
+    match estimating.fit_plant(&plant, &bars) {
+        Some(Ok((joint, row))) => {
+            said::joint(&plant.places(), &joint);
+            rows.push(("joint".into(), row));
         }
+        // No row: a joint row without an estimate would read as one.
+        Some(Err(why)) => {
+            failed += 1;
+            eprintln!(
+                "error: the joint fit of {} records failed: {why}",
+                plant.len()
+            );
+        }
+        None => {}
     }
     let outcome = Outcome {
         estimated: rows.len(),

@@ -7,7 +7,6 @@ use std::path::Path;
 use twostage::JointOfRecords;
 use twostage::RecordCheck;
 use twostage::fit::TerminationReason;
-use twostage::models::IoData;
 
 use super::columns::list;
 use twostage::sources::record_file::RecordFormat;
@@ -273,8 +272,8 @@ impl RepeatedFailures {
 /// What the joint fit of `plant`'s records (by name) did with each: the
 /// records left out and why, those whose estimates disagree, and each
 /// fitted record's fit at the joint estimate.
-pub(super) fn joint(plant: &[(String, IoData, usize)], joint: &JointOfRecords) {
-    let name = |i: usize| plant[i].0.as_str();
+pub(super) fn joint(plant: &[&str], joint: &JointOfRecords) {
+    let name = |i: usize| plant[i];
     for (i, why) in &joint.left_out {
         eprintln!(
             "warning: {}: left out of the joint fit: the model does not run on it: {why}",

@@ -25,7 +25,7 @@ mod through_model;
 
 pub use failure::{MethodFailure, RecordFailure};
 pub use methods::OUTPUT_ERROR_METHOD;
-pub use rows::{AutoRefined, Estimates, RecordEstimate, RecordOutcome};
+pub use rows::{AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome};
 
 use methods::Method;
 

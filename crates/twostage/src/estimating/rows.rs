@@ -166,3 +166,55 @@ impl AutoRefined {
         groups
     }
 }
+
+/// The records of one plant gathered over batches for the request's
+/// joint fit ([`Estimating::fit_plant`](super::Estimating::fit_plant)):
+/// each record a batch estimated, with its estimate and its place. Empty,
+/// and gathering nothing, when the request asked for no joint fit.
+#[derive(Debug, Clone, Default)]
+pub struct Plant {
+    joins: bool,
+    records: Vec<(String, IoData, RecordEstimate)>,
+}
+
+impl Plant {
+    pub(super) fn new(joins: bool) -> Self {
+        Self {
+            joins,
+            records: Vec::new(),
+        }
+    }
+
+    /// Every estimated row of `estimates` (the failed ones left out),
+    /// named by `place` of its id (`file.csv: experiment 3`, say).
+    pub fn gather(&mut self, estimates: &Estimates, place: impl Fn(&str) -> String) {
+        if !self.joins {
+            return;
+        }
+        for (id, outcome) in &estimates.rows {
+            if let Ok((record, row)) = outcome {
+                self.records.push((place(id), record.clone(), row.clone()));
+            }
+        }
+    }
+
+    /// The gathered records' places, in the order gathered: a joint fit's
+    /// record indices point here.
+    pub fn places(&self) -> Vec<&str> {
+        self.records.iter().map(|(p, _, _)| p.as_str()).collect()
+    }
+
+    /// How many records are gathered.
+    pub fn len(&self) -> usize {
+        self.records.len()
+    }
+
+    /// Whether none is.
+    pub fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
+    pub(super) fn records(&self) -> Vec<(&IoData, &RecordEstimate)> {
+        self.records.iter().map(|(_, r, e)| (r, e)).collect()
+    }
+}

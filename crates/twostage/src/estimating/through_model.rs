@@ -7,7 +7,7 @@ use twostage_refine::{BestFit, RecordCheck, RefineError, check_against, search_b
 use twostage_sources::Progress;
 
 use super::Estimating;
-use super::rows::{RecordEstimate, RecordOutcome};
+use super::rows::{Plant, RecordEstimate, RecordOutcome};
 use crate::{EstimateRefiner, JointOfRecords, ModelFailure, RECORDS_TOGETHER, ToRefine};
 
 /// A record's best-fit search, or why it failed; `None` where no check or
@@ -107,6 +107,29 @@ impl Estimating {
                 progress.advance_step(1);
             });
         progress.end_step();
+    }
+
+    /// An empty gathering of the records of one plant, for
+    /// [`Self::fit_plant`]: it gathers nothing unless the request asked
+    /// for the joint fit.
+    pub fn plant(&self) -> Plant {
+        Plant::new(self.joins())
+    }
+
+    /// The joint fit of the records `plant` gathered, and its row; `None`
+    /// when the request asked for none or nothing was gathered.
+    ///
+    /// # Errors
+    /// Why the joint fit failed, as [`Self::joint`].
+    pub fn fit_plant(
+        &self,
+        plant: &Plant,
+        progress: &dyn Progress,
+    ) -> Option<Result<(JointOfRecords, RecordEstimate), RefineError>> {
+        if plant.is_empty() {
+            return None;
+        }
+        self.joint(&plant.records(), progress)
     }
 
     /// The joint estimate of every record of `plant` (a record and its
