@@ -582,9 +582,10 @@ pub trait Simulator: Send + Sync {
     }
 }
 
-/// A simulator behind a reference or a box is the simulator: callers that
-/// own theirs (a `Box<dyn Simulator>` from a model file) and callers that
-/// borrow one share the generic code that takes `S: Simulator`.
+/// A simulator behind a reference, a box or an `Arc` is the simulator:
+/// callers that own theirs (a `Box<dyn Simulator>` from a model file),
+/// share one (an estimate's check, refinement and joint fit) or borrow one
+/// share the generic code that takes `S: Simulator`.
 macro_rules! forward_simulator {
     ($($pointer:ty),*) => {$(
         impl<S: Simulator + ?Sized> Simulator for $pointer {
@@ -643,7 +644,7 @@ macro_rules! forward_simulator {
     )*};
 }
 
-forward_simulator!(&S, Box<S>);
+forward_simulator!(&S, Box<S>, std::sync::Arc<S>);
 
 /// Check the length and finiteness of theta for `spec` (not the box:
 /// simulators may be run outside their prior on purpose).

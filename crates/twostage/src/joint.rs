@@ -13,7 +13,7 @@ use twostage_refine::{
 };
 use twostage_sources::NamedModel;
 
-use crate::refiner::ToRefine;
+use crate::refiner::{SharedSimulator, ToRefine};
 
 /// The joint estimate of the records handed to [`JointFitter::fit`], each
 /// record named by its place among them.
@@ -48,7 +48,7 @@ pub struct JointOfRecords {
 
 /// Joint estimates of an estimator's plant: see [`JointFitter::new`].
 pub struct JointFitter {
-    fit: Refinement<OutputError<Box<dyn Simulator>>>,
+    fit: Refinement<OutputError<SharedSimulator>>,
     plan: JointPlan,
 }
 
@@ -92,11 +92,24 @@ impl JointFitter {
         model_file: Option<&NamedModel>,
         search: SearchStarts,
     ) -> Result<Self> {
-        let boxed = |e: crate::Error| BaselineError::TwoStage(Box::new(e));
         let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
             .and_then(|model| model.simulator())
-            .map_err(|e| boxed(e.into()))?;
-        let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
+            .map_err(|e| BaselineError::TwoStage(Box::new(e.into())))?;
+        Self::with_simulator(estimator, simulator.into(), search)
+    }
+
+    /// [`Self::new`] through `simulator`, the model's (a request shares
+    /// one between its check, refinement and joint fit).
+    ///
+    /// # Errors
+    /// A model that cannot run without noise on a given input.
+    pub fn with_simulator(
+        estimator: &Estimator,
+        simulator: SharedSimulator,
+        search: SearchStarts,
+    ) -> Result<Self> {
+        let fit = OutputError::new(simulator)
+            .map_err(|e| BaselineError::TwoStage(Box::new(crate::Error::from(e))))?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         Ok(Self {
             fit: Refinement::new(fit),

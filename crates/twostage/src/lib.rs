@@ -66,7 +66,9 @@ pub use estimating::{
     Windows,
 };
 pub use joint::{JointFitter, JointOfRecords};
-pub use refiner::{EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, ToRefine};
+pub use refiner::{
+    EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
+};
 pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
 pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
 pub use twostage_compress::CompressorConfig;

@@ -74,6 +74,11 @@ pub struct RefinedEstimate {
 /// estimate's interval half-widths where the record has its own.
 pub type ToRefine<'a> = (&'a IoData, &'a [f64], Option<&'a [f64]>);
 
+/// One simulator of the model shared by everything an estimate request
+/// runs through it (its check, its refinement, its joint fit): built once,
+/// its processes started once.
+pub type SharedSimulator = Arc<dyn Simulator>;
+
 /// How an estimator's estimates are refined: see [`EstimateRefiner::new`].
 pub struct EstimateRefiner {
     how: How,
@@ -92,7 +97,7 @@ enum How {
         local: Refinement<Box<dyn ResidualModel<Error = BaselineError>>>,
         points: usize,
     },
-    OutputError(Refinement<OutputError<Box<dyn Simulator>>>),
+    OutputError(Refinement<OutputError<SharedSimulator>>),
 }
 
 impl EstimateRefiner {
@@ -127,6 +132,26 @@ impl EstimateRefiner {
     /// model file of another model than the estimator's, or a model that
     /// cannot run without noise on a given input.
     pub fn new(estimator: &Estimator, model_file: Option<&NamedModel>) -> Result<Self> {
+        Self::with_model(estimator, model_file, || {
+            NamedModel::trained_on(&estimator.training().model, model_file)
+                .and_then(|model| model.simulator())
+                .map(SharedSimulator::from)
+                .map_err(Into::into)
+        })
+    }
+
+    /// [`Self::new`], the simulator of an output-error refinement given by
+    /// `model` (called only where one is needed): a request shares one
+    /// simulator, and its processes, between its check, its refinement
+    /// and its joint fit.
+    ///
+    /// # Errors
+    /// As [`Self::new`], and what `model` says.
+    pub fn with_model(
+        estimator: &Estimator,
+        model_file: Option<&NamedModel>,
+        model: impl FnOnce() -> crate::Result<SharedSimulator>,
+    ) -> Result<Self> {
         let radius = estimator.neighbourhood(2.0).map_err(|e| boxed(e.into()))?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
@@ -143,9 +168,7 @@ impl EstimateRefiner {
                 search: default_search(estimator),
             });
         }
-        let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
-            .and_then(|model| model.simulator())
-            .map_err(|e| boxed(e.into()))?;
+        let simulator = model().map_err(boxed)?;
         let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
         Ok(Self {
             how: How::OutputError(Refinement::new(fit)),
@@ -305,7 +328,7 @@ impl EstimateRefiner {
     /// best-fit search, then its best fit's own interval.
     fn output_error(
         &self,
-        fit: &Refinement<OutputError<Box<dyn Simulator>>>,
+        fit: &Refinement<OutputError<SharedSimulator>>,
         items: &[ToRefine<'_>],
     ) -> Vec<std::result::Result<RefinedEstimate, ModelFailure>> {
         let prior = fit.model().prior();

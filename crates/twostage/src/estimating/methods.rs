@@ -3,12 +3,13 @@
 
 use twostage_baselines::{PredictionError, RecordEstimator};
 use twostage_estimator::Estimator;
-use twostage_models::{IoData, Simulator};
+use twostage_models::IoData;
 use twostage_refine::OutputError;
 
 use super::GivenValues;
 use super::failure::MethodFailure;
 use super::rows::RecordEstimate;
+use crate::SharedSimulator;
 
 /// The name the multi-start output-error fit goes by among the methods.
 pub const OUTPUT_ERROR_METHOD: &str = "oe";
@@ -25,7 +26,7 @@ pub(super) enum Method {
     /// A classic method of a built-in model.
     Classic(Box<dyn RecordEstimator>),
     /// The multi-start output-error fit.
-    OutputError(Box<PredictionError<OutputError<Box<dyn Simulator>>>>),
+    OutputError(Box<PredictionError<OutputError<SharedSimulator>>>),
     /// Given values.
     Given(GivenValues),
 }
@@ -41,7 +42,7 @@ impl Method {
     /// The multi-start output-error fit through `simulator`: `starts`
     /// draws from the prior of `seed`.
     pub(super) fn output_error(
-        simulator: Box<dyn Simulator>,
+        simulator: SharedSimulator,
         starts: usize,
         seed: u64,
     ) -> Result<Self, twostage_refine::RefineError> {

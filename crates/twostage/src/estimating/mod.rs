@@ -14,7 +14,7 @@ use twostage_models::{BuiltinModel, IoData, Simulator};
 use twostage_refine::{CheckPlan, DEFAULT_CHECK_RUNS, RefinePolicy, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
-use crate::{EstimateRefiner, JointFitter};
+use crate::{EstimateRefiner, JointFitter, SharedSimulator};
 
 mod failure;
 mod methods;
@@ -443,25 +443,34 @@ impl Settings {
         given: Option<&NamedModel>,
     ) -> Result<Estimating, RequestError> {
         let q = estimator.param_names().len();
+        // The model found and built once, at its first use, for all.
+        let shared: std::cell::OnceCell<SharedSimulator> = std::cell::OnceCell::new();
+        let model = || -> crate::Result<SharedSimulator> {
+            if let Some(found) = shared.get() {
+                return Ok(found.clone());
+            }
+            let built: SharedSimulator = NamedModel::trained_on(&estimator.training().model, given)
+                .and_then(|named| named.simulator())?
+                .into();
+            Ok(shared.get_or_init(|| built).clone())
+        };
         let checker = if self.checks {
-            let found = NamedModel::trained_on(&estimator.training().model, given)
-                .and_then(|named| named.simulator())
-                .map_err(|e| RequestError::new(Purpose::Check, e.into()))?;
-            Some(found)
+            Some(model().map_err(|e| RequestError::new(Purpose::Check, e.into()))?)
         } else {
             None
         };
         let refiner = match self.refine {
             Some(_) => Some(
-                EstimateRefiner::new(&estimator, given)
+                EstimateRefiner::with_model(&estimator, given, model)
                     .map_err(|e| RequestError::new(Purpose::Refine, e.into()))?
                     .search(self.search(q)),
             ),
             None => None,
         };
         let joint = if self.joint {
+            let simulator = model().map_err(|e| RequestError::new(Purpose::Joint, e.into()))?;
             Some(
-                JointFitter::new(&estimator, given, self.search(q))
+                JointFitter::with_simulator(&estimator, simulator, self.search(q))
                     .map_err(|e| RequestError::new(Purpose::Joint, e.into()))?,
             )
         } else {
@@ -511,11 +520,11 @@ impl Settings {
             purpose,
             error: RequestProblem::NoModel,
         })?;
-        let simulator = |purpose: Purpose| {
-            named
-                .simulator()
-                .map_err(|e| RequestError::new(purpose, e.into()))
-        };
+        // Built once: the method's and the check's.
+        let simulator: SharedSimulator = named
+            .simulator()
+            .map_err(|e| RequestError::new(purpose, e.into()))?
+            .into();
         let (method, spec) = match with {
             EstimateWith::Classic { method, settings } => {
                 let builtin = named
@@ -534,25 +543,18 @@ impl Settings {
                 };
                 let classic = twostage_baselines::classic_estimator(builtin, method, &settings)
                     .map_err(|e| RequestError::new(purpose, Box::new(e)))?;
-                (Method::Classic(classic), simulator(purpose)?.spec().clone())
+                (Method::Classic(classic), simulator.spec().clone())
             }
             EstimateWith::OutputError { starts } => {
-                let model = simulator(purpose)?;
-                let spec = model.spec().clone();
-                let method = Method::output_error(model, starts, self.seed)
+                let spec = simulator.spec().clone();
+                let method = Method::output_error(simulator.clone(), starts, self.seed)
                     .map_err(|e| RequestError::new(purpose, e.into()))?;
                 (method, spec)
             }
-            EstimateWith::Given(values) => {
-                (Method::Given(values), simulator(purpose)?.spec().clone())
-            }
+            EstimateWith::Given(values) => (Method::Given(values), simulator.spec().clone()),
             EstimateWith::Estimator(_) => unreachable!("an estimator is prepared by two_stage"),
         };
-        let checker = if self.checks {
-            Some(simulator(Purpose::Check)?)
-        } else {
-            None
-        };
+        let checker = self.checks.then_some(simulator);
         Ok(Estimating {
             names: spec.param_names().to_vec(),
             signals: SignalNames {
@@ -672,7 +674,7 @@ pub struct Estimating {
     sample_time: f64,
     trained: Option<usize>,
     prior_box: Option<(Vec<f64>, Vec<f64>)>,
-    checker: Option<Box<dyn Simulator>>,
+    checker: Option<SharedSimulator>,
     refiner: Option<EstimateRefiner>,
     joint: Option<JointFitter>,
     refine: Option<RefineWhich>,
@@ -725,16 +727,10 @@ impl Estimating {
         self.joint.is_some()
     }
 
-    /// The model a check simulates: after an output-error refinement, the
-    /// refinement's (its processes are running already).
+    /// The model a check simulates: the one the refinement and the joint
+    /// fit share, where they run one.
     fn check_model(&self) -> Option<&dyn Simulator> {
-        let checker = self.checker.as_deref()?;
-        Some(
-            self.refiner
-                .as_ref()
-                .and_then(EstimateRefiner::simulator)
-                .unwrap_or(checker),
-        )
+        self.checker.as_deref()
     }
 
     /// Why `RefineWhich::Auto` refines a record (`None`: it keeps its
@@ -748,5 +744,58 @@ impl Estimating {
             Some(Ok(c)) => policy.reason(c, e.out_of_distribution(), other_length),
             _ => other_length.then_some(RefineReason::OtherLength),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::TwoStage;
+    use twostage_models::Benchmark;
+
+    /// The same object behind two references to simulators.
+    fn same(a: &dyn Simulator, b: &dyn Simulator) -> bool {
+        std::ptr::addr_eq(a as *const dyn Simulator, b as *const dyn Simulator)
+    }
+
+    /// A check, an output-error refinement and a joint fit run one
+    /// simulator, built once; a request of the output-error method shares
+    /// its simulator with its check.
+    #[test]
+    fn one_simulator_serves_the_check_the_refinement_and_the_joint_fit() {
+        let estimator = TwoStage::builder(&Benchmark::new())
+            .preset(crate::paper_benchmark())
+            .simulations(300)
+            .validation(0)
+            .calibration(150)
+            .seed(5)
+            .train()
+            .unwrap();
+        let benchmark = || Some(NamedModel::builtin("benchmark").unwrap());
+        let estimating = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator)))
+            // Named, the built-in model is refined by output error.
+            .model(benchmark())
+            .check_records(true)
+            .refine(Some(RefineWhich::All))
+            .joint(true)
+            .prepare()
+            .unwrap();
+        let checker = estimating.check_model().unwrap();
+        let refiner = estimating.refiner.as_ref().unwrap().simulator().unwrap();
+        let joint = estimating.joint.as_ref().unwrap().simulator();
+        assert!(same(checker, refiner) && same(checker, joint));
+        let fit = EstimateRequest::new(EstimateWith::OutputError { starts: 2 })
+            .model(benchmark())
+            .check_records(true)
+            .prepare()
+            .unwrap();
+        let Method::OutputError(method) = &fit.method else {
+            panic!("the output-error method");
+        };
+        assert!(same(
+            fit.check_model().unwrap(),
+            method.model().simulator().as_ref()
+        ));
     }
 }
