@@ -70,26 +70,37 @@ impl std::fmt::Display for InputDeviation {
         let side = if self.value > high { "above" } else { "below" };
         // One value: every record had the same.
         if low >= high {
+            let [value, low] = apart([self.value, low]);
             write!(
                 f,
-                "input {}: {} {:.3}{unit} where every training record had {:.3}{unit}",
-                self.signal,
-                self.quantity,
-                significant(self.value),
-                significant(low)
+                "input {}: {} {value}{unit} where every training record had {low}{unit}",
+                self.signal, self.quantity,
             )
         } else {
+            let [value, low, high] = apart([self.value, low, high]);
             write!(
                 f,
-                "input {}: {} {:.3}{unit} {side} the training records' {:.3} to {:.3}{unit}",
-                self.signal,
-                self.quantity,
-                significant(self.value),
-                significant(low),
-                significant(high)
+                "input {}: {} {value}{unit} {side} the training records' {low} to {high}{unit}",
+                self.signal, self.quantity,
             )
         }
     }
+}
+
+/// `numbers` printed with one count of decimals: the fewest from 3 on at
+/// which no two of them print alike (at most 15), so that a message says
+/// the digits in which a record's value and the family's range differ.
+fn apart<const N: usize>(numbers: [f64; N]) -> [String; N] {
+    let print = |decimals: usize| numbers.map(|v| format!("{v:.decimals$}"));
+    (3..=15)
+        .map(print)
+        .find(|shown| {
+            shown
+                .iter()
+                .enumerate()
+                .all(|(i, a)| shown[i + 1..].iter().all(|b| a != b))
+        })
+        .unwrap_or_else(|| print(15))
 }
 
 /// A value rounded to 4 significant digits, for messages.
@@ -330,6 +341,30 @@ mod tests {
         assert_eq!(
             slow[0].to_string(),
             "input u: mean frequency 0.196 Hz where every training record had 0.500 Hz"
+        );
+    }
+
+    /// Numbers that agree in their first decimals are printed to the
+    /// digits in which they differ, each of a message with as many.
+    #[test]
+    fn a_message_prints_the_digits_that_differ() {
+        let deviation = |value: f64, range: [f64; 2]| InputDeviation {
+            signal: "u".into(),
+            quantity: "mean",
+            value,
+            range,
+        };
+        assert_eq!(
+            deviation(0.006_04, [0.006_123, 0.006_131]).to_string(),
+            "input u: mean 0.00604 below the training records' 0.00612 to 0.00613"
+        );
+        assert_eq!(
+            deviation(1.000_000_2, [1.0, 1.0]).to_string(),
+            "input u: mean 1.0000002 where every training record had 1.0000000"
+        );
+        assert_eq!(
+            apart([2.5, 2.5]),
+            ["2.500000000000000", "2.500000000000000"]
         );
     }
 
