@@ -238,6 +238,38 @@ fn reports_come_as_text_or_json() {
     );
 }
 
+/// Records flagged alike are said in one line naming each of them with its
+/// number, not a line each.
+#[test]
+fn records_flagged_alike_are_said_in_one_line() {
+    let dir = scratch("flagged_alike");
+    let file = dir.join("lin.tsest");
+    let out = train_linear(&file, "200", "0");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let data = dir.join("alien.csv");
+    let mut csv = String::from("experiment,u,y\n");
+    for e in ["a", "b", "c"] {
+        for k in 0..1000 {
+            let u = ((k * 7919 + 13) % 17) as f64 / 8.0 - 1.0;
+            csv.push_str(&format!("{e},{u},{}\n", 0.1 * u + 0.01 * k as f64 % 0.3));
+        }
+    }
+    std::fs::write(&data, csv).unwrap();
+    let out = twostage(&["estimate", "--estimator", path(&file), path(&data)]);
+    let err = text(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("out of distribution: their features"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].contains("experiments a, b, c: out of distribution"),
+        "{err}"
+    );
+    assert_eq!(err.matches("Mahalanobis").count(), 1, "{err}");
+}
+
 #[test]
 fn a_bad_record_is_reported_and_the_others_are_still_estimated() {
     let dir = scratch("bad_record");

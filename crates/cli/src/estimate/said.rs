@@ -1,6 +1,7 @@
 //! What `estimate` says on stderr about each record: warnings about its
 //! estimate, its refinement and its check, each failure shared by many
-//! records said once.
+//! records said once, and each kind of out-of-distribution flag said in
+//! one line naming every record it concerns.
 
 use std::path::Path;
 
@@ -19,6 +20,19 @@ pub(super) struct Said<'a> {
     /// The estimator's record length, where an estimator estimates.
     trained: Option<usize>,
     repeated: RepeatedFailures,
+    outside: Outside,
+}
+
+/// The records flagged out of distribution, by what flagged them: said
+/// at the end of the file, one line for each flag.
+#[derive(Default)]
+struct Outside {
+    /// Experiment, Mahalanobis distance, threshold.
+    features: Vec<(String, f64, f64)>,
+    /// Experiment, the numbers outside the family.
+    input: Vec<(String, String)>,
+    /// Experiment, shape distance, threshold.
+    shape: Vec<(String, f64, f64)>,
 }
 
 impl<'a> Said<'a> {
@@ -28,6 +42,7 @@ impl<'a> Said<'a> {
             format,
             trained,
             repeated: RepeatedFailures::default(),
+            outside: Outside::default(),
         }
     }
 
@@ -51,36 +66,20 @@ impl<'a> Said<'a> {
 
     /// Warnings about the estimate itself and its refinement.
     pub(super) fn warnings(&mut self, id: &str, estimated: &RecordEstimate) {
-        let file = &self.file;
         if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
-            eprintln!(
-                "warning: {file}: experiment {id}: out of distribution: its features lie \
-                 at Mahalanobis distance {d:.3} from the training features, beyond \
-                 the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
-                 and the intervals do not cover it (is it the same model and input?)"
-            );
+            self.outside.features.push((id.to_string(), d, t));
         }
         if let Some(deviations) = estimated.input.as_ref().filter(|d| !d.is_empty()) {
             let said: Vec<String> = deviations.iter().map(ToString::to_string).collect();
-            eprintln!(
-                "warning: {file}: experiment {id}: out of distribution: its input lies outside \
-                 the family the estimator was trained on ({}); the estimate extrapolates and \
-                 the intervals do not cover it (train on a design that covers this input: \
-                 docs/your-own-model.md)",
-                said.join("; ")
-            );
+            self.outside.input.push((id.to_string(), said.join("; ")));
         }
         if let Some((d, t)) = estimated
             .input_shape
             .filter(|_| estimated.input_shape_outside())
         {
-            eprintln!(
-                "warning: {file}: experiment {id}: out of distribution: {}; the estimate \
-                 extrapolates and the intervals do not cover it (train on a design that \
-                 covers this input: docs/any-experiment.md)",
-                twostage::models::input_shape_words(d, t)
-            );
+            self.outside.shape.push((id.to_string(), d, t));
         }
+        let file = &self.file;
         if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
             let outputs = &self.format.outputs;
             let listed: Vec<String> = floored
@@ -197,9 +196,103 @@ impl<'a> Said<'a> {
         }
     }
 
-    /// One line per failure many records shared.
+    /// One line per failure many records shared, and per flag.
     pub(super) fn summarize(&self) {
+        self.outside.summarize(&self.file);
         self.repeated.summarize(&self.file);
+    }
+}
+
+impl Outside {
+    /// One line for each flag that flagged any record: a record's own
+    /// words for one, the records listed with their numbers for several.
+    fn summarize(&self, file: &str) {
+        let ids = |rows: &[String]| {
+            let ids: Vec<&str> = rows.iter().map(String::as_str).collect();
+            list_ids(&ids)
+        };
+        let features: Vec<String> = self.features.iter().map(|(id, _, _)| id.clone()).collect();
+        match self.features.as_slice() {
+            [] => {}
+            [(id, d, t)] => eprintln!(
+                "warning: {file}: experiment {id}: out of distribution: its features lie \
+                 at Mahalanobis distance {d:.3} from the training features, beyond \
+                 the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
+                 and the intervals do not cover it (is it the same model and input?)"
+            ),
+            [(_, _, t), ..] => eprintln!(
+                "warning: {file}: experiments {}: out of distribution: their features lie \
+                 at Mahalanobis distances {} from the training features, beyond the {t:.3} \
+                 that 99.9% of them stay within; the estimates extrapolate and the \
+                 intervals do not cover them (are they of the same model and input?)",
+                ids(&features),
+                numbers(self.features.iter().map(|(_, d, _)| *d)),
+            ),
+        }
+        match self.input.as_slice() {
+            [] => {}
+            [(id, said)] => eprintln!(
+                "warning: {file}: experiment {id}: out of distribution: its input lies outside \
+                 the family the estimator was trained on ({said}); the estimate extrapolates \
+                 and the intervals do not cover it (train on a design that covers this \
+                 input: docs/your-own-model.md)"
+            ),
+            many => {
+                let each: Vec<String> = many
+                    .iter()
+                    .take(SHOWN)
+                    .map(|(id, said)| format!("experiment {id}: {said}"))
+                    .collect();
+                let ids_of: Vec<String> = many.iter().map(|(id, _)| id.clone()).collect();
+                eprintln!(
+                    "warning: {file}: experiments {}: out of distribution: their inputs lie \
+                     outside the family the estimator was trained on ({}{}); the estimates \
+                     extrapolate and the intervals do not cover them (train on a design that \
+                     covers these inputs: docs/your-own-model.md)",
+                    ids(&ids_of),
+                    each.join("; "),
+                    more(many.len()),
+                );
+            }
+        }
+        let shaped: Vec<String> = self.shape.iter().map(|(id, _, _)| id.clone()).collect();
+        match self.shape.as_slice() {
+            [] => {}
+            [(id, d, t)] => eprintln!(
+                "warning: {file}: experiment {id}: out of distribution: {}; the estimate \
+                 extrapolates and the intervals do not cover it (train on a design that \
+                 covers this input: docs/any-experiment.md)",
+                twostage::models::input_shape_words(*d, *t)
+            ),
+            [(_, _, t), ..] => eprintln!(
+                "warning: {file}: experiments {}: out of distribution: their input shapes \
+                 (autocorrelations) lie at distances {} from the training records' nearest, \
+                 beyond the {t:.3} that 99% of the held-out records' stay within; the \
+                 estimates extrapolate and the intervals do not cover them (train on a \
+                 design that covers these inputs: docs/any-experiment.md)",
+                ids(&shaped),
+                numbers(self.shape.iter().map(|(_, d, _)| *d)),
+            ),
+        }
+    }
+}
+
+/// Records whose own numbers a grouped line shows.
+const SHOWN: usize = 10;
+
+/// The first [`SHOWN`] of `values`, and how many more.
+fn numbers(values: impl ExactSizeIterator<Item = f64>) -> String {
+    let n = values.len();
+    let shown: Vec<String> = values.take(SHOWN).map(|v| format!("{v:.3}")).collect();
+    format!("{}{}", shown.join(", "), more(n))
+}
+
+/// ", ..." (how many more) past the first [`SHOWN`] of `n`.
+fn more(n: usize) -> String {
+    if n > SHOWN {
+        format!(" and {} more", n - SHOWN)
+    } else {
+        String::new()
     }
 }
 
