@@ -86,6 +86,10 @@ pub struct SimulateArgs {
     /// holds every sample.
     #[arg(long, value_name = "K", requires = "input")]
     score_from: Option<usize>,
+    /// With --input: score the prediction up to this sample, not
+    /// including it (counted from 0; default the record's end).
+    #[arg(long, value_name = "K", requires = "input")]
+    score_to: Option<usize>,
 }
 
 /// Run `twostage simulate`.
@@ -187,12 +191,20 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
     for (i, (row, record)) in rows.iter().zip(&records).enumerate() {
         if let Some(measured) = inputs.of(i) {
             let from = args.score_from.unwrap_or(0);
-            if from >= measured.n_samples() {
+            let n = measured.n_samples();
+            if from >= n {
                 return Err(usage(format!(
-                    "--score-from {from}: the record of experiment {} has {} samples (0 to {})",
+                    "--score-from {from}: the record of experiment {} has {n} samples (0 to {})",
                     row.id,
-                    measured.n_samples(),
-                    measured.n_samples().saturating_sub(1)
+                    n.saturating_sub(1)
+                )));
+            }
+            let to = args.score_to.unwrap_or(n);
+            if to <= from || to > n {
+                return Err(usage(format!(
+                    "--score-to {to}: the window must end after its start ({from}) and at \
+                     most at the end of the record of experiment {} ({n} samples)",
+                    row.id
                 )));
             }
             let parts: Vec<String> = spec
@@ -201,8 +213,8 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
                 .enumerate()
                 .map(|(j, name)| {
                     let (rms, fit) = twostage::output_fit(
-                        &measured.output(j)[from..],
-                        &record.output(j)[from..],
+                        &measured.output(j)[from..to],
+                        &record.output(j)[from..to],
                     );
                     format!("{name} RMS {}, fit {fit:.1}%", four_digits(rms))
                 })
@@ -210,10 +222,10 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
             eprintln!(
                 "experiment {}: against the given record's outputs{}: {}",
                 row.id,
-                if from > 0 {
-                    format!(" from sample {from}")
-                } else {
-                    String::new()
+                match (from, to) {
+                    (0, to) if to == n => String::new(),
+                    (from, to) if to == n => format!(" from sample {from}"),
+                    (from, to) => format!(" from sample {from} to {}", to - 1),
                 },
                 parts.join("; ")
             );

@@ -342,15 +342,16 @@ fn a_record_of_another_length_is_predicted_and_checked() {
 }
 
 /// `simulate --at --input --score-from K` scores the prediction on samples
-/// K and after: the RMS it prints is the one computed here from the files.
+/// K and after, `--score-to L` before L: the RMS it prints is the one
+/// computed here from the files.
 #[test]
 fn a_prediction_is_scored_from_the_sample_asked() {
     let dir = scratch("score-from");
     let data = records(&dir, 1);
     let (truth, record) = (data.join("truth.csv"), data.join("data.csv"));
     let predicted = dir.join("predicted.csv");
-    let run = |from: &str| {
-        twostage(&[
+    let run_to = |from: &str, to: Option<&str>| {
+        let mut args = vec![
             "simulate",
             "--model",
             "benchmark",
@@ -363,8 +364,13 @@ fn a_prediction_is_scored_from_the_sample_asked() {
             from,
             "--out",
             path(&predicted),
-        ])
+        ];
+        if let Some(to) = to {
+            args.extend(["--score-to", to]);
+        }
+        twostage(&args)
     };
+    let run = |from: &str| run_to(from, None);
     let out = run("100");
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stderr = text(&out.stderr);
@@ -394,6 +400,30 @@ fn a_prediction_is_scored_from_the_sample_asked() {
     assert!(
         (printed - rms).abs() <= 1e-3 * rms,
         "{printed} against {rms}"
+    );
+    // A window's end: samples 100 to 499.
+    let out = run_to("100", Some("500"));
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let printed: f64 = stderr
+        .split("from sample 100 to 499: y RMS ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .unwrap_or_else(|| panic!("{stderr}"))
+        .parse()
+        .unwrap();
+    let window = &tail[..400];
+    let rms = (window.iter().sum::<f64>() / window.len() as f64).sqrt();
+    assert!(
+        (printed - rms).abs() <= 1e-3 * rms,
+        "{printed} against {rms}"
+    );
+    let out = run_to("100", Some("100"));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("--score-to 100: the window must end after its start (100)"),
+        "{}",
+        text(&out.stderr)
     );
     // Past the record's end: named, with the valid range.
     let out = run("1000");

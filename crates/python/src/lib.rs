@@ -368,7 +368,7 @@ impl PyEstimator {
     /// parameter and two more). The model: the
     /// estimator's built-in one, or its model file (`model_file` or
     /// `model_toml`).
-    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=None, seed=0, score_from=0, prior_starts=None))]
+    #[pyo3(signature = (u, y, theta=None, *, model_file=None, model_toml=None, sims=None, seed=0, score_from=0, score_to=None, prior_starts=None))]
     #[allow(clippy::too_many_arguments)]
     fn check<'py>(
         &self,
@@ -381,6 +381,7 @@ impl PyEstimator {
         sims: Option<usize>,
         seed: u64,
         score_from: usize,
+        score_to: Option<usize>,
         prior_starts: Option<usize>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         requests::check(
@@ -394,6 +395,7 @@ impl PyEstimator {
             sims,
             seed,
             score_from,
+            score_to,
             prior_starts,
         )
     }
@@ -464,7 +466,7 @@ impl PyEstimator {
     /// writes them, the records that could not be estimated (experiment,
     /// why), and with `refine="auto"` `(explained, checked, [(experiment,
     /// reason)])`.
-    #[pyo3(signature = (records, *, experiments=None, check=false, refine=None, refine_below_fit=None, joint=false, window=None, every=None, correlation=false, model_file=None, model_toml=None, sims=None, score_from=0, prior_starts=None, seed=0, progress=None))]
+    #[pyo3(signature = (records, *, experiments=None, check=false, refine=None, refine_below_fit=None, joint=false, window=None, every=None, correlation=false, model_file=None, model_toml=None, sims=None, score_from=0, score_to=None, prior_starts=None, seed=0, progress=None))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn estimate_records<'py>(
         &self,
@@ -482,6 +484,7 @@ impl PyEstimator {
         model_toml: Option<&str>,
         sims: Option<usize>,
         score_from: usize,
+        score_to: Option<usize>,
         prior_starts: Option<usize>,
         seed: u64,
         progress: Option<Py<PyAny>>,
@@ -506,6 +509,7 @@ impl PyEstimator {
             model_toml,
             sims,
             score_from,
+            score_to,
             prior_starts,
             seed,
             progress,

@@ -30,6 +30,7 @@ pub(crate) fn check<'py>(
     sims: Option<usize>,
     seed: u64,
     score_from: usize,
+    score_to: Option<usize>,
     prior_starts: Option<usize>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let named = named_model(None, model_file, model_toml)?;
@@ -59,7 +60,7 @@ pub(crate) fn check<'py>(
         EstimateRequest::new(with)
             .model(model)
             .check_records(true)
-            .check_settings(check_settings(sims, score_from))
+            .check_settings(check_settings(sims, score_from, score_to))
             .seed(seed)
             .prior_starts(prior_starts),
     )?;
@@ -239,6 +240,7 @@ pub(crate) fn estimate_records<'py>(
     model_toml: Option<&str>,
     sims: Option<usize>,
     score_from: usize,
+    score_to: Option<usize>,
     prior_starts: Option<usize>,
     seed: u64,
     progress: Option<Py<PyAny>>,
@@ -269,7 +271,7 @@ pub(crate) fn estimate_records<'py>(
         EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
             .model(named_model(None, model_file, model_toml)?)
             .check_records(check)
-            .check_settings(check_settings(sims, score_from))
+            .check_settings(check_settings(sims, score_from, score_to))
             .refine(refine)
             .joint(joint)
             .windows(window.map(|length| twostage::Windows {

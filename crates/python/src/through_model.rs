@@ -265,10 +265,15 @@ pub(crate) fn checked_dict<'py>(
 }
 
 /// The check's settings as the keyword arguments give them.
-pub(crate) fn check_settings(sims: Option<usize>, score_from: usize) -> twostage::CheckSettings {
+pub(crate) fn check_settings(
+    sims: Option<usize>,
+    score_from: usize,
+    score_to: Option<usize>,
+) -> twostage::CheckSettings {
     twostage::CheckSettings {
         runs: sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
         score_from,
+        score_to,
     }
 }
 
@@ -276,7 +281,7 @@ pub(crate) fn check_settings(sims: Option<usize>, score_from: usize) -> twostage
 /// --check`): a dict of the check's columns, the noise-free response in
 /// `simulated`.
 #[pyfunction]
-#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=None, seed=0, allow_outside_prior=false, score_from=0, prior_starts=None))]
+#[pyo3(signature = (theta, u, y, *, model=None, model_file=None, model_toml=None, sims=None, seed=0, allow_outside_prior=false, score_from=0, score_to=None, prior_starts=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check_values<'py>(
     py: Python<'py>,
@@ -290,6 +295,7 @@ pub(crate) fn check_values<'py>(
     seed: u64,
     allow_outside_prior: bool,
     score_from: usize,
+    score_to: Option<usize>,
     prior_starts: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let named = named_model(model, model_file, model_toml)?.ok_or_else(|| {
@@ -317,7 +323,7 @@ pub(crate) fn check_values<'py>(
         EstimateRequest::new(EstimateWith::Given(given))
             .model(Some(named))
             .check_records(true)
-            .check_settings(check_settings(sims, score_from))
+            .check_settings(check_settings(sims, score_from, score_to))
             .seed(seed)
             .prior_starts(prior_starts),
     )?;

@@ -200,13 +200,23 @@ def test_given_values_are_checked_and_predicted_as_the_cli_does(benchmark, tmp_p
                               str(folder / "truth.csv"), "--check", "--check-sims", "99",
                               "--score-from", "100", "--format", "json",
                               str(folder / "data.csv")))
+    ended = json.loads(cli("estimate", "--model", "benchmark", "--at",
+                           str(folder / "truth.csv"), "--check", "--check-sims", "99",
+                           "--score-from", "100", "--score-to", "600", "--format", "json",
+                           str(folder / "data.csv")))
     for k in range(3):
         same_check(twostage.check(truth[k], u[k], y[k], model="benchmark", sims=99), checked[k])
         same_check(
             twostage.check(truth[k], u[k], y[k], model="benchmark", sims=99, score_from=100),
             windowed[k],
         )
+        same_check(
+            twostage.check(truth[k], u[k], y[k], model="benchmark", sims=99, score_from=100,
+                           score_to=600),
+            ended[k],
+        )
         assert windowed[k]["y_rms"] != checked[k]["y_rms"]
+        assert ended[k]["y_rms"] != windowed[k]["y_rms"]
         given_u, simulated = twostage.predict(truth[k], u[k], model="benchmark")
         rows = from_cli[from_cli[:, 0] == k]
         assert given_u[:, 0].tolist() == u[k][:, 0].tolist()

@@ -5,6 +5,7 @@
 
 use crate::InvalidSetting;
 use rayon::prelude::*;
+use std::ops::Range;
 use twostage_models::{Conditions, IoData, Simulator, experiment_rng};
 
 use crate::best_fit::{BestFit, SearchStarts};
@@ -183,11 +184,11 @@ pub fn output_fit(measured: &[f64], simulated: &[f64]) -> (f64, f64) {
     ((misfit / n).sqrt(), fit)
 }
 
-/// Mean square of `a - b` per output, from sample `from` on.
-fn mean_squares(a: &IoData, b: &IoData, from: usize) -> Vec<f64> {
+/// Mean square of `a - b` per output, over the samples of `window`.
+fn mean_squares(a: &IoData, b: &IoData, window: Range<usize>) -> Vec<f64> {
     (0..a.n_outputs())
         .map(|j| {
-            let (x, y) = (&a.output(j)[from..], &b.output(j)[from..]);
+            let (x, y) = (&a.output(j)[window.clone()], &b.output(j)[window.clone()]);
             x.iter().zip(y).map(|(p, q)| (p - q) * (p - q)).sum::<f64>() / x.len().max(1) as f64
         })
         .collect()
@@ -204,6 +205,9 @@ pub struct CheckPlan {
     /// probability); the first samples of a transient are left out. The
     /// best fit is still fitted to the whole record.
     pub score_from: usize,
+    /// Score up to this sample, not including it (`None`: to the record's
+    /// end); a tail the model is not meant for is left out.
+    pub score_to: Option<usize>,
     /// The best-fit search's starts drawn over the prior, besides the
     /// estimate ([`SearchStarts`]; 0 searches beside the estimate only).
     pub prior_starts: usize,
@@ -218,8 +222,17 @@ impl CheckPlan {
             noisy,
             seed,
             score_from: 0,
+            score_to: None,
             prior_starts: SearchStarts::default_from_prior(q),
         }
+    }
+
+    /// The samples scored of a record of `n`: from
+    /// [`score_from`](Self::score_from) up to [`score_to`](Self::score_to)
+    /// or the end (empty where that is not inside the record).
+    pub fn scored(&self, n: usize) -> Range<usize> {
+        let to = self.score_to.unwrap_or(n).min(n);
+        self.score_from.min(to)..to
     }
 
     /// The starts of its best-fit search beside an estimate.
@@ -240,12 +253,14 @@ impl CheckPlan {
 /// let model = Benchmark::new();
 /// let mut record = model.spec().new_record();
 /// model.simulate(&[0.3], &mut experiment_rng(7, 0), &mut record)?;
-/// let plan = CheckPlan { noisy: 99, seed: 1, score_from: 100, prior_starts: 4 };
+/// let plan = CheckPlan { noisy: 99, seed: 1, score_from: 100, score_to: Some(900), prior_starts: 4 };
 /// let check = check_with(&model, &record, &[0.3], plan)?;
 /// assert!(check.explained());
-/// // A window past the record is named.
-/// let past = CheckPlan { score_from: 1000, ..plan };
+/// // A window past the record, or empty, is named.
+/// let past = CheckPlan { score_from: 1000, score_to: None, ..plan };
 /// assert!(check_with(&model, &record, &[0.3], past).is_err());
+/// let empty = CheckPlan { score_from: 500, score_to: Some(500), ..plan };
+/// assert!(check_with(&model, &record, &[0.3], empty).is_err());
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 ///
@@ -284,7 +299,7 @@ pub fn check_against(
     plan: CheckPlan,
 ) -> Result<RecordCheck, RefineError> {
     within_record(record, plan)?;
-    let from = plan.score_from;
+    let window = plan.scored(record.n_samples());
     // The search evaluated its first start and its best: at either, the
     // response is read back from there, not simulated again.
     let searched = if same_bits(theta, &best.best.theta) {
@@ -309,14 +324,14 @@ pub fn check_against(
     let mut at_estimate = vec![0.0; record.n_samples() * record.n_outputs()];
     write_output_errors(record, &simulated, &mut at_estimate)?;
     let against = against_best(sim, record, theta, &simulated, &at_estimate, best, plan)?;
-    let span = ResponseSpan::at(sim, record, theta, from)?;
+    let span = ResponseSpan::at(sim, record, theta, window.clone())?;
     let own = OwnRecords {
         simulated: &simulated,
         at_estimate: &at_estimate,
         span: &span,
     };
     let observed = Observed {
-        misfit: mean_squares(record, &simulated, from),
+        misfit: mean_squares(record, &simulated, window.clone()),
         best_misfit: against.best_misfit,
         improved: span.window_loss(&at_estimate) - span.window_loss(&against.at_best),
     };
@@ -327,7 +342,12 @@ pub fn check_against(
     let input_shared = shared.is_some();
     let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
     let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..record.n_outputs())
-        .map(|j| output_fit(&record.output(j)[from..], &simulated.output(j)[from..]))
+        .map(|j| {
+            output_fit(
+                &record.output(j)[window.clone()],
+                &simulated.output(j)[window.clone()],
+            )
+        })
         .unzip();
     Ok(RecordCheck {
         rms,
@@ -366,8 +386,22 @@ pub fn search_best_fits(
     }
 }
 
-/// A scoring window that starts inside the record.
+/// A scoring window of at least one sample, inside the record.
 fn within_record(record: &IoData, plan: CheckPlan) -> Result<(), RefineError> {
+    if let Some(to) = plan.score_to
+        && (to <= plan.score_from || to > record.n_samples())
+    {
+        return Err(RefineError::InvalidSetting(InvalidSetting {
+            name: "score to",
+            value: to.to_string(),
+            reason: format!(
+                "the window must end after its start ({}) and at most at the record's end \
+                 ({} samples)",
+                plan.score_from,
+                record.n_samples()
+            ),
+        }));
+    }
     if plan.score_from >= record.n_samples() {
         return Err(RefineError::InvalidSetting(InvalidSetting {
             name: "score from",
@@ -493,12 +527,8 @@ fn rank_among_own(
     theta: &[f64],
     plan: CheckPlan,
 ) -> Result<Ranked, RefineError> {
-    let CheckPlan {
-        noisy,
-        seed,
-        score_from: from,
-        ..
-    } = plan;
+    let CheckPlan { noisy, seed, .. } = plan;
+    let window = plan.scored(record.n_samples());
     let with_noise = Conditions {
         noiseless: false,
         input: Some(record),
@@ -512,7 +542,7 @@ fn rank_among_own(
             *n = e - *n;
         }
         Ok((
-            mean_squares(run, own.simulated, from),
+            mean_squares(run, own.simulated, window.clone()),
             own.span.improvement(&noise),
         ))
     };
@@ -639,7 +669,7 @@ fn against_best(
     best: &BestFit,
     plan: CheckPlan,
 ) -> Result<AgainstBest, RefineError> {
-    let from = plan.score_from;
+    let window = plan.scored(record.n_samples());
     let estimate_loss: f64 = at_estimate.iter().map(|r| r * r).sum();
     let best_loss = best.best.loss;
     let loss_ratio = if best_loss > 0.0 {
@@ -667,7 +697,13 @@ fn against_best(
         &own
     };
     let best_fit_percent = (0..record.n_outputs())
-        .map(|j| output_fit(&record.output(j)[from..], &best_response.output(j)[from..]).1)
+        .map(|j| {
+            output_fit(
+                &record.output(j)[window.clone()],
+                &best_response.output(j)[window.clone()],
+            )
+            .1
+        })
         .collect();
     let mut at_best = vec![0.0; at_estimate.len()];
     write_output_errors(record, best_response, &mut at_best)?;
@@ -675,7 +711,7 @@ fn against_best(
         loss_ratio,
         best_fit_percent,
         at_best,
-        best_misfit: mean_squares(record, best_response, from),
+        best_misfit: mean_squares(record, best_response, window),
     })
 }
 

@@ -29,7 +29,7 @@ use crate::refinement::ResidualModel;
 pub(crate) struct ResponseSpan {
     /// The window's rows of each kept column, one column after another.
     columns: Vec<f64>,
-    /// The residuals' rows the window keeps: from `from` in each output.
+    /// The residuals' rows the window keeps, in each output.
     rows: Vec<std::ops::Range<usize>>,
     /// How many columns were kept.
     rank: usize,
@@ -40,7 +40,7 @@ pub(crate) struct ResponseSpan {
 impl ResponseSpan {
     /// The span at `theta` on `record`'s input through `sim`'s output
     /// errors ([`OutputError`]: each output scaled by the record's own
-    /// spread), over the samples from `from` on of every output, the
+    /// spread), over the samples of `window` of every output, the
     /// differences kept inside the prior's box where `theta` is. A
     /// parameter that does not move those samples (its column within
     /// `1e-6` of the others' span) is left out: no fit gains by it.
@@ -52,7 +52,7 @@ impl ResponseSpan {
         sim: &dyn Simulator,
         record: &IoData,
         theta: &[f64],
-        from: usize,
+        window: std::ops::Range<usize>,
     ) -> Result<Self, RefineError> {
         let loss = OutputError::new(sim)?;
         let prior = sim.spec().prior();
@@ -74,7 +74,7 @@ impl ResponseSpan {
         let total = loss.n_residuals(record);
         let jacobian = differences.jacobian(&values, total);
         let rows: Vec<_> = (0..total / n.max(1))
-            .map(|j| j * n + from.min(n)..(j + 1) * n)
+            .map(|j| j * n + window.start.min(n)..j * n + window.end.min(n))
             .collect();
         let windowed: Vec<Vec<f64>> = (0..q)
             .map(|a| {

@@ -342,6 +342,7 @@ fn one_search_serves_the_check_and_the_refinement() {
         noisy: 99,
         seed: 0,
         score_from: 0,
+        score_to: None,
         prior_starts: 6,
     };
     let first = check_against(&model, &record, &estimate, &found, plan).unwrap();

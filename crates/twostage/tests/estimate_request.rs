@@ -172,6 +172,7 @@ fn a_classic_method_and_given_values_give_their_own_estimates_and_are_checked() 
         .check_settings(twostage::CheckSettings {
             runs: 99,
             score_from: 0,
+            score_to: None,
         });
     let estimating = request.prepare().unwrap();
     let mut with_stranger = given;

@@ -31,11 +31,14 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
             "{option} is read by {readers}; {running} does not read it: leave it out"
         )))
     };
-    if (args.check_sims.is_some() || args.plot.is_some() || args.score_from.is_some())
+    if (args.check_sims.is_some()
+        || args.plot.is_some()
+        || args.score_from.is_some()
+        || args.score_to.is_some())
         && !args.checks()
     {
         return refuse(
-            "--check-sims, --plot and --score-from",
+            "--check-sims, --plot, --score-from and --score-to",
             "--check and --refine=auto",
         );
     }
@@ -142,6 +145,7 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
         .check_settings(CheckSettings {
             runs: args.check_sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
             score_from: args.score_from.unwrap_or(0),
+            score_to: args.score_to,
         })
         .refine(
             RefineWhich::chosen(

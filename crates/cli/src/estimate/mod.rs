@@ -50,6 +50,11 @@ pub struct EstimateArgs {
     /// probability; the best fit is still fitted to the whole record.
     #[arg(long, value_name = "K")]
     score_from: Option<usize>,
+    /// With --check: score up to this sample, not including it (counted
+    /// from 0; default the record's end), leaving out a tail the model is
+    /// not meant for.
+    #[arg(long, value_name = "K")]
+    score_to: Option<usize>,
     /// With --estimator: refine each estimate through the model. A
     /// built-in model: the posterior mean of its prediction-error
     /// likelihood over twice the interval (a grid of the likelihood;

@@ -238,6 +238,7 @@ class Estimator:
         sims: Optional[int] = None,
         seed: int = 0,
         score_from: int = 0,
+        score_to: Optional[int] = None,
         prior_starts: Optional[int] = None,
     ) -> dict[str, Any]:
         """Check one record's estimate against the record, as ``twostage
@@ -245,7 +246,8 @@ class Estimator:
         estimator's own estimate) simulated without noise on the record's
         input, ranked among ``sims`` of the model's own records there
         (None: as many as the command's ``--check-sims`` default),
-        scored from sample ``score_from`` on (``--score-from``), and its
+        scored from sample ``score_from`` on (``--score-from``) up to, not
+        including, ``score_to`` (``--score-to``; None: the record's end), and its
         fit judged against the best fit searched from it and from
         ``prior_starts`` starts over the prior (``--prior-starts``; None:
         two per parameter and two more).
@@ -270,6 +272,7 @@ class Estimator:
             sims=sims,
             seed=seed,
             score_from=score_from,
+            score_to=score_to,
             prior_starts=prior_starts,
         )
 
@@ -371,6 +374,7 @@ class Estimator:
         model_toml: Optional[str] = None,
         sims: Optional[int] = None,
         score_from: int = 0,
+        score_to: Optional[int] = None,
         prior_starts: Optional[int] = None,
         seed: int = 0,
         progress: Any = None,
@@ -407,6 +411,7 @@ class Estimator:
             model_toml=model_toml,
             sims=sims,
             score_from=score_from,
+            score_to=score_to,
             prior_starts=prior_starts,
             seed=seed,
             progress=_progress(progress),
@@ -649,6 +654,7 @@ def check(
     seed: int = 0,
     allow_outside_prior: bool = False,
     score_from: int = 0,
+    score_to: Optional[int] = None,
     prior_starts: Optional[int] = None,
 ) -> dict[str, Any]:
     """Check given parameter values (a published value, another tool's
@@ -669,6 +675,7 @@ def check(
         seed=seed,
         allow_outside_prior=allow_outside_prior,
         score_from=score_from,
+        score_to=score_to,
         prior_starts=prior_starts,
     )
 

@@ -63,6 +63,7 @@ class Estimator:
         sims: Optional[int] = None,
         seed: int = 0,
         score_from: int = 0,
+        score_to: Optional[int] = None,
         prior_starts: Optional[int] = None,
     ) -> dict[str, Any]: ...
     def refine(
@@ -101,6 +102,7 @@ class Estimator:
         model_toml: Optional[str] = None,
         sims: Optional[int] = None,
         score_from: int = 0,
+        score_to: Optional[int] = None,
         prior_starts: Optional[int] = None,
         seed: int = 0,
         progress: Optional[Any] = None,
@@ -139,6 +141,7 @@ def check_values(
     seed: int = 0,
     allow_outside_prior: bool = False,
     score_from: int = 0,
+    score_to: Optional[int] = None,
     prior_starts: Optional[int] = None,
 ) -> dict[str, Any]: ...
 def predict(

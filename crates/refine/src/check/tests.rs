@@ -297,6 +297,41 @@ fn a_scoring_window_leaves_out_the_transient() {
     assert!(windowed.model_consistent() && windowed.explained());
     // The whole-record RMS is the hand-computed one: sqrt(50 / 20).
     assert!((whole.rms[0] - 2.5f64.sqrt()).abs() < 1e-12);
+    // A tail the model is not meant for: the last three samples off, left
+    // out by the window's end, and its RMS the hand-computed one of the
+    // window 2..17 when it is not.
+    let mut tailed = y.clone();
+    tailed[17] += 3.0;
+    tailed[18] -= 3.0;
+    tailed[19] += 3.0;
+    let tailed = IoData::siso(&u, &tailed).unwrap();
+    let ends = |to: Option<usize>| {
+        check_with(
+            &model,
+            &tailed,
+            &[2.0],
+            CheckPlan {
+                score_from: 2,
+                score_to: to,
+                ..plan
+            },
+        )
+        .unwrap()
+    };
+    let cut = ends(Some(17));
+    assert_eq!((cut.rms[0], cut.fit_percent[0]), (0.0, 100.0));
+    assert!(cut.explained());
+    let to_the_end = ends(None);
+    assert!((to_the_end.rms[0] - (27.0f64 / 18.0).sqrt()).abs() < 1e-12);
+    assert!(!to_the_end.model_consistent());
+    let past = CheckPlan {
+        score_to: Some(21),
+        ..plan
+    };
+    let e = check_with(&model, &tailed, &[2.0], past)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("score to") && e.contains("20 samples"), "{e}");
 }
 
 /// An estimate 0.022 off on 5000 samples (22 of its standard errors): its
@@ -344,7 +379,7 @@ fn the_span_of_a_gain_improves_residuals_by_the_least_squares_amount() {
     let ur: f64 = u.iter().zip(&r).map(|(a, b)| a * b).sum();
     let uu: f64 = u.iter().map(|a| a * a).sum();
     for theta in [2.0, 5.0, 5.5] {
-        let span = ResponseSpan::at(&model, &record, &[theta], 0).unwrap();
+        let span = ResponseSpan::at(&model, &record, &[theta], 0..record.n_samples()).unwrap();
         let found = span.improvement(&r);
         assert!(
             (found - ur * ur / uu).abs() < 1e-9 * (ur * ur / uu),

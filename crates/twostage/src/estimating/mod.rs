@@ -227,6 +227,8 @@ pub struct CheckSettings {
     pub runs: usize,
     /// Score from this sample on, leaving out a transient.
     pub score_from: usize,
+    /// Score up to this sample, not including it (`None`: to the end).
+    pub score_to: Option<usize>,
 }
 
 impl Default for CheckSettings {
@@ -234,6 +236,7 @@ impl Default for CheckSettings {
         Self {
             runs: DEFAULT_CHECK_RUNS,
             score_from: 0,
+            score_to: None,
         }
     }
 }
@@ -245,7 +248,7 @@ impl Default for CheckSettings {
 /// ```
 /// use twostage::{CheckSettings, EstimateRequest, EstimateWith, RefinePolicy, RefineWhich};
 /// let request = EstimateRequest::new(EstimateWith::OutputError { starts: 3 })
-///     .check_settings(CheckSettings { runs: 19, score_from: 10 })
+///     .check_settings(CheckSettings { runs: 19, score_from: 10, score_to: None })
 ///     .seed(4);
 /// assert!(!request.checks(), "settings alone ask for no check");
 /// let request = request.refine(Some(RefineWhich::Auto(RefinePolicy::default())));
@@ -357,7 +360,7 @@ impl EstimateRequest {
     /// model.simulate(&[0.3], &mut experiment_rng(8, 0), &mut record)?;
     /// let request = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator.clone())))
     ///     .check_records(true)
-    ///     .check_settings(CheckSettings { runs: 39, score_from: 0 });
+    ///     .check_settings(CheckSettings { runs: 39, score_from: 0, score_to: None });
     /// let estimating = request.prepare()?;
     /// let estimates = estimating.estimate("records", vec![("7".into(), Ok(record.clone()))], &Silent);
     /// let (_, row) = estimates.rows[0].1.as_ref().map_err(ToString::to_string)?;
@@ -431,6 +434,7 @@ impl Settings {
             noisy: self.check.runs,
             seed: self.seed,
             score_from: self.check.score_from,
+            score_to: self.check.score_to,
             prior_starts: self.search(q).from_prior,
         }
     }
