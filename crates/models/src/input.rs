@@ -42,10 +42,11 @@ enum Kind {
         amplitude: f64,
     },
     Fixed(Arc<[f64]>),
-    /// A design drawn per experiment, about `offset`.
+    /// A design drawn per experiment, about `offset` (drawn after the
+    /// design's own settings, where it is a range).
     Designed {
         design: Box<Design>,
-        offset: f64,
+        offset: Drawn,
     },
     /// The sum of signals, each drawn in turn from the experiment's stream.
     Sum(Vec<InputSignal>),
@@ -472,6 +473,42 @@ impl InputSignal {
             .unwrap_or(0)
     }
 
+    /// The same design about an offset drawn per experiment from
+    /// `offset`'s range (a family of operating points), instead of its own.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, ExperimentRng, InputSignal, experiment_rng};
+    /// let sweep = InputSignal::sweep(0.1, Drawn::fixed(2.0), Drawn::fixed(1.0), 0.0)?;
+    /// let around = sweep.with_offset(Drawn::between(4.0, 6.0)?)?;
+    /// let mean = |k: u64| {
+    ///     let mut u = vec![0.0; 1000];
+    ///     around.fill(0.01, &mut experiment_rng(3, k), &mut u).map(|()| u.iter().sum::<f64>() / 1000.0)
+    /// };
+    /// let (a, b) = (mean(0)?, mean(1)?);
+    /// assert!((3.9..6.1).contains(&a) && (3.9..6.1).contains(&b) && (a - b).abs() > 1e-6);
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for a signal that is no design (white
+    /// noise, the chicane, a fixed signal, a sum, mixture or sequence: give
+    /// the offset to its parts).
+    pub fn with_offset(self, offset: Drawn) -> Result<Self> {
+        match self.kind {
+            Kind::Designed { design, .. } => Ok(Self {
+                kind: Kind::Designed { design, offset },
+            }),
+            _ => Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input offset",
+                value: format!("{:?}", offset.range()),
+                reason: "a drawn offset is for a design (multisine, binary, prbs, sweep, \
+                         gaussian, bursts, ramps): give it to the parts of a sum, mixture or \
+                         sequence"
+                    .into(),
+            })),
+        }
+    }
+
     /// The signals it is made of (none for a design alone).
     fn parts(&self) -> &[InputSignal] {
         match &self.kind {
@@ -484,6 +521,7 @@ impl InputSignal {
         if !offset.is_finite() {
             return Err(invalid("input offset", offset, "must be finite"));
         }
+        let offset = Drawn::fixed(offset);
         // The settings that need no sample time are checked now; the band
         // against the Nyquist frequency with [`InputSignal::check_sampling`].
         design.check(0.0)?;
@@ -553,7 +591,7 @@ impl InputSignal {
     pub fn is_deterministic(&self) -> bool {
         match &self.kind {
             Kind::WhiteGaussian { .. } => false,
-            Kind::Designed { design, .. } => design.is_deterministic(),
+            Kind::Designed { design, offset } => design.is_deterministic() && offset.is_fixed(),
             Kind::Sum(parts) => parts.iter().all(InputSignal::is_deterministic),
             // A sequence's cuts are drawn; a mixture of one part is that part.
             Kind::OneOf { parts, .. } => parts.len() == 1 && parts[0].is_deterministic(),
@@ -575,8 +613,8 @@ impl InputSignal {
             Kind::Fixed(samples) => {
                 format!("a fixed user-given signal of {} samples", samples.len())
             }
-            Kind::Designed { design, offset } if *offset != 0.0 => {
-                format!("{}, about {offset}", design.describe())
+            Kind::Designed { design, offset } if *offset != Drawn::fixed(0.0) => {
+                format!("{}, about {}", design.describe(), offset.describe(""))
             }
             Kind::Designed { design, .. } => design.describe(),
             Kind::Sum(parts) => {
@@ -637,6 +675,8 @@ impl InputSignal {
             }
             Kind::Designed { design, offset } => {
                 design.fill(sample_time, rng, u)?;
+                // A fixed offset draws nothing: the design's streams stay.
+                let offset = offset.draw(rng);
                 for v in u.iter_mut() {
                     *v += offset;
                 }

@@ -294,7 +294,12 @@ impl Locator<'_> {
             .as_ref()
             .map(|a| drawn("amplitude", a))
             .transpose()?;
-        let offset = raw.offset.unwrap_or(0.0);
+        // A drawn offset is set on the design after it is built.
+        let (offset, drawn_offset) = match &raw.offset {
+            None => (0.0, None),
+            Some(OneOrMany::One(v)) => (*v, None),
+            Some(range) => (0.0, Some(drawn("offset", range)?)),
+        };
         let signal = match kind {
             "white" => raw.sd.map(InputSignal::white_gaussian),
             "chicane" => match &raw.amplitude {
@@ -492,6 +497,10 @@ impl Locator<'_> {
         };
         signal
             .unwrap_or_else(|| unreachable!("every needed key is given"))
+            .and_then(|s| match drawn_offset {
+                Some(offset) => s.with_offset(offset),
+                None => Ok(s),
+            })
             .map_err(|e| self.error(here(), "input", e.to_string()))
     }
 }

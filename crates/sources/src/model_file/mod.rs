@@ -772,4 +772,58 @@ mod tests {
         assert!((record.output(0)[0] - 2.0).abs() < 1e-12);
         assert!(record.output(0).iter().all(|y| y.is_finite()));
     }
+
+    /// A design's offset may be drawn per experiment like its other
+    /// settings; a range the wrong way round, or of three values, is
+    /// refused by its key and line.
+    #[test]
+    fn an_offset_is_drawn_per_experiment_from_its_range() {
+        let file = |offset: &str| {
+            format!(
+                "[model]\nname = \"gain\"\n[[parameter]]\nname = \"k\"\n\
+                 prior = {{ dist = \"uniform\", low = 0.5, high = 2.0 }}\n\
+                 [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 200\n\
+                 [input]\nsignal = \"multisine\"\nband = [0.0, 0.2]\nrms = 0.1\n\
+                 offset = {offset}\n\
+                 [source]\nbuiltin = \"benchmark\"\n"
+            )
+        };
+        let means = |text: &str| -> Vec<f64> {
+            let simulator = ModelFile::parse(text, "gain.toml")
+                .unwrap()
+                .simulator()
+                .unwrap();
+            (0..6)
+                .map(|k| {
+                    let mut record = simulator.spec().new_record();
+                    simulator
+                        .simulate(
+                            &[1.0],
+                            &mut twostage_models::experiment_rng(2, k),
+                            &mut record,
+                        )
+                        .unwrap();
+                    record.input(0).iter().sum::<f64>() / 200.0
+                })
+                .collect()
+        };
+        let drawn = means(&file("[4.0, 6.0]"));
+        assert!(drawn.iter().all(|m| (3.9..6.1).contains(m)), "{drawn:?}");
+        let spread = drawn.iter().copied().fold(f64::NAN, f64::max)
+            - drawn.iter().copied().fold(f64::NAN, f64::min);
+        assert!(spread > 0.3, "one offset per experiment: {drawn:?}");
+        // One value, as before: every experiment about it.
+        let fixed = means(&file("5.0"));
+        assert!(fixed.iter().all(|m| (m - 5.0).abs() < 0.05), "{fixed:?}");
+        for (bad, said) in [
+            ("[6.0, 4.0]", "first no larger"),
+            ("[1.0, 2.0, 3.0]", "3 values"),
+        ] {
+            let e = ModelFile::parse(&file(bad), "gain.toml")
+                .and_then(|f| f.simulator().map(|_| ()))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("offset") && e.contains(said), "{bad}: {e}");
+        }
+    }
 }

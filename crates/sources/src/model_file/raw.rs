@@ -159,7 +159,7 @@ pub(super) struct RawInput {
     pub(super) rms: Option<OneOrMany>,
     pub(super) peak: Option<OneOrMany>,
     /// A constant added to a design.
-    pub(super) offset: Option<f64>,
+    pub(super) offset: Option<OneOrMany>,
     /// Samples each value of a binary sequence is held.
     pub(super) hold: Option<usize>,
     /// A PRBS register's bits.
