@@ -274,7 +274,7 @@ fn every_mistake_names_its_line_and_key() {
             "sigma = 0.2",
             "sigma = \"wide\"",
             Some(7),
-            "",
+            "parameter.prior.sigma",
             "invalid type",
         ),
         (

@@ -63,6 +63,50 @@ impl<'t> Locator<'t> {
         1 + breaks.partition_point(|&k| k < offset.min(self.text.len()))
     }
 
+    /// The dotted key whose value starts at byte `offset` (`input.hold`,
+    /// `parameter.prior.sigma` inside an inline table), read from the
+    /// text: the names before the `=` signs on its line that lead to it,
+    /// under the nearest table header above it; empty where there is none
+    /// (a key of its own, a value on a line of its own in a long array).
+    pub(super) fn key_at(&self, offset: usize) -> String {
+        let Some(before) = self.text.get(..offset.min(self.text.len())) else {
+            return String::new();
+        };
+        let line_start = before.rfind('\n').map_or(0, |k| k + 1);
+        let segment = &before[line_start..];
+        // The inline tables still open at the value, and after the last of
+        // them the value's own key.
+        let mut open: Vec<usize> = Vec::new();
+        for (k, c) in segment.char_indices() {
+            match c {
+                '{' => open.push(k),
+                '}' => {
+                    open.pop();
+                }
+                _ => {}
+            }
+        }
+        let mut names: Vec<String> = open
+            .iter()
+            .map(|&k| name_before_equals(&segment[..k]))
+            .collect();
+        let innermost = &segment[open.last().map_or(0, |k| k + 1)..];
+        names.push(name_before_equals(innermost));
+        if names.iter().any(String::is_empty) {
+            return String::new();
+        }
+        let table = before[..line_start]
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('['))
+            .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim());
+        if let Some(table) = table.filter(|t| !t.is_empty()) {
+            names.insert(0, table.to_string());
+        }
+        names.join(".")
+    }
+
     pub(super) fn error(&self, span: Option<Range<usize>>, key: &str, message: String) -> Error {
         Error::ModelFile {
             file: self.origin.to_string(),
@@ -676,6 +720,22 @@ impl<'t> Locator<'t> {
 /// outputs as f64: every simulating thread holds at least one whole
 /// record, so a record is refused before anything allocates it.
 const MAX_RECORD_BYTES: usize = 1 << 30;
+
+/// The key written just before the last `=` of `text` (quotes dropped);
+/// empty without one.
+fn name_before_equals(text: &str) -> String {
+    let Some(equals) = text.rfind('=') else {
+        return String::new();
+    };
+    let left = text[..equals].trim_end();
+    let start = left
+        .char_indices()
+        .rev()
+        .take_while(|(_, c)| c.is_alphanumeric() || matches!(c, '_' | '-' | '.' | '"'))
+        .last()
+        .map_or(left.len(), |(k, _)| k);
+    left[start..].replace('"', "")
+}
 
 #[cfg(test)]
 mod tests {

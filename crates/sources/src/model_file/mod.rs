@@ -267,7 +267,7 @@ impl ModelFile {
         let raw: RawFile = toml::from_str(text).map_err(|e| Error::ModelFile {
             file: origin.to_string(),
             line: e.span().map(|s| at.line(s.start)),
-            key: String::new(),
+            key: e.span().map(|s| at.key_at(s.start)).unwrap_or_default(),
             message: e.message().to_string(),
         })?;
         let mut source = match &raw.equations {
@@ -771,6 +771,28 @@ mod tests {
         // The level starts at h0 (measured at the start of sample 0).
         assert!((record.output(0)[0] - 2.0).abs() < 1e-12);
         assert!(record.output(0).iter().all(|y| y.is_finite()));
+    }
+
+    /// A value of the wrong type is named by its key and table, not only
+    /// its line.
+    #[test]
+    fn a_value_of_the_wrong_type_is_named_by_its_key() {
+        let text = "[model]\nname = \"gain\"\n[[parameter]]\nname = \"k\"\n\
+                    prior = { dist = \"uniform\", low = 0.5, high = 2.0 }\n\
+                    [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 200\n\
+                    [input]\nsignal = \"binary\"\namplitude = 1.0\nhold = [1, 2]\n";
+        let e = ModelFile::parse(text, "gain.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with("gain.toml, line 13, key `input.hold`: "),
+            "{e}"
+        );
+        let inline = text
+            .replace("low = 0.5", "low = [0.5]")
+            .replace("hold = [1, 2]", "hold = 2");
+        let e = ModelFile::parse(&inline, "gain.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 5, key `parameter.prior.low`"), "{e}");
     }
 
     /// A design's offset may be drawn per experiment like its other
