@@ -60,6 +60,22 @@ impl NamedModel {
         Ok(Self::File(Box::new(ModelFile::load(path)?)))
     }
 
+    /// The built-in model, where this is one (a model file is not, even
+    /// one over a built-in source: its settings are its own).
+    ///
+    /// ```
+    /// use twostage_sources::NamedModel;
+    /// use twostage_models::BuiltinModel;
+    /// assert_eq!(NamedModel::builtin("pacejka")?.as_builtin(), Some(BuiltinModel::Pacejka));
+    /// # Ok::<(), twostage_sources::Error>(())
+    /// ```
+    pub fn as_builtin(&self) -> Option<BuiltinModel> {
+        match self {
+            Self::Builtin(model) => Some(*model),
+            Self::File(_) => None,
+        }
+    }
+
     /// The model file whose text is `text`; `origin` names it in messages
     /// (as a path would).
     ///

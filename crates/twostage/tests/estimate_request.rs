@@ -266,4 +266,20 @@ fn a_request_that_cannot_run_is_refused_by_its_part() {
         e.to_string().contains("'ekf' is not available for pacejka"),
         "{e}"
     );
+    // A model file is not its built-in source, even of the same name: its
+    // settings are its own, and a classic method is the built-in's.
+    let file = NamedModel::text(
+        "[model]\nname = \"benchmark\"\n[source]\nbuiltin = \"benchmark\"\n",
+        "benchmark.toml",
+    )
+    .unwrap();
+    let e = refused(
+        EstimateRequest::new(EstimateWith::Classic {
+            method: ClassicMethod::Ekf,
+            settings: MethodSettings::default(),
+        })
+        .model(Some(file)),
+    );
+    assert_eq!(e.purpose, Purpose::Method);
+    assert!(matches!(e.error, RequestProblem::NotBuiltIn { .. }), "{e}");
 }

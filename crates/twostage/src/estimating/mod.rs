@@ -10,7 +10,7 @@ use std::collections::HashMap;
 
 use twostage_baselines::MethodSettings;
 use twostage_estimator::{Estimator, SignalNames};
-use twostage_models::{BuiltinModel, IoData, Simulator};
+use twostage_models::{IoData, Simulator};
 use twostage_refine::{CheckPlan, DEFAULT_CHECK_RUNS, RefinePolicy, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
@@ -531,16 +531,13 @@ impl Settings {
             .into();
         let (method, spec) = match with {
             EstimateWith::Classic { method, settings } => {
-                let builtin = named
-                    .name()
-                    .parse::<BuiltinModel>()
-                    .map_err(|_| RequestError {
-                        purpose,
-                        error: RequestProblem::NotBuiltIn {
-                            method: method.name(),
-                            model: named.name().to_string(),
-                        },
-                    })?;
+                let builtin = named.as_builtin().ok_or_else(|| RequestError {
+                    purpose,
+                    error: RequestProblem::NotBuiltIn {
+                        method: method.name(),
+                        model: named.name().to_string(),
+                    },
+                })?;
                 let settings = MethodSettings {
                     seed: self.seed,
                     ..settings
