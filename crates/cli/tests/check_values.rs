@@ -269,6 +269,10 @@ fn the_classic_methods_take_check_and_options_that_do_not_apply_are_refused() {
         &["--model", "benchmark", "--method", "ukf", "--seed", "3"],
         "--seed",
     );
+    refused(
+        &["--model", "benchmark", "--method", "kalman"],
+        "'kalman': use one of ekf, ukf, pf, pem, ii, bayes, oe",
+    );
     // --at without --check would only echo the values.
     refused(
         &[

@@ -5,9 +5,9 @@
 
 use anyhow::Result;
 use twostage::{
-    CheckSettings, EstimateRequest, EstimateWith, Estimating, Estimator, GivenValues,
-    OUTPUT_ERROR_METHOD, Purpose, RefineChoiceError, RefineWhich, RequestError, RequestProblem,
-    Windows,
+    CheckSettings, ClassicMethod, EstimateRequest, EstimateWith, Estimating, Estimator,
+    GivenValues, OUTPUT_ERROR_METHOD, Purpose, RefineChoiceError, RefineWhich, RequestError,
+    RequestProblem, Windows,
 };
 
 use super::EstimateArgs;
@@ -15,17 +15,61 @@ use crate::OrUsage;
 use crate::options::InitialCovariance;
 use crate::{UsageError, usage};
 
+/// What `--method` names: a classic method of a built-in model, or the
+/// multi-start output-error fit of any model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum MethodChoice {
+    Classic(ClassicMethod),
+    OutputError,
+}
+
+impl MethodChoice {
+    /// The method called `name` (as the help lists them).
+    pub(super) fn parse(name: &str) -> std::result::Result<Self, String> {
+        if name == OUTPUT_ERROR_METHOD {
+            return Ok(Self::OutputError);
+        }
+        ClassicMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .map(Self::Classic)
+            .ok_or_else(|| {
+                let names: Vec<&str> = ClassicMethod::ALL
+                    .iter()
+                    .map(|m| m.name())
+                    .chain([OUTPUT_ERROR_METHOD])
+                    .collect();
+                format!("'{name}': use one of {}", names.join(", "))
+            })
+    }
+
+    /// Its name on the command line.
+    fn name(self) -> &'static str {
+        match self {
+            Self::Classic(method) => method.name(),
+            Self::OutputError => OUTPUT_ERROR_METHOD,
+        }
+    }
+}
+
 /// Refuses an option that the chosen way of estimating would not read:
 /// an option silently ignored reads as one that worked.
 fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
-    let method = args.method.as_deref();
+    let method = args.method;
     let running = match (method, &args.estimator, &args.at) {
-        (Some(m), _, _) => format!("--method {m}"),
+        (Some(m), _, _) => format!("--method {}", m.name()),
         (None, Some(_), _) => "an estimator".to_string(),
         (None, None, Some(_)) => "--at".to_string(),
         (None, None, None) => return Ok(()),
     };
-    let is = |names: &[&str]| method.is_some_and(|m| names.contains(&m));
+    use ClassicMethod::{Ekf, IndirectInference, ParticleFilter, PredictionError, Ukf};
+    use MethodChoice::{Classic, OutputError};
+    let filter = matches!(method, Some(Classic(Ekf | Ukf)));
+    let particles = matches!(method, Some(Classic(ParticleFilter)));
+    let multi_start = matches!(
+        method,
+        Some(Classic(PredictionError | IndirectInference) | OutputError)
+    );
     let refuse = |option: &str, readers: &str| {
         Err(usage(format!(
             "{option} is read by {readers}; {running} does not read it: leave it out"
@@ -60,20 +104,17 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
     if args.correlation && args.refine.is_none() && !args.joint {
         return refuse("--correlation", "--refine and --joint");
     }
-    if args.p0.is_some() && !is(&["ekf", "ukf"]) {
+    if args.p0.is_some() && !filter {
         return refuse("--p0", "--method ekf and ukf");
     }
-    if args.particles.is_some() && !is(&["pf"]) {
+    if args.particles.is_some() && !particles {
         return refuse("--particles", "--method pf");
     }
-    if args.starts.is_some() && !is(&["pem", "ii", OUTPUT_ERROR_METHOD]) {
+    if args.starts.is_some() && !multi_start {
         return refuse("--starts", "--method pem, ii and oe");
     }
-    if args.seed.is_some()
-        && !args.checks()
-        && !args.joint
-        && !is(&["pf", "pem", "ii", OUTPUT_ERROR_METHOD])
-    {
+    let seeded = args.checks() || args.joint || particles || multi_start;
+    if args.seed.is_some() && !seeded {
         return refuse("--seed", "--method pf, pem, ii and oe, --check and --joint");
     }
     Ok(())
@@ -106,15 +147,17 @@ const DEFAULT_STARTS: usize = 5;
 /// use of it.
 pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
     refuse_what_does_not_apply(args)?;
-    let with = match (&args.estimator, &args.at, args.method.as_deref()) {
+    let with = match (&args.estimator, &args.at, args.method) {
         (Some(path), _, _) => EstimateWith::Estimator(Box::new(Estimator::load(path)?)),
         (None, Some(path), _) => EstimateWith::Given(given_values(args, path)?),
-        (None, None, Some(OUTPUT_ERROR_METHOD)) => EstimateWith::OutputError {
+        (None, None, Some(MethodChoice::OutputError)) => EstimateWith::OutputError {
             starts: args.starts.unwrap_or(DEFAULT_STARTS),
         },
-        (None, None, Some(name)) if args.model.is_some() || args.model_file.is_some() => {
+        (None, None, Some(MethodChoice::Classic(method)))
+            if args.model.is_some() || args.model_file.is_some() =>
+        {
             EstimateWith::Classic {
-                method: name.parse().or_usage()?,
+                method,
                 settings: twostage::baselines::MethodSettings {
                     initial_covariance: args.p0.unwrap_or(InitialCovariance::Eq6).into(),
                     particles: args.particles,
@@ -178,7 +221,7 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
 /// A request's error in the words of the flag it came from.
 fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Error {
     let flag = match e.purpose {
-        Purpose::Method => format!("--method {}", args.method.as_deref().unwrap_or("")),
+        Purpose::Method => format!("--method {}", args.method.map_or("", MethodChoice::name)),
         Purpose::OutputError => "--method oe".into(),
         Purpose::Given => "--at".into(),
         Purpose::Check => "--check".into(),

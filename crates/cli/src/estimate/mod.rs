@@ -146,10 +146,8 @@ pub struct EstimateArgs {
     /// built-in model; oe (a multi-start output-error fit: --starts draws
     /// from the prior, Levenberg-Marquardt on the record minus the
     /// noise-free simulation) for any model, --model or --model-file.
-    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(
-        twostage::ClassicMethod::ALL.map(|m| m.name()).into_iter().chain([twostage::OUTPUT_ERROR_METHOD])
-    ))]
-    method: Option<String>,
+    #[arg(long, value_parser = methods::MethodChoice::parse)]
+    method: Option<methods::MethodChoice>,
     /// EKF/UKF initial covariance: the paper's eq. (6) or (7) (default eq6).
     #[arg(long, value_enum)]
     p0: Option<InitialCovariance>,
