@@ -112,6 +112,29 @@ impl Estimating {
     /// An empty gathering of the records of one plant, for
     /// [`Self::fit_plant`]: it gathers nothing unless the request asked
     /// for the joint fit.
+    ///
+    /// ```
+    /// use twostage::models::{Benchmark, Simulator, experiment_rng};
+    /// use twostage::{EstimateRequest, EstimateWith, Silent, TwoStage};
+    /// let model = Benchmark::new();
+    /// let estimator = TwoStage::builder(&model)
+    ///     .preset(twostage::paper_benchmark())
+    ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
+    /// let records = (0..2).map(|k| {
+    ///     let mut record = model.spec().new_record();
+    ///     model.simulate(&[0.4], &mut experiment_rng(9, k), &mut record).map(|()| (k.to_string(), Ok(record)))
+    /// }).collect::<Result<Vec<_>, _>>()?;
+    /// let estimating = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator)))
+    ///     .joint(true)
+    ///     .prepare()?;
+    /// let mut plant = estimating.plant();
+    /// // Batches from any number of files, each record named by its place.
+    /// plant.gather(&estimating.estimate("a.csv", records, &Silent), |id| format!("a.csv: {id}"));
+    /// let (joint, row) = estimating.fit_plant(&plant, &Silent).expect("asked").map_err(|e| e.to_string())?;
+    /// assert_eq!(plant.places(), ["a.csv: 0", "a.csv: 1"]);
+    /// assert!((row.theta[0] - 0.4).abs() < 0.1 && joint.theta == row.theta);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn plant(&self) -> Plant {
         Plant::new(self.joins())
     }
