@@ -437,9 +437,14 @@ fn estimate_judges_each_record_s_input_against_the_family() {
     assert_eq!(own, ["true", "true", "true"], "{said}");
     let (loud_flags, said) = column(&records(&loud, "loud"));
     assert_eq!(loud_flags, ["false", "false", "false"]);
+    // One line for the three records, each named with its numbers.
+    assert_eq!(said.matches("out of distribution").count(), 1, "{said}");
     assert!(
-        said.contains("its input lies outside the family the estimator was trained on")
-            && said.contains("input pump: RMS 2.000 above the training records' 0.4"),
+        said.contains(
+            "experiments 0, 1, 2: out of distribution: their inputs lie outside the family \
+             the estimator was trained on (experiment 0: input pump: RMS 2.000 above the \
+             training records' 0.4"
+        ) && said.contains("experiment 2: input pump: RMS 2.000"),
         "{said}"
     );
 }
