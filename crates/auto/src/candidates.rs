@@ -207,7 +207,7 @@ const FAMILY_LEVEL_RATIO: f64 = 2.0;
 
 /// How far the records' input shapes must spread for their inputs to
 /// differ in kind: the standard deviation across records of one of an
-/// input's autocorrelations (decision 078), at its most spread lag. White
+/// input's autocorrelations (the input shape's numbers), at its most spread lag. White
 /// noise of N samples spreads as 1/sqrt(N) at every lag (0.1 at 100
 /// samples); a family of holds, bursts and noise spreads over most of
 /// [-1, 1].
@@ -278,7 +278,7 @@ pub(super) fn with_summary(
 /// it) and after it a summary network trained on the records (decision
 /// 081's default shape), where the `records`' inputs differ in level or
 /// in shape: what one stage 1 reads of a step differs from what it reads
-/// of a burst, and a network can learn to tell them apart (decision 083).
+/// of a burst, and a network can learn to tell them apart.
 /// The held-out risk decides whether it pays for its training.
 pub(super) fn with_learned(
     compressor: &CompressorConfig,
@@ -295,6 +295,27 @@ pub(super) fn with_learned(
     twostage_compress::WithLearned::new(Some(inner), twostage_compress::LearnedShape::default())
         .ok()
         .map(CompressorConfig::Learned)
+}
+
+/// The winner's stage 1 with each output's first sample and mean
+/// appended, where its features discard the record's level (ARX and NARX
+/// coefficients, also of transformed outputs): what a careful human adds
+/// when an initial state or an offset is to be estimated. The held-out
+/// risk decides whether it pays.
+pub(super) fn with_level(
+    compressor: &CompressorConfig,
+    n_outputs: usize,
+) -> Option<CompressorConfig> {
+    let stage1 = match compressor {
+        CompressorConfig::Transformed(t) => t.inner(),
+        other => other,
+    };
+    if !matches!(stage1, CompressorConfig::Arx(_) | CompressorConfig::Narx(_)) {
+        return None;
+    }
+    twostage_compress::WithLevel::new(compressor.clone(), n_outputs)
+        .ok()
+        .map(CompressorConfig::Leveled)
 }
 
 /// The longest record (in values) whose raw samples the search tries as

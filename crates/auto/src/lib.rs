@@ -7,7 +7,7 @@
 //! compressor compresses them, every candidate network fits the same rows,
 //! and all are scored on the same held-out rows; where the records'
 //! inputs differ in kind, the last rival puts a summary network after the
-//! best stage 1 (decision 083). The winner is refitted on
+//! best stage 1. The winner is refitted on
 //! the whole chart, then calibrated and validated on fresh simulations like
 //! any trained estimator (so the final report is not biased by the
 //! selection).
