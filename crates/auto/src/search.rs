@@ -3,18 +3,22 @@
 
 use std::time::{Duration, Instant};
 
-use ndarray::{Array2, Axis};
+use ndarray::Axis;
 use rayon::prelude::*;
-use twostage_compress::{Compressor, CompressorConfig, Workspace};
+use twostage_compress::{Compressor, CompressorConfig};
 use twostage_fit::{FittedRegressor, RegressorConfig};
-use twostage_models::{IoData, Simulator};
+use twostage_models::Simulator;
 use twostage_sources::{ForModel, StoredChart};
 
-use crate::candidates::{design, fit_cost, with_learned, with_summary};
+use crate::candidates::{design, fit_cost, with_level, with_summary};
 
 mod anytime;
 mod equal_time;
+mod features;
 mod final_fit;
+mod learned;
+
+use features::{compress_all, readable_rows};
 
 use crate::cost::{
     COST_MARGIN, LEARNED_SHARE, MIN_TIE, PRODUCTS_EXPONENT, REFIT_SHARE, SIZED_SHARE,
@@ -402,11 +406,7 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
             let scored = report.status.is_scored();
             match trial.role {
                 TrialRole::Rival | TrialRole::Averaged => {
-                    let seconds = scored.then_some(report.seconds);
-                    self.record(report, outcome, trial.network);
-                    if let Some(last) = self.candidates.last_mut() {
-                        last.solo_seconds = seconds;
-                    }
+                    self.record_timed_alone(report, outcome, trial.network);
                     if scored && trial.role == TrialRole::Averaged {
                         self.averaged_twin = Some((best, self.candidates.len() - 1));
                     }
@@ -441,40 +441,16 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
         scores
     }
 
-    /// Round 3's last rival, where the records' inputs differ in kind:
-    /// the best of the winner and its rivals just scored (candidates from
-    /// `first_rival` on, with the winner's network), with a summary network
-    /// after its stage 1, trained on the same `rows`. Its epochs take a
-    /// share of the time the others left ([`LEARNED_SHARE`]).
-    fn learned_rival(
+    /// [`Self::record`] of a fit that ran alone on the machine: its time
+    /// is its own, what the final fit's cost is estimated from.
+    fn record_timed_alone(
         &mut self,
-        best: usize,
-        first_rival: usize,
-        rows: usize,
-        limit: Option<(Instant, f64)>,
+        report: CandidateReport,
+        fitted: Option<(CompressorConfig, FittedRegressor)>,
+        network: RegressorConfig,
     ) {
-        let network = self.candidates[best].network.clone();
-        let base = std::iter::once(best)
-            .chain(first_rival..self.candidates.len())
-            .filter(|&i| {
-                self.candidates[i].network == network
-                    && self.candidates[i].report.status.is_scored()
-            })
-            .min_by(|&a, &b| {
-                self.candidates[a]
-                    .report
-                    .score
-                    .total_cmp(&self.candidates[b].report.score)
-            })
-            .and_then(|i| self.candidates[i].fitted.as_ref().map(|(c, _)| c.clone()));
-        let Some(learned) = base.and_then(|c| with_learned(&c, &self.plan.chart.records[..rows]))
-        else {
-            return;
-        };
-        self.plan.tell(3, 0, 1, &learned, &network);
-        let (report, outcome) = self.plan.evaluate(&learned, &network, rows, limit, 3, 0);
         let seconds = report.status.is_scored().then_some(report.seconds);
-        self.record(report, outcome, network);
+        self.record(report, fitted, network);
         if let Some(last) = self.candidates.last_mut() {
             last.solo_seconds = seconds;
         }
@@ -526,7 +502,8 @@ impl<'s, 'a, S: Simulator + ?Sized> Search<'s, 'a, S> {
     /// best score) and that no other beats on every parameter, the
     /// cheapest to fit. The time it leaves goes to round 3
     /// and to more records, which pay more than a difference the seed
-    /// could have made (decision 050).
+    /// could have made: a costlier fit that wins by less than that leaves
+    /// no time for round 3 or more records.
     /// With one parameter only the best score is beaten by none. Without
     /// a deadline (a budget in simulations), the best score.
     /// Round 3's averaged network loses to the network it averages where
@@ -820,77 +797,4 @@ impl<S: Simulator + ?Sized> Plan<'_, '_, S> {
             / rmse.len().max(1) as f64;
         Ok((rmse, score))
     }
-}
-
-/// The winner's stage 1 with each output's first sample and mean
-/// appended, where its features discard the record's level (ARX and NARX
-/// coefficients, also of transformed outputs): what a careful human adds
-/// when an initial state or an offset is to be estimated. The held-out
-/// risk decides whether it pays.
-fn with_level(compressor: &CompressorConfig, n_outputs: usize) -> Option<CompressorConfig> {
-    let stage1 = match compressor {
-        CompressorConfig::Transformed(t) => t.inner(),
-        other => other,
-    };
-    if !matches!(stage1, CompressorConfig::Arx(_) | CompressorConfig::Narx(_)) {
-        return None;
-    }
-    twostage_compress::WithLevel::new(compressor.clone(), n_outputs)
-        .ok()
-        .map(CompressorConfig::Leveled)
-}
-
-/// Features of every record, in parallel (row i is record i). A record
-/// the compressor cannot take (an ARX of a record whose input never
-/// moves) gets a row of NaN, to be left out by [`readable_rows`], as long
-/// as at most `allowed` of the records are such; beyond, the first one's
-/// error.
-fn compress_all(
-    compressor: &CompressorConfig,
-    records: &[IoData],
-    allowed: f64,
-) -> Result<Array2<f64>> {
-    let n = compressor.n_features();
-    let mut features = vec![0.0; records.len() * n];
-    let failures: Vec<(usize, twostage_compress::CompressError)> = features
-        .par_chunks_mut(n.max(1))
-        .zip(records.par_iter())
-        .enumerate()
-        .map_init(Workspace::new, |work, (i, (alpha, record))| {
-            compressor
-                .compress_into(record.inputs(), record.outputs(), work, alpha)
-                .map_err(|e| {
-                    alpha.fill(f64::NAN);
-                    (i, e)
-                })
-                .err()
-        })
-        .flatten()
-        .collect();
-    if failures.len() as f64 > allowed * records.len() as f64
-        && let Some((_, first)) = failures.into_iter().min_by_key(|(i, _)| *i)
-    {
-        return Err(first.into());
-    }
-    Ok(Array2::from_shape_vec((records.len(), n), features)
-        .unwrap_or_else(|_| unreachable!("n features per record")))
-}
-
-/// The rows of `features` (and of `thetas`, row for row) that
-/// [`compress_all`] could compress.
-fn readable_rows(
-    features: ndarray::ArrayView2<'_, f64>,
-    thetas: ndarray::ArrayView2<'_, f64>,
-) -> (Array2<f64>, Array2<f64>) {
-    let kept: Vec<usize> = features
-        .rows()
-        .into_iter()
-        .enumerate()
-        .filter(|(_, row)| row.iter().all(|v| !v.is_nan()))
-        .map(|(i, _)| i)
-        .collect();
-    (
-        features.select(Axis(0), &kept),
-        thetas.select(Axis(0), &kept),
-    )
 }
