@@ -281,7 +281,7 @@ fn benchmark_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         1,
         two_stage(&estimator),
     ));
-    let local = Refinement::new(exact_likelihood(BuiltinModel::Benchmark)?);
+    let local = Refinement::new(exact_likelihood(BuiltinModel::Benchmark));
     methods.push(run_method(
         "TS + PE refinement",
         "refined_benchmark",
@@ -367,7 +367,7 @@ fn car_section(sizes: &Sizes, seed: u64) -> Result<Section> {
         2,
         baseline(pem.as_ref()),
     ));
-    let local = Refinement::new(exact_likelihood(BuiltinModel::Pacejka)?);
+    let local = Refinement::new(exact_likelihood(BuiltinModel::Pacejka));
     methods.push(run_method(
         "TS + PE refinement",
         "refined_car",

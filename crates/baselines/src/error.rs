@@ -14,10 +14,10 @@ pub enum BaselineError {
     /// A record could not be compressed (indirect inference).
     #[error(transparent)]
     Compress(#[from] twostage_compress::CompressError),
-    /// The facade's refinement search (on which PE and indirect inference
-    /// descend) refused a setting.
+    /// The refinement's descent (on which prediction error and indirect
+    /// inference descend) refused a setting or failed.
     #[error(transparent)]
-    TwoStage(Box<twostage_train::Error>),
+    Refine(#[from] twostage_refine::RefineError),
     /// The model's table entry does not list the method.
     #[error("method '{method}' is not available for {model}: it has {available}")]
     NotAvailable {
@@ -49,21 +49,6 @@ pub enum BaselineError {
         /// What happened.
         what: String,
     },
-}
-
-impl From<twostage_train::Error> for BaselineError {
-    fn from(error: twostage_train::Error) -> Self {
-        BaselineError::TwoStage(Box::new(error))
-    }
-}
-
-/// A refinement's own errors (a start of the wrong length, say), as the
-/// facade wraps them: what a [`ResidualModel`](twostage_refine::ResidualModel) of this crate
-/// returns.
-impl From<twostage_refine::RefineError> for BaselineError {
-    fn from(error: twostage_refine::RefineError) -> Self {
-        twostage_train::Error::from(error).into()
-    }
 }
 
 /// Shorthand for results of this crate.

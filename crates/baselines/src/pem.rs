@@ -5,7 +5,7 @@
 //! facade's [`Refinement::descend`], the one that refines TS estimates.
 
 use crate::InvalidSetting;
-use twostage_models::{IoData, Prior};
+use twostage_models::{Benchmark, IoData, Prior, Simulator};
 use twostage_refine::{Descent, Refinement, ResidualModel};
 
 use crate::error::{BaselineError, Result};
@@ -20,14 +20,17 @@ pub struct BenchmarkPredictor {
 }
 
 impl BenchmarkPredictor {
-    /// The paper's benchmark, theta in [-0.9, 0.9].
-    ///
-    /// # Errors
-    /// Never for the built-in box.
-    pub fn new() -> Result<Self> {
-        Ok(Self {
-            prior: Prior::uniform_box(&[-0.9], &[0.9])?,
-        })
+    /// The paper's benchmark, theta in its prior's box [-0.9, 0.9].
+    pub fn new() -> Self {
+        Self {
+            prior: Benchmark::new().spec().prior().clone(),
+        }
+    }
+}
+
+impl Default for BenchmarkPredictor {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
@@ -55,7 +58,7 @@ impl ResidualModel for BenchmarkPredictor {
 /// let model = Benchmark::new();
 /// let mut record = model.spec().new_record();
 /// model.simulate(&[0.5], &mut experiment_rng(11, 0), &mut record)?;
-/// let pem = PredictionError::new(BenchmarkPredictor::new()?, 10).seed(1);
+/// let pem = PredictionError::new(BenchmarkPredictor::new(), 10).seed(1);
 /// let descents = pem.descents(&record)?;
 /// // The estimate is the end of the descent with the lowest loss; on this
 /// // record it is the global minimum near the truth. (On others a local

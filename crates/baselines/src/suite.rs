@@ -99,7 +99,7 @@ pub fn classic_estimator(
             Box::new(ParticleFilter::new(CarParticles::new(), particles).seed(seed))
         }
         (_, ClassicMethod::PredictionError) => {
-            Box::new(PredictionError::new(exact_likelihood(model)?, starts).seed(seed))
+            Box::new(PredictionError::new(exact_likelihood(model), starts).seed(seed))
         }
         (BuiltinModel::Benchmark, ClassicMethod::IndirectInference) => Box::new(
             IndirectInference::new(Benchmark::new(), profile.indirect_inference_arx(), starts)
@@ -120,15 +120,11 @@ pub fn classic_estimator(
 /// innovations, the car's noise-free simulation errors. What prediction
 /// error minimizes and the local posterior refinement integrates.
 ///
-/// # Errors
-/// Never for the built-in models.
-pub fn exact_likelihood(
-    model: BuiltinModel,
-) -> Result<Box<dyn ResidualModel<Error = BaselineError>>> {
-    Ok(match model {
-        BuiltinModel::Benchmark => Box::new(BenchmarkPredictor::new()?),
+pub fn exact_likelihood(model: BuiltinModel) -> Box<dyn ResidualModel<Error = BaselineError>> {
+    match model {
+        BuiltinModel::Benchmark => Box::new(BenchmarkPredictor::new()),
         BuiltinModel::Pacejka => Box::new(CarPredictor::new()),
-    })
+    }
 }
 
 #[cfg(test)]

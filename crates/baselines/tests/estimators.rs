@@ -46,7 +46,7 @@ fn the_particle_filter_finds_an_easy_theta_the_same_way_on_any_thread_count() {
 #[test]
 fn prediction_error_with_restarts_finds_the_global_minimum() {
     let data = record(0.5, 11);
-    let pem = PredictionError::new(BenchmarkPredictor::new().unwrap(), 10).seed(1);
+    let pem = PredictionError::new(BenchmarkPredictor::new(), 10).seed(1);
     let descents = pem.descents(&data).unwrap();
     assert_eq!(descents.len(), 10);
     assert!(descents.windows(2).all(|w| w[0].loss <= w[1].loss));
@@ -121,7 +121,7 @@ fn the_posterior_matches_brute_force_quadrature() {
 #[test]
 fn refining_with_the_exact_likelihood_stays_in_its_box_and_more_starts_never_end_higher() {
     use twostage::{RefineStarts, Refinement};
-    let pe = Refinement::new(BenchmarkPredictor::new().unwrap());
+    let pe = Refinement::new(BenchmarkPredictor::new());
     for (i, truth) in [-0.62, -0.2, 0.35, 0.71].into_iter().enumerate() {
         let data = record(truth, 40 + i as u64);
         let start = [truth + 0.02];

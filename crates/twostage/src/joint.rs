@@ -4,7 +4,6 @@
 //! two-stage estimates pooled, then one output-error fit of every record
 //! on its own input ([`crate::refine::JointEstimate`]).
 
-use twostage_baselines::{BaselineError, Result};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{IoData, Simulator};
@@ -91,10 +90,9 @@ impl JointFitter {
         estimator: &Estimator,
         model_file: Option<&NamedModel>,
         search: SearchStarts,
-    ) -> Result<Self> {
+    ) -> crate::Result<Self> {
         let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
-            .and_then(|model| model.simulator())
-            .map_err(|e| BaselineError::TwoStage(Box::new(e.into())))?;
+            .and_then(|model| model.simulator())?;
         Self::with_simulator(estimator, simulator.into(), search)
     }
 
@@ -107,9 +105,8 @@ impl JointFitter {
         estimator: &Estimator,
         simulator: SharedSimulator,
         search: SearchStarts,
-    ) -> Result<Self> {
-        let fit = OutputError::new(simulator)
-            .map_err(|e| BaselineError::TwoStage(Box::new(crate::Error::from(e))))?;
+    ) -> crate::Result<Self> {
+        let fit = OutputError::new(simulator)?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         Ok(Self {
             fit: Refinement::new(fit),

@@ -7,7 +7,7 @@
 use std::sync::Arc;
 
 use rayon::prelude::*;
-use twostage_baselines::{BaselineError, Result, exact_likelihood};
+use twostage_baselines::{BaselineError, exact_likelihood};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{BuiltinModel, IoData, Simulator};
@@ -131,7 +131,7 @@ impl EstimateRefiner {
     /// An estimator without intervals (no neighbourhood to refine in), a
     /// model file of another model than the estimator's, or a model that
     /// cannot run without noise on a given input.
-    pub fn new(estimator: &Estimator, model_file: Option<&NamedModel>) -> Result<Self> {
+    pub fn new(estimator: &Estimator, model_file: Option<&NamedModel>) -> crate::Result<Self> {
         Self::with_model(estimator, model_file, || {
             NamedModel::trained_on(&estimator.training().model, model_file)
                 .and_then(|model| model.simulator())
@@ -151,8 +151,8 @@ impl EstimateRefiner {
         estimator: &Estimator,
         model_file: Option<&NamedModel>,
         model: impl FnOnce() -> crate::Result<SharedSimulator>,
-    ) -> Result<Self> {
-        let radius = estimator.neighbourhood(2.0).map_err(|e| boxed(e.into()))?;
+    ) -> crate::Result<Self> {
+        let radius = estimator.neighbourhood(2.0)?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         if model_file.is_none()
@@ -160,7 +160,7 @@ impl EstimateRefiner {
         {
             return Ok(Self {
                 how: How::Posterior {
-                    local: Refinement::new(exact_likelihood(model)?),
+                    local: Refinement::new(exact_likelihood(model)),
                     points: ModelProfile::of(model).refinement_points(),
                 },
                 radius,
@@ -168,8 +168,8 @@ impl EstimateRefiner {
                 search: default_search(estimator),
             });
         }
-        let simulator = model().map_err(boxed)?;
-        let fit = OutputError::new(simulator).map_err(|e| boxed(e.into()))?;
+        let simulator = model()?;
+        let fit = OutputError::new(simulator)?;
         Ok(Self {
             how: How::OutputError(Refinement::new(fit)),
             radius,
@@ -428,7 +428,3 @@ fn default_search(estimator: &Estimator) -> SearchStarts {
 /// points fill a simulator's batches; more would only hold more residuals
 /// in memory at once.
 pub const RECORDS_TOGETHER: usize = 64;
-
-fn boxed(e: crate::Error) -> BaselineError {
-    BaselineError::TwoStage(Box::new(e))
-}
