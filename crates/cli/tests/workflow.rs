@@ -839,7 +839,9 @@ fn refinement_moves_estimates_towards_the_bayes_ones() {
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     assert!(
-        text(&out.stderr).contains("--refine-below-fit is read with --refine=auto only"),
+        text(&out.stderr).contains(
+            "--refine-below-fit: the fit below which to refine is read when refining auto only"
+        ),
         "{}",
         text(&out.stderr)
     );
@@ -1004,7 +1006,9 @@ fn check_passes_the_model_s_records_and_flags_an_alien_one() {
     ]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     assert!(
-        text(&out.stderr).contains("--model-file is read by --check, --refine and --joint"),
+        text(&out.stderr).contains(
+            "--model-file: a trained estimator reads a model only to check, refine or jointly fit"
+        ),
         "{}",
         text(&out.stderr)
     );

@@ -257,12 +257,10 @@ pub(crate) fn estimate_records<'py>(
         None => (0..records.len()).map(|k| k.to_string()).collect(),
     };
     let refine = twostage::RefineWhich::chosen(refine, refine_below_fit).map_err(|e| match e {
-        twostage::RefineChoiceError::Unknown(other) => PyValueError::new_err(format!(
-            "refine = {other:?}: give \"all\", \"auto\" or None"
-        )),
-        twostage::RefineChoiceError::BelowFitWithoutAuto => PyValueError::new_err(
-            "refine_below_fit is read with refine=\"auto\" only: leave it out",
-        ),
+        twostage::RefineChoiceError::Unknown(_) => PyValueError::new_err(format!("refine: {e}")),
+        twostage::RefineChoiceError::BelowFitWithoutAuto => {
+            PyValueError::new_err(format!("refine_below_fit: {e}"))
+        }
     })?;
     if every.is_some() && window.is_none() {
         return Err(PyValueError::new_err("every needs window=N: give both"));

@@ -20,3 +20,15 @@ def cli(*args):
     done = subprocess.run([CLI, *args], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     return done.stdout
+
+
+def cli_refusal(*args):
+    """Run the command line where it must refuse: its standard error's
+    first line without the ``error: `` the command puts before it."""
+    if not CLI:
+        pytest.fail("TWOSTAGE_CLI is not set: run the suite with `cargo xtask test`")
+    done = subprocess.run([CLI, *args], capture_output=True, text=True)
+    assert done.returncode != 0, done.stdout
+    first = done.stderr.splitlines()[0]
+    assert first.startswith("error: "), done.stderr
+    return first[len("error: "):]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import twostage
-from command_line import cli
+from command_line import cli, cli_refusal
 
 
 
@@ -137,10 +137,52 @@ def test_a_file_of_records_is_estimated_as_the_cli_estimates_it(benchmark):
     ours = estimator.estimate_records(pairs[:1], window=500)
     assert ours["rows"] == [] and len(ours["failed"]) == 2
     assert "records: experiment 0: " in ours["failed"][0][1]
-    with pytest.raises(ValueError, match="refine_below_fit is read with refine=\"auto\""):
+    with pytest.raises(ValueError, match="refine_below_fit: the fit below which to refine is read when refining auto only"):
         estimator.estimate_records(pairs, refine_below_fit=50.0)
     with pytest.raises(ValueError, match="experiments has 1 names for 3 records"):
         estimator.estimate_records(pairs, experiments=["a"])
+
+
+def words_after(spelling, message):
+    """What a door says of a refusal after its own name of the setting."""
+    assert message.startswith(spelling + ": "), message
+    return message[len(spelling) + 2:]
+
+
+def test_each_refusal_is_the_request_s_through_both_doors(benchmark, tmp_path):
+    estimator, path, folder = benchmark
+    u, y, _ = records(folder)
+    pairs = [(u[k], y[k]) for k in range(3)]
+    data = str(folder / "data.csv")
+    model = tmp_path / "short.toml"
+    model.write_text(SHORT)
+    est = ("estimate", "--estimator", str(path))
+
+    def python_refusal(**kwargs):
+        with pytest.raises(ValueError) as refused:
+            estimator.estimate_records(pairs, **kwargs)
+        return str(refused.value)
+
+    # Each door names the setting its way; the words after are the
+    # request's, the same through both.
+    cases = [
+        (("--refine=all", "--refine-below-fit", "5"), "--refine-below-fit",
+         dict(refine="all", refine_below_fit=5.0), "refine_below_fit"),
+        (("--model-file", str(model)), "--model-file",
+         dict(model_file=str(model)), "the model"),
+        (("--window", "100", "--every", "0"), "--window",
+         dict(window=100, every=0), "the windows"),
+    ]
+    for flags, flag, kwargs, name in cases:
+        from_cli = words_after(flag, cli_refusal(*est, *flags, data))
+        from_python = words_after(name, python_refusal(**kwargs))
+        assert from_cli == from_python, (flags, kwargs)
+    # A window longer than the records: each record is named, not
+    # estimated, in the request's words through both doors.
+    refused = cli_refusal(*est, "--window", "5000", data)
+    ours = estimator.estimate_records(pairs, window=5000, experiments=["0", "1", "2"])
+    assert ours["rows"] == [] and len(ours["failed"]) == 3
+    assert refused.endswith(ours["failed"][0][1].split(": ", 1)[1]), (refused, ours["failed"][0])
 
 
 def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):

@@ -282,4 +282,16 @@ fn a_request_that_cannot_run_is_refused_by_its_part() {
     );
     assert_eq!(e.purpose, Purpose::Method);
     assert!(matches!(e.error, RequestProblem::NotBuiltIn { .. }), "{e}");
+    // A trained estimator reads a model only to check, refine or fit
+    // jointly: given without them, it is refused, not ignored.
+    let trained = estimator();
+    let with_model = || {
+        EstimateRequest::new(EstimateWith::Estimator(Box::new(trained.clone())))
+            .model(Some(NamedModel::builtin("benchmark").unwrap()))
+    };
+    let e = refused(with_model());
+    assert_eq!(e.purpose, Purpose::Model);
+    assert!(matches!(e.error, RequestProblem::ModelNotRead), "{e}");
+    assert!(with_model().check_records(true).prepare().is_ok());
+    assert!(with_model().joint(true).prepare().is_ok());
 }

@@ -86,15 +86,6 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
             "--check and --refine=auto",
         );
     }
-    if args.model_file.is_some()
-        && args.estimator.is_some()
-        && !(args.checks() || args.refine.is_some() || args.joint)
-    {
-        return refuse(
-            "--model-file",
-            "--check, --refine and --joint with an estimator (it knows its model's records)",
-        );
-    }
     if args.model.is_some() && method.is_none() && args.at.is_none() {
         return refuse(
             "--model",
@@ -199,14 +190,8 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
                 args.refine_below_fit,
             )
             .map_err(|e| match e {
-                RefineChoiceError::BelowFitWithoutAuto => usage(
-                    "--refine-below-fit is read with --refine=auto only: leave it out or give \
-                     --refine=auto"
-                        .into(),
-                ),
-                RefineChoiceError::Unknown(other) => {
-                    usage(format!("--refine={other}: give all or auto"))
-                }
+                RefineChoiceError::BelowFitWithoutAuto => usage(format!("--refine-below-fit: {e}")),
+                RefineChoiceError::Unknown(_) => usage(format!("--refine: {e}")),
             })?,
         )
         .joint(args.joint)
@@ -228,6 +213,8 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
         Purpose::Refine => "--refine".into(),
         Purpose::Joint => "--joint".into(),
         Purpose::Windows => "--window".into(),
+        Purpose::Model if args.model_file.is_some() => "--model-file".into(),
+        Purpose::Model => "--model".into(),
     };
     match e.error {
         RequestProblem::NoModel => usage(format!(

@@ -207,7 +207,9 @@ pub enum RefineChoiceError {
     #[error("refine {0:?}: give all or auto")]
     Unknown(String),
     /// A fit threshold without `auto`, which alone reads it.
-    #[error("a fit below which to refine is read by refine auto only: leave it out or refine auto")]
+    #[error(
+        "the fit below which to refine is read when refining auto only: leave it out or refine auto"
+    )]
     BelowFitWithoutAuto,
 }
 
@@ -376,6 +378,15 @@ impl EstimateRequest {
     /// another model, a model that cannot run without noise, a method the
     /// model lacks, no model where one is needed).
     pub fn prepare(self) -> Result<Estimating, RequestError> {
+        if self.model.is_some()
+            && matches!(self.with, EstimateWith::Estimator(_))
+            && !(self.checks() || self.refine.is_some() || self.joint)
+        {
+            return Err(RequestError {
+                purpose: Purpose::Model,
+                error: RequestProblem::ModelNotRead,
+            });
+        }
         if let Some(w) = self.windows
             && (w.length == 0 || w.every == 0)
         {
@@ -593,6 +604,8 @@ pub enum Purpose {
     Joint,
     /// The windows of each record.
     Windows,
+    /// The model given.
+    Model,
 }
 
 impl Purpose {
@@ -606,6 +619,7 @@ impl Purpose {
             Self::Refine => "the refinement",
             Self::Joint => "the joint fit",
             Self::Windows => "the windows",
+            Self::Model => "the model",
         }
     }
 }
@@ -630,6 +644,13 @@ pub enum RequestProblem {
         /// Samples between windows.
         every: usize,
     },
+    /// A model given to a trained estimator's request that neither checks,
+    /// refines nor fits its estimates jointly: it would be ignored.
+    #[error(
+        "a trained estimator reads a model only to check, refine or jointly fit its estimates, \
+         and none is asked: leave the model out"
+    )]
+    ModelNotRead,
     /// A classic method asked of a model file.
     #[error(
         "method '{method}' is not available for {model}: the classic methods exist for the \
