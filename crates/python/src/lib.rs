@@ -232,6 +232,23 @@ impl PyEstimator {
         Ok(rows(py, theta, q, single))
     }
 
+    /// The last sample (from 1) of each window of `window` samples, one
+    /// every `every`, of a record of `samples` samples: the estimate
+    /// request's windows, refused in its words.
+    #[pyo3(signature = (samples, window, every))]
+    fn window_ends(&self, samples: usize, window: usize, every: usize) -> PyResult<Vec<usize>> {
+        let windows = twostage::Windows {
+            length: window,
+            every,
+        };
+        if let Some(refused) = windows.refused() {
+            return Err(PyValueError::new_err(format!("the windows: {refused}")));
+        }
+        windows
+            .ends(samples, "the record")
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
     /// Estimates with their intervals and the out-of-distribution flag, for
     /// one record or a batch: `(theta, half_widths, feature_distance,
     /// distance_threshold, untransformed, input_outside)`, the half-widths

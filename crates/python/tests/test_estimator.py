@@ -202,8 +202,15 @@ def test_windows_of_a_long_record_are_the_cli_s(small, tmp_path):
     for k, row in enumerate(from_cli):
         assert windows["theta"][k].tolist() == [row["theta"]]
         assert windows["lower"][k].tolist() == [row["theta_lo"]]
-    with pytest.raises(ValueError, match="shorter than the window"):
+    # Refused as the request refuses windows, in its words.
+    with pytest.raises(ValueError, match=f"the record: {3 * n} samples, shorter than the window of {4 * n}"):
         estimator.assess_windows(u, y, 4 * n)
+    with pytest.raises(ValueError) as refused:
+        estimator.assess_windows(u, y, n, 0)
+    with pytest.raises(ValueError) as requested:
+        estimator.estimate_records([(u, y)], window=n, every=0)
+    assert str(refused.value) == str(requested.value)
+    assert str(refused.value).startswith(f"the windows: a window of {n} samples every 0")
 
 
 def test_a_file_round_trips_and_the_cli_reads_it(small):

@@ -210,14 +210,7 @@ class Estimator:
         y = np.asarray(y, dtype=np.float64)
         n = y.shape[0]
         every = window if every is None else every
-        if window < 1 or every < 1:
-            raise ValueError(
-                "window %d, every %d: give a window and a step of at least 1 sample"
-                % (window, every)
-            )
-        if n < window:
-            raise ValueError("the record has %d samples, shorter than the window of %d" % (n, window))
-        ends = np.arange(window, n + 1, every)
+        ends = np.asarray(self._native.window_ends(n, window, every), dtype=np.int64)
         ys = np.stack([y[end - window:end] for end in ends])
         us = None
         if u is not None:

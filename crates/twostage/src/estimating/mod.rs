@@ -222,6 +222,55 @@ pub struct Windows {
     pub every: usize,
 }
 
+impl Windows {
+    /// Why these windows cannot be cut at all (a window or a step of no
+    /// samples), in the request's words; `None` when they can.
+    ///
+    /// ```
+    /// use twostage::Windows;
+    /// assert!(Windows { length: 100, every: 50 }.refused().is_none());
+    /// let refused = Windows { length: 100, every: 0 }.refused().expect("a step of 0");
+    /// assert!(refused.to_string().starts_with("a window of 100 samples every 0"));
+    /// ```
+    pub fn refused(self) -> Option<RequestProblem> {
+        (self.length == 0 || self.every == 0).then_some(RequestProblem::EmptyWindow {
+            length: self.length,
+            every: self.every,
+        })
+    }
+
+    /// The last sample (counted from 1) of each window of a record of
+    /// `samples` samples, or why there is none: the record, named by
+    /// `place`, shorter than one window. Windows that [`Self::refused`]
+    /// refuses give no window.
+    ///
+    /// ```
+    /// use twostage::Windows;
+    /// let windows = Windows { length: 4, every: 3 };
+    /// assert_eq!(windows.ends(10, "r.csv").ok(), Some(vec![4, 7, 10]));
+    /// assert_eq!(
+    ///     windows.ends(3, "r.csv").unwrap_err().to_string(),
+    ///     "r.csv: 3 samples, shorter than the window of 4"
+    /// );
+    /// ```
+    ///
+    /// # Errors
+    /// [`RecordFailure::ShorterThanWindow`].
+    pub fn ends(self, samples: usize, place: &str) -> Result<Vec<usize>, RecordFailure> {
+        if samples < self.length {
+            return Err(RecordFailure::ShorterThanWindow {
+                place: place.to_string(),
+                samples,
+                window: self.length,
+            });
+        }
+        if self.refused().is_some() {
+            return Ok(Vec::new());
+        }
+        Ok((self.length..=samples).step_by(self.every).collect())
+    }
+}
+
 /// How a check ranks a record among the model's own.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CheckSettings {
@@ -387,15 +436,10 @@ impl EstimateRequest {
                 error: RequestProblem::ModelNotRead,
             });
         }
-        if let Some(w) = self.windows
-            && (w.length == 0 || w.every == 0)
-        {
+        if let Some(refused) = self.windows.and_then(Windows::refused) {
             return Err(RequestError {
                 purpose: Purpose::Windows,
-                error: RequestProblem::EmptyWindow {
-                    length: w.length,
-                    every: w.every,
-                },
+                error: refused,
             });
         }
         let settings = Settings {

@@ -86,7 +86,6 @@ impl Estimating {
                 .map(|(id, r)| (id, r.map_err(RecordFailure::from), None))
                 .collect();
         };
-        let (length, every) = (windows.length, windows.every);
         let mut pieces = Vec::new();
         for (id, record) in records {
             let record = match record {
@@ -96,19 +95,14 @@ impl Estimating {
                     continue;
                 }
             };
-            let n = record.n_samples();
-            if n < length {
-                let why = RecordFailure::ShorterThanWindow {
-                    place: place(&id),
-                    samples: n,
-                    window: length,
-                };
-                pieces.push((id, Err(why), None));
-                continue;
-            }
-            // A step of 0 is refused when the request is prepared.
-            for end in (length..=n).step_by(every.max(1)) {
-                pieces.push((id.clone(), Ok(record.window(end - length, end)), Some(end)));
+            match windows.ends(record.n_samples(), &place(&id)) {
+                Err(why) => pieces.push((id, Err(why), None)),
+                Ok(ends) => {
+                    for end in ends {
+                        let start = end - windows.length;
+                        pieces.push((id.clone(), Ok(record.window(start, end)), Some(end)));
+                    }
+                }
             }
         }
         pieces
