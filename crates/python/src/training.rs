@@ -4,9 +4,12 @@
 
 use std::path::PathBuf;
 
+use numpy::{PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use twostage::{ChartDir, NamedModel, RecordsRequest, RunSettings, TrainingRequest};
+use twostage::{
+    ChartArrays, ChartDir, ChartGiven, NamedModel, RecordsRequest, RunSettings, TrainingRequest,
+};
 
 use crate::simulator::{PythonProgress, PythonSimulator};
 use crate::through_model::named_model;
@@ -41,9 +44,9 @@ pub(crate) fn train(
     calibrate: Option<usize>,
     alpha: Option<f64>,
     progress: Option<Py<PyAny>>,
-    chart: Option<(PathBuf, Option<String>)>,
-    validate_chart: Option<(PathBuf, Option<String>)>,
-    calibrate_chart: Option<(PathBuf, Option<String>)>,
+    chart: Option<Bound<'_, PyAny>>,
+    validate_chart: Option<Bound<'_, PyAny>>,
+    calibrate_chart: Option<Bound<'_, PyAny>>,
     auto: bool,
     budget_seconds: Option<f64>,
     budget_sims: Option<usize>,
@@ -79,24 +82,33 @@ pub(crate) fn train(
         })?,
     };
     let defaults = RunSettings::default();
-    let chart_dir = |given: Option<(PathBuf, Option<String>)>| {
-        given.map(|(dir, label)| ChartDir { dir, label })
+    let given = |chart: Option<Bound<'_, PyAny>>, name: &str| {
+        chart.map(|c| chart_given(&c, name)).transpose()
     };
+    let (chart, validate_chart, calibrate_chart) = (
+        given(chart, "chart")?,
+        given(validate_chart, "validate_chart")?,
+        given(calibrate_chart, "calibrate_chart")?,
+    );
     let records = match (chart, validate_chart, calibrate_chart) {
         (None, None, None) => RecordsRequest::Simulated,
-        (Some((dir, label)), validation, calibration) => match RecordsRequest::chart(&dir) {
-            RecordsRequest::Chart { .. } => RecordsRequest::Chart {
-                training: ChartDir { dir, label },
-                calibration: chart_dir(calibration),
-                validation: chart_dir(validation),
-            },
-            shards if validation.is_none() && calibration.is_none() => shards,
-            _ => {
-                return Err(PyValueError::new_err(
-                    "shards hold their own calibration and validation records: leave out \
-                     validate_chart and calibrate_chart",
-                ));
+        (Some(training), validation, calibration) => match &training {
+            ChartGiven::Folder(ChartDir { dir, .. })
+                if !matches!(RecordsRequest::chart(dir), RecordsRequest::Chart { .. }) =>
+            {
+                if validation.is_some() || calibration.is_some() {
+                    return Err(PyValueError::new_err(
+                        "shards hold their own calibration and validation records: leave out \
+                         validate_chart and calibrate_chart",
+                    ));
+                }
+                RecordsRequest::chart(dir)
             }
+            _ => RecordsRequest::Given {
+                training,
+                calibration,
+                validation,
+            },
         },
         (None, _, _) => {
             return Err(PyValueError::new_err(
@@ -147,4 +159,57 @@ pub(crate) fn train(
             inner: trained.into_estimator(),
         })
         .map_err(to_python)
+}
+
+/// A `chart` argument as the request takes it: a folder (a path), or the
+/// arrays `(theta [m, q], inputs [m, N, n_u] or None, outputs [m, N, n_y])`,
+/// float64.
+fn chart_given(chart: &Bound<'_, PyAny>, name: &str) -> PyResult<ChartGiven> {
+    if let Ok(dir) = chart.extract::<PathBuf>() {
+        return Ok(ChartGiven::Folder(ChartDir::new(dir)));
+    }
+    let Ok((theta, inputs, outputs)) =
+        chart.extract::<(Bound<'_, PyAny>, Option<Bound<'_, PyAny>>, Bound<'_, PyAny>)>()
+    else {
+        return Err(PyValueError::new_err(format!(
+            "{name} is a folder or a tuple (theta [m, q], inputs [m, N, n_u] or None, outputs \
+             [m, N, n_y]), not {}",
+            chart.get_type().name()?
+        )));
+    };
+    let float64 = |array: &Bound<'_, PyAny>, part: &str| {
+        PyValueError::new_err(format!(
+            "{name} {part} must be a float64 numpy array (np.asarray({part}, dtype=np.float64)), \
+             not {}",
+            array
+                .getattr("dtype")
+                .map_or_else(|_| array.get_type().to_string(), |d| d.to_string())
+        ))
+    };
+    let theta = theta
+        .extract::<PyReadonlyArray2<'_, f64>>()
+        .map_err(|_| float64(&theta, "theta"))?
+        .as_array()
+        .to_owned();
+    let inputs = inputs
+        .map(|u| {
+            u.extract::<PyReadonlyArray3<'_, f64>>()
+                .map(|a| a.as_array().to_owned())
+                .map_err(|_| float64(&u, "inputs"))
+        })
+        .transpose()?;
+    let outputs = outputs
+        .extract::<PyReadonlyArray3<'_, f64>>()
+        .map_err(|_| float64(&outputs, "outputs"))?
+        .as_array()
+        .to_owned();
+    let label = format!("of {} experiments given as arrays", theta.nrows());
+    Ok(ChartGiven::Arrays {
+        arrays: ChartArrays {
+            theta,
+            inputs,
+            outputs,
+        },
+        label,
+    })
 }

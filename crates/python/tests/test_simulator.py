@@ -171,9 +171,16 @@ def test_a_chart_of_arrays_trains_as_the_cli_trains_on_its_files(tmp_path):
 def test_a_bad_chart_is_named():
     theta, u, y = _chart(50, 9)
     y[7, 3, 0] = np.nan
-    with pytest.raises(ValueError, match=r"chart outputs\[7, 3, 0\] is nan"):
+    with pytest.raises(ValueError, match=r"chart: outputs\[7, 3, 0\] = NaN is not a finite number"):
         twostage.train(model_toml=MODEL, chart=(theta, u, y), validate=10, calibrate=0,
                        progress=False)
     with pytest.raises(ValueError, match="chart outputs must be a float64"):
         twostage.train(model_toml=MODEL, chart=(theta, u, y.astype(np.float32)),
+                       progress=False)
+    # Shapes are the model's, as a chart folder's are.
+    with pytest.raises(ValueError, match=r"chart: theta has shape \[50, 2\]: expected \[m, 1\]"):
+        twostage.train(model_toml=MODEL, chart=(np.hstack([theta, theta]), u, y),
+                       progress=False)
+    with pytest.raises(ValueError, match="validate_chart is a folder or a tuple"):
+        twostage.train(model_toml=MODEL, chart=(theta, u, y), validate_chart=[1, 2],
                        progress=False)

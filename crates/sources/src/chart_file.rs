@@ -15,13 +15,16 @@
 use std::collections::HashMap;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use twostage_models::{IoData, ModelSpec, SignalColumn};
 
+use crate::chart_arrays::ChartArrays;
 use crate::error::{Error, Result};
 
 /// A chart on disk, its parameters read and checked, its records read on
-/// demand.
+/// demand; or a chart of arrays in memory ([`ChartFiles::from_arrays`]),
+/// read the same way.
 ///
 /// ```no_run
 /// use twostage_sources::{ChartFiles, ModelFile};
@@ -38,7 +41,18 @@ pub struct ChartFiles {
     ids: Vec<String>,
     thetas: Vec<f64>,
     q: usize,
-    numpy: bool,
+    stored: Stored,
+}
+
+/// Where a chart's records are.
+#[derive(Debug, Clone)]
+enum Stored {
+    /// DIR/data.csv.
+    Csv,
+    /// DIR/inputs.npy and DIR/outputs.npy.
+    Numpy,
+    /// Arrays in memory.
+    Memory(Arc<ChartArrays>),
 }
 
 impl ChartFiles {
@@ -124,7 +138,7 @@ impl ChartFiles {
             ids,
             thetas,
             q,
-            numpy: false,
+            stored: Stored::Csv,
         })
     }
 
@@ -161,7 +175,7 @@ impl ChartFiles {
             ids: (0..m).map(|i| i.to_string()).collect(),
             thetas,
             q,
-            numpy: true,
+            stored: Stored::Numpy,
         };
         // Shapes now, so that a wrong file fails before any work.
         for (name, width) in chart.record_arrays(spec) {
@@ -201,14 +215,53 @@ impl ChartFiles {
         self.ids.is_empty()
     }
 
-    /// The folder.
-    pub fn dir(&self) -> &Path {
-        &self.dir
+    /// A chart given as arrays (`theta [m, q]`, `inputs [m, N, n_u]` for a
+    /// model with inputs, `outputs [m, N, n_y]`), checked against `spec`
+    /// as a chart's files are, named `label` in the estimator file: its
+    /// records are those of the same arrays saved as a NumPy chart, in
+    /// the same order.
+    ///
+    /// ```
+    /// use ndarray::{Array2, Array3};
+    /// use twostage_models::{Benchmark, Simulator};
+    /// use twostage_sources::{ChartArrays, ChartFiles};
+    /// let spec = Benchmark::new().spec().clone();
+    /// let n = spec.n_samples();
+    /// let arrays = ChartArrays {
+    ///     theta: Array2::from_elem((3, 1), 0.2),
+    ///     inputs: Some(Array3::zeros((3, n, 1))),
+    ///     outputs: Array3::zeros((3, n, 1)),
+    /// };
+    /// let chart = ChartFiles::from_arrays(arrays.clone(), &spec, "three runs")?;
+    /// assert_eq!((chart.len(), chart.theta(2), chart.describe().as_str()), (3, &[0.2][..], "three runs"));
+    /// let mut bad = arrays;
+    /// bad.outputs[[1, 4, 0]] = f64::NAN;
+    /// let refused = ChartFiles::from_arrays(bad, &spec, "three runs").unwrap_err();
+    /// assert_eq!(refused.to_string(), "chart: outputs[1, 4, 0] = NaN is not a finite number");
+    /// # Ok::<(), twostage_sources::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::ChartFile`] naming the array: a shape that is not the
+    /// model's, no experiment, a value that is not finite (its index).
+    pub fn from_arrays(
+        arrays: ChartArrays,
+        spec: &ModelSpec,
+        label: impl Into<String>,
+    ) -> Result<Self> {
+        let arrays = arrays.checked(spec)?;
+        Ok(Self {
+            dir: PathBuf::new(),
+            label: Some(label.into()),
+            ids: (0..arrays.len()).map(|i| i.to_string()).collect(),
+            thetas: arrays.thetas(),
+            q: spec.n_params(),
+            stored: Stored::Memory(Arc::new(arrays)),
+        })
     }
 
     /// Name the chart in the estimator file by `label` instead of its
-    /// folder (the Python package's arrays live in a folder that is gone
-    /// once trained).
+    /// folder.
     pub fn labelled(mut self, label: impl Into<String>) -> Self {
         self.label = Some(label.into());
         self
@@ -239,8 +292,10 @@ impl ChartFiles {
         spec: &ModelSpec,
         mut visit: impl FnMut(usize, &IoData) -> Result<()>,
     ) -> Result<()> {
-        if self.numpy {
-            return self.for_each_numpy_record(spec, visit);
+        match &self.stored {
+            Stored::Numpy => return self.for_each_numpy_record(spec, visit),
+            Stored::Memory(arrays) => return arrays.for_each_record(visit),
+            Stored::Csv => {}
         }
         let path = self.dir.join("data.csv");
         let file = Located::new(&path);

@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 
 mod chart;
+mod chart_arrays;
 mod chart_file;
 pub mod csv_rows;
 mod error;
@@ -44,6 +45,7 @@ pub use chart::ForModel;
 pub use chart::{
     CompressedChart, ExperimentFailure, StoredChart, compress_chart, simulate_records,
 };
+pub use chart_arrays::ChartArrays;
 pub use chart_file::ChartFiles;
 pub use error::{Error, InvalidSetting, Result};
 pub use model_file::{

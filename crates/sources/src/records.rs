@@ -148,7 +148,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                         reason: format!(
                             "the chart {} has {m} records: at least 10 must be left to train on \
                              (hold out fewer, or give separate validation and calibration charts)",
-                            training.dir().display()
+                            training.describe()
                         ),
                     }));
                 }

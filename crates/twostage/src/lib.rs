@@ -69,7 +69,7 @@ pub use joint::{JointFitter, JointOfRecords};
 pub use refiner::{
     EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
 };
-pub use request::{ChartDir, RecordsRequest, Trained, TrainingRequest};
+pub use request::{ChartDir, ChartGiven, RecordsRequest, Trained, TrainingRequest};
 pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_estimator::{
@@ -91,8 +91,8 @@ pub use validation_run::{
 };
 
 pub use twostage_sources::{
-    ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource, Preset,
-    Progress, RecordSource, ShardIndex, ShardPlan, ShardedChart, Silent, Stage,
+    ChartArrays, ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource,
+    Preset, Progress, RecordSource, ShardIndex, ShardPlan, ShardedChart, Silent, Stage,
     TEMPLATE as MODEL_FILE_TEMPLATE, compress_chart, fingerprint, fmu_model_file, simulate_shard,
 };
 pub use twostage_sources::{

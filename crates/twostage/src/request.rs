@@ -16,7 +16,7 @@ use twostage_fit::RegressorConfig;
 use twostage_sources::NamedModel;
 use twostage_sources::Progress;
 use twostage_sources::RecordSource;
-use twostage_sources::{ChartFiles, DEFAULT_PRESET_SIMULATIONS, Preset};
+use twostage_sources::{ChartArrays, ChartFiles, DEFAULT_PRESET_SIMULATIONS, Preset};
 use twostage_sources::{ShardPlan, ShardedChart};
 use twostage_train::{Error, Result};
 use twostage_train::{RunSettings, TwoStage};
@@ -51,6 +51,34 @@ impl ChartDir {
     }
 }
 
+/// A chart given to a request in memory or by its folder (the Python
+/// package's `chart` argument: arrays or a folder).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ChartGiven {
+    /// A chart folder.
+    Folder(ChartDir),
+    /// Arrays, and how the estimator file names them.
+    Arrays {
+        /// The chart's arrays.
+        arrays: ChartArrays,
+        /// The name the estimator's record gives them.
+        label: String,
+    },
+}
+
+impl ChartGiven {
+    fn open(&self, model: &dyn Simulator) -> Result<ChartFiles> {
+        match self {
+            Self::Folder(dir) => dir.open(model),
+            Self::Arrays { arrays, label } => Ok(ChartFiles::from_arrays(
+                arrays.clone(),
+                model.spec(),
+                label.clone(),
+            )?),
+        }
+    }
+}
+
 /// Where a request's records come from.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -75,6 +103,17 @@ pub enum RecordsRequest {
     Shards {
         /// The pattern.
         pattern: String,
+    },
+    /// Charts given in memory or by folder ([`Self::Chart`] with arrays
+    /// allowed; a request file cannot hold arrays, so it never has one).
+    #[serde(skip)]
+    Given {
+        /// The training chart.
+        training: ChartGiven,
+        /// A chart of its own for the intervals.
+        calibration: Option<ChartGiven>,
+        /// A chart of its own for the validation report.
+        validation: Option<ChartGiven>,
     },
 }
 
@@ -190,7 +229,7 @@ impl TrainingRequest {
     pub fn steps(&self, searching: bool) -> String {
         let read = match &self.records {
             RecordsRequest::Simulated => "simulate",
-            RecordsRequest::Chart { .. } => "read the chart",
+            RecordsRequest::Chart { .. } | RecordsRequest::Given { .. } => "read the chart",
             RecordsRequest::Shards { .. } => "merge the shards",
         };
         let build = if searching {
@@ -388,15 +427,24 @@ impl TrainingRequest {
                 let open = |chart: &Option<ChartDir>| {
                     chart.as_ref().map(|c| c.open(simulator)).transpose()
                 };
-                let (training, calibration, validation) = (
-                    training.open(simulator)?,
-                    open(calibration)?,
-                    open(validation)?,
-                );
                 run(builder.records(RecordSource::Files {
-                    training: &training,
-                    calibration: calibration.as_ref(),
-                    validation: validation.as_ref(),
+                    training: &training.open(simulator)?,
+                    calibration: open(calibration)?.as_ref(),
+                    validation: open(validation)?.as_ref(),
+                }))
+            }
+            RecordsRequest::Given {
+                training,
+                calibration,
+                validation,
+            } => {
+                let open = |chart: &Option<ChartGiven>| {
+                    chart.as_ref().map(|c| c.open(simulator)).transpose()
+                };
+                run(builder.records(RecordSource::Files {
+                    training: &training.open(simulator)?,
+                    calibration: open(calibration)?.as_ref(),
+                    validation: open(validation)?.as_ref(),
                 }))
             }
             RecordsRequest::Shards { pattern } => {

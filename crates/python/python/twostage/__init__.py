@@ -20,9 +20,7 @@ False
 from __future__ import annotations
 
 import json
-import os
 import sys
-import tempfile
 from os import PathLike
 from typing import Any, Callable, Optional, Union
 
@@ -595,35 +593,28 @@ def train(
     without presets searches even without ``auto``. The design found is
     ``estimator.preset_block()``, to paste into the model file.
     """
-    with tempfile.TemporaryDirectory(prefix="twostage-chart-") as scratch:
-        charts = {
-            name: _chart_folder(value, os.path.join(scratch, name))
-            for name, value in (
-                ("chart", chart),
-                ("validate_chart", validate_chart),
-                ("calibrate_chart", calibrate_chart),
-            )
-        }
-        native = _train(
-            model,
-            model_file=None if model_file is None else str(model_file),
-            model_toml=model_toml,
-            simulator=simulator,
-            batch_size=batch_size,
-            preset=preset,
-            sims=sims,
-            compress=compress,
-            fit=fit,
-            seed=seed,
-            validate=validate,
-            calibrate=calibrate,
-            alpha=alpha,
-            progress=_progress(progress),
-            auto=auto,
-            budget_seconds=budget_seconds,
-            budget_sims=budget_sims,
-            **charts,
-        )
+    native = _train(
+        model,
+        model_file=None if model_file is None else str(model_file),
+        model_toml=model_toml,
+        simulator=simulator,
+        batch_size=batch_size,
+        preset=preset,
+        sims=sims,
+        compress=compress,
+        fit=fit,
+        seed=seed,
+        validate=validate,
+        calibrate=calibrate,
+        alpha=alpha,
+        progress=_progress(progress),
+        auto=auto,
+        budget_seconds=budget_seconds,
+        budget_sims=budget_sims,
+        chart=_chart(chart),
+        validate_chart=_chart(validate_chart),
+        calibrate_chart=_chart(calibrate_chart),
+    )
     return Estimator(native)
 
 
@@ -704,36 +695,9 @@ def predict(
     )
 
 
-def _chart_folder(chart, folder):
-    """A chart as a folder ``twostage train --chart`` reads: a folder is
-    passed on, arrays ``(theta, inputs, outputs)`` are written there as
-    the ``.npy`` files of docs/decisions/021 (the reader that checks
-    them is the command line's)."""
-    if chart is None:
-        return None
-    if isinstance(chart, (str, PathLike)):
-        return (str(chart), None)
-    if not (isinstance(chart, tuple) and len(chart) == 3):
-        raise ValueError(
-            "a chart is a folder or a tuple (theta [m, q], inputs [m, N, n_u] or None, "
-            "outputs [m, N, n_y]), not %s" % type(chart).__name__
-        )
-    os.makedirs(folder)
-    for name, array in zip(("theta", "inputs", "outputs"), chart):
-        if array is None and name == "inputs":
-            continue
-        if not isinstance(array, np.ndarray) or array.dtype != np.float64:
-            raise ValueError(
-                "chart %s must be a float64 numpy array (np.asarray(%s, dtype=np.float64)), "
-                "not %s" % (name, name, getattr(array, "dtype", type(array).__name__))
-            )
-        bad = np.argwhere(~np.isfinite(array))
-        if len(bad):
-            index = tuple(int(i) for i in bad[0])
-            raise ValueError(
-                "chart %s%s is %r: charts must be finite (drop or repair that experiment)"
-                % (name, list(index), float(array[index]))
-            )
-        np.save(os.path.join(folder, name + ".npy"), array)
-    # The folder is gone after training: the file names the arrays instead.
-    return (folder, "of %d experiments given as arrays" % len(chart[0]))
+def _chart(chart):
+    """A chart as the native side reads it: a folder as a string, arrays
+    as they are (the Rust side checks them as it checks a chart's files)."""
+    if isinstance(chart, PathLike):
+        return str(chart)
+    return chart
