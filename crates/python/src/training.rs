@@ -205,11 +205,11 @@ fn chart_given(chart: &Bound<'_, PyAny>, name: &str) -> PyResult<ChartGiven> {
         .to_owned();
     let label = format!("of {} experiments given as arrays", theta.nrows());
     Ok(ChartGiven::Arrays {
-        arrays: ChartArrays {
+        arrays: std::sync::Arc::new(ChartArrays {
             theta,
             inputs,
             outputs,
-        },
+        }),
         label,
     })
 }

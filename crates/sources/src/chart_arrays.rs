@@ -35,7 +35,7 @@ impl ChartArrays {
     ///
     /// # Errors
     /// [`Error::ChartFile`] naming the array and, for a value, its index.
-    pub(crate) fn checked(self, spec: &ModelSpec) -> Result<Self> {
+    pub(crate) fn check(&self, spec: &ModelSpec) -> Result<()> {
         let (q, n) = (spec.n_params(), spec.n_samples());
         let (n_u, n_y) = (spec.input_names().len(), spec.output_names().len());
         let m = self.theta.nrows();
@@ -83,7 +83,7 @@ impl ChartArrays {
                 )));
             }
         }
-        Ok(self)
+        Ok(())
     }
 
     /// Experiments m.

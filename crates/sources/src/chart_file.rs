@@ -222,6 +222,7 @@ impl ChartFiles {
     /// the same order.
     ///
     /// ```
+    /// use std::sync::Arc;
     /// use ndarray::{Array2, Array3};
     /// use twostage_models::{Benchmark, Simulator};
     /// use twostage_sources::{ChartArrays, ChartFiles};
@@ -232,11 +233,11 @@ impl ChartFiles {
     ///     inputs: Some(Array3::zeros((3, n, 1))),
     ///     outputs: Array3::zeros((3, n, 1)),
     /// };
-    /// let chart = ChartFiles::from_arrays(arrays.clone(), &spec, "three runs")?;
+    /// let chart = ChartFiles::from_arrays(Arc::new(arrays.clone()), &spec, "three runs")?;
     /// assert_eq!((chart.len(), chart.theta(2), chart.describe().as_str()), (3, &[0.2][..], "three runs"));
     /// let mut bad = arrays;
     /// bad.outputs[[1, 4, 0]] = f64::NAN;
-    /// let refused = ChartFiles::from_arrays(bad, &spec, "three runs").unwrap_err();
+    /// let refused = ChartFiles::from_arrays(Arc::new(bad), &spec, "three runs").unwrap_err();
     /// assert_eq!(refused.to_string(), "chart: outputs[1, 4, 0] = NaN is not a finite number");
     /// # Ok::<(), twostage_sources::Error>(())
     /// ```
@@ -245,18 +246,18 @@ impl ChartFiles {
     /// [`Error::ChartFile`] naming the array: a shape that is not the
     /// model's, no experiment, a value that is not finite (its index).
     pub fn from_arrays(
-        arrays: ChartArrays,
+        arrays: Arc<ChartArrays>,
         spec: &ModelSpec,
         label: impl Into<String>,
     ) -> Result<Self> {
-        let arrays = arrays.checked(spec)?;
+        arrays.check(spec)?;
         Ok(Self {
             dir: PathBuf::new(),
             label: Some(label.into()),
             ids: (0..arrays.len()).map(|i| i.to_string()).collect(),
             thetas: arrays.thetas(),
             q: spec.n_params(),
-            stored: Stored::Memory(Arc::new(arrays)),
+            stored: Stored::Memory(arrays),
         })
     }
 

@@ -5,6 +5,7 @@
 //! same estimator file byte for byte whichever door it came through.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 use twostage_models::Simulator;
@@ -60,7 +61,7 @@ pub enum ChartGiven {
     /// Arrays, and how the estimator file names them.
     Arrays {
         /// The chart's arrays.
-        arrays: ChartArrays,
+        arrays: Arc<ChartArrays>,
         /// The name the estimator's record gives them.
         label: String,
     },
