@@ -62,7 +62,49 @@ pub enum Budget {
     Simulations(usize),
 }
 
+/// A budget choice [`Budget::chosen`] refuses; each door puts its own
+/// name of the setting before these words.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum BudgetChoiceError {
+    /// A budget without the search, which alone reads it.
+    #[error("a budget is read by the automatic design only: leave it out or search")]
+    WithoutSearch,
+    /// Both a time and a simulation budget.
+    #[error("a budget is seconds or simulations: give one of them")]
+    Both,
+}
+
 impl Budget {
+    /// The search a door asks for: `search` whether it searches, with a
+    /// budget of `seconds` or `simulations` (neither: [`Budget::default`]).
+    /// Every door reads its choice here.
+    ///
+    /// ```
+    /// use twostage_auto::{Budget, BudgetChoiceError};
+    /// assert_eq!(Budget::chosen(false, None, None), Ok(None));
+    /// assert_eq!(Budget::chosen(true, None, None), Ok(Some(Budget::default())));
+    /// assert_eq!(Budget::chosen(true, None, Some(900)), Ok(Some(Budget::Simulations(900))));
+    /// assert_eq!(Budget::chosen(false, Some(60.0), None), Err(BudgetChoiceError::WithoutSearch));
+    /// assert_eq!(Budget::chosen(true, Some(60.0), Some(900)), Err(BudgetChoiceError::Both));
+    /// ```
+    ///
+    /// # Errors
+    /// A budget without the search, or two budgets.
+    pub fn chosen(
+        search: bool,
+        seconds: Option<f64>,
+        simulations: Option<usize>,
+    ) -> std::result::Result<Option<Budget>, BudgetChoiceError> {
+        match (search, seconds, simulations) {
+            (false, None, None) => Ok(None),
+            (false, _, _) => Err(BudgetChoiceError::WithoutSearch),
+            (true, Some(_), Some(_)) => Err(BudgetChoiceError::Both),
+            (true, None, Some(m)) => Ok(Some(Budget::Simulations(m))),
+            (true, Some(t), None) => Ok(Some(Budget::Seconds(t))),
+            (true, None, None) => Ok(Some(Budget::default())),
+        }
+    }
+
     /// The budget in words, e.g. "a 120 s budget" or "5000 simulations".
     pub fn describe(&self) -> String {
         match self {

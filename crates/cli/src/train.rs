@@ -116,7 +116,7 @@ pub struct TrainArgs {
 
 impl TrainArgs {
     /// The training request these options make.
-    fn request(&self) -> TrainingRequest {
+    fn request(&self) -> Result<TrainingRequest> {
         let mut records = self
             .chart
             .as_ref()
@@ -130,14 +130,16 @@ impl TrainArgs {
             *calibration = self.calibrate_chart.as_ref().map(ChartDir::new);
             *validation = self.validate_chart.as_ref().map(ChartDir::new);
         }
-        let search = self
-            .auto
-            .then(|| match (self.budget_seconds, self.budget_sims) {
-                (_, Some(m)) => Budget::Simulations(m),
-                (Some(t), None) => Budget::Seconds(t),
-                (None, None) => Budget::default(),
-            });
-        TrainingRequest {
+        let search =
+            Budget::chosen(self.auto, self.budget_seconds, self.budget_sims).map_err(|e| {
+                let flag = match (e, self.budget_seconds) {
+                    (twostage::BudgetChoiceError::Both, _) => "--budget-seconds and --budget-sims",
+                    (_, Some(_)) => "--budget-seconds",
+                    (_, None) => "--budget-sims",
+                };
+                usage(format!("{flag}: {e}"))
+            })?;
+        Ok(TrainingRequest {
             preset: self.preset.clone(),
             simulations: self.sims,
             compress: self.compress.clone(),
@@ -151,7 +153,7 @@ impl TrainArgs {
                 ..RunSettings::default()
             },
             records,
-        }
+        })
     }
 }
 
@@ -167,7 +169,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     }
     // Before the work: a training that ends unable to save is lost.
     twostage::check_writable(&args.out)?;
-    let request = args.request();
+    let request = args.request()?;
     if matches!(request.records, RecordsRequest::Shards { .. })
         && (args.validate_chart.is_some() || args.calibrate_chart.is_some())
     {

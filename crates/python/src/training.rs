@@ -51,22 +51,14 @@ pub(crate) fn train(
     budget_seconds: Option<f64>,
     budget_sims: Option<usize>,
 ) -> PyResult<PyEstimator> {
-    let search = match (auto, budget_seconds, budget_sims) {
-        (false, None, None) => None,
-        (false, _, _) => {
-            return Err(PyValueError::new_err(
-                "budget_seconds and budget_sims go with auto=True (the automatic design)",
-            ));
-        }
-        (true, Some(_), Some(_)) => {
-            return Err(PyValueError::new_err(
-                "give budget_seconds or budget_sims, not both",
-            ));
-        }
-        (true, None, Some(m)) => Some(twostage::Budget::Simulations(m)),
-        (true, Some(t), None) => Some(twostage::Budget::Seconds(t)),
-        (true, None, None) => Some(twostage::Budget::default()),
-    };
+    let search = twostage::Budget::chosen(auto, budget_seconds, budget_sims).map_err(|e| {
+        let name = match (e, budget_seconds) {
+            (twostage::BudgetChoiceError::Both, _) => "budget_seconds and budget_sims",
+            (_, Some(_)) => "budget_seconds",
+            (_, None) => "budget_sims",
+        };
+        PyValueError::new_err(format!("{name}: {e}"))
+    })?;
     let named = match (model, simulator.is_some()) {
         (Some(_), true) => {
             return Err(PyValueError::new_err(

@@ -361,8 +361,11 @@ def test_the_automatic_design_on_a_chart_is_the_cli_s(tmp_path):
     model.write_text(GROWTH_MODEL + block)
     again = twostage.train(model_file=model, chart=chart, progress=False, **sizes)
     assert again.preset_block() == block
-    with pytest.raises(ValueError, match="budget_seconds and budget_sims go with auto"):
+    with pytest.raises(ValueError, match="budget_sims: a budget is read by the automatic design only"):
         twostage.train(model_file=model, chart=chart, budget_sims=400)
+    with pytest.raises(ValueError, match="budget_seconds and budget_sims: a budget is seconds or"):
+        twostage.train(model_file=model, chart=chart, auto=True, budget_sims=400,
+                       budget_seconds=10.0)
 
 
 def test_assess_says_which_records_a_log_could_not_take(tmp_path):

@@ -70,7 +70,9 @@ pub use refiner::{
     EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
 };
 pub use request::{ChartDir, ChartGiven, RecordsRequest, Trained, TrainingRequest};
-pub use twostage_auto::{AutoDesign, AutoOutcome, Budget, CandidateReport, FinalFit, FinalFits};
+pub use twostage_auto::{
+    AutoDesign, AutoOutcome, Budget, BudgetChoiceError, CandidateReport, FinalFit, FinalFits,
+};
 pub use twostage_compress::CompressorConfig;
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,
