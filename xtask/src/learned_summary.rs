@@ -70,6 +70,15 @@ pub(crate) struct Args {
         default_value = "chicane,iso3888,sine-with-dwell,step-steer,slalom,random"
     )]
     steerings: Vec<Steering>,
+    /// Divide each record by its own inputs' RMS before the network (a
+    /// linear system's record then looks the same at every amplitude),
+    /// the logarithm of that RMS appended to the learned summary.
+    #[arg(long)]
+    scale_by_input: bool,
+    /// Networks trained (seeds `seed`, `seed + 1`, ...), each with its own
+    /// stage 2; the estimates of all are averaged beside the first's.
+    #[arg(long, default_value_t = 1)]
+    members: usize,
 }
 
 impl Args {
@@ -92,9 +101,27 @@ impl Args {
     }
 }
 
-/// A record's signals side by side, inputs then outputs.
-fn signals(record: &IoData) -> Array2<f64> {
-    concatenate(Axis(1), &[record.inputs(), record.outputs()]).unwrap_or_default()
+/// The root mean square of a record's inputs (of its outputs without
+/// inputs), never below a floor that keeps a record at rest finite.
+fn input_level(record: &IoData) -> f64 {
+    let signal = if record.inputs().ncols() > 0 {
+        record.inputs()
+    } else {
+        record.outputs()
+    };
+    let n = signal.len().max(1) as f64;
+    (signal.iter().map(|v| v * v).sum::<f64>() / n)
+        .sqrt()
+        .max(1e-6)
+}
+
+/// `record` divided by its inputs' RMS when `by_input`.
+fn rescaled(record: &IoData, by_input: bool) -> (Array2<f64>, Array2<f64>) {
+    let level = if by_input { input_level(record) } else { 1.0 };
+    (
+        record.inputs().mapv(|v| v / level),
+        record.outputs().mapv(|v| v / level),
+    )
 }
 
 /// The family estimator's features of `records` (the records it cannot
@@ -141,17 +168,23 @@ fn variants(
     estimator: &Estimator,
     network: &SummaryNetwork,
     records: &[IoData],
+    by_input: bool,
 ) -> Result<[Array2<f64>; 3]> {
     let reference = features(estimator, records)?;
+    let width = network.n_features() + usize::from(by_input);
     let rows: Vec<Vec<f64>> = records
         .par_iter()
         .map(|r| {
             let mut row = vec![0.0; network.n_features()];
-            network.summarize(r.inputs(), r.outputs(), &mut Workspace::new(), &mut row)?;
+            let (u, y) = rescaled(r, by_input);
+            network.summarize(u.view(), y.view(), &mut Workspace::new(), &mut row)?;
+            if by_input {
+                row.push(input_level(r).ln());
+            }
             Ok(row)
         })
         .collect::<Result<_>>()?;
-    let learned = Array2::from_shape_vec((rows.len(), network.n_features()), rows.concat())?;
+    let learned = Array2::from_shape_vec((rows.len(), width), rows.concat())?;
     let both = concatenate(Axis(1), &[reference.view(), learned.view()])?;
     Ok([reference, learned, both])
 }
@@ -205,58 +238,107 @@ pub(crate) fn run(c: &Args) -> Result<()> {
         println!("{left} training records left out: the reference stage 1 cannot compress them");
     }
     let simulated = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    let recs: Vec<Array2<f64>> = records.par_iter().map(signals).collect();
+    let recs: Vec<Array2<f64>> = records
+        .par_iter()
+        .map(|r| {
+            let (u, y) = rescaled(r, c.scale_by_input);
+            concatenate(Axis(1), &[u.view(), y.view()]).unwrap_or_default()
+        })
+        .collect();
     let y = table(&truth);
-    let trained = summary.train(&recs, y.view())?;
-    println!(
-        "{} records of {} in {simulated:.1} s; summary network {:?} (kernel {}, stride {}, head {}) \
-         trained in {:.1} s: {} epochs, stopped by {:?}, held-out MSE {:.4} (standardized)",
-        c.sims,
-        family.spec().name(),
-        summary.shape.channels,
-        summary.shape.kernel,
-        summary.shape.stride,
-        summary.head,
-        start.elapsed().as_secs_f64(),
-        trained.epochs,
-        trained.reason,
-        trained.held_out_mse
-    );
-    let history: Vec<String> = trained.history.iter().map(|v| format!("{v:.4}")).collect();
-    println!("  held-out MSE by epoch: {}", history.join(" "));
     let fit: RegressorConfig = c.fit.parse()?;
-    let training = variants(&estimator, &trained.network, &records)?;
-    let mut stage2 = Vec::new();
-    for (name, x) in NAMES.iter().zip(&training) {
+    let mut members = Vec::new();
+    for member in 0..c.members.max(1) {
         let start = Instant::now();
-        stage2.push(fit.fit(x.view(), y.view(), summary.seed)?);
+        let training = SummaryTraining {
+            seed: summary.seed + member as u64,
+            ..summary.clone()
+        };
+        let trained = training.train(&recs, y.view())?;
         println!(
-            "  stage 2 on {name} ({} numbers) in {:.1} s",
-            x.ncols(),
-            start.elapsed().as_secs_f64()
+            "{} records of {} in {simulated:.1} s; summary network {:?} (kernel {}, stride {}, head {}, \
+             seed {}) trained in {:.1} s: {} epochs, stopped by {:?}, held-out MSE {:.4} (standardized)",
+            c.sims,
+            family.spec().name(),
+            training.shape.channels,
+            training.shape.kernel,
+            training.shape.stride,
+            training.head,
+            training.seed,
+            start.elapsed().as_secs_f64(),
+            trained.epochs,
+            trained.reason,
+            trained.held_out_mse
         );
+        let history: Vec<String> = trained.history.iter().map(|v| format!("{v:.4}")).collect();
+        println!("  held-out MSE by epoch: {}", history.join(" "));
+        let x = variants(&estimator, &trained.network, &records, c.scale_by_input)?;
+        let mut stage2 = Vec::new();
+        for (name, x) in NAMES.iter().zip(&x) {
+            let start = Instant::now();
+            stage2.push(fit.fit(x.view(), y.view(), training.seed)?);
+            println!(
+                "  stage 2 on {name} ({} numbers) in {:.1} s",
+                x.ncols(),
+                start.elapsed().as_secs_f64()
+            );
+        }
+        members.push((trained.network, stage2));
     }
+    // Each variant's estimates of `records`: the first member's, and the
+    // average of all members'.
+    let estimates = |records: &[IoData]| -> Result<Vec<[Vec<Vec<f64>>; 2]>> {
+        let mut sums: Vec<Option<(Vec<Vec<f64>>, Vec<Vec<f64>>)>> = vec![None, None, None];
+        for (network, stage2) in &members {
+            let x = variants(&estimator, network, records, c.scale_by_input)?;
+            for (v, (x, f)) in x.iter().zip(stage2).enumerate() {
+                let est = rows(&f.predict(x.view())?);
+                match &mut sums[v] {
+                    None => sums[v] = Some((est.clone(), est)),
+                    Some((_, total)) => total
+                        .iter_mut()
+                        .flatten()
+                        .zip(est.iter().flatten())
+                        .for_each(|(a, b)| *a += b),
+                }
+            }
+        }
+        let k = members.len() as f64;
+        Ok(sums
+            .into_iter()
+            .flatten()
+            .map(|(first, total)| {
+                let mean = total
+                    .into_iter()
+                    .map(|row| row.into_iter().map(|v| v / k).collect())
+                    .collect();
+                [first, mean]
+            })
+            .collect())
+    };
     // The family's own fresh records: the stage-2 fits' held-out error.
     let (family_truth, family_records, _) = compressible(
         &estimator,
         test_records(family.as_ref(), c.records.min(2000), 2026)?,
     );
-    let held = variants(&estimator, &trained.network, &family_records)?;
+    let held = estimates(&family_records)?;
+    let averaged = if members.len() > 1 { 2 } else { 1 };
+    let (q, family_truth) = (y.ncols(), &family_truth);
     let words: Vec<String> = NAMES
         .iter()
         .zip(&held)
-        .zip(&stage2)
-        .map(|((name, x), f)| {
-            let est = rows(&f.predict(x.view()).unwrap_or_default());
-            let all: Vec<usize> = (0..est.len()).collect();
-            format!(
-                "{name} {}",
-                (0..y.ncols())
-                    .map(|j| format!("{:.4}", rmse(&est, &family_truth, j, &all)))
-                    .collect::<Vec<_>>()
-                    .join("/")
-            )
+        .flat_map(|(name, both)| {
+            both[..averaged].iter().enumerate().map(move |(a, est)| {
+                let all: Vec<usize> = (0..est.len()).collect();
+                format!(
+                    "{name}{} {}",
+                    if a == 0 { "" } else { " averaged" },
+                    (0..q)
+                        .map(|j| format!("{:.4}", rmse(est, family_truth, j, &all)))
+                        .collect::<Vec<_>>()
+                        .join("/")
+                )
+            })
         })
         .collect();
     println!(
@@ -271,27 +353,32 @@ pub(crate) fn run(c: &Args) -> Result<()> {
             records,
             posterior,
         } = car_manoeuvre(steering, c.records)?;
-        let x = variants(&estimator, &trained.network, &records)?;
         let all: Vec<usize> = (0..records.len()).collect();
         let mut line = format!("  {steering:?}:");
-        for ((name, x), f) in NAMES.iter().zip(&x).zip(&stage2) {
-            let est = rows(&f.predict(x.view())?);
-            // As the estimator does: an estimate outside the prior's box is
-            // brought to its edge.
-            let (lower, upper) = (car.prior().lower(), car.prior().upper());
-            let est: Vec<Vec<f64>> = est
-                .into_iter()
-                .map(|t| {
-                    t.iter()
-                        .zip(lower.iter().zip(upper.iter()))
-                        .map(|(v, (lo, hi))| v.clamp(*lo, *hi))
-                        .collect()
-                })
-                .collect();
-            for j in 0..2 {
-                let ratio = rmse(&est, &truth, j, &all) / rmse(&posterior, &truth, j, &all);
-                let [low, high] = bootstrap_ratio(&est, &posterior, &truth, j, 2026);
-                line += &format!(" {name} p{j} {ratio:.3} [{low:.3}, {high:.3}];");
+        for (name, both) in NAMES.iter().zip(estimates(&records)?) {
+            for (a, est) in both[..averaged].iter().enumerate() {
+                // As the estimator does: an estimate outside the prior's
+                // box is brought to its edge.
+                let (lower, upper) = (car.prior().lower(), car.prior().upper());
+                let est: Vec<Vec<f64>> = est
+                    .iter()
+                    .map(|t| {
+                        t.iter()
+                            .zip(lower.iter().zip(upper.iter()))
+                            .map(|(v, (lo, hi))| v.clamp(*lo, *hi))
+                            .collect()
+                    })
+                    .collect();
+                let name = if a == 0 {
+                    name.to_string()
+                } else {
+                    format!("{name} averaged")
+                };
+                for j in 0..2 {
+                    let ratio = rmse(&est, &truth, j, &all) / rmse(&posterior, &truth, j, &all);
+                    let [low, high] = bootstrap_ratio(&est, &posterior, &truth, j, 2026);
+                    line += &format!(" {name} p{j} {ratio:.3} [{low:.3}, {high:.3}];");
+                }
             }
         }
         println!("{line}");
