@@ -5,9 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use ndarray::Array2;
-use twostage::{Estimator, NamedModel, TargetRmse, Validated, ValidationPlan, validate_estimator};
+use twostage::{Estimator, TargetRmse, Validated, ValidationPlan, validate_trained};
 
-use crate::OrUsage;
 use crate::usage;
 
 /// Most points drawn in the estimate-versus-truth figure.
@@ -55,11 +54,7 @@ pub struct ValidateArgs {
 /// Run `twostage validate`.
 pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     let estimator = Estimator::load(&args.estimator)?;
-    let trained_on = &estimator.training().model;
     let given = crate::model_arg::named(None, args.model_file.as_deref())?;
-    let sim = NamedModel::trained_on(trained_on, given.as_ref())
-        .and_then(|model| model.simulator())
-        .usage_context("--model-file")?;
     let plan = ValidationPlan {
         sims: args.sims,
         gamma: args.gamma,
@@ -70,7 +65,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     };
     // Progress: a bar on a terminal, else a line every 10 s of a long run.
     let bars = crate::bars::Bars::new(false);
-    let run = validate_estimator(&estimator, sim.as_ref(), &plan, &bars).map_err(|e| {
+    let run = validate_trained(&estimator, given.as_ref(), &plan, &bars).map_err(|e| {
         // What was asked for is the user's to fix, like a bad flag.
         if e.is_setting() {
             usage(e.to_string())

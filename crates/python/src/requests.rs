@@ -87,9 +87,6 @@ pub(crate) fn validate<'py>(
     Option<(bool, f64)>,
 )> {
     let named = named_model(None, model_file, model_toml)?;
-    let sim = NamedModel::trained_on(&estimator.training().model, named.as_ref())
-        .and_then(|model| model.simulator())
-        .map_err(to_python)?;
     let defaults = twostage::ValidationPlan::default();
     let plan = twostage::ValidationPlan {
         sims,
@@ -106,7 +103,7 @@ pub(crate) fn validate<'py>(
                 Some(reporter) => reporter,
                 None => &twostage::Silent,
             };
-            twostage::validate_estimator(estimator, sim.as_ref(), &plan, progress)
+            twostage::validate_trained(estimator, named.as_ref(), &plan, progress)
         })
         .map_err(to_python)?;
     let report = serde_json::to_string(&run.report)

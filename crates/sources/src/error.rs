@@ -129,7 +129,7 @@ impl Error {
     /// Whether the error is in what was asked for: a setting out of range,
     /// a structure that does not parse or fit the model, a preset the
     /// model lacks, a model file, chart or shard that is not what it
-    /// should be.
+    /// should be, a model file of another model than the estimator's.
     ///
     /// ```
     /// use twostage_sources::Error;
@@ -142,6 +142,7 @@ impl Error {
             Self::InvalidSetting(_)
                 | Self::NotAvailable { .. }
                 | Self::ModelFile { .. }
+                | Self::OtherModel { .. }
                 | Self::ChartFile { .. }
                 | Self::Shards { .. }
                 | Self::Compression(CompressError::InvalidSetting(_))

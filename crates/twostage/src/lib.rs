@@ -89,7 +89,7 @@ pub use twostage_refine::{
 pub use twostage_setting::InvalidSetting;
 pub use twostage_train::{DEFAULT_SEED, Error, Result, Run, RunSettings, TrainedOn, TwoStage};
 pub use validation_run::{
-    TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator,
+    TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator, validate_trained,
 };
 
 pub use twostage_sources::{

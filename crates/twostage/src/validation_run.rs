@@ -7,7 +7,7 @@ use ndarray::ArrayView2;
 use rayon::prelude::*;
 use twostage_estimator::{EstimateWorkspace, Estimator};
 use twostage_models::{IoData, Sampling, Simulator, run_experiment};
-use twostage_sources::{Progress, refuse_beyond_memory};
+use twostage_sources::{NamedModel, Progress, refuse_beyond_memory};
 use twostage_train::{Error, Result};
 use twostage_validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
 
@@ -82,6 +82,40 @@ pub struct Validated {
     pub records: usize,
     /// With `target_rmse`: whether it was met.
     pub target: Option<TargetRmse>,
+}
+
+/// Validates `estimator` on fresh simulations of the model it was trained
+/// on: the model file `given` where it was trained on one, else its
+/// built-in model, found as every request finds it
+/// ([`NamedModel::trained_on`]); then as [`validate_estimator`]. The
+/// command line's `validate` and Python's `Estimator.validate` both run it.
+///
+/// ```
+/// use twostage::{NamedModel, TwoStage, ValidationPlan, Silent, validate_trained};
+/// use twostage::models::Benchmark;
+/// let estimator = TwoStage::builder(&Benchmark::new())
+///     .preset(twostage::paper_benchmark())
+///     .simulations(300).validation(0).calibration(0).train()?;
+/// let plan = ValidationPlan { sims: Some(100), ..ValidationPlan::default() };
+/// assert_eq!(validate_trained(&estimator, None, &plan, &Silent)?.records, 100);
+/// // A model file of another model is refused, by name.
+/// let other = NamedModel::builtin("pacejka")?;
+/// let refused = validate_trained(&estimator, Some(&other), &plan, &Silent).unwrap_err();
+/// assert!(refused.to_string().contains("trained on 'benchmark'"), "{refused}");
+/// # Ok::<(), twostage::Error>(())
+/// ```
+///
+/// # Errors
+/// A model given of another model than the estimator's, one that cannot
+/// be started, and those of [`validate_estimator`].
+pub fn validate_trained(
+    estimator: &Estimator,
+    given: Option<&NamedModel>,
+    plan: &ValidationPlan,
+    progress: &dyn Progress,
+) -> Result<Validated> {
+    let model = NamedModel::trained_on(&estimator.training().model, given)?.simulator()?;
+    validate_estimator(estimator, model.as_ref(), plan, progress)
 }
 
 /// Validates `estimator` on fresh simulations of `model` (the model it was
