@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use twostage_baselines::{BaselineError, exact_likelihood};
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
-use twostage_models::{BuiltinModel, IoData, Simulator};
+use twostage_models::{IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
 
@@ -155,8 +155,13 @@ impl EstimateRefiner {
         let radius = estimator.neighbourhood(2.0)?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
+        // Without a model file, an estimator of a built-in model is
+        // refined through the model's exact likelihood; the model is found
+        // as every request finds it.
         if model_file.is_none()
-            && let Ok(model) = estimator.training().model.parse::<BuiltinModel>()
+            && let Some(model) = NamedModel::trained_on(&estimator.training().model, None)
+                .ok()
+                .and_then(|named| named.as_builtin())
         {
             return Ok(Self {
                 how: How::Posterior {
