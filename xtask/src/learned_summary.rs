@@ -137,7 +137,10 @@ fn features(estimator: &Estimator, records: &[IoData]) -> Result<Array2<f64>> {
     Ok(Array2::from_shape_vec((rows.len(), width), rows.concat())?)
 }
 
-fn rows(a: &Array2<f64>) -> Vec<Vec<f64>> {
+/// Estimates, a row per record.
+type Rows = Vec<Vec<f64>>;
+
+fn rows(a: &Array2<f64>) -> Rows {
     a.rows().into_iter().map(|r| r.to_vec()).collect()
 }
 
@@ -288,7 +291,8 @@ pub(crate) fn run(c: &Args) -> Result<()> {
     // Each variant's estimates of `records`: the first member's, and the
     // average of all members'.
     let estimates = |records: &[IoData]| -> Result<Vec<[Vec<Vec<f64>>; 2]>> {
-        let mut sums: Vec<Option<(Vec<Vec<f64>>, Vec<Vec<f64>>)>> = vec![None, None, None];
+        // Per variant: the first member's estimates and the sum of all.
+        let mut sums: Vec<Option<(Rows, Rows)>> = vec![None, None, None];
         for (network, stage2) in &members {
             let x = variants(&estimator, network, records, c.scale_by_input)?;
             for (v, (x, f)) in x.iter().zip(stage2).enumerate() {

@@ -66,8 +66,14 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     // Progress: a bar on a terminal, else a line every 10 s of a long run.
     let bars = crate::bars::Bars::new(false);
     let run = validate_trained(&estimator, given.as_ref(), &plan, &bars).map_err(|e| {
-        // What was asked for is the user's to fix, like a bad flag.
-        if e.is_setting() {
+        // What was asked for is the user's to fix, like a bad flag; the
+        // model is the flag's.
+        if matches!(
+            e,
+            twostage::Error::Source(twostage::sources::Error::OtherModel { .. })
+        ) {
+            usage(format!("--model-file: {e}"))
+        } else if e.is_setting() {
             usage(e.to_string())
         } else {
             anyhow::Error::new(e).context("validating")

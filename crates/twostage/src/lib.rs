@@ -53,27 +53,21 @@
 //! ```
 #![deny(missing_docs)]
 
-mod estimating;
-mod joint;
-mod refiner;
 mod request;
 mod validation_run;
 
-pub use estimating::{
-    AutoRefined, CheckSettings, EstimateRequest, EstimateWith, Estimates, Estimating, GivenValues,
-    GivenValuesError, MethodFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RecordEstimate,
-    RecordFailure, RecordOutcome, RefineChoiceError, RefineWhich, RequestError, RequestProblem,
-    Windows,
-};
-pub use joint::{JointFitter, JointOfRecords};
-pub use refiner::{
-    EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
-};
 pub use request::{ChartDir, ChartGiven, RecordsRequest, Trained, TrainingRequest};
 pub use twostage_auto::{
     AutoDesign, AutoOutcome, Budget, BudgetChoiceError, CandidateReport, FinalFit, FinalFits,
 };
 pub use twostage_compress::CompressorConfig;
+pub use twostage_estimate::{
+    AutoRefined, CheckSettings, EstimateRefiner, EstimateRequest, EstimateWith, Estimates,
+    Estimating, GivenValues, GivenValuesError, JointFitter, JointOfRecords, MethodFailure,
+    ModelFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RECORDS_TOGETHER, RecordEstimate,
+    RecordFailure, RecordOutcome, RefineChoiceError, RefineWhich, RefinedEstimate, RequestError,
+    RequestProblem, SharedSimulator, ToRefine, Windows,
+};
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,
     FeatureEnvelope, FileError, MAGIC, RecordShape, SignalNames, TrainingInfo, check_writable,

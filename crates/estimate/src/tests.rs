@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used)]
 use super::*;
-use crate::TwoStage;
 use twostage_models::Benchmark;
+use twostage_train::TwoStage;
 
 /// The same object behind two references to simulators.
 fn same(a: &dyn Simulator, b: &dyn Simulator) -> bool {
@@ -14,7 +14,7 @@ fn same(a: &dyn Simulator, b: &dyn Simulator) -> bool {
 #[test]
 fn one_simulator_serves_the_check_the_refinement_and_the_joint_fit() {
     let estimator = TwoStage::builder(&Benchmark::new())
-        .preset(crate::paper_benchmark())
+        .preset(twostage_sources::paper_benchmark())
         .simulations(300)
         .validation(0)
         .calibration(150)

@@ -14,17 +14,21 @@ use twostage_models::{IoData, Simulator};
 use twostage_refine::{CheckPlan, DEFAULT_CHECK_RUNS, RefinePolicy, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
-use crate::{EstimateRefiner, JointFitter, SharedSimulator};
-
 mod failure;
+mod joint;
 mod methods;
 mod records;
+mod refiner;
 mod rows;
 mod table;
 mod through_model;
 
 pub use failure::{MethodFailure, RecordFailure};
+pub use joint::{JointFitter, JointOfRecords};
 pub use methods::OUTPUT_ERROR_METHOD;
+pub use refiner::{
+    EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
+};
 pub use rows::{AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome};
 
 use methods::Method;
@@ -504,7 +508,7 @@ impl Settings {
         let q = estimator.param_names().len();
         // The model found and built once, at its first use, for all.
         let shared: std::cell::OnceCell<SharedSimulator> = std::cell::OnceCell::new();
-        let model = || -> crate::Result<SharedSimulator> {
+        let model = || -> twostage_train::Result<SharedSimulator> {
             if let Some(found) = shared.get() {
                 return Ok(found.clone());
             }

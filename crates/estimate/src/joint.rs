@@ -2,7 +2,7 @@
 //! estimator and its model, as the command line's `estimate --joint` and
 //! the Python package's `Estimator.joint` both give it: the records'
 //! two-stage estimates pooled, then one output-error fit of every record
-//! on its own input ([`crate::refine::JointEstimate`]).
+//! on its own input ([`twostage_refine::JointEstimate`]).
 
 use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
@@ -40,7 +40,7 @@ pub struct JointOfRecords {
     /// The records left out, by place, with why.
     pub left_out: Vec<(usize, RefineError)>,
     /// The records whose two-stage estimate disagrees with the others'
-    /// beyond its interval ([`crate::refine::PooledEstimate`]), by
+    /// beyond its interval ([`twostage_refine::PooledEstimate`]), by
     /// place.
     pub disagreeing: Vec<usize>,
 }
@@ -90,7 +90,7 @@ impl JointFitter {
         estimator: &Estimator,
         model_file: Option<&NamedModel>,
         search: SearchStarts,
-    ) -> crate::Result<Self> {
+    ) -> twostage_train::Result<Self> {
         let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
             .and_then(|model| model.simulator())?;
         Self::with_simulator(estimator, simulator.into(), search)
@@ -105,7 +105,7 @@ impl JointFitter {
         estimator: &Estimator,
         simulator: SharedSimulator,
         search: SearchStarts,
-    ) -> crate::Result<Self> {
+    ) -> twostage_train::Result<Self> {
         let fit = OutputError::new(simulator)?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         Ok(Self {

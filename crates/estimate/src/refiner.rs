@@ -131,7 +131,10 @@ impl EstimateRefiner {
     /// An estimator without intervals (no neighbourhood to refine in), a
     /// model file of another model than the estimator's, or a model that
     /// cannot run without noise on a given input.
-    pub fn new(estimator: &Estimator, model_file: Option<&NamedModel>) -> crate::Result<Self> {
+    pub fn new(
+        estimator: &Estimator,
+        model_file: Option<&NamedModel>,
+    ) -> twostage_train::Result<Self> {
         Self::with_model(estimator, model_file, || {
             NamedModel::trained_on(&estimator.training().model, model_file)
                 .and_then(|model| model.simulator())
@@ -150,8 +153,8 @@ impl EstimateRefiner {
     pub fn with_model(
         estimator: &Estimator,
         model_file: Option<&NamedModel>,
-        model: impl FnOnce() -> crate::Result<SharedSimulator>,
-    ) -> crate::Result<Self> {
+        model: impl FnOnce() -> twostage_train::Result<SharedSimulator>,
+    ) -> twostage_train::Result<Self> {
         let radius = estimator.neighbourhood(2.0)?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
@@ -364,7 +367,7 @@ impl EstimateRefiner {
     }
 
     /// The output-error refinement of `items` at best fits already
-    /// searched (one per item, as [`crate::search_best_fits`] gives
+    /// searched (one per item, as [`twostage_refine::search_best_fits`] gives
     /// them from [`EstimateRefiner::search_starts`]): each refined
     /// estimate is the mean near its record's best fit of the likelihood
     /// within the prior's box
