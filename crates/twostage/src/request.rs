@@ -418,6 +418,17 @@ impl TrainingRequest {
                 None => Trained::Designed(builder.train()?),
             })
         };
+        let from_charts = |builder: TwoStage<'_, dyn Simulator>,
+                           training: &ChartGiven,
+                           calibration: Option<&ChartGiven>,
+                           validation: Option<&ChartGiven>| {
+            let open = |chart: Option<&ChartGiven>| chart.map(|c| c.open(simulator)).transpose();
+            run(builder.records(RecordSource::Files {
+                training: &training.open(simulator)?,
+                calibration: open(calibration)?.as_ref(),
+                validation: open(validation)?.as_ref(),
+            }))
+        };
         match &self.records {
             RecordsRequest::Simulated => run(builder),
             RecordsRequest::Chart {
@@ -425,29 +436,19 @@ impl TrainingRequest {
                 calibration,
                 validation,
             } => {
-                let open = |chart: &Option<ChartDir>| {
-                    chart.as_ref().map(|c| c.open(simulator)).transpose()
-                };
-                run(builder.records(RecordSource::Files {
-                    training: &training.open(simulator)?,
-                    calibration: open(calibration)?.as_ref(),
-                    validation: open(validation)?.as_ref(),
-                }))
+                let folder = |dir: &ChartDir| ChartGiven::Folder(dir.clone());
+                from_charts(
+                    builder,
+                    &folder(training),
+                    calibration.as_ref().map(folder).as_ref(),
+                    validation.as_ref().map(folder).as_ref(),
+                )
             }
             RecordsRequest::Given {
                 training,
                 calibration,
                 validation,
-            } => {
-                let open = |chart: &Option<ChartGiven>| {
-                    chart.as_ref().map(|c| c.open(simulator)).transpose()
-                };
-                run(builder.records(RecordSource::Files {
-                    training: &training.open(simulator)?,
-                    calibration: open(calibration)?.as_ref(),
-                    validation: open(validation)?.as_ref(),
-                }))
-            }
+            } => from_charts(builder, training, calibration.as_ref(), validation.as_ref()),
             RecordsRequest::Shards { pattern } => {
                 let chart = ShardedChart::open(pattern)?;
                 if chart.plan().model_fingerprint != model.fingerprint() {
