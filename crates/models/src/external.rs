@@ -188,22 +188,18 @@ impl ExternalSimulator {
         &self,
         jobs: &[ExternalJob<'_>],
         inputs: &[IoData],
-        noiseless: bool,
+        conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
         let refused = (|| {
-            if inputs.len() != jobs.len() {
-                return Err(SimError::InvalidData(format!(
-                    "{} inputs for {} experiments: give one input per experiment",
-                    inputs.len(),
-                    jobs.len()
-                )));
+            if let Some(e) = crate::simulator::inputs_refused(jobs.len(), inputs, conditions) {
+                return Err(e);
             }
             let mut length = None;
             for input in inputs {
                 let conditions = Conditions {
-                    noiseless,
                     input: Some(input),
+                    ..conditions
                 };
                 self.capabilities().check(&conditions, self.spec.name())?;
                 let n = conditions.check_input(&self.spec)?;
@@ -226,7 +222,7 @@ impl ExternalSimulator {
         } else {
             Inputs::Each(inputs)
         };
-        self.send_jobs(jobs, noiseless, inputs, outs)
+        self.send_jobs(jobs, conditions.noiseless, inputs, outs)
     }
 
     /// Send the jobs whose parameters the model takes, in one request;
@@ -644,11 +640,11 @@ impl Simulator for ExternalSimulator {
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
         inputs: &[IoData],
-        noiseless: bool,
+        conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
         let jobs = jobs_of(thetas, rngs);
-        self.simulate_jobs_on_inputs(&jobs, inputs, noiseless, outs)
+        self.simulate_jobs_on_inputs(&jobs, inputs, conditions, outs)
     }
 
     /// One request for the block; each experiment's index and seed come

@@ -405,12 +405,39 @@ impl Simulator for NoiseFree {
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
         inputs: &[IoData],
-        _noiseless: bool,
+        conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
+        let conditions = Conditions {
+            noiseless: true,
+            ..conditions
+        };
         self.inner
-            .simulate_batch_on_inputs(thetas, rngs, inputs, true, outs)
+            .simulate_batch_on_inputs(thetas, rngs, inputs, conditions, outs)
     }
+}
+
+/// Why a block of experiments on inputs of their own cannot run: inputs
+/// of another count than the experiments', or an input for all given
+/// beside them.
+pub(crate) fn inputs_refused(
+    experiments: usize,
+    inputs: &[IoData],
+    conditions: Conditions<'_>,
+) -> Option<SimError> {
+    if conditions.input.is_some() {
+        return Some(SimError::InvalidData(
+            "an input for every experiment and one per experiment: give the inputs per \
+             experiment alone"
+                .into(),
+        ));
+    }
+    (inputs.len() != experiments).then(|| {
+        SimError::InvalidData(format!(
+            "{} inputs for {experiments} experiments: give one input per experiment",
+            inputs.len()
+        ))
+    })
 }
 
 /// A simulator of the system `P(theta)`: given a parameter vector and a
@@ -514,21 +541,28 @@ pub trait Simulator: Send + Sync {
     }
 
     /// A block of experiments, each on its own given input: `thetas[k]`
-    /// on `inputs[k]` with the stream `rngs[k]` into `outs[k]`, without
-    /// any noise when `noiseless` (an input design drawn per experiment
-    /// by the caller, for a source that cannot draw it itself). Default:
-    /// one by one through [`Simulator::simulate_under`]; a command source
-    /// sends the block in one request.
+    /// on `inputs[k]` with the stream `rngs[k]` into `outs[k]`, under
+    /// `conditions` otherwise (without noise when `conditions.noiseless`;
+    /// the inputs are these, so `conditions.input` must be `None`): an
+    /// input design drawn per experiment by the caller, for a source that
+    /// cannot draw it itself. Default: one by one through
+    /// [`Simulator::simulate_under`]; a command source sends the block in
+    /// one request.
     ///
     /// ```
-    /// use twostage_models::{experiment_rng, Benchmark, IoData, Simulator};
+    /// use twostage_models::{experiment_rng, Benchmark, Conditions, IoData, Simulator};
     /// let model = Benchmark::new();
     /// let inputs = [IoData::siso(&[0.5; 1000], &[0.0; 1000])?, IoData::siso(&[-1.0; 1000], &[0.0; 1000])?];
     /// let mut rngs = [experiment_rng(1, 0), experiment_rng(1, 1)];
     /// let mut outs = [model.spec().new_record(), model.spec().new_record()];
-    /// let results = model.simulate_batch_on_inputs(&[&[0.3], &[0.3]], &mut rngs, &inputs, true, &mut outs);
+    /// let noiseless = Conditions { noiseless: true, input: None };
+    /// let results = model.simulate_batch_on_inputs(&[&[0.3], &[0.3]], &mut rngs, &inputs, noiseless, &mut outs);
     /// assert!(results.iter().all(Result::is_ok));
     /// assert_eq!(outs[1].input(0), inputs[1].input(0));
+    /// // One input for all beside one per experiment is refused.
+    /// let both = Conditions { noiseless: true, input: Some(&inputs[0]) };
+    /// let refused = model.simulate_batch_on_inputs(&[&[0.3], &[0.3]], &mut rngs, &inputs, both, &mut outs);
+    /// assert!(refused.iter().all(Result::is_err));
     /// # Ok::<(), twostage_models::SimError>(())
     /// ```
     fn simulate_batch_on_inputs(
@@ -536,15 +570,10 @@ pub trait Simulator: Send + Sync {
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
         inputs: &[IoData],
-        noiseless: bool,
+        conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
-        if inputs.len() != thetas.len() {
-            let e = SimError::InvalidData(format!(
-                "{} inputs for {} experiments: give one input per experiment",
-                inputs.len(),
-                thetas.len()
-            ));
+        if let Some(e) = inputs_refused(thetas.len(), inputs, conditions) {
             return thetas.iter().map(|_| Err(e.clone())).collect();
         }
         thetas
@@ -554,8 +583,8 @@ pub trait Simulator: Send + Sync {
             .zip(outs.iter_mut())
             .map(|(((theta, rng), input), out)| {
                 let conditions = Conditions {
-                    noiseless,
                     input: Some(input),
+                    ..conditions
                 };
                 self.simulate_under(theta, rng, conditions, out)
             })
@@ -617,10 +646,10 @@ macro_rules! forward_simulator {
                 thetas: &[&[f64]],
                 rngs: &mut [ExperimentRng],
                 inputs: &[IoData],
-                noiseless: bool,
+                conditions: Conditions<'_>,
                 outs: &mut [IoData],
             ) -> Vec<Result<()>> {
-                (**self).simulate_batch_on_inputs(thetas, rngs, inputs, noiseless, outs)
+                (**self).simulate_batch_on_inputs(thetas, rngs, inputs, conditions, outs)
             }
             fn simulate_under(
                 &self,

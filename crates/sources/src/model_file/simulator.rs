@@ -82,13 +82,7 @@ impl Simulator for FileSimulator {
                 Ok(inputs) => inputs,
                 Err(e) => return thetas.iter().map(|_| Err(e.clone())).collect(),
             };
-            return self.simulate_batch_on_inputs(
-                thetas,
-                rngs,
-                &inputs,
-                conditions.noiseless,
-                outs,
-            );
+            return self.simulate_batch_on_inputs(thetas, rngs, &inputs, conditions, outs);
         }
         let conditions = self.with_fixed_input(conditions);
         let mut results = self
@@ -111,12 +105,12 @@ impl Simulator for FileSimulator {
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
         inputs: &[IoData],
-        noiseless: bool,
+        conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<twostage_models::Result<()>> {
         let mut results = self
             .inner
-            .simulate_batch_on_inputs(thetas, rngs, inputs, noiseless, outs);
+            .simulate_batch_on_inputs(thetas, rngs, inputs, conditions, outs);
         for (k, ((result, rng), out)) in results
             .iter_mut()
             .zip(rngs.iter_mut())
@@ -125,8 +119,8 @@ impl Simulator for FileSimulator {
         {
             if result.is_ok() {
                 let conditions = Conditions {
-                    noiseless,
                     input: inputs.get(k),
+                    ..conditions
                 };
                 *result = self.measured(rng, conditions, out);
             }
