@@ -98,32 +98,6 @@ pub fn read_rows(path: &Path, names: &[String]) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
-/// Refuses rows of `file` whose values lie outside the model's prior box
-/// (the parameter, its value and the box named), unless `allow_outside`:
-/// a model may not even run there, and its estimators never saw it.
-///
-/// # Errors
-/// The first row outside the box.
-pub fn refuse_outside_prior(
-    rows: &[Row],
-    spec: &twostage::models::ModelSpec,
-    file: &Path,
-    allow_outside: bool,
-) -> Result<()> {
-    for row in rows {
-        spec.prior()
-            .check(&row.theta, spec.param_names(), allow_outside)
-            .map_err(|e| {
-                usage(format!(
-                    "{}, experiment {}: {e}; --allow-outside-prior accepts it",
-                    file.display(),
-                    row.id
-                ))
-            })?;
-    }
-    Ok(())
-}
-
 /// The given inputs: none, one record for every row, or one per row
 /// matched by experiment id.
 pub enum Inputs {

@@ -167,7 +167,21 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
 fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<()> {
     let spec = sim.spec();
     let rows = predict::read_rows(at, spec.param_names())?;
-    predict::refuse_outside_prior(&rows, spec, at, args.allow_outside_prior)?;
+    if !args.allow_outside_prior {
+        let given = twostage::GivenValues::new(
+            rows.iter()
+                .map(|r| (r.id.clone(), r.theta.clone()))
+                .collect(),
+            &at.display().to_string(),
+        )
+        .or_usage()?;
+        if let Some(outside) = given.outside_prior(spec) {
+            return Err(usage(format!(
+                "{}: {outside}",
+                crate::estimate::OUTSIDE_PRIOR_FLAGS
+            )));
+        }
+    }
     let inputs = match &args.input {
         None => predict::Inputs::Own,
         Some(path) => predict::Inputs::read(path, &RecordFormat::of(spec), &rows)?,

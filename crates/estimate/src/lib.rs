@@ -10,7 +10,7 @@ use std::collections::HashMap;
 
 use twostage_baselines::MethodSettings;
 use twostage_estimator::{Estimator, SignalNames};
-use twostage_models::{IoData, Simulator};
+use twostage_models::{IoData, ModelSpec, Simulator};
 use twostage_refine::{CheckPlan, DEFAULT_CHECK_RUNS, RefinePolicy, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
@@ -61,13 +61,50 @@ pub enum EstimateWith {
 /// experiment.
 #[derive(Debug, Clone)]
 pub struct GivenValues {
-    one: Option<Vec<f64>>,
+    /// A single row, which stands for every record: its experiment and
+    /// values.
+    one: Option<(String, Vec<f64>)>,
     by_id: HashMap<String, Vec<f64>>,
     /// Where they came from, for the message of a record without a row.
     from: String,
 }
 
 impl GivenValues {
+    /// The first row whose values lie outside `spec`'s prior box, said as
+    /// the request refuses it (`None`: all inside). Every door asks it,
+    /// `simulate --at` too.
+    ///
+    /// ```
+    /// use twostage::{GivenValues, RequestProblem};
+    /// use twostage::models::{Benchmark, Simulator};
+    /// let spec = Benchmark::new().spec().clone();
+    /// let inside = GivenValues::new(vec![("a".into(), vec![0.5])], "v.csv")?;
+    /// assert!(inside.outside_prior(&spec).is_none());
+    /// let rows = vec![("a".into(), vec![0.5]), ("b".into(), vec![1.5])];
+    /// let outside = GivenValues::new(rows, "v.csv")?.outside_prior(&spec).expect("b is outside");
+    /// assert!(outside.to_string().starts_with("v.csv, experiment b: "), "{outside}");
+    /// # Ok::<(), twostage::GivenValuesError>(())
+    /// ```
+    pub fn outside_prior(&self, spec: &ModelSpec) -> Option<RequestProblem> {
+        let mut rows: Vec<(&str, &Vec<f64>)> = self
+            .one
+            .iter()
+            .map(|(id, theta)| (id.as_str(), theta))
+            .chain(self.by_id.iter().map(|(id, theta)| (id.as_str(), theta)))
+            .collect();
+        rows.sort_by(|a, b| a.0.cmp(b.0));
+        rows.into_iter().find_map(|(id, theta)| {
+            spec.prior()
+                .check(theta, spec.param_names(), false)
+                .err()
+                .map(|why| RequestProblem::OutsidePrior {
+                    from: self.from.clone(),
+                    id: id.to_string(),
+                    why: why.to_string(),
+                })
+        })
+    }
+
     /// The `rows` (experiment, values) read from `from`: a single row
     /// stands for every record.
     ///
@@ -92,8 +129,8 @@ impl GivenValues {
             by_id: HashMap::new(),
             from: from.to_string(),
         };
-        if let [(_, theta)] = rows.as_slice() {
-            given.one = Some(theta.clone());
+        if let [(id, theta)] = rows.as_slice() {
+            given.one = Some((id.clone(), theta.clone()));
             return Ok(given);
         }
         for (id, theta) in rows {
@@ -115,7 +152,7 @@ impl GivenValues {
     /// ([`GivenValuesError::NoRow`]).
     pub fn of(&self, id: &str) -> Result<Vec<f64>, GivenValuesError> {
         match &self.one {
-            Some(theta) => Ok(theta.clone()),
+            Some((_, theta)) => Ok(theta.clone()),
             None => self
                 .by_id
                 .get(id)
@@ -319,6 +356,7 @@ pub struct EstimateRequest {
     windows: Option<Windows>,
     seed: u64,
     prior_starts: Option<usize>,
+    allow_outside_prior: bool,
 }
 
 impl EstimateRequest {
@@ -334,6 +372,7 @@ impl EstimateRequest {
             windows: None,
             seed: 0,
             prior_starts: None,
+            allow_outside_prior: false,
         }
     }
 
@@ -391,6 +430,14 @@ impl EstimateRequest {
     /// [`SearchStarts::default_from_prior`]).
     pub fn prior_starts(mut self, starts: Option<usize>) -> Self {
         self.prior_starts = starts;
+        self
+    }
+
+    /// Accept given values outside the model's prior box (refused by
+    /// default: a model may not even run there, and its estimators never
+    /// saw it).
+    pub fn allow_outside_prior(mut self, allowed: bool) -> Self {
+        self.allow_outside_prior = allowed;
         self
     }
 
@@ -454,6 +501,7 @@ impl EstimateRequest {
             windows: self.windows,
             seed: self.seed,
             prior_starts: self.prior_starts,
+            allow_outside_prior: self.allow_outside_prior,
         };
         match self.with {
             EstimateWith::Estimator(estimator) => {
@@ -474,6 +522,7 @@ struct Settings {
     windows: Option<Windows>,
     seed: u64,
     prior_starts: Option<usize>,
+    allow_outside_prior: bool,
 }
 
 impl Settings {
@@ -611,7 +660,18 @@ impl Settings {
                     .map_err(|e| RequestError::new(purpose, e.into()))?;
                 (method, spec)
             }
-            EstimateWith::Given(values) => (Method::Given(values), simulator.spec().clone()),
+            EstimateWith::Given(values) => {
+                let spec = simulator.spec().clone();
+                if !self.allow_outside_prior
+                    && let Some(outside) = values.outside_prior(&spec)
+                {
+                    return Err(RequestError {
+                        purpose,
+                        error: outside,
+                    });
+                }
+                (Method::Given(values), spec)
+            }
             EstimateWith::Estimator(_) => unreachable!("an estimator is prepared by two_stage"),
         };
         let checker = self.checks.then_some(simulator);
@@ -691,6 +751,16 @@ pub enum RequestProblem {
         length: usize,
         /// Samples between windows.
         every: usize,
+    },
+    /// Given values outside the model's prior box, not allowed.
+    #[error("{from}, experiment {id}: {why}")]
+    OutsidePrior {
+        /// Where the values came from.
+        from: String,
+        /// The row's experiment.
+        id: String,
+        /// Which parameter lies where, and the box.
+        why: String,
     },
     /// A model given to a trained estimator's request that neither checks,
     /// refines nor fits its estimates jointly: it would be ignored.

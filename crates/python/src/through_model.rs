@@ -220,9 +220,15 @@ pub(crate) fn check_dict<'py>(
 
 /// A request prepared, its error as Python's: what it was for and why.
 pub(crate) fn prepared(request: EstimateRequest) -> PyResult<Estimating> {
-    request
-        .prepare()
-        .map_err(|e| PyValueError::new_err(e.to_string()))
+    request.prepare().map_err(|e| match &e.error {
+        // Named as the keyword that would accept them, before the
+        // request's words.
+        twostage::RequestProblem::OutsidePrior { .. } => PyValueError::new_err(format!(
+            "theta without allow_outside_prior=True: {}",
+            e.error
+        )),
+        _ => PyValueError::new_err(e.to_string()),
+    })
 }
 
 /// One record through a prepared request, without the GIL: its row, or
@@ -305,11 +311,6 @@ pub(crate) fn check_values<'py>(
     })?;
     let sim = named.simulator().map_err(to_python)?;
     let spec = sim.spec();
-    spec.prior()
-        .check(&theta, spec.param_names(), allow_outside_prior)
-        .map_err(|e| {
-            PyValueError::new_err(format!("theta: {e}; allow_outside_prior=True accepts it"))
-        })?;
     let record = one_record(
         u,
         Some(y),
@@ -322,6 +323,7 @@ pub(crate) fn check_values<'py>(
     let estimating = prepared(
         EstimateRequest::new(EstimateWith::Given(given))
             .model(Some(named))
+            .allow_outside_prior(allow_outside_prior)
             .check_records(true)
             .check_settings(check_settings(sims, score_from, score_to))
             .seed(seed)

@@ -273,8 +273,21 @@ def test_given_values_are_checked_and_predicted_as_the_cli_does(benchmark, tmp_p
 def test_bad_values_and_arrays_are_named(benchmark):
     estimator, _, folder = benchmark
     u, y, _ = records(folder)
-    with pytest.raises(ValueError, match="theta.*1.5.*allow_outside_prior"):
+    with pytest.raises(ValueError) as refused:
         twostage.check([1.5], u[0], y[0], model="benchmark")
+    from_python = words_after("theta without allow_outside_prior=True", str(refused.value))
+    assert from_python.startswith("theta, experiment 0: parameter theta = 1.5 lies outside"), \
+        from_python
+    # The command line refuses them in the request's words, naming its file.
+    values = folder / "outside.csv"
+    values.write_text("experiment,theta\n0,1.5\n")
+    from_cli = words_after("--at without --allow-outside-prior",
+                           cli_refusal("estimate", "--model", "benchmark", "--at", str(values),
+                                       "--check", str(folder / "data.csv")))
+    assert from_cli == from_python.replace("theta, experiment", str(values) + ", experiment", 1)
+    simulated = words_after("--at without --allow-outside-prior",
+                            cli_refusal("simulate", "--model", "benchmark", "--at", str(values)))
+    assert simulated == from_cli
     outside = twostage.check([1.5], u[0], y[0], model="benchmark", allow_outside_prior=True,
                              sims=49)
     assert outside["explained"] in (True, False)

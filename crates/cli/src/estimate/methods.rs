@@ -52,6 +52,10 @@ impl MethodChoice {
     }
 }
 
+/// How the command line names the setting of a refusal of values outside
+/// the prior (the request's words follow).
+pub(crate) const OUTSIDE_PRIOR_FLAGS: &str = "--at without --allow-outside-prior";
+
 /// Refuses an option that the chosen way of estimating would not read:
 /// an option silently ignored reads as one that worked.
 fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
@@ -117,7 +121,6 @@ fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<GivenValu
     let named = named_model(args, "--at")?;
     let spec = named.simulator().or_usage()?.spec().clone();
     let rows = crate::predict::read_rows(path, spec.param_names())?;
-    crate::predict::refuse_outside_prior(&rows, &spec, path, args.allow_outside_prior)?;
     let rows = rows.into_iter().map(|row| (row.id, row.theta)).collect();
     GivenValues::new(rows, &path.display().to_string()).or_usage()
 }
@@ -175,6 +178,7 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
             args.model.as_deref(),
             args.model_file.as_deref(),
         )?)
+        .allow_outside_prior(args.allow_outside_prior)
         .check_records(args.check)
         .check_settings(CheckSettings {
             runs: args.check_sims.unwrap_or(twostage::DEFAULT_CHECK_RUNS),
@@ -221,6 +225,7 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
             "{flag} simulates the model: give --model M or --model-file F"
         )),
         RequestProblem::NotBuiltIn { .. } => usage(e.error.to_string()),
+        RequestProblem::OutsidePrior { .. } => usage(format!("{OUTSIDE_PRIOR_FLAGS}: {}", e.error)),
         // The method's own error names the method and the model.
         RequestProblem::Failed(cause) if e.purpose == Purpose::Method => {
             anyhow::Error::new(UsageError::Caused(cause))

@@ -11,6 +11,7 @@ use crate::usage;
 
 mod columns;
 mod methods;
+pub(crate) use methods::OUTSIDE_PRIOR_FLAGS;
 mod said;
 
 use columns::plot_check;
