@@ -3,8 +3,6 @@
 use twostage_baselines::BaselineError;
 use twostage_sources::csv_rows::DataFileError;
 
-use super::GivenValuesError;
-
 /// Why a record, or a window of one, has no estimate: each names the
 /// record (its file and experiment, or its place in a batch).
 ///
@@ -67,4 +65,28 @@ pub enum MethodFailure {
     /// Given values do not fit the record.
     #[error(transparent)]
     Given(#[from] GivenValuesError),
+}
+
+/// Values given for records that do not fit them.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum GivenValuesError {
+    /// An experiment has two rows of values.
+    #[error("{from}: experiment {id} has two rows of values: give one per experiment")]
+    TwoRows {
+        /// Where the values came from.
+        from: String,
+        /// The experiment.
+        id: String,
+    },
+    /// A record's experiment has no row, among several.
+    #[error(
+        "{from} has no row for experiment {id}: give a row per experiment, or a single row for \
+         every record"
+    )]
+    NoRow {
+        /// Where the values came from.
+        from: String,
+        /// The experiment.
+        id: String,
+    },
 }
