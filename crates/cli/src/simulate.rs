@@ -1,21 +1,20 @@
 //! `twostage models` and `twostage simulate`.
 
-use std::fs::{self, File};
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use rayon::prelude::*;
 use twostage::Progress;
 use twostage::RunSettings;
-use twostage::models::{IoData, Simulator, experiment_rng, run_experiments};
+use twostage::models::{Simulator, experiment_rng};
+use twostage::sources::chart_writer::push_record_rows;
 use twostage::sources::csv_rows::row;
 use twostage::sources::readable_bytes;
 use twostage::sources::record_file::RecordFormat;
+use twostage::sources::write_csv_chart;
 
 use crate::OrUsage;
 use crate::model_arg::ModelArgs;
-use crate::number::{format_f64, four_digits, parse_list};
+use crate::number::{four_digits, parse_list};
 use crate::{predict, usage};
 
 /// Options of `twostage simulate`, already parsed by clap.
@@ -155,7 +154,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
     let mut text = String::with_capacity(record.n_samples() * 48);
     text.push_str(&signal_header(spec));
     text.push('\n');
-    push_rows(&mut text, None, &record);
+    push_record_rows(&mut text, None, &record);
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => crate::standard_output::StandardOutput::write_text(&text)?,
@@ -321,10 +320,6 @@ fn one_shard(
     Ok(())
 }
 
-/// Experiments are simulated in parallel in blocks and written in order, so
-/// that memory stays bounded and the files do not depend on the thread count.
-const BLOCK: usize = 256;
-
 /// Characters a number takes in the files at most, as `format_f64`
 /// writes it (a sign, 17 significant digits, a point and an exponent), and
 /// the comma after it.
@@ -369,75 +364,12 @@ fn many_experiments(sim: &dyn Simulator, count: usize, seed: u64, dir: &Path) ->
     }
     let spec = sim.spec();
     room_for(spec, count, dir)?;
-    let design = spec.prior().design(count, seed)?;
-    fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let data_path = dir.join("data.csv");
-    let truth_path = dir.join("truth.csv");
-    let open = |path: &Path| -> Result<BufWriter<File>> {
-        Ok(BufWriter::new(
-            File::create(path).with_context(|| format!("creating {}", path.display()))?,
-        ))
-    };
-    let (mut data, mut truth) = (open(&data_path)?, open(&truth_path)?);
-    let signals = spec
-        .input_names()
-        .iter()
-        .chain(spec.output_names())
-        .cloned();
-    write!(
-        data,
-        "{}",
-        row(std::iter::once("experiment".to_string()).chain(signals))
-    )?;
-    write!(
-        truth,
-        "{}",
-        row(std::iter::once("experiment").chain(spec.param_names().iter().map(String::as_str)))
-    )?;
-    // A command source answers a request of its batch at once.
-    let batch = sim.batch_size().clamp(1, BLOCK);
-    let q = spec.n_params();
-    for start in (0..count).step_by(BLOCK) {
-        let end = (start + BLOCK).min(count);
-        let block: Vec<Vec<(String, String)>> = (start..end)
-            .step_by(batch)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|first| -> Result<Vec<(String, String)>> {
-                let n = batch.min(end - first);
-                let (mut thetas, mut records) = (vec![0.0; n * q], vec![IoData::default(); n]);
-                let results = run_experiments(sim, &design, first, &mut thetas, &mut records);
-                results
-                    .into_iter()
-                    .zip(&records)
-                    .zip(thetas.chunks_exact(q.max(1)))
-                    .enumerate()
-                    .map(|(k, ((result, record), theta))| {
-                        let i = first + k;
-                        result.with_context(|| format!("simulating experiment {i}"))?;
-                        let mut rows = String::with_capacity(record.n_samples() * 56);
-                        push_rows(&mut rows, Some(i), record);
-                        let values: Vec<String> = theta.iter().map(|v| format_f64(*v)).collect();
-                        Ok((rows, format!("{i},{}\n", values.join(","))))
-                    })
-                    .collect()
-            })
-            .collect::<Result<_>>()?;
-        for (rows, truth_row) in block.into_iter().flatten() {
-            data.write_all(rows.as_bytes())?;
-            truth.write_all(truth_row.as_bytes())?;
-        }
-    }
-    data.flush()
-        .with_context(|| format!("writing {}", data_path.display()))?;
-    truth
-        .flush()
-        .with_context(|| format!("writing {}", truth_path.display()))?;
+    let chart = write_csv_chart(sim, count, seed, dir)?;
     eprintln!(
         "wrote {count} experiments of {} to {} and {}",
         spec.name(),
-        data_path.display(),
-        truth_path.display()
+        chart.data.display(),
+        chart.truth.display()
     );
     Ok(())
 }
@@ -448,24 +380,4 @@ fn signal_header(spec: &twostage::models::ModelSpec) -> String {
     row(spec.input_names().iter().chain(spec.output_names()))
         .trim_end()
         .to_string()
-}
-
-fn push_rows(text: &mut String, experiment: Option<usize>, record: &IoData) {
-    let signals: Vec<&[f64]> = (0..record.n_inputs())
-        .map(|j| record.input(j))
-        .chain((0..record.n_outputs()).map(|j| record.output(j)))
-        .collect();
-    for k in 0..record.n_samples() {
-        if let Some(i) = experiment {
-            text.push_str(&i.to_string());
-            text.push(',');
-        }
-        for (j, signal) in signals.iter().enumerate() {
-            if j > 0 {
-                text.push(',');
-            }
-            text.push_str(&format_f64(signal[k]));
-        }
-        text.push('\n');
-    }
 }

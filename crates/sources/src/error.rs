@@ -17,6 +17,14 @@ pub enum Error {
     /// A simulation failed or a model setting is wrong.
     #[error(transparent)]
     Simulation(#[from] SimError),
+    /// One experiment of a chart being written failed.
+    #[error("simulating experiment {index}: {error}")]
+    Experiment {
+        /// Its index in the design.
+        index: usize,
+        /// What went wrong.
+        error: SimError,
+    },
     /// A record could not be compressed, or a stage-1 structure is wrong.
     #[error(transparent)]
     Compression(#[from] CompressError),

@@ -28,6 +28,7 @@
 mod chart;
 mod chart_arrays;
 mod chart_file;
+pub mod chart_writer;
 pub mod csv_rows;
 mod error;
 mod model_file;
@@ -47,6 +48,7 @@ pub use chart::{
 };
 pub use chart_arrays::ChartArrays;
 pub use chart_file::ChartFiles;
+pub use chart_writer::{CsvChart, write_csv_chart};
 pub use error::{Error, InvalidSetting, Result};
 pub use model_file::{
     CommandInput, DEFAULT_PRESET_SIMULATIONS, ModelFile, ModelSource, TEMPLATE, fmu_model_file,
