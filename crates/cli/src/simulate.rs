@@ -166,20 +166,15 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
 fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<()> {
     let spec = sim.spec();
     let rows = predict::read_rows(at, spec.param_names())?;
-    if !args.allow_outside_prior {
-        let given = twostage::GivenValues::new(
-            rows.iter()
-                .map(|r| (r.id.clone(), r.theta.clone()))
-                .collect(),
-            &at.display().to_string(),
-        )
-        .or_usage()?;
-        if let Some(outside) = given.outside_prior(spec) {
-            return Err(usage(format!(
-                "{}: {outside}",
-                crate::estimate::OUTSIDE_PRIOR_FLAGS
-            )));
-        }
+    let from = at.display().to_string();
+    let values = rows.iter().map(|r| (r.id.as_str(), &r.theta));
+    if !args.allow_outside_prior
+        && let Some(outside) = twostage::values_outside_prior(&from, values, spec)
+    {
+        return Err(usage(format!(
+            "{}: {outside}",
+            crate::estimate::OUTSIDE_PRIOR_FLAGS
+        )));
     }
     let inputs = match &args.input {
         None => predict::Inputs::Own,
@@ -203,23 +198,20 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
     // an identified model by.
     for (i, (row, record)) in rows.iter().zip(&records).enumerate() {
         if let Some(measured) = inputs.of(i) {
-            let from = args.score_from.unwrap_or(0);
             let n = measured.n_samples();
-            if from >= n {
-                return Err(usage(format!(
-                    "--score-from {from}: the record of experiment {} has {n} samples (0 to {})",
-                    row.id,
-                    n.saturating_sub(1)
-                )));
-            }
-            let to = args.score_to.unwrap_or(n);
-            if to <= from || to > n {
-                return Err(usage(format!(
-                    "--score-to {to}: the window must end after its start ({from}) and at \
-                     most at the end of the record of experiment {} ({n} samples)",
-                    row.id
-                )));
-            }
+            let window =
+                twostage::refine::scoring_window(n, args.score_from.unwrap_or(0), args.score_to)
+                    .map_err(|e| match e {
+                        twostage::RefineError::InvalidSetting(refused) => usage(format!(
+                            "--{} {}: {} (the record of experiment {})",
+                            refused.name.replace(' ', "-"),
+                            refused.value,
+                            refused.reason,
+                            row.id
+                        )),
+                        other => usage(other.to_string()),
+                    })?;
+            let (from, to) = (window.start, window.end);
             let parts: Vec<String> = spec
                 .output_names()
                 .iter()

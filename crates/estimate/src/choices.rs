@@ -21,10 +21,39 @@ pub struct GivenValues {
     from: String,
 }
 
+/// The first of `rows` (experiment, values) read from `from` whose values
+/// lie outside `spec`'s prior box, said as the estimate request refuses
+/// it (`None`: all inside); `simulate --at` asks it too.
+///
+/// ```
+/// use twostage::values_outside_prior;
+/// use twostage::models::{Benchmark, Simulator};
+/// let spec = Benchmark::new().spec().clone();
+/// let (a, b) = (vec![0.5], vec![1.5]);
+/// assert!(values_outside_prior("v.csv", [("a", &a)], &spec).is_none());
+/// let outside = values_outside_prior("v.csv", [("a", &a), ("b", &b)], &spec).expect("b");
+/// assert!(outside.to_string().starts_with("v.csv, experiment b: "), "{outside}");
+/// ```
+pub fn values_outside_prior<'a>(
+    from: &str,
+    rows: impl IntoIterator<Item = (&'a str, &'a Vec<f64>)>,
+    spec: &ModelSpec,
+) -> Option<RequestProblem> {
+    rows.into_iter().find_map(|(id, theta)| {
+        spec.prior()
+            .check(theta, spec.param_names(), false)
+            .err()
+            .map(|why| RequestProblem::OutsidePrior {
+                from: from.to_string(),
+                id: id.to_string(),
+                why: why.to_string(),
+            })
+    })
+}
+
 impl GivenValues {
-    /// The first row whose values lie outside `spec`'s prior box, said as
-    /// the request refuses it (`None`: all inside). Every door asks it,
-    /// `simulate --at` too.
+    /// The first row (by experiment) whose values lie outside `spec`'s
+    /// prior box, as [`values_outside_prior`] says it.
     ///
     /// ```
     /// use twostage::{GivenValues, RequestProblem};
@@ -45,16 +74,7 @@ impl GivenValues {
             .chain(self.by_id.iter().map(|(id, theta)| (id.as_str(), theta)))
             .collect();
         rows.sort_by(|a, b| a.0.cmp(b.0));
-        rows.into_iter().find_map(|(id, theta)| {
-            spec.prior()
-                .check(theta, spec.param_names(), false)
-                .err()
-                .map(|why| RequestProblem::OutsidePrior {
-                    from: self.from.clone(),
-                    id: id.to_string(),
-                    why: why.to_string(),
-                })
-        })
+        values_outside_prior(&self.from, rows, spec)
     }
 
     /// The `rows` (experiment, values) read from `from`: a single row

@@ -22,7 +22,9 @@ mod rows;
 mod table;
 mod through_model;
 
-pub use choices::{CheckSettings, GivenValues, RefineChoiceError, RefineWhich, Windows};
+pub use choices::{
+    CheckSettings, GivenValues, RefineChoiceError, RefineWhich, Windows, values_outside_prior,
+};
 pub use failure::{GivenValuesError, MethodFailure, RecordFailure};
 pub use joint::{JointFitter, JointOfRecords};
 pub use methods::OUTPUT_ERROR_METHOD;

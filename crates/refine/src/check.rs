@@ -388,32 +388,56 @@ pub fn search_best_fits(
 
 /// A scoring window of at least one sample, inside the record.
 fn within_record(record: &IoData, plan: CheckPlan) -> Result<(), RefineError> {
-    if let Some(to) = plan.score_to
-        && (to <= plan.score_from || to > record.n_samples())
+    scoring_window(record.n_samples(), plan.score_from, plan.score_to).map(|_| ())
+}
+
+/// The samples scored of a record of `samples` samples, from `score_from`
+/// up to `score_to` (not including it; `None`: the record's end), or why
+/// that is no window: one of at least one sample, inside the record. The
+/// check and `simulate --at --input` both ask it.
+///
+/// ```
+/// use twostage_refine::scoring_window;
+/// assert_eq!(scoring_window(1000, 100, Some(600)).ok(), Some(100..600));
+/// assert_eq!(scoring_window(1000, 100, None).ok(), Some(100..1000));
+/// let empty = scoring_window(1000, 100, Some(100)).unwrap_err().to_string();
+/// assert!(empty.contains("the window must end after its start (100)"), "{empty}");
+/// let past = scoring_window(1000, 1000, None).unwrap_err().to_string();
+/// assert!(past.contains("the record has 1000 samples (0 to 999)"), "{past}");
+/// ```
+///
+/// # Errors
+/// An end not after the start or past the record, a start past the
+/// record ([`RefineError::InvalidSetting`], named `score to` or `score
+/// from`).
+pub fn scoring_window(
+    samples: usize,
+    score_from: usize,
+    score_to: Option<usize>,
+) -> Result<Range<usize>, RefineError> {
+    if let Some(to) = score_to
+        && (to <= score_from || to > samples)
     {
         return Err(RefineError::InvalidSetting(InvalidSetting {
             name: "score to",
             value: to.to_string(),
             reason: format!(
-                "the window must end after its start ({}) and at most at the record's end \
-                 ({} samples)",
-                plan.score_from,
-                record.n_samples()
+                "the window must end after its start ({score_from}) and at most at the record's \
+                 end ({samples} samples)"
             ),
         }));
     }
-    if plan.score_from >= record.n_samples() {
+    if score_from >= samples {
         return Err(RefineError::InvalidSetting(InvalidSetting {
             name: "score from",
-            value: plan.score_from.to_string(),
+            value: score_from.to_string(),
             reason: format!(
-                "the record has {} samples (0 to {})",
-                record.n_samples(),
-                record.n_samples().saturating_sub(1)
+                "the record has {samples} samples (0 to {})",
+                samples.saturating_sub(1)
             ),
         }));
     }
-    Ok(())
+    Ok(score_from..score_to.unwrap_or(samples))
 }
 
 /// Check `record` against `sim` at `theta`: one noise-free run on the

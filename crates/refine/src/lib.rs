@@ -29,7 +29,7 @@ pub use best_fit::{
 };
 pub use check::{
     CheckPlan, DEFAULT_CHECK_RUNS, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES,
-    check_against, check_record, check_with, output_fit, search_best_fits,
+    check_against, check_record, check_with, output_fit, scoring_window, search_best_fits,
 };
 pub use error::{InvalidSetting, RefineError};
 pub use joint::{JointEstimate, JointPlan, PooledEstimate, SingleEstimate, pool_estimates};

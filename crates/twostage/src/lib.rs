@@ -66,7 +66,7 @@ pub use twostage_estimate::{
     Estimating, GivenValues, GivenValuesError, JointFitter, JointOfRecords, MethodFailure,
     ModelFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RECORDS_TOGETHER, RecordEstimate,
     RecordFailure, RecordOutcome, RefineChoiceError, RefineWhich, RefinedEstimate, RequestError,
-    RequestProblem, SharedSimulator, ToRefine, Windows,
+    RequestProblem, SharedSimulator, ToRefine, Windows, values_outside_prior,
 };
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,
