@@ -611,9 +611,9 @@ def train(
         auto=auto,
         budget_seconds=budget_seconds,
         budget_sims=budget_sims,
-        chart=_chart(chart),
-        validate_chart=_chart(validate_chart),
-        calibrate_chart=_chart(calibrate_chart),
+        chart=chart,
+        validate_chart=validate_chart,
+        calibrate_chart=calibrate_chart,
     )
     return Estimator(native)
 
@@ -693,11 +693,3 @@ def predict(
         seed=seed,
         experiment=experiment,
     )
-
-
-def _chart(chart):
-    """A chart as the native side reads it: a folder as a string, arrays
-    as they are (the Rust side checks them as it checks a chart's files)."""
-    if isinstance(chart, PathLike):
-        return str(chart)
-    return chart

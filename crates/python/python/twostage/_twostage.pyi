@@ -10,6 +10,9 @@ import numpy.typing as npt
 __version__: str
 
 _Array = npt.NDArray[np.float64]
+# A chart: its folder, or its arrays (theta [m, q], inputs [m, N, n_u] or
+# None, outputs [m, N, n_y]).
+_Chart = Union[str, PathLike[str], Tuple[_Array, Optional[_Array], _Array]]
 
 class Estimator:
     """The native estimator. ``twostage.Estimator`` wraps it: use that one,
@@ -36,6 +39,7 @@ class Estimator:
     def to_json(self) -> str: ...
     def validation_json(self) -> Optional[str]: ...
     def estimate(self, u: Optional[_Array], y: _Array) -> _Array: ...
+    def window_ends(self, samples: int, window: int, every: int) -> list[int]: ...
     def assess(
         self, u: Optional[_Array], y: _Array
     ) -> Tuple[
@@ -172,9 +176,9 @@ def train(
     calibrate: Optional[int] = None,
     alpha: Optional[float] = None,
     progress: Optional[Callable[[str, str, int], Any]] = None,
-    chart: Optional[Tuple[str, Optional[str]]] = None,
-    validate_chart: Optional[Tuple[str, Optional[str]]] = None,
-    calibrate_chart: Optional[Tuple[str, Optional[str]]] = None,
+    chart: Optional[_Chart] = None,
+    validate_chart: Optional[_Chart] = None,
+    calibrate_chart: Optional[_Chart] = None,
     auto: bool = False,
     budget_seconds: Optional[float] = None,
     budget_sims: Optional[int] = None,
