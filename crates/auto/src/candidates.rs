@@ -275,8 +275,8 @@ pub(super) fn with_summary(
 }
 
 /// The winner's stage 1 (with the summary, where [`with_summary`] adds
-/// it) and after it a summary network trained on the records (decision
-/// 081's default shape), where the `records`' inputs differ in level or
+/// it) and after it a summary network of the default shape trained on
+/// the records, where the `records`' inputs differ in level or
 /// in shape: what one stage 1 reads of a step differs from what it reads
 /// of a burst, and a network can learn to tell them apart.
 /// The held-out risk decides whether it pays for its training.

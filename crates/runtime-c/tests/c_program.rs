@@ -230,8 +230,8 @@ fn a_c_program_prints_the_rust_estimates() {
             "window ending at {end}: C {theta} vs Rust {}",
             host.theta[0]
         );
-        // The runtime does not judge the input's shape yet (decision
-        // 078): it agrees with the host's features and summary.
+        // The runtime does not judge the input's shape yet: it agrees
+        // with the host's features and summary.
         let flagged = host.features_outside() || !host.input_deviations.is_empty();
         assert_eq!(fields[4] == "1", flagged, "{line}");
         assert_eq!(fields[5], input_mask(&host).to_string(), "{line}");
