@@ -84,24 +84,28 @@ pub(crate) fn train(
     );
     let records = match (chart, validate_chart, calibrate_chart) {
         (None, None, None) => RecordsRequest::Simulated,
-        (Some(training), validation, calibration) => match &training {
-            ChartGiven::Folder(ChartDir { dir, .. })
-                if !matches!(RecordsRequest::chart(dir), RecordsRequest::Chart { .. }) =>
-            {
-                if validation.is_some() || calibration.is_some() {
+        (Some(training), validation, calibration) => {
+            // A folder's argument may name shards instead of a chart.
+            let shards = match &training {
+                ChartGiven::Folder(folder) => Some(RecordsRequest::chart(&folder.dir))
+                    .filter(|named| matches!(named, RecordsRequest::Shards { .. })),
+                ChartGiven::Arrays { .. } => None,
+            };
+            match shards {
+                Some(_) if validation.is_some() || calibration.is_some() => {
                     return Err(PyValueError::new_err(
                         "shards hold their own calibration and validation records: leave out \
                          validate_chart and calibrate_chart",
                     ));
                 }
-                RecordsRequest::chart(dir)
+                Some(shards) => shards,
+                None => RecordsRequest::Given {
+                    training,
+                    calibration,
+                    validation,
+                },
             }
-            _ => RecordsRequest::Given {
-                training,
-                calibration,
-                validation,
-            },
-        },
+        }
         (None, _, _) => {
             return Err(PyValueError::new_err(
                 "validate_chart and calibrate_chart go with chart (a training chart)",

@@ -106,8 +106,8 @@ impl ChartArrays {
         let mut record = IoData::zeros(n, n_u, n_y);
         for row in 0..m {
             for k in 0..n {
-                for j in 0..n_u {
-                    if let Some(inputs) = &self.inputs {
+                if let Some(inputs) = &self.inputs {
+                    for j in 0..n_u {
                         record.input_mut(j)[k] = inputs[[row, k, j]];
                     }
                 }
