@@ -42,6 +42,7 @@ mod arx;
 mod config;
 mod error;
 mod fast;
+mod linearized;
 mod narx;
 mod pca;
 mod raw;
@@ -56,6 +57,7 @@ pub use config::{
     SummaryNetwork, TRANSFORM_RECORDS, Transformed, WithLearned, WithLevel, WithSummary,
 };
 pub use error::{CompressError, InvalidSetting, Result};
+pub use linearized::{DEFAULT_SUBSTEPS, Linearized, MAX_SUBSTEPS};
 pub use narx::{Narx, signal_rms};
 pub use pca::OutputPca;
 pub use raw::{MAX_RAW_FEATURES, RawRecord};

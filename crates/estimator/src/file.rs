@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32): 7 for an estimator whose stage 1 learns, else 6 (1 to 5 are still read) |
+//! | 8..12 | format version (u32): 8 for an estimator whose stage 1 linearizes the model, 7 for one whose stage 1 learns, else 6 (1 to 5 are still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -30,9 +30,14 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// (uniform priors, no certificate, no input family, no shapes). Version 7
 /// shares version 6's layout and is written only where it is needed, so
 /// that a build that reads 6 still reads every estimator without a
-/// learned stage 1. Every version's layout lives in `layout.rs`.
-pub const FORMAT_VERSION: u32 = 7;
-/// The version of an estimator file whose stage 1 does not learn.
+/// learned stage 1. Version 8, likewise, a stage 1 that linearizes the
+/// model (`linearized`), written only for such an estimator. Every
+/// version's layout lives in `layout.rs`.
+pub const FORMAT_VERSION: u32 = 8;
+/// The version of an estimator file whose stage 1 learns.
+const WITH_LEARNED: u32 = 7;
+/// The version of an estimator file whose stage 1 neither learns nor
+/// linearizes.
 const WITHOUT_LEARNED: u32 = 6;
 const HEADER: usize = 24;
 
@@ -47,8 +52,10 @@ impl Estimator {
         })?;
         let mut bytes = Vec::with_capacity(HEADER + payload.len());
         bytes.extend_from_slice(MAGIC);
-        let version = if self.compressor().learns() {
+        let version = if self.compressor().linearizes() {
             FORMAT_VERSION
+        } else if self.compressor().learns() {
+            WITH_LEARNED
         } else {
             WITHOUT_LEARNED
         };

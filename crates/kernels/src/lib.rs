@@ -14,6 +14,9 @@
 //! - [`convolution`]: the learned stage 1's strided convolutions and
 //!   their pooling over time;
 //! - [`vector`]: standardization and clipping to the prior box;
+//! - [`pacejka`]: the Pacejka car's equations, for plain numbers and for
+//!   numbers that carry their derivatives, and [`linearized`], the stage 1
+//!   that regresses a record on the car's sensitivities;
 //! - [`input_summary`] and [`input_shape`]: what an input was like, and
 //!   how far a record's input shape lies from a family's.
 //!
@@ -46,6 +49,8 @@ pub mod input_shape;
 pub mod input_summary;
 pub mod lagged;
 pub mod layer;
+pub mod linearized;
+pub mod pacejka;
 mod tanh;
 pub mod vector;
 

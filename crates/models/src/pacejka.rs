@@ -4,6 +4,7 @@
 
 use crate::InvalidSetting;
 use rand_distr::{Distribution, StandardNormal};
+pub use twostage_kernels::pacejka::{Car, Tire, Vehicle};
 
 use crate::data::IoData;
 use crate::error::{Result, SimError};
@@ -11,150 +12,7 @@ use crate::input::InputSignal;
 use crate::ode::{OdeSystem, Rk4};
 use crate::prior::Prior;
 use crate::rng::ExperimentRng;
-use crate::simulator::{Capabilities, Conditions, ModelSpec, Simulator, check_theta};
-
-/// Vehicle constants (spec/pacejka-car.md, "Constants").
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Vehicle {
-    /// Mass m, kg.
-    pub mass: f64,
-    /// Yaw inertia J, kg m^2.
-    pub yaw_inertia: f64,
-    /// Centre of mass to front axle lf, m.
-    pub lf: f64,
-    /// Centre of mass to rear axle lr, m.
-    pub lr: f64,
-    /// Track width l, m.
-    pub track: f64,
-    /// Centre-of-mass height h, m.
-    pub cg_height: f64,
-    /// Gravity g, m/s^2.
-    pub gravity: f64,
-    /// Speed V, m/s.
-    pub speed: f64,
-    /// Roll inertia Jr, kg m^2.
-    pub roll_inertia: f64,
-    /// Roll damping Cr, N m s/rad.
-    pub roll_damping: f64,
-    /// Roll stiffness Kr, N m/rad.
-    pub roll_stiffness: f64,
-}
-
-impl Vehicle {
-    /// The mid-size car of the spec.
-    pub const PAPER: Self = Self {
-        mass: 1500.0,
-        yaw_inertia: 2500.0,
-        lf: 1.1,
-        lr: 1.6,
-        track: 1.5,
-        cg_height: 0.5,
-        gravity: 9.81,
-        speed: 10.0,
-        roll_inertia: 700.0,
-        roll_damping: 5000.0,
-        roll_stiffness: 80000.0,
-    };
-
-    /// Static load of each axle, `(N_f, N_r)`.
-    pub fn axle_loads(&self) -> (f64, f64) {
-        let weight = self.mass * self.gravity;
-        let wheelbase = self.lf + self.lr;
-        (weight * self.lr / wheelbase, weight * self.lf / wheelbase)
-    }
-}
-
-/// Tire constants of Pacejka's magic formula; pK1 and pK2 are the unknown
-/// parameters and are passed separately.
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[allow(missing_docs)] // the fields are the formula's own symbols
-pub struct Tire {
-    /// Nominal load Fz0, N.
-    pub fz0: f64,
-    /// Camber angle gamma, rad.
-    pub camber: f64,
-    pub p_c1: f64,
-    pub p_d1: f64,
-    pub p_d2: f64,
-    pub p_d3: f64,
-    pub p_e1: f64,
-    pub p_e2: f64,
-    pub p_e3: f64,
-    pub p_e4: f64,
-    pub p_h1: f64,
-    pub p_h2: f64,
-    pub p_h3: f64,
-    pub p_v1: f64,
-    pub p_v2: f64,
-    pub p_v3: f64,
-    pub p_v4: f64,
-    pub p_k3: f64,
-}
-
-impl Tire {
-    /// The tire of the spec (all four alike).
-    pub const PAPER: Self = Self {
-        fz0: 4000.0,
-        camber: 0.0,
-        p_c1: 1.3,
-        p_d1: 1.0,
-        p_d2: -0.1,
-        p_d3: 0.0,
-        p_e1: -0.5,
-        p_e2: -0.2,
-        p_e3: 0.0,
-        p_e4: 0.0,
-        p_h1: 0.0,
-        p_h2: 0.0,
-        p_h3: 0.0,
-        p_v1: 0.0,
-        p_v2: 0.0,
-        p_v3: 0.0,
-        p_v4: 0.0,
-        p_k3: 0.0,
-    };
-
-    /// Lateral force of one wheel with load `q` and slip angle `alpha`,
-    /// Pacejka's magic formula as printed in the paper (Section 6.1).
-    ///
-    /// ```
-    /// use twostage_models::Tire;
-    /// let t = Tire::PAPER;
-    /// // Small slip: F = K alpha with K = pK1 Fz0 sin(2 atan(Q / (pK2 Fz0))).
-    /// let (pk1, pk2, q, alpha) = (-35.0, -1.1, 4000.0, 1e-7);
-    /// let k = pk1 * t.fz0 * (2.0 * (q / (pk2 * t.fz0)).atan()).sin();
-    /// assert!((t.lateral_force(q, alpha, pk1, pk2) / (k * alpha) - 1.0).abs() < 1e-6);
-    /// ```
-    pub fn lateral_force(&self, q: f64, alpha: f64, p_k1: f64, p_k2: f64) -> f64 {
-        let gamma = self.camber;
-        let fz = (q - self.fz0) / self.fz0;
-        let s_h = self.p_h1 + self.p_h2 * fz + self.p_h3 * gamma;
-        let s_v = q * ((self.p_v1 + self.p_v2 * fz) + (self.p_v3 + self.p_v4 * fz) * gamma);
-        let a = alpha + s_h;
-        let c = self.p_c1;
-        let mu = (self.p_d1 + self.p_d2 * fz) * (1.0 - self.p_d3 * gamma * gamma);
-        let d = mu * q;
-        let e = (self.p_e1 + self.p_e2 * fz) * (1.0 - (self.p_e3 + self.p_e4 * gamma) * sign(a));
-        // sin(2 atan(x)) = 2x / (1 + x^2): the same value without two
-        // transcendental calls, in the innermost loop of every car simulation.
-        let x = q / (p_k2 * self.fz0);
-        let k = p_k1 * self.fz0 * (2.0 * x / (1.0 + x * x)) * (1.0 - self.p_k3 * gamma.abs());
-        let b = k / (c * d);
-        let ba = b * a;
-        d * (c * (ba - e * (ba - ba.atan())).atan()).sin() + s_v
-    }
-}
-
-/// The paper's sign function: `sign(0) = 0`.
-fn sign(x: f64) -> f64 {
-    if x > 0.0 {
-        1.0
-    } else if x < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
-}
+use crate::simulator::{Capabilities, CarEquations, Conditions, ModelSpec, Simulator, check_theta};
 
 /// Record length of the paper's experiment: 500 samples, 0 to 9.98 s.
 pub const PACEJKA_SAMPLES: usize = 500;
@@ -271,7 +129,14 @@ impl PacejkaCarBuilder {
             self.n_samples,
         )?
         .with_signals(&["delta"], &["a_y"])
-        .with_notes(&format!("{}; RK4, step 0.002 s", input.describe()), &noise);
+        .with_notes(&format!("{}; RK4, step 0.002 s", input.describe()), &noise)
+        .with_car_equations(CarEquations {
+            car: Car {
+                vehicle: self.vehicle,
+                tire: self.tire,
+            },
+            noise_variance: PACEJKA_NOISE_VARIANCE,
+        });
         Ok(PacejkaCar {
             spec,
             vehicle: self.vehicle,
@@ -287,13 +152,13 @@ impl PacejkaCar {
     /// not the car's own input design.
     fn dynamics<'a>(&'a self, theta: &[f64], inputs: &'a [f64], given: bool) -> CarDynamics<'a> {
         CarDynamics {
-            vehicle: &self.vehicle,
-            tire: &self.tire,
-            p_k1: theta[0],
-            p_k2: theta[1],
+            car: Car {
+                vehicle: self.vehicle,
+                tire: self.tire,
+            },
+            theta: [theta[0], theta[1]],
             input: (!given).then_some(&self.input),
             samples: inputs,
-            loads: self.vehicle.axle_loads(),
         }
     }
 
@@ -364,33 +229,14 @@ impl Default for PacejkaCar {
 
 /// The car's equations at one parameter vector, with one input realization.
 struct CarDynamics<'a> {
-    vehicle: &'a Vehicle,
-    tire: &'a Tire,
-    p_k1: f64,
-    p_k2: f64,
+    car: Car,
+    theta: [f64; 2],
     /// The car's own input design; `None`: `samples` are a given input's.
     input: Option<&'a InputSignal>,
     samples: &'a [f64],
-    /// Static axle loads (N_f, N_r).
-    loads: (f64, f64),
 }
 
 impl CarDynamics<'_> {
-    /// Total lateral force and yaw moment for steer `delta` and state `x`.
-    fn force_and_moment(&self, delta: f64, x: &[f64]) -> (f64, f64) {
-        let v = self.vehicle;
-        let (beta, r, phi) = (x[0], x[1], x[2]);
-        let alpha_f = delta - beta - v.lf * r / v.speed;
-        let alpha_r = -beta + v.lr * r / v.speed;
-        let shift = v.cg_height / v.track * phi.sin();
-        let (left, right) = (0.5 - shift, 0.5 + shift);
-        let (n_f, n_r) = self.loads;
-        let force = |q: f64, alpha: f64| self.tire.lateral_force(q, alpha, self.p_k1, self.p_k2);
-        let front = force(n_f * left, alpha_f) + force(n_f * right, alpha_f);
-        let rear = force(n_r * left, alpha_r) + force(n_r * right, alpha_r);
-        (front + rear, v.lf * front - v.lr * rear)
-    }
-
     /// The steer at time t.
     fn steer(&self, t: f64) -> f64 {
         match self.input {
@@ -400,9 +246,8 @@ impl CarDynamics<'_> {
     }
 
     /// Lateral acceleration a_y at time t and state x.
-    fn lateral_acceleration(&self, t: f64, x: &[f64]) -> f64 {
-        let delta = self.steer(t);
-        self.force_and_moment(delta, x).0 / self.vehicle.mass
+    fn lateral_acceleration(&self, t: f64, x: &[f64; 4]) -> f64 {
+        self.car.lateral_acceleration(self.theta, self.steer(t), x)
     }
 }
 
@@ -412,19 +257,8 @@ impl OdeSystem for CarDynamics<'_> {
     }
 
     fn rhs(&self, t: f64, x: &[f64], dx: &mut [f64]) {
-        let v = self.vehicle;
-        let delta = self.steer(t);
-        let (force, moment) = self.force_and_moment(delta, x);
-        let a_y = force / v.mass;
-        let (r, phi, p) = (x[1], x[2], x[3]);
-        dx[0] = a_y / v.speed - r; // m V (beta' + r) = sum F
-        dx[1] = moment / v.yaw_inertia;
-        dx[2] = p;
-        let hm = v.cg_height * v.mass;
-        dx[3] = (hm * v.gravity * phi.sin() + a_y * hm * phi.cos()
-            - v.roll_damping * p
-            - v.roll_stiffness * phi)
-            / v.roll_inertia;
+        let state = [x[0], x[1], x[2], x[3]];
+        dx.copy_from_slice(&self.car.derivatives(self.theta, self.steer(t), &state));
     }
 }
 

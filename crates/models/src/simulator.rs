@@ -32,6 +32,18 @@ pub struct ModelSpec {
     output_names: Vec<String>,
     input_note: String,
     noise_note: String,
+    car_equations: Option<CarEquations>,
+}
+
+/// The equations of a model that the kernels hold, for a stage 1 that
+/// linearizes them (`linearized`): the car's constants and its output
+/// noise's variance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CarEquations {
+    /// The car's constants.
+    pub car: twostage_kernels::pacejka::Car,
+    /// The variance of its output's measurement noise.
+    pub noise_variance: f64,
 }
 
 impl ModelSpec {
@@ -92,6 +104,7 @@ impl ModelSpec {
             output_names: vec!["y".into()],
             input_note: String::new(),
             noise_note: String::new(),
+            car_equations: None,
         })
     }
 
@@ -107,6 +120,18 @@ impl ModelSpec {
         self.input_note = input.to_string();
         self.noise_note = noise.to_string();
         self
+    }
+
+    /// The same model, whose equations are the car's `equations` (its
+    /// parameters pK1 and pK2, in that order).
+    pub fn with_car_equations(mut self, equations: CarEquations) -> Self {
+        self.car_equations = Some(equations);
+        self
+    }
+
+    /// The car's equations, when the model is the car.
+    pub fn car_equations(&self) -> Option<&CarEquations> {
+        self.car_equations.as_ref()
     }
 
     /// The model's name.

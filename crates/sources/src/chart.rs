@@ -375,10 +375,33 @@ pub trait ForModel: Sized {
 
 impl ForModel for CompressorConfig {
     fn for_model(&self, spec: &ModelSpec) -> Result<Self> {
-        Ok(self.for_shape(
+        let shaped = self.for_shape(
             spec.input_names().len(),
             spec.output_names().len(),
             spec.n_samples(),
+        )?;
+        if !shaped.needs_equations() {
+            return Ok(shaped);
+        }
+        let Some(equations) = spec.car_equations() else {
+            return Err(Error::InvalidSetting(crate::InvalidSetting {
+                name: "compressor",
+                value: self.to_string(),
+                reason: format!(
+                    "the linearized stage 1 needs a model whose equations twostage holds (the \
+                 built-in car, or a model file of it with its parameters pK1, pK2); {} is \
+                 not one: use arx, narx or pca",
+                    spec.name()
+                ),
+            }));
+        };
+        let (lower, upper) = (spec.prior().lower(), spec.prior().upper());
+        Ok(shaped.for_car(
+            equations.car,
+            [lower[0], lower[1]],
+            [upper[0], upper[1]],
+            equations.noise_variance,
+            spec.sample_time(),
         )?)
     }
 

@@ -63,6 +63,11 @@ impl WithLevel {
         &self.inner
     }
 
+    /// Outputs whose level is appended.
+    pub(crate) fn n_outputs(&self) -> usize {
+        self.n_outputs
+    }
+
     /// The same for `n_outputs` outputs, with `inner` in place.
     pub(crate) fn shaped(&self, n_outputs: usize, inner: CompressorConfig) -> Result<Self> {
         Self::new(inner, n_outputs)

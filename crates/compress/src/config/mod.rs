@@ -20,7 +20,7 @@ use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{CompressError as Error, Result};
-use crate::{Arx, Compressor, Narx, OutputPca, RawRecord, Workspace, signal_rms};
+use crate::{Arx, Compressor, Linearized, Narx, OutputPca, RawRecord, Workspace, signal_rms};
 
 /// The compression map g of stage 1.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -45,6 +45,9 @@ pub enum CompressorConfig {
     /// Another compressor's features (or none), then a trained summary
     /// network's (`SPEC+learned`, `learned`).
     Learned(WithLearned),
+    /// The record regressed on its model's sensitivities at the prior's
+    /// centre (`linearized`), for models whose equations the kernels hold.
+    Linearized(Linearized),
 }
 
 /// Records a compressor's own parameters are fitted on: the first (up to)
@@ -95,6 +98,9 @@ impl CompressorConfig {
             Self::Arx(arx) => Self::Arx((*arx).with_signals(n_inputs, n_outputs)?),
             Self::Narx(_) if (n_inputs, n_outputs) != (1, 1) => {
                 return Err(refuse("a NARX takes one input and one output"));
+            }
+            Self::Linearized(_) if (n_inputs, n_outputs) != (1, 1) => {
+                return Err(refuse("the linearized car takes one input and one output"));
             }
             Self::Pca(pca) if pca.is_fitted() => Self::Pca(pca.clone().with_inputs(n_inputs)?),
             Self::Raw(_) => Self::Raw(RawRecord::new(n_samples, n_inputs, n_outputs)?),
@@ -147,6 +153,65 @@ impl CompressorConfig {
             Self::Leveled(l) => l.spec(),
             Self::Summarized(s) => s.spec(),
             Self::Learned(l) => l.spec(),
+            Self::Linearized(l) => Some(l.spec()),
+        }
+    }
+
+    /// The same compressor with its linearized part (if any, also inside
+    /// the wrappers) shaped for the car `car` of prior box `[lower,
+    /// upper]`, output noise variance `noise_variance`, sampled every
+    /// `sample_time` s ([`Linearized::for_car`]); as it is without one.
+    ///
+    /// # Errors
+    /// As [`Linearized::for_car`].
+    pub fn for_car(
+        &self,
+        car: twostage_kernels::pacejka::Car,
+        lower: [f64; 2],
+        upper: [f64; 2],
+        noise_variance: f64,
+        sample_time: f64,
+    ) -> Result<Self> {
+        let inner = |c: &Self| c.for_car(car, lower, upper, noise_variance, sample_time);
+        Ok(match self {
+            Self::Linearized(l) => {
+                Self::Linearized(l.for_car(car, lower, upper, noise_variance, sample_time)?)
+            }
+            Self::Leveled(l) => Self::Leveled(l.shaped(l.n_outputs(), inner(l.inner())?)?),
+            Self::Summarized(s) => Self::Summarized(s.with_inner(inner(s.inner())?)?),
+            Self::Learned(l) => Self::Learned(l.with_inner(l.inner().map(inner).transpose()?)),
+            other => other.clone(),
+        })
+    }
+
+    /// Whether a linearized part is in this stage 1 (shaped or not).
+    ///
+    /// ```
+    /// use twostage_compress::CompressorConfig;
+    /// let linearizes = |spec: &str| spec.parse::<CompressorConfig>().map(|c| c.linearizes());
+    /// assert_eq!(linearizes("linearized+summary")?, true);
+    /// assert_eq!(linearizes("arx:2,2+summary")?, false);
+    /// # Ok::<(), twostage_compress::CompressError>(())
+    /// ```
+    pub fn linearizes(&self) -> bool {
+        match self {
+            Self::Linearized(_) => true,
+            Self::Transformed(t) => t.inner().linearizes(),
+            Self::Leveled(l) => l.inner().linearizes(),
+            Self::Summarized(s) => s.inner().linearizes(),
+            Self::Learned(l) => l.inner().is_some_and(Self::linearizes),
+            _ => false,
+        }
+    }
+
+    /// Whether a linearized part still waits for its model's equations.
+    pub fn needs_equations(&self) -> bool {
+        match self {
+            Self::Linearized(l) => l.car().is_none(),
+            Self::Leveled(l) => l.inner().needs_equations(),
+            Self::Summarized(s) => s.inner().needs_equations(),
+            Self::Learned(l) => l.inner().is_some_and(Self::needs_equations),
+            _ => false,
         }
     }
 
@@ -305,6 +370,7 @@ impl std::fmt::Display for CompressorConfig {
             Self::Leveled(l) => l.fmt(f),
             Self::Summarized(s) => s.fmt(f),
             Self::Learned(l) => l.fmt(f),
+            Self::Linearized(l) => l.fmt(f),
         }
     }
 }
@@ -428,12 +494,18 @@ impl CompressorConfig {
             // Shaped by the model (`for_shape`): one sample of one output until then.
             return Ok(Self::Raw(RawRecord::new(1, 0, 1)?));
         }
+        if spec.trim() == "linearized" {
+            // Given its model's equations by `for_car`.
+            return Ok(Self::Linearized(Linearized::new(
+                crate::linearized::DEFAULT_SUBSTEPS,
+            )?));
+        }
         let (kind, orders) = spec.split_once(':').ok_or_else(|| {
             Error::InvalidSetting(InvalidSetting {
                 name: WHAT,
                 value: spec.to_string(),
-                reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K, raw or \
-                     learned:C1,C2,.., after output transforms as log+SPEC"
+                reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K, raw, \
+                     linearized[:S] or learned:C1,C2,.., after output transforms as log+SPEC"
                     .into(),
             })
         })?;
@@ -448,12 +520,16 @@ impl CompressorConfig {
             }
             "ar" => Arx::new(counts(orders, spec, 1, WHAT)?[0], 0)?.into(),
             "pca" => OutputPca::new(counts(orders, spec, 1, WHAT)?[0])?.into(),
+            "linearized" => {
+                let steps = counts(orders, spec, 1, WHAT)?[0];
+                Self::Linearized(Linearized::new(u32::try_from(steps).unwrap_or(u32::MAX))?)
+            }
             _ => {
                 return Err(Error::InvalidSetting(InvalidSetting {
                     name: WHAT,
                     value: spec.to_string(),
-                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K, raw or \
-                             learned:C1,C2,.."
+                    reason: "use arx:NA,NB, ar:NA (no input), narx:NA,NB,DEG, pca:K, raw, \
+                             linearized[:S] or learned:C1,C2,.."
                         .into(),
                 }));
             }
@@ -490,6 +566,7 @@ impl Compressor for CompressorConfig {
             Self::Leveled(c) => c.n_features(),
             Self::Summarized(c) => c.n_features(),
             Self::Learned(c) => c.n_features(),
+            Self::Linearized(c) => c.n_features(),
         }
     }
 
@@ -509,6 +586,7 @@ impl Compressor for CompressorConfig {
             Self::Leveled(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Summarized(c) => c.compress_into(inputs, outputs, work, alpha),
             Self::Learned(c) => c.compress_into(inputs, outputs, work, alpha),
+            Self::Linearized(c) => c.compress_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -530,6 +608,7 @@ impl Compressor for CompressorConfig {
             Self::Leveled(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Summarized(c) => c.compress_fast_into(inputs, outputs, work, alpha),
             Self::Learned(c) => c.compress_fast_into(inputs, outputs, work, alpha),
+            Self::Linearized(c) => c.compress_fast_into(inputs, outputs, work, alpha),
         }
     }
 
@@ -543,6 +622,7 @@ impl Compressor for CompressorConfig {
             Self::Leveled(c) => c.feature_names(),
             Self::Summarized(c) => c.feature_names(),
             Self::Learned(c) => c.feature_names(),
+            Self::Linearized(c) => c.feature_names(),
         }
     }
 }

@@ -77,6 +77,11 @@ impl WithSummary {
         &self.inner
     }
 
+    /// The same signals' summary after `inner`.
+    pub(crate) fn with_inner(&self, inner: CompressorConfig) -> Result<Self> {
+        Self::new(inner, self.n_inputs, self.n_outputs)
+    }
+
     /// The specification, `STAGE1+summary`, when the inner one has one.
     pub fn spec(&self) -> Option<String> {
         Some(format!("{}+summary", self.inner.spec()?))

@@ -317,7 +317,14 @@ impl ModelFile {
         .map_err(|e| at.error(Some(raw.model.name.span()), "model", e.to_string()))?
         .with_signals(&inputs, &outputs);
         let spec = match base {
-            Some(b) => spec.with_notes(b.input_note(), b.noise_note()),
+            // The car's equations stay the file's while its parameters
+            // are the car's own (a linearized stage 1 reads them).
+            Some(b) => match b.car_equations() {
+                Some(equations) if spec.param_names() == b.param_names() => spec
+                    .with_notes(b.input_note(), b.noise_note())
+                    .with_car_equations(*equations),
+                _ => spec.with_notes(b.input_note(), b.noise_note()),
+            },
             None => spec,
         };
         at.check_inputs(&raw, &source, &signals, measured_input.is_some())?;
