@@ -2,10 +2,13 @@
 //!
 //! Groups: `estimate_cost_benchmark` (ts, ts_recommended, ekf, ukf,
 //! pf1000, pem1, pem5, pem10, bayes, ii5) and `estimate_cost_pacejka` (ts,
-//! ts_recommended, ts_learned, pf500, pem5), every method on the same
-//! record of its group. `ts` is the paper preset, `ts_recommended` the
-//! recommended one, `ts_learned` ARX, the summary and a learned summary
-//! (`arx:2,2+summary+learned`, `ensemble:10`).
+//! ts_recommended, ts_learned, ts_linearized, ts_linearized1, pf500,
+//! pem5), every method on the same record of its group. `ts` is the paper
+//! preset, `ts_recommended` the recommended one, `ts_learned` ARX, the
+//! summary and a learned summary (`arx:2,2+summary+learned`,
+//! `ensemble:10`), `ts_linearized` the car linearized at the prior's
+//! centre (`linearized`, two Runge-Kutta steps a sample; `linearized:1`
+//! one), `ensemble:10`.
 
 use std::hint::black_box;
 
@@ -151,6 +154,31 @@ fn pacejka_costs(c: &mut Criterion) {
         .train()
         .unwrap_or_else(|e| panic!("training the learned stage 1: {e}"));
     bench_ts(&mut group, "ts_learned", &learned, &data);
+    // The car linearized at the prior's centre: its simulation with the
+    // output's derivatives along the record, the least-squares step, then
+    // the same kind of stage 2.
+    for (name, spec) in [
+        ("ts_linearized", "linearized"),
+        ("ts_linearized1", "linearized:1"),
+    ] {
+        let linearized = TwoStage::builder(&car)
+            .compressor(
+                spec.parse::<twostage::CompressorConfig>()
+                    .unwrap_or_else(|e| panic!("{e}")),
+            )
+            .regressor(
+                "ensemble:10"
+                    .parse::<twostage::RegressorConfig>()
+                    .unwrap_or_else(|e| panic!("{e}")),
+            )
+            .simulations(1000)
+            .validation(0)
+            .calibration(0)
+            .seed(1)
+            .train()
+            .unwrap_or_else(|e| panic!("training the linearized stage 1: {e}"));
+        bench_ts(&mut group, name, &linearized, &data);
+    }
     group.finish();
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     group.sample_size(10);

@@ -28,6 +28,23 @@ pub trait Real:
     fn cos(self) -> Self;
     /// Arc tangent.
     fn atan(self) -> Self;
+    /// Sine and cosine, as `(self.sin(), self.cos())` give them.
+    fn sin_cos(self) -> (Self, Self) {
+        (self.sin(), self.cos())
+    }
+}
+
+/// The sine and cosine of `x` in one call.
+#[inline]
+fn sin_cos(x: f64) -> (f64, f64) {
+    #[cfg(feature = "std")]
+    {
+        f64::sin_cos(x)
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        libm::sincos(x)
+    }
 }
 
 impl Real for f64 {
@@ -191,11 +208,18 @@ impl Real for Dual2 {
     }
     #[inline]
     fn sin(self) -> Self {
-        self.chain(Real::sin(self.value), Real::cos(self.value))
+        let (s, c) = sin_cos(self.value);
+        self.chain(s, c)
     }
     #[inline]
     fn cos(self) -> Self {
-        self.chain(Real::cos(self.value), -Real::sin(self.value))
+        let (s, c) = sin_cos(self.value);
+        self.chain(c, -s)
+    }
+    #[inline]
+    fn sin_cos(self) -> (Self, Self) {
+        let (s, c) = sin_cos(self.value);
+        (self.chain(s, c), self.chain(c, -s))
     }
     #[inline]
     fn atan(self) -> Self {
@@ -375,12 +399,23 @@ impl Car {
     /// Total lateral force and yaw moment for tire parameters
     /// `(pK1, pK2)`, steer `delta` and state `(beta, r, phi, p)`.
     pub fn force_and_moment<R: Real>(&self, theta: [R; 2], delta: R, x: &[R; 4]) -> (R, R) {
+        self.force_and_moment_rolled(theta, delta, x, x[2].sin())
+    }
+
+    /// [`Self::force_and_moment`] with the roll angle's sine given.
+    fn force_and_moment_rolled<R: Real>(
+        &self,
+        theta: [R; 2],
+        delta: R,
+        x: &[R; 4],
+        sin_phi: R,
+    ) -> (R, R) {
         let c_ = R::constant;
         let v = &self.vehicle;
-        let (beta, r, phi) = (x[0], x[1], x[2]);
+        let (beta, r) = (x[0], x[1]);
         let alpha_f = delta - beta - c_(v.lf) * r / c_(v.speed);
         let alpha_r = -beta + c_(v.lr) * r / c_(v.speed);
-        let shift = c_(v.cg_height / v.track) * phi.sin();
+        let shift = c_(v.cg_height / v.track) * sin_phi;
         let (left, right) = (c_(0.5) - shift, c_(0.5) + shift);
         let (n_f, n_r) = v.axle_loads();
         let force = |q: R, alpha: R| self.tire.lateral_force(q, alpha, theta[0], theta[1]);
@@ -398,16 +433,17 @@ impl Car {
     pub fn derivatives<R: Real>(&self, theta: [R; 2], delta: R, x: &[R; 4]) -> [R; 4] {
         let c_ = R::constant;
         let v = &self.vehicle;
-        let (force, moment) = self.force_and_moment(theta, delta, x);
-        let a_y = force / c_(v.mass);
         let (r, phi, p) = (x[1], x[2], x[3]);
+        let (sin_phi, cos_phi) = phi.sin_cos();
+        let (force, moment) = self.force_and_moment_rolled(theta, delta, x, sin_phi);
+        let a_y = force / c_(v.mass);
         let hm = v.cg_height * v.mass;
         [
             // m V (beta' + r) = sum F
             a_y / c_(v.speed) - r,
             moment / c_(v.yaw_inertia),
             p,
-            (c_(hm * v.gravity) * phi.sin() + a_y * c_(hm) * phi.cos()
+            (c_(hm * v.gravity) * sin_phi + a_y * c_(hm) * cos_phi
                 - c_(v.roll_damping) * p
                 - c_(v.roll_stiffness) * phi)
                 / c_(v.roll_inertia),
@@ -463,7 +499,10 @@ mod tests {
                 Dual2::variable(k1, 0),
                 Dual2::variable(k2, 1),
             );
-            assert_eq!(dual.value.to_bits(), t.lateral_force(q, alpha, k1, k2).to_bits());
+            assert_eq!(
+                dual.value.to_bits(),
+                t.lateral_force(q, alpha, k1, k2).to_bits()
+            );
             let h = [1e-5, 1e-7];
             let d0 = (t.lateral_force(q, alpha, k1 + h[0], k2)
                 - t.lateral_force(q, alpha, k1 - h[0], k2))
