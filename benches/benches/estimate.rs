@@ -36,6 +36,28 @@ fn trained(
         .unwrap_or_else(|e| panic!("training the {builtin} {name} preset: {e}"))
 }
 
+/// `model`'s estimator of stage 1 `compressor` and `ensemble:10` on 1000
+/// records.
+fn trained_with(model: &dyn twostage::models::Simulator, compressor: &str) -> Estimator {
+    TwoStage::builder(model)
+        .compressor(
+            compressor
+                .parse::<twostage::CompressorConfig>()
+                .unwrap_or_else(|e| panic!("{e}")),
+        )
+        .regressor(
+            "ensemble:10"
+                .parse::<twostage::RegressorConfig>()
+                .unwrap_or_else(|e| panic!("{e}")),
+        )
+        .simulations(1000)
+        .validation(0)
+        .calibration(0)
+        .seed(1)
+        .train()
+        .unwrap_or_else(|e| panic!("training {compressor}: {e}"))
+}
+
 fn bench_ts(
     c: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
     id: &str,
@@ -134,50 +156,16 @@ fn pacejka_costs(c: &mut Criterion) {
     let mut group = c.benchmark_group("estimate_cost_pacejka");
     bench_ts(&mut group, "ts", &estimator, &data);
     bench_ts(&mut group, "ts_recommended", &recommended, &data);
-    // A learned stage 1: the ARX fit, the summary and the
-    // network's pass over the record, then the same kind of stage 2.
-    let learned = TwoStage::builder(&car)
-        .compressor(
-            "arx:2,2+summary+learned"
-                .parse::<twostage::CompressorConfig>()
-                .unwrap_or_else(|e| panic!("{e}")),
-        )
-        .regressor(
-            "ensemble:10"
-                .parse::<twostage::RegressorConfig>()
-                .unwrap_or_else(|e| panic!("{e}")),
-        )
-        .simulations(1000)
-        .validation(0)
-        .calibration(0)
-        .seed(1)
-        .train()
-        .unwrap_or_else(|e| panic!("training the learned stage 1: {e}"));
-    bench_ts(&mut group, "ts_learned", &learned, &data);
-    // The car linearized at the prior's centre: its simulation with the
-    // output's derivatives along the record, the least-squares step, then
-    // the same kind of stage 2.
+    // A learned stage 1 (the ARX fit, the summary and the network's pass
+    // over the record), and the car linearized at the prior's centre (its
+    // simulation with the output's derivatives along the record, then the
+    // least-squares step), each before the same kind of stage 2.
     for (name, spec) in [
+        ("ts_learned", "arx:2,2+summary+learned"),
         ("ts_linearized", "linearized"),
         ("ts_linearized1", "linearized:1"),
     ] {
-        let linearized = TwoStage::builder(&car)
-            .compressor(
-                spec.parse::<twostage::CompressorConfig>()
-                    .unwrap_or_else(|e| panic!("{e}")),
-            )
-            .regressor(
-                "ensemble:10"
-                    .parse::<twostage::RegressorConfig>()
-                    .unwrap_or_else(|e| panic!("{e}")),
-            )
-            .simulations(1000)
-            .validation(0)
-            .calibration(0)
-            .seed(1)
-            .train()
-            .unwrap_or_else(|e| panic!("training the linearized stage 1: {e}"));
-        bench_ts(&mut group, name, &linearized, &data);
+        bench_ts(&mut group, name, &trained_with(&car, spec), &data);
     }
     group.finish();
     let mut group = c.benchmark_group("estimate_cost_pacejka");

@@ -28,7 +28,10 @@ pub struct TrainArgs {
     /// Stage 1: arx:NA,NB, ar:NA (outputs only, for a model without
     /// input), narx:NA,NB,DEG, pca:K (output principal components; only
     /// for models whose experiments share one input) or raw (the record
-    /// itself, for records of tens of samples), each after output
+    /// itself, for records of tens of samples), linearized[:S] (the
+    /// record regressed on the model's own output sensitivities at the
+    /// prior's centre, S Runge-Kutta steps a sample; for the built-in car
+    /// and model files of it), each after output
     /// transforms when written log+SPEC or log1p+SPEC (log,id+SPEC: one
     /// per output), and followed by +level (each output's first sample
     /// and mean) or +summary (each signal's mean, RMS, peak and mean
