@@ -7,7 +7,7 @@
 //! preset, `ts_recommended` the recommended one, `ts_learned` ARX, the
 //! summary and a learned summary (`arx:2,2+summary+learned`,
 //! `ensemble:10`), `ts_linearized` the car linearized at the prior's
-//! centre (`linearized`, two Runge-Kutta steps a sample; `linearized:1`
+//! centre (`linearized`, two Runge-Kutta steps a sample; `ts_linearized1`
 //! one), `ensemble:10`.
 
 use std::hint::black_box;

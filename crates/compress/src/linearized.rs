@@ -32,7 +32,7 @@ pub const MAX_SUBSTEPS: u32 = 20;
 /// use twostage_kernels::pacejka::Car;
 /// let spec: CompressorConfig = "linearized".parse()?;
 /// assert_eq!(spec.to_string(), "the model linearized at the prior's centre (2 steps a sample)");
-/// let shaped = Linearized::new(2)?.for_car(Car::PAPER, [-42.83, -1.22], [-27.32, -0.98], 0.01, 0.02)?;
+/// let shaped = Linearized::new(1)?.for_car(Car::PAPER, [-42.83, -1.22], [-27.32, -0.98], 0.01, 0.02)?;
 /// // A record of the car at rest says nothing: the features are the
 /// // anchor, no step, and the prior's own spread.
 /// let (u, y) = (ndarray::Array2::zeros((500, 1)), ndarray::Array2::zeros((500, 1)));
