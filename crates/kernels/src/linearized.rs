@@ -188,14 +188,4 @@ impl CarLinearization {
         out[7] = libm::log(mean_square.max(1e-6));
         Some(())
     }
-
-    /// The features of a whole record (`inputs[k]`, `outputs[k]`), as
-    /// [`CarStream`] computes them sample by sample.
-    pub fn record_features(&self, inputs: &[f64], outputs: &[f64], out: &mut [f64]) -> Option<()> {
-        let mut stream = CarStream::new();
-        for (u, y) in inputs.iter().zip(outputs) {
-            stream.push(self, *u, *y);
-        }
-        self.features(&stream.sums, out)
-    }
 }
