@@ -42,9 +42,46 @@ pub const MAX_SUBSTEPS: u32 = 20;
 /// # Ok::<(), twostage_compress::CompressError>(())
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "LinearizedFields")]
 pub struct Linearized {
     substeps: u32,
     car: Option<CarLinearization>,
+}
+
+/// What a file holds, checked as [`Linearized::new`] and
+/// [`Linearized::for_car`] check it: a damaged file cannot ask for
+/// billions of steps a sample or a box of no width.
+#[derive(Deserialize)]
+struct LinearizedFields {
+    substeps: u32,
+    car: Option<CarLinearization>,
+}
+
+impl TryFrom<LinearizedFields> for Linearized {
+    type Error = CompressError;
+    fn try_from(f: LinearizedFields) -> Result<Self> {
+        let unshaped = Self::new(f.substeps)?;
+        let Some(car) = f.car else {
+            return Ok(unshaped);
+        };
+        let shaped = unshaped.for_car(
+            car.car,
+            car.lower,
+            car.upper,
+            car.noise_variance,
+            car.sample_time,
+        )?;
+        // The anchor and the steps are derived: a file that says otherwise
+        // was not written by this code.
+        if shaped.car != Some(car) {
+            return Err(CompressError::InvalidSetting(InvalidSetting {
+                name: "linearized",
+                value: format!("anchor {:?}, {} steps", car.anchor, car.substeps),
+                reason: "the box's centre and the configuration's steps a sample".into(),
+            }));
+        }
+        Ok(shaped)
+    }
 }
 
 impl Linearized {
@@ -309,6 +346,15 @@ mod tests {
         let short = ndarray::Array2::zeros((1, 1));
         assert!(lin.compress(short.view(), short.view()).is_err());
         assert!(Linearized::new(0).is_err() && Linearized::new(MAX_SUBSTEPS + 1).is_err());
+        // Read back as written; a file that asks for too many steps, or an
+        // anchor off the box's centre, is refused.
+        let json = serde_json::to_string(&lin).unwrap();
+        assert_eq!(serde_json::from_str::<Linearized>(&json).unwrap(), lin);
+        let many = json.replacen("\"substeps\":1", "\"substeps\":4000000000", 2);
+        assert!(serde_json::from_str::<Linearized>(&many).is_err(), "{many}");
+        let off = json.replacen("\"anchor\":[-35.0", "\"anchor\":[-30.0", 1);
+        assert_ne!(off, json);
+        assert!(serde_json::from_str::<Linearized>(&off).is_err(), "{off}");
         assert!(
             Linearized::new(1)
                 .unwrap()
