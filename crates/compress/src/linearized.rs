@@ -10,7 +10,9 @@ use std::fmt;
 
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
-use twostage_kernels::linearized::{CarLinearization, LINEARIZED_FEATURES};
+use twostage_kernels::linearized::{
+    CarLinearization, CarStream, LINEARIZED_FEATURES, LinearizedSums, WindowBlocks,
+};
 
 use crate::Compressor;
 use crate::InvalidSetting;
@@ -21,8 +23,7 @@ use crate::workspace::Workspace;
 /// Runge-Kutta steps per sample when the specification names none.
 pub const DEFAULT_SUBSTEPS: u32 = 2;
 
-/// The most Runge-Kutta steps per sample (the cost grows with them).
-pub const MAX_SUBSTEPS: u32 = 20;
+pub use twostage_kernels::linearized::MAX_SUBSTEPS;
 
 /// The linearized stage 1: `linearized` or `linearized:S` (S Runge-Kutta
 /// steps per sample), then the car it linearizes once shaped for a model.
@@ -176,27 +177,52 @@ impl Linearized {
     }
 }
 
-impl fmt::Display for Linearized {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "the model linearized at the prior's centre ({} step{} a sample)",
-            self.substeps,
-            if self.substeps == 1 { "" } else { "s" }
-        )
-    }
-}
-
-impl Compressor for Linearized {
-    fn n_features(&self) -> usize {
-        LINEARIZED_FEATURES
-    }
-
-    fn compress_into(
+impl Linearized {
+    /// The features of what a runtime's sliding window of `window`
+    /// samples holds at the record's end: the car runs from the record's
+    /// first sample (where the plant was when the window began, not at
+    /// rest), and the sums cover the window's blocks
+    /// ([`twostage_kernels::linearized::WindowBlocks`]). `window` 0 is the
+    /// whole record, as [`Compressor::compress_into`].
+    ///
+    /// ```
+    /// use twostage_compress::{Compressor, Linearized};
+    /// use twostage_kernels::pacejka::Car;
+    /// let shaped = Linearized::new(1)?.for_car(Car::PAPER, [-42.83, -1.22], [-27.32, -0.98], 0.01, 0.02)?;
+    /// let u = ndarray::Array2::from_shape_fn((400, 1), |(k, _)| 0.1 * (k as f64 * 0.05).sin());
+    /// let y = ndarray::Array2::from_shape_fn((400, 1), |(k, _)| 2.0 * (k as f64 * 0.05).sin());
+    /// let (mut whole, mut window) = ([0.0; 8], [0.0; 8]);
+    /// shaped.compress_window(u.view(), y.view(), 0, &mut whole)?;
+    /// shaped.compress_window(u.view(), y.view(), 100, &mut window)?;
+    /// // A window of a quarter of the record says less of the parameters.
+    /// assert!(window[4] > whole[4]);
+    /// # Ok::<(), twostage_compress::CompressError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`Compressor::compress_into`].
+    pub fn compress_window(
         &self,
         inputs: ArrayView2<'_, f64>,
         outputs: ArrayView2<'_, f64>,
-        _work: &mut Workspace,
+        window: usize,
+        alpha: &mut [f64],
+    ) -> Result<()> {
+        let first = if window == 0 {
+            0
+        } else {
+            WindowBlocks::of(window).first_sample(inputs.nrows())
+        };
+        self.features_from(inputs, outputs, first, alpha)
+    }
+
+    /// The features of the sums from sample `first` to the record's end,
+    /// the car run from its first sample.
+    fn features_from(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        first: usize,
         alpha: &mut [f64],
     ) -> Result<()> {
         let Some(car) = &self.car else {
@@ -220,17 +246,48 @@ impl Compressor for Linearized {
             self,
         )?;
         let (u, y) = (inputs.column(0), outputs.column(0));
-        let mut stream = twostage_kernels::linearized::CarStream::new();
-        for (u, y) in u.iter().zip(y.iter()) {
-            stream.push(car, *u, *y);
+        let mut stream = CarStream::new();
+        let mut sums = LinearizedSums::default();
+        for (t, (u, y)) in u.iter().zip(y.iter()).enumerate() {
+            let (s, r) = stream.push(car, *u, *y);
+            if t >= first {
+                sums.add(s, r);
+            }
         }
-        car.features(&stream.sums, alpha)
+        car.features(&sums, alpha)
             .ok_or_else(|| CompressError::RankDeficient {
                 structure: self.to_string(),
                 cause: "the model left its range on this record's input (its sensitivities \
                         are not finite): the record is outside what the car can drive"
                     .into(),
             })
+    }
+}
+
+impl fmt::Display for Linearized {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "the model linearized at the prior's centre ({} step{} a sample)",
+            self.substeps,
+            if self.substeps == 1 { "" } else { "s" }
+        )
+    }
+}
+
+impl Compressor for Linearized {
+    fn n_features(&self) -> usize {
+        LINEARIZED_FEATURES
+    }
+
+    fn compress_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        _work: &mut Workspace,
+        alpha: &mut [f64],
+    ) -> Result<()> {
+        self.features_from(inputs, outputs, 0, alpha)
     }
 
     fn feature_names(&self) -> Vec<String> {

@@ -396,6 +396,94 @@ impl Car {
         tire: Tire::PAPER,
     };
 
+    /// How many numbers [`Self::to_words`] writes: the vehicle's 11
+    /// constants, then the tire's 18, in their declaration order.
+    pub const WORDS: usize = 29;
+
+    /// The constants as numbers, the vehicle's then the tire's, in their
+    /// declaration order: how the runtime's blob stores the car.
+    ///
+    /// ```
+    /// use twostage_kernels::pacejka::Car;
+    /// let words = Car::PAPER.to_words();
+    /// assert_eq!((words[0], words[11]), (1500.0, 4000.0)); // the mass, Fz0
+    /// assert_eq!(Car::from_words(&words), Car::PAPER);
+    /// ```
+    pub fn to_words(&self) -> [f64; Self::WORDS] {
+        let v = &self.vehicle;
+        let t = &self.tire;
+        [
+            v.mass,
+            v.yaw_inertia,
+            v.lf,
+            v.lr,
+            v.track,
+            v.cg_height,
+            v.gravity,
+            v.speed,
+            v.roll_inertia,
+            v.roll_damping,
+            v.roll_stiffness,
+            t.fz0,
+            t.camber,
+            t.p_c1,
+            t.p_d1,
+            t.p_d2,
+            t.p_d3,
+            t.p_e1,
+            t.p_e2,
+            t.p_e3,
+            t.p_e4,
+            t.p_h1,
+            t.p_h2,
+            t.p_h3,
+            t.p_v1,
+            t.p_v2,
+            t.p_v3,
+            t.p_v4,
+            t.p_k3,
+        ]
+    }
+
+    /// The car [`Self::to_words`] wrote.
+    pub fn from_words(w: &[f64; Self::WORDS]) -> Self {
+        Self {
+            vehicle: Vehicle {
+                mass: w[0],
+                yaw_inertia: w[1],
+                lf: w[2],
+                lr: w[3],
+                track: w[4],
+                cg_height: w[5],
+                gravity: w[6],
+                speed: w[7],
+                roll_inertia: w[8],
+                roll_damping: w[9],
+                roll_stiffness: w[10],
+            },
+            tire: Tire {
+                fz0: w[11],
+                camber: w[12],
+                p_c1: w[13],
+                p_d1: w[14],
+                p_d2: w[15],
+                p_d3: w[16],
+                p_e1: w[17],
+                p_e2: w[18],
+                p_e3: w[19],
+                p_e4: w[20],
+                p_h1: w[21],
+                p_h2: w[22],
+                p_h3: w[23],
+                p_v1: w[24],
+                p_v2: w[25],
+                p_v3: w[26],
+                p_v4: w[27],
+                p_k3: w[28],
+            },
+        }
+    }
+
     /// Total lateral force and yaw moment for tire parameters
     /// `(pK1, pK2)`, steer `delta` and state `(beta, r, phi, p)`.
     pub fn force_and_moment<R: Real>(&self, theta: [R; 2], delta: R, x: &[R; 4]) -> (R, R) {
