@@ -34,14 +34,14 @@ fn case(name: &'static str, model: &dyn Simulator, preset: Preset, theta: &[f64]
     case_of(name, model, &estimator, theta)
 }
 
-/// The car's estimator of a family, its stage 1 ending in a learned
-/// summary network (`arx:2,2+summary+learned`, `ensemble:10`), trained on
-/// the built-in car's records: the cost is the structure's.
-fn learned_case(theta: &[f64]) -> Case {
+/// The car's estimator of a family, its stage 1 as `compress` says (a
+/// learned summary network after the ARX coefficients and the summary,
+/// or the car linearized) and `ensemble:10`, trained on the built-in
+/// car's records: the cost is the structure's.
+fn family_case(name: &'static str, compress: &str, theta: &[f64]) -> Case {
     let model = PacejkaCar::new();
-    let compressor: twostage::compress::CompressorConfig = "arx:2,2+summary+learned"
-        .parse()
-        .unwrap_or_else(|e| panic!("{e}"));
+    let compressor: twostage::compress::CompressorConfig =
+        compress.parse().unwrap_or_else(|e| panic!("{e}"));
     let estimator = TwoStage::builder(&model)
         .compressor(compressor)
         .regressor("ensemble:10".parse().unwrap_or_else(|e| panic!("{e}")))
@@ -49,8 +49,8 @@ fn learned_case(theta: &[f64]) -> Case {
         .validation(0)
         .calibration(200)
         .train()
-        .unwrap_or_else(|e| panic!("car_learned: {e}"));
-    case_of("car_learned", &model, &estimator, theta)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    case_of(name, &model, &estimator, theta)
 }
 
 fn case_of(
@@ -97,7 +97,9 @@ fn runtime(c: &mut Criterion) {
             twostage::recommended_pacejka(),
             &[-25.0, -1.0],
         ),
-        learned_case(&[-25.0, -1.0]),
+        family_case("car_learned", "arx:2,2+summary+learned", &[-25.0, -1.0]),
+        family_case("car_linearized", "linearized", &[-25.0, -1.0]),
+        family_case("car_linearized1", "linearized:1", &[-25.0, -1.0]),
     ];
     for case in &cases {
         let estimator = Estimator::from_bytes(&case.blob).unwrap_or_else(|e| panic!("{e}"));

@@ -545,10 +545,66 @@ impl Estimator {
     ) -> Result<Assessment> {
         let mut theta = vec![0.0; self.param_names.len()];
         self.estimate_into(inputs, outputs, work, &mut theta)?;
+        let mut assessment = self.assessment_of(theta, &work.features, inputs)?;
+        assessment.floored_samples = work.compress.floored_samples().to_vec();
+        Ok(assessment)
+    }
+
+    /// What the runtime's sliding window of `window` samples
+    /// (`twostage_runtime::Stream::window`) says after the last sample of
+    /// `record`: the same as [`Estimator::assess`] of the window's samples
+    /// alone, except for a linearized stage 1, whose car runs from the
+    /// record's first sample and whose window spans whole blocks of a
+    /// tenth of it ([`twostage_compress::Linearized::compress_window`]).
+    /// The input's family and shape are judged on the last `window`
+    /// samples; `window` 0 is the whole record.
+    ///
+    /// ```
+    /// # use twostage::{TwoStage, models::{Benchmark, Simulator, experiment_rng}};
+    /// # let model = Benchmark::builder().n_samples(200).build()?;
+    /// # let trained = TwoStage::builder(&model).simulations(300).validation(0)
+    /// #     .calibration(100).linear(1e-6)?.train()?;
+    /// # let mut record = model.spec().new_record();
+    /// # model.simulate(&[0.4], &mut experiment_rng(1, 0), &mut record)?;
+    /// let last = trained.assess_window(&record, 100)?;
+    /// assert_eq!(last, trained.assess(&record.window(100, 200))?);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`Estimator::assess`].
+    pub fn assess_window(&self, record: &IoData, window: usize) -> Result<Assessment> {
+        let n = record.n_samples();
+        let start = if window == 0 {
+            0
+        } else {
+            n.saturating_sub(window)
+        };
+        let last = record.window(start, n);
+        let CompressorConfig::Linearized(linearized) = &self.compressor else {
+            return self.assess(&last);
+        };
+        let mut features = vec![0.0; self.compressor.n_features()];
+        linearized.compress_window(record.inputs(), record.outputs(), window, &mut features)?;
+        let mut theta = vec![0.0; self.param_names.len()];
+        self.regressor.predict_into(&features, &mut theta)?;
+        to_estimate(&mut theta, &self.marginals, &self.lower, &self.upper);
+        self.assessment_of(theta, &features, last.inputs())
+    }
+
+    /// The assessment of the estimate `theta` of stage 1's `features`
+    /// from a record whose inputs are `inputs`: its intervals, distance
+    /// and input judged (no floored samples: the caller knows them).
+    fn assessment_of(
+        &self,
+        theta: Vec<f64>,
+        features: &[f64],
+        inputs: ArrayView2<'_, f64>,
+    ) -> Result<Assessment> {
         let adaptive_half_widths = match &self.adaptive {
             Some(a) => {
                 let mut widths = vec![0.0; theta.len()];
-                a.half_widths_into(&work.features, &mut widths)?;
+                a.half_widths_into(features, &mut widths)?;
                 Some(widths)
             }
             None => None,
@@ -557,9 +613,9 @@ impl Estimator {
             theta,
             adaptive_half_widths,
             half_widths: self.intervals.as_ref().map(|c| c.half_widths().to_vec()),
-            feature_distance: self.envelope.as_ref().map(|e| e.distance(&work.features)),
+            feature_distance: self.envelope.as_ref().map(|e| e.distance(features)),
             distance_threshold: self.envelope.as_ref().map(FeatureEnvelope::threshold),
-            floored_samples: work.compress.floored_samples().to_vec(),
+            floored_samples: Vec::new(),
             input_deviations: self.input_deviations(inputs),
             input_shape_distance: self.input_shape_distance(inputs),
             input_shape_threshold: self.input_shapes.as_ref().map(InputShapes::threshold),

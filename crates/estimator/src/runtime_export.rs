@@ -3,14 +3,16 @@
 
 use twostage_compress::Compressor;
 use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
+use twostage_kernels::linearized::CarLinearization;
 use twostage_models::{InputFamily, Transform};
 use twostage_runtime::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_LEARNED_SUMMARY, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC,
-    MAX_CHANNELS, MAX_EXPERTS, MAX_KERNEL, MAX_LAYERS, MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS,
-    MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY,
-    SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY,
-    VERSION_WITHOUT_LEARNED, VERSION_WITHOUT_SUMMARY,
+    FLAG_LEARNED_SUMMARY, FLAG_LINEARIZED, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY,
+    HEADER_BYTES, MAGIC, MAX_CHANNELS, MAX_EXPERTS, MAX_KERNEL, MAX_LAYERS, MAX_MEMBERS, MAX_ORDER,
+    MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
+    SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED, VERSION_WITHOUT_LINEARIZED,
+    VERSION_WITHOUT_SUMMARY,
 };
 
 use crate::error::{Error, Result};
@@ -161,12 +163,13 @@ impl Writer {
 
 /// What the runtime streams as stage 1: the ARX, an output transform in
 /// front of it, each signal's summary after it, a summary network after
-/// them.
+/// them; or the car linearized, alone.
 struct RuntimeStage1<'e> {
     transformed: Option<&'e Transformed>,
-    arx: &'e Arx,
+    arx: Option<&'e Arx>,
     summary: bool,
     learned: Option<&'e SummaryNetwork>,
+    linearized: Option<&'e CarLinearization>,
 }
 
 fn refuse(reason: String) -> Error {
@@ -178,7 +181,8 @@ impl Estimator {
     /// ([`twostage_runtime`]): versioned, checksummed, read in place. The
     /// runtime streams ARX and AR compressors; stage 2 may be any of the
     /// project's (linear, MLP, piecewise), with the intervals and the
-    /// envelope; output transforms (`log+arx:...`) go with the ARX, and
+    /// envelope; the car linearized (`linearized`) streams too; output
+    /// transforms (`log+arx:...`) go with the ARX, and
     /// so does each signal's summary after it (`arx:...+summary`), but
     /// not both; a learned summary (`arx:...[+summary]+learned`) closes
     /// the features, without output transforms.
@@ -206,8 +210,10 @@ impl Estimator {
             bytes: Vec::with_capacity(4096),
         };
         w.bytes.extend_from_slice(&MAGIC);
-        let version = if stage1.learned.is_some() {
+        let version = if stage1.linearized.is_some() {
             VERSION
+        } else if stage1.learned.is_some() {
+            VERSION_WITHOUT_LINEARIZED
         } else if stage1.summary {
             VERSION_WITHOUT_LEARNED
         } else if self.runtime_family().is_some() {
@@ -243,6 +249,21 @@ impl Estimator {
     /// it, and the summary network after them; refused beyond the
     /// runtime's sizes.
     fn runtime_stage1(&self) -> Result<RuntimeStage1<'_>> {
+        if let CompressorConfig::Linearized(l) = &self.compressor {
+            let car = l.car().ok_or_else(|| {
+                refuse(format!(
+                    "{} is not shaped for a model: train the estimator first",
+                    self.compressor
+                ))
+            })?;
+            return Ok(RuntimeStage1 {
+                transformed: None,
+                arx: None,
+                summary: false,
+                learned: None,
+                linearized: Some(car),
+            });
+        }
         let (learned, before) = match &self.compressor {
             CompressorConfig::Learned(l) => {
                 let network = l.network().ok_or_else(|| {
@@ -274,10 +295,11 @@ impl Estimator {
         };
         let CompressorConfig::Arx(arx) = stage1 else {
             return Err(refuse(format!(
-                "the runtime streams ARX and AR compressors only, with each signal's summary \
-                 or a learned summary after them or output transforms before them, this \
-                 estimator uses {}; train with --compress arx:NA,NB (or ar:NA, log+arx:NA,NB, \
-                 arx:NA,NB+summary, arx:NA,NB+summary+learned)",
+                "the runtime streams ARX and AR compressors, with each signal's summary or a \
+                 learned summary after them or output transforms before them, and the car \
+                 linearized; this estimator uses {}; train with --compress arx:NA,NB (or \
+                 ar:NA, log+arx:NA,NB, arx:NA,NB+summary, arx:NA,NB+summary+learned, \
+                 linearized)",
                 self.compressor
             )));
         };
@@ -297,9 +319,10 @@ impl Estimator {
         }
         Ok(RuntimeStage1 {
             transformed,
-            arx,
+            arx: Some(arx),
             summary,
             learned,
+            linearized: None,
         })
     }
 }
@@ -309,7 +332,6 @@ impl Writer {
     /// sizes, the ARX orders, the flags of the optional parts, the kind of
     /// stage 2.
     fn header(&mut self, e: &Estimator, stage1: &RuntimeStage1<'_>) -> Result<()> {
-        let arx = stage1.arx;
         let mut flags = 0;
         if e.intervals.is_some() {
             flags |= FLAG_CONFORMAL;
@@ -332,6 +354,12 @@ impl Writer {
         if stage1.learned.is_some() {
             flags |= FLAG_LEARNED_SUMMARY;
         }
+        if stage1.linearized.is_some() {
+            flags |= FLAG_LINEARIZED;
+        }
+        let orders = stage1
+            .arx
+            .map_or([0; 3], |arx| [arx.na(), arx.nb(), arx.delay()]);
         let (kind, experts) = match &e.regressor {
             FittedRegressor::Piecewise(p) => (REGRESSOR_PIECEWISE, p.experts().len()),
             _ => (REGRESSOR_NETWORK, 0),
@@ -347,9 +375,9 @@ impl Writer {
             shape.n_inputs,
             shape.n_outputs,
             shape.n_samples,
-            arx.na(),
-            arx.nb(),
-            arx.delay(),
+            orders[0],
+            orders[1],
+            orders[2],
             flags as usize,
             kind as usize,
             experts,
@@ -378,6 +406,9 @@ impl Writer {
         self.f64s(&e.upper);
         if let Some(network) = stage1.learned {
             self.learned(network)?;
+        }
+        if let Some(car) = stage1.linearized {
+            self.f64s(&car.to_words());
         }
         match &e.regressor {
             FittedRegressor::Linear(linear) => self.linear(linear)?,

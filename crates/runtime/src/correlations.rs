@@ -182,6 +182,16 @@ impl Shape {
         }
     }
 
+    /// Keep sample `t` without any products: a stage 1 that keeps no
+    /// lagged sums (the linearized car's) still keeps a window's samples
+    /// to summarize its input at finish.
+    pub(crate) fn keep(&self, t: usize, current: impl Fn(usize) -> f64, m: &mut Memory<'_>) {
+        let now = t % m.ring_len(self);
+        for s in 0..self.signals {
+            m.keep(self, s, t, now, current(s));
+        }
+    }
+
     /// Add sample t's products with itself and the L samples before it,
     /// `past(z, d)` being signal z at sample `t - d` with its halves.
     fn gain(

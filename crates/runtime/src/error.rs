@@ -80,7 +80,9 @@ pub enum Error {
         /// The regressor column.
         column: usize,
     },
-    /// The sums left the floating-point range (samples near 1e150).
+    /// The sums left the floating-point range (samples near 1e150, or a
+    /// linearized stage 1's model run that left its range on the record's
+    /// input).
     Overflow,
     /// An output slice is shorter than the parameters.
     OutputTooShort {
@@ -97,7 +99,8 @@ pub enum Error {
         needed: usize,
     },
     /// The blob needs a part of the runtime that this build leaves out
-    /// (a learned summary network without the feature `learned`).
+    /// (a learned summary network without the feature `learned`, a
+    /// linearized stage 1 without `linearized`).
     NotBuiltIn {
         /// The Cargo feature of `twostage-runtime` that builds it in.
         feature: &'static str,
@@ -147,11 +150,11 @@ impl Error {
             -10 => c"a sample is not finite: the record cannot be estimated; reset the stream",
             -11 => c"too few samples for the regression or the summary network",
             -12 => c"a regressor is a combination of the others: the input does not excite the system enough",
-            -13 => c"the sums overflowed: samples are far too large",
+            -13 => c"the sums overflowed: samples are far too large, or the model left its range on the record's input",
             -14 => c"the output array is shorter than the parameters",
             -15 => c"the workspace holds no stream: start one with ts_stream_start",
             -16 => c"the window is shorter than the regression or the summary network needs",
-            -17 => c"the blob needs a part this runtime was built without: enable the runtime's feature that builds it (a learned summary: learned)",
+            -17 => c"the blob needs a part this runtime was built without: enable the runtime's feature that builds it (a learned summary: learned; a linearized stage 1: linearized)",
             _ => return None,
         })
     }
@@ -209,7 +212,10 @@ impl core::fmt::Display for Error {
                 "regressor {column} of output {output} is (numerically) a combination of \
                  the ones before it: the input does not excite the system enough"
             ),
-            Error::Overflow => f.write_str("the sums overflowed: samples are far too large"),
+            Error::Overflow => f.write_str(
+                "the sums overflowed: samples are far too large, or the model left its range on \
+                 the record's input",
+            ),
             Error::OutputTooShort { needed } => {
                 write!(f, "an output slice needs room for {needed} numbers")
             }

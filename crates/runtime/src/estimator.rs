@@ -6,13 +6,15 @@ use crate::bytes::{Cursor, LeF64s, u32_at};
 use crate::error::Error;
 use crate::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_LEARNED_SUMMARY, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC,
-    MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
-    SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
-    VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED, VERSION_WITHOUT_SUMMARY,
+    FLAG_LEARNED_SUMMARY, FLAG_LINEARIZED, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY,
+    HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK,
+    REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY,
+    TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED,
+    VERSION_WITHOUT_LINEARIZED, VERSION_WITHOUT_SUMMARY,
 };
 use crate::learned::Learned;
 use crate::network::Network;
+use twostage_kernels::linearized::{CarLinearization, LINEARIZED_FEATURES};
 
 /// Stage 2: one network, or a global one routing to experts.
 #[derive(Debug, Clone, Copy)]
@@ -96,8 +98,12 @@ pub struct Estimator<'a> {
     input_family_at: usize,
     /// Whether stage 1 appends each signal's summary.
     pub(crate) signal_summary: bool,
-    /// Where the learned stage 1's network starts in the blob (0: none).
-    learned_at: usize,
+    /// Where the learned stage 1's network, or the linearized stage 1's
+    /// car, starts in the blob (0: neither; the two never meet). One
+    /// offset for both keeps the view within the C API's opaque storage.
+    stage1_at: usize,
+    /// Whether the section at `stage1_at` is the linearized car's.
+    linearized: bool,
     blob: &'a [u8],
     max_width: usize,
 }
@@ -147,12 +153,7 @@ impl<'a> Estimator<'a> {
         let kind = c.u32()?;
         let n_experts = c.count("expert count", MAX_EXPERTS)?;
         let (r1, r2) = (c.u32()?, c.u32()?);
-        if q == 0 || n_outputs == 0 || na + nb == 0 || (nb > 0 && n_inputs == 0) {
-            return Err(Error::Invalid {
-                field: "record shape or ARX orders",
-                at: CHECKSUM_FROM,
-            });
-        }
+        let linearized = version >= VERSION && flags & FLAG_LINEARIZED != 0;
         let mut known = FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE | FLAG_OUTPUT_TRANSFORMS;
         if version >= VERSION_WITHOUT_SUMMARY {
             known |= FLAG_INPUT_FAMILY;
@@ -160,18 +161,37 @@ impl<'a> Estimator<'a> {
         if version >= VERSION_WITHOUT_LEARNED {
             known |= FLAG_SIGNAL_SUMMARY;
         }
-        if version >= VERSION {
+        if version >= VERSION_WITHOUT_LINEARIZED {
             known |= FLAG_LEARNED_SUMMARY;
+        }
+        if version >= VERSION {
+            known |= FLAG_LINEARIZED;
         }
         // The network reads the outputs as measured, as the summary does:
         // neither goes with output transforms.
         let learned = flags & FLAG_LEARNED_SUMMARY != 0;
         let transformed = flags & FLAG_OUTPUT_TRANSFORMS != 0;
         let measured = flags & (FLAG_SIGNAL_SUMMARY | FLAG_LEARNED_SUMMARY) != 0;
-        if flags & !known != 0 || r1 != 0 || r2 != 0 || (measured && transformed) {
+        // The linearized stage 1 is the whole of stage 1: nothing before
+        // or after it.
+        let mixed = linearized && (measured || transformed);
+        if flags & !known != 0 || r1 != 0 || r2 != 0 || (measured && transformed) || mixed {
             return Err(Error::Invalid {
                 field: "flags",
                 at: flags_at,
+            });
+        }
+        // A linearized stage 1 reads the car's one input and output for
+        // its two parameters, and no ARX coefficients.
+        let shape_ok = if linearized {
+            (q, n_inputs, n_outputs, na, nb, delay) == (2, 1, 1, 0, 0, 0)
+        } else {
+            q > 0 && n_outputs > 0 && na + nb > 0 && (nb == 0 || n_inputs > 0)
+        };
+        if !shape_ok {
+            return Err(Error::Invalid {
+                field: "record shape or ARX orders",
+                at: CHECKSUM_FROM,
             });
         }
         let signal_summary = flags & FLAG_SIGNAL_SUMMARY != 0;
@@ -210,6 +230,25 @@ impl<'a> Estimator<'a> {
         let learned_at = if learned {
             let at = c.at;
             n_features += Learned::read(&mut c, n_inputs + n_outputs)?.n_features();
+            at
+        } else {
+            0
+        };
+        if linearized && !cfg!(feature = "linearized") {
+            return Err(Error::NotBuiltIn {
+                feature: "linearized",
+            });
+        }
+        let linearized_at = if linearized {
+            let at = c.at;
+            let numbers = c.f64s(CarLinearization::WORDS)?;
+            if linearization_at(numbers).is_none() {
+                return Err(Error::Invalid {
+                    field: "linearization",
+                    at,
+                });
+            }
+            n_features += LINEARIZED_FEATURES;
             at
         } else {
             0
@@ -340,7 +379,8 @@ impl<'a> Estimator<'a> {
             output_transforms_at,
             input_family_at,
             signal_summary,
-            learned_at,
+            stage1_at: learned_at.max(linearized_at),
+            linearized,
             blob,
             max_width: 0,
         };
@@ -394,7 +434,7 @@ impl<'a> Estimator<'a> {
     /// Stage 1's features: `n_outputs * (na + n_inputs * nb)` ARX
     /// coefficients, then four summary numbers per signal where stage 1
     /// appends them, then two per channel of the learned network's last
-    /// layer where it learns.
+    /// layer where it learns; a linearized stage 1's eight alone.
     pub fn n_features(&self) -> usize {
         self.arx_features()
             + if self.signal_summary {
@@ -403,6 +443,11 @@ impl<'a> Estimator<'a> {
                 0
             }
             + self.learned().map_or(0, |l| l.n_features())
+            + if self.has_linearized_stage1() {
+                LINEARIZED_FEATURES
+            } else {
+                0
+            }
     }
 
     /// The learned stage 1's network, checked at load.
@@ -412,7 +457,8 @@ impl<'a> Estimator<'a> {
         if !cfg!(feature = "learned") {
             return None;
         }
-        match self.learned_at {
+        match self.stage1_at {
+            _ if self.linearized => None,
             0 => None,
             at => Learned::parse(
                 &mut Cursor::new(self.blob, at),
@@ -422,16 +468,40 @@ impl<'a> Estimator<'a> {
         }
     }
 
+    /// The linearized stage 1's car and linearization, checked at load.
+    pub(crate) fn linearization(&self) -> Option<CarLinearization> {
+        // Without the feature no such blob loads, and the constant lets
+        // the linker drop the car's code.
+        if !cfg!(feature = "linearized") || !self.has_linearized_stage1() {
+            return None;
+        }
+        let numbers = Cursor::new(self.blob, self.stage1_at)
+            .f64s(CarLinearization::WORDS)
+            .ok()?;
+        linearization_at(numbers)
+    }
+
+    /// Whether stage 1 linearizes the car (the host's `linearized`): its
+    /// features are what the record says of the parameters, by the
+    /// model's own sensitivities.
+    pub fn has_linearized_stage1(&self) -> bool {
+        self.linearized && self.stage1_at != 0
+    }
+
     /// Whether stage 1 appends a learned summary of the record (a
     /// convolutional network's time averages, `+learned` on the host).
     pub fn has_learned_summary(&self) -> bool {
-        self.learned_at != 0
+        !self.linearized && self.stage1_at != 0
     }
 
     /// The fewest samples a record (or a window) must hold: one
     /// regression for each output, and one position of the learned
     /// network's last layer.
     pub fn min_samples(&self) -> usize {
+        if self.has_linearized_stage1() {
+            // The host's least for a record of the car: two samples.
+            return 2;
+        }
         let regression = self.first_sample() + self.per_output();
         regression.max(self.learned().map_or(0, |l| l.min_samples()))
     }
@@ -569,6 +639,13 @@ impl<'a> Estimator<'a> {
             _ => Ok(value),
         }
     }
+}
+
+/// The linearization `numbers` hold, `None` for one that is not
+/// (`CarLinearization::fault`).
+fn linearization_at(numbers: LeF64s<'_>) -> Option<CarLinearization> {
+    let words: [f64; CarLinearization::WORDS] = core::array::from_fn(|j| numbers.at(j));
+    CarLinearization::from_words(&words).ok()
 }
 
 /// Numbers in one input's summary.

@@ -1,4 +1,4 @@
-//! The exported estimator's byte layout, version 4: what
+//! The exported estimator's byte layout, version 5: what
 //! `twostage export --to runtime` writes and [`crate::Estimator`] reads.
 //!
 //! Every number is little-endian; counts are `u32`, trained values `f64`.
@@ -10,13 +10,13 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0..4 | magic `TSRT` |
-//! | 4..8 | format version (4 for a learned stage 1; 3 without it, 2 without the signals' summary either, 1 without an input family) |
+//! | 4..8 | format version (5 for a linearized stage 1; 4 for a learned one; 3 without it, 2 without the signals' summary either, 1 without an input family) |
 //! | 8..12 | the blob's length in bytes |
 //! | 12..16 | CRC-32 (IEEE) of bytes 16..length |
 //! | 16..64 | twelve `u32`: q, inputs, outputs, trained record length, na, nb, delay, flags, regressor kind, experts, 0, 0 |
 //!
 //! Then, in order: q transform codes (`u32`); q lower and q upper bounds;
-//! the learned stage 1 (flag 64); for a piecewise regressor its start and width; the networks (one, or
+//! the learned stage 1 (flag 64) or the linearized one (flag 128); for a piecewise regressor its start and width; the networks (one, or
 //! the global one and each expert); the conformal half-widths (flag 1);
 //! the adaptive floors, quantiles and difficulty network (flag 2); the
 //! envelope's threshold, mean and row-major lower Cholesky factor (flag
@@ -34,7 +34,12 @@
 //! inputs first, each next one's the channels before), each signal's
 //! scale, then each layer's taps (out x in x kernel, row-major) and
 //! biases; stage 1 appends the last layer's time averages and average
-//! squares (the host's `+learned`). A network is: the count of its layer sizes and of its ensemble
+//! squares (the host's `+learned`). The linearized stage 1 (flag 128,
+//! version 5; one input, one output, two parameters, ARX orders 0) is
+//! the car and its linearization as
+//! `twostage_kernels::linearized::CarLinearization::to_words` writes
+//! them (38 `f64`): its features are the kernels' eight (the host's
+//! `linearized`). A network is: the count of its layer sizes and of its ensemble
 //! members (`u32`), the sizes (`u32`), the feature means and scales, the
 //! target means and scales, then each member's weights and biases, layer
 //! by layer (row-major weights, then biases). A linear map is a network
@@ -43,11 +48,13 @@
 /// The first four bytes.
 pub const MAGIC: [u8; 4] = *b"TSRT";
 /// The newest version this crate reads, which the exporter writes for an
-/// estimator with a learned stage 1. Versions 3 (the signals' summary, no
-/// network), 2 (an input family, no summary) and 1 (no family) are read
-/// too, and written for estimators without them, so that a runtime of
-/// before reads them.
-pub const VERSION: u32 = 4;
+/// estimator with a linearized stage 1. Versions 4 (a learned stage 1), 3
+/// (the signals' summary, no network), 2 (an input family, no summary)
+/// and 1 (no family) are read too, and written for estimators without
+/// them, so that a runtime of before reads them.
+pub const VERSION: u32 = 5;
+/// The version of a blob whose stage 1 learns and does not linearize.
+pub const VERSION_WITHOUT_LINEARIZED: u32 = 4;
 /// The version of a blob whose stage 1 appends the signals' summary and
 /// does not learn.
 pub const VERSION_WITHOUT_LEARNED: u32 = 3;
@@ -81,6 +88,10 @@ pub const FLAG_SIGNAL_SUMMARY: u32 = 32;
 /// Flag (version 4): a learned stage 1's network follows, and its
 /// summary numbers close the features.
 pub const FLAG_LEARNED_SUMMARY: u32 = 64;
+
+/// Flag (version 5): stage 1 linearizes the car; its constants and
+/// linearization follow the prior's box.
+pub const FLAG_LINEARIZED: u32 = 128;
 
 /// Regressor kind: one network (an MLP ensemble, or a linear map).
 pub const REGRESSOR_NETWORK: u32 = 1;

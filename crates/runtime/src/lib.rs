@@ -18,6 +18,11 @@
 //! own kernels ([`twostage_kernels`]) on the blob's bytes, so estimates
 //! agree with the host's `Estimator::estimate` to about 1e-12 (docs/embedded.md).
 //!
+//! A stage 1 that linearizes the car (the host's `linearized`) is
+//! streamed too: the car runs with its sensitivities as the samples come,
+//! its per-sample state four dual numbers, and its least-squares sums
+//! close the record (feature `linearized`, on by default).
+//!
 //! The layout of the blob is [`format`]'s.
 #![no_std]
 #![deny(missing_docs)]

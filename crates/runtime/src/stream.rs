@@ -3,6 +3,7 @@
 use twostage_kernels::Values;
 use twostage_kernels::cholesky::{RANK_TOLERANCE, solve_lower_in_place};
 use twostage_kernels::input_summary::{ACCUMULATOR_WORDS, InputAccumulator, outside_family};
+use twostage_kernels::linearized::{CarStream, LinearizedSums, WindowBlocks};
 use twostage_kernels::vector::clip_to_box;
 
 use crate::correlations::{Memory, Past, Shape, load, store};
@@ -40,6 +41,10 @@ pub(crate) struct Layout {
     /// The learned network's state: fed by each push of a record's
     /// stream, by the window's samples at a window's finish.
     learned: usize,
+    /// The linearized stage 1's car run since the stream's first sample
+    /// and its sums (a window's current block's), then a window's ring of
+    /// whole blocks' sums.
+    linearized: usize,
     features: usize,
     scratch: usize,
     pub(crate) total: usize,
@@ -60,7 +65,10 @@ impl Layout {
         // is solved, or the network's input and layers, or the envelope's
         // whitened features.
         let scratch = (n * (n + 1) + 2 * n).max(features + 2 * e.max_width());
-        let sums = shape.sum_words();
+        let linear = e.has_linearized_stage1();
+        // A linearized stage 1 keeps no lagged products; a window of it
+        // keeps its samples only to summarize its input at finish.
+        let sums = if linear { 0 } else { shape.sum_words() };
         let (history, first, marks, family) = if window == 0 {
             let family = if e.has_signal_summary() {
                 ACCUMULATOR_WORDS * (e.n_inputs + e.n_outputs)
@@ -72,11 +80,21 @@ impl Layout {
             (shape.history_words(), shape.first_words(), 0, family)
         } else {
             let marks = if e.transforms_outputs() { window } else { 0 };
-            (shape.signals.saturating_mul(window), 0, marks, 0)
+            let ring = if linear && !e.has_input_family() {
+                0
+            } else {
+                shape.signals.saturating_mul(window)
+            };
+            (ring, 0, marks, 0)
         };
         let learned = e.learned().map_or(0, |l| l.state_words());
+        let linearized = if linear {
+            CarStream::WORDS + LinearizedSums::WORDS * WindowBlocks::of(window).count
+        } else {
+            0
+        };
         let total = [
-            history, first, marks, sums, family, learned, features, scratch,
+            history, first, marks, sums, family, learned, linearized, features, scratch,
         ]
         .iter()
         .fold(STATUS_WORDS, |total, words| total.saturating_add(*words));
@@ -89,6 +107,7 @@ impl Layout {
             sums,
             family,
             learned,
+            linearized,
             features,
             scratch,
             total,
@@ -104,6 +123,7 @@ impl Layout {
         let (sums, rest) = rest.split_at_mut(self.sums.min(rest.len()));
         let (family, rest) = rest.split_at_mut(self.family.min(rest.len()));
         let (learned, rest) = rest.split_at_mut(self.learned.min(rest.len()));
+        let (linearized, rest) = rest.split_at_mut(self.linearized.min(rest.len()));
         let (features, rest) = rest.split_at_mut(self.features.min(rest.len()));
         let scratch = rest.get_mut(..self.scratch).unwrap_or_default();
         let past = if self.window == 0 {
@@ -122,6 +142,7 @@ impl Layout {
             marks,
             family,
             learned,
+            linearized,
             features,
             scratch,
         }
@@ -134,17 +155,14 @@ struct Parts<'w> {
     marks: &'w mut [f64],
     family: &'w mut [f64],
     learned: &'w mut [f64],
+    linearized: &'w mut [f64],
     features: &'w mut [f64],
     scratch: &'w mut [f64],
 }
 
 /// An accumulator kept in a workspace's words.
 fn accumulator(words: &[f64]) -> InputAccumulator {
-    let mut kept = [0.0; ACCUMULATOR_WORDS];
-    for (k, w) in kept.iter_mut().zip(words) {
-        *k = *w;
-    }
-    InputAccumulator::from_words(kept)
+    InputAccumulator::from_words(first_words(words))
 }
 
 /// Each input's summary judged against the estimator's family: bit
@@ -244,6 +262,12 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
     /// A stream over a window that slides: [`Stream::finish`] estimates
     /// the last `window` samples (all of them while fewer were pushed),
     /// the same numbers as a stream of those samples alone, to rounding.
+    /// A linearized stage 1 is the exception: its car runs from the
+    /// stream's first sample (where the plant was when the window began,
+    /// not at rest), and its window gains and loses blocks of a tenth of
+    /// its length, so a finish sums the current block and the whole
+    /// blocks before it that fit (the whole window when it comes at a
+    /// block's end).
     /// The stage-1 sums gain each sample as it is pushed and lose the one
     /// leaving the window, so a push costs about two and a half times a
     /// record stream's and a finish as much as a record's (plus a pass
@@ -417,6 +441,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             marks,
             family,
             learned,
+            linearized,
             ..
         } = layout.split(self.work);
         let mut count = self.status.get(3).copied().unwrap_or(0.0) + f64::from(untransformed);
@@ -446,6 +471,29 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
         if let (Some(network), 0) = (e.learned(), self.window) {
             network.push(learned, |j| measured(inputs, outputs, j));
         }
+        if let Some(lin) = e.linearization() {
+            let (kept, ring) = linearized.split_at_mut(CarStream::WORDS.min(linearized.len()));
+            let mut car = CarStream::from_words(&first_words(kept));
+            car.push(
+                &lin,
+                measured(inputs, outputs, 0),
+                measured(inputs, outputs, 1),
+            );
+            let blocks = WindowBlocks::of(self.window);
+            if self.window > 0 && (samples + 1).is_multiple_of(blocks.len) {
+                // A block ends: its sums take their slot in the ring, and
+                // the next block starts from none.
+                let slot = ((samples + 1) / blocks.len - 1) % blocks.count;
+                let at = slot * LinearizedSums::WORDS;
+                if let Some(kept) = ring.get_mut(at..at + LinearizedSums::WORDS) {
+                    kept.copy_from_slice(&car.sums.to_words());
+                }
+                car.sums = LinearizedSums::default();
+            }
+            for (k, w) in kept.iter_mut().zip(car.to_words()) {
+                *k = w;
+            }
+        }
         let current = |signal: usize| -> f64 {
             if signal < e.n_outputs {
                 taken.get(signal)
@@ -455,7 +503,11 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             .copied()
             .unwrap_or(f64::NAN)
         };
-        layout.shape.push(samples, current, &mut memory);
+        if e.has_linearized_stage1() {
+            layout.shape.keep(samples, current, &mut memory);
+        } else {
+            layout.shape.push(samples, current, &mut memory);
+        }
         self.set_samples(samples.saturating_add(1));
         Ok(())
     }
@@ -500,6 +552,7 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             memory,
             family,
             learned,
+            linearized,
             features,
             scratch,
             ..
@@ -528,7 +581,8 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             0
         };
         let (summary, learned_summary) = summary.split_at_mut(summary_len.min(summary.len()));
-        for (i, alpha) in arx.chunks_exact_mut(n).enumerate() {
+        // A linearized stage 1 has no ARX regression (n = 0).
+        for (i, alpha) in arx.chunks_exact_mut(n.max(1)).enumerate() {
             // Column c of output i's regression: its own lags, then each
             // input's; the target is the output at lag 0.
             let column = |c: usize| -> (usize, usize) {
@@ -600,6 +654,23 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
                 return Err(Error::TooShort { samples, needed });
             }
         }
+        if let Some(lin) = e.linearization() {
+            let (kept, ring) = linearized.split_at_mut(CarStream::WORDS.min(linearized.len()));
+            let mut sums = LinearizedSums::default();
+            if self.window > 0 {
+                let blocks = WindowBlocks::of(self.window);
+                for block in blocks.summed(pushed) {
+                    let at = (block % blocks.count) * LinearizedSums::WORDS;
+                    sums.merge(&LinearizedSums::from_words(&first_words(
+                        ring.get(at..).unwrap_or_default(),
+                    )));
+                }
+            }
+            // A record's sums, or the window's current block's.
+            sums.merge(&CarStream::from_words(&first_words(kept)).sums);
+            lin.features(&sums, learned_summary)
+                .ok_or(Error::Overflow)?;
+        }
         predict(e, features, scratch, theta)?;
         for (j, t) in theta.iter_mut().enumerate() {
             if e.is_log(j) {
@@ -643,6 +714,15 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             input_outside_family: input_outside_family(e, signal_summary),
         })
     }
+}
+
+/// The first `N` numbers of `kept` (zeros past its end).
+fn first_words<const N: usize>(kept: &[f64]) -> [f64; N] {
+    let mut out = [0.0; N];
+    for (o, k) in out.iter_mut().zip(kept) {
+        *o = *k;
+    }
+    out
 }
 
 /// Signal `j` of a sample as measured, inputs first.

@@ -945,3 +945,154 @@ fn a_learned_stage1_agrees_record_and_window_and_refuses_what_it_cannot_read() {
         "{refused}"
     );
 }
+
+/// The host's estimate, half-widths and distance of a linearized window
+/// ending at `end`: the car run from the record's first sample, its
+/// sensitivities and residuals summed from the first sample of the
+/// blocks the window spans (a tenth of `window` each: the current one and
+/// the whole ones before it that fit), then stage 2 on those features.
+fn linearized_window_on_host(
+    host: &twostage::Estimator,
+    long: &IoData,
+    end: usize,
+    window: usize,
+) -> (Vec<f64>, Vec<f64>, Option<f64>) {
+    use twostage_kernels::linearized::{CarStream, LinearizedSums};
+    let CompressorConfig::Linearized(l) = host.compressor() else {
+        panic!("not linearized: {}", host.compressor())
+    };
+    let lin = l.car().unwrap();
+    let block = window.div_ceil(10);
+    let (completed, partial) = (end / block, !end.is_multiple_of(block));
+    let whole = (window / block - usize::from(partial)).min(completed);
+    let first = (completed - whole) * block;
+    let (mut car, mut sums) = (CarStream::new(), LinearizedSums::default());
+    for t in 0..end {
+        let (s, r) = car.push(lin, long.input(0)[t], long.output(0)[t]);
+        if t >= first {
+            sums.add(s, r);
+        }
+    }
+    let mut features = [0.0; 8];
+    lin.features(&sums, &mut features).unwrap();
+    let row = ndarray::Array2::from_shape_vec((1, 8), features.to_vec()).unwrap();
+    let theta = host.predict_features(row.view()).unwrap().row(0).to_vec();
+    let mut widths = vec![0.0; theta.len()];
+    match host.adaptive_intervals() {
+        Some(adaptive) => adaptive.half_widths_into(&features, &mut widths).unwrap(),
+        None => widths.copy_from_slice(host.intervals().unwrap().half_widths()),
+    }
+    (
+        theta,
+        widths,
+        host.envelope().map(|e| e.distance(&features)),
+    )
+}
+
+/// The car linearized (`linearized:1`): record by record the runtime runs
+/// the car with its sensitivities as the samples come and gives the
+/// host's estimates, intervals, distances and flags; a window, whose car
+/// runs from the stream's first sample and whose sums gain and lose
+/// blocks of a tenth of it, gives the host's estimate of the same samples
+/// (`assess_window`, and the sums written out here) whether it is
+/// finished at a block's end or inside one; a blob whose
+/// linearization is damaged (a box with the anchor off its centre) is
+/// refused as invalid, and a steer of 10^6 rad (the tires saturate, the
+/// car stays finite) is estimated as the host does and flagged by both.
+#[test]
+fn a_linearized_stage1_agrees_record_and_window_and_refuses_a_damaged_car() {
+    let car = PacejkaCar::new();
+    let host = with_mlp5(&car, "linearized:1", 8);
+    let blob = host.to_runtime().unwrap();
+    assert_eq!(blob[4], 5, "format version 5");
+    let runtime = Estimator::from_bytes(&blob).unwrap();
+    assert!(runtime.has_linearized_stage1() && !runtime.has_learned_summary());
+    assert_eq!((runtime.n_features(), runtime.min_samples()), (8, 2));
+    check("car, linearized", &host, &car);
+
+    let long = long_record(&host, &car, 3);
+    let window = 300;
+    let mut work = vec![0.0; runtime.window_workspace_len(window)];
+    let mut stream = Stream::window(&runtime, window, &mut work).unwrap();
+    let (mut theta, mut widths) = ([0.0; 2], [0.0; 2]);
+    let (mut worst, mut finished) = ([0.0f64; 3], 0);
+    let relative = |a: f64, b: f64, scale: f64| (a - b).abs() / b.abs().max(scale);
+    for t in 0..long.n_samples() {
+        stream
+            .push(&[long.input(0)[t]], &[long.output(0)[t]])
+            .unwrap();
+        let end = t + 1;
+        // At block ends (every 30) and inside blocks (every 41).
+        if end < window / 2 || !(end.is_multiple_of(30) || end.is_multiple_of(41)) {
+            continue;
+        }
+        let got = stream.finish(&mut theta, &mut widths).unwrap();
+        let (expected, w, distance) = linearized_window_on_host(&host, &long, end, window);
+        for j in 0..2 {
+            let width = host.upper()[j] - host.lower()[j];
+            worst[0] = worst[0].max(relative(theta[j], expected[j], 1e-3 * width));
+            worst[1] = worst[1].max(relative(widths[j], w[j], 1e-300));
+        }
+        match (got.feature_distance, distance) {
+            (Some(a), Some(b)) => worst[2] = worst[2].max(relative(a, b, 1e-300)),
+            (None, None) => {}
+            other => panic!("an envelope on one side only: {other:?}"),
+        }
+        // The host's own window gives the same, and judges the same input.
+        let on_host = host.assess_window(&long.window(0, end), window).unwrap();
+        for j in 0..2 {
+            worst[0] = worst[0].max(relative(theta[j], on_host.theta[j], 1e-300));
+            worst[1] = worst[1].max(relative(
+                widths[j],
+                on_host.interval_half_widths().unwrap()[j],
+                1e-300,
+            ));
+        }
+        assert_eq!(
+            got.input_outside_family,
+            input_mask(&on_host),
+            "window ending at {end}"
+        );
+        finished += 1;
+    }
+    println!(
+        "car, linearized: {finished} windows of {window}; largest relative difference theta \
+         {:.1e}, half-widths {:.1e}, distance {:.1e}",
+        worst[0], worst[1], worst[2]
+    );
+    assert!(finished >= 30, "{finished}");
+    assert!(worst[0] <= 1e-9 && worst[2] <= 1e-9, "{worst:?}");
+    assert!(worst[1] <= 1e-8, "{worst:?}");
+
+    // The box's first lower corner moved: the anchor is off its centre.
+    let mut damaged = blob.clone();
+    let box_at = 64 + 8 + 2 * 2 * 8; // header, two transform codes, the box
+    let lower_at = box_at + 8 * (twostage_kernels::pacejka::Car::WORDS + 2);
+    damaged[lower_at..lower_at + 8].copy_from_slice(&(-50.0f64).to_le_bytes());
+    common::seal(&mut damaged);
+    assert!(
+        matches!(
+            Estimator::from_bytes(&damaged),
+            Err(twostage_runtime::Error::Invalid {
+                field: "linearization",
+                ..
+            })
+        ),
+        "{:?}",
+        Estimator::from_bytes(&damaged)
+    );
+
+    let mut work = vec![0.0; runtime.workspace_len()];
+    let mut stream = Stream::new(&runtime, &mut work).unwrap();
+    for t in 0..50 {
+        stream.push(&[1e6], &[f64::from(t)]).unwrap();
+    }
+    let got = stream.finish(&mut theta, &mut widths).unwrap();
+    let steps: Vec<f64> = (0..50).map(f64::from).collect();
+    let on_host = host
+        .assess(&IoData::siso(&[1e6; 50], &steps).unwrap())
+        .unwrap();
+    assert_eq!(theta.to_vec(), on_host.theta);
+    assert!(got.out_of_distribution() && on_host.out_of_distribution());
+    assert_eq!(got.input_outside_family, input_mask(&on_host));
+}

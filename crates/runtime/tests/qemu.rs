@@ -103,15 +103,16 @@ fn manoeuvres_case() -> Case {
 }
 
 /// The car on a family of ordinary driving (docs/examples/car), its stage 1
-/// ending in a learned summary network (three layers of eight channels)
-/// after the ARX(2, 2) coefficients and the signals' summary, with four
-/// averaged networks of ten units. Each record is four manoeuvres of the
-/// family one after another by the same car (2000 samples, 40 s), so that
-/// the window of a quarter of a record is the issue's 10 s, 500 samples.
-fn driving_learned_case() -> Case {
+/// as `compress` says (a learned summary network of three layers of eight
+/// channels after the ARX(2, 2) coefficients and the signals' summary, or
+/// the car linearized), with four averaged networks of ten units. Each
+/// record is four manoeuvres of the family one after another by the same
+/// car (2000 samples, 40 s), so that the window of a quarter of a record
+/// is the issue's 10 s, 500 samples.
+fn driving_case(name: &'static str, compress: &str) -> Case {
     let model = car_example("car_driving.toml");
-    let estimator = family_estimator(model.as_ref(), "arx:2,2+summary+learned");
-    let manoeuvres = case_of("car driving, learned", model.as_ref(), estimator);
+    let estimator = family_estimator(model.as_ref(), compress);
+    let manoeuvres = case_of(name, model.as_ref(), estimator);
     let segments = 4;
     let records = manoeuvres
         .records
@@ -150,6 +151,25 @@ fn driving_learned_case() -> Case {
         records,
         ..manoeuvres
     }
+}
+
+/// `first`'s samples, then `then`'s.
+fn concatenated(first: &IoData, then: &IoData) -> IoData {
+    let (n, m) = (first.n_samples(), then.n_samples());
+    let mut both = IoData::zeros(n + m, then.n_inputs(), then.n_outputs());
+    for j in 0..then.n_inputs() {
+        if n > 0 {
+            both.input_mut(j)[..n].copy_from_slice(first.input(j));
+        }
+        both.input_mut(j)[n..].copy_from_slice(then.input(j));
+    }
+    for j in 0..then.n_outputs() {
+        if n > 0 {
+            both.output_mut(j)[..n].copy_from_slice(first.output(j));
+        }
+        both.output_mut(j)[n..].copy_from_slice(then.output(j));
+    }
+    both
 }
 
 fn case_of(name: &'static str, model: &dyn Simulator, estimator: twostage::Estimator) -> Case {
@@ -213,22 +233,35 @@ enum Build {
     Window,
 }
 
-/// Build the firmware and return the ELF and its flash bytes; `learned`
-/// builds in the learned summary network (the runtime's feature), which
-/// only the estimators with one pay for.
-fn firmware(data: &Path, build: Build, learned: bool) -> (PathBuf, usize) {
+/// The runtime's feature an estimator's stage 1 needs (a learned summary
+/// network, the car linearized), which only the estimators with one pay
+/// for.
+fn stage1_feature(estimator: &twostage::Estimator) -> Option<&'static str> {
+    match estimator.compressor() {
+        twostage::compress::CompressorConfig::Linearized(_) => Some("linearized"),
+        c if c.to_string().contains("learned") => Some("learned"),
+        _ => None,
+    }
+}
+
+/// Build the firmware and return the ELF and its flash bytes, with the
+/// runtime's `feature` built in.
+fn firmware(data: &Path, build: Build, feature: Option<&str>) -> (PathBuf, usize) {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware");
     let (name, mut features) = match build {
         Build::Baseline => ("baseline", vec!["baseline"]),
         Build::Records => ("full", vec![]),
         Build::Window => ("window", vec!["window"]),
     };
-    if learned && build != Build::Baseline {
-        features.push("learned");
+    if let (Some(feature), false) = (feature, build == Build::Baseline) {
+        features.push(feature);
     }
     let target_dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../target/firmware")
-        .join(format!("{name}{}", if learned { "-learned" } else { "" }));
+        .join(format!(
+            "{name}{}",
+            feature.map_or(String::new(), |f| format!("-{f}"))
+        ));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut command = Command::new(cargo);
     command
@@ -337,13 +370,15 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             300,
         ),
         manoeuvres_case(),
-        driving_learned_case(),
+        driving_case("car driving, learned", "arx:2,2+summary+learned"),
+        driving_case("car driving, linearized", "linearized"),
     ];
     // One firmware per case, so that each one's flash is its own.
     let mut report = String::from(
         "case | blob B | flash B (runtime code + blob) | workspace B | peak stack B | \
          instructions per sample | instructions per finish\n",
     );
+    let mut over_budget = Vec::new();
     let mut window_report = String::from(
         "case | window (samples) | flash B (runtime code + blob) | RAM B (workspace + peak \
          stack) | instructions per sample | instructions per finish\n",
@@ -351,14 +386,14 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
     for (k, case) in cases.iter().enumerate() {
         let data = tempfile::tempdir().unwrap();
         write_case(data.path(), 0, case);
-        let learned = case.estimator.compressor().to_string().contains("learned");
-        let (elf, flash) = firmware(data.path(), Build::Records, learned);
-        let (_, baseline_flash) = firmware(data.path(), Build::Baseline, false);
-        let (window_elf, window_flash) = firmware(data.path(), Build::Window, learned);
-        if learned {
-            // A firmware built without the network refuses the blob,
-            // saying which feature builds it in.
-            let (without, _) = firmware(data.path(), Build::Records, false);
+        let feature = stage1_feature(&case.estimator);
+        let (elf, flash) = firmware(data.path(), Build::Records, feature);
+        let (_, baseline_flash) = firmware(data.path(), Build::Baseline, None);
+        let (window_elf, window_flash) = firmware(data.path(), Build::Window, feature);
+        if feature.is_some() {
+            // A firmware built without the stage 1's part refuses the
+            // blob, saying which feature builds it in.
+            let (without, _) = firmware(data.path(), Build::Records, None);
             let refused = run(&without);
             assert!(
                 refused.lines().any(|l| l == "case 0 refused -17"),
@@ -430,10 +465,14 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
         let (length, window_workspace): (usize, usize) =
             (header[3].parse().unwrap(), header[5].parse().unwrap());
         let (mut slide_push, mut slide_finish) = (0.0f64, 0.0f64);
+        let mut slid = IoData::default();
         for (r, record) in case.records.iter().enumerate() {
             let fields: Vec<&str> = lines.next().unwrap().split(' ').collect();
             let n = record.n_samples();
-            let host = case.estimator.assess(&record.window(n - length, n));
+            // What the window has seen: the records so far, one after
+            // another (a linearized stage 1's car runs through them all).
+            slid = concatenated(&slid, record);
+            let host = case.estimator.assess_window(&slid, length);
             // A window at rest (a manoeuvre record's last quarter may be)
             // has nothing to fit: both sides refuse it.
             let Ok(host) = host else {
@@ -481,7 +520,7 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             8 * window_workspace,
             8 * window_workspace + slide_stack
         ));
-        if case.name == "car driving, learned" {
+        if case.name.starts_with("car driving") {
             // The issue's control unit: a 10 s window (500 samples at
             // 20 ms) re-estimated every second on a 168 MHz Cortex-M4F,
             // counted in instructions (cycles are as many or more). The
@@ -499,8 +538,9 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
                 case.name,
                 100.0 * per_second / 168e6
             ));
-            assert!(flash <= 64 * 1024, "{}: flash {flash}", case.name);
-            assert!(ram <= 16 * 1024, "{}: RAM {ram}", case.name);
+            if flash > 64 * 1024 || ram > 16 * 1024 {
+                over_budget.push(format!("{}: flash {flash} B, RAM {ram} B", case.name));
+            }
         }
         // Both firmwares hold the case table, blob included: the difference
         // is the runtime's code, to which the blob adds itself.
@@ -527,4 +567,9 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
         }
     }
     println!("{report}\n{window_report}");
+    // After the report, so that a budget missed shows every number.
+    assert!(
+        over_budget.is_empty(),
+        "beyond 64 KiB of flash or 16 KiB of RAM: {over_budget:?}"
+    );
 }

@@ -14,18 +14,20 @@ use common::seal;
 
 use proptest::prelude::*;
 use twostage::TwoStage;
-use twostage::models::{Benchmark, Simulator, experiment_rng};
+use twostage::models::{Benchmark, PacejkaCar, Simulator, experiment_rng};
 use twostage_runtime::format::CHECKSUM_FROM;
 use twostage_runtime::{Error, Estimator, Stream};
 
-/// A network estimator, a piecewise one and one whose stage 1 ends in a
-/// learned summary network, all with intervals and envelope.
-fn blobs() -> &'static [Vec<u8>; 3] {
-    static BLOBS: OnceLock<[Vec<u8>; 3]> = OnceLock::new();
+/// A network estimator, a piecewise one, one whose stage 1 ends in a
+/// learned summary network, all with intervals and envelope, and one
+/// whose stage 1 linearizes the car.
+fn blobs() -> &'static [Vec<u8>; 4] {
+    static BLOBS: OnceLock<[Vec<u8>; 4]> = OnceLock::new();
     BLOBS.get_or_init(|| {
-        let model = Benchmark::builder().n_samples(120).build().unwrap();
-        let train = |compress: &str, regressor: &str| {
-            TwoStage::builder(&model)
+        let benchmark = Benchmark::builder().n_samples(120).build().unwrap();
+        let car = PacejkaCar::builder().n_samples(120).build().unwrap();
+        let train = |model: &dyn Simulator, compress: &str, regressor: &str| {
+            TwoStage::builder(model)
                 .compressor(
                     compress
                         .parse::<twostage::compress::CompressorConfig>()
@@ -42,9 +44,10 @@ fn blobs() -> &'static [Vec<u8>; 3] {
                 .unwrap()
         };
         [
-            train("arx:2,2", "mlp:4"),
-            train("arx:2,2", "piecewise:2,3"),
-            train("arx:2,2+learned:3", "mlp:4"),
+            train(&benchmark, "arx:2,2", "mlp:4"),
+            train(&benchmark, "arx:2,2", "piecewise:2,3"),
+            train(&benchmark, "arx:2,2+learned:3", "mlp:4"),
+            train(&car, "linearized:1", "mlp:4"),
         ]
     })
 }
@@ -94,7 +97,7 @@ proptest! {
 
     #[test]
     fn mutated_blobs_never_panic(
-        which in 0usize..3,
+        which in 0usize..4,
         edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
         cut in any::<prop::sample::Index>(),
         truncate in any::<bool>(),
@@ -130,8 +133,28 @@ proptest! {
     }
 
     #[test]
+    fn the_cars_numbers_set_to_anything_never_panic(
+        word in 0usize..twostage_kernels::linearized::CarLinearization::WORDS,
+        value in prop_oneof![
+            Just(0.0),
+            Just(f64::NAN),
+            Just(f64::INFINITY),
+            Just(-1e300),
+            -1e6f64..1e6,
+        ],
+    ) {
+        // The car's section follows the header, two transform codes and
+        // the box.
+        let mut blob = blobs()[3].clone();
+        let at = 64 + 8 + 4 * 8 + 8 * word;
+        blob[at..at + 8].copy_from_slice(&value.to_le_bytes());
+        seal(&mut blob);
+        exercise(&blob);
+    }
+
+    #[test]
     fn counts_set_to_anything_never_panic(
-        which in 0usize..3,
+        which in 0usize..4,
         field in 0usize..12,
         value in prop_oneof![0u32..300, any::<u32>()],
     ) {
@@ -170,14 +193,14 @@ fn damage_is_named() {
         Err(Error::Length { declared, actual }) if declared == blob.len() && actual == blob.len() - 8
     ));
     let mut newer = blob.clone();
-    newer[4] = 5;
+    newer[4] = 6;
     assert_eq!(
         Estimator::from_bytes(&newer).unwrap_err(),
-        Error::UnsupportedVersion { found: 5 }
+        Error::UnsupportedVersion { found: 6 }
     );
     assert_eq!(
-        Error::UnsupportedVersion { found: 5 }.to_string(),
-        "blob format version 5, this runtime reads versions 1 to 4: export the estimator \
+        Error::UnsupportedVersion { found: 6 }.to_string(),
+        "blob format version 6, this runtime reads versions 1 to 5: export the estimator \
          again with the matching twostage"
     );
     // The summary's flag belongs to version 3 and the learned one to
@@ -204,6 +227,27 @@ fn damage_is_named() {
     assert!(matches!(
         Estimator::from_bytes(&learned),
         Err(Error::Invalid { field: "flags", .. })
+    ));
+    // The linearized car belongs to version 5.
+    let mut linearized = blobs()[3].clone();
+    assert_eq!(linearized[4], 5, "a blob with the car linearized");
+    linearized[4] = 4;
+    seal(&mut linearized);
+    assert!(matches!(
+        Estimator::from_bytes(&linearized),
+        Err(Error::Invalid { field: "flags", .. })
+    ));
+    // Its ARX orders must be 0: na = 2 is damage, not a regression.
+    let mut ordered = blobs()[3].clone();
+    let na_at = CHECKSUM_FROM + 4 * 4;
+    ordered[na_at] = 2;
+    seal(&mut ordered);
+    assert!(matches!(
+        Estimator::from_bytes(&ordered),
+        Err(Error::Invalid {
+            field: "record shape or ARX orders",
+            ..
+        })
     ));
     // One more byte, sealed: read to the end, the byte is left over.
     let mut longer = blob.clone();
