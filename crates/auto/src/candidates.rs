@@ -5,8 +5,10 @@
 use twostage_compress::{
     Arx, Compressor, CompressorConfig, Narx, OutputPca, RawRecord, SignalTransform, Transformed,
 };
+use twostage_compress::{DEFAULT_SUBSTEPS, Linearized};
 use twostage_fit::{Mlp, MlpParams, Piecewise, RegressorConfig};
-use twostage_models::IoData;
+use twostage_models::{IoData, ModelSpec};
+use twostage_sources::ForModel;
 
 use twostage_train::Result;
 
@@ -139,6 +141,23 @@ pub(super) fn candidate_compressors(
         list.extend(transformed);
     }
     list
+}
+
+/// The stage 1s the model's own equations make possible, shaped for it:
+/// the car linearized at its prior's centre where twostage holds the
+/// car's equations (decision 085), none otherwise. Round 1 scores it
+/// beside the regressions: what it costs (a run of the car a record) is
+/// in its time.
+pub(super) fn model_candidates(spec: &ModelSpec) -> Vec<CompressorConfig> {
+    if spec.car_equations().is_none() {
+        return Vec::new();
+    }
+    Linearized::new(DEFAULT_SUBSTEPS)
+        .map(CompressorConfig::Linearized)
+        .ok()
+        .and_then(|c| c.for_model(spec).ok())
+        .into_iter()
+        .collect()
 }
 
 /// The transform a careful human would try on each output, judged from
@@ -360,6 +379,24 @@ mod tests {
             mimo.iter()
                 .all(|c| !matches!(c, CompressorConfig::Raw(_) | CompressorConfig::Narx(_)))
         );
+    }
+
+    /// The car, whose equations twostage holds, offers its linearization
+    /// shaped at its prior's centre; the benchmark offers nothing more.
+    #[test]
+    fn the_car_offers_its_linearization_and_the_benchmark_nothing() {
+        use twostage_models::{Benchmark, PacejkaCar, Simulator};
+        let car = PacejkaCar::new();
+        let offered = model_candidates(car.spec());
+        let [CompressorConfig::Linearized(l)] = offered.as_slice() else {
+            panic!("{offered:?}")
+        };
+        let lin = l.car().unwrap();
+        let prior = car.spec().prior();
+        assert_eq!(lin.lower.to_vec(), prior.lower().to_vec());
+        assert_eq!(lin.upper.to_vec(), prior.upper().to_vec());
+        assert_eq!(l.substeps(), DEFAULT_SUBSTEPS);
+        assert!(model_candidates(Benchmark::new().spec()).is_empty());
     }
 
     /// A family of input levels earns the summary rival; one level with

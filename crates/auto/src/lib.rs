@@ -40,7 +40,9 @@ mod search;
 mod sizing;
 use sizing::{MIN_SEARCH_RECORDS, SizedRun, chart_memory_cap, open_run};
 
-use candidates::{candidate_compressors, constant_inputs, network, output_transforms, pieces};
+use candidates::{
+    candidate_compressors, constant_inputs, model_candidates, network, output_transforms, pieces,
+};
 use cost::slowest_pace;
 pub use outcome::{
     AutoOutcome, CandidateReport, CheaperTie, Continuation, EqualTime, FinalFit, FinalFits,
@@ -269,13 +271,15 @@ impl<'a, S: Simulator + ?Sized> AutoDesign<'a, S> {
                         names.join(", ")
                     ));
                 }
-                candidate_compressors(
+                let mut list = candidate_compressors(
                     spec.output_names().len(),
                     spec.input_names().len(),
                     spec.n_samples(),
                     output_transforms(&chart.records),
                     constant.is_empty(),
-                )
+                );
+                list.extend(model_candidates(spec));
+                list
             }
         };
         let scope = Scope::of(run);
