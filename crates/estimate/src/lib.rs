@@ -31,7 +31,10 @@ pub use methods::OUTPUT_ERROR_METHOD;
 pub use refiner::{
     EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
 };
-pub use rows::{AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome};
+pub use rows::{
+    AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined,
+    RefinedBy, SearchOptima,
+};
 
 use methods::Method;
 

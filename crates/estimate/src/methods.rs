@@ -8,7 +8,7 @@ use twostage_refine::OutputError;
 
 use super::GivenValues;
 use super::failure::MethodFailure;
-use super::rows::RecordEstimate;
+use super::rows::{RecordEstimate, RefineOutcome, Refined, RefinedBy};
 use crate::SharedSimulator;
 
 /// The name the multi-start output-error fit goes by among the methods.
@@ -97,7 +97,14 @@ impl Method {
                     .next()
                     .ok_or(MethodFailure::NoDescent)?;
                 Ok(RecordEstimate {
-                    refined: Some(Ok(Some(best.stop))),
+                    refinement: Some(RefineOutcome::Done(Refined {
+                        by: RefinedBy::Descent {
+                            stop: best.stop,
+                            optima: None,
+                        },
+                        interval_failure: None,
+                        correlation: None,
+                    })),
                     ..RecordEstimate::bare(best.theta)
                 })
             }

@@ -9,10 +9,11 @@ use std::sync::Arc;
 use rayon::prelude::*;
 use twostage_baselines::{BaselineError, exact_likelihood};
 use twostage_estimator::Estimator;
-use twostage_fit::TerminationReason;
 use twostage_models::{IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
+
+use crate::{RefinedBy, SearchOptima};
 
 /// Why a record's best-fit search, check or refinement through its model
 /// failed: the two-stage estimate is then the caller's to keep.
@@ -55,8 +56,9 @@ pub enum ModelFailure {
 pub struct RefinedEstimate {
     /// The refined parameters.
     pub theta: Vec<f64>,
-    /// Why the output-error descent stopped (`None` for a posterior mean).
-    pub stop: Option<TerminationReason>,
+    /// A posterior mean, or where an output-error descent stopped and
+    /// the optima its search ended in.
+    pub by: RefinedBy,
     /// The refined estimate's own interval half-widths, at the level of the
     /// estimator's intervals, or why it has none (the record does not
     /// determine some parameter).
@@ -64,10 +66,6 @@ pub struct RefinedEstimate {
     /// The parameters' correlation matrix (row-major q x q), where the
     /// interval has one.
     pub correlation: Option<Vec<f64>>,
-    /// Of an output-error refinement, the distinct optima its search
-    /// ended in and the runner-up's loss over the best's (`None` for a
-    /// posterior mean).
-    pub optima: Option<(usize, Option<f64>)>,
 }
 
 /// A record to refine: the record, its two-stage estimate, and that
@@ -123,7 +121,7 @@ impl EstimateRefiner {
     /// Benchmark::new().simulate(&[0.3], &mut experiment_rng(8, 0), &mut record)?;
     /// let first = estimator.assess(&record)?;
     /// let refined = refiner.refine(&record, &first.theta, first.interval_half_widths())?;
-    /// assert!(refined.half_widths.is_ok() && refined.stop.is_none());
+    /// assert!(refined.half_widths.is_ok() && refined.by == twostage::RefinedBy::PosteriorMean);
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     ///
@@ -316,8 +314,7 @@ impl EstimateRefiner {
                         half_widths: Ok(posterior.sd.iter().map(|s| z * s).collect()),
                         correlation: Some(posterior.correlation),
                         theta: posterior.mean,
-                        stop: None,
-                        optima: None,
+                        by: RefinedBy::PosteriorMean,
                     })
                 })
                 .collect(),
@@ -415,8 +412,13 @@ impl EstimateRefiner {
                         .map_err(Clone::clone),
                     correlation: local.ok().map(|u| u.correlation),
                     theta,
-                    stop: Some(best.stop),
-                    optima: Some((found.optima.len(), found.runner_up_ratio())),
+                    by: RefinedBy::Descent {
+                        stop: best.stop,
+                        optima: Some(SearchOptima {
+                            count: found.optima.len(),
+                            runner_up_over_best: found.runner_up_ratio(),
+                        }),
+                    },
                 })
             })
             .collect()

@@ -35,18 +35,10 @@ pub struct RecordEstimate {
     /// With a check: how the model at the estimate explains the record, or
     /// why it could not be simulated.
     pub check: Option<Result<RecordCheck, ModelFailure>>,
-    /// With a refinement (or the output-error method, or the joint fit):
-    /// why the output-error descent stopped (`Ok(None)` for a posterior
-    /// mean), or why the refinement failed (the two-stage estimate is
-    /// kept).
-    pub refined: Option<Result<Option<TerminationReason>, ModelFailure>>,
-    /// Why a refined estimate has no interval of its own.
-    pub interval_failure: Option<RefineError>,
-    /// A refined estimate's correlation matrix (row-major q x q).
-    pub correlation: Option<Vec<f64>>,
-    /// Of an output-error refinement or the joint fit: the optima its
-    /// search ended in, and the runner-up's loss over the best's.
-    pub optima: Option<(usize, Option<f64>)>,
+    /// What was done after the estimate: nothing (`None`), a refinement
+    /// (or the output-error method, or the joint fit) and how it ended,
+    /// or why it failed (the two-stage estimate is kept).
+    pub refinement: Option<RefineOutcome>,
     /// With windows: the window's last sample in its record, from 1.
     pub window_end: Option<usize>,
 }
@@ -67,11 +59,32 @@ impl RecordEstimate {
             input_shape: None,
             floored: None,
             check: None,
-            refined: None,
-            interval_failure: None,
-            correlation: None,
-            optima: None,
+            refinement: None,
             window_end: None,
+        }
+    }
+
+    /// The refined estimate, where a refinement succeeded.
+    pub fn refined(&self) -> Option<&Refined> {
+        match &self.refinement {
+            Some(RefineOutcome::Done(refined)) => Some(refined),
+            _ => None,
+        }
+    }
+
+    /// A refined estimate's correlation matrix (row-major q x q), where it
+    /// has one.
+    pub fn correlation(&self) -> Option<&[f64]> {
+        self.refined()?.correlation.as_deref()
+    }
+
+    /// Of an output-error search (a refinement's, or the joint fit's): the
+    /// distinct optima it ended in, and the runner-up's loss over the
+    /// best's.
+    pub fn optima(&self) -> Option<SearchOptima> {
+        match self.refined()?.by {
+            RefinedBy::Descent { optima, .. } => optima,
+            RefinedBy::PosteriorMean => None,
         }
     }
 
@@ -122,6 +135,55 @@ impl RecordEstimate {
             || self.input.as_ref().is_some_and(|d| !d.is_empty())
             || self.input_shape_outside()
     }
+}
+
+/// What a refinement of one row came to.
+#[derive(Debug, Clone)]
+pub enum RefineOutcome {
+    /// It failed, and why: the row keeps its estimate.
+    Failed(ModelFailure),
+    /// It gave the row's estimate.
+    Done(Refined),
+}
+
+/// A refined estimate: how it was found, and its own interval's fate.
+#[derive(Debug, Clone)]
+pub struct Refined {
+    /// A posterior mean, or where an output-error descent stopped.
+    pub by: RefinedBy,
+    /// Why the refined estimate has no interval of its own (its
+    /// half-widths are then NaN): the record does not determine some
+    /// parameter. `None` where it has one, or where nothing computes one
+    /// (the output-error method).
+    pub interval_failure: Option<RefineError>,
+    /// The refined parameters' correlation matrix (row-major q x q),
+    /// where the interval has one.
+    pub correlation: Option<Vec<f64>>,
+}
+
+/// How a refined estimate was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RefinedBy {
+    /// The posterior mean near the best fit (a built-in model's exact
+    /// likelihood on a grid, decision 077).
+    PosteriorMean,
+    /// An output-error descent, and why it stopped; with the search's
+    /// optima where a search over the prior found its start.
+    Descent {
+        /// Why the descent stopped.
+        stop: TerminationReason,
+        /// The optima the search ended in, where one ran.
+        optima: Option<SearchOptima>,
+    },
+}
+
+/// The distinct optima an output-error search ended in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchOptima {
+    /// How many distinct optima.
+    pub count: usize,
+    /// The runner-up's loss over the best's, where there is a runner-up.
+    pub runner_up_over_best: Option<f64>,
 }
 
 /// A record (or window) with its estimate, or why it has none.

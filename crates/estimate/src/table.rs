@@ -7,7 +7,7 @@ use twostage_refine::RecordCheck;
 use twostage_sources::csv_rows::{format_f64, row};
 
 use super::Estimating;
-use super::rows::RecordEstimate;
+use super::rows::{RecordEstimate, RefineOutcome, Refined, RefinedBy};
 
 impl Estimating {
     /// The rows as the CSV table `twostage estimate` writes: a column
@@ -52,15 +52,13 @@ impl Estimating {
         if with_check {
             header.extend(check_header(outputs));
         }
-        let with_stop = rows
-            .iter()
-            .any(|(_, e)| matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))));
+        let with_stop = rows.iter().any(|(_, e)| !e.refine_stop().is_empty());
         if with_stop {
             header.push("refine_stop".into());
         }
         // The search's optima, where a refinement searched and no check
         // already wrote them.
-        let with_optima = !with_check && rows.iter().any(|(_, e)| e.optima.is_some());
+        let with_optima = !with_check && rows.iter().any(|(_, e)| e.optima().is_some());
         if with_optima {
             header.extend(["optima".into(), "runner_up_over_best".into()]);
         }
@@ -119,14 +117,17 @@ impl Estimating {
                 fields.push(e.refine_stop().to_string());
             }
             if with_optima {
-                let (optima, runner_up) = e.optima.unzip();
-                fields.push(optima.map_or_else(String::new, |n| n.to_string()));
-                fields.push(runner_up.flatten().map_or_else(String::new, format_f64));
+                let optima = e.optima();
+                fields.push(optima.map_or_else(String::new, |o| o.count.to_string()));
+                fields.push(
+                    optima
+                        .and_then(|o| o.runner_up_over_best)
+                        .map_or_else(String::new, format_f64),
+                );
             }
             for (_, at) in &pairs {
                 fields.push(
-                    e.correlation
-                        .as_ref()
+                    e.correlation()
                         .map_or_else(String::new, |r| format_f64(r[*at])),
                 );
             }
@@ -187,16 +188,16 @@ impl Estimating {
                 if let Some(floored) = &e.floored {
                     object.insert("untransformed_samples".into(), floored.len().into());
                 }
-                if matches!(e.refined, Some(Ok(Some(_))) | Some(Err(_))) {
+                if !e.refine_stop().is_empty() {
                     object.insert("refine_stop".into(), e.refine_stop().into());
                 }
-                if let (Some((optima, runner_up)), None) = (e.optima, &e.check) {
-                    object.insert("optima".into(), optima.into());
-                    if let Some(ratio) = runner_up {
+                if let (Some(optima), None) = (e.optima(), &e.check) {
+                    object.insert("optima".into(), optima.count.into());
+                    if let Some(ratio) = optima.runner_up_over_best {
                         object.insert("runner_up_over_best".into(), ratio.into());
                     }
                 }
-                if let Some(r) = &e.correlation {
+                if let Some(r) = e.correlation() {
                     for (name, at) in &pairs {
                         object.insert(name.clone(), r[*at].into());
                     }
@@ -255,9 +256,12 @@ impl RecordEstimate {
     /// Why the refinement stopped, for the table: the descent's reason, or
     /// `failed` (the TS estimate kept).
     pub fn refine_stop(&self) -> &'static str {
-        match &self.refined {
-            Some(Ok(Some(stop))) => stop.name(),
-            Some(Err(_)) => "failed",
+        match &self.refinement {
+            Some(RefineOutcome::Done(Refined {
+                by: RefinedBy::Descent { stop, .. },
+                ..
+            })) => stop.name(),
+            Some(RefineOutcome::Failed(_)) => "failed",
             _ => "",
         }
     }

@@ -7,7 +7,9 @@ use twostage_refine::{BestFit, RecordCheck, RefineError, check_against, search_b
 use twostage_sources::Progress;
 
 use super::Estimating;
-use super::rows::{Plant, RecordEstimate, RecordOutcome};
+use super::rows::{
+    Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined, RefinedBy, SearchOptima,
+};
 use crate::{EstimateRefiner, JointOfRecords, ModelFailure, RECORDS_TOGETHER, ToRefine};
 
 /// A record's best-fit search, or why it failed; `None` where no check or
@@ -193,10 +195,17 @@ impl Estimating {
             };
             let row = RecordEstimate {
                 half_widths: Some(widths),
-                refined: Some(Ok(Some(joint.stop))),
-                interval_failure: why,
-                correlation: joint.correlation.clone(),
-                optima: Some((joint.optima, joint.runner_up_ratio)),
+                refinement: Some(RefineOutcome::Done(Refined {
+                    by: RefinedBy::Descent {
+                        stop: joint.stop,
+                        optima: Some(SearchOptima {
+                            count: joint.optima,
+                            runner_up_over_best: joint.runner_up_ratio,
+                        }),
+                    },
+                    interval_failure: why,
+                    correlation: joint.correlation.clone(),
+                })),
                 ..RecordEstimate::bare(joint.theta.clone())
             };
             (joint, row)
@@ -208,7 +217,7 @@ impl Estimating {
 /// refinement at each record's best fit from its search, a posterior
 /// refinement by its own grid (their simulations in shared batches). A
 /// refinement that fails keeps the two-stage estimate, and says why in
-/// `refined`; one that succeeds brings its own interval (NaN where the
+/// `refinement`; one that succeeds brings its own interval (NaN where the
 /// record does not determine it, said in `interval_failure`).
 pub(super) fn refine_together(
     refiner: &EstimateRefiner,
@@ -252,12 +261,13 @@ pub(super) fn refine_together(
                 };
                 e.theta = r.theta;
                 e.half_widths = Some(own);
-                e.refined = Some(Ok(r.stop));
-                e.interval_failure = why;
-                e.correlation = r.correlation;
-                e.optima = r.optima;
+                e.refinement = Some(RefineOutcome::Done(Refined {
+                    by: r.by,
+                    interval_failure: why,
+                    correlation: r.correlation,
+                }));
             }
-            Err(why) => e.refined = Some(Err(why)),
+            Err(why) => e.refinement = Some(RefineOutcome::Failed(why)),
         }
     }
 }

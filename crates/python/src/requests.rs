@@ -183,26 +183,32 @@ pub(crate) fn refine<'py>(
     let shape = estimator.record_shape();
     let record = one_record(u, Some(y), shape.n_inputs, shape.n_outputs)?;
     let row = one_row(py, &estimating, record)?;
-    let stop = match &row.refined {
-        Some(Ok(stop)) => *stop,
-        Some(Err(e)) => {
+    let refined = match row.refinement {
+        Some(twostage::RefineOutcome::Done(refined)) => refined,
+        Some(twostage::RefineOutcome::Failed(e)) => {
             return Err(PyValueError::new_err(format!(
                 "the refinement failed ({e}); the two-stage estimate stands"
             )));
         }
         None => unreachable!("a request that refines gives every row a refinement"),
     };
-    let half_widths = match (row.interval_failure, row.half_widths) {
+    let half_widths = match (refined.interval_failure, row.half_widths) {
         (Some(why), _) => Err(why.to_string()),
         (None, Some(widths)) => Ok(widths),
         (None, None) => Err("the refinement gave no interval".into()),
     };
+    let (stop, optima) = match refined.by {
+        twostage::RefinedBy::PosteriorMean => (None, None),
+        twostage::RefinedBy::Descent { stop, optima } => (Some(stop), optima),
+    };
     let dict = pyo3::types::PyDict::new(py);
-    through_model::set_estimate(py, &dict, row.theta, half_widths, row.correlation)?;
+    through_model::set_estimate(py, &dict, row.theta, half_widths, refined.correlation)?;
     dict.set_item("stop", stop.map(|s| s.name()))?;
-    let (optima, runner_up) = row.optima.unzip();
-    dict.set_item("optima", optima)?;
-    dict.set_item("runner_up_over_best", runner_up.flatten())?;
+    dict.set_item("optima", optima.map(|o| o.count))?;
+    dict.set_item(
+        "runner_up_over_best",
+        optima.and_then(|o| o.runner_up_over_best),
+    )?;
     Ok(dict)
 }
 

@@ -65,8 +65,9 @@ pub use twostage_estimate::{
     AutoRefined, CheckSettings, EstimateRefiner, EstimateRequest, EstimateWith, Estimates,
     Estimating, GivenValues, GivenValuesError, JointFitter, JointOfRecords, MethodFailure,
     ModelFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RECORDS_TOGETHER, RecordEstimate,
-    RecordFailure, RecordOutcome, RefineChoiceError, RefineWhich, RefinedEstimate, RequestError,
-    RequestProblem, SharedSimulator, ToRefine, Windows, values_outside_prior,
+    RecordFailure, RecordOutcome, RefineChoiceError, RefineOutcome, RefineWhich, Refined,
+    RefinedBy, RefinedEstimate, RequestError, RequestProblem, SearchOptima, SharedSimulator,
+    ToRefine, Windows, values_outside_prior,
 };
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,

@@ -221,7 +221,7 @@ fn refine_auto_refines_only_what_the_check_does_not_explain() {
     for (k, reason) in auto.reasons.iter().enumerate() {
         let (_, row) = estimates.rows[k].1.as_ref().unwrap();
         // Refined rows say so; the others keep their two-stage estimate.
-        assert_eq!(row.refined.is_some(), reason.is_some(), "row {k}");
+        assert_eq!(row.refinement.is_some(), reason.is_some(), "row {k}");
         assert!(row.check.is_some());
     }
     let groups = auto.groups(&estimates.rows);

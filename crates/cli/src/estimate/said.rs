@@ -11,7 +11,7 @@ use twostage::fit::TerminationReason;
 
 use super::columns::list;
 use twostage::sources::record_file::RecordFormat;
-use twostage::{AutoRefined, RecordEstimate, RecordOutcome};
+use twostage::{AutoRefined, RecordEstimate, RecordOutcome, RefineOutcome, Refined, RefinedBy};
 
 /// The messages about one file's records.
 pub(super) struct Said<'a> {
@@ -100,24 +100,38 @@ impl<'a> Said<'a> {
                 if floored.len() > 5 { ", ..." } else { "" }
             );
         }
-        match &estimated.refined {
-            Some(Err(e)) if self.repeated.first("--refine", &e.to_string(), id) => eprintln!(
-                "warning: {file}: experiment {id}: --refine failed ({e}); the two-stage \
+        match &estimated.refinement {
+            Some(RefineOutcome::Failed(e))
+                if self.repeated.first("--refine", &e.to_string(), id) =>
+            {
+                eprintln!(
+                    "warning: {file}: experiment {id}: --refine failed ({e}); the two-stage \
                  estimate is kept"
-            ),
-            Some(Ok(Some(TerminationReason::MaxIterations))) => eprintln!(
+                )
+            }
+            Some(RefineOutcome::Done(Refined {
+                by:
+                    RefinedBy::Descent {
+                        stop: TerminationReason::MaxIterations,
+                        ..
+                    },
+                ..
+            })) => eprintln!(
                 "warning: {file}: experiment {id}: --refine did not converge within its \
                  iterations; the estimate is the best point it reached"
             ),
             _ => {}
         }
-        if let Some(e) = &estimated.interval_failure {
+        if let Some(e) = estimated
+            .refined()
+            .and_then(|r| r.interval_failure.as_ref())
+        {
             eprintln!(
                 "warning: {file}: experiment {id}: the refined estimate has no interval \
                  ({e}); its _lo and _hi are NaN"
             );
         }
-        if let (Some(Ok(_)), Some(Ok(check))) = (&estimated.refined, &estimated.check)
+        if let (Some(_), Some(Ok(check))) = (estimated.refined(), &estimated.check)
             && !check.best_fit_consistent()
         {
             eprintln!(
