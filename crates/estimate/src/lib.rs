@@ -284,15 +284,22 @@ impl Settings {
         given: Option<&NamedModel>,
     ) -> Result<Estimating, RequestError> {
         let q = estimator.param_names().len();
-        // The model found and built once, at its first use, for all.
+        // The model found once and built once, at their first use, for all.
+        let found: std::cell::OnceCell<std::borrow::Cow<'_, NamedModel>> =
+            std::cell::OnceCell::new();
+        let named = || -> twostage_train::Result<&NamedModel> {
+            if let Some(named) = found.get() {
+                return Ok(named);
+            }
+            let named = NamedModel::trained_on(&estimator.training().model, given)?;
+            Ok(found.get_or_init(|| named))
+        };
         let shared: std::cell::OnceCell<SharedSimulator> = std::cell::OnceCell::new();
         let model = || -> twostage_train::Result<SharedSimulator> {
-            if let Some(found) = shared.get() {
-                return Ok(found.clone());
+            if let Some(built) = shared.get() {
+                return Ok(built.clone());
             }
-            let built: SharedSimulator = NamedModel::trained_on(&estimator.training().model, given)
-                .and_then(|named| named.simulator())?
-                .into();
+            let built: SharedSimulator = named()?.simulator()?.into();
             Ok(shared.get_or_init(|| built).clone())
         };
         let checker = if self.checks {
@@ -302,9 +309,20 @@ impl Settings {
         };
         let refiner = match self.refine {
             Some(_) => Some(
-                EstimateRefiner::with_model(&estimator, given, model)
-                    .map_err(|e| RequestError::new(Purpose::Refine, e.into()))?
-                    .search(self.search(q)),
+                EstimateRefiner::with_model(
+                    &estimator,
+                    // Without a model given, an estimator of a built-in
+                    // model is refined through the model's exact likelihood.
+                    || {
+                        given
+                            .is_none()
+                            .then(|| named().ok()?.as_builtin())
+                            .flatten()
+                    },
+                    model,
+                )
+                .map_err(|e| RequestError::new(Purpose::Refine, e.into()))?
+                .search(self.search(q)),
             ),
             None => None,
         };

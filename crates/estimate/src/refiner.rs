@@ -9,7 +9,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 use twostage_baselines::{BaselineError, exact_likelihood};
 use twostage_estimator::Estimator;
-use twostage_models::{IoData, Simulator};
+use twostage_models::{BuiltinModel, IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
 
@@ -133,37 +133,42 @@ impl EstimateRefiner {
         estimator: &Estimator,
         model_file: Option<&NamedModel>,
     ) -> twostage_train::Result<Self> {
-        Self::with_model(estimator, model_file, || {
-            NamedModel::trained_on(&estimator.training().model, model_file)
-                .and_then(|model| model.simulator())
-                .map(SharedSimulator::from)
-                .map_err(Into::into)
-        })
+        let named = || NamedModel::trained_on(&estimator.training().model, model_file);
+        Self::with_model(
+            estimator,
+            || {
+                model_file
+                    .is_none()
+                    .then(|| named().ok()?.as_builtin())
+                    .flatten()
+            },
+            || {
+                named()
+                    .and_then(|model| model.simulator())
+                    .map(SharedSimulator::from)
+                    .map_err(Into::into)
+            },
+        )
     }
 
-    /// [`Self::new`], the simulator of an output-error refinement given by
-    /// `model` (called only where one is needed): a request shares one
-    /// simulator, and its processes, between its check, its refinement
-    /// and its joint fit.
+    /// [`Self::new`], with the built-in model refined through its exact
+    /// likelihood given by `builtin` (`None`: a model given, or a model
+    /// file, is refined through its simulator) and that simulator by
+    /// `model`, each called only where needed: a request finds its model
+    /// once and shares one simulator, and its processes, between its
+    /// check, its refinement and its joint fit.
     ///
     /// # Errors
     /// As [`Self::new`], and what `model` says.
     pub fn with_model(
         estimator: &Estimator,
-        model_file: Option<&NamedModel>,
+        builtin: impl FnOnce() -> Option<BuiltinModel>,
         model: impl FnOnce() -> twostage_train::Result<SharedSimulator>,
     ) -> twostage_train::Result<Self> {
         let radius = estimator.neighbourhood(2.0)?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
-        // Without a model file, an estimator of a built-in model is
-        // refined through the model's exact likelihood; the model is found
-        // as every request finds it.
-        if model_file.is_none()
-            && let Some(model) = NamedModel::trained_on(&estimator.training().model, None)
-                .ok()
-                .and_then(|named| named.as_builtin())
-        {
+        if let Some(model) = builtin() {
             return Ok(Self {
                 how: How::Posterior {
                     local: Refinement::new(exact_likelihood(model)),
