@@ -29,11 +29,11 @@ pub use failure::{GivenValuesError, MethodFailure, RecordFailure};
 pub use joint::{JointFitter, JointOfRecords};
 pub use methods::OUTPUT_ERROR_METHOD;
 pub use refiner::{
-    EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedEstimate, SharedSimulator, ToRefine,
+    EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedBy, RefinedEstimate, SearchOptima,
+    SharedSimulator, ToRefine,
 };
 pub use rows::{
     AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined,
-    RefinedBy, SearchOptima,
 };
 
 use methods::Method;

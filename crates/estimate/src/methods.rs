@@ -8,7 +8,8 @@ use twostage_refine::OutputError;
 
 use super::GivenValues;
 use super::failure::MethodFailure;
-use super::rows::{RecordEstimate, RefineOutcome, Refined, RefinedBy};
+use super::refiner::RefinedBy;
+use super::rows::{RecordEstimate, RefineOutcome, Refined};
 use crate::SharedSimulator;
 
 /// The name the multi-start output-error fit goes by among the methods.

@@ -13,7 +13,7 @@ use twostage_models::{BuiltinModel, IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
 use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
 
-use crate::{RefinedBy, SearchOptima};
+use twostage_fit::TerminationReason;
 
 /// Why a record's best-fit search, check or refinement through its model
 /// failed: the two-stage estimate is then the caller's to keep.
@@ -49,6 +49,31 @@ pub enum ModelFailure {
     /// estimate.
     #[error(transparent)]
     Posterior(Arc<BaselineError>),
+}
+
+/// How a refined estimate was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RefinedBy {
+    /// The posterior mean near the best fit (a built-in model's exact
+    /// likelihood on a grid, decision 077).
+    PosteriorMean,
+    /// An output-error descent, and why it stopped; with the search's
+    /// optima where a search over the prior found its start.
+    Descent {
+        /// Why the descent stopped.
+        stop: TerminationReason,
+        /// The optima the search ended in, where one ran.
+        optima: Option<SearchOptima>,
+    },
+}
+
+/// The distinct optima an output-error search ended in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchOptima {
+    /// How many distinct optima.
+    pub count: usize,
+    /// The runner-up's loss over the best's, where there is a runner-up.
+    pub runner_up_over_best: Option<f64>,
 }
 
 /// A refined estimate of one record.

@@ -3,12 +3,12 @@
 
 use twostage_compress::FlooredSample;
 use twostage_estimator::interval_in_box;
-use twostage_fit::TerminationReason;
+
 use twostage_models::{InputDeviation, IoData};
 use twostage_refine::{RecordCheck, RefineError, RefineReason};
 
 use super::failure::RecordFailure;
-use crate::ModelFailure;
+use crate::{ModelFailure, RefinedBy, SearchOptima};
 
 /// One record's (or window's) estimate and what was found about it.
 #[derive(Debug, Clone)]
@@ -159,31 +159,6 @@ pub struct Refined {
     /// The refined parameters' correlation matrix (row-major q x q),
     /// where the interval has one.
     pub correlation: Option<Vec<f64>>,
-}
-
-/// How a refined estimate was found.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum RefinedBy {
-    /// The posterior mean near the best fit (a built-in model's exact
-    /// likelihood on a grid, decision 077).
-    PosteriorMean,
-    /// An output-error descent, and why it stopped; with the search's
-    /// optima where a search over the prior found its start.
-    Descent {
-        /// Why the descent stopped.
-        stop: TerminationReason,
-        /// The optima the search ended in, where one ran.
-        optima: Option<SearchOptima>,
-    },
-}
-
-/// The distinct optima an output-error search ended in.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SearchOptima {
-    /// How many distinct optima.
-    pub count: usize,
-    /// The runner-up's loss over the best's, where there is a runner-up.
-    pub runner_up_over_best: Option<f64>,
 }
 
 /// A record (or window) with its estimate, or why it has none.

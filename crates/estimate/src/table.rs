@@ -7,7 +7,8 @@ use twostage_refine::RecordCheck;
 use twostage_sources::csv_rows::{format_f64, row};
 
 use super::Estimating;
-use super::rows::{RecordEstimate, RefineOutcome, Refined, RefinedBy};
+use super::refiner::RefinedBy;
+use super::rows::{RecordEstimate, RefineOutcome, Refined};
 
 impl Estimating {
     /// The rows as the CSV table `twostage estimate` writes: a column

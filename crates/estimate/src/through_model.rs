@@ -7,10 +7,11 @@ use twostage_refine::{BestFit, RecordCheck, RefineError, check_against, search_b
 use twostage_sources::Progress;
 
 use super::Estimating;
-use super::rows::{
-    Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined, RefinedBy, SearchOptima,
+use super::rows::{Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined};
+use crate::{
+    EstimateRefiner, JointOfRecords, ModelFailure, RECORDS_TOGETHER, RefinedBy, SearchOptima,
+    ToRefine,
 };
-use crate::{EstimateRefiner, JointOfRecords, ModelFailure, RECORDS_TOGETHER, ToRefine};
 
 /// A record's best-fit search, or why it failed; `None` where no check or
 /// refinement needs one.
