@@ -22,7 +22,7 @@ use fmus::{PENDULUM_DIVISOR, PENDULUM_STEP};
 use rayon::prelude::*;
 use twostage::fmi::{FmiVersion, FmuSimulator};
 use twostage::models::{
-    Benchmark, InputSignal, IoData, ModelSpec, Prior, Simulator, experiment_rng,
+    Benchmark, Conditions, InputSignal, IoData, ModelSpec, Prior, Simulator, experiment_rng,
 };
 use twostage_benches::{config, slow_config};
 
@@ -91,10 +91,11 @@ impl Simulator for Pendulum {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut twostage::models::ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> twostage::models::Result<()> {
         let n = self.spec.n_samples();

@@ -8,7 +8,7 @@ use std::time::Duration;
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::Arx;
 use twostage::fit::MlpParams;
-use twostage::models::{ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
+use twostage::models::{Conditions, ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
 use twostage::{AutoDesign, Budget, RegressorConfig};
 
 mod common;
@@ -24,10 +24,11 @@ impl Simulator for SlowFirstOrder {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         std::thread::sleep(Duration::from_millis(2));

@@ -8,7 +8,7 @@ use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::{Arx, CompressorConfig};
 use twostage::fit::MlpParams;
-use twostage::models::{ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
+use twostage::models::{Conditions, ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
 use twostage::{AutoDesign, Budget, RegressorConfig};
 
 /// A first-order lag behind an actuator that saturates at theta[0]: a
@@ -22,10 +22,11 @@ impl Simulator for SaturatingLag {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let n = self.spec.n_samples();

@@ -5,7 +5,7 @@
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::{Arx, Narx};
 use twostage::fit::MlpParams;
-use twostage::models::{ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
+use twostage::models::{Conditions, ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator};
 use twostage::{AutoDesign, Budget, RegressorConfig};
 
 mod common;
@@ -21,10 +21,11 @@ impl Simulator for TwoSensors {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let n = self.spec.n_samples();
@@ -89,10 +90,11 @@ impl Simulator for SometimesIdle {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let n = self.spec.n_samples();

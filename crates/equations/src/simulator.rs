@@ -3,7 +3,8 @@
 
 use twostage_models::InvalidSetting;
 use twostage_models::{
-    Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec, SimError, Simulator,
+    Block, BlockInputs, Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec,
+    SimError, Simulator, simulate_one_by_one,
 };
 
 use crate::EquationModel;
@@ -51,15 +52,6 @@ impl Simulator for EquationSimulator {
         &self.spec
     }
 
-    fn simulate(
-        &self,
-        theta: &[f64],
-        rng: &mut ExperimentRng,
-        out: &mut IoData,
-    ) -> Result<(), SimError> {
-        self.simulate_under(theta, rng, Conditions::default(), out)
-    }
-
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             noiseless: true,
@@ -67,7 +59,7 @@ impl Simulator for EquationSimulator {
         }
     }
 
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
@@ -83,22 +75,19 @@ impl Simulator for EquationSimulator {
         BATCH
     }
 
-    fn simulate_batch(
+    /// The compiled equations run the block together, unless each
+    /// experiment has its own input.
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
+        block: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<(), SimError>> {
-        self.simulate_batch_under(thetas, rngs, Conditions::default(), outs)
-    }
-
-    fn simulate_batch_under(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        conditions: Conditions<'_>,
-        outs: &mut [IoData],
-    ) -> Vec<Result<(), SimError>> {
+        if let BlockInputs::Each(_) = block.inputs {
+            return simulate_one_by_one(self, thetas, rngs, block, outs);
+        }
+        let conditions = block.conditions(0);
         let ready: Vec<Result<(), SimError>> = thetas
             .iter()
             .zip(rngs.iter_mut())

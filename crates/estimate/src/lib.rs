@@ -8,7 +8,7 @@
 
 use twostage_baselines::MethodSettings;
 use twostage_estimator::{Estimator, SignalNames};
-use twostage_models::{IoData, Simulator};
+use twostage_models::{IoData, ModelSpec, Simulator};
 use twostage_refine::{CheckPlan, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
@@ -60,6 +60,21 @@ pub enum EstimateWith {
     /// Given values, checked against their records (a published value,
     /// another tool's estimate).
     Given(GivenValues),
+    /// The values of a parameter-value file
+    /// ([`twostage_sources::parameter_values`]), read with the model's
+    /// parameter names once the model is found, checked against their
+    /// records; rows without values are left out and said in
+    /// [`Estimating::notes`].
+    GivenFile(std::path::PathBuf),
+    /// Given values of the model an estimator was trained on (its
+    /// built-in model, or the request's model file of it), checked
+    /// against their records: the estimator is not run.
+    GivenOfEstimator {
+        /// The values.
+        values: GivenValues,
+        /// The estimator whose model runs them.
+        estimator: Box<Estimator>,
+    },
 }
 
 /// Everything an estimate of records needs: see the module's doc. Built
@@ -236,6 +251,12 @@ impl EstimateRequest {
             EstimateWith::Estimator(estimator) => {
                 settings.two_stage(estimator, self.model.as_ref())
             }
+            EstimateWith::GivenOfEstimator { values, estimator } => {
+                let named =
+                    NamedModel::trained_on(&estimator.training().model, self.model.as_ref())
+                        .map_err(|e| RequestError::new(Purpose::Given, e.into()))?;
+                settings.through_model(EstimateWith::Given(values), Some(&named))
+            }
             other => settings.through_model(other, self.model.as_ref()),
         }
     }
@@ -350,7 +371,27 @@ impl Settings {
             plan: self.plan(q),
             // The joint fit, as a refinement, fits records of any length.
             method: Method::two_stage(estimator, self.refine.is_some() || self.joint),
+            notes: Vec::new(),
         })
+    }
+
+    /// Given values as the method, unless some lie outside the prior
+    /// without leave.
+    fn given(
+        self,
+        values: GivenValues,
+        spec: &ModelSpec,
+        purpose: Purpose,
+    ) -> Result<Method, RequestError> {
+        if !self.allow_outside_prior
+            && let Some(outside) = values.outside_prior(spec)
+        {
+            return Err(RequestError {
+                purpose,
+                error: outside,
+            });
+        }
+        Ok(Method::Given(values))
     }
 
     /// A classic method's, the output-error fit's or given values'
@@ -363,7 +404,10 @@ impl Settings {
         let purpose = match &with {
             EstimateWith::Classic { .. } => Purpose::Method,
             EstimateWith::OutputError { .. } => Purpose::OutputError,
-            EstimateWith::Given(_) | EstimateWith::Estimator(_) => Purpose::Given,
+            EstimateWith::Given(_)
+            | EstimateWith::GivenFile(_)
+            | EstimateWith::GivenOfEstimator { .. }
+            | EstimateWith::Estimator(_) => Purpose::Given,
         };
         let without = |purpose| RequestError {
             purpose,
@@ -384,6 +428,7 @@ impl Settings {
             .simulator()
             .map_err(|e| RequestError::new(purpose, e.into()))?
             .into();
+        let mut notes = Vec::new();
         let (method, spec) = match with {
             EstimateWith::Classic { method, settings } => {
                 let builtin = named.as_builtin().ok_or_else(|| RequestError {
@@ -407,19 +452,26 @@ impl Settings {
                     .map_err(|e| RequestError::new(purpose, e.into()))?;
                 (method, spec)
             }
+            EstimateWith::GivenFile(path) => {
+                let spec = simulator.spec().clone();
+                let refused = |why| RequestError {
+                    purpose,
+                    error: RequestProblem::Values(why),
+                };
+                let read = twostage_sources::parameter_values::read(&path, spec.param_names())
+                    .map_err(refused)?;
+                notes = read.skipped;
+                let values = GivenValues::new(read.rows, &path.display().to_string())
+                    .map_err(|e| refused(e.to_string()))?;
+                (self.given(values, &spec, purpose)?, spec)
+            }
             EstimateWith::Given(values) => {
                 let spec = simulator.spec().clone();
-                if !self.allow_outside_prior
-                    && let Some(outside) = values.outside_prior(&spec)
-                {
-                    return Err(RequestError {
-                        purpose,
-                        error: outside,
-                    });
-                }
-                (Method::Given(values), spec)
+                (self.given(values, &spec, purpose)?, spec)
             }
-            EstimateWith::Estimator(_) => unreachable!("an estimator is prepared by two_stage"),
+            EstimateWith::Estimator(_) | EstimateWith::GivenOfEstimator { .. } => {
+                unreachable!("prepare resolves an estimator and its model first")
+            }
         };
         let checker = self.checks.then_some(simulator);
         Ok(Estimating {
@@ -438,6 +490,7 @@ impl Settings {
             windows: self.windows,
             plan: self.plan(spec.param_names().len()),
             method,
+            notes,
         })
     }
 }
@@ -499,6 +552,10 @@ pub enum RequestProblem {
         /// Samples between windows.
         every: usize,
     },
+    /// A file of given values that cannot be read or matched to records
+    /// (the message names the file, line and column).
+    #[error("{0}")]
+    Values(String),
     /// Given values outside the model's prior box, not allowed.
     #[error("{from}, experiment {id}: {why}")]
     OutsidePrior {
@@ -567,9 +624,16 @@ pub struct Estimating {
     refine: Option<RefineWhich>,
     windows: Option<Windows>,
     plan: CheckPlan,
+    notes: Vec<String>,
 }
 
 impl Estimating {
+    /// What the preparation left out and a door should say (rows of a
+    /// values file without values), one line each.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
     /// The parameters estimated, in the rows' order.
     pub fn param_names(&self) -> &[String] {
         &self.names

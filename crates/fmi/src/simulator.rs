@@ -294,15 +294,6 @@ impl Simulator for FmuSimulator {
         &self.spec
     }
 
-    fn simulate(
-        &self,
-        theta: &[f64],
-        rng: &mut ExperimentRng,
-        out: &mut IoData,
-    ) -> twostage_models::Result<()> {
-        self.simulate_under(theta, rng, Conditions::default(), out)
-    }
-
     /// Noise-free: the noise inputs held at zero; a given input replaces
     /// the input design.
     fn capabilities(&self) -> Capabilities {
@@ -316,7 +307,7 @@ impl Simulator for FmuSimulator {
         self.input.as_ref()?.shared_record(&self.spec)
     }
 
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,

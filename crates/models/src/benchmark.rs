@@ -133,10 +133,6 @@ impl Simulator for Benchmark {
         &self.spec
     }
 
-    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
-        self.simulate_under(theta, rng, Conditions::default(), out)
-    }
-
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             noiseless: true,
@@ -148,7 +144,7 @@ impl Simulator for Benchmark {
         self.input.shared_record(&self.spec)
     }
 
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,

@@ -16,7 +16,9 @@ use crate::data::IoData;
 use crate::error::{Result, SimError};
 use crate::external_process::Process;
 use crate::rng::ExperimentRng;
-use crate::simulator::{Capabilities, Conditions, ModelSpec, Simulator, check_theta};
+use crate::simulator::{
+    Block, BlockInputs, Capabilities, Conditions, ModelSpec, Simulator, check_theta,
+};
 
 /// The newest protocol version this build speaks (the second word of the
 /// greeting); a model file chooses it with `protocol = 2`, and version 1
@@ -604,69 +606,45 @@ impl Simulator for ExternalSimulator {
         }
     }
 
-    fn simulate_under(
+    /// One experiment as a block of one.
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<()> {
-        self.simulate_batch_under(
+        self.simulate_block(
             &[theta],
             std::slice::from_mut(rng),
-            conditions,
+            Block::of(conditions),
             std::slice::from_mut(out),
         )
         .pop()
         .unwrap_or_else(|| Err(self.failure("no answer")))
     }
 
-    /// One request for the block under `conditions`.
-    fn simulate_batch_under(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        conditions: Conditions<'_>,
-        outs: &mut [IoData],
-    ) -> Vec<Result<()>> {
-        let jobs = jobs_of(thetas, rngs);
-        self.simulate_jobs(&jobs, conditions, outs)
-    }
-
-    /// One request for the block, each experiment's input after its line
-    /// (`each`, protocol 2).
-    fn simulate_batch_on_inputs(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        inputs: &[IoData],
-        conditions: Conditions<'_>,
-        outs: &mut [IoData],
-    ) -> Vec<Result<()>> {
-        let jobs = jobs_of(thetas, rngs);
-        self.simulate_jobs_on_inputs(&jobs, inputs, conditions, outs)
-    }
-
     /// One request for the block; each experiment's index and seed come
-    /// from its stream ([`ExternalJob::stream_of`]).
-    fn simulate_batch(
+    /// from its stream ([`ExternalJob::stream_of`]), its input after its
+    /// line when each has its own (`each`, protocol 2).
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
+        block: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
         let jobs = jobs_of(thetas, rngs);
-        ExternalSimulator::simulate_batch(self, &jobs, outs)
-    }
-
-    /// One experiment as a batch of one; the index and seed come from the
-    /// experiment's stream ([`ExternalJob::stream_of`]).
-    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
-        let (index, seed) = ExternalJob::stream_of(rng);
-        let job = ExternalJob { index, seed, theta };
-        self.simulate_batch(&[job], std::slice::from_mut(out))
-            .pop()
-            .unwrap_or_else(|| Err(self.failure("no answer")))
+        match block.inputs {
+            BlockInputs::Each(inputs) => {
+                let conditions = Conditions {
+                    noiseless: block.noiseless,
+                    input: None,
+                };
+                self.simulate_jobs_on_inputs(&jobs, inputs, conditions, outs)
+            }
+            _ => self.simulate_jobs(&jobs, block.conditions(0), outs),
+        }
     }
 }
 

@@ -96,7 +96,10 @@ pub use prior::{Design, Prior, Sampling, random_permutation};
 pub use resources::{available_memory, free_disk, readable_bytes};
 pub use rng::{ExperimentRng, StreamPurpose, experiment_rng, stream_rng};
 pub use signals::{SignalColumn, generic_signal_names, signal_columns};
-pub use simulator::{Capabilities, CarEquations, Conditions, ModelSpec, NoiseFree, Simulator};
+pub use simulator::{
+    Block, BlockInputs, Capabilities, CarEquations, Conditions, ModelSpec, NoiseFree, Simulator,
+    simulate_one_by_one,
+};
 pub use twostage_kernels::input_shape::SHAPE_LAGS;
 
 /// Simulate experiment `index` of the chart `(design, seed)`: draw its

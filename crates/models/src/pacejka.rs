@@ -267,10 +267,6 @@ impl Simulator for PacejkaCar {
         &self.spec
     }
 
-    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
-        self.simulate_under(theta, rng, Conditions::default(), out)
-    }
-
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             noiseless: true,
@@ -282,7 +278,7 @@ impl Simulator for PacejkaCar {
         self.input.shared_record(&self.spec)
     }
 
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,

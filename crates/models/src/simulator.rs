@@ -371,32 +371,7 @@ impl Simulator for NoiseFree {
         &self.spec
     }
 
-    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
-        self.simulate_under(theta, rng, Conditions::default(), out)
-    }
-
-    fn batch_size(&self) -> usize {
-        self.inner.batch_size()
-    }
-
-    fn simulate_batch(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        outs: &mut [IoData],
-    ) -> Vec<Result<()>> {
-        self.simulate_batch_under(thetas, rngs, Conditions::default(), outs)
-    }
-
-    fn capabilities(&self) -> Capabilities {
-        self.inner.capabilities()
-    }
-
-    fn shared_input(&self) -> Option<IoData> {
-        self.inner.shared_input()
-    }
-
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
@@ -407,38 +382,33 @@ impl Simulator for NoiseFree {
             noiseless: true,
             ..conditions
         };
-        self.inner.simulate_under(theta, rng, conditions, out)
+        self.inner.simulate_one(theta, rng, conditions, out)
     }
 
-    fn simulate_batch_under(
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
-        conditions: Conditions<'_>,
+        block: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
-        let conditions = Conditions {
+        let block = Block {
             noiseless: true,
-            ..conditions
+            ..block
         };
-        self.inner
-            .simulate_batch_under(thetas, rngs, conditions, outs)
+        self.inner.simulate_block(thetas, rngs, block, outs)
     }
 
-    fn simulate_batch_on_inputs(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        inputs: &[IoData],
-        conditions: Conditions<'_>,
-        outs: &mut [IoData],
-    ) -> Vec<Result<()>> {
-        let conditions = Conditions {
-            noiseless: true,
-            ..conditions
-        };
-        self.inner
-            .simulate_batch_on_inputs(thetas, rngs, inputs, conditions, outs)
+    fn batch_size(&self) -> usize {
+        self.inner.batch_size()
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        self.inner.capabilities()
+    }
+
+    fn shared_input(&self) -> Option<IoData> {
+        self.inner.shared_input()
     }
 }
 
@@ -465,8 +435,139 @@ pub(crate) fn inputs_refused(
     })
 }
 
+/// What a block of experiments runs under: the noise on or off, and
+/// whose inputs: the simulator's own design, one record's for all, or a
+/// record per experiment. [`Simulator::simulate_block`] receives one;
+/// the default is a block as training simulates it.
+///
+/// ```
+/// use twostage_models::{Block, BlockInputs, Conditions};
+/// assert!(Block::default().is_plain());
+/// let noiseless = Block::of(Conditions { noiseless: true, input: None });
+/// assert!(noiseless.noiseless && matches!(noiseless.inputs, BlockInputs::Own));
+/// ```
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Block<'a> {
+    /// No noise at all ([`Conditions::noiseless`]).
+    pub noiseless: bool,
+    /// Whose inputs the experiments run on.
+    pub inputs: BlockInputs<'a>,
+}
+
+/// Whose inputs a block of experiments runs on.
+#[derive(Debug, Clone, Copy, Default)]
+pub enum BlockInputs<'a> {
+    /// Each experiment's own, from the simulator's input design.
+    #[default]
+    Own,
+    /// This record's inputs, for every experiment.
+    Shared(&'a IoData),
+    /// Experiment `k` on the `k`-th record's inputs (as many records as
+    /// experiments).
+    Each(&'a [IoData]),
+}
+
+impl<'a> Block<'a> {
+    /// A block whose every experiment runs under `conditions`.
+    pub fn of(conditions: Conditions<'a>) -> Self {
+        Self {
+            noiseless: conditions.noiseless,
+            inputs: conditions
+                .input
+                .map_or(BlockInputs::Own, BlockInputs::Shared),
+        }
+    }
+
+    /// A block as training simulates it.
+    pub fn is_plain(&self) -> bool {
+        !self.noiseless && matches!(self.inputs, BlockInputs::Own)
+    }
+
+    /// The conditions of the block's `k`-th experiment.
+    pub fn conditions(&self, k: usize) -> Conditions<'a> {
+        let input = match self.inputs {
+            BlockInputs::Own => None,
+            BlockInputs::Shared(record) => Some(record),
+            BlockInputs::Each(records) => records.get(k),
+        };
+        Conditions {
+            noiseless: self.noiseless,
+            input,
+        }
+    }
+
+    /// Why `capabilities` cannot run the block of `experiments`, if they
+    /// cannot: a condition the simulator does not honour, or per-experiment
+    /// inputs of another count than the experiments'.
+    fn refusal(
+        &self,
+        experiments: usize,
+        capabilities: Capabilities,
+        model: &str,
+    ) -> Option<SimError> {
+        if let BlockInputs::Each(records) = self.inputs
+            && records.len() != experiments
+        {
+            return Some(SimError::InvalidData(format!(
+                "{} inputs for {experiments} experiments: give one input per experiment",
+                records.len()
+            )));
+        }
+        capabilities.check(&self.conditions(0), model).err()
+    }
+}
+
+/// Every experiment of a block one by one through
+/// [`Simulator::simulate_one`], each under its own conditions: what a
+/// simulator that does not batch does with a block (the default of
+/// [`Simulator::simulate_block`]), and what one that batches some
+/// blocks does with the others.
+pub fn simulate_one_by_one<S: Simulator + ?Sized>(
+    simulator: &S,
+    thetas: &[&[f64]],
+    rngs: &mut [ExperimentRng],
+    block: Block<'_>,
+    outs: &mut [IoData],
+) -> Vec<Result<()>> {
+    thetas
+        .iter()
+        .zip(rngs.iter_mut())
+        .zip(outs.iter_mut())
+        .enumerate()
+        .map(|(k, ((theta, rng), out))| {
+            simulator.simulate_one(theta, rng, block.conditions(k), out)
+        })
+        .collect()
+}
+
+/// A block, once its conditions are checked against the simulator's
+/// capabilities: the one place the batches' conditions are checked.
+fn checked_block<S: Simulator + ?Sized>(
+    simulator: &S,
+    thetas: &[&[f64]],
+    rngs: &mut [ExperimentRng],
+    block: Block<'_>,
+    outs: &mut [IoData],
+) -> Vec<Result<()>> {
+    let capabilities = simulator.capabilities();
+    if let Some(e) = block.refusal(thetas.len(), capabilities, simulator.spec().name()) {
+        return thetas.iter().map(|_| Err(e.clone())).collect();
+    }
+    simulator.simulate_block(thetas, rngs, block, outs)
+}
+
 /// A simulator of the system `P(theta)`: given a parameter vector and a
 /// random stream, it produces one experiment's input/output record.
+///
+/// A simulator implements [`Simulator::spec`] and one way to simulate,
+/// [`Simulator::simulate_one`]; it may say what else it can
+/// ([`Simulator::capabilities`], [`Simulator::shared_input`]) and run
+/// blocks in one go ([`Simulator::batch_size`],
+/// [`Simulator::simulate_block`]). Callers use the provided methods
+/// ([`Simulator::simulate`], [`Simulator::simulate_under`] and the
+/// batches), which check the conditions against the capabilities once,
+/// so an implementation is never asked what it did not offer; they are
+/// not meant to be implemented.
 ///
 /// Implementations must be deterministic given `(theta, rng)`, draw all their
 /// randomness from `rng`, and return [`SimError::Diverged`]
@@ -484,54 +585,77 @@ pub trait Simulator: Send + Sync {
     /// What the model is: names, prior, sampling, signals.
     fn spec(&self) -> &ModelSpec;
 
-    /// Simulate one experiment at `theta` into `out`, reshaping it to
-    /// `spec().n_samples()` samples.
+    /// Simulate one experiment at `theta` under `conditions` into `out`,
+    /// reshaping it to `spec().n_samples()` samples (or the given input's
+    /// length). `conditions` ask only what [`Simulator::capabilities`]
+    /// offers (a simulator that offers nothing gets plain ones).
     ///
     /// # Errors
-    /// A parameter vector of the wrong length or with non-finite values, or
-    /// a simulation that diverges.
-    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()>;
+    /// A parameter vector of the wrong length or with non-finite values, a
+    /// given input of the wrong shape, or a simulation that diverges.
+    fn simulate_one(
+        &self,
+        theta: &[f64],
+        rng: &mut ExperimentRng,
+        conditions: Conditions<'_>,
+        out: &mut IoData,
+    ) -> Result<()>;
+
+    /// Which [`Conditions`] the simulator honours (default: none beyond a
+    /// plain experiment).
+    fn capabilities(&self) -> Capabilities {
+        Capabilities::default()
+    }
+
+    /// The input every experiment gets, when the simulator's design gives
+    /// all of them the same one (a fixed or deterministic signal): an
+    /// estimator trained on its records learned that input, and a record
+    /// with another is not one it can speak for. `None` when inputs vary
+    /// (or the model has none).
+    fn shared_input(&self) -> Option<IoData> {
+        None
+    }
 
     /// How many experiments the simulator would rather receive at once
-    /// (default 1): charts hand it blocks of this size through
-    /// [`Simulator::simulate_batch`]. A program that vectorizes (numpy over
-    /// a batch) says more than 1.
+    /// (default 1): charts hand it blocks of this size. A program that
+    /// vectorizes (numpy over a batch) says more than 1.
     fn batch_size(&self) -> usize {
         1
     }
 
     /// Simulate a block of experiments: `thetas[k]` with the stream
-    /// `rngs[k]` into `outs[k]`, one result each. Each experiment must depend
-    /// on its own parameter vector and stream only, never on the block it
-    /// came in. Default: one by one through [`Simulator::simulate`].
-    fn simulate_batch(
+    /// `rngs[k]` into `outs[k]` under `block`, one result each (`block`
+    /// asks only what [`Simulator::capabilities`] offers). Each experiment
+    /// must depend on its own parameter vector, stream and input only,
+    /// never on the block it came in. Default:
+    /// [`simulate_one_by_one`]; a command source sends the block in one
+    /// request.
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
+        block: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
-        thetas
-            .iter()
-            .zip(rngs.iter_mut())
-            .zip(outs.iter_mut())
-            .map(|((theta, rng), out)| self.simulate(theta, rng, out))
-            .collect()
+        simulate_one_by_one(self, thetas, rngs, block, outs)
     }
 
-    /// Which [`Conditions`] [`Simulator::simulate_under`] honours
-    /// (default: none beyond a plain experiment).
-    fn capabilities(&self) -> Capabilities {
-        Capabilities::default()
+    /// Simulate one experiment at `theta` into `out` as training does
+    /// (provided).
+    ///
+    /// # Errors
+    /// As [`Simulator::simulate_one`].
+    fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
+        self.simulate_one(theta, rng, Conditions::default(), out)
     }
 
     /// Simulate one experiment under `conditions` (noise-free, on a given
-    /// input). Default: a plain experiment through
-    /// [`Simulator::simulate`], and a refusal of anything else.
+    /// input; provided).
     ///
     /// # Errors
     /// Conditions the simulator cannot honour
-    /// ([`Capabilities::check`]), a given input of the wrong shape, and
-    /// those of [`Simulator::simulate`].
+    /// ([`Capabilities::check`]), and those of
+    /// [`Simulator::simulate_one`].
     fn simulate_under(
         &self,
         theta: &[f64],
@@ -539,14 +663,23 @@ pub trait Simulator: Send + Sync {
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<()> {
-        // Nothing beyond a plain experiment passes the default check.
-        Capabilities::default().check(&conditions, self.spec().name())?;
-        self.simulate(theta, rng, out)
+        self.capabilities().check(&conditions, self.spec().name())?;
+        self.simulate_one(theta, rng, conditions, out)
+    }
+
+    /// A block of experiments as training simulates them, one result each
+    /// (provided).
+    fn simulate_batch(
+        &self,
+        thetas: &[&[f64]],
+        rngs: &mut [ExperimentRng],
+        outs: &mut [IoData],
+    ) -> Vec<Result<()>> {
+        self.simulate_block(thetas, rngs, Block::default(), outs)
     }
 
     /// A block of experiments under the same `conditions`, one result
-    /// each (a command source sends them in one request). Default: one
-    /// by one through [`Simulator::simulate_under`].
+    /// each (provided).
     fn simulate_batch_under(
         &self,
         thetas: &[&[f64]],
@@ -554,15 +687,7 @@ pub trait Simulator: Send + Sync {
         conditions: Conditions<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<()>> {
-        if conditions.is_plain() {
-            return self.simulate_batch(thetas, rngs, outs);
-        }
-        thetas
-            .iter()
-            .zip(rngs.iter_mut())
-            .zip(outs.iter_mut())
-            .map(|((theta, rng), out)| self.simulate_under(theta, rng, conditions, out))
-            .collect()
+        checked_block(self, thetas, rngs, Block::of(conditions), outs)
     }
 
     /// A block of experiments, each on its own given input: `thetas[k]`
@@ -570,9 +695,7 @@ pub trait Simulator: Send + Sync {
     /// `conditions` otherwise (without noise when `conditions.noiseless`;
     /// the inputs are these, so `conditions.input` must be `None`): an
     /// input design drawn per experiment by the caller, for a source that
-    /// cannot draw it itself. Default: one by one through
-    /// [`Simulator::simulate_under`]; a command source sends the block in
-    /// one request.
+    /// cannot draw it itself (provided).
     ///
     /// ```
     /// use twostage_models::{experiment_rng, Benchmark, Conditions, IoData, Simulator};
@@ -601,36 +724,19 @@ pub trait Simulator: Send + Sync {
         if let Some(e) = inputs_refused(thetas.len(), inputs, conditions) {
             return thetas.iter().map(|_| Err(e.clone())).collect();
         }
-        thetas
-            .iter()
-            .zip(rngs.iter_mut())
-            .zip(inputs)
-            .zip(outs.iter_mut())
-            .map(|(((theta, rng), input), out)| {
-                let conditions = Conditions {
-                    input: Some(input),
-                    ..conditions
-                };
-                self.simulate_under(theta, rng, conditions, out)
-            })
-            .collect()
+        let block = Block {
+            noiseless: conditions.noiseless,
+            inputs: BlockInputs::Each(inputs),
+        };
+        checked_block(self, thetas, rngs, block, outs)
     }
 
-    /// The input every experiment gets, when the simulator's design gives
-    /// all of them the same one (a fixed or deterministic signal): an
-    /// estimator trained on its records learned that input, and a record
-    /// with another is not one it can speak for. `None` when inputs vary
-    /// (or the model has none).
-    fn shared_input(&self) -> Option<IoData> {
-        None
-    }
-
-    /// The parameter names, in the order of theta.
+    /// The parameter names, in the order of theta (provided).
     fn param_names(&self) -> &[String] {
         self.spec().param_names()
     }
 
-    /// The prior box.
+    /// The prior box (provided).
     fn prior(&self) -> &Prior {
         self.spec().prior()
     }
@@ -646,19 +752,14 @@ macro_rules! forward_simulator {
             fn spec(&self) -> &ModelSpec {
                 (**self).spec()
             }
-            fn simulate(&self, theta: &[f64], rng: &mut ExperimentRng, out: &mut IoData) -> Result<()> {
-                (**self).simulate(theta, rng, out)
-            }
-            fn batch_size(&self) -> usize {
-                (**self).batch_size()
-            }
-            fn simulate_batch(
+            fn simulate_one(
                 &self,
-                thetas: &[&[f64]],
-                rngs: &mut [ExperimentRng],
-                outs: &mut [IoData],
-            ) -> Vec<Result<()>> {
-                (**self).simulate_batch(thetas, rngs, outs)
+                theta: &[f64],
+                rng: &mut ExperimentRng,
+                conditions: Conditions<'_>,
+                out: &mut IoData,
+            ) -> Result<()> {
+                (**self).simulate_one(theta, rng, conditions, out)
             }
             fn capabilities(&self) -> Capabilities {
                 (**self).capabilities()
@@ -666,33 +767,17 @@ macro_rules! forward_simulator {
             fn shared_input(&self) -> Option<IoData> {
                 (**self).shared_input()
             }
-            fn simulate_batch_on_inputs(
+            fn batch_size(&self) -> usize {
+                (**self).batch_size()
+            }
+            fn simulate_block(
                 &self,
                 thetas: &[&[f64]],
                 rngs: &mut [ExperimentRng],
-                inputs: &[IoData],
-                conditions: Conditions<'_>,
+                block: Block<'_>,
                 outs: &mut [IoData],
             ) -> Vec<Result<()>> {
-                (**self).simulate_batch_on_inputs(thetas, rngs, inputs, conditions, outs)
-            }
-            fn simulate_under(
-                &self,
-                theta: &[f64],
-                rng: &mut ExperimentRng,
-                conditions: Conditions<'_>,
-                out: &mut IoData,
-            ) -> Result<()> {
-                (**self).simulate_under(theta, rng, conditions, out)
-            }
-            fn simulate_batch_under(
-                &self,
-                thetas: &[&[f64]],
-                rngs: &mut [ExperimentRng],
-                conditions: Conditions<'_>,
-                outs: &mut [IoData],
-            ) -> Vec<Result<()>> {
-                (**self).simulate_batch_under(thetas, rngs, conditions, outs)
+                (**self).simulate_block(thetas, rngs, block, outs)
             }
         }
     )*};

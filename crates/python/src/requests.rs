@@ -10,7 +10,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use twostage::models::IoData;
 use twostage::sources::csv_rows::DataFileError;
-use twostage::{EstimateRequest, EstimateWith, NamedModel};
+use twostage::{EstimateRequest, EstimateWith};
 
 use crate::simulator::PythonProgress;
 use crate::through_model::{
@@ -42,23 +42,17 @@ pub(crate) fn check<'py>(
         None => EstimateWith::Estimator(Box::new(estimator.clone())),
         Some(theta) => {
             through_model::parameters(&theta, estimator.param_names())?;
-            let given = twostage::GivenValues::new(vec![("0".into(), theta)], "theta")
+            let values = twostage::GivenValues::new(vec![("0".into(), theta)], "theta")
                 .map_err(|e| PyValueError::new_err(e.to_string()))?;
-            EstimateWith::Given(given)
+            EstimateWith::GivenOfEstimator {
+                values,
+                estimator: Box::new(estimator.clone()),
+            }
         }
-    };
-    // Given values need the model by name; the estimator finds its own.
-    let model = match &with {
-        EstimateWith::Given(_) => Some(
-            NamedModel::trained_on(&estimator.training().model, named.as_ref())
-                .map_err(to_python)?
-                .into_owned(),
-        ),
-        _ => named,
     };
     let estimating = prepared(
         EstimateRequest::new(with)
-            .model(model)
+            .model(named)
             .check_records(true)
             .check_settings(check_settings(sims, score_from, score_to))
             .seed(seed)

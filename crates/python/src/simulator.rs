@@ -8,7 +8,9 @@
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use twostage::models::{ExperimentRng, ExternalJob, IoData, ModelSpec, SimError, Simulator};
+use twostage::models::{
+    Block, Conditions, ExperimentRng, ExternalJob, IoData, ModelSpec, SimError, Simulator,
+};
 
 /// A Python callable simulating batches of experiments.
 pub(crate) struct PythonSimulator {
@@ -191,10 +193,13 @@ impl Simulator for PythonSimulator {
         self.batch
     }
 
-    fn simulate_batch(
+    /// One call of the function for the block (its capabilities are
+    /// none, so the block is plain).
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
+        _: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<(), SimError>> {
         let jobs: Vec<(u64, u64)> = rngs.iter().map(ExternalJob::stream_of).collect();
@@ -214,15 +219,17 @@ impl Simulator for PythonSimulator {
         })
     }
 
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
-        self.simulate_batch(
+        self.simulate_block(
             &[theta],
             std::slice::from_mut(rng),
+            Block::default(),
             std::slice::from_mut(out),
         )
         .pop()

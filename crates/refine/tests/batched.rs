@@ -8,8 +8,8 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use twostage_models::{
-    Capabilities, Conditions, ExperimentRng, IoData, ModelSpec, Prior, SimError, Simulator,
-    experiment_rng,
+    Block, BlockInputs, Capabilities, Conditions, ExperimentRng, IoData, ModelSpec, Prior,
+    SimError, Simulator, experiment_rng, simulate_one_by_one,
 };
 use twostage_refine::{OutputError, Refinement, TerminationReason};
 
@@ -59,9 +59,6 @@ impl Simulator for FirstOrder {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(&self, _: &[f64], _: &mut ExperimentRng, _: &mut IoData) -> Result<(), SimError> {
-        Err(SimError::InvalidData("given inputs only".into()))
-    }
     fn batch_size(&self) -> usize {
         self.batch
     }
@@ -71,7 +68,7 @@ impl Simulator for FirstOrder {
             given_input: true,
         }
     }
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         _: &mut ExperimentRng,
@@ -84,13 +81,17 @@ impl Simulator for FirstOrder {
             .ok_or(SimError::InvalidData("no input".into()))?;
         self.respond(theta, input, out)
     }
-    fn simulate_batch_under(
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
-        _: &mut [ExperimentRng],
-        conditions: Conditions<'_>,
+        rngs: &mut [ExperimentRng],
+        block: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<Result<(), SimError>> {
+        if let BlockInputs::Each(_) = block.inputs {
+            return simulate_one_by_one(self, thetas, rngs, block, outs);
+        }
+        let conditions = block.conditions(0);
         assert!(
             thetas.len() <= self.batch,
             "a request larger than the batch"

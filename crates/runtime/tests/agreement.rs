@@ -12,8 +12,8 @@ mod common;
 use rand_distr::{Distribution, StandardNormal};
 use twostage::compress::{Arx, CompressorConfig};
 use twostage::models::{
-    Benchmark, ExperimentRng, IoData, Marginal, ModelSpec, PacejkaCar, Prior, SUMMARY_NAMES,
-    SimError, Simulator, experiment_rng,
+    Benchmark, Conditions, ExperimentRng, IoData, Marginal, ModelSpec, PacejkaCar, Prior,
+    SUMMARY_NAMES, SimError, Simulator, experiment_rng,
 };
 use twostage::{Preset, TwoStage};
 use twostage_runtime::{Estimator, Intervals, Stream};
@@ -262,10 +262,11 @@ impl Simulator for TwoByTwo {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let n = self.spec.n_samples();
@@ -335,10 +336,11 @@ impl Simulator for OutputOnly {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let n = self.spec.n_samples();
@@ -387,10 +389,11 @@ impl Simulator for Positive {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let n = self.spec.n_samples();

@@ -163,7 +163,7 @@ pub fn push_record_rows(text: &mut String, experiment: Option<usize>, record: &I
 
 #[cfg(test)]
 mod tests {
-    use twostage_models::{ExperimentRng, ModelSpec, Prior, SimError};
+    use twostage_models::{Conditions, ExperimentRng, ModelSpec, Prior, SimError};
 
     use super::*;
 
@@ -174,10 +174,11 @@ mod tests {
         fn spec(&self) -> &ModelSpec {
             &self.0
         }
-        fn simulate(
+        fn simulate_one(
             &self,
             theta: &[f64],
             _rng: &mut ExperimentRng,
+            _: Conditions<'_>,
             out: &mut IoData,
         ) -> twostage_models::Result<()> {
             if theta[0] > 0.5 {

@@ -33,6 +33,7 @@ pub mod csv_rows;
 mod error;
 mod model_file;
 mod named_model;
+pub mod parameter_values;
 mod preset;
 mod profile;
 mod progress;

@@ -16,7 +16,8 @@ use rand_distr::{Distribution, Normal};
 use twostage::compress::Arx;
 use twostage::fit::MlpParams;
 use twostage::models::{
-    ExperimentRng, IoData, ModelSpec, OdeSystem, Prior, Rk4, SimError, Simulator, experiment_rng,
+    Conditions, ExperimentRng, IoData, ModelSpec, OdeSystem, Prior, Rk4, SimError, Simulator,
+    experiment_rng,
 };
 use twostage::{Estimator, RegressorConfig, TwoStage};
 
@@ -70,10 +71,11 @@ impl Simulator for MassSpringDamper {
         &self.spec
     }
 
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         self.spec

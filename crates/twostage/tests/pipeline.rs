@@ -10,7 +10,7 @@ use twostage::compress::Arx;
 use twostage::estimator::Error as EstimatorError;
 use twostage::fit::MlpParams;
 use twostage::models::{
-    Benchmark, ExperimentRng, IoData, ModelSpec, SimError, Simulator, experiment_rng,
+    Benchmark, Conditions, ExperimentRng, IoData, ModelSpec, SimError, Simulator, experiment_rng,
 };
 use twostage::{AutoDesign, Error, Estimator, FileError, RegressorConfig, TwoStage};
 
@@ -215,10 +215,11 @@ impl Simulator for Fragile {
     fn spec(&self) -> &ModelSpec {
         self.inner.spec()
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         if theta[0] > self.above {

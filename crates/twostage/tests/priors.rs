@@ -8,7 +8,8 @@ use rand_distr::{Distribution, StandardNormal};
 use twostage::TwoStage;
 use twostage::compress::Arx;
 use twostage::models::{
-    ExperimentRng, IoData, Marginal, ModelSpec, Prior, SimError, Simulator, experiment_rng,
+    Conditions, ExperimentRng, IoData, Marginal, ModelSpec, Prior, SimError, Simulator,
+    experiment_rng,
 };
 
 /// `y_k = a y_{k-1} + K u_{k-1} + e_k`, white unit input, noise sd 0.05.
@@ -41,10 +42,11 @@ impl Simulator for FirstOrder {
     fn spec(&self) -> &ModelSpec {
         &self.spec
     }
-    fn simulate(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
+        _: Conditions<'_>,
         out: &mut IoData,
     ) -> Result<(), SimError> {
         let (gain, pole) = (theta[0], theta[1]);

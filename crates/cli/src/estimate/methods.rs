@@ -6,13 +6,11 @@
 use anyhow::Result;
 use twostage::{
     CheckSettings, ClassicMethod, EstimateRequest, EstimateWith, Estimating, Estimator,
-    GivenValues, OUTPUT_ERROR_METHOD, Purpose, RefineChoiceError, RefineWhich, RequestError,
-    RequestProblem, Windows,
+    OUTPUT_ERROR_METHOD, Purpose, RefineChoiceError, RefineWhich, RequestError, RequestProblem,
+    Windows,
 };
 
 use super::EstimateArgs;
-use crate::OrUsage;
-use crate::options::InitialCovariance;
 use crate::{UsageError, usage};
 
 /// What `--method` names: a classic method of a built-in model, or the
@@ -115,37 +113,17 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
     Ok(())
 }
 
-/// `--at VALUES.csv`: given values, one row for every record or a row per
-/// experiment, read with the model's parameters.
-fn given_values(args: &EstimateArgs, path: &std::path::Path) -> Result<GivenValues> {
-    let named = named_model(args, "--at")?;
-    let spec = named.simulator().or_usage()?.spec().clone();
-    let rows = crate::predict::read_rows(path, spec.param_names())?;
-    let rows = rows.into_iter().map(|row| (row.id, row.theta)).collect();
-    GivenValues::new(rows, &path.display().to_string()).or_usage()
-}
-
-/// The model named by --model or --model-file, which `what` needs.
-fn named_model(args: &EstimateArgs, what: &str) -> Result<twostage::NamedModel> {
-    crate::model_arg::named(args.model.as_deref(), args.model_file.as_deref())?.ok_or_else(|| {
-        usage(format!(
-            "{what} simulates the model: give --model M or --model-file F"
-        ))
-    })
-}
-
-/// Starts of the multi-start methods when --starts is not given.
-const DEFAULT_STARTS: usize = 5;
-
 /// The request the flags make, prepared: the model read once for every
 /// use of it.
 pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
     refuse_what_does_not_apply(args)?;
+    // What a flag left out leaves to the methods' own defaults.
+    let defaults = twostage::baselines::MethodSettings::default();
     let with = match (&args.estimator, &args.at, args.method) {
         (Some(path), _, _) => EstimateWith::Estimator(Box::new(Estimator::load(path)?)),
-        (None, Some(path), _) => EstimateWith::Given(given_values(args, path)?),
+        (None, Some(path), _) => EstimateWith::GivenFile(path.clone()),
         (None, None, Some(MethodChoice::OutputError)) => EstimateWith::OutputError {
-            starts: args.starts.unwrap_or(DEFAULT_STARTS),
+            starts: args.starts.unwrap_or(defaults.starts),
         },
         (None, None, Some(MethodChoice::Classic(method)))
             if args.model.is_some() || args.model_file.is_some() =>
@@ -153,10 +131,10 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
             EstimateWith::Classic {
                 method,
                 settings: twostage::baselines::MethodSettings {
-                    initial_covariance: args.p0.unwrap_or(InitialCovariance::Eq6).into(),
+                    initial_covariance: args.p0.map_or(defaults.initial_covariance, Into::into),
                     particles: args.particles,
-                    starts: args.starts.unwrap_or(DEFAULT_STARTS),
-                    seed: args.seed.unwrap_or(0),
+                    starts: args.starts.unwrap_or(defaults.starts),
+                    seed: args.seed.unwrap_or(defaults.seed),
                 },
             }
         }
@@ -202,9 +180,13 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
         .windows(window)
         .seed(args.seed.unwrap_or(0))
         .prior_starts(args.prior_starts);
-    request
+    let estimating = request
         .prepare()
-        .map_err(|e| said_as_the_flags_say_it(e, args))
+        .map_err(|e| said_as_the_flags_say_it(e, args))?;
+    for note in estimating.notes() {
+        eprintln!("note: {note}");
+    }
+    Ok(estimating)
 }
 
 /// A request's error in the words of the flag it came from.
@@ -224,7 +206,7 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
         RequestProblem::NoModel => usage(format!(
             "{flag} simulates the model: give --model M or --model-file F"
         )),
-        RequestProblem::NotBuiltIn { .. } => usage(e.error.to_string()),
+        RequestProblem::NotBuiltIn { .. } | RequestProblem::Values(_) => usage(e.error.to_string()),
         RequestProblem::OutsidePrior { .. } => usage(format!("{OUTSIDE_PRIOR_FLAGS}: {}", e.error)),
         // The method's own error names the method and the model.
         RequestProblem::Failed(cause) if e.purpose == Purpose::Method => {

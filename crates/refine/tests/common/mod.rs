@@ -59,16 +59,13 @@ impl Simulator for Duffing {
     fn spec(&self) -> &ModelSpec {
         &self.0
     }
-    fn simulate(&self, _: &[f64], _: &mut ExperimentRng, _: &mut IoData) -> Result<(), SimError> {
-        Err(SimError::InvalidData("given inputs only".into()))
-    }
     fn capabilities(&self) -> Capabilities {
         Capabilities {
             noiseless: true,
             given_input: true,
         }
     }
-    fn simulate_under(
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,

@@ -2,7 +2,8 @@
 //! noise, or none for a file that describes charts.
 
 use twostage_models::{
-    Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec, Simulator,
+    Block, BlockInputs, Capabilities, Conditions, ExperimentRng, InputSignal, IoData, ModelSpec,
+    Simulator,
 };
 
 /// A model file's simulator: the source's, under the file's name, prior
@@ -27,15 +28,6 @@ impl Simulator for FileSimulator {
         &self.spec
     }
 
-    fn simulate(
-        &self,
-        theta: &[f64],
-        rng: &mut ExperimentRng,
-        out: &mut IoData,
-    ) -> twostage_models::Result<()> {
-        self.simulate_under(theta, rng, Conditions::default(), out)
-    }
-
     fn capabilities(&self) -> Capabilities {
         self.inner.capabilities()
     }
@@ -49,17 +41,22 @@ impl Simulator for FileSimulator {
             .or_else(|| self.inner.shared_input())
     }
 
-    fn simulate_under(
+    fn batch_size(&self) -> usize {
+        self.inner.batch_size()
+    }
+
+    /// One experiment as a block of one.
+    fn simulate_one(
         &self,
         theta: &[f64],
         rng: &mut ExperimentRng,
         conditions: Conditions<'_>,
         out: &mut IoData,
     ) -> twostage_models::Result<()> {
-        self.simulate_batch_under(
+        self.simulate_block(
             &[theta],
             std::slice::from_mut(rng),
-            conditions,
+            Block::of(conditions),
             std::slice::from_mut(out),
         )
         .pop()
@@ -70,47 +67,44 @@ impl Simulator for FileSimulator {
         })
     }
 
-    fn simulate_batch_under(
+    /// The source's block on the file's inputs (its design's, drawn per
+    /// experiment, or its fixed input), then the file's measurement.
+    fn simulate_block(
         &self,
         thetas: &[&[f64]],
         rngs: &mut [ExperimentRng],
-        conditions: Conditions<'_>,
+        block: Block<'_>,
         outs: &mut [IoData],
     ) -> Vec<twostage_models::Result<()>> {
-        if let (Some(design), None) = (&self.design, conditions.input) {
-            let inputs = match self.drawn_inputs(design, rngs) {
-                Ok(inputs) => inputs,
-                Err(e) => return thetas.iter().map(|_| Err(e.clone())).collect(),
-            };
-            return self.simulate_batch_on_inputs(thetas, rngs, &inputs, conditions, outs);
-        }
-        let conditions = self.with_fixed_input(conditions);
-        let mut results = self
-            .inner
-            .simulate_batch_under(thetas, rngs, conditions, outs);
-        for ((result, rng), out) in results.iter_mut().zip(rngs.iter_mut()).zip(outs.iter_mut()) {
-            if result.is_ok() {
-                *result = self.measured(rng, conditions, out);
+        let drawn;
+        let block = match (&self.design, block.inputs) {
+            (Some(design), BlockInputs::Own) => {
+                drawn = match self.drawn_inputs(design, rngs) {
+                    Ok(inputs) => inputs,
+                    Err(e) => return thetas.iter().map(|_| Err(e.clone())).collect(),
+                };
+                Block {
+                    inputs: BlockInputs::Each(&drawn),
+                    ..block
+                }
             }
-        }
-        results
-    }
-
-    fn batch_size(&self) -> usize {
-        self.inner.batch_size()
-    }
-
-    fn simulate_batch_on_inputs(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        inputs: &[IoData],
-        conditions: Conditions<'_>,
-        outs: &mut [IoData],
-    ) -> Vec<twostage_models::Result<()>> {
-        let mut results = self
-            .inner
-            .simulate_batch_on_inputs(thetas, rngs, inputs, conditions, outs);
+            (_, BlockInputs::Each(_)) => block,
+            _ => Block::of(self.with_fixed_input(block.conditions(0))),
+        };
+        // The source's own entry points check what the file asks of it.
+        let mut results = match block.inputs {
+            BlockInputs::Each(inputs) => {
+                let noise = Conditions {
+                    noiseless: block.noiseless,
+                    input: None,
+                };
+                self.inner
+                    .simulate_batch_on_inputs(thetas, rngs, inputs, noise, outs)
+            }
+            _ => self
+                .inner
+                .simulate_batch_under(thetas, rngs, block.conditions(0), outs),
+        };
         for (k, ((result, rng), out)) in results
             .iter_mut()
             .zip(rngs.iter_mut())
@@ -118,23 +112,10 @@ impl Simulator for FileSimulator {
             .enumerate()
         {
             if result.is_ok() {
-                let conditions = Conditions {
-                    input: inputs.get(k),
-                    ..conditions
-                };
-                *result = self.measured(rng, conditions, out);
+                *result = self.measured(rng, block.conditions(k), out);
             }
         }
         results
-    }
-
-    fn simulate_batch(
-        &self,
-        thetas: &[&[f64]],
-        rngs: &mut [ExperimentRng],
-        outs: &mut [IoData],
-    ) -> Vec<twostage_models::Result<()>> {
-        self.simulate_batch_under(thetas, rngs, Conditions::default(), outs)
     }
 }
 
@@ -221,10 +202,11 @@ impl Simulator for ChartsOnly {
         &self.spec
     }
 
-    fn simulate(
+    fn simulate_one(
         &self,
         _: &[f64],
         _: &mut ExperimentRng,
+        _: Conditions<'_>,
         _: &mut IoData,
     ) -> twostage_models::Result<()> {
         Err(twostage_models::SimError::InvalidData(format!(
