@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{Result, bail};
 use rayon::prelude::*;
 use twostage::models::{Conditions, IoData, Simulator, experiment_rng};
-use twostage::sources::csv_rows::{for_each_row, row};
+use twostage::sources::csv_rows::row;
 
 use crate::number::format_f64;
 use crate::usage;
@@ -21,81 +21,21 @@ pub struct Row {
     pub theta: Vec<f64>,
 }
 
-/// The rows of an estimate CSV (as `estimate` writes it): an optional
-/// `experiment` column and one column per parameter, named as the model
-/// names them; other columns are ignored. A row whose parameters are
-/// empty (a record `estimate` could not estimate) is skipped with a note.
+/// The rows of an estimate CSV ([`twostage::sources::parameter_values`]),
+/// each row skipped for want of values said as a note.
 ///
 /// # Errors
-/// A missing parameter column, a value that is not a finite number (file,
-/// line, column), or no row at all.
+/// What the reader refuses (file, line, column).
 pub fn read_rows(path: &Path, names: &[String]) -> Result<Vec<Row>> {
-    let file = path.display().to_string();
-    let reader = std::fs::File::open(path).map_err(|e| usage(format!("{file}: {e}")))?;
-    let mut columns: Option<(Option<usize>, Vec<usize>)> = None;
-    let mut rows = Vec::new();
-    for_each_row(
-        std::io::BufReader::new(reader),
-        |line, fields| -> Result<(), String> {
-            let Some((id_column, theta_columns)) = &columns else {
-                let header: Vec<&str> = fields.iter().collect();
-                let find = |name: &str| header.iter().position(|h| *h == name);
-                let theta_columns = names
-                    .iter()
-                    .map(|n| {
-                        find(n).ok_or_else(|| {
-                            format!(
-                                "{file}, line {line}: no column `{n}`; an estimate CSV names \
-                                 the model's parameters ({}) in its header, as `twostage \
-                                 estimate` writes it",
-                                names.join(", ")
-                            )
-                        })
-                    })
-                    .collect::<Result<Vec<_>, _>>()?;
-                columns = Some((find("experiment"), theta_columns));
-                return Ok(());
-            };
-            let id = id_column
-                .and_then(|c| fields.get(c))
-                .map_or_else(|| (rows.len() + 1).to_string(), str::to_string);
-            let cells: Vec<&str> = theta_columns
-                .iter()
-                .map(|&c| fields.get(c).unwrap_or(""))
-                .collect();
-            if cells.iter().all(|c| c.is_empty()) {
-                eprintln!("note: {file}, line {line} (experiment {id}) has no estimate: skipped");
-                return Ok(());
-            }
-            let theta = cells
-                .iter()
-                .zip(names)
-                .map(|(cell, name)| {
-                    cell.parse::<f64>()
-                        .ok()
-                        .filter(|v| v.is_finite())
-                        .ok_or_else(|| {
-                            format!(
-                                "{file}, line {line}, column {name}: {cell:?} is not a finite \
-                                 number"
-                            )
-                        })
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            rows.push(Row { id, theta });
-            Ok(())
-        },
-        |line, e| format!("{file}, line {line:?}: {e}"),
-    )
-    .map_err(usage)?;
-    if rows.is_empty() {
-        return Err(usage(format!(
-            "{file} holds no parameter values: a header naming the parameters ({}) and a row \
-             of values under it",
-            names.join(", ")
-        )));
+    let read = twostage::sources::parameter_values::read(path, names).map_err(usage)?;
+    for skipped in &read.skipped {
+        eprintln!("note: {skipped}");
     }
-    Ok(rows)
+    Ok(read
+        .rows
+        .into_iter()
+        .map(|(id, theta)| Row { id, theta })
+        .collect())
 }
 
 /// The given inputs: none, one record for every row, or one per row
@@ -157,8 +97,9 @@ impl Inputs {
 }
 
 /// Simulate `sim` at every row (experiment stream `i` of `seed` for row
-/// `i`), in requests of the simulator's batch size wherever rows share an
-/// input, in parallel; the records in the rows' order.
+/// `i`), in requests of the simulator's batch size (rows on inputs of
+/// their own too: a block of them, each on its own), in parallel; the
+/// records in the rows' order.
 ///
 /// # Errors
 /// The first row that fails, named by its experiment id.
@@ -170,10 +111,7 @@ pub fn simulate_rows(
     seed: u64,
     progress: &dyn twostage::Progress,
 ) -> Result<Vec<IoData>> {
-    let batch = match inputs {
-        Inputs::PerRow(_) => 1,
-        Inputs::Own | Inputs::One(_) => sim.batch_size().max(1),
-    };
+    let batch = sim.batch_size().max(1);
     let starts: Vec<usize> = (0..rows.len()).step_by(batch).collect();
     let blocks: Vec<Vec<IoData>> = starts
         .par_iter()
@@ -184,11 +122,23 @@ pub fn simulate_rows(
                 .map(|i| experiment_rng(seed, i as u64))
                 .collect();
             let mut records = vec![IoData::default(); block.len()];
-            let conditions = Conditions {
-                noiseless,
-                input: inputs.of(start),
+            let results = match inputs {
+                Inputs::PerRow(given) => {
+                    let noise = Conditions {
+                        noiseless,
+                        input: None,
+                    };
+                    let given = &given[start..start + block.len()];
+                    sim.simulate_batch_on_inputs(&thetas, &mut rngs, given, noise, &mut records)
+                }
+                Inputs::Own | Inputs::One(_) => {
+                    let conditions = Conditions {
+                        noiseless,
+                        input: inputs.of(start),
+                    };
+                    sim.simulate_batch_under(&thetas, &mut rngs, conditions, &mut records)
+                }
             };
-            let results = sim.simulate_batch_under(&thetas, &mut rngs, conditions, &mut records);
             progress.advance_step(block.len());
             for (row, result) in block.iter().zip(results) {
                 if let Err(e) = result {

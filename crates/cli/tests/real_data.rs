@@ -519,3 +519,88 @@ serve(simulate)
     let k: f64 = row[column("k")].parse().unwrap();
     assert!((0.0..=2.0).contains(&k));
 }
+
+/// `simulate --at` with a record per row sends the rows in blocks of the
+/// source's batch, each experiment on its own input (`each`), not a
+/// request per row; each row's response is its own input's.
+#[test]
+fn rows_on_inputs_of_their_own_go_to_a_batching_source_in_blocks() {
+    let dir = scratch("real-data-rows-in-blocks");
+    let calls = dir.join("calls.log");
+    std::fs::write(
+        dir.join("gain.py"),
+        format!(
+            r#"import sys
+sys.path.insert(0, {:?})
+from twostage_protocol import serve
+
+def batch(thetas, seeds, indices, noiseless=False, input=None):
+    with open({:?}, "a") as log:
+        log.write(f"{{len(thetas)}} {{len(input[0][0]) if input is not None and isinstance(input[0][0], list) else 0}}\n")
+    inputs = input if isinstance(input[0][0], list) else [input] * len(thetas)
+    return inputs, [[[t[0] * row[0]] for row in u] for t, u in zip(thetas, inputs)]
+
+serve(batch=batch)
+"#,
+            example().join("../../protocol").to_str().unwrap(),
+            calls.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let model = dir.join("gain.toml");
+    std::fs::write(
+        &model,
+        format!(
+            "[model]\nname = \"gain\"\n[source]\ncommand = [{:?}, \"gain.py\"]\nprotocol = 2\n\
+             batch = 4\n[[parameter]]\nname = \"k\"\nprior = {{ dist = \"uniform\", low = 0.0, \
+             high = 2.0 }}\n[signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 5\n",
+            python()
+        ),
+    )
+    .unwrap();
+    let ids = ["a", "b", "c", "d", "e", "f"];
+    let mut records = String::from("experiment,u,y\n");
+    let mut estimates = String::from("experiment,k\n");
+    for (r, id) in ids.iter().enumerate() {
+        for k in 0..5 {
+            records.push_str(&format!("{id},{},0\n", (r * 10 + k) as f64 * 0.5));
+        }
+        estimates.push_str(&format!("{id},{}\n", 0.25 * (r + 1) as f64));
+    }
+    std::fs::write(dir.join("records.csv"), records).unwrap();
+    std::fs::write(dir.join("estimates.csv"), estimates).unwrap();
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(&model),
+        "--at",
+        path(&dir.join("estimates.csv")),
+        "--input",
+        path(&dir.join("records.csv")),
+        "--noiseless",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    let rows: Vec<Vec<&str>> = stdout
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 30, "{stdout}");
+    for (i, row) in rows.iter().enumerate() {
+        let (r, k) = (i / 5, i % 5);
+        assert_eq!(row[0], ids[r]);
+        let u = (r * 10 + k) as f64 * 0.5;
+        let gain = 0.25 * (r + 1) as f64;
+        assert_eq!(row[1].parse::<f64>().unwrap().to_bits(), u.to_bits());
+        assert_eq!(
+            row[2].parse::<f64>().unwrap().to_bits(),
+            (gain * u).to_bits()
+        );
+    }
+    // Two requests, of four and two experiments, each input its own.
+    let log = std::fs::read_to_string(&calls).unwrap();
+    let mut sizes: Vec<&str> = log.lines().collect();
+    sizes.sort_unstable();
+    assert_eq!(sizes, ["2 1", "4 1"], "{log}");
+}
