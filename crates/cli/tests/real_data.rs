@@ -413,6 +413,25 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
     );
 }
 
+/// `dir/gain.toml`: the protocol-2 program `dir/gain.py` as a model of one
+/// gain `k` in [0, 2], one input and one output, records of `samples`;
+/// `source` adds lines under `[source]`.
+fn gain_model(dir: &Path, source: &str, samples: usize) -> PathBuf {
+    let model = dir.join("gain.toml");
+    std::fs::write(
+        &model,
+        format!(
+            "[model]\nname = \"gain\"\n[source]\ncommand = [{:?}, \"gain.py\"]\nprotocol = 2\n\
+             {source}[[parameter]]\nname = \"k\"\nprior = {{ dist = \"uniform\", low = 0.0, \
+             high = 2.0 }}\n[signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = \
+             {samples}\n",
+            python()
+        ),
+    )
+    .unwrap();
+    model
+}
+
 /// A simulator that fails whenever it is asked to run without noise: the
 /// check and the refinement fail for each record, say so, and keep its
 /// two-stage estimate.
@@ -439,17 +458,7 @@ serve(simulate)
         ),
     )
     .unwrap();
-    let model = dir.join("gain.toml");
-    std::fs::write(
-        &model,
-        format!(
-            "[model]\nname = \"gain\"\n[source]\ncommand = [{:?}, \"gain.py\"]\nprotocol = 2\n\
-             [[parameter]]\nname = \"k\"\nprior = {{ dist = \"uniform\", low = 0.0, high = 2.0 }}\n\
-             [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 40\n",
-            python()
-        ),
-    )
-    .unwrap();
+    let model = gain_model(&dir, "", 40);
     let estimator = dir.join("gain.tsest");
     let out = twostage(&[
         "train",
@@ -547,17 +556,7 @@ serve(batch=batch)
         ),
     )
     .unwrap();
-    let model = dir.join("gain.toml");
-    std::fs::write(
-        &model,
-        format!(
-            "[model]\nname = \"gain\"\n[source]\ncommand = [{:?}, \"gain.py\"]\nprotocol = 2\n\
-             batch = 4\n[[parameter]]\nname = \"k\"\nprior = {{ dist = \"uniform\", low = 0.0, \
-             high = 2.0 }}\n[signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 5\n",
-            python()
-        ),
-    )
-    .unwrap();
+    let model = gain_model(&dir, "batch = 4\n", 5);
     let ids = ["a", "b", "c", "d", "e", "f"];
     let mut records = String::from("experiment,u,y\n");
     let mut estimates = String::from("experiment,k\n");
