@@ -19,6 +19,7 @@ mod methods;
 mod records;
 mod refiner;
 mod rows;
+mod run;
 mod table;
 mod through_model;
 
@@ -35,6 +36,7 @@ pub use refiner::{
 pub use rows::{
     AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined,
 };
+pub use run::{JointRun, RecordBatch, RecordPlace};
 
 use methods::Method;
 

@@ -134,24 +134,26 @@ pub(crate) fn joint<'py>(
             .prior_starts(prior_starts),
     )?;
     let shape = estimator.record_shape();
-    let records: Vec<(String, Result<twostage::models::IoData, DataFileError>)> = records
+    let records: Vec<(String, IoData)> = records
         .iter()
         .enumerate()
         .map(|(k, (u, y))| {
             one_record(u.as_ref(), Some(y), shape.n_inputs, shape.n_outputs)
-                .map(|record| (k.to_string(), Ok(record)))
+                .map(|record| (k.to_string(), record))
                 .map_err(|e| PyValueError::new_err(format!("records[{k}]: {e}")))
         })
         .collect::<PyResult<_>>()?;
     let joint = py.detach(|| {
-        let estimates =
-            estimating.estimate_each(records, &|id| format!("records[{id}]"), &twostage::Silent);
-        if let Some((_, Err(e))) = estimates.rows.iter().find(|(_, o)| o.is_err()) {
-            return Err(e.to_string());
-        }
-        let mut plant = estimating.plant();
-        plant.gather(&estimates, |id| format!("records[{id}]"));
-        match estimating.fit_plant(&plant, &twostage::Silent) {
+        let batch = twostage::RecordBatch::indexed("records", records);
+        let joint = estimating.run(
+            [Ok(batch)],
+            &twostage::Silent,
+            |_, estimates| match estimates.rows.into_iter().find_map(|(_, o)| o.err()) {
+                Some(e) => Err(e.to_string()),
+                None => Ok(()),
+            },
+        )?;
+        match joint.map(|joint| joint.fit) {
             Some(Ok((joint, _))) => Ok(joint),
             Some(Err(e)) => Err(format!("the joint fit failed: {e}")),
             None => unreachable!("the request asks for the joint fit of its records"),
@@ -293,32 +295,41 @@ pub(crate) fn estimate_records<'py>(
             Some(reporter) => reporter,
             None => &twostage::Silent,
         };
-        let estimates = estimating.estimate("records", records, progress);
-        let auto = estimates.auto.as_ref().map(|auto| {
-            let refined = auto
-                .groups(&estimates.rows)
-                .into_iter()
-                .flat_map(|(reason, ids)| {
-                    ids.into_iter()
-                        .map(move |id| (id.to_string(), reason.describe().to_string()))
-                })
-                .collect();
-            (auto.explained, auto.checked, refined)
-        });
-        let mut plant = estimating.plant();
-        plant.gather(&estimates, |id| format!("records[{id}]"));
         let mut rows = Vec::new();
         let mut failed = Vec::new();
-        for (id, outcome) in estimates.rows {
-            match outcome {
-                Ok((_, row)) => rows.push((id, row)),
-                Err(why) => failed.push((id, why.to_string())),
+        let mut auto = None;
+        let batch = twostage::RecordBatch {
+            source: "records".into(),
+            records,
+            place: twostage::RecordPlace::Experiment,
+        };
+        let joint = estimating.run([Ok(batch)], progress, |_, estimates| {
+            auto = estimates.auto.as_ref().map(|auto| {
+                let refined = auto
+                    .groups(&estimates.rows)
+                    .into_iter()
+                    .flat_map(|(reason, ids)| {
+                        ids.into_iter()
+                            .map(move |id| (id.to_string(), reason.describe().to_string()))
+                    })
+                    .collect();
+                (auto.explained, auto.checked, refined)
+            });
+            for (id, outcome) in estimates.rows {
+                match outcome {
+                    Ok((_, row)) => rows.push((id, row)),
+                    Err(why) => failed.push((id, why.to_string())),
+                }
             }
-        }
-        match estimating.fit_plant(&plant, progress) {
-            Some(Ok((_, row))) => rows.push(("joint".into(), row)),
-            Some(Err(why)) => failed.push(("joint".into(), format!("the joint fit failed: {why}"))),
-            None => {}
+            Ok::<(), std::convert::Infallible>(())
+        });
+        match joint {
+            Ok(Some(joint)) => match joint.fit {
+                Ok((_, row)) => rows.push(("joint".into(), row)),
+                Err(why) => failed.push(("joint".into(), format!("the joint fit failed: {why}"))),
+            },
+            Ok(None) => {}
+            Err(never) => match never {},
         }
         (rows, failed, auto)
     });

@@ -227,15 +227,11 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     let bars = crate::bars::Bars::new(false);
     let mut rows: Vec<(String, RecordEstimate)> = Vec::new();
     let mut failed = 0;
-    // With --joint: every estimated record, by file and experiment.
-    let mut plant = estimating.plant();
-    for path in &args.data {
-        let reads =
-            twostage::sources::record_file::read(path, &format).map_err(anyhow::Error::msg)?;
-        let records = reads.into_iter().map(|r| (r.id, r.record)).collect();
-        let file = path.display().to_string();
-        let estimates = estimating.estimate(&file, records, &bars);
-        plant.gather(&estimates, |id| format!("{file}: experiment {id}"));
+    let files = args
+        .data
+        .iter()
+        .map(|path| estimating.read_file(path).map_err(anyhow::Error::msg));
+    let joint = estimating.run(files, &bars, |file, estimates| {
         if let Some(auto) = &estimates.auto {
             eprintln!(
                 "note: {file}: --refine=auto: the check explains {} of {} two-stage estimates; \
@@ -245,7 +241,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 said::refine_reasons(auto, &estimates.rows)
             );
         }
-        let mut said = said::Said::new(path, &format, trained);
+        let mut said = said::Said::new(std::path::Path::new(file), &format, trained);
         for (id, outcome) in estimates.rows {
             said.note_length(&id, &outcome);
             match outcome {
@@ -271,21 +267,24 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
             }
         }
         said.summarize();
-    }
-    match estimating.fit_plant(&plant, &bars) {
-        Some(Ok((joint, row))) => {
-            said::joint(&plant.places(), &joint);
-            rows.push(("joint".into(), row));
+        Ok(())
+    })?;
+    if let Some(joint) = joint {
+        match joint.fit {
+            Ok((fit, row)) => {
+                let places: Vec<&str> = joint.places.iter().map(String::as_str).collect();
+                said::joint(&places, &fit);
+                rows.push(("joint".into(), row));
+            }
+            // No row: a joint row without an estimate would read as one.
+            Err(why) => {
+                failed += 1;
+                eprintln!(
+                    "error: the joint fit of {} records failed: {why}",
+                    joint.places.len()
+                );
+            }
         }
-        // No row: a joint row without an estimate would read as one.
-        Some(Err(why)) => {
-            failed += 1;
-            eprintln!(
-                "error: the joint fit of {} records failed: {why}",
-                plant.len()
-            );
-        }
-        None => {}
     }
     let outcome = Outcome {
         estimated: rows.len(),
