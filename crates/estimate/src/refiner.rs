@@ -55,7 +55,7 @@ pub enum ModelFailure {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RefinedBy {
     /// The posterior mean near the best fit (a built-in model's exact
-    /// likelihood on a grid, decision 077).
+    /// likelihood on a grid).
     PosteriorMean,
     /// An output-error descent, and why it stopped; with the search's
     /// optima where a search over the prior found its start.
