@@ -43,11 +43,6 @@ impl RecordBatch {
             place: RecordPlace::Indexed,
         }
     }
-
-    /// Record `id`'s place.
-    pub fn place_of(&self, id: &str) -> String {
-        place(&self.source, self.place, id)
-    }
 }
 
 fn place(source: &str, how: RecordPlace, id: &str) -> String {

@@ -442,7 +442,7 @@ pub(crate) fn inputs_refused(
 ///
 /// ```
 /// use twostage_models::{Block, BlockInputs, Conditions};
-/// assert!(Block::default().is_plain());
+/// assert!(!Block::default().noiseless && matches!(Block::default().inputs, BlockInputs::Own));
 /// let noiseless = Block::of(Conditions { noiseless: true, input: None });
 /// assert!(noiseless.noiseless && matches!(noiseless.inputs, BlockInputs::Own));
 /// ```
@@ -476,11 +476,6 @@ impl<'a> Block<'a> {
                 .input
                 .map_or(BlockInputs::Own, BlockInputs::Shared),
         }
-    }
-
-    /// A block as training simulates it.
-    pub fn is_plain(&self) -> bool {
-        !self.noiseless && matches!(self.inputs, BlockInputs::Own)
     }
 
     /// The conditions of the block's `k`-th experiment.
