@@ -149,6 +149,19 @@ pub enum RefineWhich {
 }
 
 impl RefineWhich {
+    /// Whether records refined this way are checked first: `auto` checks
+    /// every record to choose which to refine (the one place the rule is
+    /// written; a request and a door's refusals both read it).
+    ///
+    /// ```
+    /// use twostage::RefineWhich;
+    /// assert!(!RefineWhich::All.checks());
+    /// assert!(RefineWhich::chosen(Some("auto"), None).unwrap().unwrap().checks());
+    /// ```
+    pub fn checks(self) -> bool {
+        matches!(self, Self::Auto(_))
+    }
+
     /// The refinement a door names: `which` is `"all"` or `"auto"` (none:
     /// no refinement), and `below_fit` the fit in percent below which
     /// `"auto"` refines a record however well the check explains it

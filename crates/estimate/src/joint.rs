@@ -10,9 +10,9 @@ use twostage_models::{IoData, Simulator};
 use twostage_refine::{
     JointPlan, OutputError, RefineError, Refinement, SearchStarts, SingleEstimate,
 };
-use twostage_sources::NamedModel;
 
-use crate::refiner::{SharedSimulator, ToRefine};
+use crate::model_of::{EstimatorModel, SharedSimulator};
+use crate::refiner::ToRefine;
 
 /// The joint estimate of the records handed to [`JointFitter::fit`], each
 /// record named by its place among them.
@@ -52,8 +52,8 @@ pub struct JointFitter {
 }
 
 impl JointFitter {
-    /// Joint estimates through `estimator`'s model (`model_file`, else its
-    /// built-in model) by output error, starting from `search`'s starts
+    /// Joint estimates through `estimator`'s `model` by output error,
+    /// starting from `search`'s starts
     /// over the prior besides the records' own estimates, the interval at
     /// the estimator's level (90% without intervals).
     ///
@@ -61,7 +61,7 @@ impl JointFitter {
     /// use twostage::TwoStage;
     /// use twostage::models::{Benchmark, Simulator, experiment_rng};
     /// use twostage::refine::SearchStarts;
-    /// use twostage::JointFitter;
+    /// use twostage::{EstimatorModel, JointFitter};
     /// let model = Benchmark::new();
     /// let estimator = TwoStage::builder(&model)
     ///     .preset(twostage::paper_benchmark())
@@ -75,7 +75,7 @@ impl JointFitter {
     ///     .collect::<Result<_, _>>()?;
     /// let items: Vec<_> = records.iter().zip(&singles)
     ///     .map(|(r, (t, w))| (r, t.as_slice(), w.as_deref())).collect();
-    /// let fitter = JointFitter::new(&estimator, None, SearchStarts { from_prior: 4, seed: 0 })?;
+    /// let fitter = JointFitter::new(&estimator, &EstimatorModel::find(&estimator, None)?, SearchStarts { from_prior: 4, seed: 0 })?;
     /// let joint = fitter.fit(&items)?;
     /// assert_eq!(joint.fitted.len(), 3);
     /// assert!((joint.theta[0] - 0.3).abs() < 0.2);
@@ -83,30 +83,14 @@ impl JointFitter {
     /// ```
     ///
     /// # Errors
-    /// A model file of another model than the estimator's, an estimator of
-    /// a model file without it, or a model that cannot run without noise
-    /// on a given input.
+    /// A model that cannot be built or run without noise on a given
+    /// input.
     pub fn new(
         estimator: &Estimator,
-        model_file: Option<&NamedModel>,
+        model: &EstimatorModel<'_>,
         search: SearchStarts,
     ) -> twostage_train::Result<Self> {
-        let simulator = NamedModel::trained_on(&estimator.training().model, model_file)
-            .and_then(|model| model.simulator())?;
-        Self::with_simulator(estimator, simulator.into(), search)
-    }
-
-    /// [`Self::new`] through `simulator`, the model's (a request shares
-    /// one between its check, refinement and joint fit).
-    ///
-    /// # Errors
-    /// A model that cannot run without noise on a given input.
-    pub fn with_simulator(
-        estimator: &Estimator,
-        simulator: SharedSimulator,
-        search: SearchStarts,
-    ) -> twostage_train::Result<Self> {
-        let fit = OutputError::new(simulator)?;
+        let fit = OutputError::new(model.simulator()?)?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
         Ok(Self {
             fit: Refinement::new(fit),

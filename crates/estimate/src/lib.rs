@@ -16,6 +16,7 @@ mod choices;
 mod failure;
 mod joint;
 mod methods;
+mod model_of;
 mod records;
 mod refiner;
 mod rows;
@@ -29,9 +30,10 @@ pub use choices::{
 pub use failure::{GivenValuesError, MethodFailure, RecordFailure};
 pub use joint::{JointFitter, JointOfRecords};
 pub use methods::OUTPUT_ERROR_METHOD;
+pub use model_of::{EstimatorModel, SharedSimulator};
 pub use refiner::{
     EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedBy, RefinedEstimate, SearchOptima,
-    SharedSimulator, ToRefine,
+    ToRefine,
 };
 pub use rows::{
     AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined,
@@ -188,9 +190,9 @@ impl EstimateRequest {
     }
 
     /// Whether the records are checked: asked, or to choose which to
-    /// refine (the one place `refine = auto` implies the check).
+    /// refine ([`RefineWhich::checks`]).
     pub fn checks(&self) -> bool {
-        self.check || matches!(self.refine, Some(RefineWhich::Auto(_)))
+        self.check || self.refine.is_some_and(RefineWhich::checks)
     }
 
     /// The request ready to estimate records: the model found and loaded
@@ -249,16 +251,27 @@ impl EstimateRequest {
             prior_starts: self.prior_starts,
             allow_outside_prior: self.allow_outside_prior,
         };
-        match self.with {
+        // The estimator's model, found once where a use asks for it; the
+        // first use names a lookup that fails.
+        let of_estimator = match &self.with {
             EstimateWith::Estimator(estimator) => {
-                settings.two_stage(estimator, self.model.as_ref())
+                settings.model_use().map(|purpose| (estimator, purpose))
             }
-            EstimateWith::GivenOfEstimator { values, estimator } => {
-                let named =
-                    NamedModel::trained_on(&estimator.training().model, self.model.as_ref())
-                        .map_err(|e| RequestError::new(Purpose::Given, e.into()))?;
-                settings.through_model(EstimateWith::Given(values), Some(&named))
-            }
+            EstimateWith::GivenOfEstimator { estimator, .. } => Some((estimator, Purpose::Given)),
+            _ => None,
+        };
+        let model = of_estimator
+            .map(|(estimator, purpose)| {
+                EstimatorModel::find(estimator, self.model.as_ref())
+                    .map_err(|e| RequestError::new(purpose, e.into()))
+            })
+            .transpose()?;
+        match self.with {
+            EstimateWith::Estimator(estimator) => settings.two_stage(estimator, model.as_ref()),
+            EstimateWith::GivenOfEstimator { values, .. } => settings.through_model(
+                EstimateWith::Given(values),
+                model.as_ref().map(EstimatorModel::named),
+            ),
             other => settings.through_model(other, self.model.as_ref()),
         }
     }
@@ -299,64 +312,51 @@ impl Settings {
         }
     }
 
-    /// A trained estimator's request: its model (the model file `given`,
-    /// else its built-in one) for each use asked.
+    /// The first use of a trained estimator's model, which names a
+    /// lookup that fails: the check, the refinement, the joint fit, or
+    /// none (the model is not needed).
+    fn model_use(self) -> Option<Purpose> {
+        if self.checks {
+            Some(Purpose::Check)
+        } else if self.refine.is_some() {
+            Some(Purpose::Refine)
+        } else if self.joint {
+            Some(Purpose::Joint)
+        } else {
+            None
+        }
+    }
+
+    /// A trained estimator's request: its `model`, found where a use asks
+    /// for it ([`Self::model_use`]), for each use.
     fn two_stage(
         self,
         estimator: Box<Estimator>,
-        given: Option<&NamedModel>,
+        model: Option<&EstimatorModel<'_>>,
     ) -> Result<Estimating, RequestError> {
         let q = estimator.param_names().len();
-        // The model found once and built once, at their first use, for all.
-        let found: std::cell::OnceCell<std::borrow::Cow<'_, NamedModel>> =
-            std::cell::OnceCell::new();
-        let named = || -> twostage_train::Result<&NamedModel> {
-            if let Some(named) = found.get() {
-                return Ok(named);
-            }
-            let named = NamedModel::trained_on(&estimator.training().model, given)?;
-            Ok(found.get_or_init(|| named))
-        };
-        let shared: std::cell::OnceCell<SharedSimulator> = std::cell::OnceCell::new();
-        let model = || -> twostage_train::Result<SharedSimulator> {
-            if let Some(built) = shared.get() {
-                return Ok(built.clone());
-            }
-            let built: SharedSimulator = named()?.simulator()?.into();
-            Ok(shared.get_or_init(|| built).clone())
-        };
-        let checker = if self.checks {
-            Some(model().map_err(|e| RequestError::new(Purpose::Check, e.into()))?)
-        } else {
-            None
-        };
-        let refiner = match self.refine {
-            Some(_) => Some(
-                EstimateRefiner::with_model(
-                    &estimator,
-                    // Without a model given, an estimator of a built-in
-                    // model is refined through the model's exact likelihood.
-                    || {
-                        given
-                            .is_none()
-                            .then(|| named().ok()?.as_builtin())
-                            .flatten()
-                    },
-                    model,
-                )
-                .map_err(|e| RequestError::new(Purpose::Refine, e.into()))?
-                .search(self.search(q)),
+        let checker = match (model, self.checks) {
+            (Some(model), true) => Some(
+                model
+                    .simulator()
+                    .map_err(|e| RequestError::new(Purpose::Check, e.into()))?,
             ),
-            None => None,
+            _ => None,
         };
-        let joint = if self.joint {
-            let simulator = model().map_err(|e| RequestError::new(Purpose::Joint, e.into()))?;
-            Some(
-                JointFitter::with_simulator(&estimator, simulator, self.search(q))
+        let refiner = match (model, self.refine) {
+            (Some(model), Some(_)) => Some(
+                EstimateRefiner::new(&estimator, model)
+                    .map_err(|e| RequestError::new(Purpose::Refine, e.into()))?
+                    .search(self.search(q)),
+            ),
+            _ => None,
+        };
+        let joint = match (model, self.joint) {
+            (Some(model), true) => Some(
+                JointFitter::new(&estimator, model, self.search(q))
                     .map_err(|e| RequestError::new(Purpose::Joint, e.into()))?,
-            )
-        } else {
-            None
+            ),
+            _ => None,
         };
         let shape = estimator.record_shape();
         Ok(Estimating {

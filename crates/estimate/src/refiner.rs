@@ -9,9 +9,11 @@ use std::sync::Arc;
 use rayon::prelude::*;
 use twostage_baselines::{BaselineError, exact_likelihood};
 use twostage_estimator::Estimator;
-use twostage_models::{BuiltinModel, IoData, Simulator};
+use twostage_models::{IoData, Simulator};
 use twostage_refine::{BestFit, OutputError, RefineError, Refinement, ResidualModel, SearchStarts};
-use twostage_sources::{ModelProfile, NamedModel, Progress, Silent};
+use twostage_sources::{ModelProfile, Progress, Silent};
+
+use crate::model_of::{EstimatorModel, SharedSimulator};
 
 use twostage_fit::TerminationReason;
 
@@ -97,11 +99,6 @@ pub struct RefinedEstimate {
 /// estimate's interval half-widths where the record has its own.
 pub type ToRefine<'a> = (&'a IoData, &'a [f64], Option<&'a [f64]>);
 
-/// One simulator of the model shared by everything an estimate request
-/// runs through it (its check, its refinement, its joint fit): built once,
-/// its processes started once.
-pub type SharedSimulator = Arc<dyn Simulator>;
-
 /// How an estimator's estimates are refined: see [`EstimateRefiner::new`].
 pub struct EstimateRefiner {
     how: How,
@@ -124,12 +121,12 @@ enum How {
 }
 
 impl EstimateRefiner {
-    /// The refinement of `estimator`'s estimates. Without a model file
-    /// (`model_file` `None`) a built-in model's estimates are refined to
+    /// The refinement of `estimator`'s estimates through its `model`.
+    /// Without a model given a built-in model's estimates are refined to
     /// the posterior mean of its exact likelihood over twice the
     /// calibrated interval (the model's own grid), its interval the
     /// posterior mean plus or minus `z` posterior sds; with one, by an
-    /// output-error fit through the file's simulator from the estimate and
+    /// output-error fit through its simulator from the estimate and
     /// two starts inside its interval, the estimate the likelihood's mean
     /// within the prior's box near the best fit, its interval a sandwich
     /// from the record's residuals.
@@ -137,11 +134,11 @@ impl EstimateRefiner {
     /// ```
     /// use twostage::TwoStage;
     /// use twostage::models::{Benchmark, Simulator, experiment_rng};
-    /// use twostage::EstimateRefiner;
+    /// use twostage::{EstimateRefiner, EstimatorModel};
     /// let estimator = TwoStage::builder(&Benchmark::new())
     ///     .preset(twostage::paper_benchmark())
     ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
-    /// let refiner = EstimateRefiner::new(&estimator, None)?;
+    /// let refiner = EstimateRefiner::new(&estimator, &EstimatorModel::find(&estimator, None)?)?;
     /// let mut record = Benchmark::new().spec().new_record();
     /// Benchmark::new().simulate(&[0.3], &mut experiment_rng(8, 0), &mut record)?;
     /// let first = estimator.assess(&record)?;
@@ -151,61 +148,24 @@ impl EstimateRefiner {
     /// ```
     ///
     /// # Errors
-    /// An estimator without intervals (no neighbourhood to refine in), a
-    /// model file of another model than the estimator's, or a model that
-    /// cannot run without noise on a given input.
-    pub fn new(
-        estimator: &Estimator,
-        model_file: Option<&NamedModel>,
-    ) -> twostage_train::Result<Self> {
-        let named = || NamedModel::trained_on(&estimator.training().model, model_file);
-        Self::with_model(
-            estimator,
-            || {
-                model_file
-                    .is_none()
-                    .then(|| named().ok()?.as_builtin())
-                    .flatten()
-            },
-            || {
-                named()
-                    .and_then(|model| model.simulator())
-                    .map(SharedSimulator::from)
-                    .map_err(Into::into)
-            },
-        )
-    }
-
-    /// [`Self::new`], with the built-in model refined through its exact
-    /// likelihood given by `builtin` (`None`: a model given, or a model
-    /// file, is refined through its simulator) and that simulator by
-    /// `model`, each called only where needed: a request finds its model
-    /// once and shares one simulator, and its processes, between its
-    /// check, its refinement and its joint fit.
-    ///
-    /// # Errors
-    /// As [`Self::new`], and what `model` says.
-    pub fn with_model(
-        estimator: &Estimator,
-        builtin: impl FnOnce() -> Option<BuiltinModel>,
-        model: impl FnOnce() -> twostage_train::Result<SharedSimulator>,
-    ) -> twostage_train::Result<Self> {
+    /// An estimator without intervals (no neighbourhood to refine in), or
+    /// a model that cannot be built or run without noise on a given input.
+    pub fn new(estimator: &Estimator, model: &EstimatorModel<'_>) -> twostage_train::Result<Self> {
         let radius = estimator.neighbourhood(2.0)?;
         // A neighbourhood exists only where the estimator has intervals.
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
-        if let Some(model) = builtin() {
+        if let Some(builtin) = model.exact_likelihood() {
             return Ok(Self {
                 how: How::Posterior {
-                    local: Refinement::new(exact_likelihood(model)),
-                    points: ModelProfile::of(model).refinement_points(),
+                    local: Refinement::new(exact_likelihood(builtin)),
+                    points: ModelProfile::of(builtin).refinement_points(),
                 },
                 radius,
                 alpha,
                 search: default_search(estimator),
             });
         }
-        let simulator = model()?;
-        let fit = OutputError::new(simulator)?;
+        let fit = OutputError::new(model.simulator()?)?;
         Ok(Self {
             how: How::OutputError(Refinement::new(fit)),
             radius,
@@ -296,7 +256,7 @@ impl EstimateRefiner {
     /// ```
     /// use std::sync::atomic::{AtomicUsize, Ordering};
     /// use twostage::models::{Benchmark, Simulator, experiment_rng};
-    /// use twostage::{EstimateRefiner, Progress, TwoStage};
+    /// use twostage::{EstimateRefiner, EstimatorModel, Progress, TwoStage};
     /// #[derive(Default)]
     /// struct Count(AtomicUsize);
     /// impl Progress for Count {
@@ -307,7 +267,7 @@ impl EstimateRefiner {
     /// let estimator = TwoStage::builder(&Benchmark::new())
     ///     .preset(twostage::paper_benchmark())
     ///     .simulations(400).validation(0).calibration(200).seed(3).train()?;
-    /// let refiner = EstimateRefiner::new(&estimator, None)?;
+    /// let refiner = EstimateRefiner::new(&estimator, &EstimatorModel::find(&estimator, None)?)?;
     /// let records: Vec<_> = (0..3u64)
     ///     .map(|i| {
     ///         let mut record = Benchmark::new().spec().new_record();

@@ -63,8 +63,8 @@ pub use twostage_auto::{
 pub use twostage_compress::CompressorConfig;
 pub use twostage_estimate::{
     AutoRefined, CheckSettings, EstimateRefiner, EstimateRequest, EstimateWith, Estimates,
-    Estimating, GivenValues, GivenValuesError, JointFitter, JointOfRecords, JointRun,
-    MethodFailure, ModelFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RECORDS_TOGETHER,
+    Estimating, EstimatorModel, GivenValues, GivenValuesError, JointFitter, JointOfRecords,
+    JointRun, MethodFailure, ModelFailure, OUTPUT_ERROR_METHOD, Plant, Purpose, RECORDS_TOGETHER,
     RecordBatch, RecordEstimate, RecordFailure, RecordOutcome, RecordPlace, RefineChoiceError,
     RefineOutcome, RefineWhich, Refined, RefinedBy, RefinedEstimate, RequestError, RequestProblem,
     SearchOptima, SharedSimulator, ToRefine, Windows, values_outside_prior,

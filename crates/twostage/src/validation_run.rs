@@ -5,6 +5,7 @@
 
 use ndarray::ArrayView2;
 use rayon::prelude::*;
+use twostage_estimate::EstimatorModel;
 use twostage_estimator::{EstimateWorkspace, Estimator};
 use twostage_models::{IoData, Sampling, Simulator, run_experiment};
 use twostage_sources::{NamedModel, Progress, refuse_beyond_memory};
@@ -114,7 +115,7 @@ pub fn validate_trained(
     plan: &ValidationPlan,
     progress: &dyn Progress,
 ) -> Result<Validated> {
-    let model = NamedModel::trained_on(&estimator.training().model, given)?.simulator()?;
+    let model = EstimatorModel::find(estimator, given)?.simulator()?;
     validate_estimator(estimator, model.as_ref(), plan, progress)
 }
 

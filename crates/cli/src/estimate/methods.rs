@@ -56,7 +56,8 @@ pub(crate) const OUTSIDE_PRIOR_FLAGS: &str = "--at without --allow-outside-prior
 
 /// Refuses an option that the chosen way of estimating would not read:
 /// an option silently ignored reads as one that worked.
-fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
+fn refuse_what_does_not_apply(args: &EstimateArgs, refine: Option<RefineWhich>) -> Result<()> {
+    let checks = args.check || refine.is_some_and(RefineWhich::checks);
     let method = args.method;
     let running = match (method, &args.estimator, &args.at) {
         (Some(m), _, _) => format!("--method {}", m.name()),
@@ -81,7 +82,7 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
         || args.plot.is_some()
         || args.score_from.is_some()
         || args.score_to.is_some())
-        && !args.checks()
+        && !checks
     {
         return refuse(
             "--check-sims, --plot, --score-from and --score-to",
@@ -106,7 +107,7 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
     if args.starts.is_some() && !multi_start {
         return refuse("--starts", "--method pem, ii and oe");
     }
-    let seeded = args.checks() || args.joint || particles || multi_start;
+    let seeded = checks || args.joint || particles || multi_start;
     if args.seed.is_some() && !seeded {
         return refuse("--seed", "--method pf, pem, ii and oe, --check and --joint");
     }
@@ -116,7 +117,18 @@ fn refuse_what_does_not_apply(args: &EstimateArgs) -> Result<()> {
 /// The request the flags make, prepared: the model read once for every
 /// use of it.
 pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
-    refuse_what_does_not_apply(args)?;
+    let refine = RefineWhich::chosen(
+        args.refine.map(|which| match which {
+            super::RefineWhich::All => "all",
+            super::RefineWhich::Auto => "auto",
+        }),
+        args.refine_below_fit,
+    )
+    .map_err(|e| match e {
+        RefineChoiceError::BelowFitWithoutAuto => usage(format!("--refine-below-fit: {e}")),
+        RefineChoiceError::Unknown(_) => usage(format!("--refine: {e}")),
+    })?;
+    refuse_what_does_not_apply(args, refine)?;
     // What a flag left out leaves to the methods' own defaults.
     let defaults = twostage::baselines::MethodSettings::default();
     let with = match (&args.estimator, &args.at, args.method) {
@@ -163,19 +175,7 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
             score_from: args.score_from.unwrap_or(0),
             score_to: args.score_to,
         })
-        .refine(
-            RefineWhich::chosen(
-                args.refine.map(|which| match which {
-                    super::RefineWhich::All => "all",
-                    super::RefineWhich::Auto => "auto",
-                }),
-                args.refine_below_fit,
-            )
-            .map_err(|e| match e {
-                RefineChoiceError::BelowFitWithoutAuto => usage(format!("--refine-below-fit: {e}")),
-                RefineChoiceError::Unknown(_) => usage(format!("--refine: {e}")),
-            })?,
-        )
+        .refine(refine)
         .joint(args.joint)
         .windows(window)
         .seed(args.seed.unwrap_or(0))

@@ -193,14 +193,6 @@ enum RefineWhich {
     Auto,
 }
 
-impl EstimateArgs {
-    /// Whether the records are checked: --check, or `--refine=auto`, which
-    /// checks to choose.
-    fn checks(&self) -> bool {
-        self.check || self.refine == Some(RefineWhich::Auto)
-    }
-}
-
 /// Run `twostage estimate`; returns how many records were estimated and
 /// how many failed.
 pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
