@@ -8,6 +8,9 @@
 //! - [`Ridge`] -> [`FittedLinear`]: linear (ridge) least squares by QR.
 //! - [`MlpParams`] -> [`Mlp`] -> [`FittedMlp`]: tanh networks trained by
 //!   Levenberg-Marquardt, with early stopping and parallel seeded restarts.
+//! - [`MixtureDensity`] -> [`FittedMixture`]: a conditional density of the
+//!   parameters (a mixture of Gaussians a tanh network gives), trained by
+//!   negative log-likelihood, to evaluate and draw from.
 //! - [`Standardizer`]: per-column affine standardization.
 //! - [`SummaryTraining`] -> [`twostage_compress::SummaryNetwork`]: a stage 1 that learns, a
 //!   small convolutional network over a record's samples trained end to
@@ -51,11 +54,13 @@ pub use levenberg_marquardt::{
 };
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{
-    FittedMlp, MAX_WIDTH, Mlp, MlpParams, RestartReport, Trainer, n_parameters, products_per_sample,
+    DensityRestart, FittedMixture, FittedMlp, MAX_WIDTH, MixtureDensity, Mlp, MlpParams,
+    RestartReport, Trainer, n_parameters, products_per_sample,
 };
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;
 pub use summary_network::{SummaryTraining, TrainedSummary};
+pub use twostage_kernels::mixture::{MixtureShape, Support};
 
 /// A learning method for the map `h: alpha -> theta` (its hyperparameters).
 pub trait Regressor {

@@ -14,6 +14,8 @@
 //! - [`convolution`]: the learned stage 1's strided convolutions and
 //!   their pooling over time;
 //! - [`vector`]: standardization and clipping to the prior box;
+//! - [`mixture`]: a mixture of Gaussians over parameters mapped to the
+//!   real line (a density network's head): its log density and draws;
 //! - [`pacejka`]: the Pacejka car's equations, for plain numbers and for
 //!   numbers that carry their derivatives, and [`linearized`], the stage 1
 //!   that regresses a record on the car's sensitivities;
@@ -50,6 +52,7 @@ pub mod input_summary;
 pub mod lagged;
 pub mod layer;
 pub mod linearized;
+pub mod mixture;
 pub mod pacejka;
 mod tanh;
 pub mod vector;

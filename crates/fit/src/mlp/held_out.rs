@@ -89,6 +89,10 @@ impl BestHeldOut {
 
 /// Whether the training's time is up (`Mlp::stopped_by`).
 pub(super) fn out_of_time(mlp: &MlpParams) -> bool {
-    mlp.stop_by
-        .is_some_and(|stop_by| std::time::Instant::now() >= stop_by)
+    past(mlp.stop_by)
+}
+
+/// Whether `stop_by`, where there is one, has come.
+pub(crate) fn past(stop_by: Option<std::time::Instant>) -> bool {
+    stop_by.is_some_and(|stop_by| std::time::Instant::now() >= stop_by)
 }

@@ -10,6 +10,7 @@ use std::collections::VecDeque;
 
 use crate::levenberg_marquardt::TerminationReason;
 
+use super::held_out::BestHeldOut;
 use super::network::{Problem, RestartReport};
 use super::params::MlpParams;
 
@@ -25,7 +26,7 @@ const TOLERANCE: f64 = 1e-12;
 /// Iterations per unit of `patience`: an L-BFGS iteration moves the
 /// weights far less than a Levenberg-Marquardt one, whose count the
 /// patience was set for.
-const PATIENCE_SCALE: usize = 20;
+pub(super) const PATIENCE_SCALE: usize = 20;
 
 /// The training loss L-BFGS minimizes: the mean squared error per target
 /// value over the training rows plus the weight decay, the cost whose
@@ -68,6 +69,36 @@ fn direction(grad: &[f64], pairs: &VecDeque<(Vec<f64>, Vec<f64>, f64)>) -> Vec<f
     d
 }
 
+/// What L-BFGS minimizes, and the held-out loss it watches.
+pub(crate) trait Objective {
+    /// The training loss at `params`.
+    fn loss(&self, params: &[f64]) -> f64;
+    /// The training loss's gradient at `params`, into `grad`.
+    fn gradient(&self, params: &[f64], grad: &mut [f64]);
+    /// The loss on the rows held out to stop by.
+    fn held_out(&self, params: &[f64]) -> f64;
+}
+
+/// The network's mean squared error, as [`Problem`] gives it.
+struct MeanSquares<'p, 'a> {
+    problem: &'p Problem<'a>,
+    held_out: &'p [usize],
+}
+
+impl Objective for MeanSquares<'_, '_> {
+    fn loss(&self, params: &[f64]) -> f64 {
+        loss(self.problem, params)
+    }
+
+    fn gradient(&self, params: &[f64], grad: &mut [f64]) {
+        self.problem.gradient(params, self.problem.train, grad);
+    }
+
+    fn held_out(&self, params: &[f64]) -> f64 {
+        self.problem.mse(params, self.held_out)
+    }
+}
+
 /// One restart from `params` by L-BFGS, at most `iterations` iterations,
 /// keeping the weights of the lowest held-out loss (checked every
 /// iteration, `patience` counting [`PATIENCE_SCALE`] iterations) and
@@ -77,7 +108,7 @@ pub(super) fn train_lbfgs(
     problem: &Problem<'_>,
     mlp: &MlpParams,
     restart: usize,
-    mut params: Vec<f64>,
+    params: Vec<f64>,
     iterations: usize,
 ) -> (Vec<f64>, RestartReport) {
     let (mut best, held_out) = super::held_out::BestHeldOut::start(
@@ -85,10 +116,26 @@ pub(super) fn train_lbfgs(
         &params,
         mlp.patience.saturating_mul(PATIENCE_SCALE),
     );
+    let objective = MeanSquares { problem, held_out };
+    let (done, reason) = minimize(&objective, params, iterations, &mut best, mlp.stop_by);
+    best.into_restart(problem, restart, done, reason)
+}
+
+/// L-BFGS from `params`, at most `iterations` iterations, `best` watching
+/// the held-out loss after each (it keeps the weights to return and says
+/// when patience has run out), stopping at `stop_by`: the iterations run
+/// and why they stopped.
+pub(crate) fn minimize(
+    objective: &impl Objective,
+    mut params: Vec<f64>,
+    iterations: usize,
+    best: &mut BestHeldOut,
+    stop_by: Option<std::time::Instant>,
+) -> (usize, TerminationReason) {
     let n = params.len();
     let mut grad = vec![0.0; n];
-    problem.gradient(&params, problem.train, &mut grad);
-    let mut cost = loss(problem, &params);
+    objective.gradient(&params, &mut grad);
+    let mut cost = objective.loss(&params);
     let mut pairs: VecDeque<(Vec<f64>, Vec<f64>, f64)> = VecDeque::with_capacity(MEMORY);
     let mut reason = TerminationReason::LbfgsMaxIterations;
     let mut done = 0;
@@ -117,7 +164,7 @@ pub(super) fn train_lbfgs(
             for ((t, p), d) in trial.iter_mut().zip(&params).zip(&d) {
                 *t = p + step * d;
             }
-            let trial_cost = loss(problem, &trial);
+            let trial_cost = objective.loss(&trial);
             if trial_cost.is_finite() && trial_cost <= cost + ARMIJO * step * slope {
                 accepted = Some(trial_cost);
                 break;
@@ -128,7 +175,7 @@ pub(super) fn train_lbfgs(
             reason = TerminationReason::LbfgsConverged;
             break;
         };
-        problem.gradient(&trial, problem.train, &mut trial_grad);
+        objective.gradient(&trial, &mut trial_grad);
         let s: Vec<f64> = trial.iter().zip(&params).map(|(a, b)| a - b).collect();
         let y: Vec<f64> = trial_grad.iter().zip(&grad).map(|(a, b)| a - b).collect();
         let sy = dot(&s, &y);
@@ -143,7 +190,7 @@ pub(super) fn train_lbfgs(
         std::mem::swap(&mut grad, &mut trial_grad);
         let decrease = (cost - new_cost) / cost.abs().max(f64::MIN_POSITIVE);
         cost = new_cost;
-        if best.observe(problem.mse(&params, held_out), &params) {
+        if best.observe(objective.held_out(&params), &params) {
             reason = TerminationReason::LbfgsWithoutImprovement;
             break;
         }
@@ -151,12 +198,12 @@ pub(super) fn train_lbfgs(
             reason = TerminationReason::LbfgsConverged;
             break;
         }
-        if super::held_out::out_of_time(mlp) {
+        if super::held_out::past(stop_by) {
             reason = TerminationReason::LbfgsUntilDeadline;
             break;
         }
     }
-    best.into_restart(problem, restart, done, reason)
+    (done, reason)
 }
 
 #[cfg(test)]

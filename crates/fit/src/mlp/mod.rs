@@ -8,6 +8,7 @@
 //! - `lbfgs`: the L-BFGS trainer, for many rows and weights;
 //! - `held_out`: a restart's held-out watch, shared by the trainers.
 
+mod density;
 mod gauss_newton;
 mod held_out;
 mod lbfgs;
@@ -15,6 +16,7 @@ mod network;
 mod params;
 mod training;
 
+pub use density::{DensityRestart, FittedMixture, MixtureDensity};
 pub use gauss_newton::products_per_sample;
 pub(crate) use held_out::BestHeldOut;
 pub use network::RestartReport;

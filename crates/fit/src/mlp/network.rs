@@ -34,6 +34,32 @@ pub struct RestartReport {
 /// The widest layer supported: prediction keeps activations on the stack.
 pub const MAX_WIDTH: usize = 256;
 
+/// The network of layer `sizes` and weights `params` (layer after layer:
+/// W row-major, out x in, then b) on the standardized `input` (its first
+/// `sizes[0]` entries): the output layer into `output`'s first entries, by
+/// the estimate path's [`dense_layer`].
+pub(super) fn run_network(
+    sizes: &[usize],
+    params: &[f64],
+    input: &[f64; MAX_WIDTH],
+    output: &mut [f64; MAX_WIDTH],
+) {
+    // Two stack buffers, used in turn as input and output of each layer.
+    let mut a = *input;
+    let mut b = [0.0f64; MAX_WIDTH];
+    let layers = sizes.len() - 1;
+    let mut p = 0;
+    for l in 0..layers {
+        let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+        let w = &params[p..p + n_out * n_in];
+        let bias = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
+        dense_layer(w, bias, &a[..n_in], activation(l, layers), &mut b[..n_out]);
+        std::mem::swap(&mut a, &mut b);
+        p += n_out * (n_in + 1);
+    }
+    *output = a;
+}
+
 /// A trained network, with its standardization and training report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "FittedMlpFields")]
@@ -281,11 +307,48 @@ pub(super) fn backward(w: &[f64], input: &[f64], n_out: usize, delta: &mut [f64]
     cur[..n_in].copy_from_slice(next);
 }
 
+/// Add one sample's gradient to `grad`: `delta` holds its loss's
+/// derivative by the output layer's values (in its first half, the second
+/// scratch for [`backward`]), `acts` its forward pass's activations.
+/// Layers from the last, each weight's term added once, in the order the
+/// weights are stored.
+#[inline(always)]
+pub(super) fn add_sample_gradient(
+    sizes: &[usize],
+    offsets: &[usize],
+    params: &[f64],
+    acts: &[f64],
+    delta: &mut [f64],
+    grad: &mut [f64],
+) {
+    let layers = sizes.len() - 1;
+    let mut s = params.len();
+    for l in (0..layers).rev() {
+        let (n_in, n_out) = (sizes[l], sizes[l + 1]);
+        s -= n_out * (n_in + 1);
+        let input = &acts[offsets[l]..offsets[l] + n_in];
+        let (weights, biases) = grad[s..s + n_out * (n_in + 1)].split_at_mut(n_out * n_in);
+        for ((row, bias), &d) in weights
+            .chunks_exact_mut(n_in)
+            .zip(biases)
+            .zip(&delta[..n_out])
+        {
+            for (g, inp) in row.iter_mut().zip(input) {
+                *g += d * inp;
+            }
+            *bias += d;
+        }
+        if l > 0 {
+            backward(&params[s..s + n_out * n_in], input, n_out, delta);
+        }
+    }
+}
+
 /// Run `work` compiled for the widest vectors the processor offers (pulp
 /// dispatches at run time). The training loops' arithmetic is elementwise,
 /// a multiplication then an addition each rounded (Rust never fuses them),
 /// so every width gives the same bits.
-fn widest_vectors<R>(work: impl FnOnce() -> R) -> R {
+pub(super) fn widest_vectors<R>(work: impl FnOnce() -> R) -> R {
     pulp::Arch::new().dispatch(work)
 }
 
@@ -516,26 +579,7 @@ impl Problem<'_> {
             for k in 0..q {
                 delta[k] = scale * (acts[out + k] - self.t[[i, k]]);
             }
-            let mut s = params.len();
-            for l in (0..layers).rev() {
-                let (n_in, n_out) = (sizes[l], sizes[l + 1]);
-                s -= n_out * (n_in + 1);
-                let input = &acts[self.offsets[l]..self.offsets[l] + n_in];
-                let (weights, biases) = grad[s..s + n_out * (n_in + 1)].split_at_mut(n_out * n_in);
-                for ((row, bias), &d) in weights
-                    .chunks_exact_mut(n_in)
-                    .zip(biases)
-                    .zip(&delta[..n_out])
-                {
-                    for (g, inp) in row.iter_mut().zip(input) {
-                        *g += d * inp;
-                    }
-                    *bias += d;
-                }
-                if l > 0 {
-                    backward(&params[s..s + n_out * n_in], input, n_out, delta);
-                }
-            }
+            add_sample_gradient(sizes, &self.offsets, params, acts, delta, grad);
         }
     }
 
@@ -740,21 +784,10 @@ impl Predictor for FittedMlp {
         let mut input = [0.0f64; MAX_WIDTH];
         self.features.transform_into(x, &mut input[..self.sizes[0]]);
         out.fill(0.0);
+        let mut output = [0.0f64; MAX_WIDTH];
         for params in &self.members {
-            // Two stack buffers, used in turn as input and output of each layer.
-            let mut a = input;
-            let mut b = [0.0f64; MAX_WIDTH];
-            let layers = self.sizes.len() - 1;
-            let mut p = 0;
-            for l in 0..layers {
-                let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
-                let w = &params[p..p + n_out * n_in];
-                let bias = &params[p + n_out * n_in..p + n_out * (n_in + 1)];
-                dense_layer(w, bias, &a[..n_in], activation(l, layers), &mut b[..n_out]);
-                std::mem::swap(&mut a, &mut b);
-                p += n_out * (n_in + 1);
-            }
-            for (o, v) in out.iter_mut().zip(&a[..q]) {
+            run_network(&self.sizes, params, &input, &mut output);
+            for (o, v) in out.iter_mut().zip(&output[..q]) {
                 *o += v;
             }
         }

@@ -107,6 +107,30 @@ enum Begin<'a> {
     More(&'a FittedMlp, usize),
 }
 
+/// The rows of `m` in the order the training takes them, the first
+/// `n_held` (the second value) held out: a shuffle seeded by the
+/// network's seed, so a network and a density of one seed hold out the
+/// same rows.
+///
+/// # Errors
+/// Too few rows for two training rows and, where a fraction is held out,
+/// one held-out row.
+pub(super) fn held_out_split(m: usize, p: &MlpParams) -> Result<(Vec<usize>, usize)> {
+    let n_held = (p.validation_fraction * m as f64).round() as usize;
+    let n_train = m - n_held;
+    if n_train < 2 || (p.validation_fraction > 0.0 && n_held == 0) {
+        return Err(FitError::TooFewSamples {
+            got: m,
+            needed: 2 + usize::from(p.validation_fraction > 0.0),
+            why: "training and held-out sets both need samples".into(),
+        });
+    }
+    let mut order: Vec<usize> = (0..m).collect();
+    let mut split_rng = ChaCha8Rng::seed_from_u64(p.seed ^ 0x5350_4c49_5400);
+    order.shuffle(&mut split_rng);
+    Ok((order, n_held))
+}
+
 /// The restart of the lowest held-out loss; ties go to the lower index, so
 /// the choice does not depend on scheduling.
 fn lowest_held_out(reports: &[RestartReport]) -> usize {
@@ -149,7 +173,7 @@ fn train_from(
 
 /// The stream of restart `restart`: its initial weights, then Adam's
 /// batches.
-fn restart_rng(mlp: &MlpParams, restart: usize) -> ChaCha8Rng {
+pub(super) fn restart_rng(mlp: &MlpParams, restart: usize) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(mlp.seed ^ 0x4d4c_5000);
     rng.set_stream(restart as u64 + 1);
     rng
@@ -534,15 +558,7 @@ impl Mlp {
         let mut sizes = vec![n_in];
         sizes.extend(&p.hidden);
         sizes.push(q);
-        let n_held = (p.validation_fraction * m as f64).round() as usize;
-        let n_train = m - n_held;
-        if n_train < 2 || (p.validation_fraction > 0.0 && n_held == 0) {
-            return Err(FitError::TooFewSamples {
-                got: m,
-                needed: 2 + usize::from(p.validation_fraction > 0.0),
-                why: "training and held-out sets both need samples".into(),
-            });
-        }
+        let (order, n_held) = held_out_split(m, p)?;
         if let Some(start) = start
             && start.sizes != sizes
         {
@@ -559,9 +575,6 @@ impl Mlp {
         // Standard layout so rows are contiguous slices.
         let xs = features.transform(x).as_standard_layout().to_owned();
         let ts = targets.transform(y);
-        let mut order: Vec<usize> = (0..m).collect();
-        let mut split_rng = ChaCha8Rng::seed_from_u64(p.seed ^ 0x5350_4c49_5400);
-        order.shuffle(&mut split_rng);
         let (held_out, train) = order.split_at(n_held);
         let mut offsets = vec![0];
         for s in &sizes {

@@ -1,0 +1,543 @@
+//! A conditional density of the parameters given the features: a tanh
+//! network whose output layer parameterizes a mixture of Gaussians with
+//! full covariances ([`twostage_kernels::mixture`]) over the parameters
+//! mapped to the whole real line, trained by the negative log-likelihood
+//! of the chart's parameters (Bishop, "Mixture density networks", 1994).
+//!
+//! The network, its restarts, its held-out stopping and its deadline are
+//! the regression network's ([`MlpParams`]); the loss is not a sum of
+//! squares, so every restart runs L-BFGS on the whole training set (the
+//! regression network's, [`super::lbfgs::minimize`]). Blocks of rows and
+//! the order their sums are added in are fixed: the same bits on any
+//! thread count.
+
+use ndarray::{Array2, ArrayView2};
+use rand::{Rng, RngExt};
+use rand_distr::StandardNormal;
+use rayon::prelude::*;
+use twostage_kernels::mixture::{MixtureShape, Support, log_sum_exp};
+
+use crate::error::{FitError, InvalidSetting, Result};
+use crate::levenberg_marquardt::TerminationReason;
+use crate::standardize::Standardizer;
+
+use super::held_out::BestHeldOut;
+use super::lbfgs::{Objective, PATIENCE_SCALE, minimize};
+use super::network::{
+    BLOCK_SAMPLES, MAX_WIDTH, add_sample_gradient, by_columns, forward, initial_parameters,
+    run_network, widest_vectors,
+};
+use super::params::{Mlp, MlpParams};
+use super::training::{held_out_split, restart_rng};
+
+/// How a mixture density network learns: the network (its hidden layers,
+/// restarts, iterations, held-out fraction, patience, weight decay, seed
+/// and deadline; its trainer is always L-BFGS) and the mixture's
+/// components.
+///
+/// ```
+/// use ndarray::Array2;
+/// use rand::SeedableRng;
+/// use twostage_fit::{MixtureDensity, MlpParams, Support};
+/// // theta = 2 x + noise of sd 0.1: the density at x = 0.25 centres on 0.5.
+/// let x = Array2::from_shape_fn((400, 1), |(i, _)| (i as f64 / 399.0) - 0.5);
+/// let theta = Array2::from_shape_fn((400, 1), |(i, _)| {
+///     2.0 * x[[i, 0]] + 0.1 * ((i * 7919 % 400) as f64 / 400.0 - 0.5) * 12f64.sqrt()
+/// });
+/// let network = MlpParams::new(&[8])?.restarts(2).seed(1).check()?;
+/// let density = MixtureDensity::new(network, 1)?.fit(x.view(), theta.view(), &[Support::Real])?;
+/// let mut draws = vec![0.0; 2000];
+/// density.sample(&[0.25], &mut rand_chacha::ChaCha8Rng::seed_from_u64(3), &mut draws)?;
+/// let mean = draws.iter().sum::<f64>() / 2000.0;
+/// assert!((mean - 0.5).abs() < 0.03, "{mean}");
+/// # Ok::<(), twostage_fit::FitError>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct MixtureDensity {
+    network: MlpParams,
+    components: usize,
+}
+
+/// One restart of a mixture density network's training.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DensityRestart {
+    /// Restart index.
+    pub restart: usize,
+    /// L-BFGS iterations taken.
+    pub iterations: usize,
+    /// Why it stopped.
+    pub reason: TerminationReason,
+    /// Mean negative log-likelihood of the training rows at the kept
+    /// weights (standardized unbounded parameters).
+    pub train_nll: f64,
+    /// The same on the held-out rows (the training rows' when none are
+    /// held out).
+    pub held_out_nll: f64,
+}
+
+/// A trained mixture density network: `p(θ | features)`, to evaluate and
+/// draw from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedMixture {
+    features: Standardizer,
+    /// The standardization of the parameters mapped to the real line.
+    unbounded: Standardizer,
+    supports: Vec<Support>,
+    shape: MixtureShape,
+    /// Layer sizes, input first; the last is the head's length.
+    sizes: Vec<usize>,
+    /// All weights and biases, layer after layer: W (row-major, out x
+    /// in) then b.
+    params: Vec<f64>,
+    reports: Vec<DensityRestart>,
+    best: usize,
+}
+
+impl MixtureDensity {
+    /// A mixture of `components` Gaussians given by `network`.
+    ///
+    /// # Errors
+    /// No component, or an ensemble asked of the network (a density is
+    /// one network).
+    pub fn new(network: Mlp, components: usize) -> Result<Self> {
+        let network = network.params().clone();
+        if components == 0 {
+            return Err(invalid("components", "0".into(), "at least 1"));
+        }
+        if network.ensemble {
+            return Err(invalid(
+                "ensemble",
+                "true".into(),
+                "a mixture density is one network: leave the ensemble out",
+            ));
+        }
+        Ok(Self {
+            network,
+            components,
+        })
+    }
+
+    /// The density of `theta` (rows x parameters) given `x` (rows x
+    /// features), each parameter on its `supports` entry.
+    ///
+    /// # Errors
+    /// Shapes that do not match, non-finite values, a parameter outside
+    /// its support (its row and column named), too few rows, or a head
+    /// wider than the network allows.
+    pub fn fit(
+        &self,
+        x: ArrayView2<'_, f64>,
+        theta: ArrayView2<'_, f64>,
+        supports: &[Support],
+    ) -> Result<FittedMixture> {
+        crate::check::training_data(x, theta)?;
+        let (m, n_in) = x.dim();
+        let dim = theta.ncols();
+        if supports.len() != dim {
+            return Err(FitError::ShapeMismatch(format!(
+                "{} supports for {dim} parameters",
+                supports.len()
+            )));
+        }
+        let shape = MixtureShape {
+            components: self.components,
+            dim,
+        };
+        if n_in > MAX_WIDTH || shape.outputs() > MAX_WIDTH {
+            return Err(invalid(
+                "components",
+                format!(
+                    "{} components of {dim} parameters ({} outputs), {n_in} features",
+                    self.components,
+                    shape.outputs()
+                ),
+                "at most 256 features and outputs: fewer components",
+            ));
+        }
+        let mut z = Array2::zeros((m, dim));
+        for ((i, j), &v) in theta.indexed_iter() {
+            if !inside(supports[j], v) {
+                return Err(invalid(
+                    "parameter values",
+                    format!("row {i}, parameter {j}: {v}"),
+                    &format!("outside its support {:?}", supports[j]),
+                ));
+            }
+            z[[i, j]] = supports[j].to_unbounded(v);
+        }
+        let p = &self.network;
+        let (order, n_held) = held_out_split(m, p)?;
+        let (held_out, train) = order.split_at(n_held);
+        let features = Standardizer::fit(x);
+        let unbounded = Standardizer::fit(z.view());
+        let xs = features.transform(x).as_standard_layout().to_owned();
+        let zs = unbounded
+            .transform(z.view())
+            .as_standard_layout()
+            .to_owned();
+        let mut sizes = vec![n_in];
+        sizes.extend(&p.hidden);
+        sizes.push(shape.outputs());
+        let mut offsets = vec![0];
+        for s in &sizes {
+            offsets.push(offsets.last().copied().unwrap_or(0) + s);
+        }
+        let likelihood = Likelihood {
+            sizes: &sizes,
+            offsets,
+            shape,
+            x: &xs,
+            z: &zs,
+            train,
+            held_out: if held_out.is_empty() { train } else { held_out },
+            decay: p.weight_decay,
+        };
+        let runs: Vec<(Vec<f64>, DensityRestart)> = (0..p.restarts)
+            .into_par_iter()
+            .map(|restart| {
+                let params = initial_parameters(&sizes, &mut restart_rng(p, restart));
+                let held = likelihood.held_out(&params);
+                let mut best = BestHeldOut::new(
+                    held,
+                    &params,
+                    p.patience.saturating_mul(PATIENCE_SCALE),
+                    !held_out.is_empty(),
+                );
+                let (iterations, reason) =
+                    minimize(&likelihood, params, p.max_iterations, &mut best, p.stop_by);
+                let (held_out_nll, params) = best.into_best();
+                let report = DensityRestart {
+                    restart,
+                    iterations,
+                    reason,
+                    train_nll: likelihood.mean_nll(&params, train),
+                    held_out_nll,
+                };
+                (params, report)
+            })
+            .collect();
+        // Ties go to the lower restart, so the choice does not depend on
+        // scheduling.
+        let best = runs
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.1.held_out_nll.total_cmp(&b.1.1.held_out_nll))
+            .map_or(0, |(i, _)| i);
+        let (reports, mut params): (Vec<_>, Vec<_>) = runs.into_iter().map(|(w, r)| (r, w)).unzip();
+        Ok(FittedMixture {
+            features,
+            unbounded,
+            supports: supports.to_vec(),
+            shape,
+            sizes,
+            params: std::mem::take(&mut params[best]),
+            reports,
+            best,
+        })
+    }
+}
+
+fn invalid(name: &'static str, value: String, reason: &str) -> FitError {
+    FitError::InvalidSetting(InvalidSetting {
+        name,
+        value,
+        reason: reason.into(),
+    })
+}
+
+/// Whether `value` lies in `support` (bounds included).
+fn inside(support: Support, value: f64) -> bool {
+    match support {
+        Support::Real => value.is_finite(),
+        Support::Positive => value > 0.0 && value.is_finite(),
+        Support::Interval { low, high } => (low..=high).contains(&value),
+    }
+}
+
+/// The training's loss: the mean negative log-likelihood of standardized
+/// unbounded parameters under the network's mixture, plus weight decay.
+struct Likelihood<'a> {
+    sizes: &'a [usize],
+    offsets: Vec<usize>,
+    shape: MixtureShape,
+    x: &'a Array2<f64>,
+    z: &'a Array2<f64>,
+    train: &'a [usize],
+    held_out: &'a [usize],
+    decay: f64,
+}
+
+impl Likelihood<'_> {
+    fn activations(&self) -> Vec<f64> {
+        vec![0.0; self.offsets.last().copied().unwrap_or(0)]
+    }
+
+    /// Row `i` of standard-layout `data`, one contiguous slice.
+    fn row(data: &Array2<f64>, i: usize) -> &[f64] {
+        data.row(i).to_slice().unwrap_or(&[])
+    }
+
+    /// Mean negative log-likelihood over `rows`: blocks in parallel, their
+    /// sums added in block order.
+    fn mean_nll(&self, params: &[f64], rows: &[usize]) -> f64 {
+        let columns = by_columns(self.sizes, params);
+        let sum_block = |block: &[usize], acts: &mut Vec<f64>| -> f64 {
+            let out = self.offsets[self.sizes.len() - 1];
+            block
+                .iter()
+                .map(|&i| {
+                    forward(
+                        self.sizes,
+                        &columns,
+                        Self::row(self.x, i),
+                        acts,
+                        &self.offsets,
+                    );
+                    -self.shape.log_density(&acts[out..], Self::row(self.z, i))
+                })
+                .sum()
+        };
+        let partials: Vec<f64> = rows
+            .par_chunks(BLOCK_SAMPLES)
+            .map_init(|| self.activations(), |acts, block| sum_block(block, acts))
+            .collect();
+        partials.iter().sum::<f64>() / rows.len().max(1) as f64
+    }
+
+    /// Add `scale` times the gradient of `rows`' negative log-likelihoods.
+    fn add_gradient(
+        &self,
+        (params, columns): (&[f64], &[f64]),
+        rows: &[usize],
+        scale: f64,
+        grad: &mut [f64],
+        acts: &mut [f64],
+        delta: &mut [f64],
+    ) {
+        let out = self.offsets[self.sizes.len() - 1];
+        for &i in rows {
+            forward(
+                self.sizes,
+                columns,
+                Self::row(self.x, i),
+                acts,
+                &self.offsets,
+            );
+            head_gradient(self.shape, &acts[out..], Self::row(self.z, i), scale, delta);
+            add_sample_gradient(self.sizes, &self.offsets, params, acts, delta, grad);
+        }
+    }
+}
+
+impl Objective for Likelihood<'_> {
+    fn loss(&self, params: &[f64]) -> f64 {
+        let penalty = self.decay * params.iter().map(|v| v * v).sum::<f64>();
+        self.mean_nll(params, self.train) + penalty / self.train.len().max(1) as f64
+    }
+
+    fn gradient(&self, params: &[f64], grad: &mut [f64]) {
+        let rows = self.train;
+        let scale = 1.0 / rows.len().max(1) as f64;
+        let columns = by_columns(self.sizes, params);
+        let weights = (params, columns.as_slice());
+        let partials: Vec<Vec<f64>> = rows
+            .par_chunks(BLOCK_SAMPLES)
+            .map_init(
+                || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
+                |(acts, delta), block| {
+                    let mut partial = vec![0.0; params.len()];
+                    widest_vectors(|| {
+                        self.add_gradient(weights, block, scale, &mut partial, acts, delta);
+                    });
+                    partial
+                },
+            )
+            .collect();
+        grad.fill(0.0);
+        for partial in &partials {
+            for (g, p) in grad.iter_mut().zip(partial) {
+                *g += p;
+            }
+        }
+        let decay = 2.0 * self.decay / rows.len().max(1) as f64;
+        for (g, p) in grad.iter_mut().zip(params) {
+            *g += decay * p;
+        }
+    }
+
+    fn held_out(&self, params: &[f64]) -> f64 {
+        self.mean_nll(params, self.held_out)
+    }
+}
+
+/// `scale` times the derivative of `−log p(z)` by each of the head's
+/// entries, into `delta`'s first `shape.outputs()` entries.
+///
+/// With `L_c` component c's weighted log density, `r_c` its share of the
+/// density at z (`softmax(L)`), `π` the weights (`softmax` of the logits),
+/// `e = z − μ_c` and `y = U_c e`: by logit c, `π_c − r_c`; by `μ_c`,
+/// `−r_c U_c' y`; by `log U_c,ii`, `−r_c (1 − y_i U_c,ii e_i)`; by `U_c,ij`
+/// above the diagonal, `r_c y_i e_j`.
+fn head_gradient(shape: MixtureShape, head: &[f64], z: &[f64], scale: f64, delta: &mut [f64]) {
+    let (k, d) = (shape.components, shape.dim);
+    let mut weighted = [0.0f64; MAX_WIDTH];
+    for (c, w) in weighted[..k].iter_mut().enumerate() {
+        *w = head[c] + shape.component_log_density(head, c, z);
+    }
+    let total = log_sum_exp(weighted[..k].iter().copied());
+    let normalizer = shape.log_normalizer(head);
+    delta[..shape.outputs()].fill(0.0);
+    let mut e = [0.0f64; MAX_WIDTH];
+    for c in 0..k {
+        let share = (weighted[c] - total).exp();
+        delta[c] = scale * ((head[c] - normalizer).exp() - share);
+        let mean = shape.mean_at(c);
+        let log_diagonal = shape.log_diagonal_at(c);
+        let upper = shape.upper_at(c);
+        for j in 0..d {
+            e[j] = z[j] - head[mean + j];
+        }
+        for i in 0..d {
+            let diagonal = head[log_diagonal + i].exp();
+            let mut y = diagonal * e[i];
+            for j in i + 1..d {
+                y += head[upper + shape.upper_index(i, j)] * e[j];
+            }
+            // U' y, column by column: U_ii y_i to mean i, U_ij y_i to mean j.
+            delta[mean + i] -= scale * share * diagonal * y;
+            delta[log_diagonal + i] = -scale * share * (1.0 - y * diagonal * e[i]);
+            for j in i + 1..d {
+                let u = upper + shape.upper_index(i, j);
+                delta[mean + j] -= scale * share * head[u] * y;
+                delta[u] = scale * share * y * e[j];
+            }
+        }
+    }
+}
+
+impl FittedMixture {
+    /// The mixture's layout.
+    pub fn shape(&self) -> MixtureShape {
+        self.shape
+    }
+
+    /// Each parameter's support.
+    pub fn supports(&self) -> &[Support] {
+        &self.supports
+    }
+
+    /// One report per restart.
+    pub fn reports(&self) -> &[DensityRestart] {
+        &self.reports
+    }
+
+    /// The restart kept: the lowest held-out negative log-likelihood.
+    pub fn best_restart(&self) -> &DensityRestart {
+        &self.reports[self.best]
+    }
+
+    /// The head (the mixture over standardized unbounded parameters) of
+    /// the features `x`.
+    fn head(&self, x: &[f64]) -> Result<[f64; MAX_WIDTH]> {
+        if x.len() != self.sizes[0] {
+            return Err(FitError::ShapeMismatch(format!(
+                "{} features given, the density reads {}",
+                x.len(),
+                self.sizes[0]
+            )));
+        }
+        if let Some(bad) = x.iter().position(|v| !v.is_finite()) {
+            return Err(FitError::NonFinite {
+                what: "features",
+                row: 0,
+                col: bad,
+                value: x[bad],
+            });
+        }
+        let mut input = [0.0f64; MAX_WIDTH];
+        self.features.transform_into(x, &mut input[..self.sizes[0]]);
+        let mut head = [0.0f64; MAX_WIDTH];
+        run_network(&self.sizes, &self.params, &input, &mut head);
+        Ok(head)
+    }
+
+    /// `log p(theta | x)`: the density over the parameters themselves (the
+    /// standardization's and the supports' Jacobians included).
+    ///
+    /// # Errors
+    /// Features or parameters of the wrong length or not finite.
+    pub fn log_density(&self, x: &[f64], theta: &[f64]) -> Result<f64> {
+        let head = self.head(x)?;
+        let d = self.shape.dim;
+        if theta.len() != d {
+            return Err(FitError::ShapeMismatch(format!(
+                "{} parameters given, the density has {d}",
+                theta.len()
+            )));
+        }
+        let mut z = [0.0f64; MAX_WIDTH];
+        let mut jacobian = 0.0;
+        for (j, (&v, support)) in theta.iter().zip(&self.supports).enumerate() {
+            z[j] = support.to_unbounded(v);
+            jacobian += support.log_jacobian(v) - self.unbounded.scale()[j].ln();
+        }
+        let mut zs = [0.0f64; MAX_WIDTH];
+        self.unbounded.transform_into(&z[..d], &mut zs[..d]);
+        Ok(self.shape.log_density(&head, &zs[..d]) + jacobian)
+    }
+
+    /// Draws of `θ` given the features `x` into `out` (draws x parameters,
+    /// row after row: as many draws as `out` holds rows), each within its
+    /// parameter's support.
+    ///
+    /// # Errors
+    /// Features of the wrong length or not finite, or `out` not a whole
+    /// number of draws.
+    pub fn sample(&self, x: &[f64], rng: &mut impl Rng, out: &mut [f64]) -> Result<()> {
+        let d = self.shape.dim;
+        if !out.len().is_multiple_of(d) {
+            return Err(FitError::ShapeMismatch(format!(
+                "{} values do not make draws of {d} parameters",
+                out.len()
+            )));
+        }
+        let head = self.head(x)?;
+        let mut normals = [0.0f64; MAX_WIDTH];
+        for draw in out.chunks_exact_mut(d) {
+            let uniform: f64 = rng.random();
+            for n in &mut normals[..d] {
+                *n = rng.sample(StandardNormal);
+            }
+            self.shape.draw(&head, uniform, &normals[..d], draw);
+            self.unbounded.inverse_in_place(draw);
+            for (v, support) in draw.iter_mut().zip(&self.supports) {
+                *v = support.from_unbounded(*v);
+            }
+        }
+        Ok(())
+    }
+
+    /// Mean negative log-likelihood of `theta` given `x` (rows of each),
+    /// over the parameters themselves: the score by which densities are
+    /// compared on held-out records.
+    ///
+    /// # Errors
+    /// As [`Self::log_density`], for the first row that fails.
+    pub fn mean_nll(&self, x: ArrayView2<'_, f64>, theta: ArrayView2<'_, f64>) -> Result<f64> {
+        if x.nrows() != theta.nrows() {
+            return Err(FitError::ShapeMismatch(format!(
+                "{} feature rows, {} parameter rows",
+                x.nrows(),
+                theta.nrows()
+            )));
+        }
+        let mut sum = 0.0;
+        for (xr, tr) in x.rows().into_iter().zip(theta.rows()) {
+            sum -= self.log_density(&xr.to_vec(), &tr.to_vec())?;
+        }
+        Ok(sum / x.nrows().max(1) as f64)
+    }
+}
+
+#[cfg(test)]
+mod tests;
