@@ -566,6 +566,7 @@ fn ship<S: Simulator + ?Sized>(
     let Winner {
         compressor,
         features,
+        thetas,
         regressor_config,
         regressor,
         ..
@@ -576,6 +577,7 @@ fn ship<S: Simulator + ?Sized>(
         regressor,
         TrainedOn {
             features: features.view(),
+            thetas: thetas.view(),
             simulations: kept + failures,
             failures,
             regressor: regressor_config,

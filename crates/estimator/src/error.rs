@@ -40,6 +40,13 @@ pub enum Error {
         /// What the runtime lacks and what to train instead.
         reason: String,
     },
+    /// Draws were asked of an estimator trained without a conditional
+    /// density.
+    #[error(
+        "this estimator has no posterior to draw from: train it with a density of the \
+         parameters (`train --posterior`, `TwoStage::posterior`)"
+    )]
+    NoPosterior,
     /// A record or output slot does not fit the estimator.
     #[error(
         "the record does not fit this estimator: {what} has {found} values, the estimator \

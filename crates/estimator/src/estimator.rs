@@ -14,12 +14,11 @@ use twostage_validate::{ConformalIntervals, ValidationReport};
 use crate::adaptive::{AdaptiveIntervals, MIN_ADAPTIVE_CALIBRATION};
 pub use crate::assessment::{Assessment, interval_in_box};
 use crate::envelope::FeatureEnvelope;
-use crate::error::{Error, FileError, Result};
-use crate::layout::{EstimatorFields, Stages, V1, V2, V3, V5, V6};
+use crate::error::{Error, Result};
 use crate::space::{rows_to_estimates, to_estimate};
 pub use crate::stored::{SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
-use twostage_fit::FittedRegressor;
+use twostage_fit::{FittedMixture, FittedRegressor};
 pub use twostage_models::RecordShape;
 
 /// Scratch space for [`Estimator::estimate_into`]: keep one per thread and
@@ -72,181 +71,11 @@ pub struct Estimator {
     /// Where the held-out records' input shapes lie (format version 6
     /// on): a record whose input is of another shape is flagged.
     pub(crate) input_shapes: Option<InputShapes>,
-}
-
-impl TryFrom<EstimatorFields> for Estimator {
-    type Error = FileError;
-    /// Each component has checked its own invariants while decoding;
-    /// this adds the ones between components, so that a decoded estimator
-    /// estimates (or errs) and never indexes out of range.
-    fn try_from(f: EstimatorFields) -> std::result::Result<Self, FileError> {
-        let V6 {
-            v5: V5 { v4, input_family },
-            input_shapes,
-        } = f;
-        let V3 {
-            v2:
-                V2 {
-                    v1:
-                        V1 {
-                            stages:
-                                Stages {
-                                    param_names,
-                                    lower,
-                                    upper,
-                                    shape,
-                                    compressor,
-                                    regressor,
-                                    training,
-                                },
-                            intervals,
-                            validation,
-                        },
-                    envelope,
-                    adaptive,
-                },
-            marginals,
-            signal_names,
-        } = v4;
-        let estimator = Self {
-            param_names,
-            lower,
-            upper,
-            shape,
-            compressor,
-            regressor,
-            training,
-            intervals,
-            validation,
-            envelope,
-            adaptive,
-            marginals,
-            signal_names,
-            input_family,
-            input_shapes,
-        };
-        estimator
-            .check_parameters()
-            .and_then(|()| estimator.check_components())
-            .map_err(|what| FileError::Inconsistent { what })?;
-        Ok(estimator)
-    }
-}
-
-impl Estimator {
-    /// The parameters' names, boxes and priors agree.
-    fn check_parameters(&self) -> std::result::Result<(), String> {
-        let (param_names, lower, upper) = (&self.param_names, &self.lower, &self.upper);
-        let q = param_names.len();
-        if q == 0 || lower.len() != q || upper.len() != q {
-            return Err(format!(
-                "{q} parameter names, {} lower and {} upper bounds",
-                lower.len(),
-                upper.len()
-            ));
-        }
-        if let Some(j) =
-            (0..q).find(|&j| !(lower[j].is_finite() && upper[j].is_finite() && lower[j] < upper[j]))
-        {
-            return Err(format!(
-                "the box [{}, {}] of {}",
-                lower[j], upper[j], param_names[j]
-            ));
-        }
-        if self.marginals.len() != q {
-            return Err(format!(
-                "{} priors for {q} parameters",
-                self.marginals.len()
-            ));
-        }
-        for (j, marginal) in self.marginals.iter().enumerate() {
-            if marginal.check(j).is_err() {
-                return Err(format!("the prior {marginal:?} of {}", param_names[j]));
-            }
-            // The box is the prior's range; a clip outside it would leave
-            // the support (a log-normal's estimate must stay > 0).
-            let (low, high) = marginal.range();
-            let slack = 1e-9 * (high - low);
-            if !(lower[j] >= low - slack && upper[j] <= high + slack) {
-                return Err(format!(
-                    "the box [{}, {}] of {} outside its prior's range [{low}, {high}]",
-                    lower[j], upper[j], param_names[j]
-                ));
-            }
-        }
-        Ok(())
-    }
-
-    /// The stages, the envelope, the adaptive intervals, the signal names
-    /// and the intervals fit each other and the parameters.
-    fn check_components(&self) -> std::result::Result<(), String> {
-        let q = self.param_names.len();
-        let (compressor, regressor, shape) = (&self.compressor, &self.regressor, &self.shape);
-        if regressor.n_outputs() != q || regressor.n_inputs() != compressor.n_features() {
-            return Err(format!(
-                "stage 2 maps {} features to {} parameters, stage 1 gives {} features for {q}",
-                regressor.n_inputs(),
-                regressor.n_outputs(),
-                compressor.n_features()
-            ));
-        }
-        if let Some(envelope) = &self.envelope
-            && envelope.dim() != compressor.n_features()
-        {
-            return Err(format!(
-                "a feature envelope of {} features for {}",
-                envelope.dim(),
-                compressor.n_features()
-            ));
-        }
-        if let Some(adaptive) = &self.adaptive
-            && (adaptive.dim() != q || adaptive.n_features() != compressor.n_features())
-        {
-            return Err(format!(
-                "adaptive intervals for {} parameters and {} features",
-                adaptive.dim(),
-                adaptive.n_features()
-            ));
-        }
-        if let Some(names) = &self.signal_names
-            && (names.inputs.len() != shape.n_inputs || names.outputs.len() != shape.n_outputs)
-        {
-            return Err(format!(
-                "{} input and {} output names for records of {} and {}",
-                names.inputs.len(),
-                names.outputs.len(),
-                shape.n_inputs,
-                shape.n_outputs
-            ));
-        }
-        if let Some(family) = &self.input_family
-            && !family.is_consistent(shape.n_inputs)
-        {
-            return Err(format!(
-                "an input family of {} signals for records of {} inputs",
-                family.n_inputs(),
-                shape.n_inputs
-            ));
-        }
-        if let Some(shapes) = &self.input_shapes
-            && shapes.n_inputs() != shape.n_inputs
-        {
-            return Err(format!(
-                "input shapes of {} signals for records of {} inputs",
-                shapes.n_inputs(),
-                shape.n_inputs
-            ));
-        }
-        if let Some(intervals) = &self.intervals {
-            let widths = intervals.half_widths();
-            if widths.len() != q || widths.iter().any(|w| w.is_nan() || *w < 0.0) {
-                return Err(format!(
-                    "interval half-widths {widths:?} for {q} parameters"
-                ));
-            }
-        }
-        Ok(())
-    }
+    /// The parameters' conditional density given the features (format
+    /// version 9 on, written only where there is one, so an estimator
+    /// without keeps its bytes).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) posterior: Option<FittedMixture>,
 }
 
 impl Estimator {
@@ -448,6 +277,22 @@ impl Estimator {
                 expected: self.param_names.len(),
             });
         }
+        self.features_of(inputs, outputs, work)?;
+        self.regressor.predict_into(&work.features, theta)?;
+        to_estimate(theta, &self.marginals, &self.lower, &self.upper);
+        Ok(())
+    }
+
+    /// Stage 1's features of one record, in `work`.
+    ///
+    /// # Errors
+    /// A record that cannot be compressed.
+    pub(crate) fn features_of<'w>(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &'w mut EstimateWorkspace,
+    ) -> Result<&'w [f64]> {
         let n = self.compressor.n_features();
         if work.features.len() != n {
             work.features.resize(n, 0.0);
@@ -458,9 +303,7 @@ impl Estimator {
             &mut work.compress,
             &mut work.features,
         )?;
-        self.regressor.predict_into(&work.features, theta)?;
-        to_estimate(theta, &self.marginals, &self.lower, &self.upper);
-        Ok(())
+        Ok(&work.features)
     }
 
     /// Estimate theta from one SISO record.
@@ -739,6 +582,7 @@ impl Estimator {
             }),
             input_family: None,
             input_shapes: None,
+            posterior: None,
         }
     }
 

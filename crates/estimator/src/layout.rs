@@ -13,7 +13,7 @@ use crate::adaptive::AdaptiveIntervals;
 use crate::envelope::FeatureEnvelope;
 use crate::stored::{SignalNames, TrainingInfo};
 use twostage_compress::CompressorConfig;
-use twostage_fit::FittedRegressor;
+use twostage_fit::{FittedMixture, FittedRegressor};
 use twostage_models::RecordShape;
 
 /// A parameter's validation before format version 4: no betting
@@ -114,15 +114,40 @@ pub(crate) struct V5 {
 }
 
 /// Format version 6 adds the density of the held-out records' input
-/// shapes; today's layout.
+/// shapes (versions 7 and 8 share its layout).
 #[derive(Deserialize)]
 pub(crate) struct V6 {
     pub(crate) v5: V5,
     pub(crate) input_shapes: Option<InputShapes>,
 }
 
-/// Today's layout (format version 6).
-pub(crate) type EstimatorFields = V6;
+/// Format version 9 adds the parameters' conditional density; today's
+/// layout.
+#[derive(Deserialize)]
+pub(crate) struct V9 {
+    pub(crate) v6: V6,
+    pub(crate) posterior: Option<FittedMixture>,
+}
+
+/// Today's layout (format version 9).
+pub(crate) type EstimatorFields = V9;
+
+impl From<V6> for V9 {
+    /// No conditional density.
+    fn from(v6: V6) -> Self {
+        Self {
+            v6,
+            posterior: None,
+        }
+    }
+}
+
+impl From<V5> for V9 {
+    /// No input shapes, no conditional density.
+    fn from(v5: V5) -> Self {
+        V6::from(v5).into()
+    }
+}
 
 impl From<V5> for V6 {
     /// No input shapes.

@@ -12,11 +12,13 @@
 
 mod adaptive;
 mod assessment;
+mod decoded;
 mod envelope;
 mod error;
 mod estimator;
 mod file;
 mod layout;
+mod posterior;
 mod runtime_export;
 pub mod space;
 mod stored;

@@ -3,6 +3,7 @@
 //! Latin hypercube, Sobol) places points by probability, not by value.
 
 use crate::error::{Result, SimError};
+use twostage_kernels::mixture::Support;
 
 /// The probability left out in each tail of an unbounded prior: charts are
 /// drawn from the prior truncated to its central `1 - 2e-6` range, and that
@@ -254,6 +255,33 @@ impl Marginal {
         match self {
             Marginal::LogNormal { .. } => Transform::Log,
             _ => Transform::Identity,
+        }
+    }
+}
+
+impl Marginal {
+    /// Where the parameter's values lie: the whole line (normal), the
+    /// positive numbers (log-normal) or an interval (uniform, truncated
+    /// normal). A density over the parameter lives on the real line this
+    /// maps to ([`Support::to_unbounded`]), so its draws never leave it.
+    ///
+    /// ```
+    /// use twostage_models::Marginal;
+    /// use twostage_kernels::mixture::Support;
+    /// let rate = Marginal::LogNormal { mu: 0.0, sigma: 1.0 };
+    /// assert_eq!(rate.support(), Support::Positive);
+    /// assert_eq!(
+    ///     Marginal::Uniform { low: 1.0, high: 2.0 }.support(),
+    ///     Support::Interval { low: 1.0, high: 2.0 }
+    /// );
+    /// ```
+    pub fn support(&self) -> Support {
+        match *self {
+            Marginal::Uniform { low, high } | Marginal::TruncatedNormal { low, high, .. } => {
+                Support::Interval { low, high }
+            }
+            Marginal::Normal { .. } => Support::Real,
+            Marginal::LogNormal { .. } => Support::Positive,
         }
     }
 }

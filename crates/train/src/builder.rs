@@ -11,7 +11,7 @@ use twostage_models::{Sampling, Simulator};
 use crate::run::Run;
 use crate::settings::RunSettings;
 use twostage_compress::CompressorConfig;
-use twostage_fit::RegressorConfig;
+use twostage_fit::{MixtureDensity, RegressorConfig};
 use twostage_sources::paper_benchmark;
 use twostage_sources::{Preset, Progress, RecordSource, Records, RunShape, Silent};
 
@@ -21,6 +21,7 @@ use twostage_sources::{Preset, Progress, RecordSource, Records, RunShape, Silent
 /// |---|---|---|
 /// | `compressor` | ARX(5, 5) | any [`CompressorConfig`] |
 /// | `regressor` | MLP with 10 tanh units, LM | any [`RegressorConfig`] |
+/// | `posterior` | none | a [`MixtureDensity`] of the parameters given the features |
 /// | `simulations` (m) | 1500 | >= 10 |
 /// | `sampling` | the prior's own | [`Sampling`] of the training chart |
 /// | `records` | simulated | a [`RecordSource`]: simulated, chart files or shards |
@@ -52,6 +53,7 @@ pub struct TwoStage<'a, S: ?Sized> {
     simulator: &'a S,
     compressor: CompressorConfig,
     regressor: RegressorConfig,
+    posterior: Option<MixtureDensity>,
     simulations: usize,
     sampling: Option<Sampling>,
     settings: RunSettings,
@@ -67,6 +69,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
             simulator,
             compressor: p.compressor,
             regressor: p.regressor,
+            posterior: None,
             simulations: p.simulations,
             sampling: None,
             settings: RunSettings::default(),
@@ -92,6 +95,15 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         self.regressor = regressor;
         self
     }
+    /// Also a conditional density of the parameters given stage 1's
+    /// features, fitted on the training chart beside stage 2 (seeded by
+    /// the run's seed): the estimator then draws from the posterior
+    /// ([`Estimator::sample_record`]). None by default.
+    pub fn posterior(mut self, density: MixtureDensity) -> Self {
+        self.posterior = Some(density);
+        self
+    }
+
     /// A linear stage 2 with ridge penalty `lambda` (shorthand).
     ///
     /// # Errors
@@ -240,8 +252,7 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         settings.seed = Some(settings.seed_or_default());
         Ok(Run::new(
             builder.simulator,
-            builder.compressor,
-            builder.regressor,
+            (builder.compressor, builder.regressor, builder.posterior),
             settings,
             records,
             builder.progress,

@@ -6,7 +6,7 @@
 use crate::Result;
 use twostage_estimator::space::to_learning_space;
 use twostage_estimator::{Estimator, TrainingInfo};
-use twostage_fit::{FittedRegressor, RegressorConfig};
+use twostage_fit::{FittedRegressor, MixtureDensity, RegressorConfig};
 use twostage_models::{InputFamily, Simulator};
 use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};
 
@@ -18,6 +18,9 @@ use twostage_compress::CompressorConfig;
 pub struct TrainedOn<'f> {
     /// The features of the records the network was fitted on.
     pub features: ndarray::ArrayView2<'f, f64>,
+    /// Their parameters, row for row (a conditional density of the
+    /// parameters, where asked, is fitted on both).
+    pub thetas: ndarray::ArrayView2<'f, f64>,
     /// Training simulations, failed ones included.
     pub simulations: usize,
     /// Training simulations that failed and were dropped.
@@ -32,6 +35,7 @@ pub struct Run<'a, S: ?Sized> {
     simulator: &'a S,
     compressor: CompressorConfig,
     regressor: RegressorConfig,
+    posterior: Option<MixtureDensity>,
     settings: RunSettings,
     records: Records<'a, S>,
     progress: &'a dyn Progress,
@@ -42,6 +46,7 @@ impl<S: ?Sized> std::fmt::Debug for Run<'_, S> {
         f.debug_struct("Run")
             .field("compressor", &self.compressor)
             .field("regressor", &self.regressor)
+            .field("posterior", &self.posterior)
             .field("settings", &self.settings)
             .finish_non_exhaustive()
     }
@@ -50,8 +55,11 @@ impl<S: ?Sized> std::fmt::Debug for Run<'_, S> {
 impl<'a, S: Simulator + ?Sized> Run<'a, S> {
     pub(crate) fn new(
         simulator: &'a S,
-        compressor: CompressorConfig,
-        regressor: RegressorConfig,
+        (compressor, regressor, posterior): (
+            CompressorConfig,
+            RegressorConfig,
+            Option<MixtureDensity>,
+        ),
         settings: RunSettings,
         records: Records<'a, S>,
         progress: &'a dyn Progress,
@@ -60,6 +68,7 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             simulator,
             compressor,
             regressor,
+            posterior,
             settings,
             records,
             progress,
@@ -131,6 +140,7 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             regressor?,
             TrainedOn {
                 features: training.features.view(),
+                thetas: training.thetas.view(),
                 simulations: training.total(),
                 failures: training.failures.len(),
                 regressor: self.regressor.clone(),
@@ -163,6 +173,21 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
         };
         let mut estimator =
             Estimator::from_stages(spec, compressor, regressor, training, trained.features);
+        if let Some(density) = &self.posterior {
+            self.progress.begin(Stage::Fitting, 0);
+            let supports: Vec<_> = spec
+                .prior()
+                .marginals()
+                .iter()
+                .map(|m| m.support())
+                .collect();
+            let fitted =
+                density
+                    .seeded(self.seed())
+                    .fit(trained.features, trained.thetas, &supports);
+            self.progress.end(Stage::Fitting);
+            estimator = estimator.with_posterior(fitted?)?;
+        }
         // The held-out records are fresh draws of the training's
         // experiments: their inputs span the family the estimator speaks
         // for.

@@ -15,6 +15,7 @@ use ndarray::{Array2, ArrayView2};
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use twostage_kernels::mixture::{MixtureShape, Support, log_sum_exp};
 
 use crate::error::{FitError, InvalidSetting, Result};
@@ -25,15 +26,17 @@ use super::held_out::BestHeldOut;
 use super::lbfgs::{Objective, PATIENCE_SCALE, minimize};
 use super::network::{
     BLOCK_SAMPLES, MAX_WIDTH, add_sample_gradient, by_columns, forward, initial_parameters,
-    run_network, widest_vectors,
+    parameter_count, run_network, widest_vectors,
 };
 use super::params::{Mlp, MlpParams};
+use super::stored::{stored_best, stored_layers};
 use super::training::{held_out_split, restart_rng};
 
 /// How a mixture density network learns: the network (its hidden layers,
-/// restarts, iterations, held-out fraction, patience, weight decay, seed
-/// and deadline; its trainer is always L-BFGS) and the mixture's
-/// components.
+/// restarts, held-out fraction, patience, weight decay, seed and
+/// deadline), the mixture's components, and the L-BFGS iterations of each
+/// restart (the density's own: the held-out loss usually stops a restart
+/// well before them).
 ///
 /// ```
 /// use ndarray::Array2;
@@ -56,10 +59,11 @@ use super::training::{held_out_split, restart_rng};
 pub struct MixtureDensity {
     network: MlpParams,
     components: usize,
+    iterations: usize,
 }
 
 /// One restart of a mixture density network's training.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DensityRestart {
     /// Restart index.
     pub restart: usize,
@@ -77,7 +81,8 @@ pub struct DensityRestart {
 
 /// A trained mixture density network: `p(θ | features)`, to evaluate and
 /// draw from.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "FittedMixtureFields")]
 pub struct FittedMixture {
     features: Standardizer,
     /// The standardization of the parameters mapped to the real line.
@@ -93,7 +98,73 @@ pub struct FittedMixture {
     best: usize,
 }
 
+/// What a file stores; decoding checks every shape the head and the
+/// draws rely on, so a decoded density evaluates or errs but never indexes
+/// out of range.
+#[derive(Deserialize)]
+struct FittedMixtureFields {
+    features: Standardizer,
+    unbounded: Standardizer,
+    supports: Vec<Support>,
+    shape: MixtureShape,
+    sizes: Vec<usize>,
+    params: Vec<f64>,
+    reports: Vec<DensityRestart>,
+    best: usize,
+}
+
+impl TryFrom<FittedMixtureFields> for FittedMixture {
+    type Error = FitError;
+    fn try_from(f: FittedMixtureFields) -> Result<Self> {
+        let shape = |what: String| Err(FitError::ShapeMismatch(format!("stored density: {what}")));
+        let dim = f.shape.dim;
+        if f.shape.components == 0 || dim == 0 || f.shape.outputs() > MAX_WIDTH {
+            return shape(format!(
+                "{} components of {dim} parameters",
+                f.shape.components
+            ));
+        }
+        stored_layers(&f.sizes, f.features.dim(), f.shape.outputs())?;
+        if f.params.len() != parameter_count(&f.sizes) {
+            return shape(format!(
+                "{} weights for layers {:?}",
+                f.params.len(),
+                f.sizes
+            ));
+        }
+        if f.unbounded.dim() != dim || f.supports.len() != dim {
+            return shape(format!(
+                "{} standardized parameters and {} supports for {dim} parameters",
+                f.unbounded.dim(),
+                f.supports.len()
+            ));
+        }
+        if let Some(bad) = f.supports.iter().find(|s| match s {
+            Support::Interval { low, high } => !(low.is_finite() && high.is_finite() && low < high),
+            _ => false,
+        }) {
+            return shape(format!("the support {bad:?}"));
+        }
+        stored_best(f.best, f.reports.len())?;
+        Ok(Self {
+            features: f.features,
+            unbounded: f.unbounded,
+            supports: f.supports,
+            shape: f.shape,
+            sizes: f.sizes,
+            params: f.params,
+            reports: f.reports,
+            best: f.best,
+        })
+    }
+}
+
 impl MixtureDensity {
+    /// L-BFGS iterations a restart unless set otherwise: a density's
+    /// likelihood is not a sum of squares, so its descent takes many more
+    /// of them than the regression network's Levenberg-Marquardt.
+    pub const DEFAULT_ITERATIONS: usize = 5000;
+
     /// A mixture of `components` Gaussians given by `network`.
     ///
     /// # Errors
@@ -114,7 +185,29 @@ impl MixtureDensity {
         Ok(Self {
             network,
             components,
+            iterations: Self::DEFAULT_ITERATIONS,
         })
+    }
+
+    /// At most `iterations` L-BFGS iterations a restart (default
+    /// [`Self::DEFAULT_ITERATIONS`]).
+    ///
+    /// # Errors
+    /// None asked.
+    pub fn iterations(mut self, iterations: usize) -> Result<Self> {
+        if iterations == 0 {
+            return Err(invalid("iterations", "0".into(), "at least 1"));
+        }
+        self.iterations = iterations;
+        Ok(self)
+    }
+
+    /// The same density seeded by `seed` (its restarts' weights and its
+    /// held-out rows).
+    pub fn seeded(&self, seed: u64) -> Self {
+        let mut seeded = self.clone();
+        seeded.network.seed = seed;
+        seeded
     }
 
     /// The density of `theta` (rows x parameters) given `x` (rows x
@@ -204,7 +297,7 @@ impl MixtureDensity {
                     !held_out.is_empty(),
                 );
                 let (iterations, reason) =
-                    minimize(&likelihood, params, p.max_iterations, &mut best, p.stop_by);
+                    minimize(&likelihood, params, self.iterations, &mut best, p.stop_by);
                 let (held_out_nll, params) = best.into_best();
                 let report = DensityRestart {
                     restart,
@@ -419,6 +512,11 @@ impl FittedMixture {
     /// The mixture's layout.
     pub fn shape(&self) -> MixtureShape {
         self.shape
+    }
+
+    /// The features it reads.
+    pub fn n_features(&self) -> usize {
+        self.sizes[0]
     }
 
     /// Each parameter's support.

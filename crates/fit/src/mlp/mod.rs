@@ -14,6 +14,7 @@ mod held_out;
 mod lbfgs;
 mod network;
 mod params;
+mod stored;
 mod training;
 
 pub use density::{DensityRestart, FittedMixture, MixtureDensity};

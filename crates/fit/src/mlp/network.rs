@@ -12,7 +12,7 @@ use twostage_kernels::layer::{Activation, dense_layer};
 use crate::Predictor;
 use crate::TerminationReason;
 use crate::check;
-use crate::error::{FitError, Result};
+use crate::error::Result;
 use crate::standardize::Standardizer;
 
 /// How one restart went.
@@ -62,7 +62,7 @@ pub(super) fn run_network(
 
 /// A trained network, with its standardization and training report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "FittedMlpFields")]
+#[serde(try_from = "super::stored::FittedMlpFields")]
 pub struct FittedMlp {
     pub(super) features: Standardizer,
     pub(super) targets: Standardizer,
@@ -74,61 +74,6 @@ pub struct FittedMlp {
     /// One report per restart; `best` indexes the one kept.
     pub(super) reports: Vec<RestartReport>,
     pub(super) best: usize,
-}
-
-/// What a file stores; decoding checks every shape the forward pass relies
-/// on, so a decoded network predicts or errs but never indexes out of range.
-#[derive(Deserialize)]
-struct FittedMlpFields {
-    features: Standardizer,
-    targets: Standardizer,
-    sizes: Vec<usize>,
-    members: Vec<Vec<f64>>,
-    reports: Vec<RestartReport>,
-    best: usize,
-}
-
-impl TryFrom<FittedMlpFields> for FittedMlp {
-    type Error = FitError;
-    fn try_from(f: FittedMlpFields) -> Result<Self> {
-        let shape = |what: String| Err(FitError::ShapeMismatch(format!("stored network: {what}")));
-        if f.sizes.len() < 3 || f.sizes.len() > 6 {
-            return shape(format!("{} layers, expected 3 to 6", f.sizes.len()));
-        }
-        if let Some(w) = f.sizes.iter().find(|&&w| w == 0 || w > MAX_WIDTH) {
-            return shape(format!("a layer of width {w}, expected 1..={MAX_WIDTH}"));
-        }
-        if f.sizes[0] != f.features.dim() || f.sizes[f.sizes.len() - 1] != f.targets.dim() {
-            return shape(format!(
-                "layers {:?} for {} features and {} targets",
-                f.sizes,
-                f.features.dim(),
-                f.targets.dim()
-            ));
-        }
-        let count = parameter_count(&f.sizes);
-        if f.members.is_empty() || f.members.iter().any(|m| m.len() != count) {
-            return shape(format!(
-                "{} member networks, each must have {count} weights",
-                f.members.len()
-            ));
-        }
-        if f.best >= f.reports.len() {
-            return shape(format!(
-                "best restart {} of {} reports",
-                f.best,
-                f.reports.len()
-            ));
-        }
-        Ok(Self {
-            features: f.features,
-            targets: f.targets,
-            sizes: f.sizes,
-            members: f.members,
-            reports: f.reports,
-            best: f.best,
-        })
-    }
 }
 
 impl FittedMlp {

@@ -216,14 +216,10 @@ fn the_density_is_the_same_on_any_thread_count() {
             .unwrap()
             .install(|| {
                 MixtureDensity::new(
-                    MlpParams::new(&[6])
-                        .unwrap()
-                        .restarts(3)
-                        .max_iterations(40)
-                        .check()
-                        .unwrap(),
+                    MlpParams::new(&[6]).unwrap().restarts(3).check().unwrap(),
                     2,
                 )
+                .and_then(|d| d.iterations(40))
                 .unwrap()
                 .fit(x.view(), theta.view(), &[Support::Real, Support::Real])
                 .unwrap()
@@ -263,4 +259,59 @@ fn what_cannot_be_fitted_is_refused_by_name() {
         .unwrap_err()
         .to_string();
     assert!(too_wide.contains("fewer components"), "{too_wide}");
+}
+
+/// A density decodes as it was stored; one whose shapes disagree (a
+/// weight missing, another head, an empty interval, a kept restart that
+/// is not one) is refused, never indexed out of range.
+#[test]
+fn a_stored_density_is_decoded_whole_or_refused() {
+    let (x, theta) = correlated(200, 2);
+    let density = MixtureDensity::new(
+        MlpParams::new(&[4]).unwrap().restarts(1).check().unwrap(),
+        2,
+    )
+    .and_then(|d| d.iterations(5))
+    .unwrap()
+    .fit(x.view(), theta.view(), &[Support::Real, Support::Real])
+    .unwrap();
+    let bytes = postcard::to_allocvec(&density).unwrap();
+    assert_eq!(
+        postcard::from_bytes::<FittedMixture>(&bytes).unwrap(),
+        density
+    );
+    let damaged: [fn(&mut FittedMixture); 4] = [
+        |d| {
+            d.params.pop();
+        },
+        |d| d.shape.components = 3,
+        |d| {
+            d.supports[0] = Support::Interval {
+                low: 1.0,
+                high: 1.0,
+            }
+        },
+        |d| d.best = 1,
+    ];
+    for (k, damage) in damaged.into_iter().enumerate() {
+        let mut bad = density.clone();
+        damage(&mut bad);
+        let bytes = postcard::to_allocvec(&bad).unwrap();
+        assert!(
+            postcard::from_bytes::<FittedMixture>(&bytes).is_err(),
+            "{k}"
+        );
+        let fields = FittedMixtureFields {
+            features: bad.features,
+            unbounded: bad.unbounded,
+            supports: bad.supports,
+            shape: bad.shape,
+            sizes: bad.sizes,
+            params: bad.params,
+            reports: bad.reports,
+            best: bad.best,
+        };
+        let refused = FittedMixture::try_from(fields).unwrap_err().to_string();
+        assert!(refused.contains("stored"), "{k}: {refused}");
+    }
 }

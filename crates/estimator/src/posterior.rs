@@ -1,0 +1,101 @@
+//! The parameters' conditional density given a record, where the
+//! estimator was trained with one: draws from `p(θ | record)` through
+//! stage 1's features.
+
+use rand::Rng;
+use twostage_compress::Compressor;
+use twostage_fit::FittedMixture;
+use twostage_models::{IoData, Marginal};
+
+use crate::error::{Error, Result};
+use crate::estimator::{EstimateWorkspace, Estimator};
+
+impl Estimator {
+    /// The parameters' conditional density given a record's features,
+    /// where the estimator was trained with one.
+    pub fn posterior(&self) -> Option<&FittedMixture> {
+        self.posterior.as_ref()
+    }
+
+    /// The estimator with `posterior`, a density of its parameters given
+    /// its stage 1's features.
+    ///
+    /// # Errors
+    /// A density of other features, or of other parameters or supports
+    /// than the estimator's priors give.
+    pub fn with_posterior(mut self, posterior: FittedMixture) -> Result<Self> {
+        check_against(&posterior, self.compressor.n_features(), &self.marginals).map_err(
+            |what| {
+                Error::InvalidSetting(crate::InvalidSetting {
+                    name: "posterior",
+                    value: what,
+                    reason: "train the density on this estimator's features and priors".into(),
+                })
+            },
+        )?;
+        self.posterior = Some(posterior);
+        Ok(self)
+    }
+
+    /// Draws of the parameters given `record` into `out` (draws x
+    /// parameters, row after row: as many draws as it holds rows), from
+    /// the random numbers of `rng`, each inside its prior's support.
+    ///
+    /// ```
+    /// use rand::SeedableRng;
+    /// use twostage::TwoStage;
+    /// use twostage::fit::{MixtureDensity, MlpParams};
+    /// use twostage::models::{Benchmark, Simulator, experiment_rng};
+    /// let model = Benchmark::builder().n_samples(300).build()?;
+    /// let estimator = TwoStage::builder(&model)
+    ///     .simulations(1000).validation(0).calibration(0)
+    ///     .posterior(MixtureDensity::new(MlpParams::new(&[16])?.check()?, 2)?)
+    ///     .train()?;
+    /// let mut record = model.spec().new_record();
+    /// model.simulate(&[0.3], &mut experiment_rng(4, 0), &mut record)?;
+    /// let mut draws = vec![0.0; 500];
+    /// estimator.sample_record(&record, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1), &mut draws)?;
+    /// let mean = draws.iter().sum::<f64>() / 500.0;
+    /// assert!((mean - 0.3).abs() < 0.1, "{mean}");
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// An estimator without a density, a record that cannot be compressed,
+    /// or `out` not a whole number of draws.
+    pub fn sample_record(
+        &self,
+        record: &IoData,
+        rng: &mut impl Rng,
+        out: &mut [f64],
+    ) -> Result<()> {
+        let posterior = self.posterior.as_ref().ok_or(Error::NoPosterior)?;
+        let mut work = EstimateWorkspace::new();
+        let features = self.features_of(record.inputs(), record.outputs(), &mut work)?;
+        posterior.sample(features, rng, out)?;
+        Ok(())
+    }
+}
+
+/// Whether `posterior` reads `n_features` features and draws parameters
+/// of the priors `marginals` on their supports; what disagrees, else.
+pub(crate) fn check_against(
+    posterior: &FittedMixture,
+    n_features: usize,
+    marginals: &[Marginal],
+) -> std::result::Result<(), String> {
+    if posterior.n_features() != n_features {
+        return Err(format!(
+            "a density of {} features, stage 1 gives {n_features}",
+            posterior.n_features()
+        ));
+    }
+    let supports: Vec<_> = marginals.iter().map(Marginal::support).collect();
+    if posterior.supports() != supports.as_slice() {
+        return Err(format!(
+            "a density on {:?}, the priors' supports are {supports:?}",
+            posterior.supports()
+        ));
+    }
+    Ok(())
+}
