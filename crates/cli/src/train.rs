@@ -72,6 +72,11 @@ pub struct TrainArgs {
     /// every candidate evaluated (reproducible outcome).
     #[arg(long, requires = "auto")]
     budget_sims: Option<usize>,
+    /// Also train the posterior: a density of the parameters given stage
+    /// 1's features, a mixture of K Gaussians with full covariances, that
+    /// `estimate --samples` draws from.
+    #[arg(long, value_name = "K")]
+    posterior: Option<usize>,
     /// Seed of every random choice (default 1; with shards, theirs).
     #[arg(long)]
     seed: Option<u64>,
@@ -148,6 +153,7 @@ impl TrainArgs {
             compress: self.compress.clone(),
             fit: self.fit.clone(),
             search,
+            posterior: self.posterior,
             settings: RunSettings {
                 seed: self.seed,
                 validation: self.validate,

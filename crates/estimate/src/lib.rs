@@ -13,6 +13,7 @@ use twostage_refine::{CheckPlan, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
 mod choices;
+mod draws;
 mod failure;
 mod joint;
 mod methods;
@@ -27,6 +28,7 @@ mod through_model;
 pub use choices::{
     CheckSettings, GivenValues, RefineChoiceError, RefineWhich, Windows, values_outside_prior,
 };
+pub use draws::{PosteriorDraws, draws_refused};
 pub use failure::{GivenValuesError, MethodFailure, RecordFailure};
 pub use joint::{JointFitter, JointOfRecords};
 pub use methods::OUTPUT_ERROR_METHOD;
@@ -105,6 +107,7 @@ pub struct EstimateRequest {
     seed: u64,
     prior_starts: Option<usize>,
     allow_outside_prior: bool,
+    samples: Option<usize>,
 }
 
 impl EstimateRequest {
@@ -121,6 +124,7 @@ impl EstimateRequest {
             seed: 0,
             prior_starts: None,
             allow_outside_prior: false,
+            samples: None,
         }
     }
 
@@ -157,6 +161,14 @@ impl EstimateRequest {
     /// ([`Estimating::joint`]).
     pub fn joint(mut self, joint: bool) -> Self {
         self.joint = joint;
+        self
+    }
+
+    /// Also draw `samples` parameter vectors from the estimator's
+    /// posterior given each record (seeded by the request's seed and the
+    /// record's place: [`RecordEstimate::posterior`]).
+    pub fn samples(mut self, samples: Option<usize>) -> Self {
+        self.samples = samples;
         self
     }
 
@@ -241,6 +253,19 @@ impl EstimateRequest {
                 error: refused,
             });
         }
+        if let Some(samples) = self.samples {
+            let estimator = match &self.with {
+                EstimateWith::Estimator(estimator) => Some(estimator.as_ref()),
+                _ => None,
+            };
+            let refined = self.refine.is_some() || self.joint;
+            if let Some(refused) = draws::draws_refused(samples, estimator, refined) {
+                return Err(RequestError {
+                    purpose: Purpose::Samples,
+                    error: refused,
+                });
+            }
+        }
         let settings = Settings {
             checks: self.checks(),
             check: self.check_settings,
@@ -250,6 +275,7 @@ impl EstimateRequest {
             seed: self.seed,
             prior_starts: self.prior_starts,
             allow_outside_prior: self.allow_outside_prior,
+            samples: self.samples,
         };
         // The estimator's model, found once where a use asks for it; the
         // first use names a lookup that fails.
@@ -288,6 +314,7 @@ struct Settings {
     seed: u64,
     prior_starts: Option<usize>,
     allow_outside_prior: bool,
+    samples: Option<usize>,
 }
 
 impl Settings {
@@ -371,6 +398,7 @@ impl Settings {
             refine: self.refine,
             windows: self.windows,
             plan: self.plan(q),
+            samples: self.samples,
             // The joint fit, as a refinement, fits records of any length.
             method: Method::two_stage(estimator, self.refine.is_some() || self.joint),
             notes: Vec::new(),
@@ -492,6 +520,7 @@ impl Settings {
             windows: self.windows,
             plan: self.plan(spec.param_names().len()),
             method,
+            samples: None,
             notes,
         })
     }
@@ -516,6 +545,8 @@ pub enum Purpose {
     Windows,
     /// The model given.
     Model,
+    /// The posterior's draws.
+    Samples,
 }
 
 impl Purpose {
@@ -530,6 +561,7 @@ impl Purpose {
             Self::Joint => "the joint fit",
             Self::Windows => "the windows",
             Self::Model => "the model",
+            Self::Samples => "the posterior's draws",
         }
     }
 }
@@ -568,6 +600,10 @@ pub enum RequestProblem {
         /// Which parameter lies where, and the box.
         why: String,
     },
+    /// Draws that cannot be made (none asked, no posterior, a method
+    /// that does not draw, more than memory holds).
+    #[error("{0}")]
+    Samples(String),
     /// A model given to a trained estimator's request that neither checks,
     /// refines nor fits its estimates jointly: it would be ignored.
     #[error(
@@ -626,6 +662,7 @@ pub struct Estimating {
     refine: Option<RefineWhich>,
     windows: Option<Windows>,
     plan: CheckPlan,
+    samples: Option<usize>,
     notes: Vec<String>,
 }
 

@@ -46,18 +46,20 @@ impl Estimating {
         progress.begin_step("estimating", pieces.len(), "records");
         let mut rows: Vec<(String, RecordOutcome)> = pieces
             .into_par_iter()
-            .map(|(id, record, window_end)| {
+            .enumerate()
+            .map(|(index, (id, record, window_end))| {
                 let estimated = record.and_then(|record| {
-                    let estimated = self.method.estimate(&id, &record).map_err(|why| {
-                        RecordFailure::NotEstimated {
-                            place: place(&id),
-                            why,
-                        }
-                    })?;
+                    let failed = |why| RecordFailure::NotEstimated {
+                        place: place(&id),
+                        why,
+                    };
+                    let estimated = self.method.estimate(&id, &record).map_err(failed)?;
+                    let posterior = self.draws(&record, index).map_err(|e| failed(e.into()))?;
                     Ok((
                         record,
                         RecordEstimate {
                             window_end,
+                            posterior,
                             ..estimated
                         },
                     ))
@@ -69,6 +71,21 @@ impl Estimating {
         progress.end_step();
         let auto = self.check_and_refine(&mut rows, progress);
         Estimates { rows, auto }
+    }
+
+    /// The draws asked of the `index`th record (or window) of a batch,
+    /// where samples are asked.
+    fn draws(
+        &self,
+        record: &IoData,
+        index: usize,
+    ) -> twostage_estimator::Result<Option<crate::PosteriorDraws>> {
+        match (self.samples, &self.method) {
+            (Some(samples), super::methods::Method::TwoStage { estimator, .. }) => {
+                super::draws::draw(estimator, record, samples, self.plan.seed, index).map(Some)
+            }
+            _ => Ok(None),
+        }
     }
 
     /// The records to estimate: each whole, or with windows each of its

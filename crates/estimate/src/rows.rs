@@ -8,7 +8,7 @@ use twostage_models::{InputDeviation, IoData};
 use twostage_refine::{RecordCheck, RefineError, RefineReason};
 
 use super::failure::RecordFailure;
-use crate::{ModelFailure, RefinedBy, SearchOptima};
+use crate::{ModelFailure, PosteriorDraws, RefinedBy, SearchOptima};
 
 /// One record's (or window's) estimate and what was found about it.
 #[derive(Debug, Clone)]
@@ -41,6 +41,9 @@ pub struct RecordEstimate {
     pub refinement: Option<RefineOutcome>,
     /// With windows: the window's last sample in its record, from 1.
     pub window_end: Option<usize>,
+    /// With samples asked: the draws from the estimator's posterior given
+    /// the record.
+    pub posterior: Option<PosteriorDraws>,
 }
 
 impl RecordEstimate {
@@ -61,6 +64,7 @@ impl RecordEstimate {
             check: None,
             refinement: None,
             window_end: None,
+            posterior: None,
         }
     }
 

@@ -15,7 +15,8 @@ impl Estimating {
     /// per parameter, then those that some row has (window ends,
     /// intervals inside the prior's box, feature distances, the check's
     /// columns, why a refinement stopped, the search's optima and, with
-    /// `with_correlation`, the refined estimates' correlations), empty
+    /// `with_correlation`, the refined estimates' correlations; with
+    /// samples, each parameter's posterior draws' mean and sd), empty
     /// where a row has no value. Numbers read back to the same bits.
     pub fn csv(&self, rows: &[(String, RecordEstimate)], with_correlation: bool) -> String {
         let (names, outputs) = (&self.names, &self.signals.outputs);
@@ -62,6 +63,10 @@ impl Estimating {
         let with_optima = !with_check && rows.iter().any(|(_, e)| e.optima().is_some());
         if with_optima {
             header.extend(["optima".into(), "runner_up_over_best".into()]);
+        }
+        let with_posterior = rows.iter().any(|(_, e)| e.posterior.is_some());
+        if with_posterior {
+            header.extend(posterior_header(names));
         }
         let pairs = if with_correlation {
             self.correlation_pairs()
@@ -125,6 +130,17 @@ impl Estimating {
                         .and_then(|o| o.runner_up_over_best)
                         .map_or_else(String::new, format_f64),
                 );
+            }
+            if with_posterior {
+                match &e.posterior {
+                    Some(draws) => {
+                        for (mean, sd) in draws.mean().iter().zip(draws.sd()) {
+                            fields.push(format_f64(*mean));
+                            fields.push(format_f64(sd));
+                        }
+                    }
+                    None => fields.extend(vec![String::new(); 2 * names.len()]),
+                }
             }
             for (_, at) in &pairs {
                 fields.push(
@@ -198,6 +214,14 @@ impl Estimating {
                         object.insert("runner_up_over_best".into(), ratio.into());
                     }
                 }
+                if let Some(draws) = &e.posterior {
+                    let columns = posterior_header(names);
+                    let values = draws.mean().into_iter().zip(draws.sd());
+                    for (pair, (mean, sd)) in columns.chunks_exact(2).zip(values) {
+                        object.insert(pair[0].clone(), mean.into());
+                        object.insert(pair[1].clone(), sd.into());
+                    }
+                }
                 if let Some(r) = e.correlation() {
                     for (name, at) in &pairs {
                         object.insert(name.clone(), r[*at].into());
@@ -241,6 +265,36 @@ impl Estimating {
         serde_json::Value::Array(records)
     }
 
+    /// Every row's posterior draws as CSV: `experiment` (and `window_end`
+    /// with windows), `draw` (from 0), then a column per parameter; rows
+    /// without draws (the joint row) have none. Numbers read back to the
+    /// same bits.
+    ///
+    pub fn draws_csv(&self, rows: &[(String, RecordEstimate)]) -> String {
+        let windowed = rows.iter().any(|(_, e)| e.window_end.is_some());
+        let mut header = vec!["experiment".to_string()];
+        if windowed {
+            header.push("window_end".into());
+        }
+        header.push("draw".into());
+        header.extend(self.names.iter().cloned());
+        let mut text = row(&header);
+        let q = self.names.len().max(1);
+        for (id, e) in rows {
+            let Some(draws) = &e.posterior else { continue };
+            for (k, draw) in draws.draws().chunks_exact(q).enumerate() {
+                let mut fields = vec![id.clone()];
+                if windowed {
+                    fields.push(e.window_end.map_or_else(String::new, |end| end.to_string()));
+                }
+                fields.push(k.to_string());
+                fields.extend(draw.iter().map(|v| format_f64(*v)));
+                text.push_str(&row(&fields));
+            }
+        }
+        text
+    }
+
     /// The pairs of parameters a correlation column names, `corr_A_B` with A
     /// before B, with their place in the row-major matrix.
     pub fn correlation_pairs(&self) -> Vec<(String, usize)> {
@@ -277,6 +331,14 @@ impl RecordEstimate {
             self.in_family()
         }
     }
+}
+
+/// The posterior's columns: per parameter its draws' mean and sd.
+fn posterior_header(names: &[String]) -> Vec<String> {
+    names
+        .iter()
+        .flat_map(|n| [format!("{n}_posterior_mean"), format!("{n}_posterior_sd")])
+        .collect()
 }
 
 /// The check's columns: per output its RMS residual and fit, then the

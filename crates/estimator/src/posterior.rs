@@ -2,6 +2,7 @@
 //! estimator was trained with one: draws from `p(θ | record)` through
 //! stage 1's features.
 
+use ndarray::ArrayView2;
 use rand::Rng;
 use twostage_compress::Compressor;
 use twostage_fit::FittedMixture;
@@ -69,9 +70,30 @@ impl Estimator {
         rng: &mut impl Rng,
         out: &mut [f64],
     ) -> Result<()> {
+        self.sample_into(
+            record.inputs(),
+            record.outputs(),
+            &mut EstimateWorkspace::new(),
+            rng,
+            out,
+        )
+    }
+
+    /// [`Estimator::sample_record`] of the record `inputs` (N x n_u),
+    /// `outputs` (N x n_y), with a workspace kept across records.
+    ///
+    /// # Errors
+    /// As [`Estimator::sample_record`].
+    pub fn sample_into(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        outputs: ArrayView2<'_, f64>,
+        work: &mut EstimateWorkspace,
+        rng: &mut impl Rng,
+        out: &mut [f64],
+    ) -> Result<()> {
         let posterior = self.posterior.as_ref().ok_or(Error::NoPosterior)?;
-        let mut work = EstimateWorkspace::new();
-        let features = self.features_of(record.inputs(), record.outputs(), &mut work)?;
+        let features = self.features_of(inputs, outputs, work)?;
         posterior.sample(features, rng, out)?;
         Ok(())
     }

@@ -23,6 +23,8 @@ pub enum StreamPurpose {
     Parameter,
     /// Design-wide randomness (Latin hypercube permutations, Sobol shifts).
     Design,
+    /// The posterior's draws given one record.
+    Posterior,
 }
 
 impl StreamPurpose {
@@ -31,6 +33,7 @@ impl StreamPurpose {
             Self::Simulation => 0x5349_4d55_4c41_5445, // "SIMULATE"
             Self::Parameter => 0x5041_5241_4d45_5445,  // "PARAMETE"
             Self::Design => 0x4445_5349_474e_0000,     // "DESIGN"
+            Self::Posterior => 0x504f_5354_4552_494f,  // "POSTERIO"
         }
     }
 }

@@ -226,10 +226,48 @@ impl PyEstimator {
     ) -> PyResult<Bound<'py, PyAny>> {
         let q = self.inner.param_names().len();
         let estimator = &self.inner;
-        let (theta, single) = self.each_record(py, u, y, q, |u, y, work, out| {
+        let (theta, single) = self.each_record(py, u, y, q, |_, u, y, work, out| {
             Ok(estimator.estimate_into(u, y, work, out)?)
         })?;
         Ok(rows(py, theta, q, single))
+    }
+
+    /// `n` draws from the estimator's posterior given one record (`u`
+    /// `[N, n_u]`, `y` `[N, n_y]`: draws `[n, q]`) or each record of a
+    /// batch (draws `[b, n, q]`), the records in parallel without the GIL;
+    /// record k's draws come from the stream of (`seed`, k), as `twostage
+    /// estimate --samples n --seed SEED` draws for the k-th record of a
+    /// file, so both give the same numbers.
+    #[pyo3(signature = (u, y, n, *, seed=0))]
+    fn sample<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+        n: usize,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        if let Some(refused) = twostage::draws_refused(n, Some(&self.inner), false) {
+            return Err(PyValueError::new_err(format!("n: {refused}")));
+        }
+        let q = self.inner.param_names().len();
+        let estimator = &self.inner;
+        let (draws, single) = self.each_record(py, u, y, n * q, |k, u, y, work, out| {
+            let mut rng = twostage::models::stream_rng(
+                seed,
+                k as u64,
+                twostage::models::StreamPurpose::Posterior,
+            );
+            Ok(estimator.sample_into(u, y, work, &mut rng, out)?)
+        })?;
+        let shape = if single {
+            vec![n, q]
+        } else {
+            vec![draws.len() / (n * q).max(1), n, q]
+        };
+        ndarray::ArrayD::from_shape_vec(shape, draws)
+            .map(|a| a.into_pyarray(py).into_any())
+            .map_err(|e| PyValueError::new_err(format!("draws: {e}")))
     }
 
     /// The last sample (from 1) of each window of `window` samples, one
@@ -277,7 +315,7 @@ impl PyEstimator {
         // when none), samples outside the output transform, ways its
         // input lies outside the family.
         let width = 2 * q + 3;
-        let (values, single) = self.each_record(py, u, y, width, |u, y, work, out| {
+        let (values, single) = self.each_record(py, u, y, width, |_, u, y, work, out| {
             let assessment = estimator.assess_with(u, y, work)?;
             let (theta, rest) = out.split_at_mut(q);
             theta.copy_from_slice(&assessment.theta);
@@ -343,7 +381,7 @@ impl PyEstimator {
     ) -> PyResult<Vec<Vec<String>>> {
         let estimator = &self.inner;
         let said = std::sync::Mutex::new(Vec::new());
-        let (indices, _) = self.each_record(py, u, y, 1, |u, _, _, out| {
+        let (indices, _) = self.each_record(py, u, y, 1, |_, u, _, _, out| {
             let mut sentences: Vec<String> = estimator
                 .input_deviations(u)
                 .iter()
@@ -633,6 +671,7 @@ impl PyEstimator {
         y: &Bound<'_, PyAny>,
         width: usize,
         each: impl Fn(
+            usize,
             ArrayView2<'_, f64>,
             ArrayView2<'_, f64>,
             &mut EstimateWorkspace,
@@ -678,7 +717,7 @@ impl PyEstimator {
                     {
                         return Some((k, Failure::Value(bad)));
                     }
-                    each(u, y, work, out)
+                    each(k, u, y, work, out)
                         .err()
                         .map(|e| (k, Failure::Estimate(e)))
                 })

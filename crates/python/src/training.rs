@@ -26,7 +26,7 @@ use crate::{PyEstimator, to_python};
 /// `progress(event, stage, count)`, and as `progress("note" or "status",
 /// message, 0)` for the run's messages.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None, posterior=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn train(
     py: Python<'_>,
@@ -50,6 +50,7 @@ pub(crate) fn train(
     auto: bool,
     budget_seconds: Option<f64>,
     budget_sims: Option<usize>,
+    posterior: Option<usize>,
 ) -> PyResult<PyEstimator> {
     let search = twostage::Budget::chosen(auto, budget_seconds, budget_sims).map_err(|e| {
         let name = match (e, budget_seconds) {
@@ -118,6 +119,7 @@ pub(crate) fn train(
         compress: compress.map(str::to_string),
         fit: fit.map(str::to_string),
         search,
+        posterior,
         settings: RunSettings {
             seed,
             validation: validate.unwrap_or(defaults.validation),

@@ -392,3 +392,39 @@ def test_assess_says_which_records_a_log_could_not_take(tmp_path):
     n = plain.record_shape[0]
     u, y = np.random.default_rng(1).standard_normal((2, n, 1))
     assert plain.assess(u, y)["untransformed_samples"] is None
+
+
+def test_the_posterior_s_draws_are_the_cli_s_bit_for_bit(tmp_path):
+    """``posterior=K`` trains the command line's file; ``sample`` draws
+    what ``estimate --samples --draws`` writes, record for record; an
+    estimator without a posterior, or no draw asked, is refused."""
+    args = dict(model="benchmark", sims=400, fit="linear", validate=0,
+                calibrate=0, seed=3, progress=False)
+    estimator = twostage.train(posterior=2, **args)
+    path = tmp_path / "posterior.tsest"
+    cli("train", "--model", "benchmark", "--sims", "400", "--fit", "linear",
+        "--validate", "0", "--calibrate", "0", "--seed", "3", "--posterior", "2",
+        "--out", str(path), "--quiet")
+    assert path.read_bytes() == estimator.to_bytes()
+    charts = tmp_path / "records"
+    cli("simulate", "--model", "benchmark", "--count", "4", "--seed", "8",
+        "--out-dir", str(charts))
+    draws_file = tmp_path / "draws.csv"
+    cli("estimate", "--estimator", str(path), "--samples", "30", "--seed", "5",
+        "--draws", str(draws_file), str(charts / "data.csv"))
+    from_cli = np.loadtxt(draws_file, delimiter=",", skiprows=1)
+    data = np.loadtxt(charts / "data.csv", delimiter=",", skiprows=1)
+    experiments = np.unique(data[:, 0]).astype(int)
+    u = np.stack([data[data[:, 0] == e, 1:2] for e in experiments])
+    y = np.stack([data[data[:, 0] == e, 2:3] for e in experiments])
+    draws = estimator.sample(u, y, 30, seed=5)
+    assert draws.shape == (4, 30, 1)
+    assert draws.reshape(-1).tolist() == from_cli[:, 2].tolist()
+    # One record alone is record 0 of its own batch: the stream of (seed, 0).
+    assert estimator.sample(u[0], y[0], 30, seed=5).tolist() == draws[0].tolist()
+    assert np.all((draws >= -0.9) & (draws <= 0.9))
+    with pytest.raises(ValueError, match="at least 1"):
+        estimator.sample(u, y, 0)
+    plain = twostage.train(**args)
+    with pytest.raises(ValueError, match="posterior=K"):
+        plain.sample(u, y, 10)

@@ -13,7 +13,7 @@ use twostage_models::Simulator;
 use twostage_auto::{AutoDesign, AutoOutcome, Budget};
 use twostage_compress::CompressorConfig;
 use twostage_estimator::Estimator;
-use twostage_fit::RegressorConfig;
+use twostage_fit::{MixtureDensity, RegressorConfig};
 use twostage_sources::NamedModel;
 use twostage_sources::Progress;
 use twostage_sources::RecordSource;
@@ -178,6 +178,10 @@ pub struct TrainingRequest {
     /// Search compressors and networks within this budget instead of
     /// training a preset.
     pub search: Option<Budget>,
+    /// Also fit a conditional density of the parameters of this many
+    /// Gaussian components (the posterior the estimator then draws
+    /// from; [`MixtureDensity::with_components`]).
+    pub posterior: Option<usize>,
     /// Seed, sizes, levels.
     pub settings: RunSettings,
     /// Where the records come from.
@@ -400,9 +404,19 @@ impl TrainingRequest {
                 budget.describe()
             ));
         }
-        let builder = TwoStage::builder(simulator)
+        let mut builder = TwoStage::builder(simulator)
             .settings(self.settings.clone())
             .progress(progress);
+        if let Some(components) = self.posterior {
+            builder =
+                builder.posterior(MixtureDensity::with_components(components).map_err(|_| {
+                    Error::setting(
+                        "posterior",
+                        components.to_string(),
+                        "at least 1 Gaussian component",
+                    )
+                })?);
+        }
         let builder = match search {
             Some(_) => builder,
             None => builder.preset(self.preset(model)?),

@@ -9,7 +9,9 @@ use rand_chacha::ChaCha8Rng;
 use twostage::baselines::BayesBenchmark;
 use twostage::fit::{MixtureDensity, MlpParams};
 use twostage::models::{Benchmark, Simulator, experiment_rng};
-use twostage::{Estimator, FORMAT_VERSION, TwoStage};
+use twostage::{
+    EstimateRequest, EstimateWith, Estimator, FORMAT_VERSION, Purpose, RefineWhich, TwoStage,
+};
 
 fn trained(model: &Benchmark) -> Estimator {
     TwoStage::builder(model)
@@ -98,6 +100,22 @@ fn the_posterior_travels_in_the_estimator_file() {
     let read = Estimator::from_bytes(&bytes).unwrap();
     assert_eq!(read, with);
     assert!(read.posterior().is_some());
+    // Draws are the two-stage posterior's: asked beside a refinement or a
+    // joint fit, whose estimates are not, they are refused by the request.
+    for (refine, joint) in [(Some(RefineWhich::All), false), (None, true)] {
+        let refused = EstimateRequest::new(EstimateWith::Estimator(Box::new(read.clone())))
+            .samples(Some(10))
+            .refine(refine)
+            .joint(joint)
+            .prepare()
+            .err()
+            .unwrap();
+        assert_eq!(refused.purpose, Purpose::Samples);
+        assert!(
+            refused.to_string().contains("refined or joint"),
+            "{refused}"
+        );
+    }
     let without = TwoStage::builder(&model)
         .simulations(300)
         .validation(0)

@@ -107,9 +107,12 @@ fn refuse_what_does_not_apply(args: &EstimateArgs, refine: Option<RefineWhich>) 
     if args.starts.is_some() && !multi_start {
         return refuse("--starts", "--method pem, ii and oe");
     }
-    let seeded = checks || args.joint || particles || multi_start;
+    let seeded = checks || args.joint || particles || multi_start || args.samples.is_some();
     if args.seed.is_some() && !seeded {
-        return refuse("--seed", "--method pf, pem, ii and oe, --check and --joint");
+        return refuse(
+            "--seed",
+            "--method pf, pem, ii and oe, --check, --joint and --samples",
+        );
     }
     Ok(())
 }
@@ -179,6 +182,7 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
         .joint(args.joint)
         .windows(window)
         .seed(args.seed.unwrap_or(0))
+        .samples(args.samples)
         .prior_starts(args.prior_starts);
     let estimating = request
         .prepare()
@@ -199,6 +203,7 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
         Purpose::Refine => "--refine".into(),
         Purpose::Joint => "--joint".into(),
         Purpose::Windows => "--window".into(),
+        Purpose::Samples => "--samples".into(),
         Purpose::Model if args.model_file.is_some() => "--model-file".into(),
         Purpose::Model => "--model".into(),
     };

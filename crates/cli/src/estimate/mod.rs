@@ -173,6 +173,16 @@ pub struct EstimateArgs {
     /// by side; the last window ends at the record's last full step).
     #[arg(long, value_name = "K", requires = "window")]
     every: Option<usize>,
+    /// Draw N parameter vectors from the estimator's posterior given each
+    /// record (an estimator trained with --posterior; seeded by --seed
+    /// and the record's place): the table gets each parameter's
+    /// posterior mean and sd, --draws FILE the draws.
+    #[arg(long, value_name = "N")]
+    samples: Option<usize>,
+    /// With --samples: write every draw here (CSV: experiment, draw, a
+    /// column per parameter).
+    #[arg(long, value_name = "FILE", requires = "samples")]
+    draws: Option<PathBuf>,
     /// CSV files: header u,y (one record) or experiment,u,y (many).
     #[arg(required = true)]
     data: Vec<PathBuf>,
@@ -209,7 +219,7 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         )));
     }
     // Before the work: refined or checked records take minutes.
-    if let Some(path) = &args.out {
+    for path in [&args.out, &args.draws].into_iter().flatten() {
         twostage::check_writable(path)?;
     }
     let estimating = methods::prepared(args)?;
@@ -304,6 +314,9 @@ fn write_table(
     match &args.out {
         Some(path) => twostage::write_whole(path, text.as_bytes())?,
         None => crate::standard_output::StandardOutput::write_text(&text)?,
+    }
+    if let Some(path) = &args.draws {
+        twostage::write_whole(path, estimating.draws_csv(rows).as_bytes())?;
     }
     Ok(())
 }

@@ -189,6 +189,20 @@ impl MixtureDensity {
         })
     }
 
+    /// Hidden layers of a density given by its components alone.
+    pub const DEFAULT_HIDDEN: [usize; 2] = [32, 32];
+
+    /// A mixture of `components` Gaussians on the default network
+    /// ([`Self::DEFAULT_HIDDEN`] tanh units, the regression network's
+    /// restarts, held-out fraction, patience and weight decay): what a
+    /// door asks for when it names only the components.
+    ///
+    /// # Errors
+    /// No component.
+    pub fn with_components(components: usize) -> Result<Self> {
+        Self::new(MlpParams::new(&Self::DEFAULT_HIDDEN)?.check()?, components)
+    }
+
     /// At most `iterations` L-BFGS iterations a restart (default
     /// [`Self::DEFAULT_ITERATIONS`]).
     ///

@@ -136,6 +136,24 @@ class Estimator:
 
         return column(u, n_u), column(y, n_y)
 
+    def sample(
+        self,
+        u: Optional[npt.NDArray[np.float64]],
+        y: npt.NDArray[np.float64],
+        n: int,
+        *,
+        seed: int = 0,
+    ) -> npt.NDArray[np.float64]:
+        """``n`` draws from the posterior given one record (shapes as
+        ``estimate``: draws [n, q]) or each record of a batch ([b, n, q]),
+        every draw inside its prior's support. Record k of a batch draws
+        from the stream of (``seed``, k), as ``twostage estimate --samples
+        n --seed SEED`` does for the k-th record of a file: the same
+        numbers. The estimator must have been trained with ``posterior=K``
+        (else ValueError says so)."""
+        u, y = self._columns(u, y)
+        return self._native.sample(u, y, n, seed=seed)
+
     def assess(
         self, u: Optional[npt.NDArray[np.float64]], y: npt.NDArray[np.float64]
     ) -> dict[str, Any]:
@@ -550,6 +568,7 @@ def train(
     auto: bool = False,
     budget_seconds: Optional[float] = None,
     budget_sims: Optional[int] = None,
+    posterior: Optional[int] = None,
 ) -> Estimator:
     """Train an estimator with the command line's defaults: the same
     arguments and seed give the same file, bit for bit, as ``twostage
@@ -592,6 +611,11 @@ def train(
     ``chart`` it fits and scores on the chart's own records. A model
     without presets searches even without ``auto``. The design found is
     ``estimator.preset_block()``, to paste into the model file.
+
+    ``posterior=K`` also trains the posterior, a density of the parameters
+    given stage 1's features (a mixture of K Gaussians with full
+    covariances), that ``Estimator.sample`` draws from, as ``twostage
+    train --posterior K`` does.
     """
     native = _train(
         model,
@@ -611,6 +635,7 @@ def train(
         auto=auto,
         budget_seconds=budget_seconds,
         budget_sims=budget_sims,
+        posterior=posterior,
         chart=chart,
         validate_chart=validate_chart,
         calibrate_chart=calibrate_chart,

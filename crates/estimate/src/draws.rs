@@ -1,0 +1,123 @@
+//! Draws from a trained estimator's posterior for each record a request
+//! estimates (`samples`): how many, refused where they cannot be made,
+//! and each record's draws with their mean and sd.
+
+use twostage_estimator::Estimator;
+use twostage_models::{IoData, StreamPurpose, stream_rng};
+
+use crate::RequestProblem;
+
+/// One record's draws from the estimator's posterior, row after row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PosteriorDraws {
+    draws: Vec<f64>,
+    dim: usize,
+}
+
+impl PosteriorDraws {
+    /// The draws (draws x parameters, row after row).
+    pub fn draws(&self) -> &[f64] {
+        &self.draws
+    }
+
+    /// How many draws.
+    pub fn len(&self) -> usize {
+        self.draws.len() / self.dim.max(1)
+    }
+
+    /// Whether there is none.
+    pub fn is_empty(&self) -> bool {
+        self.draws.is_empty()
+    }
+
+    /// The draws' mean, per parameter.
+    ///
+    /// ```
+    /// let draws = twostage::PosteriorDraws::of(vec![1.0, 10.0, 3.0, 30.0], 2);
+    /// assert_eq!(draws.mean(), [2.0, 20.0]);
+    /// assert_eq!(draws.sd(), [1.0, 10.0]);
+    /// ```
+    pub fn mean(&self) -> Vec<f64> {
+        let n = self.len().max(1) as f64;
+        (0..self.dim)
+            .map(|j| self.column(j).sum::<f64>() / n)
+            .collect()
+    }
+
+    /// The draws' standard deviation (of the draws themselves, divided by
+    /// their count), per parameter.
+    pub fn sd(&self) -> Vec<f64> {
+        let n = self.len().max(1) as f64;
+        self.mean()
+            .iter()
+            .enumerate()
+            .map(|(j, m)| (self.column(j).map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt())
+            .collect()
+    }
+
+    /// Draws of `dim` parameters, row after row.
+    pub fn of(draws: Vec<f64>, dim: usize) -> Self {
+        Self { draws, dim }
+    }
+
+    fn column(&self, j: usize) -> impl Iterator<Item = f64> + '_ {
+        self.draws.iter().skip(j).step_by(self.dim.max(1)).copied()
+    }
+}
+
+/// Why `samples` draws per record cannot be made: none asked, a way of
+/// estimating without a posterior (`estimator` `None`, or one trained
+/// without), a refinement or joint fit (`refined`: their estimates are
+/// not the posterior's), or more than memory holds. Every door asks here,
+/// so each refuses in the same words.
+///
+/// ```
+/// let refused = twostage::draws_refused(0, None, false).unwrap();
+/// assert!(refused.to_string().contains("at least 1"));
+/// ```
+pub fn draws_refused(
+    samples: usize,
+    estimator: Option<&Estimator>,
+    refined: bool,
+) -> Option<RequestProblem> {
+    let why = if samples == 0 {
+        "0 draws asked: ask at least 1".to_string()
+    } else if let Some(estimator) = estimator {
+        if estimator.posterior().is_none() {
+            "this estimator has no posterior: train it with `--posterior K` (Python: \
+             posterior=K), K Gaussian components"
+                .to_string()
+        } else if refined {
+            "the draws are the two-stage posterior's, not a refined or joint estimate's: \
+             leave out the refinement and the joint fit, or the draws"
+                .to_string()
+        } else {
+            let each = 8 * estimator.param_names().len() as u64;
+            return twostage_sources::refuse_beyond_memory("samples", samples, each, "draws")
+                .err()
+                .map(|e| RequestProblem::Samples(e.to_string()));
+        }
+    } else {
+        "only a trained estimator with a posterior draws (an estimator file trained with \
+         `--posterior K`); the classic methods, the output-error fit and given values do not"
+            .to_string()
+    };
+    Some(RequestProblem::Samples(why))
+}
+
+/// `samples` draws given `record`, the `index`th piece of its request,
+/// from the stream of (`seed`, `index`): the same draws for the same
+/// record and seed whatever the threads.
+pub(crate) fn draw(
+    estimator: &Estimator,
+    record: &IoData,
+    samples: usize,
+    seed: u64,
+    index: usize,
+) -> twostage_estimator::Result<PosteriorDraws> {
+    let dim = estimator.param_names().len();
+    let mut draws = vec![0.0; samples * dim];
+    let mut rng = stream_rng(seed, index as u64, StreamPurpose::Posterior);
+    estimator.sample_record(record, &mut rng, &mut draws)?;
+    Ok(PosteriorDraws { draws, dim })
+}
