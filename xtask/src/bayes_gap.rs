@@ -13,7 +13,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
 use twostage::models::{
-    BuiltinModel, BuiltinOverrides, Drawn, InputSignal, IoData, Simulator, experiment_rng,
+    BuiltinModel, BuiltinOverrides, Drawn, InputSignal, IoData, Simulator, StreamPurpose,
+    experiment_rng, stream_rng,
 };
 use twostage::sources::{ChartFiles, csv_rows::read_columns};
 use twostage::{Assessment, ClassicMethod, EstimateWorkspace, Estimator, interval_in_box};
@@ -306,6 +307,98 @@ fn said_of_itself(estimator: &Estimator, assessed: &[Assessment], truth: &[Vec<f
     words.join("; ")
 }
 
+/// Draws of each record from an estimator's posterior: their means, and
+/// per parameter how often their central 50, 90 and 95% intervals hold
+/// the truth.
+struct PosteriorScores {
+    means: Vec<Vec<f64>>,
+    /// `covered[j][l]`: records whose level-`l` interval of parameter j
+    /// holds its truth.
+    covered: Vec<[usize; 3]>,
+    records: usize,
+}
+
+/// The levels whose central intervals are scored.
+const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
+/// Draws per record.
+const DRAWS: usize = 1000;
+
+impl PosteriorScores {
+    fn coverage_words(&self, j: usize) -> String {
+        LEVELS
+            .iter()
+            .zip(self.covered[j])
+            .map(|(level, count)| {
+                format!(
+                    "{:.0}%: {:.3}",
+                    100.0 * level,
+                    count as f64 / self.records as f64
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// [`DRAWS`] draws of every record from `estimator`'s posterior (record i
+/// from the stream of (`seed`, i), as `estimate --samples` draws), timed.
+fn posterior_draws(
+    estimator: &Estimator,
+    records: &[IoData],
+    truth: &[Vec<f64>],
+    seed: u64,
+) -> Result<PosteriorScores> {
+    let q = estimator.param_names().len();
+    let start = Instant::now();
+    let per_record: Vec<(Vec<f64>, Vec<[bool; 3]>)> = records
+        .par_iter()
+        .enumerate()
+        .map_init(EstimateWorkspace::new, |work, (i, record)| {
+            let mut draws = vec![0.0; DRAWS * q];
+            let mut rng = stream_rng(seed, i as u64, StreamPurpose::Posterior);
+            estimator.sample_into(
+                record.inputs(),
+                record.outputs(),
+                work,
+                &mut rng,
+                &mut draws,
+            )?;
+            let mut mean = vec![0.0; q];
+            let mut inside = vec![[false; 3]; q];
+            for j in 0..q {
+                let mut column: Vec<f64> = draws.iter().skip(j).step_by(q).copied().collect();
+                mean[j] = column.iter().sum::<f64>() / DRAWS as f64;
+                column.sort_by(f64::total_cmp);
+                for (l, level) in LEVELS.iter().enumerate() {
+                    let tail = ((1.0 - level) / 2.0 * DRAWS as f64).round() as usize;
+                    let (low, high) = (column[tail], column[DRAWS - 1 - tail]);
+                    inside[j][l] = (low..=high).contains(&truth[i][j]);
+                }
+            }
+            Ok::<_, twostage::estimator::Error>((mean, inside))
+        })
+        .collect::<Result<_, _>>()?;
+    let seconds = start.elapsed().as_secs_f64();
+    println!(
+        "  posterior: {DRAWS} draws of each record in {seconds:.2} s ({:.0} draws a second, \
+         features included)",
+        (DRAWS * records.len()) as f64 / seconds
+    );
+    let mut covered = vec![[0usize; 3]; q];
+    for (_, inside) in &per_record {
+        for (j, levels) in inside.iter().enumerate() {
+            for (l, hit) in levels.iter().enumerate() {
+                covered[j][l] += usize::from(*hit);
+            }
+        }
+    }
+    Ok(PosteriorScores {
+        means: per_record.into_iter().map(|(mean, _)| mean).collect(),
+        covered,
+        records: records.len(),
+    })
+}
+
 /// Which records an estimator is tested on.
 pub(crate) struct TestRecords {
     /// The built-in model (default: the estimator's).
@@ -464,6 +557,10 @@ pub(crate) fn run(
         path.display()
     );
     println!("  {}", said_of_itself(&estimator, &assessed, &truth));
+    let drawn = match estimator.posterior() {
+        Some(_) => Some(posterior_draws(&estimator, &records, &truth, seed)?),
+        None => None,
+    };
     let all: Vec<usize> = (0..records.len()).collect();
     for (j, name) in estimator.param_names().iter().enumerate() {
         let (ts_rmse, bayes_rmse) = (
@@ -476,6 +573,16 @@ pub(crate) fn run(
              [{low:.3}, {high:.3}]",
             ts_rmse / bayes_rmse
         );
+        if let Some(drawn) = &drawn {
+            let [low, high] = bootstrap_ratio(&drawn.means, &posterior, &truth, j, seed);
+            println!(
+                "  {name}: the posterior draws' mean RMSE {:.5}, over Bayes {:.3} [{low:.3}, \
+                 {high:.3}]; central intervals of the draws cover {}",
+                rmse(&drawn.means, &truth, j, &all),
+                rmse(&drawn.means, &truth, j, &all) / bayes_rmse,
+                drawn.coverage_words(j)
+            );
+        }
         for (label, other) in &others {
             let other_rmse = rmse(other, &truth, j, &all);
             let [low, high] = bootstrap_ratio(&ts, other, &truth, j, seed);

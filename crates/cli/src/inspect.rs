@@ -83,6 +83,9 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
         _ => t.regressor.to_string(),
     };
     writeln!(out, "  stage 2     {network}")?;
+    if let Some(posterior) = e.posterior() {
+        writeln!(out, "  posterior   {}", posterior.summary())?;
+    }
     writeln!(
         out,
         "  training    m = {} records ({} failed), seed {}, {}",

@@ -66,6 +66,12 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
     };
     train(&with, true);
     train(&without, false);
+    let inspected = ok(&["inspect", path(&with)]);
+    assert!(
+        inspected.contains("format version 9")
+            && inspected.contains("posterior   mixture of 2 full-covariance Gaussians"),
+        "{inspected}"
+    );
     let draws = |seed: &str, file: &std::path::Path| {
         let table = ok(&[
             "estimate",

@@ -543,6 +543,26 @@ impl FittedMixture {
         &self.reports
     }
 
+    /// What the density is and how it was trained, in one line: its
+    /// components, layers and weights, and the kept restart's held-out
+    /// negative log-likelihood (per record, standardized unbounded
+    /// parameters) and iterations.
+    pub fn summary(&self) -> String {
+        let best = self.best_restart();
+        format!(
+            "mixture of {} full-covariance Gaussians over {} parameters; layers {:?}, {} \
+             weights; best of {} restarts (held-out NLL {:.4}, {} L-BFGS iterations, {})",
+            self.shape.components,
+            self.shape.dim,
+            self.sizes,
+            self.params.len(),
+            self.reports.len(),
+            best.held_out_nll,
+            best.iterations,
+            best.reason.name()
+        )
+    }
+
     /// The restart kept: the lowest held-out negative log-likelihood.
     pub fn best_restart(&self) -> &DensityRestart {
         &self.reports[self.best]
