@@ -38,6 +38,24 @@ impl Estimator {
         Ok(self)
     }
 
+    /// The posterior's spread calibrated on held-out records (parameters
+    /// `thetas`, stage 1's `features`, rows of each): the factor that
+    /// gives them the least negative log-likelihood
+    /// ([`FittedMixture::calibrate_spread`]). Nothing without a posterior.
+    ///
+    /// # Errors
+    /// Rows that do not fit the density.
+    pub fn calibrate_posterior(
+        &mut self,
+        thetas: ndarray::ArrayView2<'_, f64>,
+        features: ndarray::ArrayView2<'_, f64>,
+    ) -> Result<()> {
+        if let Some(posterior) = self.posterior.as_mut() {
+            posterior.calibrate_spread(features, thetas)?;
+        }
+        Ok(())
+    }
+
     /// Draws of the parameters given `record` into `out` (draws x
     /// parameters, row after row: as many draws as it holds rows), from
     /// the random numbers of `rng`, each inside its prior's support.

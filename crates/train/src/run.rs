@@ -205,6 +205,7 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             .compressed(ChartRole::Calibration, estimator.compressor())?
         {
             include(&chart);
+            estimator.calibrate_posterior(chart.thetas.view(), chart.features.view())?;
             estimator.calibrate(
                 chart.thetas.view(),
                 chart.features.view(),

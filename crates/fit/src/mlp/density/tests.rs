@@ -280,7 +280,7 @@ fn a_stored_density_is_decoded_whole_or_refused() {
         postcard::from_bytes::<FittedMixture>(&bytes).unwrap(),
         density
     );
-    let damaged: [fn(&mut FittedMixture); 4] = [
+    let damaged: [fn(&mut FittedMixture); 5] = [
         |d| {
             d.params.pop();
         },
@@ -292,6 +292,7 @@ fn a_stored_density_is_decoded_whole_or_refused() {
             }
         },
         |d| d.best = 1,
+        |d| d.spread = 0.0,
     ];
     for (k, damage) in damaged.into_iter().enumerate() {
         let mut bad = density.clone();
@@ -310,8 +311,34 @@ fn a_stored_density_is_decoded_whole_or_refused() {
             params: bad.params,
             reports: bad.reports,
             best: bad.best,
+            spread: bad.spread,
         };
         let refused = FittedMixture::try_from(fields).unwrap_err().to_string();
         assert!(refused.contains("stored"), "{k}: {refused}");
     }
+}
+
+/// Fresh rows like the training's leave the spread near 1; rows whose
+/// noise is twice as large widen it near 2, and their likelihood rises.
+#[test]
+fn the_spread_is_calibrated_on_fresh_rows() {
+    let (x, theta) = correlated(3000, 1);
+    let mut density = MixtureDensity::new(network(&[16], 2), 2)
+        .unwrap()
+        .fit(x.view(), theta.view(), &[Support::Real, Support::Real])
+        .unwrap();
+    let (xf, tf) = correlated(4000, 12);
+    let same = density.calibrate_spread(xf.view(), tf.view()).unwrap();
+    assert!((same - 1.0).abs() < 0.05, "{same}");
+    // The same means, the noise doubled.
+    let mut wide = tf.clone();
+    for (mut row, v) in wide.rows_mut().into_iter().zip(xf.column(0)) {
+        row[0] = v + 2.0 * (row[0] - v);
+        row[1] = -0.5 * v + 2.0 * (row[1] + 0.5 * v);
+    }
+    let before = density.mean_nll(xf.view(), wide.view()).unwrap();
+    let doubled = density.calibrate_spread(xf.view(), wide.view()).unwrap();
+    let after = density.mean_nll(xf.view(), wide.view()).unwrap();
+    assert!((doubled / same - 2.0).abs() < 0.15, "{doubled}");
+    assert!(after < before - 0.3, "{before} -> {after}");
 }
