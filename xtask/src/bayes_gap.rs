@@ -315,8 +315,16 @@ struct PosteriorScores {
     /// `covered[j][l]`: records whose level-`l` interval of parameter j
     /// holds its truth.
     covered: Vec<[usize; 3]>,
+    /// Records whose level-`l` region of highest posterior density holds
+    /// their whole parameter vector.
+    joint: [usize; 3],
     records: usize,
 }
+
+/// One record's draws scored: their mean, whether each parameter's
+/// central interval and the whole vector's region of highest density hold
+/// the truth, at each level.
+type RecordScores = (Vec<f64>, Vec<[bool; 3]>, [bool; 3]);
 
 /// The levels whose central intervals are scored.
 const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
@@ -350,7 +358,7 @@ fn posterior_draws(
 ) -> Result<PosteriorScores> {
     let q = estimator.param_names().len();
     let start = Instant::now();
-    let per_record: Vec<(Vec<f64>, Vec<[bool; 3]>)> = records
+    let per_record: Vec<RecordScores> = records
         .par_iter()
         .enumerate()
         .map_init(EstimateWorkspace::new, |work, (i, record)| {
@@ -363,6 +371,20 @@ fn posterior_draws(
                 &mut rng,
                 &mut draws,
             )?;
+            // The region of highest density: the draws' log densities
+            // above their (1 - level) quantile.
+            let posterior = estimator.posterior().context("no posterior")?;
+            let features = estimator.features_of(record.inputs(), record.outputs(), work)?;
+            let mut densities = vec![0.0; DRAWS];
+            posterior.log_densities(features, &draws, &mut densities)?;
+            let mut at_truth = [0.0];
+            posterior.log_densities(features, &truth[i], &mut at_truth)?;
+            densities.sort_by(f64::total_cmp);
+            let mut joint = [false; 3];
+            for (l, level) in LEVELS.iter().enumerate() {
+                let below = ((1.0 - level) * DRAWS as f64).round() as usize;
+                joint[l] = at_truth[0] >= densities[below];
+            }
             let mut mean = vec![0.0; q];
             let mut inside = vec![[false; 3]; q];
             for j in 0..q {
@@ -375,17 +397,21 @@ fn posterior_draws(
                     inside[j][l] = (low..=high).contains(&truth[i][j]);
                 }
             }
-            Ok::<_, twostage::estimator::Error>((mean, inside))
+            Ok::<_, anyhow::Error>((mean, inside, joint))
         })
-        .collect::<Result<_, _>>()?;
+        .collect::<Result<_>>()?;
     let seconds = start.elapsed().as_secs_f64();
     println!(
-        "  posterior: {DRAWS} draws of each record in {seconds:.2} s ({:.0} draws a second, \
-         features included)",
+        "  posterior: {DRAWS} draws of each record and their densities in {seconds:.2} s \
+         ({:.0} draws a second, features and densities included)",
         (DRAWS * records.len()) as f64 / seconds
     );
     let mut covered = vec![[0usize; 3]; q];
-    for (_, inside) in &per_record {
+    let mut joint = [0usize; 3];
+    for (_, inside, whole) in &per_record {
+        for (l, hit) in whole.iter().enumerate() {
+            joint[l] += usize::from(*hit);
+        }
         for (j, levels) in inside.iter().enumerate() {
             for (l, hit) in levels.iter().enumerate() {
                 covered[j][l] += usize::from(*hit);
@@ -393,8 +419,9 @@ fn posterior_draws(
         }
     }
     Ok(PosteriorScores {
-        means: per_record.into_iter().map(|(mean, _)| mean).collect(),
+        means: per_record.into_iter().map(|(mean, _, _)| mean).collect(),
         covered,
+        joint,
         records: records.len(),
     })
 }
@@ -594,6 +621,23 @@ pub(crate) fn run(
                 other_rmse / bayes_rmse
             );
         }
+    }
+    if let Some(drawn) = &drawn {
+        let words: Vec<String> = LEVELS
+            .iter()
+            .zip(drawn.joint)
+            .map(|(level, count)| {
+                format!(
+                    "{:.0}%: {:.3}",
+                    100.0 * level,
+                    count as f64 / drawn.records as f64
+                )
+            })
+            .collect();
+        println!(
+            "  the posterior's regions of highest density hold the whole parameter vector: {}",
+            words.join(", ")
+        );
     }
     Ok(())
 }

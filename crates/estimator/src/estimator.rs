@@ -283,11 +283,12 @@ impl Estimator {
         Ok(())
     }
 
-    /// Stage 1's features of one record, in `work`.
+    /// Stage 1's features of one record (`inputs` N x n_u, `outputs`
+    /// N x n_y), kept in `work`: what stage 2 and the posterior read.
     ///
     /// # Errors
     /// A record that cannot be compressed.
-    pub(crate) fn features_of<'w>(
+    pub fn features_of<'w>(
         &self,
         inputs: ArrayView2<'_, f64>,
         outputs: ArrayView2<'_, f64>,

@@ -680,23 +680,40 @@ impl FittedMixture {
     /// # Errors
     /// Features or parameters of the wrong length or not finite.
     pub fn log_density(&self, x: &[f64], theta: &[f64]) -> Result<f64> {
+        let mut out = [0.0];
+        self.log_densities(x, theta, &mut out)?;
+        Ok(out[0])
+    }
+
+    /// [`Self::log_density`] of each parameter vector of `thetas` (rows
+    /// after row) into `out`, the network run once for them all: what
+    /// the region of highest density takes of a record's draws.
+    ///
+    /// # Errors
+    /// Features not finite or of the wrong length, or `thetas` not a row
+    /// of parameters per entry of `out`.
+    pub fn log_densities(&self, x: &[f64], thetas: &[f64], out: &mut [f64]) -> Result<()> {
         let head = self.head(x)?;
         let d = self.shape.dim;
-        if theta.len() != d {
+        if thetas.len() != out.len() * d {
             return Err(FitError::ShapeMismatch(format!(
-                "{} parameters given, the density has {d}",
-                theta.len()
+                "{} values for {} vectors of {d} parameters",
+                thetas.len(),
+                out.len()
             )));
         }
-        let mut z = [0.0f64; MAX_WIDTH];
-        let mut jacobian = 0.0;
-        for (j, (&v, support)) in theta.iter().zip(&self.supports).enumerate() {
-            z[j] = support.to_unbounded(v);
-            jacobian += support.log_jacobian(v) - self.unbounded.scale()[j].ln();
+        for (theta, out) in thetas.chunks_exact(d).zip(out.iter_mut()) {
+            let mut z = [0.0f64; MAX_WIDTH];
+            let mut jacobian = 0.0;
+            for (j, (&v, support)) in theta.iter().zip(&self.supports).enumerate() {
+                z[j] = support.to_unbounded(v);
+                jacobian += support.log_jacobian(v) - self.unbounded.scale()[j].ln();
+            }
+            let mut zs = [0.0f64; MAX_WIDTH];
+            self.unbounded.transform_into(&z[..d], &mut zs[..d]);
+            *out = self.shape.log_density(&head, &zs[..d]) + jacobian;
         }
-        let mut zs = [0.0f64; MAX_WIDTH];
-        self.unbounded.transform_into(&z[..d], &mut zs[..d]);
-        Ok(self.shape.log_density(&head, &zs[..d]) + jacobian)
+        Ok(())
     }
 
     /// Draws of `θ` given the features `x` into `out` (draws x parameters,
