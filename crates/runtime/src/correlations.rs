@@ -8,7 +8,10 @@
 //! ARX(5, 5)), and keeps the first and the last few samples for the ends.
 //!
 //! Each product is exact and each sum compensated
-//! ([`crate::dd::accumulate`]); the ends are subtracted in double-double.
+//! ([`crate::dd::accumulate`]); the ends are subtracted in double-double,
+//! and the packed normal equations solved in it ([`solve`]).
+
+use twostage_kernels::cholesky::RANK_TOLERANCE;
 
 use crate::dd::{self, Dd, split, two_prod};
 
@@ -284,4 +287,64 @@ pub(crate) fn store(sums: &mut [f64], k: usize, v: Dd) {
     if let Some(pair) = sums.get_mut(2 * k..2 * k + 2) {
         pair.copy_from_slice(&[v.hi, v.lo]);
     }
+}
+
+/// Packed lower-triangle index of (row, column), column <= row.
+#[inline]
+pub(crate) fn packed(row: usize, column: usize) -> usize {
+    row * (row + 1) / 2 + column
+}
+
+/// Solve the packed normal equations in `sums` (overwritten) into `alpha`, in
+/// double-double, with the QR rank test's tolerance on each pivot's sine.
+/// `Err(Some(column))` for a rank deficiency, `Err(None)` for overflow.
+pub(crate) fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usize>> {
+    let tolerance = Dd::from_f64(RANK_TOLERANCE * RANK_TOLERANCE);
+    for j in 0..n {
+        let diagonal = load(sums, packed(j, j));
+        if !(diagonal.hi.is_finite() && diagonal.lo.is_finite()) {
+            return Err(None);
+        }
+        let mut pivot = diagonal;
+        for k in 0..j {
+            let l = load(sums, packed(j, k));
+            pivot = pivot.sub(l.mul(l));
+        }
+        // The squared sine of column j's angle to the ones before it.
+        if !(diagonal.hi > 0.0 && pivot.hi > tolerance.mul(diagonal).hi) {
+            return Err(Some(j));
+        }
+        let root = pivot.sqrt();
+        store(sums, packed(j, j), root);
+        for i in j + 1..n {
+            let mut s = load(sums, packed(i, j));
+            for k in 0..j {
+                s = s.sub(load(sums, packed(i, k)).mul(load(sums, packed(j, k))));
+            }
+            store(sums, packed(i, j), s.div(root));
+        }
+    }
+    let rhs = packed(n, 0);
+    // L z = b, then L' x = z, in place in the right-hand side.
+    for i in 0..n {
+        let mut s = load(sums, rhs + i);
+        for k in 0..i {
+            s = s.sub(load(sums, packed(i, k)).mul(load(sums, rhs + k)));
+        }
+        store(sums, rhs + i, s.div(load(sums, packed(i, i))));
+    }
+    for i in (0..n).rev() {
+        let mut s = load(sums, rhs + i);
+        for k in i + 1..n {
+            s = s.sub(load(sums, packed(k, i)).mul(load(sums, rhs + k)));
+        }
+        store(sums, rhs + i, s.div(load(sums, packed(i, i))));
+    }
+    for (i, a) in alpha.iter_mut().enumerate().take(n) {
+        *a = load(sums, rhs + i).to_f64();
+        if !a.is_finite() {
+            return Err(None);
+        }
+    }
+    Ok(())
 }

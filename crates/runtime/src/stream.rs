@@ -1,13 +1,12 @@
 //! Stage 1 accumulated sample by sample, then the rest of the estimate.
 
 use twostage_kernels::Values;
-use twostage_kernels::cholesky::{RANK_TOLERANCE, solve_lower_in_place};
+use twostage_kernels::cholesky::solve_lower_in_place;
 use twostage_kernels::input_summary::{ACCUMULATOR_WORDS, InputAccumulator, outside_family};
 use twostage_kernels::linearized::{CarStream, LinearizedSums, WindowBlocks};
 use twostage_kernels::vector::clip_to_box;
 
-use crate::correlations::{Memory, Past, Shape, load, store};
-use crate::dd::Dd;
+use crate::correlations::{Memory, Past, Shape, packed, solve, store};
 use crate::error::Error;
 use crate::estimator::{Estimator, Regressor, SUMMARY_LEN};
 use crate::format::MAX_SIGNALS;
@@ -766,66 +765,6 @@ fn predict(
             expert.predict(features, scratch, out)
         }
     }
-}
-
-/// Packed lower-triangle index of (row, column), column <= row.
-#[inline]
-fn packed(row: usize, column: usize) -> usize {
-    row * (row + 1) / 2 + column
-}
-
-/// Solve the packed normal equations in `sums` (overwritten) into `alpha`, in
-/// double-double, with the QR rank test's tolerance on each pivot's sine.
-/// `Err(Some(column))` for a rank deficiency, `Err(None)` for overflow.
-fn solve(sums: &mut [f64], n: usize, alpha: &mut [f64]) -> Result<(), Option<usize>> {
-    let tolerance = Dd::from_f64(RANK_TOLERANCE * RANK_TOLERANCE);
-    for j in 0..n {
-        let diagonal = load(sums, packed(j, j));
-        if !(diagonal.hi.is_finite() && diagonal.lo.is_finite()) {
-            return Err(None);
-        }
-        let mut pivot = diagonal;
-        for k in 0..j {
-            let l = load(sums, packed(j, k));
-            pivot = pivot.sub(l.mul(l));
-        }
-        // The squared sine of column j's angle to the ones before it.
-        if !(diagonal.hi > 0.0 && pivot.hi > tolerance.mul(diagonal).hi) {
-            return Err(Some(j));
-        }
-        let root = pivot.sqrt();
-        store(sums, packed(j, j), root);
-        for i in j + 1..n {
-            let mut s = load(sums, packed(i, j));
-            for k in 0..j {
-                s = s.sub(load(sums, packed(i, k)).mul(load(sums, packed(j, k))));
-            }
-            store(sums, packed(i, j), s.div(root));
-        }
-    }
-    let rhs = packed(n, 0);
-    // L z = b, then L' x = z, in place in the right-hand side.
-    for i in 0..n {
-        let mut s = load(sums, rhs + i);
-        for k in 0..i {
-            s = s.sub(load(sums, packed(i, k)).mul(load(sums, rhs + k)));
-        }
-        store(sums, rhs + i, s.div(load(sums, packed(i, i))));
-    }
-    for i in (0..n).rev() {
-        let mut s = load(sums, rhs + i);
-        for k in i + 1..n {
-            s = s.sub(load(sums, packed(k, i)).mul(load(sums, rhs + k)));
-        }
-        store(sums, rhs + i, s.div(load(sums, packed(i, i))));
-    }
-    for (i, a) in alpha.iter_mut().enumerate().take(n) {
-        *a = load(sums, rhs + i).to_f64();
-        if !a.is_finite() {
-            return Err(None);
-        }
-    }
-    Ok(())
 }
 
 impl Estimator<'_> {
