@@ -116,6 +116,26 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
     assert_eq!(draws("3", &dir.join("b.csv")).1, first);
     assert_ne!(draws("4", &dir.join("c.csv")).1, first);
 
+    // --correlation reads the draws' correlations (none for one
+    // parameter), and is refused where nothing gives one.
+    let correlated = ok(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "20",
+        "--correlation",
+        path(&records),
+    ]);
+    assert_eq!(correlated.lines().next(), table.lines().next());
+    let alone = refused(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--correlation",
+        path(&records),
+    ]);
+    assert!(alone.contains("--refine, --joint and --samples"), "{alone}");
     let zero = refused(&[
         "estimate",
         "--estimator",

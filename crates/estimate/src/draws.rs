@@ -12,6 +12,8 @@ use crate::RequestProblem;
 pub struct PosteriorDraws {
     draws: Vec<f64>,
     dim: usize,
+    /// The draws' correlation matrix, row-major `dim x dim`.
+    correlation: Vec<f64>,
 }
 
 impl PosteriorDraws {
@@ -55,9 +57,55 @@ impl PosteriorDraws {
             .collect()
     }
 
+    /// The draws' correlation matrix (row-major, parameters x
+    /// parameters; NaN off the diagonal where a parameter does not vary).
+    ///
+    /// ```
+    /// // (1, 2), (2, 4), (3, 5): a covariance of 1 over variances 2/3 and
+    /// // 14/9, a correlation of 1 / sqrt(28/27).
+    /// let draws = twostage::PosteriorDraws::of(vec![1.0, 2.0, 2.0, 4.0, 3.0, 5.0], 2);
+    /// let r = draws.correlation();
+    /// assert_eq!(r[0], 1.0);
+    /// assert!((r[1] - (27f64 / 28.0).sqrt()).abs() < 1e-12);
+    /// assert_eq!(r[1], r[2]);
+    /// ```
+    pub fn correlation(&self) -> &[f64] {
+        &self.correlation
+    }
+
     /// Draws of `dim` parameters, row after row.
     pub fn of(draws: Vec<f64>, dim: usize) -> Self {
-        Self { draws, dim }
+        let mut made = Self {
+            draws,
+            dim,
+            correlation: Vec::new(),
+        };
+        made.correlation = made.correlation_matrix();
+        made
+    }
+
+    fn correlation_matrix(&self) -> Vec<f64> {
+        let (q, n) = (self.dim, self.len().max(1) as f64);
+        let mean = self.mean();
+        let covariance = |a: usize, b: usize| {
+            self.draws
+                .chunks_exact(q.max(1))
+                .map(|d| (d[a] - mean[a]) * (d[b] - mean[b]))
+                .sum::<f64>()
+                / n
+        };
+        let sd: Vec<f64> = (0..q).map(|j| covariance(j, j).sqrt()).collect();
+        let mut r = vec![0.0; q * q];
+        for a in 0..q {
+            for b in 0..q {
+                r[a * q + b] = if a == b {
+                    1.0
+                } else {
+                    covariance(a, b) / (sd[a] * sd[b])
+                };
+            }
+        }
+        r
     }
 
     fn column(&self, j: usize) -> impl Iterator<Item = f64> + '_ {
@@ -119,5 +167,5 @@ pub(crate) fn draw(
     let mut draws = vec![0.0; samples * dim];
     let mut rng = stream_rng(seed, index as u64, StreamPurpose::Posterior);
     estimator.sample_record(record, &mut rng, &mut draws)?;
-    Ok(PosteriorDraws { draws, dim })
+    Ok(PosteriorDraws::of(draws, dim))
 }

@@ -76,10 +76,14 @@ impl RecordEstimate {
         }
     }
 
-    /// A refined estimate's correlation matrix (row-major q x q), where it
-    /// has one.
+    /// The estimate's correlation matrix (row-major q x q), where it has
+    /// one: a refined estimate's, or the posterior draws'.
     pub fn correlation(&self) -> Option<&[f64]> {
-        self.refined()?.correlation.as_deref()
+        match (self.refined(), &self.posterior) {
+            (Some(refined), _) => refined.correlation.as_deref(),
+            (None, Some(draws)) => Some(draws.correlation()),
+            (None, None) => None,
+        }
     }
 
     /// Of an output-error search (a refinement's, or the joint fit's): the

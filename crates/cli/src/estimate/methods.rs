@@ -95,8 +95,8 @@ fn refuse_what_does_not_apply(args: &EstimateArgs, refine: Option<RefineWhich>) 
             "--method and --at (an estimator knows its model)",
         );
     }
-    if args.correlation && args.refine.is_none() && !args.joint {
-        return refuse("--correlation", "--refine and --joint");
+    if args.correlation && args.refine.is_none() && !args.joint && args.samples.is_none() {
+        return refuse("--correlation", "--refine, --joint and --samples");
     }
     if args.p0.is_some() && !filter {
         return refuse("--p0", "--method ekf and ukf");

@@ -113,10 +113,11 @@ pub struct EstimateArgs {
     /// model: an estimator's built-in one, or --model-file.
     #[arg(long, requires = "estimator", conflicts_with_all = ["refine", "check"])]
     joint: bool,
-    /// With --refine or --joint: add the estimate's parameter correlations,
-    /// a column `corr_A_B` per pair of parameters (empty where the
-    /// refined estimate has no interval).
-    #[arg(long, requires = "refine")]
+    /// With --refine, --joint or --samples: add the estimate's parameter
+    /// correlations, a column `corr_A_B` per pair of parameters (empty
+    /// where the refined estimate has no interval; with --samples, the
+    /// draws').
+    #[arg(long)]
     correlation: bool,
     /// With --method or --at: the built-in model the records come from
     /// (benchmark or pacejka).
