@@ -25,8 +25,8 @@ use crate::standardize::Standardizer;
 use super::held_out::BestHeldOut;
 use super::lbfgs::{Objective, PATIENCE_SCALE, minimize};
 use super::network::{
-    BLOCK_SAMPLES, MAX_WIDTH, add_sample_gradient, by_columns, forward, initial_parameters,
-    parameter_count, run_network, widest_vectors,
+    BLOCK_SAMPLES, MAX_WIDTH, add_sample_gradient, by_columns, forward, gradient_by_blocks,
+    initial_parameters, parameter_count, run_network, widest_vectors,
 };
 use super::params::{Mlp, MlpParams};
 use super::stored::{stored_best, stored_layers};
@@ -456,25 +456,14 @@ impl Objective for Likelihood<'_> {
         let scale = 1.0 / rows.len().max(1) as f64;
         let columns = by_columns(self.sizes, params);
         let weights = (params, columns.as_slice());
-        let partials: Vec<Vec<f64>> = rows
-            .par_chunks(BLOCK_SAMPLES)
-            .map_init(
-                || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
-                |(acts, delta), block| {
-                    let mut partial = vec![0.0; params.len()];
-                    widest_vectors(|| {
-                        self.add_gradient(weights, block, scale, &mut partial, acts, delta);
-                    });
-                    partial
-                },
-            )
-            .collect();
-        grad.fill(0.0);
-        for partial in &partials {
-            for (g, p) in grad.iter_mut().zip(partial) {
-                *g += p;
-            }
-        }
+        gradient_by_blocks(
+            rows,
+            grad,
+            self.offsets.last().copied().unwrap_or(0),
+            |block, grad, acts, delta| {
+                widest_vectors(|| self.add_gradient(weights, block, scale, grad, acts, delta));
+            },
+        );
         let decay = 2.0 * self.decay / rows.len().max(1) as f64;
         for (g, p) in grad.iter_mut().zip(params) {
             *g += decay * p;

@@ -289,6 +289,45 @@ pub(super) fn add_sample_gradient(
     }
 }
 
+/// `grad` (zeroed first) as the sum of `add`'s gradients of blocks of
+/// [`BLOCK_SAMPLES`] `rows`, each given a block, its gradient to add to,
+/// and scratch for `activations` values and a back-propagated delta: one
+/// block on the calling thread, more in parallel, their gradients added
+/// in block order, so the bits are the same on any thread count.
+pub(super) fn gradient_by_blocks(
+    rows: &[usize],
+    grad: &mut [f64],
+    activations: usize,
+    add: impl Fn(&[usize], &mut [f64], &mut [f64], &mut [f64]) + Sync,
+) {
+    grad.fill(0.0);
+    if rows.len() <= BLOCK_SAMPLES {
+        add(
+            rows,
+            grad,
+            &mut vec![0.0; activations],
+            &mut vec![0.0; 2 * MAX_WIDTH],
+        );
+        return;
+    }
+    let partials: Vec<Vec<f64>> = rows
+        .par_chunks(BLOCK_SAMPLES)
+        .map_init(
+            || (vec![0.0; activations], vec![0.0; 2 * MAX_WIDTH]),
+            |(acts, delta), block| {
+                let mut partial = vec![0.0; grad.len()];
+                add(block, &mut partial, acts, delta);
+                partial
+            },
+        )
+        .collect();
+    for partial in &partials {
+        for (g, p) in grad.iter_mut().zip(partial) {
+            *g += p;
+        }
+    }
+}
+
 /// Run `work` compiled for the widest vectors the processor offers (pulp
 /// dispatches at run time). The training loops' arithmetic is elementwise,
 /// a multiplication then an addition each rounded (Rust never fuses them),
@@ -451,35 +490,14 @@ impl Problem<'_> {
         let scale = 2.0 / (rows.len() * q).max(1) as f64;
         let columns = by_columns(self.sizes, params);
         let weights = (params, columns.as_slice());
-        grad.fill(0.0);
-        if rows.len() <= BLOCK_SAMPLES {
-            let mut delta = vec![0.0; 2 * MAX_WIDTH];
-            self.add_gradient(
-                weights,
-                rows,
-                scale,
-                grad,
-                &mut self.activations(),
-                &mut delta,
-            );
-        } else {
-            let partials: Vec<Vec<f64>> = rows
-                .par_chunks(BLOCK_SAMPLES)
-                .map_init(
-                    || (self.activations(), vec![0.0; 2 * MAX_WIDTH]),
-                    |(acts, delta), block| {
-                        let mut partial = vec![0.0; params.len()];
-                        self.add_gradient(weights, block, scale, &mut partial, acts, delta);
-                        partial
-                    },
-                )
-                .collect();
-            for partial in &partials {
-                for (g, p) in grad.iter_mut().zip(partial) {
-                    *g += p;
-                }
-            }
-        }
+        gradient_by_blocks(
+            rows,
+            grad,
+            self.offsets.last().copied().unwrap_or(0),
+            |block, grad, acts, delta| {
+                self.add_gradient(weights, block, scale, grad, acts, delta);
+            },
+        );
         let decay = 2.0 * self.decay / (self.train.len() * q).max(1) as f64;
         for (g, p) in grad.iter_mut().zip(params) {
             *g += decay * p;
