@@ -144,3 +144,26 @@ fn refining_with_the_exact_likelihood_stays_in_its_box_and_more_starts_never_end
             .is_err()
     );
 }
+
+#[test]
+fn the_benchmark_reference_draws_have_the_posterior_s_moments() {
+    use rand::SeedableRng;
+    let data = record(0.41, 14);
+    let bayes = BayesBenchmark::default();
+    let posterior = bayes.posterior(&data).unwrap();
+    let n = 40_000;
+    let draws = bayes
+        .draws(&data, n, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1))
+        .unwrap();
+    let mean = draws.iter().sum::<f64>() / n as f64;
+    let sd = (draws.iter().map(|d| (d - mean) * (d - mean)).sum::<f64>() / n as f64).sqrt();
+    // Monte Carlo: the mean within 4 of its standard errors, the sd
+    // within 3% (its standard error is 0.35% for a near-normal sample).
+    let error = posterior.sd / (n as f64).sqrt();
+    assert!(
+        (mean - posterior.mean).abs() < 4.0 * error,
+        "{mean} {posterior:?}"
+    );
+    assert!((sd / posterior.sd - 1.0).abs() < 0.03, "{sd} {posterior:?}");
+    assert!(draws.iter().all(|d| (-0.9..=0.9).contains(d)));
+}

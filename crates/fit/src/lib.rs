@@ -54,8 +54,9 @@ pub use levenberg_marquardt::{
 };
 pub use linear::{FittedLinear, Ridge};
 pub use mlp::{
-    DensityRestart, FittedMixture, FittedMlp, MAX_WIDTH, MixtureDensity, Mlp, MlpParams,
-    RestartReport, Trainer, n_parameters, products_per_sample,
+    Classifier, DensityRestart, FittedClassifier, FittedMixture, FittedMlp, MAX_WIDTH,
+    MixtureDensity, Mlp, MlpParams, RestartReport, Trainer, n_parameters, products_per_sample,
+    two_sample_accuracy,
 };
 pub use piecewise::{FittedPiecewise, Piecewise};
 pub use standardize::Standardizer;

@@ -14,23 +14,17 @@
 use ndarray::{Array2, ArrayView2};
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use twostage_kernels::mixture::{MixtureShape, Support, log_sum_exp};
 
 use crate::error::{FitError, InvalidSetting, Result};
-use crate::levenberg_marquardt::TerminationReason;
 use crate::standardize::Standardizer;
 
-use super::held_out::BestHeldOut;
-use super::lbfgs::{Objective, PATIENCE_SCALE, minimize};
-use super::network::{
-    BLOCK_SAMPLES, MAX_WIDTH, add_sample_gradient, by_columns, forward, gradient_by_blocks,
-    initial_parameters, parameter_count, run_network, widest_vectors,
-};
+use super::likelihood::{DensityRestart, Head, Likelihood, layers};
+use super::network::{MAX_WIDTH, parameter_count, run_network};
 use super::params::{Mlp, MlpParams};
 use super::stored::{stored_best, stored_layers};
-use super::training::{held_out_split, restart_rng};
+use super::training::held_out_split;
 
 /// How a mixture density network learns: the network (its hidden layers,
 /// restarts, held-out fraction, patience, weight decay, seed and
@@ -60,23 +54,6 @@ pub struct MixtureDensity {
     network: MlpParams,
     components: usize,
     iterations: usize,
-}
-
-/// One restart of a mixture density network's training.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DensityRestart {
-    /// Restart index.
-    pub restart: usize,
-    /// L-BFGS iterations taken.
-    pub iterations: usize,
-    /// Why it stopped.
-    pub reason: TerminationReason,
-    /// Mean negative log-likelihood of the training rows at the kept
-    /// weights (standardized unbounded parameters).
-    pub train_nll: f64,
-    /// The same on the held-out rows (the training rows' when none are
-    /// held out).
-    pub held_out_nll: f64,
 }
 
 /// A trained mixture density network: `p(θ | features)`, to evaluate and
@@ -290,62 +267,25 @@ impl MixtureDensity {
             .transform(z.view())
             .as_standard_layout()
             .to_owned();
-        let mut sizes = vec![n_in];
-        sizes.extend(&p.hidden);
-        sizes.push(shape.outputs());
-        let mut offsets = vec![0];
-        for s in &sizes {
-            offsets.push(offsets.last().copied().unwrap_or(0) + s);
-        }
+        let (sizes, offsets) = layers(n_in, &p.hidden, shape.outputs());
         let likelihood = Likelihood {
             sizes: &sizes,
             offsets,
-            shape,
+            head: shape,
             x: &xs,
             z: &zs,
             train,
             held_out: if held_out.is_empty() { train } else { held_out },
             decay: p.weight_decay,
         };
-        let runs: Vec<(Vec<f64>, DensityRestart)> = (0..p.restarts)
-            .into_par_iter()
-            .map(|restart| {
-                let params = initial_parameters(&sizes, &mut restart_rng(p, restart));
-                let held = likelihood.held_out(&params);
-                let mut best = BestHeldOut::new(
-                    held,
-                    &params,
-                    p.patience.saturating_mul(PATIENCE_SCALE),
-                    !held_out.is_empty(),
-                );
-                let (iterations, reason) =
-                    minimize(&likelihood, params, self.iterations, &mut best, p.stop_by);
-                let (held_out_nll, params) = best.into_best();
-                let report = DensityRestart {
-                    restart,
-                    iterations,
-                    reason,
-                    train_nll: likelihood.mean_nll(&params, train),
-                    held_out_nll,
-                };
-                (params, report)
-            })
-            .collect();
-        // Ties go to the lower restart, so the choice does not depend on
-        // scheduling.
-        let best = runs
-            .iter()
-            .enumerate()
-            .min_by(|a, b| a.1.1.held_out_nll.total_cmp(&b.1.1.held_out_nll))
-            .map_or(0, |(i, _)| i);
-        let (reports, mut params): (Vec<_>, Vec<_>) = runs.into_iter().map(|(w, r)| (r, w)).unzip();
+        let (params, reports, best) = likelihood.train(p, self.iterations, !held_out.is_empty());
         Ok(FittedMixture {
             features,
             unbounded,
             supports: supports.to_vec(),
             shape,
             sizes,
-            params: std::mem::take(&mut params[best]),
+            params,
             reports,
             best,
             spread: 1.0,
@@ -370,111 +310,6 @@ fn inside(support: Support, value: f64) -> bool {
     }
 }
 
-/// The training's loss: the mean negative log-likelihood of standardized
-/// unbounded parameters under the network's mixture, plus weight decay.
-struct Likelihood<'a> {
-    sizes: &'a [usize],
-    offsets: Vec<usize>,
-    shape: MixtureShape,
-    x: &'a Array2<f64>,
-    z: &'a Array2<f64>,
-    train: &'a [usize],
-    held_out: &'a [usize],
-    decay: f64,
-}
-
-impl Likelihood<'_> {
-    fn activations(&self) -> Vec<f64> {
-        vec![0.0; self.offsets.last().copied().unwrap_or(0)]
-    }
-
-    /// Row `i` of standard-layout `data`, one contiguous slice.
-    fn row(data: &Array2<f64>, i: usize) -> &[f64] {
-        data.row(i).to_slice().unwrap_or(&[])
-    }
-
-    /// Mean negative log-likelihood over `rows`: blocks in parallel, their
-    /// sums added in block order.
-    fn mean_nll(&self, params: &[f64], rows: &[usize]) -> f64 {
-        let columns = by_columns(self.sizes, params);
-        let sum_block = |block: &[usize], acts: &mut Vec<f64>| -> f64 {
-            let out = self.offsets[self.sizes.len() - 1];
-            block
-                .iter()
-                .map(|&i| {
-                    forward(
-                        self.sizes,
-                        &columns,
-                        Self::row(self.x, i),
-                        acts,
-                        &self.offsets,
-                    );
-                    -self.shape.log_density(&acts[out..], Self::row(self.z, i))
-                })
-                .sum()
-        };
-        let partials: Vec<f64> = rows
-            .par_chunks(BLOCK_SAMPLES)
-            .map_init(|| self.activations(), |acts, block| sum_block(block, acts))
-            .collect();
-        partials.iter().sum::<f64>() / rows.len().max(1) as f64
-    }
-
-    /// Add `scale` times the gradient of `rows`' negative log-likelihoods.
-    fn add_gradient(
-        &self,
-        (params, columns): (&[f64], &[f64]),
-        rows: &[usize],
-        scale: f64,
-        grad: &mut [f64],
-        acts: &mut [f64],
-        delta: &mut [f64],
-    ) {
-        let out = self.offsets[self.sizes.len() - 1];
-        for &i in rows {
-            forward(
-                self.sizes,
-                columns,
-                Self::row(self.x, i),
-                acts,
-                &self.offsets,
-            );
-            head_gradient(self.shape, &acts[out..], Self::row(self.z, i), scale, delta);
-            add_sample_gradient(self.sizes, &self.offsets, params, acts, delta, grad);
-        }
-    }
-}
-
-impl Objective for Likelihood<'_> {
-    fn loss(&self, params: &[f64]) -> f64 {
-        let penalty = self.decay * params.iter().map(|v| v * v).sum::<f64>();
-        self.mean_nll(params, self.train) + penalty / self.train.len().max(1) as f64
-    }
-
-    fn gradient(&self, params: &[f64], grad: &mut [f64]) {
-        let rows = self.train;
-        let scale = 1.0 / rows.len().max(1) as f64;
-        let columns = by_columns(self.sizes, params);
-        let weights = (params, columns.as_slice());
-        gradient_by_blocks(
-            rows,
-            grad,
-            self.offsets.last().copied().unwrap_or(0),
-            |block, grad, acts, delta| {
-                widest_vectors(|| self.add_gradient(weights, block, scale, grad, acts, delta));
-            },
-        );
-        let decay = 2.0 * self.decay / rows.len().max(1) as f64;
-        for (g, p) in grad.iter_mut().zip(params) {
-            *g += decay * p;
-        }
-    }
-
-    fn held_out(&self, params: &[f64]) -> f64 {
-        self.mean_nll(params, self.held_out)
-    }
-}
-
 /// Every component of `head` widened by `spread`: its covariance times
 /// `spread²`, so its precision factor over `spread` (the log-diagonal less
 /// `log spread`, the entries above it divided by it).
@@ -490,6 +325,16 @@ fn widen(shape: MixtureShape, head: &mut [f64], spread: f64) {
         for v in &mut head[at..at + shape.upper_len()] {
             *v /= spread;
         }
+    }
+}
+
+impl Head for MixtureShape {
+    fn nll(&self, head: &[f64], target: &[f64]) -> f64 {
+        -self.log_density(head, target)
+    }
+
+    fn gradient(&self, head: &[f64], target: &[f64], scale: f64, delta: &mut [f64]) {
+        head_gradient(*self, head, target, scale, delta);
     }
 }
 
@@ -703,6 +548,38 @@ impl FittedMixture {
             *out = self.shape.log_density(&head, &zs[..d]) + jacobian;
         }
         Ok(())
+    }
+
+    /// The smallest level of the region of highest density given `x`
+    /// that holds `at`, by `draws` (draws x parameters, row after row,
+    /// from this density given `x`): the share of the draws the density
+    /// finds more probable than `at`. `at` lies inside the joint region of
+    /// level q (e.g. 0.9) where this is at most q; a level near 1 says the
+    /// values are far in the posterior's tails.
+    ///
+    /// # Errors
+    /// Features, draws or `at` of the wrong length or not finite, or `at`
+    /// outside a parameter's support.
+    pub fn region_level(&self, x: &[f64], draws: &[f64], at: &[f64]) -> Result<f64> {
+        let d = self.shape.dim;
+        if at.len() != d {
+            return Err(FitError::ShapeMismatch(format!(
+                "{} values to test, the density is of {d} parameters",
+                at.len()
+            )));
+        }
+        if let Some(j) = (0..d).find(|&j| !inside(self.supports[j], at[j])) {
+            return Err(invalid(
+                "values to test",
+                format!("parameter {j}: {}", at[j]),
+                &format!("inside its support {:?}", self.supports[j]),
+            ));
+        }
+        let mut densities = vec![0.0; draws.len() / d];
+        self.log_densities(x, draws, &mut densities)?;
+        let at_density = self.log_density(x, at)?;
+        let above = densities.iter().filter(|&&v| v > at_density).count();
+        Ok(above as f64 / densities.len().max(1) as f64)
     }
 
     /// Draws of `θ` given the features `x` into `out` (draws x parameters,

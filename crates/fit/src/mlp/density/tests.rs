@@ -4,6 +4,8 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
+use super::super::lbfgs::Objective;
+use super::super::network::BLOCK_SAMPLES;
 use super::*;
 
 fn network(hidden: &[usize], seed: u64) -> Mlp {
@@ -33,7 +35,7 @@ fn the_likelihood_gradient_matches_finite_differences() {
     let likelihood = Likelihood {
         sizes: &sizes,
         offsets: vec![0, 3, 8, 8 + shape.outputs()],
-        shape,
+        head: shape,
         x: &x,
         z: &z,
         train: &train,
@@ -341,4 +343,35 @@ fn the_spread_is_calibrated_on_fresh_rows() {
     let after = density.mean_nll(xf.view(), wide.view()).unwrap();
     assert!((doubled / same - 2.0).abs() < 0.15, "{doubled}");
     assert!(after < before - 0.3, "{before} -> {after}");
+}
+
+/// A one-component density of one parameter is a normal given x: the
+/// region level of a value z sds off its mean is the normal's
+/// two-sided probability P(|Z| < |z|), by the draws' count.
+#[test]
+fn the_region_level_is_the_normal_s_two_sided_probability() {
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let x = Array2::from_shape_fn((2000, 1), |_| rng.random_range(-1.0..1.0));
+    let theta = Array2::from_shape_fn((2000, 1), |(i, _)| {
+        x[[i, 0]] + 0.2 * rng.sample::<f64, _>(StandardNormal)
+    });
+    let density = MixtureDensity::new(network(&[4], 3), 1)
+        .unwrap()
+        .fit(x.view(), theta.view(), &[Support::Real])
+        .unwrap();
+    let mut draws = vec![0.0; 40_000];
+    density
+        .sample(&[0.3], &mut ChaCha8Rng::seed_from_u64(5), &mut draws)
+        .unwrap();
+    let mean = draws.iter().sum::<f64>() / draws.len() as f64;
+    let sd = (draws.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / draws.len() as f64).sqrt();
+    // P(|Z| < 0.6745) = 0.5, P(|Z| < 1.6449) = 0.9, P(|Z| < 2.5758) = 0.99.
+    for (z, level) in [(0.0, 0.0), (0.6745, 0.5), (-1.6449, 0.9), (2.5758, 0.99)] {
+        let got = density
+            .region_level(&[0.3], &draws, &[mean + z * sd])
+            .unwrap();
+        assert!((got - level).abs() < 0.01, "{z}: {got} against {level}");
+    }
+    assert!(density.region_level(&[0.3], &draws, &[0.1, 0.2]).is_err());
+    assert!(density.region_level(&[0.3], &draws, &[f64::NAN]).is_err());
 }
