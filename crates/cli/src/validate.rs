@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use ndarray::Array2;
+use twostage::validate::{COVERAGE_LEVELS, PosteriorCalibration};
 use twostage::{Estimator, TargetRmse, Validated, ValidationPlan, validate_trained};
 
 use crate::usage;
@@ -79,12 +80,14 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
             anyhow::Error::new(e).context("validating")
         }
     })?;
+    let json = run.report_json()?;
     let Validated {
         report,
         truth,
         estimates,
         records: r,
         target,
+        posterior,
     } = run;
     if let (Some(k), Some(target), false) = (args.target_rmse, target, args.format.json()) {
         match target {
@@ -101,9 +104,16 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
     }
     if args.format.json() {
-        writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+        writeln!(out, "{}", serde_json::to_string_pretty(&json)?)?;
     } else {
         writeln!(out, "{report}")?;
+        if let Some(posterior) = &posterior {
+            write!(
+                out,
+                "{}",
+                posterior_words(posterior, estimator.param_names())
+            )?;
+        }
     }
     let q = estimator.param_names().len();
     let truth = Array2::from_shape_vec((r, q), truth)?;
@@ -149,4 +159,40 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// How far the posterior's draws can be trusted, in the report's style:
+/// the joint region's coverage, each parameter's central intervals' and
+/// its ranks' uniformity (simulation-based calibration).
+fn posterior_words(p: &PosteriorCalibration, names: &[String]) -> String {
+    let shares = |s: &[f64; 3]| {
+        COVERAGE_LEVELS
+            .iter()
+            .zip(s)
+            .map(|(level, share)| format!("{:.0}% {share:.3}", 100.0 * level))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut text = format!(
+        "posterior ({} draws of each of the {} records): the region of highest density holds \
+         the whole parameter vector at {}\n",
+        p.draws,
+        p.records,
+        shares(&p.joint)
+    );
+    for (j, name) in names.iter().enumerate() {
+        let verdict = if p.uniformity_p[j] < 0.01 {
+            "not uniform: the draws are off centre, too narrow or too wide"
+        } else {
+            "uniform as far as these records tell"
+        };
+        text.push_str(&format!(
+            "  {name}  central intervals hold it at {}; its ranks among the draws: distance \
+             {:.3} from uniform (p {:.3}), {verdict}\n",
+            shares(&p.central[j]),
+            p.uniformity_distance[j],
+            p.uniformity_p[j]
+        ));
+    }
+    text
 }

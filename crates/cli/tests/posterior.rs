@@ -180,4 +180,122 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
         huge.contains("--samples") && huge.contains("draws take"),
         "{huge}"
     );
+
+    // --at tests values against each record's posterior: the records' own
+    // truth (a row per experiment) and one far value for all.
+    let truth = data.join("truth.csv");
+    let tested = ok(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "2000",
+        "--at",
+        path(&truth),
+        path(&records),
+    ]);
+    let header: Vec<&str> = tested.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (level, inside, mean, sd) = (
+        column("region_level"),
+        column("in_region_90"),
+        column("theta_posterior_mean"),
+        column("theta_posterior_sd"),
+    );
+    for row in tested.lines().skip(1) {
+        let fields: Vec<&str> = row.split(',').collect();
+        let l: f64 = fields[level].parse().unwrap();
+        assert!((0.0..=1.0).contains(&l), "{row}");
+        assert_eq!(fields[inside], (l <= 0.9).to_string(), "{row}");
+    }
+    let far = dir.join("far.csv");
+    std::fs::write(&far, "theta\n0.899\n").unwrap();
+    let tested = ok(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "2000",
+        "--at",
+        path(&far),
+        path(&records),
+    ]);
+    let mut checked = 0;
+    for row in tested.lines().skip(1) {
+        let fields: Vec<&str> = row.split(',').collect();
+        let (m, s): (f64, f64) = (fields[mean].parse().unwrap(), fields[sd].parse().unwrap());
+        let l: f64 = fields[level].parse().unwrap();
+        // A value many sds from the posterior's mean is in no region a
+        // user would quote; one within half an sd is in its central half.
+        if (0.899 - m).abs() > 4.0 * s {
+            assert!(l > 0.99 && fields[inside] == "false", "{row}");
+            checked += 1;
+        } else if (0.899 - m).abs() < 0.5 * s {
+            assert!(l < 0.5, "{row}");
+            checked += 1;
+        }
+    }
+    assert!(checked > 0, "{tested}");
+    let without_draws = refused(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--at",
+        path(&far),
+        path(&records),
+    ]);
+    assert!(without_draws.contains("add --samples N"), "{without_draws}");
+    let without_check = refused(&[
+        "estimate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&far),
+        path(&records),
+    ]);
+    assert!(
+        without_check.contains("--check") && without_check.contains("--samples"),
+        "{without_check}"
+    );
+    // validate scores the posterior's calibration on its fresh records;
+    // the JSON has it under `posterior`; an estimator without one has none.
+    let validated = ok(&["validate", "--estimator", path(&with), "--sims", "300"]);
+    let line = validated
+        .lines()
+        .find(|l| l.starts_with("posterior (200 draws of each of the 300 records)"))
+        .unwrap_or_else(|| panic!("{validated}"));
+    assert!(line.contains("90% 0."), "{line}");
+    assert!(
+        validated.contains("its ranks among the draws"),
+        "{validated}"
+    );
+    let json = ok(&[
+        "validate",
+        "--estimator",
+        path(&with),
+        "--sims",
+        "300",
+        "--format",
+        "json",
+    ]);
+    let value: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(value["posterior"]["records"], 300);
+    let plain = ok(&["validate", "--estimator", path(&without), "--sims", "300"]);
+    assert!(!plain.contains("posterior ("), "{plain}");
+    let other = dir.join("other.csv");
+    std::fs::write(&other, "alpha\n0.1\n").unwrap();
+    let wrong = refused(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "10",
+        "--at",
+        path(&other),
+        path(&records),
+    ]);
+    assert!(
+        wrong.contains("other.csv") && wrong.contains("theta"),
+        "{wrong}"
+    );
 }

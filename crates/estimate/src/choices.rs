@@ -117,6 +117,14 @@ impl GivenValues {
         Ok(given)
     }
 
+    /// How many values each row holds.
+    pub(crate) fn widths(&self) -> impl Iterator<Item = usize> + '_ {
+        self.one
+            .iter()
+            .map(|(_, theta)| theta.len())
+            .chain(self.by_id.values().map(Vec::len))
+    }
+
     /// The values of experiment `id`.
     ///
     /// # Errors

@@ -2,10 +2,10 @@
 //! estimates (`samples`): how many, refused where they cannot be made,
 //! and each record's draws with their mean and sd.
 
-use twostage_estimator::Estimator;
+use twostage_estimator::{EstimateWorkspace, Estimator};
 use twostage_models::{IoData, StreamPurpose, stream_rng};
 
-use crate::RequestProblem;
+use crate::{GivenValues, Purpose, RegionValues, RequestError, RequestProblem};
 
 /// One record's draws from the estimator's posterior, row after row.
 #[derive(Debug, Clone, PartialEq)]
@@ -14,6 +14,9 @@ pub struct PosteriorDraws {
     dim: usize,
     /// The draws' correlation matrix, row-major `dim x dim`.
     correlation: Vec<f64>,
+    /// The smallest level of the posterior's region of highest density
+    /// that holds the values tested, where values were given.
+    region_level: Option<f64>,
 }
 
 impl PosteriorDraws {
@@ -73,12 +76,23 @@ impl PosteriorDraws {
         &self.correlation
     }
 
+    /// Where values were tested against the posterior
+    /// ([`crate::EstimateRequest::region_at`]): the smallest level of its
+    /// region of highest density that holds them, the share of the draws
+    /// the posterior finds more probable
+    /// ([`twostage_fit::FittedMixture::region_level`]). The values lie in
+    /// the joint 90% region where it is at most 0.9.
+    pub fn region_level(&self) -> Option<f64> {
+        self.region_level
+    }
+
     /// Draws of `dim` parameters, row after row.
     pub fn of(draws: Vec<f64>, dim: usize) -> Self {
         let mut made = Self {
             draws,
             dim,
             correlation: Vec::new(),
+            region_level: None,
         };
         made.correlation = made.correlation_matrix();
         made
@@ -155,17 +169,64 @@ pub fn draws_refused(
 
 /// `samples` draws given `record`, the `index`th piece of its request,
 /// from the stream of (`seed`, `index`): the same draws for the same
-/// record and seed whatever the threads.
+/// record and seed whatever the threads; and where values `at` are given,
+/// the level of the posterior's region that holds them.
 pub(crate) fn draw(
     estimator: &Estimator,
     record: &IoData,
     samples: usize,
-    seed: u64,
-    index: usize,
+    (seed, index): (u64, usize),
+    at: Option<&[f64]>,
 ) -> twostage_estimator::Result<PosteriorDraws> {
     let dim = estimator.param_names().len();
     let mut draws = vec![0.0; samples * dim];
     let mut rng = stream_rng(seed, index as u64, StreamPurpose::Posterior);
-    estimator.sample_record(record, &mut rng, &mut draws)?;
-    Ok(PosteriorDraws::of(draws, dim))
+    let mut work = EstimateWorkspace::new();
+    let region_level = match at {
+        Some(at) => Some(estimator.sample_testing(
+            (record.inputs(), record.outputs()),
+            &mut work,
+            &mut rng,
+            &mut draws,
+            at,
+        )?),
+        None => {
+            let (inputs, outputs) = (record.inputs(), record.outputs());
+            estimator.sample_into(inputs, outputs, &mut work, &mut rng, &mut draws)?;
+            None
+        }
+    };
+    Ok(PosteriorDraws {
+        region_level,
+        ..PosteriorDraws::of(draws, dim)
+    })
+}
+
+/// The values of `values` for parameters `names` (a file read with them),
+/// and the file's rows without values, said.
+pub(crate) fn region_values(
+    values: RegionValues,
+    names: &[String],
+) -> Result<(GivenValues, Vec<String>), RequestError> {
+    let refused = |why: String| RequestError {
+        purpose: Purpose::Region,
+        error: RequestProblem::Values(why),
+    };
+    let (values, skipped) = match values {
+        RegionValues::Given(values) => (values, Vec::new()),
+        RegionValues::File(path) => {
+            let read = twostage_sources::parameter_values::read(&path, names).map_err(refused)?;
+            let values = GivenValues::new(read.rows, &path.display().to_string())
+                .map_err(|e| refused(e.to_string()))?;
+            (values, read.skipped)
+        }
+    };
+    if let Some(width) = values.widths().find(|&w| w != names.len()) {
+        return Err(refused(format!(
+            "{width} values given, the estimator has {} parameters ({})",
+            names.len(),
+            names.join(", ")
+        )));
+    }
+    Ok((values, skipped))
 }

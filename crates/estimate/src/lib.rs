@@ -108,6 +108,19 @@ pub struct EstimateRequest {
     prior_starts: Option<usize>,
     allow_outside_prior: bool,
     samples: Option<usize>,
+    region_at: Option<RegionValues>,
+}
+
+/// Parameter values to test against each record's posterior region
+/// ([`EstimateRequest::region_at`]).
+#[derive(Debug, Clone)]
+pub enum RegionValues {
+    /// Values given in code: one row for every record, or a row per
+    /// experiment.
+    Given(GivenValues),
+    /// A parameter-value file ([`twostage_sources::parameter_values`]),
+    /// read with the estimator's parameter names.
+    File(std::path::PathBuf),
 }
 
 impl EstimateRequest {
@@ -125,6 +138,7 @@ impl EstimateRequest {
             prior_starts: None,
             allow_outside_prior: false,
             samples: None,
+            region_at: None,
         }
     }
 
@@ -169,6 +183,15 @@ impl EstimateRequest {
     /// record's place: [`RecordEstimate::posterior`]).
     pub fn samples(mut self, samples: Option<usize>) -> Self {
         self.samples = samples;
+        self
+    }
+
+    /// With draws: test `values` against each record's posterior, the
+    /// smallest level of its region of highest density that holds them
+    /// ([`PosteriorDraws::region_level`]): whether a published value, a
+    /// design value or another tool's estimate is one the record allows.
+    pub fn region_at(mut self, values: Option<RegionValues>) -> Self {
+        self.region_at = values;
         self
     }
 
@@ -237,7 +260,7 @@ impl EstimateRequest {
     /// refinement, the joint fit) and what went wrong (a model file of
     /// another model, a model that cannot run without noise, a method the
     /// model lacks, no model where one is needed).
-    pub fn prepare(self) -> Result<Estimating, RequestError> {
+    pub fn prepare(mut self) -> Result<Estimating, RequestError> {
         if self.model.is_some()
             && matches!(self.with, EstimateWith::Estimator(_))
             && !(self.checks() || self.refine.is_some() || self.joint)
@@ -266,6 +289,22 @@ impl EstimateRequest {
                 });
             }
         }
+        let region = match (self.region_at.take(), &self.with) {
+            (None, _) => None,
+            (Some(_), _) if self.samples.is_none() => {
+                return Err(RequestError {
+                    purpose: Purpose::Region,
+                    error: RequestProblem::Samples(
+                        "values are tested against the posterior's draws: ask for draws too".into(),
+                    ),
+                });
+            }
+            (Some(values), EstimateWith::Estimator(estimator)) => {
+                Some(draws::region_values(values, estimator.param_names())?)
+            }
+            // Draws of anything but an estimator were refused above.
+            (Some(_), _) => None,
+        };
         let settings = Settings {
             checks: self.checks(),
             check: self.check_settings,
@@ -293,7 +332,15 @@ impl EstimateRequest {
             })
             .transpose()?;
         match self.with {
-            EstimateWith::Estimator(estimator) => settings.two_stage(estimator, model.as_ref()),
+            EstimateWith::Estimator(estimator) => settings
+                .two_stage(estimator, model.as_ref())
+                .map(|mut estimating| {
+                    if let Some((values, skipped)) = region {
+                        estimating.region = Some(values);
+                        estimating.notes.extend(skipped);
+                    }
+                    estimating
+                }),
             EstimateWith::GivenOfEstimator { values, .. } => settings.through_model(
                 EstimateWith::Given(values),
                 model.as_ref().map(EstimatorModel::named),
@@ -399,6 +446,7 @@ impl Settings {
             windows: self.windows,
             plan: self.plan(q),
             samples: self.samples,
+            region: None,
             // The joint fit, as a refinement, fits records of any length.
             method: Method::two_stage(estimator, self.refine.is_some() || self.joint),
             notes: Vec::new(),
@@ -521,6 +569,7 @@ impl Settings {
             plan: self.plan(spec.param_names().len()),
             method,
             samples: None,
+            region: None,
             notes,
         })
     }
@@ -547,6 +596,8 @@ pub enum Purpose {
     Model,
     /// The posterior's draws.
     Samples,
+    /// Values tested against the posterior's region.
+    Region,
 }
 
 impl Purpose {
@@ -562,6 +613,7 @@ impl Purpose {
             Self::Windows => "the windows",
             Self::Model => "the model",
             Self::Samples => "the posterior's draws",
+            Self::Region => "testing values against the posterior",
         }
     }
 }
@@ -663,6 +715,8 @@ pub struct Estimating {
     windows: Option<Windows>,
     plan: CheckPlan,
     samples: Option<usize>,
+    /// Values tested against each record's posterior region.
+    region: Option<GivenValues>,
     notes: Vec<String>,
 }
 

@@ -54,7 +54,7 @@ impl Estimating {
                         why,
                     };
                     let estimated = self.method.estimate(&id, &record).map_err(failed)?;
-                    let posterior = self.draws(&record, index).map_err(|e| failed(e.into()))?;
+                    let posterior = self.draws(&id, &record, index).map_err(failed)?;
                     Ok((
                         record,
                         RecordEstimate {
@@ -73,19 +73,28 @@ impl Estimating {
         Estimates { rows, auto }
     }
 
-    /// The draws asked of the `index`th record (or window) of a batch,
-    /// where samples are asked.
+    /// The draws asked of the `index`th record (or window) of a batch, the
+    /// experiment `id`, where samples are asked; with the level of its
+    /// posterior's region that holds the values given for it.
     fn draws(
         &self,
+        id: &str,
         record: &IoData,
         index: usize,
-    ) -> twostage_estimator::Result<Option<crate::PosteriorDraws>> {
-        match (self.samples, &self.method) {
-            (Some(samples), super::methods::Method::TwoStage { estimator, .. }) => {
-                super::draws::draw(estimator, record, samples, self.plan.seed, index).map(Some)
-            }
-            _ => Ok(None),
-        }
+    ) -> Result<Option<crate::PosteriorDraws>, crate::MethodFailure> {
+        let (Some(samples), super::methods::Method::TwoStage { estimator, .. }) =
+            (self.samples, &self.method)
+        else {
+            return Ok(None);
+        };
+        let at = self.region.as_ref().map(|v| v.of(id)).transpose()?;
+        Ok(Some(super::draws::draw(
+            estimator,
+            record,
+            samples,
+            (self.plan.seed, index),
+            at.as_deref(),
+        )?))
     }
 
     /// The records to estimate: each whole, or with windows each of its

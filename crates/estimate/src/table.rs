@@ -6,9 +6,9 @@ use twostage_models::input_shape_words;
 use twostage_refine::RecordCheck;
 use twostage_sources::csv_rows::{format_f64, row};
 
-use super::Estimating;
 use super::refiner::RefinedBy;
 use super::rows::{RecordEstimate, RefineOutcome, Refined};
+use super::{Estimating, PosteriorDraws};
 
 impl Estimating {
     /// The rows as the CSV table `twostage estimate` writes: a column
@@ -67,6 +67,10 @@ impl Estimating {
         let with_posterior = rows.iter().any(|(_, e)| e.posterior.is_some());
         if with_posterior {
             header.extend(posterior_header(names));
+        }
+        let with_region = rows.iter().any(|(_, e)| region_level(e).is_some());
+        if with_region {
+            header.extend(REGION_COLUMNS.map(String::from));
         }
         let pairs = if with_correlation {
             self.correlation_pairs()
@@ -140,6 +144,14 @@ impl Estimating {
                         }
                     }
                     None => fields.extend(vec![String::new(); 2 * names.len()]),
+                }
+            }
+            if with_region {
+                match region_level(e) {
+                    Some(level) => {
+                        fields.extend([format_f64(level), (level <= REGION_LEVEL).to_string()])
+                    }
+                    None => fields.extend([String::new(), String::new()]),
                 }
             }
             for (_, at) in &pairs {
@@ -221,6 +233,10 @@ impl Estimating {
                         object.insert(pair[0].clone(), mean.into());
                         object.insert(pair[1].clone(), sd.into());
                     }
+                }
+                if let Some(level) = region_level(e) {
+                    object.insert(REGION_COLUMNS[0].into(), level.into());
+                    object.insert(REGION_COLUMNS[1].into(), (level <= REGION_LEVEL).into());
                 }
                 if let Some(r) = e.correlation() {
                     for (name, at) in &pairs {
@@ -331,6 +347,18 @@ impl RecordEstimate {
             self.in_family()
         }
     }
+}
+
+/// The level of the joint region a table says values lie inside or not.
+const REGION_LEVEL: f64 = 0.9;
+
+/// The columns of values tested against the posterior: the smallest level
+/// of its region of highest density that holds them, and whether that is
+/// within [`REGION_LEVEL`].
+const REGION_COLUMNS: [&str; 2] = ["region_level", "in_region_90"];
+
+fn region_level(e: &RecordEstimate) -> Option<f64> {
+    e.posterior.as_ref().and_then(PosteriorDraws::region_level)
 }
 
 /// The posterior's columns: per parameter its draws' mean and sd.

@@ -115,6 +115,59 @@ impl Estimator {
         posterior.sample(features, rng, out)?;
         Ok(())
     }
+
+    /// [`Estimator::sample_into`], the same draws, and the smallest level
+    /// of the posterior's region of highest density that holds the values
+    /// `at`: the share of the draws it finds more probable
+    /// ([`FittedMixture::region_level`]; at most 0.9 where `at` lies in
+    /// the joint 90% region). Stage 1 runs once for both.
+    ///
+    /// # Errors
+    /// As [`Estimator::sample_into`], and values of the wrong length or
+    /// outside a parameter's support.
+    pub fn sample_testing(
+        &self,
+        (inputs, outputs): (ArrayView2<'_, f64>, ArrayView2<'_, f64>),
+        work: &mut EstimateWorkspace,
+        rng: &mut impl Rng,
+        out: &mut [f64],
+        at: &[f64],
+    ) -> Result<f64> {
+        let posterior = self.posterior.as_ref().ok_or(Error::NoPosterior)?;
+        let features = self.features_of(inputs, outputs, work)?;
+        posterior.sample(features, rng, out)?;
+        Ok(posterior.region_level(features, out, at)?)
+    }
+
+    /// Where a record's known parameters `truth` fall among its
+    /// posterior's draws (as many as `out` holds, drawn into it by
+    /// [`Estimator::sample_testing`]): per parameter the share of draws
+    /// below its value, the ends split (`(below + 1/2) / (L + 1)`, uniform
+    /// over records where the posterior is calibrated: simulation-based
+    /// calibration's rank), and the smallest region level that holds the
+    /// whole vector.
+    ///
+    /// # Errors
+    /// As [`Estimator::sample_testing`].
+    pub fn truth_ranks(
+        &self,
+        record: (ArrayView2<'_, f64>, ArrayView2<'_, f64>),
+        work: &mut EstimateWorkspace,
+        rng: &mut impl Rng,
+        out: &mut [f64],
+        truth: &[f64],
+    ) -> Result<(Vec<f64>, f64)> {
+        let level = self.sample_testing(record, work, rng, out, truth)?;
+        let q = truth.len();
+        let draws = out.len() / q.max(1);
+        let ranks = (0..q)
+            .map(|j| {
+                let below = out.chunks_exact(q).filter(|d| d[j] < truth[j]).count();
+                (below as f64 + 0.5) / (draws + 1) as f64
+            })
+            .collect();
+        Ok((ranks, level))
+    }
 }
 
 /// Whether `posterior` reads `n_features` features and draws parameters

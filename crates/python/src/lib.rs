@@ -270,6 +270,52 @@ impl PyEstimator {
             .map_err(|e| PyValueError::new_err(format!("draws: {e}")))
     }
 
+    /// Whether the values `at` (`[q]`) are ones the record allows: for
+    /// one record (a float) or each record of a batch (`[b]`), the
+    /// smallest level of its posterior's region of highest density that
+    /// holds them, by the `n` draws `sample` gives with the same `seed`
+    /// (the share of them the posterior finds more probable; at most 0.9
+    /// where `at` lies in the joint 90% region), as `twostage estimate
+    /// --samples n --seed SEED --at` writes it in `region_level`.
+    #[pyo3(signature = (u, y, at, n, *, seed=0))]
+    fn region_level<'py>(
+        &self,
+        py: Python<'py>,
+        u: Option<&Bound<'py, PyAny>>,
+        y: &Bound<'py, PyAny>,
+        at: Vec<f64>,
+        n: usize,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        if let Some(refused) = twostage::draws_refused(n, Some(&self.inner), false) {
+            return Err(PyValueError::new_err(format!("n: {refused}")));
+        }
+        let q = self.inner.param_names().len();
+        if at.len() != q {
+            return Err(PyValueError::new_err(format!(
+                "at: {} values, the estimator has {q} parameters ({})",
+                at.len(),
+                self.inner.param_names().join(", ")
+            )));
+        }
+        let estimator = &self.inner;
+        let (levels, single) = self.each_record(py, u, y, 1, |k, u, y, work, out| {
+            let mut rng = twostage::models::stream_rng(
+                seed,
+                k as u64,
+                twostage::models::StreamPurpose::Posterior,
+            );
+            let mut draws = vec![0.0; n * q];
+            out[0] = estimator.sample_testing((u, y), work, &mut rng, &mut draws, &at)?;
+            Ok(())
+        })?;
+        Ok(if single {
+            levels[0].into_pyobject(py)?.into_any()
+        } else {
+            levels.into_pyarray(py).into_any()
+        })
+    }
+
     /// The last sample (from 1) of each window of `window` samples, one
     /// every `every`, of a record of `samples` samples: the estimate
     /// request's windows, refused in its words.

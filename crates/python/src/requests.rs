@@ -100,7 +100,9 @@ pub(crate) fn validate<'py>(
             twostage::validate_trained(estimator, named.as_ref(), &plan, progress)
         })
         .map_err(to_python)?;
-    let report = serde_json::to_string(&run.report)
+    let report = run
+        .report_json()
+        .map(|json| json.to_string())
         .map_err(|e| PyValueError::new_err(format!("validation report: {e}")))?;
     let q = estimator.param_names().len();
     let table = |values: Vec<f64>| -> PyResult<Bound<'py, PyArrayDyn<f64>>> {

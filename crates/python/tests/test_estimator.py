@@ -428,3 +428,21 @@ def test_the_posterior_s_draws_are_the_cli_s_bit_for_bit(tmp_path):
     plain = twostage.train(**args)
     with pytest.raises(ValueError, match="posterior=K"):
         plain.sample(u, y, 10)
+    # region_level is the command line's --at column, record for record.
+    at = tmp_path / "at.csv"
+    at.write_text("theta\n0.2\n")
+    table = tmp_path / "table.csv"
+    cli("estimate", "--estimator", str(path), "--samples", "30", "--seed", "5",
+        "--at", str(at), "--out", str(table), str(charts / "data.csv"))
+    header = table.read_text().splitlines()[0].split(",")
+    said = np.loadtxt(table, delimiter=",", skiprows=1)[:, header.index("region_level")]
+    levels = estimator.region_level(u, y, [0.2], 30, seed=5)
+    assert levels.tolist() == said.tolist()
+    assert estimator.region_level(u[0], y[0], [0.2], 30, seed=5) == levels[0]
+    with pytest.raises(ValueError, match="1 parameters"):
+        estimator.region_level(u, y, [0.2, 0.3], 30)
+    # validate scores the posterior on its records, as the command line's JSON does.
+    validated = estimator.validate(sims=100)
+    posterior = validated["report"]["posterior"]
+    assert posterior["records"] == 100 and len(posterior["central"]) == 1
+    assert "posterior" not in plain.validate(sims=100)["report"]

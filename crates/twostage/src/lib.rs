@@ -67,8 +67,8 @@ pub use twostage_estimate::{
     JointRun, MethodFailure, ModelFailure, OUTPUT_ERROR_METHOD, Plant, PosteriorDraws, Purpose,
     RECORDS_TOGETHER, RecordBatch, RecordEstimate, RecordFailure, RecordOutcome, RecordPlace,
     RefineChoiceError, RefineOutcome, RefineWhich, Refined, RefinedBy, RefinedEstimate,
-    RequestError, RequestProblem, SearchOptima, SharedSimulator, ToRefine, Windows, draws_refused,
-    values_outside_prior,
+    RegionValues, RequestError, RequestProblem, SearchOptima, SharedSimulator, ToRefine, Windows,
+    draws_refused, values_outside_prior,
 };
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,
@@ -85,7 +85,8 @@ pub use twostage_refine::{
 pub use twostage_setting::InvalidSetting;
 pub use twostage_train::{DEFAULT_SEED, Error, Result, Run, RunSettings, TrainedOn, TwoStage};
 pub use validation_run::{
-    TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator, validate_trained,
+    CALIBRATION_DRAWS, TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator,
+    validate_trained,
 };
 
 pub use twostage_sources::{

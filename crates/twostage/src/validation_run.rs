@@ -7,10 +7,12 @@ use ndarray::ArrayView2;
 use rayon::prelude::*;
 use twostage_estimate::EstimatorModel;
 use twostage_estimator::{EstimateWorkspace, Estimator};
-use twostage_models::{IoData, Sampling, Simulator, run_experiment};
+use twostage_models::{IoData, Sampling, Simulator, StreamPurpose, run_experiment, stream_rng};
 use twostage_sources::{NamedModel, Progress, refuse_beyond_memory};
 use twostage_train::{Error, Result};
-use twostage_validate::{ValidationReport, hoeffding_sample_size, squared_error_bound};
+use twostage_validate::{
+    PosteriorCalibration, ValidationReport, hoeffding_sample_size, squared_error_bound,
+};
 
 /// What a validation run simulates and how it stops. Each field is named
 /// as the setting that an error about it names.
@@ -83,6 +85,25 @@ pub struct Validated {
     pub records: usize,
     /// With `target_rmse`: whether it was met.
     pub target: Option<TargetRmse>,
+    /// Where the estimator has a posterior: its calibration on the same
+    /// records ([`CALIBRATION_DRAWS`] draws each).
+    pub posterior: Option<PosteriorCalibration>,
+}
+
+impl Validated {
+    /// The report as JSON, with the posterior's calibration under the key
+    /// `posterior` where there is one: what the command line's `validate
+    /// --format json` prints and Python's `validate` returns.
+    ///
+    /// # Errors
+    /// None in practice: the report's numbers are plain.
+    pub fn report_json(&self) -> serde_json::Result<serde_json::Value> {
+        let mut json = serde_json::to_value(&self.report)?;
+        if let (Some(posterior), Some(object)) = (&self.posterior, json.as_object_mut()) {
+            object.insert("posterior".into(), serde_json::to_value(posterior)?);
+        }
+        Ok(json)
+    }
 }
 
 /// Validates `estimator` on fresh simulations of the model it was trained
@@ -173,14 +194,15 @@ pub fn validate_estimator(
     let prior = model.prior().clone().with_sampling(Sampling::Uniform);
     let design = prior.design(most, plan.seed)?;
     let (mut truth, mut estimates) = (Vec::new(), Vec::new());
+    let (mut ranks, mut levels) = (Vec::new(), Vec::new());
     progress.begin_step("validating", most, "records");
     let outcome = loop {
         let done = truth.len() / q;
-        let pairs: Vec<(Vec<f64>, Vec<f64>)> = (done..r)
+        let rows_of_round: Vec<Scored> = (done..r)
             .into_par_iter()
             .map_init(
                 || (IoData::default(), EstimateWorkspace::new()),
-                |(record, work), i| -> Result<(Vec<f64>, Vec<f64>)> {
+                |(record, work), i| -> Result<Scored> {
                     let mut theta = vec![0.0; q];
                     run_experiment(model, &design, i, &mut theta, record)?;
                     let mut estimate = vec![0.0; q];
@@ -190,14 +212,28 @@ pub fn validate_estimator(
                         work,
                         &mut estimate,
                     )?;
+                    let drawn = match estimator.posterior() {
+                        Some(_) => Some(posterior_ranks(
+                            estimator,
+                            record,
+                            work,
+                            &theta,
+                            (plan.seed, i),
+                        )?),
+                        None => None,
+                    };
                     progress.advance_step(1);
-                    Ok((theta, estimate))
+                    Ok((theta, estimate, drawn))
                 },
             )
             .collect::<Result<_>>()?;
-        for (theta, estimate) in pairs {
+        for (theta, estimate, drawn) in rows_of_round {
             truth.extend(theta);
             estimates.extend(estimate);
+            if let Some((rank, level)) = drawn {
+                ranks.push(rank);
+                levels.push(level);
+            }
         }
         let report = ValidationReport::new(
             estimator.param_names(),
@@ -222,13 +258,52 @@ pub fn validate_estimator(
     };
     progress.end_step();
     let (report, target) = outcome;
+    let posterior = if levels.is_empty() {
+        None
+    } else {
+        Some(PosteriorCalibration::from_ranks(
+            &ranks,
+            &levels,
+            CALIBRATION_DRAWS,
+        )?)
+    };
     Ok(Validated {
         report,
         truth,
         estimates,
         records: r,
         target,
+        posterior,
     })
+}
+
+/// A validation record's truth, estimate, and with a posterior the
+/// truth's ranks among the draws and the region level that holds it.
+type Scored = (Vec<f64>, Vec<f64>, Option<(Vec<f64>, f64)>);
+
+/// Draws of each validation record's posterior that rank its truth: the
+/// ranks' resolution is 1/201.
+pub const CALIBRATION_DRAWS: usize = 200;
+
+/// Record `i`'s truth `theta` among [`CALIBRATION_DRAWS`] draws of its
+/// posterior, from the stream of (`seed`, `i`)
+/// ([`Estimator::truth_ranks`]).
+fn posterior_ranks(
+    estimator: &Estimator,
+    record: &IoData,
+    work: &mut EstimateWorkspace,
+    theta: &[f64],
+    (seed, i): (u64, usize),
+) -> Result<(Vec<f64>, f64)> {
+    let mut draws = vec![0.0; CALIBRATION_DRAWS * theta.len()];
+    let mut rng = stream_rng(seed, i as u64, StreamPurpose::Posterior);
+    Ok(estimator.truth_ranks(
+        (record.inputs(), record.outputs()),
+        work,
+        &mut rng,
+        &mut draws,
+        theta,
+    )?)
 }
 
 /// The first round's records and the most the plan may run.

@@ -36,12 +36,14 @@ mod betting;
 mod conformal;
 mod error;
 mod hoeffding;
+mod posterior;
 mod report;
 
 pub use betting::{BettingBound, MAX_STAKE};
 pub use conformal::ConformalIntervals;
 pub use error::{InvalidSetting, Result, ValidateError};
 pub use hoeffding::{HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound};
+pub use posterior::{COVERAGE_LEVELS, PosteriorCalibration};
 pub use report::{ParameterReport, ValidationReport};
 
 #[cfg(test)]

@@ -89,7 +89,25 @@ fn refuse_what_does_not_apply(args: &EstimateArgs, refine: Option<RefineWhich>) 
             "--check and --refine=auto",
         );
     }
-    if args.model.is_some() && method.is_none() && args.at.is_none() {
+    match (&args.at, &args.estimator) {
+        (Some(_), None) if !args.check => {
+            return Err(usage(
+                "--at checks given values with --check, or tests them against an estimator's \
+                 posterior with --estimator and --samples: add one"
+                    .into(),
+            ));
+        }
+        (Some(_), Some(_)) if args.samples.is_none() => {
+            return Err(usage(
+                "--at with an estimator tests the values against each record's posterior: \
+                 add --samples N (its draws), or leave out --estimator and check the values \
+                 with --check"
+                    .into(),
+            ));
+        }
+        _ => {}
+    }
+    if args.model.is_some() && method.is_none() && (args.at.is_none() || args.estimator.is_some()) {
         return refuse(
             "--model",
             "--method and --at (an estimator knows its model)",
@@ -183,6 +201,12 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
         .windows(window)
         .seed(args.seed.unwrap_or(0))
         .samples(args.samples)
+        .region_at(
+            args.estimator
+                .as_ref()
+                .and(args.at.clone())
+                .map(twostage::RegionValues::File),
+        )
         .prior_starts(args.prior_starts);
     let estimating = request
         .prepare()
@@ -204,6 +228,7 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
         Purpose::Joint => "--joint".into(),
         Purpose::Windows => "--window".into(),
         Purpose::Samples => "--samples".into(),
+        Purpose::Region => "--at".into(),
         Purpose::Model if args.model_file.is_some() => "--model-file".into(),
         Purpose::Model => "--model".into(),
     };

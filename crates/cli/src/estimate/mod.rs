@@ -128,17 +128,16 @@ pub struct EstimateArgs {
     /// methods exist for the built-in models only: it says so).
     #[arg(long, value_name = "PATH")]
     model_file: Option<PathBuf>,
-    /// Check given parameter values instead of estimating them (a
-    /// published value, another tool's estimate): a CSV with a column per
-    /// parameter, as `estimate` writes it, its rows matched to the records
-    /// by `experiment`, or one row for every record. Needs --check and the
-    /// model (--model or --model-file).
-    #[arg(
-        long,
-        value_name = "VALUES.csv",
-        conflicts_with_all = ["estimator", "method", "refine"],
-        requires = "check"
-    )]
+    /// Given parameter values (a published value, a design value, another
+    /// tool's estimate): a CSV with a column per parameter, as `estimate`
+    /// writes it, its rows matched to the records by `experiment`, or one
+    /// row for every record. With --check and the model (--model or
+    /// --model-file): check them against the records instead of
+    /// estimating. With --estimator and --samples: test them against each
+    /// record's posterior (columns `region_level`, the smallest level of
+    /// its joint region of highest density that holds them, and
+    /// `in_region_90`).
+    #[arg(long, value_name = "VALUES.csv", conflicts_with_all = ["method", "refine"])]
     at: Option<PathBuf>,
     /// With --at: accept values outside the model's prior box.
     #[arg(long, requires = "at")]

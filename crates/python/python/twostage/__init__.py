@@ -454,7 +454,10 @@ class Estimator:
         training seed. The model is the estimator's built-in one, or its
         model file (``model_file`` or ``model_toml``). ``progress`` as in
         ``train``. Returns a dict: ``report`` (as ``validation`` holds
-        it), ``truth`` and ``estimates`` [r, q], ``records`` r, and
+        it; with a posterior, its calibration on the same records under
+        ``posterior``: the joint region's and central intervals' coverage
+        at 50/90/95% and the ranks' uniformity), ``truth`` and
+        ``estimates`` [r, q], ``records`` r, and
         ``target_met`` and ``certified_over_observed`` (None without
         ``target_rmse``). A setting out of range raises ValueError naming
         it."""
