@@ -19,9 +19,12 @@ use twostage::models::{
 use twostage::sources::{ChartFiles, csv_rows::read_columns};
 use twostage::{Assessment, ClassicMethod, EstimateWorkspace, Estimator, interval_in_box};
 use twostage_baselines::{
-    BayesCar, InitialCovariance, MethodSettings, RecordEstimator, classic_estimator,
+    BayesBenchmark, BayesCar, InitialCovariance, MethodSettings, RecordEstimator, classic_estimator,
 };
 
+use twostage::validate::{COVERAGE_LEVELS, PosteriorCalibration};
+
+use crate::c2st::Reference;
 use crate::paper::test_records;
 use crate::posterior_cache;
 
@@ -308,44 +311,39 @@ fn said_of_itself(estimator: &Estimator, assessed: &[Assessment], truth: &[Vec<f
 }
 
 /// Draws of each record from an estimator's posterior: their means, and
-/// per parameter how often their central 50, 90 and 95% intervals hold
-/// the truth.
+/// their calibration against the truth.
 struct PosteriorScores {
     means: Vec<Vec<f64>>,
-    /// `covered[j][l]`: records whose level-`l` interval of parameter j
-    /// holds its truth.
-    covered: Vec<[usize; 3]>,
-    /// Records whose level-`l` region of highest posterior density holds
-    /// their whole parameter vector.
-    joint: [usize; 3],
-    records: usize,
+    calibration: PosteriorCalibration,
 }
 
-/// One record's draws scored: their mean, whether each parameter's
-/// central interval and the whole vector's region of highest density hold
-/// the truth, at each level.
-type RecordScores = (Vec<f64>, Vec<[bool; 3]>, [bool; 3]);
-
-/// The levels whose central intervals are scored.
-const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 /// Draws per record.
 const DRAWS: usize = 1000;
 
+/// A record's truth among its draws: per parameter its rank, and the
+/// region level that holds it ([`Estimator::truth_ranks`]).
+type Ranked = (Vec<f64>, f64);
+
 impl PosteriorScores {
     fn coverage_words(&self, j: usize) -> String {
-        LEVELS
-            .iter()
-            .zip(self.covered[j])
-            .map(|(level, count)| {
-                format!(
-                    "{:.0}%: {:.3}",
-                    100.0 * level,
-                    count as f64 / self.records as f64
-                )
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
+        let c = &self.calibration;
+        format!(
+            "{}; ranks' distance from uniform {:.3} (p {:.3})",
+            levels_words(&c.central[j]),
+            c.uniformity_distance[j],
+            c.uniformity_p[j]
+        )
     }
+}
+
+/// Shares at each of [`COVERAGE_LEVELS`], in words.
+fn levels_words(shares: &[f64; 3]) -> String {
+    COVERAGE_LEVELS
+        .iter()
+        .zip(shares)
+        .map(|(level, share)| format!("{:.0}%: {share:.3}", 100.0 * level))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// [`DRAWS`] draws of every record from `estimator`'s posterior (record i
@@ -358,46 +356,23 @@ fn posterior_draws(
 ) -> Result<PosteriorScores> {
     let q = estimator.param_names().len();
     let start = Instant::now();
-    let per_record: Vec<RecordScores> = records
+    let per_record: Vec<(Vec<f64>, Ranked)> = records
         .par_iter()
         .enumerate()
         .map_init(EstimateWorkspace::new, |work, (i, record)| {
             let mut draws = vec![0.0; DRAWS * q];
             let mut rng = stream_rng(seed, i as u64, StreamPurpose::Posterior);
-            estimator.sample_into(
-                record.inputs(),
-                record.outputs(),
+            let ranked = estimator.truth_ranks(
+                (record.inputs(), record.outputs()),
                 work,
                 &mut rng,
                 &mut draws,
+                &truth[i],
             )?;
-            // The region of highest density: the draws' log densities
-            // above their (1 - level) quantile.
-            let posterior = estimator.posterior().context("no posterior")?;
-            let features = estimator.features_of(record.inputs(), record.outputs(), work)?;
-            let mut densities = vec![0.0; DRAWS];
-            posterior.log_densities(features, &draws, &mut densities)?;
-            let mut at_truth = [0.0];
-            posterior.log_densities(features, &truth[i], &mut at_truth)?;
-            densities.sort_by(f64::total_cmp);
-            let mut joint = [false; 3];
-            for (l, level) in LEVELS.iter().enumerate() {
-                let below = ((1.0 - level) * DRAWS as f64).round() as usize;
-                joint[l] = at_truth[0] >= densities[below];
-            }
-            let mut mean = vec![0.0; q];
-            let mut inside = vec![[false; 3]; q];
-            for j in 0..q {
-                let mut column: Vec<f64> = draws.iter().skip(j).step_by(q).copied().collect();
-                mean[j] = column.iter().sum::<f64>() / DRAWS as f64;
-                column.sort_by(f64::total_cmp);
-                for (l, level) in LEVELS.iter().enumerate() {
-                    let tail = ((1.0 - level) / 2.0 * DRAWS as f64).round() as usize;
-                    let (low, high) = (column[tail], column[DRAWS - 1 - tail]);
-                    inside[j][l] = (low..=high).contains(&truth[i][j]);
-                }
-            }
-            Ok::<_, anyhow::Error>((mean, inside, joint))
+            let mean = (0..q)
+                .map(|j| draws.iter().skip(j).step_by(q).sum::<f64>() / DRAWS as f64)
+                .collect();
+            Ok::<_, anyhow::Error>((mean, ranked))
         })
         .collect::<Result<_>>()?;
     let seconds = start.elapsed().as_secs_f64();
@@ -406,23 +381,11 @@ fn posterior_draws(
          ({:.0} draws a second, features and densities included)",
         (DRAWS * records.len()) as f64 / seconds
     );
-    let mut covered = vec![[0usize; 3]; q];
-    let mut joint = [0usize; 3];
-    for (_, inside, whole) in &per_record {
-        for (l, hit) in whole.iter().enumerate() {
-            joint[l] += usize::from(*hit);
-        }
-        for (j, levels) in inside.iter().enumerate() {
-            for (l, hit) in levels.iter().enumerate() {
-                covered[j][l] += usize::from(*hit);
-            }
-        }
-    }
+    let (means, ranked): (Vec<Vec<f64>>, Vec<Ranked>) = per_record.into_iter().unzip();
+    let (ranks, levels): (Vec<Vec<f64>>, Vec<f64>) = ranked.into_iter().unzip();
     Ok(PosteriorScores {
-        means: per_record.into_iter().map(|(mean, _, _)| mean).collect(),
-        covered,
-        joint,
-        records: records.len(),
+        means,
+        calibration: PosteriorCalibration::from_ranks(&ranks, &levels, DRAWS)?,
     })
 }
 
@@ -497,6 +460,7 @@ pub(crate) fn run(
     against: Option<&Path>,
     test: TestRecords,
     scored: &[PathBuf],
+    c2st: usize,
 ) -> Result<()> {
     let TestRecords {
         model,
@@ -535,6 +499,14 @@ pub(crate) fn run(
         None => test_records(simulator.as_ref(), count, seed)?,
     };
     let count = records.len();
+    let reference = match (kind, &given) {
+        _ if c2st == 0 => None,
+        (BuiltinModel::Benchmark, _) => Some(Reference::Benchmark(BayesBenchmark::default())),
+        (BuiltinModel::Pacejka, Some(steering)) => Some(Reference::Car(Box::new(
+            BayesCar::on_steering(129, 65, steering.clone())?,
+        ))),
+        (BuiltinModel::Pacejka, None) => Some(Reference::Car(Box::new(BayesCar::paper()?))),
+    };
     let bayes: Box<dyn RecordEstimator> = match given {
         Some(steering) => Box::new(BayesCar::on_steering(129, 65, steering)?),
         None => {
@@ -623,21 +595,13 @@ pub(crate) fn run(
         }
     }
     if let Some(drawn) = &drawn {
-        let words: Vec<String> = LEVELS
-            .iter()
-            .zip(drawn.joint)
-            .map(|(level, count)| {
-                format!(
-                    "{:.0}%: {:.3}",
-                    100.0 * level,
-                    count as f64 / drawn.records as f64
-                )
-            })
-            .collect();
         println!(
             "  the posterior's regions of highest density hold the whole parameter vector: {}",
-            words.join(", ")
+            levels_words(&drawn.calibration.joint)
         );
+    }
+    if let Some(reference) = &reference {
+        crate::c2st::run(&estimator, reference, &records, c2st, seed)?;
     }
     Ok(())
 }

@@ -22,6 +22,7 @@ use clap::{Parser, Subcommand};
 use twostage::models::{Benchmark, Simulator};
 
 mod bayes_gap;
+mod c2st;
 mod crates;
 mod fit_speed;
 mod flag_study;
@@ -93,6 +94,11 @@ enum Command {
         /// chart's order), scored beside the estimator; repeatable.
         #[arg(long, requires = "chart")]
         estimates: Vec<PathBuf>,
+        /// Test the estimator's posterior draws against the exact
+        /// posterior's by a classifier (sbibm's C2ST) on this many of the
+        /// records.
+        #[arg(long, default_value_t = 0)]
+        c2st: usize,
     },
     /// A stage 1 that learns against the family estimator's own: a summary
     /// network trained on a model file's family, stage 2 fitted on its
@@ -256,6 +262,7 @@ fn main() -> ExitCode {
             seed,
             chart,
             estimates,
+            c2st,
         } => bayes_gap::run(
             &estimator,
             against.as_deref(),
@@ -267,6 +274,7 @@ fn main() -> ExitCode {
                 chart,
             },
             &estimates,
+            c2st,
         ),
     };
     match result {
