@@ -68,12 +68,13 @@ impl Inputs {
             let (_, record) = checked(records.remove(0))?;
             return Ok(Self::One(record));
         }
-        let mut by_id: std::collections::HashMap<String, IoData> =
+        let by_id: std::collections::HashMap<String, IoData> =
             records.into_iter().map(checked).collect::<Result<_>>()?;
+        // Rows of one experiment (the draws of a posterior) share its record.
         let per_row = rows
             .iter()
             .map(|row| {
-                by_id.remove(&row.id).ok_or_else(|| {
+                by_id.get(&row.id).cloned().ok_or_else(|| {
                     usage(format!(
                         "--input {} holds no record of experiment {}: give one record for \
                          every row, or one per experiment of the estimates",
@@ -164,6 +165,83 @@ pub fn records_csv(sim: &dyn Simulator, rows: &[Row], records: &[IoData]) -> Str
                 .chain((0..record.n_outputs()).map(|j| record.output(j)[k]))
                 .map(format_f64);
             text.push_str(&row(std::iter::once(r.id.clone()).chain(values)));
+        }
+    }
+    text
+}
+
+/// One experiment's prediction band: its rows (the draws of its
+/// posterior, simulated), and per output and sample the mean of their
+/// outputs and the central band of `level` (a share, 0.9 say).
+pub struct Band {
+    /// The experiment.
+    pub id: String,
+    /// Its rows, in the file's order.
+    pub rows: Vec<usize>,
+    /// `[output][sample]`: mean, low and high.
+    pub outputs: Vec<Vec<[f64; 3]>>,
+}
+
+/// The rows' simulated `records` gathered by experiment (in the order of
+/// each experiment's first row), each experiment's band of `level`.
+pub fn bands(rows: &[Row], records: &[IoData], level: f64) -> Vec<Band> {
+    let mut order: Vec<(String, Vec<usize>)> = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    for (i, row) in rows.iter().enumerate() {
+        let at = *index.entry(row.id.clone()).or_insert_with(|| {
+            order.push((row.id.clone(), Vec::new()));
+            order.len() - 1
+        });
+        order[at].1.push(i);
+    }
+    order
+        .into_iter()
+        .map(|(id, members)| {
+            let first = &records[members[0]];
+            let outputs = (0..first.n_outputs())
+                .map(|j| {
+                    (0..first.n_samples())
+                        .map(|k| {
+                            let mut values: Vec<f64> =
+                                members.iter().map(|&m| records[m].output(j)[k]).collect();
+                            let mean = values.iter().sum::<f64>() / values.len() as f64;
+                            values.sort_by(f64::total_cmp);
+                            let last = (values.len() - 1) as f64;
+                            let tail = ((1.0 - level) / 2.0 * last).round() as usize;
+                            [mean, values[tail], values[values.len() - 1 - tail]]
+                        })
+                        .collect()
+                })
+                .collect();
+            Band {
+                id,
+                rows: members,
+                outputs,
+            }
+        })
+        .collect()
+}
+
+/// The bands as one CSV: `experiment`, the inputs of each experiment's
+/// first row, then per output its mean, low and high
+/// (`y_mean,y_low,y_high`).
+pub fn bands_csv(sim: &dyn Simulator, bands: &[Band], records: &[IoData]) -> String {
+    let spec = sim.spec();
+    let band_columns = spec
+        .output_names()
+        .iter()
+        .flat_map(|y| [format!("{y}_mean"), format!("{y}_low"), format!("{y}_high")]);
+    let mut text = row(std::iter::once("experiment".to_string())
+        .chain(spec.input_names().iter().cloned())
+        .chain(band_columns));
+    for band in bands {
+        let first = &records[band.rows[0]];
+        for k in 0..first.n_samples() {
+            let values = (0..first.n_inputs())
+                .map(|j| first.input(j)[k])
+                .chain(band.outputs.iter().flat_map(|o| o[k]))
+                .map(format_f64);
+            text.push_str(&row(std::iter::once(band.id.clone()).chain(values)));
         }
     }
     text

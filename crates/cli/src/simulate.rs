@@ -80,6 +80,14 @@ pub struct SimulateArgs {
     /// estimates) instead of the model's own input design.
     #[arg(long, value_name = "RECORD.csv", requires = "at")]
     input: Option<PathBuf>,
+    /// With --input and --at a file of posterior draws (`estimate --samples
+    /// N --draws FILE`: many rows of one experiment): write, per
+    /// experiment and sample, each output's mean over the draws'
+    /// simulations and their central band of this level in percent
+    /// (`y_mean`, `y_low`, `y_high`), a prediction band, instead of every
+    /// simulation; the band is scored against the record's outputs.
+    #[arg(long, value_name = "PERCENT", requires = "input")]
+    band: Option<f64>,
     /// With --input: score the prediction from this sample on (counted
     /// from 0), leaving out the first samples of a transient; the CSV still
     /// holds every sample.
@@ -193,21 +201,45 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
         &bars,
     )?;
     bars.end_step();
-    let text = predict::records_csv(sim, &rows, &records);
+    let level = match args.band {
+        None => None,
+        Some(p) if p > 0.0 && p < 100.0 => Some(p / 100.0),
+        Some(p) => {
+            return Err(usage(format!(
+                "--band {p}: a band's level is a percentage between 0 and 100, such as 90"
+            )));
+        }
+    };
+    let bands = level.map(|l| predict::bands(&rows, &records, l));
+    let text = match &bands {
+        Some(bands) => predict::bands_csv(sim, bands, &records),
+        None => predict::records_csv(sim, &rows, &records),
+    };
     // Against a record's own outputs: the prediction error a user validates
-    // an identified model by.
-    for (i, (row, record)) in rows.iter().zip(&records).enumerate() {
+    // an identified model by (with a band: its mean, and the share of the
+    // record's samples inside it).
+    let predictions: Vec<(&str, usize, Option<&predict::Band>)> = match &bands {
+        Some(bands) => bands
+            .iter()
+            .map(|b| (b.id.as_str(), b.rows[0], Some(b)))
+            .collect(),
+        None => rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| (r.id.as_str(), i, None))
+            .collect(),
+    };
+    for (id, i, band) in predictions {
         if let Some(measured) = inputs.of(i) {
             let n = measured.n_samples();
             let window =
                 twostage::refine::scoring_window(n, args.score_from.unwrap_or(0), args.score_to)
                     .map_err(|e| match e {
                         twostage::RefineError::InvalidSetting(refused) => usage(format!(
-                            "--{} {}: {} (the record of experiment {})",
+                            "--{} {}: {} (the record of experiment {id})",
                             refused.name.replace(' ', "-"),
                             refused.value,
                             refused.reason,
-                            row.id
                         )),
                         other => usage(other.to_string()),
                     })?;
@@ -217,16 +249,30 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
                 .iter()
                 .enumerate()
                 .map(|(j, name)| {
-                    let (rms, fit) = twostage::output_fit(
-                        &measured.output(j)[from..to],
-                        &record.output(j)[from..to],
-                    );
-                    format!("{name} RMS {}, fit {fit:.1}%", four_digits(rms))
+                    let measured = &measured.output(j)[from..to];
+                    let Some(band) = band else {
+                        let (rms, fit) =
+                            twostage::output_fit(measured, &records[i].output(j)[from..to]);
+                        return format!("{name} RMS {}, fit {fit:.1}%", four_digits(rms));
+                    };
+                    let predicted = &band.outputs[j][from..to];
+                    let mean: Vec<f64> = predicted.iter().map(|p| p[0]).collect();
+                    let (rms, fit) = twostage::output_fit(measured, &mean);
+                    let inside = measured
+                        .iter()
+                        .zip(predicted)
+                        .filter(|(y, p)| (p[1]..=p[2]).contains(*y))
+                        .count();
+                    format!(
+                        "{name} RMS {} of the band's mean, fit {fit:.1}%, {:.1}% of samples \
+                         inside the band",
+                        four_digits(rms),
+                        100.0 * inside as f64 / measured.len().max(1) as f64
+                    )
                 })
                 .collect();
             eprintln!(
-                "experiment {}: against the given record's outputs{}: {}",
-                row.id,
+                "experiment {id}: against the given record's outputs{}: {}",
                 match (from, to) {
                     (0, to) if to == n => String::new(),
                     (from, to) if to == n => format!(" from sample {from}"),

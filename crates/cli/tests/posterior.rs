@@ -94,7 +94,7 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
         "{header}"
     );
     let lines: Vec<&str> = first.lines().collect();
-    assert_eq!(lines[0], "experiment,draw,theta");
+    assert_eq!(lines[0], "experiment,draw,out_of_distribution,theta");
     assert_eq!(lines.len(), 1 + 3 * 50);
     for line in &lines[1..] {
         let v: f64 = line.rsplit(',').next().unwrap().parse().unwrap();
@@ -115,6 +115,46 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
     assert!((said - record_mean(fields[0])).abs() < 1e-12, "{said}");
     assert_eq!(draws("3", &dir.join("b.csv")).1, first);
     assert_ne!(draws("4", &dir.join("c.csv")).1, first);
+
+    // A record far outside the training records has its draws written
+    // and flagged.
+    let odd = dir.join("odd.csv");
+    let odd_text: String = std::fs::read_to_string(&records)
+        .unwrap()
+        .lines()
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let f: Vec<&str> = l.split(',').collect();
+            match i {
+                0 => Some("u,y\n".to_string()),
+                _ if f[0] == lines[1].split(',').next().unwrap() => {
+                    let y: f64 = f[2].parse().unwrap();
+                    Some(format!("{},{}\n", f[1], 50.0 * y))
+                }
+                _ => None,
+            }
+        })
+        .collect();
+    std::fs::write(&odd, odd_text).unwrap();
+    let odd_draws = dir.join("odd-draws.csv");
+    ok(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "5",
+        "--draws",
+        path(&odd_draws),
+        path(&odd),
+    ]);
+    let flagged = std::fs::read_to_string(&odd_draws).unwrap();
+    assert!(
+        flagged
+            .lines()
+            .skip(1)
+            .all(|l| l.split(',').nth(2) == Some("true")),
+        "{flagged}"
+    );
 
     // --correlation reads the draws' correlations (none for one
     // parameter), and is refused where nothing gives one.
@@ -257,6 +297,93 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
         without_check.contains("--check") && without_check.contains("--samples"),
         "{without_check}"
     );
+    // simulate --at the draws --band 90: each experiment's band over its
+    // draws' simulations on its own input, its mean the mean of the same
+    // simulations written one by one; the record's samples mostly inside.
+    let draws_file = dir.join("band-draws.csv");
+    ok(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "200",
+        "--draws",
+        path(&draws_file),
+        path(&records),
+    ]);
+    let simulate = |band: bool| {
+        let mut args = vec![
+            "simulate",
+            "--model",
+            "benchmark",
+            "--at",
+            path(&draws_file),
+            "--input",
+            path(&records),
+        ];
+        if band {
+            args.extend(["--band", "90"]);
+        }
+        let out = twostage(&args);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        (text(&out.stdout), text(&out.stderr))
+    };
+    let (band, said) = simulate(true);
+    let (each, _) = simulate(false);
+    let mut lines = band.lines();
+    assert_eq!(
+        lines.next(),
+        Some("experiment,u,y_mean,y_low,y_high"),
+        "{band}"
+    );
+    let band_rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let each_rows: Vec<Vec<f64>> = each
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let n = band_rows.len() / 3;
+    assert_eq!(each_rows.len(), 200 * band_rows.len());
+    for (k, b) in band_rows.iter().enumerate().step_by(97) {
+        let (experiment, sample) = (k / n, k % n);
+        let values: Vec<f64> = (0..200)
+            .map(|d| each_rows[(experiment * 200 + d) * n + sample][2])
+            .collect();
+        let mean = values.iter().sum::<f64>() / 200.0;
+        assert!(
+            (b[2] - mean).abs() < 1e-9 * (1.0 + mean.abs()),
+            "{b:?} {mean}"
+        );
+        assert!(b[3] <= b[2] && b[2] <= b[4], "{b:?}");
+    }
+    let inside: Vec<f64> = said
+        .lines()
+        .filter_map(|l| {
+            l.split("% of samples inside the band")
+                .next()?
+                .rsplit(", ")
+                .next()?
+                .parse()
+                .ok()
+        })
+        .collect();
+    assert_eq!(inside.len(), 3, "{said}");
+    assert!(inside.iter().all(|p| (75.0..=99.5).contains(p)), "{said}");
+    let bad = refused(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--at",
+        path(&draws_file),
+        "--input",
+        path(&records),
+        "--band",
+        "100",
+    ]);
+    assert!(bad.contains("between 0 and 100"), "{bad}");
+
     // validate scores the posterior's calibration on its fresh records;
     // the JSON has it under `posterior`; an estimator without one has none.
     let validated = ok(&["validate", "--estimator", path(&with), "--sims", "300"]);

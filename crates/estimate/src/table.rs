@@ -282,7 +282,8 @@ impl Estimating {
     }
 
     /// Every row's posterior draws as CSV: `experiment` (and `window_end`
-    /// with windows), `draw` (from 0), then a column per parameter; rows
+    /// with windows), `draw` (from 0), `out_of_distribution` where the
+    /// estimator flags records, then a column per parameter; rows
     /// without draws (the joint row) have none. Numbers read back to the
     /// same bits.
     ///
@@ -293,6 +294,14 @@ impl Estimating {
             header.push("window_end".into());
         }
         header.push("draw".into());
+        // A record out of distribution has its draws flagged with it: they
+        // are the network's extrapolation.
+        let flagged = rows
+            .iter()
+            .any(|(_, e)| e.posterior.is_some() && e.distance.is_some());
+        if flagged {
+            header.push("out_of_distribution".into());
+        }
         header.extend(self.names.iter().cloned());
         let mut text = row(&header);
         let q = self.names.len().max(1);
@@ -304,6 +313,12 @@ impl Estimating {
                     fields.push(e.window_end.map_or_else(String::new, |end| end.to_string()));
                 }
                 fields.push(k.to_string());
+                if flagged {
+                    fields.push(
+                        e.distance
+                            .map_or_else(String::new, |_| e.out_of_distribution().to_string()),
+                    );
+                }
                 fields.extend(draw.iter().map(|v| format_f64(*v)));
                 text.push_str(&row(&fields));
             }

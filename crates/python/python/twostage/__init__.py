@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import sys
 from os import PathLike
-from typing import Any, Callable, Optional, Union
+from typing import Any, Callable, Optional, Sequence, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -153,6 +153,25 @@ class Estimator:
         (else ValueError says so)."""
         u, y = self._columns(u, y)
         return self._native.sample(u, y, n, seed=seed)
+
+    def region_level(
+        self,
+        u: Optional[npt.NDArray[np.float64]],
+        y: npt.NDArray[np.float64],
+        at: Sequence[float],
+        n: int,
+        *,
+        seed: int = 0,
+    ) -> Any:
+        """Whether the parameter values ``at`` are ones the record allows:
+        the smallest level of its posterior's joint region of highest
+        density that holds them (a float for one record, [b] for a
+        batch), by the ``n`` draws ``sample`` gives with the same
+        ``seed``: at most 0.9 where ``at`` lies in the joint 90% region.
+        ``twostage estimate --samples n --seed SEED --at`` writes the same
+        numbers in its ``region_level`` column."""
+        u, y = self._columns(u, y)
+        return self._native.region_level(u, y, list(at), n, seed=seed)
 
     def assess(
         self, u: Optional[npt.NDArray[np.float64]], y: npt.NDArray[np.float64]
