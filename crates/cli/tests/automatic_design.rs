@@ -197,7 +197,8 @@ fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
 }
 
 /// A time budget that searches on part of a chart still learns from all
-/// of it: the winner's final fit takes every training record.
+/// of it: the winner's final fit takes every training record; a posterior
+/// asked of the search has its components chosen.
 #[test]
 fn every_record_of_a_chart_reaches_the_final_fit() {
     let (dir, model) = growth_folder("auto-whole-chart", 420);
@@ -214,11 +215,20 @@ fn every_record_of_a_chart_reaches_the_final_fit() {
         "10",
         "--calibrate",
         "10",
+        "--posterior",
+        "2",
         "--out",
         path(&dir.join("growth.tsest")),
     ]);
     let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
     assert!(out.status.success(), "{stderr}");
+    // The search chooses the posterior's components by held-out
+    // likelihood, the asked count the most.
+    assert!(
+        stderr.contains("posterior: ")
+            && stderr.contains("the lowest held-out negative log-likelihood of [1, 2]"),
+        "{stderr}"
+    );
     assert!(
         stderr.contains("first 200 of the chart's 400 training records")
             && stderr.contains("the winner's final fit takes them all"),

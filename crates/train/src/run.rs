@@ -186,7 +186,17 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
                     .seeded(self.seed())
                     .fit(trained.features, trained.thetas, &supports);
             self.progress.end(Stage::Fitting);
-            estimator = estimator.with_posterior(fitted?)?;
+            let fitted = fitted?;
+            let tried = density.candidates();
+            if tried.len() > 1 {
+                self.progress.note(&format!(
+                    "posterior: {} components, the lowest held-out negative log-likelihood of \
+                     {tried:?} ({:.4})",
+                    fitted.shape().components,
+                    fitted.best_restart().held_out_nll
+                ));
+            }
+            estimator = estimator.with_posterior(fitted)?;
         }
         // The held-out records are fresh draws of the training's
         // experiments: their inputs span the family the estimator speaks

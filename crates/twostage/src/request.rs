@@ -180,7 +180,9 @@ pub struct TrainingRequest {
     pub search: Option<Budget>,
     /// Also fit a conditional density of the parameters of this many
     /// Gaussian components (the posterior the estimator then draws
-    /// from; [`MixtureDensity::with_components`]).
+    /// from; [`MixtureDensity::with_components`]); with a search, the
+    /// most components, the count chosen by held-out likelihood
+    /// ([`MixtureDensity::choosing_components`]).
     pub posterior: Option<usize>,
     /// Seed, sizes, levels.
     pub settings: RunSettings,
@@ -408,14 +410,19 @@ impl TrainingRequest {
             .settings(self.settings.clone())
             .progress(progress);
         if let Some(components) = self.posterior {
-            builder =
-                builder.posterior(MixtureDensity::with_components(components).map_err(|_| {
-                    Error::setting(
-                        "posterior",
-                        components.to_string(),
-                        "at least 1 Gaussian component",
-                    )
-                })?);
+            let density = MixtureDensity::with_components(components).map_err(|_| {
+                Error::setting(
+                    "posterior",
+                    components.to_string(),
+                    "at least 1 Gaussian component",
+                )
+            })?;
+            // The automatic design chooses the density's components too,
+            // by held-out likelihood, the asked count the most.
+            builder = builder.posterior(match search {
+                Some(_) => density.choosing_components(),
+                None => density,
+            });
         }
         let builder = match search {
             Some(_) => builder,

@@ -54,6 +54,8 @@ pub struct MixtureDensity {
     network: MlpParams,
     components: usize,
     iterations: usize,
+    /// Whether `components` is the most of several counts tried.
+    choose: bool,
 }
 
 /// A trained mixture density network: `p(θ | features)`, to evaluate and
@@ -171,6 +173,7 @@ impl MixtureDensity {
             network,
             components,
             iterations: Self::DEFAULT_ITERATIONS,
+            choose: false,
         })
     }
 
@@ -201,6 +204,31 @@ impl MixtureDensity {
         Ok(self)
     }
 
+    /// Component counts a choosing density tries, up to its components.
+    pub const CANDIDATE_COMPONENTS: [usize; 5] = [1, 2, 3, 5, 8];
+
+    /// The same density, its components the most of the counts tried:
+    /// each of [`Self::CANDIDATE_COMPONENTS`] up to them (and them) is
+    /// fitted on the same rows, and the one of the lowest held-out
+    /// negative log-likelihood kept (the fewer components on a tie).
+    pub fn choosing_components(mut self) -> Self {
+        self.choose = true;
+        self
+    }
+
+    /// The component counts `fit` tries.
+    pub fn candidates(&self) -> Vec<usize> {
+        if !self.choose {
+            return vec![self.components];
+        }
+        let mut counts: Vec<usize> = Self::CANDIDATE_COMPONENTS
+            .into_iter()
+            .filter(|&k| k < self.components)
+            .collect();
+        counts.push(self.components);
+        counts
+    }
+
     /// The same density seeded by `seed` (its restarts' weights and its
     /// held-out rows).
     pub fn seeded(&self, seed: u64) -> Self {
@@ -210,7 +238,9 @@ impl MixtureDensity {
     }
 
     /// The density of `theta` (rows x parameters) given `x` (rows x
-    /// features), each parameter on its `supports` entry.
+    /// features), each parameter on its `supports` entry; where it
+    /// chooses its components ([`Self::choosing_components`]), the count
+    /// of the lowest held-out negative log-likelihood.
     ///
     /// # Errors
     /// Shapes that do not match, non-finite values, a parameter outside
@@ -218,6 +248,27 @@ impl MixtureDensity {
     /// wider than the network allows.
     pub fn fit(
         &self,
+        x: ArrayView2<'_, f64>,
+        theta: ArrayView2<'_, f64>,
+        supports: &[Support],
+    ) -> Result<FittedMixture> {
+        let mut best: Option<FittedMixture> = None;
+        for components in self.candidates() {
+            let fitted = self.fit_components(components, x, theta, supports)?;
+            let better = best
+                .as_ref()
+                .is_none_or(|b| fitted.best_restart().held_out_nll < b.best_restart().held_out_nll);
+            if better {
+                best = Some(fitted);
+            }
+        }
+        best.ok_or_else(|| invalid("components", "none".into(), "at least 1"))
+    }
+
+    /// The density of `components` components, fitted.
+    fn fit_components(
+        &self,
+        components: usize,
         x: ArrayView2<'_, f64>,
         theta: ArrayView2<'_, f64>,
         supports: &[Support],
@@ -231,16 +282,12 @@ impl MixtureDensity {
                 supports.len()
             )));
         }
-        let shape = MixtureShape {
-            components: self.components,
-            dim,
-        };
+        let shape = MixtureShape { components, dim };
         if n_in > MAX_WIDTH || shape.outputs() > MAX_WIDTH {
             return Err(invalid(
                 "components",
                 format!(
-                    "{} components of {dim} parameters ({} outputs), {n_in} features",
-                    self.components,
+                    "{components} components of {dim} parameters ({} outputs), {n_in} features",
                     shape.outputs()
                 ),
                 "at most 256 features and outputs: fewer components",

@@ -375,3 +375,43 @@ fn the_region_level_is_the_normal_s_two_sided_probability() {
     assert!(density.region_level(&[0.3], &draws, &[0.1, 0.2]).is_err());
     assert!(density.region_level(&[0.3], &draws, &[f64::NAN]).is_err());
 }
+
+/// Choosing among 1, 2 and 3 components on two modes keeps the count of
+/// the lowest held-out loss, the one each count fitted alone on the same
+/// rows gives; a density told its count tries that one only.
+#[test]
+fn a_choosing_density_keeps_the_count_of_the_lowest_held_out_loss() {
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let n = 1500;
+    let x = Array2::from_shape_fn((n, 1), |_| rng.random_range(0.5..1.0));
+    let theta = Array2::from_shape_fn((n, 1), |(i, _)| {
+        let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+        sign * x[[i, 0]] + 0.05 * rng.sample::<f64, _>(StandardNormal)
+    });
+    let fit = |density: MixtureDensity| {
+        density
+            .fit(x.view(), theta.view(), &[Support::Real])
+            .unwrap()
+    };
+    let alone: Vec<f64> = (1..=3)
+        .map(|k| {
+            fit(MixtureDensity::new(network(&[8], 2), k).unwrap())
+                .best_restart()
+                .held_out_nll
+        })
+        .collect();
+    let chooser = MixtureDensity::new(network(&[8], 2), 3)
+        .unwrap()
+        .choosing_components();
+    assert_eq!(chooser.candidates(), vec![1, 2, 3]);
+    let chosen = fit(chooser);
+    let lowest = alone.iter().copied().fold(f64::INFINITY, f64::min);
+    assert_eq!(
+        chosen.best_restart().held_out_nll.to_bits(),
+        lowest.to_bits()
+    );
+    assert!(chosen.shape().components >= 2, "{alone:?}");
+    let told = MixtureDensity::new(network(&[8], 2), 5).unwrap();
+    assert_eq!(told.candidates(), vec![5]);
+    assert_eq!(told.choosing_components().candidates(), vec![1, 2, 3, 5]);
+}
