@@ -247,17 +247,11 @@ impl PyEstimator {
         n: usize,
         seed: u64,
     ) -> PyResult<Bound<'py, PyAny>> {
-        if let Some(refused) = twostage::draws_refused(n, Some(&self.inner), false) {
-            return Err(PyValueError::new_err(format!("n: {refused}")));
-        }
+        self.draws_refused(n)?;
         let q = self.inner.param_names().len();
         let estimator = &self.inner;
         let (draws, single) = self.each_record(py, u, y, n * q, |k, u, y, work, out| {
-            let mut rng = twostage::models::stream_rng(
-                seed,
-                k as u64,
-                twostage::models::StreamPurpose::Posterior,
-            );
+            let mut rng = posterior_stream(seed, k);
             Ok(estimator.sample_into(u, y, work, &mut rng, out)?)
         })?;
         let shape = if single {
@@ -287,9 +281,7 @@ impl PyEstimator {
         n: usize,
         seed: u64,
     ) -> PyResult<Bound<'py, PyAny>> {
-        if let Some(refused) = twostage::draws_refused(n, Some(&self.inner), false) {
-            return Err(PyValueError::new_err(format!("n: {refused}")));
-        }
+        self.draws_refused(n)?;
         let q = self.inner.param_names().len();
         if at.len() != q {
             return Err(PyValueError::new_err(format!(
@@ -300,11 +292,7 @@ impl PyEstimator {
         }
         let estimator = &self.inner;
         let (levels, single) = self.each_record(py, u, y, 1, |k, u, y, work, out| {
-            let mut rng = twostage::models::stream_rng(
-                seed,
-                k as u64,
-                twostage::models::StreamPurpose::Posterior,
-            );
+            let mut rng = posterior_stream(seed, k);
             let mut draws = vec![0.0; n * q];
             out[0] = estimator.sample_testing((u, y), work, &mut rng, &mut draws, &at)?;
             Ok(())
@@ -707,6 +695,15 @@ fn rows(py: Python<'_>, values: Vec<f64>, width: usize, single: bool) -> Bound<'
 }
 
 impl PyEstimator {
+    /// `n` draws a record refused as every door refuses them, said as
+    /// the argument `n`.
+    fn draws_refused(&self, n: usize) -> PyResult<()> {
+        match twostage::draws_refused(n, Some(&self.inner), false) {
+            Some(refused) => Err(PyValueError::new_err(format!("n: {refused}"))),
+            None => Ok(()),
+        }
+    }
+
     /// Check `u` and `y`, then run `each` on every record in parallel
     /// without the GIL, each writing `width` numbers; the first failure
     /// (by record index) becomes a `ValueError` naming the record.
@@ -791,4 +788,10 @@ fn _twostage(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(through_model::predict, module)?)?;
     module.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
+}
+
+/// Record `k`'s draws' stream under `seed`: the command line's for the
+/// k-th record of a file.
+fn posterior_stream(seed: u64, k: usize) -> twostage::models::ExperimentRng {
+    twostage::models::stream_rng(seed, k as u64, twostage::models::StreamPurpose::Posterior)
 }

@@ -15,8 +15,8 @@ use rand_chacha::ChaCha8Rng;
 use crate::error::{FitError, InvalidSetting, Result};
 use crate::standardize::Standardizer;
 
-use super::likelihood::{DensityRestart, Head, Likelihood, layers};
-use super::network::{MAX_WIDTH, run_network};
+use super::likelihood::{DensityRestart, Head, Likelihood, head_of, layers};
+use super::network::MAX_WIDTH;
 use super::params::{Mlp, MlpParams};
 use super::training::held_out_split;
 
@@ -176,25 +176,12 @@ impl FittedClassifier {
     /// # Errors
     /// A row of the wrong length or not finite.
     pub fn probability(&self, x: &[f64]) -> Result<f64> {
-        if x.len() != self.sizes[0] {
-            return Err(FitError::ShapeMismatch(format!(
-                "{} features given, the classifier reads {}",
-                x.len(),
-                self.sizes[0]
-            )));
-        }
-        if let Some(bad) = x.iter().position(|v| !v.is_finite()) {
-            return Err(FitError::NonFinite {
-                what: "features",
-                row: 0,
-                col: bad,
-                value: x[bad],
-            });
-        }
-        let mut input = [0.0f64; MAX_WIDTH];
-        self.features.transform_into(x, &mut input[..self.sizes[0]]);
-        let mut head = [0.0f64; MAX_WIDTH];
-        run_network(&self.sizes, &self.params, &input, &mut head);
+        let head = head_of(
+            &self.features,
+            (&self.sizes, &self.params),
+            x,
+            "the classifier",
+        )?;
         Ok(sigmoid(head[0]))
     }
 

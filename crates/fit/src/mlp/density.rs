@@ -20,8 +20,8 @@ use twostage_kernels::mixture::{MixtureShape, Support, log_sum_exp};
 use crate::error::{FitError, InvalidSetting, Result};
 use crate::standardize::Standardizer;
 
-use super::likelihood::{DensityRestart, Head, Likelihood, layers};
-use super::network::{MAX_WIDTH, parameter_count, run_network};
+use super::likelihood::{DensityRestart, Head, Likelihood, head_of, layers};
+use super::network::{MAX_WIDTH, parameter_count};
 use super::params::{Mlp, MlpParams};
 use super::stored::{stored_best, stored_layers};
 use super::training::held_out_split;
@@ -481,25 +481,12 @@ impl FittedMixture {
     /// The head (the mixture over standardized unbounded parameters) of
     /// the features `x`.
     fn head(&self, x: &[f64]) -> Result<[f64; MAX_WIDTH]> {
-        if x.len() != self.sizes[0] {
-            return Err(FitError::ShapeMismatch(format!(
-                "{} features given, the density reads {}",
-                x.len(),
-                self.sizes[0]
-            )));
-        }
-        if let Some(bad) = x.iter().position(|v| !v.is_finite()) {
-            return Err(FitError::NonFinite {
-                what: "features",
-                row: 0,
-                col: bad,
-                value: x[bad],
-            });
-        }
-        let mut input = [0.0f64; MAX_WIDTH];
-        self.features.transform_into(x, &mut input[..self.sizes[0]]);
-        let mut head = [0.0f64; MAX_WIDTH];
-        run_network(&self.sizes, &self.params, &input, &mut head);
+        let mut head = head_of(
+            &self.features,
+            (&self.sizes, &self.params),
+            x,
+            "the density",
+        )?;
         widen(self.shape, &mut head, self.spread);
         Ok(head)
     }

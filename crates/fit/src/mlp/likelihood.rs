@@ -11,13 +11,15 @@ use ndarray::Array2;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{FitError, Result};
 use crate::levenberg_marquardt::TerminationReason;
+use crate::standardize::Standardizer;
 
 use super::held_out::BestHeldOut;
 use super::lbfgs::{Objective, PATIENCE_SCALE, minimize};
 use super::network::{
-    BLOCK_SAMPLES, add_sample_gradient, by_columns, forward, gradient_by_blocks,
-    initial_parameters, widest_vectors,
+    BLOCK_SAMPLES, MAX_WIDTH, add_sample_gradient, by_columns, forward, gradient_by_blocks,
+    initial_parameters, run_network, widest_vectors,
 };
 use super::params::MlpParams;
 use super::training::restart_rng;
@@ -47,6 +49,37 @@ pub(super) trait Head: Sync {
     /// `scale` times the derivative of [`Head::nll`] by each of the head's
     /// entries, into `delta`'s first entries.
     fn gradient(&self, head: &[f64], target: &[f64], scale: f64, delta: &mut [f64]);
+}
+
+/// The output layer of the network of layers `sizes` and weights
+/// `params` given `x`, standardized by `features`: the head a likelihood
+/// reads. `reader` names the network in an error.
+pub(super) fn head_of(
+    features: &Standardizer,
+    (sizes, params): (&[usize], &[f64]),
+    x: &[f64],
+    reader: &str,
+) -> Result<[f64; MAX_WIDTH]> {
+    if x.len() != sizes[0] {
+        return Err(FitError::ShapeMismatch(format!(
+            "{} features given, {reader} reads {}",
+            x.len(),
+            sizes[0]
+        )));
+    }
+    if let Some(bad) = x.iter().position(|v| !v.is_finite()) {
+        return Err(FitError::NonFinite {
+            what: "features",
+            row: 0,
+            col: bad,
+            value: x[bad],
+        });
+    }
+    let mut input = [0.0f64; MAX_WIDTH];
+    features.transform_into(x, &mut input[..sizes[0]]);
+    let mut head = [0.0f64; MAX_WIDTH];
+    run_network(sizes, params, &input, &mut head);
+    Ok(head)
 }
 
 /// Layer sizes (input, `hidden`, then the head's `outputs`) and where each
