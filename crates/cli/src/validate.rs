@@ -5,7 +5,6 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use ndarray::Array2;
-use twostage::validate::{COVERAGE_LEVELS, PosteriorCalibration};
 use twostage::{Estimator, TargetRmse, Validated, ValidationPlan, validate_trained};
 
 use crate::usage;
@@ -108,11 +107,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
     } else {
         writeln!(out, "{report}")?;
         if let Some(posterior) = &posterior {
-            write!(
-                out,
-                "{}",
-                posterior_words(posterior, estimator.param_names())
-            )?;
+            write!(out, "{}", posterior.describe(estimator.param_names()))?;
         }
     }
     let q = estimator.param_names().len();
@@ -159,40 +154,4 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// How far the posterior's draws can be trusted, in the report's style:
-/// the joint region's coverage, each parameter's central intervals' and
-/// its ranks' uniformity (simulation-based calibration).
-fn posterior_words(p: &PosteriorCalibration, names: &[String]) -> String {
-    let shares = |s: &[f64; 3]| {
-        COVERAGE_LEVELS
-            .iter()
-            .zip(s)
-            .map(|(level, share)| format!("{:.0}% {share:.3}", 100.0 * level))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let mut text = format!(
-        "posterior ({} draws of each of the {} records): the region of highest density holds \
-         the whole parameter vector at {}\n",
-        p.draws,
-        p.records,
-        shares(&p.joint)
-    );
-    for (j, name) in names.iter().enumerate() {
-        let verdict = if p.uniformity_p[j] < 0.01 {
-            "not uniform: the draws are off centre, too narrow or too wide"
-        } else {
-            "uniform as far as these records tell"
-        };
-        text.push_str(&format!(
-            "  {name}  central intervals hold it at {}; its ranks among the draws: distance \
-             {:.3} from uniform (p {:.3}), {verdict}\n",
-            shares(&p.central[j]),
-            p.uniformity_distance[j],
-            p.uniformity_p[j]
-        ));
-    }
-    text
 }

@@ -384,6 +384,32 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
     ]);
     assert!(bad.contains("between 0 and 100"), "{bad}");
 
+    // train says the posterior's calibration on its validation records.
+    let trained = twostage(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "300",
+        "--fit",
+        "linear",
+        "--validate",
+        "100",
+        "--calibrate",
+        "100",
+        "--posterior",
+        "2",
+        "--out",
+        path(&dir.join("said.twostage")),
+    ]);
+    assert!(trained.status.success());
+    let said = text(&trained.stderr);
+    assert!(
+        said.contains("posterior (200 draws of each of the 100 records)")
+            && said.contains("its ranks among the draws"),
+        "{said}"
+    );
+
     // validate scores the posterior's calibration on its fresh records;
     // the JSON has it under `posterior`; an estimator without one has none.
     let validated = ok(&["validate", "--estimator", path(&with), "--sims", "300"]);

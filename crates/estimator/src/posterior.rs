@@ -4,9 +4,11 @@
 
 use ndarray::ArrayView2;
 use rand::Rng;
+use rayon::prelude::*;
 use twostage_compress::Compressor;
 use twostage_fit::FittedMixture;
-use twostage_models::{IoData, Marginal};
+use twostage_models::{IoData, Marginal, StreamPurpose, stream_rng};
+use twostage_validate::PosteriorCalibration;
 
 use crate::error::{Error, Result};
 use crate::estimator::{EstimateWorkspace, Estimator};
@@ -158,16 +160,56 @@ impl Estimator {
         truth: &[f64],
     ) -> Result<(Vec<f64>, f64)> {
         let level = self.sample_testing(record, work, rng, out, truth)?;
-        let q = truth.len();
-        let draws = out.len() / q.max(1);
-        let ranks = (0..q)
-            .map(|j| {
-                let below = out.chunks_exact(q).filter(|d| d[j] < truth[j]).count();
-                (below as f64 + 0.5) / (draws + 1) as f64
-            })
-            .collect();
-        Ok((ranks, level))
+        Ok((ranks_among(out, truth), level))
     }
+
+    /// The posterior's calibration on records of known parameters given by
+    /// their stage-1 `features` and `truth` (rows of each): record i's
+    /// truth ranked among `draws` draws from the stream of (`seed`, i),
+    /// in parallel ([`PosteriorCalibration`]). `None` without a posterior.
+    ///
+    /// # Errors
+    /// Rows that do not fit the posterior.
+    pub fn posterior_calibration(
+        &self,
+        truth: ArrayView2<'_, f64>,
+        features: ArrayView2<'_, f64>,
+        draws: usize,
+        seed: u64,
+    ) -> Result<Option<PosteriorCalibration>> {
+        let Some(posterior) = self.posterior.as_ref() else {
+            return Ok(None);
+        };
+        let q = truth.ncols();
+        let ranked: Vec<(Vec<f64>, f64)> = (0..truth.nrows())
+            .into_par_iter()
+            .map(|i| -> Result<(Vec<f64>, f64)> {
+                let (x, theta) = (features.row(i).to_vec(), truth.row(i).to_vec());
+                let mut out = vec![0.0; draws * q];
+                let mut rng = stream_rng(seed, i as u64, StreamPurpose::Posterior);
+                posterior.sample(&x, &mut rng, &mut out)?;
+                let level = posterior.region_level(&x, &out, &theta)?;
+                Ok((ranks_among(&out, &theta), level))
+            })
+            .collect::<Result<_>>()?;
+        let (ranks, levels): (Vec<Vec<f64>>, Vec<f64>) = ranked.into_iter().unzip();
+        Ok(Some(PosteriorCalibration::from_ranks(
+            &ranks, &levels, draws,
+        )?))
+    }
+}
+
+/// Per parameter, the share of `draws` (rows of `truth`'s width) below
+/// `truth`, the ends split: `(below + 1/2) / (L + 1)`.
+fn ranks_among(draws: &[f64], truth: &[f64]) -> Vec<f64> {
+    let q = truth.len();
+    let count = draws.len() / q.max(1);
+    (0..q)
+        .map(|j| {
+            let below = draws.chunks_exact(q).filter(|d| d[j] < truth[j]).count();
+            (below as f64 + 0.5) / (count + 1) as f64
+        })
+        .collect()
 }
 
 /// Whether `posterior` reads `n_features` features and draws parameters

@@ -9,6 +9,7 @@ use twostage_estimator::{Estimator, TrainingInfo};
 use twostage_fit::{FittedRegressor, MixtureDensity, RegressorConfig};
 use twostage_models::{InputFamily, Simulator};
 use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};
+use twostage_validate::CALIBRATION_DRAWS;
 
 use crate::settings::RunSettings;
 use twostage_compress::CompressorConfig;
@@ -233,6 +234,17 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
                 chart.features.view(),
                 self.settings.delta,
             )?;
+            // The posterior's calibration on the same records, said beside
+            // the certificate (the file keeps the report, not this).
+            if let Some(calibration) = estimator.posterior_calibration(
+                chart.thetas.view(),
+                chart.features.view(),
+                CALIBRATION_DRAWS,
+                self.seed(),
+            )? {
+                self.progress
+                    .note(calibration.describe(estimator.param_names()).trim_end());
+            }
         }
         Ok(estimator.with_input_family(inputs))
     }

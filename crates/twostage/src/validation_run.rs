@@ -11,7 +11,8 @@ use twostage_models::{IoData, Sampling, Simulator, StreamPurpose, run_experiment
 use twostage_sources::{NamedModel, Progress, refuse_beyond_memory};
 use twostage_train::{Error, Result};
 use twostage_validate::{
-    PosteriorCalibration, ValidationReport, hoeffding_sample_size, squared_error_bound,
+    CALIBRATION_DRAWS, PosteriorCalibration, ValidationReport, hoeffding_sample_size,
+    squared_error_bound,
 };
 
 /// What a validation run simulates and how it stops. Each field is named
@@ -280,10 +281,6 @@ pub fn validate_estimator(
 /// A validation record's truth, estimate, and with a posterior the
 /// truth's ranks among the draws and the region level that holds it.
 type Scored = (Vec<f64>, Vec<f64>, Option<(Vec<f64>, f64)>);
-
-/// Draws of each validation record's posterior that rank its truth: the
-/// ranks' resolution is 1/201.
-pub const CALIBRATION_DRAWS: usize = 200;
 
 /// Record `i`'s truth `theta` among [`CALIBRATION_DRAWS`] draws of its
 /// posterior, from the stream of (`seed`, `i`)

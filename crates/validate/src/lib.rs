@@ -43,7 +43,7 @@ pub use betting::{BettingBound, MAX_STAKE};
 pub use conformal::ConformalIntervals;
 pub use error::{InvalidSetting, Result, ValidateError};
 pub use hoeffding::{HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound};
-pub use posterior::{COVERAGE_LEVELS, PosteriorCalibration};
+pub use posterior::{CALIBRATION_DRAWS, COVERAGE_LEVELS, PosteriorCalibration};
 pub use report::{ParameterReport, ValidationReport};
 
 #[cfg(test)]

@@ -16,6 +16,10 @@ use crate::error::{Result, ValidateError};
 /// The levels whose coverage a [`PosteriorCalibration`] reports.
 pub const COVERAGE_LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 
+/// Draws of each record's posterior a validation ranks its truth among:
+/// the ranks' resolution is 1/201.
+pub const CALIBRATION_DRAWS: usize = 200;
+
 /// A posterior's calibration on records of known parameters.
 ///
 /// ```
@@ -119,6 +123,53 @@ impl PosteriorCalibration {
             uniformity_distance: distance,
             uniformity_p: p,
         })
+    }
+}
+
+impl PosteriorCalibration {
+    /// How far the draws can be trusted, in a validation report's style,
+    /// parameter by parameter (`names`): the joint region's coverage, each
+    /// parameter's central intervals' and its ranks' uniformity.
+    ///
+    /// ```
+    /// use twostage_validate::PosteriorCalibration;
+    /// let ranks: Vec<Vec<f64>> = (0..100).map(|i| vec![(i as f64 + 0.5) / 100.0]).collect();
+    /// let levels: Vec<f64> = ranks.iter().map(|r| r[0]).collect();
+    /// let words = PosteriorCalibration::from_ranks(&ranks, &levels, 200)?.describe(&["theta".into()]);
+    /// assert!(words.contains("90% 0.900") && words.contains("uniform as far as these records tell"));
+    /// # Ok::<(), twostage_validate::ValidateError>(())
+    /// ```
+    pub fn describe(&self, names: &[String]) -> String {
+        let shares = |s: &[f64; 3]| {
+            COVERAGE_LEVELS
+                .iter()
+                .zip(s)
+                .map(|(level, share)| format!("{:.0}% {share:.3}", 100.0 * level))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let mut text = format!(
+            "posterior ({} draws of each of the {} records): the region of highest density \
+             holds the whole parameter vector at {}\n",
+            self.draws,
+            self.records,
+            shares(&self.joint)
+        );
+        for (j, name) in names.iter().enumerate().take(self.central.len()) {
+            let verdict = if self.uniformity_p[j] < 0.01 {
+                "not uniform: the draws are off centre, too narrow or too wide"
+            } else {
+                "uniform as far as these records tell"
+            };
+            text.push_str(&format!(
+                "  {name}  central intervals hold it at {}; its ranks among the draws: \
+                 distance {:.3} from uniform (p {:.3}), {verdict}\n",
+                shares(&self.central[j]),
+                self.uniformity_distance[j],
+                self.uniformity_p[j]
+            ));
+        }
+        text
     }
 }
 
