@@ -285,6 +285,21 @@ fn draws_are_written_per_record_seeded_and_refused_where_none_can_be_made() {
         path(&records),
     ]);
     assert!(without_draws.contains("add --samples N"), "{without_draws}");
+    let outside = refused(&[
+        "estimate",
+        "--estimator",
+        path(&with),
+        "--samples",
+        "10",
+        "--at",
+        path(&far),
+        "--allow-outside-prior",
+        path(&records),
+    ]);
+    assert!(
+        outside.contains("--allow-outside-prior goes with --at --check"),
+        "{outside}"
+    );
     let without_check = refused(&[
         "estimate",
         "--model",

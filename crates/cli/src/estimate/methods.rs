@@ -97,6 +97,14 @@ fn refuse_what_does_not_apply(args: &EstimateArgs, refine: Option<RefineWhich>) 
                     .into(),
             ));
         }
+        (Some(_), Some(_)) if args.allow_outside_prior => {
+            return Err(usage(
+                "--allow-outside-prior goes with --at --check (values checked against the \
+                 records); a posterior's draws lie inside the prior, and values outside it \
+                 are in no region of it: leave it out"
+                    .into(),
+            ));
+        }
         (Some(_), Some(_)) if args.samples.is_none() => {
             return Err(usage(
                 "--at with an estimator tests the values against each record's posterior: \
