@@ -222,8 +222,9 @@ impl FittedClassifier {
 /// accuracy on rows it did not learn from, averaged over `folds` folds of
 /// the pooled rows shuffled by the classifier's seed. About 0.5 where the
 /// two samples come from one distribution, 1 where they do not overlap;
-/// the samples are standardized by the first's mean and spread (the
-/// classifier's own standardization, fold by fold).
+/// each fold's classifier standardizes the rows it learns from (sbibm
+/// standardizes by the first sample's mean and spread: another shift and
+/// scale, which the network's first layer absorbs).
 ///
 /// ```
 /// use ndarray::Array2;
