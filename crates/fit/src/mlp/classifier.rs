@@ -15,10 +15,9 @@ use rand_chacha::ChaCha8Rng;
 use crate::error::{FitError, InvalidSetting, Result};
 use crate::standardize::Standardizer;
 
-use super::likelihood::{DensityRestart, Head, Likelihood, head_of, layers};
+use super::likelihood::{DensityRestart, Head, fit_network, head_of};
 use super::network::MAX_WIDTH;
 use super::params::{Mlp, MlpParams};
-use super::training::held_out_split;
 
 /// How a classifier learns: the network (hidden layers, restarts,
 /// held-out fraction, patience, weight decay, seed, deadline) and the
@@ -135,7 +134,7 @@ impl Classifier {
     pub fn fit(&self, x: ArrayView2<'_, f64>, labels: &[bool]) -> Result<FittedClassifier> {
         let targets = Array2::from_shape_fn((labels.len(), 1), |(i, _)| f64::from(labels[i]));
         crate::check::training_data(x, targets.view())?;
-        let (m, n_in) = x.dim();
+        let n_in = x.ncols();
         if n_in > MAX_WIDTH {
             return Err(invalid(
                 "features",
@@ -144,22 +143,10 @@ impl Classifier {
             ));
         }
         let p = &self.network;
-        let (order, n_held) = held_out_split(m, p)?;
-        let (held_out, train) = order.split_at(n_held);
         let features = Standardizer::fit(x);
         let xs = features.transform(x).as_standard_layout().to_owned();
-        let (sizes, offsets) = layers(n_in, &p.hidden, 1);
-        let likelihood = Likelihood {
-            sizes: &sizes,
-            offsets,
-            head: LogOdds,
-            x: &xs,
-            z: &targets,
-            train,
-            held_out: if held_out.is_empty() { train } else { held_out },
-            decay: p.weight_decay,
-        };
-        let (params, reports, best) = likelihood.train(p, self.iterations, !held_out.is_empty());
+        let (sizes, params, reports, best) =
+            fit_network(LogOdds, 1, (&xs, &targets), p, self.iterations)?;
         Ok(FittedClassifier {
             features,
             sizes,
@@ -298,6 +285,7 @@ mod tests {
     use rand_distr::StandardNormal;
 
     use super::super::lbfgs::Objective;
+    use super::super::likelihood::Likelihood;
     use super::*;
 
     fn network(hidden: &[usize], seed: u64) -> Classifier {

@@ -20,11 +20,10 @@ use twostage_kernels::mixture::{MixtureShape, Support, log_sum_exp};
 use crate::error::{FitError, InvalidSetting, Result};
 use crate::standardize::Standardizer;
 
-use super::likelihood::{DensityRestart, Head, Likelihood, head_of, layers};
+use super::likelihood::{DensityRestart, Head, fit_network, head_of};
 use super::network::{MAX_WIDTH, parameter_count};
 use super::params::{Mlp, MlpParams};
 use super::stored::{stored_best, stored_layers};
-use super::training::held_out_split;
 
 /// How a mixture density network learns: the network (its hidden layers,
 /// restarts, held-out fraction, patience, weight decay, seed and
@@ -305,8 +304,6 @@ impl MixtureDensity {
             z[[i, j]] = supports[j].to_unbounded(v);
         }
         let p = &self.network;
-        let (order, n_held) = held_out_split(m, p)?;
-        let (held_out, train) = order.split_at(n_held);
         let features = Standardizer::fit(x);
         let unbounded = Standardizer::fit(z.view());
         let xs = features.transform(x).as_standard_layout().to_owned();
@@ -314,18 +311,8 @@ impl MixtureDensity {
             .transform(z.view())
             .as_standard_layout()
             .to_owned();
-        let (sizes, offsets) = layers(n_in, &p.hidden, shape.outputs());
-        let likelihood = Likelihood {
-            sizes: &sizes,
-            offsets,
-            head: shape,
-            x: &xs,
-            z: &zs,
-            train,
-            held_out: if held_out.is_empty() { train } else { held_out },
-            decay: p.weight_decay,
-        };
-        let (params, reports, best) = likelihood.train(p, self.iterations, !held_out.is_empty());
+        let (sizes, params, reports, best) =
+            fit_network(shape, shape.outputs(), (&xs, &zs), p, self.iterations)?;
         Ok(FittedMixture {
             features,
             unbounded,

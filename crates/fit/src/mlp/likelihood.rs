@@ -22,7 +22,7 @@ use super::network::{
     initial_parameters, run_network, widest_vectors,
 };
 use super::params::MlpParams;
-use super::training::restart_rng;
+use super::training::{held_out_split, restart_rng};
 
 /// One restart of a network trained by its likelihood (a mixture density
 /// or a classifier).
@@ -81,6 +81,39 @@ pub(super) fn head_of(
     run_network(sizes, params, &input, &mut head);
     Ok(head)
 }
+
+/// A network of `p`'s hidden layers and `outputs` outputs read by `head`,
+/// fitted to the targets `z` given the inputs `x` (standard-layout rows,
+/// already standardized): rows held out as `p` says, restarts as
+/// [`Likelihood::train`] runs them. Its layer sizes, the kept weights,
+/// every restart's report and which was kept.
+pub(super) fn fit_network<H: Head>(
+    head: H,
+    outputs: usize,
+    (x, z): (&Array2<f64>, &Array2<f64>),
+    p: &MlpParams,
+    iterations: usize,
+) -> Result<Fitted> {
+    let (order, n_held) = held_out_split(x.nrows(), p)?;
+    let (held_out, train) = order.split_at(n_held);
+    let (sizes, offsets) = layers(x.ncols(), &p.hidden, outputs);
+    let likelihood = Likelihood {
+        sizes: &sizes,
+        offsets,
+        head,
+        x,
+        z,
+        train,
+        held_out: if held_out.is_empty() { train } else { held_out },
+        decay: p.weight_decay,
+    };
+    let (params, reports, best) = likelihood.train(p, iterations, !held_out.is_empty());
+    Ok((sizes, params, reports, best))
+}
+
+/// A fitted network: layer sizes, weights, every restart's report, the
+/// restart kept.
+pub(super) type Fitted = (Vec<usize>, Vec<f64>, Vec<DensityRestart>, usize);
 
 /// Layer sizes (input, `hidden`, then the head's `outputs`) and where each
 /// layer's activations start.

@@ -5,6 +5,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use super::super::lbfgs::Objective;
+use super::super::likelihood::Likelihood;
 use super::super::network::BLOCK_SAMPLES;
 use super::*;
 
