@@ -5,13 +5,17 @@
 //! quarter (`runtime_window_push`, per sample of a full window, and
 //! `runtime_window_finish`), and of the car's estimator whose stage 1 ends
 //! in a learned summary network (docs/embedded.md puts them beside the
-//! Cortex-M4's instruction counts). The estimators are trained on fewer simulations than the
+//! Cortex-M4's instruction counts); and the posterior's draws through a
+//! stream (`runtime_draws`: a finish with 1000 draws, per draw) beside
+//! the host's own (`host_draws`: `Estimator::sample_into`, stage 1
+//! included). The estimators are trained on fewer simulations than the
 //! presets say: the cost depends on the structure, not on m.
 
 use std::hint::black_box;
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
-use twostage::models::{Benchmark, IoData, PacejkaCar, Simulator};
+use twostage::fit::MixtureDensity;
+use twostage::models::{Benchmark, IoData, PacejkaCar, Simulator, StreamPurpose, stream_rng};
 use twostage::runtime::{Estimator, Stream};
 use twostage::{Preset, TwoStage};
 use twostage_benches::{config, record};
@@ -194,9 +198,93 @@ fn window(c: &mut Criterion, case: &Case, estimator: &Estimator<'_>) {
         });
 }
 
+/// A finish that draws 1000 times from the posterior of a preset's
+/// estimator trained with `--posterior 3` (the default network), and the
+/// host's draws of the same record.
+fn draws(c: &mut Criterion) {
+    let count = 1000;
+    for (name, model, preset, truth) in [
+        (
+            "benchmark_paper_posterior3",
+            &Benchmark::new() as &dyn Simulator,
+            twostage::paper_benchmark(),
+            &[0.4][..],
+        ),
+        (
+            "car_paper_posterior3",
+            &PacejkaCar::new(),
+            twostage::paper_pacejka(),
+            &[-25.0, -1.0],
+        ),
+    ] {
+        let host = TwoStage::builder(model)
+            .preset(preset)
+            .simulations(1000)
+            .validation(0)
+            .calibration(300)
+            .posterior(MixtureDensity::with_components(3).unwrap_or_else(|e| panic!("{e}")))
+            .train()
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let case = case_of(name, model, &host, truth);
+        let estimator = Estimator::from_bytes(&case.blob).unwrap_or_else(|e| panic!("{e}"));
+        let (nu, ny, q) = (
+            estimator.n_inputs(),
+            estimator.n_outputs(),
+            estimator.n_parameters(),
+        );
+        let mut work = vec![0.0; estimator.workspace_len()];
+        let mut stream = Stream::new(&estimator, &mut work).unwrap_or_else(|e| panic!("{e}"));
+        for t in 0..case.outputs.len() / ny {
+            stream
+                .push(
+                    &case.inputs[t * nu..(t + 1) * nu],
+                    &case.outputs[t * ny..(t + 1) * ny],
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let pushed = work.clone();
+        let (mut theta, mut out) = (vec![0.0; q], vec![0.0; count * q]);
+        let mut group = c.benchmark_group("runtime_draws");
+        group.throughput(Throughput::Elements(count as u64));
+        group.bench_function(name, |b| {
+            b.iter_batched_ref(
+                || pushed.clone(),
+                |work| {
+                    let mut stream =
+                        Stream::resume(&estimator, work).unwrap_or_else(|e| panic!("{e}"));
+                    stream
+                        .finish_with_draws(&mut theta, &mut [], &mut out, 1, 0)
+                        .unwrap_or_else(|e| panic!("{e}"));
+                    black_box(out[0])
+                },
+                BatchSize::SmallInput,
+            )
+        });
+        group.finish();
+        let data = record(model, truth);
+        let mut host_work = twostage::EstimateWorkspace::new();
+        let mut group = c.benchmark_group("host_draws");
+        group.throughput(Throughput::Elements(count as u64));
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                host.sample_into(
+                    data.inputs(),
+                    data.outputs(),
+                    &mut host_work,
+                    &mut stream_rng(1, 0, StreamPurpose::Posterior),
+                    &mut out,
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+                black_box(out[0])
+            })
+        });
+        group.finish();
+    }
+}
+
 criterion_group! {
     name = benches;
     config = config();
-    targets = runtime
+    targets = runtime, draws
 }
 criterion_main!(benches);

@@ -27,11 +27,18 @@ pub struct ExportArgs {
     /// Where to write it (by convention NAME.tsrt).
     #[arg(long)]
     pub out: PathBuf,
+    /// Leave the posterior's density out of the blob: the estimate, its
+    /// intervals and flags as with it, no draws, fewer bytes of flash.
+    #[arg(long)]
+    pub without_posterior: bool,
 }
 
 /// Run `twostage export`.
 pub fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
-    let estimator = Estimator::load(&args.estimator)?;
+    let mut estimator = Estimator::load(&args.estimator)?;
+    if args.without_posterior {
+        estimator = estimator.without_posterior();
+    }
     match args.to {
         ExportTarget::Runtime => {
             let blob = estimator
@@ -53,6 +60,14 @@ pub fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
                 runtime.workspace_len(),
                 8 * runtime.workspace_len()
             )?;
+            if runtime.has_posterior() {
+                writeln!(
+                    out,
+                    "it carries the posterior: a stream's finish_with_draws (C: \
+                     ts_stream_finish_draws) draws what `estimate --samples N --seed S` draws \
+                     for the same seed and record number; --without-posterior leaves it out"
+                )?;
+            }
         }
     }
     Ok(())

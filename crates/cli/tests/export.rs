@@ -140,3 +140,137 @@ fn a_structure_the_runtime_cannot_stream_is_refused_with_what_to_do() {
         text(&out.stderr)
     );
 }
+
+/// The control unit draws what `estimate --samples N --seed S` draws: the
+/// same numbers for the same seed and record number, from the blob
+/// `export` writes; `--without-posterior` leaves the density out and the
+/// estimate as it was.
+#[test]
+fn the_control_unit_draws_what_estimate_draws() {
+    let dir = scratch("export_draws");
+    let data = dir.join("data");
+    let run = |args: &[&str]| {
+        let out = twostage(args);
+        assert!(out.status.success(), "{args:?}: {}", text(&out.stderr));
+        text(&out.stdout)
+    };
+    run(&[
+        "simulate",
+        "--model",
+        "benchmark",
+        "--count",
+        "3",
+        "--seed",
+        "5",
+        "--out-dir",
+        path(&data),
+    ]);
+    let file = dir.join("bench.twostage");
+    run(&[
+        "train",
+        "--model",
+        "benchmark",
+        "--sims",
+        "500",
+        "--fit",
+        "linear",
+        "--posterior",
+        "2",
+        "--validate",
+        "0",
+        "--calibrate",
+        "100",
+        "--quiet",
+        "--out",
+        path(&file),
+    ]);
+    let records = data.join("data.csv");
+    let draws_file = dir.join("draws.csv");
+    run(&[
+        "estimate",
+        "--estimator",
+        path(&file),
+        "--samples",
+        "20",
+        "--seed",
+        "7",
+        "--draws",
+        path(&draws_file),
+        path(&records),
+    ]);
+    let blob_path = dir.join("bench.tsrt");
+    let said = run(&[
+        "export",
+        "--estimator",
+        path(&file),
+        "--out",
+        path(&blob_path),
+    ]);
+    assert!(said.contains("it carries the posterior"), "{said}");
+    let blob = std::fs::read(&blob_path).unwrap();
+    let runtime = twostage::runtime::Estimator::from_bytes(&blob).unwrap();
+    assert!(runtime.has_posterior());
+
+    // The records in the order the file gives them: record k's samples
+    // and the CLI's draws of it.
+    let table = std::fs::read_to_string(&records).unwrap();
+    let mut ids: Vec<String> = Vec::new();
+    let mut samples: Vec<Vec<(f64, f64)>> = Vec::new();
+    for line in table.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if ids.last().map(String::as_str) != Some(f[0]) {
+            ids.push(f[0].to_string());
+            samples.push(Vec::new());
+        }
+        let number = |s: &str| s.parse::<f64>().unwrap();
+        samples
+            .last_mut()
+            .unwrap()
+            .push((number(f[1]), number(f[2])));
+    }
+    let drawn = std::fs::read_to_string(&draws_file).unwrap();
+    let mut work = vec![0.0; runtime.workspace_len()];
+    for (k, (id, record)) in ids.iter().zip(&samples).enumerate() {
+        let expected: Vec<f64> = drawn
+            .lines()
+            .skip(1)
+            .filter(|l| l.split(',').next() == Some(id.as_str()))
+            .map(|l| l.rsplit(',').next().unwrap().parse().unwrap())
+            .collect();
+        assert_eq!(expected.len(), 20, "record {id}");
+        let mut stream = twostage::runtime::Stream::new(&runtime, &mut work).unwrap();
+        for (u, y) in record {
+            stream.push(&[*u], &[*y]).unwrap();
+        }
+        let (mut theta, mut draws) = ([0.0], [0.0; 20]);
+        stream
+            .finish_with_draws(&mut theta, &mut [], &mut draws, 7, k as u64)
+            .unwrap();
+        for (got, want) in draws.iter().zip(&expected) {
+            assert!((got - want).abs() <= 1e-9, "record {id}: {got} vs {want}");
+        }
+    }
+
+    let lean_path = dir.join("lean.tsrt");
+    let said = run(&[
+        "export",
+        "--estimator",
+        path(&file),
+        "--without-posterior",
+        "--out",
+        path(&lean_path),
+    ]);
+    assert!(!said.contains("posterior"), "{said}");
+    let lean = std::fs::read(&lean_path).unwrap();
+    let lean = twostage::runtime::Estimator::from_bytes(&lean).unwrap();
+    assert!(!lean.has_posterior() && lean.n_features() == runtime.n_features());
+    let (mut a, mut b) = ([0.0], [0.0]);
+    let (inputs, outputs): (Vec<f64>, Vec<f64>) = samples[0].iter().copied().unzip();
+    let mut lean_work = vec![0.0; lean.workspace_len()];
+    lean.estimate_record(&inputs, &outputs, &mut lean_work, &mut a, &mut [])
+        .unwrap();
+    runtime
+        .estimate_record(&inputs, &outputs, &mut work, &mut b, &mut [])
+        .unwrap();
+    assert_eq!(a[0].to_bits(), b[0].to_bits());
+}

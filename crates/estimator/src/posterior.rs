@@ -40,6 +40,14 @@ impl Estimator {
         Ok(self)
     }
 
+    /// The estimator without its posterior: the point estimate, its
+    /// intervals and flags as before, no draws (what a control unit that
+    /// needs no draws carries: `export --without-posterior`).
+    pub fn without_posterior(mut self) -> Self {
+        self.posterior = None;
+        self
+    }
+
     /// The posterior's spread calibrated on held-out records (parameters
     /// `thetas`, stage 1's `features`, rows of each): the factor that
     /// gives them the least negative log-likelihood

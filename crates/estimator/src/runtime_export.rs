@@ -2,17 +2,18 @@
 //! (layout: [`twostage_runtime::format`]).
 
 use twostage_compress::Compressor;
-use twostage_fit::{FittedLinear, FittedMlp, Predictor, Standardizer};
+use twostage_fit::{FittedLinear, FittedMixture, FittedMlp, Predictor, Standardizer, Support};
 use twostage_kernels::linearized::CarLinearization;
 use twostage_models::{InputFamily, Transform};
 use twostage_runtime::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_LEARNED_SUMMARY, FLAG_LINEARIZED, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY,
-    HEADER_BYTES, MAGIC, MAX_CHANNELS, MAX_EXPERTS, MAX_KERNEL, MAX_LAYERS, MAX_MEMBERS, MAX_ORDER,
-    MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES, MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE,
-    SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
+    FLAG_LEARNED_SUMMARY, FLAG_LINEARIZED, FLAG_OUTPUT_TRANSFORMS, FLAG_POSTERIOR,
+    FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC, MAX_CHANNELS, MAX_COMPONENTS, MAX_EXPERTS,
+    MAX_KERNEL, MAX_LAYERS, MAX_MEMBERS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, MAX_SIZES,
+    MAX_WIDTH, REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P,
+    SUPPORT_INTERVAL, SUPPORT_POSITIVE, SUPPORT_REAL, TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION,
     VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED, VERSION_WITHOUT_LINEARIZED,
-    VERSION_WITHOUT_SUMMARY,
+    VERSION_WITHOUT_POSTERIOR, VERSION_WITHOUT_SUMMARY,
 };
 
 use crate::error::{Error, Result};
@@ -210,8 +211,10 @@ impl Estimator {
             bytes: Vec::with_capacity(4096),
         };
         w.bytes.extend_from_slice(&MAGIC);
-        let version = if stage1.linearized.is_some() {
+        let version = if self.posterior.is_some() {
             VERSION
+        } else if stage1.linearized.is_some() {
+            VERSION_WITHOUT_POSTERIOR
         } else if stage1.learned.is_some() {
             VERSION_WITHOUT_LINEARIZED
         } else if stage1.summary {
@@ -357,6 +360,9 @@ impl Writer {
         if stage1.linearized.is_some() {
             flags |= FLAG_LINEARIZED;
         }
+        if e.posterior.is_some() {
+            flags |= FLAG_POSTERIOR;
+        }
         let orders = stage1
             .arx
             .map_or([0; 3], |arx| [arx.na(), arx.nb(), arx.delay()]);
@@ -448,6 +454,58 @@ impl Writer {
                 }
             }
         }
+        if let Some(posterior) = &e.posterior {
+            self.posterior(posterior)?;
+        }
+        Ok(())
+    }
+
+    /// The posterior's shape, supports, standardization, spread and
+    /// network; the network's targets are its head as it is (mean 0,
+    /// scale 1), so the runtime's standardization changes no bit of it.
+    fn posterior(&mut self, posterior: &FittedMixture) -> Result<()> {
+        let shape = posterior.shape();
+        if shape.components > MAX_COMPONENTS {
+            return Err(refuse(format!(
+                "a posterior of {} components, the runtime takes at most {MAX_COMPONENTS}; \
+                 train with --posterior {MAX_COMPONENTS} or fewer",
+                shape.components
+            )));
+        }
+        // The section's length in bytes (third count, set below) lets a
+        // runtime built without draws step over it.
+        let start = self.bytes.len();
+        self.u32s(&[shape.components, shape.dim, 0])?;
+        let (codes, bounds): (Vec<usize>, Vec<[f64; 2]>) = posterior
+            .supports()
+            .iter()
+            .map(|support| match *support {
+                Support::Real => (SUPPORT_REAL as usize, [0.0, 0.0]),
+                Support::Positive => (SUPPORT_POSITIVE as usize, [0.0, 0.0]),
+                Support::Interval { low, high } => (SUPPORT_INTERVAL as usize, [low, high]),
+            })
+            .unzip();
+        self.u32s(&codes)?;
+        self.f64s(bounds.as_flattened());
+        let unbounded = posterior.unbounded_scaling();
+        self.f64s(unbounded.mean());
+        self.f64s(unbounded.scale());
+        // The logarithm is the host's (`FittedMixture`'s), written so that
+        // the runtime widens the head by the same bits.
+        self.f64s(&[posterior.spread(), posterior.spread().ln()]);
+        let (sizes, params) = posterior.network();
+        let head = sizes.last().copied().unwrap_or(0);
+        let targets = Standardizer::identity(head);
+        self.network(
+            sizes,
+            posterior.feature_scaling(),
+            &targets,
+            &[params.to_vec()],
+        )?;
+        let length = self.bytes.len() - start;
+        let length = u32::try_from(length)
+            .map_err(|_| refuse(format!("a posterior of {length} bytes exceeds 32 bits")))?;
+        self.bytes[start + 8..start + 12].copy_from_slice(&length.to_le_bytes());
         Ok(())
     }
 }

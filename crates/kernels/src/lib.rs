@@ -16,6 +16,8 @@
 //! - [`vector`]: standardization and clipping to the prior box;
 //! - [`mixture`]: a mixture of Gaussians over parameters mapped to the
 //!   real line (a density network's head): its log density and draws;
+//! - [`random`]: a stream's key, uniforms and standard normals from a
+//!   generator's words, the draws' randomness the same on every platform;
 //! - [`pacejka`]: the Pacejka car's equations, for plain numbers and for
 //!   numbers that carry their derivatives, and [`linearized`], the stage 1
 //!   that regresses a record on the car's sensitivities;
@@ -54,6 +56,7 @@ pub mod layer;
 pub mod linearized;
 pub mod mixture;
 pub mod pacejka;
+pub mod random;
 mod tanh;
 pub mod vector;
 

@@ -122,6 +122,42 @@ impl MixtureShape {
         }
     }
 
+    /// One draw into `z` from a generator's `words`: the first word's
+    /// uniform chooses the component, the next `2 ⌈dim / 2⌉` give the
+    /// standard normals ([`crate::random::standard_normals`], into
+    /// `normals`, `dim` long), then [`Self::draw`]. Every draw takes the
+    /// same number of words, so draw `k` of a stream starts at a known
+    /// word on any platform.
+    pub fn draw_from_words(
+        self,
+        head: &[f64],
+        words: &mut impl FnMut() -> u64,
+        normals: &mut [f64],
+        z: &mut [f64],
+    ) {
+        let uniform = crate::random::unit_uniform(words());
+        crate::random::standard_normals(words, &mut normals[..self.dim]);
+        self.draw(head, uniform, normals, z);
+    }
+
+    /// Widen every component's spread by `spread` (its logarithm
+    /// `log_spread` given too, so that a caller decides once how it is
+    /// computed): `U`'s diagonal logarithms lose `log_spread`, the entries
+    /// above it are divided by `spread`, so every covariance grows by
+    /// `spread²`. A spread of 1 (and 0 for its logarithm) changes no bit.
+    pub fn widen(self, head: &mut [f64], spread: f64, log_spread: f64) {
+        for c in 0..self.components {
+            let at = self.log_diagonal_at(c);
+            for v in &mut head[at..at + self.dim] {
+                *v -= log_spread;
+            }
+            let at = self.upper_at(c);
+            for v in &mut head[at..at + self.upper_len()] {
+                *v /= spread;
+            }
+        }
+    }
+
     /// The component a draw of `uniform` falls in.
     fn component_at(self, head: &[f64], uniform: f64) -> usize {
         let normalizer = self.log_normalizer(head);

@@ -33,21 +33,9 @@ impl StreamPurpose {
             Self::Simulation => 0x5349_4d55_4c41_5445, // "SIMULATE"
             Self::Parameter => 0x5041_5241_4d45_5445,  // "PARAMETE"
             Self::Design => 0x4445_5349_474e_0000,     // "DESIGN"
-            Self::Posterior => 0x504f_5354_4552_494f,  // "POSTERIO"
+            Self::Posterior => twostage_kernels::random::POSTERIOR_TAG,
         }
     }
-}
-
-/// SplitMix64 (Steele, Lea and Flood, 2014): a bijective mixer, used here to
-/// spread a 64-bit seed over a 256-bit ChaCha key. We derive keys ourselves
-/// rather than rely on `seed_from_u64`, whose expansion is not part of our
-/// own compatibility promise.
-fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// The stream of experiment `index` of the chart seeded with `seed`, for
@@ -63,12 +51,9 @@ fn splitmix64(state: &mut u64) -> u64 {
 /// assert_ne!(a, c);
 /// ```
 pub fn stream_rng(seed: u64, index: u64, purpose: StreamPurpose) -> ExperimentRng {
-    let mut state = seed ^ purpose.tag();
-    let mut key = [0u8; 32];
-    for chunk in key.chunks_exact_mut(8) {
-        chunk.copy_from_slice(&splitmix64(&mut state).to_le_bytes());
-    }
-    let mut rng = ChaCha8Rng::from_seed(key);
+    // The key's expansion is the kernels' (SplitMix64), so that a
+    // microcontroller's posterior draws read the host's stream.
+    let mut rng = ChaCha8Rng::from_seed(twostage_kernels::random::stream_key(seed, purpose.tag()));
     rng.set_stream(index);
     rng
 }
@@ -97,13 +82,5 @@ mod tests {
         assert_ne!(base, first(1, 0, StreamPurpose::Design));
         assert_ne!(base, first(2, 0, StreamPurpose::Simulation));
         assert_ne!(base, first(1, 1, StreamPurpose::Simulation));
-    }
-
-    #[test]
-    fn splitmix_matches_reference_values() {
-        // Reference outputs of SplitMix64 seeded with 0 (Vigna's splitmix64.c).
-        let mut s = 0u64;
-        assert_eq!(splitmix64(&mut s), 0xe220_a839_7b1d_cdaf);
-        assert_eq!(splitmix64(&mut s), 0x6e78_9e6a_a1b9_65f4);
     }
 }

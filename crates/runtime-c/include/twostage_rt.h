@@ -155,6 +155,24 @@ int32_t ts_stream_finish(const ts_stream *s,
                          size_t half_widths_len,
                          ts_assessment *assessment);
 
+// `ts_stream_finish`, then draws of the parameters from the posterior
+// the estimator carries into `draws` (`draws_len` doubles, a multiple of
+// q: draw after draw, q numbers each, inside the prior's support). The
+// random numbers are those of record number `record` of seed `seed`: the
+// host's `estimate --samples N --seed seed` draws the same for its
+// record number `record` (counted from 0). No allocation.
+//
+// # Safety
+// As `ts_stream_finish`; `draws` points to `draws_len` writable doubles.
+int32_t ts_stream_finish_draws(const ts_stream *s,
+                               double *theta,
+                               size_t theta_len,
+                               double *draws,
+                               size_t draws_len,
+                               uint64_t seed,
+                               uint64_t record,
+                               ts_assessment *assessment);
+
 // The intervals `theta +- half_widths` kept inside the prior's box into
 // `lower` and `upper`, each of `len` >= q doubles, exactly as the host
 // writes them (a parameter's interval never leaves its prior's support;

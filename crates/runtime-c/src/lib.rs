@@ -36,7 +36,7 @@
 use core::ffi::c_char;
 use core::mem::{align_of, size_of};
 
-use twostage_runtime::{Error, Estimator, Intervals, Stream};
+use twostage_runtime::{Assessment, Error, Estimator, Intervals, Stream};
 
 /// Success.
 pub const TS_OK: i32 = 0;
@@ -394,6 +394,15 @@ pub unsafe extern "C" fn ts_stream_finish(
     };
     let result =
         Stream::resume(estimator, work).and_then(|mut stream| stream.finish(theta, widths));
+    // SAFETY: as documented.
+    unsafe { finished(result, assessment) }
+}
+
+/// A finish's result as a C code, its assessment written where asked.
+///
+/// # Safety
+/// `assessment` is null or points to one writable `ts_assessment`.
+unsafe fn finished(result: Result<Assessment, Error>, assessment: *mut TsAssessment) -> i32 {
     match result {
         Ok(a) => {
             // SAFETY: null or a valid pointer, as documented.
@@ -416,6 +425,50 @@ pub unsafe extern "C" fn ts_stream_finish(
         }
         Err(e) => e.code(),
     }
+}
+
+/// `ts_stream_finish`, then draws of the parameters from the posterior
+/// the estimator carries into `draws` (`draws_len` doubles, a multiple of
+/// q: draw after draw, q numbers each, inside the prior's support). The
+/// random numbers are those of record number `record` of seed `seed`: the
+/// host's `estimate --samples N --seed seed` draws the same for its
+/// record number `record` (counted from 0). No allocation.
+///
+/// # Safety
+/// As `ts_stream_finish`; `draws` points to `draws_len` writable doubles.
+// A C signature: each array comes with its length.
+#[allow(clippy::too_many_arguments)]
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn ts_stream_finish_draws(
+    s: *const TsStream,
+    theta: *mut f64,
+    theta_len: usize,
+    draws: *mut f64,
+    draws_len: usize,
+    seed: u64,
+    record: u64,
+    assessment: *mut TsAssessment,
+) -> i32 {
+    // SAFETY: as documented.
+    let (estimator, work) = match unsafe { attached(s) } {
+        Ok(parts) => parts,
+        Err(code) => return code,
+    };
+    if theta.is_null() || (draws.is_null() && draws_len > 0) {
+        return TS_ERROR_NULL;
+    }
+    // SAFETY: the caller promises theta_len writable doubles.
+    let theta = unsafe { core::slice::from_raw_parts_mut(theta, theta_len) };
+    let draws: &mut [f64] = if draws_len == 0 {
+        &mut []
+    } else {
+        // SAFETY: the caller promises draws_len writable doubles.
+        unsafe { core::slice::from_raw_parts_mut(draws, draws_len) }
+    };
+    let result = Stream::resume(estimator, work)
+        .and_then(|mut stream| stream.finish_with_draws(theta, &mut [], draws, seed, record));
+    // SAFETY: as documented.
+    unsafe { finished(result, assessment) }
 }
 
 /// The intervals `theta +- half_widths` kept inside the prior's box into

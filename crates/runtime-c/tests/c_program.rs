@@ -1,6 +1,7 @@
 //! A C program, compiled here with gcc against the static library and the
 //! committed header, estimates fresh benchmark records through the C API
-//! and prints the numbers the Rust estimator gives.
+//! and prints the numbers the Rust estimator gives, its posterior's draws
+//! included.
 
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
@@ -8,7 +9,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use twostage::TwoStage;
-use twostage::models::{Benchmark, IoData, SUMMARY_NAMES, Simulator, experiment_rng};
+use twostage::fit::{MixtureDensity, MlpParams};
+use twostage::models::{
+    Benchmark, IoData, SUMMARY_NAMES, Simulator, StreamPurpose, experiment_rng, stream_rng,
+};
 
 /// Build `libtwostage_rt.a` (release, in its own target directory, so that
 /// this test's cargo does not wait on the one running it).
@@ -82,6 +86,7 @@ fn a_c_program_prints_the_rust_estimates() {
         .validation(0)
         .calibration(200)
         .seed(21)
+        .posterior(MixtureDensity::new(MlpParams::new(&[8]).unwrap().check().unwrap(), 2).unwrap())
         .train()
         .unwrap();
     let blob_path = dir.path().join("benchmark.tsrt");
@@ -145,7 +150,7 @@ fn a_c_program_prints_the_rust_estimates() {
         "damaged -4 the blob's checksum does not match: it was damaged; export it again"
     );
     let mut clipped = 0;
-    for record in &records {
+    for (r, record) in records.iter().enumerate() {
         let fields: Vec<&str> = lines.next().unwrap().split(' ').collect();
         assert_eq!(fields[0], "0", "{fields:?}");
         let number = |k: usize| fields[k].parse::<f64>().unwrap();
@@ -190,6 +195,21 @@ fn a_c_program_prints_the_rust_estimates() {
             assert!((c - host).abs() <= 1e-9, "C bound {c} vs host {host}");
         }
         clipped += usize::from(number(10).to_bits() == estimator.lower()[0].to_bits());
+        // The posterior's draws of record r, seed 5: the host's, for a
+        // record out of distribution too (its flag is above).
+        assert_eq!(fields[12], "0", "ts_stream_finish_draws");
+        let mut draws = [0.0; 3];
+        estimator
+            .sample_record(
+                record,
+                &mut stream_rng(5, r as u64, StreamPurpose::Posterior),
+                &mut draws,
+            )
+            .unwrap();
+        for (k, host) in draws.iter().enumerate() {
+            let c = number(13 + k);
+            assert!((c - host).abs() <= 1e-9, "draw {k}: C {c} vs host {host}");
+        }
     }
     // The record at -0.895 has an interval reaching past the box's -0.9.
     assert!(clipped >= 1, "no interval met the prior's box");

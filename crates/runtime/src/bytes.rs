@@ -103,6 +103,12 @@ impl<'a> Cursor<'a> {
         Ok(run)
     }
 
+    /// Step to byte `end` (at or after the cursor) without reading.
+    pub(crate) fn skip_to(&mut self, end: usize) -> Result<(), Error> {
+        self.take(end.saturating_sub(self.at), 1)?;
+        Ok(())
+    }
+
     /// `count` u32s as bytes, then padding to the next multiple of 8.
     pub(crate) fn u32s(&mut self, count: usize) -> Result<&'a [u8], Error> {
         let run = self.take(count, 4)?;

@@ -100,10 +100,19 @@ pub enum Error {
     },
     /// The blob needs a part of the runtime that this build leaves out
     /// (a learned summary network without the feature `learned`, a
-    /// linearized stage 1 without `linearized`).
+    /// linearized stage 1 without `linearized`, draws from its posterior
+    /// without `posterior`).
     NotBuiltIn {
         /// The Cargo feature of `twostage-runtime` that builds it in.
         feature: &'static str,
+    },
+    /// Draws were asked of a blob without a posterior: train the
+    /// estimator with one (`train --posterior K`) and export it again.
+    NoPosterior,
+    /// The draws' array is not a whole number of draws.
+    DrawCount {
+        /// Numbers per draw (the parameters).
+        parameters: usize,
     },
 }
 
@@ -128,6 +137,8 @@ impl Error {
             Error::NotStarted => -15,
             Error::WindowTooShort { .. } => -16,
             Error::NotBuiltIn { .. } => -17,
+            Error::NoPosterior => -18,
+            Error::DrawCount { .. } => -19,
         }
     }
 }
@@ -154,7 +165,9 @@ impl Error {
             -14 => c"the output array is shorter than the parameters",
             -15 => c"the workspace holds no stream: start one with ts_stream_start",
             -16 => c"the window is shorter than the regression or the summary network needs",
-            -17 => c"the blob needs a part this runtime was built without: enable the runtime's feature that builds it (a learned summary: learned; a linearized stage 1: linearized)",
+            -17 => c"the blob needs a part this runtime was built without: enable the runtime's feature that builds it (a learned summary: learned; a linearized stage 1: linearized; draws: posterior)",
+            -18 => c"the blob carries no posterior to draw from: train the estimator with --posterior and export it again",
+            -19 => c"the draws' array is not a whole number of draws (a multiple of the parameters)",
             _ => return None,
         })
     }
@@ -229,8 +242,17 @@ impl core::fmt::Display for Error {
             ),
             Error::NotBuiltIn { feature } => write!(
                 f,
-                "the blob's stage 1 needs a part of the runtime that this build leaves out: \
+                "the blob needs a part of the runtime that this build leaves out: \
                  build twostage-runtime with its feature `{feature}` (on by default)"
+            ),
+            Error::NoPosterior => f.write_str(
+                "the blob carries no posterior to draw from: train the estimator with \
+                 `--posterior K` and export it again",
+            ),
+            Error::DrawCount { parameters } => write!(
+                f,
+                "the draws' array must hold a whole number of draws of {parameters} \
+                 parameters"
             ),
         }
     }

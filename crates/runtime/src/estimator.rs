@@ -6,14 +6,15 @@ use crate::bytes::{Cursor, LeF64s, u32_at};
 use crate::error::Error;
 use crate::format::{
     CHECKSUM_FROM, FLAG_ADAPTIVE, FLAG_CONFORMAL, FLAG_ENVELOPE, FLAG_INPUT_FAMILY,
-    FLAG_LEARNED_SUMMARY, FLAG_LINEARIZED, FLAG_OUTPUT_TRANSFORMS, FLAG_SIGNAL_SUMMARY,
-    HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS, REGRESSOR_NETWORK,
-    REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P, TRANSFORM_IDENTITY,
-    TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED,
-    VERSION_WITHOUT_LINEARIZED, VERSION_WITHOUT_SUMMARY,
+    FLAG_LEARNED_SUMMARY, FLAG_LINEARIZED, FLAG_OUTPUT_TRANSFORMS, FLAG_POSTERIOR,
+    FLAG_SIGNAL_SUMMARY, HEADER_BYTES, MAGIC, MAX_EXPERTS, MAX_ORDER, MAX_PARAMETERS, MAX_SIGNALS,
+    REGRESSOR_NETWORK, REGRESSOR_PIECEWISE, SIGNAL_IDENTITY, SIGNAL_LOG, SIGNAL_LOG1P,
+    TRANSFORM_IDENTITY, TRANSFORM_LOG, VERSION, VERSION_WITHOUT_FAMILY, VERSION_WITHOUT_LEARNED,
+    VERSION_WITHOUT_LINEARIZED, VERSION_WITHOUT_POSTERIOR, VERSION_WITHOUT_SUMMARY,
 };
 use crate::learned::Learned;
 use crate::network::Network;
+use crate::posterior::Posterior;
 use twostage_kernels::linearized::{CarLinearization, LINEARIZED_FEATURES};
 
 /// Stage 2: one network, or a global one routing to experts.
@@ -104,6 +105,10 @@ pub struct Estimator<'a> {
     stage1_at: usize,
     /// Whether the section at `stage1_at` is the linearized car's.
     linearized: bool,
+    /// Where the posterior's density starts in the blob (0: none); read
+    /// again where it lies when drawn from, as an expert is; 32 bits, as
+    /// the blob's length is, keep the view within the C API's storage.
+    posterior_at: u32,
     blob: &'a [u8],
     max_width: usize,
 }
@@ -153,7 +158,7 @@ impl<'a> Estimator<'a> {
         let kind = c.u32()?;
         let n_experts = c.count("expert count", MAX_EXPERTS)?;
         let (r1, r2) = (c.u32()?, c.u32()?);
-        let linearized = version >= VERSION && flags & FLAG_LINEARIZED != 0;
+        let linearized = version >= VERSION_WITHOUT_POSTERIOR && flags & FLAG_LINEARIZED != 0;
         let mut known = FLAG_CONFORMAL | FLAG_ADAPTIVE | FLAG_ENVELOPE | FLAG_OUTPUT_TRANSFORMS;
         if version >= VERSION_WITHOUT_SUMMARY {
             known |= FLAG_INPUT_FAMILY;
@@ -164,8 +169,11 @@ impl<'a> Estimator<'a> {
         if version >= VERSION_WITHOUT_LINEARIZED {
             known |= FLAG_LEARNED_SUMMARY;
         }
-        if version >= VERSION {
+        if version >= VERSION_WITHOUT_POSTERIOR {
             known |= FLAG_LINEARIZED;
+        }
+        if version >= VERSION {
+            known |= FLAG_POSTERIOR;
         }
         // The network reads the outputs as measured, as the summary does:
         // neither goes with output transforms.
@@ -358,6 +366,17 @@ impl<'a> Estimator<'a> {
         } else {
             0
         };
+        let posterior_at = if flags & FLAG_POSTERIOR != 0 {
+            let at = c.at;
+            if cfg!(feature = "posterior") {
+                Posterior::read(&mut c, n_features, q)?;
+            } else {
+                Posterior::skip(&mut c)?;
+            }
+            u32::try_from(at).map_err(|_| Error::Truncated { at })?
+        } else {
+            0
+        };
         if c.at != blob.len() {
             return Err(Error::TrailingBytes { at: c.at });
         }
@@ -381,6 +400,7 @@ impl<'a> Estimator<'a> {
             signal_summary,
             stage1_at: learned_at.max(linearized_at),
             linearized,
+            posterior_at,
             blob,
             max_width: 0,
         };
@@ -390,6 +410,9 @@ impl<'a> Estimator<'a> {
 
     fn networks_max_width(&self) -> usize {
         let mut width = self.adaptive.map_or(0, |a| a.difficulty.max_width());
+        if let Some(posterior) = self.posterior() {
+            width = width.max(posterior.network.max_width());
+        }
         match self.regressor {
             Regressor::Network(n) => width = width.max(n.max_width()),
             Regressor::Piecewise { global, count, .. } => {
@@ -400,6 +423,44 @@ impl<'a> Estimator<'a> {
             }
         }
         width
+    }
+
+    /// The posterior's density (read again where it lies), where the
+    /// blob carries one and this build reads it (the feature `posterior`).
+    pub(crate) fn posterior(&self) -> Option<Posterior<'a>> {
+        if self.posterior_at == 0 || !cfg!(feature = "posterior") {
+            return None;
+        }
+        Posterior::read(
+            &mut Cursor::new(self.blob, self.posterior_at as usize),
+            self.n_features(),
+            self.q,
+        )
+        .ok()
+    }
+
+    /// Words of workspace a draw needs beside the network's scratch (the
+    /// head and one draw's normals), from the section's counts, checked
+    /// when the blob was read: 0 without a posterior or the feature.
+    pub(crate) fn posterior_words(&self) -> usize {
+        if self.posterior_at == 0 || !cfg!(feature = "posterior") {
+            return 0;
+        }
+        let at = self.posterior_at as usize;
+        let count = |offset: usize| u32_at(self.blob, at + offset).map_or(0, |v| v as usize);
+        let shape = twostage_kernels::mixture::MixtureShape {
+            components: count(0),
+            dim: count(4),
+        };
+        shape.outputs() + shape.dim
+    }
+
+    /// Whether the blob carries the posterior's density, so that
+    /// [`crate::Stream::finish_with_draws`] draws the parameters given a
+    /// record (in a build with the feature `posterior`; one without it
+    /// estimates from the blob as from one without a posterior).
+    pub fn has_posterior(&self) -> bool {
+        self.posterior_at != 0
     }
 
     /// Expert `k` of a piecewise regressor (read again where it lies).

@@ -1,4 +1,4 @@
-//! The exported estimator's byte layout, version 5: what
+//! The exported estimator's byte layout, version 6: what
 //! `twostage export --to runtime` writes and [`crate::Estimator`] reads.
 //!
 //! Every number is little-endian; counts are `u32`, trained values `f64`.
@@ -10,7 +10,7 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0..4 | magic `TSRT` |
-//! | 4..8 | format version (5 for a linearized stage 1; 4 for a learned one; 3 without it, 2 without the signals' summary either, 1 without an input family) |
+//! | 4..8 | format version (6 with a posterior; 5 for a linearized stage 1; 4 for a learned one; 3 without it, 2 without the signals' summary either, 1 without an input family) |
 //! | 8..12 | the blob's length in bytes |
 //! | 12..16 | CRC-32 (IEEE) of bytes 16..length |
 //! | 16..64 | twelve `u32`: q, inputs, outputs, trained record length, na, nb, delay, flags, regressor kind, experts, 0, 0 |
@@ -39,7 +39,17 @@
 //! the car and its linearization as
 //! `twostage_kernels::linearized::CarLinearization::to_words` writes
 //! them (38 `f64`): its features are the kernels' eight (the host's
-//! `linearized`). A network is: the count of its layer sizes and of its ensemble
+//! `linearized`). The posterior (flag 256, version 6) closes the blob:
+//! its components, parameters and length in bytes from the section's
+//! start (`u32`; a runtime built without draws steps over it by that
+//! length), each parameter's support code
+//! (`u32`: 0 the real line, 1 positive numbers, 2 an interval), each
+//! parameter's interval as low and high (`f64`; zeros for the other
+//! supports), the mean and scale that standardize the parameters mapped
+//! to the real line, the spread and its natural logarithm, then the
+//! density network (one member, target mean 0 and scale 1) from the
+//! features to the mixture's head
+//! (`twostage_kernels::mixture`). A network is: the count of its layer sizes and of its ensemble
 //! members (`u32`), the sizes (`u32`), the feature means and scales, the
 //! target means and scales, then each member's weights and biases, layer
 //! by layer (row-major weights, then biases). A linear map is a network
@@ -48,11 +58,13 @@
 /// The first four bytes.
 pub const MAGIC: [u8; 4] = *b"TSRT";
 /// The newest version this crate reads, which the exporter writes for an
-/// estimator with a linearized stage 1. Versions 4 (a learned stage 1), 3
-/// (the signals' summary, no network), 2 (an input family, no summary)
-/// and 1 (no family) are read too, and written for estimators without
-/// them, so that a runtime of before reads them.
-pub const VERSION: u32 = 5;
+/// estimator with a posterior. Versions 5 (a linearized stage 1), 4 (a
+/// learned stage 1), 3 (the signals' summary, no network), 2 (an input
+/// family, no summary) and 1 (no family) are read too, and written for
+/// estimators without them, so that a runtime of before reads them.
+pub const VERSION: u32 = 6;
+/// The version of a blob without a posterior whose stage 1 linearizes.
+pub const VERSION_WITHOUT_POSTERIOR: u32 = 5;
 /// The version of a blob whose stage 1 learns and does not linearize.
 pub const VERSION_WITHOUT_LINEARIZED: u32 = 4;
 /// The version of a blob whose stage 1 appends the signals' summary and
@@ -93,6 +105,16 @@ pub const FLAG_LEARNED_SUMMARY: u32 = 64;
 /// linearization follow the prior's box.
 pub const FLAG_LINEARIZED: u32 = 128;
 
+/// Flag (version 6): the posterior's density network follows, last.
+pub const FLAG_POSTERIOR: u32 = 256;
+
+/// Support code: a parameter on the whole real line.
+pub const SUPPORT_REAL: u32 = 0;
+/// Support code: a positive parameter (its logarithm is unbounded).
+pub const SUPPORT_POSITIVE: u32 = 1;
+/// Support code: a parameter within an interval (its logit is unbounded).
+pub const SUPPORT_INTERVAL: u32 = 2;
+
 /// Regressor kind: one network (an MLP ensemble, or a linear map).
 pub const REGRESSOR_NETWORK: u32 = 1;
 /// Regressor kind: a global network routing to experts by pieces of the
@@ -123,6 +145,8 @@ pub const MAX_WIDTH: usize = 256;
 pub const MAX_SIZES: usize = 10;
 /// Most ensemble members of a network.
 pub const MAX_MEMBERS: usize = 64;
+/// Most components of a posterior's mixture.
+pub const MAX_COMPONENTS: usize = 16;
 /// Most experts of a piecewise regressor.
 pub const MAX_EXPERTS: usize = 16;
 /// Most convolutions of a learned stage 1.

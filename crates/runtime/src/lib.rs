@@ -42,6 +42,7 @@ mod estimator;
 pub mod format;
 mod learned;
 mod network;
+mod posterior;
 mod stream;
 
 pub use bytes::LeF64s;

@@ -46,6 +46,9 @@ pub(crate) struct Layout {
     linearized: usize,
     features: usize,
     scratch: usize,
+    /// The posterior's head and one draw's normal numbers (an estimator
+    /// with a posterior).
+    posterior: usize,
     pub(crate) total: usize,
 }
 
@@ -92,8 +95,10 @@ impl Layout {
         } else {
             0
         };
+        // From the section's counts: a push must not read the network.
+        let posterior = e.posterior_words();
         let total = [
-            history, first, marks, sums, family, learned, linearized, features, scratch,
+            history, first, marks, sums, family, learned, linearized, features, scratch, posterior,
         ]
         .iter()
         .fold(STATUS_WORDS, |total, words| total.saturating_add(*words));
@@ -109,6 +114,7 @@ impl Layout {
             linearized,
             features,
             scratch,
+            posterior,
             total,
         }
     }
@@ -124,7 +130,8 @@ impl Layout {
         let (learned, rest) = rest.split_at_mut(self.learned.min(rest.len()));
         let (linearized, rest) = rest.split_at_mut(self.linearized.min(rest.len()));
         let (features, rest) = rest.split_at_mut(self.features.min(rest.len()));
-        let scratch = rest.get_mut(..self.scratch).unwrap_or_default();
+        let (scratch, rest) = rest.split_at_mut(self.scratch.min(rest.len()));
+        let posterior = rest.get_mut(..self.posterior).unwrap_or_default();
         let past = if self.window == 0 {
             Past::Record {
                 first,
@@ -144,6 +151,7 @@ impl Layout {
             linearized,
             features,
             scratch,
+            posterior,
         }
     }
 }
@@ -157,6 +165,7 @@ struct Parts<'w> {
     linearized: &'w mut [f64],
     features: &'w mut [f64],
     scratch: &'w mut [f64],
+    posterior: &'w mut [f64],
 }
 
 /// An accumulator kept in a workspace's words.
@@ -712,6 +721,55 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             // window alone.
             input_outside_family: input_outside_family(e, signal_summary),
         })
+    }
+}
+
+impl Stream<'_, '_, '_> {
+    /// [`Stream::finish`], then draws of the parameters from the
+    /// posterior the blob carries, given the same features, into `draws`
+    /// (draws x parameters, row after row: as many draws as it holds
+    /// rows; each inside its prior's support). The random numbers are the
+    /// ChaCha8 stream `record` of `seed`'s posterior key, the host's for
+    /// record number `record` of `estimate --samples N --seed seed` (and
+    /// of Python's `Estimator.sample`): the same draws wherever the
+    /// features agree, with no allocation. A record out of distribution
+    /// still gets its draws; the assessment flags it as `finish` does.
+    ///
+    /// # Errors
+    /// [`Error::NoPosterior`] for a blob without one,
+    /// [`Error::NotBuiltIn`] for a build without the feature `posterior`,
+    /// [`Error::DrawCount`] for `draws` not a whole number of draws, and
+    /// those of [`Stream::finish`].
+    pub fn finish_with_draws(
+        &mut self,
+        theta: &mut [f64],
+        half_widths: &mut [f64],
+        draws: &mut [f64],
+        seed: u64,
+        record: u64,
+    ) -> Result<Assessment, Error> {
+        let e = self.estimator;
+        let posterior = e.posterior().ok_or(if e.has_posterior() {
+            Error::NotBuiltIn {
+                feature: "posterior",
+            }
+        } else {
+            Error::NoPosterior
+        })?;
+        if !draws.len().is_multiple_of(e.n_parameters()) {
+            return Err(Error::DrawCount {
+                parameters: e.n_parameters(),
+            });
+        }
+        let assessment = self.finish(theta, half_widths)?;
+        let Parts {
+            features,
+            scratch,
+            posterior: own,
+            ..
+        } = Layout::of(e, self.window).split(self.work);
+        posterior.draw(features, (seed, record), (own, scratch), draws)?;
+        Ok(assessment)
     }
 }
 

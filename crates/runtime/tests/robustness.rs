@@ -193,14 +193,14 @@ fn damage_is_named() {
         Err(Error::Length { declared, actual }) if declared == blob.len() && actual == blob.len() - 8
     ));
     let mut newer = blob.clone();
-    newer[4] = 6;
+    newer[4] = 7;
     assert_eq!(
         Estimator::from_bytes(&newer).unwrap_err(),
-        Error::UnsupportedVersion { found: 6 }
+        Error::UnsupportedVersion { found: 7 }
     );
     assert_eq!(
-        Error::UnsupportedVersion { found: 6 }.to_string(),
-        "blob format version 6, this runtime reads versions 1 to 5: export the estimator \
+        Error::UnsupportedVersion { found: 7 }.to_string(),
+        "blob format version 7, this runtime reads versions 1 to 6: export the estimator \
          again with the matching twostage"
     );
     // The summary's flag belongs to version 3 and the learned one to

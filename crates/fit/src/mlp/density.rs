@@ -12,8 +12,7 @@
 //! thread count.
 
 use ndarray::{Array2, ArrayView2};
-use rand::{Rng, RngExt};
-use rand_distr::StandardNormal;
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 use twostage_kernels::mixture::{MixtureShape, Support, log_sum_exp};
 
@@ -349,17 +348,7 @@ fn inside(support: Support, value: f64) -> bool {
 /// `log spread`, the entries above it divided by it).
 fn widen(shape: MixtureShape, head: &mut [f64], spread: f64) {
     // A spread of 1 changes no bit: x - 0 and x / 1 are x.
-    let log_spread = spread.ln();
-    for c in 0..shape.components {
-        let at = shape.log_diagonal_at(c);
-        for v in &mut head[at..at + shape.dim] {
-            *v -= log_spread;
-        }
-        let at = shape.upper_at(c);
-        for v in &mut head[at..at + shape.upper_len()] {
-            *v /= spread;
-        }
-    }
+    shape.widen(head, spread, spread.ln());
 }
 
 impl Head for MixtureShape {
@@ -431,6 +420,24 @@ impl FittedMixture {
     /// Each parameter's support.
     pub fn supports(&self) -> &[Support] {
         &self.supports
+    }
+
+    /// The standardization of the features the network reads.
+    pub fn feature_scaling(&self) -> &Standardizer {
+        &self.features
+    }
+
+    /// The standardization of the parameters mapped to the real line
+    /// (the space the mixture lives in).
+    pub fn unbounded_scaling(&self) -> &Standardizer {
+        &self.unbounded
+    }
+
+    /// The network's layer sizes (features first, the head's length
+    /// last) and its weights and biases, layer after layer (row-major
+    /// weights, out x in, then biases): what an exporter writes.
+    pub fn network(&self) -> (&[usize], &[f64]) {
+        (&self.sizes, &self.params)
     }
 
     /// One report per restart.
@@ -620,12 +627,10 @@ impl FittedMixture {
         }
         let head = self.head(x)?;
         let mut normals = [0.0f64; MAX_WIDTH];
+        let mut words = || rng.next_u64();
         for draw in out.chunks_exact_mut(d) {
-            let uniform: f64 = rng.random();
-            for n in &mut normals[..d] {
-                *n = rng.sample(StandardNormal);
-            }
-            self.shape.draw(&head, uniform, &normals[..d], draw);
+            self.shape
+                .draw_from_words(&head, &mut words, &mut normals[..d], draw);
             self.unbounded.inverse_in_place(draw);
             for (v, support) in draw.iter_mut().zip(&self.supports) {
                 *v = support.from_unbounded(*v);

@@ -2,7 +2,8 @@
  * would: usage `estimate_records BLOB RECORDS WINDOW EVERY`. RECORDS is text: a line
  * "R N NU NY", then R*N lines of NU inputs and NY outputs. For each record
  * it prints "rc theta... widths... intervals ood distance threshold
- * untransformed input-mask interval-rc (lower upper)...". Then it slides
+ * untransformed input-mask interval-rc (lower upper)... draws-rc draws..."
+ * (three draws of the posterior, seed 5, the record's number). Then it slides
  * a window of WINDOW samples over the records before the last, one after
  * another, and prints "window END rc theta... ood input-mask" every EVERY
  * samples. */
@@ -63,6 +64,7 @@ int main(int argc, char **argv) {
     double *widths = malloc(q * sizeof(double));
     double *lower = malloc(q * sizeof(double));
     double *upper = malloc(q * sizeof(double));
+    double *draws = malloc(3 * q * sizeof(double));
     double u[16], y[16];
 
     FILE *records = fopen(argv[2], "r");
@@ -102,6 +104,10 @@ int main(int argc, char **argv) {
             int bounds = ts_interval(&est, theta, widths, lower, upper, q);
             printf(" %d", bounds);
             for (size_t j = 0; j < q; j++) printf(" %.17g %.17g", lower[j], upper[j]);
+            /* Three draws from the posterior, as the host's record r of seed 5. */
+            int drawn = ts_stream_finish_draws(&stream, theta, q, draws, 3 * q, 5, r, NULL);
+            printf(" %d", drawn);
+            for (size_t k = 0; k < 3 * q; k++) printf(" %.17g", draws[k]);
         } else {
             printf(" %s", ts_error_message(rc));
         }
@@ -143,6 +149,7 @@ int main(int argc, char **argv) {
     free(widths);
     free(lower);
     free(upper);
+    free(draws);
     free(blob);
     return 0;
 }
