@@ -223,7 +223,7 @@ impl Support {
             Self::Real => theta,
             Self::Positive => libm::log(theta.max(Self::EDGE)),
             Self::Interval { low, high } => {
-                let u = ((theta - low) / (high - low)).clamp(Self::EDGE, 1.0 - Self::EDGE);
+                let u = within((theta - low) / (high - low), Self::EDGE, 1.0 - Self::EDGE);
                 libm::log(u) - libm::log1p(-u)
             }
         }
@@ -242,7 +242,7 @@ impl Support {
                     let e = libm::exp(z);
                     e / (1.0 + e)
                 };
-                (low + (high - low) * u).clamp(low, high)
+                within(low + (high - low) * u, low, high)
             }
         }
     }
@@ -254,11 +254,26 @@ impl Support {
             Self::Real => 0.0,
             Self::Positive => -libm::log(theta.max(Self::EDGE)),
             Self::Interval { low, high } => {
-                let u = ((theta - low) / (high - low)).clamp(Self::EDGE, 1.0 - Self::EDGE);
+                let u = within((theta - low) / (high - low), Self::EDGE, 1.0 - Self::EDGE);
                 -libm::log(u) - libm::log1p(-u) - libm::log(high - low)
             }
         }
     }
+}
+
+/// `x` kept within `[low, high]` as `f64::clamp` keeps it (a NaN stays
+/// NaN), without its check that the bounds are ordered: that check's
+/// panic message formats floats, which costs a microcontroller's
+/// firmware about 10 KB of flash (the callers' bounds are ordered).
+fn within(x: f64, low: f64, high: f64) -> f64 {
+    let mut v = x;
+    if v < low {
+        v = low;
+    }
+    if v > high {
+        v = high;
+    }
+    v
 }
 
 #[cfg(test)]

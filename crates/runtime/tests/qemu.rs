@@ -5,7 +5,9 @@
 //! (flash: the runtime's code, by difference with the same firmware
 //! without the runtime, plus the blob;
 //! workspace and peak stack, instructions per pushed sample and per final
-//! solve by SysTick under `-icount`, calibrated by a loop of known length).
+//! solve by SysTick under `-icount`, calibrated by a loop of known length);
+//! and the posterior's draws of the car's paper preset, which must be the
+//! host's, with their instructions per draw.
 //!
 //! Needs the thumbv7em-none-eabihf target and qemu-system-arm; without
 //! them it is skipped loudly, unless TWOSTAGE_REQUIRE_QEMU=1 (as in CI),
@@ -16,7 +18,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use twostage::models::{Benchmark, IoData, PacejkaCar, Simulator, experiment_rng};
+use twostage::fit::MixtureDensity;
+use twostage::models::{
+    Benchmark, IoData, PacejkaCar, Simulator, StreamPurpose, experiment_rng, stream_rng,
+};
 use twostage::{Preset, TwoStage};
 
 const TARGET: &str = "thumbv7em-none-eabihf";
@@ -566,10 +571,89 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
             );
         }
     }
-    println!("{report}\n{window_report}");
+    let draws_report = draws_on_the_cortex_m4();
+    println!("{report}\n{window_report}\n{draws_report}");
     // After the report, so that a budget missed shows every number.
     assert!(
         over_budget.is_empty(),
         "beyond 64 KiB of flash or 16 KiB of RAM: {over_budget:?}"
     );
+}
+
+/// Draws of the posterior on the Cortex-M4 (the firmware's feature
+/// `posterior`): the car's paper preset trained with `--posterior 3`,
+/// each record's 100 draws of seed 1 and its number (the first eight
+/// numbers and the last draw) against the host's, the instructions a draw
+/// adds to a finish, and the flash the drawing code takes (by difference
+/// with the same firmware without the feature). The report's line.
+fn draws_on_the_cortex_m4() -> String {
+    const DRAWS: usize = 100;
+    let model = PacejkaCar::new();
+    let estimator = TwoStage::builder(&model)
+        .preset(twostage::paper_pacejka())
+        .simulations(300)
+        .validation(0)
+        .calibration(200)
+        .seed(41)
+        .posterior(MixtureDensity::with_components(3).unwrap())
+        .train()
+        .unwrap();
+    let case = case_of("car paper, posterior", &model, estimator);
+    let data = tempfile::tempdir().unwrap();
+    write_case(data.path(), 0, &case);
+    let (elf, flash) = firmware(data.path(), Build::Records, Some("posterior"));
+    let (_, without) = firmware(data.path(), Build::Records, None);
+    let stdout = run(&elf);
+    let mut lines = stdout.lines();
+    let ticks: f64 = lines
+        .next()
+        .unwrap()
+        .strip_prefix("calibration ")
+        .unwrap()
+        .parse()
+        .unwrap();
+    let per_tick = 300_000.0 / ticks;
+    assert!(lines.next().unwrap().starts_with("case 0 blob"));
+    let q = case.estimator.param_names().len();
+    let (mut per_draw, mut with_draws) = (0.0f64, 0.0f64);
+    for (r, record) in case.records.iter().enumerate() {
+        let estimate: Vec<&str> = lines.next().unwrap().split(' ').collect();
+        assert_eq!(estimate[3], "ok", "{estimate:?}");
+        let finish: f64 = estimate[8 + 2 * q].parse().unwrap();
+        let fields: Vec<&str> = lines.next().unwrap().split(' ').collect();
+        assert_eq!(
+            fields[..4],
+            ["draws", "0", &r.to_string(), "ok"],
+            "{fields:?}"
+        );
+        let value = |i: usize| f64::from_bits(u64::from_str_radix(fields[4 + i], 16).unwrap());
+        let mut host = vec![0.0; DRAWS * q];
+        case.estimator
+            .sample_record(
+                record,
+                &mut stream_rng(1, r as u64, StreamPurpose::Posterior),
+                &mut host,
+            )
+            .unwrap();
+        let shown = (0..8).chain(DRAWS * q - q..DRAWS * q);
+        for (i, k) in shown.enumerate() {
+            let j = k % q;
+            let width = case.estimator.upper()[j] - case.estimator.lower()[j];
+            assert!(
+                (value(i) - host[k]).abs() <= 1e-9 * width,
+                "record {r}, number {k}: Cortex-M4 {} vs host {}",
+                value(i),
+                host[k]
+            );
+        }
+        let drawn: f64 = fields[5 + 8 + q].parse().unwrap();
+        with_draws = with_draws.max(drawn * per_tick);
+        per_draw = per_draw.max((drawn - finish) * per_tick / DRAWS as f64);
+    }
+    format!(
+        "{}: a finish with {DRAWS} draws {with_draws:.0} instructions, {per_draw:.0} a draw; \
+         the drawing code {} B of flash",
+        case.name,
+        flash as i64 - without as i64
+    )
 }

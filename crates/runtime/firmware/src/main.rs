@@ -12,6 +12,10 @@
 //!   finished at each record's end, `slide K R rc THETA.. OOD MASK push
 //!   TICKS finish TICKS` and the window's peak stack, `slide K stack
 //!   BYTES`;
+//! - with the feature `posterior`, after each record:
+//!   `draws K R ok FIRST.. LAST.. finish TICKS`, the first eight numbers
+//!   and the last draw of `DRAWS` draws of seed 1 and the record's number,
+//!   and the ticks of the finish that drew them;
 //! - then the peak stack of the records' estimates (`stack BYTES`) and the
 //!   firmware's sections (`sections TEXT RODATA DATA BSS`).
 #![no_std]
@@ -29,6 +33,12 @@ include!(concat!(env!("OUT_DIR"), "/cases.rs"));
 /// The largest workspace a case may need, in f64 (32 KiB).
 const WORK: usize = 4096;
 static mut WORKSPACE: [f64; WORK] = [0.0; WORK];
+
+/// Draws of each record, of at most two parameters.
+#[cfg(feature = "posterior")]
+const DRAWS: usize = 100;
+#[cfg(feature = "posterior")]
+static mut DRAWN: [f64; 2 * DRAWS] = [0.0; 2 * DRAWS];
 
 const PAINT: u32 = 0xDEAD_BEEF;
 /// How far below the stack pointer the paint goes.
@@ -178,6 +188,8 @@ fn estimate_case(k: usize, blob: &[u8], records: &[u8], work: &mut [f64], peak_s
             }
             Err(e) => hprintln!("record {} {} error {}", k, r, e.code()),
         }
+        #[cfg(feature = "posterior")]
+        draw(k, r, &estimator, records, work);
     }
     #[cfg(feature = "window")]
     slide(k, &estimator, records, work);
@@ -205,6 +217,36 @@ fn push_record(
         stream.push(&u[..nu], &y[..ny])?;
     }
     Ok(since(start))
+}
+
+/// Record `r` pushed again and finished with `DRAWS` draws of seed 1 and
+/// the record's number: the first eight numbers, the last draw and the
+/// finish's ticks.
+#[cfg(all(feature = "posterior", not(feature = "baseline")))]
+fn draw(k: usize, r: usize, estimator: &Estimator<'_>, records: &[u8], work: &mut [f64]) {
+    let q = estimator.n_parameters();
+    let drawn = unsafe { &mut *core::ptr::addr_of_mut!(DRAWN) };
+    let Some(draws) = drawn.get_mut(..DRAWS * q) else {
+        hprintln!("draws {} {} error more than two parameters", k, r);
+        return;
+    };
+    let mut theta = [0.0; 8];
+    let result = Stream::new(estimator, work).and_then(|mut stream| {
+        push_record(&mut stream, records, r)?;
+        let start = SYST::get_current();
+        stream.finish_with_draws(&mut theta[..q], &mut [], draws, 1, r as u64)?;
+        Ok(since(start))
+    });
+    match result {
+        Ok(ticks) => {
+            let mut line = heapless_line();
+            for v in draws.iter().take(8).chain(&draws[draws.len() - q..]) {
+                line.push_hex(v.to_bits());
+            }
+            hprintln!("draws {} {} ok{} finish {}", k, r, line.as_str(), ticks);
+        }
+        Err(e) => hprintln!("draws {} {} error {}", k, r, e.code()),
+    }
 }
 
 /// A window of a quarter of a record slid over all of the case's records,
