@@ -47,7 +47,7 @@ pub(crate) struct Layout {
     features: usize,
     scratch: usize,
     /// The posterior's head and one draw's normal numbers (an estimator
-    /// with a posterior).
+    /// with a posterior), last: only a finish that draws cuts them off.
     posterior: usize,
     pub(crate) total: usize,
 }
@@ -130,8 +130,7 @@ impl Layout {
         let (learned, rest) = rest.split_at_mut(self.learned.min(rest.len()));
         let (linearized, rest) = rest.split_at_mut(self.linearized.min(rest.len()));
         let (features, rest) = rest.split_at_mut(self.features.min(rest.len()));
-        let (scratch, rest) = rest.split_at_mut(self.scratch.min(rest.len()));
-        let posterior = rest.get_mut(..self.posterior).unwrap_or_default();
+        let scratch = rest.get_mut(..self.scratch).unwrap_or_default();
         let past = if self.window == 0 {
             Past::Record {
                 first,
@@ -151,7 +150,6 @@ impl Layout {
             linearized,
             features,
             scratch,
-            posterior,
         }
     }
 }
@@ -165,7 +163,6 @@ struct Parts<'w> {
     linearized: &'w mut [f64],
     features: &'w mut [f64],
     scratch: &'w mut [f64],
-    posterior: &'w mut [f64],
 }
 
 /// An accumulator kept in a workspace's words.
@@ -762,12 +759,15 @@ impl Stream<'_, '_, '_> {
             });
         }
         let assessment = self.finish(theta, half_widths)?;
+        // The posterior's words close the workspace: cut them off first,
+        // so that the parts every finish splits are split as they are.
+        let layout = Layout::of(e, self.window);
+        let own_at = layout.total - STATUS_WORDS - layout.posterior;
+        let (work, own) = self.work.split_at_mut(own_at.min(self.work.len()));
+        let own = own.get_mut(..layout.posterior).unwrap_or_default();
         let Parts {
-            features,
-            scratch,
-            posterior: own,
-            ..
-        } = Layout::of(e, self.window).split(self.work);
+            features, scratch, ..
+        } = layout.split(work);
         posterior.draw(features, (seed, record), (own, scratch), draws)?;
         Ok(assessment)
     }
