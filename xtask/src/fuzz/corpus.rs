@@ -186,7 +186,22 @@ fn estimators() -> Result<Vec<(&'static str, twostage::Estimator)>> {
             .seed(3)
             .train()?)
     };
+    // A posterior: the estimator file's density and the blob's section
+    // that the runtime draws from.
+    let with_posterior = TwoStage::builder(&car)
+        .compressor(twostage::compress::Arx::new(2, 2)?)
+        .regressor("mlp:3".parse()?)
+        .posterior(twostage::fit::MixtureDensity::new(
+            twostage::fit::MlpParams::new(&[4])?.check()?,
+            2,
+        )?)
+        .simulations(200)
+        .validation(0)
+        .calibration(100)
+        .seed(3)
+        .train()?;
     Ok(vec![
+        ("car-posterior", with_posterior),
         ("benchmark-mlp", train(&benchmark, "mlp:4")?),
         ("benchmark-piecewise", train(&benchmark, "piecewise:2,3")?),
         ("benchmark-linear", train(&benchmark, "linear")?),

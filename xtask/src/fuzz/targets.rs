@@ -15,7 +15,8 @@ pub(crate) use on_disk::{NPY_FILES, npy_chart, scratch_root, shard_sets};
 pub(crate) enum Reader {
     /// Estimator files (`Estimator::from_bytes`), then an estimate.
     EstimatorFile,
-    /// The embedded runtime's blobs, then a record streamed through them.
+    /// The embedded runtime's blobs, then a record streamed through them
+    /// (and drawn from, where a blob carries a posterior).
     RuntimeBlob,
     /// Model files (`ModelFile::parse`): built-in sources and equations
     /// are built and simulate one short record; commands never run.
@@ -200,6 +201,10 @@ fn runtime_blob(input: &[u8]) -> bool {
     }
     if let Ok(answer) = stream.finish(&mut theta, &mut widths) {
         let _ = answer.out_of_distribution();
+    }
+    if estimator.has_posterior() {
+        let mut draws = vec![0.0; 8 * q];
+        let _ = stream.finish_with_draws(&mut theta, &mut widths, &mut draws, 1, 0);
     }
     true
 }
