@@ -198,7 +198,7 @@ fn an_estimate_takes_a_sample_its_log_cannot_and_says_which() {
 
 /// A time budget that searches on part of a chart still learns from all
 /// of it: the winner's final fit takes every training record; a posterior
-/// asked of the search has its components chosen.
+/// asked of the search has its components chosen, within the budget.
 #[test]
 fn every_record_of_a_chart_reaches_the_final_fit() {
     let (dir, model) = growth_folder("auto-whole-chart", 420);
@@ -229,8 +229,23 @@ fn every_record_of_a_chart_reaches_the_final_fit() {
             && stderr.contains("the lowest held-out negative log-likelihood of [1, 2]"),
         "{stderr}"
     );
+    // The density's share of the budget is said; the search, in the rest,
+    // fits and scores on part of the chart.
     assert!(
-        stderr.contains("first 200 of the chart's 400 training records")
+        stderr.contains("the posterior's density is fitted within the time budget"),
+        "{stderr}"
+    );
+    let searched: usize = stderr
+        .split("the search fits and scores on the first ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{stderr}"));
+    assert!(
+        (50..400).contains(&searched)
+            && stderr.contains(&format!(
+                "first {searched} of the chart's 400 training records"
+            ))
             && stderr.contains("the winner's final fit takes them all"),
         "{stderr}"
     );

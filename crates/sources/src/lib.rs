@@ -40,6 +40,7 @@ mod progress;
 mod readable;
 pub mod record_file;
 mod records;
+mod records_request;
 mod roles;
 mod shard;
 
@@ -63,6 +64,7 @@ pub use profile::{
 pub use progress::{Progress, Silent, Stage};
 pub use readable::refuse_beyond_memory;
 pub use records::{RecordSource, Records, RunShape};
+pub use records_request::{ChartDir, ChartGiven, RecordsRequest};
 pub use roles::{ChartRole, RoleCounts};
 pub use shard::{ShardIndex, ShardPlan, ShardedChart, fingerprint, simulate_shard};
 pub use twostage_models::{available_memory, readable_bytes};

@@ -197,6 +197,12 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
                     fitted.best_restart().held_out_nll
                 ));
             }
+            if fitted.stopped_at_deadline() {
+                self.progress.note(
+                    "posterior: its fit was stopped at the time budget's end, calibrated on \
+                     held-out records as it is; a larger budget trains it further",
+                );
+            }
             estimator = estimator.with_posterior(fitted)?;
         }
         // The held-out records are fresh draws of the training's

@@ -56,7 +56,7 @@
 mod request;
 mod validation_run;
 
-pub use request::{ChartDir, ChartGiven, RecordsRequest, Trained, TrainingRequest};
+pub use request::{POSTERIOR_SHARE, Trained, TrainingRequest};
 pub use twostage_auto::{
     AutoDesign, AutoOutcome, Budget, BudgetChoiceError, CandidateReport, FinalFit, FinalFits,
 };
@@ -90,9 +90,10 @@ pub use validation_run::{
 };
 
 pub use twostage_sources::{
-    ChartArrays, ChartFiles, ChartRole, CompressedChart, ExperimentFailure, ModelFile, ModelSource,
-    Preset, Progress, RecordSource, ShardIndex, ShardPlan, ShardedChart, Silent, Stage,
-    TEMPLATE as MODEL_FILE_TEMPLATE, compress_chart, fingerprint, fmu_model_file, simulate_shard,
+    ChartArrays, ChartDir, ChartFiles, ChartGiven, ChartRole, CompressedChart, ExperimentFailure,
+    ModelFile, ModelSource, Preset, Progress, RecordSource, RecordsRequest, ShardIndex, ShardPlan,
+    ShardedChart, Silent, Stage, TEMPLATE as MODEL_FILE_TEMPLATE, compress_chart, fingerprint,
+    fmu_model_file, simulate_shard,
 };
 pub use twostage_sources::{
     ClassicMethod, ModelProfile, NamedModel, paper_benchmark, paper_pacejka, recommended_benchmark,

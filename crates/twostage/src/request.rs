@@ -4,9 +4,6 @@
 //! [`TrainingRequest`] and hand it here, so the same request gives the
 //! same estimator file byte for byte whichever door it came through.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-
 use serde::{Deserialize, Serialize};
 use twostage_models::Simulator;
 
@@ -17,131 +14,10 @@ use twostage_fit::{MixtureDensity, RegressorConfig};
 use twostage_sources::NamedModel;
 use twostage_sources::Progress;
 use twostage_sources::RecordSource;
-use twostage_sources::{ChartArrays, ChartFiles, DEFAULT_PRESET_SIMULATIONS, Preset};
+use twostage_sources::{ChartDir, ChartGiven, DEFAULT_PRESET_SIMULATIONS, Preset, RecordsRequest};
 use twostage_sources::{ShardPlan, ShardedChart};
 use twostage_train::{Error, Result};
 use twostage_train::{RunSettings, TwoStage};
-
-/// A chart folder (CSV or NumPy files), and how the estimator file names
-/// it when not by its folder.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ChartDir {
-    /// The folder.
-    pub dir: PathBuf,
-    /// The name the estimator's record gives it (default: the folder).
-    #[serde(default)]
-    pub label: Option<String>,
-}
-
-impl ChartDir {
-    /// The folder `dir`, named by itself.
-    pub fn new(dir: impl Into<PathBuf>) -> Self {
-        Self {
-            dir: dir.into(),
-            label: None,
-        }
-    }
-
-    fn open(&self, model: &dyn Simulator) -> Result<ChartFiles> {
-        let chart = ChartFiles::open(&self.dir, model.spec())?;
-        Ok(match &self.label {
-            Some(label) => chart.labelled(label.clone()),
-            None => chart,
-        })
-    }
-}
-
-/// A chart given to a request in memory or by its folder (the Python
-/// package's `chart` argument: arrays or a folder).
-#[derive(Debug, Clone, PartialEq)]
-pub enum ChartGiven {
-    /// A chart folder.
-    Folder(ChartDir),
-    /// Arrays, and how the estimator file names them.
-    Arrays {
-        /// The chart's arrays.
-        arrays: Arc<ChartArrays>,
-        /// The name the estimator's record gives them.
-        label: String,
-    },
-}
-
-impl ChartGiven {
-    fn open(&self, model: &dyn Simulator) -> Result<ChartFiles> {
-        match self {
-            Self::Folder(dir) => dir.open(model),
-            Self::Arrays { arrays, label } => Ok(ChartFiles::from_arrays(
-                arrays.clone(),
-                model.spec(),
-                label.clone(),
-            )?),
-        }
-    }
-}
-
-/// Where a request's records come from.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum RecordsRequest {
-    /// Simulated by the model as the run goes.
-    #[default]
-    Simulated,
-    /// A chart simulated elsewhere; calibration and validation on charts
-    /// of their own when given, else on records held out of it.
-    Chart {
-        /// The training chart.
-        training: ChartDir,
-        /// A chart of its own for the intervals.
-        #[serde(default)]
-        calibration: Option<ChartDir>,
-        /// A chart of its own for the validation report.
-        #[serde(default)]
-        validation: Option<ChartDir>,
-    },
-    /// Shard files of `twostage simulate --shard`, named by a pattern such
-    /// as `DIR/shard-*`.
-    Shards {
-        /// The pattern.
-        pattern: String,
-    },
-    /// Charts given in memory or by folder ([`Self::Chart`] with arrays
-    /// allowed; a request file cannot hold arrays, so it never has one).
-    #[serde(skip)]
-    Given {
-        /// The training chart.
-        training: ChartGiven,
-        /// A chart of its own for the intervals.
-        calibration: Option<ChartGiven>,
-        /// A chart of its own for the validation report.
-        validation: Option<ChartGiven>,
-    },
-}
-
-impl RecordsRequest {
-    /// The records a `--chart` argument names: shard files when it is a
-    /// pattern (`*`, `?`, `[`) or a `.tsshard` file, else a chart folder.
-    ///
-    /// ```
-    /// use twostage::RecordsRequest;
-    /// assert!(matches!(RecordsRequest::chart("runs/shard-*"), RecordsRequest::Shards { .. }));
-    /// assert!(matches!(RecordsRequest::chart("runs/sir"), RecordsRequest::Chart { .. }));
-    /// ```
-    pub fn chart(argument: impl AsRef<Path>) -> Self {
-        let text = argument.as_ref().to_string_lossy();
-        if text.contains(['*', '?', '[']) || text.ends_with(".tsshard") {
-            Self::Shards {
-                pattern: text.into_owned(),
-            }
-        } else {
-            Self::Chart {
-                training: ChartDir::new(argument.as_ref()),
-                calibration: None,
-                validation: None,
-            }
-        }
-    }
-}
 
 /// Every setting of one training run. `Default` is the command line's
 /// `twostage train` with no option: the model's default preset,
@@ -228,6 +104,11 @@ impl Trained {
         }
     }
 }
+
+/// The share of a time budget the posterior's density is fitted in,
+/// where the automatic design searches and a posterior is asked: the
+/// search takes the rest (decision 091).
+pub const POSTERIOR_SHARE: f64 = 1.0 / 3.0;
 
 impl TrainingRequest {
     /// The steps the run takes, for a line such as "training the benchmark
@@ -396,7 +277,17 @@ impl TrainingRequest {
         simulator: &dyn Simulator,
         progress: &dyn Progress,
     ) -> Result<Trained> {
-        let search = self.search_budget(model)?;
+        let started = std::time::Instant::now();
+        let mut search = self.search_budget(model)?;
+        // A time budget holds the posterior's density too: the search
+        // takes its first part, the density what is left of the whole.
+        let density_by = match (search, self.posterior) {
+            (Some(Budget::Seconds(seconds)), Some(_)) => {
+                search = Some(Budget::Seconds(seconds * (1.0 - POSTERIOR_SHARE)));
+                Some(started + std::time::Duration::from_secs_f64(seconds))
+            }
+            _ => None,
+        };
         if let (Some(budget), None) = (search, self.search) {
             progress.note(&format!(
                 "{} has no preset: searching for a design (automatic design, {}); add the \
@@ -419,8 +310,19 @@ impl TrainingRequest {
             })?;
             // The automatic design chooses the density's components too,
             // by held-out likelihood, the asked count the most.
-            builder = builder.posterior(match search {
+            let density = match search {
                 Some(_) => density.choosing_components(),
+                None => density,
+            };
+            builder = builder.posterior(match density_by {
+                Some(end) => {
+                    progress.note(&format!(
+                        "the posterior's density is fitted within the time budget: the search \
+                         takes its first {:.0}%, the density the rest",
+                        100.0 * (1.0 - POSTERIOR_SHARE)
+                    ));
+                    density.stopped_by(end)
+                }
                 None => density,
             });
         }

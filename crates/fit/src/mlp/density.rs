@@ -54,6 +54,8 @@ pub struct MixtureDensity {
     iterations: usize,
     /// Whether `components` is the most of several counts tried.
     choose: bool,
+    /// When the whole fit must end, the counts tried sharing the time.
+    stop_by: Option<std::time::Instant>,
 }
 
 /// A trained mixture density network: `p(θ | features)`, to evaluate and
@@ -172,6 +174,7 @@ impl MixtureDensity {
             components,
             iterations: Self::DEFAULT_ITERATIONS,
             choose: false,
+            stop_by: None,
         })
     }
 
@@ -214,6 +217,18 @@ impl MixtureDensity {
         self
     }
 
+    /// The same density, its fit ended at `stop_by` if it has not ended
+    /// by then: each count tried gets an equal share of the time left
+    /// when it starts (what an earlier one leaves goes to the later
+    /// ones), and each restart keeps its best held-out weights so far
+    /// ([`super::params::Mlp::stopped_by`]). For a density within a time
+    /// budget; [`FittedMixture::stopped_at_deadline`] says whether it was
+    /// cut short.
+    pub fn stopped_by(mut self, stop_by: std::time::Instant) -> Self {
+        self.stop_by = Some(stop_by);
+        self
+    }
+
     /// The component counts `fit` tries.
     pub fn candidates(&self) -> Vec<usize> {
         if !self.choose {
@@ -251,8 +266,15 @@ impl MixtureDensity {
         supports: &[Support],
     ) -> Result<FittedMixture> {
         let mut best: Option<FittedMixture> = None;
-        for components in self.candidates() {
-            let fitted = self.fit_components(components, x, theta, supports)?;
+        let candidates = self.candidates();
+        for (k, &components) in candidates.iter().enumerate() {
+            let mut network = self.network.clone();
+            if let Some(end) = self.stop_by {
+                let now = std::time::Instant::now();
+                let share = end.saturating_duration_since(now) / (candidates.len() - k) as u32;
+                network.stop_by = Some(now + share);
+            }
+            let fitted = self.fit_components(&network, components, x, theta, supports)?;
             let better = best
                 .as_ref()
                 .is_none_or(|b| fitted.best_restart().held_out_nll < b.best_restart().held_out_nll);
@@ -266,6 +288,7 @@ impl MixtureDensity {
     /// The density of `components` components, fitted.
     fn fit_components(
         &self,
+        p: &MlpParams,
         components: usize,
         x: ArrayView2<'_, f64>,
         theta: ArrayView2<'_, f64>,
@@ -302,7 +325,6 @@ impl MixtureDensity {
             }
             z[[i, j]] = supports[j].to_unbounded(v);
         }
-        let p = &self.network;
         let features = Standardizer::fit(x);
         let unbounded = Standardizer::fit(z.view());
         let xs = features.transform(x).as_standard_layout().to_owned();
@@ -443,6 +465,12 @@ impl FittedMixture {
     /// One report per restart.
     pub fn reports(&self) -> &[DensityRestart] {
         &self.reports
+    }
+
+    /// Whether a deadline ([`MixtureDensity::stopped_by`]) cut its kept
+    /// restart short: it would fit better given more time.
+    pub fn stopped_at_deadline(&self) -> bool {
+        self.best_restart().reason.is_deadline()
     }
 
     /// What the density is and how it was trained, in one line: its

@@ -416,3 +416,32 @@ fn a_choosing_density_keeps_the_count_of_the_lowest_held_out_loss() {
     assert_eq!(told.candidates(), vec![5]);
     assert_eq!(told.choosing_components().candidates(), vec![1, 2, 3, 5]);
 }
+
+/// A density whose time is up still gives a density of every count tried
+/// (each restart takes a step), says it was cut short, and fits worse on
+/// held-out rows than one given its time; without a deadline nothing says
+/// it was cut.
+#[test]
+fn a_deadline_ends_the_fit_and_says_so() {
+    let (x, theta) = correlated(1500, 4);
+    let supports = [Support::Real, Support::Real];
+    let density = MixtureDensity::new(network(&[8], 3), 3)
+        .unwrap()
+        .choosing_components();
+    let cut = density
+        .clone()
+        .stopped_by(std::time::Instant::now())
+        .fit(x.view(), theta.view(), &supports)
+        .unwrap();
+    let whole = density.fit(x.view(), theta.view(), &supports).unwrap();
+    assert!(cut.stopped_at_deadline());
+    assert!(!whole.stopped_at_deadline());
+    assert!(cut.reports().iter().all(|r| r.iterations >= 1));
+    assert!([1, 2, 3].contains(&cut.shape().components));
+    let (xt, tt) = correlated(2000, 8);
+    let (cut_nll, whole_nll) = (
+        cut.mean_nll(xt.view(), tt.view()).unwrap(),
+        whole.mean_nll(xt.view(), tt.view()).unwrap(),
+    );
+    assert!(cut_nll > whole_nll + 0.1, "{cut_nll} against {whole_nll}");
+}
