@@ -313,6 +313,13 @@ fn flash_of(elf: &Path) -> usize {
         .sum()
 }
 
+/// Instructions per SysTick tick from the firmware's first line,
+/// `calibration TICKS`: its loop runs 3 instructions 100000 times.
+fn instructions_per_tick(line: &str) -> f64 {
+    let ticks: f64 = line.strip_prefix("calibration ").unwrap().parse().unwrap();
+    300_000.0 / ticks
+}
+
 fn run(elf: &Path) -> String {
     let output = Command::new("timeout")
         .args([
@@ -408,15 +415,7 @@ fn the_cortex_m4_estimates_as_the_host_within_its_budgets() {
         }
         let stdout = run(&elf);
         let mut lines = stdout.lines();
-        let ticks: f64 = lines
-            .next()
-            .unwrap()
-            .strip_prefix("calibration ")
-            .unwrap()
-            .parse()
-            .unwrap();
-        // The loop runs 3 instructions 100000 times.
-        let per_tick = 300_000.0 / ticks;
+        let per_tick = instructions_per_tick(lines.next().unwrap());
         let header: Vec<&str> = lines.next().unwrap().split(' ').collect();
         let (blob, workspace): (usize, usize) =
             (header[3].parse().unwrap(), header[5].parse().unwrap());
@@ -605,14 +604,7 @@ fn draws_on_the_cortex_m4() -> String {
     let (_, without) = firmware(data.path(), Build::Records, None);
     let stdout = run(&elf);
     let mut lines = stdout.lines();
-    let ticks: f64 = lines
-        .next()
-        .unwrap()
-        .strip_prefix("calibration ")
-        .unwrap()
-        .parse()
-        .unwrap();
-    let per_tick = 300_000.0 / ticks;
+    let per_tick = instructions_per_tick(lines.next().unwrap());
     assert!(lines.next().unwrap().starts_with("case 0 blob"));
     let q = case.estimator.param_names().len();
     let (mut per_draw, mut with_draws) = (0.0f64, 0.0f64);
