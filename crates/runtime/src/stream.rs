@@ -15,7 +15,7 @@ use crate::format::MAX_SIGNALS;
 /// sample that was not finite (for a failed stream), the output samples
 /// an output transform could not take (of the window, for a window), and
 /// the window's length (0: the whole record).
-const STATUS_WORDS: usize = 5;
+pub(crate) const STATUS_WORDS: usize = 5;
 const OPEN: f64 = 0.0;
 const FAILED: f64 = 2.0;
 
@@ -48,7 +48,7 @@ pub(crate) struct Layout {
     scratch: usize,
     /// The posterior's head and one draw's normal numbers (an estimator
     /// with a posterior), last: only a finish that draws cuts them off.
-    posterior: usize,
+    pub(crate) posterior: usize,
     pub(crate) total: usize,
 }
 
@@ -121,7 +121,7 @@ impl Layout {
 
     /// The stream's memory, the window's marks, the input accumulators,
     /// the features and the scratch.
-    fn split<'w>(&self, work: &'w mut [f64]) -> Parts<'w> {
+    pub(crate) fn split<'w>(&self, work: &'w mut [f64]) -> Parts<'w> {
         let (history, rest) = work.split_at_mut(self.history.min(work.len()));
         let (first, rest) = rest.split_at_mut(self.first.min(rest.len()));
         let (marks, rest) = rest.split_at_mut(self.marks.min(rest.len()));
@@ -155,14 +155,14 @@ impl Layout {
 }
 
 /// A workspace cut into its parts.
-struct Parts<'w> {
+pub(crate) struct Parts<'w> {
     memory: Memory<'w>,
     marks: &'w mut [f64],
     family: &'w mut [f64],
     learned: &'w mut [f64],
     linearized: &'w mut [f64],
-    features: &'w mut [f64],
-    scratch: &'w mut [f64],
+    pub(crate) features: &'w mut [f64],
+    pub(crate) scratch: &'w mut [f64],
 }
 
 /// An accumulator kept in a workspace's words.
@@ -246,10 +246,10 @@ pub enum Intervals {
 /// instead, as a control unit re-estimates while the plant runs.
 #[derive(Debug)]
 pub struct Stream<'e, 'a, 'w> {
-    estimator: &'e Estimator<'a>,
-    window: usize,
+    pub(crate) estimator: &'e Estimator<'a>,
+    pub(crate) window: usize,
     status: &'w mut [f64],
-    work: &'w mut [f64],
+    pub(crate) work: &'w mut [f64],
 }
 
 impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
@@ -718,58 +718,6 @@ impl<'e, 'a, 'w> Stream<'e, 'a, 'w> {
             // window alone.
             input_outside_family: input_outside_family(e, signal_summary),
         })
-    }
-}
-
-impl Stream<'_, '_, '_> {
-    /// [`Stream::finish`], then draws of the parameters from the
-    /// posterior the blob carries, given the same features, into `draws`
-    /// (draws x parameters, row after row: as many draws as it holds
-    /// rows; each inside its prior's support). The random numbers are the
-    /// ChaCha8 stream `record` of `seed`'s posterior key, the host's for
-    /// record number `record` of `estimate --samples N --seed seed` (and
-    /// of Python's `Estimator.sample`): the same draws wherever the
-    /// features agree, with no allocation. A record out of distribution
-    /// still gets its draws; the assessment flags it as `finish` does.
-    ///
-    /// # Errors
-    /// [`Error::NoPosterior`] for a blob without one,
-    /// [`Error::NotBuiltIn`] for a build without the feature `posterior`,
-    /// [`Error::DrawCount`] for `draws` not a whole number of draws, and
-    /// those of [`Stream::finish`].
-    pub fn finish_with_draws(
-        &mut self,
-        theta: &mut [f64],
-        half_widths: &mut [f64],
-        draws: &mut [f64],
-        seed: u64,
-        record: u64,
-    ) -> Result<Assessment, Error> {
-        let e = self.estimator;
-        let posterior = e.posterior().ok_or(if e.has_posterior() {
-            Error::NotBuiltIn {
-                feature: "posterior",
-            }
-        } else {
-            Error::NoPosterior
-        })?;
-        if !draws.len().is_multiple_of(e.n_parameters()) {
-            return Err(Error::DrawCount {
-                parameters: e.n_parameters(),
-            });
-        }
-        let assessment = self.finish(theta, half_widths)?;
-        // The posterior's words close the workspace: cut them off first,
-        // so that the parts every finish splits are split as they are.
-        let layout = Layout::of(e, self.window);
-        let own_at = layout.total - STATUS_WORDS - layout.posterior;
-        let (work, own) = self.work.split_at_mut(own_at.min(self.work.len()));
-        let own = own.get_mut(..layout.posterior).unwrap_or_default();
-        let Parts {
-            features, scratch, ..
-        } = layout.split(work);
-        posterior.draw(features, (seed, record), (own, scratch), draws)?;
-        Ok(assessment)
     }
 }
 

@@ -107,7 +107,7 @@ impl Trained {
 
 /// The share of a time budget the posterior's density is fitted in,
 /// where the automatic design searches and a posterior is asked: the
-/// search takes the rest (decision 091).
+/// search takes the rest.
 pub const POSTERIOR_SHARE: f64 = 1.0 / 3.0;
 
 impl TrainingRequest {
