@@ -263,8 +263,9 @@ impl Support {
 
 /// `x` kept within `[low, high]` as `f64::clamp` keeps it (a NaN stays
 /// NaN), without its check that the bounds are ordered: that check's
-/// panic message formats floats, which costs a microcontroller's
-/// firmware about 10 KB of flash (the callers' bounds are ordered).
+/// panic message formats floats, and a microcontroller's firmware would
+/// carry the float formatting for it (the callers' bounds are ordered;
+/// docs/embedded.md has what it cost).
 fn within(x: f64, low: f64, high: f64) -> f64 {
     let mut v = x;
     if v < low {
