@@ -37,6 +37,7 @@
 mod bytes;
 mod correlations;
 mod dd;
+mod draws;
 mod error;
 mod estimator;
 pub mod format;
