@@ -22,9 +22,9 @@ pub struct ValidateArgs {
     #[arg(long, conflicts_with = "gamma")]
     sims: Option<usize>,
     /// Simulate until every certified RMSE is at most K times the observed
-    /// one (doubling r from --sims, at most --max-sims). The certificate
-    /// holds at every r at once, so stopping when it is met keeps its
-    /// confidence.
+    /// one (from --sims, each round as many records as the last predicts,
+    /// at most --max-sims). The certificate holds at every r at once, so
+    /// stopping when it is met keeps its confidence.
     #[arg(long, value_name = "K", conflicts_with = "gamma")]
     target_rmse: Option<f64>,
     /// The most fresh simulations --target-rmse may run.
@@ -85,6 +85,7 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         truth,
         estimates,
         records: r,
+        rounds,
         target,
         posterior,
     } = run;
@@ -93,12 +94,14 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
             TargetRmse::Met { ratio } => writeln!(
                 out,
                 "--target-rmse {k}: met with r = {r} (every certified RMSE within {ratio:.3} \
-                 times the observed)"
+                 times the observed; rounds ended at r = {})",
+                list(&rounds)
             )?,
             TargetRmse::NotMet { ratio } => writeln!(
                 out,
                 "--target-rmse {k}: not met with r = {r} = --max-sims (a certified RMSE is \
-                 {ratio:.3} times the observed): raise --max-sims"
+                 {ratio:.3} times the observed; rounds ended at r = {}): raise --max-sims",
+                list(&rounds)
             )?,
         }
     }
@@ -154,4 +157,13 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Counts as "100, 1600, 9000".
+fn list(counts: &[usize]) -> String {
+    counts
+        .iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -86,7 +86,7 @@ pub use twostage_setting::InvalidSetting;
 pub use twostage_train::{DEFAULT_SEED, Error, Result, Run, RunSettings, TrainedOn, TwoStage};
 pub use twostage_validate::CALIBRATION_DRAWS;
 pub use validation_run::{
-    TargetRmse, Validated, ValidationPlan, certified_ratio, validate_estimator, validate_trained,
+    TargetRmse, Validated, ValidationPlan, validate_estimator, validate_trained,
 };
 
 pub use twostage_sources::{

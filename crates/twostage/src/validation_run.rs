@@ -30,7 +30,8 @@ pub struct ValidationPlan {
     /// Seed of the fresh simulations.
     pub seed: u64,
     /// Simulate until every certified RMSE is at most this many times the
-    /// observed one, doubling r, at most `max_sims`. The certificate holds
+    /// observed one, each round sized by the records the last predicts
+    /// ([`ValidationReport::next_round`]), at most `max_sims`. The certificate holds
     /// at every r at once, so stopping when it is met keeps its
     /// confidence.
     pub target_rmse: Option<f64>,
@@ -84,6 +85,9 @@ pub struct Validated {
     pub estimates: Vec<f64>,
     /// How many records ran.
     pub records: usize,
+    /// The records run by the end of each round, the last `records`: one
+    /// round unless `target_rmse` grew the run.
+    pub rounds: Vec<usize>,
     /// With `target_rmse`: whether it was met.
     pub target: Option<TargetRmse>,
     /// Where the estimator has a posterior: its calibration on the same
@@ -196,6 +200,7 @@ pub fn validate_estimator(
     let design = prior.design(most, plan.seed)?;
     let (mut truth, mut estimates) = (Vec::new(), Vec::new());
     let (mut ranks, mut levels) = (Vec::new(), Vec::new());
+    let mut rounds = vec![r];
     progress.begin_step("validating", most, "records");
     let outcome = loop {
         let done = truth.len() / q;
@@ -248,14 +253,15 @@ pub fn validate_estimator(
         let Some(k) = plan.target_rmse else {
             break (report, None);
         };
-        let ratio = certified_ratio(&report);
+        let ratio = report.certified_ratio();
         if ratio <= k {
             break (report, Some(TargetRmse::Met { ratio }));
         }
         if r == most {
             break (report, Some(TargetRmse::NotMet { ratio }));
         }
-        r = r.saturating_mul(2).min(most);
+        r = report.next_round(k, most);
+        rounds.push(r);
     };
     progress.end_step();
     let (report, target) = outcome;
@@ -273,6 +279,7 @@ pub fn validate_estimator(
         truth,
         estimates,
         records: r,
+        rounds,
         target,
         posterior,
     })
@@ -357,23 +364,4 @@ fn sizes(estimator: &Estimator, plan: &ValidationPlan) -> Result<(usize, usize)>
 fn rows(values: &[f64], r: usize, q: usize) -> ArrayView2<'_, f64> {
     ArrayView2::from_shape((r, q), values)
         .unwrap_or_else(|_| unreachable!("{} values are {r} records of {q}", values.len()))
-}
-
-/// The largest ratio of a certified RMSE to the observed one, over the
-/// parameters and the whole vector (infinite when an observed error is 0,
-/// since no finite r certifies a perfect estimator).
-pub fn certified_ratio(report: &ValidationReport) -> f64 {
-    let ratio = |bound: Option<f64>, observed_mse: f64| match bound {
-        Some(mse_bound) if observed_mse > 0.0 => (mse_bound / observed_mse).sqrt(),
-        _ => f64::INFINITY,
-    };
-    report
-        .parameters
-        .iter()
-        .map(|p| ratio(p.certified.map(|c| c.upper()), p.mse))
-        .chain([ratio(
-            report.certified_total.map(|c| c.upper()),
-            report.total.empirical_mse,
-        )])
-        .fold(0.0, f64::max)
 }

@@ -6,9 +6,7 @@
 
 use twostage::models::Benchmark;
 use twostage::validate::{hoeffding_sample_size, squared_error_bound};
-use twostage::{
-    Estimator, Silent, TargetRmse, TwoStage, ValidationPlan, certified_ratio, validate_estimator,
-};
+use twostage::{Estimator, Silent, TargetRmse, TwoStage, ValidationPlan, validate_estimator};
 
 fn estimator(model: &Benchmark) -> Estimator {
     TwoStage::builder(model)
@@ -43,16 +41,22 @@ fn a_grown_run_stops_at_the_first_round_that_meets_the_target_and_equals_a_run_o
         panic!("{:?}", run.target)
     };
     let r = run.records;
-    assert!(r > 100 && (r / 100).is_power_of_two(), "r = {r}");
+    assert!(r > 100 && run.rounds.first() == Some(&100) && run.rounds.last() == Some(&r));
+    assert!(
+        run.rounds.windows(2).all(|w| w[1] >= w[0] + w[0] / 2),
+        "{:?}",
+        run.rounds
+    );
     assert!(ratio <= 1.5);
     // Each round extends the one before: the same records, bit for bit,
     // as a run of the final size, and the round before it fell short.
     let fixed = validate_estimator(&estimator, &model, &plan(r), &Silent).unwrap();
     assert_eq!(fixed.truth, run.truth);
     assert_eq!(fixed.estimates, run.estimates);
-    assert_eq!(certified_ratio(&fixed.report).to_bits(), ratio.to_bits());
-    let before = validate_estimator(&estimator, &model, &plan(r / 2), &Silent).unwrap();
-    assert!(certified_ratio(&before.report) > 1.5);
+    assert_eq!(fixed.report.certified_ratio().to_bits(), ratio.to_bits());
+    let previous = run.rounds[run.rounds.len() - 2];
+    let before = validate_estimator(&estimator, &model, &plan(previous), &Silent).unwrap();
+    assert!(before.report.certified_ratio() > 1.5);
     assert_eq!(before.truth[..], fixed.truth[..before.truth.len()]);
 
     // Out of room: said, with the ratio reached.

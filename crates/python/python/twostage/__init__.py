@@ -467,8 +467,9 @@ class Estimator:
         bit for bit): ``sims`` records (default 1000), or as many as
         Theorem 1 needs for accuracy ``gamma`` with confidence
         ``1 - delta`` (``delta`` default 1e-3); with ``target_rmse`` K,
-        doubling the records from ``sims`` until every certified RMSE is
-        at most K times the observed one, at most ``max_sims`` (default
+        growing the records from ``sims``, each round as many as the last
+        predicts, until every certified RMSE is at most K times the
+        observed one, at most ``max_sims`` (default
         1,000,000). ``seed`` defaults to the command's, apart from every
         training seed. The model is the estimator's built-in one, or its
         model file (``model_file`` or ``model_toml``). ``progress`` as in
