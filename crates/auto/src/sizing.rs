@@ -102,9 +102,17 @@ pub(crate) fn open_run<'a, S: Simulator + ?Sized>(
             base.run_settings().calibration,
             base.run_settings().validation,
         );
-        let base = match sized.held_out {
-            Some((calibration, validation)) => base.calibration(calibration).validation(validation),
-            None => base,
+        let grown = base.run_settings().certify_within;
+        let most = base.run_settings().max_validation;
+        let base = match (sized.held_out, grown) {
+            (Some((calibration, validation)), Some(k)) => base
+                .calibration(calibration)
+                .validation(validation)
+                .certify_within(k, most),
+            (Some((calibration, validation)), None) => {
+                base.calibration(calibration).validation(validation)
+            }
+            (None, _) => base,
         };
         let run = base.simulations(sized.m).prepare()?;
         if let Some((calibration, validation)) = sized.held_out {
@@ -130,7 +138,7 @@ pub(crate) fn open_run<'a, S: Simulator + ?Sized>(
         ..
     } = sized;
     Ok(SizedRun {
-        run,
+        run: run.with_deadline(deadline),
         m,
         deadline,
         per_simulation,

@@ -82,9 +82,22 @@ pub struct TrainArgs {
     /// Seed of every random choice (default 1; with shards, theirs).
     #[arg(long)]
     seed: Option<u64>,
-    /// Fresh simulations for the validation report (0: none).
-    #[arg(long, default_value_t = RunSettings::default().validation)]
-    validate: usize,
+    /// Fresh simulations for the validation report, exactly (0: none).
+    /// Without it the validation starts with 1000 and grows until the
+    /// certificate is within --certify-within of the observed error.
+    #[arg(long)]
+    validate: Option<usize>,
+    /// Grow the validation (from --validate records, default 1000) until
+    /// every certified RMSE is at most K times the observed one, each
+    /// round as many records as the last predicts, at most
+    /// --max-validate. The default, with K 1.2, where no --validate is
+    /// given; records read from a chart or shards cannot grow, and the
+    /// report says how many it would take.
+    #[arg(long, value_name = "K")]
+    certify_within: Option<f64>,
+    /// The most validation records growing may take (default 1,000,000).
+    #[arg(long, value_name = "M")]
+    max_validate: Option<usize>,
     /// Fresh simulations for the conformal intervals (0: none; adaptive
     /// intervals need at least 100). With 4000 the coverage on fresh
     /// records stays within about 2 points of the level.
@@ -158,11 +171,11 @@ impl TrainArgs {
             posterior: self.posterior,
             settings: RunSettings {
                 seed: self.seed,
-                validation: self.validate,
                 calibration: self.calibrate,
                 alpha: self.alpha,
                 ..RunSettings::default()
-            },
+            }
+            .validation_asked(self.validate, self.certify_within, self.max_validate),
             records,
         })
     }

@@ -26,7 +26,7 @@ use crate::{PyEstimator, to_python};
 /// `progress(event, stage, count)`, and as `progress("note" or "status",
 /// message, 0)` for the run's messages.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None, posterior=None))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, certify_within=None, max_validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None, posterior=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn train(
     py: Python<'_>,
@@ -41,6 +41,8 @@ pub(crate) fn train(
     fit: Option<&str>,
     seed: Option<u64>,
     validate: Option<usize>,
+    certify_within: Option<f64>,
+    max_validate: Option<usize>,
     calibrate: Option<usize>,
     alpha: Option<f64>,
     progress: Option<Py<PyAny>>,
@@ -122,11 +124,11 @@ pub(crate) fn train(
         posterior,
         settings: RunSettings {
             seed,
-            validation: validate.unwrap_or(defaults.validation),
             calibration: calibrate.unwrap_or(defaults.calibration),
             alpha: alpha.unwrap_or(defaults.alpha),
             ..defaults
-        },
+        }
+        .validation_asked(validate, certify_within, max_validate),
         records,
     };
     let python = match (&named, simulator) {

@@ -73,19 +73,22 @@ where
     simulate_and_compress(
         simulator,
         compressor,
-        design,
+        (design, 0..design.len(), true),
         stage,
         max_failure_fraction,
         |_| {},
     )
 }
 
-/// [`compress_chart`] for one stage of a training run, telling `progress`
-/// of each finished experiment.
+/// [`compress_chart`] of the experiments `range` of `design` (their
+/// indices the design's), for one stage of a training run, telling
+/// `progress` of each finished experiment; the failure allowance is
+/// taken on the range alone. The records' input family is summarized
+/// where `family` asks for it (it costs about as much as compressing).
 pub(crate) fn compress_chart_observed<S, C>(
     simulator: &S,
     compressor: &C,
-    design: &Design,
+    rows: (&Design, std::ops::Range<usize>, bool),
     stage: Stage,
     max_failure_fraction: f64,
     progress: &dyn Progress,
@@ -94,11 +97,11 @@ where
     S: Simulator + ?Sized,
     C: Compressor + ?Sized,
 {
-    progress.begin(stage, design.len());
+    progress.begin(stage, rows.1.len());
     let chart = simulate_and_compress(
         simulator,
         compressor,
-        design,
+        rows,
         stage.label(),
         max_failure_fraction,
         |_| progress.advance(stage, 1),
@@ -110,7 +113,7 @@ where
 fn simulate_and_compress<S, C>(
     simulator: &S,
     compressor: &C,
-    design: &Design,
+    (design, range, family): (&Design, std::ops::Range<usize>, bool),
     stage: &'static str,
     max_failure_fraction: f64,
     finished: impl Fn(usize) + Sync,
@@ -119,7 +122,7 @@ where
     S: Simulator + ?Sized,
     C: Compressor + ?Sized,
 {
-    let m = design.len();
+    let (first, m) = (range.start, range.len());
     let q = design.prior().dim();
     let n = compressor.n_features();
     let mut thetas = vec![0.0; m * q];
@@ -136,7 +139,7 @@ where
         .map_init(
             || (Vec::<IoData>::new(), Workspace::new()),
             |(records, work), (c, (theta_block, alpha_block))| {
-                let start = c * block;
+                let start = first + c * block;
                 let len = theta_block.len() / q;
                 records.resize_with(len, IoData::default);
                 let simulated =
@@ -153,7 +156,8 @@ where
                     });
                     finished(start + k);
                     match outcome {
-                        Ok(()) => inputs.include(record),
+                        Ok(()) if family => inputs.include(record),
+                        Ok(()) => {}
                         Err(error) => failed.push(ExperimentFailure {
                             index: start + k,
                             theta: theta_block[k * q..(k + 1) * q].to_vec(),
@@ -175,14 +179,13 @@ where
     }
     within_allowance(stage, &failures, m, max_failure_fraction)?;
     let failed: Vec<usize> = failures.iter().map(|f| f.index).collect();
-    let indices: Vec<usize> = (0..m)
-        .filter(|i| failed.binary_search(i).is_err())
-        .collect();
+    let indices: Vec<usize> = range.filter(|i| failed.binary_search(i).is_err()).collect();
     let keep = |values: Vec<f64>, width: usize| -> Array2<f64> {
         let rows = indices.len();
         let mut kept = Vec::with_capacity(rows * width);
         for &i in &indices {
-            kept.extend_from_slice(&values[i * width..(i + 1) * width]);
+            let at = i - first;
+            kept.extend_from_slice(&values[at * width..(at + 1) * width]);
         }
         Array2::from_shape_vec((rows, width), kept)
             .unwrap_or_else(|_| unreachable!("rows * width values were kept"))
@@ -192,7 +195,7 @@ where
         features: keep(features, n),
         indices,
         failures,
-        inputs: Some(inputs),
+        inputs: family.then_some(inputs),
     })
 }
 
@@ -200,6 +203,24 @@ impl CompressedChart {
     /// Experiments tried: kept and failed.
     pub fn total(&self) -> usize {
         self.indices.len() + self.failures.len()
+    }
+
+    /// `more`'s rows after these: the chart of two ranges of one design,
+    /// compressed by one compressor, `more`'s following this one's.
+    pub(crate) fn extend(&mut self, more: CompressedChart) {
+        let stack = |a: &Array2<f64>, b: &Array2<f64>| {
+            ndarray::concatenate(ndarray::Axis(0), &[a.view(), b.view()])
+                .unwrap_or_else(|_| unreachable!("one compressor's rows are of one width"))
+        };
+        self.thetas = stack(&self.thetas, &more.thetas);
+        self.features = stack(&self.features, &more.features);
+        self.indices.extend(more.indices);
+        self.failures.extend(more.failures);
+        match (self.inputs.as_mut(), more.inputs) {
+            (Some(all), Some(family)) => all.merge(&family),
+            (None, family) => self.inputs = family,
+            (Some(_), None) => {}
+        }
     }
 }
 

@@ -297,7 +297,7 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
                 return compress_chart_observed(
                     self.simulator,
                     compressor,
-                    &design,
+                    (&design, 0..count, true),
                     stage(role),
                     self.max_failure_fraction,
                     self.progress,
@@ -327,6 +327,59 @@ impl<'a, S: Simulator + ?Sized> Records<'a, S> {
             self.max_failure_fraction,
         )?;
         Ok(Some(chart))
+    }
+
+    /// Whether the records of `role` can grow past the run's count: only
+    /// simulated ones, whose design extends with the same rows.
+    pub fn grows(&self, role: ChartRole) -> bool {
+        matches!(self.kind, Kind::Simulated) && role != ChartRole::Training
+    }
+
+    /// `chart`, the records of `role` as [`Self::compressed`] gave them,
+    /// grown to `to` experiments of the same design: the chart a run of
+    /// `to` records of that role would have given, bit for bit, but for
+    /// its input family, which stays the first records' (the new ones'
+    /// inputs are not summarized). A source that cannot grow
+    /// ([`Self::grows`]) leaves it as it is.
+    ///
+    /// # Errors
+    /// Records that would not fit in memory, too many failed records among
+    /// the new ones, or a malformed prior.
+    pub fn grow(
+        &self,
+        role: ChartRole,
+        compressor: &CompressorConfig,
+        chart: &mut CompressedChart,
+        to: usize,
+    ) -> Result<()> {
+        let from = chart.total();
+        if !self.grows(role) || to <= from {
+            return Ok(());
+        }
+        let q = self.training_prior.dim() as u64;
+        let each = 8 * (q + compressor.n_features() as u64);
+        // The setting that let the chart grow is the one to lower.
+        let name = match role {
+            ChartRole::Validation => "max_validation",
+            other => other.label(),
+        };
+        refuse_beyond_memory(
+            name,
+            to,
+            each,
+            &format!("{} records' parameters and features", role.label()),
+        )?;
+        let design = role.design(&self.training_prior, to, self.seed)?;
+        let more = compress_chart_observed(
+            self.simulator,
+            compressor,
+            (&design, from..to, false),
+            stage(role),
+            self.max_failure_fraction,
+            self.progress,
+        )?;
+        chart.extend(more);
+        Ok(())
     }
 
     /// Every training record, uncompressed, with its parameters, in design

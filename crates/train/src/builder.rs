@@ -137,9 +137,22 @@ impl<'a, S: Simulator + ?Sized> TwoStage<'a, S> {
         self.settings.alpha = alpha;
         self
     }
-    /// Fresh simulations r for the validation report (0: none).
+    /// Fresh simulations r for the validation report, exactly (0: none);
+    /// a later [`certify_within`](Self::certify_within) makes them the
+    /// first round.
     pub fn validation(mut self, r: usize) -> Self {
         self.settings.validation = r;
+        self.settings.certify_within = None;
+        self
+    }
+    /// Grow the validation, from its first round of
+    /// [`validation`](Self::validation) records, until every certified RMSE
+    /// is at most `k` times the observed one, at most `max` records
+    /// ([`RunSettings::certify_within`]; the default, from 1000 records,
+    /// with `k` 1.2).
+    pub fn certify_within(mut self, k: f64, max: usize) -> Self {
+        self.settings.certify_within = Some(k);
+        self.settings.max_validation = max;
         self
     }
     /// Confidence parameter delta of the Hoeffding bound.

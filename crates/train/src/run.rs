@@ -12,7 +12,9 @@ use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};
 use twostage_validate::CALIBRATION_DRAWS;
 
 use crate::settings::RunSettings;
+use std::time::{Duration, Instant};
 use twostage_compress::CompressorConfig;
+use twostage_sources::CompressedChart;
 
 /// What the fitted stages were trained on, for the estimator's record.
 #[derive(Debug, Clone)]
@@ -40,6 +42,9 @@ pub struct Run<'a, S: ?Sized> {
     settings: RunSettings,
     records: Records<'a, S>,
     progress: &'a dyn Progress,
+    /// The end of the run's time budget: a validation grown toward its
+    /// certificate starts no round that would end past it.
+    deadline: Option<Instant>,
 }
 
 impl<S: ?Sized> std::fmt::Debug for Run<'_, S> {
@@ -73,7 +78,17 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             settings,
             records,
             progress,
+            deadline: None,
         }
+    }
+
+    /// The run under a time budget ending at `deadline`: a validation
+    /// grown toward its certificate starts no round predicted to end past
+    /// it (the run's outcome then depends on the machine, as the budget's
+    /// search does).
+    pub fn with_deadline(mut self, deadline: Option<Instant>) -> Self {
+        self.deadline = deadline;
+        self
     }
 
     /// The simulator.
@@ -230,7 +245,8 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
                 self.seed(),
             )?;
         }
-        if let Some(chart) = self
+        let started = Instant::now();
+        if let Some(mut chart) = self
             .records
             .compressed(ChartRole::Validation, estimator.compressor())?
         {
@@ -240,8 +256,9 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
                 chart.features.view(),
                 self.settings.delta,
             )?;
-            // The posterior's calibration on the same records, said beside
-            // the certificate (the file keeps the report, not this).
+            // The posterior's calibration on the first round's records,
+            // said beside the certificate (the file keeps the report, not
+            // this): a grown validation would cost it draws per record.
             if let Some(calibration) = estimator.posterior_calibration(
                 chart.thetas.view(),
                 chart.features.view(),
@@ -251,7 +268,117 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
                 self.progress
                     .note(calibration.describe(estimator.param_names()).trim_end());
             }
+            self.certify_within(&mut estimator, &mut chart, started.elapsed())?;
         }
         Ok(estimator.with_input_family(inputs))
     }
+
+    /// Grows the validation `chart` (validated on already, in `took`)
+    /// until every certified RMSE is within the settings' multiple of the
+    /// observed one, each round as many records as the last predicts
+    /// ([`ValidationReport::next_round`]), then validates `estimator` on
+    /// all of them; said in a note either way. Stops short, and says so,
+    /// at the settings' most records, at a source whose records cannot
+    /// grow, or where the next round would end past the run's deadline.
+    fn certify_within(
+        &self,
+        estimator: &mut Estimator,
+        chart: &mut CompressedChart,
+        mut took: Duration,
+    ) -> Result<()> {
+        let Some(k) = self.settings.certify_within else {
+            return Ok(());
+        };
+        let most = self.settings.max_validation;
+        let mut rounds = vec![chart.total()];
+        let ended = loop {
+            let Some(report) = estimator.validation() else {
+                return Ok(());
+            };
+            let ratio = report.certified_ratio();
+            let r = chart.total();
+            if ratio <= k {
+                break Ended::Met(ratio);
+            }
+            let wanted = report.records_for_ratio(k);
+            if !self.records.grows(ChartRole::Validation) {
+                break Ended::Fixed(ratio, wanted);
+            }
+            if r >= most {
+                break Ended::Most(ratio, wanted);
+            }
+            let next = report.next_round(k, most);
+            let pace = took.as_secs_f64() / rounds.last().map_or(1, |&n| n.max(1)) as f64;
+            if let Some(deadline) = self.deadline {
+                let round = Duration::from_secs_f64(pace * (next - r) as f64);
+                if Instant::now() + round > deadline {
+                    break Ended::Deadline(ratio, wanted);
+                }
+            }
+            let started = Instant::now();
+            self.records
+                .grow(ChartRole::Validation, estimator.compressor(), chart, next)?;
+            estimator.validate(
+                chart.thetas.view(),
+                chart.features.view(),
+                self.settings.delta,
+            )?;
+            took = started.elapsed();
+            rounds.push(next - r);
+        };
+        let r = chart.total();
+        let records = |wanted: Option<u64>| match wanted {
+            Some(n) => format!("about {n} records would bring it within {k}"),
+            None => "no number of records would: an observed error is 0".to_string(),
+        };
+        let note = match ended {
+            Ended::Met(ratio) if rounds.len() == 1 => format!(
+                "certificate within {ratio:.3} times the observed RMSE on the first {r} \
+                 validation records (asked: {k})"
+            ),
+            Ended::Met(ratio) => format!(
+                "validation grown to r = {r} records (rounds of {}) until every certified RMSE \
+                 is within {k} times the observed: {ratio:.3}",
+                list(&rounds)
+            ),
+            Ended::Fixed(ratio, wanted) => format!(
+                "the certificate is {ratio:.3} times the observed RMSE on the {r} validation \
+                 records read; {} (records read from charts or shards cannot grow: simulate \
+                 a larger validation chart)",
+                records(wanted)
+            ),
+            Ended::Most(ratio, wanted) => format!(
+                "the certificate is {ratio:.3} times the observed RMSE on r = {r} validation \
+                 records, the most allowed (rounds of {}); {}: raise the most",
+                list(&rounds),
+                records(wanted)
+            ),
+            Ended::Deadline(ratio, wanted) => format!(
+                "the certificate is {ratio:.3} times the observed RMSE on r = {r} validation \
+                 records (rounds of {}), the time budget's end before the next round; {}",
+                list(&rounds),
+                records(wanted)
+            ),
+        };
+        self.progress.note(&note);
+        Ok(())
+    }
+}
+
+/// How a grown validation ended: its certified-to-observed ratio, and
+/// where short, the records the last round predicts.
+enum Ended {
+    Met(f64),
+    Fixed(f64, Option<u64>),
+    Most(f64, Option<u64>),
+    Deadline(f64, Option<u64>),
+}
+
+/// Counts as "1000, 15000".
+fn list(counts: &[usize]) -> String {
+    counts
+        .iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
 }

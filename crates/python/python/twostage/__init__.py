@@ -582,6 +582,8 @@ def train(
     fit: Optional[str] = None,
     seed: Optional[int] = None,
     validate: Optional[int] = None,
+    certify_within: Optional[float] = None,
+    max_validate: Optional[int] = None,
     calibrate: Optional[int] = None,
     alpha: Optional[float] = None,
     progress: Union[bool, Callable[[str, str, int], Any]] = True,
@@ -622,7 +624,11 @@ def train(
     (``"mlp:10"``...) override the model's default preset as the CLI's
     flags do; ``seed``, ``validate``, ``calibrate`` and ``alpha`` left as
     None take the command line's defaults (1, 1000, 4000, 0.1), which the
-    Rust side holds once. ``progress=True`` shows tqdm bars when tqdm is installed;
+    Rust side holds once. As there, ``validate`` fixes the validation's
+    records; without it they grow from 1000 until every certified RMSE is
+    within ``certify_within`` (default 1.2) times the observed one, at most
+    ``max_validate`` (default 1,000,000) records; ``certify_within`` with
+    ``validate`` grows from ``validate`` records. ``progress=True`` shows tqdm bars when tqdm is installed;
     a callable receives ``(event, stage, count)``, and ``("note", message,
     0)`` or ``("status", message, 0)`` for the run's messages. The
     simulation, compression and fitting run in Rust without the GIL.
@@ -653,6 +659,8 @@ def train(
         fit=fit,
         seed=seed,
         validate=validate,
+        certify_within=certify_within,
+        max_validate=max_validate,
         calibrate=calibrate,
         alpha=alpha,
         progress=_progress(progress),

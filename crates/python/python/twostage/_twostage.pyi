@@ -177,6 +177,8 @@ def train(
     fit: Optional[str] = None,
     seed: Optional[int] = None,
     validate: Optional[int] = None,
+    certify_within: Optional[float] = None,
+    max_validate: Optional[int] = None,
     calibrate: Optional[int] = None,
     alpha: Optional[float] = None,
     progress: Optional[Callable[[str, str, int], Any]] = None,
