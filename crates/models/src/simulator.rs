@@ -129,6 +129,20 @@ impl ModelSpec {
         self
     }
 
+    /// The same model with other parameters: `names` and their `prior`
+    /// (what is left of it when some parameters are held at values,
+    /// [`crate::WithFixed`]), a name per parameter of the prior. The
+    /// car's equations, which take both of its parameters, are not
+    /// carried over.
+    pub(crate) fn with_parameters(&self, names: Vec<String>, prior: Prior) -> Self {
+        Self {
+            param_names: names,
+            prior,
+            car_equations: None,
+            ..self.clone()
+        }
+    }
+
     /// The car's equations, when the model is the car.
     pub fn car_equations(&self) -> Option<&CarEquations> {
         self.car_equations.as_ref()
