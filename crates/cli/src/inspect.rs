@@ -27,6 +27,7 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
             "lower": e.lower(),
             "upper": e.upper(),
             "priors": e.marginals(),
+            "fixed": e.fixed(),
             "validation": e.validation(),
             "input_family": e.input_family().map(|f| f.describe(&e.signal_names().inputs)),
             "input_shapes": e.input_shapes().map(|s| serde_json::json!({
@@ -63,6 +64,14 @@ pub fn inspect(path: &PathBuf, json: bool, out: &mut dyn Write) -> Result<()> {
                 "  parameter   {name} in {range} (central 1 - 2e-6 of its prior {marginal})"
             )?;
         }
+    }
+    for held in e.fixed().values() {
+        writeln!(
+            out,
+            "  fixed       {} = {} (held while training, not estimated)",
+            held.name,
+            format_f64(held.value)
+        )?;
     }
     let shape = e.record_shape();
     writeln!(

@@ -4,6 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Result;
+use twostage::models::FixedValues;
 use twostage::{Budget, ChartDir, RecordsRequest, RunSettings, TrainingRequest};
 
 use crate::OrUsage;
@@ -79,6 +80,13 @@ pub struct TrainArgs {
     /// log-likelihood is kept.
     #[arg(long, value_name = "K")]
     posterior: Option<usize>,
+    /// Hold a parameter at a value, not estimated (NAME=VALUE,
+    /// repeatable): the estimator is of the others, the model file
+    /// unchanged, and every later check, refinement, joint fit and
+    /// validation through the estimator holds it too. Simulated records
+    /// only.
+    #[arg(long, value_name = "NAME=VALUE")]
+    fix: Vec<String>,
     /// Seed of every random choice (default 1; with shards, theirs).
     #[arg(long)]
     seed: Option<u64>,
@@ -177,6 +185,7 @@ impl TrainArgs {
             }
             .validation_asked(self.validate, self.certify_within, self.max_validate),
             records,
+            fix: FixedValues::parse(&self.fix).map_err(|e| usage(format!("--fix: {e}")))?,
         })
     }
 }
@@ -194,6 +203,14 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<()> {
     // Before the work: a training that ends unable to save is lost.
     twostage::check_writable(&args.out)?;
     let request = args.request()?;
+    if !request.fix.is_empty() {
+        // Before the work: a name the model does not have is a usage error.
+        let described = model.named().chart_model()?;
+        request
+            .fix
+            .positions(described.spec())
+            .map_err(|e| usage(format!("--fix: {e}")))?;
+    }
     if matches!(request.records, RecordsRequest::Shards { .. })
         && (args.validate_chart.is_some() || args.calibrate_chart.is_some())
     {

@@ -6,7 +6,7 @@ use std::cell::OnceCell;
 use std::sync::Arc;
 
 use twostage_estimator::Estimator;
-use twostage_models::{BuiltinModel, Simulator};
+use twostage_models::{BuiltinModel, FixedValues, Simulator, WithFixed};
 use twostage_sources::NamedModel;
 
 /// One simulator of the model shared by everything an estimate request
@@ -40,6 +40,9 @@ pub type SharedSimulator = Arc<dyn Simulator>;
 pub struct EstimatorModel<'a> {
     named: Cow<'a, NamedModel>,
     given: bool,
+    /// The parameters the estimator's model held at values: its
+    /// simulator holds them too.
+    fixed: FixedValues,
     built: OnceCell<SharedSimulator>,
 }
 
@@ -57,6 +60,7 @@ impl<'a> EstimatorModel<'a> {
         Ok(Self {
             named: NamedModel::trained_on(&estimator.training().model, given)?,
             given: given.is_some(),
+            fixed: estimator.fixed().clone(),
             built: OnceCell::new(),
         })
     }
@@ -67,27 +71,35 @@ impl<'a> EstimatorModel<'a> {
     }
 
     /// The built-in model whose exact likelihood refines the estimates:
-    /// the estimator's built-in model where no model was given (a model
-    /// given, built-in or a file, is refined through its simulator).
+    /// the estimator's built-in model where no model was given and no
+    /// parameter is held (a model given, built-in or a file, and a model
+    /// with parameters held, are refined through their simulators).
     pub fn exact_likelihood(&self) -> Option<BuiltinModel> {
-        if self.given {
+        if self.given || !self.fixed.is_empty() {
             None
         } else {
             self.named.as_builtin()
         }
     }
 
-    /// The model's simulator, with its noise: built at the first call,
-    /// the same one (its processes started once) at every later call.
+    /// The model's simulator, with its noise and the estimator's held
+    /// values: built at the first call, the same one (its processes
+    /// started once) at every later call.
     ///
     /// # Errors
     /// A simulator that cannot be built (a model file's program that does
-    /// not start, an FMU that does not load).
+    /// not start, an FMU that does not load), or held values the model
+    /// does not take (a model file since edited).
     pub fn simulator(&self) -> twostage_train::Result<SharedSimulator> {
         if let Some(built) = self.built.get() {
             return Ok(Arc::clone(built));
         }
-        let built: SharedSimulator = self.named.simulator()?.into();
+        let whole = self.named.simulator()?;
+        let built: SharedSimulator = if self.fixed.is_empty() {
+            whole.into()
+        } else {
+            Arc::new(WithFixed::new(whole, &self.fixed).map_err(twostage_sources::Error::from)?)
+        };
         Ok(Arc::clone(self.built.get_or_init(|| built)))
     }
 }

@@ -8,7 +8,7 @@ use twostage_fit::Predictor;
 
 use crate::error::FileError;
 use crate::estimator::Estimator;
-use crate::layout::{EstimatorFields, Stages, V1, V2, V3, V5, V6, V9};
+use crate::layout::{EstimatorFields, Stages, V1, V2, V3, V5, V6, V9, V10};
 
 impl TryFrom<EstimatorFields> for Estimator {
     type Error = FileError;
@@ -16,13 +16,17 @@ impl TryFrom<EstimatorFields> for Estimator {
     /// this adds the ones between components, so that a decoded estimator
     /// estimates (or errs) and never indexes out of range.
     fn try_from(f: EstimatorFields) -> std::result::Result<Self, FileError> {
-        let V9 {
-            v6:
-                V6 {
-                    v5: V5 { v4, input_family },
-                    input_shapes,
+        let V10 {
+            v9:
+                V9 {
+                    v6:
+                        V6 {
+                            v5: V5 { v4, input_family },
+                            input_shapes,
+                        },
+                    posterior,
                 },
-            posterior,
+            fixed,
         } = f;
         let V3 {
             v2:
@@ -65,6 +69,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             input_family,
             input_shapes,
             posterior,
+            fixed,
         };
         estimator
             .check_parameters()
@@ -114,6 +119,18 @@ impl Estimator {
                     lower[j], upper[j], param_names[j]
                 ));
             }
+        }
+        // A parameter held at a value is not one the estimator estimates.
+        if let Some(held) = self
+            .fixed
+            .values()
+            .iter()
+            .find(|v| param_names.contains(&v.name) || !v.value.is_finite())
+        {
+            return Err(format!(
+                "{} held at {} and estimated too",
+                held.name, held.value
+            ));
         }
         Ok(())
     }

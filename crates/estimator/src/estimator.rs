@@ -7,7 +7,8 @@ use serde::Serialize;
 use twostage_compress::{Compressor, Workspace};
 use twostage_fit::Predictor;
 use twostage_models::{
-    InputDeviation, InputFamily, InputShapes, IoData, Marginal, ModelSpec, generic_signal_names,
+    FixedValues, InputDeviation, InputFamily, InputShapes, IoData, Marginal, ModelSpec,
+    generic_signal_names,
 };
 use twostage_validate::{ConformalIntervals, ValidationReport};
 
@@ -42,7 +43,7 @@ impl EstimateWorkspace {
 /// Serialized (the file's payload, the JSON export) as its fields in this
 /// order; files are read through the layouts of `layout.rs`, which check
 /// them.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Estimator {
     pub(crate) param_names: Vec<String>,
     pub(crate) lower: Vec<f64>,
@@ -74,8 +75,51 @@ pub struct Estimator {
     /// The parameters' conditional density given the features (format
     /// version 9 on, written only where there is one, so an estimator
     /// without keeps its bytes).
-    #[serde(skip_serializing_if = "Option::is_none")]
     pub(crate) posterior: Option<FittedMixture>,
+    /// The model's parameters held at values, not estimated (format
+    /// version 10 on, written only where there are any).
+    pub(crate) fixed: FixedValues,
+}
+
+impl Serialize for Estimator {
+    /// Its fields in order (the file's payload, the JSON export). The
+    /// posterior and the values held close it and are written only where
+    /// there are any, so that every estimator keeps the bytes of the
+    /// oldest version that holds it (`layout.rs`); an estimator with
+    /// values held writes its posterior's slot, empty or not, before them.
+    fn serialize<S: serde::Serializer>(
+        &self,
+        serializer: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut fields = serializer.serialize_struct("Estimator", 17)?;
+        fields.serialize_field("param_names", &self.param_names)?;
+        fields.serialize_field("lower", &self.lower)?;
+        fields.serialize_field("upper", &self.upper)?;
+        fields.serialize_field("shape", &self.shape)?;
+        fields.serialize_field("compressor", &self.compressor)?;
+        fields.serialize_field("regressor", &self.regressor)?;
+        fields.serialize_field("training", &self.training)?;
+        fields.serialize_field("intervals", &self.intervals)?;
+        fields.serialize_field("validation", &self.validation)?;
+        fields.serialize_field("envelope", &self.envelope)?;
+        fields.serialize_field("adaptive", &self.adaptive)?;
+        fields.serialize_field("marginals", &self.marginals)?;
+        fields.serialize_field("signal_names", &self.signal_names)?;
+        fields.serialize_field("input_family", &self.input_family)?;
+        fields.serialize_field("input_shapes", &self.input_shapes)?;
+        if self.posterior.is_some() || !self.fixed.is_empty() {
+            fields.serialize_field("posterior", &self.posterior)?;
+        } else {
+            fields.skip_field("posterior")?;
+        }
+        if self.fixed.is_empty() {
+            fields.skip_field("fixed")?;
+        } else {
+            fields.serialize_field("fixed", &self.fixed)?;
+        }
+        fields.end()
+    }
 }
 
 impl Estimator {
@@ -103,6 +147,17 @@ impl Estimator {
             inputs: generic_signal_names("u", self.shape.n_inputs),
             outputs: generic_signal_names("y", self.shape.n_outputs),
         })
+    }
+    /// The model's parameters held at values (`--fix`): not estimated,
+    /// put back in place wherever the estimator's model is simulated.
+    pub fn fixed(&self) -> &FixedValues {
+        &self.fixed
+    }
+    /// The estimator of a model whose parameters `fixed` were held at
+    /// values while it trained ([`twostage_models::WithFixed`]).
+    pub fn with_fixed(mut self, fixed: FixedValues) -> Self {
+        self.fixed = fixed;
+        self
     }
     /// The record shape it was trained on.
     pub fn record_shape(&self) -> &RecordShape {
@@ -584,6 +639,7 @@ impl Estimator {
             input_family: None,
             input_shapes: None,
             posterior: None,
+            fixed: FixedValues::default(),
         }
     }
 

@@ -6,7 +6,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 0..8 | magic `TWOSTAGE` |
-//! | 8..12 | format version (u32): 9 for an estimator with a conditional density of its parameters, else 8 for one whose stage 1 linearizes the model, 7 for one whose stage 1 learns, else 6 (1 to 5 are still read) |
+//! | 8..12 | format version (u32): 10 for an estimator of a model with parameters held at values, else 9 for one with a conditional density of its parameters, else 8 for one whose stage 1 linearizes the model, 7 for one whose stage 1 learns, else 6 (1 to 5 are still read) |
 //! | 12..20 | payload length in bytes (u64) |
 //! | 20..24 | CRC-32 (IEEE 802.3) of the payload (u32) |
 //! | 24.. | payload: postcard-encoded estimator |
@@ -15,7 +15,7 @@ use std::path::Path;
 
 use crate::error::{Error, FileError, Result};
 use crate::estimator::Estimator;
-use crate::layout::{EstimatorFields, V1, V2, V3, V5, V6, ValidationReportV3};
+use crate::layout::{EstimatorFields, V1, V2, V3, V5, V6, V9, ValidationReportV3};
 use twostage_validate::ValidationReport;
 
 /// The first eight bytes of every estimator file.
@@ -33,9 +33,13 @@ pub const MAGIC: &[u8; 8] = b"TWOSTAGE";
 /// learned stage 1. Version 8, likewise, a stage 1 that linearizes the
 /// model (`linearized`), written only for such an estimator; version 9
 /// adds the parameters' conditional density (the posterior's draws),
-/// written only for an estimator that has one. Every version's layout
+/// written only for an estimator that has one; version 10 the parameters
+/// held at values (`--fix`), written only for an estimator of such a
+/// model. Every version's layout
 /// lives in `layout.rs`.
-pub const FORMAT_VERSION: u32 = 9;
+pub const FORMAT_VERSION: u32 = 10;
+/// The version of an estimator file with a conditional density.
+const WITH_POSTERIOR: u32 = 9;
 /// The version of an estimator file whose stage 1 linearizes the model.
 const WITH_LINEARIZED: u32 = 8;
 /// The version of an estimator file whose stage 1 learns.
@@ -56,8 +60,10 @@ impl Estimator {
         })?;
         let mut bytes = Vec::with_capacity(HEADER + payload.len());
         bytes.extend_from_slice(MAGIC);
-        let version = if self.posterior.is_some() {
+        let version = if !self.fixed.is_empty() {
             FORMAT_VERSION
+        } else if self.posterior.is_some() {
+            WITH_POSTERIOR
         } else if self.compressor().linearizes() {
             WITH_LINEARIZED
         } else if self.compressor().learns() {
@@ -170,6 +176,7 @@ impl Estimator {
             4 => read::<V3<ValidationReport>>(payload).map(|v4| V5::from(v4).into()),
             5 => read::<V5>(payload).map(Into::into),
             6..=8 => read::<V6>(payload).map(Into::into),
+            9 => read::<V9>(payload).map(Into::into),
             _ => read::<EstimatorFields>(payload),
         };
         fields

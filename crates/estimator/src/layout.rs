@@ -6,7 +6,7 @@
 //! at a time, and checked as a whole into an [`Estimator`](crate::Estimator).
 
 use serde::Deserialize;
-use twostage_models::{InputFamily, InputShapes, Marginal};
+use twostage_models::{FixedValues, InputFamily, InputShapes, Marginal};
 use twostage_validate::{ConformalIntervals, HoeffdingBound, ParameterReport, ValidationReport};
 
 use crate::adaptive::AdaptiveIntervals;
@@ -121,16 +121,39 @@ pub(crate) struct V6 {
     pub(crate) input_shapes: Option<InputShapes>,
 }
 
-/// Format version 9 adds the parameters' conditional density; today's
-/// layout.
+/// Format version 9 adds the parameters' conditional density.
 #[derive(Deserialize)]
 pub(crate) struct V9 {
     pub(crate) v6: V6,
     pub(crate) posterior: Option<FittedMixture>,
 }
 
-/// Today's layout (format version 9).
-pub(crate) type EstimatorFields = V9;
+/// Format version 10 adds the parameters held at values; today's layout.
+#[derive(Deserialize)]
+pub(crate) struct V10 {
+    pub(crate) v9: V9,
+    pub(crate) fixed: FixedValues,
+}
+
+/// Today's layout (format version 10).
+pub(crate) type EstimatorFields = V10;
+
+impl From<V9> for V10 {
+    /// Nothing held.
+    fn from(v9: V9) -> Self {
+        Self {
+            v9,
+            fixed: FixedValues::default(),
+        }
+    }
+}
+
+impl From<V6> for V10 {
+    /// No conditional density, nothing held.
+    fn from(v6: V6) -> Self {
+        V9::from(v6).into()
+    }
+}
 
 impl From<V6> for V9 {
     /// No conditional density.
@@ -142,8 +165,8 @@ impl From<V6> for V9 {
     }
 }
 
-impl From<V5> for V9 {
-    /// No input shapes, no conditional density.
+impl From<V5> for V10 {
+    /// No input shapes, no conditional density, nothing held.
     fn from(v5: V5) -> Self {
         V6::from(v5).into()
     }

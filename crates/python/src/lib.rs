@@ -163,6 +163,17 @@ impl PyEstimator {
         self.inner.param_names().to_vec()
     }
 
+    /// The parameters held at values while it trained, name to value.
+    #[getter]
+    fn fixed(&self) -> Vec<(String, f64)> {
+        self.inner
+            .fixed()
+            .values()
+            .iter()
+            .map(|v| (v.name.clone(), v.value))
+            .collect()
+    }
+
     /// The prior box's lower corner.
     #[getter]
     fn lower(&self) -> Vec<f64> {

@@ -26,7 +26,7 @@ use crate::{PyEstimator, to_python};
 /// `progress(event, stage, count)`, and as `progress("note" or "status",
 /// message, 0)` for the run's messages.
 #[pyfunction]
-#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, certify_within=None, max_validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None, posterior=None))]
+#[pyo3(signature = (model=None, *, model_file=None, model_toml=None, simulator=None, batch_size=64, preset=None, sims=None, compress=None, fit=None, seed=None, validate=None, certify_within=None, max_validate=None, calibrate=None, alpha=None, progress=None, chart=None, validate_chart=None, calibrate_chart=None, auto=false, budget_seconds=None, budget_sims=None, posterior=None, fix=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn train(
     py: Python<'_>,
@@ -53,6 +53,7 @@ pub(crate) fn train(
     budget_seconds: Option<f64>,
     budget_sims: Option<usize>,
     posterior: Option<usize>,
+    fix: Option<Bound<'_, pyo3::types::PyDict>>,
 ) -> PyResult<PyEstimator> {
     let search = twostage::Budget::chosen(auto, budget_seconds, budget_sims).map_err(|e| {
         let name = match (e, budget_seconds) {
@@ -130,6 +131,7 @@ pub(crate) fn train(
         }
         .validation_asked(validate, certify_within, max_validate),
         records,
+        fix: fixed_values(fix)?,
     };
     let python = match (&named, simulator) {
         (NamedModel::File(file), Some(function)) => {
@@ -212,4 +214,22 @@ fn chart_given(chart: &Bound<'_, PyAny>, name: &str) -> PyResult<ChartGiven> {
         }),
         label,
     })
+}
+
+/// `fix={name: value}` as the values held, in the dict's order.
+fn fixed_values(
+    fix: Option<Bound<'_, pyo3::types::PyDict>>,
+) -> PyResult<twostage::models::FixedValues> {
+    let mut pairs: Vec<(String, f64)> = Vec::new();
+    for (name, value) in fix.iter().flat_map(|d| d.iter()) {
+        let name: String = name
+            .extract()
+            .map_err(|_| PyValueError::new_err(format!("fix: the key {name} is not a str")))?;
+        let value: f64 = value.extract().map_err(|_| {
+            PyValueError::new_err(format!("fix: {name}'s value {value} is not a number"))
+        })?;
+        pairs.push((name, value));
+    }
+    twostage::models::FixedValues::from_pairs(pairs.iter().map(|(n, v)| (n.as_str(), *v)))
+        .map_err(|e| PyValueError::new_err(e.to_string()))
 }

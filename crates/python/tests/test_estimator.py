@@ -39,6 +39,24 @@ def test_the_same_seed_gives_the_cli_s_file(small, tmp_path):
     assert other.to_bytes() != estimator.to_bytes()
 
 
+def test_a_held_parameter_is_the_cli_s_and_said(tmp_path):
+    """``fix=`` is ``--fix``: the same file bit for bit, the parameter held
+    said by ``fixed`` and gone from ``parameters``; a name the model does
+    not have is refused, naming those it has."""
+    held = twostage.train(model="pacejka", fix={"pK2": -1.05}, progress=False, **SMALL)
+    assert held.parameters == ["pK1"]
+    assert held.fixed == {"pK2": -1.05}
+    out = tmp_path / "cli.tsest"
+    cli(
+        "train", "--model", "pacejka", "--fix", "pK2=-1.05", "--sims", "300",
+        "--validate", "100", "--calibrate", "100", "--seed", "5", "--out", str(out),
+        "--quiet",
+    )
+    assert out.read_bytes() == held.to_bytes()
+    with pytest.raises(ValueError, match=r"no parameter 'mass'.*pK1, pK2"):
+        twostage.train(model="pacejka", fix={"mass": 1500.0}, progress=False, **SMALL)
+
+
 ONE_REQUEST_MODEL = """
 [model]
 name = "one-request"

@@ -5,7 +5,7 @@
 //! same estimator file byte for byte whichever door it came through.
 
 use serde::{Deserialize, Serialize};
-use twostage_models::Simulator;
+use twostage_models::{FixedValues, Simulator, WithFixed};
 
 use twostage_auto::{AutoDesign, AutoOutcome, Budget};
 use twostage_compress::CompressorConfig;
@@ -64,6 +64,11 @@ pub struct TrainingRequest {
     pub settings: RunSettings,
     /// Where the records come from.
     pub records: RecordsRequest,
+    /// The model's parameters held at values (`--fix NAME=VALUE`): the
+    /// estimator estimates the others, and records that its model holds
+    /// them. Simulated records only: a chart's were simulated at their
+    /// own values.
+    pub fix: FixedValues,
 }
 
 /// What a request trained: an estimator, and the candidates of a search.
@@ -93,6 +98,18 @@ impl Trained {
         match self {
             Self::Designed(estimator) => estimator,
             Self::Searched(outcome) => outcome.estimator,
+        }
+    }
+
+    /// The same, its estimator of a model whose parameters `fixed` were
+    /// held at values ([`Estimator::with_fixed`]).
+    pub fn with_fixed(self, fixed: FixedValues) -> Self {
+        match self {
+            Self::Designed(estimator) => Self::Designed(estimator.with_fixed(fixed)),
+            Self::Searched(mut outcome) => {
+                outcome.estimator = outcome.estimator.with_fixed(fixed);
+                Self::Searched(outcome)
+            }
         }
     }
 
@@ -272,6 +289,35 @@ impl TrainingRequest {
     /// that does not parse; shards of another model description; what
     /// [`TwoStage::train`] or [`AutoDesign`] report.
     pub fn train_with(
+        &self,
+        model: &NamedModel,
+        simulator: &dyn Simulator,
+        progress: &dyn Progress,
+    ) -> Result<Trained> {
+        if self.fix.is_empty() {
+            return self.train_on(model, simulator, progress);
+        }
+        if !matches!(self.records, RecordsRequest::Simulated) {
+            return Err(Error::setting(
+                "fix",
+                self.fix.to_string(),
+                "a chart's or shards' records were simulated at their own values of these \
+                 parameters: hold them on simulated records, or simulate a chart without them",
+            ));
+        }
+        let held = WithFixed::new(simulator, &self.fix).map_err(twostage_sources::Error::from)?;
+        progress.note(&format!(
+            "holding {} (not estimated): the estimator is of {}",
+            self.fix,
+            held.spec().param_names().join(", ")
+        ));
+        Ok(self
+            .train_on(model, &held, progress)?
+            .with_fixed(self.fix.clone()))
+    }
+
+    /// [`Self::train_with`] on `simulator` as it is.
+    fn train_on(
         &self,
         model: &NamedModel,
         simulator: &dyn Simulator,

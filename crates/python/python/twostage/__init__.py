@@ -86,6 +86,13 @@ class Estimator:
         return self._native.parameters
 
     @property
+    def fixed(self) -> dict[str, float]:
+        """The parameters held at values while it trained (``fix=``),
+        name to value: not estimated, held by its checks and
+        refinements."""
+        return dict(self._native.fixed)
+
+    @property
     def lower(self) -> list[float]:
         """Lower corner of the prior box."""
         return self._native.lower
@@ -594,6 +601,7 @@ def train(
     budget_seconds: Optional[float] = None,
     budget_sims: Optional[int] = None,
     posterior: Optional[int] = None,
+    fix: Optional[dict[str, float]] = None,
 ) -> Estimator:
     """Train an estimator with the command line's defaults: the same
     arguments and seed give the same file, bit for bit, as ``twostage
@@ -646,6 +654,10 @@ def train(
     covariances), that ``Estimator.sample`` draws from, as ``twostage
     train --posterior K`` does; with ``auto`` K is the most, the count of
     the lowest held-out negative log-likelihood kept.
+
+    ``fix={"name": value}`` holds parameters at values, as ``--fix`` does:
+    the estimator estimates the others (``Estimator.fixed`` says what was
+    held), and its checks, refinements and validations hold them too.
     """
     native = _train(
         model,
@@ -668,6 +680,7 @@ def train(
         budget_seconds=budget_seconds,
         budget_sims=budget_sims,
         posterior=posterior,
+        fix=fix,
         chart=chart,
         validate_chart=validate_chart,
         calibrate_chart=calibrate_chart,
