@@ -331,11 +331,13 @@ impl AutoOutcome {
         }
         let stepped: usize = self.steps.iter().map(|s| s.simulations).sum();
         if self.added_simulations > stepped {
+            let rows = self.final_fit.rows();
+            let of_all = of_the_chart(&self.final_fit, self.simulations, self.failures);
             writeln!(
                 f,
-                "so the winner's final fit took {} more simulations: fitted on {} records",
+                "so the winner's final fit took {} more simulations: fitted on {rows} \
+                 records{of_all}",
                 self.added_simulations - stepped,
-                self.final_fit.rows()
             )?;
         }
         if let FinalFit::Compared {
@@ -534,9 +536,49 @@ pub struct FinalFits {
     pub rival_anew: bool,
 }
 
+/// Where the final fit's rows fall short of the chart's kept records,
+/// how many of the chart's `simulations` it fitted and why (the file's m
+/// counts them all); else nothing.
+fn of_the_chart(final_fit: &FinalFit, simulations: usize, failures: usize) -> String {
+    let (rows, kept) = (final_fit.rows(), simulations - failures);
+    if rows >= kept {
+        return String::new();
+    }
+    let why = match final_fit {
+        FinalFit::Compared { .. } => "held out to compare the fits",
+        _ => "not reached by the fit",
+    };
+    format!(
+        " of the {simulations} training records (inspect's m; the other {} {why})",
+        kept - rows
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fitted_rows_short_of_the_chart_are_said_beside_its_m() {
+        let anew = FinalFit::Anew { rows: 5466 };
+        assert_eq!(of_the_chart(&anew, 5466, 0), "");
+        assert_eq!(
+            of_the_chart(&anew, 6295, 9),
+            " of the 6295 training records (inspect's m; the other 820 not reached by the fit)"
+        );
+        let compared = FinalFit::Compared {
+            rows: 5466,
+            fits: FinalFits {
+                compared: 829,
+                further: 0.02,
+                rival: 0.021,
+                rival_of: RivalNetwork::Candidate(0),
+                rival_anew: true,
+            },
+            stopped: false,
+        };
+        assert!(of_the_chart(&compared, 6295, 0).ends_with("829 held out to compare the fits)"));
+    }
 
     #[test]
     fn more_records_are_tried_unless_the_learning_curve_was_measured_flat() {
