@@ -60,6 +60,14 @@ pub fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<()> {
                 runtime.workspace_len(),
                 8 * runtime.workspace_len()
             )?;
+            if !estimator.fixed().is_empty() {
+                writeln!(
+                    out,
+                    "it estimates {}; {} held while training, not in the blob",
+                    estimator.param_names().join(", "),
+                    estimator.fixed()
+                )?;
+            }
             if runtime.has_posterior() {
                 writeln!(
                     out,

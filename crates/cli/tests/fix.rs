@@ -42,6 +42,15 @@ fn a_fixed_parameter_is_said_held_and_refined_around() {
     );
     assert!(!printed.contains("parameter   pK2"), "{printed}");
 
+    // The runtime's blob estimates pK1 and says so.
+    let blob = dir.join("held.blob");
+    let out = twostage(&["export", "--estimator", path(&file), "--out", path(&blob)]);
+    assert!(
+        text(&out.stdout).contains("it estimates pK1; pK2 = -1.05 held while training"),
+        "{}",
+        text(&out.stdout)
+    );
+
     // A record of the car at pK2 = -1.05: the check and the refinement
     // run the car with pK2 held, and the refined pK1 is near its truth.
     let record = dir.join("record.csv");
