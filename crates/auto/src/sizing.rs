@@ -52,8 +52,27 @@ impl<S: Simulator + ?Sized> SizedRun<'_, S> {
         let held_out = settings.calibration + settings.validation;
         if let Some((per_simulation, search)) = search_seconds_measured(budget, charted, held_out) {
             self.per_simulation = Some(per_simulation);
-            self.deadline = Some(start + Duration::from_secs_f64(search));
+            let kept = certificate_seconds(budget, settings);
+            self.deadline = Some(start + Duration::from_secs_f64((search - kept).max(0.0)));
         }
+    }
+}
+
+/// The share of a time budget kept for a validation that grows toward
+/// its certificate ([`RunSettings::certify_within`]), where the records
+/// are simulated: the search ends that much earlier, and the validation's
+/// rounds take what is left before the budget's end.
+const CERTIFICATE_SHARE: f64 = 0.1;
+
+/// The seconds of `budget` kept for the certificate's growth under
+/// `settings` (none for a simulation budget, a fixed validation, or
+/// none at all).
+fn certificate_seconds(budget: Budget, settings: &RunSettings) -> f64 {
+    match budget {
+        Budget::Seconds(t) if settings.certify_within.is_some() && settings.validation > 0 => {
+            CERTIFICATE_SHARE * t
+        }
+        _ => 0.0,
     }
 }
 
@@ -137,8 +156,14 @@ pub(crate) fn open_run<'a, S: Simulator + ?Sized>(
         per_simulation,
         ..
     } = sized;
+    // The run's own rounds (a validation growing toward its certificate)
+    // may take the whole budget; the search ends before them.
+    let end = match budget {
+        Budget::Seconds(t) if t.is_finite() && t > 0.0 => Some(start + Duration::from_secs_f64(t)),
+        _ => None,
+    };
     Ok(SizedRun {
-        run: run.with_deadline(deadline),
+        run: run.with_deadline(end),
         m,
         deadline,
         per_simulation,
@@ -215,7 +240,7 @@ fn chart_size<S: Simulator + ?Sized>(
                     }
                     held_out_sizes = Some((calibration, validation));
                 }
-                let search = t - reserve;
+                let search = (t - reserve - certificate_seconds(budget, settings)).max(0.0);
                 let affordable =
                     (0.2 * search / per_simulation).min(SIMULATIONS_PER_BUDGET_SECOND * search);
                 (

@@ -125,7 +125,7 @@ fn the_presets_write_the_files_they_always_wrote() {
             (
                 "benchmark-defaults",
                 &["train", "--model", "benchmark"],
-                0xe399588dd369979a,
+                0x035457e9e4ce81e8,
             ),
             (
                 "benchmark-defaults-validation-fixed",

@@ -277,9 +277,10 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
     /// until every certified RMSE is within the settings' multiple of the
     /// observed one, each round as many records as the last predicts
     /// ([`ValidationReport::next_round`]), then validates `estimator` on
-    /// all of them; said in a note either way. Stops short, and says so,
-    /// at the settings' most records, at a source whose records cannot
-    /// grow, or where the next round would end past the run's deadline.
+    /// all of them; said in a note either way. Under the run's deadline a
+    /// round takes as many records as the time left affords. Stops short,
+    /// and says so, at the settings' most records, at a source whose
+    /// records cannot grow, or where the time left affords too few.
     fn certify_within(
         &self,
         estimator: &mut Estimator,
@@ -307,11 +308,17 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             if r >= most {
                 break Ended::Most(ratio, wanted);
             }
-            let next = report.next_round(k, most);
-            let pace = took.as_secs_f64() / rounds.last().map_or(1, |&n| n.max(1)) as f64;
+            let mut next = report.next_round(k, most);
             if let Some(deadline) = self.deadline {
-                let round = Duration::from_secs_f64(pace * (next - r) as f64);
-                if Instant::now() + round > deadline {
+                // As many records as the time left affords at the last
+                // round's pace (a tenth of it kept for validating them):
+                // the bound holds at every r, so a shorter round still
+                // tightens it.
+                let pace = took.as_secs_f64() / rounds.last().map_or(1, |&n| n.max(1)) as f64;
+                let left = deadline.saturating_duration_since(Instant::now());
+                let affordable = (0.9 * left.as_secs_f64() / pace.max(1e-12)).min(most as f64);
+                next = next.min(r.saturating_add(affordable as usize));
+                if next <= r + r.div_ceil(100) {
                     break Ended::Deadline(ratio, wanted);
                 }
             }
@@ -355,7 +362,7 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             ),
             Ended::Deadline(ratio, wanted) => format!(
                 "the certificate is {ratio:.3} times the observed RMSE on r = {r} validation \
-                 records (rounds of {}), the time budget's end before the next round; {}",
+                 records (rounds of {}), as many as the time budget afforded; {}",
                 list(&rounds),
                 records(wanted)
             ),

@@ -163,3 +163,30 @@ fn a_chart_s_validation_cannot_grow_and_says_how_many_records_it_would_take() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_deadline_passed_ends_the_growth_at_the_first_round_and_says_so() {
+    let model = model();
+    let notes = Notes::default();
+    let run = TwoStage::builder(&model)
+        .preset(twostage::paper_benchmark())
+        .simulations(400)
+        .settings(RunSettings {
+            calibration: 200,
+            validation: 300,
+            certify_within: Some(1.05),
+            seed: Some(4),
+            ..RunSettings::default()
+        })
+        .progress(&notes)
+        .prepare()
+        .unwrap()
+        .with_deadline(Some(std::time::Instant::now()));
+    let estimator = run.fit().unwrap();
+    assert_eq!(estimator.validation().unwrap().total.r, 300);
+    let said = notes.about_the_certificate();
+    assert!(
+        said.contains("as many as the time budget afforded"),
+        "{said}"
+    );
+}

@@ -226,11 +226,11 @@ impl ValidationReport {
 
     /// The size of the next round of a validation grown until every
     /// certified RMSE is within `k` times the observed one, at most
-    /// `most` records: the predicted need ([`Self::records_for_ratio`]),
-    /// at least half again the records run (a prediction that falls short
-    /// costs a round, not a crawl) and at most sixteen times them (a
-    /// first round too small to predict from does not jump to the
-    /// maximum).
+    /// `most` records: a tenth above the predicted need
+    /// ([`Self::records_for_ratio`], which falls short where the margin
+    /// still shrinks like `1/sqrt(r)`), at least a tenth above the records
+    /// run and at most sixteen times them (a first round too small to
+    /// predict from does not jump to the maximum).
     ///
     /// ```
     /// use ndarray::Array2;
@@ -239,17 +239,18 @@ impl ValidationReport {
     /// let estimate = Array2::from_shape_fn((1000, 1), |(i, _)| truth[[i, 0]] + 0.02 * ((i % 5) as f64 - 2.0));
     /// let report = ValidationReport::new(&["theta".into()], truth.view(), estimate.view(), &[-0.9], &[0.9], 1e-3, None)?;
     /// let next = report.next_round(1.2, 1_000_000);
-    /// assert!((1500..=16_000).contains(&next));
+    /// let predicted = report.records_for_ratio(1.2).unwrap() as usize;
+    /// assert_eq!(next, (predicted + predicted.div_ceil(10)).clamp(1100, 16_000));
     /// assert_eq!(report.next_round(1.2, 1200), 1200);
     /// # Ok::<(), twostage_validate::ValidateError>(())
     /// ```
     pub fn next_round(&self, k: f64, most: usize) -> usize {
         let r = usize::try_from(self.total.r).unwrap_or(usize::MAX);
-        let (least, largest) = (r.saturating_add(r.div_ceil(2)), r.saturating_mul(16));
+        let (least, largest) = (r.saturating_add(r.div_ceil(10)), r.saturating_mul(16));
         let predicted = self
             .records_for_ratio(k)
             .and_then(|n| usize::try_from(n).ok())
-            .unwrap_or(largest);
+            .map_or(largest, |n| n.saturating_add(n.div_ceil(10)));
         predicted.clamp(least, largest).min(most)
     }
 }
