@@ -63,7 +63,9 @@ pub struct TrainArgs {
     /// --auto: wall-clock seconds for the whole run (machine-dependent
     /// outcome): a pilot simulation times the model, the calibration and
     /// validation records (--calibrate, --validate) are reserved first,
-    /// the search and final fit get the rest. Where the reserve would take
+    /// and a tenth for the validation's growth toward its certificate
+    /// (--certify-within), the search and final fit get the rest. Where
+    /// the reserve would take
     /// more than half the budget, both sets shrink alike to what half
     /// affords (at least 100 each, said in a note); a budget too small
     /// even for those is refused with the smallest budget it accepts.
