@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use ndarray::Array2;
+use twostage::validate::rounds_listed;
 use twostage::{Estimator, TargetRmse, Validated, ValidationPlan, validate_trained};
 
 use crate::usage;
@@ -95,13 +96,13 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
                 out,
                 "--target-rmse {k}: met with r = {r} (every certified RMSE within {ratio:.3} \
                  times the observed; rounds ended at r = {})",
-                list(&rounds)
+                rounds_listed(&rounds)
             )?,
             TargetRmse::NotMet { ratio } => writeln!(
                 out,
                 "--target-rmse {k}: not met with r = {r} = --max-sims (a certified RMSE is \
                  {ratio:.3} times the observed; rounds ended at r = {}): raise --max-sims",
-                list(&rounds)
+                rounds_listed(&rounds)
             )?,
         }
     }
@@ -157,13 +158,4 @@ pub fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Counts as "100, 1600, 9000".
-fn list(counts: &[usize]) -> String {
-    counts
-        .iter()
-        .map(usize::to_string)
-        .collect::<Vec<_>>()
-        .join(", ")
 }

@@ -9,7 +9,7 @@ use twostage_estimator::{Estimator, TrainingInfo};
 use twostage_fit::{FittedRegressor, MixtureDensity, RegressorConfig};
 use twostage_models::{InputFamily, Simulator};
 use twostage_sources::{ChartRole, ForModel, Progress, Records, Stage};
-use twostage_validate::CALIBRATION_DRAWS;
+use twostage_validate::{CALIBRATION_DRAWS, rounds_listed};
 
 use crate::settings::RunSettings;
 use std::time::{Duration, Instant};
@@ -346,7 +346,7 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             Ended::Met(ratio) => format!(
                 "validation grown to r = {r} records (rounds of {}) until every certified RMSE \
                  is within {k} times the observed: {ratio:.3}",
-                list(&rounds)
+                rounds_listed(&rounds)
             ),
             Ended::Fixed(ratio, wanted) => format!(
                 "the certificate is {ratio:.3} times the observed RMSE on the {r} validation \
@@ -357,13 +357,13 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
             Ended::Most(ratio, wanted) => format!(
                 "the certificate is {ratio:.3} times the observed RMSE on r = {r} validation \
                  records, the most allowed (rounds of {}); {}: raise the most",
-                list(&rounds),
+                rounds_listed(&rounds),
                 records(wanted)
             ),
             Ended::Deadline(ratio, wanted) => format!(
                 "the certificate is {ratio:.3} times the observed RMSE on r = {r} validation \
                  records (rounds of {}), as many as the time budget afforded; {}",
-                list(&rounds),
+                rounds_listed(&rounds),
                 records(wanted)
             ),
         };
@@ -379,13 +379,4 @@ enum Ended {
     Fixed(f64, Option<u64>),
     Most(f64, Option<u64>),
     Deadline(f64, Option<u64>),
-}
-
-/// Counts as "1000, 15000".
-fn list(counts: &[usize]) -> String {
-    counts
-        .iter()
-        .map(usize::to_string)
-        .collect::<Vec<_>>()
-        .join(", ")
 }

@@ -44,7 +44,7 @@ pub use conformal::ConformalIntervals;
 pub use error::{InvalidSetting, Result, ValidateError};
 pub use hoeffding::{HoeffdingBound, hoeffding_gamma, hoeffding_sample_size, squared_error_bound};
 pub use posterior::{CALIBRATION_DRAWS, COVERAGE_LEVELS, PosteriorCalibration};
-pub use report::{ParameterReport, ValidationReport};
+pub use report::{ParameterReport, ValidationReport, rounds_listed};
 
 #[cfg(test)]
 mod tests {

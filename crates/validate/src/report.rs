@@ -311,6 +311,19 @@ impl std::fmt::Display for ValidationReport {
     }
 }
 
+/// A grown validation's rounds as a note says them: "1000, 15000".
+///
+/// ```
+/// assert_eq!(twostage_validate::rounds_listed(&[1000, 15000]), "1000, 15000");
+/// ```
+pub fn rounds_listed(rounds: &[usize]) -> String {
+    rounds
+        .iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
