@@ -129,11 +129,8 @@ impl ModelSpec {
         self
     }
 
-    /// The same model with other parameters: `names` and their `prior`
-    /// (what is left of it when some parameters are held at values,
-    /// [`crate::WithFixed`]), a name per parameter of the prior. The
-    /// car's equations, which take both of its parameters, are not
-    /// carried over.
+    /// The same model with the parameters `names` of `prior` (those left
+    /// by [`crate::WithFixed`]), without the car's equations (of both).
     pub(crate) fn with_parameters(&self, names: Vec<String>, prior: Prior) -> Self {
         Self {
             param_names: names,

@@ -12,11 +12,12 @@ use twostage::models::IoData;
 use twostage::sources::csv_rows::DataFileError;
 use twostage::{EstimateRequest, EstimateWith};
 
+use crate::arrays::shape_error;
 use crate::simulator::PythonProgress;
 use crate::through_model::{
     check_settings, checked_dict, named_model, one_record, one_row, prepared,
 };
-use crate::{joint, shape_error, through_model, to_python};
+use crate::{joint, through_model, to_python};
 
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check<'py>(

@@ -16,7 +16,8 @@ use twostage::{
     EstimateRequest, EstimateWith, Estimating, GivenValues, NamedModel, RecordCheck, RecordEstimate,
 };
 
-use crate::{as_batch, non_finite, records, to_python};
+use crate::arrays::{as_batch, non_finite, records};
+use crate::to_python;
 
 /// The model named by one of `model` (built-in), `model_file` or
 /// `model_toml` (a model file's text), or `None` when none is given.

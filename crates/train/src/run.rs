@@ -43,7 +43,7 @@ pub struct Run<'a, S: ?Sized> {
     records: Records<'a, S>,
     progress: &'a dyn Progress,
     /// The end of the run's time budget: a validation grown toward its
-    /// certificate starts no round that would end past it.
+    /// certificate takes no more records than the time left affords.
     deadline: Option<Instant>,
 }
 
@@ -83,9 +83,9 @@ impl<'a, S: Simulator + ?Sized> Run<'a, S> {
     }
 
     /// The run under a time budget ending at `deadline`: a validation
-    /// grown toward its certificate starts no round predicted to end past
-    /// it (the run's outcome then depends on the machine, as the budget's
-    /// search does).
+    /// grown toward its certificate takes no more records than the time
+    /// left affords (the run's outcome then depends on the machine, as
+    /// the budget's search does).
     pub fn with_deadline(mut self, deadline: Option<Instant>) -> Self {
         self.deadline = deadline;
         self
