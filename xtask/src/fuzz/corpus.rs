@@ -172,7 +172,7 @@ pub(crate) fn write() -> Result<()> {
 }
 
 /// Small estimators of every kind a file holds: a network, pieces, a
-/// linear map, and the car's two parameters.
+/// linear map, the car's two parameters, a posterior, a parameter held.
 fn estimators() -> Result<Vec<(&'static str, twostage::Estimator)>> {
     let benchmark = Benchmark::builder().n_samples(120).build()?;
     let car = PacejkaCar::builder().n_samples(100).build()?;
@@ -200,7 +200,13 @@ fn estimators() -> Result<Vec<(&'static str, twostage::Estimator)>> {
         .calibration(100)
         .seed(3)
         .train()?;
+    // A parameter held at a value: format 10's list after the posterior's
+    // empty slot.
+    let fixed = twostage::models::FixedValues::parse(&["pK2=-1.05"])?;
+    let held = twostage::models::WithFixed::new(&car, &fixed)?;
+    let with_fixed = train(&held, "mlp:3")?.with_fixed(fixed);
     Ok(vec![
+        ("car-fixed", with_fixed),
         ("car-posterior", with_posterior),
         ("benchmark-mlp", train(&benchmark, "mlp:4")?),
         ("benchmark-piecewise", train(&benchmark, "piecewise:2,3")?),
