@@ -759,10 +759,29 @@ fn the_demo_trains_validates_and_estimates_a_fresh_record() {
     let out = twostage(&["demo", "--theta", "-0.3"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let report = text(&out.stdout);
+    // The validation grew until the certificate is within 1.2 times the
+    // error seen, and the report is of all its records.
+    let r: usize = report
+        .split("validated on ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{report}"));
+    assert!(r > 1000, "{report}");
     assert!(
-        report.contains("r = 1000 records unseen in training"),
+        report.contains(&format!("r = {r} records unseen in training")),
         "{report}"
     );
+    let rmse = |after: &str| -> f64 {
+        report
+            .split(after)
+            .nth(1)
+            .and_then(|rest| rest.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{after}: {report}"))
+    };
+    let ratio = rmse("RMSE <= ") / rmse("theta  RMSE ");
+    assert!(ratio > 1.0 && ratio <= 1.2, "{ratio}: {report}");
     let estimate: f64 = report
         .split("estimated theta = ")
         .nth(1)
