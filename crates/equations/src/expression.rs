@@ -9,7 +9,7 @@ use exmex::{Express, FlatEx};
 
 use crate::instruction::{Instruction, run};
 use crate::jit::Native;
-use crate::ops::{EquationOps, Traced};
+use crate::ops::{DecimalMatcher, EquationOps, Traced};
 use crate::{EquationError, Names};
 
 /// Several right sides compiled into one run over the value table, each
@@ -234,7 +234,7 @@ impl Expression {
                     .into(),
             ));
         }
-        let flat = FlatEx::<Traced, EquationOps>::parse(text)
+        let flat = FlatEx::<Traced, EquationOps, DecimalMatcher>::parse(text)
             .map_err(|e| error(position_of(text, e.msg()), syntax_message(e.msg())))?;
         let mut slots = Vec::with_capacity(flat.var_names().len());
         for name in flat.var_names() {

@@ -15,7 +15,7 @@
 
 use std::str::FromStr;
 
-use exmex::{BinOp, MakeOperators, Operator};
+use exmex::{BinOp, MakeOperators, MatchLiteral, Operator};
 
 /// What `then` gives where its condition is false: a NaN whose bits no
 /// arithmetic produces, which `else` replaces by its right side. An
@@ -291,6 +291,40 @@ impl FromStr for Traced {
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         s.parse().map(Self::Number)
+    }
+}
+
+/// Numbers as an equation writes them: digits with at most one decimal
+/// point, and an exponent (`2.0e5`, `1E-3`) where digits follow the `e`.
+#[derive(Clone, Debug)]
+pub(crate) struct DecimalMatcher;
+
+impl MatchLiteral for DecimalMatcher {
+    fn is_literal(text: &str) -> Option<&str> {
+        let bytes = text.as_bytes();
+        let digits_from = |start: usize| {
+            start
+                + bytes[start..]
+                    .iter()
+                    .take_while(|b| b.is_ascii_digit())
+                    .count()
+        };
+        let whole = digits_from(0);
+        let mut end = whole;
+        if bytes.get(end) == Some(&b'.') {
+            end = digits_from(end + 1);
+        }
+        if end == 0 || (end == 1 && whole == 0) {
+            return None;
+        }
+        if let Some(b'e' | b'E') = bytes.get(end) {
+            let sign = usize::from(matches!(bytes.get(end + 1), Some(b'+' | b'-')));
+            let exponent = digits_from(end + 1 + sign);
+            if exponent > end + 1 + sign {
+                end = exponent;
+            }
+        }
+        Some(&text[..end])
     }
 }
 

@@ -292,3 +292,39 @@ fn mistakes_are_refused_at_load_named() {
     };
     assert_eq!(error_of(&zero, &spec).equation, "substeps");
 }
+
+/// Numbers in exponent notation read as Rust reads them, in any place an
+/// expression holds a number; an `e` without digits after it is no
+/// exponent.
+#[test]
+fn numbers_in_exponent_notation_are_numbers() {
+    let spec = spec(&["a"], &[], &["y"], 1.0, 3);
+    let output = |expression: &str| {
+        let text = EquationsText {
+            time: Time::Discrete,
+            states: vec![State::new("x", "0", "x")],
+            outputs: vec![Equation::new("y", expression)],
+            ..EquationsText::default()
+        };
+        let mut record = IoData::zeros(3, 0, 1);
+        let model = compile(&text, &spec)?;
+        model.respond(&[2.0], &mut record, None).unwrap();
+        Ok::<f64, EquationError>(record.output(0)[0])
+    };
+    for (expression, value) in [
+        ("2.0e5 * a", 4.0e5),
+        ("1E-3 + a", 2.001),
+        ("a * 2.5e+2", 500.0),
+        (".5e1 - a", 3.0),
+        ("3. * a", 6.0),
+        ("a^2e0", 4.0),
+    ] {
+        let got = output(expression).unwrap();
+        assert!(
+            (got - value).abs() < 1e-12 * value.abs(),
+            "{expression}: {got}"
+        );
+    }
+    // `2e` is no number: said, as a syntax mistake.
+    assert!(output("2e * a").is_err());
+}
