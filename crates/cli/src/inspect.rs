@@ -158,9 +158,11 @@ pub(crate) fn trust_summary(e: &Estimator) -> String {
         let _ = writeln!(
             text,
             "  input family of its {} held-out records (a record's input outside is out of \
-             distribution, {:.0}% of each range's width of slack):",
+             distribution, {:.0}% of each range's width of slack, at least {:.0}% of the number's \
+             size, the mean's of the smallest RMS):",
             family.records(),
-            100.0 * twostage::models::FAMILY_MARGIN
+            100.0 * twostage::models::FAMILY_MARGIN,
+            100.0 * twostage::models::FAMILY_MARGIN * twostage::models::FAMILY_LEAST_WIDTH
         );
         for line in family.describe(&e.signal_names().inputs) {
             let _ = writeln!(text, "    {line}");

@@ -23,26 +23,42 @@ pub const SUMMARY_NAMES: [&str; 4] = ["mean", "RMS", "peak", "mean frequency"];
 /// width, and a record just past it is no extrapolation.
 pub const FAMILY_MARGIN: f64 = 0.1;
 
-/// The least tolerance, relative to a number's size: a record of the one
-/// input every training record had, read back from text, is that input.
-pub const FAMILY_RELATIVE_TOLERANCE: f64 = 1e-9;
+/// The least width a summary number's range is judged by, as a share of
+/// the number's size (the mean's size at least the family's smallest
+/// RMS). Inputs of one design with one setting (a fixed level, a fixed
+/// offset, equal lines) give ranges of no width, and a measured record of
+/// that design differs from them by its instruments' gain and offset and
+/// by its noise; a record read back from text differs in its last digit:
+/// a record within [`FAMILY_MARGIN`] of this share is of the family.
+pub const FAMILY_LEAST_WIDTH: f64 = 0.1;
 
-/// Whether a summary number `value` lies outside the range `[low, high]`
-/// a family's records spanned, widened by [`FAMILY_MARGIN`] of its width
-/// and [`FAMILY_RELATIVE_TOLERANCE`] of its size: the one judgement of
-/// the host and the runtime (a NaN is outside).
+/// Which numbers of an input's summary `[mean, RMS, peak, mean frequency]`
+/// lie outside the ranges `[low, high]` a family's records spanned, each
+/// widened by [`FAMILY_MARGIN`] of the larger of its width and
+/// [`FAMILY_LEAST_WIDTH`] of its size: the one judgement of the host and
+/// the runtime (a NaN is outside).
 ///
 /// ```
 /// use twostage_kernels::input_summary::outside_family;
-/// assert!(!outside_family(1.05, [0.0, 1.0])); // within a tenth of the width
-/// assert!(outside_family(1.2, [0.0, 1.0]));
-/// assert!(!outside_family(2.0, [2.0, 2.0])); // the one value every record had
-/// assert!(outside_family(f64::NAN, [0.0, 1.0]));
+/// let family = [[0.0, 1.0], [2.0, 2.0], [5.0, 6.0], [10.0, 10.0]];
+/// // Within a tenth of each width; the RMS and frequency within 1% of their size.
+/// assert_eq!(outside_family([1.05, 2.01, 6.05, 9.95], family), [false; 4]);
+/// assert_eq!(outside_family([1.2, 2.1, 6.2, 10.2], family), [true; 4]);
+/// // A mean of no width near zero is judged against the smallest RMS: 1% of 2.
+/// let fixed_offset = [[0.5, 0.5], [2.0, 3.0], [5.0, 6.0], [10.0, 11.0]];
+/// assert!(!outside_family([0.515, 2.5, 5.5, 10.5], fixed_offset)[0]);
+/// assert!(outside_family([0.53, 2.5, 5.5, 10.5], fixed_offset)[0]);
+/// assert!(outside_family([f64::NAN, 2.5, 5.5, 10.5], fixed_offset)[0]);
 /// ```
-pub fn outside_family(value: f64, [low, high]: [f64; 2]) -> bool {
-    let slack = FAMILY_MARGIN * (high - low)
-        + FAMILY_RELATIVE_TOLERANCE * low.abs().max(high.abs()).max(f64::MIN_POSITIVE);
-    !(value >= low - slack && value <= high + slack)
+pub fn outside_family(summary: [f64; 4], ranges: [[f64; 2]; 4]) -> [bool; 4] {
+    let smallest_rms = ranges[1][0].abs();
+    core::array::from_fn(|k| {
+        let [low, high] = ranges[k];
+        let size = low.abs().max(high.abs());
+        let size = if k == 0 { size.max(smallest_rms) } else { size };
+        let slack = FAMILY_MARGIN * (high - low).max(FAMILY_LEAST_WIDTH * size);
+        !(summary[k] >= low - slack && summary[k] <= high + slack)
+    })
 }
 
 /// Summarize one input signal sampled every `sample_time` seconds:
@@ -267,15 +283,35 @@ mod tests {
 
     #[test]
     fn the_family_range_is_widened_by_its_margin_on_both_sides() {
-        // The margin's edge, computed independently: a tenth of the width.
+        // The margin's edge, computed independently: a tenth of the width
+        // (the RMS's range, the mean's scale, is 1 to 3: 0.1 of it is less).
+        let family = |range: [f64; 2]| [range, [1.0, 3.0], [5.0, 9.0], [10.0, 20.0]];
+        let mean =
+            |value: f64, range: [f64; 2]| outside_family([value, 2.0, 7.0, 15.0], family(range))[0];
         let range = [2.0, 6.0];
-        assert!(!outside_family(6.0 + 0.39, range));
-        assert!(outside_family(6.0 + 0.41, range));
-        assert!(!outside_family(2.0 - 0.39, range));
-        assert!(outside_family(2.0 - 0.41, range));
-        // A degenerate range allows a relative 1e-9 only.
-        assert!(!outside_family(1.0 + 5e-10, [1.0, 1.0]));
-        assert!(outside_family(1.0 + 2e-9, [1.0, 1.0]));
+        assert!(!mean(6.0 + 0.39, range));
+        assert!(mean(6.0 + 0.41, range));
+        assert!(!mean(2.0 - 0.39, range));
+        assert!(mean(2.0 - 0.41, range));
+        // A mean of no width: 1% of the smallest RMS, 1, or of itself.
+        assert!(!mean(0.5 + 0.0099, [0.5, 0.5]) && mean(0.5 + 0.0101, [0.5, 0.5]));
+        assert!(!mean(4.0 + 0.0399, [4.0, 4.0]) && mean(4.0 + 0.0401, [4.0, 4.0]));
+        // An RMS, a peak or a frequency of no width: 1% of its size.
+        let one = |k: usize, value: f64| {
+            let mut summary = [0.0, 2.0, 7.0, 15.0];
+            let mut ranges = family([-1.0, 1.0]);
+            summary[k] = value;
+            ranges[k] = [4.0, 4.0];
+            outside_family(summary, ranges)[k]
+        };
+        for k in 1..4 {
+            assert!(!one(k, 4.0399) && !one(k, 3.9601), "number {k}");
+            assert!(one(k, 4.0401) && one(k, 3.9599), "number {k}");
+        }
+        // A range of no width at zero admits zero only.
+        let zero = [[0.0, 0.0]; 4];
+        assert_eq!(outside_family([0.0; 4], zero), [false; 4]);
+        assert!(outside_family([1e-300, 0.0, 0.0, 0.0], zero)[0]);
     }
 
     #[test]

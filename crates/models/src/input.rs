@@ -8,7 +8,7 @@ use rand::{Rng, RngExt};
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Result, SimError};
-use crate::input_design::{Design, Drawn, Grid, Level, Phases};
+use crate::input_design::{Design, Drawn, Grid, Level, Phases, Spectrum};
 
 /// The input applied in every experiment of a model.
 ///
@@ -151,6 +151,7 @@ impl InputSignal {
                 grid,
                 phases,
                 level,
+                spectrum: None,
             },
             offset,
         )
@@ -507,6 +508,75 @@ impl InputSignal {
                     .into(),
             })),
         }
+    }
+
+    /// The same multisine or band noise with its lines' amplitudes shaped
+    /// by `spectrum` (a table, or a measured record's shape): a family of
+    /// inputs that looks like the one a plant was measured with. A band
+    /// noise becomes Gaussian lines on the record's full grid (periodic
+    /// over the record), its filters' order no longer used.
+    ///
+    /// ```
+    /// use twostage_models::{Drawn, Grid, InputSignal, Level, Phases, Spectrum, experiment_rng};
+    /// let falling = Spectrum::table(vec![[0.0, 1.0], [50.0, 0.25]])?;
+    /// let u = InputSignal::multisine(0.0, Drawn::fixed(50.0), Grid::Full, Phases::Random,
+    ///     Level::Rms(Drawn::fixed(1.0)), 0.0)?
+    ///     .with_spectrum(falling)?;
+    /// let mut x = vec![0.0; 1000];
+    /// u.fill(0.01, &mut experiment_rng(1, 0), &mut x)?;
+    /// // The shape, read back from the record, falls as the table does.
+    /// let read = Spectrum::like(&x)?;
+    /// let ratio = read.level_at(45.0, 0.01) / read.level_at(5.0, 0.01);
+    /// assert!((ratio - 0.325 / 0.925).abs() < 0.01, "{ratio}");
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`SimError::InvalidSetting`] for any other signal (give the shape to
+    /// the multisine or noise part of a sum, mixture or sequence).
+    pub fn with_spectrum(self, spectrum: Spectrum) -> Result<Self> {
+        let refused = || {
+            Err(SimError::InvalidSetting(InvalidSetting {
+                name: "input spectrum",
+                value: spectrum.describe(),
+                reason: "shapes a multisine's or a band noise's lines: give it to that design \
+                         (or to such a part of a sum, mixture or sequence)"
+                    .into(),
+            }))
+        };
+        let Kind::Designed { design, offset } = self.kind else {
+            return refused();
+        };
+        let design = match *design {
+            Design::Multisine {
+                band,
+                grid,
+                phases,
+                level,
+                ..
+            } => Design::Multisine {
+                band,
+                grid,
+                phases,
+                level,
+                spectrum: Some(spectrum),
+            },
+            Design::FilteredNoise { band, rms, .. } | Design::ShapedNoise { band, rms, .. } => {
+                Design::ShapedNoise {
+                    band,
+                    spectrum,
+                    rms,
+                }
+            }
+            _ => return refused(),
+        };
+        design.check(0.0)?;
+        Ok(Self {
+            kind: Kind::Designed {
+                design: Box::new(design),
+                offset,
+            },
+        })
     }
 
     /// The signals it is made of (none for a design alone).

@@ -11,7 +11,6 @@ use std::f64::consts::PI;
 
 use rand::{Rng, RngExt};
 use rand_distr::{Distribution, StandardNormal};
-use rustfft::FftPlannerScalar;
 use rustfft::num_complex::Complex;
 
 use crate::butterworth::{Cascade, MAX_FILTER_ORDER, Pass};
@@ -21,11 +20,14 @@ use crate::prbs::{MAX_PRBS_ORDER, prbs_taps};
 mod bursts;
 mod drawn;
 mod ramps;
+mod spectrum;
 
 pub(crate) use bursts::Bursts;
 pub use bursts::{MAX_BURSTS, Taper};
 pub use drawn::Drawn;
 pub(crate) use ramps::Ramps;
+pub use spectrum::{LIKE_BANDS, LIKE_BINS_PER_BAND, Spectrum};
+use spectrum::{band_lines, synthesize};
 
 /// The frequency lines of a multisine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,6 +67,8 @@ pub(crate) enum Design {
         grid: Grid,
         phases: Phases,
         level: Level,
+        /// Its lines' relative amplitudes (`None`: all equal).
+        spectrum: Option<Spectrum>,
     },
     RandomBinary {
         amplitude: Drawn,
@@ -87,6 +91,13 @@ pub(crate) enum Design {
     FilteredNoise {
         band: (f64, Drawn),
         order: u32,
+        rms: Drawn,
+    },
+    /// Gaussian noise whose lines on the full grid in the band have
+    /// amplitudes shaped by `spectrum`: periodic over the record.
+    ShapedNoise {
+        band: (f64, Drawn),
+        spectrum: Spectrum,
         rms: Drawn,
     },
     Bursts(Bursts),
@@ -113,7 +124,7 @@ impl Design {
             Ok(())
         };
         match self {
-            Self::Multisine { band, .. } => {
+            Self::Multisine { band, spectrum, .. } => {
                 if !(band.0 >= 0.0 && band.0 < band.1.range().0) {
                     return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "multisine band",
@@ -121,7 +132,21 @@ impl Design {
                         reason: "give a lowest frequency >= 0 below the band's top".into(),
                     }));
                 }
+                if let Some(spectrum) = spectrum {
+                    spectrum.check(sample_time)?;
+                }
                 above("multisine band top", band.1.range().1)
+            }
+            Self::ShapedNoise { band, spectrum, .. } => {
+                if !(band.0 >= 0.0 && band.0 < band.1.range().0) {
+                    return Err(SimError::InvalidSetting(InvalidSetting {
+                        name: "noise band",
+                        value: format!("[{}, {:?}]", band.0, band.1.range()),
+                        reason: "give a lowest frequency >= 0 below the band's top".into(),
+                    }));
+                }
+                spectrum.check(sample_time)?;
+                above("noise band top", band.1.range().1)
             }
             Self::RandomBinary { hold, .. } | Self::Prbs { hold, .. } if *hold == 0 => {
                 Err(SimError::InvalidSetting(InvalidSetting {
@@ -215,8 +240,9 @@ impl Design {
                 grid,
                 phases,
                 level,
+                spectrum,
             } => format!(
-                "{} multisine on the {} grid from {} Hz to {}, {}",
+                "{} multisine on the {} grid from {} Hz to {}, {}{}",
                 match phases {
                     Phases::Random => "random-phase",
                     Phases::Schroeder => "Schroeder-phase",
@@ -227,7 +253,10 @@ impl Design {
                 },
                 band.0,
                 band.1.describe(" Hz"),
-                describe_level(level)
+                describe_level(level),
+                spectrum
+                    .as_ref()
+                    .map_or_else(String::new, |s| format!(", {}", s.describe()))
             ),
             Self::RandomBinary { amplitude, hold } => format!(
                 "random binary +-{}, each value held {hold} sample(s)",
@@ -263,6 +292,18 @@ impl Design {
                 band.1.describe(" Hz"),
                 rms.describe("")
             ),
+            Self::ShapedNoise {
+                band,
+                spectrum,
+                rms,
+            } => format!(
+                "Gaussian noise on the full grid from {} Hz to {}, {}, RMS {} (periodic over \
+                 the record)",
+                band.0,
+                band.1.describe(" Hz"),
+                spectrum.describe(),
+                rms.describe("")
+            ),
             Self::Bursts(bursts) => bursts.describe(),
             Self::Ramps(ramps) => ramps.describe(),
         }
@@ -283,49 +324,52 @@ impl Design {
                 grid,
                 phases,
                 level,
+                spectrum,
             } => {
                 let top = band.1.draw(rng);
-                let df = 1.0 / (n as f64 * sample_time);
                 // Lines strictly inside (0, Nyquist): each a full cosine
-                // whose samples' squares sum to n / 2.
-                let lines: Vec<usize> = (1..n.div_ceil(2))
-                    .filter(|&k| {
-                        let f = k as f64 * df;
-                        f >= band.0 && f <= top && (*grid == Grid::Full || k % 2 == 1)
-                    })
-                    .collect();
-                if lines.is_empty() {
-                    return Err(SimError::InvalidSetting(InvalidSetting {
-                        name: "multisine band",
-                        value: format!("[{}, {top}] Hz", band.0),
-                        reason: format!(
-                            "holds no line of the record's grid (spacing 1/(N T) = {df} Hz for \
-                             N = {n}): widen the band or lengthen the record"
-                        ),
-                    }));
-                }
+                // whose samples' squares sum to n / 2 per unit amplitude.
+                let lines = band_lines(band.0, top, *grid == Grid::Odd, n, sample_time);
                 let count = lines.len() as f64;
-                let angles: Vec<f64> = lines
+                let amplitudes = line_amplitudes(&lines, spectrum.as_ref(), n, sample_time);
+                no_lines("multisine band", band.0, top, &amplitudes, n, sample_time)?;
+                let coefficients: Vec<Complex<f64>> = amplitudes
                     .iter()
                     .enumerate()
-                    .map(|(i, _)| match phases {
-                        Phases::Random => 2.0 * PI * rng.random::<f64>(),
-                        Phases::Schroeder => -PI * (i as f64) * (i as f64 + 1.0) / count,
+                    .map(|(i, a)| {
+                        let phase = match phases {
+                            Phases::Random => 2.0 * PI * rng.random::<f64>(),
+                            Phases::Schroeder => -PI * (i as f64) * (i as f64 + 1.0) / count,
+                        };
+                        Complex::from_polar(*a, phase)
                     })
                     .collect();
-                // The inverse DFT of the lines, in O(N log N): sample t is
-                // the sum over lines of cos(2 pi k t / N + phase).
-                let mut spectrum = vec![Complex::new(0.0, 0.0); n];
-                for (&k, phase) in lines.iter().zip(&angles) {
-                    spectrum[k] = Complex::from_polar(1.0, *phase);
-                }
-                FftPlannerScalar::new()
-                    .plan_fft_inverse(n)
-                    .process(&mut spectrum);
-                for (v, c) in u.iter_mut().zip(&spectrum) {
-                    *v = c.re;
-                }
+                synthesize(&lines, &coefficients, u);
                 scale_to(u, level, rng);
+            }
+            Self::ShapedNoise {
+                band,
+                spectrum,
+                rms,
+            } => {
+                let top = band.1.draw(rng);
+                let level = rms.draw(rng);
+                let lines = band_lines(band.0, top, false, n, sample_time);
+                let amplitudes = line_amplitudes(&lines, Some(spectrum), n, sample_time);
+                no_lines("noise band", band.0, top, &amplitudes, n, sample_time)?;
+                // Each line's coefficient complex Gaussian: every sample's
+                // variance is the sum of the squared amplitudes.
+                let power: f64 = amplitudes.iter().map(|a| a * a).sum();
+                let scale = level / power.sqrt();
+                let coefficients: Vec<Complex<f64>> = amplitudes
+                    .iter()
+                    .map(|a| {
+                        let (re, im): (f64, f64) =
+                            (StandardNormal.sample(rng), StandardNormal.sample(rng));
+                        Complex::new(re, im) * (a * scale)
+                    })
+                    .collect();
+                synthesize(&lines, &coefficients, u);
             }
             Self::RandomBinary { amplitude, hold } => {
                 let a = amplitude.draw(rng);
@@ -419,6 +463,49 @@ impl Design {
     }
 }
 
+/// Each line's relative amplitude: 1, or the spectrum's at its frequency.
+fn line_amplitudes(
+    lines: &[usize],
+    spectrum: Option<&Spectrum>,
+    n: usize,
+    sample_time: f64,
+) -> Vec<f64> {
+    let df = 1.0 / (n as f64 * sample_time);
+    lines
+        .iter()
+        .map(|&k| spectrum.map_or(1.0, |s| s.level_at(k as f64 * df, sample_time)))
+        .collect()
+}
+
+/// Refuses a band in which no line of the record's grid has an amplitude.
+fn no_lines(
+    name: &'static str,
+    low: f64,
+    top: f64,
+    amplitudes: &[f64],
+    n: usize,
+    sample_time: f64,
+) -> Result<()> {
+    if amplitudes.iter().any(|a| *a > 0.0) {
+        return Ok(());
+    }
+    let df = 1.0 / (n as f64 * sample_time);
+    let reason = if amplitudes.is_empty() {
+        format!(
+            "holds no line of the record's grid (spacing 1/(N T) = {df} Hz for N = {n}): widen \
+             the band or lengthen the record"
+        )
+    } else {
+        "its spectrum is zero on every line of the band: give it a level above zero there"
+            .to_string()
+    };
+    Err(SimError::InvalidSetting(InvalidSetting {
+        name,
+        value: format!("[{low}, {top}] Hz"),
+        reason,
+    }))
+}
+
 fn fixed(d: Drawn) -> bool {
     d.is_fixed()
 }
@@ -467,6 +554,7 @@ fn resolved_band(bottom: f64, top: f64, sample_time: f64, n: usize) -> Result<()
 mod tests {
     use super::*;
     use crate::rng::experiment_rng;
+    use rustfft::FftPlannerScalar;
 
     fn filled(design: &Design, sample_time: f64, n: usize, experiment: u64) -> Vec<f64> {
         let mut u = vec![0.0; n];
@@ -497,6 +585,7 @@ mod tests {
             grid: Grid::Odd,
             phases: Phases::Random,
             level: Level::Rms(Drawn::fixed(0.7)),
+            spectrum: None,
         };
         let u = filled(&odd, dt, n, 0);
         let rms = (u.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
@@ -528,6 +617,7 @@ mod tests {
                 grid: Grid::Full,
                 phases,
                 level: Level::Peak(Drawn::fixed(1.0)),
+                spectrum: None,
             };
             let u = filled(&d, dt, n, 3);
             let peak = u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -683,6 +773,7 @@ mod tests {
             grid: Grid::Full,
             phases: Phases::Random,
             level: Level::Rms(Drawn::fixed(1.0)),
+            spectrum: None,
         };
         let e = high.check(0.01).unwrap_err().to_string();
         assert!(e.contains("above the Nyquist frequency 50 Hz"), "{e}");
@@ -691,6 +782,7 @@ mod tests {
             grid: Grid::Full,
             phases: Phases::Random,
             level: Level::Rms(Drawn::fixed(1.0)),
+            spectrum: None,
         };
         let mut u = vec![0.0; 100];
         let e = narrow

@@ -77,8 +77,12 @@ pub use error::{InvalidSetting, Result, SimError};
 pub use external::{ExternalJob, ExternalSimulator, PROTOCOL_VERSION, ProtocolAnswer};
 pub use fixed::{FixedValue, FixedValues, WithFixed};
 pub use input::{InputSignal, MAX_INPUT_NESTING};
-pub use input_design::{Drawn, Grid, Level, MAX_BURSTS, Phases, Taper};
-pub use input_family::{FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES};
+pub use input_design::{
+    Drawn, Grid, LIKE_BANDS, LIKE_BINS_PER_BAND, Level, MAX_BURSTS, Phases, Spectrum, Taper,
+};
+pub use input_family::{
+    FAMILY_LEAST_WIDTH, FAMILY_MARGIN, InputDeviation, InputFamily, SUMMARY_NAMES,
+};
 pub use input_shape::{
     InputShapes, SHAPE_LEVEL, SHAPE_SAMPLE, ShapeSample, input_shape_words, record_shape_numbers,
     shape_of,

@@ -658,6 +658,16 @@ impl<'a> Estimator<'a> {
         Some([self.family().at(at), self.family().at(at + 1)])
     }
 
+    /// Input `j`'s four ranges, as [`Estimator::input_family_range`] gives
+    /// them one by one, for an estimator with a family and `j` an input.
+    pub(crate) fn input_family_ranges(&self, j: usize) -> [[f64; 2]; SUMMARY_LEN] {
+        let family = self.family();
+        core::array::from_fn(|k| {
+            let at = 1 + 2 * (SUMMARY_LEN * j + k);
+            [family.at(at), family.at(at + 1)]
+        })
+    }
+
     /// The sample time the family's frequencies are in (NaN without a
     /// family).
     pub(crate) fn input_sample_time(&self) -> f64 {

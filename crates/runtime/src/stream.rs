@@ -180,9 +180,9 @@ fn input_outside_family(e: &Estimator<'_>, summary_of: impl Fn(usize) -> InputAc
     let sample_time = e.input_sample_time();
     for j in 0..e.n_inputs {
         let summary = summary_of(j).summary(sample_time);
-        for (k, value) in summary.iter().enumerate() {
-            let range = e.input_family_range(j, k).unwrap_or([f64::NAN; 2]);
-            if outside_family(*value, range) {
+        let ranges = e.input_family_ranges(j);
+        for (k, out) in outside_family(summary, ranges).into_iter().enumerate() {
+            if out {
                 outside |= 1 << (SUMMARY_LEN * j + k);
             }
         }

@@ -191,7 +191,9 @@ impl Locator<'_> {
             "chicane" => (&["amplitude"], &["amplitude"]),
             "fixed" => (&["values"], &["values"]),
             "multisine" => (
-                &["band", "grid", "phases", "rms", "peak", "offset"],
+                &[
+                    "band", "grid", "phases", "rms", "peak", "offset", "spectrum", "like",
+                ],
                 &["band"],
             ),
             "binary" => (&["amplitude", "hold", "offset"], &["amplitude", "hold"]),
@@ -200,7 +202,10 @@ impl Locator<'_> {
                 &["order", "amplitude", "hold"],
             ),
             "sweep" => (&["band", "amplitude", "offset"], &["band", "amplitude"]),
-            "gaussian" => (&["band", "order", "rms", "offset"], &["band", "rms"]),
+            "gaussian" => (
+                &["band", "order", "rms", "offset", "spectrum", "like"],
+                &["band", "rms"],
+            ),
             "steps" => (&["levels", "hold_seconds"], &["levels", "hold_seconds"]),
             "bursts" => (
                 &[
@@ -254,6 +259,8 @@ impl Locator<'_> {
             ("parts", raw.parts.is_some()),
             ("ramp_seconds", raw.ramp_seconds.is_some()),
             ("weights", raw.weights.is_some()),
+            ("spectrum", raw.spectrum.is_some()),
+            ("like", raw.like.is_some()),
         ];
         if let Some((key, _)) = given.iter().find(|(k, g)| *g && !takes.contains(k)) {
             return Err(self.error(
@@ -495,8 +502,21 @@ impl Locator<'_> {
                 .map(|(l, h)| InputSignal::steps((l[0], l[1]), (h[0], h[1]))),
             _ => unreachable!("the kinds are matched above"),
         };
+        let shape = self.spectrum(raw)?;
+        if let (Some(_), Some(_)) = (&shape, raw.order) {
+            return Err(wrong(
+                "order",
+                "a shaped noise is drawn line by line on the record's grid: order sets the \
+                 filters of an unshaped one; give spectrum or like, or order"
+                    .into(),
+            ));
+        }
         signal
             .unwrap_or_else(|| unreachable!("every needed key is given"))
+            .and_then(|s| match shape {
+                Some(shape) => s.with_spectrum(shape),
+                None => Ok(s),
+            })
             .and_then(|s| match drawn_offset {
                 Some(offset) => s.with_offset(offset),
                 None => Ok(s),

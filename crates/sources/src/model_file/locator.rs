@@ -35,6 +35,10 @@ struct FmuRun {
 pub(super) struct Locator<'t> {
     pub(super) text: &'t str,
     pub(super) origin: &'t str,
+    /// The model file's folder, where the files it names are found
+    /// (`None`: a text parsed alone, its files relative to the working
+    /// folder).
+    pub(super) folder: Option<&'t std::path::Path>,
     /// Where each line break is, found once: a file names a line per
     /// parameter and signal, and counting from the start for each made
     /// reading a file of many names take time in their square.
@@ -46,8 +50,14 @@ impl<'t> Locator<'t> {
         Self {
             text,
             origin,
+            folder: None,
             breaks: std::cell::OnceCell::new(),
         }
+    }
+
+    /// The same, the files the model file names found in `folder`.
+    pub(super) fn beside(self, folder: Option<&'t std::path::Path>) -> Self {
+        Self { folder, ..self }
     }
 
     /// The line (from 1) of byte `offset`.

@@ -223,7 +223,6 @@ impl ModelFile {
             ))));
         }
         let text = std::fs::read_to_string(path).map_err(io)?;
-        let mut file = Self::parse(&text, &path.display().to_string())?;
         // A command runs beside its model file, so that `python3 sim.py` works
         // from any folder; an FMU is found beside it.
         let folder = path.parent().map(|p| {
@@ -233,6 +232,7 @@ impl ModelFile {
                 p
             }
         });
+        let mut file = Self::parse_beside(&text, &path.display().to_string(), folder)?;
         match &mut file.source {
             ModelSource::Command { dir, .. } => *dir = folder.map(Path::to_path_buf),
             ModelSource::Fmu { path: fmu, .. } => {
@@ -263,7 +263,13 @@ impl ModelFile {
     /// # Errors
     /// [`Error::ModelFile`] naming the line, the key and what is accepted.
     pub fn parse(text: &str, origin: &str) -> Result<Self> {
-        let at = Locator::new(text, origin);
+        Self::parse_beside(text, origin, None)
+    }
+
+    /// [`ModelFile::parse`], the files it names (a `like` record) read
+    /// from `folder` where relative.
+    fn parse_beside(text: &str, origin: &str, folder: Option<&Path>) -> Result<Self> {
+        let at = Locator::new(text, origin).beside(folder);
         let raw: RawFile = toml::from_str(text).map_err(|e| Error::ModelFile {
             file: origin.to_string(),
             line: e.span().map(|s| at.line(s.start)),
@@ -716,6 +722,7 @@ mod locator;
 mod noise;
 mod priors;
 mod raw;
+mod shape;
 mod simulator;
 
 pub use fmu_template::fmu_model_file;

@@ -158,6 +158,11 @@ pub(super) struct RawInput {
     pub(super) phases: Option<String>,
     pub(super) rms: Option<OneOrMany>,
     pub(super) peak: Option<OneOrMany>,
+    /// A multisine's or a band noise's relative line amplitudes,
+    /// `[[Hz, level], ...]`.
+    pub(super) spectrum: Option<Spanned<Vec<[f64; 2]>>>,
+    /// The same, shaped like a measured record's column.
+    pub(super) like: Option<Spanned<RawLike>>,
     /// A constant added to a design.
     pub(super) offset: Option<OneOrMany>,
     /// Samples each value of a binary sequence is held.
@@ -187,6 +192,16 @@ pub(super) struct RawInput {
     /// The file's columns to read, in the order of the model's inputs.
     pub(super) columns: Option<Spanned<Vec<String>>>,
     /// The file's data rows to read, first and last (from 1), inclusive.
+    pub(super) rows: Option<Spanned<[usize; 2]>>,
+}
+
+/// A measured record whose input's spectrum a design takes the shape of.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawLike {
+    pub(super) file: Spanned<String>,
+    pub(super) column: Spanned<String>,
+    /// Data rows to read, first and last from 1, inclusive.
     pub(super) rows: Option<Spanned<[usize; 2]>>,
 }
 
