@@ -167,7 +167,7 @@ fn an_impossible_design_is_named_by_its_key() {
         (
             "signal = \"multisine\"\nband = [0.0, 0.1]\nhold = 3",
             "input.hold",
-            "takes band, grid, phases, rms, peak, offset only",
+            "takes band, grid, phases, rms, peak, offset, spectrum, like only",
         ),
         (
             "signal = \"multisine\"\nband = [0.0, 0.1]\nrms = 1\npeak = 2",
@@ -204,7 +204,7 @@ fn an_impossible_design_is_named_by_its_key() {
         (
             "signal = \"gaussian\"\nband = [0.0, 0.1]\namplitude = 1",
             "input.amplitude",
-            "takes band, order, rms, offset only",
+            "takes band, order, rms, offset, spectrum, like only",
         ),
         (
             "signal = \"prbs\"\namplitude = 1\nhold = 1",
