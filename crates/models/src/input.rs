@@ -1,14 +1,14 @@
 //! Input signals: what excites the system during an experiment.
 
 use crate::InvalidSetting;
-use std::f64::consts::PI;
 use std::sync::Arc;
 
 use rand::{Rng, RngExt};
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::{Result, SimError};
-use crate::input_design::{Design, Drawn, Grid, Level, Phases, Spectrum};
+use crate::input_design::{Design, Drawn, Grid, Level, Phases};
+use between_samples::chicane;
 
 /// The input applied in every experiment of a model.
 ///
@@ -474,111 +474,6 @@ impl InputSignal {
             .unwrap_or(0)
     }
 
-    /// The same design about an offset drawn per experiment from
-    /// `offset`'s range (a family of operating points), instead of its own.
-    ///
-    /// ```
-    /// use twostage_models::{Drawn, ExperimentRng, InputSignal, experiment_rng};
-    /// let sweep = InputSignal::sweep(0.1, Drawn::fixed(2.0), Drawn::fixed(1.0), 0.0)?;
-    /// let around = sweep.with_offset(Drawn::between(4.0, 6.0)?)?;
-    /// let mean = |k: u64| {
-    ///     let mut u = vec![0.0; 1000];
-    ///     around.fill(0.01, &mut experiment_rng(3, k), &mut u).map(|()| u.iter().sum::<f64>() / 1000.0)
-    /// };
-    /// let (a, b) = (mean(0)?, mean(1)?);
-    /// assert!((3.9..6.1).contains(&a) && (3.9..6.1).contains(&b) && (a - b).abs() > 1e-6);
-    /// # Ok::<(), twostage_models::SimError>(())
-    /// ```
-    ///
-    /// # Errors
-    /// [`SimError::InvalidSetting`] for a signal that is no design (white
-    /// noise, the chicane, a fixed signal, a sum, mixture or sequence: give
-    /// the offset to its parts).
-    pub fn with_offset(self, offset: Drawn) -> Result<Self> {
-        match self.kind {
-            Kind::Designed { design, .. } => Ok(Self {
-                kind: Kind::Designed { design, offset },
-            }),
-            _ => Err(SimError::InvalidSetting(InvalidSetting {
-                name: "input offset",
-                value: format!("{:?}", offset.range()),
-                reason: "a drawn offset is for a design (multisine, binary, prbs, sweep, \
-                         gaussian, bursts, ramps): give it to the parts of a sum, mixture or \
-                         sequence"
-                    .into(),
-            })),
-        }
-    }
-
-    /// The same multisine or band noise with its lines' amplitudes shaped
-    /// by `spectrum` (a table, or a measured record's shape): a family of
-    /// inputs that looks like the one a plant was measured with. A band
-    /// noise becomes Gaussian lines on the record's full grid (periodic
-    /// over the record), its filters' order no longer used.
-    ///
-    /// ```
-    /// use twostage_models::{Drawn, Grid, InputSignal, Level, Phases, Spectrum, experiment_rng};
-    /// let falling = Spectrum::table(vec![[0.0, 1.0], [50.0, 0.25]])?;
-    /// let u = InputSignal::multisine(0.0, Drawn::fixed(50.0), Grid::Full, Phases::Random,
-    ///     Level::Rms(Drawn::fixed(1.0)), 0.0)?
-    ///     .with_spectrum(falling)?;
-    /// let mut x = vec![0.0; 1000];
-    /// u.fill(0.01, &mut experiment_rng(1, 0), &mut x)?;
-    /// // The shape, read back from the record, falls as the table does.
-    /// let read = Spectrum::like(&x)?;
-    /// let ratio = read.level_at(45.0, 0.01) / read.level_at(5.0, 0.01);
-    /// assert!((ratio - 0.325 / 0.925).abs() < 0.01, "{ratio}");
-    /// # Ok::<(), twostage_models::SimError>(())
-    /// ```
-    ///
-    /// # Errors
-    /// [`SimError::InvalidSetting`] for any other signal (give the shape to
-    /// the multisine or noise part of a sum, mixture or sequence).
-    pub fn with_spectrum(self, spectrum: Spectrum) -> Result<Self> {
-        let refused = || {
-            Err(SimError::InvalidSetting(InvalidSetting {
-                name: "input spectrum",
-                value: spectrum.describe(),
-                reason: "shapes a multisine's or a band noise's lines: give it to that design \
-                         (or to such a part of a sum, mixture or sequence)"
-                    .into(),
-            }))
-        };
-        let Kind::Designed { design, offset } = self.kind else {
-            return refused();
-        };
-        let design = match *design {
-            Design::Multisine {
-                band,
-                grid,
-                phases,
-                level,
-                ..
-            } => Design::Multisine {
-                band,
-                grid,
-                phases,
-                level,
-                spectrum: Some(spectrum),
-            },
-            Design::FilteredNoise { band, rms, .. } | Design::ShapedNoise { band, rms, .. } => {
-                Design::ShapedNoise {
-                    band,
-                    spectrum,
-                    rms,
-                }
-            }
-            _ => return refused(),
-        };
-        design.check(0.0)?;
-        Ok(Self {
-            kind: Kind::Designed {
-                design: Box::new(design),
-                offset,
-            },
-        })
-    }
-
     /// The signals it is made of (none for a design alone).
     fn parts(&self) -> &[InputSignal] {
         match &self.kind {
@@ -792,66 +687,6 @@ impl InputSignal {
         }
         Ok(())
     }
-
-    /// The input at continuous time `t`, for models integrated between
-    /// samples. The chicane is evaluated exactly; sampled signals (noise
-    /// realizations and fixed signals, passed as `samples` = the output of
-    /// [`InputSignal::fill`]) are interpolated linearly between samples and
-    /// held after the last one (docs/decisions/005-continuous-time-inputs.md).
-    pub fn value_at(&self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
-        match &self.kind {
-            Kind::Chicane { amplitude } => chicane(*amplitude, t),
-            Kind::WhiteGaussian { .. }
-            | Kind::Fixed(_)
-            | Kind::Designed { .. }
-            | Kind::Sum(_)
-            | Kind::OneOf { .. }
-            | Kind::Sequence(_) => Self::sampled_value_at(t, sample_time, samples),
-        }
-    }
-
-    /// A sampled signal (a measured input, say) at continuous time `t`:
-    /// linear between samples, held after the last, as
-    /// [`InputSignal::value_at`] takes sampled designs.
-    ///
-    /// ```
-    /// use twostage_models::InputSignal;
-    /// assert_eq!(InputSignal::sampled_value_at(0.75, 0.5, &[0.0, 1.0, 3.0]), 2.0);
-    /// assert_eq!(InputSignal::sampled_value_at(9.0, 0.5, &[0.0, 1.0, 3.0]), 3.0);
-    /// ```
-    pub fn sampled_value_at(t: f64, sample_time: f64, samples: &[f64]) -> f64 {
-        interpolate(samples, t / sample_time)
-    }
-}
-
-fn chicane(amplitude: f64, t: f64) -> f64 {
-    if (1.0..=9.0).contains(&t) {
-        let s = (PI * (t - 1.0) / 8.0).sin();
-        amplitude * (2.0 * PI * (t - 1.0) / 4.0).sin() * s * s
-    } else {
-        0.0
-    }
-}
-
-/// Linear interpolation of `samples` at fractional index `x`.
-fn interpolate(samples: &[f64], x: f64) -> f64 {
-    let Some(&last) = samples.last() else {
-        return 0.0;
-    };
-    if x <= 0.0 {
-        return samples[0];
-    }
-    if x.is_nan() {
-        return f64::NAN;
-    }
-    // At or past the last sample (an infinite index included) it holds.
-    if x >= (samples.len() - 1) as f64 {
-        return last;
-    }
-    let k = x.floor();
-    let i = k as usize;
-    let frac = x - k;
-    samples[i] + frac * (samples[i + 1] - samples[i])
 }
 
 fn invalid(name: &'static str, value: f64, reason: &str) -> SimError {
@@ -862,5 +697,7 @@ fn invalid(name: &'static str, value: f64, reason: &str) -> SimError {
     })
 }
 
+mod between_samples;
+mod reshaped;
 #[cfg(test)]
 mod tests;

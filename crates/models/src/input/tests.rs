@@ -1,5 +1,6 @@
 use super::*;
 use crate::rng::experiment_rng;
+use between_samples::interpolate;
 
 #[test]
 fn interpolation_holds_the_ends_for_any_index() {

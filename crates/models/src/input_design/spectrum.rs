@@ -282,22 +282,10 @@ pub(crate) fn synthesize(lines: &[usize], coefficients: &[Complex<f64>], u: &mut
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::line_power;
     use super::super::{Design, Drawn, Grid, Level, Phases};
     use super::*;
     use crate::rng::experiment_rng;
-
-    /// The power of `u` at grid line `k`, by a direct DFT (a second
-    /// algorithm beside the FFT that made it).
-    fn line_power(u: &[f64], k: usize) -> f64 {
-        let n = u.len();
-        let (mut re, mut im) = (0.0, 0.0);
-        for (t, v) in u.iter().enumerate() {
-            let angle = std::f64::consts::TAU * (k * t % n) as f64 / n as f64;
-            re += v * angle.cos();
-            im -= v * angle.sin();
-        }
-        re * re + im * im
-    }
 
     fn filled(design: &Design, n: usize, experiment: u64) -> Vec<f64> {
         let mut u = vec![0.0; n];
