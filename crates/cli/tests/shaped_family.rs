@@ -20,8 +20,9 @@ fn example(name: &str) -> PathBuf {
 }
 
 /// Train on `model` (small: the family's flags need no accurate
-/// estimator) and estimate `blocks`: per block, the warnings that name it.
-fn warnings_per_block(dir: &Path, model: &Path, blocks: &[PathBuf]) -> Vec<Vec<String>> {
+/// estimator) and estimate `blocks` with `extra` arguments: what
+/// `estimate` says on stderr.
+fn said_of_blocks(dir: &Path, model: &Path, blocks: &[PathBuf], extra: &[&str]) -> String {
     let estimator = model.with_extension("tsest");
     let out = twostage(&[
         "train",
@@ -45,24 +46,18 @@ fn warnings_per_block(dir: &Path, model: &Path, blocks: &[PathBuf]) -> Vec<Vec<S
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let mut args = vec!["estimate", "--estimator", path(&estimator)];
+    args.extend(extra);
     args.extend(blocks.iter().map(|b| path(b)));
     let out = twostage(&args);
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let stderr = text(&out.stderr);
-    assert_eq!(
-        text(&out.stdout).lines().count(),
-        blocks.len() + 1,
-        "{dir:?}"
-    );
-    (0..blocks.len())
-        .map(|i| {
-            stderr
-                .lines()
-                .filter(|l| l.contains(&format!("experiment block-{i}:")))
-                .map(String::from)
-                .collect()
-        })
-        .collect()
+    let rows = text(&out.stdout).lines().count();
+    assert_eq!(rows, blocks.len() + 1, "{dir:?}");
+    text(&out.stderr)
+}
+
+/// The lines of `said` that hold `words`.
+fn lines_with<'a>(said: &'a str, words: &str) -> Vec<&'a str> {
+    said.lines().filter(|l| l.contains(words)).collect()
 }
 
 #[test]
@@ -97,31 +92,53 @@ fn a_family_shaped_like_a_measured_block_holds_every_block() {
         model
     };
     // Equal lines: every block is below the family's mean frequency, and
-    // its shape is far from the family's.
+    // its shape is far from the family's: one line for each flag names
+    // the blocks of every file.
     let equal = write(
         "equal.toml",
         shaped.replace("like = { file = \"block-0.csv\", column = \"u\" }", ""),
     );
-    for (i, said) in warnings_per_block(&dir, &equal, &blocks).iter().enumerate() {
+    let said = said_of_blocks(&dir, &equal, &blocks, &[]);
+    let inputs = lines_with(&said, "their inputs lie outside the family");
+    let shapes = lines_with(&said, "their input shapes");
+    assert_eq!((inputs.len(), shapes.len()), (1, 1), "{said}");
+    for (i, block) in blocks.iter().enumerate() {
+        let named = format!("block-{i} ({})", block.display());
         assert!(
-            said.iter()
-                .any(|l| l.contains("mean frequency") && l.contains("below")),
-            "block {i}: {said:?}"
+            inputs[0].contains(&named) && shapes[0].contains(&named),
+            "{said}"
         );
-        assert!(
-            said.iter().any(|l| l.contains("input shape")),
-            "block {i}: {said:?}"
-        );
+        let why = format!("experiment block-{i}: input u: mean frequency");
+        assert!(inputs[0].contains(&why), "{said}");
     }
+    assert_eq!(said.lines().count(), 2, "{said}");
     // Shaped like block 0: no block is flagged, the offset drawn or fixed
     // 1.3% above the blocks' (a fraction of a percent of their RMS).
     let fixed_offset = write(
         "fixed-offset.toml",
         shaped.replace("offset = [0.0058, 0.0064]", "offset = 0.00612"),
     );
-    for model in [write("shaped.toml", shaped.clone()), fixed_offset] {
-        for (i, said) in warnings_per_block(&dir, &model, &blocks).iter().enumerate() {
-            assert!(said.is_empty(), "{model:?}, block {i}: {said:?}");
-        }
+    let shaped = write("shaped.toml", shaped.clone());
+    for model in [&shaped, &fixed_offset] {
+        let said = said_of_blocks(&dir, model, &blocks, &[]);
+        assert!(said.is_empty(), "{model:?}: {said}");
     }
+    // Refined through the model, which leaves the plant's quadratic
+    // stiffness out: each note once, naming the blocks of every file.
+    let said = said_of_blocks(
+        &dir,
+        &shaped,
+        &blocks,
+        &["--model-file", path(&shaped), "--check", "--refine=auto"],
+    );
+    let auto = lines_with(&said, "--refine=auto: the check explains");
+    assert_eq!(auto.len(), 1, "{said}");
+    assert!(auto[0].contains("two-stage estimates in 4 files"), "{said}");
+    let inexact = lines_with(&said, "the model does not make these records exactly");
+    assert_eq!(inexact.len(), 1, "{said}");
+    for (i, block) in blocks.iter().enumerate() {
+        let named = format!("block-{i} ({})", block.display());
+        assert!(inexact[0].contains(&named), "{said}");
+    }
+    assert!(said.lines().count() <= 3, "{said}");
 }

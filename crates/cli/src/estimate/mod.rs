@@ -233,17 +233,12 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
         .data
         .iter()
         .map(|path| estimating.read_file(path).map_err(anyhow::Error::msg));
+    let mut said = said::Said::new(&format, trained);
     let joint = estimating.run(files, &bars, |file, estimates| {
+        said.file(std::path::Path::new(file));
         if let Some(auto) = &estimates.auto {
-            eprintln!(
-                "note: {file}: --refine=auto: the check explains {} of {} two-stage estimates; \
-                 refining {}",
-                auto.explained,
-                auto.checked,
-                said::refine_reasons(auto, &estimates.rows)
-            );
+            said.auto(auto, &estimates.rows);
         }
-        let mut said = said::Said::new(std::path::Path::new(file), &format, trained);
         for (id, outcome) in estimates.rows {
             said.note_length(&id, &outcome);
             match outcome {
@@ -268,9 +263,9 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
                 }
             }
         }
-        said.summarize();
         Ok(())
     })?;
+    said.summarize();
     if let Some(joint) = joint {
         match joint.fit {
             Ok((fit, row)) => {

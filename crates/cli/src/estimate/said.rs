@@ -1,7 +1,8 @@
 //! What `estimate` says on stderr about each record: warnings about its
 //! estimate, its refinement and its check, each failure shared by many
-//! records said once, and each kind of out-of-distribution flag said in
-//! one line naming every record it concerns.
+//! records said once, and each kind of out-of-distribution flag and of
+//! note said in one line naming every record it concerns, over every
+//! file of the run.
 
 use std::path::Path;
 
@@ -13,36 +14,108 @@ use super::columns::list;
 use twostage::sources::record_file::RecordFormat;
 use twostage::{AutoRefined, RecordEstimate, RecordOutcome, RefineOutcome, Refined, RefinedBy};
 
-/// The messages about one file's records.
+/// The messages about a run's records.
 pub(super) struct Said<'a> {
+    /// The file whose records are being said.
     file: String,
     format: &'a RecordFormat,
     /// The estimator's record length, where an estimator estimates.
     trained: Option<usize>,
     repeated: RepeatedFailures,
     outside: Outside,
+    notes: Notes,
+}
+
+/// A record: the file it came from and its experiment id.
+#[derive(Clone)]
+struct Named {
+    file: String,
+    id: String,
 }
 
 /// The records flagged out of distribution, by what flagged them: said
-/// at the end of the file, one line for each flag.
+/// at the end of the run, one line for each flag.
 #[derive(Default)]
 struct Outside {
-    /// Experiment, Mahalanobis distance, threshold.
-    features: Vec<(String, f64, f64)>,
-    /// Experiment, the numbers outside the family.
-    input: Vec<(String, String)>,
-    /// Experiment, shape distance, threshold.
-    shape: Vec<(String, f64, f64)>,
+    /// Record, Mahalanobis distance, threshold.
+    features: Vec<(Named, f64, f64)>,
+    /// Record, the numbers outside the family.
+    input: Vec<(Named, String)>,
+    /// Record, shape distance, threshold.
+    shape: Vec<(Named, f64, f64)>,
+}
+
+/// Notes many records may share, said at the end of the run, one line
+/// for each.
+#[derive(Default)]
+struct Notes {
+    /// Records of another length than the estimator's, and theirs.
+    lengths: Vec<(Named, usize)>,
+    /// Refined records the model's best fit does not make to its noise,
+    /// and the best fit's tail probability.
+    not_exact: Vec<(Named, f64)>,
+    /// Checked records whose estimate fits within 5% of a best fit that
+    /// misses them: the fit in percent, the best fit's tail probability.
+    near_an_inexact_best_fit: Vec<(Named, String, f64)>,
+    /// What `--refine=auto` chose, where it ran.
+    auto: Option<AutoChoices>,
+}
+
+/// `--refine=auto`'s choices over a run's files.
+#[derive(Default)]
+struct AutoChoices {
+    files: Vec<String>,
+    /// Records the check explained, of the records it checked.
+    explained: usize,
+    checked: usize,
+    /// The records refined, by reason (described).
+    by_reason: Vec<(String, Vec<Named>)>,
 }
 
 impl<'a> Said<'a> {
-    pub(super) fn new(path: &Path, format: &'a RecordFormat, trained: Option<usize>) -> Self {
+    pub(super) fn new(format: &'a RecordFormat, trained: Option<usize>) -> Self {
         Self {
-            file: path.display().to_string(),
+            file: String::new(),
             format,
             trained,
             repeated: RepeatedFailures::default(),
             outside: Outside::default(),
+            notes: Notes::default(),
+        }
+    }
+
+    /// The records said next are `path`'s.
+    pub(super) fn file(&mut self, path: &Path) {
+        self.file = path.display().to_string();
+    }
+
+    fn named(&self, id: &str) -> Named {
+        Named {
+            file: self.file.clone(),
+            id: id.to_string(),
+        }
+    }
+
+    /// What `--refine=auto` chose in this file.
+    pub(super) fn auto(&mut self, auto: &AutoRefined, rows: &[(String, RecordOutcome)]) {
+        let groups: Vec<(String, Vec<Named>)> = auto
+            .groups(rows)
+            .into_iter()
+            .map(|(reason, ids)| {
+                let named = ids.iter().map(|id| self.named(id)).collect();
+                (reason.describe().to_string(), named)
+            })
+            .collect();
+        let file = self.file.clone();
+        let choices = self.notes.auto.get_or_insert_with(AutoChoices::default);
+        choices.files.push(file);
+        choices.explained += auto.explained;
+        choices.checked += auto.checked;
+        for (reason, named) in groups {
+            match choices.by_reason.iter_mut().find(|(r, _)| *r == reason) {
+                Some((_, all)) => all.extend(named),
+                None => choices.by_reason.push((reason, named)),
+            }
         }
     }
 
@@ -50,34 +123,29 @@ impl<'a> Said<'a> {
     /// still defined, but the validation error and the intervals were
     /// measured for another N (said only of a record that was estimated:
     /// a failed one says why).
-    pub(super) fn note_length(&self, id: &str, outcome: &RecordOutcome) {
+    pub(super) fn note_length(&mut self, id: &str, outcome: &RecordOutcome) {
         if let (Ok((record, _)), Some(trained)) = (outcome, self.trained)
             && record.n_samples() != trained
         {
-            eprintln!(
-                "note: {}: experiment {id}: {} samples, the estimator was trained and \
-                 validated on N = {trained}: its estimate only starts the refinement, \
-                 which fits the record at its own length",
-                self.file,
-                record.n_samples()
-            );
+            let named = self.named(id);
+            self.notes.lengths.push((named, record.n_samples()));
         }
     }
 
     /// Warnings about the estimate itself and its refinement.
     pub(super) fn warnings(&mut self, id: &str, estimated: &RecordEstimate) {
         if let Some((d, t)) = estimated.distance.filter(|(d, t)| d > t) {
-            self.outside.features.push((id.to_string(), d, t));
+            self.outside.features.push((self.named(id), d, t));
         }
         if let Some(deviations) = estimated.input.as_ref().filter(|d| !d.is_empty()) {
             let said: Vec<String> = deviations.iter().map(ToString::to_string).collect();
-            self.outside.input.push((id.to_string(), said.join("; ")));
+            self.outside.input.push((self.named(id), said.join("; ")));
         }
         if let Some((d, t)) = estimated
             .input_shape
             .filter(|_| estimated.input_shape_outside())
         {
-            self.outside.shape.push((id.to_string(), d, t));
+            self.outside.shape.push((self.named(id), d, t));
         }
         let file = &self.file;
         if let Some(floored) = estimated.floored.as_ref().filter(|f| !f.is_empty()) {
@@ -102,7 +170,9 @@ impl<'a> Said<'a> {
         }
         match &estimated.refinement {
             Some(RefineOutcome::Failed(e))
-                if self.repeated.first("--refine", &e.to_string(), id) =>
+                if self
+                    .repeated
+                    .first("--refine", &e.to_string(), self.named(id)) =>
             {
                 eprintln!(
                     "warning: {file}: experiment {id}: --refine failed ({e}); the two-stage \
@@ -134,14 +204,10 @@ impl<'a> Said<'a> {
         if let (Some(_), Some(Ok(check))) = (estimated.refined(), &estimated.check)
             && !check.best_fit_consistent()
         {
-            eprintln!(
-                "note: {file}: experiment {id}: the model does not make this record \
-                 exactly (not even its best fit misses it as the model's own records \
-                 do: check_best_fit_tail_probability {}): the refined interval covers \
-                 this record's noise about the model's best fit, not the error of the \
-                 model itself, so the plant's true values may lie outside it",
-                check.best_fit_tail_probability
-            );
+            let named = self.named(id);
+            self.notes
+                .not_exact
+                .push((named, check.best_fit_tail_probability));
         }
     }
 
@@ -168,10 +234,16 @@ impl<'a> Said<'a> {
             );
         }
         match &estimated.check {
-            Some(Err(e)) if self.repeated.first("--check", &e.to_string(), id) => eprintln!(
-                "warning: {file}: experiment {id}: --check could not simulate the model at \
+            Some(Err(e))
+                if self
+                    .repeated
+                    .first("--check", &e.to_string(), self.named(id)) =>
+            {
+                eprintln!(
+                    "warning: {file}: experiment {id}: --check could not simulate the model at \
                  the estimate ({e}); the estimate is kept, unchecked"
-            ),
+                )
+            }
             Some(Ok(c)) if !c.explained() && c.best_fit_consistent() => eprintln!(
                 "warning: {file}: experiment {id}: not explained by the model at its \
                  estimate (fit {} %): the model's best fit (searched from the estimate \
@@ -196,95 +268,231 @@ impl<'a> Said<'a> {
                 list(&c.best_fit_percent),
                 100.0 * c.tail_probability
             ),
-            Some(Ok(c)) if !c.best_fit_consistent() => eprintln!(
-                "note: {file}: experiment {id}: the estimate fits the record within 5% \
-                 in RMS of the best fit the model reaches from the estimate and over \
-                 its prior (fit {} %), but not even that best fit does to the model's \
-                 own noise (at most {:.1}% of its records miss by as much): the model \
-                 is not exact for this record; judge it by predicting a record it was \
-                 not fitted to (docs/real-data.md)",
-                list(&c.fit_percent),
-                100.0 * c.best_fit_tail_probability
-            ),
+            Some(Ok(c)) if !c.best_fit_consistent() => {
+                let named = self.named(id);
+                self.notes.near_an_inexact_best_fit.push((
+                    named,
+                    list(&c.fit_percent),
+                    c.best_fit_tail_probability,
+                ));
+            }
             _ => {}
         }
     }
 
-    /// One line per failure many records shared, and per flag.
+    /// One line per failure many records shared, per flag and per note.
     pub(super) fn summarize(&self) {
-        self.outside.summarize(&self.file);
-        self.repeated.summarize(&self.file);
+        self.notes.summarize(self.trained);
+        self.outside.summarize();
+        self.repeated.summarize();
     }
+}
+
+/// Records for a message: `file: experiment id` for one, `file:
+/// experiments a, b` for several of one file, `experiments a (file), b
+/// (other file)` across files; the first ten, and how many more.
+fn who(records: &[&Named]) -> String {
+    match records {
+        [] => String::new(),
+        [one] => format!("{}: experiment {}", one.file, one.id),
+        [first, ..] if records.iter().all(|r| r.file == first.file) => {
+            format!("{}: experiments {}", first.file, ids(records, false))
+        }
+        _ => format!("experiments {}", ids(records, true)),
+    }
+}
+
+/// The records' ids, each with its file in brackets where `with_files`.
+fn ids(records: &[&Named], with_files: bool) -> String {
+    let each: Vec<String> = records
+        .iter()
+        .map(|r| {
+            if with_files {
+                format!("{} ({})", r.id, r.file)
+            } else {
+                r.id.clone()
+            }
+        })
+        .collect();
+    list_ids(&each.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
+/// [`who`] of the records of `rows`, each row's first field.
+fn who_of<T>(rows: &[(Named, T)]) -> String {
+    who(&rows.iter().map(|(named, _)| named).collect::<Vec<_>>())
+}
+
+impl Notes {
+    fn summarize(&self, trained: Option<usize>) {
+        if let Some(AutoChoices {
+            files,
+            explained,
+            checked,
+            by_reason,
+        }) = &self.auto
+        {
+            // One file: its name before the note, its records by id alone.
+            let (whose, across) = match files.as_slice() {
+                [file] => (format!("{file}: "), String::new()),
+                _ => (String::new(), format!(" in {} files", files.len())),
+            };
+            let parts: Vec<String> = by_reason
+                .iter()
+                .map(|(reason, named)| {
+                    let named: Vec<&Named> = named.iter().collect();
+                    format!(
+                        "{} ({reason}): {}",
+                        named.len(),
+                        ids(&named, files.len() > 1)
+                    )
+                })
+                .collect();
+            let refining = if parts.is_empty() {
+                "none".to_string()
+            } else {
+                format!("experiment(s) {}", parts.join("; "))
+            };
+            eprintln!(
+                "note: {whose}--refine=auto: the check explains {explained} of {checked} \
+                 two-stage estimates{across}; refining {refining}"
+            );
+        }
+        match (self.lengths.as_slice(), trained) {
+            ([], _) | (_, None) => {}
+            ([(_, n)], Some(trained)) => eprintln!(
+                "note: {}: {n} samples, the estimator was trained and validated on N = \
+                 {trained}: its estimate only starts the refinement, which fits the record \
+                 at its own length",
+                who_of(&self.lengths)
+            ),
+            (many, Some(trained)) => eprintln!(
+                "note: {}: {} samples, the estimator was trained and validated on N = \
+                 {trained}: their estimates only start the refinement, which fits each \
+                 record at its own length",
+                who_of(many),
+                list_counts(many.iter().map(|(_, n)| *n))
+            ),
+        }
+        match self.not_exact.as_slice() {
+            [] => {}
+            [(_, p)] => eprintln!(
+                "note: {}: the model does not make this record exactly (not even its best \
+                 fit misses it as the model's own records do: \
+                 check_best_fit_tail_probability {p}): the refined interval covers this \
+                 record's noise about the model's best fit, not the error of the model \
+                 itself, so the plant's true values may lie outside it",
+                who_of(&self.not_exact)
+            ),
+            many => eprintln!(
+                "note: {}: the model does not make these records exactly (not even their \
+                 best fits miss them as the model's own records do: \
+                 check_best_fit_tail_probability {}): the refined intervals cover each \
+                 record's noise about the model's best fit, not the error of the model \
+                 itself, so the plant's true values may lie outside them",
+                who_of(many),
+                numbers(many.iter().map(|(_, p)| *p))
+            ),
+        }
+        match self.near_an_inexact_best_fit.as_slice() {
+            [] => {}
+            [(named, fit, p)] => eprintln!(
+                "note: {}: the estimate fits the record within 5% in RMS of the best fit \
+                 the model reaches from the estimate and over its prior (fit {fit} %), but \
+                 not even that best fit does to the model's own noise (at most {:.1}% of \
+                 its records miss by as much): the model is not exact for this record; \
+                 judge it by predicting a record it was not fitted to (docs/real-data.md)",
+                who(&[named]),
+                100.0 * p
+            ),
+            many => {
+                let fits: Vec<&str> = many.iter().map(|(_, fit, _)| fit.as_str()).collect();
+                let worst = many.iter().fold(0.0f64, |m, (_, _, p)| m.max(*p));
+                eprintln!(
+                    "note: {}: the estimates fit the records within 5% in RMS of the best \
+                     fits the model reaches from them and over its prior (fit {} %), but \
+                     not even those best fits do to the model's own noise (at most {:.1}% \
+                     of its records miss by as much): the model is not exact for these \
+                     records; judge it by predicting a record it was not fitted to \
+                     (docs/real-data.md)",
+                    who(&many.iter().map(|(named, _, _)| named).collect::<Vec<_>>()),
+                    list_ids(&fits),
+                    100.0 * worst
+                );
+            }
+        }
+    }
+}
+
+/// Whole numbers for a message: the first ten, and how many more.
+fn list_counts(counts: impl Iterator<Item = usize>) -> String {
+    let counts: Vec<String> = counts.map(|n| n.to_string()).collect();
+    list_ids(&counts.iter().map(String::as_str).collect::<Vec<_>>())
 }
 
 impl Outside {
     /// One line for each flag that flagged any record: a record's own
     /// words for one, the records listed with their numbers for several.
-    fn summarize(&self, file: &str) {
-        let ids = |rows: &[String]| {
-            let ids: Vec<&str> = rows.iter().map(String::as_str).collect();
-            list_ids(&ids)
-        };
-        let features: Vec<String> = self.features.iter().map(|(id, _, _)| id.clone()).collect();
+    fn summarize(&self) {
         match self.features.as_slice() {
             [] => {}
-            [(id, d, t)] => eprintln!(
-                "warning: {file}: experiment {id}: out of distribution: its features lie \
-                 at Mahalanobis distance {d:.3} from the training features, beyond \
-                 the {t:.3} that 99.9% of them stay within; the estimate extrapolates \
-                 and the intervals do not cover it (is it the same model and input?)"
+            [(named, d, t)] => eprintln!(
+                "warning: {}: out of distribution: its features lie at Mahalanobis distance \
+                 {d:.3} from the training features, beyond the {t:.3} that 99.9% of them \
+                 stay within; the estimate extrapolates and the intervals do not cover it \
+                 (is it the same model and input?)",
+                who(&[named])
             ),
             [(_, _, t), ..] => eprintln!(
-                "warning: {file}: experiments {}: out of distribution: their features lie \
-                 at Mahalanobis distances {} from the training features, beyond the {t:.3} \
-                 that 99.9% of them stay within; the estimates extrapolate and the \
-                 intervals do not cover them (are they of the same model and input?)",
-                ids(&features),
+                "warning: {}: out of distribution: their features lie at Mahalanobis \
+                 distances {} from the training features, beyond the {t:.3} that 99.9% of \
+                 them stay within; the estimates extrapolate and the intervals do not cover \
+                 them (are they of the same model and input?)",
+                who(&self.features.iter().map(|(n, _, _)| n).collect::<Vec<_>>()),
                 numbers(self.features.iter().map(|(_, d, _)| *d)),
             ),
         }
         match self.input.as_slice() {
             [] => {}
-            [(id, said)] => eprintln!(
-                "warning: {file}: experiment {id}: out of distribution: its input lies outside \
-                 the family the estimator was trained on ({said}); the estimate extrapolates \
-                 and the intervals do not cover it (train on a design that covers this \
-                 input: docs/your-own-model.md)"
+            [(named, said)] => eprintln!(
+                "warning: {}: out of distribution: its input lies outside the family the \
+                 estimator was trained on ({said}); the estimate extrapolates and the \
+                 intervals do not cover it (train on a design that covers this input: \
+                 docs/your-own-model.md)",
+                who(&[named])
             ),
             many => {
                 let each: Vec<String> = many
                     .iter()
                     .take(SHOWN)
-                    .map(|(id, said)| format!("experiment {id}: {said}"))
+                    .map(|(named, said)| format!("experiment {}: {said}", named.id))
                     .collect();
-                let ids_of: Vec<String> = many.iter().map(|(id, _)| id.clone()).collect();
                 eprintln!(
-                    "warning: {file}: experiments {}: out of distribution: their inputs lie \
-                     outside the family the estimator was trained on ({}{}); the estimates \
-                     extrapolate and the intervals do not cover them (train on a design that \
-                     covers these inputs: docs/your-own-model.md)",
-                    ids(&ids_of),
+                    "warning: {}: out of distribution: their inputs lie outside the family \
+                     the estimator was trained on ({}{}); the estimates extrapolate and the \
+                     intervals do not cover them (train on a design that covers these \
+                     inputs: docs/your-own-model.md)",
+                    who_of(many),
                     each.join("; "),
                     more(many.len()),
                 );
             }
         }
-        let shaped: Vec<String> = self.shape.iter().map(|(id, _, _)| id.clone()).collect();
         match self.shape.as_slice() {
             [] => {}
-            [(id, d, t)] => eprintln!(
-                "warning: {file}: experiment {id}: out of distribution: {}; the estimate \
-                 extrapolates and the intervals do not cover it (train on a design that \
-                 covers this input: docs/any-experiment.md)",
+            [(named, d, t)] => eprintln!(
+                "warning: {}: out of distribution: {}; the estimate extrapolates and the \
+                 intervals do not cover it (train on a design that covers this input: \
+                 docs/any-experiment.md)",
+                who(&[named]),
                 twostage::models::input_shape_words(*d, *t)
             ),
             [(_, _, t), ..] => eprintln!(
-                "warning: {file}: experiments {}: out of distribution: their input shapes \
-                 (autocorrelations) lie at distances {} from the training records' nearest, \
-                 beyond the {t:.3} that 99% of the held-out records' stay within; the \
-                 estimates extrapolate and the intervals do not cover them (train on a \
-                 design that covers these inputs: docs/any-experiment.md)",
-                ids(&shaped),
+                "warning: {}: out of distribution: their input shapes (autocorrelations) lie \
+                 at distances {} from the training records' nearest, beyond the {t:.3} that \
+                 99% of the held-out records' stay within; the estimates extrapolate and the \
+                 intervals do not cover them (train on a design that covers these inputs: \
+                 docs/any-experiment.md)",
+                who(&self.shape.iter().map(|(n, _, _)| n).collect::<Vec<_>>()),
                 numbers(self.shape.iter().map(|(_, d, _)| *d)),
             ),
         }
@@ -310,20 +518,6 @@ fn more(n: usize) -> String {
     }
 }
 
-/// The records `--refine=auto` refines, for its note: "none", or their
-/// ids grouped by reason.
-pub(super) fn refine_reasons(auto: &AutoRefined, rows: &[(String, RecordOutcome)]) -> String {
-    let groups = auto.groups(rows);
-    if groups.is_empty() {
-        return "none".into();
-    }
-    let parts: Vec<String> = groups
-        .iter()
-        .map(|(reason, ids)| format!("{} ({}): {}", ids.len(), reason.describe(), list_ids(ids)))
-        .collect();
-    format!("experiment(s) {}", parts.join("; "))
-}
-
 /// Experiment ids for a message: the first ten, and how many more.
 pub(super) fn list_ids(ids: &[&str]) -> String {
     let shown = ids.iter().take(10).copied().collect::<Vec<_>>().join(", ");
@@ -338,39 +532,45 @@ pub(super) fn list_ids(ids: &[&str]) -> String {
 /// and message is said in full, the others only counted.
 #[derive(Default)]
 struct RepeatedFailures {
-    /// (what failed, message) -> (the first experiment, the others).
-    seen: std::collections::BTreeMap<(&'static str, String), (String, Vec<String>)>,
+    /// (what failed, message) -> (the first record, the others).
+    seen: std::collections::BTreeMap<(&'static str, String), (Named, Vec<Named>)>,
 }
 
 impl RepeatedFailures {
     /// Whether this failure is the first of its kind and message (to be
     /// said in full); a repeat is counted.
-    fn first(&mut self, what: &'static str, message: &str, id: &str) -> bool {
+    fn first(&mut self, what: &'static str, message: &str, record: Named) -> bool {
         match self.seen.get_mut(&(what, message.to_string())) {
             Some((_, others)) => {
-                others.push(id.to_string());
+                others.push(record);
                 false
             }
             None => {
                 self.seen
-                    .insert((what, message.to_string()), (id.to_string(), Vec::new()));
+                    .insert((what, message.to_string()), (record, Vec::new()));
                 true
             }
         }
     }
 
     /// One line per repeated failure: how many more records, which.
-    fn summarize(&self, file: &str) {
+    fn summarize(&self) {
         for ((what, _), (first, others)) in &self.seen {
             if others.is_empty() {
                 continue;
             }
-            let ids: Vec<&str> = others.iter().map(String::as_str).collect();
+            let all_one_file = others.iter().all(|r| r.file == first.file);
+            let others: Vec<&Named> = others.iter().collect();
+            let (whose, first_id) = if all_one_file {
+                (format!("{}: ", first.file), first.id.clone())
+            } else {
+                (String::new(), format!("{} ({})", first.id, first.file))
+            };
             eprintln!(
-                "warning: {file}: {what} failed as for experiment {first} in {} more \
+                "warning: {whose}{what} failed as for experiment {first_id} in {} more \
                  experiment(s): {}",
                 others.len(),
-                list_ids(&ids)
+                ids(&others, !all_one_file)
             );
         }
     }
