@@ -138,7 +138,7 @@ impl InputSignal {
     /// [`SimError::InvalidSetting`] for a band whose bottom is not below
     /// its top, or a non-finite offset.
     pub fn multisine(
-        low: f64,
+        low: impl Into<Drawn>,
         high: Drawn,
         grid: Grid,
         phases: Phases,
@@ -147,7 +147,7 @@ impl InputSignal {
     ) -> Result<Self> {
         Self::designed(
             Design::Multisine {
-                band: (low, high),
+                band: (low.into(), high),
                 grid,
                 phases,
                 level,
@@ -189,10 +189,10 @@ impl InputSignal {
     ///
     /// # Errors
     /// [`SimError::InvalidSetting`] for a negative start.
-    pub fn sweep(from: f64, to: Drawn, amplitude: Drawn, offset: f64) -> Result<Self> {
+    pub fn sweep(from: impl Into<Drawn>, to: Drawn, amplitude: Drawn, offset: f64) -> Result<Self> {
         Self::designed(
             Design::Sweep {
-                from,
+                from: from.into(),
                 to,
                 amplitude,
             },
@@ -223,7 +223,7 @@ impl InputSignal {
     /// its top, an order outside 1 to [`crate::MAX_FILTER_ORDER`], or a
     /// non-finite offset.
     pub fn filtered_noise(
-        low: f64,
+        low: impl Into<Drawn>,
         high: Drawn,
         order: u32,
         rms: Drawn,
@@ -231,7 +231,7 @@ impl InputSignal {
     ) -> Result<Self> {
         Self::designed(
             Design::FilteredNoise {
-                band: (low, high),
+                band: (low.into(), high),
                 order,
                 rms,
             },

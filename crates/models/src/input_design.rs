@@ -63,7 +63,7 @@ pub enum Level {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Design {
     Multisine {
-        band: (f64, Drawn),
+        band: (Drawn, Drawn),
         grid: Grid,
         phases: Phases,
         level: Level,
@@ -80,7 +80,7 @@ pub(crate) enum Design {
         hold: usize,
     },
     Sweep {
-        from: f64,
+        from: Drawn,
         to: Drawn,
         amplitude: Drawn,
     },
@@ -89,14 +89,14 @@ pub(crate) enum Design {
         hold: (f64, f64),
     },
     FilteredNoise {
-        band: (f64, Drawn),
+        band: (Drawn, Drawn),
         order: u32,
         rms: Drawn,
     },
     /// Gaussian noise whose lines on the full grid in the band have
     /// amplitudes shaped by `spectrum`: periodic over the record.
     ShapedNoise {
-        band: (f64, Drawn),
+        band: (Drawn, Drawn),
         spectrum: Spectrum,
         rms: Drawn,
     },
@@ -151,10 +151,10 @@ impl Design {
                 }))
             }
             Self::Sweep { from, to, .. } => {
-                if !from.is_finite() || *from < 0.0 {
+                if from.range().0 < 0.0 {
                     return Err(SimError::InvalidSetting(InvalidSetting {
                         name: "sweep start",
-                        value: format!("{from} Hz"),
+                        value: from.describe(" Hz"),
                         reason: "give a frequency >= 0".into(),
                     }));
                 }
@@ -193,7 +193,20 @@ impl Design {
     /// for every top the design may draw.
     pub(crate) fn check_record(&self, sample_time: f64, n: usize) -> Result<()> {
         if let Self::FilteredNoise { band, .. } = self {
-            resolved_band(band.0, band.1.range().0, sample_time, n)?;
+            let (lowest, highest) = band.0.range();
+            let resolution = 1.0 / (n as f64 * sample_time);
+            if lowest < highest && lowest < resolution {
+                return Err(SimError::InvalidSetting(InvalidSetting {
+                    name: "noise band bottom",
+                    value: format!("[{lowest}, {highest}] Hz"),
+                    reason: format!(
+                        "drawn per experiment, it may fall below the record's resolution \
+                         1/(N T) = {resolution} Hz (N = {n}): draw it from {resolution} Hz up, \
+                         or give 0 for no lower edge"
+                    ),
+                }));
+            }
+            resolved_band(lowest, band.1.range().0, sample_time, n)?;
         }
         Ok(())
     }
@@ -224,7 +237,7 @@ impl Design {
                 level,
                 spectrum,
             } => format!(
-                "{} multisine on the {} grid from {} Hz to {}, {}{}",
+                "{} multisine on the {} grid from {} to {}, {}{}",
                 match phases {
                     Phases::Random => "random-phase",
                     Phases::Schroeder => "Schroeder-phase",
@@ -233,7 +246,7 @@ impl Design {
                     Grid::Full => "full",
                     Grid::Odd => "odd",
                 },
-                band.0,
+                band.0.describe(" Hz"),
                 band.1.describe(" Hz"),
                 describe_level(level),
                 spectrum
@@ -259,7 +272,8 @@ impl Design {
                 to,
                 amplitude,
             } => format!(
-                "linear sweep from {from} Hz to {} over the record, amplitude {}",
+                "linear sweep from {} to {} over the record, amplitude {}",
+                from.describe(" Hz"),
                 to.describe(" Hz"),
                 amplitude.describe("")
             ),
@@ -268,9 +282,9 @@ impl Design {
                 level.0, level.1, hold.0, hold.1
             ),
             Self::FilteredNoise { band, order, rms } => format!(
-                "Gaussian noise through Butterworth filters of order {order} from {} Hz to {}, \
+                "Gaussian noise through Butterworth filters of order {order} from {} to {}, \
                  RMS {} (stationary)",
-                band.0,
+                band.0.describe(" Hz"),
                 band.1.describe(" Hz"),
                 rms.describe("")
             ),
@@ -279,9 +293,9 @@ impl Design {
                 spectrum,
                 rms,
             } => format!(
-                "Gaussian noise on the full grid from {} Hz to {}, {}, RMS {} (periodic over \
+                "Gaussian noise on the full grid from {} to {}, {}, RMS {} (periodic over \
                  the record)",
-                band.0,
+                band.0.describe(" Hz"),
                 band.1.describe(" Hz"),
                 spectrum.describe(),
                 rms.describe("")
@@ -309,12 +323,13 @@ impl Design {
                 spectrum,
             } => {
                 let top = band.1.draw(rng);
+                let bottom = band.0.draw(rng);
                 // Lines strictly inside (0, Nyquist): each a full cosine
                 // whose samples' squares sum to n / 2 per unit amplitude.
-                let lines = band_lines(band.0, top, *grid == Grid::Odd, n, sample_time);
+                let lines = band_lines(bottom, top, *grid == Grid::Odd, n, sample_time);
                 let count = lines.len() as f64;
                 let amplitudes = line_amplitudes(&lines, spectrum.as_ref(), n, sample_time);
-                no_lines("multisine band", band.0, top, &amplitudes, n, sample_time)?;
+                no_lines("multisine band", bottom, top, &amplitudes, n, sample_time)?;
                 let coefficients: Vec<Complex<f64>> = amplitudes
                     .iter()
                     .enumerate()
@@ -336,9 +351,10 @@ impl Design {
             } => {
                 let top = band.1.draw(rng);
                 let level = rms.draw(rng);
-                let lines = band_lines(band.0, top, false, n, sample_time);
+                let bottom = band.0.draw(rng);
+                let lines = band_lines(bottom, top, false, n, sample_time);
                 let amplitudes = line_amplitudes(&lines, Some(spectrum), n, sample_time);
-                no_lines("noise band", band.0, top, &amplitudes, n, sample_time)?;
+                no_lines("noise band", bottom, top, &amplitudes, n, sample_time)?;
                 // Each line's coefficient complex Gaussian: every sample's
                 // variance is the sum of the squared amplitudes.
                 let power: f64 = amplitudes.iter().map(|a| a * a).sum();
@@ -386,6 +402,7 @@ impl Design {
             } => {
                 let end = to.draw(rng);
                 let a = amplitude.draw(rng);
+                let from = from.draw(rng);
                 let duration = n as f64 * sample_time;
                 for (k, v) in u.iter_mut().enumerate() {
                     let t = k as f64 * sample_time;
@@ -396,10 +413,11 @@ impl Design {
             Self::FilteredNoise { band, order, rms } => {
                 let top = band.1.draw(rng);
                 let level = rms.draw(rng);
-                resolved_band(band.0, top, sample_time, n)?;
+                let bottom = band.0.draw(rng);
+                resolved_band(bottom, top, sample_time, n)?;
                 let mut filter = Cascade::new();
-                if band.0 > 0.0 {
-                    filter = filter.butterworth(Pass::High, *order, band.0, sample_time)?;
+                if bottom > 0.0 {
+                    filter = filter.butterworth(Pass::High, *order, bottom, sample_time)?;
                 }
                 if top < 0.5 / sample_time {
                     filter = filter.butterworth(Pass::Low, *order, top, sample_time)?;
@@ -410,7 +428,7 @@ impl Design {
                     filter.energy_and_settling(64 * n + 10_000).ok_or_else(|| {
                         SimError::InvalidSetting(InvalidSetting {
                             name: "noise band",
-                            value: format!("[{}, {top}] Hz", band.0),
+                            value: format!("[{bottom}, {top}] Hz"),
                             reason: "the filters do not settle: widen the band".into(),
                         })
                     })?;
@@ -445,15 +463,16 @@ impl Design {
     }
 }
 
-/// Refuses a band whose bottom is below zero or not below its top's
-/// lowest draw.
-fn bottom_below_top(name: &'static str, band: &(f64, Drawn)) -> Result<()> {
-    if band.0 >= 0.0 && band.0 < band.1.range().0 {
+/// Refuses a band whose bottom may be below zero or not below its top
+/// (each end's every draw).
+fn bottom_below_top(name: &'static str, band: &(Drawn, Drawn)) -> Result<()> {
+    let ((lowest, highest), (top, _)) = (band.0.range(), band.1.range());
+    if lowest >= 0.0 && highest < top {
         return Ok(());
     }
     Err(SimError::InvalidSetting(InvalidSetting {
         name,
-        value: format!("[{}, {:?}]", band.0, band.1.range()),
+        value: format!("[{:?}, {:?}]", band.0.range(), band.1.range()),
         reason: "give a lowest frequency >= 0 below the band's top".into(),
     }))
 }

@@ -19,6 +19,13 @@ pub struct Drawn {
     high: f64,
 }
 
+/// A number is the same value in every experiment.
+impl From<f64> for Drawn {
+    fn from(value: f64) -> Self {
+        Self::fixed(value)
+    }
+}
+
 impl Drawn {
     /// The same value in every experiment.
     pub fn fixed(value: f64) -> Self {

@@ -303,7 +303,7 @@ mod tests {
     fn a_shaped_multisine_s_lines_follow_the_table() {
         let n = 400; // lines every 0.25 Hz
         let design = Design::Multisine {
-            band: (1.0, Drawn::fixed(40.0)),
+            band: (Drawn::fixed(1.0), Drawn::fixed(40.0)),
             grid: Grid::Odd,
             phases: Phases::Random,
             level: Level::Rms(Drawn::fixed(1.0)),
@@ -335,7 +335,7 @@ mod tests {
     fn shaped_noise_has_its_level_on_average_and_its_shape() {
         let n = 400;
         let design = Design::ShapedNoise {
-            band: (0.0, Drawn::fixed(40.0)),
+            band: (Drawn::fixed(0.0), Drawn::fixed(40.0)),
             spectrum: falling(),
             rms: Drawn::fixed(2.0),
         };
@@ -402,7 +402,7 @@ mod tests {
     fn a_band_whose_lines_are_all_zero_is_refused() {
         let zero_top = Spectrum::table(vec![[0.0, 1.0], [10.0, 0.0]]).unwrap();
         let design = Design::Multisine {
-            band: (20.0, Drawn::fixed(40.0)),
+            band: (Drawn::fixed(20.0), Drawn::fixed(40.0)),
             grid: Grid::Full,
             phases: Phases::Random,
             level: Level::Rms(Drawn::fixed(1.0)),

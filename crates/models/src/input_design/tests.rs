@@ -29,7 +29,7 @@ pub(super) fn line_power(u: &[f64], k: usize) -> f64 {
 fn a_multisine_has_its_lines_in_its_band_and_its_level() {
     let (n, dt) = (512, 0.01);
     let odd = Design::Multisine {
-        band: (2.0, Drawn::fixed(20.0)),
+        band: (Drawn::fixed(2.0), Drawn::fixed(20.0)),
         grid: Grid::Odd,
         phases: Phases::Random,
         level: Level::Rms(Drawn::fixed(0.7)),
@@ -61,7 +61,7 @@ fn schroeder_phases_lower_the_crest_factor_and_a_peak_level_holds() {
     let (n, dt) = (1024, 1.0);
     let crest = |phases| {
         let d = Design::Multisine {
-            band: (0.0, Drawn::fixed(0.2)),
+            band: (Drawn::fixed(0.0), Drawn::fixed(0.2)),
             grid: Grid::Full,
             phases,
             level: Level::Peak(Drawn::fixed(1.0)),
@@ -136,7 +136,7 @@ fn binary_steps_and_sweeps_keep_their_settings() {
     // A sweep from 0 to 5 Hz over 10 s crosses zero about 2 * 25 times
     // (its mean frequency 2.5 Hz).
     let sweep = Design::Sweep {
-        from: 0.0,
+        from: Drawn::fixed(0.0),
         to: Drawn::fixed(5.0),
         amplitude: Drawn::fixed(1.0),
     };
@@ -152,7 +152,7 @@ fn binary_steps_and_sweeps_keep_their_settings() {
 fn filtered_noise_keeps_its_level_and_its_band() {
     let (n, dt) = (1 << 15, 0.01);
     let design = Design::FilteredNoise {
-        band: (5.0, Drawn::fixed(10.0)),
+        band: (Drawn::fixed(5.0), Drawn::fixed(10.0)),
         order: 6,
         rms: Drawn::fixed(2.0),
     };
@@ -196,7 +196,7 @@ fn filtered_noise_keeps_its_level_and_its_band() {
     );
     // An edge below the record's resolution, and an order out of range.
     let coarse = Design::FilteredNoise {
-        band: (0.0, Drawn::fixed(0.5)),
+        band: (Drawn::fixed(0.0), Drawn::fixed(0.5)),
         order: 4,
         rms: Drawn::fixed(1.0),
     };
@@ -207,7 +207,7 @@ fn filtered_noise_keeps_its_level_and_its_band() {
         .to_string();
     assert!(e.contains("resolution") && e.contains("1 Hz"), "{e}");
     let steep = Design::FilteredNoise {
-        band: (0.0, Drawn::fixed(5.0)),
+        band: (Drawn::fixed(0.0), Drawn::fixed(5.0)),
         order: 11,
         rms: Drawn::fixed(1.0),
     };
@@ -217,7 +217,7 @@ fn filtered_noise_keeps_its_level_and_its_band() {
 #[test]
 fn impossible_designs_are_refused_with_what_would_work() {
     let high = Design::Multisine {
-        band: (0.0, Drawn::fixed(60.0)),
+        band: (Drawn::fixed(0.0), Drawn::fixed(60.0)),
         grid: Grid::Full,
         phases: Phases::Random,
         level: Level::Rms(Drawn::fixed(1.0)),
@@ -226,7 +226,7 @@ fn impossible_designs_are_refused_with_what_would_work() {
     let e = high.check(0.01).unwrap_err().to_string();
     assert!(e.contains("above the Nyquist frequency 50 Hz"), "{e}");
     let narrow = Design::Multisine {
-        band: (1.2, Drawn::fixed(1.5)),
+        band: (Drawn::fixed(1.2), Drawn::fixed(1.5)),
         grid: Grid::Full,
         phases: Phases::Random,
         level: Level::Rms(Drawn::fixed(1.0)),
@@ -255,4 +255,57 @@ fn impossible_designs_are_refused_with_what_would_work() {
         hold: 1,
     };
     assert!(order.check(1.0).is_err());
+}
+
+/// A band's bottom drawn per experiment: each record's lowest line lies
+/// in its range, and records differ in it; a bottom that may reach its
+/// top is refused.
+#[test]
+fn a_band_s_bottom_is_drawn_per_experiment() {
+    let (n, dt) = (400, 0.01); // lines every 0.25 Hz
+    let design = Design::Multisine {
+        band: (Drawn::between(1.0, 3.0).unwrap(), Drawn::fixed(10.0)),
+        grid: Grid::Full,
+        phases: Phases::Random,
+        level: Level::Rms(Drawn::fixed(1.0)),
+        spectrum: None,
+    };
+    let lowest: Vec<f64> = (0..8)
+        .map(|e| {
+            let u = filled(&design, dt, n, e);
+            let total: f64 = (1..n / 2).map(|k| line_power(&u, k)).sum();
+            let k = (1..n / 2)
+                .find(|&k| line_power(&u, k) > 1e-12 * total)
+                .unwrap();
+            k as f64 * 0.25
+        })
+        .collect();
+    assert!(lowest.iter().all(|f| (1.0..3.25).contains(f)), "{lowest:?}");
+    assert!(lowest.iter().any(|f| (*f - lowest[0]).abs() > 0.1), "{lowest:?}");
+    let reaching = Design::Multisine {
+        band: (Drawn::between(1.0, 12.0).unwrap(), Drawn::fixed(10.0)),
+        grid: Grid::Full,
+        phases: Phases::Random,
+        level: Level::Rms(Drawn::fixed(1.0)),
+        spectrum: None,
+    };
+    let e = reaching.check(dt).unwrap_err().to_string();
+    assert!(e.contains("below the band's top"), "{e}");
+    // A noise's bottom drawn from 0: some draws no record resolves.
+    let noise = Design::FilteredNoise {
+        band: (Drawn::between(0.0, 1.0).unwrap(), Drawn::fixed(10.0)),
+        order: 4,
+        rms: Drawn::fixed(1.0),
+    };
+    let e = noise.check_record(dt, n).unwrap_err().to_string();
+    assert!(
+        e.contains("noise band bottom") && e.contains("0.25 Hz"),
+        "{e}"
+    );
+    let resolved = Design::FilteredNoise {
+        band: (Drawn::between(0.5, 1.0).unwrap(), Drawn::fixed(10.0)),
+        order: 4,
+        rms: Drawn::fixed(1.0),
+    };
+    assert!(resolved.check_record(dt, n).is_ok());
 }

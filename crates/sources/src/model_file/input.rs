@@ -323,7 +323,7 @@ impl Locator<'_> {
                 let (low, top) = raw
                     .band
                     .as_ref()
-                    .map(|(l, t)| (*l, t))
+                    .map(|(l, t)| (l, t))
                     .unwrap_or_else(|| unreachable!("needed"));
                 let grid = match raw.grid.as_deref() {
                     None | Some("full") => Grid::Full,
@@ -351,7 +351,7 @@ impl Locator<'_> {
                     }
                 };
                 Some(InputSignal::multisine(
-                    low,
+                    drawn("band", low)?,
                     drawn("band", top)?,
                     grid,
                     phases,
@@ -369,14 +369,17 @@ impl Locator<'_> {
                 _ => None,
             },
             "sweep" => match (&raw.band, amplitude) {
-                (Some((from, to)), Some(a)) => {
-                    Some(InputSignal::sweep(*from, drawn("band", to)?, a, offset))
-                }
+                (Some((from, to)), Some(a)) => Some(InputSignal::sweep(
+                    drawn("band", from)?,
+                    drawn("band", to)?,
+                    a,
+                    offset,
+                )),
                 _ => None,
             },
             "gaussian" => match (&raw.band, &raw.rms) {
                 (Some((low, top)), Some(rms)) => Some(InputSignal::filtered_noise(
-                    *low,
+                    drawn("band", low)?,
                     drawn("band", top)?,
                     raw.order.unwrap_or(DEFAULT_FILTER_ORDER),
                     drawn("rms", rms)?,

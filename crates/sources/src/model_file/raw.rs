@@ -150,8 +150,9 @@ pub(super) struct RawInput {
     /// One value, or `[low, high]` drawn per experiment.
     pub(super) amplitude: Option<OneOrMany>,
     pub(super) values: Option<Vec<f64>>,
-    /// A design's band in Hz: its bottom, and its top or `[low, high]`.
-    pub(super) band: Option<(f64, OneOrMany)>,
+    /// A design's band in Hz: its bottom and its top, each one value or
+    /// `[low, high]`.
+    pub(super) band: Option<(OneOrMany, OneOrMany)>,
     /// A multisine's lines: "full" or "odd".
     pub(super) grid: Option<String>,
     /// A multisine's phases: "random" or "schroeder".

@@ -286,3 +286,42 @@ fn a_design_s_lines_take_the_shape_of_a_measured_record() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A band's bottom is drawn per experiment like its top: a range is read,
+/// and one a noise's records cannot resolve is refused by its key.
+#[test]
+fn a_band_s_bottom_may_be_a_range() {
+    let file = |kind: &str, band: &str| {
+        format!(
+            "[model]\nname = \"gain\"\n[[parameter]]\nname = \"k\"\n\
+             prior = {{ dist = \"uniform\", low = 0.5, high = 2.0 }}\n\
+             [signals]\ninputs = [\"u\"]\noutputs = [\"y\"]\nsamples = 400\n\
+             [input]\nsignal = \"{kind}\"\nband = {band}\nrms = 0.1\n\
+             [source]\nbuiltin = \"benchmark\"\n"
+        )
+    };
+    let simulator = ModelFile::parse(&file("multisine", "[[0.02, 0.05], 0.2]"), "gain.toml")
+        .unwrap()
+        .simulator()
+        .unwrap();
+    let mut record = simulator.spec().new_record();
+    simulator
+        .simulate(
+            &[1.0],
+            &mut twostage_models::experiment_rng(2, 0),
+            &mut record,
+        )
+        .unwrap();
+    assert!(record.input(0).iter().all(|u| u.is_finite()));
+    for (kind, band, said) in [
+        ("gaussian", "[[0.0, 0.05], 0.2]", "noise band bottom"),
+        ("multisine", "[[0.02, 0.3], 0.2]", "below the band's top"),
+        ("multisine", "[[0.05, 0.02], 0.2]", "first no larger"),
+    ] {
+        let e = ModelFile::parse(&file(kind, band), "gain.toml")
+            .and_then(|f| f.simulator().map(|_| ()))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("key `input") && e.contains(said), "{band}: {e}");
+    }
+}
