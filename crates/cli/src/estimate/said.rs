@@ -505,7 +505,12 @@ const SHOWN: usize = 10;
 /// The first [`SHOWN`] of `values`, and how many more.
 fn numbers(values: impl ExactSizeIterator<Item = f64>) -> String {
     let n = values.len();
-    let shown: Vec<String> = values.take(SHOWN).map(|v| format!("{v:.3}")).collect();
+    let printed: Vec<String> = values.map(|v| format!("{v:.3}")).collect();
+    // Many records at one value (a floor, a threshold): said once.
+    if n > 1 && printed.iter().all(|p| *p == printed[0]) {
+        return format!("{} each", printed[0]);
+    }
+    let shown: Vec<&str> = printed.iter().take(SHOWN).map(String::as_str).collect();
     format!("{}{}", shown.join(", "), more(n))
 }
 
@@ -614,4 +619,44 @@ pub(super) fn joint(plant: &[&str], joint: &JointOfRecords) {
         )),
         fits.join(", ")
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn named(file: &str, id: &str) -> Named {
+        Named {
+            file: file.into(),
+            id: id.into(),
+        }
+    }
+
+    #[test]
+    fn records_are_named_with_their_files_only_across_files() {
+        let (a, b, c) = (
+            named("x.csv", "0"),
+            named("x.csv", "1"),
+            named("y.csv", "b"),
+        );
+        assert_eq!(who(&[&a]), "x.csv: experiment 0");
+        assert_eq!(who(&[&a, &b]), "x.csv: experiments 0, 1");
+        assert_eq!(who(&[&a, &c]), "experiments 0 (x.csv), b (y.csv)");
+        let many: Vec<Named> = (0..12).map(|i| named(&format!("{i}.csv"), "r")).collect();
+        let many: Vec<&Named> = many.iter().collect();
+        assert!(
+            who(&many).ends_with("r (9.csv) and 2 more"),
+            "{}",
+            who(&many)
+        );
+    }
+
+    #[test]
+    fn one_value_many_records_share_is_said_once() {
+        assert_eq!(numbers([0.005, 0.005, 0.005].into_iter()), "0.005 each");
+        assert_eq!(numbers([0.005, 0.25].into_iter()), "0.005, 0.250");
+        assert_eq!(numbers([0.5].into_iter()), "0.500");
+        let twelve = numbers((0..12).map(f64::from));
+        assert!(twelve.ends_with("9.000 and 2 more"), "{twelve}");
+    }
 }

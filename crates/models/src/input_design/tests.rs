@@ -281,7 +281,10 @@ fn a_band_s_bottom_is_drawn_per_experiment() {
         })
         .collect();
     assert!(lowest.iter().all(|f| (1.0..3.25).contains(f)), "{lowest:?}");
-    assert!(lowest.iter().any(|f| (*f - lowest[0]).abs() > 0.1), "{lowest:?}");
+    assert!(
+        lowest.iter().any(|f| (*f - lowest[0]).abs() > 0.1),
+        "{lowest:?}"
+    );
     let reaching = Design::Multisine {
         band: (Drawn::between(1.0, 12.0).unwrap(), Drawn::fixed(10.0)),
         grid: Grid::Full,
