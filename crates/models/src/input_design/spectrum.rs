@@ -130,9 +130,9 @@ impl Spectrum {
     /// ```
     ///
     /// # Errors
-    /// [`SimError::InvalidData`] for a record of fewer than
-    /// `2 LIKE_BINS_PER_BAND + 2` samples, a value not finite, or one
-    /// that does not vary.
+    /// [`SimError::InvalidData`] for a record too short for two bands
+    /// (fewer than `4 LIKE_BINS_PER_BAND + 1` samples), a value not
+    /// finite, or one that does not vary.
     pub fn like(samples: &[f64]) -> Result<Self> {
         let n = samples.len();
         let bins = n.saturating_sub(1) / 2;
@@ -140,7 +140,7 @@ impl Spectrum {
             return Err(SimError::InvalidData(format!(
                 "a record of {n} samples is too short to take a spectrum's shape from: give one \
                  of {} samples or more",
-                4 * LIKE_BINS_PER_BAND + 2
+                4 * LIKE_BINS_PER_BAND + 1
             )));
         }
         if let Some(k) = samples.iter().position(|v| !v.is_finite()) {
@@ -388,8 +388,13 @@ mod tests {
 
     #[test]
     fn a_record_without_a_shape_is_refused() {
-        let short = Spectrum::like(&[1.0; 9]).unwrap_err().to_string();
-        assert!(short.contains("too short"), "{short}");
+        let varying = |n: usize| (0..n).map(|t| (t as f64).sin()).collect::<Vec<f64>>();
+        let short = Spectrum::like(&varying(16)).unwrap_err().to_string();
+        assert!(
+            short.contains("too short") && short.contains("17 samples or more"),
+            "{short}"
+        );
+        assert_eq!(Spectrum::like(&varying(17)).unwrap().points().len(), 2);
         let flat = Spectrum::like(&[3.0; 100]).unwrap_err().to_string();
         assert!(flat.contains("does not vary"), "{flat}");
         let mut broken = vec![0.0; 100];
