@@ -10,6 +10,9 @@ use super::raw::RawInput;
 use crate::csv_rows::read_columns;
 use crate::error::Result;
 
+/// The largest file a `like` record is read from.
+const MAX_LIKE_BYTES: u64 = 1 << 30;
+
 impl Locator<'_> {
     /// The shape `[input]` gives its lines, if any: a `spectrum` table, or
     /// the spectrum of a measured record's column (`like`), read from the
@@ -33,6 +36,37 @@ impl Locator<'_> {
                     Some(folder) if named.is_relative() => folder.join(&named),
                     _ => named,
                 };
+                // A device or a folder named by mistake would be read
+                // without end, or not at all: a record is a file of a
+                // record's size.
+                let size = std::fs::metadata(&path)
+                    .ok()
+                    .filter(|m| m.is_file())
+                    .map(|m| m.len());
+                if let Some(size) = size.filter(|s| *s > MAX_LIKE_BYTES) {
+                    return Err(self.error(
+                        Some(like.file.span()),
+                        "input.like.file",
+                        format!(
+                            "{}: a file of {}, where a record to look like takes at most {}: \
+                             give the rows of one record (rows = [first, last]) in a file of \
+                             its own",
+                            path.display(),
+                            crate::readable_bytes(size as f64),
+                            crate::readable_bytes(MAX_LIKE_BYTES as f64)
+                        ),
+                    ));
+                }
+                if size.is_none() && path.exists() {
+                    return Err(self.error(
+                        Some(like.file.span()),
+                        "input.like.file",
+                        format!(
+                            "{}: not a file: name the CSV file of a record",
+                            path.display()
+                        ),
+                    ));
+                }
                 let column = like.column.get_ref().clone();
                 let mut samples = read_columns(&path, std::slice::from_ref(&column))
                     .map_err(|e| {

@@ -241,6 +241,12 @@ fn a_design_s_lines_take_the_shape_of_a_measured_record() {
             "absent.csv",
         ),
         (
+            "like = { file = \".\", column = \"v\" }",
+            "multisine",
+            "input.like.file",
+            "not a file",
+        ),
+        (
             "spectrum = [[0.0, 1.0], [0.7, 0.5]]",
             "multisine",
             "input",
