@@ -282,18 +282,10 @@ pub(crate) fn synthesize(lines: &[usize], coefficients: &[Complex<f64>], u: &mut
 
 #[cfg(test)]
 mod tests {
-    use super::super::tests::line_power;
+    use super::super::tests::{filled, line_power};
     use super::super::{Design, Drawn, Grid, Level, Phases};
     use super::*;
     use crate::rng::experiment_rng;
-
-    fn filled(design: &Design, n: usize, experiment: u64) -> Vec<f64> {
-        let mut u = vec![0.0; n];
-        design
-            .fill(0.01, &mut experiment_rng(11, experiment), &mut u)
-            .unwrap();
-        u
-    }
 
     fn falling() -> Spectrum {
         Spectrum::table(vec![[0.0, 1.0], [10.0, 1.0], [40.0, 0.5]]).unwrap()
@@ -309,7 +301,7 @@ mod tests {
             level: Level::Rms(Drawn::fixed(1.0)),
             spectrum: Some(falling()),
         };
-        let u = filled(&design, n, 0);
+        let u = filled(&design, 0.01, n, 0);
         let reference = line_power(&u, 39); // 9.75 Hz: level 1
         for k in 4..=160 {
             let f = k as f64 * 0.25;
@@ -339,7 +331,7 @@ mod tests {
             spectrum: falling(),
             rms: Drawn::fixed(2.0),
         };
-        let records: Vec<Vec<f64>> = (0..400).map(|e| filled(&design, n, e)).collect();
+        let records: Vec<Vec<f64>> = (0..400).map(|e| filled(&design, 0.01, n, e)).collect();
         let variance = records.iter().flatten().map(|v| v * v).sum::<f64>() / (400 * n) as f64;
         // 400 records of 159 lines' two Gaussian coordinates: a relative
         // standard error near 0.4% on the variance.
@@ -360,7 +352,7 @@ mod tests {
             (ratio / expected - 1.0).abs() < 0.1,
             "{ratio} vs {expected}"
         );
-        assert_eq!(records[3], filled(&design, n, 3));
+        assert_eq!(records[3], filled(&design, 0.01, n, 3));
         assert_ne!(records[3], records[4]);
     }
 

@@ -4,7 +4,7 @@ use super::*;
 use crate::rng::experiment_rng;
 use rustfft::FftPlannerScalar;
 
-fn filled(design: &Design, sample_time: f64, n: usize, experiment: u64) -> Vec<f64> {
+pub(super) fn filled(design: &Design, sample_time: f64, n: usize, experiment: u64) -> Vec<f64> {
     let mut u = vec![0.0; n];
     design
         .fill(sample_time, &mut experiment_rng(5, experiment), &mut u)
