@@ -88,8 +88,8 @@ pub use input_shape::{
     shape_of,
 };
 pub use marginal::{
-    Marginal, Transform, UNBOUNDED_TAIL, standard_normal_cdf, standard_normal_quantile,
-    truncated_standard_mean,
+    Marginal, Transform, UNBOUNDED_TAIL, chi_square_quantile, standard_normal_cdf,
+    standard_normal_quantile, truncated_standard_mean,
 };
 pub use ode::{OdeSystem, Rk4};
 pub use origin::RecordsOrigin;

@@ -389,6 +389,30 @@ pub fn standard_normal_quantile(p: f64) -> f64 {
     x - u / (1.0 + 0.5 * x * u)
 }
 
+/// The quantile `p` of the chi-square distribution of `dof` degrees of
+/// freedom, by Wilson and Hilferty's cube-root normal approximation ("The
+/// distribution of chi-square", PNAS 17, 1931): `dof (1 - 2/(9 dof) + z
+/// sqrt(2/(9 dof)))^3`, `z` the standard normal quantile: for p from 0.9
+/// to 0.999 its tail probability within 20% of `1 - p` (the worst at one
+/// degree of freedom, where the quantile is 3% high at 0.999), within 10%
+/// from nine degrees of freedom on. NaN for a `dof` of 0.
+///
+/// ```
+/// use twostage_models::chi_square_quantile;
+/// // The tables' 21.666 (9 degrees of freedom, 99%) and 6.635 (1, 99%).
+/// assert!((chi_square_quantile(0.99, 9) / 21.666 - 1.0).abs() < 0.003);
+/// assert!((chi_square_quantile(0.99, 1) / 6.635 - 1.0).abs() < 0.01);
+/// ```
+pub fn chi_square_quantile(p: f64, dof: usize) -> f64 {
+    if dof == 0 {
+        return f64::NAN;
+    }
+    let k = dof as f64;
+    let spread = (2.0 / (9.0 * k)).sqrt();
+    let root = 1.0 - 2.0 / (9.0 * k) + standard_normal_quantile(p) * spread;
+    k * root.max(0.0).powi(3)
+}
+
 /// The mean of the standard normal conditioned on `[a, b]`, `(phi(a) -
 /// phi(b)) / (Phi(b) - Phi(a))` (Johnson, Kotz and Balakrishnan,
 /// Continuous Univariate Distributions 1, 2nd ed., 1994, sec. 13.10);
@@ -427,6 +451,47 @@ fn truncated_standard_quantile(a: f64, b: f64, p: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The chi-square CDF at the approximate quantile, by Simpson's rule
+    /// on the density (the substitution `x = t^2` takes away the
+    /// singularity of one degree of freedom at 0), lands within a few
+    /// thousandths of the probability asked.
+    #[test]
+    fn the_chi_square_quantile_holds_its_probability() {
+        for dof in [1usize, 2, 3, 5, 9, 30] {
+            for p in [0.9, 0.99, 0.999] {
+                let x = chi_square_quantile(p, dof);
+                let k = dof as f64;
+                let log_norm = (k / 2.0) * std::f64::consts::LN_2 + libm::lgamma(k / 2.0);
+                // Density of t = sqrt(x): 2 t f(t^2).
+                let density = |t: f64| {
+                    if t == 0.0 {
+                        return if dof == 1 {
+                            2.0 * (-log_norm).exp()
+                        } else {
+                            0.0
+                        };
+                    }
+                    let x = t * t;
+                    2.0 * t * ((k / 2.0 - 1.0) * x.ln() - x / 2.0 - log_norm).exp()
+                };
+                let (end, cells) = (x.sqrt(), 20_000);
+                let h = end / cells as f64;
+                let inner: f64 = (1..cells)
+                    .map(|i| density(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 })
+                    .sum();
+                let cdf = h / 3.0 * (density(0.0) + inner + density(end));
+                let tail = 1.0 - p;
+                // The cube root is a rough fit of one degree of freedom's
+                // far tail, and a close one from nine on.
+                let allowed = if dof >= 9 { 0.1 } else { 0.2 };
+                assert!(
+                    ((1.0 - cdf) / tail - 1.0).abs() < allowed,
+                    "dof {dof}, p {p}: quantile {x}, CDF {cdf}"
+                );
+            }
+        }
+    }
 
     /// Quantiles of the standard normal from tables (Abramowitz and Stegun
     /// 26.2; R's qnorm for the far tail).

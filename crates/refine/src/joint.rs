@@ -10,8 +10,9 @@ use twostage_models::{IoData, Prior, standard_normal_quantile};
 
 use crate::RefineError;
 use crate::best_fit::{BestFit, SearchStarts};
+use crate::between::BetweenRecords;
 use crate::refinement::{Refinement, ResidualModel};
-use crate::uncertainty::LocalUncertainty;
+use crate::uncertainty::{LocalUncertainty, local_uncertainty};
 
 /// One record with its own estimate, as [`Refinement::joint_estimate`]
 /// pools it: the estimate's interval half-widths where it has them.
@@ -195,7 +196,9 @@ pub struct JointEstimate<E> {
     /// The joint estimate: the best fit of every fitted record together.
     pub theta: Vec<f64>,
     /// Its uncertainty from the records' residuals (each record's outputs
-    /// their own noise model), or why it has none.
+    /// their own noise model), each sd at least the joint sd under the
+    /// scatter between the records ([`BetweenRecords::joint_sd`]), or why
+    /// it has none.
     pub uncertainty: Result<LocalUncertainty, E>,
     /// The single estimates pooled, which the search started from.
     pub pooled: PooledEstimate,
@@ -209,6 +212,11 @@ pub struct JointEstimate<E> {
     /// Each fitted record's own loss at the joint estimate, in the order
     /// of `fitted` (`None` where the interval's evaluations failed).
     pub record_losses: Option<Vec<f64>>,
+    /// How far the records' own best fits scatter about the joint
+    /// estimate beyond their noise (`None` with fewer than two records
+    /// that determine every parameter, or where the interval's
+    /// evaluations failed).
+    pub between: Option<BetweenRecords>,
 }
 
 impl<M: ResidualModel> Refinement<M> {
@@ -294,26 +302,43 @@ impl<M: ResidualModel> Refinement<M> {
             .unwrap_or_else(|| unreachable!("one search, one result"))?;
         let theta = search.best.theta.clone();
         let at_best = together
-            .uncertainties_and_residuals(&[(nominal, &theta)])
+            .linearizations(&[(nominal, &theta)])
             .pop()
             .unwrap_or_else(|| unreachable!("one estimate, one result"));
-        let (uncertainty, record_losses) = match at_best {
-            Ok((local, residuals)) => {
-                let mut rest = residuals.as_slice();
-                let losses = together
-                    .model()
-                    .records
-                    .iter()
-                    .map(|record| {
-                        let (mine, after) = rest.split_at(self.model().n_residuals(record));
-                        rest = after;
-                        mine.iter().map(|r| r * r).sum()
-                    })
-                    .collect();
-                (local.map_err(M::Error::from), Some(losses))
+        let (mut uncertainty, record_losses, between) = match at_best {
+            Ok(at) => {
+                let span = self.span();
+                let local = at.covariance().map(|(covariance, noise_order)| {
+                    local_uncertainty(&covariance, &span, noise_order)
+                });
+                let mut losses = Vec::with_capacity(fitted.len());
+                let mut steps = Vec::with_capacity(fitted.len());
+                let mut from = 0;
+                for record in &together.model().records {
+                    let n = self.model().n_residuals(record);
+                    let mine = &at.residuals[from..from + n];
+                    losses.push(mine.iter().map(|r| r * r).sum());
+                    let mut runs = self.model().residual_runs(record);
+                    if runs.iter().sum::<usize>() != n {
+                        runs = vec![n];
+                    }
+                    // A record whose own loss leaves some parameter free
+                    // has no own best fit to scatter.
+                    if let Ok(step) = at.part(from, n, runs).own_step() {
+                        steps.push(step);
+                    }
+                    from += n;
+                }
+                let between = BetweenRecords::of_steps(&steps, &span);
+                (local.map_err(M::Error::from), Some(losses), between)
             }
-            Err(e) => (Err(e), None),
+            Err(e) => (Err(e), None, None),
         };
+        if let (Ok(local), Some(between)) = (&mut uncertainty, &between) {
+            for (sd, joint) in local.sd.iter_mut().zip(&between.joint_sd) {
+                *sd = sd.max(*joint);
+            }
+        }
         Ok(JointEstimate {
             theta,
             uncertainty,
@@ -322,6 +347,7 @@ impl<M: ResidualModel> Refinement<M> {
             fitted,
             left_out,
             record_losses,
+            between,
         })
     }
 
@@ -503,10 +529,39 @@ mod tests {
         );
         let alone = fit.uncertainty(&both, &joint.theta).unwrap();
         let together = joint.uncertainty.unwrap();
+        // Each record's own best fit is its mean, with its own interval
+        // there: their scatter by the moment estimate, computed apart.
+        let own: Vec<(f64, f64)> = [&a, &b]
+            .into_iter()
+            .zip([&first, &second])
+            .map(|(y, record)| {
+                let m = y.iter().sum::<f64>() / n as f64;
+                (m, fit.uncertainty(record, &[m]).unwrap().sd[0].powi(2))
+            })
+            .collect();
+        let (means, variances): (Vec<f64>, Vec<f64>) = own.into_iter().unzip();
+        let tau2 = crate::between_record_variance(&means, &variances).unwrap();
+        let between = joint.between.unwrap();
         assert!(
-            (together.sd[0] - alone.sd[0]).abs() <= 1e-9 * alone.sd[0],
-            "{together:?} {alone:?}"
+            (between.sd[0] - tau2.sqrt()).abs() <= 1e-6 * tau2.sqrt(),
+            "{between:?} against tau^2 {tau2}"
         );
+        let under_scatter = 1.0
+            / variances
+                .iter()
+                .map(|v| 1.0 / (v + tau2))
+                .sum::<f64>()
+                .sqrt();
+        assert!((between.joint_sd[0] - under_scatter).abs() <= 1e-6 * under_scatter);
+        // The means lie 0.2 apart, far beyond their noise: the scatter
+        // sets the joint sd, wider than the sandwich of one record of two
+        // outputs (which sees the offsets as slow noise).
+        assert_eq!(between.mismatch_sets_width(), [true]);
+        assert!(
+            under_scatter > 1.5 * alone.sd[0],
+            "{under_scatter} {alone:?}"
+        );
+        assert_eq!(together.sd[0].to_bits(), between.joint_sd[0].to_bits());
         assert_eq!(together.noise_order, alone.noise_order);
         // The records' own losses add up to the search's.
         let losses = joint.record_losses.unwrap();

@@ -12,6 +12,7 @@
 #![deny(missing_docs)]
 
 mod best_fit;
+mod between;
 mod check;
 mod error;
 mod improvement;
@@ -27,6 +28,7 @@ mod uncertainty;
 pub use best_fit::{
     BestFit, JOIN_DISTANCE, Optimum, SAME_OPTIMUM, SCREEN_SHARE, SearchStarts, spread_starts,
 };
+pub use between::{BetweenRecords, between_record_variance};
 pub use check::{
     CheckPlan, DEFAULT_CHECK_RUNS, EXPLAINED_LEVEL, NEAR_BEST_LOSS, RecordCheck, STOP_EXCEEDANCES,
     check_against, check_record, check_with, output_fit, scoring_window, search_best_fits,

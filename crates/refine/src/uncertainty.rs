@@ -148,6 +148,36 @@ impl<M: ResidualModel> Refinement<M> {
         &self,
         estimates: &[(&IoData, &[f64])],
     ) -> Vec<Result<WithResiduals, M::Error>> {
+        let span = self.span();
+        self.linearizations(estimates)
+            .into_iter()
+            .map(|found| {
+                found.map(|at| {
+                    let local = at.covariance().map(|(covariance, noise_order)| {
+                        local_uncertainty(&covariance, &span, noise_order)
+                    });
+                    (local, at.residuals)
+                })
+            })
+            .collect()
+    }
+
+    /// The prior box's widths: a unit coordinate's length in the
+    /// parameters' own.
+    pub(crate) fn span(&self) -> Vec<f64> {
+        let prior = self.model().prior();
+        (0..prior.dim())
+            .map(|j| prior.upper()[j] - prior.lower()[j])
+            .collect()
+    }
+
+    /// Each estimate's residuals and their Jacobian in unit coordinates
+    /// (central differences), the `2q + 1` points of every estimate asked
+    /// for in one batch.
+    pub(crate) fn linearizations(
+        &self,
+        estimates: &[(&IoData, &[f64])],
+    ) -> Vec<Result<Linearized, M::Error>> {
         let model = self.model();
         let prior = model.prior();
         let q = prior.dim();
@@ -184,9 +214,6 @@ impl<M: ResidualModel> Refinement<M> {
             .into_iter()
             .map(Result::err)
             .collect();
-        let span: Vec<f64> = (0..q)
-            .map(|j| prior.upper()[j] - prior.lower()[j])
-            .collect();
         prepared
             .into_iter()
             .zip(estimates)
@@ -210,19 +237,124 @@ impl<M: ResidualModel> Refinement<M> {
                 if runs.iter().sum::<usize>() != n {
                     runs = vec![n];
                 }
-                let local =
-                    sandwich(&columns, &residuals, q, &runs).map(|(covariance, noise_order)| {
-                        local_uncertainty(&covariance, &span, noise_order)
-                    });
-                Ok((local, residuals))
+                Ok(Linearized {
+                    columns,
+                    residuals,
+                    runs,
+                    q,
+                })
             })
             .collect()
     }
 }
 
+/// An estimate's residuals and their Jacobian in the prior box's unit
+/// coordinates: what its interval, and a record's own step from it, are
+/// made of.
+pub(crate) struct Linearized {
+    /// The Jacobian, column by column (each `residuals.len()` long).
+    columns: Vec<f64>,
+    /// The residuals at the estimate.
+    pub(crate) residuals: Vec<f64>,
+    /// The lengths of the residuals' runs (an output of a record each).
+    runs: Vec<usize>,
+    /// The parameters.
+    q: usize,
+}
+
+impl Linearized {
+    /// `A^-1 B A^-1` of the whole, and the largest autoregressive order
+    /// taken ([`sandwich`]).
+    pub(crate) fn covariance(&self) -> Result<(Vec<f64>, usize), Error> {
+        sandwich(&self.columns, &self.residuals, self.q, &self.runs)
+    }
+
+    /// The residuals `from..from + n` (whole runs) and their rows of the
+    /// Jacobian, the runs `runs`: one record of several fitted together.
+    pub(crate) fn part(&self, from: usize, n: usize, runs: Vec<usize>) -> Self {
+        let whole = self.residuals.len();
+        let columns = (0..self.q)
+            .flat_map(|a| {
+                self.columns[a * whole + from..a * whole + from + n]
+                    .iter()
+                    .copied()
+            })
+            .collect();
+        Self {
+            columns,
+            residuals: self.residuals[from..from + n].to_vec(),
+            runs,
+            q: self.q,
+        }
+    }
+
+    /// The Gauss-Newton step `-A^-1 J' r` of this loss alone from where it
+    /// was linearized (unit coordinates), where its own best fit lies to
+    /// first order, with that best fit's covariance (the sandwich of the
+    /// residuals there, `r + J step`).
+    ///
+    /// # Errors
+    /// Residuals that do not change with some parameter.
+    pub(crate) fn own_step(&self) -> Result<(Vec<f64>, Vec<f64>), Error> {
+        let (q, n) = (self.q, self.residuals.len());
+        let mut factor = bread(&self.columns, n, q);
+        cholesky_in_place(&mut factor, q, PivotRule::RelativeToLargest(1e-12))
+            .map_err(|_| undetermined())?;
+        let mut step: Vec<f64> = (0..q)
+            .map(|a| {
+                -self.columns[a * n..(a + 1) * n]
+                    .iter()
+                    .zip(&self.residuals)
+                    .map(|(j, r)| j * r)
+                    .sum::<f64>()
+            })
+            .collect();
+        solve_cholesky_in_place(&factor, q, &mut step);
+        // The noise is judged on the residuals at the own best fit, `r +
+        // J step`: at the joint estimate they hold the very offset whose
+        // size is in question.
+        let mut residuals = self.residuals.clone();
+        for (a, s) in step.iter().enumerate() {
+            for (r, j) in residuals.iter_mut().zip(&self.columns[a * n..(a + 1) * n]) {
+                *r += j * s;
+            }
+        }
+        let (covariance, _) = sandwich(&self.columns, &residuals, q, &self.runs)?;
+        Ok((step, covariance))
+    }
+}
+
+/// The error of residuals that some parameter does not move.
+fn undetermined() -> Error {
+    Error::Numerical {
+        what: "the residuals do not change with some parameter near the estimate: the record \
+               does not determine it, and it has no interval"
+            .into(),
+    }
+}
+
+/// `J'J` (row-major q x q) of the Jacobian `columns`, each `n` long.
+fn bread(columns: &[f64], n: usize, q: usize) -> Vec<f64> {
+    let mut bread = vec![0.0; q * q];
+    for a in 0..q {
+        for b in 0..q {
+            bread[a * q + b] = columns[a * n..(a + 1) * n]
+                .iter()
+                .zip(&columns[b * n..(b + 1) * n])
+                .map(|(x, y)| x * y)
+                .sum();
+        }
+    }
+    bread
+}
+
 /// The sds and correlations of a covariance in unit coordinates, back in
 /// the parameters' own (`span` the prior box's widths).
-fn local_uncertainty(covariance: &[f64], span: &[f64], noise_order: usize) -> LocalUncertainty {
+pub(crate) fn local_uncertainty(
+    covariance: &[f64],
+    span: &[f64],
+    noise_order: usize,
+) -> LocalUncertainty {
     let q = span.len();
     let sd_unit: Vec<f64> = (0..q)
         .map(|j| covariance[j * q + j].max(0.0).sqrt())
@@ -286,24 +418,9 @@ fn sandwich(
         }
         offset += length;
     }
-    let mut bread = vec![0.0; q * q];
-    for a in 0..q {
-        for b in 0..q {
-            bread[a * q + b] = columns[a * n..(a + 1) * n]
-                .iter()
-                .zip(&columns[b * n..(b + 1) * n])
-                .map(|(x, y)| x * y)
-                .sum();
-        }
-    }
-    let mut factor = bread;
-    cholesky_in_place(&mut factor, q, PivotRule::RelativeToLargest(1e-12)).map_err(|_| {
-        Error::Numerical {
-            what: "the residuals do not change with some parameter near the estimate: the record \
-                   does not determine it, and it has no interval"
-                .into(),
-        }
-    })?;
+    let mut factor = bread(columns, n, q);
+    cholesky_in_place(&mut factor, q, PivotRule::RelativeToLargest(1e-12))
+        .map_err(|_| undetermined())?;
     // A^-1 B, column by column of B (symmetric), then (A^-1 B) A^-1 likewise.
     let mut half = meat;
     for a in 0..q {

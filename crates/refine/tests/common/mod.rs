@@ -18,8 +18,12 @@ pub const DT: f64 = 0.1;
 pub const NOISE: f64 = 0.02;
 
 /// `x'' + c x' + k x + k3 x^3 = u`, `y = x + e`, RK4 with two steps a
-/// sample and the input held between samples.
-pub struct Duffing(ModelSpec);
+/// sample and the input held between samples; as a plant, with a
+/// quadratic stiffness `k2 x^2` the model leaves out.
+pub struct Duffing {
+    spec: ModelSpec,
+    unmodelled: f64,
+}
 
 impl Duffing {
     pub fn new() -> Self {
@@ -27,12 +31,23 @@ impl Duffing {
         let spec = ModelSpec::new("duffing", &["k", "c", "k3"], prior, DT, N)
             .unwrap()
             .with_signals(&["u"], &["y"]);
-        Self(spec)
+        Self {
+            spec,
+            unmodelled: 0.0,
+        }
     }
 
-    fn respond(theta: &[f64], u: &[f64], noise: Option<&mut ExperimentRng>, y: &mut [f64]) {
-        let (k, c, k3) = (theta[0], theta[1], theta[2]);
-        let f = |x: f64, v: f64, u: f64| (v, u - c * v - k * x - k3 * x * x * x);
+    /// The plant with a quadratic stiffness `k2` besides the model's terms.
+    pub fn with_unmodelled(k2: f64) -> Self {
+        Self {
+            unmodelled: k2,
+            ..Self::new()
+        }
+    }
+
+    fn respond(&self, theta: &[f64], u: &[f64], noise: Option<&mut ExperimentRng>, y: &mut [f64]) {
+        let (k, c, k3, k2) = (theta[0], theta[1], theta[2], self.unmodelled);
+        let f = |x: f64, v: f64, u: f64| (v, u - c * v - k * x - k2 * x * x - k3 * x * x * x);
         let (mut x, mut v) = (0.0, 0.0);
         let h = DT / 2.0;
         for (t, u) in u.iter().enumerate() {
@@ -57,7 +72,7 @@ impl Duffing {
 
 impl Simulator for Duffing {
     fn spec(&self) -> &ModelSpec {
-        &self.0
+        &self.spec
     }
     fn capabilities(&self) -> Capabilities {
         Capabilities {
@@ -86,7 +101,7 @@ impl Simulator for Duffing {
             )));
         }
         let noise = (!conditions.noiseless).then_some(rng);
-        Self::respond(theta, &u, noise, out.output_mut(0));
+        self.respond(theta, &u, noise, out.output_mut(0));
         Ok(())
     }
 }
