@@ -8,7 +8,7 @@ use twostage_estimator::Estimator;
 use twostage_fit::TerminationReason;
 use twostage_models::{IoData, Simulator};
 use twostage_refine::{
-    JointPlan, OutputError, RefineError, Refinement, SearchStarts, SingleEstimate,
+    BetweenRecords, JointPlan, OutputError, RefineError, Refinement, SearchStarts, SingleEstimate,
 };
 
 use crate::model_of::{EstimatorModel, SharedSimulator};
@@ -43,6 +43,42 @@ pub struct JointOfRecords {
     /// beyond its interval ([`twostage_refine::PooledEstimate`]), by
     /// place.
     pub disagreeing: Vec<usize>,
+    /// How far the records' own best fits scatter about the joint
+    /// estimate beyond their noise, where two or more determine every
+    /// parameter: the joint interval includes it, and
+    /// [`JointOfRecords::widen`] adds it to a record's own.
+    pub between: Option<BetweenRecords>,
+    /// The level `1 - alpha` of the intervals.
+    pub alpha: f64,
+}
+
+impl JointOfRecords {
+    /// A record's interval half-widths with the scatter between the
+    /// records added ([`BetweenRecords::widen`]): an interval of the
+    /// plant's value, as the joint fit says its records are of one plant.
+    /// Unchanged without a scatter.
+    ///
+    /// ```
+    /// use twostage::JointOfRecords;
+    /// use twostage::refine::{BetweenRecords, TerminationReason};
+    /// let joint = JointOfRecords {
+    ///     theta: vec![1.0], half_widths: Ok(vec![0.1]), correlation: None,
+    ///     stop: TerminationReason::Converged, optima: 1, runner_up_ratio: None,
+    ///     pooled: vec![1.0], fitted: vec![(0, 95.0), (1, 94.0)], left_out: vec![], disagreeing: vec![],
+    ///     between: Some(BetweenRecords {
+    ///         sd: vec![0.3], within_sd: vec![0.1], joint_sd: vec![0.2], beyond_chance: vec![true], records: 2,
+    ///     }),
+    ///     alpha: 0.1,
+    /// };
+    /// let widened = joint.widen(&[0.2]);
+    /// assert!((widened[0] - 0.2f64.hypot(1.6448536269514722 * 0.3)).abs() < 1e-9);
+    /// ```
+    pub fn widen(&self, half_widths: &[f64]) -> Vec<f64> {
+        match &self.between {
+            Some(between) => between.widen(half_widths, self.alpha),
+            None => half_widths.to_vec(),
+        }
+    }
 }
 
 /// Joint estimates of an estimator's plant: see [`JointFitter::new`].
@@ -147,6 +183,8 @@ impl JointFitter {
             fitted: joint.fitted.into_iter().zip(fits).collect(),
             left_out: joint.left_out,
             disagreeing: joint.pooled.disagreeing,
+            between: joint.between,
+            alpha: self.plan.alpha,
         })
     }
 }

@@ -62,6 +62,22 @@ pub struct JointRun {
     pub fit: Result<(JointOfRecords, RecordEstimate), RefineError>,
 }
 
+impl JointRun {
+    /// The rows of the records gathered, in [`JointRun::places`]' order
+    /// (the rows `each` was handed, the failed ones left out), each
+    /// interval widened by the scatter between the records
+    /// ([`JointOfRecords::widen`]); nothing changes where the joint fit
+    /// failed or found no scatter.
+    pub fn widen<'a>(&self, rows: impl IntoIterator<Item = &'a mut RecordEstimate>) {
+        let Ok((joint, _)) = &self.fit else { return };
+        for row in rows.into_iter().take(self.places.len()) {
+            if let Some(widths) = &mut row.half_widths {
+                *widths = joint.widen(widths);
+            }
+        }
+    }
+}
+
 impl Estimating {
     /// The records of the record file at `path`, laid out as the request's
     /// records are ([`Estimating::record_format`]), named `PATH:

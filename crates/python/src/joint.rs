@@ -13,7 +13,12 @@ use twostage::JointOfRecords;
 /// estimates pooled; `fitted`, the indices of the records fitted, and
 /// `fit_percent`, each one's fit at the joint estimate; `left_out`, pairs
 /// of an index and why; `disagreeing`, the indices of records whose
-/// two-stage estimates lie beyond their intervals from the others'.
+/// two-stage estimates lie beyond their intervals from the others';
+/// `between_sd`, per parameter the sd of the records' own best fits about
+/// the joint one beyond their noise (None with fewer than two records
+/// that determine every parameter), and `mismatch_sets_width`, per
+/// parameter whether that scatter, beyond chance and above a record's own
+/// sd, sets the widths (the joint interval includes it).
 pub(crate) fn joint_dict(
     py: Python<'_>,
     joint: JointOfRecords,
@@ -40,5 +45,14 @@ pub(crate) fn joint_dict(
         .collect();
     dict.set_item("left_out", left_out)?;
     dict.set_item("disagreeing", joint.disagreeing)?;
+    let (between, wide) = joint
+        .between
+        .map(|b| {
+            let wide = b.mismatch_sets_width();
+            (b.sd.into_pyarray(py), wide)
+        })
+        .unzip();
+    dict.set_item("between_sd", between)?;
+    dict.set_item("mismatch_sets_width", wide)?;
     Ok(dict)
 }

@@ -327,10 +327,16 @@ pub(crate) fn estimate_records<'py>(
             Ok::<(), std::convert::Infallible>(())
         });
         match joint {
-            Ok(Some(joint)) => match joint.fit {
-                Ok((_, row)) => rows.push(("joint".into(), row)),
-                Err(why) => failed.push(("joint".into(), format!("the joint fit failed: {why}"))),
-            },
+            Ok(Some(joint)) => {
+                // The rows so far are the gathered records', in their order.
+                joint.widen(rows.iter_mut().map(|(_, row)| row));
+                match joint.fit {
+                    Ok((_, row)) => rows.push(("joint".into(), row)),
+                    Err(why) => {
+                        failed.push(("joint".into(), format!("the joint fit failed: {why}")));
+                    }
+                }
+            }
             Ok(None) => {}
             Err(never) => match never {},
         }

@@ -109,9 +109,14 @@ pub struct EstimateArgs {
     /// estimate and the prior (--prior-starts), with its own interval in
     /// _lo/_hi. Stderr names the records fitted (with their fit there),
     /// left out (the model cannot run them) and disagreeing (their
-    /// estimates lie beyond their intervals from the others'). Needs the
-    /// model: an estimator's built-in one, or --model-file.
-    #[arg(long, requires = "estimator", conflicts_with_all = ["refine", "check"])]
+    /// estimates lie beyond their intervals from the others'). The records
+    /// are taken to be of one plant: where their own best fits scatter
+    /// beyond their noise (a model that misses part of the plant), the
+    /// joint interval and each record's own include the scatter, and
+    /// stderr says which parameters' widths it sets. With --refine, the
+    /// records' refined estimates are pooled. Needs the model: an
+    /// estimator's built-in one, or --model-file.
+    #[arg(long, requires = "estimator")]
     joint: bool,
     /// With --refine, --joint or --samples: add the estimate's parameter
     /// correlations, a column `corr_A_B` per pair of parameters (empty
@@ -267,10 +272,12 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     })?;
     said.summarize();
     if let Some(joint) = joint {
+        // The rows so far are the gathered records', in their order.
+        joint.widen(rows.iter_mut().map(|(_, row)| row));
         match joint.fit {
             Ok((fit, row)) => {
                 let places: Vec<&str> = joint.places.iter().map(String::as_str).collect();
-                said::joint(&places, &fit);
+                said::joint(&places, estimating.param_names(), &fit);
                 rows.push(("joint".into(), row));
             }
             // No row: a joint row without an estimate would read as one.

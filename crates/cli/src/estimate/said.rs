@@ -4,6 +4,7 @@
 //! note said in one line naming every record it concerns, over every
 //! file of the run.
 
+use crate::number::four_digits;
 use std::path::Path;
 
 use twostage::JointOfRecords;
@@ -582,9 +583,10 @@ impl RepeatedFailures {
 }
 
 /// What the joint fit of `plant`'s records (by name) did with each: the
-/// records left out and why, those whose estimates disagree, and each
-/// fitted record's fit at the joint estimate.
-pub(super) fn joint(plant: &[&str], joint: &JointOfRecords) {
+/// records left out and why, those whose estimates disagree, the
+/// parameters (named `params`) whose width the scatter between the
+/// records sets, and each fitted record's fit at the joint estimate.
+pub(super) fn joint(plant: &[&str], params: &[String], joint: &JointOfRecords) {
     let name = |i: usize| plant[i];
     for (i, why) in &joint.left_out {
         eprintln!(
@@ -600,6 +602,31 @@ pub(super) fn joint(plant: &[&str], joint: &JointOfRecords) {
              fitted with the rest, and the joint estimate is a compromise between them",
             names.join("; ")
         );
+    }
+    if let Some(between) = &joint.between {
+        let wide: Vec<String> = between
+            .mismatch_sets_width()
+            .iter()
+            .enumerate()
+            .filter(|(_, wide)| **wide)
+            .map(|(j, _)| {
+                format!(
+                    "{} {} against {}",
+                    params[j],
+                    four_digits(between.sd[j]),
+                    four_digits(between.within_sd[j])
+                )
+            })
+            .collect();
+        if !wide.is_empty() {
+            eprintln!(
+                "note: the records' own best fits scatter beyond their noise (sd between records \
+                 against a record's own: {}): the model's mismatch with the plant, not the \
+                 noise, sets these widths; the joint interval and each record's include the \
+                 scatter",
+                wide.join(", ")
+            );
+        }
     }
     let fits: Vec<String> = joint
         .fitted
