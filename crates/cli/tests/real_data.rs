@@ -317,9 +317,15 @@ fn a_mismatched_model_is_checked_refined_and_validated() {
         .parse()
         .unwrap();
     assert!(best_fit <= 0.01, "{header:?}\n{row:?}");
-    // And the refined interval says what it covers there.
+    // So the refined estimate is the best fit itself, not the posterior
+    // mean near it, and its interval says what it covers there.
+    let over_best: f64 = row[column("loss_over_best")].parse().unwrap();
+    assert!((over_best - 1.0).abs() < 1e-12, "{header:?}\n{row:?}");
     assert!(
-        text(&out.stderr).contains("the refined interval covers this record's noise"),
+        text(&out.stderr).contains(
+            "the refined estimate is the model's best fit itself, and its interval covers this \
+             record's noise"
+        ),
         "{}",
         text(&out.stderr)
     );

@@ -105,6 +105,7 @@ impl Method {
                         },
                         interval_failure: None,
                         correlation: None,
+                        at_best_fit: false,
                     })),
                     ..RecordEstimate::bare(best.theta)
                 })

@@ -112,6 +112,53 @@ impl Estimating {
         progress.end_step();
     }
 
+    /// The refined rows marked in `only` whose check finds that the model
+    /// does not make the record even at its best fit
+    /// ([`RecordCheck::best_fit_consistent`] false: a plant the model
+    /// misses part of) take their best fit itself as the estimate, their
+    /// interval centred on it, and are checked there. The posterior mean
+    /// near the best fit (decision 077) weighs the likelihood of a model
+    /// that makes the record; on one it does not, that likelihood's
+    /// sandwich holds the model's error, and the mean moved a loose
+    /// parameter away from the best fit at a cost in fit the records' noise
+    /// does not explain.
+    pub(super) fn settle_on_best_fits(
+        &self,
+        rows: &mut [(String, RecordOutcome)],
+        only: &[bool],
+        searches: &[Search],
+        progress: &dyn Progress,
+    ) {
+        if !self
+            .refiner
+            .as_ref()
+            .is_some_and(EstimateRefiner::is_output_error)
+        {
+            return;
+        }
+        let mut moved = vec![false; rows.len()];
+        for (((_, outcome), search), (marked, moved)) in rows
+            .iter_mut()
+            .zip(searches)
+            .zip(only.iter().zip(&mut moved))
+        {
+            let (Ok((_, e)), Some(Ok(found)), true) = (outcome, search, *marked) else {
+                continue;
+            };
+            let inexact = matches!(&e.check, Some(Ok(c)) if !c.best_fit_consistent());
+            let elsewhere = e.theta != found.best.theta;
+            let Some(refined) = e.refined_mut().filter(|_| inexact && elsewhere) else {
+                continue;
+            };
+            refined.at_best_fit = true;
+            e.theta.clone_from(&found.best.theta);
+            *moved = true;
+        }
+        if moved.iter().any(|m| *m) {
+            self.check_all(rows, &moved, searches, progress);
+        }
+    }
+
     /// An empty gathering of the records of one plant, for
     /// [`Self::fit_plant`]: it gathers nothing unless the request asked
     /// for the joint fit.
@@ -206,6 +253,7 @@ impl Estimating {
                     },
                     interval_failure: why,
                     correlation: joint.correlation.clone(),
+                    at_best_fit: false,
                 })),
                 ..RecordEstimate::bare(joint.theta.clone())
             };
@@ -266,6 +314,7 @@ pub(super) fn refine_together(
                     by: r.by,
                     interval_failure: why,
                     correlation: r.correlation,
+                    at_best_fit: false,
                 }));
             }
             Err(why) => e.refinement = Some(RefineOutcome::Failed(why)),

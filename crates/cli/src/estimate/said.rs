@@ -379,17 +379,19 @@ impl Notes {
             [(_, p)] => eprintln!(
                 "note: {}: the model does not make this record exactly (not even its best \
                  fit misses it as the model's own records do: \
-                 check_best_fit_tail_probability {p}): the refined interval covers this \
-                 record's noise about the model's best fit, not the error of the model \
-                 itself, so the plant's true values may lie outside it",
+                 check_best_fit_tail_probability {p}): the refined estimate is the \
+                 model's best fit itself, and its interval covers this record's noise \
+                 about it, not the error of the model itself, so the plant's true values \
+                 may lie outside it",
                 who_of(&self.not_exact)
             ),
             many => eprintln!(
                 "note: {}: the model does not make these records exactly (not even their \
                  best fits miss them as the model's own records do: \
-                 check_best_fit_tail_probability {}): the refined intervals cover each \
-                 record's noise about the model's best fit, not the error of the model \
-                 itself, so the plant's true values may lie outside them",
+                 check_best_fit_tail_probability {}): the refined estimates are the \
+                 model's best fits themselves, and their intervals cover each record's \
+                 noise about them, not the error of the model itself, so the plant's true \
+                 values may lie outside them",
                 who_of(many),
                 numbers(many.iter().map(|(_, p)| *p))
             ),
