@@ -162,7 +162,7 @@ impl Estimating {
                     .count();
                 super::through_model::refine_together(refiner, rows, &chosen, &searches, progress);
                 self.check_all(rows, &chosen, &searches, progress);
-                self.settle_on_best_fits(rows, &chosen, &searches, progress);
+                self.settle_on_best_fits(rows, &chosen, &searches);
                 Some(AutoRefined {
                     explained,
                     checked: everyone.len(),
@@ -174,7 +174,7 @@ impl Estimating {
                     refiner, rows, &everyone, &searches, progress,
                 );
                 self.check_all(rows, &everyone, &searches, progress);
-                self.settle_on_best_fits(rows, &everyone, &searches, progress);
+                self.settle_on_best_fits(rows, &everyone, &searches);
                 None
             }
             (None, _) => {

@@ -116,18 +116,18 @@ impl Estimating {
     /// does not make the record even at its best fit
     /// ([`RecordCheck::best_fit_consistent`] false: a plant the model
     /// misses part of) take their best fit itself as the estimate, their
-    /// interval centred on it, and are checked there. The posterior mean
+    /// interval centred on it, and their check moved there
+    /// ([`RecordCheck::at_best_fit`]: no simulation). The posterior mean
     /// near the best fit (decision 077) weighs the likelihood of a model
     /// that makes the record; on one it does not, that likelihood's
     /// sandwich holds the model's error, and the mean moved a loose
-    /// parameter away from the best fit at a cost in fit the records' noise
-    /// does not explain.
+    /// parameter away from the best fit at a cost in fit the records'
+    /// noise does not explain.
     pub(super) fn settle_on_best_fits(
         &self,
         rows: &mut [(String, RecordOutcome)],
         only: &[bool],
         searches: &[Search],
-        progress: &dyn Progress,
     ) {
         if !self
             .refiner
@@ -136,26 +136,23 @@ impl Estimating {
         {
             return;
         }
-        let mut moved = vec![false; rows.len()];
-        for (((_, outcome), search), (marked, moved)) in rows
-            .iter_mut()
-            .zip(searches)
-            .zip(only.iter().zip(&mut moved))
-        {
-            let (Ok((_, e)), Some(Ok(found)), true) = (outcome, search, *marked) else {
+        for (((_, outcome), search), marked) in rows.iter_mut().zip(searches).zip(only) {
+            let (Ok((record, e)), Some(Ok(found)), true) = (outcome, search, *marked) else {
                 continue;
             };
-            let inexact = matches!(&e.check, Some(Ok(c)) if !c.best_fit_consistent());
-            let elsewhere = e.theta != found.best.theta;
-            let Some(refined) = e.refined_mut().filter(|_| inexact && elsewhere) else {
+            let Some(Ok(check)) = &e.check else { continue };
+            if check.best_fit_consistent() || e.theta == found.best.theta {
+                continue;
+            }
+            let Some(moved) = check.at_best_fit(record, found, self.plan) else {
+                continue;
+            };
+            let Some(refined) = e.refined_mut() else {
                 continue;
             };
             refined.at_best_fit = true;
             e.theta.clone_from(&found.best.theta);
-            *moved = true;
-        }
-        if moved.iter().any(|m| *m) {
-            self.check_all(rows, &moved, searches, progress);
+            e.check = Some(Ok(moved));
         }
     }
 

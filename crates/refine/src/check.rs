@@ -744,5 +744,6 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
+mod at_best_fit;
 #[cfg(test)]
 mod tests;

@@ -13,7 +13,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "protocol"))
-from overflow import levels, multisine, SAMPLES  # noqa: E402
+import overflow  # noqa: E402
 from twostage_protocol import serve  # noqa: E402
 
 NOISE_SD = 0.05
@@ -24,22 +24,17 @@ def batch(thetas, seeds, indices, noiseless=False, input=None):
     if os.environ.get("COUNT_LOG"):
         with open(os.environ["COUNT_LOG"], "a") as log:
             log.write("%d\n" % len(thetas))
-    theta = np.asarray(thetas, dtype=float)
-    b = theta.shape[0]
-    n = SAMPLES if input is None else len(input)
-    u = np.empty((b, n))
-    noise = np.empty((b, n))
-    for j, (seed, index) in enumerate(zip(seeds, indices)):
-        rng = np.random.default_rng([seed, index])
-        if input is None:
-            u[j] = multisine(rng, n)
-        noise[j] = rng.standard_normal(n)
-    if input is not None:
-        u[:] = np.asarray(input, dtype=float)[:, 0]
-    y = np.minimum(levels(theta, u)[:, :, 1], SENSOR_TOP)
+    u, level = overflow.batch(thetas, seeds, indices, noiseless=True, input=input)
+    y = np.minimum(level, SENSOR_TOP)
     if not noiseless:
-        y = y + NOISE_SD * noise
-    return u[:, :, None], y[:, :, None]
+        n = u.shape[1]
+        for j, (seed, index) in enumerate(zip(seeds, indices)):
+            # The stream overflow.py draws from: its own input first, if any.
+            rng = np.random.default_rng([seed, index])
+            if input is None:
+                overflow.multisine(rng, n)
+            y[j, :, 0] += NOISE_SD * rng.standard_normal(n)
+    return u, y
 
 
 if __name__ == "__main__":

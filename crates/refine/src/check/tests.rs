@@ -380,3 +380,54 @@ fn the_span_of_a_gain_improves_residuals_by_the_least_squares_amount() {
         );
     }
 }
+
+/// A check moved to its best fit reads what checking the best fit again
+/// through the model computes: the same fit and response, a loss ratio of
+/// 1, nothing to improve, and (on a record the model does not make) the
+/// same tail probability, without a run of the model.
+#[test]
+fn a_check_moved_to_its_best_fit_is_the_check_of_the_best_fit() {
+    let model = gain(400);
+    let (u, _) = noisy_gain_record(400, 2.0, 3, 0);
+    // A quadratic term the gain model leaves out.
+    let y: Vec<f64> = u.iter().map(|u| 2.0 * u + 0.3 * u * u).collect();
+    let record = IoData::siso(&u, &y).unwrap();
+    let mut plan = CheckPlan::new(199, 4, 1);
+    plan.score_from = 20;
+    let starts = plan
+        .search()
+        .starts(model.spec().prior(), &[1.9], None)
+        .unwrap();
+    let best = search_best_fits(&model, vec![(&record, starts)])
+        .pop()
+        .unwrap()
+        .unwrap();
+    let first = check_against(&model, &record, &[1.9], &best, plan).unwrap();
+    let moved = first.at_best_fit(&record, &best, plan).unwrap();
+    let again = check_against(&model, &record, &best.best.theta, &best, plan).unwrap();
+    for (a, b) in moved
+        .rms
+        .iter()
+        .zip(&again.rms)
+        .chain(moved.fit_percent.iter().zip(&again.fit_percent))
+    {
+        assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} against {b}");
+    }
+    let (ours, theirs) = (moved.simulated.output(0), again.simulated.output(0));
+    assert!(ours.iter().zip(theirs).all(|(a, b)| (a - b).abs() <= 1e-12));
+    assert_eq!(moved.loss_ratio.to_bits(), 1.0f64.to_bits());
+    assert_eq!(moved.best_theta, again.best_theta);
+    for c in [&moved, &again] {
+        assert!(!c.best_fit_consistent() && c.explained(), "{}", said(c));
+        assert!(c.improvement_tail_probability >= 1.0 - 1e-12, "{}", said(c));
+    }
+    assert_eq!(
+        moved.tail_probability.to_bits(),
+        again.tail_probability.to_bits()
+    );
+    assert!(
+        !first.explained() || first.loss_ratio > 1.0,
+        "{}",
+        said(&first)
+    );
+}
