@@ -17,7 +17,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{path, scratch, text, twostage};
+use common::{path, scratch, text, train_small, twostage};
 
 const MODEL: &str = r#"
 [model]
@@ -92,34 +92,6 @@ fn simulate(plant: &Path, theta: &str, i: usize) -> String {
     path(&record).to_string()
 }
 
-/// A small estimator of `model` (its two-stage estimates only start the
-/// refinement), written beside it.
-fn train(model: &Path) -> std::path::PathBuf {
-    let estimator = model.with_extension("tsest");
-    let out = twostage(&[
-        "train",
-        "--model-file",
-        path(model),
-        "--compress",
-        "arx:2,2",
-        "--fit",
-        "linear",
-        "--sims",
-        "400",
-        "--calibrate",
-        "200",
-        "--validate",
-        "200",
-        "--seed",
-        "3",
-        "--quiet",
-        "--out",
-        path(&estimator),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    estimator
-}
-
 /// `estimate` of the records with `extra`: its table and its stderr.
 fn estimate(
     estimator: &Path,
@@ -154,7 +126,7 @@ fn a_mismatched_plants_records_hold_the_joint_estimate_with_their_scatter() {
     )
     .unwrap();
     let records: Vec<String> = (0..6).map(|i| simulate(&plant, "1.5,1.5", i)).collect();
-    let estimator = train(&model);
+    let estimator = train_small(&model);
 
     let (alone, _) = estimate(&estimator, &model, &records, &[]);
     let (together, said) = estimate(&estimator, &model, &records, &["--joint"]);
@@ -212,7 +184,7 @@ fn on_a_record_the_model_does_not_make_the_refined_estimate_is_the_best_fit() {
     let plant = dir.join("plant.toml");
     std::fs::write(&plant, with_cubic.replace("- c * x^3", "- 0.3 * x^3")).unwrap();
     let record = simulate(&plant, "1.5,1.5,0", 3);
-    let estimator = train(&model);
+    let estimator = train_small(&model);
     let (table, said) = estimate(&estimator, &model, &[record], &["--check"]);
     let rows = rows(&table);
     let [(_, row)] = rows.as_slice() else {

@@ -11,7 +11,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{path, scratch, text, twostage};
+use common::{path, scratch, text, train_small, twostage};
 
 fn example(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -23,28 +23,7 @@ fn example(name: &str) -> PathBuf {
 /// estimator) and estimate `blocks` with `extra` arguments: what
 /// `estimate` says on stderr.
 fn said_of_blocks(dir: &Path, model: &Path, blocks: &[PathBuf], extra: &[&str]) -> String {
-    let estimator = model.with_extension("tsest");
-    let out = twostage(&[
-        "train",
-        "--model-file",
-        path(model),
-        "--compress",
-        "arx:2,2",
-        "--fit",
-        "linear",
-        "--sims",
-        "400",
-        "--calibrate",
-        "200",
-        "--validate",
-        "200",
-        "--seed",
-        "3",
-        "--quiet",
-        "--out",
-        path(&estimator),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
+    let estimator = train_small(model);
     let mut args = vec!["estimate", "--estimator", path(&estimator)];
     args.extend(extra);
     args.extend(blocks.iter().map(|b| path(b)));

@@ -341,14 +341,7 @@ pub fn check_against(
         .filter(|shared| shared.n_inputs() == record.n_inputs());
     let input_shared = shared.is_some();
     let input_differs_at = shared.and_then(|shared| first_difference(record, &shared));
-    let (rms, fit_percent): (Vec<f64>, Vec<f64>) = (0..record.n_outputs())
-        .map(|j| {
-            output_fit(
-                &record.output(j)[window.clone()],
-                &simulated.output(j)[window.clone()],
-            )
-        })
-        .unzip();
+    let (rms, fit_percent) = fits_over(record, &simulated, window);
     Ok(RecordCheck {
         rms,
         fit_percent,
@@ -365,6 +358,19 @@ pub fn check_against(
         optima: best.optima.len(),
         runner_up_ratio: best.runner_up_ratio(),
     })
+}
+
+/// Per output of `record`, the RMS misfit and the normalized fit of
+/// `simulated` over the samples `window` ([`output_fit`]).
+fn fits_over(record: &IoData, simulated: &IoData, window: Range<usize>) -> (Vec<f64>, Vec<f64>) {
+    (0..record.n_outputs())
+        .map(|j| {
+            output_fit(
+                &record.output(j)[window.clone()],
+                &simulated.output(j)[window.clone()],
+            )
+        })
+        .unzip()
 }
 
 /// The best fit of each record from its starts (see

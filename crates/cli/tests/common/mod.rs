@@ -30,6 +30,36 @@ pub fn path(p: &Path) -> &str {
     p.to_str().expect("test paths are UTF-8")
 }
 
+/// A small estimator of the model file `model` (`arx:2,2`, linear, 400
+/// simulations, seed 3), written beside it: for tests whose estimates
+/// only start a refinement or show a flag, not for accuracy.
+#[allow(dead_code)]
+pub fn train_small(model: &Path) -> PathBuf {
+    let estimator = model.with_extension("tsest");
+    let out = twostage(&[
+        "train",
+        "--model-file",
+        path(model),
+        "--compress",
+        "arx:2,2",
+        "--fit",
+        "linear",
+        "--sims",
+        "400",
+        "--calibrate",
+        "200",
+        "--validate",
+        "200",
+        "--seed",
+        "3",
+        "--quiet",
+        "--out",
+        path(&estimator),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    estimator
+}
+
 /// The Python to run simulators with: `TWOSTAGE_PYTHON` (as `cargo xtask
 /// test` sets it), else the environment it made, else python3.
 #[allow(dead_code)]

@@ -3,7 +3,7 @@
 
 use twostage_models::IoData;
 
-use super::{CheckPlan, RecordCheck, output_fit};
+use super::{CheckPlan, RecordCheck, fits_over};
 use crate::best_fit::BestFit;
 use crate::output_error::response_from_output_errors;
 
@@ -20,15 +20,7 @@ impl RecordCheck {
     /// search's residuals are not the record's outputs'.
     pub fn at_best_fit(&self, record: &IoData, best: &BestFit, plan: CheckPlan) -> Option<Self> {
         let simulated = response_from_output_errors(record, &best.best_residuals)?;
-        let window = plan.scored(record.n_samples());
-        let (rms, fit_percent) = (0..record.n_outputs())
-            .map(|j| {
-                output_fit(
-                    &record.output(j)[window.clone()],
-                    &simulated.output(j)[window.clone()],
-                )
-            })
-            .unzip();
+        let (rms, fit_percent) = fits_over(record, &simulated, plan.scored(record.n_samples()));
         Some(Self {
             rms,
             fit_percent,
