@@ -118,11 +118,11 @@ impl Estimating {
     /// misses part of) take their best fit itself as the estimate, their
     /// interval centred on it, and their check moved there
     /// ([`RecordCheck::at_best_fit`]: no simulation). The posterior mean
-    /// near the best fit (decision 077) weighs the likelihood of a model
-    /// that makes the record; on one it does not, that likelihood's
-    /// sandwich holds the model's error, and the mean moved a loose
-    /// parameter away from the best fit at a cost in fit the records'
-    /// noise does not explain.
+    /// near the best fit, which a refinement reports otherwise, weighs the
+    /// likelihood of a model that makes the record; on one it does not,
+    /// that likelihood's sandwich holds the model's error, and the mean
+    /// moved a loose parameter away from the best fit at a cost in fit
+    /// the records' noise does not explain.
     pub(super) fn settle_on_best_fits(
         &self,
         rows: &mut [(String, RecordOutcome)],

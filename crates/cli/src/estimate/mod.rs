@@ -66,7 +66,9 @@ pub struct EstimateArgs {
     /// simulations batched together), the estimate the mean of the
     /// likelihood near its best fit within the prior's box (the best fit
     /// where the record pins a parameter down, further inside where it
-    /// leaves one loose by a bound of the box); its own interval in
+    /// leaves one loose by a bound of the box; with --check or
+    /// --refine=auto, the best fit itself where the check finds that the
+    /// model does not make the record even there); its own interval in
     /// _lo/_hi;
     /// `refine_stop` says why the best descent stopped, `optima` and `runner_up_over_best`
     /// what its search over the prior found. `--refine=auto`: check every
