@@ -164,6 +164,16 @@ fn a_mismatched_plants_records_hold_the_joint_estimate_with_their_scatter() {
         "{note}"
     );
     assert!(note.contains("the model's mismatch with the plant, not the noise, sets these widths"));
+    // Records whose estimates disagree are said to be possibly of another
+    // plant, or of one the model misses part of: here, the latter.
+    let warning = said
+        .lines()
+        .find(|l| l.contains("lie beyond their intervals"))
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!(
+        warning.contains("or the model may miss part of the plant"),
+        "{warning}"
+    );
 }
 
 /// A cubic coefficient whose prior ends below the plant's: its best fit

@@ -600,8 +600,10 @@ pub(super) fn joint(plant: &[&str], params: &[String], joint: &JointOfRecords) {
         let names: Vec<&str> = joint.disagreeing.iter().map(|&i| name(i)).collect();
         eprintln!(
             "warning: the two-stage estimates of {} lie beyond their intervals from the \
-             others': the records may not be of one plant (or one condition); they are \
-             fitted with the rest, and the joint estimate is a compromise between them",
+             others': the records may not be of one plant (or one condition), or the model \
+             may miss part of the plant, so that its best fit moves with each record's \
+             input; they are fitted with the rest, and the joint estimate is a compromise \
+             between them",
             names.join("; ")
         );
     }
