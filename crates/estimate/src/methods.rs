@@ -105,7 +105,6 @@ impl Method {
                         },
                         interval_failure: None,
                         correlation: None,
-                        at_best_fit: false,
                     })),
                     ..RecordEstimate::bare(best.theta)
                 })

@@ -76,14 +76,6 @@ impl RecordEstimate {
         }
     }
 
-    /// The refined estimate, where a refinement succeeded, to change.
-    pub(crate) fn refined_mut(&mut self) -> Option<&mut Refined> {
-        match &mut self.refinement {
-            Some(RefineOutcome::Done(refined)) => Some(refined),
-            _ => None,
-        }
-    }
-
     /// The estimate's correlation matrix (row-major q x q), where it has
     /// one: a refined estimate's, or the posterior draws'.
     pub fn correlation(&self) -> Option<&[f64]> {
@@ -175,10 +167,6 @@ pub struct Refined {
     /// The refined parameters' correlation matrix (row-major q x q),
     /// where the interval has one.
     pub correlation: Option<Vec<f64>>,
-    /// Whether the estimate is the best fit itself where it would have
-    /// been the posterior mean near it: its check found that the model
-    /// does not make the record even there.
-    pub at_best_fit: bool,
 }
 
 /// A record (or window) with its estimate, or why it has none.

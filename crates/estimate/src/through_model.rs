@@ -141,16 +141,12 @@ impl Estimating {
                 continue;
             };
             let Some(Ok(check)) = &e.check else { continue };
-            if check.best_fit_consistent() || e.theta == found.best.theta {
+            if e.refined().is_none() || check.best_fit_consistent() || e.theta == found.best.theta {
                 continue;
             }
             let Some(moved) = check.at_best_fit(record, found, self.plan) else {
                 continue;
             };
-            let Some(refined) = e.refined_mut() else {
-                continue;
-            };
-            refined.at_best_fit = true;
             e.theta.clone_from(&found.best.theta);
             e.check = Some(Ok(moved));
         }
@@ -250,7 +246,6 @@ impl Estimating {
                     },
                     interval_failure: why,
                     correlation: joint.correlation.clone(),
-                    at_best_fit: false,
                 })),
                 ..RecordEstimate::bare(joint.theta.clone())
             };
@@ -311,7 +306,6 @@ pub(super) fn refine_together(
                     by: r.by,
                     interval_failure: why,
                     correlation: r.correlation,
-                    at_best_fit: false,
                 }));
             }
             Err(why) => e.refinement = Some(RefineOutcome::Failed(why)),
