@@ -213,11 +213,7 @@ impl<S: Simulator> WithFixed<S> {
         let free: Vec<usize> = (0..full.n_params()).filter(|j| !held.contains(j)).collect();
         let prior = Prior::new(free.iter().map(|&j| full.prior().marginals()[j]).collect())?
             .with_sampling(full.prior().sampling());
-        let names: Vec<String> = free
-            .iter()
-            .map(|&j| full.param_names()[j].clone())
-            .collect();
-        let spec = full.with_parameters(names, prior);
+        let spec = full.with_parameters(&free, prior);
         Ok(Self {
             inner,
             spec,

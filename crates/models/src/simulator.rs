@@ -33,6 +33,9 @@ pub struct ModelSpec {
     input_note: String,
     noise_note: String,
     car_equations: Option<CarEquations>,
+    /// Per parameter, whether it belongs to one record (an initial state,
+    /// a sensor offset) rather than to the plant.
+    per_record: Vec<bool>,
 }
 
 /// The equations of a model that the kernels hold, for a stage 1 that
@@ -105,6 +108,7 @@ impl ModelSpec {
             input_note: String::new(),
             noise_note: String::new(),
             car_equations: None,
+            per_record: vec![false; param_names.len()],
         })
     }
 
@@ -129,11 +133,48 @@ impl ModelSpec {
         self
     }
 
-    /// The same model with the parameters `names` of `prior` (those left
-    /// by [`crate::WithFixed`]), without the car's equations (of both).
-    pub(crate) fn with_parameters(&self, names: Vec<String>, prior: Prior) -> Self {
+    /// The same model, whose parameters marked `true` in `per_record`
+    /// (one flag per parameter, in order) each belong to one record (an
+    /// initial state, a sensor offset) rather than to the plant: a fit of
+    /// several records together gives each record its own value of them.
+    ///
+    /// ```
+    /// use twostage_models::{ModelSpec, Prior};
+    /// let prior = Prior::uniform_box(&[0.1, 0.0], &[2.0, 5.0])?;
+    /// let spec = ModelSpec::new("tank", &["a", "h0"], prior, 1.0, 100)?
+    ///     .with_per_record(&[false, true])?;
+    /// assert_eq!(spec.per_record(), [false, true]);
+    /// assert!(spec.with_per_record(&[true]).is_err());
+    /// # Ok::<(), twostage_models::SimError>(())
+    /// ```
+    ///
+    /// # Errors
+    /// A flag count other than the parameters'.
+    pub fn with_per_record(mut self, per_record: &[bool]) -> Result<Self> {
+        if per_record.len() != self.param_names.len() {
+            return Err(SimError::InvalidSetting(InvalidSetting {
+                name: "per-record parameters",
+                value: format!("{} flags", per_record.len()),
+                reason: format!("the model has {} parameters", self.param_names.len()),
+            }));
+        }
+        self.per_record = per_record.to_vec();
+        Ok(self)
+    }
+
+    /// Per parameter, whether it belongs to one record rather than to the
+    /// plant ([`ModelSpec::with_per_record`]; all `false` unless set).
+    pub fn per_record(&self) -> &[bool] {
+        &self.per_record
+    }
+
+    /// The same model with the parameters `free` (by place) of `prior`
+    /// (those left by [`crate::WithFixed`]), without the car's equations
+    /// (of both).
+    pub(crate) fn with_parameters(&self, free: &[usize], prior: Prior) -> Self {
         Self {
-            param_names: names,
+            param_names: free.iter().map(|&j| self.param_names[j].clone()).collect(),
+            per_record: free.iter().map(|&j| self.per_record[j]).collect(),
             prior,
             car_equations: None,
             ..self.clone()

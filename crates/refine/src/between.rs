@@ -132,6 +132,32 @@ impl BetweenRecords {
         })
     }
 
+    /// The same of a model of `q` parameters, these being those at
+    /// `places`: the others (a record's own) scatter by nothing.
+    pub(crate) fn of_parameters(self, places: &[usize], q: usize) -> Self {
+        if places.len() == q {
+            return self;
+        }
+        let spread = |values: &[f64]| {
+            let mut whole = vec![0.0; q];
+            for (&j, v) in places.iter().zip(values) {
+                whole[j] = *v;
+            }
+            whole
+        };
+        let mut beyond_chance = vec![false; q];
+        for (&j, b) in places.iter().zip(&self.beyond_chance) {
+            beyond_chance[j] = *b;
+        }
+        Self {
+            sd: spread(&self.sd),
+            within_sd: spread(&self.within_sd),
+            joint_sd: spread(&self.joint_sd),
+            beyond_chance,
+            records: self.records,
+        }
+    }
+
     /// The parameters whose scatter between records is beyond chance and
     /// exceeds a record's own sd from its noise: the model's mismatch, not
     /// the noise, sets their intervals' width.

@@ -6,12 +6,13 @@
 //! together (the multi-experiment fit of system identification).
 
 use crate::InvalidSetting;
-use twostage_models::{IoData, Prior, standard_normal_quantile};
+use twostage_models::{IoData, standard_normal_quantile};
 
 use crate::RefineError;
 use crate::best_fit::{BestFit, SearchStarts};
 use crate::between::BetweenRecords;
 use crate::refinement::{Refinement, ResidualModel};
+use crate::together::Together;
 use crate::uncertainty::{LocalUncertainty, local_uncertainty};
 
 /// One record with its own estimate, as [`Refinement::joint_estimate`]
@@ -193,7 +194,8 @@ fn weighted_median(mut values: Vec<(f64, f64)>) -> f64 {
 /// What [`Refinement::joint_estimate`] found.
 #[derive(Debug, Clone)]
 pub struct JointEstimate<E> {
-    /// The joint estimate: the best fit of every fitted record together.
+    /// The joint estimate: the best fit of every fitted record together
+    /// (NaN at the records' own parameters, which have no one value).
     pub theta: Vec<f64>,
     /// Its uncertainty from the records' residuals (each record's outputs
     /// their own noise model), each sd at least the joint sd under the
@@ -215,8 +217,16 @@ pub struct JointEstimate<E> {
     /// How far the records' own best fits scatter about the joint
     /// estimate beyond their noise (`None` with fewer than two records
     /// that determine every parameter, or where the interval's
-    /// evaluations failed).
+    /// evaluations failed); zero on the records' own parameters.
     pub between: Option<BetweenRecords>,
+    /// Each fitted record's whole parameter vector at the joint estimate,
+    /// in the order of `fitted`: the plant's parameters the joint
+    /// estimate's, its own parameters its own (each equal to `theta`
+    /// without own parameters).
+    pub records_theta: Vec<Vec<f64>>,
+    /// Each fitted record's uncertainty of `records_theta` (`None` where
+    /// `uncertainty` has none).
+    pub records_uncertainty: Option<Vec<LocalUncertainty>>,
 }
 
 impl<M: ResidualModel> Refinement<M> {
@@ -267,19 +277,126 @@ impl<M: ResidualModel> Refinement<M> {
         singles: &[SingleEstimate<'_>],
         plan: JointPlan,
     ) -> Result<JointEstimate<M::Error>, M::Error> {
+        let q = self.model().prior().dim();
+        self.joint_estimate_with_own(singles, plan, &vec![false; q])
+    }
+
+    /// [`Refinement::joint_estimate`] of a model whose parameters marked in
+    /// `per_record` (one flag each, in order) belong to each record (an
+    /// initial state, a sensor offset): the records share the others, and
+    /// each gets its own value of these, fitted with the rest in one
+    /// search of the joint vector (the plant's parameters once, each
+    /// record's own once per record). The joint estimate's entries of the
+    /// records' own parameters are NaN: each record's whole vector is in
+    /// [`JointEstimate::records_theta`], with its interval. The records'
+    /// single estimates are pooled, and judged to disagree, on the
+    /// plant's parameters alone.
+    ///
+    /// ```
+    /// # use twostage_models::{IoData, Prior};
+    /// # use twostage_refine::{RefineError, Refinement, ResidualModel};
+    /// // The output is a gain times the input plus the record's own offset.
+    /// struct GainAndOffset(Prior);
+    /// impl ResidualModel for GainAndOffset {
+    ///     type Error = RefineError;
+    ///     fn prior(&self) -> &Prior { &self.0 }
+    ///     fn residuals(&self, theta: &[f64], record: &IoData, r: &mut [f64]) -> Result<(), RefineError> {
+    ///         for ((r, u), y) in r.iter_mut().zip(record.input(0)).zip(record.output(0)) {
+    ///             *r = y - theta[0] * u - theta[1];
+    ///         }
+    ///         Ok(())
+    ///     }
+    /// }
+    /// use twostage_refine::{JointPlan, SearchStarts, SingleEstimate};
+    /// let fit = Refinement::new(GainAndOffset(Prior::uniform_box(&[0.0, -5.0], &[5.0, 5.0])?));
+    /// let a = IoData::siso(&[1.0, 2.0, 3.0], &[2.0, 4.0, 6.0])?; // gain 2, offset 0
+    /// let b = IoData::siso(&[1.0, 0.0, 2.0], &[3.0, 1.0, 5.0])?; // gain 2, offset 1
+    /// let singles = [
+    ///     SingleEstimate { record: &a, theta: &[1.8, 0.2], half_widths: None },
+    ///     SingleEstimate { record: &b, theta: &[2.2, 0.8], half_widths: None },
+    /// ];
+    /// let plan = JointPlan { search: SearchStarts { from_prior: 2, seed: 0 }, alpha: 0.1 };
+    /// let joint = fit.joint_estimate_with_own(&singles, plan, &[false, true])?;
+    /// assert!((joint.theta[0] - 2.0).abs() < 1e-6 && joint.theta[1].is_nan());
+    /// assert!((joint.records_theta[0][1] - 0.0).abs() < 1e-6);
+    /// assert!((joint.records_theta[1][1] - 1.0).abs() < 1e-6);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`Refinement::joint_estimate`], and flags of another count than
+    /// the parameters'.
+    pub fn joint_estimate_with_own(
+        &self,
+        singles: &[SingleEstimate<'_>],
+        plan: JointPlan,
+        per_record: &[bool],
+    ) -> Result<JointEstimate<M::Error>, M::Error> {
         let prior = self.model().prior();
-        let estimates: Vec<(&[f64], Option<&[f64]>)> =
-            singles.iter().map(|s| (s.theta, s.half_widths)).collect();
-        let pooled = pool_estimates(&estimates, plan.alpha)?;
-        if pooled.theta.len() != prior.dim() {
+        let q = prior.dim();
+        if per_record.len() != q {
             return Err(RefineError::Length {
-                what: "the single estimates",
-                found: pooled.theta.len(),
-                expected: prior.dim(),
+                what: "the per-record flags",
+                found: per_record.len(),
+                expected: q,
             }
             .into());
         }
-        let (fitted, left_out) = self.runnable(singles, &pooled.theta);
+        for single in singles {
+            if single.theta.len() != q {
+                return Err(RefineError::Length {
+                    what: "a single estimate",
+                    found: single.theta.len(),
+                    expected: q,
+                }
+                .into());
+            }
+        }
+        // Pooled, and judged, on the plant's parameters: the records' own
+        // differ by design.
+        let shared: Vec<usize> = (0..q).filter(|&j| !per_record[j]).collect();
+        let pick = |v: &[f64]| -> Vec<f64> { shared.iter().map(|&j| v[j]).collect() };
+        let picked: Vec<(Vec<f64>, Option<Vec<f64>>)> = singles
+            .iter()
+            .map(|s| (pick(s.theta), s.half_widths.map(pick)))
+            .collect();
+        let estimates: Vec<(&[f64], Option<&[f64]>)> = picked
+            .iter()
+            .map(|(t, w)| (t.as_slice(), w.as_deref()))
+            .collect();
+        let pooled = if shared.is_empty() {
+            PooledEstimate {
+                theta: Vec::new(),
+                half_widths: None,
+                disagreeing: Vec::new(),
+            }
+        } else {
+            pool_estimates(&estimates, plan.alpha)?
+        };
+        let spread = |shared_values: &[f64], fill: f64| -> Vec<f64> {
+            let mut whole = vec![fill; q];
+            for (&j, v) in shared.iter().zip(shared_values) {
+                whole[j] = *v;
+            }
+            whole
+        };
+        let pooled = PooledEstimate {
+            theta: spread(&pooled.theta, f64::NAN),
+            half_widths: pooled.half_widths.map(|w| spread(&w, f64::NAN)),
+            disagreeing: pooled.disagreeing,
+        };
+        // Each record at the pooled plant and its own estimate's own part.
+        let at_pooled: Vec<Vec<f64>> = singles
+            .iter()
+            .map(|s| {
+                let mut theta = s.theta.to_vec();
+                for &j in &shared {
+                    theta[j] = pooled.theta[j];
+                }
+                theta
+            })
+            .collect();
+        let (fitted, left_out) = self.runnable(singles, &at_pooled);
         let Some(&nominal) = fitted.first().map(|&i| &singles[i].record) else {
             let (_, first) = left_out
                 .into_iter()
@@ -287,34 +404,54 @@ impl<M: ResidualModel> Refinement<M> {
                 .unwrap_or_else(|| unreachable!("a record is fitted or left out"));
             return Err(first);
         };
-        let mut starts = plan
-            .search
-            .starts(prior, &pooled.theta, pooled.half_widths.as_deref())?;
-        starts.extend(fitted.iter().map(|&i| singles[i].theta.to_vec()));
-        let together = Refinement::new(Together {
-            model: self.model(),
-            records: fitted.iter().map(|&i| singles[i].record).collect(),
-        })
+        let together = Refinement::new(Together::new(
+            self.model(),
+            fitted.iter().map(|&i| singles[i].record).collect(),
+            per_record,
+        )?)
         .max_iterations(self.iterations());
+        let layout = together.model().layout.clone();
+        let joint_of = |plant: &[f64]| layout.joint_vector(plant, |r| singles[fitted[r]].theta);
+        // The pooled interval spreads the first starts where every fitted
+        // record has its own parameters' interval to spread them by.
+        let joint_widths = pooled.half_widths.as_ref().and_then(|w| {
+            let own: Option<Vec<&[f64]>> = fitted.iter().map(|&i| singles[i].half_widths).collect();
+            own.map(|own| layout.joint_vector(w, |r| own[r]))
+        });
+        let mut starts = plan.search.starts(
+            together.model().prior(),
+            &joint_of(&at_pooled[fitted[0]]),
+            joint_widths.as_deref(),
+        )?;
+        starts.extend(fitted.iter().map(|&i| joint_of(singles[i].theta)));
         let search = together
             .best_fits(vec![(nominal, starts)])
             .pop()
             .unwrap_or_else(|| unreachable!("one search, one result"))?;
-        let theta = search.best.theta.clone();
+        let joint = search.best.theta.clone();
+        let records_theta: Vec<Vec<f64>> = (0..fitted.len())
+            .map(|r| layout.record_theta(&joint, r))
+            .collect();
         let at_best = together
-            .linearizations(&[(nominal, &theta)])
+            .linearizations(&[(nominal, &joint)])
             .pop()
             .unwrap_or_else(|| unreachable!("one estimate, one result"));
-        let (mut uncertainty, record_losses, between) = match at_best {
+        let span = self.span();
+        let (mut records_uncertainty, record_losses, between) = match at_best {
             Ok(at) => {
-                let span = self.span();
+                let joint_span = together.span();
                 let local = at.covariance().map(|(covariance, noise_order)| {
-                    local_uncertainty(&covariance, &span, noise_order)
+                    let whole = local_uncertainty(&covariance, &joint_span, noise_order);
+                    (0..fitted.len())
+                        .map(|r| whole.of(&layout.places(r)))
+                        .collect::<Vec<_>>()
                 });
                 let mut losses = Vec::with_capacity(fitted.len());
                 let mut steps = Vec::with_capacity(fitted.len());
                 let mut from = 0;
-                for record in &together.model().records {
+                let plant_places = &layout.places(0)[..];
+                let plant_places: Vec<usize> = shared.iter().map(|&j| plant_places[j]).collect();
+                for (r, record) in together.model().records.iter().enumerate() {
                     let n = self.model().n_residuals(record);
                     let mine = &at.residuals[from..from + n];
                     losses.push(mine.iter().map(|r| r * r).sum());
@@ -322,23 +459,56 @@ impl<M: ResidualModel> Refinement<M> {
                     if runs.iter().sum::<usize>() != n {
                         runs = vec![n];
                     }
+                    let part = at.part(from, n, runs);
+                    // A record's own best fit moves its own parameters
+                    // too; only the plant's scatter between records.
+                    let part = if layout.has_own() {
+                        let places = layout.places(r);
+                        let mut keep = plant_places.clone();
+                        keep.extend(layout.own.iter().map(|&j| places[j]));
+                        part.columns_of(&keep)
+                    } else {
+                        part
+                    };
                     // A record whose own loss leaves some parameter free
                     // has no own best fit to scatter.
-                    if let Ok(step) = at.part(from, n, runs).own_step() {
-                        steps.push(step);
+                    if let Ok((step, covariance)) = part.own_step() {
+                        let width = step.len();
+                        let s = shared.len();
+                        steps.push((
+                            step[..s].to_vec(),
+                            (0..s * s)
+                                .map(|k| covariance[(k / s) * width + k % s])
+                                .collect(),
+                        ));
                     }
                     from += n;
                 }
-                let between = BetweenRecords::of_steps(&steps, &span);
+                let plant_span: Vec<f64> = shared.iter().map(|&j| span[j]).collect();
+                let between = BetweenRecords::of_steps(&steps, &plant_span)
+                    .map(|b| b.of_parameters(&shared, q));
                 (local.map_err(M::Error::from), Some(losses), between)
             }
             Err(e) => (Err(e), None, None),
         };
-        if let (Ok(local), Some(between)) = (&mut uncertainty, &between) {
-            for (sd, joint) in local.sd.iter_mut().zip(&between.joint_sd) {
-                *sd = sd.max(*joint);
+        if let (Ok(records), Some(between)) = (&mut records_uncertainty, &between) {
+            for local in records {
+                for (sd, joint) in local.sd.iter_mut().zip(&between.joint_sd) {
+                    *sd = sd.max(*joint);
+                }
             }
         }
+        // The plant's view: a record's own parameters have no one value.
+        let own_nan = |v: &[f64]| -> Vec<f64> {
+            (0..q)
+                .map(|j| if per_record[j] { f64::NAN } else { v[j] })
+                .collect()
+        };
+        let theta = own_nan(&records_theta[0]);
+        let (uncertainty, records_uncertainty) = match records_uncertainty {
+            Ok(records) => (Ok(records[0].without(per_record)), Some(records)),
+            Err(e) => (Err(e), None),
+        };
         Ok(JointEstimate {
             theta,
             uncertainty,
@@ -348,17 +518,23 @@ impl<M: ResidualModel> Refinement<M> {
             left_out,
             record_losses,
             between,
+            records_theta,
+            records_uncertainty,
         })
     }
 
-    /// The records the model runs on at `theta` (by place), and those it
+    /// The records the model runs on, each at its `thetas` (by place), and those it
     /// does not, with why: all of them asked for in one batch.
     fn runnable(
         &self,
         singles: &[SingleEstimate<'_>],
-        theta: &[f64],
+        thetas: &[Vec<f64>],
     ) -> (Vec<usize>, Vec<(usize, M::Error)>) {
-        let pairs: Vec<(&[f64], &IoData)> = singles.iter().map(|s| (theta, s.record)).collect();
+        let pairs: Vec<(&[f64], &IoData)> = singles
+            .iter()
+            .zip(thetas)
+            .map(|(s, theta)| (theta.as_slice(), s.record))
+            .collect();
         let mut values = vec![Vec::new(); pairs.len()];
         let mut fitted = Vec::new();
         let mut left_out = Vec::new();
@@ -377,80 +553,10 @@ impl<M: ResidualModel> Refinement<M> {
     }
 }
 
-/// Several records as one: the residuals of each record in turn, at the
-/// same parameters. The record a search hands it stands for them all.
-struct Together<'a, M> {
-    model: &'a M,
-    records: Vec<&'a IoData>,
-}
-
-impl<M: ResidualModel> ResidualModel for Together<'_, M> {
-    type Error = M::Error;
-
-    fn prior(&self) -> &Prior {
-        self.model.prior()
-    }
-
-    fn residuals(&self, theta: &[f64], _: &IoData, residuals: &mut [f64]) -> Result<(), M::Error> {
-        let mut rest = residuals;
-        for record in &self.records {
-            let (mine, after) = rest.split_at_mut(self.model.n_residuals(record));
-            self.model.residuals(theta, record, mine)?;
-            rest = after;
-        }
-        Ok(())
-    }
-
-    fn n_residuals(&self, _: &IoData) -> usize {
-        self.records.iter().map(|r| self.model.n_residuals(r)).sum()
-    }
-
-    fn residual_runs(&self, _: &IoData) -> Vec<usize> {
-        self.records
-            .iter()
-            .flat_map(|r| self.model.residual_runs(r))
-            .collect()
-    }
-
-    /// Every point on every record in one batch of the model's, so that a
-    /// simulator gets each record's points together.
-    fn residuals_batch(
-        &self,
-        pairs: &[(&[f64], &IoData)],
-        residuals: &mut [Vec<f64>],
-    ) -> Vec<Result<(), M::Error>> {
-        let each: Vec<(&[f64], &IoData)> = pairs
-            .iter()
-            .flat_map(|(theta, _)| self.records.iter().map(move |record| (*theta, *record)))
-            .collect();
-        let mut parts = vec![Vec::new(); each.len()];
-        let mut answers = self.model.residuals_batch(&each, &mut parts).into_iter();
-        let mut parts = parts.into_iter();
-        let per_point = self.records.len();
-        residuals
-            .iter_mut()
-            .map(|r| {
-                r.clear();
-                let mut failed = None;
-                for (answer, part) in answers.by_ref().take(per_point).zip(parts.by_ref()) {
-                    match answer {
-                        Ok(()) => r.extend_from_slice(&part),
-                        Err(e) => failed = failed.or(Some(e)),
-                    }
-                }
-                failed.map_or(Ok(()), Err)
-            })
-            .collect()
-    }
-
-    fn trials_at_once(&self) -> usize {
-        self.model.trials_at_once()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use twostage_models::Prior;
 
     /// Every output is `theta` plus noise: residuals `y_j - theta` per
     /// output, each a run of its own.
@@ -567,5 +673,126 @@ mod tests {
         let losses = joint.record_losses.unwrap();
         let direct: f64 = a.iter().map(|y| (y - joint.theta[0]).powi(2)).sum();
         assert!((losses[0] - direct).abs() < 1e-9 * direct);
+    }
+
+    /// A gain times the input plus the record's own offset.
+    struct GainAndOffset(Prior);
+
+    impl ResidualModel for GainAndOffset {
+        type Error = RefineError;
+        fn prior(&self) -> &Prior {
+            &self.0
+        }
+        fn residuals(
+            &self,
+            theta: &[f64],
+            record: &IoData,
+            r: &mut [f64],
+        ) -> Result<(), Self::Error> {
+            for ((r, u), y) in r.iter_mut().zip(record.input(0)).zip(record.output(0)) {
+                *r = y - theta[0] * u - theta[1];
+            }
+            Ok(())
+        }
+    }
+
+    /// Records of one gain, each with its own offset far from the others'
+    /// and noise: the joint fit is the least-squares solution of the
+    /// gain and one offset per record (solved here by its normal
+    /// equations), and the offsets' differences do not make the records
+    /// disagree.
+    #[test]
+    fn own_offsets_and_a_shared_gain_are_the_least_squares_solution() {
+        let offsets = [-2.0, 0.5, 3.0];
+        let n = 200;
+        let records: Vec<IoData> = offsets
+            .iter()
+            .enumerate()
+            .map(|(k, b)| {
+                let u: Vec<f64> = (0..n)
+                    .map(|t| ((t * (k + 3)) as f64 * 0.37).sin() + 0.1 * k as f64)
+                    .collect();
+                let y: Vec<f64> = u
+                    .iter()
+                    .enumerate()
+                    .map(|(t, u)| 1.5 * u + b + 0.05 * (((t * 7 + k) % 13) as f64 / 6.0 - 1.0))
+                    .collect();
+                IoData::siso(&u, &y).unwrap()
+            })
+            .collect();
+        // Normal equations of [u, one-hot record] for (gain, b_0, b_1, b_2).
+        let p = 1 + offsets.len();
+        let mut a = vec![0.0; p * p];
+        let mut rhs = vec![0.0; p];
+        for (k, record) in records.iter().enumerate() {
+            for (u, y) in record.input(0).iter().zip(record.output(0)) {
+                let mut row = vec![0.0; p];
+                row[0] = *u;
+                row[1 + k] = 1.0;
+                for i in 0..p {
+                    rhs[i] += row[i] * y;
+                    for j in 0..p {
+                        a[i * p + j] += row[i] * row[j];
+                    }
+                }
+            }
+        }
+        // Gaussian elimination without pivoting: the matrix is positive
+        // definite.
+        for c in 0..p {
+            for r in c + 1..p {
+                let f = a[r * p + c] / a[c * p + c];
+                for j in c..p {
+                    a[r * p + j] -= f * a[c * p + j];
+                }
+                rhs[r] -= f * rhs[c];
+            }
+        }
+        let mut solution = vec![0.0; p];
+        for c in (0..p).rev() {
+            let known: f64 = (c + 1..p).map(|j| a[c * p + j] * solution[j]).sum();
+            solution[c] = (rhs[c] - known) / a[c * p + c];
+        }
+        let fit = Refinement::new(GainAndOffset(
+            Prior::uniform_box(&[0.0, -5.0], &[5.0, 5.0]).unwrap(),
+        ));
+        let starts: Vec<[f64; 2]> = offsets.iter().map(|b| [1.4, b + 0.1]).collect();
+        let singles: Vec<SingleEstimate<'_>> = records
+            .iter()
+            .zip(&starts)
+            .map(|(record, theta)| SingleEstimate {
+                record,
+                theta,
+                half_widths: Some(&[0.05, 0.05]),
+            })
+            .collect();
+        let plan = JointPlan {
+            search: SearchStarts {
+                from_prior: 2,
+                seed: 0,
+            },
+            alpha: 0.1,
+        };
+        let joint = fit
+            .joint_estimate_with_own(&singles, plan, &[false, true])
+            .unwrap();
+        assert!((joint.theta[0] - solution[0]).abs() < 1e-7, "{joint:?}");
+        assert!(joint.theta[1].is_nan() && joint.pooled.theta[1].is_nan());
+        for (k, theta) in joint.records_theta.iter().enumerate() {
+            assert_eq!(theta[0].to_bits(), joint.theta[0].to_bits());
+            assert!((theta[1] - solution[1 + k]).abs() < 1e-7, "{theta:?}");
+        }
+        assert!(joint.pooled.disagreeing.is_empty());
+        let records = joint.records_uncertainty.unwrap();
+        let plant = joint.uncertainty.unwrap();
+        assert!(plant.sd[0] > 0.0 && plant.sd[1].is_nan());
+        assert_eq!(plant.sd[0].to_bits(), records[2].sd[0].to_bits());
+        assert!(records.iter().all(|u| u.sd[1] > 0.0 && u.sd[1] < 0.05));
+        // All of them the plant's: one offset forced on every record
+        // fits worse than each record's own.
+        let forced = fit.joint_estimate(&singles, plan).unwrap();
+        let loss = |losses: Option<Vec<f64>>| losses.unwrap().iter().sum::<f64>();
+        assert!(loss(forced.record_losses) > 10.0 * loss(joint.record_losses));
+        assert_eq!(forced.records_theta[0], forced.theta);
     }
 }

@@ -23,6 +23,7 @@ mod output_error;
 mod policy;
 mod refinement;
 mod residual;
+mod together;
 mod uncertainty;
 
 pub use best_fit::{

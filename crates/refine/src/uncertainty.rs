@@ -77,6 +77,41 @@ impl LocalUncertainty {
             })
             .collect()
     }
+
+    /// The uncertainty of the parameters at `places` alone, in that order
+    /// (a record's parameters among a joint fit's).
+    pub(crate) fn of(&self, places: &[usize]) -> Self {
+        let q = self.sd.len();
+        Self {
+            sd: places.iter().map(|&a| self.sd[a]).collect(),
+            correlation: places
+                .iter()
+                .flat_map(|&a| places.iter().map(move |&b| self.correlation[a * q + b]))
+                .collect(),
+            noise_order: self.noise_order,
+        }
+    }
+
+    /// The same with NaN at the parameters marked in `unknown` (their sd
+    /// and their correlations with any other).
+    pub(crate) fn without(&self, unknown: &[bool]) -> Self {
+        let q = self.sd.len();
+        Self {
+            sd: (0..q)
+                .map(|a| if unknown[a] { f64::NAN } else { self.sd[a] })
+                .collect(),
+            correlation: (0..q * q)
+                .map(|k| {
+                    if unknown[k / q] || unknown[k % q] {
+                        f64::NAN
+                    } else {
+                        self.correlation[k]
+                    }
+                })
+                .collect(),
+            noise_order: self.noise_order,
+        }
+    }
 }
 
 impl<M: ResidualModel> Refinement<M> {
@@ -267,6 +302,21 @@ impl Linearized {
     /// taken ([`sandwich`]).
     pub(crate) fn covariance(&self) -> Result<(Vec<f64>, usize), Error> {
         sandwich(&self.columns, &self.residuals, self.q, &self.runs)
+    }
+
+    /// The same residuals with the Jacobian's columns `keep` alone, in
+    /// that order: a loss of some of the parameters, the others held.
+    pub(crate) fn columns_of(&self, keep: &[usize]) -> Self {
+        let n = self.residuals.len();
+        Self {
+            columns: keep
+                .iter()
+                .flat_map(|&a| self.columns[a * n..(a + 1) * n].iter().copied())
+                .collect(),
+            residuals: self.residuals.clone(),
+            runs: self.runs.clone(),
+            q: keep.len(),
+        }
     }
 
     /// The residuals `from..from + n` (whole runs) and their rows of the

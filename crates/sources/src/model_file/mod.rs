@@ -322,6 +322,17 @@ impl ModelFile {
         )
         .map_err(|e| at.error(Some(raw.model.name.span()), "model", e.to_string()))?
         .with_signals(&inputs, &outputs);
+        // A built-in source's parameters, given no [[parameter]], are the
+        // plant's.
+        let mut per_record: Vec<bool> = raw
+            .parameter
+            .iter()
+            .map(|p| p.get_ref().per_record)
+            .collect();
+        per_record.resize(names.len(), false);
+        let spec = spec
+            .with_per_record(&per_record)
+            .map_err(|e| at.error(None, "parameter.per_record", e.to_string()))?;
         let spec = match base {
             // The car's equations stay the file's while its parameters
             // are the car's own (a linearized stage 1 reads them).

@@ -121,6 +121,10 @@ impl RawSource {
 pub(super) struct RawParameter {
     pub(super) name: Spanned<String>,
     pub(super) prior: Option<Spanned<RawPrior>>,
+    /// The parameter belongs to one record (an initial state, a sensor
+    /// offset), not to the plant.
+    #[serde(default)]
+    pub(super) per_record: bool,
 }
 
 #[derive(Deserialize)]
