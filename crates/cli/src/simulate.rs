@@ -97,6 +97,14 @@ pub struct SimulateArgs {
     /// including it (counted from 0; default the record's end).
     #[arg(long, value_name = "K", requires = "input")]
     score_to: Option<usize>,
+    /// With --input: before predicting a record, fit its own parameters
+    /// (`per_record = true` in the model file: an initial state, a
+    /// sensor offset) to its first K samples by output error, the others
+    /// held at the row's values, as MATLAB's findstates; the prediction
+    /// of the rest is then of the plant alone (score it with
+    /// --score-from K).
+    #[arg(long, value_name = "K", requires = "input")]
+    own_from_first: Option<usize>,
 }
 
 /// Run `twostage simulate`.
@@ -173,7 +181,7 @@ fn one_experiment(sim: &dyn Simulator, theta: &str, args: &SimulateArgs) -> Resu
 /// `--at ESTIMATES.csv [--input RECORD.csv]`.
 fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<()> {
     let spec = sim.spec();
-    let rows = predict::read_rows(at, spec.param_names())?;
+    let mut rows = predict::read_rows(at, spec.param_names())?;
     let from = at.display().to_string();
     let values = rows.iter().map(|r| (r.id.as_str(), &r.theta));
     if !args.allow_outside_prior
@@ -189,6 +197,9 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
         Some(path) => predict::Inputs::read(path, &RecordFormat::of(spec), &rows)?,
     };
     let start = std::time::Instant::now();
+    if let Some(samples) = args.own_from_first {
+        fit_own(sim, &mut rows, &inputs, samples, args.seed.unwrap_or(0))?;
+    }
     // Progress: a bar on a terminal, else a line every 10 s of a long run.
     let bars = crate::bars::Bars::new(false);
     bars.begin_step("simulating at estimates", rows.len(), "records");
@@ -303,6 +314,57 @@ fn at_estimates(sim: &dyn Simulator, at: &Path, args: &SimulateArgs) -> Result<(
         },
         start.elapsed().as_secs_f64()
     );
+    Ok(())
+}
+
+/// `--own-from-first K`: each row's own parameters fitted to the first
+/// `samples` samples of its record, said on stderr.
+fn fit_own(
+    sim: &dyn Simulator,
+    rows: &mut [predict::Row],
+    inputs: &predict::Inputs,
+    samples: usize,
+    seed: u64,
+) -> Result<()> {
+    let spec = sim.spec();
+    let own: Vec<usize> = (0..spec.n_params())
+        .filter(|&j| spec.per_record()[j])
+        .collect();
+    let search = twostage::refine::SearchStarts {
+        from_prior: twostage::refine::SearchStarts::default_from_prior(own.len()),
+        seed,
+    };
+    for (i, row) in rows.iter_mut().enumerate() {
+        let Some(record) = inputs.of(i) else { continue };
+        let found = twostage::fit_own_parameters(sim, record, &row.theta, samples, search)
+            .map_err(|e| match e {
+                twostage::RefineError::InvalidSetting(refused) => usage(format!(
+                    "--own-from-first {samples}: {} (the record of experiment {})",
+                    refused.reason, row.id
+                )),
+                other => anyhow::anyhow!(
+                    "--own-from-first {samples}: the record of experiment {}: {other}",
+                    row.id
+                ),
+            })?;
+        let values: Vec<String> = own
+            .iter()
+            .map(|&j| {
+                format!(
+                    "{} = {}",
+                    spec.param_names()[j],
+                    four_digits(found.theta[j])
+                )
+            })
+            .collect();
+        eprintln!(
+            "experiment {}: its own parameters fitted to its first {samples} samples: {} ({})",
+            row.id,
+            values.join(", "),
+            found.stop.name()
+        );
+        row.theta = found.theta;
+    }
     Ok(())
 }
 

@@ -14,11 +14,26 @@ use twostage_refine::{
 use crate::model_of::{EstimatorModel, SharedSimulator};
 use crate::refiner::ToRefine;
 
+/// One fitted record's whole parameter vector at a joint estimate: the
+/// plant's parameters the joint estimate's, the record's own parameters
+/// (`per_record = true` in the model file) its own.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordOfJoint {
+    /// The record's parameters.
+    pub theta: Vec<f64>,
+    /// Their interval half-widths at the estimator's level, where the
+    /// joint estimate has an interval.
+    pub half_widths: Option<Vec<f64>>,
+    /// Their correlation matrix (row-major q x q), likewise.
+    pub correlation: Option<Vec<f64>>,
+}
+
 /// The joint estimate of the records handed to [`JointFitter::fit`], each
 /// record named by its place among them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JointOfRecords {
-    /// The joint estimate.
+    /// The joint estimate (NaN at the records' own parameters, which have
+    /// no one value: see `records`).
     pub theta: Vec<f64>,
     /// Its interval half-widths at the estimator's level, or why it has
     /// none (the records do not determine some parameter).
@@ -50,6 +65,12 @@ pub struct JointOfRecords {
     pub between: Option<BetweenRecords>,
     /// The level `1 - alpha` of the intervals.
     pub alpha: f64,
+    /// Per parameter, whether it belongs to each record rather than to
+    /// the plant.
+    pub per_record: Vec<bool>,
+    /// Each fitted record's parameters at the joint estimate, in the
+    /// order of `fitted`.
+    pub records: Vec<RecordOfJoint>,
 }
 
 impl JointOfRecords {
@@ -68,7 +89,7 @@ impl JointOfRecords {
     ///     between: Some(BetweenRecords {
     ///         sd: vec![0.3], within_sd: vec![0.1], joint_sd: vec![0.2], beyond_chance: vec![true], records: 2,
     ///     }),
-    ///     alpha: 0.1,
+    ///     alpha: 0.1, per_record: vec![false], records: vec![],
     /// };
     /// let widened = joint.widen(&[0.2]);
     /// assert!((widened[0] - 0.2f64.hypot(1.6448536269514722 * 0.3)).abs() < 1e-9);
@@ -79,12 +100,19 @@ impl JointOfRecords {
             None => half_widths.to_vec(),
         }
     }
+
+    /// Whether some parameter belongs to each record: then each fitted
+    /// record has its own whole estimate in `records`, and `theta` none.
+    pub fn has_own_parameters(&self) -> bool {
+        self.per_record.contains(&true)
+    }
 }
 
 /// Joint estimates of an estimator's plant: see [`JointFitter::new`].
 pub struct JointFitter {
     fit: Refinement<OutputError<SharedSimulator>>,
     plan: JointPlan,
+    per_record: Vec<bool>,
 }
 
 impl JointFitter {
@@ -128,9 +156,11 @@ impl JointFitter {
     ) -> twostage_train::Result<Self> {
         let fit = OutputError::new(model.simulator()?)?;
         let alpha = estimator.intervals().map_or(0.1, |i| i.alpha());
+        let per_record = fit.simulator().spec().per_record().to_vec();
         Ok(Self {
             fit: Refinement::new(fit),
             plan: JointPlan { search, alpha },
+            per_record,
         })
     }
 
@@ -154,7 +184,9 @@ impl JointFitter {
                 half_widths: *half_widths,
             })
             .collect();
-        let joint = self.fit.joint_estimate(&singles, self.plan)?;
+        let joint = self
+            .fit
+            .joint_estimate_with_own(&singles, self.plan, &self.per_record)?;
         let fits: Vec<f64> = match &joint.record_losses {
             Some(losses) => joint
                 .fitted
@@ -185,6 +217,20 @@ impl JointFitter {
             disagreeing: joint.pooled.disagreeing,
             between: joint.between,
             alpha: self.plan.alpha,
+            per_record: self.per_record.clone(),
+            records: joint
+                .records_theta
+                .into_iter()
+                .enumerate()
+                .map(|(r, theta)| {
+                    let local = joint.records_uncertainty.as_ref().map(|u| &u[r]);
+                    RecordOfJoint {
+                        theta,
+                        half_widths: local.map(|u| u.half_widths(self.plan.alpha)),
+                        correlation: local.map(|u| u.correlation.clone()),
+                    }
+                })
+                .collect(),
         })
     }
 }

@@ -18,6 +18,7 @@ mod failure;
 mod joint;
 mod methods;
 mod model_of;
+mod own;
 mod records;
 mod refiner;
 mod rows;
@@ -30,9 +31,10 @@ pub use choices::{
 };
 pub use draws::{PosteriorDraws, draws_refused};
 pub use failure::{GivenValuesError, MethodFailure, RecordFailure};
-pub use joint::{JointFitter, JointOfRecords};
+pub use joint::{JointFitter, JointOfRecords, RecordOfJoint};
 pub use methods::OUTPUT_ERROR_METHOD;
 pub use model_of::{EstimatorModel, SharedSimulator};
+pub use own::{OwnFit, fit_own_parameters};
 pub use refiner::{
     EstimateRefiner, ModelFailure, RECORDS_TOGETHER, RefinedBy, RefinedEstimate, SearchOptima,
     ToRefine,

@@ -10,7 +10,7 @@ use twostage_sources::csv_rows::DataFileError;
 use twostage_sources::record_file;
 
 use super::Estimating;
-use super::rows::{Estimates, RecordEstimate};
+use super::rows::{Estimates, RecordEstimate, RefineOutcome};
 use crate::JointOfRecords;
 
 /// How a batch names one of its records in errors and in the joint fit.
@@ -63,6 +63,39 @@ pub struct JointRun {
 }
 
 impl JointRun {
+    /// The joint fit's rows, to follow the records' own: one row `joint`,
+    /// or, where some parameter belongs to each record (`per_record =
+    /// true` in the model file), one row `joint[K]` per fitted record (`K`
+    /// its place in [`JointRun::places`]) with its whole estimate, the
+    /// plant's parameters the joint ones and its own its own.
+    ///
+    /// # Errors
+    /// Why the joint fit failed.
+    pub fn rows(&self) -> Result<Vec<(String, RecordEstimate)>, &RefineError> {
+        let (joint, row) = self.fit.as_ref()?;
+        if !joint.has_own_parameters() {
+            return Ok(vec![("joint".into(), row.clone())]);
+        }
+        Ok(joint
+            .fitted
+            .iter()
+            .zip(&joint.records)
+            .map(|((place, _), own)| {
+                let mut mine = row.clone();
+                mine.theta.clone_from(&own.theta);
+                mine.half_widths = Some(
+                    own.half_widths
+                        .clone()
+                        .unwrap_or_else(|| vec![f64::NAN; own.theta.len()]),
+                );
+                if let Some(RefineOutcome::Done(refined)) = &mut mine.refinement {
+                    refined.correlation.clone_from(&own.correlation);
+                }
+                (format!("joint[{place}]"), mine)
+            })
+            .collect())
+    }
+
     /// The rows of the records gathered, in [`JointRun::places`]' order
     /// (the rows `each` was handed, the failed ones left out), each
     /// interval widened by the scatter between the records

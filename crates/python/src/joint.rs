@@ -18,7 +18,10 @@ use twostage::JointOfRecords;
 /// the joint one beyond their noise (None with fewer than two records
 /// that determine every parameter), and `mismatch_sets_width`, per
 /// parameter whether that scatter, beyond chance and above a record's own
-/// sd, sets the widths (the joint interval includes it).
+/// sd, sets the widths (the joint interval includes it); `per_record`,
+/// per parameter whether it belongs to each record (`per_record = true` in
+/// the model file: NaN in `theta`), and `records_theta` [fitted, q] and
+/// `records_half_widths` (or None), each fitted record's whole estimate.
 pub(crate) fn joint_dict(
     py: Python<'_>,
     joint: JointOfRecords,
@@ -54,5 +57,21 @@ pub(crate) fn joint_dict(
         .unzip();
     dict.set_item("between_sd", between)?;
     dict.set_item("mismatch_sets_width", wide)?;
+    let q = joint.per_record.len();
+    dict.set_item("per_record", joint.per_record)?;
+    let fitted = joint.records.len();
+    let (thetas, widths): (Vec<Vec<f64>>, Vec<Option<Vec<f64>>>) = joint
+        .records
+        .into_iter()
+        .map(|r| (r.theta, r.half_widths))
+        .unzip();
+    let matrix = |rows: Vec<Vec<f64>>| {
+        numpy::ndarray::Array2::from_shape_vec((fitted, q), rows.concat())
+            .map(|a| a.into_pyarray(py))
+            .map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))
+    };
+    dict.set_item("records_theta", matrix(thetas)?)?;
+    let widths: Option<Vec<Vec<f64>>> = widths.into_iter().collect();
+    dict.set_item("records_half_widths", widths.map(matrix).transpose()?)?;
     Ok(dict)
 }

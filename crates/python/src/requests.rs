@@ -330,8 +330,8 @@ pub(crate) fn estimate_records<'py>(
             Ok(Some(joint)) => {
                 // The rows so far are the gathered records', in their order.
                 joint.widen(rows.iter_mut().map(|(_, row)| row));
-                match joint.fit {
-                    Ok((_, row)) => rows.push(("joint".into(), row)),
+                match joint.rows() {
+                    Ok(joint_rows) => rows.extend(joint_rows),
                     Err(why) => {
                         failed.push(("joint".into(), format!("the joint fit failed: {why}")));
                     }

@@ -221,6 +221,9 @@ def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
     # The scatter of the two records' own best fits beyond their noise.
     assert ours["between_sd"].shape == (1,) and ours["between_sd"][0] >= 0
     assert len(ours["mismatch_sets_width"]) == 1
+    # No parameter of the records' own: each record's whole estimate is the joint one.
+    assert ours["per_record"] == [False]
+    assert ours["records_theta"].tolist() == [[joint["theta"]]] * 2
     # A record the model cannot run (the wrong number of outputs) is refused, named.
     with pytest.raises(ValueError, match=r"records\[1\]"):
         estimator.joint([(u[0], y[0]), (u[1], np.hstack([y[1], y[1]]))], model_file=model)

@@ -64,11 +64,11 @@ pub use twostage_compress::CompressorConfig;
 pub use twostage_estimate::{
     AutoRefined, CheckSettings, EstimateRefiner, EstimateRequest, EstimateWith, Estimates,
     Estimating, EstimatorModel, GivenValues, GivenValuesError, JointFitter, JointOfRecords,
-    JointRun, MethodFailure, ModelFailure, OUTPUT_ERROR_METHOD, Plant, PosteriorDraws, Purpose,
-    RECORDS_TOGETHER, RecordBatch, RecordEstimate, RecordFailure, RecordOutcome, RecordPlace,
-    RefineChoiceError, RefineOutcome, RefineWhich, Refined, RefinedBy, RefinedEstimate,
-    RegionValues, RequestError, RequestProblem, SearchOptima, SharedSimulator, ToRefine, Windows,
-    draws_refused, values_outside_prior,
+    JointRun, MethodFailure, ModelFailure, OUTPUT_ERROR_METHOD, OwnFit, Plant, PosteriorDraws,
+    Purpose, RECORDS_TOGETHER, RecordBatch, RecordEstimate, RecordFailure, RecordOfJoint,
+    RecordOutcome, RecordPlace, RefineChoiceError, RefineOutcome, RefineWhich, Refined, RefinedBy,
+    RefinedEstimate, RegionValues, RequestError, RequestProblem, SearchOptima, SharedSimulator,
+    ToRefine, Windows, draws_refused, fit_own_parameters, values_outside_prior,
 };
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,

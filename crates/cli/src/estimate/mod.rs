@@ -276,14 +276,14 @@ pub fn estimate(args: &EstimateArgs) -> Result<Outcome> {
     if let Some(joint) = joint {
         // The rows so far are the gathered records', in their order.
         joint.widen(rows.iter_mut().map(|(_, row)| row));
-        match joint.fit {
-            Ok((fit, row)) => {
+        match (&joint.fit, joint.rows()) {
+            (Ok((fit, _)), Ok(joint_rows)) => {
                 let places: Vec<&str> = joint.places.iter().map(String::as_str).collect();
-                said::joint(&places, estimating.param_names(), &fit);
-                rows.push(("joint".into(), row));
+                said::joint(&places, estimating.param_names(), fit);
+                rows.extend(joint_rows);
             }
             // No row: a joint row without an estimate would read as one.
-            Err(why) => {
+            (_, Err(why)) | (Err(why), _) => {
                 failed += 1;
                 eprintln!(
                     "error: the joint fit of {} records failed: {why}",

@@ -632,11 +632,31 @@ pub(super) fn joint(plant: &[&str], params: &[String], joint: &JointOfRecords) {
             );
         }
     }
+    let own = joint.has_own_parameters();
     let fits: Vec<String> = joint
         .fitted
         .iter()
-        .map(|(i, fit)| format!("{} {fit:.1}%", name(*i)))
+        .map(|(i, fit)| {
+            if own {
+                format!("{} (row joint[{i}]) {fit:.1}%", name(*i))
+            } else {
+                format!("{} {fit:.1}%", name(*i))
+            }
+        })
         .collect();
+    if own {
+        let names: Vec<&str> = params
+            .iter()
+            .zip(&joint.per_record)
+            .filter(|(_, own)| **own)
+            .map(|(p, _)| p.as_str())
+            .collect();
+        eprintln!(
+            "note: {} belong to each record (per_record in the model file): each record gets its \
+             own value in its row joint[K], beside the plant's parameters the records share",
+            names.join(", ")
+        );
+    }
     eprintln!(
         "note: joint estimate of {} of {} records ({} found{}); fit at it: {}",
         joint.fitted.len(),
