@@ -148,7 +148,7 @@ fn the_joint_fit_gives_each_record_its_own_initial_state() {
         assert!(field(row, "x0_hi") - field(row, "x0_lo") < 0.2, "{row:?}");
     }
     assert!(
-        said.contains("x0 belong to each record (per_record in the model file)"),
+        said.contains("x0 belongs to each record (per_record in the model file)"),
         "{said}"
     );
     // Different initial states are not a disagreement between records.

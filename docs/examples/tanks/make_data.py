@@ -5,7 +5,9 @@ its level, which the model lacks), its sensor noise is coloured (AR(1),
 estimation.csv and validation.csv (pump,level; 400 samples every 2 s),
 each on its own pump steps, validation_long.csv (1600 samples: a record
 four times the estimation window, which the model simulates at its own
-length), and truth.txt with the plant's constants.
+length), validation_refilled.csv (the validation record's pump steps,
+the tanks filled to 8 instead of 4 at its start: a record's own initial
+level, docs/real-data.md) and truth.txt with the plant's constants.
 
     python3 make_data.py [DIR]
 """
@@ -21,10 +23,10 @@ from tanks import SAMPLES, levels, steps  # noqa: E402
 PLANT = {"k": 1.2, "a1": 0.9, "a2": 0.8, "h0": 4.0, "leak": 0.02}
 
 
-def record(seed, n=SAMPLES):
+def record(seed, n=SAMPLES, h0=PLANT["h0"]):
     rng = np.random.default_rng(seed)
     u = steps(rng, n)
-    theta = np.array([[PLANT["k"], PLANT["a1"], PLANT["a2"], PLANT["h0"]]])
+    theta = np.array([[PLANT["k"], PLANT["a1"], PLANT["a2"], h0]])
     h = levels(theta, u[None, :], leak=PLANT["leak"])[0]
     h = np.minimum(h, 30.0)
     e = np.zeros(n)
@@ -37,12 +39,13 @@ def record(seed, n=SAMPLES):
 def main():
     out = sys.argv[1] if len(sys.argv) > 1 else "."
     os.makedirs(out, exist_ok=True)
-    for name, seed, n in (
-        ("estimation", 11, SAMPLES),
-        ("validation", 12, SAMPLES),
-        ("validation_long", 13, 4 * SAMPLES),
+    for name, seed, n, h0 in (
+        ("estimation", 11, SAMPLES, PLANT["h0"]),
+        ("validation", 12, SAMPLES, PLANT["h0"]),
+        ("validation_long", 13, 4 * SAMPLES, PLANT["h0"]),
+        ("validation_refilled", 12, SAMPLES, 8.0),
     ):
-        u, y = record(seed, n)
+        u, y = record(seed, n, h0)
         with open(os.path.join(out, name + ".csv"), "w") as f:
             f.write("pump,level\n")
             for a, b in zip(u, y):

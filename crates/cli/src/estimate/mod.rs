@@ -116,8 +116,12 @@ pub struct EstimateArgs {
     /// beyond their noise (a model that misses part of the plant), the
     /// joint interval and each record's own include the scatter, and
     /// stderr says which parameters' widths it sets. With --refine, the
-    /// records' refined estimates are pooled. Needs the model: an
-    /// estimator's built-in one, or --model-file.
+    /// records' refined estimates are pooled. Parameters marked
+    /// `per_record = true` in the model file (an initial state, a sensor
+    /// offset) are fitted once per record: then one row `joint[K]` per
+    /// record K (counted from 0 in the order given) holds its own values
+    /// beside the shared ones. Needs the model: an estimator's built-in
+    /// one, or --model-file.
     #[arg(long, requires = "estimator")]
     joint: bool,
     /// With --refine, --joint or --samples: add the estimate's parameter

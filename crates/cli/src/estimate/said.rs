@@ -652,9 +652,10 @@ pub(super) fn joint(plant: &[&str], params: &[String], joint: &JointOfRecords) {
             .map(|(p, _)| p.as_str())
             .collect();
         eprintln!(
-            "note: {} belong to each record (per_record in the model file): each record gets its \
+            "note: {} {} to each record (per_record in the model file): each record gets its \
              own value in its row joint[K], beside the plant's parameters the records share",
-            names.join(", ")
+            names.join(", "),
+            if names.len() == 1 { "belongs" } else { "belong" }
         );
     }
     eprintln!(
