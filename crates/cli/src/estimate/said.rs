@@ -655,7 +655,11 @@ pub(super) fn joint(plant: &[&str], params: &[String], joint: &JointOfRecords) {
             "note: {} {} to each record (per_record in the model file): each record gets its \
              own value in its row joint[K], beside the plant's parameters the records share",
             names.join(", "),
-            if names.len() == 1 { "belongs" } else { "belong" }
+            if names.len() == 1 {
+                "belongs"
+            } else {
+                "belong"
+            }
         );
     }
     eprintln!(
