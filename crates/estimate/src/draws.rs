@@ -145,7 +145,11 @@ pub fn draws_refused(
     let why = if samples == 0 {
         "0 draws asked: ask at least 1".to_string()
     } else if let Some(estimator) = estimator {
-        if estimator.posterior().is_none() {
+        if estimator.holds_at_estimate_time() {
+            "draws with parameters held at estimate time are not built (the posterior is of \
+             every parameter): train with --fix and --posterior K (Python: fix=, posterior=K)"
+                .to_string()
+        } else if estimator.posterior().is_none() {
             "this estimator has no posterior: train it with `--posterior K` (Python: \
              posterior=K), K Gaussian components"
                 .to_string()

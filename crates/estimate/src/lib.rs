@@ -8,7 +8,7 @@
 
 use twostage_baselines::MethodSettings;
 use twostage_estimator::{Estimator, SignalNames};
-use twostage_models::{IoData, ModelSpec, Simulator};
+use twostage_models::{FixedValues, IoData, ModelSpec, Simulator};
 use twostage_refine::{CheckPlan, RefineReason, SearchStarts};
 use twostage_sources::{ClassicMethod, NamedModel};
 
@@ -111,6 +111,7 @@ pub struct EstimateRequest {
     allow_outside_prior: bool,
     samples: Option<usize>,
     region_at: Option<RegionValues>,
+    fix: FixedValues,
 }
 
 /// Parameter values to test against each record's posterior region
@@ -141,7 +142,38 @@ impl EstimateRequest {
             allow_outside_prior: false,
             samples: None,
             region_at: None,
+            fix: FixedValues::default(),
         }
+    }
+
+    /// Hold the trained estimator's parameters of `values` there
+    /// ([`Estimator::holding`]): its rows are of the other parameters, and
+    /// its check, refinement and joint fit search them alone, the model
+    /// holding the values, as an estimator trained with them held does.
+    ///
+    /// ```
+    /// use twostage::models::{FixedValues, PacejkaCar, Simulator, experiment_rng};
+    /// use twostage::{EstimateRequest, EstimateWith, Silent, TwoStage};
+    /// let car = PacejkaCar::builder().n_samples(100).build()?;
+    /// let estimator = TwoStage::builder(&car)
+    ///     .simulations(200).validation(0).calibration(50).seed(1).linear(1e-6)?.train()?;
+    /// let estimating = EstimateRequest::new(EstimateWith::Estimator(Box::new(estimator)))
+    ///     .fix(FixedValues::parse(&["pK1=-30"])?)
+    ///     .prepare()?;
+    /// assert_eq!(estimating.param_names(), ["pK2"]);
+    /// // Only a trained estimator holds values.
+    /// let refused = EstimateRequest::new(EstimateWith::OutputError { starts: 4 })
+    ///     .model(Some(twostage::sources::NamedModel::builtin("pacejka")?))
+    ///     .fix(FixedValues::parse(&["pK1=-30"])?)
+    ///     .prepare()
+    ///     .err()
+    ///     .expect("refused");
+    /// assert!(refused.to_string().contains("give a trained estimator"), "{refused}");
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn fix(mut self, values: FixedValues) -> Self {
+        self.fix = values;
+        self
     }
 
     /// The model the records come from: a built-in one or a model file.
@@ -263,6 +295,17 @@ impl EstimateRequest {
     /// another model, a model that cannot run without noise, a method the
     /// model lacks, no model where one is needed).
     pub fn prepare(mut self) -> Result<Estimating, RequestError> {
+        if !self.fix.is_empty() {
+            let EstimateWith::Estimator(estimator) = &mut self.with else {
+                return Err(RequestError {
+                    purpose: Purpose::Fix,
+                    error: RequestProblem::HeldNeedsEstimator,
+                });
+            };
+            **estimator = estimator
+                .holding(&self.fix)
+                .map_err(|e| RequestError::new(Purpose::Fix, e.into()))?;
+        }
         if self.model.is_some()
             && matches!(self.with, EstimateWith::Estimator(_))
             && !(self.checks() || self.refine.is_some() || self.joint)
@@ -600,6 +643,8 @@ pub enum Purpose {
     Samples,
     /// Values tested against the posterior's region.
     Region,
+    /// Parameters held at values.
+    Fix,
 }
 
 impl Purpose {
@@ -616,6 +661,7 @@ impl Purpose {
             Self::Model => "the model",
             Self::Samples => "the posterior's draws",
             Self::Region => "testing values against the posterior",
+            Self::Fix => "holding parameters at values",
         }
     }
 }
@@ -630,6 +676,14 @@ pub enum RequestProblem {
     /// than a trained estimator.
     #[error("it starts from a two-stage estimate and its interval: give a trained estimator")]
     NeedsEstimator,
+    /// Values held with another way of estimating than a trained
+    /// estimator.
+    #[error(
+        "values are held in a trained estimator's estimates and in its refinement through the \
+         model: give a trained estimator (a classic method or the output-error fit takes a model \
+         file with the values written in)"
+    )]
+    HeldNeedsEstimator,
     /// A window or a step of no samples.
     #[error(
         "a window of {length} samples every {every}: give a window and a step of at least 1 sample"

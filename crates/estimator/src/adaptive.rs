@@ -148,6 +148,11 @@ impl AdaptiveIntervals {
         Ok(sigma)
     }
 
+    /// How many parameters it gives half-widths of.
+    pub(crate) fn n_parameters(&self) -> usize {
+        self.quantile.len()
+    }
+
     /// Half-widths of the intervals of one record, from its features.
     ///
     /// # Errors

@@ -70,6 +70,7 @@ impl TryFrom<EstimatorFields> for Estimator {
             input_shapes,
             posterior,
             fixed,
+            reported: None,
         };
         estimator
             .check_parameters()

@@ -28,6 +28,9 @@ pub use twostage_models::RecordShape;
 pub struct EstimateWorkspace {
     compress: Workspace,
     features: Vec<f64>,
+    /// Stage 2's whole output, where some of it is held
+    /// ([`Estimator::holding`]).
+    pub(crate) whole: Vec<f64>,
 }
 
 impl EstimateWorkspace {
@@ -79,6 +82,11 @@ pub struct Estimator {
     /// The model's parameters held at values, not estimated (format
     /// version 10 on, written only where there are any).
     pub(crate) fixed: FixedValues,
+    /// Where some of the parameters stage 2 estimates are held at values
+    /// at estimate time ([`Estimator::holding`]): the places, among stage
+    /// 2's outputs, of those it reports. Never written: such an estimator
+    /// is not saved.
+    pub(crate) reported: Option<Vec<usize>>,
 }
 
 impl Serialize for Estimator {
@@ -92,6 +100,12 @@ impl Serialize for Estimator {
         serializer: S,
     ) -> std::result::Result<S::Ok, S::Error> {
         use serde::ser::SerializeStruct;
+        if self.reported.is_some() {
+            return Err(serde::ser::Error::custom(
+                "an estimator with values held at estimate time is not saved: train one with \
+                 --fix (Python: fix=) to keep the values in its file",
+            ));
+        }
         let mut fields = serializer.serialize_struct("Estimator", 17)?;
         fields.serialize_field("param_names", &self.param_names)?;
         fields.serialize_field("lower", &self.lower)?;
@@ -333,7 +347,10 @@ impl Estimator {
             });
         }
         self.features_of(inputs, outputs, work)?;
-        self.regressor.predict_into(&work.features, theta)?;
+        let EstimateWorkspace {
+            features, whole, ..
+        } = work;
+        self.stage2_into(features, whole, theta)?;
         to_estimate(theta, &self.marginals, &self.lower, &self.upper);
         Ok(())
     }
@@ -486,7 +503,7 @@ impl Estimator {
         let mut features = vec![0.0; self.compressor.n_features()];
         linearized.compress_window(record.inputs(), record.outputs(), window, &mut features)?;
         let mut theta = vec![0.0; self.param_names.len()];
-        self.regressor.predict_into(&features, &mut theta)?;
+        self.stage2_into(&features, &mut Vec::new(), &mut theta)?;
         to_estimate(&mut theta, &self.marginals, &self.lower, &self.upper);
         self.assessment_of(theta, &features, last.inputs())
     }
@@ -502,9 +519,9 @@ impl Estimator {
     ) -> Result<Assessment> {
         let adaptive_half_widths = match &self.adaptive {
             Some(a) => {
-                let mut widths = vec![0.0; theta.len()];
+                let mut widths = vec![0.0; a.n_parameters()];
                 a.half_widths_into(features, &mut widths)?;
-                Some(widths)
+                Some(self.reported_of(widths))
             }
             None => None,
         };
@@ -574,8 +591,36 @@ impl Estimator {
     /// Features of another width than the compressor writes.
     pub fn predict_features(&self, features: ArrayView2<'_, f64>) -> Result<Array2<f64>> {
         let mut out = self.regressor.predict(features)?;
+        if let Some(reported) = &self.reported {
+            out = out.select(ndarray::Axis(1), reported);
+        }
         rows_to_estimates(&mut out, &self.marginals, &self.lower, &self.upper);
         Ok(out)
+    }
+
+    /// Stage 2's estimate of `features` (in the learning space) into
+    /// `theta`: its reported outputs, `whole` holding all of them where
+    /// some are held.
+    fn stage2_into(&self, features: &[f64], whole: &mut Vec<f64>, theta: &mut [f64]) -> Result<()> {
+        let Some(reported) = &self.reported else {
+            self.regressor.predict_into(features, theta)?;
+            return Ok(());
+        };
+        whole.resize(self.regressor.n_outputs(), 0.0);
+        self.regressor.predict_into(features, whole)?;
+        for (t, &j) in theta.iter_mut().zip(reported) {
+            *t = whole[j];
+        }
+        Ok(())
+    }
+
+    /// The reported parameters' entries of `values`, one per stage 2
+    /// output.
+    fn reported_of(&self, values: Vec<f64>) -> Vec<f64> {
+        match &self.reported {
+            Some(reported) => reported.iter().map(|&j| values[j]).collect(),
+            None => values,
+        }
     }
 }
 
@@ -640,6 +685,7 @@ impl Estimator {
             input_shapes: None,
             posterior: None,
             fixed: FixedValues::default(),
+            reported: None,
         }
     }
 

@@ -17,6 +17,7 @@ mod envelope;
 mod error;
 mod estimator;
 mod file;
+mod held;
 mod layout;
 mod posterior;
 mod runtime_export;

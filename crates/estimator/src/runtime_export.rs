@@ -206,6 +206,13 @@ impl Estimator {
     /// after output transforms, or sizes beyond the runtime's limits
     /// ([`twostage_runtime::format`]).
     pub fn to_runtime(&self) -> Result<Vec<u8>> {
+        if self.holds_at_estimate_time() {
+            return Err(Error::NotExportable {
+                reason: "values held at estimate time are not exported: train with --fix \
+                         (Python: fix=) to hold them on the control unit"
+                    .into(),
+            });
+        }
         let stage1 = self.runtime_stage1()?;
         let mut w = Writer {
             bytes: Vec::with_capacity(4096),

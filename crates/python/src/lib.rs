@@ -492,8 +492,9 @@ impl PyEstimator {
     /// `(rows_json, failed, auto)`, the rows as its `--format json`
     /// writes them, the records that could not be estimated (experiment,
     /// why), and with `refine="auto"` `(explained, checked, [(experiment,
-    /// reason)])`.
-    #[pyo3(signature = (records, *, experiments=None, check=false, refine=None, refine_below_fit=None, joint=false, window=None, every=None, correlation=false, model_file=None, model_toml=None, sims=None, score_from=0, score_to=None, prior_starts=None, seed=0, progress=None))]
+    /// reason)])`. `fix={name: value}` holds parameters there, as
+    /// `--fix`: the rows are of the others.
+    #[pyo3(signature = (records, *, experiments=None, check=false, refine=None, refine_below_fit=None, joint=false, window=None, every=None, correlation=false, model_file=None, model_toml=None, sims=None, score_from=0, score_to=None, prior_starts=None, seed=0, progress=None, fix=None))]
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn estimate_records<'py>(
         &self,
@@ -515,11 +516,13 @@ impl PyEstimator {
         prior_starts: Option<usize>,
         seed: u64,
         progress: Option<Py<PyAny>>,
+        fix: Option<Bound<'py, pyo3::types::PyDict>>,
     ) -> PyResult<(
         String,
         Vec<(String, String)>,
         Option<(usize, usize, Vec<(String, String)>)>,
     )> {
+        let fix = training::fixed_values(fix)?;
         requests::estimate_records(
             &self.inner,
             py,
@@ -540,6 +543,7 @@ impl PyEstimator {
             prior_starts,
             seed,
             progress,
+            fix,
         )
     }
 
@@ -547,8 +551,10 @@ impl PyEstimator {
     /// lengths), as `twostage estimate --joint`: their two-stage
     /// estimates pooled, then one output-error fit of every record on its
     /// own input, searched from `prior_starts` starts over the prior of
-    /// `seed` besides them. See `joint::joint_dict` for the keys.
-    #[pyo3(signature = (records, *, model_file=None, model_toml=None, prior_starts=None, seed=0))]
+    /// `seed` besides them; `fix={name: value}` holds parameters there,
+    /// as `--fix`. See `joint::joint_dict` for the keys.
+    #[pyo3(signature = (records, *, model_file=None, model_toml=None, prior_starts=None, seed=0, fix=None))]
+    #[allow(clippy::too_many_arguments)]
     fn joint<'py>(
         &self,
         py: Python<'py>,
@@ -557,7 +563,9 @@ impl PyEstimator {
         model_toml: Option<&str>,
         prior_starts: Option<usize>,
         seed: u64,
+        fix: Option<Bound<'py, pyo3::types::PyDict>>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let fix = training::fixed_values(fix)?;
         requests::joint(
             &self.inner,
             py,
@@ -566,6 +574,7 @@ impl PyEstimator {
             model_toml,
             prior_starts,
             seed,
+            fix,
         )
     }
 

@@ -119,6 +119,7 @@ pub(crate) fn validate<'py>(
     Ok((report, table(run.truth)?, table(run.estimates)?, target))
 }
 
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn joint<'py>(
     estimator: &twostage::Estimator,
     py: Python<'py>,
@@ -127,6 +128,7 @@ pub(crate) fn joint<'py>(
     model_toml: Option<&str>,
     prior_starts: Option<usize>,
     seed: u64,
+    fix: twostage::models::FixedValues,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let named = named_model(None, model_file, model_toml)?;
     let estimating = prepared(
@@ -134,7 +136,8 @@ pub(crate) fn joint<'py>(
             .model(named)
             .joint(true)
             .seed(seed)
-            .prior_starts(prior_starts),
+            .prior_starts(prior_starts)
+            .fix(fix),
     )?;
     let shape = estimator.record_shape();
     let records: Vec<(String, IoData)> = records
@@ -246,6 +249,7 @@ pub(crate) fn estimate_records<'py>(
     prior_starts: Option<usize>,
     seed: u64,
     progress: Option<Py<PyAny>>,
+    fix: twostage::models::FixedValues,
 ) -> PyResult<Table> {
     let ids = match experiments {
         Some(ids) if ids.len() != records.len() => {
@@ -279,7 +283,8 @@ pub(crate) fn estimate_records<'py>(
                 every: every.unwrap_or(length),
             }))
             .seed(seed)
-            .prior_starts(prior_starts),
+            .prior_starts(prior_starts)
+            .fix(fix),
     )?;
     let shape = estimator.record_shape();
     let records: Vec<(String, Result<IoData, DataFileError>)> = records

@@ -217,7 +217,7 @@ fn chart_given(chart: &Bound<'_, PyAny>, name: &str) -> PyResult<ChartGiven> {
 }
 
 /// `fix={name: value}` as the values held, in the dict's order.
-fn fixed_values(
+pub(crate) fn fixed_values(
     fix: Option<Bound<'_, pyo3::types::PyDict>>,
 ) -> PyResult<twostage::models::FixedValues> {
     let mut pairs: Vec<(String, f64)> = Vec::new();

@@ -224,6 +224,13 @@ def test_an_output_error_refinement_through_a_model_file_is_the_cli_s(tmp_path):
     # No parameter of the records' own: each record's whole estimate is the joint one.
     assert ours["per_record"] == [False]
     assert ours["records_theta"].tolist() == [[joint["theta"]]] * 2
+    # Holding the only parameter leaves nothing to estimate; a name the
+    # estimator lacks is refused with those it has.
+    with pytest.raises(ValueError, match="every parameter is fixed"):
+        estimator.joint([(u[0], y[0]), (u[1], y[1])], model_file=model, fix={"theta": 0.3})
+    with pytest.raises(ValueError, match="its parameters are theta"):
+        estimator.estimate_records([(u[0], y[0])], refine="all", model_file=model,
+                                   fix={"mass": 1.0})
     # A record the model cannot run (the wrong number of outputs) is refused, named.
     with pytest.raises(ValueError, match=r"records\[1\]"):
         estimator.joint([(u[0], y[0]), (u[1], np.hstack([y[1], y[1]]))], model_file=model)

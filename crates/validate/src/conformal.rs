@@ -85,6 +85,29 @@ impl ConformalIntervals {
         &self.half_widths
     }
 
+    /// The intervals of the parameters at `places` alone, in that order
+    /// (an estimator's other parameters held at values).
+    ///
+    /// ```
+    /// use twostage_validate::ConformalIntervals;
+    /// let residuals = ndarray::array![[0.1, -2.0], [-0.3, 1.0], [0.2, 0.5]];
+    /// let both = ConformalIntervals::calibrate(residuals.view(), 0.5)?;
+    /// let second = both.of_parameters(&[1]);
+    /// assert_eq!(second.half_widths(), &both.half_widths()[1..]);
+    /// assert_eq!((second.alpha(), second.n_calibration()), (0.5, 3));
+    /// # Ok::<(), twostage_validate::ValidateError>(())
+    /// ```
+    ///
+    /// # Panics
+    /// A place beyond the parameters (a caller's bug, not data).
+    pub fn of_parameters(&self, places: &[usize]) -> Self {
+        Self {
+            alpha: self.alpha,
+            n_calibration: self.n_calibration,
+            half_widths: places.iter().map(|&j| self.half_widths[j]).collect(),
+        }
+    }
+
     /// The share of `(truth, estimate)` rows whose truth lies in the interval,
     /// per parameter.
     pub fn coverage(&self, truth: ArrayView2<'_, f64>, estimates: ArrayView2<'_, f64>) -> Vec<f64> {

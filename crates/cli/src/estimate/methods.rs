@@ -215,7 +215,11 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
                 .and(args.at.clone())
                 .map(twostage::RegionValues::File),
         )
-        .prior_starts(args.prior_starts);
+        .prior_starts(args.prior_starts)
+        .fix(
+            twostage::models::FixedValues::parse(&args.fix)
+                .map_err(|e| usage(format!("--fix: {e}")))?,
+        );
     let estimating = request
         .prepare()
         .map_err(|e| said_as_the_flags_say_it(e, args))?;
@@ -237,6 +241,7 @@ fn said_as_the_flags_say_it(e: RequestError, args: &EstimateArgs) -> anyhow::Err
         Purpose::Windows => "--window".into(),
         Purpose::Samples => "--samples".into(),
         Purpose::Region => "--at".into(),
+        Purpose::Fix => "--fix".into(),
         Purpose::Model if args.model_file.is_some() => "--model-file".into(),
         Purpose::Model => "--model".into(),
     };

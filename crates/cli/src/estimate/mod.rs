@@ -153,6 +153,13 @@ pub struct EstimateArgs {
     /// With --at: accept values outside the model's prior box.
     #[arg(long, requires = "at")]
     allow_outside_prior: bool,
+    /// With --estimator: hold a parameter at a value (NAME=VALUE,
+    /// repeatable): the rows are of the others, and --check, --refine and
+    /// --joint search them alone through the model with the value held,
+    /// as an estimator trained with `train --fix` does (whose network
+    /// also learned with it held: the two-stage estimates here did not).
+    #[arg(long, value_name = "NAME=VALUE", requires = "estimator")]
+    fix: Vec<String>,
     /// A classic method instead of an estimator: ekf, ukf, pf, pem, ii
     /// (indirect inference through the TS preset's ARX) or bayes for a
     /// built-in model; oe (a multi-start output-error fit: --starts draws
