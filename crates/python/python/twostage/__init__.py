@@ -352,6 +352,7 @@ class Estimator:
         model_toml: Optional[str] = None,
         prior_starts: Optional[int] = None,
         seed: int = 0,
+        fix: Optional[dict[str, float]] = None,
     ) -> dict[str, Any]:
         """One estimate of the plant behind all ``records`` (a list of
         ``(u, y)`` pairs, each of any length on its own input), as
@@ -367,7 +368,14 @@ class Estimator:
         ``fit_percent`` at the joint estimate; ``left_out``, pairs of an
         index and why the model could not run it; ``disagreeing``, the
         indices of records whose estimates lie beyond their intervals from
-        the others'. Raises ValueError when no record can be fitted."""
+        the others'; ``between_sd`` and ``mismatch_sets_width``, the scatter
+        of the records' own best fits beyond their noise; ``per_record``,
+        per parameter whether it belongs to each record (``per_record =
+        true`` in the model file: NaN in ``theta``), and ``records_theta``
+        and ``records_half_widths``, each fitted record's whole estimate.
+        ``fix={"name": value}`` holds parameters there, as ``--fix``: the
+        estimate is of the others. Raises ValueError when no record can be
+        fitted."""
         pairs = [self._columns(u, y) for u, y in records]
         joint = self._native.joint(
             pairs,
@@ -375,6 +383,7 @@ class Estimator:
             model_toml=model_toml,
             prior_starts=prior_starts,
             seed=seed,
+            fix=fix,
         )
         widths = joint.pop("half_widths")
         joint["lower"], joint["upper"] = self._interval(joint["theta"], widths)
@@ -413,6 +422,7 @@ class Estimator:
         prior_starts: Optional[int] = None,
         seed: int = 0,
         progress: Any = None,
+        fix: Optional[dict[str, float]] = None,
     ) -> dict[str, Any]:
         """Estimate ``records`` (a list of ``(u, y)`` pairs, any lengths),
         named ``experiments`` (default their indices), as ``twostage
@@ -430,7 +440,9 @@ class Estimator:
         for bit); ``failed``, pairs of an experiment and why it has no
         row; ``auto``, with ``refine="auto"``, a dict of ``explained``
         and ``checked`` counts and ``refined``, each refined experiment
-        and why."""
+        and why. ``fix={"name": value}`` holds parameters there, as
+        ``--fix``: the rows are of the others, and the check, refinement
+        and joint fit search them alone."""
         pairs = [self._columns(u, y) for u, y in records]
         rows, failed, auto = self._native.estimate_records(
             pairs,
@@ -450,6 +462,7 @@ class Estimator:
             prior_starts=prior_starts,
             seed=seed,
             progress=_progress(progress),
+            fix=fix,
         )
         if auto is not None:
             explained, checked, refined = auto

@@ -92,6 +92,7 @@ class Estimator:
         model_toml: Optional[str] = None,
         prior_starts: Optional[int] = None,
         seed: int = 0,
+        fix: Optional[dict[str, float]] = None,
     ) -> dict[str, Any]: ...
     def read_records(
         self, path: str
@@ -116,6 +117,7 @@ class Estimator:
         prior_starts: Optional[int] = None,
         seed: int = 0,
         progress: Optional[Any] = None,
+        fix: Optional[dict[str, float]] = None,
     ) -> Tuple[
         str, list[Tuple[str, str]], Optional[Tuple[int, int, list[Tuple[str, str]]]]
     ]:
