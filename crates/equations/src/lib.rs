@@ -90,13 +90,31 @@ pub enum Integrator {
 /// What the inputs are between samples, for a continuous-time model.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum InputPath {
-    /// The straight line through the samples, held after the last
-    /// (as the built-in models and FMUs see them).
+    /// The cubic through the four nearest samples where the signal is
+    /// smooth, straight where it holds or at its ends, held after the
+    /// last ([`twostage_models::InputSignal::sampled_value_at`], as the
+    /// built-in car sees a sampled steer).
     #[default]
+    Cubic,
+    /// The straight line through the samples, held after the last (the
+    /// only reading before decision 099).
     Linear,
     /// Each sample held until the next (a zero-order hold: a digital
     /// controller's output, a pump switched per sample).
     Hold,
+}
+
+impl InputPath {
+    /// The sampled signal `samples` at time `t` (a held path reads it
+    /// sample by sample elsewhere: here as the cubic one).
+    pub(crate) fn value_at(self, t: f64, sample_time: f64, samples: &[f64]) -> f64 {
+        match self {
+            Self::Linear => twostage_models::InputSignal::linear_value_at(t, sample_time, samples),
+            Self::Cubic | Self::Hold => {
+                twostage_models::InputSignal::sampled_value_at(t, sample_time, samples)
+            }
+        }
+    }
 }
 
 /// A named right side: `name = text`.

@@ -3,7 +3,7 @@
 //! of a batch side by side.
 
 use rand_distr::{Distribution, StandardNormal};
-use twostage_models::{ExperimentRng, InputSignal, IoData, SimError};
+use twostage_models::{ExperimentRng, IoData, SimError};
 
 use super::EquationModel;
 use crate::expression::Program;
@@ -276,7 +276,7 @@ impl EquationModel {
         let times = [t, t + 0.5 * h, t + h];
         for (slots, &at) in stage_inputs.iter().zip(&times) {
             for (&slot, samples) in slots.iter().zip(inputs) {
-                values[slot] = InputSignal::sampled_value_at(at, self.sample_time, samples);
+                values[slot] = self.input_path.value_at(at, self.sample_time, samples);
             }
         }
     }
@@ -326,10 +326,8 @@ impl EquationModel {
         let start = self.names.inputs().start;
         for (j, samples) in inputs.iter().enumerate() {
             values[start + j] = match (self.input_path, self.time) {
-                (InputPath::Linear, Time::Continuous { .. }) => {
-                    twostage_models::InputSignal::sampled_value_at(t, self.sample_time, samples)
-                }
-                _ => samples[k.min(samples.len() - 1)],
+                (InputPath::Hold, _) | (_, Time::Discrete) => samples[k.min(samples.len() - 1)],
+                (path, Time::Continuous { .. }) => path.value_at(t, self.sample_time, samples),
             };
         }
     }

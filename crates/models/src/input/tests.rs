@@ -24,6 +24,63 @@ fn interpolation_holds_the_ends_for_any_index() {
     assert_eq!(interpolate(&[], 0.3).to_bits(), 0.0f64.to_bits());
 }
 
+/// A slalom's 0.6 Hz sine sampled at 50 Hz, read between its samples:
+/// the cubic reading within 1e-6 of the sine itself (the bound of the
+/// cubic through four nodes, (h w)^4 9 / 384, is 7.5e-7), the linear one
+/// 7e-4 off ((h w)^2 / 8); every sample read as itself. (Its phase keeps
+/// two samples from straddling a peak at equal values, which are read
+/// as a hold.)
+#[test]
+fn a_smooth_signal_is_read_by_its_cubic_and_a_held_one_straight() {
+    let (h, w) = (0.02, std::f64::consts::TAU * 0.6);
+    let sine = |t: f64| (w * t + 0.3).sin();
+    let samples: Vec<f64> = (0..200).map(|k| sine(k as f64 * h)).collect();
+    let (mut cubic, mut linear) = (0.0f64, 0.0f64);
+    for step in 0..199 * 40 {
+        let t = step as f64 * h / 40.0;
+        cubic = cubic.max((InputSignal::sampled_value_at(t, h, &samples) - sine(t)).abs());
+        if (1.0..198.0).contains(&(t / h)) {
+            linear = linear.max((InputSignal::linear_value_at(t, h, &samples) - sine(t)).abs());
+        }
+    }
+    let bound = (h * w).powi(4) * 9.0 / 384.0;
+    // The first and last intervals are read straight.
+    let ends = (h * w).powi(2) / 8.0;
+    assert!(cubic <= ends * 1.01, "{cubic}");
+    let mut inner = 0.0f64;
+    for step in 40..197 * 40 {
+        let t = step as f64 * h / 40.0;
+        inner = inner.max((InputSignal::sampled_value_at(t, h, &samples) - sine(t)).abs());
+    }
+    assert!(
+        inner <= bound * 1.01 && inner < 1e-6,
+        "{inner} against {bound}"
+    );
+    assert!(
+        linear > 0.9 * ends && linear > 500.0 * inner,
+        "{linear} {inner}"
+    );
+    for (k, s) in samples.iter().enumerate() {
+        assert_eq!(
+            InputSignal::sampled_value_at(k as f64, 1.0, &samples).to_bits(),
+            s.to_bits()
+        );
+    }
+    // A held signal stays flat where it holds and straight across its
+    // steps, never past them.
+    let held = [0.0, 0.0, 1.0, 1.0, 1.0, -2.0, -2.0, 0.5, 3.0, 3.0];
+    for step in 0..90 {
+        let x = step as f64 / 10.0;
+        let k = x.floor() as usize;
+        let read = InputSignal::sampled_value_at(x, 1.0, &held);
+        let (a, b) = (held[k], held[k + 1]);
+        assert!(read >= a.min(b) && read <= a.max(b), "{x}: {read}");
+        if a == b {
+            assert_eq!(read, a);
+        }
+    }
+}
+
 #[test]
 fn chicane_is_zero_outside_its_window_and_matches_the_formula() {
     let c = InputSignal::chicane(0.2).unwrap();

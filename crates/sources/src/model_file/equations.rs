@@ -121,8 +121,13 @@ impl Locator<'_> {
             0 => Integrator::Rk4,
             _ => Integrator::Euler,
         };
-        let inputs = match choice(&raw.inputs, "equations.inputs", &["linear", "hold"])? {
-            0 => InputPath::Linear,
+        let inputs = match choice(
+            &raw.inputs,
+            "equations.inputs",
+            &["cubic", "linear", "hold"],
+        )? {
+            0 => InputPath::Cubic,
+            1 => InputPath::Linear,
             _ => InputPath::Hold,
         };
         if let (Time::Discrete, Some(key)) = (time, raw.integrator.as_ref().or(raw.inputs.as_ref()))

@@ -7,7 +7,7 @@
 use std::cell::RefCell;
 
 use rand::RngExt;
-use twostage_models::{ModelSpec, OdeSystem, Prior, Rk4, experiment_rng};
+use twostage_models::{InputSignal, ModelSpec, OdeSystem, Prior, Rk4, experiment_rng};
 
 use super::*;
 use crate::{Equation, EquationsText, Integrator, State};
@@ -106,7 +106,12 @@ impl OdeSystem for Reference<'_> {
         for (j, samples) in self.inputs.iter().enumerate() {
             values[self.model.names.inputs().start + j] = match self.held {
                 Some(k) => samples[k],
-                None => InputSignal::sampled_value_at(t, self.model.sample_time, samples),
+                None => match self.model.input_path {
+                    InputPath::Linear => {
+                        InputSignal::linear_value_at(t, self.model.sample_time, samples)
+                    }
+                    _ => InputSignal::sampled_value_at(t, self.model.sample_time, samples),
+                },
             };
         }
         self.derivatives.interpret(&mut values, x, dx);
@@ -129,7 +134,7 @@ fn bits(v: &[f64]) -> Vec<u64> {
 fn compiled_steps_are_the_integrators_steps() {
     let mut rng = experiment_rng(11, 0);
     for integrator in [Integrator::Rk4, Integrator::Euler] {
-        for path in [InputPath::Linear, InputPath::Hold] {
+        for path in [InputPath::Cubic, InputPath::Linear, InputPath::Hold] {
             let model = every_function_by(integrator, path);
             let Stepping::Integrated {
                 substeps,
@@ -201,7 +206,7 @@ fn compiled_steps_are_the_integrators_steps() {
 }
 
 /// Records of a batch respond side by side with the bits and the
-/// streams each has alone: with linear and held inputs, both
+/// streams each has alone: with cubic, linear and held inputs, both
 /// integrators and discrete time, process and output noise.
 #[test]
 fn records_side_by_side_are_the_records_alone() {
@@ -215,6 +220,11 @@ fn records_side_by_side_are_the_records_alone() {
             Time::Continuous { substeps: 3 },
             Integrator::Rk4,
             InputPath::Linear,
+        ),
+        (
+            Time::Continuous { substeps: 4 },
+            Integrator::Rk4,
+            InputPath::Cubic,
         ),
         (
             Time::Continuous { substeps: 2 },
