@@ -199,7 +199,7 @@ fn the_car_written_as_equations_is_the_built_in_car() {
     let dir = scratch("car-equations");
     let examples = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../docs/examples/car");
     // The same sampled steering for both (the chicane's samples, which
-    // both follow linearly between samples).
+    // both read by their cubic between samples).
     let mut steering = String::from("delta\n");
     for k in 0..500 {
         let t = f64::from(k) * 0.02;

@@ -318,9 +318,9 @@ impl EquationModel {
         Ok(())
     }
 
-    /// `t` and the inputs there into the value table: linear between
-    /// samples and held after the last, or, held, those of
-    /// the sample interval `k` being simulated.
+    /// `t` and the inputs there into the value table: read between
+    /// samples as the model's input path says and held after the last,
+    /// or, held, those of the sample interval `k` being simulated.
     fn set_time_and_inputs(&self, values: &mut [f64], (t, k): (f64, usize), inputs: &[Vec<f64>]) {
         values[TIME_SLOT] = t;
         let start = self.names.inputs().start;
