@@ -86,7 +86,7 @@ pub(super) fn smooth(samples: &[f64], x: f64) -> f64 {
     let k = x.floor();
     let i = k as usize;
     let (before, a, b, after) = (samples[i - 1], samples[i], samples[i + 1], samples[i + 2]);
-    if before == a || a == b || b == after {
+    if holds(before, a) || holds(a, b) || holds(b, after) {
         return interpolate(samples, x);
     }
     // Lagrange's weights of the nodes -1, 0, 1, 2 at s in [0, 1).
@@ -94,6 +94,12 @@ pub(super) fn smooth(samples: &[f64], x: f64) -> f64 {
     let (sm, s1, s2) = (s + 1.0, s - 1.0, s - 2.0);
     -s * s1 * s2 / 6.0 * before + sm * s1 * s2 / 2.0 * a - sm * s * s2 / 2.0 * b
         + sm * s * s1 / 6.0 * after
+}
+
+/// Whether a signal holds from sample value `a` to `b`: a held signal
+/// repeats its value exactly, so no margin.
+fn holds(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits() || (a == 0.0 && b == 0.0)
 }
 
 /// Linear interpolation of `samples` at fractional index `x`.
