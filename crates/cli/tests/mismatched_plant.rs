@@ -17,7 +17,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{path, scratch, text, train_small, twostage};
+use common::{field, path, rows, scratch, simulate_beside, text, train_small, twostage};
 
 const MODEL: &str = r#"
 [model]
@@ -50,47 +50,6 @@ outputs = { y = "x" }
 [noise]
 output_sd = 0.01
 "#;
-
-/// Each row of an `estimate` table: its experiment and its fields by
-/// column name.
-fn rows(table: &str) -> Vec<(String, Vec<(String, f64)>)> {
-    let mut lines = table.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    lines
-        .map(|line| {
-            let cells: Vec<&str> = line.split(',').collect();
-            let fields = header
-                .iter()
-                .zip(&cells)
-                .skip(1)
-                .filter_map(|(name, cell)| Some((name.to_string(), cell.parse().ok()?)))
-                .collect();
-            (cells[0].to_string(), fields)
-        })
-        .collect()
-}
-
-fn field(row: &[(String, f64)], name: &str) -> f64 {
-    row.iter().find(|(n, _)| n == name).unwrap().1
-}
-
-/// Experiment `i` of `plant` at `theta`, written beside it: its path.
-fn simulate(plant: &Path, theta: &str, i: usize) -> String {
-    let record = plant.with_file_name(format!("r{i}.csv"));
-    let out = twostage(&[
-        "simulate",
-        "--model-file",
-        path(plant),
-        "--theta",
-        theta,
-        "--experiment",
-        &i.to_string(),
-        "--out",
-        path(&record),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    path(&record).to_string()
-}
 
 /// `estimate` of the records with `extra`: its table and its stderr.
 fn estimate(
@@ -125,7 +84,9 @@ fn a_mismatched_plants_records_hold_the_joint_estimate_with_their_scatter() {
         MODEL.replace("\"b * u - a * x\"", "\"b * u - a * x - 0.3 * x^3\""),
     )
     .unwrap();
-    let records: Vec<String> = (0..6).map(|i| simulate(&plant, "1.5,1.5", i)).collect();
+    let records: Vec<String> = (0..6)
+        .map(|i| simulate_beside(&plant, "1.5,1.5", i))
+        .collect();
     let estimator = train_small(&model);
 
     let (alone, _) = estimate(&estimator, &model, &records, &[]);
@@ -193,7 +154,7 @@ fn on_a_record_the_model_does_not_make_the_refined_estimate_is_the_best_fit() {
     std::fs::write(&model, &with_cubic).unwrap();
     let plant = dir.join("plant.toml");
     std::fs::write(&plant, with_cubic.replace("- c * x^3", "- 0.3 * x^3")).unwrap();
-    let record = simulate(&plant, "1.5,1.5,0", 3);
+    let record = simulate_beside(&plant, "1.5,1.5,0", 3);
     let estimator = train_small(&model);
     let (table, said) = estimate(&estimator, &model, &[record], &["--check"]);
     let rows = rows(&table);

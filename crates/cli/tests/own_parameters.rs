@@ -12,9 +12,7 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::{path, scratch, text, train_small, twostage};
+use common::{field, path, rows, scratch, simulate_beside, text, train_small, twostage};
 
 const MODEL: &str = r#"
 [model]
@@ -53,49 +51,6 @@ outputs = { y = "x" }
 output_sd = 0.01
 "#;
 
-/// Each row of a table: its first cell and its fields by column name.
-fn rows(table: &str) -> Vec<(String, Vec<(String, f64)>)> {
-    let mut lines = table.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    lines
-        .map(|line| {
-            let cells: Vec<&str> = line.split(',').collect();
-            let fields = header
-                .iter()
-                .zip(&cells)
-                .skip(1)
-                .filter_map(|(name, cell)| Some((name.to_string(), cell.parse().ok()?)))
-                .collect();
-            (cells[0].to_string(), fields)
-        })
-        .collect()
-}
-
-fn field(row: &[(String, f64)], name: &str) -> f64 {
-    row.iter()
-        .find(|(n, _)| n == name)
-        .unwrap_or_else(|| panic!("no {name} in {row:?}"))
-        .1
-}
-
-/// Experiment `i` of `model` at `theta`, written beside it: its path.
-fn simulate(model: &Path, theta: &str, i: usize) -> String {
-    let record = model.with_file_name(format!("r{i}.csv"));
-    let out = twostage(&[
-        "simulate",
-        "--model-file",
-        path(model),
-        "--theta",
-        theta,
-        "--experiment",
-        &i.to_string(),
-        "--out",
-        path(&record),
-    ]);
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    path(&record).to_string()
-}
-
 /// The first number after `what` in `said`.
 fn number_after(said: &str, what: &str) -> f64 {
     let at = said
@@ -120,7 +75,7 @@ fn the_joint_fit_gives_each_record_its_own_initial_state() {
     let records: Vec<String> = STARTS
         .iter()
         .enumerate()
-        .map(|(i, x0)| simulate(&model, &format!("1.5,2.0,{x0}"), i))
+        .map(|(i, x0)| simulate_beside(&model, &format!("1.5,2.0,{x0}"), i))
         .collect();
     let estimator = train_small(&model);
     let mut args = vec![
@@ -179,7 +134,7 @@ fn another_record_is_predicted_from_its_own_first_samples() {
     let dir = scratch("own_parameters_predict");
     let model = dir.join("lag.toml");
     std::fs::write(&model, MODEL).unwrap();
-    let other = simulate(&model, "1.5,2.0,-2.0", 1);
+    let other = simulate_beside(&model, "1.5,2.0,-2.0", 1);
     // The plant as estimated on another record, which started at 2.5.
     let estimate = dir.join("estimate.csv");
     std::fs::write(&estimate, "experiment,a,b,x0\n0,1.5,2.0,2.5\n").unwrap();

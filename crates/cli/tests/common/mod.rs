@@ -60,6 +60,55 @@ pub fn train_small(model: &Path) -> PathBuf {
     estimator
 }
 
+/// Each row of a table (`estimate`'s, say): its first cell and its
+/// fields by column name (those that read as numbers).
+#[allow(dead_code)]
+pub fn rows(table: &str) -> Vec<(String, Vec<(String, f64)>)> {
+    let mut lines = table.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    lines
+        .map(|line| {
+            let cells: Vec<&str> = line.split(',').collect();
+            let fields = header
+                .iter()
+                .zip(&cells)
+                .skip(1)
+                .filter_map(|(name, cell)| Some((name.to_string(), cell.parse().ok()?)))
+                .collect();
+            (cells[0].to_string(), fields)
+        })
+        .collect()
+}
+
+/// The field `name` of a row of [`rows`].
+#[allow(dead_code)]
+pub fn field(row: &[(String, f64)], name: &str) -> f64 {
+    row.iter()
+        .find(|(n, _)| n == name)
+        .unwrap_or_else(|| panic!("no {name} in {row:?}"))
+        .1
+}
+
+/// Experiment `i` of the model file `model` at `theta` (with its noise),
+/// written beside it as `r{i}.csv`: its path.
+#[allow(dead_code)]
+pub fn simulate_beside(model: &Path, theta: &str, i: usize) -> String {
+    let record = model.with_file_name(format!("r{i}.csv"));
+    let out = twostage(&[
+        "simulate",
+        "--model-file",
+        path(model),
+        "--theta",
+        theta,
+        "--experiment",
+        &i.to_string(),
+        "--out",
+        path(&record),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    path(&record).to_string()
+}
+
 /// The Python to run simulators with: `TWOSTAGE_PYTHON` (as `cargo xtask
 /// test` sets it), else the environment it made, else python3.
 #[allow(dead_code)]
