@@ -97,7 +97,7 @@ pub enum InputPath {
     #[default]
     Cubic,
     /// The straight line through the samples, held after the last (the
-    /// only reading before decision 099).
+    /// chord: what earlier versions read).
     Linear,
     /// Each sample held until the next (a zero-order hold: a digital
     /// controller's output, a pump switched per sample).

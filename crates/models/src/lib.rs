@@ -64,6 +64,7 @@ mod rng;
 mod signals;
 mod simulator;
 mod sobol;
+mod spec;
 
 pub use ar_noise::ArNoise;
 pub use benchmark::{

@@ -1,7 +1,6 @@
 //! An input between its samples, for models integrated in continuous
 //! time: the chicane exactly, a sampled signal by the cubic through its
-//! four nearest samples where it is smooth, kept straight where it holds
-//! (decision 099).
+//! four nearest samples where it is smooth, kept straight where it holds.
 
 use std::f64::consts::PI;
 
@@ -54,7 +53,7 @@ impl InputSignal {
 
     /// A sampled signal at continuous time `t` read linearly between
     /// samples, held after the last: the straight reading (an equations
-    /// model's `inputs = "linear"`), before decision 099 the only one.
+    /// model's `inputs = "linear"`), what earlier versions read.
     ///
     /// ```
     /// use twostage_models::InputSignal;
