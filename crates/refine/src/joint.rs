@@ -412,9 +412,12 @@ impl<M: ResidualModel> Refinement<M> {
         .max_iterations(self.iterations());
         let layout = together.model().layout.clone();
         let joint_of = |plant: &[f64]| layout.joint_vector(plant, |r| singles[fitted[r]].theta);
-        // The pooled interval spreads the first starts where every fitted
-        // record has its own parameters' interval to spread them by.
+        // The pooled interval spreads the first starts; with own
+        // parameters, where every fitted record has their interval too.
         let joint_widths = pooled.half_widths.as_ref().and_then(|w| {
+            if !layout.has_own() {
+                return Some(w.clone());
+            }
             let own: Option<Vec<&[f64]>> = fitted.iter().map(|&i| singles[i].half_widths).collect();
             own.map(|own| layout.joint_vector(w, |r| own[r]))
         });
@@ -794,5 +797,38 @@ mod tests {
         let loss = |losses: Option<Vec<f64>>| losses.unwrap().iter().sum::<f64>();
         assert!(loss(forced.record_losses) > 10.0 * loss(joint.record_losses));
         assert_eq!(forced.records_theta[0], forced.theta);
+    }
+
+    /// Without own parameters the pooled interval spreads the first
+    /// starts even where a record has no interval of its own (one out of
+    /// the estimator's distribution, say): the pooled point, its two
+    /// corners, the prior's starts and each record's estimate.
+    #[test]
+    fn the_pooled_interval_spreads_the_starts_whatever_a_record_lacks() {
+        let u = vec![0.0; 50];
+        let a = IoData::siso(&u, &[1.0; 50]).unwrap();
+        let b = IoData::siso(&u, &[1.2; 50]).unwrap();
+        let fit = Refinement::new(ConstantOutputs(Prior::uniform_box(&[0.0], &[3.0]).unwrap()));
+        let singles = [
+            SingleEstimate {
+                record: &a,
+                theta: &[1.0],
+                half_widths: Some(&[0.1]),
+            },
+            SingleEstimate {
+                record: &b,
+                theta: &[1.2],
+                half_widths: None,
+            },
+        ];
+        let plan = JointPlan {
+            search: SearchStarts {
+                from_prior: 2,
+                seed: 0,
+            },
+            alpha: 0.1,
+        };
+        let joint = fit.joint_estimate(&singles, plan).unwrap();
+        assert_eq!(joint.search.descents, 3 + 2 + 2);
     }
 }
