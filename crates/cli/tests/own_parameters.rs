@@ -138,19 +138,22 @@ fn another_record_is_predicted_from_its_own_first_samples() {
     // The plant as estimated on another record, which started at 2.5.
     let estimate = dir.join("estimate.csv");
     std::fs::write(&estimate, "experiment,a,b,x0\n0,1.5,2.0,2.5\n").unwrap();
-    let predict = |extra: &[&str]| {
+    // `simulate --at` of the estimate on the other record through `model`.
+    let simulate_at = |model: &std::path::Path, extra: &[&str]| {
         let mut args = vec![
             "simulate",
             "--model-file",
-            path(&model),
+            path(model),
             "--at",
             path(&estimate),
             "--input",
             &other,
-            "--noiseless",
         ];
         args.extend(extra);
-        let out = twostage(&args);
+        twostage(&args)
+    };
+    let predict = |extra: &[&str]| {
+        let out = simulate_at(&model, &[&["--noiseless"], extra].concat());
         let said = text(&out.stderr);
         assert!(out.status.success(), "{said}");
         (text(&out.stdout), said)
@@ -189,33 +192,13 @@ fn another_record_is_predicted_from_its_own_first_samples() {
             "its first 1 to 400 samples",
         ),
     ] {
-        let mut args = vec![
-            "simulate",
-            "--model-file",
-            path(&model),
-            "--at",
-            path(&estimate),
-            "--input",
-            &other,
-        ];
-        args.extend(extra);
-        let out = twostage(&args);
+        let out = simulate_at(&model, extra);
         assert!(!out.status.success());
         assert!(text(&out.stderr).contains(says), "{}", text(&out.stderr));
     }
     let shared = dir.join("shared.toml");
     std::fs::write(&shared, MODEL.replace("per_record = true\n", "")).unwrap();
-    let out = twostage(&[
-        "simulate",
-        "--model-file",
-        path(&shared),
-        "--at",
-        path(&estimate),
-        "--input",
-        &other,
-        "--own-from-first",
-        "40",
-    ]);
+    let out = simulate_at(&shared, &["--own-from-first", "40"]);
     assert!(!out.status.success());
     assert!(
         text(&out.stderr)
