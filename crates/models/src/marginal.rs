@@ -172,6 +172,70 @@ impl Marginal {
         }
     }
 
+    /// The log density of the prior at `z` of the unbounded space its
+    /// [`Marginal::support`] maps it to (a log-normal parameter's
+    /// logarithm, the logit of the place in a bounded one's interval): what
+    /// a likelihood over that space is multiplied by.
+    ///
+    /// ```
+    /// use twostage_models::Marginal;
+    /// // Uniform on [2, 4]: the logit of the place is logistic, 1/4 at 0.
+    /// let uniform = Marginal::Uniform { low: 2.0, high: 4.0 };
+    /// assert!((uniform.unbounded_log_density(0.0) - 0.25f64.ln()).abs() < 1e-15);
+    /// // Log-normal: its logarithm is normal.
+    /// let lognormal = Marginal::LogNormal { mu: 1.0, sigma: 2.0 };
+    /// let normal = Marginal::Normal { mu: 1.0, sigma: 2.0 };
+    /// assert_eq!(lognormal.unbounded_log_density(0.3), normal.unbounded_log_density(0.3));
+    /// ```
+    pub fn unbounded_log_density(&self, z: f64) -> f64 {
+        let normal = |x: f64, mu: f64, sigma: f64| {
+            let r = (x - mu) / sigma;
+            -0.5 * r * r - sigma.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln()
+        };
+        // ln u + ln(1 - u) for u the logistic of z, without overflow.
+        let log_logistic_density = -z.abs() - 2.0 * (-z.abs()).exp().ln_1p();
+        match *self {
+            Marginal::Normal { mu, sigma } | Marginal::LogNormal { mu, sigma } => {
+                normal(z, mu, sigma)
+            }
+            Marginal::Uniform { .. } => log_logistic_density,
+            Marginal::TruncatedNormal {
+                mu,
+                sigma,
+                low,
+                high,
+            } => {
+                let theta = self.support().from_unbounded(z);
+                let mass = standard_normal_cdf((high - mu) / sigma)
+                    - standard_normal_cdf((low - mu) / sigma);
+                normal(theta, mu, sigma) - mass.ln() + (high - low).ln() + log_logistic_density
+            }
+        }
+    }
+
+    /// The largest value [`Marginal::unbounded_log_density`] takes (for
+    /// a truncated normal, a bound: the product of its factors' largest).
+    pub fn unbounded_log_density_peak(&self) -> f64 {
+        let quarter = 0.25f64.ln();
+        let normal_peak = |sigma: f64| -sigma.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
+        match *self {
+            Marginal::Normal { sigma, .. } | Marginal::LogNormal { sigma, .. } => {
+                normal_peak(sigma)
+            }
+            Marginal::Uniform { .. } => quarter,
+            Marginal::TruncatedNormal {
+                mu,
+                sigma,
+                low,
+                high,
+            } => {
+                let mass = standard_normal_cdf((high - mu) / sigma)
+                    - standard_normal_cdf((low - mu) / sigma);
+                normal_peak(sigma) - mass.ln() + (high - low).ln() + quarter
+            }
+        }
+    }
+
     /// The probability the prior puts below `x`.
     pub fn cdf(&self, x: f64) -> f64 {
         match *self {
@@ -451,6 +515,67 @@ fn truncated_standard_quantile(a: f64, b: f64, p: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each prior's density over its unbounded space integrates to 1, and
+    /// the parameter's mean under it is the distribution's own: the
+    /// midpoint of a uniform, the closed-form mean of a truncated normal,
+    /// exp(mu + sigma^2 / 2) of a log-normal.
+    #[test]
+    fn the_unbounded_density_is_the_prior_carried_over() {
+        let truncated = Marginal::TruncatedNormal {
+            mu: 1.0,
+            sigma: 2.0,
+            low: 0.5,
+            high: 6.0,
+        };
+        let truncated_mean =
+            1.0 + 2.0 * truncated_standard_mean(-0.25, 2.5).expect("a finite interval");
+        let cases = [
+            (
+                Marginal::Uniform {
+                    low: -3.0,
+                    high: 5.0,
+                },
+                1.0,
+            ),
+            (truncated, truncated_mean),
+            (
+                Marginal::LogNormal {
+                    mu: 0.3,
+                    sigma: 0.4,
+                },
+                (0.3f64 + 0.08).exp(),
+            ),
+            (
+                Marginal::Normal {
+                    mu: -2.0,
+                    sigma: 0.5,
+                },
+                -2.0,
+            ),
+        ];
+        for (marginal, mean) in cases {
+            let (h, cells) = (1e-3, 80_000);
+            let (mut mass, mut first) = (0.0, 0.0);
+            let peak = marginal.unbounded_log_density_peak();
+            for k in 0..=cells {
+                let z = -40.0 + k as f64 * h;
+                assert!(
+                    marginal.unbounded_log_density(z) <= peak + 1e-12,
+                    "{marginal} at {z}"
+                );
+                let weight = if k == 0 || k == cells { 0.5 } else { 1.0 };
+                let p = weight * h * marginal.unbounded_log_density(z).exp();
+                mass += p;
+                first += p * marginal.support().from_unbounded(z);
+            }
+            assert!((mass - 1.0).abs() < 1e-9, "{marginal}: mass {mass}");
+            assert!(
+                (first - mean).abs() < 1e-8,
+                "{marginal}: mean {first} against {mean}"
+            );
+        }
+    }
 
     /// The chi-square CDF at the approximate quantile, by Simpson's rule
     /// on the density (the substitution `x = t^2` takes away the
