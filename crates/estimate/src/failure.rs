@@ -65,6 +65,10 @@ pub enum MethodFailure {
     /// Given values do not fit the record.
     #[error(transparent)]
     Given(#[from] GivenValuesError),
+    /// The draws could not be sharpened through the model (a run that
+    /// failed, or a local likelihood that could not be fitted).
+    #[error("the draws could not be sharpened through the model: {0}")]
+    Sharpen(String),
 }
 
 /// Values given for records that do not fit them.

@@ -69,6 +69,7 @@ impl Estimating {
             })
             .collect();
         progress.end_step();
+        self.sharpen(&mut rows, place, progress);
         let auto = self.check_and_refine(&mut rows, progress);
         Estimates { rows, auto }
     }

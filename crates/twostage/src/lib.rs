@@ -68,7 +68,7 @@ pub use twostage_estimate::{
     Purpose, RECORDS_TOGETHER, RecordBatch, RecordEstimate, RecordFailure, RecordOfJoint,
     RecordOutcome, RecordPlace, RefineChoiceError, RefineOutcome, RefineWhich, Refined, RefinedBy,
     RefinedEstimate, RegionValues, RequestError, RequestProblem, SearchOptima, SharedSimulator,
-    ToRefine, Windows, draws_refused, fit_own_parameters, values_outside_prior,
+    ToRefine, Windows, draws_refused, fit_own_parameters, sharpen_refused, values_outside_prior,
 };
 pub use twostage_estimator::{
     AdaptiveIntervals, Assessment, ENVELOPE_LEVEL, EstimateWorkspace, Estimator, FORMAT_VERSION,

@@ -209,6 +209,7 @@ pub(super) fn prepared(args: &EstimateArgs) -> Result<Estimating> {
         .windows(window)
         .seed(args.seed.unwrap_or(0))
         .samples(args.samples)
+        .sharpen(args.sharpen)
         .region_at(
             args.estimator
                 .as_ref()

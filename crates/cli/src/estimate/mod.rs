@@ -197,6 +197,13 @@ pub struct EstimateArgs {
     /// posterior mean and sd, --draws FILE the draws.
     #[arg(long, value_name = "N")]
     samples: Option<usize>,
+    /// With --samples: sharpen each record's draws through the
+    /// estimator's model (--model-file for one not built in) with M runs
+    /// of it, in two rounds near the record's posterior: stage 1's
+    /// features of the runs as a local Gaussian likelihood, times the
+    /// prior. For posteriors narrower than the network resolves.
+    #[arg(long, value_name = "M", requires = "samples")]
+    sharpen: Option<usize>,
     /// With --samples: write every draw here (CSV: experiment, draw, a
     /// column per parameter).
     #[arg(long, value_name = "FILE", requires = "samples")]
