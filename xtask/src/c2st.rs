@@ -5,6 +5,7 @@
 //! 5-fold cross-validation (0.5: the two alike). A second set of exact
 //! draws against the first gives the test's own floor on these records.
 
+use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -73,6 +74,112 @@ fn classifier(dim: usize, seed: u64) -> Result<Classifier> {
         .seed(seed)
         .check()?;
     Ok(Classifier::new(network)?)
+}
+
+/// An experiment's name and its draws (draws x parameters).
+type Experiment = (String, Array2<f64>);
+
+/// Draws read from a CSV as `twostage estimate --draws` writes them (an
+/// `experiment` column, a `draw` column, one per parameter; an
+/// `out_of_distribution` column is left out), by
+/// experiment in the order they first appear, with the parameters' names.
+fn read_draws(path: &Path) -> Result<(Vec<String>, Vec<Experiment>)> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines().enumerate();
+    let (_, header) = lines
+        .next()
+        .with_context(|| format!("{} is empty", path.display()))?;
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let experiment = columns
+        .iter()
+        .position(|c| *c == "experiment")
+        .with_context(|| format!("{}: no `experiment` column in the header", path.display()))?;
+    let parameters: Vec<usize> = (0..columns.len())
+        .filter(|&j| j != experiment && !["draw", "out_of_distribution"].contains(&columns[j]))
+        .collect();
+    let names = parameters.iter().map(|&j| columns[j].to_string()).collect();
+    let mut groups: Vec<(String, Vec<f64>)> = Vec::new();
+    for (number, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cells.len() != columns.len() {
+            anyhow::bail!(
+                "{} line {}: {} cells where the header has {}",
+                path.display(),
+                number + 1,
+                cells.len(),
+                columns.len()
+            );
+        }
+        let key = cells[experiment];
+        if groups.last().is_none_or(|(k, _)| k != key) {
+            groups.push((key.to_string(), Vec::new()));
+        }
+        let values = &mut groups.last_mut().expect("pushed above").1;
+        for &j in &parameters {
+            values.push(cells[j].parse().with_context(|| {
+                format!(
+                    "{} line {}, column {}: `{}` is not a number",
+                    path.display(),
+                    number + 1,
+                    columns[j],
+                    cells[j]
+                )
+            })?);
+        }
+    }
+    let q = parameters.len();
+    let groups = groups
+        .into_iter()
+        .map(|(key, values)| Ok((key, Array2::from_shape_vec((values.len() / q, q), values)?)))
+        .collect::<Result<_>>()?;
+    Ok((names, groups))
+}
+
+/// The test between two files of draws (say a method's and a reference
+/// posterior's), experiment by experiment: each experiment of `first`
+/// against the same experiment of `second`, printed.
+pub(crate) fn files(first: &Path, second: &Path, seed: u64) -> Result<()> {
+    let (names, ours) = read_draws(first)?;
+    let (their_names, theirs) = read_draws(second)?;
+    if names != their_names {
+        anyhow::bail!(
+            "{} draws {names:?} but {} draws {their_names:?}: the same parameters in the same \
+             order are needed",
+            first.display(),
+            second.display()
+        );
+    }
+    let start = Instant::now();
+    let scores: Vec<(String, f64)> = ours
+        .par_iter()
+        .enumerate()
+        .map(|(i, (key, drawn))| {
+            let (_, exact) = theirs.iter().find(|(k, _)| k == key).with_context(|| {
+                format!("{} has no draws of experiment {key}", second.display())
+            })?;
+            let tester = classifier(names.len(), seed.wrapping_add(i as u64))?;
+            Ok((
+                key.clone(),
+                two_sample_accuracy(exact.view(), drawn.view(), FOLDS, &tester)?,
+            ))
+        })
+        .collect::<Result<_>>()?;
+    for (key, score) in &scores {
+        println!("  experiment {key}: {score:.3}");
+    }
+    let values: Vec<f64> = scores.iter().map(|s| s.1).collect();
+    println!(
+        "  C2ST ({FOLDS}-fold MLP [{h}, {h}]) on {} experiments: {} ({:.0} s)",
+        values.len(),
+        spread_words(&values),
+        start.elapsed().as_secs_f64(),
+        h = 10 * names.len()
+    );
+    Ok(())
 }
 
 /// Mean, lowest and highest of `values`, in words.

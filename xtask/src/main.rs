@@ -100,6 +100,18 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         c2st: usize,
     },
+    /// The classifier two-sample test (sbibm's C2ST) between two files
+    /// of posterior draws, as `twostage estimate --draws` writes them:
+    /// each experiment of the first against the same of the second.
+    C2st {
+        /// Draws to score (say `twostage estimate --samples 10000 --draws`).
+        first: PathBuf,
+        /// Reference draws of the same experiments and parameters.
+        second: PathBuf,
+        /// Seed of the classifiers and the folds.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// A stage 1 that learns against the family estimator's own: a summary
     /// network trained on a model file's family, stage 2 fitted on its
     /// summary (alone and beside the estimator's features), each against
@@ -251,6 +263,11 @@ fn main() -> ExitCode {
             from,
             count,
         } => fuzz::chunk(reader, seed, from, count),
+        Command::C2st {
+            first,
+            second,
+            seed,
+        } => c2st::files(&first, &second, seed),
         Command::LearnedSummary(args) => learned_summary::run(&args),
         Command::FlagStudy(args) => flag_study::run(&args),
         Command::BayesGap {
