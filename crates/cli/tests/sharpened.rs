@@ -185,7 +185,7 @@ fn sharpened_draws_are_the_closed_form_posterior() {
         text(&out.stderr)
     };
     assert!(refused(&["--sharpen", "400"]).contains("--samples"));
-    assert!(refused(&["--samples", "10", "--sharpen", "2"]).contains("at least 4"));
+    assert!(refused(&["--samples", "10", "--sharpen", "2"]).contains("at least 6"));
     let values = dir.join("values.csv");
     std::fs::write(&values, "m,k\n0.1,0.2\n").unwrap();
     assert!(

@@ -189,8 +189,8 @@ pub fn sharpen_refused(
     let why = if samples.is_none() {
         "sharpening works on the posterior's draws: ask for draws too (--samples N)"
     } else if simulations < 2 * crate::sharpen::ROUNDS {
-        "sharpening takes runs of the model in two rounds: give at least 4 (a few hundred \
-         per parameter is typical)"
+        "sharpening takes runs of the model in three rounds: give at least 6 (a thousand or \
+         more per parameter is typical)"
     } else if region {
         "values are tested against the network's posterior density, which sharpened draws \
          leave: test them without sharpening"

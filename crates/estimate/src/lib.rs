@@ -226,9 +226,9 @@ impl EstimateRequest {
     }
 
     /// With draws: sharpen them through the estimator's model with
-    /// `simulations` runs of it per record, in two rounds: each round runs
+    /// `simulations` runs of it per record, in three rounds: each round runs
     /// the model, with its noise, on the record's input near the record's
-    /// posterior (first the estimator's, then the first round's), fits
+    /// posterior (first the estimator's, then the round before's), fits
     /// stage 1's features of the runs as a Gaussian whose mean is linear in
     /// the unbounded parameters, and draws its likelihood of the record's
     /// features times the prior exactly (decision 100). For a posterior

@@ -1,9 +1,10 @@
 //! Draws sharpened through the model (`samples` with `sharpen`): the
 //! estimator's posterior proposes where to run the model, the runs'
 //! stage-1 features near the record give a local likelihood, and its
-//! product with the prior is drawn exactly. Two rounds: the second runs
-//! where the first's posterior lies, and reads the features by the `q`
-//! combinations the first found informative ([`local::Summary`]).
+//! product with the prior is drawn exactly. Three rounds: each runs
+//! where the round before put the posterior, and the last reads the
+//! features by the `q` combinations the round before found informative
+//! ([`local::Summary`]).
 
 mod local;
 
@@ -21,9 +22,10 @@ use super::rows::RecordOutcome;
 use crate::PosteriorDraws;
 use local::{Gaussian, Summary, draw_with_prior, local_likelihood};
 
-/// Rounds of runs: the first where the estimator's posterior lies, the
-/// second where the first round's does.
-pub(crate) const ROUNDS: usize = 2;
+/// Rounds of runs: the first where the estimator's posterior lies, each
+/// next where the round before put it (a network's posterior several of
+/// its sds off is found in two).
+pub(crate) const ROUNDS: usize = 3;
 /// How much wider than the posterior each round runs the model: the
 /// local likelihood's slopes are measured across more than the
 /// posterior's spread, its mean stays within the region it is fitted on.
@@ -45,7 +47,7 @@ struct Round {
 
 impl Estimating {
     /// Each estimated record's draws sharpened through the model with
-    /// `simulations` runs of it (half a round), the records' runs of a
+    /// `simulations` runs of it (a third a round), the records' runs of a
     /// round simulated together; a record whose runs or fit fail gets the
     /// failure, named by `place` of its id.
     pub(super) fn sharpen(
@@ -124,9 +126,9 @@ impl Estimating {
                         let observed = estimator
                             .features_of(record.inputs(), record.outputs(), &mut work)
                             .map_err(|e| e.to_string())?;
-                        // After the first round, the features are read by
-                        // the first round's combinations.
-                        let fitted = match summary {
+                        // The last round reads the features by the
+                        // combinations the round before found informative.
+                        let fitted = match summary.as_ref().filter(|_| last) {
                             Some(summary) => local_likelihood(
                                 &ran.at,
                                 q,
@@ -143,7 +145,7 @@ impl Estimating {
                         );
                         let n = if last { samples } else { PROPOSAL_DRAWS };
                         let draws = draw_with_prior(&fitted.likelihood, &prior, n, &mut rng)?;
-                        Ok((draws, summary.clone().unwrap_or(fitted.summary)))
+                        Ok((draws, fitted.summary))
                     }))
                 })
                 .collect();

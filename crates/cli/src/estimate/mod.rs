@@ -199,7 +199,7 @@ pub struct EstimateArgs {
     samples: Option<usize>,
     /// With --samples: sharpen each record's draws through the
     /// estimator's model (--model-file for one not built in) with M runs
-    /// of it, in two rounds near the record's posterior: stage 1's
+    /// of it, in three rounds near the record's posterior: stage 1's
     /// features of the runs as a local Gaussian likelihood, times the
     /// prior. For posteriors narrower than the network resolves.
     #[arg(long, value_name = "M", requires = "samples")]
