@@ -171,35 +171,6 @@ pub fn draws_refused(
     Some(RequestProblem::Samples(why))
 }
 
-/// Why draws cannot be sharpened through the model as asked: no runs,
-/// no draws asked, or values to test against the posterior (whose region
-/// is the network's density, which sharpened draws leave behind).
-///
-/// ```
-/// assert!(twostage::sharpen_refused(Some(400), None, false).is_some());
-/// assert!(twostage::sharpen_refused(Some(400), Some(1000), false).is_none());
-/// assert!(twostage::sharpen_refused(None, Some(1000), true).is_none());
-/// ```
-pub fn sharpen_refused(
-    simulations: Option<usize>,
-    samples: Option<usize>,
-    region: bool,
-) -> Option<RequestProblem> {
-    let simulations = simulations?;
-    let why = if samples.is_none() {
-        "sharpening works on the posterior's draws: ask for draws too (--samples N)"
-    } else if simulations < 2 * crate::sharpen::ROUNDS {
-        "sharpening takes runs of the model in three rounds: give at least 6 (a thousand or \
-         more per parameter is typical)"
-    } else if region {
-        "values are tested against the network's posterior density, which sharpened draws \
-         leave: test them without sharpening"
-    } else {
-        return None;
-    };
-    Some(RequestProblem::Samples(why.into()))
-}
-
 /// `samples` draws given `record`, the `index`th piece of its request,
 /// from the stream of (`seed`, `index`): the same draws for the same
 /// record and seed whatever the threads; and where values `at` are given,

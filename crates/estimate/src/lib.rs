@@ -31,7 +31,7 @@ mod through_model;
 pub use choices::{
     CheckSettings, GivenValues, RefineChoiceError, RefineWhich, Windows, values_outside_prior,
 };
-pub use draws::{PosteriorDraws, draws_refused, sharpen_refused};
+pub use draws::{PosteriorDraws, draws_refused};
 pub use failure::{GivenValuesError, MethodFailure, RecordFailure};
 pub use joint::{JointFitter, JointOfRecords, RecordOfJoint};
 pub use methods::OUTPUT_ERROR_METHOD;
@@ -46,6 +46,7 @@ pub use rows::{
     AutoRefined, Estimates, Plant, RecordEstimate, RecordOutcome, RefineOutcome, Refined,
 };
 pub use run::{JointRun, RecordBatch, RecordPlace};
+pub use sharpen::sharpen_refused;
 
 use methods::Method;
 
@@ -354,7 +355,7 @@ impl EstimateRequest {
             }
         }
         if let Some(refused) =
-            draws::sharpen_refused(self.sharpen, self.samples, self.region_at.is_some())
+            sharpen::sharpen_refused(self.sharpen, self.samples, self.region_at.is_some())
         {
             return Err(RequestError {
                 purpose: Purpose::Samples,

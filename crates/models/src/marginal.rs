@@ -206,9 +206,9 @@ impl Marginal {
                 high,
             } => {
                 let theta = self.support().from_unbounded(z);
-                let mass = standard_normal_cdf((high - mu) / sigma)
-                    - standard_normal_cdf((low - mu) / sigma);
-                normal(theta, mu, sigma) - mass.ln() + (high - low).ln() + log_logistic_density
+                normal(theta, mu, sigma) - truncated_mass(mu, sigma, low, high).ln()
+                    + (high - low).ln()
+                    + log_logistic_density
             }
         }
     }
@@ -229,9 +229,9 @@ impl Marginal {
                 low,
                 high,
             } => {
-                let mass = standard_normal_cdf((high - mu) / sigma)
-                    - standard_normal_cdf((low - mu) / sigma);
-                normal_peak(sigma) - mass.ln() + (high - low).ln() + quarter
+                normal_peak(sigma) - truncated_mass(mu, sigma, low, high).ln()
+                    + (high - low).ln()
+                    + quarter
             }
         }
     }
@@ -370,6 +370,11 @@ impl std::fmt::Display for Marginal {
             ),
         }
     }
+}
+
+/// The probability a normal(mu, sigma) puts in [low, high].
+fn truncated_mass(mu: f64, sigma: f64, low: f64, high: f64) -> f64 {
+    standard_normal_cdf((high - mu) / sigma) - standard_normal_cdf((low - mu) / sigma)
 }
 
 /// The standard normal CDF, `erfc(-x / sqrt 2) / 2`: accurate in both tails
