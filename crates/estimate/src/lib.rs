@@ -232,9 +232,9 @@ impl EstimateRequest {
     /// posterior (first the estimator's, then the round before's), fits
     /// stage 1's features of the runs as a Gaussian whose mean is linear in
     /// the unbounded parameters, and draws its likelihood of the record's
-    /// features times the prior exactly (decision 100). For a posterior
-    /// narrower than the estimator resolves from its chart; the draws are
-    /// then of the features' local likelihood, not the network's.
+    /// features times the prior exactly. For a posterior narrower than the
+    /// estimator resolves from its chart; the draws are then of the
+    /// features' local likelihood, not the network's.
     pub fn sharpen(mut self, simulations: Option<usize>) -> Self {
         self.sharpen = simulations;
         self

@@ -81,6 +81,7 @@ impl Estimating {
             .collect();
         let mut finals: Vec<Option<Result<Vec<f64>, String>>> = vec![None; rows.len()];
         let mut summaries: Vec<Option<Summary>> = vec![None; rows.len()];
+        settle_failures(&mut proposals, &mut finals);
         progress.begin_step("sharpening", ROUNDS, "rounds");
         for round in 0..ROUNDS {
             let last = round + 1 == ROUNDS;
@@ -164,12 +165,7 @@ impl Estimating {
                     }
                 })
                 .collect();
-            for (index, proposal) in proposals.iter_mut().enumerate() {
-                if let Some(Err(why)) = proposal {
-                    finals[index] = Some(Err(why.clone()));
-                    *proposal = None;
-                }
-            }
+            settle_failures(&mut proposals, &mut finals);
             progress.advance_step(1);
         }
         progress.end_step();
@@ -225,6 +221,18 @@ pub fn sharpen_refused(
         return None;
     };
     Some(RequestProblem::Samples(why.into()))
+}
+
+/// A record whose proposal failed is done: its failure moves to `finals`.
+fn settle_failures(
+    proposals: &mut [Option<Result<Gaussian, String>>],
+    finals: &mut [Option<Result<Vec<f64>, String>>],
+) {
+    for (proposal, done) in proposals.iter_mut().zip(finals) {
+        if let Some(Err(why)) = proposal.take_if(|p| p.is_err()) {
+            *done = Some(Err(why));
+        }
+    }
 }
 
 /// The seed of a round's streams.
