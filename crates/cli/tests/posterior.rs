@@ -6,13 +6,7 @@
 
 mod common;
 
-use common::{path, scratch, text, twostage};
-
-fn ok(args: &[&str]) -> String {
-    let out = twostage(args);
-    assert!(out.status.success(), "{args:?}: {}", text(&out.stderr));
-    text(&out.stdout)
-}
+use common::{ok, path, scratch, text, twostage};
 
 fn refused(args: &[&str]) -> String {
     let out = twostage(args);

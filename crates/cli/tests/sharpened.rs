@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{field, path, rows, scratch, text, twostage};
+use common::{field, ok, path, rows, scratch, text, twostage};
 
 /// y = m + k u + noise (sd 2), m and k normal(0, 1) a priori: the
 /// posterior is normal, its precision I + X'X / 4 for X = [1, u].
@@ -42,12 +42,6 @@ outputs = { y = "x + k * u" }
 [noise]
 output_sd = 2.0
 "#;
-
-fn ok(args: &[&str]) -> String {
-    let out = twostage(args);
-    assert!(out.status.success(), "{args:?}: {}", text(&out.stderr));
-    text(&out.stdout)
-}
 
 /// The posterior mean and sds of (m, k) given a record's u and y.
 fn exact_posterior(u: &[f64], y: &[f64]) -> ([f64; 2], [f64; 2]) {

@@ -12,6 +12,14 @@ pub fn twostage(args: &[&str]) -> Output {
         .expect("the twostage binary runs")
 }
 
+/// Run `twostage` with `args`, which must succeed; its standard output.
+#[allow(dead_code)]
+pub fn ok(args: &[&str]) -> String {
+    let out = twostage(args);
+    assert!(out.status.success(), "{args:?}: {}", text(&out.stderr));
+    text(&out.stdout)
+}
+
 /// Output bytes as text.
 pub fn text(bytes: &[u8]) -> String {
     String::from_utf8(bytes.to_vec()).expect("the output is UTF-8")
