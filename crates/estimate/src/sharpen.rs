@@ -6,6 +6,7 @@
 //! features by the `q` combinations the round before found informative
 //! ([`local::Summary`]).
 
+mod curved;
 mod local;
 
 use rayon::prelude::*;
@@ -20,6 +21,7 @@ use super::Estimating;
 use super::failure::{MethodFailure, RecordFailure};
 use super::rows::RecordOutcome;
 use crate::{PosteriorDraws, RequestProblem};
+use curved::{Curved, curved_combinations, draw_by_weights};
 use local::{Gaussian, Summary, draw_with_prior, local_likelihood};
 
 /// Rounds of runs: the first where the estimator's posterior lies, each
@@ -35,7 +37,7 @@ const PROPOSAL_DRAWS: usize = 4000;
 
 /// A record's draws of a round (unbounded, row after row) and the
 /// combinations its features are read by, or why there are none.
-type Drawn = Result<(Vec<f64>, Summary), String>;
+type Drawn = Result<(Vec<f64>, Option<Summary>), String>;
 
 /// The model runs of one round of one record, and where they ran.
 struct Round {
@@ -118,37 +120,46 @@ impl Estimating {
                 .par_iter()
                 .enumerate()
                 .zip(rounds.par_iter().zip(features))
-                .zip(summaries.par_iter())
-                .map(|(((index, (_, outcome)), (ran, features)), summary)| {
-                    let (record, _) = outcome.as_ref().ok()?;
-                    let ran = ran.as_ref()?;
-                    Some(features.and_then(|(features, p)| {
-                        let mut work = EstimateWorkspace::new();
-                        let observed = estimator
-                            .features_of(record.inputs(), record.outputs(), &mut work)
-                            .map_err(|e| e.to_string())?;
-                        // The last round reads the features by the
-                        // combinations the round before found informative.
-                        let fitted = match summary.as_ref().filter(|_| last) {
-                            Some(summary) => local_likelihood(
-                                &ran.at,
-                                q,
-                                &summary.of(&features),
-                                q,
-                                &summary.of(observed),
-                            )?,
-                            None => local_likelihood(&ran.at, q, &features, p, observed)?,
+                .zip(summaries.par_iter().zip(proposals.par_iter()))
+                .map(
+                    |(((index, (_, outcome)), (ran, features)), (summary, proposal))| {
+                        let (record, _) = outcome.as_ref().ok()?;
+                        let ran = ran.as_ref()?;
+                        let Some(Ok(proposal)) = proposal else {
+                            return None;
                         };
-                        let mut rng = stream_rng(
-                            round_seed(seed, round) ^ 0x5348_4152,
-                            index as u64,
-                            StreamPurpose::Posterior,
-                        );
-                        let n = if last { samples } else { PROPOSAL_DRAWS };
-                        let draws = draw_with_prior(&fitted.likelihood, &prior, n, &mut rng)?;
-                        Ok((draws, fitted.summary))
-                    }))
-                })
+                        Some(features.and_then(|(features, p)| {
+                            let mut work = EstimateWorkspace::new();
+                            let observed = estimator
+                                .features_of(record.inputs(), record.outputs(), &mut work)
+                                .map_err(|e| e.to_string())?;
+                            let mut rng = stream_rng(
+                                round_seed(seed, round) ^ 0x5348_4152,
+                                index as u64,
+                                StreamPurpose::Posterior,
+                            );
+                            if last {
+                                // The last round reads the features by the
+                                // combinations the round before found
+                                // informative, their mean curved.
+                                let (features, observed, p) = match summary {
+                                    Some(summary) => {
+                                        (summary.of(&features), summary.of(observed), summary.len())
+                                    }
+                                    None => (features, observed.to_vec(), p),
+                                };
+                                let curved = Curved::fit(&ran.at, q, &features, p, &observed)?;
+                                let draws =
+                                    draw_by_weights(&curved, &prior, proposal, samples, &mut rng)?;
+                                return Ok((draws, None));
+                            }
+                            let likelihood = local_likelihood(&ran.at, q, &features, p, observed)?;
+                            let draws =
+                                draw_with_prior(&likelihood, &prior, PROPOSAL_DRAWS, &mut rng)?;
+                            Ok((draws, Some(curved_combinations(&ran.at, q, &features, p)?)))
+                        }))
+                    },
+                )
                 .collect();
             proposals = drawn
                 .into_iter()
@@ -160,7 +171,7 @@ impl Estimating {
                         None
                     }
                     Ok((draws, summary)) => {
-                        summaries[index] = Some(summary);
+                        summaries[index] = summary;
                         Some(Gaussian::of_draws(&draws, q, WIDEN))
                     }
                 })

@@ -33,6 +33,20 @@ impl Gaussian {
         }
     }
 
+    /// The log density at `z`, up to a constant: `-|L' (z - mean)|^2 / 2`.
+    pub(crate) fn log_density(&self, z: &[f64]) -> f64 {
+        let q = self.mean.len();
+        (0..q)
+            .map(|i| {
+                let v: f64 = (i..q)
+                    .map(|j| self.precision_factor[j * q + i] * (z[j] - self.mean[j]))
+                    .sum();
+                v * v
+            })
+            .sum::<f64>()
+            * -0.5
+    }
+
     /// The Gaussian of `draws` (rows of `q` values): their mean and
     /// covariance, the covariance's spread widened `widen` times.
     pub(crate) fn of_draws(draws: &[f64], q: usize, widen: f64) -> Result<Self, String> {
@@ -84,106 +98,176 @@ fn precision_factor_of_covariance(mut covariance: Vec<f64>, q: usize) -> Result<
     Ok(precision)
 }
 
+/// Stage 1's features of runs regressed on regressors of the runs'
+/// parameters by least squares, `s = s0 + B (x - x0) + e`, with `e` of the
+/// residuals' covariance `S = K K'` (its correlations shrunk). Features
+/// that no run moves (a sample that is always zero, say) are left out:
+/// `moved` names the ones kept.
+pub(crate) struct Regression {
+    /// The regressors' mean `x0`.
+    pub(crate) regressors_mean: Vec<f64>,
+    /// The kept features' mean `s0`.
+    pub(crate) features_mean: Vec<f64>,
+    /// `B`, row after row of the kept features, `r` slopes each.
+    pub(crate) slopes: Vec<f64>,
+    /// The lower Cholesky factor `K` of the residuals' covariance.
+    pub(crate) noise_factor: Vec<f64>,
+    /// The features kept, by index.
+    pub(crate) moved: Vec<usize>,
+}
+
+impl Regression {
+    /// The fit of `features` (rows of `p`) on `regressors` (rows of `r`),
+    /// one row a run.
+    ///
+    /// # Errors
+    /// Fewer runs than the fit needs, regressors that do not vary apart,
+    /// or residuals collinear across features (more features than runs can
+    /// spread).
+    pub(crate) fn fit(
+        regressors: &[f64],
+        r: usize,
+        features: &[f64],
+        p: usize,
+    ) -> Result<Self, String> {
+        let m = regressors.len() / r.max(1);
+        if features.len() != m * p {
+            return Err(format!(
+                "{} feature values for {m} runs of {p} features",
+                features.len()
+            ));
+        }
+        let mean_of = |values: &[f64], width: usize| -> Vec<f64> {
+            let mut mean = vec![0.0; width];
+            for row in values.chunks_exact(width) {
+                for (s, v) in mean.iter_mut().zip(row) {
+                    *s += v / m as f64;
+                }
+            }
+            mean
+        };
+        let x0 = mean_of(regressors, r);
+        let all_means = mean_of(features, p);
+        let moved: Vec<usize> = (0..p)
+            .filter(|&k| {
+                features
+                    .chunks_exact(p)
+                    .any(|row| (row[k] - all_means[k]).abs() > 1e-12 * (1.0 + all_means[k].abs()))
+            })
+            .collect();
+        let kept = moved.len();
+        if m < r + kept + 2 {
+            return Err(format!(
+                "{m} runs for {r} regressors and {kept} features that vary: at least {} needed",
+                r + kept + 2
+            ));
+        }
+        // Normal equations of the centred regression: G = Xc' Xc, B' = G^-1 Xc' Sc.
+        let mut gram = vec![0.0; r * r];
+        let mut cross = vec![0.0; r * kept];
+        for (x, s) in regressors.chunks_exact(r).zip(features.chunks_exact(p)) {
+            for a in 0..r {
+                let da = x[a] - x0[a];
+                for b in 0..r {
+                    gram[a * r + b] += da * (x[b] - x0[b]);
+                }
+                for (c, &k) in moved.iter().enumerate() {
+                    cross[a * kept + c] += da * (s[k] - all_means[k]);
+                }
+            }
+        }
+        cholesky_in_place(&mut gram, r, PivotRule::Angle(RANK_TOLERANCE))
+            .map_err(|e| format!("the runs do not move every parameter apart ({e})"))?;
+        let mut slopes = vec![0.0; kept * r];
+        for c in 0..kept {
+            let mut column: Vec<f64> = (0..r).map(|a| cross[a * kept + c]).collect();
+            solve_cholesky_in_place(&gram, r, &mut column);
+            slopes[c * r..(c + 1) * r].copy_from_slice(&column);
+        }
+        let mut residuals = Vec::with_capacity(m * kept);
+        for (x, s) in regressors.chunks_exact(r).zip(features.chunks_exact(p)) {
+            for (c, &k) in moved.iter().enumerate() {
+                let fitted: f64 = (0..r).map(|a| slopes[c * r + a] * (x[a] - x0[a])).sum();
+                residuals.push(s[k] - all_means[k] - fitted);
+            }
+        }
+        let mut covariance = shrunk_covariance(&residuals, kept, m - r - 1);
+        cholesky_in_place(&mut covariance, kept, PivotRule::RelativeToLargest(1e-12)).map_err(
+            |e| format!("the features' noise is collinear ({e}): more runs, or fewer features"),
+        )?;
+        Ok(Self {
+            regressors_mean: x0,
+            features_mean: moved.iter().map(|&k| all_means[k]).collect(),
+            slopes,
+            noise_factor: covariance,
+            moved,
+        })
+    }
+
+    /// The combinations `B' S^-1` of the `p` features (zero on those left
+    /// out), one a regressor: where the features' mean is linear in the
+    /// regressors with Gaussian noise of covariance `S`, they keep all the
+    /// features tell of the regressors ([`Summary`]).
+    pub(crate) fn combinations(&self, p: usize) -> Summary {
+        let kept = self.moved.len();
+        let r = self.regressors_mean.len();
+        let mut weights = vec![0.0; r * p];
+        for a in 0..r {
+            let mut row: Vec<f64> = (0..kept).map(|c| self.slopes[c * r + a]).collect();
+            solve_lower_in_place(&self.noise_factor[..], kept, &mut row);
+            solve_lower_transposed_in_place(&self.noise_factor, kept, &mut row);
+            for (c, &k) in self.moved.iter().enumerate() {
+                weights[a * p + k] = row[c];
+            }
+        }
+        Summary { weights, p }
+    }
+
+    /// `K^-1 (observed - s0)` over the kept features: the record's gap to
+    /// the runs' mean, whitened.
+    pub(crate) fn whitened_gap(&self, observed: &[f64]) -> Vec<f64> {
+        let mut gap: Vec<f64> = self
+            .moved
+            .iter()
+            .zip(&self.features_mean)
+            .map(|(&k, s0)| observed[k] - s0)
+            .collect();
+        solve_lower_in_place(&self.noise_factor[..], self.moved.len(), &mut gap);
+        gap
+    }
+}
+
 /// The likelihood of the `observed` features as a Gaussian over the
 /// unbounded parameters: the features of the runs (`features`, rows of
-/// `p`) regressed on the runs' parameters (`at`, rows of `q`) by least
-/// squares, `s = s0 + D (z - z0) + e` with `e` of the residuals'
-/// covariance `S`; its precision `D' S^-1 D` and the `z` that best
-/// explains `observed`. Features that no run moves (a sample that is
-/// always zero, say) are left out.
-///
-/// With the likelihood, the features' combinations `D' S^-1` that a
-/// later round may read them by ([`Summary`]).
+/// `p`) regressed on the runs' parameters (`at`, rows of `q`),
+/// `s = s0 + D (z - z0) + e` with `e` of covariance `S` ([`Regression`]);
+/// its precision `D' S^-1 D` and the `z` that best explains `observed`.
 ///
 /// # Errors
-/// Fewer runs than the fit needs, runs that do not move every parameter,
-/// features that carry no information on some parameter, or residuals
-/// collinear across features (more features than runs can spread).
+/// Those of [`Regression::fit`], an `observed` of another width, and
+/// features that carry no information on some parameter.
 pub(crate) fn local_likelihood(
     at: &[f64],
     q: usize,
     features: &[f64],
     p: usize,
     observed: &[f64],
-) -> Result<Fitted, String> {
-    let m = at.len() / q.max(1);
-    if features.len() != m * p || observed.len() != p {
-        return Err(format!(
-            "{} feature values for {m} runs of {p} features, {} observed",
-            features.len(),
-            observed.len()
-        ));
+) -> Result<Gaussian, String> {
+    if observed.len() != p {
+        return Err(format!("{} observed features for {p}", observed.len()));
     }
-    let mean_of = |values: &[f64], width: usize| -> Vec<f64> {
-        let mut mean = vec![0.0; width];
-        for row in values.chunks_exact(width) {
-            for (s, v) in mean.iter_mut().zip(row) {
-                *s += v / m as f64;
-            }
-        }
-        mean
-    };
-    let z0 = mean_of(at, q);
-    let s0 = mean_of(features, p);
-    let moved: Vec<usize> = (0..p)
-        .filter(|&k| {
-            features
-                .chunks_exact(p)
-                .any(|row| (row[k] - s0[k]).abs() > 1e-12 * (1.0 + s0[k].abs()))
-        })
-        .collect();
-    let kept = moved.len();
-    if m < q + kept + 2 {
-        return Err(format!(
-            "{m} runs for {q} parameters and {kept} features that vary: at least {} needed",
-            q + kept + 2
-        ));
-    }
-    // Normal equations of the centred regression: G = Zc' Zc, B = G^-1 Zc' Sc.
-    let mut gram = vec![0.0; q * q];
-    let mut cross = vec![0.0; q * kept];
-    for (z, s) in at.chunks_exact(q).zip(features.chunks_exact(p)) {
-        for a in 0..q {
-            let da = z[a] - z0[a];
-            for b in 0..q {
-                gram[a * q + b] += da * (z[b] - z0[b]);
-            }
-            for (c, &k) in moved.iter().enumerate() {
-                cross[a * kept + c] += da * (s[k] - s0[k]);
-            }
-        }
-    }
-    cholesky_in_place(&mut gram, q, PivotRule::Angle(RANK_TOLERANCE))
-        .map_err(|e| format!("the runs do not move every parameter apart ({e})"))?;
-    // Column c of B (q values): the slopes of feature c.
-    let mut slopes = vec![0.0; kept * q];
-    for c in 0..kept {
-        let mut column: Vec<f64> = (0..q).map(|a| cross[a * kept + c]).collect();
-        solve_cholesky_in_place(&gram, q, &mut column);
-        slopes[c * q..(c + 1) * q].copy_from_slice(&column);
-    }
-    let mut residuals = Vec::with_capacity(m * kept);
-    for (z, s) in at.chunks_exact(q).zip(features.chunks_exact(p)) {
-        for (c, &k) in moved.iter().enumerate() {
-            let fitted: f64 = (0..q).map(|a| slopes[c * q + a] * (z[a] - z0[a])).sum();
-            residuals.push(s[k] - s0[k] - fitted);
-        }
-    }
-    let mut covariance = shrunk_covariance(&residuals, kept, m - q - 1);
-    cholesky_in_place(&mut covariance, kept, PivotRule::RelativeToLargest(1e-12)).map_err(|e| {
-        format!("the features' noise is collinear ({e}): more runs, or fewer features")
-    })?;
+    let fit = Regression::fit(at, q, features, p)?;
+    let kept = fit.moved.len();
     // Whitened: W = K^-1 D (kept x q), v = K^-1 (observed - s0).
     let mut whitened = vec![0.0; kept * q];
     for a in 0..q {
-        let mut column: Vec<f64> = (0..kept).map(|c| slopes[c * q + a]).collect();
-        solve_lower_in_place(&covariance[..], kept, &mut column);
+        let mut column: Vec<f64> = (0..kept).map(|c| fit.slopes[c * q + a]).collect();
+        solve_lower_in_place(&fit.noise_factor[..], kept, &mut column);
         for c in 0..kept {
             whitened[c * q + a] = column[c];
         }
     }
-    let mut gap: Vec<f64> = moved.iter().map(|&k| observed[k] - s0[k]).collect();
-    solve_lower_in_place(&covariance[..], kept, &mut gap);
+    let gap = fit.whitened_gap(observed);
     let mut precision = vec![0.0; q * q];
     let mut toward = vec![0.0; q];
     for c in 0..kept {
@@ -198,25 +282,15 @@ pub(crate) fn local_likelihood(
         format!("the features carry no information on some parameter near the record ({e})")
     })?;
     solve_cholesky_in_place(&precision, q, &mut toward);
-    let mean = z0.iter().zip(&toward).map(|(z, t)| z + t).collect();
-    // Row a of D' S^-1 = (K'^-1 w_a)', w_a column a of W.
-    let mut summary = vec![0.0; q * p];
-    for a in 0..q {
-        let mut row: Vec<f64> = (0..kept).map(|c| whitened[c * q + a]).collect();
-        solve_lower_transposed_in_place(&covariance, kept, &mut row);
-        for (c, &k) in moved.iter().enumerate() {
-            summary[a * p + k] = row[c];
-        }
-    }
-    Ok(Fitted {
-        likelihood: Gaussian {
-            mean,
-            precision_factor: precision,
-        },
-        summary: Summary {
-            weights: summary,
-            p,
-        },
+    let mean = fit
+        .regressors_mean
+        .iter()
+        .zip(&toward)
+        .map(|(z, t)| z + t)
+        .collect();
+    Ok(Gaussian {
+        mean,
+        precision_factor: precision,
     })
 }
 
@@ -274,19 +348,14 @@ fn shrunk_covariance(residuals: &[f64], p: usize, dof: usize) -> Vec<f64> {
     covariance
 }
 
-/// A local likelihood and the features' combinations it reads them by.
-pub(crate) struct Fitted {
-    pub(crate) likelihood: Gaussian,
-    pub(crate) summary: Summary,
-}
-
-/// `q` linear combinations of `p` features, `D' S^-1` of a local fit:
-/// where the features are linear in the parameters with Gaussian noise,
-/// they keep all the features tell of the parameters, so a later round
-/// fits its likelihood on `q` numbers instead of `p` (its slopes and
-/// noise then need runs in proportion to `q`, not `p`). Combinations a
-/// little off those of the exact likelihood lose a little information,
-/// and widen the posterior, never narrow it.
+/// `r` linear combinations of `p` features, `B' S^-1` of a local fit
+/// ([`Regression::combinations`]): where the features' mean is linear in
+/// the fit's `r` regressors with Gaussian noise, they keep all the
+/// features tell of them, so a later round fits its likelihood on `r`
+/// numbers instead of `p` (its slopes and noise then need runs in
+/// proportion to `r`, not `p`). Combinations a little off those of the
+/// exact likelihood lose a little information, and widen the posterior,
+/// never narrow it.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Summary {
     weights: Vec<f64>,
@@ -294,9 +363,14 @@ pub(crate) struct Summary {
 }
 
 impl Summary {
-    /// The combinations of `features` (rows of `p`), rows of `q`.
+    /// How many combinations.
+    pub(crate) fn len(&self) -> usize {
+        self.weights.len() / self.p.max(1)
+    }
+
+    /// The combinations of `features` (rows of `p`), rows of [`Self::len`].
     pub(crate) fn of(&self, features: &[f64]) -> Vec<f64> {
-        let q = self.weights.len() / self.p.max(1);
+        let q = self.len();
         features
             .chunks_exact(self.p.max(1))
             .flat_map(|s| {
@@ -391,17 +465,19 @@ mod tests {
         let observed: Vec<f64> = (0..3)
             .map(|k| offset[k] + slopes[k][0] * truth[0] + slopes[k][1] * truth[1])
             .collect();
-        let both = local_likelihood(&at, 2, &features, 3, &observed).expect("a fit");
-        // The summary's weights are D' S^-1, by hand.
+        let fitted = local_likelihood(&at, 2, &features, 3, &observed).expect("a fit");
+        // The combinations are D' S^-1, by hand.
+        let combinations = Regression::fit(&at, 2, &features, 3)
+            .expect("a fit")
+            .combinations(3);
         let weights = [100.0, 25.0, 0.0, 0.0, 25.0, 2.0 / 0.09];
-        for (got, want) in both.summary.weights.iter().zip(weights) {
+        for (got, want) in combinations.weights.iter().zip(weights) {
             assert!(
                 (got - want).abs() < 0.02 * (1.0 + want),
                 "{:?}",
-                both.summary.weights
+                combinations.weights
             );
         }
-        let fitted = both.likelihood;
         // P = [[1/0.01 + 1/0.04, 1/0.04], [1/0.04, 1/0.04 + 4/0.09]].
         let p = [125.0, 25.0, 25.0, 25.0 + 4.0 / 0.09];
         let l = &fitted.precision_factor;
