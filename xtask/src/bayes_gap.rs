@@ -460,7 +460,7 @@ pub(crate) fn run(
     against: Option<&Path>,
     test: TestRecords,
     scored: &[PathBuf],
-    c2st: usize,
+    (c2st, drawn_file): (usize, Option<&Path>),
 ) -> Result<()> {
     let TestRecords {
         model,
@@ -601,7 +601,7 @@ pub(crate) fn run(
         );
     }
     if let Some(reference) = &reference {
-        crate::c2st::run(&estimator, reference, &records, c2st, seed)?;
+        crate::c2st::run(&estimator, reference, &records, (c2st, drawn_file), seed)?;
     }
     Ok(())
 }

@@ -8,7 +8,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use ndarray::Array2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -198,14 +198,37 @@ pub(crate) fn run(
     estimator: &Estimator,
     reference: &Reference,
     records: &[IoData],
-    count: usize,
+    (count, drawn_file): (usize, Option<&Path>),
     seed: u64,
 ) -> Result<()> {
-    estimator
-        .posterior()
-        .context("the estimator has no posterior to test (train it with --posterior K)")?;
     let count = count.min(records.len());
     let q = estimator.param_names().len();
+    let from_file = match drawn_file {
+        Some(path) => {
+            let (names, experiments) = read_draws(path)?;
+            if names != estimator.param_names() {
+                bail!(
+                    "{} draws {names:?}, the estimator estimates {:?}",
+                    path.display(),
+                    estimator.param_names()
+                );
+            }
+            if experiments.len() < count {
+                bail!(
+                    "{} holds {} experiments: fewer than the {count} records to test",
+                    path.display(),
+                    experiments.len()
+                );
+            }
+            Some(experiments)
+        }
+        None => {
+            estimator
+                .posterior()
+                .context("the estimator has no posterior to test (train it with --posterior K)")?;
+            None
+        }
+    };
     let start = Instant::now();
     let scores: Vec<(f64, Option<f64>)> = records[..count]
         .par_iter()
@@ -214,7 +237,10 @@ pub(crate) fn run(
             let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xc257);
             rng.set_stream(i as u64);
             let exact = reference.draws(record, &mut rng)?;
-            let drawn = estimator_draws(estimator, record, i, seed)?;
+            let drawn = match &from_file {
+                Some(experiments) => experiments[i].1.clone(),
+                None => estimator_draws(estimator, record, i, seed)?,
+            };
             let tester = classifier(q, seed.wrapping_add(i as u64))?;
             let score = two_sample_accuracy(exact.view(), drawn.view(), FOLDS, &tester)?;
             let floor = if i < FLOOR_RECORDS {

@@ -99,6 +99,12 @@ enum Command {
         /// records.
         #[arg(long, default_value_t = 0)]
         c2st: usize,
+        /// With --c2st: score these draws (as `twostage estimate --draws`
+        /// writes them, say sharpened) instead of the estimator's own, their
+        /// experiments taken in the records' order (`--chart` the folder the
+        /// draws' records came from).
+        #[arg(long, requires = "c2st")]
+        draws: Option<PathBuf>,
     },
     /// The classifier two-sample test (sbibm's C2ST) between two files
     /// of posterior draws, as `twostage estimate --draws` writes them:
@@ -280,6 +286,7 @@ fn main() -> ExitCode {
             chart,
             estimates,
             c2st,
+            draws,
         } => bayes_gap::run(
             &estimator,
             against.as_deref(),
@@ -291,7 +298,7 @@ fn main() -> ExitCode {
                 chart,
             },
             &estimates,
-            c2st,
+            (c2st, draws.as_deref()),
         ),
     };
     match result {

@@ -42,7 +42,11 @@ impl Curved {
         if observed.len() != p {
             return Err(format!("{} observed features for {p}", observed.len()));
         }
-        let (centre, scale, regressors) = quadratic_design(at, q)?;
+        let Design {
+            centre,
+            scale,
+            regressors,
+        } = quadratic_design(at, q)?;
         let r = regressor_count(q);
         let fit = Regression::fit(&regressors, r, features, p)?;
         let kept = fit.moved.len();
@@ -99,13 +103,21 @@ pub(crate) fn curved_combinations(
     features: &[f64],
     p: usize,
 ) -> Result<Summary, String> {
-    let (_, _, regressors) = quadratic_design(at, q)?;
-    Ok(Regression::fit(&regressors, regressor_count(q), features, p)?.combinations(p))
+    let design = quadratic_design(at, q)?;
+    Ok(Regression::fit(&design.regressors, regressor_count(q), features, p)?.combinations(p))
 }
 
 /// The runs' centre and spread in each unbounded parameter, and their
-/// quadratic regressors, rows of [`regressor_count`].
-fn quadratic_design(at: &[f64], q: usize) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), String> {
+/// quadratic regressors.
+struct Design {
+    centre: Vec<f64>,
+    scale: Vec<f64>,
+    /// Rows of [`regressor_count`], one a run.
+    regressors: Vec<f64>,
+}
+
+/// The [`Design`] of runs at the unbounded parameters `at` (rows of `q`).
+fn quadratic_design(at: &[f64], q: usize) -> Result<Design, String> {
     let m = at.len() / q.max(1);
     let mut centre = vec![0.0; q];
     for z in at.chunks_exact(q) {
@@ -119,7 +131,7 @@ fn quadratic_design(at: &[f64], q: usize) -> Result<(Vec<f64>, Vec<f64>, Vec<f64
             (sum / m.max(2).saturating_sub(1) as f64).sqrt()
         })
         .collect();
-    if let Some(a) = scale.iter().position(|s| !(*s > 0.0)) {
+    if let Some(a) = scale.iter().position(|s| s.is_nan() || *s <= 0.0) {
         return Err(format!("the runs do not vary parameter {}", a + 1));
     }
     let r = regressor_count(q);
@@ -127,7 +139,11 @@ fn quadratic_design(at: &[f64], q: usize) -> Result<(Vec<f64>, Vec<f64>, Vec<f64
     for (z, row) in at.chunks_exact(q).zip(regressors.chunks_exact_mut(r)) {
         quadratic_regressors(z, &centre, &scale, row);
     }
-    Ok((centre, scale, regressors))
+    Ok(Design {
+        centre,
+        scale,
+        regressors,
+    })
 }
 
 /// `q` deviations and their `q (q + 1) / 2` products.
