@@ -1,10 +1,12 @@
 //! Draws sharpened through the model (`samples` with `sharpen`): the
 //! estimator's posterior proposes where to run the model, the runs'
 //! stage-1 features near the record give a local likelihood, and its
-//! product with the prior is drawn exactly. Three rounds: each runs
-//! where the round before put the posterior, and the last reads the
-//! features by the `q` combinations the round before found informative
-//! ([`local::Summary`]).
+//! product with the prior is drawn. Three rounds: each runs where the
+//! round before put the posterior (a likelihood linear in the parameters,
+//! drawn exactly), and the last reads the features by the combinations a
+//! quadratic fit of the round before found informative
+//! ([`local::Summary`]), with a mean quadratic in the parameters
+//! ([`curved::Curved`], drawn by weights).
 
 mod curved;
 mod local;
@@ -156,7 +158,12 @@ impl Estimating {
                             let likelihood = local_likelihood(&ran.at, q, &features, p, observed)?;
                             let draws =
                                 draw_with_prior(&likelihood, &prior, PROPOSAL_DRAWS, &mut rng)?;
-                            Ok((draws, Some(curved_combinations(&ran.at, q, &features, p)?)))
+                            // The round before the last finds the
+                            // combinations the last reads.
+                            let combinations = (round + 2 == ROUNDS)
+                                .then(|| curved_combinations(&ran.at, q, &features, p))
+                                .transpose()?;
+                            Ok((draws, combinations))
                         }))
                     },
                 )
