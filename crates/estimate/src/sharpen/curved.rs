@@ -5,7 +5,6 @@
 //! proposal, where the runs were made and the quadratic was fitted.
 
 use rand::Rng;
-use twostage_kernels::cholesky::solve_lower_in_place;
 use twostage_kernels::random::unit_uniform;
 use twostage_models::Marginal;
 
@@ -49,19 +48,10 @@ impl Curved {
         } = quadratic_design(at, q)?;
         let r = regressor_count(q);
         let fit = Regression::fit(&regressors, r, features, p)?;
-        let kept = fit.moved.len();
-        let mut whitened_slopes = vec![0.0; kept * r];
-        for a in 0..r {
-            let mut column: Vec<f64> = (0..kept).map(|c| fit.slopes[c * r + a]).collect();
-            solve_lower_in_place(&fit.noise_factor[..], kept, &mut column);
-            for c in 0..kept {
-                whitened_slopes[c * r + a] = column[c];
-            }
-        }
         Ok(Self {
+            whitened_slopes: fit.whitened_slopes(),
             whitened_gap: fit.whitened_gap(observed),
             regressors_mean: fit.regressors_mean,
-            whitened_slopes,
             centre,
             scale,
         })

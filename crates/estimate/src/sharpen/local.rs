@@ -211,16 +211,32 @@ impl Regression {
     pub(crate) fn combinations(&self, p: usize) -> Summary {
         let kept = self.moved.len();
         let r = self.regressors_mean.len();
+        let whitened = self.whitened_slopes();
         let mut weights = vec![0.0; r * p];
         for a in 0..r {
-            let mut row: Vec<f64> = (0..kept).map(|c| self.slopes[c * r + a]).collect();
-            solve_lower_in_place(&self.noise_factor[..], kept, &mut row);
+            let mut row: Vec<f64> = (0..kept).map(|c| whitened[c * r + a]).collect();
             solve_lower_transposed_in_place(&self.noise_factor, kept, &mut row);
             for (c, &k) in self.moved.iter().enumerate() {
                 weights[a * p + k] = row[c];
             }
         }
         Summary { weights, p }
+    }
+
+    /// `K^-1 B`, rows of the kept features: the slopes in units of the
+    /// noise.
+    pub(crate) fn whitened_slopes(&self) -> Vec<f64> {
+        let kept = self.moved.len();
+        let r = self.regressors_mean.len();
+        let mut whitened = vec![0.0; kept * r];
+        for a in 0..r {
+            let mut column: Vec<f64> = (0..kept).map(|c| self.slopes[c * r + a]).collect();
+            solve_lower_in_place(&self.noise_factor[..], kept, &mut column);
+            for c in 0..kept {
+                whitened[c * r + a] = column[c];
+            }
+        }
+        whitened
     }
 
     /// `K^-1 (observed - s0)` over the kept features: the record's gap to
@@ -259,14 +275,7 @@ pub(crate) fn local_likelihood(
     let fit = Regression::fit(at, q, features, p)?;
     let kept = fit.moved.len();
     // Whitened: W = K^-1 D (kept x q), v = K^-1 (observed - s0).
-    let mut whitened = vec![0.0; kept * q];
-    for a in 0..q {
-        let mut column: Vec<f64> = (0..kept).map(|c| fit.slopes[c * q + a]).collect();
-        solve_lower_in_place(&fit.noise_factor[..], kept, &mut column);
-        for c in 0..kept {
-            whitened[c * q + a] = column[c];
-        }
-    }
+    let whitened = fit.whitened_slopes();
     let gap = fit.whitened_gap(observed);
     let mut precision = vec![0.0; q * q];
     let mut toward = vec![0.0; q];
