@@ -10,6 +10,7 @@
 
 mod curved;
 mod local;
+mod windowed;
 
 use rayon::prelude::*;
 use twostage_estimator::{EstimateWorkspace, Estimator};
@@ -23,8 +24,9 @@ use super::Estimating;
 use super::failure::{MethodFailure, RecordFailure};
 use super::rows::RecordOutcome;
 use crate::{PosteriorDraws, RequestProblem};
-use curved::{Curved, curved_combinations, draw_by_weights};
+use curved::{Curved, LastRoundLikelihood, curved_combinations, draw_by_weights};
 use local::{Gaussian, Summary, draw_with_prior, local_likelihood};
+use windowed::Windowed;
 
 /// Rounds of runs: the first where the estimator's posterior lies, each
 /// next where the round before put it (a network's posterior several of
@@ -141,18 +143,20 @@ impl Estimating {
                                 StreamPurpose::Posterior,
                             );
                             if last {
-                                // The last round reads the features by the
-                                // combinations the round before found
-                                // informative, their mean curved.
-                                let (features, observed, p) = match summary {
-                                    Some(summary) => {
-                                        (summary.of(&features), summary.of(observed), summary.len())
-                                    }
-                                    None => (features, observed.to_vec(), p),
-                                };
-                                let curved = Curved::fit(&ran.at, q, &features, p, &observed)?;
-                                let draws =
-                                    draw_by_weights(&curved, &prior, proposal, samples, &mut rng)?;
+                                let likelihood = last_likelihood(
+                                    &ran.at,
+                                    q,
+                                    (&features, p),
+                                    observed,
+                                    summary.as_ref(),
+                                )?;
+                                let draws = draw_by_weights(
+                                    &*likelihood,
+                                    &prior,
+                                    proposal,
+                                    samples,
+                                    &mut rng,
+                                )?;
                                 return Ok((draws, None));
                             }
                             let likelihood = local_likelihood(&ran.at, q, &features, p, observed)?;
@@ -210,6 +214,36 @@ impl Estimating {
             }
         }
     }
+}
+
+/// The last round's likelihood of the record's `observed` features given
+/// the runs at `at` (rows of `q`) and their `features` (rows of `p`): a
+/// mean fitted window by window on all the features where windows predict
+/// the runs' features better than one quadratic ([`Windowed`]; one
+/// quadratic's combinations keep too little of a mean that bends
+/// faster); else the features read by the combinations the round before
+/// found informative (`summary`), their mean one quadratic ([`Curved`]).
+fn last_likelihood(
+    at: &[f64],
+    q: usize,
+    (features, p): (&[f64], usize),
+    observed: &[f64],
+    summary: Option<&Summary>,
+) -> Result<Box<dyn LastRoundLikelihood>, String> {
+    if let Some(windowed) = Windowed::choose(at, q, features, p, observed) {
+        return Ok(Box::new(windowed));
+    }
+    let curved = match summary {
+        Some(summary) => Curved::fit(
+            at,
+            q,
+            &summary.of(features),
+            summary.len(),
+            &summary.of(observed),
+        )?,
+        None => Curved::fit(at, q, features, p, observed)?,
+    };
+    Ok(Box::new(curved))
 }
 
 /// Why draws cannot be sharpened through the model as asked: no runs,

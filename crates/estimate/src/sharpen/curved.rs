@@ -57,9 +57,24 @@ impl Curved {
         })
     }
 
+    /// The number of regressors for `q` parameters.
+    fn regressors(&self) -> usize {
+        self.regressors_mean.len()
+    }
+}
+
+/// A likelihood of a record's features the last round draws by weights.
+pub(crate) trait LastRoundLikelihood {
     /// The log likelihood at the unbounded parameters `z`, up to a
-    /// constant: `-|K^-1 (observed - s(z))|^2 / 2`.
-    pub(crate) fn log_likelihood(&self, z: &[f64], row: &mut [f64]) -> f64 {
+    /// constant (minus infinity where it cannot be told), with `scratch`
+    /// for its working values.
+    fn log_likelihood(&self, z: &[f64], scratch: &mut Vec<f64>) -> f64;
+}
+
+impl LastRoundLikelihood for Curved {
+    /// `-|K^-1 (observed - s(z))|^2 / 2`.
+    fn log_likelihood(&self, z: &[f64], row: &mut Vec<f64>) -> f64 {
+        row.resize(self.regressors(), 0.0);
         quadratic_regressors(z, &self.centre, &self.scale, row);
         let r = row.len();
         for (x, x0) in row.iter_mut().zip(&self.regressors_mean) {
@@ -71,11 +86,6 @@ impl Curved {
             sum += (gap - fitted).powi(2);
         }
         -0.5 * sum
-    }
-
-    /// The number of regressors for `q` parameters.
-    pub(crate) fn regressors(&self) -> usize {
-        self.regressors_mean.len()
     }
 }
 
@@ -99,15 +109,15 @@ pub(crate) fn curved_combinations(
 
 /// The runs' centre and spread in each unbounded parameter, and their
 /// quadratic regressors.
-struct Design {
-    centre: Vec<f64>,
-    scale: Vec<f64>,
+pub(super) struct Design {
+    pub(super) centre: Vec<f64>,
+    pub(super) scale: Vec<f64>,
     /// Rows of [`regressor_count`], one a run.
-    regressors: Vec<f64>,
+    pub(super) regressors: Vec<f64>,
 }
 
 /// The [`Design`] of runs at the unbounded parameters `at` (rows of `q`).
-fn quadratic_design(at: &[f64], q: usize) -> Result<Design, String> {
+pub(super) fn quadratic_design(at: &[f64], q: usize) -> Result<Design, String> {
     let m = at.len() / q.max(1);
     let mut centre = vec![0.0; q];
     for z in at.chunks_exact(q) {
@@ -137,13 +147,13 @@ fn quadratic_design(at: &[f64], q: usize) -> Result<Design, String> {
 }
 
 /// `q` deviations and their `q (q + 1) / 2` products.
-fn regressor_count(q: usize) -> usize {
+pub(super) fn regressor_count(q: usize) -> usize {
     q + q * (q + 1) / 2
 }
 
 /// The deviations of `z` from `centre` in units of `scale`, then their
 /// products two by two (squares included), into `row`.
-fn quadratic_regressors(z: &[f64], centre: &[f64], scale: &[f64], row: &mut [f64]) {
+pub(super) fn quadratic_regressors(z: &[f64], centre: &[f64], scale: &[f64], row: &mut [f64]) {
     let q = z.len();
     for a in 0..q {
         row[a] = (z[a] - centre[a]) / scale[a];
@@ -178,7 +188,7 @@ const MOST_CANDIDATES_PER_DRAW: usize = 1000;
 /// Fewer than one candidate in [`MOST_CANDIDATES_PER_DRAW`] kept: the
 /// posterior lies outside the region the runs were made in.
 pub(crate) fn draw_by_weights(
-    likelihood: &Curved,
+    likelihood: &dyn LastRoundLikelihood,
     prior: &[Marginal],
     proposal: &Gaussian,
     n: usize,
@@ -189,7 +199,7 @@ pub(crate) fn draw_by_weights(
     let mut draws = Vec::with_capacity(n * q);
     let mut candidates = vec![0.0; pool * q];
     let mut weights = vec![0.0; pool];
-    let mut row = vec![0.0; likelihood.regressors()];
+    let mut scratch = Vec::new();
     let mut bound = f64::NEG_INFINITY;
     let mut tried = 0usize;
     let farthest = -0.5 * chi_square_quantile_999(q);
@@ -213,7 +223,7 @@ pub(crate) fn draw_by_weights(
                 .zip(&*z)
                 .map(|(marginal, v)| marginal.unbounded_log_density(*v))
                 .sum();
-            *w = log_prior + likelihood.log_likelihood(z, &mut row) - log_proposal;
+            *w = log_prior + likelihood.log_likelihood(z, &mut scratch) - log_proposal;
             if w.is_finite() {
                 bound = bound.max(*w);
             }

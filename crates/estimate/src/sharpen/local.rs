@@ -310,7 +310,7 @@ pub(crate) fn local_likelihood(
 /// the sum of their squares, at most 1. With many features and few runs
 /// the sample correlations' noise would otherwise enter the likelihood's
 /// weights; with few features and many runs the intensity is near 0.
-fn shrunk_covariance(residuals: &[f64], p: usize, dof: usize) -> Vec<f64> {
+pub(super) fn shrunk_covariance(residuals: &[f64], p: usize, dof: usize) -> Vec<f64> {
     let m = residuals.len() / p.max(1);
     let sd: Vec<f64> = (0..p)
         .map(|a| {
