@@ -3,13 +3,17 @@
 //! stage-1 features near the record give a local likelihood, and its
 //! product with the prior is drawn. Three rounds: each runs where the
 //! round before put the posterior (a likelihood linear in the parameters,
-//! drawn exactly), and the last reads the features by the combinations a
-//! quadratic fit of the round before found informative
-//! ([`local::Summary`]), with a mean quadratic in the parameters
-//! ([`curved::Curved`], drawn by weights).
+//! drawn exactly). The last fits the features' mean window by window
+//! ([`windowed::Windowed`]) where that predicts the runs better than one
+//! quadratic; else it reads the features by the combinations a quadratic
+//! fit of the round before found informative ([`local::Summary`]), with
+//! a mean quadratic in the parameters ([`curved::Curved`]); either is
+//! drawn by weights. A long record is read by its second moments
+//! ([`moments`]), a short one by stage 1's features.
 
 mod curved;
 mod local;
+mod moments;
 mod windowed;
 
 use rayon::prelude::*;
@@ -26,6 +30,7 @@ use super::rows::RecordOutcome;
 use crate::{PosteriorDraws, RequestProblem};
 use curved::{Curved, LastRoundLikelihood, curved_combinations, draw_by_weights};
 use local::{Gaussian, Summary, draw_with_prior, local_likelihood};
+use moments::{MOMENT_LAGS, MOMENTS_FROM, second_moments};
 use windowed::Windowed;
 
 /// Rounds of runs: the first where the estimator's posterior lies, each
@@ -133,10 +138,7 @@ impl Estimating {
                             return None;
                         };
                         Some(features.and_then(|(features, p)| {
-                            let mut work = EstimateWorkspace::new();
-                            let observed = estimator
-                                .features_of(record.inputs(), record.outputs(), &mut work)
-                                .map_err(|e| e.to_string())?;
+                            let observed = &read_of(estimator, record)?;
                             let mut rng = stream_rng(
                                 round_seed(seed, round) ^ 0x5348_4152,
                                 index as u64,
@@ -214,6 +216,23 @@ impl Estimating {
             }
         }
     }
+}
+
+/// What sharpening reads of a record or a run: its second moments
+/// ([`second_moments`]) where it is long enough for them to be near
+/// Gaussian, else stage 1's features.
+fn read_of(estimator: &Estimator, record: &IoData) -> Result<Vec<f64>, String> {
+    if record.n_samples() >= MOMENTS_FROM {
+        return Ok(second_moments(record, MOMENT_LAGS));
+    }
+    estimator
+        .features_of(
+            record.inputs(),
+            record.outputs(),
+            &mut EstimateWorkspace::new(),
+        )
+        .map(<[f64]>::to_vec)
+        .map_err(|e| e.to_string())
 }
 
 /// The last round's likelihood of the record's `observed` features given
@@ -369,15 +388,12 @@ fn run_rounds(
                     input: Some(record),
                 };
                 let results = model.simulate_batch_under(&thetas, &mut rngs, with_noise, &mut outs);
-                let mut work = EstimateWorkspace::new();
                 for (result, run) in results.into_iter().zip(&outs) {
                     answers.push(
                         result
                             .map_err(|e| format!("a run of the model failed: {e}"))
                             .and_then(|()| {
-                                estimator
-                                    .features_of(run.inputs(), run.outputs(), &mut work)
-                                    .map(<[f64]>::to_vec)
+                                read_of(estimator, run)
                                     .map_err(|e| format!("a run could not be compressed: {e}"))
                             }),
                     );

@@ -18,9 +18,10 @@ use super::local::{Regression, shrunk_covariance};
 /// Window widths tried, in units of the runs' spread, widest first.
 const WIDTHS: [f64; 4] = [2.0, 1.0, 0.5, 0.3];
 /// The share by which a window must cut the features' leave-one-out
-/// prediction error of one quadratic over the whole region to be chosen:
-/// a window's fit is noisier, and a small gain is within that noise.
-const WINDOW_GAIN: f64 = 0.05;
+/// prediction error of one quadratic over the whole region to be chosen
+/// (the leave-one-out error already counts a window's noisier fit; the
+/// margin keeps one quadratic's combinations where the two are alike).
+const WINDOW_GAIN: f64 = 0.02;
 /// The most runs whose features the widths are scored on.
 const SCORED_RUNS: usize = 400;
 /// A window's fit is made where it holds at least this many runs a
