@@ -252,17 +252,13 @@ fn last_likelihood(
     if let Some(windowed) = Windowed::choose(at, q, features, p, observed) {
         return Ok(Box::new(windowed));
     }
-    let curved = match summary {
-        Some(summary) => Curved::fit(
-            at,
-            q,
-            &summary.of(features),
-            summary.len(),
-            &summary.of(observed),
-        )?,
-        None => Curved::fit(at, q, features, p, observed)?,
-    };
-    Ok(Box::new(curved))
+    Ok(Box::new(Curved::fit_read_by(
+        summary,
+        at,
+        q,
+        (features, p),
+        observed,
+    )?))
 }
 
 /// Why draws cannot be sharpened through the model as asked: no runs,

@@ -57,6 +57,30 @@ impl Curved {
         })
     }
 
+    /// [`Curved::fit`] of the features read by `summary`'s combinations
+    /// (the record's too), or of the features themselves without one.
+    ///
+    /// # Errors
+    /// Those of [`Curved::fit`].
+    pub(crate) fn fit_read_by(
+        summary: Option<&Summary>,
+        at: &[f64],
+        q: usize,
+        (features, p): (&[f64], usize),
+        observed: &[f64],
+    ) -> Result<Self, String> {
+        match summary {
+            Some(summary) => Self::fit(
+                at,
+                q,
+                &summary.of(features),
+                summary.len(),
+                &summary.of(observed),
+            ),
+            None => Self::fit(at, q, features, p, observed),
+        }
+    }
+
     /// The number of regressors for `q` parameters.
     fn regressors(&self) -> usize {
         self.regressors_mean.len()
@@ -355,14 +379,8 @@ mod tests {
         let summary = curved_combinations(&at, 2, &features, 4).expect("combinations");
         assert_eq!(summary.len(), 5);
         let (at, features) = runs(&proposal, 3000, &mut rng);
-        let curved = Curved::fit(
-            &at,
-            2,
-            &summary.of(&features),
-            summary.len(),
-            &summary.of(&observed),
-        )
-        .expect("a fit");
+        let curved =
+            Curved::fit_read_by(Some(&summary), &at, 2, (&features, 4), &observed).expect("a fit");
         let prior = [Marginal::Normal {
             mu: 0.0,
             sigma: 1.0,

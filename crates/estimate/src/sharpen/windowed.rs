@@ -36,7 +36,6 @@ const NEAREST_RUN: f64 = 0.25;
 /// point and Gaussian noise of the covariance its leave-one-out residuals
 /// have.
 pub(crate) struct Windowed {
-    q: usize,
     centre: Vec<f64>,
     scale: Vec<f64>,
     runs: Runs,
@@ -145,7 +144,6 @@ impl Windowed {
             .collect();
         Some(Self {
             fits,
-            q,
             centre: design.centre,
             scale: design.scale,
             width,
@@ -166,7 +164,7 @@ impl LastRoundLikelihood for Windowed {
     /// `-|K^-1 (observed - s(z))|^2 / 2`, `s(z)` the window's fit at `z`;
     /// minus infinity where the window holds too few runs to fit.
     fn log_likelihood(&self, z: &[f64], scratch: &mut Vec<f64>) -> f64 {
-        let (q, kept) = (self.q, self.runs.kept);
+        let (q, kept) = (self.runs.q, self.runs.kept);
         let r = 1 + regressor_count(q);
         let point: Vec<f64> = z
             .iter()
@@ -451,14 +449,8 @@ mod tests {
         assert!(near < 0.12, "windowed: {near}");
         let summary = curved_combinations(&at, 1, &features, 3).expect("combinations");
         let (at, features) = runs(3000, bend, &mut rng);
-        let curved = Curved::fit(
-            &at,
-            1,
-            &summary.of(&features),
-            summary.len(),
-            &summary.of(&observed),
-        )
-        .expect("a fit");
+        let curved =
+            Curved::fit_read_by(Some(&summary), &at, 1, (&features, 3), &observed).expect("a fit");
         let draws = draw_by_weights(&curved, &prior, &proposal, 40_000, &mut rng).expect("draws");
         let far = distance(&draws, &exact);
         assert!(far > 0.4, "one quadratic: {far}");
